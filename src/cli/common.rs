@@ -1,0 +1,173 @@
+//! Helpers every subcommand uses: loading a formula (file, `-` for stdin, or `--expr`), parsing
+//! `name=value,…` lists, and one error type that knows how to print itself and which exit code to use.
+
+use crate::front::diag::Diagnostics;
+use crate::ir::Formula;
+use crate::{Backend, Kernel, Options};
+use std::fmt;
+use std::io::Read;
+
+/// Largest formula source accepted (a .brdf file is a few lines; this bounds time and memory on garbage).
+pub const MAX_SOURCE_BYTES: usize = 1 << 20;
+
+/// An error a subcommand reports: rendered diagnostics, or a plain message with an optional hint.
+#[derive(Debug)]
+pub enum CliError {
+    Diagnostics(Diagnostics),
+    Msg { msg: String, hint: Option<String> },
+    /// The command ran, and its verdict is "fail" (e.g. `check --sweep --deny nan` found NaN); already printed.
+    Failed,
+}
+
+impl CliError {
+    pub fn msg(msg: impl Into<String>) -> CliError {
+        CliError::Msg { msg: msg.into(), hint: None }
+    }
+    pub fn hint(msg: impl Into<String>, hint: impl Into<String>) -> CliError {
+        CliError::Msg { msg: msg.into(), hint: Some(hint.into()) }
+    }
+    /// Process exit code: 1 for bad input and failed verdicts.
+    pub fn exit_code(&self) -> i32 {
+        1
+    }
+    pub fn render(&self, color: bool) -> String {
+        match self {
+            CliError::Diagnostics(d) => d.render(color),
+            CliError::Msg { msg, hint } => match hint {
+                Some(h) => format!("error: {msg}\n  = help: {h}\n"),
+                None => format!("error: {msg}\n"),
+            },
+            CliError::Failed => String::new(),
+        }
+    }
+}
+
+impl fmt::Display for CliError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.render(false))
+    }
+}
+
+impl From<Diagnostics> for CliError {
+    fn from(d: Diagnostics) -> CliError {
+        CliError::Diagnostics(d)
+    }
+}
+
+/// Reads a formula source: a path, or `-` for standard input. Refuses non-UTF-8 and oversized input.
+pub fn read_source(path: &str) -> Result<(String, String), CliError> {
+    let mut bytes = Vec::new();
+    let name = if path == "-" {
+        std::io::stdin()
+            .take(MAX_SOURCE_BYTES as u64 + 1)
+            .read_to_end(&mut bytes)
+            .map_err(|e| CliError::msg(format!("cannot read standard input: {e}")))?;
+        "<stdin>".to_string()
+    } else {
+        let file = std::fs::File::open(path).map_err(|e| {
+            CliError::hint(format!("cannot open `{path}`: {e}"), "check the path; `-` reads the formula from standard input")
+        })?;
+        if file.metadata().map(|m| m.is_dir()).unwrap_or(false) {
+            return Err(CliError::hint(format!("`{path}` is a directory"), "give a .brdf file"));
+        }
+        file.take(MAX_SOURCE_BYTES as u64 + 1)
+            .read_to_end(&mut bytes)
+            .map_err(|e| CliError::msg(format!("cannot read `{path}`: {e}")))?;
+        path.to_string()
+    };
+    source_from_bytes(&name, bytes).map(|s| (name, s))
+}
+
+/// Validates raw bytes as a formula source (size, UTF-8, no NUL bytes).
+pub fn source_from_bytes(name: &str, bytes: Vec<u8>) -> Result<String, CliError> {
+    if bytes.len() > MAX_SOURCE_BYTES {
+        return Err(CliError::hint(
+            format!("`{name}` is larger than {} KiB; a formula file is a few lines", MAX_SOURCE_BYTES / 1024),
+            "is this the right file?",
+        ));
+    }
+    match String::from_utf8(bytes) {
+        Ok(s) if s.contains('\0') => Err(CliError::hint(
+            format!("`{name}` contains NUL bytes; it looks like a binary file, not a formula"),
+            "a .brdf file is UTF-8 text",
+        )),
+        Ok(s) => Ok(s),
+        Err(e) => {
+            let at = e.utf8_error().valid_up_to();
+            let (line, col) = crate::front::span::line_col(&String::from_utf8_lossy(&e.into_bytes()[..at]), at);
+            Err(CliError::hint(
+                format!("{name}:{line}:{col}: the file is not valid UTF-8 text (byte offset {at})"),
+                "a .brdf file is UTF-8 text; is this a binary file?",
+            ))
+        }
+    }
+}
+
+/// Loads and lowers a formula from a path (or `-`), or from `--expr` text when given.
+pub fn load_formula(path: Option<&str>, expr: Option<&str>) -> Result<Formula, CliError> {
+    let (name, src) = match (path, expr) {
+        (_, Some(e)) => ("<expr>".to_string(), source_from_bytes("<expr>", e.as_bytes().to_vec())?),
+        (Some(p), None) => read_source(p)?,
+        (None, None) => {
+            return Err(CliError::hint("no formula given", "pass a .brdf file, `-` for standard input, or --expr '…'"))
+        }
+    };
+    Ok(crate::front::parse(&name, &src)?)
+}
+
+/// Loads a formula and compiles it with `--set` values baked in.
+pub fn load_kernel(path: Option<&str>, expr: Option<&str>, set: &[(String, f64)], backend: Backend) -> Result<Kernel, CliError> {
+    let f = load_formula(path, expr)?;
+    let opts = Options { backend, bake: set.to_vec(), ..Options::default() };
+    Ok(crate::compile_formula(f, &opts)?)
+}
+
+/// Parses `name=value,name=value` (also accepts repeated flags joined by the caller).
+pub fn parse_assignments(s: &str) -> Result<Vec<(String, f64)>, String> {
+    let mut out = Vec::new();
+    for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        let (k, v) = part
+            .split_once('=')
+            .ok_or_else(|| format!("`{part}` is not of the form name=value (e.g. n=50)"))?;
+        let k = k.trim();
+        if k.is_empty() || !k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+            return Err(format!("`{k}` is not a valid name in `{part}`"));
+        }
+        let v: f64 = v.trim().parse().map_err(|_| format!("`{}` is not a number in `{part}`", v.trim()))?;
+        if !v.is_finite() {
+            return Err(format!("`{part}`: the value must be finite"));
+        }
+        out.push((k.to_string(), v));
+    }
+    Ok(out)
+}
+
+/// Parameter values for a kernel: defaults, overridden by `set` (names already checked by compilation).
+pub fn param_values(f: &Formula, set: &[(String, f64)]) -> Vec<f64> {
+    let mut p = f.default_params();
+    for (k, v) in set {
+        if let Some(i) = f.param_index(k) {
+            p[i] = *v;
+        }
+    }
+    p
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn assignments_parse_and_reject() {
+        assert_eq!(parse_assignments("n=200, a=16").unwrap(), vec![("n".into(), 200.0), ("a".into(), 16.0)]);
+        assert!(parse_assignments("n").is_err());
+        assert!(parse_assignments("n=abc").is_err());
+        assert!(parse_assignments("n=inf").is_err());
+    }
+
+    #[test]
+    fn binary_input_is_refused() {
+        assert!(source_from_bytes("x", vec![0xff, 0xfe, 0x00]).is_err());
+        assert!(source_from_bytes("x", b"NH\0".to_vec()).is_err());
+    }
+}

@@ -1,0 +1,7 @@
+//! Command-line plumbing shared by the subcommands: reading sources, `--set`/`--at` lists, errors.
+//!
+//! Each subcommand lives in its own file as a clap `Args` struct and a `run` function that calls library
+//! code; no numerical or rendering logic lives here.
+
+pub mod common;
+pub mod eval;

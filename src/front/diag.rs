@@ -1,0 +1,127 @@
+//! Diagnostics: span-carrying errors rendered once, with carets, at the user's own source.
+//!
+//! Every stage that can reject user input (the front end, `--set` overrides, scene files) produces
+//! [`Diagnostic`]s; [`Diagnostics::render`] turns them into `file:line:col` text with the offending source
+//! underlined (codespan-reporting), which the CLI prints and the snapshot tests compare whole.
+
+use super::span::Span;
+use codespan_reporting::diagnostic::{Diagnostic as CsDiag, Label};
+use codespan_reporting::files::SimpleFile;
+use codespan_reporting::term::{self, termcolor::Buffer};
+use std::fmt;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Severity {
+    Error,
+    Warning,
+}
+
+/// One message about the source, with a primary span, optional secondary spans, and hints.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Diagnostic {
+    pub severity: Severity,
+    pub message: String,
+    /// The main location and its label (what is wrong *here*).
+    pub primary: Option<(Span, String)>,
+    /// Related locations ("parenthesis opened here").
+    pub secondary: Vec<(Span, String)>,
+    /// "help: …" lines.
+    pub hints: Vec<String>,
+}
+
+impl Diagnostic {
+    pub fn error(message: impl Into<String>) -> Diagnostic {
+        Diagnostic { severity: Severity::Error, message: message.into(), primary: None, secondary: vec![], hints: vec![] }
+    }
+    pub fn warning(message: impl Into<String>) -> Diagnostic {
+        Diagnostic { severity: Severity::Warning, ..Diagnostic::error(message) }
+    }
+    pub fn at(mut self, span: Span, label: impl Into<String>) -> Diagnostic {
+        self.primary = Some((span, label.into()));
+        self
+    }
+    pub fn also(mut self, span: Span, label: impl Into<String>) -> Diagnostic {
+        self.secondary.push((span, label.into()));
+        self
+    }
+    pub fn hint(mut self, h: impl Into<String>) -> Diagnostic {
+        self.hints.push(h.into());
+        self
+    }
+}
+
+/// All diagnostics for one source file.
+#[derive(Clone, Debug)]
+pub struct Diagnostics {
+    pub file: String,
+    pub source: String,
+    pub items: Vec<Diagnostic>,
+}
+
+impl Diagnostics {
+    pub fn new(file: impl Into<String>, source: impl Into<String>) -> Diagnostics {
+        Diagnostics { file: file.into(), source: source.into(), items: vec![] }
+    }
+    /// A single error that has no useful location (an unreadable file, say).
+    pub fn single(file: impl Into<String>, d: Diagnostic) -> Diagnostics {
+        let mut ds = Diagnostics::new(file, "");
+        ds.push(d);
+        ds
+    }
+    pub fn push(&mut self, d: Diagnostic) {
+        self.items.push(d);
+    }
+    pub fn has_errors(&self) -> bool {
+        self.items.iter().any(|d| d.severity == Severity::Error)
+    }
+    pub fn errors(&self) -> impl Iterator<Item = &Diagnostic> {
+        self.items.iter().filter(|d| d.severity == Severity::Error)
+    }
+
+    /// Renders every diagnostic as `error: …` followed by `┌─ file:line:col` and the underlined source.
+    pub fn render(&self, color: bool) -> String {
+        let file = SimpleFile::new(self.file.as_str(), self.source.as_str());
+        let mut buf = if color { Buffer::ansi() } else { Buffer::no_color() };
+        let config = term::Config::default();
+        let len = self.source.len();
+        for d in &self.items {
+            let mut cs = match d.severity {
+                Severity::Error => CsDiag::error(),
+                Severity::Warning => CsDiag::warning(),
+            }
+            .with_message(&d.message);
+            let clip = |s: Span| {
+                let a = (s.start as usize).min(len);
+                let b = (s.end as usize).clamp(a, len);
+                a..b
+            };
+            let mut labels = vec![];
+            if let Some((s, l)) = &d.primary {
+                labels.push(Label::primary((), clip(*s)).with_message(l));
+            }
+            for (s, l) in &d.secondary {
+                labels.push(Label::secondary((), clip(*s)).with_message(l));
+            }
+            cs = cs.with_labels(labels);
+            let mut notes: Vec<String> = d.hints.iter().map(|h| format!("help: {h}")).collect();
+            if d.primary.is_none() && !self.file.is_empty() {
+                notes.insert(0, format!("in {}", self.file));
+            }
+            cs = cs.with_notes(notes);
+            // Writing to an in-memory buffer cannot fail except on a span bug; fall back to plain text.
+            if term::emit(&mut buf, &config, &file, &cs).is_err() {
+                use std::io::Write;
+                let _ = writeln!(buf, "error: {}", d.message);
+            }
+        }
+        String::from_utf8_lossy(buf.as_slice()).into_owned()
+    }
+}
+
+impl fmt::Display for Diagnostics {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.render(false))
+    }
+}
+
+impl std::error::Error for Diagnostics {}

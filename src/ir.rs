@@ -1,0 +1,513 @@
+//! The resolved expression every backend consumes.
+//!
+//! Design: a hash-consed arena. Nodes live in a `Vec` in topological order (every operand has a smaller
+//! index than its user), so the interpreter is one forward loop, the JIT emits one Cranelift value per node in
+//! order, and the GLSL export writes one `float tN = …;` per shared node. Pushing a node that already exists
+//! returns the existing id, so common subexpressions are shared by construction (`acos(NH)` written twice is
+//! one node). Every node carries the byte span of the source text it came from, so later stages (the
+//! stability sweep, the simplifier's notes) can point at the user's text.
+//!
+//! Semantics (the interpreter in `interp.rs` is the reference):
+//! - all arithmetic is IEEE f64; `Div` by zero gives ±inf or NaN as IEEE says;
+//! - `min`/`max`/`clamp` propagate NaN (IEEE 754-2019 minimum/maximum, as Cranelift's `fmin`/`fmax`), and
+//!   order −0 below +0, so the JIT and the interpreter agree bit for bit;
+//! - the domain policy (inputs clamped to [0, 1], acos/asin arguments clamped to [−1, 1], the result clamped
+//!   at 0) is written into the IR by the lowering, not hidden in a backend, so every backend obeys it.
+
+use crate::builtins::Builtin;
+use crate::front::span::Span;
+use std::collections::HashMap;
+use std::fmt;
+
+/// Index of a node in an [`Ir`] arena.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct NodeId(pub u32);
+
+impl NodeId {
+    pub fn index(self) -> usize {
+        self.0 as usize
+    }
+}
+
+/// The geometric inputs of a BRDF: cosines between unit vectors.
+///
+/// VH (view·half, equal to LH) is an input because Cook–Torrance's geometry term needs it and it cannot be
+/// recovered from the other four without the full vectors.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Input {
+    NL,
+    NV,
+    NH,
+    VR,
+    VH,
+}
+
+/// Number of geometric inputs; kernels take them as `[f64; N_INPUTS]` in [`Input::ALL`] order.
+pub const N_INPUTS: usize = 5;
+
+impl Input {
+    pub const ALL: [Input; N_INPUTS] = [Input::NL, Input::NV, Input::NH, Input::VR, Input::VH];
+
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Input::NL => "NL",
+            Input::NV => "NV",
+            Input::NH => "NH",
+            Input::VR => "VR",
+            Input::VH => "VH",
+        }
+    }
+
+    pub fn from_name(s: &str) -> Option<Input> {
+        Input::ALL.iter().copied().find(|i| i.name() == s)
+    }
+
+    /// What the input means, for hints and reports.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Input::NL => "cosine between the normal and the light direction",
+            Input::NV => "cosine between the normal and the view direction",
+            Input::NH => "cosine between the normal and the half vector H = norm(L + V)",
+            Input::VR => "cosine between the view direction and the mirrored light R = 2(N·L)N − L",
+            Input::VH => "cosine between the view direction and the half vector (equals L·H)",
+        }
+    }
+}
+
+/// A set of inputs, as a bit mask; what a formula reads, so callers skip computing the rest.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub struct InputSet(pub u8);
+
+impl InputSet {
+    pub fn contains(self, i: Input) -> bool {
+        self.0 & (1 << i.index()) != 0
+    }
+    pub fn insert(&mut self, i: Input) {
+        self.0 |= 1 << i.index();
+    }
+    pub fn iter(self) -> impl Iterator<Item = Input> {
+        Input::ALL.into_iter().filter(move |i| self.contains(*i))
+    }
+    pub fn len(self) -> usize {
+        self.0.count_ones() as usize
+    }
+    pub fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+}
+
+impl fmt::Display for InputSet {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let names: Vec<_> = self.iter().map(|i| i.name()).collect();
+        write!(f, "{}", names.join(", "))
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum BinOp {
+    Add,
+    Sub,
+    Mul,
+    Div,
+}
+
+impl BinOp {
+    pub fn symbol(self) -> &'static str {
+        match self {
+            BinOp::Add => "+",
+            BinOp::Sub => "-",
+            BinOp::Mul => "*",
+            BinOp::Div => "/",
+        }
+    }
+    pub fn apply(self, a: f64, b: f64) -> f64 {
+        match self {
+            BinOp::Add => a + b,
+            BinOp::Sub => a - b,
+            BinOp::Mul => a * b,
+            BinOp::Div => a / b,
+        }
+    }
+}
+
+/// One operation. Constants are stored as bit patterns so nodes can be hashed (and so −0 and +0, or two NaN
+/// payloads, are distinct constants, as they are to IEEE).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Node {
+    Const(u64),
+    Input(Input),
+    /// Index into [`Formula::params`].
+    Param(u16),
+    Neg(NodeId),
+    Binary(BinOp, NodeId, NodeId),
+    /// A builtin from the one table; unused argument slots hold the first argument and are ignored.
+    Call(Builtin, [NodeId; 3]),
+}
+
+impl Node {
+    pub fn constant(v: f64) -> Node {
+        Node::Const(v.to_bits())
+    }
+
+    pub fn as_const(&self) -> Option<f64> {
+        match self {
+            Node::Const(b) => Some(f64::from_bits(*b)),
+            _ => None,
+        }
+    }
+
+    /// Calls `f` on every operand, in order.
+    pub fn for_each_arg(&self, mut f: impl FnMut(NodeId)) {
+        match self {
+            Node::Const(_) | Node::Input(_) | Node::Param(_) => {}
+            Node::Neg(a) => f(*a),
+            Node::Binary(_, a, b) => {
+                f(*a);
+                f(*b);
+            }
+            Node::Call(b, args) => args[..b.arity()].iter().for_each(|a| f(*a)),
+        }
+    }
+
+    /// The same node with every operand mapped through `m`.
+    pub fn map_args(&self, mut m: impl FnMut(NodeId) -> NodeId) -> Node {
+        match *self {
+            Node::Const(_) | Node::Input(_) | Node::Param(_) => *self,
+            Node::Neg(a) => Node::Neg(m(a)),
+            Node::Binary(op, a, b) => Node::Binary(op, m(a), m(b)),
+            Node::Call(f, args) => {
+                let mut out = args;
+                for (i, a) in args.iter().enumerate().take(f.arity()) {
+                    out[i] = m(*a);
+                }
+                // Unused slots mirror the first argument so that equal calls hash equally.
+                for i in f.arity()..3 {
+                    out[i] = out[0];
+                }
+                Node::Call(f, out)
+            }
+        }
+    }
+}
+
+/// A hash-consed expression arena; see the module docs.
+#[derive(Clone, Debug, Default)]
+pub struct Ir {
+    nodes: Vec<Node>,
+    spans: Vec<Span>,
+    intern: HashMap<Node, NodeId>,
+}
+
+impl Ir {
+    pub fn new() -> Ir {
+        Ir::default()
+    }
+
+    /// Adds `node` (whose operands must already be in the arena) or returns the identical existing node.
+    pub fn push(&mut self, node: Node, span: Span) -> NodeId {
+        if let Some(&id) = self.intern.get(&node) {
+            return id;
+        }
+        let id = NodeId(self.nodes.len() as u32);
+        node.for_each_arg(|a| debug_assert!(a < id, "IR operands must precede their users"));
+        self.nodes.push(node);
+        self.spans.push(span);
+        self.intern.insert(node, id);
+        id
+    }
+
+    pub fn konst(&mut self, v: f64, span: Span) -> NodeId {
+        self.push(Node::constant(v), span)
+    }
+    pub fn input(&mut self, i: Input, span: Span) -> NodeId {
+        self.push(Node::Input(i), span)
+    }
+    pub fn param(&mut self, p: u16, span: Span) -> NodeId {
+        self.push(Node::Param(p), span)
+    }
+    pub fn neg(&mut self, a: NodeId, span: Span) -> NodeId {
+        self.push(Node::Neg(a), span)
+    }
+    pub fn bin(&mut self, op: BinOp, a: NodeId, b: NodeId, span: Span) -> NodeId {
+        self.push(Node::Binary(op, a, b), span)
+    }
+    pub fn call(&mut self, f: Builtin, args: &[NodeId], span: Span) -> NodeId {
+        assert_eq!(args.len(), f.arity(), "arity is checked by the front end before lowering");
+        let mut a = [args[0]; 3];
+        a[..args.len()].copy_from_slice(args);
+        self.push(Node::Call(f, a), span)
+    }
+
+    pub fn node(&self, id: NodeId) -> &Node {
+        &self.nodes[id.index()]
+    }
+    pub fn span(&self, id: NodeId) -> Span {
+        self.spans[id.index()]
+    }
+    pub fn nodes(&self) -> &[Node] {
+        &self.nodes
+    }
+    pub fn len(&self) -> usize {
+        self.nodes.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.nodes.is_empty()
+    }
+    pub fn ids(&self) -> impl Iterator<Item = NodeId> {
+        (0..self.nodes.len() as u32).map(NodeId)
+    }
+
+    /// Copies the nodes reachable from `root` into a fresh arena (dropping dead nodes, renumbering in
+    /// topological order); returns the arena and the new root.
+    pub fn compact(&self, root: NodeId) -> (Ir, NodeId) {
+        let mut live = vec![false; self.nodes.len()];
+        live[root.index()] = true;
+        for i in (0..=root.index()).rev() {
+            if live[i] {
+                self.nodes[i].for_each_arg(|a| live[a.index()] = true);
+            }
+        }
+        let mut out = Ir::new();
+        let mut map = vec![NodeId(u32::MAX); self.nodes.len()];
+        for i in 0..=root.index() {
+            if live[i] {
+                let n = self.nodes[i].map_args(|a| map[a.index()]);
+                map[i] = out.push(n, self.spans[i]);
+            }
+        }
+        let r = map[root.index()];
+        (out, r)
+    }
+
+    /// Inputs read by the expression rooted at `root`.
+    pub fn used_inputs(&self, root: NodeId) -> InputSet {
+        let mut set = InputSet::default();
+        self.walk(root, |n| {
+            if let Node::Input(i) = n {
+                set.insert(*i)
+            }
+        });
+        set
+    }
+
+    /// Parameters read by the expression rooted at `root` (indices into `Formula::params`).
+    pub fn used_params(&self, root: NodeId) -> Vec<u16> {
+        let mut v = Vec::new();
+        self.walk(root, |n| {
+            if let Node::Param(p) = n {
+                v.push(*p)
+            }
+        });
+        v.sort_unstable();
+        v.dedup();
+        v
+    }
+
+    /// Visits every node reachable from `root` once.
+    pub fn walk(&self, root: NodeId, mut f: impl FnMut(&Node)) {
+        let mut seen = vec![false; root.index() + 1];
+        seen[root.index()] = true;
+        for i in (0..=root.index()).rev() {
+            if seen[i] {
+                let n = &self.nodes[i];
+                n.for_each_arg(|a| seen[a.index()] = true);
+                f(n);
+            }
+        }
+    }
+
+    /// How many times each node is used as an operand within the graph rooted at `root` (the root counts 1).
+    pub fn use_counts(&self, root: NodeId) -> Vec<u32> {
+        let mut counts = vec![0u32; self.nodes.len()];
+        let mut seen = vec![false; self.nodes.len()];
+        counts[root.index()] = 1;
+        seen[root.index()] = true;
+        for i in (0..=root.index()).rev() {
+            if seen[i] {
+                self.nodes[i].for_each_arg(|a| {
+                    counts[a.index()] += 1;
+                    seen[a.index()] = true;
+                });
+            }
+        }
+        counts
+    }
+}
+
+/// A declared parameter: `param NAME = DEFAULT in LO..HI`. `n` is always parameter 0.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParamDecl {
+    pub name: String,
+    pub default: f64,
+    pub lo: f64,
+    pub hi: f64,
+    /// Where it was declared; `None` for the implicit `n`.
+    pub span: Option<Span>,
+}
+
+/// Display metadata from `@name "…"` and `@cite "…"` lines.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Meta {
+    pub name: Option<String>,
+    pub citation: Option<String>,
+}
+
+/// A whole lowered .brdf file: what every stage after the front end consumes.
+#[derive(Clone, Debug)]
+pub struct Formula {
+    pub meta: Meta,
+    pub params: Vec<ParamDecl>,
+    pub ir: Ir,
+    pub root: NodeId,
+    /// File name for diagnostics and reports.
+    pub file: String,
+    /// The source text, kept so later stages can quote it.
+    pub source: String,
+}
+
+impl Formula {
+    /// Default parameter values, in declaration order.
+    pub fn default_params(&self) -> Vec<f64> {
+        self.params.iter().map(|p| p.default).collect()
+    }
+
+    pub fn param_index(&self, name: &str) -> Option<usize> {
+        self.params.iter().position(|p| p.name == name)
+    }
+
+    pub fn used_inputs(&self) -> InputSet {
+        self.ir.used_inputs(self.root)
+    }
+
+    /// A display name: the `@name` metadata, else the file stem.
+    pub fn display_name(&self) -> String {
+        if let Some(n) = &self.meta.name {
+            return n.clone();
+        }
+        std::path::Path::new(&self.file)
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| self.file.clone())
+    }
+
+    /// The expression as text with the usual precedence (shared nodes are printed inline).
+    pub fn to_text(&self) -> String {
+        crate::ir::print::expr(self, self.root)
+    }
+}
+
+pub mod print {
+    //! Pretty printer: the simplified formula as `lobe check` shows it.
+    use super::*;
+
+    fn prec(n: &Node) -> u8 {
+        match n {
+            Node::Binary(BinOp::Add | BinOp::Sub, ..) => 1,
+            Node::Binary(BinOp::Mul | BinOp::Div, ..) => 2,
+            Node::Neg(_) => 3,
+            Node::Const(b) if f64::from_bits(*b) < 0.0 => 3,
+            _ => 4,
+        }
+    }
+
+    pub fn number(v: f64) -> String {
+        if v.is_nan() {
+            return "nan".into();
+        }
+        if v.is_infinite() {
+            return if v > 0.0 { "inf".into() } else { "-inf".into() };
+        }
+        if v == std::f64::consts::PI {
+            return "pi".into();
+        }
+        let s = format!("{v}");
+        if s.len() > 18 {
+            format!("{v:e}")
+        } else {
+            s
+        }
+    }
+
+    pub fn expr(f: &Formula, id: NodeId) -> String {
+        let mut out = String::new();
+        write(f, id, &mut out);
+        out
+    }
+
+    fn write(f: &Formula, id: NodeId, out: &mut String) {
+        let n = f.ir.node(id);
+        let child = |c: NodeId, min: u8, out: &mut String| {
+            let cn = f.ir.node(c);
+            if prec(cn) < min {
+                out.push('(');
+                write(f, c, out);
+                out.push(')');
+            } else {
+                write(f, c, out);
+            }
+        };
+        match n {
+            Node::Const(b) => out.push_str(&number(f64::from_bits(*b))),
+            Node::Input(i) => out.push_str(i.name()),
+            Node::Param(p) => out.push_str(&f.params[*p as usize].name),
+            Node::Neg(a) => {
+                out.push('-');
+                child(*a, 3, out);
+            }
+            Node::Binary(op, a, b) => {
+                let p = prec(n);
+                child(*a, p, out);
+                out.push(' ');
+                out.push_str(op.symbol());
+                out.push(' ');
+                // Right operand of - and / needs parentheses at equal precedence.
+                let rmin = if matches!(op, BinOp::Sub | BinOp::Div) { p + 1 } else { p };
+                child(*b, rmin, out);
+            }
+            Node::Call(b, args) => {
+                out.push_str(b.name());
+                out.push('(');
+                for (k, a) in args[..b.arity()].iter().enumerate() {
+                    if k > 0 {
+                        out.push_str(", ");
+                    }
+                    write(f, *a, out);
+                }
+                out.push(')');
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hash_consing_shares_equal_nodes() {
+        let mut ir = Ir::new();
+        let s = Span::default();
+        let nh = ir.input(Input::NH, s);
+        let a = ir.call(Builtin::Acos, &[nh], s);
+        let b = ir.call(Builtin::Acos, &[nh], s);
+        assert_eq!(a, b);
+        assert_eq!(ir.len(), 2);
+    }
+
+    #[test]
+    fn compact_drops_dead_nodes() {
+        let mut ir = Ir::new();
+        let s = Span::default();
+        let nh = ir.input(Input::NH, s);
+        let _dead = ir.input(Input::NL, s);
+        let two = ir.konst(2.0, s);
+        let root = ir.bin(BinOp::Mul, two, nh, s);
+        let (c, r) = ir.compact(root);
+        assert_eq!(c.len(), 3);
+        assert_eq!(c.used_inputs(r).iter().collect::<Vec<_>>(), vec![Input::NH]);
+    }
+}

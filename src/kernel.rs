@@ -1,0 +1,132 @@
+//! What the renderer and the numerical checks call: a compiled formula behind one interface.
+//!
+//! A [`Kernel`] owns the simplified [`Formula`] and an [`Evaluator`] (the interpreter or JIT code). Inputs are
+//! passed as `[f64; N_INPUTS]` in [`Input::ALL`] order (NL, NV, NH, VR, VH) and parameters as a slice in
+//! declaration order (`n` first). Baked parameters are already constants in the IR; their slots in the slice
+//! are ignored, so callers can always pass the full parameter vector.
+//!
+//! The checks are written against [`Evaluator`], not `Kernel`, so they can also run on a plain Rust closure
+//! (the hand-written twins used in tests and benches).
+
+use crate::ir::{Formula, Input, InputSet, N_INPUTS};
+use std::sync::Arc;
+use std::time::Duration;
+
+/// Structure-of-arrays inputs for a batch: one column per input, in [`Input::ALL`] order. Columns of inputs the
+/// formula does not read may be empty; the others must all have the length of the output.
+#[derive(Clone, Copy, Debug)]
+pub struct Columns<'a> {
+    pub cols: [&'a [f64]; N_INPUTS],
+}
+
+impl<'a> Columns<'a> {
+    pub fn new(cols: [&'a [f64]; N_INPUTS]) -> Columns<'a> {
+        Columns { cols }
+    }
+    pub fn col(&self, i: Input) -> &'a [f64] {
+        self.cols[i.index()]
+    }
+}
+
+/// Anything that evaluates a BRDF: the interpreter, JIT code, or a Rust closure.
+pub trait Evaluator: Send + Sync {
+    /// One evaluation. `x` holds the cosines (NL, NV, NH, VR, VH), `params` the parameter values.
+    fn eval(&self, x: &[f64; N_INPUTS], params: &[f64]) -> f64;
+
+    /// A batch: `out[i] = f(cols[..][i])`. The default loops over [`Evaluator::eval`].
+    fn eval_batch(&self, cols: &Columns, params: &[f64], out: &mut [f64]) {
+        let mut x = [0.0; N_INPUTS];
+        for (i, o) in out.iter_mut().enumerate() {
+            for (k, c) in cols.cols.iter().enumerate() {
+                x[k] = c.get(i).copied().unwrap_or(0.0);
+            }
+            *o = self.eval(&x, params);
+        }
+    }
+}
+
+/// A Rust closure as an evaluator (hand-written twins in tests and benches).
+pub struct FnEvaluator<F>(pub F);
+
+impl<F: Fn(&[f64; N_INPUTS], &[f64]) -> f64 + Send + Sync> Evaluator for FnEvaluator<F> {
+    fn eval(&self, x: &[f64; N_INPUTS], params: &[f64]) -> f64 {
+        (self.0)(x, params)
+    }
+}
+
+/// Which backend evaluates a kernel.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Backend {
+    Interp,
+    #[default]
+    Jit,
+}
+
+impl Backend {
+    pub fn name(self) -> &'static str {
+        match self {
+            Backend::Interp => "interp",
+            Backend::Jit => "jit",
+        }
+    }
+}
+
+impl std::str::FromStr for Backend {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Backend, String> {
+        match s {
+            "interp" | "interpreter" => Ok(Backend::Interp),
+            "jit" => Ok(Backend::Jit),
+            _ => Err(format!("unknown backend `{s}`; expected `jit` or `interp`")),
+        }
+    }
+}
+
+/// A simplified formula with its evaluator.
+#[derive(Clone)]
+pub struct Kernel {
+    pub formula: Arc<Formula>,
+    pub backend: Backend,
+    evaluator: Arc<dyn Evaluator>,
+    /// Code generation time (zero for the interpreter beyond its flattening).
+    pub compile_time: Duration,
+}
+
+impl Kernel {
+    pub fn new(formula: Arc<Formula>, backend: Backend, evaluator: Arc<dyn Evaluator>, compile_time: Duration) -> Kernel {
+        Kernel { formula, backend, evaluator, compile_time }
+    }
+
+    /// Inputs the formula reads; the renderer computes only these.
+    pub fn used_inputs(&self) -> InputSet {
+        self.formula.used_inputs()
+    }
+
+    /// Default parameter values (declaration order).
+    pub fn default_params(&self) -> Vec<f64> {
+        self.formula.default_params()
+    }
+
+    pub fn evaluator(&self) -> &Arc<dyn Evaluator> {
+        &self.evaluator
+    }
+}
+
+impl Evaluator for Kernel {
+    fn eval(&self, x: &[f64; N_INPUTS], params: &[f64]) -> f64 {
+        self.evaluator.eval(x, params)
+    }
+    fn eval_batch(&self, cols: &Columns, params: &[f64], out: &mut [f64]) {
+        self.evaluator.eval_batch(cols, params, out)
+    }
+}
+
+impl std::fmt::Debug for Kernel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Kernel")
+            .field("formula", &self.formula.to_text())
+            .field("backend", &self.backend)
+            .field("compile_time", &self.compile_time)
+            .finish()
+    }
+}

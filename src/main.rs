@@ -1,0 +1,30 @@
+//! The `lobe` command: clap subcommands only; each one's logic lives in the library.
+
+use clap::{Parser, Subcommand};
+use lobe::cli;
+use std::io::IsTerminal;
+
+#[derive(Parser)]
+#[command(name = "lobe", version, about = "Compile, check, benchmark and render BRDF formulas", long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Evaluate a formula at one point.
+    Eval(cli::eval::EvalArgs),
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match &cli.cmd {
+        Cmd::Eval(a) => cli::eval::run(a),
+    };
+    if let Err(e) = result {
+        let color = std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none();
+        eprint!("{}", e.render(color));
+        std::process::exit(e.exit_code());
+    }
+}

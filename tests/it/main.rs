@@ -1,0 +1,1 @@
+//! lobe's integration tests: one binary, one module per area.
