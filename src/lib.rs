@@ -18,6 +18,7 @@ pub mod front;
 pub mod interp;
 pub mod ir;
 pub mod kernel;
+pub mod report;
 pub mod simplify;
 
 pub use front::diag::{Diagnostic, Diagnostics};

@@ -15,12 +15,15 @@ struct Cli {
 enum Cmd {
     /// Evaluate a formula at one point.
     Eval(cli::eval::EvalArgs),
+    /// Export a formula as a GLSL or WGSL function.
+    Export(cli::export::ExportArgs),
 }
 
 fn main() {
     let cli = Cli::parse();
     let result = match &cli.cmd {
         Cmd::Eval(a) => cli::eval::run(a),
+        Cmd::Export(a) => cli::export::run(a),
     };
     if let Err(e) = result {
         let color = std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none();

@@ -171,3 +171,47 @@ mod tests {
         assert!(source_from_bytes("x", b"NH\0".to_vec()).is_err());
     }
 }
+
+/// Writes an output file the way every lobe command does: to a temporary file in the same directory, then
+/// renamed over the target, so a failure never leaves a half-written or truncated file at the user's path.
+/// An existing file is replaced only if `force` is set or `is_ours` recognises it as something lobe wrote
+/// earlier (a PNG with lobe's tEXt chunk, an export with lobe's header): nothing the user wrote is clobbered
+/// without asking.
+pub fn write_output(path: &std::path::Path, bytes: &[u8], force: bool, is_ours: fn(&[u8]) -> bool) -> Result<(), CliError> {
+    use std::io::Write;
+    if path.is_dir() {
+        return Err(CliError::hint(format!("`{}` is a directory", path.display()), "give a file name, e.g. out.png"));
+    }
+    if path.exists() && !force {
+        let existing = std::fs::read(path).unwrap_or_default();
+        if !is_ours(&existing) {
+            return Err(CliError::hint(
+                format!("`{}` exists and was not written by lobe; not overwriting it", path.display()),
+                "choose another output path, or pass --force to replace it",
+            ));
+        }
+    }
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => std::path::PathBuf::from("."),
+    };
+    if !dir.is_dir() {
+        return Err(CliError::hint(
+            format!("cannot write `{}`: directory `{}` does not exist", path.display(), dir.display()),
+            "create the directory first",
+        ));
+    }
+    let file_name = path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
+    let tmp = dir.join(format!(".{file_name}.lobe-{}.tmp", std::process::id()));
+    let result = (|| -> std::io::Result<()> {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(CliError::msg(format!("cannot write `{}`: {e}", path.display())));
+    }
+    Ok(())
+}

@@ -1,0 +1,3 @@
+//! Reports for people and other tools: shader export (and, later, bench tables and plots).
+
+pub mod glsl;
