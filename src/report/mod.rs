@@ -1,3 +1,4 @@
 //! Reports for people and other tools: shader export (and, later, bench tables and plots).
 
 pub mod glsl;
+pub mod plot;

@@ -1,3 +1,4 @@
 //! lobe's integration tests: one binary, one module per area.
 mod catalogue;
 mod export;
+mod cli;

@@ -1,0 +1,102 @@
+//! The `lobe` binary end to end: bad input of every kind ends in a clear message and exit code 1 (2 for clap
+//! usage errors) — never a panic, a hang, or a stack overflow — and good input prints what the README says.
+
+use std::io::Write;
+use std::process::{Command, Output, Stdio};
+
+fn lobe(args: &[&str], stdin: Option<&[u8]>) -> Output {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_lobe"));
+    c.args(args).current_dir(env!("CARGO_MANIFEST_DIR")).env("NO_COLOR", "1");
+    c.stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped());
+    let mut child = c.spawn().expect("spawn lobe");
+    if let Some(input) = stdin {
+        // The child may exit before reading everything (e.g. on an oversized input); that is fine.
+        let _ = child.stdin.take().unwrap().write_all(input);
+    } else {
+        drop(child.stdin.take());
+    }
+    child.wait_with_output().unwrap()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Asserts a clean failure: exit code 1 and an `error:` line, no panic or signal.
+fn assert_clean_error(o: &Output, what: &str, needle: &str) {
+    let e = stderr(o);
+    assert_eq!(o.status.code(), Some(1), "{what}: exit status {:?}, stderr:\n{e}", o.status);
+    assert!(!e.contains("panicked") && !e.contains("RUST_BACKTRACE"), "{what} panicked:\n{e}");
+    assert!(e.contains("error"), "{what}: no error message:\n{e}");
+    assert!(e.contains(needle), "{what}: expected `{needle}` in:\n{e}");
+}
+
+#[test]
+fn eval_prints_the_value_and_json() {
+    let o = lobe(&["eval", "examples/brdfs/blinn.brdf", "--set", "n=2", "--at", "NH=0.5"], None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(String::from_utf8_lossy(&o.stdout).trim(), "0.25");
+    for backend in ["jit", "interp"] {
+        let o = lobe(&["eval", "--expr", "NH^n", "--set", "n=3", "--at", "NH=0.5", "--json", "--backend", backend], None);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(v["value"], serde_json::json!(0.125));
+    }
+    let o = lobe(&["eval", "-", "--at", "VR=0.5", "--set", "n=1"], Some(b"VR^n\n"));
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(String::from_utf8_lossy(&o.stdout).trim(), "0.5");
+}
+
+#[test]
+fn bad_input_of_every_kind_fails_cleanly() {
+    let dir = std::env::temp_dir().join(format!("lobe-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let write = |name: &str, bytes: &[u8]| {
+        let p = dir.join(name);
+        std::fs::write(&p, bytes).unwrap();
+        p.display().to_string()
+    };
+    let empty = write("empty.brdf", b"");
+    assert_clean_error(&lobe(&["eval", &empty], None), "empty file", "no formula");
+    let garbage: Vec<u8> = (0..4096u32).map(|i| (i.wrapping_mul(2654435761) >> 24) as u8).collect();
+    let bin = write("garbage.brdf", &garbage);
+    assert_clean_error(&lobe(&["eval", &bin], None), "binary garbage", "garbage.brdf");
+    let deep = write("deep.brdf", &[b"(".repeat(100_000), b"NH".to_vec(), b")".repeat(100_000)].concat());
+    assert_clean_error(&lobe(&["eval", &deep], None), "100 000-deep nesting", "deep");
+    let mut big = b"NH".to_vec();
+    while big.len() < 10 << 20 {
+        big.extend_from_slice(b"+NH");
+    }
+    let big_path = write("big.brdf", &big);
+    assert_clean_error(&lobe(&["eval", &big_path], None), "10 MB formula", "big.brdf");
+    assert_clean_error(&lobe(&["eval", "-"], Some(&big)), "10 MB formula on stdin", "stdin");
+    assert_clean_error(&lobe(&["eval", "no/such/file.brdf"], None), "missing file", "no/such/file.brdf");
+    assert_clean_error(&lobe(&["eval", "--expr", "NX^n"], None), "unknown variable", "NX");
+    assert_clean_error(&lobe(&["eval", "examples/brdfs/blinn.brdf", "--set", "q=3"], None), "unknown param", "q");
+    assert_clean_error(&lobe(&["eval", "examples/brdfs/blinn.brdf", "--set", "n=5000"], None), "n out of range", "5000");
+    assert_clean_error(&lobe(&["eval", "examples/brdfs/blinn.brdf", "--at", "NZ=1"], None), "unknown input", "NZ");
+    let o = lobe(&["eval", "examples/brdfs/blinn.brdf", "--no-such-flag"], None);
+    assert_eq!(o.status.code(), Some(2), "unknown flag: {}", stderr(&o));
+    assert!(stderr(&o).contains("--no-such-flag"));
+    let o = lobe(&["frobnicate"], None);
+    assert_eq!(o.status.code(), Some(2));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn export_refuses_to_clobber_a_file_it_did_not_write() {
+    let dir = std::env::temp_dir().join(format!("lobe-export-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let target = dir.join("mine.glsl");
+    std::fs::write(&target, "// my own shader, hands off\n").unwrap();
+    let t = target.display().to_string();
+    let o = lobe(&["export", "--glsl", "examples/brdfs/blinn.brdf", "-o", &t], None);
+    assert_clean_error(&o, "clobber", "not overwriting");
+    assert_eq!(std::fs::read_to_string(&target).unwrap(), "// my own shader, hands off\n");
+    let fresh = dir.join("new.glsl").display().to_string();
+    assert!(lobe(&["export", "--glsl", "examples/brdfs/blinn.brdf", "-o", &fresh], None).status.success());
+    // lobe may replace its own output without --force.
+    assert!(lobe(&["export", "--wgsl", "examples/brdfs/blinn.brdf", "-o", &fresh], None).status.success());
+    assert!(std::fs::read_to_string(&fresh).unwrap().contains("fn lobe_blinn"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
