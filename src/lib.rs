@@ -20,6 +20,7 @@ pub mod ir;
 pub mod kernel;
 pub mod report;
 pub mod simplify;
+pub mod twins;
 
 pub use front::diag::{Diagnostic, Diagnostics};
 pub use ir::{Formula, Input, N_INPUTS};

@@ -1,0 +1,141 @@
+//! The speed-versus-error table of `lobe bench`: rows, the Pareto front, text and JSON output.
+//!
+//! A formula is on the Pareto front when no other formula is at least as fast *and* at least as accurate with
+//! one of the two strictly better. Speed is the scalar JIT's median ns/eval, error the mean |Δ| against the
+//! reference on the papers' 91 × 1000 grid; the reference itself (error 0) is on the front by definition, which
+//! is the honest answer: nothing beats it on accuracy.
+
+use serde::Serialize;
+
+/// One formula's measurements. Times are medians over repeated runs in this process; `*_spread` is the
+/// relative half-width between the 25th and 75th percentiles.
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchRow {
+    pub name: String,
+    pub file: String,
+    pub compile_us: f64,
+    pub jit_ns: f64,
+    pub jit_spread: f64,
+    pub jit_batch_ns: f64,
+    pub interp_ns: f64,
+    /// Hand-written Rust, where lobe has a built-in twin of the formula.
+    pub native_ns: Option<f64>,
+    pub mean_abs_grid: f64,
+    pub epicenter_max_rel_pct: f64,
+    pub max_abs: f64,
+    /// Normalisation coefficient at n = 50 (lobe mode).
+    pub coef_n50: Option<f64>,
+    /// Maximum hemispherical-directional albedo at n = 50 (unnormalised).
+    pub albedo_max: Option<f64>,
+    pub pareto: bool,
+}
+
+/// Marks `pareto` on every row (by `jit_ns` and `mean_abs_grid`).
+pub fn mark_pareto(rows: &mut [BenchRow]) {
+    let pts: Vec<(f64, f64)> = rows.iter().map(|r| (r.jit_ns, r.mean_abs_grid)).collect();
+    for (i, r) in rows.iter_mut().enumerate() {
+        let (c, e) = pts[i];
+        r.pareto = c.is_finite()
+            && e.is_finite()
+            && !pts.iter().enumerate().any(|(j, &(c2, e2))| j != i && c2 <= c && e2 <= e && (c2 < c || e2 < e));
+    }
+}
+
+/// What machine the numbers come from.
+pub fn machine() -> String {
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| s.lines().find(|l| l.starts_with("model name")).and_then(|l| l.split(':').nth(1)).map(|s| s.trim().to_string()))
+        .unwrap_or_else(|| std::env::consts::ARCH.to_string());
+    let threads = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
+    format!("{cpu}, {threads} hardware threads, {} {}", std::env::consts::OS, std::env::consts::ARCH)
+}
+
+fn fmt_opt(v: Option<f64>, prec: usize) -> String {
+    match v {
+        Some(x) if x.is_finite() => format!("{x:.prec$}"),
+        Some(_) => "nan".into(),
+        None => "—".into(),
+    }
+}
+
+/// The table, sorted by cost, Pareto rows marked with `*`.
+pub fn table(rows: &[BenchRow]) -> String {
+    let mut rows: Vec<&BenchRow> = rows.iter().collect();
+    rows.sort_by(|a, b| a.jit_ns.total_cmp(&b.jit_ns));
+    let mut out = String::new();
+    out.push_str(&format!(
+        "{:<2}{:<28} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>11} {:>9} {:>9} {:>8} {:>8}\n",
+        "", "formula", "compile", "jit ns", "batch ns", "interp", "rust ns", "interp/", "mean |Δ|", "epic. %", "max |Δ|", "coef50", "albedo"
+    ));
+    out.push_str(&format!(
+        "{:<2}{:<28} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>11} {:>9} {:>9} {:>8} {:>8}\n",
+        "", "", "µs", "(±spread)", "/elem", "ns", "", "jit", "vs ref", "max", "", "n=50", "max"
+    ));
+    for r in rows {
+        out.push_str(&format!(
+            "{:<2}{:<28} {:>9.1} {:>6.2} ±{:>2.0}% {:>9.2} {:>9.1} {:>9} {:>7.1}× {:>11.3e} {:>9.2} {:>9.3e} {:>8} {:>8}\n",
+            if r.pareto { "*" } else { "" },
+            truncate(&r.name, 28),
+            r.compile_us,
+            r.jit_ns,
+            r.jit_spread * 100.0,
+            r.jit_batch_ns,
+            r.interp_ns,
+            fmt_opt(r.native_ns, 2),
+            r.interp_ns / r.jit_ns,
+            r.mean_abs_grid,
+            r.epicenter_max_rel_pct,
+            r.max_abs,
+            fmt_opt(r.coef_n50, 3),
+            fmt_opt(r.albedo_max, 3),
+        ));
+    }
+    out.push_str("* = Pareto front: no other formula is both faster and more accurate.\n");
+    out
+}
+
+fn truncate(s: &str, n: usize) -> String {
+    if s.chars().count() <= n {
+        s.to_string()
+    } else {
+        let mut t: String = s.chars().take(n - 1).collect();
+        t.push('…');
+        t
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(name: &str, ns: f64, err: f64) -> BenchRow {
+        BenchRow {
+            name: name.into(),
+            file: String::new(),
+            compile_us: 0.0,
+            jit_ns: ns,
+            jit_spread: 0.0,
+            jit_batch_ns: 0.0,
+            interp_ns: 10.0 * ns,
+            native_ns: None,
+            mean_abs_grid: err,
+            epicenter_max_rel_pct: 0.0,
+            max_abs: 0.0,
+            coef_n50: None,
+            albedo_max: None,
+            pareto: false,
+        }
+    }
+
+    #[test]
+    fn pareto_front_is_the_undominated_set() {
+        let mut rows = vec![row("ref", 10.0, 0.0), row("fast", 1.0, 0.1), row("mid", 3.0, 0.01), row("bad", 4.0, 0.2), row("tie", 3.0, 0.01)];
+        mark_pareto(&mut rows);
+        let front: Vec<&str> = rows.iter().filter(|r| r.pareto).map(|r| r.name.as_str()).collect();
+        // "mid" and "tie" are equal: neither strictly dominates the other, both stay on the front.
+        assert_eq!(front, vec!["ref", "fast", "mid", "tie"]);
+        let t = table(&rows);
+        assert!(t.contains("* fast") || t.starts_with("  "), "{t}");
+    }
+}
