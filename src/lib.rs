@@ -21,6 +21,7 @@ pub mod kernel;
 pub mod report;
 pub mod simplify;
 pub mod twins;
+pub mod watch;
 
 pub use front::diag::{Diagnostic, Diagnostics};
 pub use ir::{Formula, Input, N_INPUTS};
