@@ -1,0 +1,1 @@
+use lobe as _;
