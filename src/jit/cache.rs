@@ -76,6 +76,10 @@ impl<V> Lru<V> {
         self.map.is_empty()
     }
 
+    pub fn capacity(&self) -> usize {
+        self.capacity
+    }
+
     /// Changes the bound (0 disables caching), evicting the oldest entries as needed.
     pub fn set_capacity(&mut self, capacity: usize) {
         self.capacity = capacity;

@@ -229,7 +229,7 @@ fn lock_cache() -> std::sync::MutexGuard<'static, cache::Lru<Compiled>> {
 /// Changes the cache bound (0 disables it); returns the previous bound.
 pub fn set_cache_capacity(capacity: usize) -> usize {
     let mut c = lock_cache();
-    let old = c.len().max(capacity);
+    let old = c.capacity();
     c.set_capacity(capacity);
     old
 }

@@ -168,3 +168,94 @@ fn jit_memory_is_freed_on_drop() {
     let bound_kb = 40 * 1024 * n as u64 / 10_000;
     assert!(grown_kb < bound_kb, "RSS grew by {grown_kb} KiB over {n} compiles (bound {bound_kb} KiB)");
 }
+
+/// Every nasty input in tests/corpus through `lobe::compile` with both backends, then evaluation on a few
+/// points (scalar and batched): errors are fine, panics are not. Runs on a thread with an 8 MiB stack (the
+/// CLI's main-thread size), so a front end that recurses per nesting level is held to that budget.
+#[test]
+fn corpus_inputs_never_panic() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/corpus");
+    let mut files: Vec<_> = std::fs::read_dir(&dir).expect("tests/corpus exists").filter_map(|e| e.ok()).map(|e| e.path()).collect();
+    files.sort();
+    assert!(files.len() >= 20, "corpus has {} files", files.len());
+    let worker = std::thread::Builder::new().stack_size(8 << 20).spawn(move || {
+        let pts = [[0.0; 5], [1.0; 5], [0.5, 1e-8, 1.0, 0.0, 0.3], [2.0, -1.0, f64::NAN, f64::INFINITY, 0.5]];
+        for path in files {
+            let bytes = std::fs::read(&path).expect("readable");
+            let src = String::from_utf8_lossy(&bytes);
+            let name = path.display().to_string();
+            for backend in [Backend::Jit, Backend::Interp] {
+                let opts = lobe::Options { backend, ..Default::default() };
+                match lobe::compile(&name, &src, &opts) {
+                    Ok(k) => {
+                        let p = k.default_params();
+                        for x in &pts {
+                            std::hint::black_box(k.eval(x, &p));
+                            std::hint::black_box(k.eval(x, &[]));
+                        }
+                        let col: Vec<f64> = pts.iter().map(|x| x[2]).collect();
+                        let mut out = vec![0.0; col.len()];
+                        k.eval_batch(&Columns::new([&col, &col, &col, &col, &col]), &p, &mut out);
+                    }
+                    Err(d) => {
+                        // The diagnostics must render (codespan can panic on a bad span).
+                        assert!(!d.render(false).is_empty(), "{name}: empty diagnostic");
+                    }
+                }
+            }
+        }
+    });
+    let joined = worker.expect("spawn").join();
+    assert!(joined.is_ok(), "a corpus input panicked");
+}
+
+/// Odd shapes the front end can produce: a constant formula, a bare parameter, a long chain, a far parameter
+/// index, and a NaN constant — scalar and batched agree with the interpreter bit for bit.
+#[test]
+fn unusual_shapes_compile_and_agree() {
+    let mut shapes = vec![];
+    // constant
+    let mut ir = Ir::new();
+    let r = ir.konst(0.25, S);
+    shapes.push(formula(ir, r, vec![param("n", 1.0)]));
+    // bare parameter, with a far index (offset 8 * 999)
+    let mut ir = Ir::new();
+    let r = ir.param(999, S);
+    shapes.push(formula(ir, r, (0..1000).map(|i| param(&format!("p{i}"), i as f64)).collect()));
+    // NaN constant through max
+    let mut ir = Ir::new();
+    let a = ir.konst(f64::NAN, S);
+    let b = clamped(&mut ir, Input::VH);
+    let r = ir.call(Builtin::Max, &[a, b], S);
+    shapes.push(formula(ir, r, vec![]));
+    // a 5000-node chain mixing every input and a libm call every 100 nodes
+    let mut ir = Ir::new();
+    let mut acc = clamped(&mut ir, Input::NL);
+    for k in 0..5000u32 {
+        let x = clamped(&mut ir, Input::ALL[k as usize % 5]);
+        let c = ir.konst(1.0 + f64::from(k) * 1e-7, S);
+        let t = ir.bin(BinOp::Mul, x, c, S);
+        acc = ir.bin(if k % 2 == 0 { BinOp::Add } else { BinOp::Sub }, acc, t, S);
+        if k % 100 == 99 {
+            acc = ir.call(Builtin::Sin, &[acc], S);
+        }
+    }
+    shapes.push(formula(ir, acc, vec![]));
+
+    let pts: Vec<[f64; 5]> = lobe::jit::measure::sample_points(9, 3);
+    let cols: Vec<Vec<f64>> = (0..5).map(|i| pts.iter().map(|p| p[i]).collect()).collect();
+    let columns = Columns::new(std::array::from_fn(|i| cols[i].as_slice()));
+    for f in shapes {
+        let params = f.default_params();
+        let k = jit::compile(&f).expect("compiles");
+        let i = Interp::new(&f);
+        let mut out = vec![0.0; pts.len()];
+        k.eval_batch(&columns, &params, &mut out);
+        for (j, x) in pts.iter().enumerate() {
+            let want = i.eval(x, &params);
+            let same = |a: f64| a.to_bits() == want.to_bits() || (a.is_nan() && want.is_nan());
+            assert!(same(k.eval(x, &params)), "scalar {} vs {want}", k.eval(x, &params));
+            assert!(same(out[j]), "batched {} vs {want}", out[j]);
+        }
+    }
+}
