@@ -17,6 +17,7 @@ pub mod cli;
 pub mod front;
 pub mod interp;
 pub mod ir;
+pub mod jit;
 pub mod kernel;
 pub mod report;
 pub mod simplify;
@@ -59,7 +60,7 @@ pub fn build_kernel(f: Arc<Formula>, backend: Backend) -> Result<Kernel, Diagnos
     let t = Instant::now();
     let ev: Arc<dyn Evaluator> = match backend {
         Backend::Interp => Arc::new(interp::Interp::new(&f)),
-        Backend::Jit => Arc::new(interp::Interp::new(&f)),
+        Backend::Jit => jit::kernel_evaluator(&f).map_err(|d| Diagnostics::single(&f.file, d))?,
     };
     Ok(Kernel::new(f, backend, ev, t.elapsed()))
 }

@@ -1,4 +1,6 @@
 //! lobe's integration tests: one binary, one module per area.
 mod catalogue;
-mod export;
 mod cli;
+mod differential;
+mod export;
+mod jit;
