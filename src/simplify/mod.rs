@@ -30,11 +30,15 @@ pub struct Policy {
     /// Allow rewrites that may change the last bits of a value: integer `pow` as a multiplication chain,
     /// `pow(x, 0.5) → sqrt(x)`, and `a − a·x → a·(1 − x)`. Each one that fires is listed in the [`Report`].
     pub rounding: bool,
+    /// Largest |k| for which `pow(x, k)` becomes a multiplication chain (at most [`MAX_POW_CHAIN`]); the chain's
+    /// error grows with k (≈ 0.1·k ulp mean, 0.7·k max, against libm's 0.5), so a caller that needs accuracy
+    /// above speed can lower it. Only used when `rounding` is on.
+    pub max_chain: u32,
 }
 
 impl Default for Policy {
     fn default() -> Policy {
-        Policy { inputs_not_nan: true, params_in_range: true, rounding: true }
+        Policy { inputs_not_nan: true, params_in_range: true, rounding: true, max_chain: powi::MAX_EXPONENT }
     }
 }
 
@@ -42,7 +46,7 @@ impl Policy {
     /// Only rewrites that are exact for every input bit pattern (NaN inputs and out-of-range parameters
     /// included): the simplified formula returns bit-identical results up to NaN payloads.
     pub fn exact() -> Policy {
-        Policy { inputs_not_nan: false, params_in_range: false, rounding: false }
+        Policy { inputs_not_nan: false, params_in_range: false, rounding: false, max_chain: 0 }
     }
 }
 
@@ -192,6 +196,12 @@ fn as_neg(ir: &Ir, id: NodeId) -> Option<NodeId> {
     }
 }
 
+/// Values in `ra` are ≤ those in `rb`, so `min(a, b)` returns `a` bit for bit (`b` never NaN; at a tie at zero
+/// `b` is +0, and min(±0, +0) is the first).
+fn min_first(ra: Range, rb: Range) -> bool {
+    !rb.nan && ra.hi <= rb.lo && (ra.hi < 0.0 || rb.lo > 0.0 || !rb.negz)
+}
+
 /// `c` is ±2^e with 1/c also normal, so `x / c` and `x * (1/c)` round identically.
 fn exact_reciprocal(c: f64) -> bool {
     c.is_normal() && (1.0 / c).is_normal() && c.to_bits() & ((1u64 << 52) - 1) == 0
@@ -221,12 +231,12 @@ impl<'a> Rewriter<'a> {
                 Some(d) if self.policy.params_in_range => Range::new(d.lo, d.hi, false, d.lo <= 0.0),
                 _ => Range::TOP,
             },
-            Node::Neg(a) => r(a).neg(),
+            Node::Neg(a) => -r(a),
             Node::Binary(op, a, b) => match op {
-                BinOp::Add => r(a).add(r(b)),
-                BinOp::Sub => r(a).sub(r(b)),
-                BinOp::Mul => r(a).mul(r(b)),
-                BinOp::Div => r(a).div(r(b)),
+                BinOp::Add => r(a) + r(b),
+                BinOp::Sub => r(a) - r(b),
+                BinOp::Mul => r(a) * r(b),
+                BinOp::Div => r(a) / r(b),
             },
             Node::Call(f, args) => {
                 let k = f.arity();
@@ -283,8 +293,7 @@ impl<'a> Rewriter<'a> {
     }
     /// `a ≤ b` for every pair, with `min(a, b)` then returning `a` bit for bit (b never NaN).
     fn min_is_first(&self, a: NodeId, b: NodeId) -> bool {
-        let (ra, rb) = (self.range(a), self.range(b));
-        !rb.nan && ra.hi <= rb.lo && (ra.hi < 0.0 || rb.lo > 0.0 || !rb.negz)
+        min_first(self.range(a), self.range(b))
     }
 
     /// One rewrite of `n`, or `None` if no rule applies. Each rule is introduced by its pattern.
@@ -517,9 +526,10 @@ impl<'a> Rewriter<'a> {
                 None
             }
             Builtin::Clamp => {
-                let (lo_ok, hi_ok) = (self.max_is_first(a, b), self.min_is_first(a, c));
+                // clamp(x, lo, hi) = min(max(x, lo), hi)
+                let lo_ok = self.max_is_first(a, b);
                 // clamp(x, lo, hi) → x   when x is provably in [lo, hi] (NaN passes through either way)
-                if lo_ok && hi_ok {
+                if lo_ok && self.min_is_first(a, c) {
                     self.fire("clamp-redundant");
                     return Some(a);
                 }
@@ -528,8 +538,8 @@ impl<'a> Rewriter<'a> {
                     self.fire("clamp-redundant");
                     return Some(self.call(Builtin::Min, &[a, c], span));
                 }
-                // clamp(x, lo, hi) → max(x, lo)   when x ≤ hi always (and hi is never NaN)
-                if hi_ok {
+                // clamp(x, lo, hi) → max(x, lo)   when max(x, lo) ≤ hi always (hi never NaN; lo may exceed x)
+                if min_first(self.range(a).max(self.range(b)), self.range(c)) {
                     self.fire("clamp-redundant");
                     return Some(self.call(Builtin::Max, &[a, b], span));
                 }
@@ -572,7 +582,7 @@ impl<'a> Rewriter<'a> {
             return Some(self.call(Builtin::Sqrt, &[x], span));
         }
         // pow(x, k) → multiplication chain for integer 2 ≤ |k| ≤ 1024; negative k → 1/x^|k|
-        if k.fract() == 0.0 && k.abs() <= f64::from(powi::MAX_EXPONENT) && k != -0.0 {
+        if k.fract() == 0.0 && k.abs() <= f64::from(self.policy.max_chain.min(powi::MAX_EXPONENT)) {
             let m = k.abs() as u32;
             let mut pows: Vec<(u32, NodeId)> = vec![(1, x)];
             for (p, q) in powi::steps(m) {

@@ -98,11 +98,11 @@ impl Range {
         Range::new(lo, hi, nan, negz)
     }
 
-    pub fn neg(self) -> Range {
+    fn neg_(self) -> Range {
         Range::new(-self.hi, -self.lo, self.nan, self.contains_zero())
     }
 
-    pub fn add(self, b: Range) -> Range {
+    fn add_(self, b: Range) -> Range {
         let a = self;
         let inf_minus_inf = (a.hi == f64::INFINITY && b.lo == f64::NEG_INFINITY)
             || (a.lo == f64::NEG_INFINITY && b.hi == f64::INFINITY);
@@ -116,9 +116,9 @@ impl Range {
         }
     }
 
-    pub fn sub(self, b: Range) -> Range {
+    fn sub_(self, b: Range) -> Range {
         // a − b is exactly a + (−b), including the sign of zero (−0 − +0 = −0 + −0 = −0).
-        self.add(b.neg())
+        self.add_(b.neg_())
     }
 
     /// −0 possible for a product or quotient: unless both factors have clear sign bits, any zero result may be −0.
@@ -126,7 +126,7 @@ impl Range {
         !(a.nonneg() && b.nonneg()) && r.contains_zero()
     }
 
-    pub fn mul(self, b: Range) -> Range {
+    fn mul_(self, b: Range) -> Range {
         let a = self;
         let zero_inf = (a.contains_zero() && (b.lo.is_infinite() || b.hi.is_infinite()))
             || (b.contains_zero() && (a.lo.is_infinite() || a.hi.is_infinite()));
@@ -142,7 +142,7 @@ impl Range {
         Range { negz: Range::sign_negz(a, b, r), ..r }
     }
 
-    pub fn div(self, b: Range) -> Range {
+    fn div_(self, b: Range) -> Range {
         let a = self;
         let nan = a.nan
             || b.nan
@@ -255,6 +255,28 @@ impl Range {
     }
 }
 
+impl std::ops::Neg for Range {
+    type Output = Range;
+    fn neg(self) -> Range {
+        self.neg_()
+    }
+}
+
+macro_rules! binop {
+    ($tr:ident, $f:ident, $imp:ident) => {
+        impl std::ops::$tr for Range {
+            type Output = Range;
+            fn $f(self, b: Range) -> Range {
+                self.$imp(b)
+            }
+        }
+    };
+}
+binop!(Add, add, add_);
+binop!(Sub, sub, sub_);
+binop!(Mul, mul, mul_);
+binop!(Div, div, div_);
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -303,10 +325,10 @@ mod tests {
         ];
         for a in rs {
             for b in rs {
-                check_sound(a, b, |x, y| x + y, a.add(b));
-                check_sound(a, b, |x, y| x - y, a.sub(b));
-                check_sound(a, b, |x, y| x * y, a.mul(b));
-                check_sound(a, b, |x, y| x / y, a.div(b));
+                check_sound(a, b, |x, y| x + y, a + b);
+                check_sound(a, b, |x, y| x - y, a - b);
+                check_sound(a, b, |x, y| x * y, a * b);
+                check_sound(a, b, |x, y| x / y, a / b);
                 check_sound(a, b, crate::builtins::fmax, a.max(b));
                 check_sound(a, b, crate::builtins::fmin, a.min(b));
                 for k in [-3.0, -2.0, 0.0, 0.5, 2.0, 3.0, 7.5] {

@@ -95,8 +95,8 @@ impl Builder<'_> {
             while self.toks.get(self.pos).map(|t| t.0.as_str()) != Some(")") {
                 args.push(self.expr()?);
             }
-            self.pos += 1;
-            let span = os.join(s);
+            let (_, close) = self.next()?;
+            let span = os.join(s).join(close);
             return self.apply(&op, &args, span);
         }
         if t == ")" {
