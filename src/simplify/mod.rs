@@ -1,7 +1,76 @@
 //! IR → IR rewrites to a fixpoint: constant folding, exact algebraic identities, integer powers as
 //! multiplication chains, range-based removal of redundant clamps, baked parameters, dead-input elimination.
 //!
-//! MODULE_DOC_PLACEHOLDER
+//! # Design
+//! Like rhai's optimizer and OSL's `constfold.cpp`: a loop of passes until a pass fires no rewrite (capped at
+//! [`MAX_PASSES`]; in practice two or three — the property tests check ≤ 3). A pass walks the arena in
+//! topological order and rebuilds it bottom-up into a fresh hash-consed arena; each node is rewritten as it is
+//! added, after its operands, and a rewrite's own new nodes go through the same rewriting, so most formulas
+//! reach the fixpoint in one rewriting pass plus one confirming pass. Because the new arena hash-conses,
+//! rewritten subgraphs re-intern: `pow(NH, 2)` and `NH*NH` end as one node. A rewritten node keeps the span of
+//! the node it replaces (so notes point at the user's text), and the result is compacted ([`Ir::compact`]), so
+//! a `let` used only in a branch that folded away, and any input only it read, disappear from
+//! [`Formula::used_inputs`]. Each rewrite below is introduced by its pattern in a comment (`// x*1 → x`) and
+//! counted by name in the [`Report`]. Cost: ~0.1–0.3 ms for a catalogue formula (debug build).
+//!
+//! Constants fold through [`BinOp::apply`] and [`Builtin::eval`] — the functions every backend uses — so
+//! folding never changes a value.
+//!
+//! # IEEE policy
+//! Exact identities (the same bits for every input, NaN payloads aside), always on:
+//! `x*1 → x`, `x/1 → x`, `x−0 → x`, `x+(−0) → x`, `(−0)−x → −x`, `−(−x) → x`, `x*(−1) → −x`, `x/(−1) → −x`,
+//! `a+(−b) → a−b`, `a−(−b) → a+b`, `(−a)*(−b) → a*b`, `x/c → x*(1/c)` only for c = ±2^e with 1/c normal,
+//! `pow(x, 1) → x`, `pow(x, 0) → 1` (C99 F.9.4.4: pow(x, ±0) = 1 for every x, NaN included — checked against
+//! Rust's `powf`), `abs(−x) → abs(x)`, `abs(abs(x)) → abs(x)`, `min(x, x) → x`, `max(x, x) → x`,
+//! `acos(clamp(x, ≤−1, ≥1)) → acos(x)` (the builtin clamps itself).
+//!
+//! Exact only on part of the domain, so guarded by interval analysis ([`range`]: bounds, NaN possible, −0
+//! possible): `x+0 → x` when x cannot be −0 (−0+0 = +0); `x*0 → ±0` when x is finite with a known sign
+//! (0·inf = NaN); `x−x → 0` when x is finite; `x/x → 1` when x is finite and non-zero; `0/x → 0` for x > 0;
+//! `max(a, b) → a` / `min(a, b) → a` when the ranges order them and b is never NaN (this removes the
+//! lowering's root `max(raw, 0)` when raw ≥ 0 — NaN passes through either way); `clamp(x, lo, hi) → x` (or
+//! `→ min(x, hi)`, `→ max(x, lo)`) when a side is provably redundant; `abs(x) → x` for x ≥ +0.
+//!
+//! Refused (not exact under IEEE): `0*x → 0` for x that may be NaN or inf; `x+0 → x` for x that may be −0;
+//! `x−x → 0` and `x/x → 1` for unbounded x; reassociation (`(2*x)*3 ≠ 6*x`, `(a+b)+c ≠ a+(b+c)`) and
+//! distribution, which change rounding without a bound we could report; `sqrt(x*x) → abs(x)` (overflow);
+//! `pow(x, 0.5) → sqrt(x)` where x may be −0 (pow: +0, sqrt: −0) or −inf (pow: +inf, sqrt: NaN).
+//!
+//! What the ranges assume is the [`Policy`]. The default follows the kernel contract: inputs are cosines, never
+//! NaN (so `NL*0` is 0 and NL is no longer read; the lowering's `clamp(INPUT, 0, 1)` bounds them to [0, 1]), and
+//! parameters stay in their declared ranges. [`Policy::exact`] assumes nothing and changes no rounding: the
+//! property tests check it is bit-identical on NaN, inf and out-of-range inputs and parameters.
+//!
+//! # Rewrites that change rounding (listed in [`Report::rounding`]; off under [`Policy::exact`])
+//! - `pow(x, k) → multiplication chain` for integer 2 ≤ |k| ≤ [`MAX_POW_CHAIN`] (shortest addition chains up
+//!   to 16, binary above; negative k → `1/x^|k|`): ~5× faster than libm `pow` natively (x^50: 11 vs 75 ns, x^268:
+//!   15–24 vs 80–90 ns, loaded 2-core machine), and the JIT needs it to match Rust. Error bound (k−1)·u.
+//!   Measured against a double-double reference, x uniform in [0, 1], normal results (test
+//!   `accuracy_pow_chain_vs_libm`; glibc `pow` itself measured ≤ 0.5 ulp, i.e. correctly rounded here):
+//!
+//!   | k | 2 | 3 | 4 | 5 | 8 | 10 | 12 | 15 | 16 | 50 | 268 | 1000 |
+//!   |---|---|---|---|---|---|----|----|----|----|----|-----|------|
+//!   | chain max ulp  | 0.50 | 1.23 | 1.86 | 2.84 | 4.64 | 5.71 | 7.21 | 8.97 | 10.45 | 32.6 | 182 | 490 |
+//!   | chain mean ulp | 0.25 | 0.34 | 0.55 | 0.60 | 1.13 | 1.23 | 1.47 | 1.82 | 2.28 | 5.96 | 36.8 | 101 |
+//!
+//!   So x^268 is ~4·10⁻¹⁴ relative at worst — invisible in a BRDF, but not libm's 0.5 ulp; callers who want
+//!   that lower [`Policy::max_chain`]. Below 2^−1022 (x^268 for x < 0.071) a chain through subnormal
+//!   intermediates loses relative accuracy; the absolute error stays < 2^−1022.
+//! - `pow(x, 0.5) → sqrt(x)` where x cannot be −0 or −inf: sqrt is correctly rounded; glibc's pow(x, 0.5)
+//!   agreed bit for bit on 10⁵ samples in [0, 1] (test `pow_half_vs_sqrt_differences`). ~7× faster.
+//! - `a − a·x → a·(1 − x)` when a is finite and x ∈ [0, 1] (Schlick's `n − n·c`): 1 − x is exact for
+//!   x ∈ [0.5, 1] (Sterbenz), so the product rounds once (≤ 0.5 ulp) where the original cancels. Measured
+//!   (test `accuracy_factoring_near_one`, error in ulps of the exact a·(1 − x)):
+//!
+//!   | a | x range | a − a·x max / mean | a·(1 − x) max / mean |
+//!   |---|---------|--------------------|----------------------|
+//!   | 50 | [0.5, 1) | 16384 / 7.1 | 0.50 / 0.22 |
+//!   | 50 | [0.99, 1) | 262144 / 232 | 0 / 0 |
+//!   | 50 | [1 − 10⁻⁹, 1) | 3.8·10¹² / 2.6·10⁹ | 0 / 0 |
+//!   | 268 | [0.99, 1) | 131072 / 321 | 0 / 0 |
+//!   | 1000 | [1 − 10⁻⁹, 1) | 2.7·10¹¹ / 1.4·10⁹ | 0 / 0 |
+//!
+//!   (a = 1 is exact either way.) The one value it changes beyond rounding is the sign of a zero when a = −0.
 
 mod powi;
 pub mod range;
@@ -174,7 +243,15 @@ pub fn simplify_with(f: &Formula, bake: &[(usize, f64)], policy: &Policy) -> (Fo
     }
     report.nodes_after = ir.len();
     report.inputs_after = ir.used_inputs(root);
-    (Formula { ir, root, ..f.clone() }, report)
+    let out = Formula {
+        meta: f.meta.clone(),
+        params: f.params.clone(),
+        ir,
+        root,
+        file: f.file.clone(),
+        source: f.source.clone(),
+    };
+    (out, report)
 }
 
 /// One pass: builds a fresh arena bottom-up, rewriting each node as it is added.

@@ -346,3 +346,17 @@ fn program_text_names_shared_subexpressions() {
     let g = simplify(&formula("(pow NH 4)", &[]).unwrap(), &[]);
     assert_eq!(g.to_program_text(), "let nh = clamp(NH, 0, 1)\nlet t1 = nh * nh\nt1 * t1");
 }
+
+#[test]
+fn pow_zero_and_one_are_exact_in_libm() {
+    // The justification for pow-zero and pow-one: the builtin (libm pow) gives 1 and x for every x.
+    for x in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, -0.0, 0.0, -3.5, 1e-310] {
+        assert_eq!(Builtin::Pow.eval(&[x, 0.0]), 1.0, "pow({x}, 0)");
+        assert_eq!(Builtin::Pow.eval(&[x, -0.0]), 1.0, "pow({x}, -0)");
+        let p1 = Builtin::Pow.eval(&[x, 1.0]);
+        assert!(p1.to_bits() == x.to_bits() || (x.is_nan() && p1.is_nan()), "pow({x}, 1) = {p1}");
+    }
+    // And pow(-0, 0.5) = +0 while sqrt(-0) = -0, pow(-inf, 0.5) = inf while sqrt(-inf) = NaN: why pow-half is guarded.
+    assert!(Builtin::Pow.eval(&[-0.0, 0.5]).is_sign_positive() && (-0.0f64).sqrt().is_sign_negative());
+    assert_eq!(Builtin::Pow.eval(&[f64::NEG_INFINITY, 0.5]), f64::INFINITY);
+}

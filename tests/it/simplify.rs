@@ -15,7 +15,7 @@
 use lobe::builtins::Builtin;
 use lobe::interp::Interp;
 use lobe::ir::Node;
-use lobe::simplify::sexpr::{formula, formula_literal};
+use lobe::simplify::sexpr::{formula, formula_literal, ParamSpec};
 use lobe::simplify::{simplify, simplify_report, simplify_with, Policy};
 use lobe::{Evaluator, Formula, Input};
 use proptest::prelude::*;
@@ -65,7 +65,7 @@ fn blinn_with_baked_n_is_a_chain_without_the_root_max() {
 #[test]
 fn catalogue_formulas_keep_their_values() {
     let ward = ("m", 0.3, 0.05, 1.0);
-    let cases: &[(&str, &[(&str, f64, f64, f64)], &[Input])] = &[
+    let cases: &[(&str, &[ParamSpec], &[Input])] = &[
         ("(pow VR n)", &[], &[Input::VR]),
         ("(/ NH (+ (- n (* n NH)) NH))", &[], &[Input::NH]),
         ("(/ (* 2 NH) (* 1.25 (pow (+ (- n (* n NH)) (* 1.25 NH)) 2)))", &[], &[Input::NH]),
