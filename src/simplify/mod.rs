@@ -156,6 +156,19 @@ impl Report {
     }
 }
 
+impl Report {
+    /// The report with rounding notes located as `file:line:col` in `f`'s source (for `lobe check`).
+    pub fn render(&self, f: &Formula) -> String {
+        let mut out = self.to_string();
+        for r in &self.rounding {
+            let (line, col) = crate::front::span::line_col(&f.source, r.span.start as usize);
+            let from = format!("at {}..{}", r.span.start, r.span.end);
+            out = out.replacen(&from, &format!("at {}:{line}:{col}", f.file), 1);
+        }
+        out
+    }
+}
+
 impl fmt::Display for Report {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(

@@ -197,6 +197,15 @@ impl Range {
                 }
                 Range::widened(a.lo.max(0.0).ln(), a.hi.ln(), a.nan || a.lo < 0.0, false)
             }
+            // cos is decreasing on [0, π], sin increasing on [−π/2, π/2]; elsewhere only [−1, 1] is known.
+            Builtin::Cos if a.lo >= 0.0 && a.hi <= PI => {
+                let r = Range::widened(a.hi.cos(), a.lo.cos(), a.nan, false);
+                Range::new(r.lo.max(-1.0), r.hi.min(1.0), a.nan, false)
+            }
+            Builtin::Sin if a.lo >= -FRAC_PI_2 && a.hi <= FRAC_PI_2 => {
+                let r = Range::widened(a.lo.sin(), a.hi.sin(), a.nan, true);
+                Range::new(r.lo.max(-1.0), r.hi.min(1.0), a.nan, a.negz)
+            }
             Builtin::Cos | Builtin::Sin => Range::new(-1.0, 1.0, a.nan || inf, true),
             Builtin::Tan => Range { nan: a.nan || inf, ..Range::TOP },
             Builtin::Acos => {
@@ -322,6 +331,8 @@ mod tests {
             Range::new(-5.0, -0.5, false, false),
             Range::new(0.0, f64::INFINITY, false, false),
             Range::constant(-0.0),
+            Range::new(0.0, PI, false, false),
+            Range::new(-FRAC_PI_2, 0.3, false, true),
         ];
         for a in rs {
             for b in rs {
@@ -335,7 +346,7 @@ mod tests {
                     let r = Range::call(Builtin::Pow, &[a, Range::constant(k)], &[None, Some(k)]);
                     check_sound(a, Range::constant(k), |x, y| x.powf(y), r);
                 }
-                for f in [Builtin::Sqrt, Builtin::Abs, Builtin::Exp, Builtin::Ln, Builtin::Acos, Builtin::Atan, Builtin::Cos] {
+                for f in [Builtin::Sqrt, Builtin::Abs, Builtin::Exp, Builtin::Ln, Builtin::Acos, Builtin::Atan, Builtin::Cos, Builtin::Sin, Builtin::Asin] {
                     let r = Range::call(f, &[a], &[None]);
                     check_sound(a, a, |x, _| f.eval(&[x]), r);
                 }

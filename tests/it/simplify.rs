@@ -78,6 +78,7 @@ fn catalogue_formulas_keep_their_values() {
             &[ward],
             &[Input::NL, Input::NV, Input::NH],
         ),
+        ("(pow (cos (* (/ (acos (pow 0.5 (/ 1 3))) (acos (pow 0.5 (/ 1 n)))) (acos NH))) 3)", &[], &[Input::NH]),
         (
             "(/ (* (min 1 (min (/ (* 2 NH NV) VH) (/ (* 2 NH NL) VH))) (pow NH 4)) (* pi NL NV))",
             &[],
@@ -128,6 +129,10 @@ fn report_lists_rounding_changes_with_spans() {
     assert_eq!(&src[r.rounding[1].span.range()], "(pow NL 0.5)");
     let text = r.to_string();
     assert!(text.contains("pow-int") && text.contains("10 multiplications"), "{text}");
+    let src2 = "(+ NL\n   (pow NH 3))";
+    let f2 = formula(src2, &[]).unwrap();
+    let (_, r2) = simplify_report(&f2, &[]);
+    assert!(r2.render(&f2).contains("rounding: pow-int at sexpr:2:4: pow(x, 3) as 2 multiplications"), "{}", r2.render(&f2));
 }
 
 // ---------------------------------------------------------------------------------------------------------
