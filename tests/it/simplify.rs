@@ -213,12 +213,14 @@ proptest! {
     #[test]
     fn default_policy_without_rounding_is_bit_identical(
         src in any_expr(),
-        xs in prop::collection::vec(prop::array::uniform5(hard_value()), 4),
+        // Any input but NaN: raw cosines can be negative (back-facing) or a rounding above 1; the lowering clamps.
+        xs in prop::collection::vec(prop::array::uniform5(wild_value().prop_filter("not NaN", |v| !v.is_nan())), 4),
         n in prop_oneof![1.0..=1000.0f64, Just(1.0), Just(1000.0)],
         a in prop_oneof![0.0..=1.0f64, Just(0.0), Just(1.0)],
         bake in any::<bool>(),
+        literal in any::<bool>(),
     ) {
-        let f = formula(&src, &[A]).unwrap();
+        let f = if literal { formula_literal(&src, &[A]) } else { formula(&src, &[A]) }.unwrap();
         let policy = Policy { rounding: false, ..Policy::default() };
         let baked = if bake { vec![(0, n)] } else { vec![] };
         let (g, r) = simplify_with(&f, &baked, &policy);
