@@ -361,4 +361,71 @@ mod tests {
         assert_eq!(r, unit());
         assert!(r.nonneg());
     }
+
+    use proptest::prelude::*;
+
+    fn value() -> impl Strategy<Value = f64> {
+        prop_oneof![
+            3 => -4.0..4.0f64,
+            1 => prop::sample::select(vec![0.0, -0.0, 1.0, -1.0, f64::INFINITY, f64::NEG_INFINITY, 1e-310, 1e300, PI]),
+            1 => any::<f64>().prop_filter("not NaN", |v| !v.is_nan()),
+        ]
+    }
+
+    /// A range and a member of it: an interval from two values, a member between them (or an end point).
+    fn member() -> impl Strategy<Value = (Range, f64)> {
+        (value(), value(), 0.0..=1.0f64, any::<bool>(), 0..4u8).prop_map(|(a, b, t, nan, pick)| {
+            let (lo, hi) = if a <= b { (a, b) } else { (b, a) };
+            let mut x = match pick {
+                0 => lo,
+                1 => hi,
+                _ => lo + (hi - lo) * t,
+            };
+            if !(x >= lo && x <= hi) {
+                x = lo;
+            }
+            let negz = x == 0.0 && x.is_sign_negative() || lo == 0.0 && lo.is_sign_negative() || hi == 0.0 && hi.is_sign_negative();
+            let x = if nan && pick == 3 { f64::NAN } else { x };
+            (Range::new(lo, hi, nan, negz), x)
+        })
+    }
+
+    fn inside(r: Range, z: f64) -> bool {
+        if z.is_nan() {
+            return r.nan;
+        }
+        z >= r.lo && z <= r.hi && !(z == 0.0 && z.is_sign_negative() && !r.negz)
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 3000, ..ProptestConfig::default() })]
+        #[test]
+        fn ranges_contain_every_result((ra, x) in member(), (rb, y) in member(), (rc, z) in member()) {
+            prop_assert!(inside(ra, x) && inside(rb, y));
+            prop_assert!(inside(-ra, -x));
+            prop_assert!(inside(ra + rb, x + y), "{x} + {y}: {:?}", ra + rb);
+            prop_assert!(inside(ra - rb, x - y), "{x} - {y}: {:?}", ra - rb);
+            prop_assert!(inside(ra * rb, x * y), "{x} * {y}: {:?}", ra * rb);
+            prop_assert!(inside(ra / rb, x / y), "{x} / {y}: {:?}", ra / rb);
+            for f in Builtin::ALL {
+                let args = [x, y, z];
+                let rs = [ra, rb, rc];
+                let k = f.arity();
+                let konst: Vec<Option<f64>> = (0..k).map(|i| (i == 1 && rb.lo == rb.hi && !rb.nan && !y.is_nan()).then_some(y)).collect();
+                let r = Range::call(f, &rs[..k], &konst);
+                let v = f.eval(&args[..k]);
+                prop_assert!(inside(r, v), "{}({:?}) = {v} outside {r:?} from {:?}", f.name(), &args[..k], &rs[..k]);
+            }
+        }
+
+        #[test]
+        fn pow_ranges_with_constant_exponents(
+            (ra, x) in member(),
+            k in prop::sample::select(vec![-1025.0, -268.0, -3.0, -2.0, -1.0, -0.5, 0.0, -0.0, 0.5, 1.0, 2.0, 3.0, 7.0, 16.0, 268.0, 1e7, 2.5]),
+        ) {
+            let r = Range::call(Builtin::Pow, &[ra, Range::constant(k)], &[None, Some(k)]);
+            let v = x.powf(k);
+            prop_assert!(inside(r, v), "pow({x}, {k}) = {v} outside {r:?} from {ra:?}");
+        }
+    }
 }
