@@ -12,7 +12,7 @@ use crate::builtins::Builtin;
 use std::f64::consts::{FRAC_PI_2, PI};
 
 /// Ulps by which bounds computed through a libm function are widened (glibc documents < 1–2 ulp).
-const LIBM_SLACK: u32 = 4;
+pub const LIBM_SLACK: u32 = 4;
 
 /// Bounds on the values a node can take; see the module docs.
 #[derive(Clone, Copy, Debug, PartialEq)]
