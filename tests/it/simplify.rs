@@ -406,3 +406,37 @@ fn generators_exercise_the_rewrites() {
         assert!(rounding.contains_key(rule), "default policy never fired {rule}");
     }
 }
+/// Arbitrary trees with rounding changes on have no a-priori bound (a 1-ulp change from a chain or from
+/// pow(x, 0.5) → sqrt(x), fed into a cancelling subtraction or asin near 1, is amplified without limit), so
+/// this is a measurement with a threshold, not a bound: over 3000 deterministic random trees at three input
+/// points, 96.5 % of results were bit-identical and all but 2 of 9000 within 1e-9 relative; both exceptions
+/// were `asin`/`acos` of pow(1 − 2^-53, 0.5), where glibc's pow returns 1.0 and sqrt the correctly rounded
+/// 1 − 2^-53 (the simplified value is the accurate one).
+#[test]
+fn default_policy_on_arbitrary_trees_mostly_agrees() {
+    use proptest::strategy::ValueTree;
+    use proptest::test_runner::TestRunner;
+    let mut runner = TestRunner::deterministic();
+    let (mut total, mut bit, mut close9, mut bad) = (0, 0, 0, vec![]);
+    for _ in 0..3000 {
+        let src = any_expr().new_tree(&mut runner).unwrap().current();
+        let f = formula(&src, &[A]).unwrap();
+        let g = simplify(&f, &[]);
+        for x in [[0.3, 0.7, 0.9, 0.2, 0.5], [1.0, 0.0, 1.0 - f64::EPSILON / 2.0, 1e-300, 0.5], [0.99, 0.98, 0.97, 0.96, 0.95]] {
+            let (u, v) = (eval(&f, &x, &[50.0, 0.5]), eval(&g, &x, &[50.0, 0.5]));
+            total += 1;
+            bit += usize::from(same(u, v));
+            if close(u, v, 1e-9) {
+                close9 += 1;
+            } else {
+                bad.push((src.clone(), u, v));
+            }
+        }
+    }
+    println!("{total} results: {bit} bit-identical, {close9} within 1e-9 relative");
+    for b in &bad {
+        println!("  {b:?}");
+    }
+    assert!(bit * 100 >= total * 90, "only {bit} of {total} bit-identical");
+    assert!(close9 * 1000 >= total * 999, "{} of {total} beyond 1e-9: {bad:?}", total - close9);
+}
