@@ -367,3 +367,15 @@ fn pow_zero_and_one_are_exact_in_libm() {
     assert!(Builtin::Pow.eval(&[-0.0, 0.5]).is_sign_positive() && (-0.0f64).sqrt().is_sign_negative());
     assert_eq!(Builtin::Pow.eval(&[f64::NEG_INFINITY, 0.5]), f64::INFINITY);
 }
+
+#[test]
+fn clamp_with_bounds_out_of_order_is_not_a_max() {
+    // clamp(x, lo, hi) = min(max(x, lo), hi): with lo > hi the result is hi, so "x ≤ hi" alone does not make
+    // it max(x, lo) (two bugs the differential property test found).
+    let (g, _) = check("(clamp 0 NV NL)", 0.0);
+    assert!(g.to_text().contains("clamp"), "{}", g.to_text());
+    let (g, _) = check("(clamp NL n 1.5)", 0.0);
+    assert!(g.to_text().contains("clamp"), "{}", g.to_text());
+    // With lo ≤ hi provable, it is.
+    assert_eq!(text("(clamp (* 0.5 NL) NV 1.5)").0, "max(0.5 * clamp(NL, 0, 1), clamp(NV, 0, 1))");
+}
