@@ -379,3 +379,15 @@ fn clamp_with_bounds_out_of_order_is_not_a_max() {
     // With lo ≤ hi provable, it is.
     assert_eq!(text("(clamp (* 0.5 NL) NV 1.5)").0, "max(0.5 * clamp(NL, 0, 1), clamp(NV, 0, 1))");
 }
+
+#[test]
+fn a_formula_can_fold_to_a_constant() {
+    let f = formula("(+ (* NL 0) (pow n 2))", &[]).unwrap();
+    let (g, r) = simplify_report(&f, &[(0, 3.0)]);
+    assert_eq!(g.to_text(), "9");
+    assert_eq!(g.ir.len(), 1);
+    assert!(g.used_inputs().is_empty() && r.inputs_after.is_empty());
+    assert!(r.to_string().contains("inputs used: none (was NL)"), "{r}");
+    assert_eq!(eval(&g, 0.4, &[]), 9.0);
+    assert_eq!(g.to_program_text(), "9");
+}
