@@ -398,6 +398,12 @@ impl Formula {
     pub fn to_text(&self) -> String {
         crate::ir::print::expr(self, self.root)
     }
+
+    /// The formula as `let` lines naming each shared subexpression, then the final expression
+    /// (see [`print::with_lets`]); what `lobe check` shows for a simplified formula.
+    pub fn to_program_text(&self) -> String {
+        crate::ir::print::with_lets(self)
+    }
 }
 
 pub mod print {
@@ -434,20 +440,60 @@ pub mod print {
 
     pub fn expr(f: &Formula, id: NodeId) -> String {
         let mut out = String::new();
-        write(f, id, &mut out);
+        write(f, id, &mut out, &HashMap::new());
         out
     }
 
-    fn write(f: &Formula, id: NodeId, out: &mut String) {
+    /// The formula with every shared non-leaf subexpression named once, as the .brdf language writes it:
+    /// `let nh = clamp(NH, 0, 1)` for a clamped input read several times, `let t1 = …` otherwise, then the
+    /// final expression. A chain like x^4 prints as `let t1 = x * x` and `t1 * t1`, showing what is computed.
+    pub fn with_lets(f: &Formula) -> String {
+        let counts = f.ir.use_counts(f.root);
+        let mut names: HashMap<NodeId, String> = HashMap::new();
+        let mut out = String::new();
+        let taken = |s: &str| f.params.iter().any(|p| p.name == s) || s == "pi";
+        let mut k = 0;
+        for id in f.ir.ids().take(f.root.index()) {
+            let n = f.ir.node(id);
+            if counts[id.index()] < 2 || matches!(n, Node::Const(_) | Node::Input(_) | Node::Param(_)) {
+                continue;
+            }
+            let mut name = match n {
+                Node::Call(crate::builtins::Builtin::Clamp, [x, ..]) => match f.ir.node(*x) {
+                    Node::Input(i) => i.name().to_lowercase(),
+                    _ => String::new(),
+                },
+                _ => String::new(),
+            };
+            while name.is_empty() || taken(&name) || names.values().any(|v| *v == name) {
+                k += 1;
+                name = format!("t{k}");
+            }
+            out.push_str("let ");
+            out.push_str(&name);
+            out.push_str(" = ");
+            write(f, id, &mut out, &names);
+            out.push('\n');
+            names.insert(id, name);
+        }
+        write(f, f.root, &mut out, &names);
+        out
+    }
+
+    fn write(f: &Formula, id: NodeId, out: &mut String, names: &HashMap<NodeId, String>) {
         let n = f.ir.node(id);
         let child = |c: NodeId, min: u8, out: &mut String| {
+            if let Some(name) = names.get(&c) {
+                out.push_str(name);
+                return;
+            }
             let cn = f.ir.node(c);
             if prec(cn) < min {
                 out.push('(');
-                write(f, c, out);
+                write(f, c, out, names);
                 out.push(')');
             } else {
-                write(f, c, out);
+                write(f, c, out, names);
             }
         };
         match n {
@@ -464,8 +510,10 @@ pub mod print {
                 out.push(' ');
                 out.push_str(op.symbol());
                 out.push(' ');
-                // Right operand of - and / needs parentheses at equal precedence.
-                let rmin = if matches!(op, BinOp::Sub | BinOp::Div) { p + 1 } else { p };
+                // The right operand needs parentheses at equal precedence: for - and / by algebra, and for + and *
+                // because floating-point addition and multiplication are not associative (a + (b + c) differs
+                // from a + b + c), so the text shows the evaluation order the IR has.
+                let rmin = p + 1;
                 child(*b, rmin, out);
             }
             Node::Call(b, args) => {
@@ -475,7 +523,7 @@ pub mod print {
                     if k > 0 {
                         out.push_str(", ");
                     }
-                    write(f, *a, out);
+                    child(*a, 0, out);
                 }
                 out.push(')');
             }
