@@ -15,6 +15,8 @@ struct Cli {
 enum Cmd {
     /// Evaluate a formula at one point.
     Eval(cli::eval::EvalArgs),
+    /// Show the simplified formula, the inputs it reads and its compile time.
+    Check(cli::check::CheckArgs),
     /// Export a formula as a GLSL or WGSL function.
     Export(cli::export::ExportArgs),
 }
@@ -24,6 +26,7 @@ fn main() {
     let result = match &cli.cmd {
         Cmd::Eval(a) => cli::eval::run(a),
         Cmd::Export(a) => cli::export::run(a),
+        Cmd::Check(a) => cli::check::run(a),
     };
     if let Err(e) = result {
         let color = std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none();

@@ -3,6 +3,7 @@
 //! Each subcommand lives in its own file as a clap `Args` struct and a `run` function that calls library
 //! code; no numerical or rendering logic lives here.
 
+pub mod check;
 pub mod common;
 pub mod eval;
 pub mod export;

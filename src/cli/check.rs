@@ -1,0 +1,106 @@
+//! `lobe check FILE [--set n=50] [--json]`: what lobe made of a formula — the simplified expression, the
+//! rewrites that fired, the inputs it reads (and so the ones a renderer skips), parameters baked or live, and
+//! the compile time on each backend.
+
+use super::common::{self, CliError};
+use crate::ir::Input;
+use crate::{Backend, Options};
+use serde_json::json;
+
+#[derive(clap::Args, Debug)]
+pub struct CheckArgs {
+    /// Formula file (.brdf), or `-` for standard input.
+    pub file: Option<String>,
+    /// The formula inline instead of a file.
+    #[arg(long, conflicts_with = "file")]
+    pub expr: Option<String>,
+    /// Parameters to bake as constants, e.g. `n=50`.
+    #[arg(long, value_parser = common::parse_assignments, action = clap::ArgAction::Append)]
+    pub set: Vec<Vec<(String, f64)>>,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(a: &CheckArgs) -> Result<(), CliError> {
+    let set = a.set.concat();
+    let f = common::load_formula(a.file.as_deref(), a.expr.as_deref())?;
+    let bake = crate::resolve_bake(&f, &set)?;
+    let (simplified, report) = crate::simplify::simplify_report(&f, &bake);
+    let (nodes_before, nodes_after) = (report.nodes_before, report.nodes_after);
+    let used = simplified.used_inputs();
+    let unused: Vec<&str> = Input::ALL.iter().filter(|i| !used.contains(**i)).map(|i| i.name()).collect();
+    let live = simplified.ir.used_params(simplified.root);
+    let opts = |backend| Options { backend, bake: set.clone(), ..Options::default() };
+    let jit = crate::compile_formula(f.clone(), &opts(Backend::Jit))?;
+    let interp = crate::compile_formula(f.clone(), &opts(Backend::Interp))?;
+    let params: Vec<serde_json::Value> = f
+        .params
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let baked = bake.iter().find(|(j, _)| *j == i).map(|(_, v)| *v);
+            json!({
+                "name": p.name, "default": p.default, "lo": p.lo, "hi": p.hi,
+                "baked": baked, "live": live.contains(&(i as u16)),
+            })
+        })
+        .collect();
+    if a.json {
+        let obj = json!({
+            "file": f.file,
+            "name": f.display_name(),
+            "citation": f.meta.citation,
+            "params": params,
+            "formula": f.to_text(),
+            "simplified": simplified.to_text(),
+            "nodes_before": nodes_before,
+            "nodes_after": nodes_after,
+            "rewrites": report.fired.iter().map(|(k, v)| json!({"rule": k, "count": v})).collect::<Vec<_>>(),
+            "rounding_changes": report.rounding.iter().map(|r| {
+                let (line, col) = crate::front::span::line_col(&f.source, r.span.start as usize);
+                json!({"rule": r.rule, "line": line, "col": col, "detail": r.detail})
+            }).collect::<Vec<_>>(),
+            "passes": report.passes,
+            "used_inputs": used.iter().map(|i| i.name()).collect::<Vec<_>>(),
+            "unused_inputs": unused,
+            "compile_us": { "jit": jit.compile_time.as_secs_f64() * 1e6, "interp": interp.compile_time.as_secs_f64() * 1e6 },
+        });
+        println!("{obj}");
+        return Ok(());
+    }
+    println!("{} — {}", f.file, f.display_name());
+    if let Some(c) = &f.meta.citation {
+        println!("  cite        {c}");
+    }
+    for (i, p) in f.params.iter().enumerate() {
+        let state = match bake.iter().find(|(j, _)| *j == i) {
+            Some((_, v)) => format!("baked = {v}"),
+            None if live.contains(&(i as u16)) => "live".to_string(),
+            None => "unused".to_string(),
+        };
+        println!("  param       {} = {} in {}..{}  ({state})", p.name, p.default, p.lo, p.hi);
+    }
+    println!("  formula     {}", f.to_text());
+    println!("  simplified  {}", simplified.to_program_text().replace('\n', "\n              "));
+    println!("  nodes       {nodes_before} → {nodes_after}");
+    if !report.fired.is_empty() {
+        let r: Vec<String> = report.fired.iter().map(|(k, v)| format!("{k} ×{v}")).collect();
+        println!("  rewrites    {} ({} passes)", r.join(", "), report.passes);
+    }
+    for r in &report.rounding {
+        let (line, col) = crate::front::span::line_col(&f.source, r.span.start as usize);
+        println!("  rounding    {}:{line}:{col} {}: {}", f.file, r.rule, r.detail);
+    }
+    println!(
+        "  reads       {}{}",
+        if used.is_empty() { "no input (a constant)".to_string() } else { used.to_string() },
+        if unused.is_empty() { String::new() } else { format!("   (a renderer skips {})", unused.join(", ")) }
+    );
+    println!(
+        "  compile     jit {:.0} µs, interpreter {:.0} µs",
+        jit.compile_time.as_secs_f64() * 1e6,
+        interp.compile_time.as_secs_f64() * 1e6
+    );
+    Ok(())
+}
