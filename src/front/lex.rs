@@ -446,7 +446,7 @@ fn close_all(opens: &mut Vec<Span>, at: usize, out: &mut Lexed) {
     } else {
         format!("{n} unterminated parentheses")
     })
-    .at(Span::new(at, at), if n == 1 { "expected `)` here" } else { "expected `)` here" });
+    .at(Span::new(at, at), "expected `)` here");
     for o in opens.iter() {
         d = d.also(*o, "parenthesis opened here");
     }

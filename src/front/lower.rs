@@ -61,6 +61,8 @@ struct Lowerer<'a, 's> {
     /// Every `let` in the file (name → its name span), for "used before its `let`".
     all_lets: HashMap<&'s str, Span>,
     memo: Vec<Slot>,
+    /// Operand buffer reused across nodes (one allocation per file, not per node).
+    args: Vec<NodeId>,
     diags: Vec<Diagnostic>,
 }
 
@@ -88,6 +90,7 @@ pub fn lower(
         scope: HashMap::new(),
         all_lets: HashMap::new(),
         memo: vec![Slot::Todo; ast.exprs.len()],
+        args: vec![],
         diags: vec![],
     };
     let meta = lw.meta();
@@ -415,7 +418,8 @@ impl<'a, 's> Lowerer<'a, 's> {
                 e.for_each_child(|c| stack.push((c, false)));
                 continue;
             }
-            let mut args: Vec<NodeId> = Vec::new();
+            let mut args = std::mem::take(&mut self.args);
+            args.clear();
             let mut poisoned = false;
             e.for_each_child(|c| match self.memo[c.index()] {
                 Slot::Done(n) => args.push(n),
@@ -445,6 +449,7 @@ impl<'a, 's> Lowerer<'a, 's> {
                 }
             };
             self.memo[id.index()] = out;
+            self.args = args;
         }
         self.memo[root.index()]
     }
@@ -507,9 +512,11 @@ impl<'a, 's> Lowerer<'a, 's> {
         };
         let d = Diagnostic::error(msg).at(n.span, "not defined");
         if let Some(s) = sugg {
-            return d.hint(match Input::from_name(s) {
-                Some(i) => format!("`{}` is the {}", i.name(), i.describe()),
-                None => format!("or define `{}` with `let` or `param`", n.name),
+            return d.hint(match (exact_ci, Input::from_name(s)) {
+                (Some(_), Some(i)) => format!("names are case-sensitive; `{}` is the {}", i.name(), i.describe()),
+                (Some(_), None) => format!("names are case-sensitive: write `{s}`"),
+                (None, Some(i)) => format!("`{}` is the {}", i.name(), i.describe()),
+                (None, None) => format!("if `{}` is a new name, define it with `let` or `param` first", n.name),
             });
         }
         let hint = match n.name {
@@ -598,5 +605,32 @@ impl<'a, 's> Lowerer<'a, 's> {
                     .hint("a lobe usually depends on NH (Blinn-style) or VR (Phong-style)"),
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::builtins::Builtin;
+    use crate::ir::{Input, Node};
+
+    #[test]
+    fn domain_policy_is_written_into_the_ir() {
+        let f = crate::front::parse("t", "NH").expect("parses");
+        let Node::Call(Builtin::Max, [raw, zero, _]) = *f.ir.node(f.root) else { panic!("root is max(raw, 0)") };
+        assert_eq!(f.ir.node(zero).as_const(), Some(0.0));
+        let Node::Call(Builtin::Clamp, [x, lo, hi]) = *f.ir.node(raw) else { panic!("an input is clamped") };
+        assert_eq!(*f.ir.node(x), Node::Input(Input::NH));
+        assert_eq!((f.ir.node(lo).as_const(), f.ir.node(hi).as_const()), (Some(0.0), Some(1.0)));
+    }
+
+    #[test]
+    fn n_is_parameter_zero_and_lets_share_nodes() {
+        let f = crate::front::parse("t", "param a = 2\nlet c = acos(NH)\nc * c + a * n").expect("parses");
+        assert_eq!(f.params[0].name, "n");
+        assert_eq!(f.params[1].name, "a");
+        // `c` is lowered once: one acos node.
+        let acos = f.ir.nodes().iter().filter(|n| matches!(n, Node::Call(Builtin::Acos, _))).count();
+        assert_eq!(acos, 1);
+        assert_eq!(f.ir.used_params(f.root), vec![0, 1]);
     }
 }

@@ -126,7 +126,7 @@ fn newline_rules() {
     check("let a = NH; let b = 2; a * b", c * 2.0);
     check("\n\n# leading blank lines\n\nNH\n\n\n", c);
     // Without a continuation marker a newline ends the statement: two statements here.
-    let d = parse("t", "NH\n- 1").err().expect("two statements");
+    let d = parse("t", "NH\n- 1").expect_err("two statements");
     assert!(d.render(false).contains("more than one final expression"), "{d}");
 }
 
@@ -136,7 +136,7 @@ fn crlf_line_endings_and_unicode_comments() {
     check("# Blinn \u{2014} \u{3b8} = acos(NH) \u{2713}\r\nlet c = NH\r\n\r\nc^n  # \u{3c0} \u{00e9}\u{00fc}\r\n", c.powf(50.0));
     check("let a = NH +\r\n  1\r\na", c + 1.0);
     // A diagnostic after a CRLF line points at the right line and column.
-    let d = parse("t.brdf", "# \u{3b8}\u{3b8}\r\nNX").err().expect("rejected");
+    let d = parse("t.brdf", "# \u{3b8}\u{3b8}\r\nNX").expect_err("rejected");
     assert!(d.render(false).contains("t.brdf:2:1"), "{}", d.render(false));
 }
 
@@ -249,7 +249,7 @@ fn binary_garbage() {
 #[test]
 fn deep_nesting_is_refused_not_overflowed() {
     let src = "(".repeat(100_000) + "NH" + &")".repeat(100_000);
-    let d = parse("deep.brdf", &src).err().expect("rejected");
+    let d = parse("deep.brdf", &src).expect_err("rejected");
     assert_eq!(d.errors().count(), 1, "{d}");
     assert!(d.render(false).contains("nested more than 200 deep"));
     // Unclosed, and nested calls.
@@ -283,7 +283,7 @@ fn one_mebibyte_chains_parse_and_lower() {
 #[test]
 fn many_errors_are_capped() {
     let src = "NX\n".repeat(10_000) + "NH";
-    let d = parse("t", &src).err().expect("rejected");
+    let d = parse("t", &src).expect_err("rejected");
     let text = d.render(false);
     assert!(text.contains("more errors not shown"), "{text}");
     assert!(d.errors().count() <= lobe::front::MAX_ERRORS + 1);

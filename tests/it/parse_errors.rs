@@ -96,6 +96,8 @@ fn each_mistake_gets_its_message_and_hint() {
         ("malformed_statements", &["a name after `let`", "expected `=` after `a`", "after `@name`"]),
         ("self_reference", &["`c` refers to itself"]),
         ("empty_parens", &["empty parentheses"]),
+        ("duplicate_param", &["parameter `a` is declared twice", "parameter `n` is declared twice"]),
+        ("case_mismatch", &["did you mean `NH`?", "did you mean `n`?", "did you mean `pi`?"]),
     ];
     for (name, needles) in want {
         let path = dir().join(format!("{name}.brdf"));
@@ -115,6 +117,6 @@ fn each_mistake_gets_its_message_and_hint() {
 #[test]
 fn several_errors_are_all_reported() {
     let src = fs::read_to_string(dir().join("several_errors.brdf")).expect("case");
-    let d = lobe::front::parse("several_errors.brdf", &src).err().expect("rejected");
+    let d = lobe::front::parse("several_errors.brdf", &src).expect_err("rejected");
     assert!(d.errors().count() >= 5, "{}", d.render(false));
 }
