@@ -398,6 +398,8 @@ fn layout<'s>(src: &str, toks: &[(Tok<'s>, Span)], out: &mut Lexed<'s>) {
                             .at(span, "no `(` is open here")
                             .hint("remove this `)` or add the missing `(` before it"),
                     );
+                    // An error token, not nothing: dropping it would glue `n)(x` into the call `n(x)`.
+                    out.toks.push((span.start as usize, Tok::Error, span.end as usize));
                     continue;
                 }
                 out.toks.push((span.start as usize, tok, span.end as usize));

@@ -5,6 +5,21 @@
 //! recovers at each statement) → [`lower`] (names, arity, `n` as parameter 0, domain policy → `ir::Formula`).
 //! Every stage reports into one list, so a file with several mistakes gets all of them, sorted by position.
 //!
+//! The language, in brief (grammar/formula.lalrpop is the definition):
+//!
+//! ```text
+//! # comment                                  statements end at a newline or `;`
+//! @name "Modified Schlick"                   metadata: @name, @cite (each at most once, before the formula)
+//! param a = 16 in 1..1000                    a parameter: default, optional range (none = unbounded);
+//!                                            `n` is always parameter 0 (implicitly 50 in 1..1000)
+//! let c = NH                                 bindings, visible after their own line; no shadowing
+//! 2*c / (1.25*(n - n*c + 1.25*c)^2)          exactly one final expression, last
+//! ```
+//!
+//! Precedence, tightest first: calls and parentheses; `^` (right-associative; `2^-x` allowed); unary `-`
+//! (so `-x^2 = -(x^2)`); `*` `/`; `+` `-` (left-associative). A newline continues the statement inside
+//! parentheses and after a binary operator, `=`, `,` or `(`. Numbers: `2`, `0.5`, `1e-3`, `1.5E+2`.
+//!
 //! Robustness: nothing here recurses on the input's depth (the parser's stack and the AST are `Vec`s;
 //! lowering uses an explicit stack), parentheses deeper than [`lex::MAX_DEPTH`] are refused at once, and at
 //! most [`MAX_ERRORS`] errors are shown. Measured (debug build, opt-level 1): a 1 MiB `1+1+…` chain lexes,
@@ -57,6 +72,12 @@ pub fn parse_with_warnings(file: &str, src: &str) -> Result<(Formula, Diagnostic
     }
     let mut ds = Diagnostics::new(file, src);
     ds.items = items;
+    if formula.is_none() && !ds.has_errors() {
+        // Lowering fails only after reporting; this keeps a bug here from becoming a silent rejection.
+        ds.push(Diagnostic::error("internal error: the formula was rejected without a reason").hint(
+            "please report this file to the lobe developers",
+        ));
+    }
     match formula {
         Some(f) if !ds.has_errors() => Ok((f, ds)),
         _ => Err(ds),
