@@ -500,6 +500,10 @@ impl<'a, 's> Lowerer<'a, 's> {
                 .also(def, "being defined here")
                 .hint("a `let` cannot use its own name; use another name for the new value");
         }
+        if self.diags.len() > super::MAX_ERRORS {
+            // Past the display cap the message is not shown; skip the O(names) suggestion search.
+            return Diagnostic::error(format!("unknown variable `{}`", n.name)).at(n.span, "not defined");
+        }
         let mut cands: Vec<&str> = INPUT_PREFERENCE.to_vec();
         cands.extend(self.lets.iter().rev().map(|l| l.name.name));
         cands.extend(self.params.iter().map(|p| p.name.as_str()));

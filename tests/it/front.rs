@@ -287,4 +287,9 @@ fn many_errors_are_capped() {
     let text = d.render(false);
     assert!(text.contains("more errors not shown"), "{text}");
     assert!(d.errors().count() <= lobe::front::MAX_ERRORS + 1);
+    // Many unknown names among many `let`s: the suggestion search stops with the display cap (quadratic
+    // otherwise: 20 000 names x 20 000 candidates).
+    let src: String = (0..20_000).map(|i| format!("let a{i} = q{i}\n")).collect::<String>() + "NH";
+    let d = parse("t", &src).expect_err("rejected");
+    assert!(d.render(false).contains("unknown variable `q0`"));
 }
