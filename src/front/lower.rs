@@ -159,7 +159,12 @@ impl<'a, 's> Lowerer<'a, 's> {
                 other => {
                     let mut d = Diagnostic::error(format!("unknown metadata key `@{other}`"))
                         .at(key.span, "not a metadata key");
-                    d = match super::suggest(other, ["name", "cite"]) {
+                    let synonym = match other.to_ascii_lowercase().as_str() {
+                        "title" | "label" | "display" | "model" => Some("name"),
+                        "citation" | "ref" | "reference" | "source" | "eq" | "paper" => Some("cite"),
+                        _ => None,
+                    };
+                    d = match synonym.or_else(|| super::suggest(other, ["name", "cite"])) {
                         Some(k) => d.hint(format!("did you mean `@{k}`? The keys are `@name` and `@cite`")),
                         None => d.hint("the keys are `@name \"display name\"` and `@cite \"source, equation\"`"),
                     };
