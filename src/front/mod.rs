@@ -1,14 +1,87 @@
 //! The front end: .brdf text → [`Formula`](crate::ir::Formula), or diagnostics. Knows nothing of backends.
+//!
+//! Pipeline: [`lex`] (logos DFA + an adapter that decides statement-ending newlines and repairs bad
+//! spellings) → [`parse`] (lalrpop LR(1), table-driven, builds the arena [`ast`] with a span on every node,
+//! recovers at each statement) → [`lower`] (names, arity, `n` as parameter 0, domain policy → `ir::Formula`).
+//! Every stage reports into one list, so a file with several mistakes gets all of them, sorted by position.
+//!
+//! The language, in brief (grammar/formula.lalrpop is the definition):
+//!
+//! ```text
+//! # comment                                  statements end at a newline or `;`
+//! @name "Modified Schlick"                   metadata: @name, @cite (each at most once, before the formula)
+//! param a = 16 in 1..1000                    a parameter: default, optional range (none = unbounded);
+//!                                            `n` is always parameter 0 (implicitly 50 in 1..1000)
+//! let c = NH                                 bindings, visible after their own line; no shadowing
+//! 2*c / (1.25*(n - n*c + 1.25*c)^2)          exactly one final expression, last
+//! ```
+//!
+//! Precedence, tightest first: calls and parentheses; `^` (right-associative; `2^-x` allowed); unary `-`
+//! (so `-x^2 = -(x^2)`); `*` `/`; `+` `-` (left-associative). A newline continues the statement inside
+//! parentheses and after a binary operator, `=`, `,` or `(`. Numbers: `2`, `0.5`, `1e-3`, `1.5E+2`.
+//!
+//! Robustness: nothing here recurses on the input's depth (the parser's stack and the AST are `Vec`s;
+//! lowering uses an explicit stack), parentheses deeper than [`lex::MAX_DEPTH`] are refused at once, and at
+//! most [`MAX_ERRORS`] errors are shown. Measured (debug build, opt-level 1): a 1 MiB `1+1+…` chain lexes,
+//! parses and lowers in about 0.3 s; a 100 000-deep `((((…` is rejected in well under a millisecond.
 
+pub mod ast;
 pub mod diag;
+pub mod lex;
+pub mod lower;
+pub mod parse;
 pub mod span;
 
 use crate::ir::Formula;
-use diag::{Diagnostic, Diagnostics};
+use diag::{Diagnostic, Diagnostics, Severity};
 
-/// Parses and lowers one .brdf source file.
-pub fn parse(file: &str, _src: &str) -> Result<Formula, Diagnostics> {
-    Err(Diagnostics::single(file, Diagnostic::error("the parser is not built yet")))
+/// At most this many errors are rendered; the rest are summarised in one line.
+pub const MAX_ERRORS: usize = 25;
+
+/// Parses and lowers one .brdf source file. Warnings are dropped; use [`parse_with_warnings`] to show them.
+pub fn parse(file: &str, src: &str) -> Result<Formula, Diagnostics> {
+    parse_with_warnings(file, src).map(|(f, _)| f)
+}
+
+/// Parses and lowers one .brdf source file; on success also returns the warnings (unused `let`/`param`, a
+/// formula that reads no input), possibly empty. On failure the diagnostics hold every error found.
+pub fn parse_with_warnings(file: &str, src: &str) -> Result<(Formula, Diagnostics), Diagnostics> {
+    let mut items: Vec<Diagnostic> = Vec::new();
+    let lexed = lex::lex(src);
+    items.extend(lexed.diags.iter().cloned());
+    let formula = if lexed.fatal {
+        None
+    } else {
+        let ast = parse::parse(src, &lexed, &mut items);
+        let syntax_failed = !items.is_empty();
+        lower::lower(file, src, &ast, syntax_failed, &mut items)
+    };
+    // Reading order; diagnostics without a location (a missing formula) come first.
+    items.sort_by_key(|d| d.primary.as_ref().map(|p| (p.0.start, p.0.end)));
+    let n_errors = items.iter().filter(|d| d.severity == Severity::Error).count();
+    if n_errors > MAX_ERRORS {
+        let mut kept = 0;
+        items.retain(|d| {
+            kept += usize::from(d.severity == Severity::Error);
+            kept <= MAX_ERRORS && d.severity == Severity::Error
+        });
+        items.push(
+            Diagnostic::error(format!("{} more errors not shown", n_errors - MAX_ERRORS))
+                .hint("fix the errors above first; is this really a .brdf file?"),
+        );
+    }
+    let mut ds = Diagnostics::new(file, src);
+    ds.items = items;
+    if formula.is_none() && !ds.has_errors() {
+        // Lowering fails only after reporting; this keeps a bug here from becoming a silent rejection.
+        ds.push(Diagnostic::error("internal error: the formula was rejected without a reason").hint(
+            "please report this file to the lobe developers",
+        ));
+    }
+    match formula {
+        Some(f) if !ds.has_errors() => Ok((f, ds)),
+        _ => Err(ds),
+    }
 }
 
 /// The closest candidate by edit distance, if close enough to be a plausible typo.
@@ -17,8 +90,10 @@ pub fn suggest<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) ->
     candidates
         .into_iter()
         .map(|c| (levenshtein(&lname, &c.to_lowercase()), c))
-        .filter(|(d, c)| *d <= (c.len().max(name.len()) / 3).max(1))
-        .min_by_key(|(d, _)| *d)
+        // Close enough to be a typo, and not a rewrite of the whole name (`c` → `d` is no suggestion).
+        .filter(|(d, c)| *d <= (c.len().max(name.len()) / 3).max(1) && (*d == 0 || *d < name.chars().count()))
+        // Ties go to the candidate as long as the name (`NX` → `NH`, not `n`), then to the earlier one.
+        .min_by_key(|(d, c)| (*d, c.chars().count().abs_diff(name.chars().count())))
         .map(|(_, c)| c)
 }
 
@@ -40,7 +115,10 @@ fn levenshtein(a: &str, b: &str) -> usize {
 mod tests {
     #[test]
     fn suggests_close_names() {
-        assert_eq!(super::suggest("NX", ["NL", "NV", "NH", "VR"]), Some("NL"));
+        assert_eq!(super::suggest("NX", ["NH", "NL", "NV", "VR"]), Some("NH"));
+        assert_eq!(super::suggest("NX", ["n", "NH"]), Some("NH"));
+        assert_eq!(super::suggest("nh", ["n", "NH"]), Some("NH"));
+        assert_eq!(super::suggest("c", ["d", "n"]), None);
         assert_eq!(super::suggest("acoss", ["acos", "cos"]), Some("acos"));
         assert_eq!(super::suggest("zzzzzz", ["acos", "cos"]), None);
     }

@@ -3,5 +3,7 @@ mod catalogue;
 mod cli;
 mod differential;
 mod export;
+mod front;
 mod jit;
+mod parse_errors;
 mod simplify;

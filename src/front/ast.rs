@@ -1,0 +1,129 @@
+//! The syntax tree of a .brdf file, as an arena.
+//!
+//! Design: expressions live in one `Vec` and refer to their operands by [`ExprId`], so building, walking and
+//! dropping a tree never recurses: a 1 MiB `1+1+1+…` (a left spine 500 000 deep) drops as one `Vec` and is
+//! lowered with an explicit stack. The parser builds bottom-up, so every operand has a smaller id than its
+//! user. Every node carries the byte span of its source text. Names borrow from the source.
+
+use super::span::Span;
+
+/// Index of an expression in [`Ast::exprs`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct ExprId(pub u32);
+
+impl ExprId {
+    pub fn index(self) -> usize {
+        self.0 as usize
+    }
+}
+
+/// A name as written, with its span.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Ident<'s> {
+    pub name: &'s str,
+    pub span: Span,
+}
+
+/// A binary operator as written (`^` is lowered to the `pow` builtin).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BinOp {
+    Add,
+    Sub,
+    Mul,
+    Div,
+    Pow,
+}
+
+impl BinOp {
+    pub fn symbol(self) -> &'static str {
+        match self {
+            BinOp::Add => "+",
+            BinOp::Sub => "-",
+            BinOp::Mul => "*",
+            BinOp::Div => "/",
+            BinOp::Pow => "^",
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum ExprKind<'s> {
+    Num(f64),
+    Name(Ident<'s>),
+    Neg(ExprId),
+    Binary(BinOp, ExprId, ExprId),
+    Call(Ident<'s>, Vec<ExprId>),
+    /// `( e )`: kept so the span covers the parentheses.
+    Paren(ExprId),
+    /// Where the parser recovered from a syntax error (already reported); lowers to nothing, silently.
+    Error,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Expr<'s> {
+    pub kind: ExprKind<'s>,
+    pub span: Span,
+}
+
+impl Expr<'_> {
+    /// Calls `f` on every operand, in order.
+    pub fn for_each_child(&self, mut f: impl FnMut(ExprId)) {
+        match &self.kind {
+            ExprKind::Num(_) | ExprKind::Name(_) | ExprKind::Error => {}
+            ExprKind::Neg(a) | ExprKind::Paren(a) => f(*a),
+            ExprKind::Binary(_, a, b) => {
+                f(*a);
+                f(*b);
+            }
+            ExprKind::Call(_, args) => args.iter().for_each(|a| f(*a)),
+        }
+    }
+}
+
+/// A number in a `param` declaration (an optional `-` and a literal).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lit {
+    pub value: f64,
+    pub span: Span,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum StmtKind<'s> {
+    /// `@key "value"`.
+    Meta { key: Ident<'s>, value: &'s str, value_span: Span },
+    /// `param name = default [in lo..hi]`.
+    Param { name: Ident<'s>, default: Lit, range: Option<(Lit, Lit)> },
+    /// `let name = value`.
+    Let { name: Ident<'s>, value: ExprId },
+    /// The formula (there must be exactly one, last).
+    Expr(ExprId),
+    /// A statement the parser could not read (already reported).
+    Error,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Stmt<'s> {
+    pub kind: StmtKind<'s>,
+    pub span: Span,
+}
+
+/// A parsed file: statements in source order over one expression arena.
+#[derive(Clone, Debug, Default)]
+pub struct Ast<'s> {
+    pub exprs: Vec<Expr<'s>>,
+    pub stmts: Vec<Stmt<'s>>,
+}
+
+impl<'s> Ast<'s> {
+    pub fn push(&mut self, kind: ExprKind<'s>, span: Span) -> ExprId {
+        let id = ExprId(self.exprs.len() as u32);
+        self.exprs.push(Expr { kind, span });
+        id
+    }
+    pub fn expr(&self, id: ExprId) -> &Expr<'s> {
+        &self.exprs[id.index()]
+    }
+    pub fn span(&self, id: ExprId) -> Span {
+        self.exprs[id.index()].span
+    }
+}

@@ -1,0 +1,291 @@
+//! lalrpop glue: runs the generated LR parser over the lexer's tokens and turns its errors into diagnostics.
+//!
+//! Design: the parser is table-driven (lalrpop's default LR(1) machine keeps its stack in a `Vec`), so deep
+//! input cannot overflow the native stack while parsing; the actions build the arena AST in [`State`].
+//! Errors recovered with `!` (at each statement, and after `let name =`) are converted here, where the token
+//! list is at hand, so a message can name the previous token ("expected an operand after `+`") and detect
+//! the common shapes: a missing operator between two operands, a trailing operator, `**` for powers, `()`.
+//! Errors at a [`Tok::Error`] token are dropped: the lexer has already reported that character.
+
+use super::ast::{Ast, BinOp, ExprId, ExprKind, Stmt, StmtKind};
+use super::diag::Diagnostic;
+use super::lex::{Lexed, Tok};
+use super::span::Span;
+use lalrpop_util::{ErrorRecovery, ParseError};
+use std::convert::Infallible;
+
+lalrpop_util::lalrpop_mod!(
+    #[allow(clippy::all, clippy::pedantic, unused_parens, unused_imports, dead_code)]
+    grammar,
+    "/formula.rs"
+);
+
+type Recovered<'s> = ErrorRecovery<usize, Tok<'s>, Infallible>;
+
+/// What the grammar's actions write to.
+#[derive(Debug, Default)]
+pub struct State<'s> {
+    pub ast: Ast<'s>,
+    pub recovered: Vec<Recovered<'s>>,
+}
+
+impl<'s> State<'s> {
+    pub fn stmt(&mut self, kind: StmtKind<'s>, l: usize, r: usize) {
+        self.ast.stmts.push(Stmt { kind, span: Span::new(l, r) });
+    }
+    pub fn bin(&mut self, op: BinOp, a: ExprId, b: ExprId) -> ExprId {
+        let span = self.ast.span(a).join(self.ast.span(b));
+        self.ast.push(ExprKind::Binary(op, a, b), span)
+    }
+    pub fn neg(&mut self, a: ExprId, l: usize) -> ExprId {
+        let span = Span::new(l, self.ast.span(a).end as usize);
+        self.ast.push(ExprKind::Neg(a), span)
+    }
+}
+
+/// Parses the tokens into an AST; syntax errors are appended to `diags`.
+pub fn parse<'s>(src: &str, lexed: &Lexed<'s>, diags: &mut Vec<Diagnostic>) -> Ast<'s> {
+    let mut st = State::default();
+    let toks = &lexed.toks;
+    let result = grammar::FileParser::new().parse(&mut st, toks.iter().copied().map(Ok::<_, Infallible>));
+    let mut errors: Vec<ParseError<usize, Tok<'s>, Infallible>> =
+        std::mem::take(&mut st.recovered).into_iter().map(|r| r.error).collect();
+    if let Err(e) = result {
+        errors.push(e);
+        // The statements parsed so far stand; mark the rest unreadable so no "missing formula" follows.
+        st.stmt(StmtKind::Error, src.len(), src.len());
+    }
+    for e in &errors {
+        if let Some(d) = syntax_error(src, toks, e) {
+            diags.push(d);
+        }
+    }
+    st.ast
+}
+
+/// Index of the token `(l, tok, r)` in `toks`.
+fn index_of(toks: &[(usize, Tok, usize)], l: usize, tok: Tok, r: usize) -> Option<usize> {
+    let first = toks.partition_point(|t| t.0 < l);
+    (first..toks.len()).take_while(|&i| toks[i].0 == l).find(|&i| toks[i].1 == tok && toks[i].2 == r)
+}
+
+/// How a token reads in a message.
+fn describe(src: &str, tok: Tok, l: usize, r: usize) -> String {
+    let text = src.get(l..r).unwrap_or("");
+    match tok {
+        Tok::Newline if text == ";" => "`;`".into(),
+        Tok::Newline => "the end of the line".into(),
+        _ if l == r => "the end of the line".into(),
+        Tok::Num(_) => format!("number `{text}`"),
+        Tok::Ident(_) => format!("name `{text}`"),
+        Tok::Str(_) => "a string".into(),
+        _ => format!("`{text}`"),
+    }
+}
+
+/// "an expression, `)` or `,`" from lalrpop's list of expected terminals.
+fn expected_phrase(expected: &[String]) -> String {
+    let has = |s: &str| expected.iter().any(|e| e.trim_matches('"') == s);
+    let mut parts: Vec<String> = vec![];
+    if has("number") && has("name") {
+        parts.push("an expression".into());
+    } else {
+        if has("number") {
+            parts.push("a number".into());
+        }
+        if has("name") {
+            parts.push("a name".into());
+        }
+    }
+    if has("+") && has("*") {
+        parts.push("an operator".into());
+    }
+    for (t, p) in [(")", "`)`"), (",", "`,`"), ("=", "`=`"), ("in", "`in`"), ("..", "`..`")] {
+        if has(t) {
+            parts.push(p.into());
+        }
+    }
+    if has("string") {
+        parts.push("a string in double quotes".into());
+    }
+    if has("newline") {
+        parts.push("the end of the statement".into());
+    }
+    match parts.len() {
+        0 => "something else".into(),
+        1 => parts.remove(0),
+        _ => {
+            let last = parts.pop().unwrap_or_default();
+            format!("{} or {}", parts.join(", "), last)
+        }
+    }
+}
+
+/// A syntax error as a diagnostic; `None` when the lexer already reported the cause.
+fn syntax_error(src: &str, toks: &[(usize, Tok, usize)], e: &ParseError<usize, Tok, Infallible>) -> Option<Diagnostic> {
+    let (cur, expected, at) = match e {
+        ParseError::UnrecognizedToken { token: (l, t, r), expected } => (Some((*l, *t, *r)), expected.as_slice(), *l),
+        ParseError::UnrecognizedEof { location, expected } => (None, expected.as_slice(), *location),
+        ParseError::ExtraToken { token: (l, t, r) } => (Some((*l, *t, *r)), &[][..], *l),
+        ParseError::InvalidToken { location } => (None, &[][..], *location),
+        ParseError::User { error } => match *error {},
+    };
+    if let Some((_, Tok::Error, _)) = cur {
+        return None;
+    }
+    let idx = match cur {
+        Some((l, t, r)) => index_of(toks, l, t, r).unwrap_or(toks.partition_point(|t| t.0 < l)),
+        None => toks.len(),
+    };
+    let prev = idx.checked_sub(1).and_then(|i| toks.get(i)).copied();
+    let found = match cur {
+        Some((l, t, r)) => describe(src, t, l, r),
+        None => "the end of the file".into(),
+    };
+    let cur_span = match cur {
+        Some((l, _, r)) => Span::new(l, r),
+        None => Span::new(at, at),
+    };
+    // The first token of the statement, for a syntax hint.
+    let stmt_start = toks[..idx.min(toks.len())]
+        .iter()
+        .rposition(|t| t.1 == Tok::Newline)
+        .map(|i| i + 1)
+        .unwrap_or(0);
+    let stmt_kind = toks.get(stmt_start).map(|t| t.1).filter(|_| stmt_start < idx);
+
+    if let (Some((pl, pt, pr)), Some((_, ct, _))) = (prev, cur) {
+        if pt == Tok::Error {
+            return None;
+        }
+        let (ptext, ctext) = (src.get(pl..pr).unwrap_or(""), cur.and_then(|(l, _, r)| src.get(l..r)).unwrap_or(""));
+        // `2 NH`, `a (b)`, `) (`: two operands in a row.
+        let operator_expected = expected.iter().any(|e| e.trim_matches('"') == "*");
+        if pt.ends_operand() && ct.starts_operand() && !ctext.is_empty() && operator_expected {
+            return Some(
+                Diagnostic::error(format!("missing operator between `{ptext}` and `{ctext}`"))
+                    .at(cur_span, "expected an operator before this")
+                    .also(Span::new(pl, pr), "this operand ends here")
+                    .hint(format!("did you mean `{ptext} * {ctext}`? Multiplication needs an explicit `*`")),
+            );
+        }
+        if pt == Tok::Star && ct == Tok::Star {
+            return Some(
+                Diagnostic::error("`**` is not an operator")
+                    .at(Span::new(pl, cur_span.end as usize), "written here")
+                    .hint("write powers with `^`, like `NH^n`"),
+            );
+        }
+        if pt == Tok::LParen && ct == Tok::RParen {
+            return Some(
+                Diagnostic::error("empty parentheses")
+                    .at(Span::new(pl, cur_span.end as usize), "nothing inside")
+                    .hint("put an expression between `(` and `)`, or remove them"),
+            );
+        }
+    }
+    if let Some((pl, pt, pr)) = prev {
+        if pt.is_binary_operator() && !cur.is_some_and(|c| c.1.starts_operand() || c.1 == Tok::Minus) {
+            let op = src.get(pl..pr).unwrap_or("");
+            let mut d = Diagnostic::error(format!("expected an operand after `{op}`, found {found}"));
+            d = if cur.is_none_or(|c| c.1 == Tok::Newline || c.0 == c.2) {
+                d.at(Span::new(pl, pr), "nothing follows this operator")
+            } else {
+                d.at(cur_span, "expected an operand here").also(Span::new(pl, pr), "after this operator")
+            };
+            return Some(d.hint(format!("complete the expression after `{op}`, or remove the trailing `{op}`")));
+        }
+    }
+    let what = expected_phrase(expected);
+    let mut d = match prev {
+        Some((pl, _, pr)) if cur.is_some() || prev.is_some() => {
+            let ptext = src.get(pl..pr).unwrap_or("");
+            Diagnostic::error(format!("expected {what} after `{ptext}`, found {found}"))
+        }
+        _ => Diagnostic::error(format!("expected {what}, found {found}")),
+    };
+    d = d.at(cur_span, format!("expected {what}"));
+    let hint = match stmt_kind {
+        Some(Tok::Param) => "a parameter is declared as `param a = 16 in 1..1000` (the range is optional)".to_string(),
+        Some(Tok::Let) => "a binding is written `let name = expression`".to_string(),
+        Some(Tok::Meta(k)) => {
+            if expected.iter().any(|e| e.trim_matches('"') == "string") {
+                format!("metadata takes a string in double quotes: `@{k} \"…\"`")
+            } else {
+                "write each `@key \"…\"` on its own line".to_string()
+            }
+        }
+        _ if cur.is_some_and(|c| c.1 == Tok::RParen) => "remove this `)` or complete the expression before it".into(),
+        _ => "a statement is `let name = …`, `param name = …`, `@name \"…\"`, or the formula itself".to_string(),
+    };
+    Some(d.hint(hint))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::front::lex::lex;
+
+    fn parse_ok(src: &str) -> Ast<'_> {
+        let l = lex(src);
+        let mut d = vec![];
+        let ast = parse(src, &l, &mut d);
+        assert!(d.is_empty() && l.diags.is_empty(), "{src}: {d:?}");
+        ast
+    }
+
+    /// The tree as fully parenthesised text, to check precedence without evaluating.
+    fn show(ast: &Ast, id: ExprId) -> String {
+        match &ast.expr(id).kind {
+            ExprKind::Num(v) => format!("{v}"),
+            ExprKind::Name(n) => n.name.to_string(),
+            ExprKind::Neg(a) => format!("(-{})", show(ast, *a)),
+            ExprKind::Binary(op, a, b) => format!("({} {} {})", show(ast, *a), op.symbol(), show(ast, *b)),
+            ExprKind::Call(n, args) => {
+                format!("{}({})", n.name, args.iter().map(|a| show(ast, *a)).collect::<Vec<_>>().join(", "))
+            }
+            ExprKind::Paren(a) => show(ast, *a),
+            ExprKind::Error => "<error>".into(),
+        }
+    }
+
+    fn expr(src: &str) -> String {
+        let ast = parse_ok(src);
+        match ast.stmts.last().map(|s| &s.kind) {
+            Some(StmtKind::Expr(e)) => show(&ast, *e),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn precedence_and_associativity() {
+        assert_eq!(expr("-x^2"), "(-(x ^ 2))");
+        assert_eq!(expr("2^3^2"), "(2 ^ (3 ^ 2))");
+        assert_eq!(expr("a-b-c"), "((a - b) - c)");
+        assert_eq!(expr("a/b/c"), "((a / b) / c)");
+        assert_eq!(expr("a+b*c^d"), "(a + (b * (c ^ d)))");
+        assert_eq!(expr("2^-x"), "(2 ^ (-x))");
+        assert_eq!(expr("--x"), "(-(-x))");
+        assert_eq!(expr("-a*b"), "((-a) * b)");
+        assert_eq!(expr("max(a, b,)"), "max(a, b)");
+    }
+
+    #[test]
+    fn spans_cover_the_source() {
+        let src = "let c = (NH + 1)\n2 * c";
+        let ast = parse_ok(src);
+        let StmtKind::Let { value, .. } = ast.stmts[0].kind else { panic!() };
+        assert_eq!(&src[ast.span(value).range()], "(NH + 1)");
+        assert_eq!(&src[ast.stmts[1].span.range()], "2 * c");
+    }
+
+    #[test]
+    fn recovers_at_each_statement() {
+        let src = "let a = 2 3\nlet b = * 3\nc d\nNH";
+        let l = lex(src);
+        let mut d = vec![];
+        let ast = parse(src, &l, &mut d);
+        assert_eq!(d.len(), 3, "{d:#?}");
+        assert_eq!(ast.stmts.len(), 4);
+    }
+}
