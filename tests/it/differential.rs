@@ -380,22 +380,21 @@ fn catalogue_formulas_agree_with_rust_twins() {
             for x in &pts {
                 let want = builtins::fmax(twin(x, &ps), 0.0);
                 let got = jit.eval(x, &ps);
-                assert!(agree(want, got), "{name} at {x:?} n={}: twin {want:e}, jit {got:e}", ps[0]);
+                // Not 4 ulp: the simplifier rewrites n - n*c into n*(1 - c), which is *more* accurate than the
+                // twin near c = 1 (the twin's cancellation costs up to ~n ulp there), so the twin is only a
+                // reference to within its own conditioning.
+                let close = agree(want, got) || (want - got).abs() <= 1e-12 * want.abs().max(got.abs());
+                assert!(close, "{name} at {x:?} n={}: twin {want:e}, jit {got:e}", ps[0]);
             }
         }
     }
 }
 
-/// (b) every catalogue file through `lobe::compile`, both backends. Skipped (with a note) while the branch
-/// has no `examples/brdfs/`; once the front end and the examples are merged, every file must compile with
-/// both backends and agree.
+/// (b) every catalogue file through `lobe::compile`, both backends: every file must compile and agree.
 #[test]
 fn catalogue_files_agree() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/brdfs");
-    let Ok(entries) = std::fs::read_dir(&dir) else {
-        eprintln!("note: {} not present; catalogue file test skipped", dir.display());
-        return;
-    };
+    let entries = std::fs::read_dir(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
     let mut files: Vec<_> =
         entries.filter_map(|e| e.ok()).map(|e| e.path()).filter(|p| p.extension().is_some_and(|x| x == "brdf")).collect();
     files.sort();
