@@ -115,7 +115,7 @@ fn with_n(p: &[f64], n: f64) -> Vec<f64> {
 /// The first angle (degrees) from the normal where `f < level`, bisected between fine-grid samples;
 /// 90 when the lobe never drops below `level`.
 fn cutoff_deg(f: &dyn Fn(f64) -> f64, deg: &[f64], vals: &[f64], level: f64) -> f64 {
-    let Some(i) = vals.iter().position(|v| !(*v >= level)) else { return 90.0 };
+    let Some(i) = vals.iter().position(|v| v.is_nan() || *v < level) else { return 90.0 };
     if i == 0 {
         return 0.0;
     }

@@ -140,6 +140,27 @@ pub fn check_param_values(decls: &[crate::ir::ParamDecl], params: &[f64]) -> Res
     Ok(())
 }
 
+/// A number for `--json` output: finite values as numbers, NaN and ±inf as the strings "NaN", "inf", "-inf"
+/// (JSON has no non-finite numbers; `null` would hide which one it was).
+pub fn json_num(v: f64) -> serde_json::Value {
+    if v.is_finite() {
+        serde_json::json!(v)
+    } else {
+        serde_json::json!(v.to_string())
+    }
+}
+
+/// Parses `lo..hi` (both numbers) as used by `--range` and `--param`.
+pub fn parse_range(s: &str) -> Result<(f64, f64), String> {
+    let (a, b) = s.split_once("..").ok_or_else(|| format!("`{s}` is not a range; write lo..hi, e.g. 1..1000"))?;
+    let p = |t: &str| t.trim().parse::<f64>().map_err(|_| format!("`{}` is not a number in the range `{s}`", t.trim()));
+    let (lo, hi) = (p(a)?, p(b)?);
+    if !(lo.is_finite() && hi.is_finite()) || lo > hi {
+        return Err(format!("`{s}`: need finite lo ≤ hi"));
+    }
+    Ok((lo, hi))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

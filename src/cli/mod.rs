@@ -5,3 +5,7 @@
 
 pub mod common;
 pub mod eval;
+pub mod accuracy;
+pub mod energy;
+pub mod fit;
+pub mod sweep;
