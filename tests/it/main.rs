@@ -1,1 +1,3 @@
 //! lobe's integration tests: one binary, one module per area.
+mod accuracy;
+mod energy;
