@@ -6,8 +6,16 @@ use super::common::{self, CliError};
 use super::energy::resolve_lobe;
 use crate::check::accuracy::{accuracy, AccuracyOptions};
 use crate::check::json_num;
-use crate::Backend;
+use crate::{Backend, Kernel};
 use serde_json::json;
+
+/// `writeln!` into the report string (formatting into a `String` cannot fail).
+macro_rules! outln {
+    ($o:expr, $($t:tt)*) => {{
+        use std::fmt::Write as _;
+        let _ = writeln!($o, $($t)*);
+    }};
+}
 
 #[derive(clap::Args, Debug)]
 pub struct AccuracyArgs {
@@ -43,12 +51,20 @@ pub struct AccuracyArgs {
 
 pub fn run(a: &AccuracyArgs) -> Result<(), CliError> {
     let set: Vec<(String, f64)> = a.set.concat();
+    let k = common::load_kernel(a.file.as_deref(), a.expr.as_deref(), &set, a.backend)?;
+    let r = common::load_kernel(Some(&a.reference), None, &[], a.backend)?;
+    print!("{}", report(a, &k, &r)?);
+    Ok(())
+}
+
+/// The command's output for already compiled kernels (formula `k`, reference `r`).
+pub fn report(a: &AccuracyArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
+    let mut out = String::new();
+    let set: Vec<(String, f64)> = a.set.concat();
     if set.iter().any(|(k, _)| k == "n") {
         return Err(CliError::hint("accuracy sweeps n itself; --set n is not allowed", "set only the other parameters"));
     }
     let t = std::time::Instant::now();
-    let k = common::load_kernel(a.file.as_deref(), a.expr.as_deref(), &set, a.backend)?;
-    let r = common::load_kernel(Some(&a.reference), None, &[], a.backend)?;
     let params = common::param_values(&k.formula, &set);
     let (lobe, note) = resolve_lobe(a.lobe.as_deref(), k.used_inputs())?;
     let (ref_lobe, _) = resolve_lobe(None, r.used_inputs())?;
@@ -63,10 +79,10 @@ pub fn run(a: &AccuracyArgs) -> Result<(), CliError> {
         }
     }
     let opts = AccuracyOptions { q: a.q, n_max: a.n_max, epicenter_from: a.epicenter_from, ..Default::default() };
-    let rep = accuracy(&k, &params, lobe, &r, &r.default_params(), ref_lobe, &opts)?;
+    let rep = accuracy(k, &params, lobe, r, &r.default_params(), ref_lobe, &opts)?;
     let secs = t.elapsed().as_secs_f64();
     if a.json {
-        println!(
+        outln!(out, 
             "{}",
             json!({
                 "mean_abs_grid": json_num(rep.mean_abs_grid),
@@ -81,30 +97,59 @@ pub fn run(a: &AccuracyArgs) -> Result<(), CliError> {
                 "q": a.q, "nan_points": rep.nan_points, "seconds": secs,
             })
         );
-        return Ok(());
+        return Ok(out);
     }
-    println!("{} vs {} (n = 1..{}, lobe variable {}):", k.formula.display_name(), r.formula.display_name(), a.n_max, lobe.name());
-    println!("  mean |Δ| on the 91×{} grid (0°..90° step 1°):   {:.6e}", a.n_max, rep.mean_abs_grid);
-    println!(
+    outln!(out, "{} vs {} (n = 1..{}, lobe variable {}):", k.formula.display_name(), r.formula.display_name(), a.n_max, lobe.name());
+    outln!(out, "  mean |Δ| on the 91×{} grid (0°..90° step 1°):   {:.6e}", a.n_max, rep.mean_abs_grid);
+    outln!(out, 
         "  epicentre max rel. error, n ∈ [{}, {}]:          {:.4} % at n = {} (x = {:.4}°)",
         a.epicenter_from, a.n_max, rep.epicenter.value * 100.0, rep.epicenter.n, rep.epicenter.angle_deg
     );
-    println!(
+    outln!(out, 
         "  inflection max rel. error, n ∈ [3, {}]:          {:.4} % at n = {} (x = {:.4}°)",
         a.n_max, rep.inflection.value * 100.0, rep.inflection.n, rep.inflection.angle_deg
     );
-    println!("  max |Δ| over angles (step 0.05°):               {:.6} at n = {}, {:.2}°", rep.max_abs.value, rep.max_abs.n, rep.max_abs.angle_deg);
-    println!(
+    outln!(out, "  max |Δ| over angles (step 0.05°):               {:.6} at n = {}, {:.2}°", rep.max_abs.value, rep.max_abs.n, rep.max_abs.angle_deg);
+    outln!(out, 
         "  max rel. error where the reference ≥ 2^−{}:       {:.4} % at n = {}, {:.2}°",
         a.q, rep.cutoff_rel.value * 100.0, rep.cutoff_rel.n, rep.cutoff_rel.angle_deg
     );
-    println!(
+    outln!(out, 
         "  lobe-size ratio (cut-off angle / reference's):   {:.4} (n = {}) … {:.4} (n = {})",
         rep.lobe_ratio_min.value, rep.lobe_ratio_min.n, rep.lobe_ratio_max.value, rep.lobe_ratio_max.n
     );
     if rep.nan_points > 0 {
-        println!("  {} grid points were NaN (counted as the worst error); run `lobe sweep` on the file", rep.nan_points);
+        outln!(out, "  {} grid points were NaN (counted as the worst error); run `lobe sweep` on the file", rep.nan_points);
     }
-    println!("  ({secs:.2} s, backend {})", k.backend.name());
-    Ok(())
+    outln!(out, "  ({secs:.2} s, backend {})", k.backend.name());
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::check::twins;
+    use crate::cli::energy::tests::twin_kernel;
+    use crate::ir::Input;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct T {
+        #[command(flatten)]
+        a: AccuracyArgs,
+    }
+
+    #[test]
+    fn json_keys_and_published_mean() {
+        let a = T::try_parse_from(["accuracy", "--reference", "blinn.brdf", "--json", "--n-max", "1000"]).unwrap().a;
+        let k = twin_kernel(twins::modified_schlick(), Input::NH, &[]);
+        let r = twin_kernel(twins::blinn(), Input::NH, &[]);
+        let v: serde_json::Value = serde_json::from_str(&report(&a, &k, &r).unwrap()).unwrap();
+        assert!((v["mean_abs_grid"].as_f64().unwrap() - 0.006554934).abs() < 1e-8, "{v}");
+        for key in ["epicenter_max_rel_pct", "inflection_max_rel_pct", "max_abs", "cutoff_max_rel_pct", "lobe_ratio_max"] {
+            assert!(v[key].as_f64().is_some(), "missing {key}: {v}");
+        }
+        let a = T::try_parse_from(["accuracy", "--reference", "b", "--set", "n=3"]).unwrap().a;
+        assert!(report(&a, &k, &r).is_err());
+    }
 }

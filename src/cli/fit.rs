@@ -6,9 +6,17 @@ use super::common::{self, CliError};
 use super::energy::resolve_lobe;
 use crate::check::fit::{fit, FitOptions, FreeParam, Metric};
 use crate::check::{json_num, parse_range};
-use crate::Backend;
+use crate::{Backend, Kernel};
 use serde_json::json;
 use std::io::IsTerminal;
+
+/// `writeln!` into the report string (formatting into a `String` cannot fail).
+macro_rules! outln {
+    ($o:expr, $($t:tt)*) => {{
+        use std::fmt::Write as _;
+        let _ = writeln!($o, $($t)*);
+    }};
+}
 
 #[derive(clap::Args, Debug)]
 pub struct FitArgs {
@@ -75,6 +83,18 @@ pub fn run(a: &FitArgs) -> Result<(), CliError> {
     }
     let k = common::load_kernel(a.file.as_deref(), a.expr.as_deref(), &set, a.backend)?;
     let r = common::load_kernel(Some(&a.reference), None, &[], a.backend)?;
+    print!("{}", report(a, &k, &r)?);
+    Ok(())
+}
+
+/// The command's output for already compiled kernels (formula `k`, reference `r`).
+pub fn report(a: &FitArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
+    let mut out = String::new();
+    let set: Vec<(String, f64)> = a.set.concat();
+    let mut free_spec = vec![];
+    for p in &a.param {
+        free_spec.push(parse_free(p).map_err(|e| CliError::hint(format!("--param: {e}"), "e.g. --param a=1..1000 or a=0.1..0.9:0.1"))?);
+    }
     let mut free = vec![];
     for (name, lo, hi, step) in free_spec {
         let Some(index) = k.formula.param_index(&name) else {
@@ -115,7 +135,7 @@ pub fn run(a: &FitArgs) -> Result<(), CliError> {
     };
     let opts = FitOptions { metric: a.metric, top: a.top.max(1), refine: !a.no_refine, n_max: a.n_max };
     let t = std::time::Instant::now();
-    let rep = fit(&k, &params, lobe, &r, &r.default_params(), ref_lobe, &free, &opts, &|| bar.inc(1))?;
+    let rep = fit(k, &params, lobe, r, &r.default_params(), ref_lobe, &free, &opts, &|| bar.inc(1))?;
     bar.finish_and_clear();
     let secs = t.elapsed().as_secs_f64();
     let names: Vec<&str> = free.iter().map(|f| f.name.as_str()).collect();
@@ -129,10 +149,10 @@ pub fn run(a: &FitArgs) -> Result<(), CliError> {
                 json!({"params": p, "score": json_num(c.score), "refined": c.refined})
             })
             .collect();
-        println!("{}", json!({"best": best, "metric": a.metric.name(), "evaluated": rep.evaluated, "seconds": secs}));
-        return Ok(());
+        outln!(out, "{}", json!({"best": best, "metric": a.metric.name(), "evaluated": rep.evaluated, "seconds": secs}));
+        return Ok(out);
     }
-    println!(
+    outln!(out, 
         "{} vs {}: {} over {} ({} grid points, {} scores in {secs:.2} s, backend {})",
         k.formula.display_name(),
         r.formula.display_name(),
@@ -144,13 +164,40 @@ pub fn run(a: &FitArgs) -> Result<(), CliError> {
     );
     for (i, c) in rep.best.iter().enumerate() {
         let shown: Vec<String> = free.iter().map(|f| format!("{}={}", f.name, c.params[f.index])).collect();
-        println!("  {}. {:<40} score {:.6e}{}", i + 1, shown.join(", "), c.score, if c.refined { "  (continuous refinement)" } else { "" });
+        outln!(out, "  {}. {:<40} score {:.6e}{}", i + 1, shown.join(", "), c.score, if c.refined { "  (continuous refinement)" } else { "" });
     }
-    Ok(())
+    Ok(out)
 }
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+    use crate::check::twins;
+    use crate::cli::energy::tests::twin_kernel;
+    use crate::ir::Input;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct T {
+        #[command(flatten)]
+        a: FitArgs,
+    }
+
+    #[test]
+    fn finds_268_and_reports_json() {
+        let a = T::try_parse_from(["fit", "--reference", "b", "--param", "a=260..280", "--json", "--quiet"]).unwrap().a;
+        let k = twin_kernel(twins::f_st(), Input::NH, &[("a", 16.0, 1.0, 1000.0)]);
+        let r = twin_kernel(twins::blinn(), Input::NH, &[]);
+        let v: serde_json::Value = serde_json::from_str(&report(&a, &k, &r).unwrap()).unwrap();
+        let best = &v["best"].as_array().unwrap();
+        let grid = best.iter().find(|c| c["refined"] == false).unwrap();
+        assert_eq!(grid["params"]["a"].as_f64(), Some(268.0), "{v}");
+        let a = T::try_parse_from(["fit", "--reference", "b", "--param", "b=1..3"]).unwrap().a;
+        assert!(report(&a, &k, &r).unwrap_err().render(false).contains("no parameter `b`"));
+        let a = T::try_parse_from(["fit", "--reference", "b", "--param", "a=0..3"]).unwrap().a;
+        assert!(report(&a, &k, &r).unwrap_err().render(false).contains("declared range"));
+    }
+
     #[test]
     fn parses_free_parameters() {
         assert_eq!(super::parse_free("a=1..1000").unwrap(), ("a".into(), 1.0, 1000.0, None));

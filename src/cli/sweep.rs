@@ -6,8 +6,17 @@
 use super::common::{self, CliError};
 use crate::check::json_num;
 use crate::check::sweep::{sweep, Example, RegionStats, SweepOptions};
+use crate::ir::Formula;
 use crate::{Backend, Options};
 use serde_json::json;
+
+/// `writeln!` into the report string (formatting into a `String` cannot fail).
+macro_rules! outln {
+    ($o:expr, $($t:tt)*) => {{
+        use std::fmt::Write as _;
+        let _ = writeln!($o, $($t)*);
+    }};
+}
 
 #[derive(clap::Args, Debug)]
 pub struct SweepArgs {
@@ -63,8 +72,20 @@ pub fn run(a: &SweepArgs) -> Result<(), CliError> {
     if !(a.bound.is_finite() || a.bound == f64::INFINITY) {
         return Err(CliError::hint("--bound must be a number", "e.g. --bound 1e6"));
     }
-    let set: Vec<(String, f64)> = a.set.concat();
     let f = common::load_formula(a.file.as_deref(), a.expr.as_deref())?;
+    let (text, denied) = report(a, &f)?;
+    print!("{text}");
+    if !denied.is_empty() {
+        eprintln!("error: denied kinds occurred: {}", denied.join(", "));
+        return Err(CliError::Failed);
+    }
+    Ok(())
+}
+
+/// The command's output for a lowered formula, and the `--deny` kinds that occurred.
+pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliError> {
+    let mut out = String::new();
+    let set: Vec<(String, f64)> = a.set.concat();
     let mut decls = f.params.clone();
     let u = f.unclamped();
     let k = crate::compile_formula(u, &Options { backend: a.backend, bake: set.clone(), ..Options::default() })?;
@@ -98,13 +119,13 @@ pub fn run(a: &SweepArgs) -> Result<(), CliError> {
                                  "over_bound": example_json(&r.first_over_bound, &names)}})
             })
             .collect();
-        println!(
+        outln!(out, 
             "{}",
             json!({"nan": t.nan, "inf": t.inf, "negative": t.negative, "over_bound": t.over_bound, "evaluated": t.evaluated,
                    "bound": json_num(rep.bound), "exhaustive": rep.exhaustive, "regions": regions})
         );
     } else {
-        println!(
+        outln!(out, 
             "{}: unclamped formula {} over {} points ({}; inputs read: {})",
             f.display_name(),
             k.formula.to_text(),
@@ -112,22 +133,47 @@ pub fn run(a: &SweepArgs) -> Result<(), CliError> {
             if rep.exhaustive { "exhaustive grid" } else { "subsampled grid" },
             if used.is_empty() { "none".to_string() } else { used.to_string() }
         );
-        println!("  {:<10} {:>10} {:>8} {:>8} {:>9} {:>9}", "region", "evaluated", "NaN", "±inf", "negative", format!(">{:e}", rep.bound));
+        outln!(out, "  {:<10} {:>10} {:>8} {:>8} {:>9} {:>9}", "region", "evaluated", "NaN", "±inf", "negative", format!(">{:e}", rep.bound));
         for r in rep.regions.iter().chain(std::iter::once(t)) {
-            println!("  {:<10} {:>10} {:>8} {:>8} {:>9} {:>9}", r.region, r.evaluated, r.nan, r.inf, r.negative, r.over_bound);
+            outln!(out, "  {:<10} {:>10} {:>8} {:>8} {:>9} {:>9}", r.region, r.evaluated, r.nan, r.inf, r.negative, r.over_bound);
         }
         for r in &rep.regions {
             for (kind, e) in [("NaN", &r.first_nan), ("inf", &r.first_inf), ("negative", &r.first_negative), ("over bound", &r.first_over_bound)] {
                 if let Some(e) = e {
-                    println!("  first {kind} in {}: {}", r.region, example_text(e, used, &names));
+                    outln!(out, "  first {kind} in {}: {}", r.region, example_text(e, used, &names));
                 }
             }
         }
     }
-    let denied: Vec<&str> = a.deny.iter().map(String::as_str).filter(|d| count(d, t) > 0).collect();
-    if !denied.is_empty() {
-        eprintln!("error: denied kinds occurred: {}", denied.join(", "));
-        return Err(CliError::Failed);
+    let denied: Vec<String> = a.deny.iter().filter(|d| count(d, t) > 0).cloned().collect();
+    Ok((out, denied))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cli::energy::tests::power_formula;
+    use crate::ir::Input;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct T {
+        #[command(flatten)]
+        a: SweepArgs,
     }
-    Ok(())
+
+    #[test]
+    fn clean_formula_passes_deny_and_reports_json() {
+        let f = power_formula(Input::NH, &[]);
+        let a = T::try_parse_from(["sweep", "--json", "--deny", "nan,inf", "--backend", "interp"]).unwrap().a;
+        let (text, denied) = report(&a, &f).unwrap();
+        assert!(denied.is_empty());
+        let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        assert_eq!((v["nan"].as_u64(), v["inf"].as_u64(), v["negative"].as_u64()), (Some(0), Some(0), Some(0)));
+        // pow(c, n) with n ≥ 1 is ≤ 1: a bound of 0.5 is exceeded, and `--deny bound` says so.
+        let a = T::try_parse_from(["sweep", "--bound", "0.5", "--deny", "bound", "--backend", "interp"]).unwrap().a;
+        let (text, denied) = report(&a, &f).unwrap();
+        assert_eq!(denied, vec!["bound".to_string()]);
+        assert!(text.contains("first over bound"), "{text}");
+    }
 }
