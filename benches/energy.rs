@@ -55,4 +55,31 @@ fn bench(c: &mut Criterion) {
 }
 
 criterion_group!(benches, bench);
-criterion_main!(benches);
+
+
+/// Whole-report costs (accuracy over the 91×1000 grid + fine grid, full-mode albedo, stability sweep).
+fn checks(c: &mut Criterion) {
+    use lobe::check::accuracy::{accuracy, AccuracyOptions};
+    use lobe::check::energy::full_energy;
+    use lobe::check::sweep::{sweep, SweepOptions};
+    let mut g = c.benchmark_group("checks");
+    g.sample_size(10);
+    let ms = twins::modified_schlick();
+    let b = twins::blinn();
+    let interp = Interp::new(&blinn_ir());
+    let opts = AccuracyOptions::default();
+    g.bench_function("accuracy modified Schlick vs Blinn (twins)", |bch| {
+        bch.iter(|| accuracy(ms.ev.as_ref(), &[1.0], Input::NH, b.ev.as_ref(), &[1.0], Input::NH, &opts))
+    });
+    g.bench_function("accuracy twin Schlick vs interp Blinn", |bch| {
+        bch.iter(|| accuracy(ms.ev.as_ref(), &[1.0], Input::NH, &interp, &[1.0], Input::NH, &opts))
+    });
+    let ph = twins::phong();
+    g.bench_function("full energy Phong n=50 (91 angles + reciprocity)", |bch| bch.iter(|| full_energy(ph.ev.as_ref(), &[50.0])));
+    let f = blinn_ir();
+    g.bench_function("sweep interp Blinn", |bch| bch.iter(|| sweep(&interp, f.used_inputs(), &f.params, &SweepOptions::default())));
+    g.finish();
+}
+
+criterion_group!(check_benches, checks);
+criterion_main!(benches, check_benches);

@@ -157,7 +157,7 @@ pub fn accuracy(
     }
     let coarse: Vec<f64> = (0..=90).map(f64::from).collect();
     let fine: Vec<f64> = (0..=1800).map(|i| i as f64 * 0.05).collect();
-    let (gc, gcr) = (Grid::new(coarse, lobe), Grid::new(coarse_clone(), ref_lobe));
+    let (gc, gcr) = (Grid::new(coarse.clone(), lobe), Grid::new(coarse, ref_lobe));
     let (gf, gfr) = (Grid::new(fine.clone(), lobe), Grid::new(fine, ref_lobe));
     let level = 2f64.powf(-opts.q);
     struct PerN {
@@ -244,10 +244,6 @@ pub fn accuracy(
     }
     rep.mean_abs_grid = if rep.nan_points > 0 { f64::NAN } else { sum / (91.0 * f64::from(opts.n_max)) };
     Ok(rep)
-}
-
-fn coarse_clone() -> Vec<f64> {
-    (0..=90).map(f64::from).collect()
 }
 
 #[cfg(test)]

@@ -101,7 +101,8 @@ fn published_energy_rows_keep_their_verdicts() {
 #[test]
 #[ignore = "needs the parser and examples/brdfs/*.brdf (wired at merge)"]
 fn catalogue_files_match_their_twins() {
-    let cases: [(&str, fn() -> twins::Twin, Vec<f64>); 6] = [
+    type Case = (&'static str, fn() -> twins::Twin, Vec<f64>);
+    let cases: [Case; 6] = [
         ("phong", twins::phong, vec![100.0]),
         ("blinn", twins::blinn, vec![100.0]),
         ("schlick", twins::schlick, vec![100.0]),
