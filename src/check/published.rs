@@ -25,6 +25,14 @@
 //! | thesis | inflection max rel. error, F_SCOS, n ∈ [3,1000] | ≤ 7 % | 7.2517 % (n = 1000) | holds only after rounding |
 //! | thesis | inflection, F_SCOS2 | ≤ 4 % | 4.0574 % (n = 3) | holds only after rounding |
 //!
+//! | thesis | F_ST: best integer a for mean \|Δ\| | 268 | 268 (exhaustive grid, `fit.rs` test over a ∈ 200..340) | reproduces |
+//!
+//! Beyond the papers (full mode, real geometry): the lobe convention treats NH as the cosine of the viewing
+//! angle, but with the light at the normal NH = cos(θ/2). A half-vector lobe scaled by the papers'
+//! coefficient therefore reflects more than it receives at normal incidence: modified Schlick ρ(0)·coef =
+//! 2.56 (n = 10), 3.58 (n = 100), 3.92 (n = 1000) → 4 as n grows (`tests/it/energy.rs`). For VR (Phong)
+//! lobes the convention is exact (ρ(0)·coef = 1).
+//!
 //! Not published but computed for the record: the quadratic model's fitted normalisation (3.25)/(3.26)
 //! is off by up to 5.77 % (n = 3), mean 1.65 % over n ∈ [1,1000].
 

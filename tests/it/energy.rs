@@ -121,3 +121,17 @@ fn catalogue_files_match_their_twins() {
         assert!((a / b - 1.0).abs() < 1e-9, "{name}: {a} vs {b}");
     }
 }
+
+#[test]
+fn papers_coefficient_overshoots_unit_albedo_for_half_vector_lobes() {
+    // Finding: the lobe convention treats NH as the cosine of the viewing angle, but with real geometry
+    // (light at the normal) NH = cos(θ/2), so a Blinn-style lobe scaled by the papers' coefficient reflects
+    // ~4× the incoming energy at normal incidence for large n (cos^n(θ/2) is 2× wider in θ, 4× in solid angle).
+    let ms = twins::modified_schlick();
+    for (n, lo, hi) in [(10.0, 2.5, 2.6), (100.0, 3.55, 3.6), (1000.0, 3.9, 3.95)] {
+        let coef = normalization_coef(ms.ev.as_ref(), &[n], Input::NH).unwrap();
+        let rho0 = coef * albedo(ms.ev.as_ref(), &[n], 0.0).unwrap();
+        eprintln!("modified Schlick n={n}: coef {coef:.6}, normalised albedo at normal incidence {rho0:.6}");
+        assert!(rho0 > lo && rho0 < hi, "n={n}: {rho0}");
+    }
+}
