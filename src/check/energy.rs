@@ -32,7 +32,8 @@ pub struct LobeIntegral {
     /// Estimated absolute error.
     pub error: f64,
     pub evals: usize,
-    /// Cosines where the lobe switches between zero and positive (its cut-off), ascending.
+    /// Cosines where the lobe switches between zero and clearly positive values (its cut-off), ascending;
+    /// underflow to zero is not listed.
     pub kinks: Vec<f64>,
 }
 
@@ -76,9 +77,13 @@ pub fn lobe_integral(ev: &dyn Evaluator, params: &[f64], lobe: Input) -> Result<
             "run `lobe sweep` on the file to see where it is undefined",
         ));
     }
+    // Breakpoints at every switch; only switches next to a non-negligible value are reported as cut-offs
+    // (c^1000 underflowing to 0 near 62° is not a clamp).
     let mut kinks = Vec::new();
+    let mut switches = Vec::new();
     for i in 1..xs.len() {
         if (ys[i - 1] > 0.0) != (ys[i] > 0.0) {
+            let significant = ys[i - 1].max(ys[i]) > 1e-200;
             let (mut a, mut b) = (xs[i - 1], xs[i]);
             let pa = ys[i - 1] > 0.0;
             for _ in 0..80 {
@@ -93,12 +98,15 @@ pub fn lobe_integral(ev: &dyn Evaluator, params: &[f64], lobe: Input) -> Result<
                     b = m
                 }
             }
-            kinks.push(0.5 * (a + b));
+            switches.push(0.5 * (a + b));
+            if significant {
+                kinks.push(0.5 * (a + b));
+            }
         }
     }
     let mut breaks: Vec<f64> = vec![0.0, 1.0];
     breaks.extend((1..=24).map(|k| 1.0 - 2f64.powi(-k)));
-    breaks.extend(kinks.iter().copied());
+    breaks.extend(switches);
     breaks.sort_by(f64::total_cmp);
     breaks.dedup();
     let mut nan_at = None;
@@ -371,6 +379,9 @@ mod tests {
             let r = lobe_integral(t.ev.as_ref(), &[n], Input::NH).unwrap();
             assert!((r.integral / exact - 1.0).abs() < 1e-9, "n={n}: {} vs {exact}", r.integral);
             assert_eq!(r.kinks.len(), 1);
+            // Underflow of c^1000 to zero is not a cut-off.
+            let ph = lobe_integral(twins::phong().ev.as_ref(), &[1000.0], Input::VR).unwrap();
+            assert!(ph.kinks.is_empty(), "{:?}", ph.kinks);
             assert!((r.kinks[0] - (n - 2.0) / n).abs() < 1e-12);
         }
     }

@@ -57,10 +57,19 @@ fn example_json(e: &Option<Example>, names: &[String]) -> serde_json::Value {
     }
 }
 
+/// A compact number: plain for ordinary magnitudes, scientific otherwise.
+fn num(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() || (1e-4..1e6).contains(&v.abs()) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
+
 fn example_text(e: &Example, used: crate::ir::InputSet, names: &[String]) -> String {
-    let mut parts: Vec<String> = used.iter().map(|i| format!("{}={:e}", i.name(), e.inputs[i.index()])).collect();
-    parts.extend(names.iter().zip(&e.params).map(|(n, v)| format!("{n}={v}")));
-    format!("{} → {}", parts.join(" "), e.value)
+    let mut parts: Vec<String> = used.iter().map(|i| format!("{}={}", i.name(), num(e.inputs[i.index()]))).collect();
+    parts.extend(names.iter().zip(&e.params).map(|(n, v)| format!("{n}={}", num(*v))));
+    format!("{} → {}", parts.join(" "), num(e.value))
 }
 
 pub fn run(a: &SweepArgs) -> Result<(), CliError> {
