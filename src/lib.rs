@@ -13,6 +13,7 @@
 //! the one table in [`builtins`]. The entry point is [`compile`].
 
 pub mod builtins;
+pub mod check;
 pub mod cli;
 pub mod front;
 pub mod interp;

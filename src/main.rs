@@ -19,6 +19,14 @@ enum Cmd {
     Check(cli::check::CheckArgs),
     /// Export a formula as a GLSL or WGSL function.
     Export(cli::export::ExportArgs),
+    /// Energy: the exact normalisation coefficient (lobe mode) or the albedo over incidence angles (full mode).
+    Energy(cli::energy::EnergyArgs),
+    /// Accuracy against a reference lobe (mean |Δ|, epicentre, inflection, cut-off metrics).
+    Accuracy(cli::accuracy::AccuracyArgs),
+    /// Fit parameters to a reference lobe (exhaustive grid + continuous refinement).
+    Fit(cli::fit::FitArgs),
+    /// Stability sweep: NaN, ±inf, negative and huge values over the whole domain.
+    Sweep(cli::sweep::SweepArgs),
 }
 
 fn main() {
@@ -27,6 +35,10 @@ fn main() {
         Cmd::Eval(a) => cli::eval::run(a),
         Cmd::Export(a) => cli::export::run(a),
         Cmd::Check(a) => cli::check::run(a),
+        Cmd::Energy(a) => cli::energy::run(a),
+        Cmd::Accuracy(a) => cli::accuracy::run(a),
+        Cmd::Fit(a) => cli::fit::run(a),
+        Cmd::Sweep(a) => cli::sweep::run(a),
     };
     if let Err(e) = result {
         let color = std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none();

@@ -215,3 +215,32 @@ pub fn write_output(path: &std::path::Path, bytes: &[u8], force: bool, is_ours: 
     }
     Ok(())
 }
+
+/// Recognises files lobe wrote: PNGs carry a `Software: lobe` tEXt chunk, SVGs and text exports a lobe header.
+pub fn is_lobe_output(bytes: &[u8]) -> bool {
+    let head = &bytes[..bytes.len().min(4096)];
+    head.windows(13).any(|w| w == b"Software\0lobe")
+        || String::from_utf8_lossy(&head[..head.len().min(400)]).contains("made by lobe")
+        || String::from_utf8_lossy(&head[..head.len().min(400)]).contains("exported by lobe")
+}
+
+/// For commands over several formulas: the `--set` values each formula declares. A name no formula declares
+/// is an error (a typo), not silently ignored.
+pub fn set_for(f: &Formula, set: &[(String, f64)]) -> Vec<(String, f64)> {
+    set.iter().filter(|(k, _)| f.param_index(k).is_some()).cloned().collect()
+}
+
+/// Checks that every `--set` name is declared by at least one of the formulas.
+pub fn check_set_names(formulas: &[&Formula], set: &[(String, f64)]) -> Result<(), CliError> {
+    for (k, _) in set {
+        if !formulas.iter().any(|f| f.param_index(k).is_some()) {
+            let names: Vec<&str> = formulas.iter().flat_map(|f| f.params.iter().map(|p| p.name.as_str())).collect();
+            let hint = match crate::front::suggest(k, names.iter().copied()) {
+                Some(s) => format!("did you mean `{s}`?"),
+                None => format!("the formulas' parameters are: {}", names.join(", ")),
+            };
+            return Err(CliError::hint(format!("--set: no formula has a parameter `{k}`"), hint));
+        }
+    }
+    Ok(())
+}

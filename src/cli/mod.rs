@@ -7,3 +7,7 @@ pub mod check;
 pub mod common;
 pub mod eval;
 pub mod export;
+pub mod accuracy;
+pub mod energy;
+pub mod fit;
+pub mod sweep;

@@ -7,3 +7,5 @@ mod front;
 mod jit;
 mod parse_errors;
 mod simplify;
+mod accuracy;
+mod energy;

@@ -1,0 +1,85 @@
+//! Cost of one exact normalisation coefficient (`check::energy::normalization_coef`), the feature the
+//! integrator bakes into kernels (`normalize = true`). Target: ≤ 1 ms for one n.
+//!
+//! Evaluators: the hand-written Rust twins (a lower bound: what the JIT approaches) and the reference
+//! interpreter on a hand-built IR of Blinn (an upper bound until the JIT lands).
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use lobe::builtins::Builtin;
+use lobe::check::energy::{lobe_integral, normalization_coef};
+use lobe::check::twins;
+use lobe::front::span::Span;
+use lobe::interp::Interp;
+use lobe::ir::{Formula, Input, Ir, Meta, ParamDecl};
+use std::hint::black_box;
+
+fn blinn_ir() -> Formula {
+    let mut ir = Ir::new();
+    let s = Span::default();
+    let nh = ir.input(Input::NH, s);
+    let z = ir.konst(0.0, s);
+    let o = ir.konst(1.0, s);
+    let c = ir.call(Builtin::Clamp, &[nh, z, o], s);
+    let n = ir.param(0, s);
+    let p = ir.call(Builtin::Pow, &[c, n], s);
+    let root = ir.call(Builtin::Max, &[p, z], s);
+    Formula {
+        meta: Meta::default(),
+        params: vec![ParamDecl { name: "n".into(), default: 50.0, lo: 1.0, hi: 1000.0, span: None }],
+        ir,
+        root,
+        file: "blinn".into(),
+        source: String::new(),
+    }
+}
+
+fn bench(c: &mut Criterion) {
+    let mut g = c.benchmark_group("normalization_coef");
+    for (t, p) in [
+        (twins::phong(), vec![1000.0]),
+        (twins::modified_schlick(), vec![50.0]),
+        (twins::f_st(), vec![1000.0, 268.0]),
+        (twins::kutlog(), vec![100.0, 1.0, 0.5]),
+    ] {
+        let lobe = if t.name == "Phong" { Input::VR } else { Input::NH };
+        let evals = lobe_integral(t.ev.as_ref(), &p, lobe).map(|r| r.evals).unwrap_or(0);
+        g.bench_function(format!("{} n={} ({evals} evals)", t.name, p[0]), |b| {
+            b.iter(|| normalization_coef(black_box(t.ev.as_ref()), black_box(&p), lobe))
+        });
+    }
+    let interp = Interp::new(&blinn_ir());
+    for n in [50.0, 1000.0] {
+        g.bench_function(format!("interp Blinn n={n}"), |b| b.iter(|| normalization_coef(black_box(&interp), black_box(&[n]), Input::NH)));
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+
+
+/// Whole-report costs (accuracy over the 91×1000 grid + fine grid, full-mode albedo, stability sweep).
+fn checks(c: &mut Criterion) {
+    use lobe::check::accuracy::{accuracy, AccuracyOptions};
+    use lobe::check::energy::full_energy;
+    use lobe::check::sweep::{sweep, SweepOptions};
+    let mut g = c.benchmark_group("checks");
+    g.sample_size(10);
+    let ms = twins::modified_schlick();
+    let b = twins::blinn();
+    let interp = Interp::new(&blinn_ir());
+    let opts = AccuracyOptions::default();
+    g.bench_function("accuracy modified Schlick vs Blinn (twins)", |bch| {
+        bch.iter(|| accuracy(ms.ev.as_ref(), &[1.0], Input::NH, b.ev.as_ref(), &[1.0], Input::NH, &opts))
+    });
+    g.bench_function("accuracy twin Schlick vs interp Blinn", |bch| {
+        bch.iter(|| accuracy(ms.ev.as_ref(), &[1.0], Input::NH, &interp, &[1.0], Input::NH, &opts))
+    });
+    let ph = twins::phong();
+    g.bench_function("full energy Phong n=50 (91 angles + reciprocity)", |bch| bch.iter(|| full_energy(ph.ev.as_ref(), &[50.0])));
+    let f = blinn_ir();
+    g.bench_function("sweep interp Blinn", |bch| bch.iter(|| sweep(&interp, f.used_inputs(), &f.params, &SweepOptions::default())));
+    g.finish();
+}
+
+criterion_group!(check_benches, checks);
+criterion_main!(benches, check_benches);

@@ -1,0 +1,462 @@
+//! Energy: the papers' normalisation coefficient (lobe mode) and the real hemispherical-directional albedo
+//! with a reciprocity check (full mode).
+//!
+//! Lobe mode. `coef = 1 / (2π·Int)`, `Int = ∫₀^{π/2} max(f(cos θ), 0) cos θ sin θ dθ`. With `c = cos θ` this is
+//! `Int = ∫₀¹ max(f(c), 0)·c dc` — integrating in `c` turns the n = 1000 spike at θ = 0 into a smooth
+//! boundary layer at c = 1 of width ~1/n, which a geometric ladder of breakpoints 1 − 2^−k (k = 1..24)
+//! resolves. Kinks where a lobe is clamped to zero are located first (a scan of 80 points plus bisection to
+//! 1 ulp) and become breakpoints too, so adaptive GK15 (see [`quad`](super::quad)) meets a 1e-11 relative
+//! tolerance in typically 400–1500 evaluations. Inputs follow the lobe convention of the [module
+//! docs](super).
+//!
+//! Full mode. `ρ(θᵢ) = ∫_{H²} f(L, V) (N·V) dω_V` with N = +z, L at θᵢ in the xz-plane, V over the upper
+//! hemisphere. V is parametrised around the mirror direction R (α = angle from R, φ = azimuth about R), where
+//! every lobe of the catalogue peaks; the horizon N·V = 0 becomes an analytic cut φ*(α), and the problem's
+//! mirror symmetry (y → −y) halves the azimuth range. Nested adaptive GK15 in α (with a ladder near α = 0)
+//! and φ. Reciprocity compares f(L, V) with f(V, L) on a direction grid.
+//!
+//! Measured cost: see the module docs of [`check`](super) and `benches/energy.rs`.
+
+use super::quad::integrate;
+use super::{dir, inputs_from_dirs, lobe_inputs, CheckError};
+use crate::ir::Input;
+use crate::kernel::Evaluator;
+use rayon::prelude::*;
+use std::f64::consts::{FRAC_PI_2, PI};
+
+/// The lobe integral with what it took.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LobeIntegral {
+    /// `∫₀¹ max(f(c), 0)·c dc`.
+    pub integral: f64,
+    /// Estimated absolute error.
+    pub error: f64,
+    pub evals: usize,
+    /// Cosines where the lobe switches between zero and clearly positive values (its cut-off), ascending;
+    /// underflow to zero is not listed.
+    pub kinks: Vec<f64>,
+}
+
+impl LobeIntegral {
+    /// `1 / (2π·Int)`.
+    pub fn coef(&self) -> f64 {
+        1.0 / (2.0 * PI * self.integral)
+    }
+}
+
+const REL_TOL: f64 = 1e-11;
+
+fn describe(lobe: Input, c: f64) -> String {
+    format!("{} = {c} (θ = {:.4}°)", lobe.name(), c.clamp(-1.0, 1.0).acos().to_degrees())
+}
+
+/// `∫₀¹ max(f(c), 0)·c dc` under the lobe convention, with clear errors for NaN, an infinity at the normal, a
+/// non-convergent (non-integrable) lobe, and a lobe that is zero everywhere.
+pub fn lobe_integral(ev: &dyn Evaluator, params: &[f64], lobe: Input) -> Result<LobeIntegral, CheckError> {
+    if let Some((i, v)) = params.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(CheckError::new(format!("parameter #{i} is {v}; parameters must be finite")));
+    }
+    let f = |c: f64| ev.eval(&lobe_inputs(c, lobe), params);
+    let at_normal = f(1.0);
+    if at_normal.is_infinite() {
+        return Err(CheckError::hint(
+            format!("the formula is infinite at the normal ({}): the lobe cannot be normalised", describe(lobe, 1.0)),
+            "a BRDF lobe must be finite at its peak; check for a division by (1 − c) or similar",
+        ));
+    }
+    // Scan for NaN and for the switches between zero and positive.
+    let mut xs: Vec<f64> = (0..=64).map(|i| i as f64 / 64.0).collect();
+    xs.extend((1..=24).map(|k| 1.0 - 2f64.powi(-k)));
+    xs.sort_by(f64::total_cmp);
+    xs.dedup();
+    let ys: Vec<f64> = xs.iter().map(|&c| f(c)).collect();
+    let mut evals = xs.len() + 1;
+    if let Some(i) = ys.iter().position(|y| y.is_nan()) {
+        return Err(CheckError::hint(
+            format!("the formula is NaN at {}", describe(lobe, xs[i])),
+            "run `lobe sweep` on the file to see where it is undefined",
+        ));
+    }
+    // Breakpoints at every switch; only switches next to a non-negligible value are reported as cut-offs
+    // (c^1000 underflowing to 0 near 62° is not a clamp).
+    let mut kinks = Vec::new();
+    let mut switches = Vec::new();
+    for i in 1..xs.len() {
+        if (ys[i - 1] > 0.0) != (ys[i] > 0.0) {
+            let significant = ys[i - 1].max(ys[i]) > 1e-200;
+            let (mut a, mut b) = (xs[i - 1], xs[i]);
+            let pa = ys[i - 1] > 0.0;
+            for _ in 0..80 {
+                let m = 0.5 * (a + b);
+                if !(m > a && m < b) {
+                    break;
+                }
+                evals += 1;
+                if (f(m) > 0.0) == pa {
+                    a = m
+                } else {
+                    b = m
+                }
+            }
+            switches.push(0.5 * (a + b));
+            if significant {
+                kinks.push(0.5 * (a + b));
+            }
+        }
+    }
+    let mut breaks: Vec<f64> = vec![0.0, 1.0];
+    breaks.extend((1..=24).map(|k| 1.0 - 2f64.powi(-k)));
+    breaks.extend(switches);
+    breaks.sort_by(f64::total_cmp);
+    breaks.dedup();
+    let mut nan_at = None;
+    let r = integrate(
+        |c| {
+            let y = f(c);
+            if y.is_nan() && nan_at.is_none() {
+                nan_at = Some(c);
+            }
+            crate::builtins::fmax(y, 0.0) * c
+        },
+        &breaks,
+        REL_TOL,
+        1e-300,
+        4000,
+    );
+    evals += r.evals;
+    if let Some(c) = nan_at {
+        return Err(CheckError::hint(
+            format!("the formula is NaN at {}", describe(lobe, c)),
+            "run `lobe sweep` on the file to see where it is undefined",
+        ));
+    }
+    if !r.value.is_finite() || !r.converged && r.error > 1e-7 * r.value.abs() {
+        return Err(CheckError::hint(
+            format!(
+                "the lobe integral does not converge (estimate {:e} ± {:e} after {} evaluations): the lobe is not integrable",
+                r.value, r.error, r.evals
+            ),
+            "the formula probably has a pole inside [0°, 90°]; check its denominators",
+        ));
+    }
+    if r.value <= 0.0 {
+        return Err(CheckError::hint(
+            "the integral is zero; cannot normalise",
+            "the formula is ≤ 0 (clamped to 0) at every angle for these parameters",
+        ));
+    }
+    Ok(LobeIntegral { integral: r.value, error: r.error, evals, kinks })
+}
+
+/// The exact normalisation coefficient `1 / (2π·Int)` of the papers (lobe convention; module docs).
+/// Relative accuracy ~1e-11; a few hundred to ~2000 evaluations.
+pub fn normalization_coef(ev: &dyn Evaluator, params: &[f64], lobe_input: Input) -> Result<f64, CheckError> {
+    lobe_integral(ev, params, lobe_input).map(|r| r.coef())
+}
+
+/// `coef(n)` for every `n` in `ns` (parameter 0 replaced), in parallel.
+pub fn coef_sweep(ev: &dyn Evaluator, params: &[f64], lobe: Input, ns: &[f64]) -> Vec<Result<LobeIntegral, CheckError>> {
+    ns.par_iter()
+        .map(|&n| {
+            let mut p = params.to_vec();
+            if let Some(p0) = p.first_mut() {
+                *p0 = n;
+            }
+            lobe_integral(ev, &p, lobe)
+        })
+        .collect()
+}
+
+/// How well a fitted normalisation formula does: `|coef_fit(n)·2π·Int(n) − 1|`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AgainstScore {
+    pub max_abs: f64,
+    pub worst_n: f64,
+    pub mean_abs: f64,
+    /// Per n: (n, exact coef, fitted coef, |coef_fit·2π·Int − 1|).
+    pub rows: Vec<(f64, f64, f64, f64)>,
+}
+
+/// Scores a fitted coefficient `fit(n)` against the exact integrals `(n, Int)`.
+pub fn score_against(exact: &[(f64, f64)], fit: impl Fn(f64) -> f64) -> AgainstScore {
+    let rows: Vec<_> = exact
+        .iter()
+        .map(|&(n, int)| {
+            let cf = fit(n);
+            (n, 1.0 / (2.0 * PI * int), cf, (cf * 2.0 * PI * int - 1.0).abs())
+        })
+        .collect();
+    let (mut max_abs, mut worst_n) = (0.0, f64::NAN);
+    for r in &rows {
+        // NaN counts as the worst possible.
+        if r.3.is_nan() || r.3 > max_abs {
+            max_abs = if r.3.is_nan() { f64::INFINITY } else { r.3 };
+            worst_n = r.0;
+        }
+    }
+    let mean_abs = rows.iter().map(|r| r.3).sum::<f64>() / rows.len().max(1) as f64;
+    AgainstScore { max_abs, worst_n, mean_abs, rows }
+}
+
+/// The hemispherical-directional albedo `ρ(θᵢ)` (θᵢ in radians, < π/2).
+pub fn albedo(ev: &dyn Evaluator, params: &[f64], theta_i: f64) -> Result<f64, CheckError> {
+    let t = theta_i;
+    let (st, ct) = t.sin_cos();
+    let l = [st, 0.0, ct];
+    let r = [-st, 0.0, ct];
+    let t1 = [ct, 0.0, st];
+    let mut nan = None;
+    let mut nonconv = 0usize;
+    let mut inner = |alpha: f64| -> f64 {
+        let (sa, ca) = alpha.sin_cos();
+        // Horizon: N·V = ca·ct + sa·cosφ·st > 0.
+        let phi_max = if sa * st <= 0.0 || ca * ct >= sa * st {
+            PI
+        } else {
+            (-(ca * ct) / (sa * st)).clamp(-1.0, 1.0).acos()
+        };
+        if phi_max <= 0.0 {
+            return 0.0;
+        }
+        let g = |phi: f64| {
+            let (sp, cp) = phi.sin_cos();
+            let v = [ca * r[0] + sa * cp * t1[0], sa * sp, ca * r[2] + sa * cp * t1[2]];
+            if v[2] <= 0.0 {
+                return 0.0;
+            }
+            let y = ev.eval(&inputs_from_dirs(l, v), params);
+            if y.is_nan() {
+                nan.get_or_insert((alpha, phi));
+                return 0.0;
+            }
+            crate::builtins::fmax(y, 0.0) * v[2]
+        };
+        let q = integrate(g, &[0.0, 0.5 * phi_max, phi_max], 1e-9, 1e-15, 400);
+        if !q.converged {
+            nonconv += 1;
+        }
+        2.0 * q.value * sa
+    };
+    let top = FRAC_PI_2 + t;
+    let mut breaks = vec![0.0, top];
+    breaks.extend((0..=16).map(|k| FRAC_PI_2 * 2f64.powi(-k)).filter(|&a| a < top));
+    if FRAC_PI_2 - t > 0.0 {
+        breaks.push(FRAC_PI_2 - t);
+    }
+    breaks.sort_by(f64::total_cmp);
+    breaks.dedup();
+    let q = integrate(&mut inner, &breaks, 1e-8, 1e-14, 2000);
+    if let Some((a, p)) = nan {
+        let v = [a.cos() * r[0] + a.sin() * p.cos() * t1[0], a.sin() * p.sin(), a.cos() * r[2] + a.sin() * p.cos() * t1[2]];
+        let x = inputs_from_dirs(l, v);
+        return Err(CheckError::hint(
+            format!(
+                "the formula is NaN at θᵢ = {:.3}° with NL={:.6} NV={:.6} NH={:.6} VR={:.6} VH={:.6}",
+                t.to_degrees(),
+                x[0],
+                x[1],
+                x[2],
+                x[3],
+                x[4]
+            ),
+            "run `lobe sweep` on the file to see where it is undefined",
+        ));
+    }
+    if !q.value.is_finite() || (!q.converged && q.error > 1e-5 * q.value.abs()) {
+        return Err(CheckError::hint(
+            format!("the albedo integral at θᵢ = {:.3}° does not converge (estimate {:e})", t.to_degrees(), q.value),
+            "the formula probably has a pole on the hemisphere",
+        ));
+    }
+    Ok(q.value)
+}
+
+/// Worst reciprocity violation `|f(L,V) − f(V,L)| / max(|f(L,V)|, |f(V,L)|)` over a direction grid.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Reciprocity {
+    pub max_rel: f64,
+    pub theta_l_deg: f64,
+    pub theta_v_deg: f64,
+    pub phi_v_deg: f64,
+    pub pairs: usize,
+}
+
+/// f(L,V) vs f(V,L): L at θ_L ∈ {0, 5, …, 85, 89}° (φ_L = 0, by symmetry), V at every θ_V of the same list and
+/// φ_V ∈ {0, 15, …, 345}°. NaN on either side counts as a violation of 1.
+pub fn reciprocity(ev: &dyn Evaluator, params: &[f64]) -> Reciprocity {
+    let thetas: Vec<f64> = (0..18).map(|i| i as f64 * 5.0).chain([89.0]).collect();
+    let mut best = Reciprocity { max_rel: 0.0, theta_l_deg: 0.0, theta_v_deg: 0.0, phi_v_deg: 0.0, pairs: 0 };
+    for &tl in &thetas {
+        let l = dir(tl.to_radians(), 0.0);
+        for &tv in &thetas {
+            for k in 0..24 {
+                let pv = k as f64 * 15.0;
+                let v = dir(tv.to_radians(), pv.to_radians());
+                let a = ev.eval(&inputs_from_dirs(l, v), params);
+                let b = ev.eval(&inputs_from_dirs(v, l), params);
+                best.pairs += 1;
+                let m = a.abs().max(b.abs());
+                let rel = if a.is_nan() || b.is_nan() {
+                    1.0
+                } else if m == 0.0 || a == b {
+                    0.0
+                } else {
+                    (a - b).abs() / m
+                };
+                if rel > best.max_rel {
+                    best = Reciprocity { max_rel: rel, theta_l_deg: tl, theta_v_deg: tv, phi_v_deg: pv, pairs: best.pairs };
+                }
+            }
+        }
+    }
+    best
+}
+
+/// The full-mode report.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FullEnergy {
+    /// (θᵢ in degrees, ρ(θᵢ)).
+    pub albedo: Vec<(f64, f64)>,
+    pub albedo_max: f64,
+    pub theta_i_at_max_deg: f64,
+    /// `1 / albedo_max`: the largest scale that keeps every ρ(θᵢ) ≤ 1.
+    pub coef: f64,
+    pub reciprocity: Reciprocity,
+}
+
+/// The incidence angles of the full mode: 0°, 1°, …, 89°, 89.9°.
+pub fn full_mode_angles() -> Vec<f64> {
+    (0..90).map(f64::from).chain([89.9]).collect()
+}
+
+/// ρ(θᵢ) over [`full_mode_angles`] (in parallel), its maximum, and reciprocity.
+pub fn full_energy(ev: &dyn Evaluator, params: &[f64]) -> Result<FullEnergy, CheckError> {
+    let angles = full_mode_angles();
+    let rows: Result<Vec<(f64, f64)>, CheckError> =
+        angles.par_iter().map(|&d| albedo(ev, params, d.to_radians()).map(|r| (d, r))).collect();
+    let rows = rows?;
+    let (mut albedo_max, mut at) = (f64::NEG_INFINITY, 0.0);
+    for &(d, r) in &rows {
+        if r > albedo_max {
+            albedo_max = r;
+            at = d;
+        }
+    }
+    if albedo_max <= 0.0 {
+        return Err(CheckError::hint(
+            "the albedo is zero at every incidence angle; cannot normalise",
+            "the formula is ≤ 0 (clamped to 0) everywhere for these parameters",
+        ));
+    }
+    Ok(FullEnergy { albedo: rows, albedo_max, theta_i_at_max_deg: at, coef: 1.0 / albedo_max, reciprocity: reciprocity(ev, params) })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::check::twins;
+    use crate::kernel::FnEvaluator;
+
+    #[test]
+    fn phong_closed_form_to_1e_9() {
+        let t = twins::phong();
+        for n in [1.0, 2.0, 10.0, 100.0, 500.0, 1000.0] {
+            let c = normalization_coef(t.ev.as_ref(), &[n], Input::VR).unwrap();
+            let exact = (n + 2.0) / (2.0 * PI);
+            assert!((c / exact - 1.0).abs() < 1e-9, "n={n}: {c} vs {exact}");
+        }
+    }
+
+    #[test]
+    fn clamped_lobes_match_closed_forms() {
+        // F_SCOS, zero beyond c0 = (n−2)/n: ∫_{c0}^1 (n/2(c−1)+1)² c dc, by the substitution u = 1 − c:
+        // ∫_0^{2/n} (1 − nu/2)² (1 − u) du = 2/(3n) − (2/n)²/12·... computed exactly below.
+        let t = twins::scos();
+        for n in [3.0, 10.0, 100.0, 1000.0] {
+            let w = 2.0 / n;
+            // ∫_0^w (1 − u/w)²(1 − u) du = w/3 − w²/12.
+            let exact = w / 3.0 - w * w / 12.0;
+            let r = lobe_integral(t.ev.as_ref(), &[n], Input::NH).unwrap();
+            assert!((r.integral / exact - 1.0).abs() < 1e-9, "n={n}: {} vs {exact}", r.integral);
+            assert_eq!(r.kinks.len(), 1);
+            // Underflow of c^1000 to zero is not a cut-off.
+            let ph = lobe_integral(twins::phong().ev.as_ref(), &[1000.0], Input::VR).unwrap();
+            assert!(ph.kinks.is_empty(), "{:?}", ph.kinks);
+            assert!((r.kinks[0] - (n - 2.0) / n).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn quadratic_matches_its_closed_form() {
+        // 0.786n·c² + (1 − 0.786n)·c, zero below c0 = max(0, (0.786n − 1)/(0.786n)):
+        // Int = a(1 − c0⁴)/4 + b(1 − c0³)/3 with a = 0.786n, b = 1 − a.
+        let t = twins::quadratic();
+        for n in [1.0, 20.0, 60.0, 120.0, 1000.0] {
+            let a: f64 = 0.786 * n;
+            let b = 1.0 - a;
+            let c0 = ((a - 1.0) / a).max(0.0);
+            let exact = a * (1.0 - c0.powi(4)) / 4.0 + b * (1.0 - c0.powi(3)) / 3.0;
+            let r = lobe_integral(t.ev.as_ref(), &[n], Input::NH).unwrap();
+            assert!((r.integral / exact - 1.0).abs() < 1e-9, "n={n}: {} vs {exact}", r.integral);
+        }
+    }
+
+    #[test]
+    fn bad_lobes_get_clear_errors() {
+        let zero = FnEvaluator(|_: &[f64; 5], _: &[f64]| 0.0);
+        let e = normalization_coef(&zero, &[50.0], Input::NH).unwrap_err();
+        assert!(e.msg.contains("integral is zero; cannot normalise"), "{e}");
+        let pole = FnEvaluator(|x: &[f64; 5], _: &[f64]| 1.0 / (1.0 - x[2]));
+        let e = normalization_coef(&pole, &[50.0], Input::NH).unwrap_err();
+        assert!(e.msg.contains("infinite at the normal"), "{e}");
+        let nan = FnEvaluator(|x: &[f64; 5], _: &[f64]| (x[2] - 0.5).sqrt());
+        let e = normalization_coef(&nan, &[50.0], Input::NH).unwrap_err();
+        assert!(e.msg.contains("NaN"), "{e}");
+        let e = normalization_coef(twins::blinn().ev.as_ref(), &[f64::NAN], Input::NH).unwrap_err();
+        assert!(e.msg.contains("finite"), "{e}");
+        // A pole inside the hemisphere (not at the normal): not integrable.
+        let inner = FnEvaluator(|x: &[f64; 5], _: &[f64]| 1.0 / (x[2] - 0.5).abs());
+        let e = normalization_coef(&inner, &[50.0], Input::NH).unwrap_err();
+        assert!(e.msg.contains("does not converge"), "{e}");
+    }
+
+    #[test]
+    fn against_score_is_relative_to_exact() {
+        let exact = [(1.0, 1.0 / (2.0 * PI * 0.5)), (2.0, 0.25)];
+        // exact coef = 1/(2π Int); a fit 1% high everywhere scores 0.01.
+        let s = score_against(&exact, |n| 1.01 / (2.0 * PI * exact.iter().find(|e| e.0 == n).unwrap().1));
+        assert!((s.max_abs - 0.01).abs() < 1e-12 && (s.mean_abs - 0.01).abs() < 1e-12);
+    }
+
+    #[test]
+    fn lambert_albedo_is_one_at_every_angle() {
+        let lambert = FnEvaluator(|_: &[f64; 5], _: &[f64]| 1.0 / PI);
+        for d in [0.0, 30.0, 60.0, 85.0, 89.9] {
+            let r = albedo(&lambert, &[], f64::to_radians(d)).unwrap();
+            assert!((r - 1.0).abs() < 1e-7, "θ={d}: {r}");
+        }
+    }
+
+    #[test]
+    fn phong_albedo_at_normal_incidence_is_the_lobe_integral() {
+        let t = twins::phong();
+        for n in [1.0, 50.0, 1000.0] {
+            let r = albedo(t.ev.as_ref(), &[n], 0.0).unwrap();
+            let exact = 2.0 * PI / (n + 2.0);
+            assert!((r / exact - 1.0).abs() < 1e-6, "n={n}: {r} vs {exact}");
+        }
+    }
+
+    #[test]
+    fn phong_albedo_falls_off_at_grazing_and_is_reciprocal() {
+        let t = twins::phong();
+        let full = full_energy(t.ev.as_ref(), &[20.0]).unwrap();
+        // Energy is lost below the horizon as θᵢ grows, so the maximum is at normal incidence.
+        assert_eq!(full.theta_i_at_max_deg, 0.0);
+        assert!(full.albedo.last().unwrap().1 < 0.6 * full.albedo_max);
+        assert!(full.reciprocity.max_rel < 1e-12, "{:?}", full.reciprocity);
+        // NL·VR^n is not reciprocal.
+        let nonrec = FnEvaluator(|x: &[f64; 5], p: &[f64]| x[0] * x[3].max(0.0).powf(p[0]));
+        assert!(reciprocity(&nonrec, &[20.0]).max_rel > 0.5);
+    }
+}

@@ -1,0 +1,323 @@
+//! The stability sweep: evaluate a formula over its whole domain and count NaN, ±inf, negative values and
+//! values above a bound, per region of the input domain, with the first example of each.
+//!
+//! Domain: n and every other parameter over its declared range (ends, default, interior points); each input
+//! the formula reads over 29 cosines — −1, −0.5, −1e-9, −5e-324 (negative), ±0, 5e-324 and 1e-310
+//! (denormals), 1e-300, 1e-16, 1e-8 (tiny), nine interior values, 1 − 1e-8, 1 − 2 ulp, 1 − 1 ulp (near
+//! one), 1, and 1 + 1 ulp, 1 + 1e-8, 1.5 (above one: cosines of rounded vectors overshoot). Inputs it does not
+//! read are fixed at 0.5. The full Cartesian product is evaluated when it has at most `max_evals` points;
+//! otherwise each parameter combination gets an evenly strided, combination-dependent subset of the input
+//! grid (deterministic), so every input value is still visited. A point's region is the most extreme category
+//! among its inputs (negative > above-one > denormal > zero > tiny > near-one > one > interior).
+//!
+//! Negative values are only visible on the *unclamped* formula: the lowering's root is `max(raw, 0)`, which
+//! [`Formula::unclamped`] peels. The input clamps `clamp(INPUT, 0, 1)` stay, so negative and above-one
+//! cosines exercise those clamps (a NaN there is a real bug in the domain policy).
+//!
+//! Cost: at most `max_evals` batched evaluations (default 2 M; well under a second on the JIT).
+
+use crate::builtins::Builtin;
+use crate::ir::{Formula, InputSet, Node, ParamDecl, N_INPUTS};
+use crate::kernel::{Columns, Evaluator};
+use rayon::prelude::*;
+
+impl Formula {
+    /// The formula without its root `max(raw, 0)` (from the lowering), so a sweep sees negative raw values.
+    /// Returns the formula unchanged when the root is not such a clamp.
+    pub fn unclamped(&self) -> Formula {
+        let raw = match *self.ir.node(self.root) {
+            Node::Call(Builtin::Max, [a, b, _]) => {
+                let zero = |id| self.ir.node(id).as_const().is_some_and(|v| v == 0.0);
+                if zero(b) {
+                    Some(a)
+                } else if zero(a) {
+                    Some(b)
+                } else {
+                    None
+                }
+            }
+            _ => None,
+        };
+        match raw {
+            Some(r) => {
+                let (ir, root) = self.ir.compact(r);
+                Formula { ir, root, ..self.clone() }
+            }
+            None => self.clone(),
+        }
+    }
+}
+
+/// Input value categories, in increasing extremity order for region labels (see module docs).
+const CATS: [&str; 8] = ["interior", "one", "near-one", "tiny", "zero", "denormal", "above-one", "negative"];
+
+fn grid() -> Vec<(f64, usize)> {
+    let one_m = f64::from_bits(1f64.to_bits() - 1);
+    let one_m2 = f64::from_bits(1f64.to_bits() - 2);
+    let one_p = f64::from_bits(1f64.to_bits() + 1);
+    let mut g = vec![];
+    g.extend([-1.0, -0.5, -1e-9, -5e-324].map(|v| (v, 7)));
+    g.extend([0.0, -0.0].map(|v| (v, 4)));
+    g.extend([5e-324, 1e-310].map(|v| (v, 5)));
+    g.extend([1e-300, 1e-16, 1e-8].map(|v| (v, 3)));
+    g.extend([1e-4, 0.01, 0.1, 0.3, 0.5, 0.7, 0.9, 0.99, 0.9999].map(|v| (v, 0)));
+    g.extend([1.0 - 1e-8, one_m2, one_m].map(|v| (v, 2)));
+    g.push((1.0, 1));
+    g.extend([one_p, 1.0 + 1e-8, 1.5].map(|v| (v, 6)));
+    g
+}
+
+/// Values tried for one parameter: the range ends, the default, and interior points (geometric when the
+/// range is positive, since exponents act multiplicatively).
+pub fn param_values(d: &ParamDecl) -> Vec<f64> {
+    let mut v = vec![d.lo, d.hi, d.default];
+    if d.name == "n" {
+        v.extend([1.0, 1.0 + 1e-9, 1.5, 2.0, 3.0, 5.0, 10.0, 50.0, 100.0, 268.0, 500.0, 999.0, 1000.0]);
+    }
+    for t in [0.1, 0.5, 0.9] {
+        v.push(d.lo + t * (d.hi - d.lo));
+        if d.lo > 0.0 {
+            v.push(d.lo * (d.hi / d.lo).powf(t));
+        }
+    }
+    let mut v: Vec<f64> = v.into_iter().filter(|x| x.is_finite() && *x >= d.lo && *x <= d.hi).collect();
+    v.sort_by(f64::total_cmp);
+    v.dedup();
+    v
+}
+
+/// An offending point.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Example {
+    pub inputs: [f64; N_INPUTS],
+    pub params: Vec<f64>,
+    pub value: f64,
+}
+
+/// Counts for one region.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RegionStats {
+    pub region: &'static str,
+    pub evaluated: u64,
+    pub nan: u64,
+    pub inf: u64,
+    pub negative: u64,
+    pub over_bound: u64,
+    pub first_nan: Option<Example>,
+    pub first_inf: Option<Example>,
+    pub first_negative: Option<Example>,
+    pub first_over_bound: Option<Example>,
+}
+
+impl RegionStats {
+    fn merge(&mut self, o: RegionStats) {
+        self.evaluated += o.evaluated;
+        self.nan += o.nan;
+        self.inf += o.inf;
+        self.negative += o.negative;
+        self.over_bound += o.over_bound;
+        self.first_nan = self.first_nan.take().or(o.first_nan);
+        self.first_inf = self.first_inf.take().or(o.first_inf);
+        self.first_negative = self.first_negative.take().or(o.first_negative);
+        self.first_over_bound = self.first_over_bound.take().or(o.first_over_bound);
+    }
+}
+
+/// Options for [`sweep`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct SweepOptions {
+    /// Values above this count as `over_bound`.
+    pub bound: f64,
+    /// Evaluation budget.
+    pub max_evals: u64,
+}
+
+impl Default for SweepOptions {
+    fn default() -> Self {
+        SweepOptions { bound: 1e6, max_evals: 2_000_000 }
+    }
+}
+
+/// The sweep result: per-region statistics (regions with no points omitted) and totals.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SweepReport {
+    pub regions: Vec<RegionStats>,
+    pub total: RegionStats,
+    pub bound: f64,
+    /// True when the full Cartesian product was evaluated.
+    pub exhaustive: bool,
+}
+
+/// Sweeps `ev` (normally the [`Formula::unclamped`] kernel) over the domain described in the module docs.
+pub fn sweep(ev: &dyn Evaluator, used: InputSet, decls: &[ParamDecl], opts: &SweepOptions) -> SweepReport {
+    let g = grid();
+    let used: Vec<usize> = used.iter().map(|i| i.index()).collect();
+    let k = used.len();
+    let gsize = g.len().pow(k as u32) as u64;
+    // Parameter combinations (mixed radix over each parameter's values).
+    let pv: Vec<Vec<f64>> = decls.iter().map(param_values).collect();
+    let combos: u64 = pv.iter().map(|v| v.len().max(1) as u64).product();
+    let exhaustive = combos.saturating_mul(gsize) <= opts.max_evals;
+    let per_combo = if exhaustive { gsize } else { (opts.max_evals / combos.max(1)).clamp(64.min(gsize), gsize) };
+    let per_combo_stats: Vec<Vec<RegionStats>> = (0..combos)
+        .into_par_iter()
+        .map(|ci| {
+            let mut params = Vec::with_capacity(pv.len());
+            let mut r = ci;
+            for v in &pv {
+                let l = v.len().max(1) as u64;
+                params.push(v.get((r % l) as usize).copied().unwrap_or(f64::NAN));
+                r /= l;
+            }
+            // Strided subset of the input grid: gi = (offset + j·stride) mod gsize with stride coprime.
+            let stride = if exhaustive { 1 } else { coprime_stride(gsize) };
+            let offset = if exhaustive { 0 } else { ci.wrapping_mul(7919) % gsize };
+            let mut stats: Vec<RegionStats> = CATS.iter().map(|c| RegionStats { region: c, ..Default::default() }).collect();
+            let mut cols: [Vec<f64>; N_INPUTS] = Default::default();
+            let mut cat = Vec::new();
+            let mut j = 0u64;
+            while j < per_combo {
+                let end = (j + 4096).min(per_combo);
+                for c in cols.iter_mut() {
+                    c.clear();
+                    c.resize((end - j) as usize, 0.5);
+                }
+                cat.clear();
+                for (row, jj) in (j..end).enumerate() {
+                    let mut gi = ((offset as u128 + jj as u128 * stride as u128) % gsize as u128) as u64;
+                    let mut worst = 0;
+                    for &inp in &used {
+                        let (v, c) = g[(gi % g.len() as u64) as usize];
+                        gi /= g.len() as u64;
+                        cols[inp][row] = v;
+                        worst = worst.max(c);
+                    }
+                    cat.push(worst);
+                }
+                let mut out = vec![0.0; (end - j) as usize];
+                let c = Columns::new([&cols[0], &cols[1], &cols[2], &cols[3], &cols[4]]);
+                ev.eval_batch(&c, &params, &mut out);
+                for (row, &y) in out.iter().enumerate() {
+                    let s = &mut stats[cat[row]];
+                    s.evaluated += 1;
+                    let ex = || Example { inputs: std::array::from_fn(|i| cols[i][row]), params: params.clone(), value: y };
+                    if y.is_nan() {
+                        s.nan += 1;
+                        s.first_nan.get_or_insert_with(ex);
+                    } else if y.is_infinite() {
+                        s.inf += 1;
+                        s.first_inf.get_or_insert_with(ex);
+                    } else if y < 0.0 {
+                        s.negative += 1;
+                        s.first_negative.get_or_insert_with(ex);
+                    }
+                    if y > opts.bound {
+                        s.over_bound += 1;
+                        s.first_over_bound.get_or_insert_with(ex);
+                    }
+                }
+                j = end;
+            }
+            stats
+        })
+        .collect();
+    let mut regions: Vec<RegionStats> = CATS.iter().map(|c| RegionStats { region: c, ..Default::default() }).collect();
+    for st in per_combo_stats {
+        for (r, s) in regions.iter_mut().zip(st) {
+            r.merge(s);
+        }
+    }
+    let mut total = RegionStats { region: "all", ..Default::default() };
+    for r in &regions {
+        total.merge(r.clone());
+    }
+    regions.retain(|r| r.evaluated > 0);
+    SweepReport { regions, total, bound: opts.bound, exhaustive }
+}
+
+fn coprime_stride(m: u64) -> u64 {
+    let gcd = |mut a: u64, mut b: u64| {
+        while b != 0 {
+            (a, b) = (b, a % b);
+        }
+        a
+    };
+    let mut s = (m as f64 * 0.618_033_988_75) as u64 | 1;
+    while gcd(s, m) != 1 {
+        s += 2;
+    }
+    s.max(1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::front::span::Span;
+    use crate::interp::Interp;
+    use crate::ir::{BinOp, Input, Ir, Meta};
+    use crate::kernel::FnEvaluator;
+
+    fn n_decl() -> ParamDecl {
+        ParamDecl { name: "n".into(), default: 50.0, lo: 1.0, hi: 1000.0, span: None }
+    }
+
+    #[test]
+    fn finds_nan_inf_and_negatives_in_the_right_regions() {
+        // sqrt(NH − 0.5) is NaN for NH < 0.5; 1/NL is inf at NL = ±0; NH − 0.25 is negative below 0.25.
+        let f = FnEvaluator(|x: &[f64; 5], p: &[f64]| (x[2] - 0.5).sqrt() * p[0] / x[0]);
+        let mut used = InputSet::default();
+        used.insert(Input::NH);
+        used.insert(Input::NL);
+        let r = sweep(&f, used, &[n_decl()], &SweepOptions::default());
+        assert!(r.exhaustive);
+        let g = grid().len() as u64;
+        assert_eq!(r.total.evaluated, g * g * param_values(&n_decl()).len() as u64);
+        assert!(r.total.nan > 0 && r.total.inf > 0);
+        let zero = r.regions.iter().find(|s| s.region == "zero").unwrap();
+        let ex = zero.first_inf.as_ref().unwrap();
+        assert_eq!(ex.inputs[0], 0.0);
+        assert!(ex.inputs[2] > 0.5);
+        let neg = FnEvaluator(|x: &[f64; 5], _: &[f64]| x[2] - 0.25);
+        let mut used = InputSet::default();
+        used.insert(Input::NH);
+        let r = sweep(&neg, used, &[n_decl()], &SweepOptions::default());
+        assert_eq!(r.total.nan + r.total.inf, 0);
+        // Negative at 4 negative, 2 zero, 2 denormal, 3 tiny, and 3 interior (1e-4, 0.01, 0.1) cosines.
+        assert_eq!(r.total.negative, 14 * param_values(&n_decl()).len() as u64);
+    }
+
+    #[test]
+    fn large_domains_are_subsampled_within_budget() {
+        let f = FnEvaluator(|x: &[f64; 5], _: &[f64]| x.iter().sum::<f64>());
+        let all = InputSet(0b11111);
+        let opts = SweepOptions { max_evals: 100_000, ..Default::default() };
+        let r = sweep(&f, all, &[n_decl()], &opts);
+        assert!(!r.exhaustive);
+        assert!(r.total.evaluated <= 100_000 && r.total.evaluated > 50_000, "{}", r.total.evaluated);
+        assert!(r.regions.iter().any(|s| s.region == "negative") && r.regions.iter().any(|s| s.region == "interior"));
+    }
+
+    #[test]
+    fn unclamped_peels_the_root_max() {
+        // max(NH^n − 0.5, 0): clamped it is never negative; unclamped it is.
+        let mut ir = Ir::new();
+        let s = Span::default();
+        let nh = ir.input(Input::NH, s);
+        let n = ir.param(0, s);
+        let p = ir.call(Builtin::Pow, &[nh, n], s);
+        let h = ir.konst(0.5, s);
+        let raw = ir.bin(BinOp::Sub, p, h, s);
+        let z = ir.konst(0.0, s);
+        let root = ir.call(Builtin::Max, &[raw, z], s);
+        let f = Formula { meta: Meta::default(), params: vec![n_decl()], ir, root, file: "t".into(), source: String::new() };
+        let used = f.used_inputs();
+        let clamped = sweep(&Interp::new(&f), used, &f.params, &SweepOptions::default());
+        assert_eq!(clamped.total.negative, 0);
+        let u = f.unclamped();
+        assert_eq!(u.to_text(), "pow(NH, n) - 0.5");
+        let r = sweep(&Interp::new(&u), used, &u.params, &SweepOptions::default());
+        assert!(r.total.negative > 0);
+        // A formula without the root clamp is unchanged.
+        assert_eq!(u.unclamped().to_text(), u.to_text());
+    }
+}

@@ -1,0 +1,155 @@
+//! `lobe accuracy FILE --reference examples/brdfs/blinn.brdf [--set a=268] [--q 8] [--json]`
+//!
+//! JSON keys are documented in [`crate::check`].
+
+use super::common::{self, CliError};
+use super::energy::resolve_lobe;
+use crate::check::accuracy::{accuracy, AccuracyOptions};
+use crate::check::json_num;
+use crate::{Backend, Kernel};
+use serde_json::json;
+
+/// `writeln!` into the report string (formatting into a `String` cannot fail).
+macro_rules! outln {
+    ($o:expr, $($t:tt)*) => {{
+        use std::fmt::Write as _;
+        let _ = writeln!($o, $($t)*);
+    }};
+}
+
+#[derive(clap::Args, Debug)]
+pub struct AccuracyArgs {
+    /// Formula file (.brdf), or `-` for standard input.
+    pub file: Option<String>,
+    /// The formula inline instead of a file.
+    #[arg(long, conflicts_with = "file")]
+    pub expr: Option<String>,
+    /// The reference lobe (normally Blinn, cos^n).
+    #[arg(long)]
+    pub reference: String,
+    /// Values of the formula's other parameters, e.g. `a=268` (n is swept over 1..1000).
+    #[arg(long, value_parser = common::parse_assignments, action = clap::ArgAction::Append)]
+    pub set: Vec<Vec<(String, f64)>>,
+    /// Cut-off level 2^−q for the relative-error and lobe-size metrics.
+    #[arg(long, default_value_t = 8.0)]
+    pub q: f64,
+    /// Smallest n of the epicentre metric (the papers use 9 for F_dsh).
+    #[arg(long, default_value_t = 2)]
+    pub epicenter_from: u32,
+    /// Largest n.
+    #[arg(long, default_value_t = 1000)]
+    pub n_max: u32,
+    /// The lobe variable (NH or VR); default: the one the formula reads.
+    #[arg(long)]
+    pub lobe: Option<String>,
+    #[arg(long, default_value = "jit")]
+    pub backend: Backend,
+    /// Print one JSON object (keys documented in the crate docs of `check`).
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(a: &AccuracyArgs) -> Result<(), CliError> {
+    let set: Vec<(String, f64)> = a.set.concat();
+    let k = common::load_kernel(a.file.as_deref(), a.expr.as_deref(), &set, a.backend)?;
+    let r = common::load_kernel(Some(&a.reference), None, &[], a.backend)?;
+    print!("{}", report(a, &k, &r)?);
+    Ok(())
+}
+
+/// The command's output for already compiled kernels (formula `k`, reference `r`).
+pub fn report(a: &AccuracyArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
+    let mut out = String::new();
+    let set: Vec<(String, f64)> = a.set.concat();
+    if set.iter().any(|(k, _)| k == "n") {
+        return Err(CliError::hint("accuracy sweeps n itself; --set n is not allowed", "set only the other parameters"));
+    }
+    let t = std::time::Instant::now();
+    let params = common::param_values(&k.formula, &set);
+    let (lobe, note) = resolve_lobe(a.lobe.as_deref(), k.used_inputs())?;
+    let (ref_lobe, _) = resolve_lobe(None, r.used_inputs())?;
+    if let (Some(n), false) = (&note, a.json) {
+        eprintln!("note: {n}");
+    }
+    for (f, what) in [(&k.formula, "formula"), (&r.formula, "reference")] {
+        if let Some(d) = f.params.first() {
+            if d.lo > 1.0 || d.hi < f64::from(a.n_max) {
+                eprintln!("warning: the {what} declares n in {}..{}, but accuracy evaluates n = 1..{}", d.lo, d.hi, a.n_max);
+            }
+        }
+    }
+    let opts = AccuracyOptions { q: a.q, n_max: a.n_max, epicenter_from: a.epicenter_from, ..Default::default() };
+    let rep = accuracy(k, &params, lobe, r, &r.default_params(), ref_lobe, &opts)?;
+    let secs = t.elapsed().as_secs_f64();
+    if a.json {
+        outln!(out, 
+            "{}",
+            json!({
+                "mean_abs_grid": json_num(rep.mean_abs_grid),
+                "epicenter_max_rel_pct": json_num(rep.epicenter.value * 100.0), "epicenter_worst_n": json_num(rep.epicenter.n),
+                "inflection_max_rel_pct": json_num(rep.inflection.value * 100.0), "inflection_worst_n": json_num(rep.inflection.n),
+                "max_abs": json_num(rep.max_abs.value), "max_abs_n": json_num(rep.max_abs.n),
+                "max_abs_angle_deg": json_num(rep.max_abs.angle_deg),
+                "cutoff_max_rel_pct": json_num(rep.cutoff_rel.value * 100.0), "cutoff_worst_n": json_num(rep.cutoff_rel.n),
+                "cutoff_worst_angle_deg": json_num(rep.cutoff_rel.angle_deg),
+                "lobe_ratio_min": json_num(rep.lobe_ratio_min.value), "lobe_ratio_min_n": json_num(rep.lobe_ratio_min.n),
+                "lobe_ratio_max": json_num(rep.lobe_ratio_max.value), "lobe_ratio_max_n": json_num(rep.lobe_ratio_max.n),
+                "q": a.q, "nan_points": rep.nan_points, "seconds": secs,
+            })
+        );
+        return Ok(out);
+    }
+    outln!(out, "{} vs {} (n = 1..{}, lobe variable {}):", k.formula.display_name(), r.formula.display_name(), a.n_max, lobe.name());
+    outln!(out, "  mean |Δ| on the 91×{} grid (0°..90° step 1°):   {:.6e}", a.n_max, rep.mean_abs_grid);
+    outln!(out, 
+        "  epicentre max rel. error, n ∈ [{}, {}]:          {:.4} % at n = {} (x = {:.4}°)",
+        a.epicenter_from, a.n_max, rep.epicenter.value * 100.0, rep.epicenter.n, rep.epicenter.angle_deg
+    );
+    outln!(out, 
+        "  inflection max rel. error, n ∈ [3, {}]:          {:.4} % at n = {} (x = {:.4}°)",
+        a.n_max, rep.inflection.value * 100.0, rep.inflection.n, rep.inflection.angle_deg
+    );
+    outln!(out, "  max |Δ| over angles (step 0.05°):               {:.6} at n = {}, {:.2}°", rep.max_abs.value, rep.max_abs.n, rep.max_abs.angle_deg);
+    outln!(out, 
+        "  max rel. error where the reference ≥ 2^−{}:       {:.4} % at n = {}, {:.2}°",
+        a.q, rep.cutoff_rel.value * 100.0, rep.cutoff_rel.n, rep.cutoff_rel.angle_deg
+    );
+    outln!(out, 
+        "  lobe-size ratio (cut-off angle / reference's):   {:.4} (n = {}) … {:.4} (n = {})",
+        rep.lobe_ratio_min.value, rep.lobe_ratio_min.n, rep.lobe_ratio_max.value, rep.lobe_ratio_max.n
+    );
+    if rep.nan_points > 0 {
+        outln!(out, "  {} grid points were NaN (counted as the worst error); run `lobe sweep` on the file", rep.nan_points);
+    }
+    outln!(out, "  ({secs:.2} s, backend {})", k.backend.name());
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::check::twins;
+    use crate::cli::energy::tests::twin_kernel;
+    use crate::ir::Input;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct T {
+        #[command(flatten)]
+        a: AccuracyArgs,
+    }
+
+    #[test]
+    fn json_keys_and_published_mean() {
+        let a = T::try_parse_from(["accuracy", "--reference", "blinn.brdf", "--json", "--n-max", "1000"]).unwrap().a;
+        let k = twin_kernel(twins::modified_schlick(), Input::NH, &[]);
+        let r = twin_kernel(twins::blinn(), Input::NH, &[]);
+        let v: serde_json::Value = serde_json::from_str(&report(&a, &k, &r).unwrap()).unwrap();
+        assert!((v["mean_abs_grid"].as_f64().unwrap() - 0.006554934).abs() < 1e-8, "{v}");
+        for key in ["epicenter_max_rel_pct", "inflection_max_rel_pct", "max_abs", "cutoff_max_rel_pct", "lobe_ratio_max"] {
+            assert!(v[key].as_f64().is_some(), "missing {key}: {v}");
+        }
+        let a = T::try_parse_from(["accuracy", "--reference", "b", "--set", "n=3"]).unwrap().a;
+        assert!(report(&a, &k, &r).is_err());
+    }
+}

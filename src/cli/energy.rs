@@ -1,0 +1,328 @@
+//! `lobe energy FILE --set n=50 [--mode lobe|full] [--range 1..1000 [--against F.brdf | --against-expr E]] [--json]`
+//!
+//! JSON keys are documented in [`crate::check`].
+
+use super::common::{self, CliError};
+use crate::check::energy::{coef_sweep, full_energy, lobe_integral, score_against};
+use crate::check::{choose_lobe_input, json_num, parse_range};
+use crate::ir::Input;
+use crate::{Backend, Evaluator, Kernel};
+use serde_json::json;
+
+/// `writeln!` into the report string (formatting into a `String` cannot fail).
+macro_rules! outln {
+    ($o:expr, $($t:tt)*) => {{
+        use std::fmt::Write as _;
+        let _ = writeln!($o, $($t)*);
+    }};
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum Mode {
+    /// The papers' coefficient: the lobe as a function of one angle, light at the normal.
+    #[default]
+    Lobe,
+    /// Hemispherical-directional albedo over incidence angles, its maximum, and reciprocity.
+    Full,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct EnergyArgs {
+    /// Formula file (.brdf), or `-` for standard input.
+    pub file: Option<String>,
+    /// The formula inline instead of a file.
+    #[arg(long, conflicts_with = "file")]
+    pub expr: Option<String>,
+    /// Parameter values, e.g. `n=50,a=16` (n is swept instead with --range).
+    #[arg(long, value_parser = common::parse_assignments, action = clap::ArgAction::Append)]
+    pub set: Vec<Vec<(String, f64)>>,
+    /// `lobe` (1/(2π∫f cosθ sinθ dθ)) or `full` (albedo ρ(θᵢ) from real geometry).
+    #[arg(long, value_enum, default_value = "lobe")]
+    pub mode: Mode,
+    /// Sweep n over `lo..hi` (lobe mode) and print coef(n).
+    #[arg(long)]
+    pub range: Option<String>,
+    /// Step of the --range sweep.
+    #[arg(long, default_value_t = 1.0)]
+    pub step: f64,
+    /// A .brdf whose value is a fitted coef(n, params…) to score against the exact one (needs --range).
+    #[arg(long, requires = "range", conflicts_with = "against_expr")]
+    pub against: Option<String>,
+    /// The fitted coefficient inline, e.g. `0.125*n - 45.76/(n + 46.578) + 1.317`.
+    #[arg(long, requires = "range")]
+    pub against_expr: Option<String>,
+    /// The lobe variable (NH or VR); default: the one the formula reads.
+    #[arg(long)]
+    pub lobe: Option<String>,
+    #[arg(long, default_value = "jit")]
+    pub backend: Backend,
+    /// Print one JSON object (keys documented in the crate docs of `check`).
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// The lobe variable from `--lobe`, or chosen from the inputs the formula reads (with a note).
+pub fn resolve_lobe(arg: Option<&str>, used: crate::ir::InputSet) -> Result<(Input, Option<String>), CliError> {
+    match arg {
+        Some(s) => Input::from_name(s).map(|i| (i, None)).ok_or_else(|| {
+            CliError::hint(format!("--lobe: `{s}` is not an input"), "the lobe variable is NH (Blinn-style) or VR (Phong-style)")
+        }),
+        None => Ok(choose_lobe_input(used)),
+    }
+}
+
+pub fn run(a: &EnergyArgs) -> Result<(), CliError> {
+    let set: Vec<(String, f64)> = a.set.concat();
+    if a.range.is_some() && set.iter().any(|(k, _)| k == "n") {
+        return Err(CliError::hint("--set n conflicts with --range", "--range sweeps n; drop n from --set"));
+    }
+    let k = common::load_kernel(a.file.as_deref(), a.expr.as_deref(), &set, a.backend)?;
+    let against = match (&a.against, &a.against_expr) {
+        (None, None) => None,
+        (file, expr) => Some(common::load_kernel(file.as_deref(), expr.as_deref(), &[], a.backend)?),
+    };
+    print!("{}", report(a, &k, against.as_ref())?);
+    Ok(())
+}
+
+/// The command's output for already compiled kernels (the formula, and the fitted coefficient if any).
+pub fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<String, CliError> {
+    let mut out = String::new();
+    let set: Vec<(String, f64)> = a.set.concat();
+    let params = common::param_values(&k.formula, &set);
+    let (lobe, note) = resolve_lobe(a.lobe.as_deref(), k.used_inputs())?;
+    let name = k.formula.display_name();
+    if let (Some(n), false) = (&note, a.json) {
+        eprintln!("note: {n}");
+    }
+    let params_json: serde_json::Map<String, serde_json::Value> =
+        k.formula.params.iter().zip(&params).map(|(d, v)| (d.name.clone(), json_num(*v))).collect();
+
+    if a.mode == Mode::Full {
+        if a.range.is_some() {
+            return Err(CliError::hint("--range works in lobe mode only", "drop --mode full, or drop --range"));
+        }
+        let r = full_energy(k, &params)?;
+        if a.json {
+            let rows: Vec<_> = r.albedo.iter().map(|(t, v)| json!({"theta_i_deg": t, "rho": json_num(*v)})).collect();
+            let rec = &r.reciprocity;
+            outln!(out, 
+                "{}",
+                json!({
+                    "mode": "full", "params": params_json, "coef": json_num(r.coef), "albedo_max": json_num(r.albedo_max),
+                    "theta_i_at_max_deg": r.theta_i_at_max_deg, "albedo": rows,
+                    "reciprocity_max_rel": json_num(rec.max_rel),
+                    "reciprocity_worst": {"theta_l_deg": rec.theta_l_deg, "theta_v_deg": rec.theta_v_deg, "phi_v_deg": rec.phi_v_deg},
+                })
+            );
+        } else {
+            outln!(out, "{name}: hemispherical-directional albedo ρ(θᵢ) = ∫ f·cosθₒ dωₒ");
+            outln!(out, "  θᵢ (deg)   ρ(θᵢ)");
+            for (t, v) in &r.albedo {
+                if t.fract() != 0.0 || (*t as i64) % 5 == 0 {
+                    outln!(out, "  {t:>8.1}   {v:.8}");
+                }
+            }
+            outln!(out, "max ρ = {:.8} at θᵢ = {}°; coefficient 1/max ρ = {:.8}", r.albedo_max, r.theta_i_at_max_deg, r.coef);
+            if r.albedo_max > 1.0 + 1e-9 {
+                outln!(out, "  the formula reflects more energy than it receives at θᵢ = {}° (ρ > 1)", r.theta_i_at_max_deg);
+            }
+            let rec = &r.reciprocity;
+            outln!(out, 
+                "reciprocity: worst |f(L,V) − f(V,L)|/max = {:.3e} at θ_L = {}°, θ_V = {}°, φ_V = {}° ({} pairs){}",
+                rec.max_rel,
+                rec.theta_l_deg,
+                rec.theta_v_deg,
+                rec.phi_v_deg,
+                rec.pairs,
+                if rec.max_rel < 1e-12 { " — reciprocal" } else { "" }
+            );
+        }
+        return Ok(out);
+    }
+
+    let Some(range) = &a.range else {
+        let r = lobe_integral(k, &params, lobe)?;
+        if a.json {
+            outln!(out, 
+                "{}",
+                json!({"mode": "lobe", "params": params_json, "coef": json_num(r.coef()), "integral": json_num(r.integral),
+                       "lobe_input": lobe.name(), "evals": r.evals})
+            );
+        } else {
+            let shown: Vec<String> = k.formula.params.iter().zip(&params).map(|(d, v)| format!("{}={v}", d.name)).collect();
+            outln!(out, "{name} ({}): coef = 1/(2π·Int) = {:.9}", shown.join(", "), r.coef());
+            outln!(out, "  Int = ∫₀¹ max(f(c),0)·c dc = {:.12e} (± {:.1e}, {} evaluations)", r.integral, r.error, r.evals);
+            outln!(out, "  lobe variable {} = cos θ; NL = 1, NV = cos θ (light at the normal)", lobe.name());
+            for c in &r.kinks {
+                outln!(out, "  the lobe is clamped to zero beyond θ = {:.6}° ({} = {c:.9})", c.acos().to_degrees(), lobe.name());
+            }
+        }
+        return Ok(out);
+    };
+
+    let (lo, hi) = parse_range(range).map_err(|e| CliError::hint(format!("--range: {e}"), "e.g. --range 1..1000"))?;
+    if !(a.step > 0.0 && a.step.is_finite()) {
+        return Err(CliError::hint(format!("--step {} must be positive", a.step), "e.g. --step 1"));
+    }
+    if let Some(d) = k.formula.params.first() {
+        if lo < d.lo || hi > d.hi {
+            return Err(CliError::hint(
+                format!("--range {range} leaves the declared range of n ({}..{})", d.lo, d.hi),
+                format!("choose a range inside {}..{}", d.lo, d.hi),
+            ));
+        }
+    }
+    let count = ((hi - lo) / a.step + 1e-9).floor() as usize + 1;
+    if count > 1_000_000 {
+        return Err(CliError::hint(format!("--range with --step {} has {count} points", a.step), "use a larger --step"));
+    }
+    let ns: Vec<f64> = (0..count).map(|i| lo + i as f64 * a.step).collect();
+    let results = coef_sweep(k, &params, lobe, &ns);
+    let mut exact = Vec::with_capacity(ns.len());
+    for (n, r) in ns.iter().zip(results) {
+        let r = r.map_err(|e| CliError::Msg { msg: format!("at n = {n}: {}", e.msg), hint: e.hint })?;
+        exact.push((*n, r.integral));
+    }
+    let score = against.map(|ak| {
+        // The fitted formula's parameters: n from the sweep, others by name from this formula, else defaults.
+        let mut ap = ak.default_params();
+        let n_idx = ak.formula.param_index("n");
+        for (i, d) in ak.formula.params.iter().enumerate() {
+            if let Some(j) = k.formula.param_index(&d.name) {
+                ap[i] = params[j];
+            }
+        }
+        score_against(&exact, |n| {
+            let mut p = ap.clone();
+            if let Some(i) = n_idx {
+                p[i] = n;
+            }
+            ak.eval(&[0.0; crate::N_INPUTS], &p)
+        })
+    });
+    if a.json {
+        let rows: Vec<_> = exact.iter().map(|(n, i)| json!({"n": n, "coef": json_num(1.0 / (2.0 * std::f64::consts::PI * i))})).collect();
+        let mut obj = json!({"mode": "lobe", "params": params_json, "lobe_input": lobe.name(), "range": rows});
+        if let Some(s) = &score {
+            obj["against_max_abs"] = json_num(s.max_abs);
+            obj["against_worst_n"] = json_num(s.worst_n);
+            obj["against_mean_abs"] = json_num(s.mean_abs);
+        }
+        outln!(out, "{obj}");
+        return Ok(out);
+    }
+    outln!(out, "{name}: coef(n) = 1/(2π·Int(n)), lobe variable {}", lobe.name());
+    match &score {
+        None => {
+            outln!(out, "{:>10}  {:>16}", "n", "coef");
+            for (n, i) in &exact {
+                outln!(out, "{n:>10}  {:>16.9}", 1.0 / (2.0 * std::f64::consts::PI * i));
+            }
+        }
+        Some(s) => {
+            outln!(out, "{:>10}  {:>16}  {:>16}  {:>14}", "n", "coef exact", "coef fitted", "|fit·2π·Int−1|");
+            for (n, ce, cf, err) in &s.rows {
+                outln!(out, "{n:>10}  {ce:>16.9}  {cf:>16.9}  {err:>14.6e}");
+            }
+            outln!(out, 
+                "fitted coefficient: max |coef_fit·2π·Int − 1| = {:.6e} at n = {}; mean {:.6e} over {} values of n",
+                s.max_abs,
+                s.worst_n,
+                s.mean_abs,
+                s.rows.len()
+            );
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use crate::builtins::Builtin;
+    use crate::check::twins::{self, Twin};
+    use crate::front::span::Span;
+    use crate::ir::{Formula, Ir, Meta, ParamDecl};
+    use clap::Parser;
+    use std::sync::Arc;
+
+    /// `max(pow(clamp(INPUT, 0, 1), n), 0)` with the given extra parameters declared (n first).
+    pub fn power_formula(input: Input, extra: &[(&str, f64, f64, f64)]) -> Formula {
+        let mut ir = Ir::new();
+        let s = Span::default();
+        let x = ir.input(input, s);
+        let z = ir.konst(0.0, s);
+        let o = ir.konst(1.0, s);
+        let c = ir.call(Builtin::Clamp, &[x, z, o], s);
+        let n = ir.param(0, s);
+        let p = ir.call(Builtin::Pow, &[c, n], s);
+        let root = ir.call(Builtin::Max, &[p, z], s);
+        let mut params = vec![ParamDecl { name: "n".into(), default: 50.0, lo: 1.0, hi: 1000.0, span: None }];
+        params.extend(extra.iter().map(|&(name, default, lo, hi)| ParamDecl { name: name.into(), default, lo, hi, span: None }));
+        Formula { meta: Meta { name: Some("test".into()), citation: None }, params, ir, root, file: "t.brdf".into(), source: String::new() }
+    }
+
+    /// A kernel whose evaluator is a twin, with a formula declaring the twin's parameters and reading `input`.
+    pub fn twin_kernel(t: Twin, input: Input, extra: &[(&str, f64, f64, f64)]) -> Kernel {
+        Kernel::new(Arc::new(power_formula(input, extra)), Backend::Interp, Arc::from(t.ev), std::time::Duration::ZERO)
+    }
+
+    #[derive(Parser)]
+    struct T {
+        #[command(flatten)]
+        a: EnergyArgs,
+    }
+
+    fn args(v: &[&str]) -> EnergyArgs {
+        T::try_parse_from(std::iter::once("energy").chain(v.iter().copied())).unwrap().a
+    }
+
+    fn json(s: &str) -> serde_json::Value {
+        serde_json::from_str(s).unwrap()
+    }
+
+    #[test]
+    fn lobe_mode_json_and_text() {
+        let k = twin_kernel(twins::phong(), Input::VR, &[]);
+        let v = json(&report(&args(&["--set", "n=100", "--json"]), &k, None).unwrap());
+        assert!((v["coef"].as_f64().unwrap() - 102.0 / (2.0 * std::f64::consts::PI)).abs() < 1e-9);
+        assert_eq!(v["lobe_input"], "VR");
+        let t = report(&args(&["--set", "n=100"]), &k, None).unwrap();
+        assert!(t.contains("coef = 1/(2π·Int) = 16.2338"), "{t}");
+    }
+
+    #[test]
+    fn range_against_an_exact_fit_scores_zero() {
+        let k = twin_kernel(twins::phong(), Input::VR, &[]);
+        let exact = Kernel::new(
+            Arc::new(power_formula(Input::NH, &[])),
+            Backend::Interp,
+            Arc::new(crate::kernel::FnEvaluator(|_: &[f64; 5], p: &[f64]| (p[0] + 2.0) / (2.0 * std::f64::consts::PI))),
+            std::time::Duration::ZERO,
+        );
+        let v = json(&report(&args(&["--range", "1..40", "--against-expr", "x", "--json"]), &k, Some(&exact)).unwrap());
+        assert!(v["against_max_abs"].as_f64().unwrap() < 1e-9, "{v}");
+        assert_eq!(v["range"].as_array().unwrap().len(), 40);
+        let e = report(&args(&["--range", "0..40"]), &k, None).unwrap_err();
+        assert!(e.render(false).contains("declared range of n"));
+    }
+
+    #[test]
+    fn full_mode_json_has_the_documented_keys() {
+        let k = twin_kernel(twins::phong(), Input::VR, &[]);
+        let v = json(&report(&args(&["--set", "n=10", "--mode", "full", "--json"]), &k, None).unwrap());
+        for key in ["coef", "albedo_max", "theta_i_at_max_deg", "reciprocity_max_rel", "albedo"] {
+            assert!(!v[key].is_null(), "missing {key}: {v}");
+        }
+        assert_eq!(v["theta_i_at_max_deg"].as_f64(), Some(0.0));
+    }
+
+    #[test]
+    fn zero_lobe_is_a_clear_error() {
+        let zero = Twin { name: "zero", params: &["n"], defaults: vec![50.0], ev: Box::new(crate::kernel::FnEvaluator(|_: &[f64; 5], _: &[f64]| 0.0)) };
+        let k = twin_kernel(zero, Input::NH, &[]);
+        let e = report(&args(&[]), &k, None).unwrap_err();
+        assert!(e.render(false).contains("integral is zero; cannot normalise"));
+    }
+}

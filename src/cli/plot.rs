@@ -1,0 +1,96 @@
+//! `lobe plot FILES… --set n=50 -o lobes.png [--polar] [--log] [--reference REF [--error]]`
+
+use super::common::{self, CliError};
+use crate::check::{choose_lobe_input, lobe_inputs};
+use crate::report::plot::{self, Format, LobeOptions, Series};
+use crate::{Backend, Evaluator, Kernel};
+
+#[derive(clap::Args, Debug)]
+pub struct PlotArgs {
+    /// Formula files (.brdf) to overlay.
+    #[arg(required = true)]
+    pub files: Vec<String>,
+    /// Parameter values, e.g. `n=50,a=16` (each formula takes the ones it declares).
+    #[arg(long, value_parser = common::parse_assignments, action = clap::ArgAction::Append)]
+    pub set: Vec<Vec<(String, f64)>>,
+    /// Output image (.png or .svg).
+    #[arg(short, long)]
+    pub output: std::path::PathBuf,
+    /// Polar plot (radius = value) instead of value against angle.
+    #[arg(long)]
+    pub polar: bool,
+    /// Logarithmic value axis (cartesian only).
+    #[arg(long)]
+    pub log: bool,
+    /// A reference formula drawn with the others (e.g. examples/brdfs/blinn.brdf).
+    #[arg(long)]
+    pub reference: Option<String>,
+    /// With --reference: plot F − reference instead of the lobes.
+    #[arg(long, requires = "reference")]
+    pub error: bool,
+    /// Image size in pixels, WxH.
+    #[arg(long, default_value = "900x600", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Replace an existing output file even if lobe did not write it.
+    #[arg(long)]
+    pub force: bool,
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s.split_once('x').ok_or("size is WxH, e.g. 900x600")?;
+    let w: u32 = w.parse().map_err(|_| format!("`{w}` is not a width"))?;
+    let h: u32 = h.parse().map_err(|_| format!("`{h}` is not a height"))?;
+    if !(100..=8192).contains(&w) || !(100..=8192).contains(&h) {
+        return Err("plot size must be between 100 and 8192 pixels per side".into());
+    }
+    Ok((w, h))
+}
+
+/// Samples a kernel as a one-dimensional lobe: value against the angle (degrees) from the lobe axis.
+fn sample(k: &Kernel, params: &[f64]) -> Vec<(f64, f64)> {
+    let (lobe, _) = choose_lobe_input(k.used_inputs());
+    (0..=360)
+        .map(|i| {
+            let deg = i as f64 * 0.25;
+            (deg, k.eval(&lobe_inputs(deg.to_radians().cos(), lobe), params))
+        })
+        .collect()
+}
+
+pub fn run(a: &PlotArgs) -> Result<(), CliError> {
+    let format = Format::from_path(&a.output).map_err(|e| CliError::hint(e, "use -o lobes.png or -o lobes.svg"))?;
+    let set = a.set.concat();
+    let mut files = a.files.clone();
+    if let Some(r) = &a.reference {
+        files.push(r.clone());
+    }
+    let formulas = files.iter().map(|p| common::load_formula(Some(p), None)).collect::<Result<Vec<_>, _>>()?;
+    common::check_set_names(&formulas.iter().collect::<Vec<_>>(), &set)?;
+    let mut series = Vec::new();
+    for f in &formulas {
+        let s = common::set_for(f, &set);
+        let params = common::param_values(f, &s);
+        let k = crate::compile_formula(f.clone(), &crate::Options { backend: Backend::Jit, bake: s, ..Default::default() })?;
+        series.push(Series { name: f.display_name(), points: sample(&k, &params) });
+    }
+    let n_label = set.iter().find(|(k, _)| k == "n").map(|(_, v)| format!("n = {v}")).unwrap_or_else(|| "default parameters".into());
+    let mut title = format!("Lobes, {n_label}");
+    if a.error {
+        let reference = series.pop().unwrap_or(Series { name: String::new(), points: vec![] });
+        for s in &mut series {
+            for (p, r) in s.points.iter_mut().zip(&reference.points) {
+                p.1 -= r.1;
+            }
+            s.name = format!("{} − {}", s.name, reference.name);
+        }
+        title = format!("Error against {}, {n_label}", reference.name);
+    }
+    let opts = LobeOptions { title, polar: a.polar, log: a.log, size: a.size };
+    let mut bytes = plot::lobes(&series, &opts, format).map_err(CliError::msg)?;
+    if format == Format::Svg {
+        bytes = [b"<!-- made by lobe -->\n".to_vec(), bytes].concat();
+    }
+    common::write_output(&a.output, &bytes, a.force, common::is_lobe_output)?;
+    eprintln!("wrote {}", a.output.display());
+    Ok(())
+}
