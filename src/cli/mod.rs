@@ -4,4 +4,6 @@
 //! code; no numerical or rendering logic lives here.
 
 pub mod common;
+pub mod compare;
 pub mod eval;
+pub mod render;

@@ -1,1 +1,2 @@
 //! lobe's integration tests: one binary, one module per area.
+mod render;
