@@ -571,9 +571,9 @@ pub fn normalization_coef(ev: &dyn Evaluator, params: &[f64]) -> Result<f64, Str
     let cols = crate::kernel::Columns::new([&cosines, &cosines, &cosines, &cosines, &cosines]);
     ev.eval_batch(&cols, params, &mut f);
     let mut sum = 0.0;
-    for i in 0..=N {
+    for (i, fi) in f.iter().enumerate() {
         let th = i as f64 * h;
-        let g = f[i].max(0.0) * th.cos() * th.sin();
+        let g = fi.max(0.0) * th.cos() * th.sin();
         let w = if i == 0 || i == N { 1.0 } else if i % 2 == 1 { 4.0 } else { 2.0 };
         sum += w * g;
     }
