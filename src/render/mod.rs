@@ -199,7 +199,7 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
         .zip(covered.par_chunks_mut(w * tile))
         .enumerate()
         .map(|(ty, (band, band_cov))| {
-            let tiles: Vec<(Vec<u8>, Vec<bool>, shade::ShadeCounts)> = (0..setup.tiles_x)
+            let tiles: Vec<Option<(Vec<u8>, Vec<bool>, shade::ShadeCounts)>> = (0..setup.tiles_x)
                 .into_par_iter()
                 .map_init(shade::Scratch::default, |sc, tx| {
                     let t = ty * setup.tiles_x + tx;
@@ -208,8 +208,13 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
                     out
                 })
                 .collect();
+            // Background everywhere first; empty tiles need nothing more.
+            for p in band.chunks_exact_mut(3) {
+                p.copy_from_slice(&bg);
+            }
             let mut counts = shade::ShadeCounts::default();
-            for (tx, (px, cov, c)) in tiles.into_iter().enumerate() {
+            for (tx, tile) in tiles.into_iter().enumerate() {
+                let Some((px, cov, c)) = tile else { continue };
                 counts += c;
                 let (x0, _, tw, th) = raster::tile_rect(&setup, ty * setup.tiles_x + tx);
                 for y in 0..th {
@@ -244,7 +249,7 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
     (Frame { image: Image { width: w, height: h, rgb }, covered }, stats)
 }
 
-/// One tile's 8-bit pixels and coverage (row-major, tile-sized).
+/// One tile's 8-bit pixels and coverage (row-major, tile-sized); `None` for a tile no triangle touches.
 #[allow(clippy::too_many_arguments)]
 fn tile_pixels(
     scene: &Scene,
@@ -255,12 +260,11 @@ fn tile_pixels(
     bg: [u8; 3],
     raster_ns: &AtomicU64,
     shade_ns: &AtomicU64,
-) -> (Vec<u8>, Vec<bool>, shade::ShadeCounts) {
+) -> Option<(Vec<u8>, Vec<bool>, shade::ShadeCounts)> {
     let (_, _, tw, th) = raster::tile_rect(setup, t);
     let n = tw * th;
     if setup.bins[t].is_empty() {
-        let px = bg.iter().copied().cycle().take(n * 3).collect();
-        return (px, vec![false; n], shade::ShadeCounts::default());
+        return None;
     }
     let t0 = Instant::now();
     raster::raster_tile(setup, t, &mut sc.gb);
@@ -280,7 +284,7 @@ fn tile_pixels(
     let t2 = Instant::now();
     raster_ns.fetch_add((t1 - t0).as_nanos() as u64, Ordering::Relaxed);
     shade_ns.fetch_add((t2 - t1).as_nanos() as u64, Ordering::Relaxed);
-    (px, cov, counts)
+    Some((px, cov, counts))
 }
 
 /// An indicatif bar that appears only once a render has run for half a second.

@@ -295,6 +295,25 @@ struct ObjectDef {
     cull: Option<bool>,
 }
 
+/// The dotted key a byte offset of the TOML text belongs to, for messages: the key on its line (if the
+/// offset is at or after `key =`) under the nearest `[table]` / `[[array]]` header above it.
+pub fn key_at(src: &str, offset: usize) -> Option<String> {
+    let offset = offset.min(src.len());
+    let line_start = src[..offset].rfind('\n').map(|i| i + 1).unwrap_or(0);
+    let line = src[line_start..].lines().next().unwrap_or("");
+    let key = line.split_once('=').map(|(k, _)| k.trim().to_string()).filter(|k| !k.is_empty() && !k.starts_with('#'));
+    let table = src[..line_start].lines().rev().map(str::trim).find(|l| l.starts_with('[')).map(|l| {
+        let l = l.split('#').next().unwrap_or("").trim();
+        l.trim_start_matches('[').trim_end_matches(']').trim().to_string()
+    });
+    match (table, key) {
+        (Some(t), Some(k)) => Some(format!("{t}.{k}")),
+        (None, Some(k)) => Some(k),
+        (Some(t), None) => Some(t),
+        (None, None) => None,
+    }
+}
+
 fn span_of(r: std::ops::Range<usize>) -> Span {
     Span::new(r.start, r.end)
 }
@@ -321,12 +340,17 @@ pub fn parse_scene(name: &str, src: &str, base: &Path, opts: &LoadOptions, compi
     let file: SceneFile = match toml::from_str(src) {
         Ok(f) => f,
         Err(e) => {
-            let mut d = Diagnostic::error(e.message().trim().to_string());
+            let msg = e.message().trim().to_string();
+            let key = e.span().and_then(|s| key_at(src, s.start));
+            let mut d = match &key {
+                Some(k) => Diagnostic::error(format!("`{k}`: {msg}")),
+                None => Diagnostic::error(msg),
+            };
             if let Some(s) = e.span() {
-                d = d.at(span_of(s), "here");
+                d = d.at(span_of(s), key.map(|k| format!("in `{k}`")).unwrap_or_else(|| "here".into()));
             }
             if e.message().contains("unknown field") {
-                d = d.hint("see the scene format in `lobe render --help` or examples/scenes/");
+                d = d.hint("the scene format is documented in src/render/scene.rs; examples are in examples/scenes/");
             }
             ds.push(d);
             return Err(ds);
@@ -670,6 +694,14 @@ mod tests {
             assert!((c - exact).abs() / exact < 1e-6, "{n}: {c} vs {exact}");
         }
         assert!(normalization_coef(&FnEvaluator(|_: &[f64; 5], _: &[f64]| 0.0), &[1.0]).is_err());
+    }
+
+    #[test]
+    fn keys_are_named_from_offsets() {
+        let src = "width = 5\n[camera]\nposition = \"x\"\n[[light]]\ncolor = 1\n";
+        assert_eq!(key_at(src, 3).as_deref(), Some("width"));
+        assert_eq!(key_at(src, src.find("\"x").unwrap()).as_deref(), Some("camera.position"));
+        assert_eq!(key_at(src, src.find("1\n").unwrap()).as_deref(), Some("light.color"));
     }
 
     #[test]

@@ -211,7 +211,7 @@ fn scene_errors_name_file_line_and_key() {
     assert!(e.contains("bad.toml:3:") && e.contains("focus"), "{e}");
     // Wrong type.
     let e = scene_err(&GOOD.replace("position = [0, 0, 6]", "position = \"far\""));
-    assert!(e.contains("bad.toml:2:") && e.contains("invalid type"), "{e}");
+    assert!(e.contains("bad.toml:2:") && e.contains("invalid type") && e.contains("`camera.position`"), "{e}");
     // Unknown material, with a suggestion.
     let e = scene_err(&GOOD.replace("material = \"m\"", "material = \"mm\""));
     assert!(e.contains("bad.toml:10:") && e.contains("unknown material `mm`") && e.contains("did you mean `m`"), "{e}");
