@@ -199,7 +199,7 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
         .zip(covered.par_chunks_mut(w * tile))
         .enumerate()
         .map(|(ty, (band, band_cov))| {
-            let tiles: Vec<Option<(Vec<u8>, Vec<bool>, shade::ShadeCounts)>> = (0..setup.tiles_x)
+            let tiles: Vec<Option<TileOut>> = (0..setup.tiles_x)
                 .into_par_iter()
                 .map_init(shade::Scratch::default, |sc, tx| {
                     let t = ty * setup.tiles_x + tx;
@@ -249,7 +249,10 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
     (Frame { image: Image { width: w, height: h, rgb }, covered }, stats)
 }
 
-/// One tile's 8-bit pixels and coverage (row-major, tile-sized); `None` for a tile no triangle touches.
+/// A shaded tile: 8-bit pixels and coverage (row-major, tile-sized) and its counters.
+type TileOut = (Vec<u8>, Vec<bool>, shade::ShadeCounts);
+
+/// One tile's output; `None` for a tile no triangle touches.
 #[allow(clippy::too_many_arguments)]
 fn tile_pixels(
     scene: &Scene,
@@ -260,7 +263,7 @@ fn tile_pixels(
     bg: [u8; 3],
     raster_ns: &AtomicU64,
     shade_ns: &AtomicU64,
-) -> Option<(Vec<u8>, Vec<bool>, shade::ShadeCounts)> {
+) -> Option<TileOut> {
     let (_, _, tw, th) = raster::tile_rect(setup, t);
     let n = tw * th;
     if setup.bins[t].is_empty() {
