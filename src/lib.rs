@@ -105,3 +105,6 @@ pub fn resolve_bake(f: &Formula, set: &[(String, f64)]) -> Result<Vec<(usize, f6
         Ok(out)
     }
 }
+
+/// The tile-based software renderer (scenes, meshes, rasteriser, shading, PNG output, image comparison).
+pub mod render;

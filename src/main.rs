@@ -15,6 +15,8 @@ struct Cli {
 enum Cmd {
     /// Evaluate a formula at one point.
     Eval(cli::eval::EvalArgs),
+    /// Overlay lobes of several formulas against angle (cartesian or polar), optionally as error curves.
+    Plot(cli::plot::PlotArgs),
     /// Show the simplified formula, the inputs it reads and its compile time.
     Check(cli::check::CheckArgs),
     /// Export a formula as a GLSL or WGSL function.
@@ -27,18 +29,25 @@ enum Cmd {
     Fit(cli::fit::FitArgs),
     /// Stability sweep: NaN, ±inf, negative and huge values over the whole domain.
     Sweep(cli::sweep::SweepArgs),
+    /// Render a scene (TOML) to a PNG with the tile-based software renderer.
+    Render(cli::render::RenderArgs),
+    /// Render two formulas in the same scene and measure the difference (the papers' table 4.2).
+    Compare(cli::compare::CompareArgs),
 }
 
 fn main() {
     let cli = Cli::parse();
     let result = match &cli.cmd {
         Cmd::Eval(a) => cli::eval::run(a),
+        Cmd::Plot(a) => cli::plot::run(a),
         Cmd::Export(a) => cli::export::run(a),
         Cmd::Check(a) => cli::check::run(a),
         Cmd::Energy(a) => cli::energy::run(a),
         Cmd::Accuracy(a) => cli::accuracy::run(a),
         Cmd::Fit(a) => cli::fit::run(a),
         Cmd::Sweep(a) => cli::sweep::run(a),
+        Cmd::Render(a) => cli::render::run(a),
+        Cmd::Compare(a) => cli::compare::run(a),
     };
     if let Err(e) = result {
         let color = std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none();

@@ -5,9 +5,12 @@
 
 pub mod check;
 pub mod common;
+pub mod compare;
 pub mod eval;
 pub mod export;
+pub mod plot;
 pub mod accuracy;
 pub mod energy;
 pub mod fit;
 pub mod sweep;
+pub mod render;

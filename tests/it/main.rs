@@ -9,3 +9,4 @@ mod parse_errors;
 mod simplify;
 mod accuracy;
 mod energy;
+mod render;

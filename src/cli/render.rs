@@ -1,0 +1,136 @@
+//! `lobe render SCENE [-o out.png] [--size 1024] [--set n=200] [--backend jit|interp] [--threads N] [--stats]`
+
+use super::common::{self, CliError};
+use crate::render::image::{self, Transfer};
+use crate::render::scene::{self, LobeCompiler, LoadOptions};
+use crate::render::{self as r, RenderOptions, RenderStats};
+use crate::Backend;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+#[derive(clap::Args, Debug)]
+pub struct RenderArgs {
+    /// Scene file (.toml); see examples/scenes/.
+    pub scene: PathBuf,
+    /// Output PNG (default: the scene's name with .png, in the current directory).
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Image size: `N` (square) or `WxH`, each at most 4096.
+    #[arg(long, value_parser = parse_size)]
+    pub size: Option<(usize, usize)>,
+    /// Parameter values for every material that declares them, e.g. `n=200`.
+    #[arg(long, value_parser = common::parse_assignments, action = clap::ArgAction::Append)]
+    pub set: Vec<Vec<(String, f64)>>,
+    /// Evaluation backend for the materials.
+    #[arg(long, default_value = "jit")]
+    pub backend: Backend,
+    /// Worker threads (default: one per core).
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
+    /// Tile side in pixels.
+    #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u16).range(8..=256))]
+    pub tile: u16,
+    /// Encode with the sRGB curve instead of the papers' linear clamp to 0..255.
+    #[arg(long)]
+    pub srgb: bool,
+    /// Print throughput and time per stage.
+    #[arg(long)]
+    pub stats: bool,
+    /// No progress bar.
+    #[arg(short, long)]
+    pub quiet: bool,
+    /// Overwrite an existing output file even if lobe did not write it.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// `N` or `WxH`, each 1..=4096.
+pub fn parse_size(s: &str) -> Result<(usize, usize), String> {
+    let one = |t: &str| -> Result<usize, String> {
+        let v: usize = t.trim().parse().map_err(|_| format!("`{t}` is not a whole number"))?;
+        if (1..=r::MAX_SIZE).contains(&v) {
+            Ok(v)
+        } else {
+            Err(format!("{v} is outside 1..={}", r::MAX_SIZE))
+        }
+    };
+    match s.split_once(['x', 'X']) {
+        Some((w, h)) => Ok((one(w)?, one(h)?)),
+        None => one(s).map(|v| (v, v)),
+    }
+}
+
+/// The default output path: `<scene stem>.png` in the current directory.
+pub fn default_output(scene: &Path) -> PathBuf {
+    let stem = scene.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "render".into());
+    PathBuf::from(format!("{stem}.png"))
+}
+
+pub fn run(a: &RenderArgs) -> Result<(), CliError> {
+    let out = a.output.clone().unwrap_or_else(|| default_output(&a.scene));
+    // Refuse a bad output path before doing any work, and write nothing unless everything succeeds.
+    image::check_output_path(&out, a.force).map_err(|m| CliError::hint(m, "choose another -o path"))?;
+    let opts = LoadOptions { size: a.size, set: a.set.concat(), formula_override: None };
+    let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: a.backend })?;
+    let ropts = RenderOptions {
+        threads: a.threads,
+        tile: a.tile as usize,
+        transfer: if a.srgb { Transfer::Srgb } else { Transfer::Linear },
+        progress: !a.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr()),
+    };
+    let (frame, stats) = r::render(&sc, &ropts).map_err(CliError::msg)?;
+    let t = Instant::now();
+    let png = frame.image.encode_png().map_err(CliError::msg)?;
+    let encode = t.elapsed();
+    image::write_atomic(&out, &png).map_err(CliError::msg)?;
+    if stats.nan > 0 {
+        eprintln!("warning: {} kernel evaluations returned NaN and were shaded as 0", stats.nan);
+    }
+    if a.stats {
+        eprint!("{}", format_stats(&stats, encode));
+    }
+    if !a.quiet {
+        eprintln!("wrote {} ({}×{})", out.display(), stats.width, stats.height);
+    }
+    Ok(())
+}
+
+/// The `--stats` report.
+pub fn format_stats(s: &RenderStats, encode: std::time::Duration) -> String {
+    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+    format!(
+        "render: {}×{} px, {} thread(s), {} triangles, {}/{} tiles touched\n\
+         \x20 time: {:.2} ms wall ({:.2} Mpixel/s); setup+binning {:.2} ms; raster {:.2} ms cpu; shading {:.2} ms cpu; encode {:.2} ms\n\
+         \x20 shading: {} visible px, {} kernel evaluations in {} batched calls, {} NaN\n",
+        s.width,
+        s.height,
+        s.threads,
+        s.triangles,
+        s.tiles_touched,
+        s.tiles,
+        ms(s.render_wall),
+        s.mpixels_per_s(),
+        ms(s.setup),
+        ms(s.raster_cpu),
+        ms(s.shade_cpu),
+        ms(encode),
+        s.visible_pixels,
+        s.evals,
+        s.kernel_calls,
+        s.nan
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_parse_and_are_bounded() {
+        assert_eq!(parse_size("1024").unwrap(), (1024, 1024));
+        assert_eq!(parse_size("640x480").unwrap(), (640, 480));
+        assert!(parse_size("5000").is_err());
+        assert!(parse_size("0").is_err());
+        assert!(parse_size("axb").is_err());
+    }
+}

@@ -1,0 +1,197 @@
+//! 8-bit RGB images: colour transfer, PNG encoding/decoding, and atomic output.
+//!
+//! Colour: the renderer accumulates linear RGB in f64. The papers' program clamps each channel to 0..1 and
+//! scales to 0..255 with no gamma curve, so that is the default ([`Transfer::Linear`]) and what the
+//! comparison metrics are computed on; `--srgb` applies the sRGB transfer curve instead, which is what a
+//! physically based pipeline would display. NaN channels become 0.
+//!
+//! Output is written atomically: the PNG is encoded in memory, written to a temporary file in the target's
+//! directory, synced, and renamed over the target. Nothing touches the output path unless everything
+//! before succeeded, and an existing file that is not a PNG lobe wrote is refused unless forced.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// How linear radiance becomes an 8-bit value.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Transfer {
+    /// clamp(c, 0, 1)·255, rounded — the papers' convention.
+    #[default]
+    Linear,
+    /// The sRGB curve (IEC 61966-2-1) after clamping.
+    Srgb,
+}
+
+impl Transfer {
+    pub fn encode(self, c: f64) -> u8 {
+        let c = if c.is_nan() { 0.0 } else { c.clamp(0.0, 1.0) };
+        let c = match self {
+            Transfer::Linear => c,
+            Transfer::Srgb if c <= 0.003_130_8 => 12.92 * c,
+            Transfer::Srgb => 1.055 * c.powf(1.0 / 2.4) - 0.055,
+        };
+        (c * 255.0).round() as u8
+    }
+}
+
+/// An 8-bit RGB image, row-major, top row first.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Image {
+    pub width: usize,
+    pub height: usize,
+    pub rgb: Vec<u8>,
+}
+
+/// The tEXt key/value lobe writes into every PNG, so it can recognise its own files before overwriting.
+pub const PNG_SOFTWARE: (&str, &str) = ("Software", "lobe");
+
+impl Image {
+    pub fn new(width: usize, height: usize) -> Image {
+        Image { width, height, rgb: vec![0; width * height * 3] }
+    }
+
+    pub fn pixel(&self, x: usize, y: usize) -> [u8; 3] {
+        let o = (y * self.width + x) * 3;
+        [self.rgb[o], self.rgb[o + 1], self.rgb[o + 2]]
+    }
+
+    pub fn set(&mut self, x: usize, y: usize, c: [u8; 3]) {
+        let o = (y * self.width + x) * 3;
+        self.rgb[o..o + 3].copy_from_slice(&c);
+    }
+
+    /// PNG bytes (8-bit RGB) with lobe's tEXt marker.
+    pub fn encode_png(&self) -> Result<Vec<u8>, String> {
+        let mut buf = Vec::new();
+        {
+            let mut enc = png::Encoder::new(&mut buf, self.width as u32, self.height as u32);
+            enc.set_color(png::ColorType::Rgb);
+            enc.set_depth(png::BitDepth::Eight);
+            enc.set_compression(png::Compression::Fast);
+            enc.add_text_chunk(PNG_SOFTWARE.0.into(), PNG_SOFTWARE.1.into()).map_err(|e| e.to_string())?;
+            let mut w = enc.write_header().map_err(|e| format!("PNG encoder: {e}"))?;
+            w.write_image_data(&self.rgb).map_err(|e| format!("PNG encoder: {e}"))?;
+            w.finish().map_err(|e| format!("PNG encoder: {e}"))?;
+        }
+        Ok(buf)
+    }
+
+    /// Decodes an 8-bit RGB or RGBA PNG (alpha is dropped).
+    pub fn decode_png(bytes: &[u8]) -> Result<Image, String> {
+        let dec = png::Decoder::new(std::io::Cursor::new(bytes));
+        let mut reader = dec.read_info().map_err(|e| format!("not a readable PNG: {e}"))?;
+        let size = reader.output_buffer_size().ok_or("PNG too large")?;
+        let mut data = vec![0; size];
+        let info = reader.next_frame(&mut data).map_err(|e| format!("not a readable PNG: {e}"))?;
+        if info.bit_depth != png::BitDepth::Eight {
+            return Err("only 8-bit PNGs are supported".into());
+        }
+        let (w, h) = (info.width as usize, info.height as usize);
+        let rgb = match info.color_type {
+            png::ColorType::Rgb => data[..w * h * 3].to_vec(),
+            png::ColorType::Rgba => data[..w * h * 4].chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect(),
+            other => return Err(format!("unsupported PNG colour type {other:?}")),
+        };
+        Ok(Image { width: w, height: h, rgb })
+    }
+}
+
+/// Is `bytes` a PNG carrying lobe's tEXt marker?
+pub fn is_lobe_png(bytes: &[u8]) -> bool {
+    let dec = png::Decoder::new(std::io::Cursor::new(bytes));
+    match dec.read_info() {
+        Ok(r) => r
+            .info()
+            .uncompressed_latin1_text
+            .iter()
+            .any(|t| t.keyword == PNG_SOFTWARE.0 && t.text == PNG_SOFTWARE.1),
+        Err(_) => false,
+    }
+}
+
+/// Checks that `path` may be (over)written: it must not be a directory, its directory must exist, and an
+/// existing file must be a PNG lobe wrote, unless `force`.
+pub fn check_output_path(path: &Path, force: bool) -> Result<(), String> {
+    if path.is_dir() {
+        return Err(format!("`{}` is a directory", path.display()));
+    }
+    let dir = parent_dir(path);
+    if !dir.is_dir() {
+        return Err(format!("the directory `{}` does not exist", dir.display()));
+    }
+    if path.exists() && !force {
+        let bytes = std::fs::read(path).map_err(|e| format!("cannot read existing `{}`: {e}", path.display()))?;
+        if !is_lobe_png(&bytes) {
+            return Err(format!("`{}` exists and is not a PNG lobe wrote; refusing to overwrite it (use --force)", path.display()));
+        }
+    }
+    Ok(())
+}
+
+fn parent_dir(path: &Path) -> PathBuf {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+/// Writes `bytes` to `path` atomically: a temporary file in the same directory, fsync, rename. On any
+/// failure the temporary file is removed and `path` is untouched.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), String> {
+    let dir = parent_dir(path);
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
+    let tmp = dir.join(format!(".{name}.lobe-tmp-{}", std::process::id()));
+    let result = (|| -> std::io::Result<()> {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        drop(f);
+        std::fs::rename(&tmp, path)
+    })();
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(format!("cannot write `{}`: {e}", path.display()));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn transfer_matches_definitions() {
+        assert_eq!(Transfer::Linear.encode(0.5), 128);
+        assert_eq!(Transfer::Linear.encode(2.0), 255);
+        assert_eq!(Transfer::Linear.encode(f64::NAN), 0);
+        assert_eq!(Transfer::Linear.encode(-1.0), 0);
+        // sRGB of linear 0.5 is 0.7354 → 188.
+        assert_eq!(Transfer::Srgb.encode(0.5), 188);
+        assert_eq!(Transfer::Srgb.encode(1.0), 255);
+    }
+
+    #[test]
+    fn png_round_trip_and_marker() {
+        let mut im = Image::new(3, 2);
+        im.set(2, 1, [1, 2, 3]);
+        let bytes = im.encode_png().unwrap();
+        assert!(is_lobe_png(&bytes));
+        assert_eq!(Image::decode_png(&bytes).unwrap(), im);
+        assert!(!is_lobe_png(b"hello"));
+    }
+
+    #[test]
+    fn refuses_to_clobber_foreign_files() {
+        let dir = std::env::temp_dir().join(format!("lobe-img-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("notes.png");
+        std::fs::write(&p, "precious").unwrap();
+        assert!(check_output_path(&p, false).is_err());
+        assert!(check_output_path(&p, true).is_ok());
+        let ours = Image::new(1, 1).encode_png().unwrap();
+        write_atomic(&p, &ours).unwrap();
+        assert!(check_output_path(&p, false).is_ok());
+        assert!(check_output_path(&dir.join("missing/x.png"), false).is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
