@@ -34,7 +34,7 @@ use cranelift_codegen::settings::{self, Configurable};
 use cranelift_codegen::Context;
 use cranelift_frontend::FunctionBuilderContext;
 use cranelift_jit::{JITBuilder, JITModule};
-use cranelift_module::{default_libcall_names, Module, ModuleError};
+use cranelift_module::{default_libcall_names, FuncId, Module, ModuleError};
 use std::cell::RefCell;
 use std::fmt;
 use std::sync::{Arc, Mutex, OnceLock};
@@ -150,6 +150,27 @@ impl Jit {
         Jit { ctx: Context::new(), fctx: FunctionBuilderContext::new() }
     }
 
+    /// Declares the imports and defines both kernels in `module`, then finalizes it.
+    fn define(&mut self, module: &mut JITModule, ir: &Ir, root: NodeId) -> Result<(FuncId, FuncId), JitError> {
+        let imports = codegen::declare_imports(module, ir)?;
+        let scalar_id = module.declare_anonymous_function(&codegen::scalar_signature(module))?;
+        let batch_id = module.declare_anonymous_function(&codegen::batch_signature(module))?;
+
+        module.clear_context(&mut self.ctx);
+        self.ctx.func.name = UserFuncName::user(0, scalar_id.as_u32());
+        codegen::build_scalar(module, &mut self.ctx, &mut self.fctx, ir, root, &imports)?;
+        module.define_function(scalar_id, &mut self.ctx)?;
+
+        module.clear_context(&mut self.ctx);
+        self.ctx.func.name = UserFuncName::user(0, batch_id.as_u32());
+        codegen::build_batch(module, &mut self.ctx, &mut self.fctx, ir, root, &imports)?;
+        module.define_function(batch_id, &mut self.ctx)?;
+        module.clear_context(&mut self.ctx);
+
+        module.finalize_definitions()?;
+        Ok((scalar_id, batch_id))
+    }
+
     /// Compiles a compacted IR (every node reachable from `root`, root last) into a fresh module.
     pub fn compile(&mut self, ir: &Ir, root: NodeId) -> Result<Compiled, JitError> {
         if root.index() >= ir.len() {
@@ -160,27 +181,21 @@ impl Jit {
             builder.symbol(sym, ptr);
         }
         let mut module = JITModule::new(builder);
-        // If anything below fails, the module is dropped unfinalized, which frees its memory.
-        let imports = codegen::declare_imports(&mut module, ir)?;
-
-        let scalar_id = module.declare_anonymous_function(&codegen::scalar_signature(&module))?;
-        let batch_id = module.declare_anonymous_function(&codegen::batch_signature(&module))?;
-
-        module.clear_context(&mut self.ctx);
-        self.ctx.func.name = UserFuncName::user(0, scalar_id.as_u32());
-        codegen::build_scalar(&mut module, &mut self.ctx, &mut self.fctx, ir, root, &imports)?;
-        module.define_function(scalar_id, &mut self.ctx)?;
-
-        module.clear_context(&mut self.ctx);
-        self.ctx.func.name = UserFuncName::user(0, batch_id.as_u32());
-        codegen::build_batch(&mut module, &mut self.ctx, &mut self.fctx, ir, root, &imports)?;
-        module.define_function(batch_id, &mut self.ctx)?;
-        module.clear_context(&mut self.ctx);
-
-        module.finalize_definitions()?;
+        let (scalar_id, batch_id) = match self.define(&mut module, ir, root) {
+            Ok(ids) => ids,
+            Err(e) => {
+                // Safety: nothing was finalized and no pointer into the module escaped, so nothing can call
+                // into the memory being freed. (Dropping the module instead would leak it: cranelift-jit leaks
+                // on drop to keep any escaped pointers valid.)
+                unsafe { module.free_memory() };
+                return Err(e);
+            }
+        };
         let s = module.get_finalized_function(scalar_id);
         let b = module.get_finalized_function(batch_id);
         if s.is_null() || b.is_null() {
+            // Safety: the null pointers are discarded; nothing else points into the module.
+            unsafe { module.free_memory() };
             return Err(JitError::Internal("finalized function has no address".into()));
         }
         // Safety: both pointers are the entry points of functions just compiled with exactly these signatures
@@ -337,4 +352,33 @@ impl Evaluator for JitKernel {
 /// Compiles `f` with the JIT and reports failure as a diagnostic on the formula's file.
 pub fn kernel_evaluator(f: &Formula) -> Result<Arc<dyn Evaluator>, Diagnostic> {
     compile(f).map(|k| Arc::new(k) as Arc<dyn Evaluator>).map_err(|e| e.to_diagnostic())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::front::span::Span;
+    use crate::ir::Input;
+
+    #[test]
+    fn bad_root_is_an_error_not_a_panic() {
+        let mut ir = Ir::new();
+        ir.input(Input::NH, Span::default());
+        let e = Jit::new().compile(&ir, NodeId(7)).err().map(|e| e.to_string());
+        assert_eq!(e.as_deref(), Some("internal JIT error: root outside the arena"));
+    }
+
+    #[test]
+    fn errors_become_diagnostics_with_a_fallback_hint() {
+        let d = JitError::Module("out of memory".into()).to_diagnostic();
+        assert!(d.message.contains("out of memory"));
+        assert!(d.hints.iter().any(|h| h.contains("--backend interp")));
+    }
+
+    #[test]
+    fn host_isa_is_built_once() {
+        let isa = host_isa().expect("host supported");
+        assert_eq!(isa.pointer_bytes(), 8);
+        assert!(Arc::ptr_eq(&isa, &host_isa().expect("host supported")));
+    }
 }
