@@ -147,8 +147,9 @@ fn statm_resident_pages() -> Option<u64> {
 }
 
 /// Distinct formulas (a different constant each) compiled without the cache and dropped: resident memory must
-/// stay flat. Without `free_memory` each module leaks at least two pages (code + constants): 10 000 compiles
-/// would add ≥ 80 MB; the bound is 40 MB to leave room for allocator noise.
+/// stay flat. Without `free_memory` each module leaks its code page (measured: +4 KiB per compile, 2000
+/// compiles → +2003 pages; with it: +3 pages); the bound is 1 KiB per compile to leave room for allocator
+/// noise. 10 000 compiles in release, 2000 in debug builds (the verifier makes each compile slower).
 #[test]
 fn jit_memory_is_freed_on_drop() {
     let Some(_) = statm_resident_pages() else { return };
@@ -160,12 +161,13 @@ fn jit_memory_is_freed_on_drop() {
     };
     run(0..200); // warm up allocator and thread-local contexts
     let before = statm_resident_pages().unwrap_or(0);
-    let n = if cfg!(debug_assertions) { 3_000 } else { 10_000 };
+    let n = if cfg!(debug_assertions) { 2_000 } else { 10_000 };
     run(200..200 + n);
     let after = statm_resident_pages().unwrap_or(0);
     let page_kb = 4;
     let grown_kb = after.saturating_sub(before) * page_kb;
-    let bound_kb = 40 * 1024 * n as u64 / 10_000;
+    eprintln!("RSS {before} -> {after} pages over {n} compiles");
+    let bound_kb = n as u64;
     assert!(grown_kb < bound_kb, "RSS grew by {grown_kb} KiB over {n} compiles (bound {bound_kb} KiB)");
 }
 
