@@ -137,6 +137,9 @@ impl Drop for Compiled {
 pub struct Jit {
     ctx: Context,
     fctx: FunctionBuilderContext,
+    /// When set, the machine code listing of each function compiled is kept in `listing`.
+    disasm: bool,
+    listing: Vec<String>,
 }
 
 impl Default for Jit {
@@ -147,7 +150,14 @@ impl Default for Jit {
 
 impl Jit {
     pub fn new() -> Jit {
-        Jit { ctx: Context::new(), fctx: FunctionBuilderContext::new() }
+        Jit { ctx: Context::new(), fctx: FunctionBuilderContext::new(), disasm: false, listing: vec![] }
+    }
+
+    fn keep_listing(&mut self) {
+        if self.disasm {
+            let text = self.ctx.compiled_code().and_then(|c| c.vcode.clone()).unwrap_or_default();
+            self.listing.push(text);
+        }
     }
 
     /// Declares the imports and defines both kernels in `module`, then finalizes it.
@@ -159,12 +169,16 @@ impl Jit {
         module.clear_context(&mut self.ctx);
         self.ctx.func.name = UserFuncName::user(0, scalar_id.as_u32());
         codegen::build_scalar(module, &mut self.ctx, &mut self.fctx, ir, root, &imports)?;
+        self.ctx.set_disasm(self.disasm);
         module.define_function(scalar_id, &mut self.ctx)?;
+        self.keep_listing();
 
         module.clear_context(&mut self.ctx);
         self.ctx.func.name = UserFuncName::user(0, batch_id.as_u32());
         codegen::build_batch(module, &mut self.ctx, &mut self.fctx, ir, root, &imports)?;
+        self.ctx.set_disasm(self.disasm);
         module.define_function(batch_id, &mut self.ctx)?;
+        self.keep_listing();
         module.clear_context(&mut self.ctx);
 
         module.finalize_definitions()?;
@@ -279,6 +293,17 @@ pub fn compile(f: &Formula) -> Result<JitKernel, JitError> {
         }
     };
     Ok(JitKernel { n_params: f.params.len().max(code.params_read), code, cached })
+}
+
+/// The machine code (Cranelift's listing) of the scalar and the batched kernel, for `lobe` reports and for
+/// checking what the code generator emits (e.g. that the scalar kernel has no stack traffic).
+pub fn disassemble(f: &Formula) -> Result<(String, String), JitError> {
+    let (ir, root) = f.ir.compact(f.root);
+    let mut j = Jit::new();
+    j.disasm = true;
+    j.compile(&ir, root)?;
+    let mut l = std::mem::take(&mut j.listing).into_iter();
+    Ok((l.next().unwrap_or_default(), l.next().unwrap_or_default()))
 }
 
 /// Compiles without consulting or filling the cache (for compile-time measurements and tests).

@@ -261,3 +261,17 @@ fn unusual_shapes_compile_and_agree() {
         }
     }
 }
+
+/// The scalar kernel of an arithmetic formula is straight-line register code: no stack slots, no spills, no
+/// calls (clamp/max are inline instructions).
+#[test]
+fn scalar_arithmetic_kernel_has_no_stack_traffic_or_calls() {
+    let (scalar, batch) = jit::disassemble(&modified_schlick(1.25)).expect("compiles");
+    assert!(!scalar.is_empty() && !batch.is_empty());
+    for bad in ["rsp", "call"] {
+        let hits: Vec<&str> = scalar.lines().filter(|l| l.contains(bad) && !l.contains("rbp")).collect();
+        assert!(hits.is_empty(), "scalar kernel mentions `{bad}`:\n{scalar}");
+    }
+    // The batched loop works on two lanes: packed instructions appear.
+    assert!(batch.contains("divpd") || batch.contains("vdivpd"), "no packed division:\n{batch}");
+}
