@@ -104,18 +104,41 @@ fn host_isa() -> Result<OwnedTargetIsa, JitError> {
 type ScalarFn = unsafe extern "C" fn(*const f64, *const f64) -> f64;
 type BatchFn = unsafe extern "C" fn(*const *const f64, *const f64, *mut f64, usize);
 
-/// Finalized machine code for one formula: the module that owns the memory and the two entry points.
+/// Finalized machine code for one formula: the module that owns the memory and the entry points.
+///
+/// The scalar kernel is compiled eagerly; the batched kernel (about 60% of the compile time: a loop and two
+/// copies of the body) is defined in the same module on the first batch call, so kernels that are only ever
+/// evaluated point by point (the numerical checks) never pay for it.
 pub struct Compiled {
-    /// Only touched on drop (to free the code); the `Mutex` makes the holder `Sync` without `unsafe`.
+    /// Locked only to add the batched kernel and to free the code on drop; the `Mutex` also makes the holder
+    /// `Sync` without `unsafe`.
     module: Mutex<Option<JITModule>>,
     scalar: ScalarFn,
-    batch: BatchFn,
+    /// The batched kernel, or why it could not be built (then batches fall back to scalar calls).
+    batch: OnceLock<Result<BatchFn, String>>,
+    /// The compacted IR and the imports, kept to build the batched kernel later.
+    ir: Ir,
+    root: NodeId,
+    imports: codegen::Imports,
     /// Number of parameter slots the code reads (`max index + 1`).
     params_read: usize,
     /// Inputs the code reads (their columns must be full length).
     inputs: InputSet,
     /// Size of the compiled IR (for reports).
     pub nodes: usize,
+}
+
+impl Compiled {
+    /// The batched kernel, compiled on first use (concurrent first callers wait for one compile).
+    fn batch(&self) -> Option<BatchFn> {
+        let r = self.batch.get_or_init(|| {
+            let mut guard = self.module.lock().map_err(|_| "JIT module lock poisoned".to_string())?;
+            let module = guard.as_mut().ok_or("JIT module already freed")?;
+            let f = with_jit(|j| j.define_batch(module, &self.ir, self.root, &self.imports)).map_err(|e| e.to_string())?;
+            Ok(f)
+        });
+        r.as_ref().ok().copied()
+    }
 }
 
 impl Drop for Compiled {
@@ -160,32 +183,58 @@ impl Jit {
         }
     }
 
-    /// Declares the imports and defines both kernels in `module`, then finalizes it.
-    fn define(&mut self, module: &mut JITModule, ir: &Ir, root: NodeId) -> Result<(FuncId, FuncId), JitError> {
+    /// Declares the imports and defines the scalar kernel in `module`, then finalizes it.
+    fn define_scalar(
+        &mut self,
+        module: &mut JITModule,
+        ir: &Ir,
+        root: NodeId,
+    ) -> Result<(FuncId, codegen::Imports), JitError> {
         let imports = codegen::declare_imports(module, ir)?;
-        let scalar_id = module.declare_anonymous_function(&codegen::scalar_signature(module))?;
-        let batch_id = module.declare_anonymous_function(&codegen::batch_signature(module))?;
-
+        let id = module.declare_anonymous_function(&codegen::scalar_signature(module))?;
         module.clear_context(&mut self.ctx);
-        self.ctx.func.name = UserFuncName::user(0, scalar_id.as_u32());
+        self.ctx.func.name = UserFuncName::user(0, id.as_u32());
         codegen::build_scalar(module, &mut self.ctx, &mut self.fctx, ir, root, &imports)?;
         self.ctx.set_disasm(self.disasm);
-        module.define_function(scalar_id, &mut self.ctx)?;
-        self.keep_listing();
-
-        module.clear_context(&mut self.ctx);
-        self.ctx.func.name = UserFuncName::user(0, batch_id.as_u32());
-        codegen::build_batch(module, &mut self.ctx, &mut self.fctx, ir, root, &imports)?;
-        self.ctx.set_disasm(self.disasm);
-        module.define_function(batch_id, &mut self.ctx)?;
+        module.define_function(id, &mut self.ctx)?;
         self.keep_listing();
         module.clear_context(&mut self.ctx);
-
         module.finalize_definitions()?;
-        Ok((scalar_id, batch_id))
+        Ok((id, imports))
     }
 
-    /// Compiles a compacted IR (every node reachable from `root`, root last) into a fresh module.
+    /// Adds the batched kernel to an already finalized module (new code goes to new pages; the scalar
+    /// kernel's pages are untouched, so it may run concurrently).
+    fn define_batch(
+        &mut self,
+        module: &mut JITModule,
+        ir: &Ir,
+        root: NodeId,
+        imports: &codegen::Imports,
+    ) -> Result<BatchFn, JitError> {
+        let id = module.declare_anonymous_function(&codegen::batch_signature(module))?;
+        module.clear_context(&mut self.ctx);
+        self.ctx.func.name = UserFuncName::user(0, id.as_u32());
+        let built = codegen::build_batch(module, &mut self.ctx, &mut self.fctx, ir, root, imports);
+        let defined = built.and_then(|()| {
+            self.ctx.set_disasm(self.disasm);
+            module.define_function(id, &mut self.ctx).map_err(JitError::from)
+        });
+        self.keep_listing();
+        module.clear_context(&mut self.ctx);
+        defined?;
+        module.finalize_definitions()?;
+        let p = module.get_finalized_function(id);
+        if p.is_null() {
+            return Err(JitError::Internal("finalized batch function has no address".into()));
+        }
+        // Safety: `p` is the entry of the function just compiled with exactly `BatchFn`'s signature (declared
+        // with the host's C calling convention); it stays valid while the module lives, which `Compiled` owns.
+        Ok(unsafe { std::mem::transmute::<*const u8, BatchFn>(p) })
+    }
+
+    /// Compiles a compacted IR (every node reachable from `root`, root last) into a fresh module. Only the
+    /// scalar kernel is built now; the batched one on the first batch call.
     pub fn compile(&mut self, ir: &Ir, root: NodeId) -> Result<Compiled, JitError> {
         if root.index() >= ir.len() {
             return Err(JitError::Internal("root outside the arena".into()));
@@ -195,34 +244,35 @@ impl Jit {
             builder.symbol(sym, ptr);
         }
         let mut module = JITModule::new(builder);
-        let (scalar_id, batch_id) = match self.define(&mut module, ir, root) {
-            Ok(ids) => ids,
+        let defined = self.define_scalar(&mut module, ir, root).and_then(|(id, imports)| {
+            let p = module.get_finalized_function(id);
+            if p.is_null() {
+                Err(JitError::Internal("finalized function has no address".into()))
+            } else {
+                Ok((p, imports))
+            }
+        });
+        let (p, imports) = match defined {
+            Ok(x) => x,
             Err(e) => {
-                // Safety: nothing was finalized and no pointer into the module escaped, so nothing can call
-                // into the memory being freed. (Dropping the module instead would leak it: cranelift-jit leaks
-                // on drop to keep any escaped pointers valid.)
+                // Safety: no pointer into the module escaped, so nothing can call into the memory being freed.
+                // (Dropping the module instead would leak it: cranelift-jit leaks on drop to keep any escaped
+                // pointers valid.)
                 unsafe { module.free_memory() };
                 return Err(e);
             }
         };
-        let s = module.get_finalized_function(scalar_id);
-        let b = module.get_finalized_function(batch_id);
-        if s.is_null() || b.is_null() {
-            // Safety: the null pointers are discarded; nothing else points into the module.
-            unsafe { module.free_memory() };
-            return Err(JitError::Internal("finalized function has no address".into()));
-        }
-        // Safety: both pointers are the entry points of functions just compiled with exactly these signatures
-        // (declared above with the host's default C calling convention); they stay valid while `module`
-        // lives, and `Compiled` owns the module.
-        let (scalar, batch) = unsafe {
-            (std::mem::transmute::<*const u8, ScalarFn>(s), std::mem::transmute::<*const u8, BatchFn>(b))
-        };
+        // Safety: `p` is the entry of the function just compiled with exactly `ScalarFn`'s signature (declared
+        // with the host's C calling convention); it stays valid while `module` lives, and `Compiled` owns it.
+        let scalar = unsafe { std::mem::transmute::<*const u8, ScalarFn>(p) };
         let params_read = ir.used_params(root).last().map_or(0, |p| *p as usize + 1);
         Ok(Compiled {
             module: Mutex::new(Some(module)),
             scalar,
-            batch,
+            batch: OnceLock::new(),
+            ir: ir.clone(),
+            root,
+            imports,
             params_read,
             inputs: ir.used_inputs(root),
             nodes: root.index() + 1,
@@ -301,7 +351,12 @@ pub fn disassemble(f: &Formula) -> Result<(String, String), JitError> {
     let (ir, root) = f.ir.compact(f.root);
     let mut j = Jit::new();
     j.disasm = true;
-    j.compile(&ir, root)?;
+    let c = j.compile(&ir, root)?;
+    {
+        let mut guard = c.module.lock().map_err(|_| JitError::Internal("module lock poisoned".into()))?;
+        let module = guard.as_mut().ok_or(JitError::Internal("module freed".into()))?;
+        j.define_batch(module, &c.ir, c.root, &c.imports)?;
+    }
     let mut l = std::mem::take(&mut j.listing).into_iter();
     Ok((l.next().unwrap_or_default(), l.next().unwrap_or_default()))
 }
@@ -331,14 +386,35 @@ impl JitKernel {
         p
     }
 
+    /// Compiles the batched kernel now rather than on the first batch call (e.g. before timing a render).
+    /// Returns whether it is available (if not, batches run through the scalar kernel).
+    pub fn prepare_batch(&self) -> bool {
+        self.code.batch().is_some()
+    }
+
+    /// Scalar calls over a batch: for ragged columns (interpreter semantics: a missing element reads as 0)
+    /// and in the unlikely case that the batched kernel failed to build.
+    fn batch_by_scalar(&self, cols: &Columns, params: &[f64], out: &mut [f64]) {
+        let mut x = [0.0; N_INPUTS];
+        for (i, o) in out.iter_mut().enumerate() {
+            for (k, c) in cols.cols.iter().enumerate() {
+                x[k] = c.get(i).copied().unwrap_or(0.0);
+            }
+            *o = self.eval(&x, params);
+        }
+    }
+
     /// Batch call with all lengths already checked.
     fn batch_checked(&self, cols: &Columns, params: &[f64], out: &mut [f64]) {
+        let Some(batch) = self.code.batch() else {
+            return self.batch_by_scalar(cols, params, out);
+        };
         let ptrs: [*const f64; N_INPUTS] = std::array::from_fn(|i| cols.cols[i].as_ptr());
         // Safety: the caller checked `params.len() >= self.n_params` (every slot the code reads) and that every
         // column the code reads has exactly `out.len()` elements; the code reads `len` elements of those
         // columns and writes `len` elements of `out`, which is exclusively borrowed. Unread columns are never
         // dereferenced. The code is alive as long as `self.code`.
-        unsafe { (self.code.batch)(ptrs.as_ptr(), params.as_ptr(), out.as_mut_ptr(), out.len()) }
+        unsafe { batch(ptrs.as_ptr(), params.as_ptr(), out.as_mut_ptr(), out.len()) }
     }
 }
 
@@ -357,14 +433,7 @@ impl Evaluator for JitKernel {
     fn eval_batch(&self, cols: &Columns, params: &[f64], out: &mut [f64]) {
         let columns_ok = self.code.inputs.iter().all(|i| cols.col(i).len() == out.len());
         if !columns_ok {
-            // Same semantics as the interpreter for ragged columns (a missing element reads as 0), one by one.
-            let mut x = [0.0; N_INPUTS];
-            for (i, o) in out.iter_mut().enumerate() {
-                for (k, c) in cols.cols.iter().enumerate() {
-                    x[k] = c.get(i).copied().unwrap_or(0.0);
-                }
-                *o = self.eval(&x, params);
-            }
+            self.batch_by_scalar(cols, params, out);
         } else if params.len() >= self.n_params {
             self.batch_checked(cols, params, out);
         } else {
