@@ -256,11 +256,18 @@ impl Entry {
         let opts = Options { backend, ..Options::default() };
         match lobe::compile(self.name, self.text, &opts) {
             Ok(k) => (k, true),
-            Err(_) => match lobe::compile_formula((self.hand)(), &opts) {
+            Err(_) => match lobe::compile_formula(self.hand_formula(), &opts) {
                 Ok(k) => (k, false),
                 Err(d) => panic!("{}: {}", self.name, d.render(false)),
             },
         }
+    }
+
+    /// The hand-built IR, declaring exactly the parameters the entry passes (`n`, and `a` for F_ST).
+    pub fn hand_formula(&self) -> Formula {
+        let mut f = (self.hand)();
+        f.params.truncate(self.params.len());
+        f
     }
 
     /// The Rust twin behind the same `Evaluator` interface as the JIT (same dispatch cost).
