@@ -161,8 +161,8 @@ impl<'a, 'b> Translator<'a, 'b> {
         Ok(match self.source {
             Source::Ptr(x) => self.b.ins().load(types::F64, mem(), x, off),
             Source::Cols { bases, off } => {
-                let base = bases[i.index()]
-                    .ok_or_else(|| JitError::Internal(format!("input {} has no column", i.name())))?;
+                let base =
+                    bases[i.index()].ok_or_else(|| JitError::Internal(format!("input {} has no column", i.name())))?;
                 let addr = self.b.ins().iadd(base, off);
                 self.b.ins().load(self.ty, mem(), addr, 0)
             }
@@ -217,9 +217,7 @@ impl<'a, 'b> Translator<'a, 'b> {
                 let m = self.b.ins().fmax(x, lo);
                 self.b.ins().fmin(m, hi)
             }
-            other => {
-                return Err(JitError::Internal(format!("builtin `{}` is not an inline lowering", other.name())))
-            }
+            other => return Err(JitError::Internal(format!("builtin `{}` is not an inline lowering", other.name()))),
         })
     }
 

@@ -134,7 +134,8 @@ impl Compiled {
         let r = self.batch.get_or_init(|| {
             let mut guard = self.module.lock().map_err(|_| "JIT module lock poisoned".to_string())?;
             let module = guard.as_mut().ok_or("JIT module already freed")?;
-            let f = with_jit(|j| j.define_batch(module, &self.ir, self.root, &self.imports)).map_err(|e| e.to_string())?;
+            let f =
+                with_jit(|j| j.define_batch(module, &self.ir, self.root, &self.imports)).map_err(|e| e.to_string())?;
             Ok(f)
         });
         r.as_ref().ok().copied()

@@ -306,10 +306,7 @@ fn catalogue() -> Vec<(&'static str, E, Twin)> {
                 mul(c(2.0), i(Input::NH)),
                 mul(
                     c(1.25),
-                    call(
-                        Builtin::Pow,
-                        vec![add(sub(n(), mul(n(), i(Input::NH))), mul(c(1.25), i(Input::NH))), c(2.0)],
-                    ),
+                    call(Builtin::Pow, vec![add(sub(n(), mul(n(), i(Input::NH))), mul(c(1.25), i(Input::NH))), c(2.0)]),
                 ),
             ),
             |x, p| {
@@ -356,7 +353,10 @@ fn catalogue() -> Vec<(&'static str, E, Twin)> {
             call(
                 Builtin::Exp,
                 vec![div(
-                    mul(E::Neg(Box::new(n())), call(Builtin::Pow, vec![call(Builtin::Acos, vec![i(Input::NH)]), c(2.0)])),
+                    mul(
+                        E::Neg(Box::new(n())),
+                        call(Builtin::Pow, vec![call(Builtin::Acos, vec![i(Input::NH)]), c(2.0)]),
+                    ),
                     c(2.0),
                 )],
             ),
@@ -396,8 +396,11 @@ fn catalogue_files_agree() {
         eprintln!("note: {} not present; catalogue file test skipped", dir.display());
         return;
     };
-    let mut files: Vec<_> =
-        entries.filter_map(|e| e.ok()).map(|e| e.path()).filter(|p| p.extension().is_some_and(|x| x == "brdf")).collect();
+    let mut files: Vec<_> = entries
+        .filter_map(|e| e.ok())
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "brdf"))
+        .collect();
     files.sort();
     assert!(!files.is_empty(), "{} has no .brdf files", dir.display());
     let pts = points(&lobe::jit::measure::sample_points(64, 5));

@@ -182,7 +182,8 @@ fn jit_memory_is_freed_on_drop() {
 #[test]
 fn corpus_inputs_never_panic() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/corpus");
-    let mut files: Vec<_> = std::fs::read_dir(&dir).expect("tests/corpus exists").filter_map(|e| e.ok()).map(|e| e.path()).collect();
+    let mut files: Vec<_> =
+        std::fs::read_dir(&dir).expect("tests/corpus exists").filter_map(|e| e.ok()).map(|e| e.path()).collect();
     files.sort();
     assert!(files.len() >= 20, "corpus has {} files", files.len());
     let worker = std::thread::Builder::new().stack_size(8 << 20).spawn(move || {
