@@ -8,7 +8,8 @@
 //!
 //! Loop-invariant nodes (constants, parameters, and anything computed only from them, e.g. `pow(2, n)`) are
 //! computed once, in scalar, in the entry block of the batched function and splatted once for vector use, so
-//! the loop body holds only work that depends on the inputs.
+//! the loop body holds only work that depends on the inputs (Cranelift may still rematerialise a cheap constant
+//! next to its use).
 //!
 //! Codegen never sees text from the user: the only names are the builtins table's symbols, and every error
 //! is a [`JitError`] rather than a panic.
@@ -261,7 +262,7 @@ impl<'a, 'b> Translator<'a, 'b> {
     fn min_value(&mut self, v: Value, b: NodeId) -> Result<Value, JitError> {
         let vb = self.arg(b)?;
         match self.ordered_const(b) {
-            Some(c) if !self.vector_mode() && !(c == 0.0 && c.is_sign_negative()) => {
+            Some(c) if !self.vector_mode() && c.to_bits() != (-0.0f64).to_bits() => {
                 // pmin(c, v) = c < v ? c : v  (lowered to one minsd)
                 let lt = self.b.ins().fcmp(FloatCC::LessThan, vb, v);
                 Ok(self.b.ins().select(lt, vb, v))

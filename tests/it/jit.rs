@@ -296,3 +296,17 @@ fn scalar_arithmetic_kernel_has_no_stack_traffic_or_calls() {
     // The batched loop works on two lanes: packed instructions appear.
     assert!(batch.contains("divpd") || batch.contains("vdivpd"), "no packed division:\n{batch}");
 }
+
+/// `measure_kernel` runs all three paths and reports sane (finite, positive, ordered) statistics.
+#[test]
+fn measure_kernel_reports_all_paths() {
+    let k = lobe::build_kernel(Arc::new(modified_schlick(1.25)), Backend::Jit).expect("builds");
+    let opts = jit::measure::MeasureOptions { points: 64, samples: 5 };
+    let m = jit::measure::measure_kernel(&k, &[50.0], opts).expect("measures");
+    for t in [m.scalar_jit, m.batched_jit, m.interp] {
+        assert!(t.min_ns > 0.0 && t.min_ns.is_finite(), "{t:?}");
+        assert!(t.min_ns <= t.p25_ns && t.p25_ns <= t.median_ns && t.median_ns <= t.p75_ns, "{t:?}");
+    }
+    assert!(m.compile.as_nanos() > 0);
+    assert!(m.speedup_vs_interp().is_finite());
+}
