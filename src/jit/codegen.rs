@@ -19,7 +19,7 @@ use crate::builtins::{Builtin, Lowering};
 use crate::ir::{BinOp, Input, Ir, Node, NodeId, N_INPUTS};
 use cranelift_codegen::ir::condcodes::FloatCC;
 use cranelift_codegen::ir::immediates::Ieee64;
-use cranelift_codegen::ir::{types, AbiParam, BlockArg, FuncRef, InstBuilder, MemFlagsData, Signature, Type, Value};
+use cranelift_codegen::ir::{types, AbiParam, BlockArg, Endianness, FuncRef, InstBuilder, MemFlagsData, Signature, Type, Value};
 use cranelift_codegen::Context;
 use cranelift_frontend::{FunctionBuilder, FunctionBuilderContext};
 use cranelift_jit::JITModule;
@@ -222,25 +222,23 @@ impl<'a, 'b> Translator<'a, 'b> {
     }
 
     /// IEEE-2019 `maximum(a, b)`. Against a non-NaN constant `c` (the lowering's `clamp(INPUT, 0, 1)` and
-    /// `max(raw, 0)`), a single `maxsd` replaces Cranelift's general branchy sequence in scalar code:
+    /// `max(raw, 0)`), a single `maxsd`/`maxpd` replaces Cranelift's general sequence (branches in scalar code, eight
+    /// instructions in vector code):
     /// `v < c ? c : v` (x86 pseudo-max, operands ordered so that a NaN `v` is returned) equals `maximum(v, c)`
     /// for every `v` except `v = −0, c = +0`, which `+ 0.0` repairs (−0 + 0 = +0, and it is the identity on
     /// everything else, NaN included). Measured: ~1.3 ns less per clamp on the catalogue formulas.
     fn max(&mut self, a: NodeId, b: NodeId) -> Result<Value, JitError> {
         let (va, vb) = (self.arg(a)?, self.arg(b)?);
-        if self.vector_mode() {
-            return Ok(self.b.ins().fmax(va, vb));
-        }
         let (v, c, cv) = match (self.ordered_const(b), self.ordered_const(a)) {
             (Some(c), _) => (va, c, vb),
             (None, Some(c)) => (vb, c, va),
             (None, None) => return Ok(self.b.ins().fmax(va, vb)),
         };
-        // pmax(c, v) = v < c ? c : v  (lowered to one maxsd)
+        // pmax(c, v) = v < c ? c : v  (lowered to one maxsd / maxpd)
         let lt = self.b.ins().fcmp(FloatCC::LessThan, v, cv);
-        let m = self.b.ins().select(lt, cv, v);
+        let m = self.select(lt, cv, v);
         Ok(if c == 0.0 && c.is_sign_positive() {
-            let z = self.b.ins().f64const(Ieee64::with_bits(0));
+            let z = self.konst(0);
             self.b.ins().fadd(m, z)
         } else {
             m
@@ -258,14 +256,25 @@ impl<'a, 'b> Translator<'a, 'b> {
         self.min_value(va, b)
     }
 
+    /// `cond ? x : y` lane-wise, in the shape Cranelift's x64 backend matches to `min/max{sd,pd}`.
+    fn select(&mut self, cond: Value, x: Value, y: Value) -> Value {
+        if self.vector_mode() {
+            let flags = MemFlagsData::new().with_endianness(Endianness::Little);
+            let mask = self.b.ins().bitcast(self.ty, flags, cond);
+            self.b.ins().bitselect(mask, x, y)
+        } else {
+            self.b.ins().select(cond, x, y)
+        }
+    }
+
     /// `minimum(v, b)` with `v` already translated.
     fn min_value(&mut self, v: Value, b: NodeId) -> Result<Value, JitError> {
         let vb = self.arg(b)?;
         match self.ordered_const(b) {
-            Some(c) if !self.vector_mode() && c.to_bits() != (-0.0f64).to_bits() => {
-                // pmin(c, v) = c < v ? c : v  (lowered to one minsd)
+            Some(c) if c.to_bits() != (-0.0f64).to_bits() => {
+                // pmin(c, v) = c < v ? c : v  (lowered to one minsd / minpd)
                 let lt = self.b.ins().fcmp(FloatCC::LessThan, vb, v);
-                Ok(self.b.ins().select(lt, vb, v))
+                Ok(self.select(lt, vb, v))
             }
             _ => Ok(self.b.ins().fmin(v, vb)),
         }

@@ -293,8 +293,10 @@ fn scalar_arithmetic_kernel_has_no_stack_traffic_or_calls() {
         let hits: Vec<&str> = scalar.lines().filter(|l| l.contains(bad) && !l.contains("rbp")).collect();
         assert!(hits.is_empty(), "scalar kernel mentions `{bad}`:\n{scalar}");
     }
-    // The batched loop works on two lanes: packed instructions appear.
-    assert!(batch.contains("divpd") || batch.contains("vdivpd"), "no packed division:\n{batch}");
+    // The batched loop works on two lanes, and clamp against constants is one packed max and one packed min
+    // (not the general NaN-fixing sequence with `cmpunordpd`).
+    assert!(batch.contains("divpd") && batch.contains("maxpd") && batch.contains("minpd"), "{batch}");
+    assert!(!batch.contains("cmpunordpd"), "general min/max sequence in the loop:\n{batch}");
 }
 
 /// `measure_kernel` runs all three paths and reports sane (finite, positive, ordered) statistics.
