@@ -16,17 +16,18 @@
 //! The only `unsafe` in lobe is here: calling the generated code (the safe wrapper validates every length
 //! first, so no input from safe code can make it read or write out of bounds) and freeing its memory.
 //!
-//! Measured cost (release build, 2-core VM shared with four other builds — load ≈ 9, so absolute times are
-//! inflated; each ratio comes from one run; min over 400 samples of 1024 points, catalogue formulas with the
+//! Measured cost (release build, 2-core VM shared with four other builds — load ≈ 8–9, so absolute times are
+//! inflated; ratios are within one run, minimum over 400 samples of 1024 points; catalogue formulas with the
 //! lowering's clamps and `max(·, 0)`, hand-built IR because the simplifier is still a placeholder):
-//! - build (scalar kernel, uncached): median 86–130 µs per catalogue formula (a trivial Cranelift module alone
-//!   is ~40 µs here); the batched kernel adds ~300–450 µs on its first use; a cache hit is a hash lookup;
-//! - scalar JIT vs the hand-written Rust twin behind the same `Evaluator` interface: 1.0–1.05× for the pow
-//!   formulas (libm dominates), 1.14× Gaussian, 1.17× Schlick and modified Schlick, 1.31× SCOS2; vs the twin
-//!   called directly (inlined, no dynamic dispatch): 1.03–1.68×;
-//! - batched JIT vs a Rust loop over the same columns: 0.55–0.66× (faster: F64X2 lanes) for arithmetic
-//!   formulas, 0.88–1.0× with libm calls;
-//! - interpreter / JIT: 2.2–2.5× (pow/exp-bound formulas) to 8–9× (arithmetic) scalar, 13–16× batched.
+//! - build (scalar kernel, uncached): median 85–130 µs per catalogue formula (a trivial Cranelift module alone
+//!   is ~40 µs here); the batched kernel adds ~350–500 µs on its first use; a cache hit is a hash lookup;
+//! - scalar JIT vs the hand-written Rust twin behind the same `Evaluator` interface: 0.98–1.06× for the pow
+//!   formulas (libm dominates), 1.13–1.16× Gaussian, 1.16–1.32× for the arithmetic ones (Schlick, modified
+//!   Schlick, SCOS2: ~1–2 ns per call of dispatch and less tuned scheduling); vs the twin inlined into the
+//!   loop (no dynamic dispatch at all): 1.02–1.8×;
+//! - batched JIT vs a Rust loop over the same columns: 0.20–0.36× for arithmetic formulas (F64X2 lanes, one
+//!   `maxpd`/`minpd` per clamp), 0.75–0.94× with libm calls (per-lane calls dominate);
+//! - interpreter / JIT: 2.2–3× for pow/exp-bound formulas, 7.4–9.4× scalar and 28–45× batched for arithmetic.
 
 pub mod cache;
 mod codegen;
@@ -330,6 +331,8 @@ pub fn cache_stats() -> (u64, u64, usize) {
 /// A JIT-compiled formula behind the [`Evaluator`] interface.
 #[derive(Clone)]
 pub struct JitKernel {
+    /// Copy of `code.scalar`, saving a dependent load per call (valid while `code` lives).
+    scalar: ScalarFn,
     code: Arc<Compiled>,
     /// Parameter slots the caller must supply: max(declared, read by the code).
     n_params: usize,
@@ -350,7 +353,7 @@ pub fn compile(f: &Formula) -> Result<JitKernel, JitError> {
             (c, false)
         }
     };
-    Ok(JitKernel { n_params: f.params.len().max(code.params_read), code, cached })
+    Ok(JitKernel { n_params: f.params.len().max(code.params_read), scalar: code.scalar, code, cached })
 }
 
 /// The machine code (Cranelift's listing) of the scalar and the batched kernel, for `lobe` reports and for
@@ -373,7 +376,7 @@ pub fn disassemble(f: &Formula) -> Result<(String, String), JitError> {
 pub fn compile_uncached(f: &Formula) -> Result<JitKernel, JitError> {
     let (ir, root) = f.ir.compact(f.root);
     let code = Arc::new(with_jit(|j| j.compile(&ir, root))?);
-    Ok(JitKernel { n_params: f.params.len().max(code.params_read), code, cached: false })
+    Ok(JitKernel { n_params: f.params.len().max(code.params_read), scalar: code.scalar, code, cached: false })
 }
 
 impl JitKernel {
@@ -430,8 +433,8 @@ impl Evaluator for JitKernel {
     fn eval(&self, x: &[f64; N_INPUTS], params: &[f64]) -> f64 {
         if params.len() >= self.n_params {
             // Safety: `x` has the 5 inputs the code may read; `params` has every slot it reads (checked just
-            // above); the code is alive as long as `self.code`.
-            unsafe { (self.code.scalar)(x.as_ptr(), params.as_ptr()) }
+            // above); `self.scalar` is `self.code.scalar`, alive as long as `self.code`.
+            unsafe { (self.scalar)(x.as_ptr(), params.as_ptr()) }
         } else {
             let p = self.padded(params);
             self.eval(x, &p)
