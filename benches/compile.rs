@@ -21,9 +21,13 @@ fn bench_compile(c: &mut Criterion) {
         if from_text {
             let opts = Options { backend: Backend::Jit, ..Options::default() };
             let old = lobe::jit::set_cache_capacity(0);
-            g.bench_function("pipeline_uncached", |b| b.iter(|| lobe::compile(e.name, black_box(e.text), &opts).is_ok()));
+            g.bench_function("pipeline_uncached", |b| {
+                b.iter(|| lobe::compile(e.name, black_box(e.text), &opts).is_ok())
+            });
             lobe::jit::set_cache_capacity(old);
-            g.bench_function("pipeline_cache_hit", |b| b.iter(|| lobe::compile(e.name, black_box(e.text), &opts).is_ok()));
+            g.bench_function("pipeline_cache_hit", |b| {
+                b.iter(|| lobe::compile(e.name, black_box(e.text), &opts).is_ok())
+            });
         } else {
             eprintln!("note: {}: front end not available, only code generation is timed", e.name);
         }

@@ -73,9 +73,7 @@ fn bench_eval(c: &mut Criterion) {
         let parser = fasteval::Parser::new();
         let mut slab = fasteval::Slab::new();
         use fasteval::{Compiler, Evaler};
-        let compiled = parser
-            .parse(e.fasteval, &mut slab.ps)
-            .map(|p| p.from(&slab.ps).compile(&slab.ps, &mut slab.cs));
+        let compiled = parser.parse(e.fasteval, &mut slab.ps).map(|p| p.from(&slab.ps).compile(&slab.ps, &mut slab.cs));
         match compiled {
             Ok(compiled) => {
                 g.bench_function("fasteval", |b| {

@@ -63,11 +63,13 @@ pub fn catalogue() -> Vec<Entry> {
             twin: |x, p| fmax(cl(x[3]).powf(p[0]), 0.0),
             arithmetic: false,
             params: &[50.0],
-            hand: || hand(|b| {
-                let c = b.input(Input::VR);
-                let n = b.param(0);
-                b.call(Builtin::Pow, &[c, n])
-            }),
+            hand: || {
+                hand(|b| {
+                    let c = b.input(Input::VR);
+                    let n = b.param(0);
+                    b.call(Builtin::Pow, &[c, n])
+                })
+            },
         },
         Entry {
             name: "blinn",
@@ -76,11 +78,13 @@ pub fn catalogue() -> Vec<Entry> {
             twin: |x, p| fmax(cl(x[2]).powf(p[0]), 0.0),
             arithmetic: false,
             params: &[50.0],
-            hand: || hand(|b| {
-                let c = b.input(Input::NH);
-                let n = b.param(0);
-                b.call(Builtin::Pow, &[c, n])
-            }),
+            hand: || {
+                hand(|b| {
+                    let c = b.input(Input::NH);
+                    let n = b.param(0);
+                    b.call(Builtin::Pow, &[c, n])
+                })
+            },
         },
         Entry {
             name: "schlick",
@@ -92,14 +96,16 @@ pub fn catalogue() -> Vec<Entry> {
             },
             arithmetic: true,
             params: &[50.0],
-            hand: || hand(|b| {
-                let c = b.input(Input::NH);
-                let n = b.param(0);
-                let nc = b.bin(BinOp::Mul, n, c);
-                let d = b.bin(BinOp::Sub, n, nc);
-                let d = b.bin(BinOp::Add, d, c);
-                b.bin(BinOp::Div, c, d)
-            }),
+            hand: || {
+                hand(|b| {
+                    let c = b.input(Input::NH);
+                    let n = b.param(0);
+                    let nc = b.bin(BinOp::Mul, n, c);
+                    let d = b.bin(BinOp::Sub, n, nc);
+                    let d = b.bin(BinOp::Add, d, c);
+                    b.bin(BinOp::Div, c, d)
+                })
+            },
         },
         Entry {
             name: "modified_schlick",
@@ -112,20 +118,22 @@ pub fn catalogue() -> Vec<Entry> {
             },
             arithmetic: true,
             params: &[50.0],
-            hand: || hand(|b| {
-                let c = b.input(Input::NH);
-                let n = b.param(0);
-                let two = b.konst(2.0);
-                let q = b.konst(1.25);
-                let num = b.bin(BinOp::Mul, two, c);
-                let nc = b.bin(BinOp::Mul, n, c);
-                let qc = b.bin(BinOp::Mul, q, c);
-                let t = b.bin(BinOp::Sub, n, nc);
-                let t = b.bin(BinOp::Add, t, qc);
-                let sq = b.bin(BinOp::Mul, t, t);
-                let den = b.bin(BinOp::Mul, q, sq);
-                b.bin(BinOp::Div, num, den)
-            }),
+            hand: || {
+                hand(|b| {
+                    let c = b.input(Input::NH);
+                    let n = b.param(0);
+                    let two = b.konst(2.0);
+                    let q = b.konst(1.25);
+                    let num = b.bin(BinOp::Mul, two, c);
+                    let nc = b.bin(BinOp::Mul, n, c);
+                    let qc = b.bin(BinOp::Mul, q, c);
+                    let t = b.bin(BinOp::Sub, n, nc);
+                    let t = b.bin(BinOp::Add, t, qc);
+                    let sq = b.bin(BinOp::Mul, t, t);
+                    let den = b.bin(BinOp::Mul, q, sq);
+                    b.bin(BinOp::Div, num, den)
+                })
+            },
         },
         Entry {
             name: "scos2",
@@ -138,24 +146,26 @@ pub fn catalogue() -> Vec<Entry> {
             },
             arithmetic: true,
             params: &[50.0],
-            hand: || hand(|b| {
-                let c = b.input(Input::NH);
-                let n = b.param(0);
-                let k = b.konst(-1.1);
-                let two = b.konst(2.0);
-                let one = b.konst(1.0);
-                let nn = b.neg(n);
-                let nc = b.bin(BinOp::Mul, n, c);
-                let tc = b.bin(BinOp::Mul, two, c);
-                let d = b.bin(BinOp::Add, nn, nc);
-                let d = b.bin(BinOp::Sub, d, tc);
-                let q = b.bin(BinOp::Div, k, d);
-                let q = b.bin(BinOp::Mul, q, n);
-                let cm = b.bin(BinOp::Sub, c, one);
-                let q = b.bin(BinOp::Mul, q, cm);
-                let t = b.bin(BinOp::Add, q, one);
-                b.bin(BinOp::Mul, t, t)
-            }),
+            hand: || {
+                hand(|b| {
+                    let c = b.input(Input::NH);
+                    let n = b.param(0);
+                    let k = b.konst(-1.1);
+                    let two = b.konst(2.0);
+                    let one = b.konst(1.0);
+                    let nn = b.neg(n);
+                    let nc = b.bin(BinOp::Mul, n, c);
+                    let tc = b.bin(BinOp::Mul, two, c);
+                    let d = b.bin(BinOp::Add, nn, nc);
+                    let d = b.bin(BinOp::Sub, d, tc);
+                    let q = b.bin(BinOp::Div, k, d);
+                    let q = b.bin(BinOp::Mul, q, n);
+                    let cm = b.bin(BinOp::Sub, c, one);
+                    let q = b.bin(BinOp::Mul, q, cm);
+                    let t = b.bin(BinOp::Add, q, one);
+                    b.bin(BinOp::Mul, t, t)
+                })
+            },
         },
         Entry {
             name: "f_st",
@@ -167,17 +177,19 @@ pub fn catalogue() -> Vec<Entry> {
             },
             arithmetic: false,
             params: &[50.0, 16.0],
-            hand: || hand(|b| {
-                let c = b.input(Input::NH);
-                let n = b.param(0);
-                let a = b.param(1);
-                let one = b.konst(1.0);
-                let q = b.bin(BinOp::Div, n, a);
-                let cm = b.bin(BinOp::Sub, c, one);
-                let t = b.bin(BinOp::Mul, q, cm);
-                let t = b.bin(BinOp::Add, t, one);
-                b.call(Builtin::Pow, &[t, a])
-            }),
+            hand: || {
+                hand(|b| {
+                    let c = b.input(Input::NH);
+                    let n = b.param(0);
+                    let a = b.param(1);
+                    let one = b.konst(1.0);
+                    let q = b.bin(BinOp::Div, n, a);
+                    let cm = b.bin(BinOp::Sub, c, one);
+                    let t = b.bin(BinOp::Mul, q, cm);
+                    let t = b.bin(BinOp::Add, t, one);
+                    b.call(Builtin::Pow, &[t, a])
+                })
+            },
         },
         Entry {
             name: "gaussian",
@@ -190,17 +202,19 @@ pub fn catalogue() -> Vec<Entry> {
             },
             arithmetic: false,
             params: &[50.0],
-            hand: || hand(|b| {
-                let c = b.input(Input::NH);
-                let n = b.param(0);
-                let two = b.konst(2.0);
-                let t = b.call(Builtin::Acos, &[c]);
-                let sq = b.bin(BinOp::Mul, t, t);
-                let nn = b.neg(n);
-                let q = b.bin(BinOp::Mul, nn, sq);
-                let q = b.bin(BinOp::Div, q, two);
-                b.call(Builtin::Exp, &[q])
-            }),
+            hand: || {
+                hand(|b| {
+                    let c = b.input(Input::NH);
+                    let n = b.param(0);
+                    let two = b.konst(2.0);
+                    let t = b.call(Builtin::Acos, &[c]);
+                    let sq = b.bin(BinOp::Mul, t, t);
+                    let nn = b.neg(n);
+                    let q = b.bin(BinOp::Mul, nn, sq);
+                    let q = b.bin(BinOp::Div, q, two);
+                    b.call(Builtin::Exp, &[q])
+                })
+            },
         },
     ]
 }
@@ -256,16 +270,28 @@ impl Entry {
         let opts = Options { backend, ..Options::default() };
         match lobe::compile(self.name, self.text, &opts) {
             Ok(k) => (k, true),
-            Err(_) => match lobe::compile_formula((self.hand)(), &opts) {
+            Err(_) => match lobe::compile_formula(self.hand_formula(), &opts) {
                 Ok(k) => (k, false),
                 Err(d) => panic!("{}: {}", self.name, d.render(false)),
             },
         }
     }
 
+    /// The hand-built IR, declaring exactly the parameters the entry passes (`n`, and `a` for F_ST).
+    pub fn hand_formula(&self) -> Formula {
+        let mut f = (self.hand)();
+        f.params.truncate(self.params.len());
+        f
+    }
+
     /// The Rust twin behind the same `Evaluator` interface as the JIT (same dispatch cost).
     pub fn twin_kernel(&self, like: &Kernel) -> Kernel {
         let twin = self.twin;
-        Kernel::new(like.formula.clone(), Backend::Interp, Arc::new(lobe::kernel::FnEvaluator(twin)), Default::default())
+        Kernel::new(
+            like.formula.clone(),
+            Backend::Interp,
+            Arc::new(lobe::kernel::FnEvaluator(twin)),
+            Default::default(),
+        )
     }
 }

@@ -19,7 +19,11 @@ fn agree(a: f64, b: f64) -> bool {
     }
     let key = |x: f64| {
         let b = x.to_bits() as i64;
-        if b < 0 { i64::MIN.wrapping_sub(b) } else { b }
+        if b < 0 {
+            i64::MIN.wrapping_sub(b)
+        } else {
+            b
+        }
     };
     key(a).abs_diff(key(b)) <= 4
 }

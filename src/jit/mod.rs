@@ -2,13 +2,13 @@
 //!
 //! Design (after bytecodealliance/cranelift-jit-demo, stricter):
 //! - a [`Jit`] owns the reusable Cranelift contexts; one per thread (compiles run in parallel);
-//! - [`codegen`] has one translator method per IR node kind, never sees user text, never panics;
+//! - `codegen` has one translator method per IR node kind, never sees user text, never panics;
 //! - builtins come from the one table: `Lowering::Inline` becomes a native instruction, `Call1/Call2` a call
 //!   to the same `extern "C"` function the interpreter calls (so the two backends agree bit for bit there),
 //!   registered with `JITBuilder::symbol` before anything is finalized (an unresolved import would panic
 //!   inside Cranelift);
-//! - one `JITModule` per compiled formula holding both functions; its memory is freed when the last kernel
-//!   using it is dropped;
+//! - one `JITModule` per compiled formula: the scalar kernel is compiled at once, the batched kernel is added
+//!   to the same module on the first batch call; its memory is freed when the last kernel using it is dropped;
 //! - a bounded LRU [`cache`] keyed by the simplified IR's structure, so compiling a formula twice is free;
 //! - live parameters are loads from the `params` slice, so changing them needs no recompilation; baked ones
 //!   are already constants in the IR.
@@ -16,10 +16,18 @@
 //! The only `unsafe` in lobe is here: calling the generated code (the safe wrapper validates every length
 //! first, so no input from safe code can make it read or write out of bounds) and freeing its memory.
 //!
-//! Measured cost (release, 2-core dev VM; `cargo run --release --example jit_numbers` style numbers are in
-//! the final report and README): compiling a catalogue formula (both kernels) takes ~0.1 ms; a scalar call is
-//! within a few percent of the hand-written Rust twin called through the same `Evaluator` interface; the
-//! batched kernel costs about 1–2 ns per element for arithmetic-only formulas.
+//! Measured cost (release build, 2-core VM shared with four other builds — load ≈ 8–9, so absolute times are
+//! inflated; ratios are within one run, minimum over 400 samples of 1024 points; catalogue formulas with the
+//! lowering's clamps and `max(·, 0)`, hand-built IR because the simplifier is still a placeholder):
+//! - build (scalar kernel, uncached): median 85–130 µs per catalogue formula (a trivial Cranelift module alone
+//!   is ~40 µs here); the batched kernel adds ~350–500 µs on its first use; a cache hit is a hash lookup;
+//! - scalar JIT vs the hand-written Rust twin behind the same `Evaluator` interface: 0.98–1.06× for the pow
+//!   formulas (libm dominates), 1.13–1.16× Gaussian, 1.16–1.32× for the arithmetic ones (Schlick, modified
+//!   Schlick, SCOS2: ~1–2 ns per call of dispatch and less tuned scheduling); vs the twin inlined into the
+//!   loop (no dynamic dispatch at all): 1.02–1.8×;
+//! - batched JIT vs a Rust loop over the same columns: 0.20–0.36× for arithmetic formulas (F64X2 lanes, one
+//!   `maxpd`/`minpd` per clamp), 0.75–0.94× with libm calls (per-lane calls dominate);
+//! - interpreter / JIT: 2.2–3× for pow/exp-bound formulas, 7.4–9.4× scalar and 28–45× batched for arithmetic.
 
 pub mod cache;
 mod codegen;
@@ -34,7 +42,7 @@ use cranelift_codegen::settings::{self, Configurable};
 use cranelift_codegen::Context;
 use cranelift_frontend::FunctionBuilderContext;
 use cranelift_jit::{JITBuilder, JITModule};
-use cranelift_module::{default_libcall_names, Module, ModuleError};
+use cranelift_module::{default_libcall_names, FuncId, Module, ModuleError};
 use std::cell::RefCell;
 use std::fmt;
 use std::sync::{Arc, Mutex, OnceLock};
@@ -104,18 +112,42 @@ fn host_isa() -> Result<OwnedTargetIsa, JitError> {
 type ScalarFn = unsafe extern "C" fn(*const f64, *const f64) -> f64;
 type BatchFn = unsafe extern "C" fn(*const *const f64, *const f64, *mut f64, usize);
 
-/// Finalized machine code for one formula: the module that owns the memory and the two entry points.
+/// Finalized machine code for one formula: the module that owns the memory and the entry points.
+///
+/// The scalar kernel is compiled eagerly; the batched kernel (about 60% of the compile time: a loop and two
+/// copies of the body) is defined in the same module on the first batch call, so kernels that are only ever
+/// evaluated point by point (the numerical checks) never pay for it.
 pub struct Compiled {
-    /// Only touched on drop (to free the code); the `Mutex` makes the holder `Sync` without `unsafe`.
+    /// Locked only to add the batched kernel and to free the code on drop; the `Mutex` also makes the holder
+    /// `Sync` without `unsafe`.
     module: Mutex<Option<JITModule>>,
     scalar: ScalarFn,
-    batch: BatchFn,
+    /// The batched kernel, or why it could not be built (then batches fall back to scalar calls).
+    batch: OnceLock<Result<BatchFn, String>>,
+    /// The compacted IR and the imports, kept to build the batched kernel later.
+    ir: Ir,
+    root: NodeId,
+    imports: codegen::Imports,
     /// Number of parameter slots the code reads (`max index + 1`).
     params_read: usize,
     /// Inputs the code reads (their columns must be full length).
     inputs: InputSet,
     /// Size of the compiled IR (for reports).
     pub nodes: usize,
+}
+
+impl Compiled {
+    /// The batched kernel, compiled on first use (concurrent first callers wait for one compile).
+    fn batch(&self) -> Option<BatchFn> {
+        let r = self.batch.get_or_init(|| {
+            let mut guard = self.module.lock().map_err(|_| "JIT module lock poisoned".to_string())?;
+            let module = guard.as_mut().ok_or("JIT module already freed")?;
+            let f =
+                with_jit(|j| j.define_batch(module, &self.ir, self.root, &self.imports)).map_err(|e| e.to_string())?;
+            Ok(f)
+        });
+        r.as_ref().ok().copied()
+    }
 }
 
 impl Drop for Compiled {
@@ -137,6 +169,9 @@ impl Drop for Compiled {
 pub struct Jit {
     ctx: Context,
     fctx: FunctionBuilderContext,
+    /// When set, the machine code listing of each function compiled is kept in `listing`.
+    disasm: bool,
+    listing: Vec<String>,
 }
 
 impl Default for Jit {
@@ -147,10 +182,68 @@ impl Default for Jit {
 
 impl Jit {
     pub fn new() -> Jit {
-        Jit { ctx: Context::new(), fctx: FunctionBuilderContext::new() }
+        Jit { ctx: Context::new(), fctx: FunctionBuilderContext::new(), disasm: false, listing: vec![] }
     }
 
-    /// Compiles a compacted IR (every node reachable from `root`, root last) into a fresh module.
+    fn keep_listing(&mut self) {
+        if self.disasm {
+            let text = self.ctx.compiled_code().and_then(|c| c.vcode.clone()).unwrap_or_default();
+            self.listing.push(text);
+        }
+    }
+
+    /// Declares the imports and defines the scalar kernel in `module`, then finalizes it.
+    fn define_scalar(
+        &mut self,
+        module: &mut JITModule,
+        ir: &Ir,
+        root: NodeId,
+    ) -> Result<(FuncId, codegen::Imports), JitError> {
+        let imports = codegen::declare_imports(module, ir)?;
+        let id = module.declare_anonymous_function(&codegen::scalar_signature(module))?;
+        module.clear_context(&mut self.ctx);
+        self.ctx.func.name = UserFuncName::user(0, id.as_u32());
+        codegen::build_scalar(module, &mut self.ctx, &mut self.fctx, ir, root, &imports)?;
+        self.ctx.set_disasm(self.disasm);
+        module.define_function(id, &mut self.ctx)?;
+        self.keep_listing();
+        module.clear_context(&mut self.ctx);
+        module.finalize_definitions()?;
+        Ok((id, imports))
+    }
+
+    /// Adds the batched kernel to an already finalized module (new code goes to new pages; the scalar
+    /// kernel's pages are untouched, so it may run concurrently).
+    fn define_batch(
+        &mut self,
+        module: &mut JITModule,
+        ir: &Ir,
+        root: NodeId,
+        imports: &codegen::Imports,
+    ) -> Result<BatchFn, JitError> {
+        let id = module.declare_anonymous_function(&codegen::batch_signature(module))?;
+        module.clear_context(&mut self.ctx);
+        self.ctx.func.name = UserFuncName::user(0, id.as_u32());
+        let built = codegen::build_batch(module, &mut self.ctx, &mut self.fctx, ir, root, imports);
+        let defined = built.and_then(|()| {
+            self.ctx.set_disasm(self.disasm);
+            module.define_function(id, &mut self.ctx).map_err(JitError::from)
+        });
+        self.keep_listing();
+        module.clear_context(&mut self.ctx);
+        defined?;
+        module.finalize_definitions()?;
+        let p = module.get_finalized_function(id);
+        if p.is_null() {
+            return Err(JitError::Internal("finalized batch function has no address".into()));
+        }
+        // Safety: `p` is the entry of the function just compiled with exactly `BatchFn`'s signature (declared
+        // with the host's C calling convention); it stays valid while the module lives, which `Compiled` owns.
+        Ok(unsafe { std::mem::transmute::<*const u8, BatchFn>(p) })
+    }
+
+    /// Compiles a compacted IR (every node reachable from `root`, root last) into a fresh module. Only the
+    /// scalar kernel is built now; the batched one on the first batch call.
     pub fn compile(&mut self, ir: &Ir, root: NodeId) -> Result<Compiled, JitError> {
         if root.index() >= ir.len() {
             return Err(JitError::Internal("root outside the arena".into()));
@@ -160,40 +253,35 @@ impl Jit {
             builder.symbol(sym, ptr);
         }
         let mut module = JITModule::new(builder);
-        // If anything below fails, the module is dropped unfinalized, which frees its memory.
-        let imports = codegen::declare_imports(&mut module, ir)?;
-
-        let scalar_id = module.declare_anonymous_function(&codegen::scalar_signature(&module))?;
-        let batch_id = module.declare_anonymous_function(&codegen::batch_signature(&module))?;
-
-        module.clear_context(&mut self.ctx);
-        self.ctx.func.name = UserFuncName::user(0, scalar_id.as_u32());
-        codegen::build_scalar(&mut module, &mut self.ctx, &mut self.fctx, ir, root, &imports)?;
-        module.define_function(scalar_id, &mut self.ctx)?;
-
-        module.clear_context(&mut self.ctx);
-        self.ctx.func.name = UserFuncName::user(0, batch_id.as_u32());
-        codegen::build_batch(&mut module, &mut self.ctx, &mut self.fctx, ir, root, &imports)?;
-        module.define_function(batch_id, &mut self.ctx)?;
-        module.clear_context(&mut self.ctx);
-
-        module.finalize_definitions()?;
-        let s = module.get_finalized_function(scalar_id);
-        let b = module.get_finalized_function(batch_id);
-        if s.is_null() || b.is_null() {
-            return Err(JitError::Internal("finalized function has no address".into()));
-        }
-        // Safety: both pointers are the entry points of functions just compiled with exactly these signatures
-        // (declared above with the host's default C calling convention); they stay valid while `module`
-        // lives, and `Compiled` owns the module.
-        let (scalar, batch) = unsafe {
-            (std::mem::transmute::<*const u8, ScalarFn>(s), std::mem::transmute::<*const u8, BatchFn>(b))
+        let defined = self.define_scalar(&mut module, ir, root).and_then(|(id, imports)| {
+            let p = module.get_finalized_function(id);
+            if p.is_null() {
+                Err(JitError::Internal("finalized function has no address".into()))
+            } else {
+                Ok((p, imports))
+            }
+        });
+        let (p, imports) = match defined {
+            Ok(x) => x,
+            Err(e) => {
+                // Safety: no pointer into the module escaped, so nothing can call into the memory being freed.
+                // (Dropping the module instead would leak it: cranelift-jit leaks on drop to keep any escaped
+                // pointers valid.)
+                unsafe { module.free_memory() };
+                return Err(e);
+            }
         };
+        // Safety: `p` is the entry of the function just compiled with exactly `ScalarFn`'s signature (declared
+        // with the host's C calling convention); it stays valid while `module` lives, and `Compiled` owns it.
+        let scalar = unsafe { std::mem::transmute::<*const u8, ScalarFn>(p) };
         let params_read = ir.used_params(root).last().map_or(0, |p| *p as usize + 1);
         Ok(Compiled {
             module: Mutex::new(Some(module)),
             scalar,
-            batch,
+            batch: OnceLock::new(),
+            ir: ir.clone(),
+            root,
+            imports,
             params_read,
             inputs: ir.used_inputs(root),
             nodes: root.index() + 1,
@@ -243,6 +331,8 @@ pub fn cache_stats() -> (u64, u64, usize) {
 /// A JIT-compiled formula behind the [`Evaluator`] interface.
 #[derive(Clone)]
 pub struct JitKernel {
+    /// Copy of `code.scalar`, saving a dependent load per call (valid while `code` lives).
+    scalar: ScalarFn,
     code: Arc<Compiled>,
     /// Parameter slots the caller must supply: max(declared, read by the code).
     n_params: usize,
@@ -263,14 +353,30 @@ pub fn compile(f: &Formula) -> Result<JitKernel, JitError> {
             (c, false)
         }
     };
-    Ok(JitKernel { n_params: f.params.len().max(code.params_read), code, cached })
+    Ok(JitKernel { n_params: f.params.len().max(code.params_read), scalar: code.scalar, code, cached })
+}
+
+/// The machine code (Cranelift's listing) of the scalar and the batched kernel, for `lobe` reports and for
+/// checking what the code generator emits (e.g. that the scalar kernel has no stack traffic).
+pub fn disassemble(f: &Formula) -> Result<(String, String), JitError> {
+    let (ir, root) = f.ir.compact(f.root);
+    let mut j = Jit::new();
+    j.disasm = true;
+    let c = j.compile(&ir, root)?;
+    {
+        let mut guard = c.module.lock().map_err(|_| JitError::Internal("module lock poisoned".into()))?;
+        let module = guard.as_mut().ok_or(JitError::Internal("module freed".into()))?;
+        j.define_batch(module, &c.ir, c.root, &c.imports)?;
+    }
+    let mut l = std::mem::take(&mut j.listing).into_iter();
+    Ok((l.next().unwrap_or_default(), l.next().unwrap_or_default()))
 }
 
 /// Compiles without consulting or filling the cache (for compile-time measurements and tests).
 pub fn compile_uncached(f: &Formula) -> Result<JitKernel, JitError> {
     let (ir, root) = f.ir.compact(f.root);
     let code = Arc::new(with_jit(|j| j.compile(&ir, root))?);
-    Ok(JitKernel { n_params: f.params.len().max(code.params_read), code, cached: false })
+    Ok(JitKernel { n_params: f.params.len().max(code.params_read), scalar: code.scalar, code, cached: false })
 }
 
 impl JitKernel {
@@ -291,14 +397,35 @@ impl JitKernel {
         p
     }
 
+    /// Compiles the batched kernel now rather than on the first batch call (e.g. before timing a render).
+    /// Returns whether it is available (if not, batches run through the scalar kernel).
+    pub fn prepare_batch(&self) -> bool {
+        self.code.batch().is_some()
+    }
+
+    /// Scalar calls over a batch: for ragged columns (interpreter semantics: a missing element reads as 0)
+    /// and in the unlikely case that the batched kernel failed to build.
+    fn batch_by_scalar(&self, cols: &Columns, params: &[f64], out: &mut [f64]) {
+        let mut x = [0.0; N_INPUTS];
+        for (i, o) in out.iter_mut().enumerate() {
+            for (k, c) in cols.cols.iter().enumerate() {
+                x[k] = c.get(i).copied().unwrap_or(0.0);
+            }
+            *o = self.eval(&x, params);
+        }
+    }
+
     /// Batch call with all lengths already checked.
     fn batch_checked(&self, cols: &Columns, params: &[f64], out: &mut [f64]) {
+        let Some(batch) = self.code.batch() else {
+            return self.batch_by_scalar(cols, params, out);
+        };
         let ptrs: [*const f64; N_INPUTS] = std::array::from_fn(|i| cols.cols[i].as_ptr());
         // Safety: the caller checked `params.len() >= self.n_params` (every slot the code reads) and that every
         // column the code reads has exactly `out.len()` elements; the code reads `len` elements of those
         // columns and writes `len` elements of `out`, which is exclusively borrowed. Unread columns are never
         // dereferenced. The code is alive as long as `self.code`.
-        unsafe { (self.code.batch)(ptrs.as_ptr(), params.as_ptr(), out.as_mut_ptr(), out.len()) }
+        unsafe { batch(ptrs.as_ptr(), params.as_ptr(), out.as_mut_ptr(), out.len()) }
     }
 }
 
@@ -306,8 +433,8 @@ impl Evaluator for JitKernel {
     fn eval(&self, x: &[f64; N_INPUTS], params: &[f64]) -> f64 {
         if params.len() >= self.n_params {
             // Safety: `x` has the 5 inputs the code may read; `params` has every slot it reads (checked just
-            // above); the code is alive as long as `self.code`.
-            unsafe { (self.code.scalar)(x.as_ptr(), params.as_ptr()) }
+            // above); `self.scalar` is `self.code.scalar`, alive as long as `self.code`.
+            unsafe { (self.scalar)(x.as_ptr(), params.as_ptr()) }
         } else {
             let p = self.padded(params);
             self.eval(x, &p)
@@ -317,14 +444,7 @@ impl Evaluator for JitKernel {
     fn eval_batch(&self, cols: &Columns, params: &[f64], out: &mut [f64]) {
         let columns_ok = self.code.inputs.iter().all(|i| cols.col(i).len() == out.len());
         if !columns_ok {
-            // Same semantics as the interpreter for ragged columns (a missing element reads as 0), one by one.
-            let mut x = [0.0; N_INPUTS];
-            for (i, o) in out.iter_mut().enumerate() {
-                for (k, c) in cols.cols.iter().enumerate() {
-                    x[k] = c.get(i).copied().unwrap_or(0.0);
-                }
-                *o = self.eval(&x, params);
-            }
+            self.batch_by_scalar(cols, params, out);
         } else if params.len() >= self.n_params {
             self.batch_checked(cols, params, out);
         } else {
@@ -337,4 +457,33 @@ impl Evaluator for JitKernel {
 /// Compiles `f` with the JIT and reports failure as a diagnostic on the formula's file.
 pub fn kernel_evaluator(f: &Formula) -> Result<Arc<dyn Evaluator>, Diagnostic> {
     compile(f).map(|k| Arc::new(k) as Arc<dyn Evaluator>).map_err(|e| e.to_diagnostic())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::front::span::Span;
+    use crate::ir::Input;
+
+    #[test]
+    fn bad_root_is_an_error_not_a_panic() {
+        let mut ir = Ir::new();
+        ir.input(Input::NH, Span::default());
+        let e = Jit::new().compile(&ir, NodeId(7)).err().map(|e| e.to_string());
+        assert_eq!(e.as_deref(), Some("internal JIT error: root outside the arena"));
+    }
+
+    #[test]
+    fn errors_become_diagnostics_with_a_fallback_hint() {
+        let d = JitError::Module("out of memory".into()).to_diagnostic();
+        assert!(d.message.contains("out of memory"));
+        assert!(d.hints.iter().any(|h| h.contains("--backend interp")));
+    }
+
+    #[test]
+    fn host_isa_is_built_once() {
+        let isa = host_isa().expect("host supported");
+        assert_eq!(isa.pointer_bytes(), 8);
+        assert!(Arc::ptr_eq(&isa, &host_isa().expect("host supported")));
+    }
 }
