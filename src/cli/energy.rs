@@ -203,7 +203,9 @@ pub fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<St
     });
     if a.json {
         let rows: Vec<_> = exact.iter().map(|(n, i)| json!({"n": n, "coef": json_num(1.0 / (2.0 * std::f64::consts::PI * i))})).collect();
-        let mut obj = json!({"mode": "lobe", "params": params_json, "lobe_input": lobe.name(), "range": rows});
+        let mut fixed = params_json.clone();
+        fixed.remove("n");
+        let mut obj = json!({"mode": "lobe", "params": fixed, "lobe_input": lobe.name(), "range": rows});
         if let Some(s) = &score {
             obj["against_max_abs"] = json_num(s.max_abs);
             obj["against_worst_n"] = json_num(s.worst_n);
