@@ -359,3 +359,32 @@ fn table_4_2_report() {
         std::fs::write(root().join(format!("target/table42_{label}.png")), png).unwrap();
     }
 }
+
+/// Prints `--stats` for the paper sphere at 1024² and 4096² with 1 and 2 threads (Rust-twin Phong kernel).
+/// Run in release for meaningful numbers: `cargo test --release --test it render_stats_report -- --ignored
+/// --nocapture`.
+#[test]
+#[ignore = "report, not a check: prints timings"]
+fn render_stats_report() {
+    for size in [1024, 4096] {
+        let s = load("paper_sphere.toml", &sized(size, size));
+        for threads in [1, 2] {
+            // Best of 3 wall times.
+            let mut best: Option<r::RenderStats> = None;
+            for _ in 0..3 {
+                let (_, st) = r::render(&s, &RenderOptions { threads, ..RenderOptions::default() }).unwrap();
+                if best.as_ref().is_none_or(|b| st.render_wall < b.render_wall) {
+                    best = Some(st);
+                }
+            }
+            let st = best.unwrap();
+            let t = std::time::Instant::now();
+            let (f, _) = r::render(&s, &RenderOptions { threads, ..RenderOptions::default() }).unwrap();
+            let _ = t;
+            let t = std::time::Instant::now();
+            let png = f.image.encode_png().unwrap();
+            print!("{}", lobe::cli::render::format_stats(&st, t.elapsed()));
+            println!("  ({} bytes PNG)", png.len());
+        }
+    }
+}
