@@ -45,6 +45,9 @@ pub struct CompareArgs {
     /// Overwrite an existing output file even if lobe did not write it.
     #[arg(long)]
     pub force: bool,
+    /// Test-only: evaluate the papers' formulas with hand-written Rust twins instead of compiling them.
+    #[arg(long, hide = true)]
+    pub rust_twins: bool,
 }
 
 fn json_num(v: f64) -> serde_json::Value {
@@ -85,7 +88,9 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
         transfer: if a.srgb { Transfer::Srgb } else { Transfer::Linear },
         ..RenderOptions::default()
     };
-    let compiler = LobeCompiler { backend: a.backend };
+    let lobe_compiler = LobeCompiler { backend: a.backend };
+    let compiler: &dyn crate::render::scene::BrdfCompiler =
+        if a.rust_twins { &crate::render::scene::TwinCompiler } else { &lobe_compiler };
     let base_set = a.set.concat();
     let sets: Vec<Vec<(String, f64)>> = if a.sweep_n.is_empty() {
         vec![base_set.clone()]
@@ -101,7 +106,7 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
     };
     let mut rows = vec![];
     for set in &sets {
-        rows.push(compare::compare_formulas(&job, set, &compiler, &ropts)?);
+        rows.push(compare::compare_formulas(&job, set, compiler, &ropts)?);
     }
     let scale = rows.iter().map(|c| c.metrics.max_gray_diff).fold(0.0, f64::max).max(1.0);
     if let Some(out) = &a.output {

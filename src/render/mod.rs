@@ -15,8 +15,12 @@
 //! Determinism: every tile is computed from its own bin in scene order and written to its own pixels, and
 //! all counters are integers, so 1 thread and N threads give byte-identical images and equal counts.
 //!
-//! Measured cost (release, 2 cores, paper sphere, batched closure kernel): see `benches/render.rs` and the
-//! numbers in README; at 1024² shading dominates (≈ 60 %), raster ≈ 25 %, setup is negligible.
+//! Measured cost (release, the 2-core machine shared with other builds at load ≈ 8, so upper bounds; paper
+//! sphere, Rust-twin Phong kernel; `benches/render.rs` and the `render_stats_report` test): 1024² in 30 ms
+//! with 2 threads (35 Mpixel/s; 43 ms on 1), 4096² in 0.49 s. Shading is ≈ 160 ns per visible pixel
+//! (normals, vectors, kernel, 8-bit conversion) and dominates; raster ≈ 15 ns per visible pixel; setup and
+//! binning < 0.5 ms; the 85 % of 4096² tiles the sphere does not touch cost only the background fill. PNG
+//! encoding (measured separately) adds ≈ 70 ms at 4096².
 
 pub mod camera;
 pub mod compare;

@@ -359,3 +359,69 @@ fn table_4_2_report() {
         std::fs::write(root().join(format!("target/table42_{label}.png")), png).unwrap();
     }
 }
+
+/// Prints `--stats` for the paper sphere at 1024² and 4096² with 1 and 2 threads (Rust-twin Phong kernel).
+/// Run in release for meaningful numbers: `cargo test --release --test it render_stats_report -- --ignored
+/// --nocapture`.
+#[test]
+#[ignore = "report, not a check: prints timings"]
+fn render_stats_report() {
+    for size in [1024, 4096] {
+        let s = load("paper_sphere.toml", &sized(size, size));
+        for threads in [1, 2] {
+            // Best of 3 wall times.
+            let mut best: Option<r::RenderStats> = None;
+            for _ in 0..3 {
+                let (_, st) = r::render(&s, &RenderOptions { threads, ..RenderOptions::default() }).unwrap();
+                if best.as_ref().is_none_or(|b| st.render_wall < b.render_wall) {
+                    best = Some(st);
+                }
+            }
+            let st = best.unwrap();
+            let t = std::time::Instant::now();
+            let (f, _) = r::render(&s, &RenderOptions { threads, ..RenderOptions::default() }).unwrap();
+            let _ = t;
+            let t = std::time::Instant::now();
+            let png = f.image.encode_png().unwrap();
+            print!("{}", lobe::cli::render::format_stats(&st, t.elapsed()));
+            println!("  ({} bytes PNG)", png.len());
+        }
+    }
+}
+
+/// `lobe render` and `lobe compare` end to end (with the hidden Rust-twin compiler, so this runs before the
+/// front end is merged): a decodable PNG of the requested size, the stats line, and the JSON keys.
+#[test]
+fn cli_render_and_compare_end_to_end() {
+    let dir = std::env::temp_dir().join(format!("lobe-render-e2e-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let lobe = |args: &[&str]| std::process::Command::new(env!("CARGO_BIN_EXE_lobe")).args(args).output().unwrap();
+    let out = dir.join("p.png");
+    let scene = scene_file("paper_sphere.toml");
+    let o = lobe(&["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "--size", "80x60", "--stats", "--threads", "2", "--rust-twins"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("Mpixel/s") && err.contains("2 thread(s)") && err.contains("encode"), "{err}");
+    let im = Image::decode_png(&std::fs::read(&out).unwrap()).unwrap();
+    assert_eq!((im.width, im.height), (80, 60));
+    // Re-rendering over our own PNG is allowed.
+    assert!(lobe(&["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "--size", "16", "-q", "--rust-twins"]).status.success());
+
+    let b = |f: &str| root().join("examples/brdfs").join(f).to_str().unwrap().to_string();
+    let cmp = dir.join("cmp.png");
+    let o = lobe(&[
+        "compare", &b("phong.brdf"), &b("modified_schlick.brdf"), "--sweep-n", "5,50", "--size", "64", "-o", cmp.to_str().unwrap(), "--json", "--rust-twins",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let rows = v.as_array().expect("an array per n");
+    assert_eq!(rows.len(), 2);
+    for (row, n) in rows.iter().zip([5.0, 50.0]) {
+        assert_eq!(row["n"].as_f64(), Some(n));
+        assert!(row["manhattan"].as_f64().unwrap() > 0.0 && row["rmse"].as_f64().unwrap() > 0.0);
+        assert!(row["psnr"].as_f64().unwrap() > 20.0);
+    }
+    let im = Image::decode_png(&std::fs::read(&cmp).unwrap()).unwrap();
+    assert_eq!((im.width, im.height), (3 * 64, 2 * 64));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
