@@ -5,7 +5,7 @@
 //! Run: `cargo bench --bench render`. Targets (2 cores): 1024² ≤ 40 ms, 4096² ≤ 0.6 s.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use lobe::render::scene::{self, LoadOptions, TwinCompiler};
+use lobe::render::scene::{self, LoadOptions, LobeCompiler};
 use lobe::render::{self, RenderOptions};
 use std::hint::black_box;
 use std::path::PathBuf;
@@ -14,7 +14,7 @@ use std::time::Duration;
 fn paper(size: usize) -> render::Scene {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("examples/scenes/paper_sphere.toml");
     let opts = LoadOptions { size: Some((size, size)), ..LoadOptions::default() };
-    scene::load_scene(&path, &opts, &TwinCompiler).unwrap_or_else(|d| panic!("{}", d.render(false)))
+    scene::load_scene(&path, &opts, &LobeCompiler { backend: lobe::Backend::Jit }).unwrap_or_else(|d| panic!("{}", d.render(false)))
 }
 
 fn sizes(c: &mut Criterion) {

@@ -45,9 +45,6 @@ pub struct CompareArgs {
     /// Overwrite an existing output file even if lobe did not write it.
     #[arg(long)]
     pub force: bool,
-    /// Test-only: evaluate the papers' formulas with hand-written Rust twins instead of compiling them.
-    #[arg(long, hide = true)]
-    pub rust_twins: bool,
 }
 
 fn json_num(v: f64) -> serde_json::Value {
@@ -89,8 +86,7 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
         ..RenderOptions::default()
     };
     let lobe_compiler = LobeCompiler { backend: a.backend };
-    let compiler: &dyn crate::render::scene::BrdfCompiler =
-        if a.rust_twins { &crate::render::scene::TwinCompiler } else { &lobe_compiler };
+    let compiler: &dyn crate::render::scene::BrdfCompiler = &lobe_compiler;
     let base_set = a.set.concat();
     let sets: Vec<Vec<(String, f64)>> = if a.sweep_n.is_empty() {
         vec![base_set.clone()]

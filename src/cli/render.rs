@@ -42,9 +42,6 @@ pub struct RenderArgs {
     /// Overwrite an existing output file even if lobe did not write it.
     #[arg(long)]
     pub force: bool,
-    /// Test-only: evaluate the papers' formulas with hand-written Rust twins instead of compiling them.
-    #[arg(long, hide = true)]
-    pub rust_twins: bool,
 }
 
 /// `N` or `WxH`, each 1..=4096.
@@ -74,11 +71,7 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
     // Refuse a bad output path before doing any work, and write nothing unless everything succeeds.
     image::check_output_path(&out, a.force).map_err(|m| CliError::hint(m, "choose another -o path"))?;
     let opts = LoadOptions { size: a.size, set: a.set.concat(), formula_override: None };
-    let sc = if a.rust_twins {
-        scene::load_scene(&a.scene, &opts, &scene::TwinCompiler)?
-    } else {
-        scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: a.backend })?
-    };
+    let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: a.backend })?;
     let ropts = RenderOptions {
         threads: a.threads,
         tile: a.tile as usize,

@@ -38,17 +38,16 @@
 //!
 //! Every table denies unknown keys. Errors are [`Diagnostics`] on the scene file (file:line:col, carets, the
 //! key, a hint); a formula that fails to compile reports its own diagnostics plus a note naming the scene key
-//! that referenced it. Formulas are compiled through a [`BrdfCompiler`]: [`LobeCompiler`] (the real front
-//! end and backends) or [`TwinCompiler`] (hand-written Rust twins of the papers' formulas, for tests that
-//! must not depend on the front end).
+//! that referenced it. Formulas are compiled through a [`BrdfCompiler`] — [`LobeCompiler`], the real front
+//! end and backends; the trait lets embedders supply kernels of their own.
 
 use super::camera::Camera;
 use super::mesh::{self, Mesh};
 use super::{Light, LightKind, Material, Object, Scene, MAX_SIZE};
 use crate::front::diag::{Diagnostic, Diagnostics};
 use crate::front::span::Span;
-use crate::ir::{Input, InputSet, ParamDecl};
-use crate::kernel::{Backend, Evaluator, FnEvaluator};
+use crate::ir::{InputSet, ParamDecl};
+use crate::kernel::{Backend, Evaluator};
 use glam::DVec3;
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -86,76 +85,6 @@ impl BrdfCompiler for LobeCompiler {
     }
 }
 
-/// Hand-written Rust twins of the papers' formulas, recognised by their source text (comments, `@` metadata
-/// and `param` lines ignored, whitespace removed, statements joined by `;`). Every twin declares only `n`
-/// (default 50, range 1..1000) and clamps its inputs to [0, 1] like the lowering does.
-pub struct TwinCompiler;
-
-type TwinFn = fn(&[f64; 5], &[f64]) -> f64;
-
-impl TwinCompiler {
-    /// The known formulas: normalised source → (function, inputs read).
-    pub fn table() -> Vec<(&'static str, TwinFn, &'static [Input])> {
-        fn c(x: f64) -> f64 {
-            x.clamp(0.0, 1.0)
-        }
-        fn schlick(c: f64, n: f64) -> f64 {
-            c / (n - n * c + c)
-        }
-        fn mod_schlick(c: f64, n: f64) -> f64 {
-            let d = n - n * c + 1.25 * c;
-            2.0 * c / (1.25 * d * d)
-        }
-        vec![
-            ("VR^n", |x, p| c(x[3]).powf(p[0]).max(0.0), &[Input::VR]),
-            ("NH^n", |x, p| c(x[2]).powf(p[0]).max(0.0), &[Input::NH]),
-            ("letc=VR;c/(n-n*c+c)", |x, p| schlick(c(x[3]), p[0]).max(0.0), &[Input::VR]),
-            ("letc=NH;c/(n-n*c+c)", |x, p| schlick(c(x[2]), p[0]).max(0.0), &[Input::NH]),
-            ("letc=VR;2*c/(1.25*(n-n*c+1.25*c)^2)", |x, p| mod_schlick(c(x[3]), p[0]).max(0.0), &[Input::VR]),
-            ("letc=NH;2*c/(1.25*(n-n*c+1.25*c)^2)", |x, p| mod_schlick(c(x[2]), p[0]).max(0.0), &[Input::NH]),
-            ("NL", |x, _| c(x[0]), &[Input::NL]),
-            ("0/0", |_, _| f64::NAN, &[]),
-        ]
-    }
-
-    /// The normalised text a source is matched by.
-    pub fn key(src: &str) -> String {
-        src.lines()
-            .map(|l| l.split('#').next().unwrap_or("").trim())
-            .flat_map(|l| l.split(';'))
-            .map(str::trim)
-            .filter(|l| !l.is_empty() && !l.starts_with('@') && !l.starts_with("param "))
-            .map(|l| l.split_whitespace().collect::<String>())
-            .collect::<Vec<_>>()
-            .join(";")
-    }
-}
-
-impl BrdfCompiler for TwinCompiler {
-    fn declare(&self, file: &str, src: &str) -> Result<Vec<ParamDecl>, Diagnostics> {
-        self.compile(file, src, &[])?;
-        Ok(vec![ParamDecl { name: "n".into(), default: 50.0, lo: 1.0, hi: 1000.0, span: None }])
-    }
-    fn compile(&self, file: &str, src: &str, values: &[(String, f64)]) -> Result<CompiledBrdf, Diagnostics> {
-        let key = TwinCompiler::key(src);
-        let Some((_, f, inputs)) = TwinCompiler::table().into_iter().find(|(k, _, _)| *k == key) else {
-            let mut ds = Diagnostics::new(file, src);
-            ds.push(Diagnostic::error(format!("no Rust twin for the formula `{key}`")).at(Span::new(0, src.len()), "this formula").hint(
-                "the twin compiler knows only the papers' Phong, Blinn, Schlick and modified Schlick; use the real compiler",
-            ));
-            return Err(ds);
-        };
-        let mut used = InputSet::default();
-        inputs.iter().for_each(|i| used.insert(*i));
-        let n = values.iter().find(|(k, _)| k == "n").map(|(_, v)| *v);
-        // Baking: the closure sees the baked n whatever the params slice says, as a real kernel would.
-        let evaluator: Arc<dyn Evaluator> = match n {
-            Some(n) => Arc::new(FnEvaluator(move |x: &[f64; 5], _p: &[f64]| f(x, &[n]))),
-            None => Arc::new(FnEvaluator(f)),
-        };
-        Ok(CompiledBrdf { evaluator, used })
-    }
-}
 
 /// What to override when loading.
 #[derive(Clone, Debug, Default)]
@@ -564,7 +493,7 @@ fn build_material(
     }
     let params: Vec<f64> = values.iter().map(|(_, v)| *v).collect();
     let coef = if d.normalize {
-        normalization_coef(compiled.evaluator.as_ref(), &params)
+        normalization_coef(compiled.evaluator.as_ref(), compiled.used, &params)
             .map_err(|msg| here(m.span(), format!("materials.{mname}.normalize: {msg}"), "this material"))?
     } else {
         1.0
@@ -583,29 +512,12 @@ fn build_material(
     })
 }
 
-/// The papers' energy coefficient coef = 1 / (2π·∫₀^{π/2} max(f(cos θ), 0)·cos θ·sin θ dθ), with every input
-/// set to cos θ (the lobe as a function of the polar angle, light at the normal). Composite Simpson over
-/// 4096 intervals, one batched kernel call. The energy checker computes the same integral more carefully;
-/// this is what the renderer needs to bake the factor.
-pub fn normalization_coef(ev: &dyn Evaluator, params: &[f64]) -> Result<f64, String> {
-    const N: usize = 4096;
-    let h = std::f64::consts::FRAC_PI_2 / N as f64;
-    let cosines: Vec<f64> = (0..=N).map(|i| (i as f64 * h).cos()).collect();
-    let mut f = vec![0.0; N + 1];
-    let cols = crate::kernel::Columns::new([&cosines, &cosines, &cosines, &cosines, &cosines]);
-    ev.eval_batch(&cols, params, &mut f);
-    let mut sum = 0.0;
-    for (i, fi) in f.iter().enumerate() {
-        let th = i as f64 * h;
-        let g = fi.max(0.0) * th.cos() * th.sin();
-        let w = if i == 0 || i == N { 1.0 } else if i % 2 == 1 { 4.0 } else { 2.0 };
-        sum += w * g;
-    }
-    let integral = sum * h / 3.0;
-    if !(integral.is_finite() && integral > 0.0) {
-        return Err(format!("the lobe integral is {integral}; cannot normalise"));
-    }
-    Ok(1.0 / (2.0 * std::f64::consts::PI * integral))
+/// The papers' normalisation coefficient `1/(2π·Int)` of a compiled material, with the lobe variable chosen
+/// from the inputs it reads — the energy checker's exact adaptive quadrature (relative accuracy ~1e-11), so
+/// a scene never needs a fitted coefficient formula.
+pub fn normalization_coef(ev: &dyn Evaluator, used: InputSet, params: &[f64]) -> Result<f64, String> {
+    let (lobe, _) = crate::check::choose_lobe_input(used);
+    crate::check::energy::normalization_coef(ev, params, lobe).map_err(|e| e.to_string())
 }
 
 type MeshErr = (std::ops::Range<usize>, String, String);
@@ -687,13 +599,15 @@ mod tests {
 
     #[test]
     fn phong_coefficient_is_n_plus_2_over_2pi() {
-        let ev = FnEvaluator(|x: &[f64; 5], p: &[f64]| x[3].clamp(0.0, 1.0).powf(p[0]));
+        let ev = crate::kernel::FnEvaluator(|x: &[f64; 5], p: &[f64]| x[3].clamp(0.0, 1.0).powf(p[0]));
+        let mut vr = InputSet::default();
+        vr.insert(crate::ir::Input::VR);
         for n in [1.0, 10.0, 100.0] {
-            let c = normalization_coef(&ev, &[n]).unwrap();
+            let c = normalization_coef(&ev, vr, &[n]).unwrap();
             let exact = (n + 2.0) / (2.0 * std::f64::consts::PI);
             assert!((c - exact).abs() / exact < 1e-6, "{n}: {c} vs {exact}");
         }
-        assert!(normalization_coef(&FnEvaluator(|_: &[f64; 5], _: &[f64]| 0.0), &[1.0]).is_err());
+        assert!(normalization_coef(&crate::kernel::FnEvaluator(|_: &[f64; 5], _: &[f64]| 0.0), vr, &[1.0]).is_err());
     }
 
     #[test]
@@ -704,10 +618,4 @@ mod tests {
         assert_eq!(key_at(src, src.find("1\n").unwrap()).as_deref(), Some("light.color"));
     }
 
-    #[test]
-    fn twin_keys_ignore_comments_metadata_and_spacing() {
-        let src = "# Phong\n@name \"Phong\"\nparam n = 50 in 1..1000\nVR ^ n   # lobe\n";
-        assert_eq!(TwinCompiler::key(src), "VR^n");
-        assert_eq!(TwinCompiler::key("let c = VR\n2*c / (1.25*(n - n*c + 1.25*c)^2)"), "letc=VR;2*c/(1.25*(n-n*c+1.25*c)^2)");
-    }
 }

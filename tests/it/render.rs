@@ -11,7 +11,9 @@ use lobe::ir::{Input, InputSet, N_INPUTS};
 use lobe::kernel::{Columns, Evaluator};
 use lobe::render::compare::{self, CompareJob};
 use lobe::render::image::{Image, Transfer};
-use lobe::render::scene::{self, LoadOptions, TwinCompiler};
+use lobe::render::scene::{self, LoadOptions, LobeCompiler};
+
+const JIT: LobeCompiler = LobeCompiler { backend: lobe::Backend::Jit };
 use lobe::render::{self as r, RenderOptions};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -26,7 +28,7 @@ fn scene_file(name: &str) -> PathBuf {
 }
 
 fn load(name: &str, opts: &LoadOptions) -> r::Scene {
-    match scene::load_scene(&scene_file(name), opts, &TwinCompiler) {
+    match scene::load_scene(&scene_file(name), opts, &JIT) {
         Ok(s) => s,
         Err(d) => panic!("{}", d.render(false)),
     }
@@ -63,8 +65,8 @@ fn golden(name: &str, im: &Image) {
 fn golden_paper_sphere_phong_and_modified_schlick() {
     let s = load("paper_sphere.toml", &sized(96, 96));
     golden("paper_sphere_phong_n50.png", &render(&s, 2).0.image);
-    let src = std::fs::read_to_string(root().join("examples/brdfs/modified_schlick.brdf")).unwrap();
-    let opts = LoadOptions { formula_override: Some(("modified_schlick.brdf".into(), src)), ..sized(96, 96) };
+    let src = std::fs::read_to_string(root().join("examples/brdfs/modified_schlick_vr.brdf")).unwrap();
+    let opts = LoadOptions { formula_override: Some(("modified_schlick_vr.brdf".into(), src)), ..sized(96, 96) };
     let s = load("paper_sphere.toml", &opts);
     golden("paper_sphere_modschlick_n50.png", &render(&s, 2).0.image);
 }
@@ -178,7 +180,7 @@ fn nan_from_the_kernel_is_shaded_as_zero_and_counted() {
                [[light]]\nkind = \"point\"\nposition = [10, 0, 10]\n\
                [materials.bad]\nformula = \"0/0\"\nka = 0\nkd = 0\nks = 1\n\
                [[object]]\nshape = \"sphere\"\nmaterial = \"bad\"\n";
-    let s = scene::parse_scene("nan.toml", src, Path::new("."), &LoadOptions::default(), &TwinCompiler).unwrap();
+    let s = scene::parse_scene("nan.toml", src, Path::new("."), &LoadOptions::default(), &JIT).unwrap();
     let (f, st) = render(&s, 2);
     assert!(st.nan > 0);
     assert_eq!(st.nan, st.evals);
@@ -188,13 +190,13 @@ fn nan_from_the_kernel_is_shaded_as_zero_and_counted() {
 #[test]
 fn normalize_bakes_the_energy_coefficient() {
     let src = std::fs::read_to_string(scene_file("paper_sphere.toml")).unwrap().replace("\nks = 0.5\n", "\nks = 0.5\nnormalize = true\n");
-    let s = scene::parse_scene("p.toml", &src, &scene_file(""), &LoadOptions::default(), &TwinCompiler).unwrap();
+    let s = scene::parse_scene("p.toml", &src, &scene_file(""), &LoadOptions::default(), &JIT).unwrap();
     let exact = 52.0 / (2.0 * std::f64::consts::PI); // Phong: (n + 2) / 2π at n = 50
     assert!((s.materials[0].coef - exact).abs() / exact < 1e-6, "{}", s.materials[0].coef);
 }
 
 fn scene_err(src: &str) -> String {
-    match scene::parse_scene("bad.toml", src, &scene_file(""), &LoadOptions::default(), &TwinCompiler) {
+    match scene::parse_scene("bad.toml", src, &scene_file(""), &LoadOptions::default(), &JIT) {
         Ok(_) => panic!("accepted:\n{src}"),
         Err(d) => d.render(false),
     }
@@ -205,7 +207,7 @@ const GOOD: &str = "[camera]\nposition = [0, 0, 6]\n[[light]]\nkind = \"point\"\
 
 #[test]
 fn scene_errors_name_file_line_and_key() {
-    assert!(scene::parse_scene("ok.toml", GOOD, Path::new("."), &LoadOptions::default(), &TwinCompiler).is_ok());
+    assert!(scene::parse_scene("ok.toml", GOOD, Path::new("."), &LoadOptions::default(), &JIT).is_ok());
     // Unknown key, line 2.
     let e = scene_err(&GOOD.replace("position = [0, 0, 6]", "position = [0, 0, 6]\nfocus = 3"));
     assert!(e.contains("bad.toml:3:") && e.contains("focus"), "{e}");
@@ -240,13 +242,13 @@ fn broken_and_missing_obj_files_are_reported_with_their_line() {
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("broken.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n").unwrap();
     let src = GOOD.replace("shape = \"sphere\"", "shape = \"mesh\"\npath = \"broken.obj\"");
-    let e = match scene::parse_scene("bad.toml", &src, &dir, &LoadOptions::default(), &TwinCompiler) {
+    let e = match scene::parse_scene("bad.toml", &src, &dir, &LoadOptions::default(), &JIT) {
         Ok(_) => panic!("broken OBJ accepted"),
         Err(d) => d.render(false),
     };
     assert!(e.contains("bad.toml:10:") && e.contains("broken.obj:4"), "{e}");
     let src = GOOD.replace("shape = \"sphere\"", "shape = \"mesh\"\npath = \"missing.obj\"");
-    let e = match scene::parse_scene("bad.toml", &src, &dir, &LoadOptions::default(), &TwinCompiler) {
+    let e = match scene::parse_scene("bad.toml", &src, &dir, &LoadOptions::default(), &JIT) {
         Ok(_) => panic!("missing OBJ accepted"),
         Err(d) => d.render(false),
     };
@@ -295,13 +297,13 @@ fn cli_writes_nothing_on_error() {
 #[test]
 fn table_4_2_shape() {
     let read = |f: &str| std::fs::read_to_string(root().join("examples/brdfs").join(f)).unwrap();
-    let (phong, schlick, msh) = (read("phong.brdf"), read("schlick.brdf"), read("modified_schlick.brdf"));
+    let (phong, schlick, msh) = (read("phong.brdf"), read("schlick_vr.brdf"), read("modified_schlick_vr.brdf"));
     let scene_src = std::fs::read_to_string(scene_file("paper_sphere.toml")).unwrap();
     let base = scene_file("");
     let ropts = RenderOptions { tile: 32, ..RenderOptions::default() };
     let run = |b: &str, n: f64| {
         let job = CompareJob { scene_name: "paper", scene_src: &scene_src, base: &base, a: ("phong", &phong), b: ("b", b), size: Some((128, 128)) };
-        compare::compare_formulas(&job, &[("n".into(), n)], &TwinCompiler, &ropts).unwrap().metrics
+        compare::compare_formulas(&job, &[("n".into(), n)], &JIT, &ropts).unwrap().metrics
     };
     let mut prev = (f64::INFINITY, f64::INFINITY);
     for n in [5.0, 20.0, 100.0, 500.0] {
@@ -319,7 +321,7 @@ fn table_4_2_shape() {
 fn jit_and_interpreter_render_within_one_level() {
     use lobe::render::scene::LobeCompiler;
     let opts = sized(96, 96);
-    for brdf in ["phong.brdf", "schlick.brdf", "modified_schlick.brdf", "blinn.brdf"] {
+    for brdf in ["phong.brdf", "schlick_vr.brdf", "modified_schlick_vr.brdf", "blinn.brdf"] {
         let src = std::fs::read_to_string(root().join("examples/brdfs").join(brdf)).unwrap();
         let o = LoadOptions { formula_override: Some((brdf.into(), src)), ..opts.clone() };
         let load = |b| scene::load_scene(&scene_file("paper_sphere.toml"), &o, &LobeCompiler { backend: b }).map_err(|d| d.render(false));
@@ -341,11 +343,11 @@ fn table_4_2_report() {
     let base = scene_file("");
     let ropts = RenderOptions::default();
     let published = [(5.0, 1.22, 0.65), (10.0, 1.24, 0.52), (15.0, 0.77, 0.19), (20.0, 0.71, 0.17), (50.0, 0.41, 0.07), (100.0, 0.26, 0.04), (250.0, 0.14, 0.02), (500.0, 0.08, 0.01)];
-    for (label, b) in [("schlick", read("schlick.brdf")), ("modified_schlick", read("modified_schlick.brdf"))] {
+    for (label, b) in [("schlick", read("schlick_vr.brdf")), ("modified_schlick", read("modified_schlick_vr.brdf"))] {
         let mut rows = vec![];
         for (n, ps, pm) in published {
             let job = CompareJob { scene_name: "paper", scene_src: &scene_src, base: &base, a: ("phong", &phong), b: (label, &b), size: None };
-            let c = compare::compare_formulas(&job, &[("n".into(), n)], &TwinCompiler, &ropts).unwrap();
+            let c = compare::compare_formulas(&job, &[("n".into(), n)], &JIT, &ropts).unwrap();
             let m = &c.metrics;
             let publ = if label == "schlick" { ps } else { pm };
             println!(
@@ -398,19 +400,19 @@ fn cli_render_and_compare_end_to_end() {
     let lobe = |args: &[&str]| std::process::Command::new(env!("CARGO_BIN_EXE_lobe")).args(args).output().unwrap();
     let out = dir.join("p.png");
     let scene = scene_file("paper_sphere.toml");
-    let o = lobe(&["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "--size", "80x60", "--stats", "--threads", "2", "--rust-twins"]);
+    let o = lobe(&["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "--size", "80x60", "--stats", "--threads", "2"]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert!(err.contains("Mpixel/s") && err.contains("2 thread(s)") && err.contains("encode"), "{err}");
     let im = Image::decode_png(&std::fs::read(&out).unwrap()).unwrap();
     assert_eq!((im.width, im.height), (80, 60));
     // Re-rendering over our own PNG is allowed.
-    assert!(lobe(&["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "--size", "16", "-q", "--rust-twins"]).status.success());
+    assert!(lobe(&["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "--size", "16", "-q"]).status.success());
 
     let b = |f: &str| root().join("examples/brdfs").join(f).to_str().unwrap().to_string();
     let cmp = dir.join("cmp.png");
     let o = lobe(&[
-        "compare", &b("phong.brdf"), &b("modified_schlick.brdf"), "--sweep-n", "5,50", "--size", "64", "-o", cmp.to_str().unwrap(), "--json", "--rust-twins",
+        "compare", &b("phong.brdf"), &b("modified_schlick_vr.brdf"), "--sweep-n", "5,50", "--size", "64", "-o", cmp.to_str().unwrap(), "--json",
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
