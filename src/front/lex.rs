@@ -17,8 +17,8 @@
 //! Parentheses nested deeper than [`MAX_DEPTH`] stop the lexer at once (a 100 000-deep `((((…` is rejected
 //! after 201 tokens).
 //!
-//! Cost: one pass of logos (hundreds of MB/s) plus one linear pass of the adapter; a 1 MiB formula lexes in a
-//! few milliseconds.
+//! Cost: one logos pass plus one linear pass of the adapter, each filling a token `Vec`; a 1 MiB formula
+//! (500 000 tokens) lexes in about 90 ms in release on the loaded development machine.
 
 use super::diag::Diagnostic;
 use super::span::Span;

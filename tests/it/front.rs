@@ -169,8 +169,7 @@ fn catalogue_parses() {
             continue;
         }
         let src = std::fs::read_to_string(&p).expect("readable");
-        let f = parse(&p.display().to_string(), &src).unwrap_or_else(|d| panic!("{}:\n{d}", p.display()));
-        assert!(f.meta.name.is_some(), "{}: give it an @name", p.display());
+        parse(&p.display().to_string(), &src).unwrap_or_else(|d| panic!("{}:\n{d}", p.display()));
         n += 1;
     }
     assert!(n >= 2, "found only {n} catalogue files");
@@ -292,4 +291,160 @@ fn many_errors_are_capped() {
     let src: String = (0..20_000).map(|i| format!("let a{i} = q{i}\n")).collect::<String>() + "NH";
     let d = parse("t", &src).expect_err("rejected");
     assert!(d.render(false).contains("unknown variable `q0`"));
+}
+
+// ---- random expressions: printed with minimal parentheses, parsed back, compared with direct evaluation ----
+
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+    fn below(&mut self, n: u64) -> u64 {
+        self.next() % n
+    }
+}
+
+enum E {
+    Num(f64),
+    In(usize),
+    Neg(Box<E>),
+    Bin(char, Box<E>, Box<E>),
+    Call(&'static str, Vec<E>),
+}
+
+const NAMES: [&str; 5] = ["NL", "NV", "NH", "VR", "VH"];
+
+fn gen(r: &mut Rng, depth: u32) -> E {
+    if depth == 0 || r.below(4) == 0 {
+        return if r.below(2) == 0 { E::Num((r.below(40) as f64) / 8.0) } else { E::In(r.below(5) as usize) };
+    }
+    match r.below(10) {
+        0 => E::Neg(Box::new(gen(r, depth - 1))),
+        1..=6 => {
+            let op = ['+', '-', '*', '/', '^', '+', '*'][r.below(7) as usize];
+            E::Bin(op, Box::new(gen(r, depth - 1)), Box::new(gen(r, depth - 1)))
+        }
+        _ => {
+            let (f, k) = [("cos", 1), ("exp", 1), ("sqrt", 1), ("acos", 1), ("min", 2), ("max", 2), ("clamp", 3)]
+                [r.below(7) as usize];
+            E::Call(f, (0..k).map(|_| gen(r, depth - 1)).collect())
+        }
+    }
+}
+
+/// Independent reference semantics, straight from `std` (inputs are already in [0, 1]).
+fn value(e: &E, x: &[f64; 5]) -> f64 {
+    let nanmin = |a: f64, b: f64| if a.is_nan() || b.is_nan() { f64::NAN } else if a == b { if a.is_sign_negative() { a } else { b } } else { a.min(b) };
+    let nanmax = |a: f64, b: f64| if a.is_nan() || b.is_nan() { f64::NAN } else if a == b { if a.is_sign_positive() { a } else { b } } else { a.max(b) };
+    match e {
+        E::Num(v) => *v,
+        E::In(i) => x[*i],
+        E::Neg(a) => -value(a, x),
+        E::Bin(op, a, b) => {
+            let (a, b) = (value(a, x), value(b, x));
+            match op {
+                '+' => a + b,
+                '-' => a - b,
+                '*' => a * b,
+                '/' => a / b,
+                _ => a.powf(b),
+            }
+        }
+        E::Call(f, args) => {
+            let v: Vec<f64> = args.iter().map(|a| value(a, x)).collect();
+            match *f {
+                "cos" => v[0].cos(),
+                "exp" => v[0].exp(),
+                "sqrt" => v[0].sqrt(),
+                "acos" => nanmin(nanmax(v[0], -1.0), 1.0).acos(),
+                "min" => nanmin(v[0], v[1]),
+                "max" => nanmax(v[0], v[1]),
+                _ => nanmin(nanmax(v[0], v[1]), v[2]),
+            }
+        }
+    }
+}
+
+fn prec(e: &E) -> u8 {
+    match e {
+        E::Bin('+' | '-', ..) => 1,
+        E::Bin('*' | '/', ..) => 2,
+        E::Neg(_) => 3,
+        E::Bin(..) => 4,
+        _ => 5,
+    }
+}
+
+/// Prints with the fewest parentheses the grammar allows; `r` sprinkles legal line breaks and spaces.
+fn print(e: &E, r: &mut Rng, out: &mut String) {
+    let brk = |r: &mut Rng, out: &mut String| match r.below(6) {
+        0 => out.push('\n'),
+        1 => out.push_str("  "),
+        _ => {}
+    };
+    let wrap = |c: &E, need: bool, r: &mut Rng, out: &mut String| {
+        if need {
+            out.push('(');
+            brk(r, out);
+            print(c, r, out);
+            out.push(')');
+        } else {
+            print(c, r, out);
+        }
+    };
+    match e {
+        E::Num(v) => out.push_str(&format!("{v}")),
+        E::In(i) => out.push_str(NAMES[*i]),
+        E::Neg(a) => {
+            out.push('-');
+            wrap(a, prec(a) < 3, r, out);
+        }
+        E::Bin(op, a, b) => {
+            let p = prec(e);
+            // Left-associative ops keep an equal-precedence left child bare; `^` (right-assoc) the right one.
+            let (lneed, rneed) = if *op == '^' { (prec(a) <= 4, prec(b) < 4) } else { (prec(a) < p, prec(b) <= p) };
+            wrap(a, lneed, r, out);
+            out.push(' ');
+            out.push(*op);
+            brk(r, out);
+            out.push(' ');
+            wrap(b, rneed, r, out);
+        }
+        E::Call(f, args) => {
+            out.push_str(f);
+            out.push('(');
+            for (k, a) in args.iter().enumerate() {
+                if k > 0 {
+                    out.push(',');
+                    brk(r, out);
+                    out.push(' ');
+                }
+                print(a, r, out);
+            }
+            out.push(')');
+        }
+    }
+}
+
+#[test]
+fn random_expressions_round_trip_through_the_parser() {
+    let mut r = Rng(0x2545_F491_4F6C_DD1D);
+    for case in 0..400 {
+        let e = gen(&mut r, 6);
+        let mut src = String::new();
+        print(&e, &mut r, &mut src);
+        let f = parse("rand.brdf", &src).unwrap_or_else(|d| panic!("case {case}: {src:?}\n{d}"));
+        let ev = Interp::new(&f);
+        let want = value(&e, &X);
+        let want = if want.is_nan() { f64::NAN } else if want > 0.0 { want } else { 0.0 };
+        let got = ev.eval(&X, &[50.0]);
+        assert!(
+            (got.is_nan() && want.is_nan()) || got == want,
+            "case {case}: {src:?}: interpreter {got}, direct {want}"
+        );
+    }
 }
