@@ -480,52 +480,68 @@ pub mod print {
         out
     }
 
+    /// Writes the expression at `id`. Iterative (an explicit stack of pending pieces), so a 500 000-deep chain
+    /// that the front end accepts prints instead of overflowing the stack.
     fn write(f: &Formula, id: NodeId, out: &mut String, names: &HashMap<NodeId, String>) {
-        let n = f.ir.node(id);
-        let child = |c: NodeId, min: u8, out: &mut String| {
-            if let Some(name) = names.get(&c) {
-                out.push_str(name);
-                return;
-            }
-            let cn = f.ir.node(c);
-            if prec(cn) < min {
-                out.push('(');
-                write(f, c, out, names);
-                out.push(')');
-            } else {
-                write(f, c, out, names);
-            }
-        };
-        match n {
-            Node::Const(b) => out.push_str(&number(f64::from_bits(*b))),
-            Node::Input(i) => out.push_str(i.name()),
-            Node::Param(p) => out.push_str(&f.params[*p as usize].name),
-            Node::Neg(a) => {
-                out.push('-');
-                child(*a, 3, out);
-            }
-            Node::Binary(op, a, b) => {
-                let p = prec(n);
-                child(*a, p, out);
-                out.push(' ');
-                out.push_str(op.symbol());
-                out.push(' ');
-                // The right operand needs parentheses at equal precedence: for - and / by algebra, and for + and *
-                // because floating-point addition and multiplication are not associative (a + (b + c) differs
-                // from a + b + c), so the text shows the evaluation order the IR has.
-                let rmin = p + 1;
-                child(*b, rmin, out);
-            }
-            Node::Call(b, args) => {
-                out.push_str(b.name());
-                out.push('(');
-                for (k, a) in args[..b.arity()].iter().enumerate() {
-                    if k > 0 {
-                        out.push_str(", ");
-                    }
-                    child(*a, 0, out);
+        enum Item {
+            /// A node to print; `min` is the precedence below which it needs parentheses (`None`: top level).
+            Node(NodeId, Option<u8>),
+            Text(&'static str),
+        }
+        let mut stack = vec![Item::Node(id, None)];
+        while let Some(item) = stack.pop() {
+            let (id, min) = match item {
+                Item::Text(t) => {
+                    out.push_str(t);
+                    continue;
                 }
-                out.push(')');
+                Item::Node(id, min) => (id, min),
+            };
+            if min.is_some() {
+                if let Some(name) = names.get(&id) {
+                    out.push_str(name);
+                    continue;
+                }
+            }
+            let n = f.ir.node(id);
+            let paren = min.is_some_and(|m| prec(n) < m);
+            if paren {
+                out.push('(');
+                stack.push(Item::Text(")"));
+            }
+            match n {
+                Node::Const(b) => out.push_str(&number(f64::from_bits(*b))),
+                Node::Input(i) => out.push_str(i.name()),
+                Node::Param(p) => out.push_str(&f.params[*p as usize].name),
+                Node::Neg(a) => {
+                    out.push('-');
+                    stack.push(Item::Node(*a, Some(3)));
+                }
+                Node::Binary(op, a, b) => {
+                    let p = prec(n);
+                    // The right operand needs parentheses at equal precedence: for - and / by algebra, and for
+                    // + and * because floating-point addition and multiplication are not associative
+                    // (a + (b + c) differs from a + b + c), so the text shows the evaluation order the IR has.
+                    stack.push(Item::Node(*b, Some(p + 1)));
+                    stack.push(Item::Text(match op {
+                        BinOp::Add => " + ",
+                        BinOp::Sub => " - ",
+                        BinOp::Mul => " * ",
+                        BinOp::Div => " / ",
+                    }));
+                    stack.push(Item::Node(*a, Some(p)));
+                }
+                Node::Call(b, args) => {
+                    out.push_str(b.name());
+                    out.push('(');
+                    stack.push(Item::Text(")"));
+                    for (k, a) in args[..b.arity()].iter().enumerate().rev() {
+                        stack.push(Item::Node(*a, Some(0)));
+                        if k > 0 {
+                            stack.push(Item::Text(", "));
+                        }
+                    }
+                }
             }
         }
     }

@@ -15,6 +15,10 @@ struct Cli {
 enum Cmd {
     /// Evaluate a formula at one point.
     Eval(cli::eval::EvalArgs),
+    /// Recompile and re-render whenever a .brdf file changes.
+    Watch(cli::watch::WatchArgs),
+    /// Speed against error for several formulas: ns/eval per backend, error vs a reference, energy, Pareto front.
+    Bench(cli::bench::BenchArgs),
     /// Overlay lobes of several formulas against angle (cartesian or polar), optionally as error curves.
     Plot(cli::plot::PlotArgs),
     /// Show the simplified formula, the inputs it reads and its compile time.
@@ -39,6 +43,8 @@ fn main() {
     let cli = Cli::parse();
     let result = match &cli.cmd {
         Cmd::Eval(a) => cli::eval::run(a),
+        Cmd::Watch(a) => cli::watch::run(a),
+        Cmd::Bench(a) => cli::bench::run(a),
         Cmd::Plot(a) => cli::plot::run(a),
         Cmd::Export(a) => cli::export::run(a),
         Cmd::Check(a) => cli::check::run(a),

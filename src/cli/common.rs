@@ -112,7 +112,13 @@ pub fn load_formula(path: Option<&str>, expr: Option<&str>) -> Result<Formula, C
             return Err(CliError::hint("no formula given", "pass a .brdf file, `-` for standard input, or --expr '…'"))
         }
     };
-    Ok(crate::front::parse(&name, &src)?)
+    let (f, warnings) = crate::front::parse_with_warnings(&name, &src)?;
+    if !warnings.items.is_empty() {
+        use std::io::IsTerminal;
+        let color = std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none();
+        eprint!("{}", warnings.render(color));
+    }
+    Ok(f)
 }
 
 /// Loads a formula and compiles it with `--set` values baked in.

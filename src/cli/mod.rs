@@ -3,6 +3,7 @@
 //! Each subcommand lives in its own file as a clap `Args` struct and a `run` function that calls library
 //! code; no numerical or rendering logic lives here.
 
+pub mod bench;
 pub mod check;
 pub mod common;
 pub mod compare;
@@ -13,4 +14,5 @@ pub mod accuracy;
 pub mod energy;
 pub mod fit;
 pub mod sweep;
+pub mod watch;
 pub mod render;

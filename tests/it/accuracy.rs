@@ -1,5 +1,4 @@
-//! Accuracy, fit and sweep through the public API on interpreter kernels and twins. Tests that need the parser
-//! and the catalogue files are `#[ignore]`d until merge.
+//! Accuracy, fit and sweep through the public API on interpreter kernels, twins, and the catalogue files.
 
 use crate::energy::power_lobe;
 use lobe::check::accuracy::{accuracy, AccuracyOptions};
@@ -39,7 +38,6 @@ fn sweep_of_the_clamped_kernel_is_clean() {
 }
 
 #[test]
-#[ignore = "needs the parser and examples/brdfs/*.brdf (wired at merge)"]
 fn catalogue_modified_schlick_reproduces_mean_error() {
     let dir = format!("{}/examples/brdfs", env!("CARGO_MANIFEST_DIR"));
     let load = |name: &str| {

@@ -1,5 +1,5 @@
 //! Energy checks through the public API, on the interpreter kernel (the path compiled .brdf files take) and on
-//! the hand-written twins. Tests that need the parser and the catalogue files are `#[ignore]`d until merge.
+//! the hand-written twins.
 
 use lobe::builtins::Builtin;
 use lobe::check::energy::{albedo, full_energy, lobe_integral, normalization_coef};
@@ -96,10 +96,8 @@ fn published_energy_rows_keep_their_verdicts() {
     }
 }
 
-/// The catalogue files (written on main) against their twins. Wire at merge: remove the ignore and fix the
-/// file names if they differ.
+/// The catalogue files against their twins.
 #[test]
-#[ignore = "needs the parser and examples/brdfs/*.brdf (wired at merge)"]
 fn catalogue_files_match_their_twins() {
     type Case = (&'static str, fn() -> twins::Twin, Vec<f64>);
     let cases: [Case; 6] = [
