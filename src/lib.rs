@@ -41,6 +41,10 @@ pub struct Options {
     pub bake: Vec<(String, f64)>,
     /// Skip the simplifier (for testing the simplifier itself against the unsimplified formula).
     pub no_simplify: bool,
+    /// Multiply the formula by its exact normalisation coefficient 1/(2π·Int) (the papers' lobe integral,
+    /// computed by adaptive quadrature at compile time) and bake it into the kernel. The coefficient depends on
+    /// every parameter, so normalising bakes them all: values from `bake`, declared defaults for the rest.
+    pub normalize: bool,
 }
 
 /// Parses, lowers and simplifies a formula, then builds its kernel for the chosen backend.
@@ -51,9 +55,36 @@ pub fn compile(file: &str, src: &str, opts: &Options) -> Result<Kernel, Diagnost
 
 /// [`compile`] for an already lowered formula.
 pub fn compile_formula(f: Formula, opts: &Options) -> Result<Kernel, Diagnostics> {
-    let bake = resolve_bake(&f, &opts.bake)?;
-    let f = if opts.no_simplify { simplify::bake_only(&f, &bake) } else { simplify::simplify(&f, &bake) };
-    build_kernel(Arc::new(f), opts.backend)
+    let mut bake = resolve_bake(&f, &opts.bake)?;
+    if opts.normalize {
+        for (i, p) in f.params.iter().enumerate() {
+            if !bake.iter().any(|(j, _)| *j == i) {
+                bake.push((i, p.default));
+            }
+        }
+    }
+    let simplified = if opts.no_simplify { simplify::bake_only(&f, &bake) } else { simplify::simplify(&f, &bake) };
+    let simplified = if opts.normalize { normalized(simplified)? } else { simplified };
+    build_kernel(Arc::new(simplified), opts.backend)
+}
+
+/// `coef · f` with the exact coefficient of the fully baked formula `f` (see [`Options::normalize`]).
+fn normalized(f: Formula) -> Result<Formula, Diagnostics> {
+    let params = f.default_params();
+    let ev = interp::Interp::new(&f);
+    let (lobe, _) = check::choose_lobe_input(f.used_inputs());
+    let coef = check::energy::normalization_coef(&ev, &params, lobe).map_err(|e| {
+        let mut d = Diagnostic::error(format!("cannot normalise {}: {e}", f.display_name()));
+        if let Some(h) = &e.hint {
+            d = d.hint(h.clone());
+        }
+        Diagnostics::single(&f.file, d)
+    })?;
+    let mut g = f.clone();
+    let span = g.ir.span(g.root);
+    let c = g.ir.konst(coef, span);
+    g.root = g.ir.bin(ir::BinOp::Mul, c, g.root, span);
+    Ok(simplify::simplify(&g, &[]))
 }
 
 /// Builds the evaluator for an already simplified formula.

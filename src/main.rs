@@ -40,7 +40,13 @@ enum Cmd {
 }
 
 fn main() {
-    let cli = Cli::parse();
+    // `lobe check --sweep FILE` is the spelling of `lobe sweep FILE`.
+    let mut args: Vec<std::ffi::OsString> = std::env::args_os().collect();
+    if args.get(1).is_some_and(|a| a == "check") && args.iter().any(|a| a == "--sweep") {
+        args[1] = "sweep".into();
+        args.retain(|a| a != "--sweep");
+    }
+    let cli = Cli::parse_from(args);
     let result = match &cli.cmd {
         Cmd::Eval(a) => cli::eval::run(a),
         Cmd::Watch(a) => cli::watch::run(a),

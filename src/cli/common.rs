@@ -159,24 +159,6 @@ pub fn param_values(f: &Formula, set: &[(String, f64)]) -> Vec<f64> {
     p
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn assignments_parse_and_reject() {
-        assert_eq!(parse_assignments("n=200, a=16").unwrap(), vec![("n".into(), 200.0), ("a".into(), 16.0)]);
-        assert!(parse_assignments("n").is_err());
-        assert!(parse_assignments("n=abc").is_err());
-        assert!(parse_assignments("n=inf").is_err());
-    }
-
-    #[test]
-    fn binary_input_is_refused() {
-        assert!(source_from_bytes("x", vec![0xff, 0xfe, 0x00]).is_err());
-        assert!(source_from_bytes("x", b"NH\0".to_vec()).is_err());
-    }
-}
 
 /// Writes an output file the way every lobe command does: to a temporary file in the same directory, then
 /// renamed over the target, so a failure never leaves a half-written or truncated file at the user's path.
@@ -249,4 +231,23 @@ pub fn check_set_names(formulas: &[&Formula], set: &[(String, f64)]) -> Result<(
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn assignments_parse_and_reject() {
+        assert_eq!(parse_assignments("n=200, a=16").unwrap(), vec![("n".into(), 200.0), ("a".into(), 16.0)]);
+        assert!(parse_assignments("n").is_err());
+        assert!(parse_assignments("n=abc").is_err());
+        assert!(parse_assignments("n=inf").is_err());
+    }
+
+    #[test]
+    fn binary_input_is_refused() {
+        assert!(source_from_bytes("x", vec![0xff, 0xfe, 0x00]).is_err());
+        assert!(source_from_bytes("x", b"NH\0".to_vec()).is_err());
+    }
 }

@@ -17,6 +17,10 @@ pub struct EvalArgs {
     /// Input cosines, e.g. `NH=0.95,NL=0.7`; unset inputs are 0.
     #[arg(long, value_parser = common::parse_assignments, action = clap::ArgAction::Append)]
     pub at: Vec<Vec<(String, f64)>>,
+    /// Multiply by the exact energy normalisation coefficient 1/(2π·Int), computed at compile time (bakes
+    /// every parameter).
+    #[arg(long)]
+    pub normalize: bool,
     /// Evaluation backend.
     #[arg(long, default_value = "jit")]
     pub backend: Backend,
@@ -27,7 +31,9 @@ pub struct EvalArgs {
 
 pub fn run(a: &EvalArgs) -> Result<(), CliError> {
     let set: Vec<(String, f64)> = a.set.concat();
-    let k = common::load_kernel(a.file.as_deref(), a.expr.as_deref(), &set, a.backend)?;
+    let f = common::load_formula(a.file.as_deref(), a.expr.as_deref())?;
+    let opts = crate::Options { backend: a.backend, bake: set.clone(), normalize: a.normalize, ..Default::default() };
+    let k = crate::compile_formula(f, &opts)?;
     let mut x = [0.0; N_INPUTS];
     for (name, v) in a.at.concat() {
         let i = Input::from_name(&name).ok_or_else(|| {

@@ -129,8 +129,8 @@ pub fn export(f: &Formula, d: Dialect) -> String {
             Node::Binary(op, a, b) => format!("({} {} {})", t(a), op.symbol(), t(b)),
             Node::Call(b, a) => {
                 let mut s = b.info().glsl.to_string();
-                for k in 0..b.arity() {
-                    s = s.replace(&format!("{{{k}}}"), &t(a[k]));
+                for (k, arg) in a[..b.arity()].iter().enumerate() {
+                    s = s.replace(&format!("{{{k}}}"), &t(*arg));
                 }
                 s
             }

@@ -285,7 +285,8 @@ fn every_catalogue_file_is_covered_and_reads_the_expected_lobe_input() {
 #[test]
 fn normalisation_formulas_parse_and_evaluate() {
     // (file, params, expected) — hand-computed from the published formulas.
-    let cases: &[(&str, &[(&str, f64)], f64)] = &[
+    type NormCase<'a> = (&'a str, &'a [(&'a str, f64)], f64);
+    let cases: &[NormCase] = &[
         ("modified_schlick_2_24", &[("n", 50.0)], 0.125 * 50.0 - 45.76 / (50.0 + 46.578) + 1.317),
         ("quadratic_3_26", &[("n", 120.0)], 0.255 * 120.0),
         (

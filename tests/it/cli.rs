@@ -100,3 +100,25 @@ fn export_refuses_to_clobber_a_file_it_did_not_write() {
     assert!(std::fs::read_to_string(&fresh).unwrap().contains("fn lobe_blinn"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn normalize_bakes_the_exact_coefficient() {
+    // Phong at n = 10: coef = (n + 2) / 2π, so the normalised value at VR = 1 is exactly that.
+    let o = lobe(&["eval", "examples/brdfs/phong.brdf", "--set", "n=10", "--at", "VR=1", "--normalize", "--json"], None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let got = v["value"].as_f64().unwrap();
+    let want = 12.0 / (2.0 * std::f64::consts::PI);
+    assert!((got - want).abs() < 1e-9 * want, "{got} vs {want}");
+    // A lobe that is zero everywhere cannot be normalised: a clear error, not a NaN.
+    let o = lobe(&["eval", "--expr", "0*NH", "--normalize"], None);
+    assert_clean_error(&o, "zero lobe", "cannot normalise");
+}
+
+#[test]
+fn check_sweep_is_an_alias_of_sweep() {
+    let o = lobe(&["check", "--sweep", "examples/brdfs/beckmann.brdf", "--json"], None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(v["nan"].as_u64().unwrap() > 0, "Beckmann is NaN at NH = 0: {v}");
+}

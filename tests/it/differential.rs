@@ -211,7 +211,7 @@ fn check(jit: &Kernel, interp: &Kernel, pts: &[[f64; N_INPUTS]]) -> Result<(), S
 }
 
 fn both(f: Formula, bake: Vec<(String, f64)>) -> (Kernel, Kernel) {
-    let opts = |backend| Options { backend, bake: bake.clone(), no_simplify: false };
+    let opts = |backend| Options { backend, bake: bake.clone(), no_simplify: false, normalize: false };
     let jit = compile_formula(f.clone(), &opts(Backend::Jit)).expect("jit compiles");
     let interp = compile_formula(f, &opts(Backend::Interp)).expect("interp builds");
     assert_eq!(jit.backend, Backend::Jit);
