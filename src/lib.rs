@@ -22,7 +22,6 @@ pub mod jit;
 pub mod kernel;
 pub mod report;
 pub mod simplify;
-pub mod twins;
 pub mod watch;
 
 pub use front::diag::{Diagnostic, Diagnostics};

@@ -116,3 +116,21 @@ pub fn kutlog() -> Twin {
 pub fn all() -> Vec<Twin> {
     vec![phong(), blinn(), schlick(), modified_schlick(), dsh(), scos(), scos2(), f_st(), quadratic(), kutlog()]
 }
+
+/// The twin of a catalogue file (`examples/brdfs/<stem>.brdf`), if there is one; its parameters are in the
+/// file's declaration order, so a kernel's parameter vector can be passed to it unchanged.
+pub fn by_stem(stem: &str) -> Option<Twin> {
+    Some(match stem {
+        "phong" => phong(),
+        "blinn" => blinn(),
+        "schlick" => schlick(),
+        "modified_schlick" => modified_schlick(),
+        "dsh" => dsh(),
+        "scos" => scos(),
+        "scos2" => scos2(),
+        "fst" => f_st(),
+        "quadratic" => quadratic(),
+        "kutlog" => kutlog(),
+        _ => return None,
+    })
+}

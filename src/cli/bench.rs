@@ -57,15 +57,16 @@ fn catalogue() -> Result<Vec<String>, CliError> {
     Ok(v)
 }
 
-/// Median ns/eval of a hand-written Rust twin over the same points the JIT is timed on.
-fn time_twin(f: crate::twins::TwinFn, params: &[f64], samples: usize) -> f64 {
+/// Median ns/eval of a hand-written Rust twin over the same points the JIT is timed on, called through the
+/// same `Evaluator` interface as the JIT kernel (so the comparison is of the code, not of the call path).
+fn time_twin(ev: &dyn crate::Evaluator, params: &[f64], samples: usize) -> f64 {
     let pts = sample_points(4096, 0x5EED);
     let mut ns: Vec<f64> = (0..samples.max(1) + 1)
         .map(|_| {
             let t = Instant::now();
             let mut acc = 0.0;
             for p in &pts {
-                acc += f(black_box(p), black_box(params));
+                acc += ev.eval(black_box(p), black_box(params));
             }
             black_box(acc);
             t.elapsed().as_nanos() as f64 / pts.len() as f64
@@ -84,7 +85,7 @@ fn row(f: &Formula, path: &str, set: &[(String, f64)], reference: &crate::Kernel
     let m = measure_kernel(&baked, &params, MeasureOptions { points: 4096, samples: a.samples })
         .map_err(|e| CliError::msg(format!("{path}: {e}")))?;
     let stem = Path::new(path).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-    let native_ns = crate::twins::twin(&stem).map(|t| time_twin(t, &params, a.samples));
+    let native_ns = crate::check::twins::by_stem(&stem).map(|t| time_twin(t.ev.as_ref(), &params, a.samples));
     let (lobe, _) = choose_lobe_input(live.used_inputs());
     let (ref_lobe, _) = choose_lobe_input(reference.used_inputs());
     let acc = accuracy(&live, &params, lobe, reference, &reference.default_params(), ref_lobe, &AccuracyOptions::default());

@@ -122,3 +122,54 @@ fn check_sweep_is_an_alias_of_sweep() {
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!(v["nan"].as_u64().unwrap() > 0, "Beckmann is NaN at NH = 0: {v}");
 }
+
+#[test]
+fn watch_renders_on_start_and_keeps_the_last_good_image_on_errors() {
+    let dir = std::env::temp_dir().join(format!("lobe-watch-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let brdf = dir.join("w.brdf");
+    let out = dir.join("w.png");
+    std::fs::write(&brdf, "VR^n\n").unwrap();
+    let (b, o) = (brdf.display().to_string(), out.display().to_string());
+    let r = lobe(&["watch", &b, "--scene", "examples/scenes/paper_sphere.toml", "-o", &o, "--size", "48", "--count", "1"], None);
+    assert!(r.status.success(), "{}", stderr(&r));
+    assert!(stderr(&r).contains("reloaded in"), "{}", stderr(&r));
+    let first = std::fs::read(&out).unwrap();
+    assert_eq!(&first[1..4], b"PNG");
+    // A broken formula: diagnostics on stderr, exit 0 (watch keeps running), the image untouched.
+    std::fs::write(&brdf, "VR^^n\n").unwrap();
+    let r = lobe(&["watch", &b, "--scene", "examples/scenes/paper_sphere.toml", "-o", &o, "--size", "48", "--count", "1"], None);
+    assert!(r.status.success());
+    assert!(stderr(&r).contains("keeping the last good image"), "{}", stderr(&r));
+    assert_eq!(std::fs::read(&out).unwrap(), first);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bench_and_plot_write_what_they_say() {
+    let dir = std::env::temp_dir().join(format!("lobe-bench-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let plot = dir.join("se.svg").display().to_string();
+    let o = lobe(
+        &["bench", "examples/brdfs/schlick.brdf", "examples/brdfs/modified_schlick.brdf", "--samples", "3", "--no-albedo", "--json", "--plot", &plot],
+        None,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let rows = v.as_array().unwrap();
+    assert_eq!(rows.len(), 2);
+    for key in ["name", "compile_us", "jit_ns", "jit_batch_ns", "interp_ns", "mean_abs_grid", "pareto"] {
+        assert!(rows[0].get(key).is_some(), "missing {key}: {v}");
+    }
+    // Modified Schlick is more accurate than Schlick (the papers' 0.0066 vs Schlick's ~0.029).
+    let err = |name: &str| rows.iter().find(|r| r["name"] == name).unwrap()["mean_abs_grid"].as_f64().unwrap();
+    assert!(err("Modified Schlick") < 0.0067 && err("Schlick") > 0.02, "{v}");
+    assert!(std::fs::read_to_string(&plot).unwrap().contains("<svg"));
+    let lobes = dir.join("l.png").display().to_string();
+    let o = lobe(&["plot", "examples/brdfs/blinn.brdf", "examples/brdfs/scos2.brdf", "--set", "n=50", "--polar", "-o", &lobes], None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(&std::fs::read(&lobes).unwrap()[1..4], b"PNG");
+    let o = lobe(&["plot", "examples/brdfs/blinn.brdf", "--set", "q=5", "-o", &lobes], None);
+    assert_clean_error(&o, "plot with an unknown parameter", "no formula has a parameter `q`");
+    let _ = std::fs::remove_dir_all(&dir);
+}
