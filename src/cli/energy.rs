@@ -59,6 +59,12 @@ pub struct EnergyArgs {
     /// Print one JSON object (keys documented in the crate docs of `check`).
     #[arg(long)]
     pub json: bool,
+    /// With --range: also plot coef(n) (and the fitted coefficient with --against) to this .png or .svg.
+    #[arg(long, requires = "range")]
+    pub plot: Option<std::path::PathBuf>,
+    /// Replace an existing plot file even if lobe did not write it.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// The lobe variable from `--lobe`, or chosen from the inputs the formula reads (with a note).
@@ -201,6 +207,9 @@ pub fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<St
             ak.eval(&[0.0; crate::N_INPUTS], &p)
         })
     });
+    if let Some(path) = &a.plot {
+        plot_range(path, &name, &exact, score.as_ref(), a.force)?;
+    }
     if a.json {
         let rows: Vec<_> = exact.iter().map(|(n, i)| json!({"n": n, "coef": json_num(1.0 / (2.0 * std::f64::consts::PI * i))})).collect();
         let mut fixed = params_json.clone();
@@ -237,6 +246,32 @@ pub fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<St
         }
     }
     Ok(out)
+}
+
+/// Writes coef(n) (exact, and fitted when scored) as a plot.
+fn plot_range(
+    path: &std::path::Path,
+    name: &str,
+    exact: &[(f64, f64)],
+    score: Option<&crate::check::energy::AgainstScore>,
+    force: bool,
+) -> Result<(), CliError> {
+    use crate::report::plot::{self, Format, Series};
+    let format = Format::from_path(path).map_err(|e| CliError::hint(e, "use --plot coef.png or coef.svg"))?;
+    let mut series = vec![Series {
+        name: "exact coef(n) = 1/(2π·Int)".into(),
+        points: exact.iter().map(|(n, i)| (*n, 1.0 / (2.0 * std::f64::consts::PI * i))).collect(),
+    }];
+    if let Some(s) = score {
+        series.push(Series { name: "fitted coef(n)".into(), points: s.rows.iter().map(|r| (r.0, r.2)).collect() });
+    }
+    let mut bytes = plot::curves(&series, &format!("{name}: normalisation coefficient"), "n", "coef", format).map_err(CliError::msg)?;
+    if format == Format::Svg {
+        bytes = [b"<!-- made by lobe -->\n".to_vec(), bytes].concat();
+    }
+    common::write_output(path, &bytes, force, common::is_lobe_output)?;
+    eprintln!("wrote {}", path.display());
+    Ok(())
 }
 
 #[cfg(test)]

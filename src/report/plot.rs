@@ -188,6 +188,42 @@ pub fn lobes(series: &[Series], o: &LobeOptions, format: Format) -> DrawResult<V
     render_with(format, o.size, |r| body!(r), |r| body!(r))
 }
 
+/// Curves over any x range (e.g. coef(n) against n for `lobe energy --range … --plot`).
+pub fn curves(series: &[Series], title: &str, x_desc: &str, y_desc: &str, format: Format) -> DrawResult<Vec<u8>> {
+    let pts = || series.iter().flat_map(|s| s.points.iter()).filter(|p| p.0.is_finite() && p.1.is_finite());
+    let (xmin, xmax) = pts().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.0), b.max(p.0)));
+    let (ymin, ymax) = pts().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.1), b.max(p.1)));
+    if !(xmin.is_finite() && ymin.is_finite()) {
+        return Err("nothing to plot: no finite points".into());
+    }
+    let (xmax, ymax) = (if xmax > xmin { xmax } else { xmin + 1.0 }, if ymax > ymin { ymax } else { ymin + 1.0 });
+    let pad = (ymax - ymin) * 0.05;
+    macro_rules! body {
+        ($root:expr) => {{
+            let mut chart = ChartBuilder::on($root)
+                .caption(title, ("sans-serif", 22))
+                .margin(12)
+                .x_label_area_size(35)
+                .y_label_area_size(70)
+                .build_cartesian_2d(xmin..xmax, (ymin - pad)..(ymax + pad))
+                .map_err(err)?;
+            chart.configure_mesh().x_desc(x_desc).y_desc(y_desc).draw().map_err(err)?;
+            for (i, s) in series.iter().enumerate() {
+                let c = color(i);
+                let pts: Vec<(f64, f64)> = s.points.iter().copied().filter(|p| p.0.is_finite() && p.1.is_finite()).collect();
+                chart
+                    .draw_series(LineSeries::new(pts, c.stroke_width(2)))
+                    .map_err(err)?
+                    .label(&s.name)
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+            }
+            chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(err)?;
+            Ok(())
+        }};
+    }
+    render_with(format, (900, 600), |r| body!(r), |r| body!(r))
+}
+
 /// One point of the speed-versus-error scatter.
 #[derive(Clone, Debug)]
 pub struct CostError {
@@ -285,6 +321,14 @@ mod tests {
         }
         let o = LobeOptions { title: "t".into(), polar: true, log: true, size: (320, 240) };
         assert!(lobes(&[cos_n(5.0)], &o, Format::Png).is_err());
+    }
+
+    #[test]
+    fn curves_take_any_x_range() {
+        let s = Series { name: "coef".into(), points: (1..=1000).map(|n| (n as f64, 0.255 * n as f64)).collect() };
+        assert_eq!(&curves(&[s], "t", "n", "coef", Format::Png).unwrap()[1..4], b"PNG");
+        let empty = Series { name: "none".into(), points: vec![(1.0, f64::NAN)] };
+        assert!(curves(&[empty], "t", "n", "coef", Format::Svg).is_err());
     }
 
     #[test]
