@@ -70,6 +70,22 @@ fn color(i: usize) -> RGBColor {
     PALETTE[i % PALETTE.len()]
 }
 
+/// Draws every series as a labelled line with a legend; `points` maps a series to what is drawn.
+macro_rules! draw_lines {
+    ($chart:expr, $series:expr, $points:expr) => {{
+        let points = $points;
+        for (i, s) in $series.iter().enumerate() {
+            let c = color(i);
+            $chart
+                .draw_series(LineSeries::new(points(s), c.stroke_width(2)))
+                .map_err(err)?
+                .label(&s.name)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+        }
+        $chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(err)?;
+    }};
+}
+
 type DrawResult<T> = Result<T, String>;
 
 fn err<E: std::fmt::Display>(e: E) -> String {
@@ -121,23 +137,14 @@ pub fn lobes(series: &[Series], o: &LobeOptions, format: Format) -> DrawResult<V
                     .build_cartesian_2d(-r..r, 0.0..r)
                     .map_err(err)?;
                 chart.configure_mesh().x_desc("value · sin θ").y_desc("value · cos θ").draw().map_err(err)?;
-                for (i, s) in series.iter().enumerate() {
-                    let c = color(i);
-                    let pts: Vec<(f64, f64)> = s
+                draw_lines!(chart, series, |s: &Series| -> Vec<(f64, f64)> { s
                         .points
                         .iter()
                         .rev()
                         .map(|&(deg, v)| (-v.max(0.0) * deg.to_radians().sin(), v.max(0.0) * deg.to_radians().cos()))
                         .chain(s.points.iter().map(|&(deg, v)| (v.max(0.0) * deg.to_radians().sin(), v.max(0.0) * deg.to_radians().cos())))
                         .filter(|p| p.0.is_finite() && p.1.is_finite())
-                        .collect();
-                    chart
-                        .draw_series(LineSeries::new(pts, c.stroke_width(2)))
-                        .map_err(err)?
-                        .label(&s.name)
-                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
-                }
-                chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(err)?;
+                        .collect() });
             } else if o.log {
                 let mut chart = ChartBuilder::on(root)
                     .caption(&o.title, ("sans-serif", 22))
@@ -147,16 +154,7 @@ pub fn lobes(series: &[Series], o: &LobeOptions, format: Format) -> DrawResult<V
                     .build_cartesian_2d(0.0..90.0, (ymin_pos..ymax * 1.5).log_scale())
                     .map_err(err)?;
                 chart.configure_mesh().x_desc("angle (degrees)").y_desc("value (log)").draw().map_err(err)?;
-                for (i, s) in series.iter().enumerate() {
-                    let c = color(i);
-                    let pts: Vec<(f64, f64)> = s.points.iter().copied().filter(|p| p.1.is_finite() && p.1 > 0.0).collect();
-                    chart
-                        .draw_series(LineSeries::new(pts, c.stroke_width(2)))
-                        .map_err(err)?
-                        .label(&s.name)
-                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
-                }
-                chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(err)?;
+                draw_lines!(chart, series, |s: &Series| -> Vec<(f64, f64)> { s.points.iter().copied().filter(|p| p.1.is_finite() && p.1 > 0.0).collect() });
             } else {
                 let ymin = series
                     .iter()
@@ -171,16 +169,7 @@ pub fn lobes(series: &[Series], o: &LobeOptions, format: Format) -> DrawResult<V
                     .build_cartesian_2d(0.0..90.0, ymin * 1.05..ymax * 1.05)
                     .map_err(err)?;
                 chart.configure_mesh().x_desc("angle (degrees)").y_desc("value").draw().map_err(err)?;
-                for (i, s) in series.iter().enumerate() {
-                    let c = color(i);
-                    let pts: Vec<(f64, f64)> = s.points.iter().copied().filter(|p| p.1.is_finite()).collect();
-                    chart
-                        .draw_series(LineSeries::new(pts, c.stroke_width(2)))
-                        .map_err(err)?
-                        .label(&s.name)
-                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
-                }
-                chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(err)?;
+                draw_lines!(chart, series, |s: &Series| -> Vec<(f64, f64)> { s.points.iter().copied().filter(|p| p.1.is_finite()).collect() });
             }
             Ok(())
         }};
@@ -208,16 +197,7 @@ pub fn curves(series: &[Series], title: &str, x_desc: &str, y_desc: &str, format
                 .build_cartesian_2d(xmin..xmax, (ymin - pad)..(ymax + pad))
                 .map_err(err)?;
             chart.configure_mesh().x_desc(x_desc).y_desc(y_desc).draw().map_err(err)?;
-            for (i, s) in series.iter().enumerate() {
-                let c = color(i);
-                let pts: Vec<(f64, f64)> = s.points.iter().copied().filter(|p| p.0.is_finite() && p.1.is_finite()).collect();
-                chart
-                    .draw_series(LineSeries::new(pts, c.stroke_width(2)))
-                    .map_err(err)?
-                    .label(&s.name)
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
-            }
-            chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(err)?;
+            draw_lines!(chart, series, |s: &Series| -> Vec<(f64, f64)> { s.points.iter().copied().filter(|p| p.0.is_finite() && p.1.is_finite()).collect() });
             Ok(())
         }};
     }
