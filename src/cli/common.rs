@@ -103,8 +103,14 @@ pub fn source_from_bytes(name: &str, bytes: Vec<u8>) -> Result<String, CliError>
     }
 }
 
-/// Loads and lowers a formula from a path (or `-`), or from `--expr` text when given.
+/// Loads and lowers a formula from a path (or `-`), or from `--expr` text when given; warnings go to stderr.
 pub fn load_formula(path: Option<&str>, expr: Option<&str>) -> Result<Formula, CliError> {
+    load_formula_with(path, expr, true)
+}
+
+/// [`load_formula`], optionally without printing warnings (for formulas whose warnings are expected, such as a
+/// fitted normalisation coefficient, which by design reads no input).
+pub fn load_formula_with(path: Option<&str>, expr: Option<&str>, show_warnings: bool) -> Result<Formula, CliError> {
     let (name, src) = match (path, expr) {
         (_, Some(e)) => ("<expr>".to_string(), source_from_bytes("<expr>", e.as_bytes().to_vec())?),
         (Some(p), None) => read_source(p)?,
@@ -113,7 +119,7 @@ pub fn load_formula(path: Option<&str>, expr: Option<&str>) -> Result<Formula, C
         }
     };
     let (f, warnings) = crate::front::parse_with_warnings(&name, &src)?;
-    if !warnings.items.is_empty() {
+    if show_warnings && !warnings.items.is_empty() {
         use std::io::IsTerminal;
         let color = std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none();
         eprint!("{}", warnings.render(color));

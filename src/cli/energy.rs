@@ -85,7 +85,11 @@ pub fn run(a: &EnergyArgs) -> Result<(), CliError> {
     let k = common::load_kernel(a.file.as_deref(), a.expr.as_deref(), &set, a.backend)?;
     let against = match (&a.against, &a.against_expr) {
         (None, None) => None,
-        (file, expr) => Some(common::load_kernel(file.as_deref(), expr.as_deref(), &[], a.backend)?),
+        (file, expr) => {
+            // A fitted coefficient reads no input by design: its "reads no input" warning is noise here.
+            let f = common::load_formula_with(file.as_deref(), expr.as_deref(), false)?;
+            Some(crate::compile_formula(f, &crate::Options { backend: a.backend, ..Default::default() })?)
+        }
     };
     print!("{}", report(a, &k, against.as_ref())?);
     Ok(())
