@@ -132,13 +132,14 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
     common::check_set_names(&formulas.iter().collect::<Vec<_>>(), &set)?;
     let reference = common::load_kernel(Some(&a.reference), None, &[], Backend::Jit)?;
     let mut rows = Vec::new();
+    let progress = !a.json && std::io::IsTerminal::is_terminal(&std::io::stderr());
     for (f, path) in formulas.iter().zip(&files) {
-        if !a.json {
+        if progress {
             eprint!("\rmeasuring {:<40}", f.display_name());
         }
         rows.push(row(f, path, &set, &reference, a)?);
     }
-    if !a.json {
+    if progress {
         eprint!("\r{:<52}\r", "");
     }
     bench::mark_pareto(&mut rows);
