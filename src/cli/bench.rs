@@ -156,11 +156,8 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
             .iter()
             .map(|r| CostError { name: r.name.clone(), cost: r.jit_ns, error: r.mean_abs_grid, pareto: r.pareto })
             .collect();
-        let mut bytes = plot::speed_error(&pts, "Speed against error", "scalar JIT ns/eval (log)", "mean |Δ| vs reference (log)", format)
+        let bytes = plot::speed_error(&pts, "Speed against error", "scalar JIT ns/eval (log)", "mean |Δ| vs reference (log)", format)
             .map_err(CliError::msg)?;
-        if format == Format::Svg {
-            bytes = [b"<!-- made by lobe -->\n".to_vec(), bytes].concat();
-        }
         common::write_output(path, &bytes, a.force, common::is_lobe_output)?;
         eprintln!("wrote {}", path.display());
     }

@@ -166,56 +166,22 @@ pub fn param_values(f: &Formula, set: &[(String, f64)]) -> Vec<f64> {
 }
 
 
-/// Writes an output file the way every lobe command does: to a temporary file in the same directory, then
-/// renamed over the target, so a failure never leaves a half-written or truncated file at the user's path.
-/// An existing file is replaced only if `force` is set or `is_ours` recognises it as something lobe wrote
-/// earlier (a PNG with lobe's tEXt chunk, an export with lobe's header): nothing the user wrote is clobbered
-/// without asking.
+/// Writes an output file the way every lobe command does ([`crate::render::image::check_output_path`], then
+/// [`crate::render::image::write_atomic`]): to a temporary file in the same directory, renamed over the target,
+/// so a failure never leaves a half-written or truncated file at the user's path. An existing file is replaced
+/// only if `force` is set or `is_ours` recognises it as something lobe wrote earlier: nothing the user wrote is
+/// clobbered without asking.
 pub fn write_output(path: &std::path::Path, bytes: &[u8], force: bool, is_ours: fn(&[u8]) -> bool) -> Result<(), CliError> {
-    use std::io::Write;
-    if path.is_dir() {
-        return Err(CliError::hint(format!("`{}` is a directory", path.display()), "give a file name, e.g. out.png"));
-    }
-    if path.exists() && !force {
-        let existing = std::fs::read(path).unwrap_or_default();
-        if !is_ours(&existing) {
-            return Err(CliError::hint(
-                format!("`{}` exists and was not written by lobe; not overwriting it", path.display()),
-                "choose another output path, or pass --force to replace it",
-            ));
-        }
-    }
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => std::path::PathBuf::from("."),
-    };
-    if !dir.is_dir() {
-        return Err(CliError::hint(
-            format!("cannot write `{}`: directory `{}` does not exist", path.display(), dir.display()),
-            "create the directory first",
-        ));
-    }
-    let file_name = path.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
-    let tmp = dir.join(format!(".{file_name}.lobe-{}.tmp", std::process::id()));
-    let result = (|| -> std::io::Result<()> {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(CliError::msg(format!("cannot write `{}`: {e}", path.display())));
-    }
-    Ok(())
+    use crate::render::image;
+    image::check_output_path(path, force, is_ours)
+        .map_err(|m| CliError::hint(m, "choose another output path, or pass --force to replace it"))?;
+    image::write_atomic(path, bytes).map_err(CliError::msg)
 }
 
 /// Recognises files lobe wrote: PNGs carry a `Software: lobe` tEXt chunk, SVGs and text exports a lobe header.
 pub fn is_lobe_output(bytes: &[u8]) -> bool {
-    let head = &bytes[..bytes.len().min(4096)];
-    head.windows(13).any(|w| w == b"Software\0lobe")
-        || String::from_utf8_lossy(&head[..head.len().min(400)]).contains("made by lobe")
-        || String::from_utf8_lossy(&head[..head.len().min(400)]).contains("exported by lobe")
+    let head = String::from_utf8_lossy(&bytes[..bytes.len().min(400)]);
+    crate::render::image::is_lobe_png(bytes) || head.contains("made by lobe") || head.contains("exported by lobe")
 }
 
 /// For commands over several formulas: the `--set` values each formula declares. A name no formula declares

@@ -67,7 +67,7 @@ fn row_json(a: &CompareArgs, c: &Comparison) -> serde_json::Value {
 
 pub fn run(a: &CompareArgs) -> Result<(), CliError> {
     if let Some(out) = &a.output {
-        image::check_output_path(out, a.force).map_err(|m| CliError::hint(m, "choose another -o path"))?;
+        image::check_output_path(out, a.force, image::is_lobe_png).map_err(|m| CliError::hint(m, "choose another -o path"))?;
     }
     let (fa, sa) = common::read_source(&a.a)?;
     let (fb, sb) = common::read_source(&a.b)?;

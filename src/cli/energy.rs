@@ -269,10 +269,7 @@ fn plot_range(
     if let Some(s) = score {
         series.push(Series { name: "fitted coef(n)".into(), points: s.rows.iter().map(|r| (r.0, r.2)).collect() });
     }
-    let mut bytes = plot::curves(&series, &format!("{name}: normalisation coefficient"), "n", "coef", format).map_err(CliError::msg)?;
-    if format == Format::Svg {
-        bytes = [b"<!-- made by lobe -->\n".to_vec(), bytes].concat();
-    }
+    let bytes = plot::curves(&series, &format!("{name}: normalisation coefficient"), "n", "coef", format).map_err(CliError::msg)?;
     common::write_output(path, &bytes, force, common::is_lobe_output)?;
     eprintln!("wrote {}", path.display());
     Ok(())

@@ -86,10 +86,7 @@ pub fn run(a: &PlotArgs) -> Result<(), CliError> {
         title = format!("Error against {}, {n_label}", reference.name);
     }
     let opts = LobeOptions { title, polar: a.polar, log: a.log, size: a.size };
-    let mut bytes = plot::lobes(&series, &opts, format).map_err(CliError::msg)?;
-    if format == Format::Svg {
-        bytes = [b"<!-- made by lobe -->\n".to_vec(), bytes].concat();
-    }
+    let bytes = plot::lobes(&series, &opts, format).map_err(CliError::msg)?;
     common::write_output(&a.output, &bytes, a.force, common::is_lobe_output)?;
     eprintln!("wrote {}", a.output.display());
     Ok(())

@@ -69,7 +69,7 @@ pub fn default_output(scene: &Path) -> PathBuf {
 pub fn run(a: &RenderArgs) -> Result<(), CliError> {
     let out = a.output.clone().unwrap_or_else(|| default_output(&a.scene));
     // Refuse a bad output path before doing any work, and write nothing unless everything succeeds.
-    image::check_output_path(&out, a.force).map_err(|m| CliError::hint(m, "choose another -o path"))?;
+    image::check_output_path(&out, a.force, image::is_lobe_png).map_err(|m| CliError::hint(m, "choose another -o path"))?;
     let opts = LoadOptions { size: a.size, set: a.set.concat(), formula_override: None };
     let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: a.backend })?;
     let ropts = RenderOptions {

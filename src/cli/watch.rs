@@ -58,7 +58,7 @@ fn reload(a: &WatchArgs, src: String) -> Result<String, CliError> {
 }
 
 pub fn run(a: &WatchArgs) -> Result<(), CliError> {
-    image::check_output_path(&a.output, a.force).map_err(|m| CliError::hint(m, "choose another -o path"))?;
+    image::check_output_path(&a.output, a.force, image::is_lobe_png).map_err(|m| CliError::hint(m, "choose another -o path"))?;
     if !a.scene.is_file() {
         return Err(CliError::hint(format!("scene `{}` not found", a.scene.display()), "examples are in examples/scenes/"));
     }

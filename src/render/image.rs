@@ -110,8 +110,9 @@ pub fn is_lobe_png(bytes: &[u8]) -> bool {
 }
 
 /// Checks that `path` may be (over)written: it must not be a directory, its directory must exist, and an
-/// existing file must be a PNG lobe wrote, unless `force`.
-pub fn check_output_path(path: &Path, force: bool) -> Result<(), String> {
+/// existing file must be one lobe wrote (`is_ours`, e.g. [`is_lobe_png`]) unless `force`. Every command that
+/// writes a file goes through this and [`write_atomic`].
+pub fn check_output_path(path: &Path, force: bool, is_ours: fn(&[u8]) -> bool) -> Result<(), String> {
     if path.is_dir() {
         return Err(format!("`{}` is a directory", path.display()));
     }
@@ -121,8 +122,11 @@ pub fn check_output_path(path: &Path, force: bool) -> Result<(), String> {
     }
     if path.exists() && !force {
         let bytes = std::fs::read(path).map_err(|e| format!("cannot read existing `{}`: {e}", path.display()))?;
-        if !is_lobe_png(&bytes) {
-            return Err(format!("`{}` exists and is not a PNG lobe wrote; refusing to overwrite it (use --force)", path.display()));
+        if !is_ours(&bytes) {
+            return Err(format!(
+                "`{}` exists and was not written by lobe; not overwriting it (refusing to overwrite without --force)",
+                path.display()
+            ));
         }
     }
     Ok(())
@@ -186,12 +190,12 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let p = dir.join("notes.png");
         std::fs::write(&p, "precious").unwrap();
-        assert!(check_output_path(&p, false).is_err());
-        assert!(check_output_path(&p, true).is_ok());
+        assert!(check_output_path(&p, false, is_lobe_png).is_err());
+        assert!(check_output_path(&p, true, is_lobe_png).is_ok());
         let ours = Image::new(1, 1).encode_png().unwrap();
         write_atomic(&p, &ours).unwrap();
-        assert!(check_output_path(&p, false).is_ok());
-        assert!(check_output_path(&dir.join("missing/x.png"), false).is_err());
+        assert!(check_output_path(&p, false, is_lobe_png).is_ok());
+        assert!(check_output_path(&dir.join("missing/x.png"), false, is_lobe_png).is_err());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

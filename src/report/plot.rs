@@ -92,21 +92,6 @@ fn err<E: std::fmt::Display>(e: E) -> String {
     format!("plotting failed: {e}")
 }
 
-/// PNG bytes of an 8-bit RGB buffer, tagged `Software: lobe` so lobe knows it may overwrite it later.
-pub fn encode_png_rgb(rgb: &[u8], w: u32, h: u32) -> DrawResult<Vec<u8>> {
-    let mut out = Vec::new();
-    {
-        let mut enc = png::Encoder::new(&mut out, w, h);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        enc.add_text_chunk("Software".into(), "lobe".into()).map_err(err)?;
-        let mut wr = enc.write_header().map_err(err)?;
-        wr.write_image_data(rgb).map_err(err)?;
-        wr.finish().map_err(err)?;
-    }
-    Ok(out)
-}
-
 /// Lobes (value against angle in degrees, 0..90). Polar: radius = value, drawn on both sides of the axis.
 pub fn lobes(series: &[Series], o: &LobeOptions, format: Format) -> DrawResult<Vec<u8>> {
     if o.polar && o.log {
@@ -267,7 +252,8 @@ where
                 png(&root)?;
                 root.present().map_err(err)?;
             }
-            encode_png_rgb(&buf, size.0, size.1)
+            // The renderer's encoder: same `Software: lobe` marker, so lobe may later replace its own plot.
+            crate::render::image::Image { width: size.0 as usize, height: size.1 as usize, rgb: buf }.encode_png()
         }
         Format::Svg => {
             let mut s = String::new();
@@ -277,7 +263,8 @@ where
                 svg(&root)?;
                 root.present().map_err(err)?;
             }
-            Ok(s.into_bytes())
+            // The marker lets lobe recognise (and later replace) its own SVGs.
+            Ok([b"<!-- made by lobe -->\n".as_slice(), s.as_bytes()].concat())
         }
     }
 }
