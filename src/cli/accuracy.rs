@@ -9,14 +9,6 @@ use crate::check::json_num;
 use crate::{Backend, Kernel};
 use serde_json::json;
 
-/// `writeln!` into the report string (formatting into a `String` cannot fail).
-macro_rules! outln {
-    ($o:expr, $($t:tt)*) => {{
-        use std::fmt::Write as _;
-        let _ = writeln!($o, $($t)*);
-    }};
-}
-
 #[derive(clap::Args, Debug)]
 pub struct AccuracyArgs {
     /// Formula file (.brdf), or `-` for standard input.

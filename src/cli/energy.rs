@@ -9,14 +9,6 @@ use crate::ir::Input;
 use crate::{Backend, Evaluator, Kernel};
 use serde_json::json;
 
-/// `writeln!` into the report string (formatting into a `String` cannot fail).
-macro_rules! outln {
-    ($o:expr, $($t:tt)*) => {{
-        use std::fmt::Write as _;
-        let _ = writeln!($o, $($t)*);
-    }};
-}
-
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
 pub enum Mode {
     /// The papers' coefficient: the lobe as a function of one angle, light at the normal.

@@ -10,14 +10,6 @@ use crate::{Backend, Kernel};
 use serde_json::json;
 use std::io::IsTerminal;
 
-/// `writeln!` into the report string (formatting into a `String` cannot fail).
-macro_rules! outln {
-    ($o:expr, $($t:tt)*) => {{
-        use std::fmt::Write as _;
-        let _ = writeln!($o, $($t)*);
-    }};
-}
-
 #[derive(clap::Args, Debug)]
 pub struct FitArgs {
     /// Formula file (.brdf), or `-` for standard input.

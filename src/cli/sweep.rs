@@ -10,14 +10,6 @@ use crate::ir::Formula;
 use crate::{Backend, Options};
 use serde_json::json;
 
-/// `writeln!` into the report string (formatting into a `String` cannot fail).
-macro_rules! outln {
-    ($o:expr, $($t:tt)*) => {{
-        use std::fmt::Write as _;
-        let _ = writeln!($o, $($t)*);
-    }};
-}
-
 #[derive(clap::Args, Debug)]
 pub struct SweepArgs {
     /// Formula file (.brdf), or `-` for standard input.
