@@ -5,32 +5,14 @@
 //! interpreter on a hand-built IR of Blinn (an upper bound until the JIT lands).
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use lobe::builtins::Builtin;
 use lobe::check::energy::{lobe_integral, normalization_coef};
 use lobe::check::twins;
-use lobe::front::span::Span;
 use lobe::interp::Interp;
-use lobe::ir::{Formula, Input, Ir, Meta, ParamDecl};
+use lobe::ir::{Formula, Input};
 use std::hint::black_box;
 
 fn blinn_ir() -> Formula {
-    let mut ir = Ir::new();
-    let s = Span::default();
-    let nh = ir.input(Input::NH, s);
-    let z = ir.konst(0.0, s);
-    let o = ir.konst(1.0, s);
-    let c = ir.call(Builtin::Clamp, &[nh, z, o], s);
-    let n = ir.param(0, s);
-    let p = ir.call(Builtin::Pow, &[c, n], s);
-    let root = ir.call(Builtin::Max, &[p, z], s);
-    Formula {
-        meta: Meta::default(),
-        params: vec![ParamDecl { name: "n".into(), default: 50.0, lo: 1.0, hi: 1000.0, span: None }],
-        ir,
-        root,
-        file: "blinn".into(),
-        source: String::new(),
-    }
+    lobe::front::parse("blinn", "NH^n").expect("a valid formula")
 }
 
 fn bench(c: &mut Criterion) {

@@ -1,34 +1,16 @@
 //! Energy checks through the public API, on the interpreter kernel (the path compiled .brdf files take) and on
 //! the hand-written twins.
 
-use lobe::builtins::Builtin;
 use lobe::check::energy::{albedo, full_energy, lobe_integral, normalization_coef};
 use lobe::check::{published, twins};
-use lobe::front::span::Span;
-use lobe::ir::{Formula, Input, Ir, Meta, ParamDecl};
+use lobe::ir::{Formula, Input};
 use lobe::{build_kernel, Backend};
 use std::f64::consts::PI;
 use std::sync::Arc;
 
-/// `max(pow(clamp(INPUT, 0, 1), n), 0)` as the lowering would produce it.
+/// `INPUT^n` through the front end: `max(pow(clamp(INPUT, 0, 1), n), 0)`, n = 50 in 1..1000.
 pub fn power_lobe(input: Input) -> Formula {
-    let mut ir = Ir::new();
-    let s = Span::default();
-    let x = ir.input(input, s);
-    let z = ir.konst(0.0, s);
-    let o = ir.konst(1.0, s);
-    let c = ir.call(Builtin::Clamp, &[x, z, o], s);
-    let n = ir.param(0, s);
-    let p = ir.call(Builtin::Pow, &[c, n], s);
-    let root = ir.call(Builtin::Max, &[p, z], s);
-    Formula {
-        meta: Meta::default(),
-        params: vec![ParamDecl { name: "n".into(), default: 50.0, lo: 1.0, hi: 1000.0, span: None }],
-        ir,
-        root,
-        file: "lobe".into(),
-        source: String::new(),
-    }
+    lobe::front::parse("lobe", &format!("{}^n", input.name())).expect("a valid formula")
 }
 
 #[test]
