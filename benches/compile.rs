@@ -16,17 +16,17 @@ fn bench_compile(c: &mut Criterion) {
         let mut g = c.benchmark_group(format!("compile/{}", e.name));
         g.warm_up_time(Duration::from_millis(300)).measurement_time(Duration::from_secs(1)).sample_size(30);
         g.bench_function("jit_codegen", |b| {
-            b.iter(|| lobe::jit::compile_uncached(black_box(&k.formula)).map(|k| k.nodes()))
+            b.iter(|| lobe::backend::jit::jit_kernel_uncached(black_box(&k.formula)).map(|k| k.nodes()))
         });
         if from_text {
             let opts = Options { backend: Backend::Jit, ..Options::default() };
-            let old = lobe::jit::set_cache_capacity(0);
+            let old = lobe::backend::jit::set_cache_capacity(0);
             g.bench_function("pipeline_uncached", |b| {
-                b.iter(|| lobe::compile(e.name, black_box(e.text), &opts).is_ok())
+                b.iter(|| lobe::compile_source(e.name, black_box(e.text), &opts).is_ok())
             });
-            lobe::jit::set_cache_capacity(old);
+            lobe::backend::jit::set_cache_capacity(old);
             g.bench_function("pipeline_cache_hit", |b| {
-                b.iter(|| lobe::compile(e.name, black_box(e.text), &opts).is_ok())
+                b.iter(|| lobe::compile_source(e.name, black_box(e.text), &opts).is_ok())
             });
         } else {
             eprintln!("note: {}: front end not available, only code generation is timed", e.name);

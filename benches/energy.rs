@@ -5,9 +5,9 @@
 //! interpreter on a hand-built IR of Blinn (an upper bound until the JIT lands).
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use lobe::check::energy::{lobe_integral, normalization_coef};
-use lobe::check::twins;
-use lobe::interp::Interp;
+use lobe::numerics::energy::{lobe_integral, normalization_coef};
+use lobe::numerics::twins;
+use lobe::backend::interp::Interp;
 use lobe::ir::{Formula, Input};
 use std::hint::black_box;
 
@@ -41,9 +41,9 @@ criterion_group!(benches, bench);
 
 /// Whole-report costs (accuracy over the 91×1000 grid + fine grid, full-mode albedo, stability sweep).
 fn checks(c: &mut Criterion) {
-    use lobe::check::accuracy::{accuracy, AccuracyOptions};
-    use lobe::check::energy::full_energy;
-    use lobe::check::sweep::{sweep, SweepOptions};
+    use lobe::numerics::accuracy::{accuracy, AccuracyOptions};
+    use lobe::numerics::energy::full_energy;
+    use lobe::numerics::sweep::{sweep, SweepOptions};
     let mut g = c.benchmark_group("checks");
     g.sample_size(10);
     let ms = twins::modified_schlick();

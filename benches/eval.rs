@@ -15,7 +15,7 @@ use std::time::Duration;
 const POINTS: usize = 1024;
 
 fn bench_eval(c: &mut Criterion) {
-    let rows = lobe::jit::measure::sample_points(POINTS, 0x5EED);
+    let rows = lobe::report::measure::sample_points(POINTS, 0x5EED);
     let cols: Vec<Vec<f64>> = (0..N_INPUTS).map(|i| rows.iter().map(|r| r[i]).collect()).collect();
     let columns = Columns::new(std::array::from_fn(|i| cols[i].as_slice()));
     let mut out = vec![0.0; POINTS];

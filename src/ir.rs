@@ -15,7 +15,7 @@
 //!   at 0) is written into the IR by the lowering, not hidden in a backend, so every backend obeys it.
 
 use crate::builtins::Builtin;
-use crate::front::span::Span;
+use crate::base::span::Span;
 use std::collections::HashMap;
 use std::fmt;
 
@@ -347,6 +347,14 @@ pub struct ParamDecl {
     pub hi: f64,
     /// Where it was declared; `None` for the implicit `n`.
     pub span: Option<Span>,
+}
+
+impl ParamDecl {
+    /// Whether `v` is an allowed value: finite and inside the declared range. The one range check every
+    /// caller uses (`--set`, scene `params`, checks that vary parameters).
+    pub fn admits(&self, v: f64) -> bool {
+        v.is_finite() && v >= self.lo && v <= self.hi
+    }
 }
 
 /// Display metadata from `@name "…"` and `@cite "…"` lines.

@@ -1,32 +1,39 @@
 //! lobe: a compiler and JIT for BRDF formulas.
 //!
-//! The pipeline, one module per stage:
+//! The pipeline, one layer per folder; every import points down this list, and nothing below `cli` knows the
+//! CLI exists:
 //!
 //! ```text
-//! text (.brdf) → front (logos tokens → lalrpop AST with spans → names/arity resolved) → ir::Formula
-//!   → simplify (fixpoint rewrites, baked parameters, used inputs)
-//!   → { interp (reference) | jit (Cranelift, scalar and batched) | export (GLSL) } = kernel::Kernel
-//!   → check (energy, accuracy, sweep, fit) and render (tiles → image → metrics)
+//! base       spans, diagnostics, reading sources, file polling
+//! ir         the resolved expression (arena, hash-consed); builtins: the one table of functions
+//! front      .brdf text → logos tokens → lalrpop AST with spans → names/arity resolved → ir::Formula
+//! simplify   fixpoint rewrites, baked parameters, integer powers, used inputs
+//! backend    the Evaluator interface and Kernel; interpreter (reference), Cranelift JIT, GLSL/WGSL emission
+//! lib.rs     the compile entry points: compile_source, compile_formula, build_kernel
+//! numerics   energy and normalisation, accuracy against a reference, the domain sweep, fits, twins
+//! render     scenes, shapes, camera, rasteriser, shading, images, image comparison
+//! report     bench measurement and tables, plots
+//! cli        clap subcommands over the layers above (main.rs dispatches)
 //! ```
 //!
 //! The front end knows nothing of Cranelift; every backend consumes only [`ir::Formula`]; builtins come from
-//! the one table in [`builtins`]. The entry point is [`compile`].
+//! the one table in [`builtins`]. Numerical checks consume kernels ([`backend::Evaluator`]), never text.
+#![deny(unsafe_code)]
 
+pub mod base;
 pub mod builtins;
-pub mod check;
-pub mod cli;
-pub mod front;
-pub mod interp;
 pub mod ir;
-pub mod jit;
-pub mod kernel;
-pub mod report;
+pub mod front;
 pub mod simplify;
-pub mod watch;
+pub mod backend;
+pub mod numerics;
+pub mod render;
+pub mod report;
+pub mod cli;
 
-pub use front::diag::{Diagnostic, Diagnostics};
+pub use backend::{Backend, Columns, Evaluator, Kernel};
+pub use base::diag::{Diagnostic, Diagnostics};
 pub use ir::{Formula, Input, N_INPUTS};
-pub use kernel::{Backend, Columns, Evaluator, Kernel};
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -40,58 +47,31 @@ pub struct Options {
     pub bake: Vec<(String, f64)>,
     /// Skip the simplifier (for testing the simplifier itself against the unsimplified formula).
     pub no_simplify: bool,
-    /// Multiply the formula by its exact normalisation coefficient 1/(2π·Int) (the papers' lobe integral,
-    /// computed by adaptive quadrature at compile time) and bake it into the kernel. The coefficient depends on
-    /// every parameter, so normalising bakes them all: values from `bake`, declared defaults for the rest.
-    pub normalize: bool,
 }
 
 /// Parses, lowers and simplifies a formula, then builds its kernel for the chosen backend.
-pub fn compile(file: &str, src: &str, opts: &Options) -> Result<Kernel, Diagnostics> {
+pub fn compile_source(file: &str, src: &str, opts: &Options) -> Result<Kernel, Diagnostics> {
     let f = front::parse(file, src)?;
     compile_formula(f, opts)
 }
 
-/// [`compile`] for an already lowered formula.
+/// [`compile_source`] for an already lowered formula.
 pub fn compile_formula(f: Formula, opts: &Options) -> Result<Kernel, Diagnostics> {
-    let mut bake = resolve_bake(&f, &opts.bake)?;
-    if opts.normalize {
-        for (i, p) in f.params.iter().enumerate() {
-            if !bake.iter().any(|(j, _)| *j == i) {
-                bake.push((i, p.default));
-            }
-        }
-    }
-    let simplified = if opts.no_simplify { simplify::bake_only(&f, &bake) } else { simplify::simplify(&f, &bake) };
-    let simplified = if opts.normalize { normalized(simplified)? } else { simplified };
-    build_kernel(Arc::new(simplified), opts.backend)
+    build_kernel(Arc::new(simplified(&f, opts)?), opts.backend)
 }
 
-/// `coef · f` with the exact coefficient of the fully baked formula `f` (see [`Options::normalize`]).
-fn normalized(f: Formula) -> Result<Formula, Diagnostics> {
-    let params = f.default_params();
-    let ev = interp::Interp::new(&f);
-    let (lobe, _) = check::choose_lobe_input(f.used_inputs());
-    let coef = check::energy::normalization_coef(&ev, &params, lobe).map_err(|e| {
-        let mut d = Diagnostic::error(format!("cannot normalise {}: {e}", f.display_name()));
-        if let Some(h) = &e.hint {
-            d = d.hint(h.clone());
-        }
-        Diagnostics::single(&f.file, d)
-    })?;
-    let mut g = f.clone();
-    let span = g.ir.span(g.root);
-    let c = g.ir.konst(coef, span);
-    g.root = g.ir.bin(ir::BinOp::Mul, c, g.root, span);
-    Ok(simplify::simplify(&g, &[]))
+/// The simplified formula with `opts.bake` folded in (`--set` names and ranges checked first).
+pub fn simplified(f: &Formula, opts: &Options) -> Result<Formula, Diagnostics> {
+    let bake = resolve_bake(f, &opts.bake)?;
+    Ok(if opts.no_simplify { simplify::bake_only(f, &bake) } else { simplify::simplify(f, &bake) })
 }
 
 /// Builds the evaluator for an already simplified formula.
 pub fn build_kernel(f: Arc<Formula>, backend: Backend) -> Result<Kernel, Diagnostics> {
     let t = Instant::now();
     let ev: Arc<dyn Evaluator> = match backend {
-        Backend::Interp => Arc::new(interp::Interp::new(&f)),
-        Backend::Jit => jit::kernel_evaluator(&f).map_err(|d| Diagnostics::single(&f.file, d))?,
+        Backend::Interp => Arc::new(backend::interp::Interp::new(&f)),
+        Backend::Jit => backend::jit::kernel_evaluator(&f).map_err(|d| Diagnostics::single(&f.file, d))?,
     };
     Ok(Kernel::new(f, backend, ev, t.elapsed()))
 }
@@ -104,7 +84,7 @@ pub fn resolve_bake(f: &Formula, set: &[(String, f64)]) -> Result<Vec<(usize, f6
         match f.param_index(name) {
             Some(i) => {
                 let p = &f.params[i];
-                if !(v.is_finite() && *v >= p.lo && *v <= p.hi) {
+                if !p.admits(*v) {
                     let mut d = Diagnostic::error(format!(
                         "value {v} for parameter `{name}` is outside its declared range {}..{}",
                         ir::print::number(p.lo),
@@ -135,6 +115,3 @@ pub fn resolve_bake(f: &Formula, set: &[(String, f64)]) -> Result<Vec<(usize, f6
         Ok(out)
     }
 }
-
-/// The tile-based software renderer (scenes, meshes, rasteriser, shading, PNG output, image comparison).
-pub mod render;

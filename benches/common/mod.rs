@@ -7,7 +7,7 @@
 #![allow(dead_code)]
 
 use lobe::builtins::Builtin;
-use lobe::front::span::Span;
+use lobe::base::span::Span;
 use lobe::ir::{BinOp, Formula, Input, Ir, Meta, NodeId, ParamDecl, N_INPUTS};
 use lobe::{Backend, Kernel, Options};
 use std::sync::Arc;
@@ -264,11 +264,11 @@ fn hand(build: impl FnOnce(&mut B) -> NodeId) -> Formula {
 }
 
 impl Entry {
-    /// The kernel from the formula text via `lobe::compile`, or (before the front end is merged) from the
+    /// The kernel from the formula text via `lobe::compile_source`, or (before the front end is merged) from the
     /// hand-built IR. The bool says whether the text path was used.
     pub fn kernel(&self, backend: Backend) -> (Kernel, bool) {
         let opts = Options { backend, ..Options::default() };
-        match lobe::compile(self.name, self.text, &opts) {
+        match lobe::compile_source(self.name, self.text, &opts) {
             Ok(k) => (k, true),
             Err(_) => match lobe::compile_formula(self.hand_formula(), &opts) {
                 Ok(k) => (k, false),
@@ -290,7 +290,7 @@ impl Entry {
         Kernel::new(
             like.formula.clone(),
             Backend::Interp,
-            Arc::new(lobe::kernel::FnEvaluator(twin)),
+            Arc::new(lobe::backend::FnEvaluator(twin)),
             Default::default(),
         )
     }

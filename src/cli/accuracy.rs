@@ -1,11 +1,11 @@
 //! `lobe accuracy FILE --reference examples/brdfs/blinn.brdf [--set a=268] [--q 8] [--json]`
 //!
-//! JSON keys are documented in [`crate::check`].
+//! JSON keys are documented in [`crate::numerics`].
 
 use super::common::{self, CliError};
 use super::energy::resolve_lobe;
-use crate::check::accuracy::{accuracy, AccuracyOptions};
-use crate::check::json_num;
+use crate::numerics::accuracy::{accuracy, AccuracyOptions};
+use crate::numerics::json_num;
 use crate::{Backend, Kernel};
 use serde_json::json;
 
@@ -120,7 +120,7 @@ pub fn report(a: &AccuracyArgs, k: &Kernel, r: &Kernel) -> Result<String, CliErr
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::check::twins;
+    use crate::numerics::twins;
     use crate::cli::energy::tests::twin_kernel;
     use crate::ir::Input;
     use clap::Parser;

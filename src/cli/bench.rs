@@ -6,9 +6,9 @@
 //! marked; `--plot` draws cost against error.
 
 use super::common::{self, CliError};
-use crate::check::accuracy::{accuracy, AccuracyOptions};
-use crate::check::{choose_lobe_input, energy};
-use crate::jit::measure::{measure_kernel, sample_points, MeasureOptions};
+use crate::numerics::accuracy::{accuracy, AccuracyOptions};
+use crate::numerics::{choose_lobe_input, energy};
+use crate::report::measure::{measure_kernel, sample_points, MeasureOptions};
 use crate::report::bench::{self, BenchRow};
 use crate::report::plot::{self, CostError, Format};
 use crate::{Backend, Formula, Options};
@@ -85,7 +85,7 @@ fn row(f: &Formula, path: &str, set: &[(String, f64)], reference: &crate::Kernel
     let m = measure_kernel(&baked, &params, MeasureOptions { points: 4096, samples: a.samples })
         .map_err(|e| CliError::msg(format!("{path}: {e}")))?;
     let stem = Path::new(path).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-    let native_ns = crate::check::twins::by_stem(&stem).map(|t| time_twin(t.ev.as_ref(), &params, a.samples));
+    let native_ns = crate::numerics::twins::by_stem(&stem).map(|t| time_twin(t.ev.as_ref(), &params, a.samples));
     let (lobe, _) = choose_lobe_input(live.used_inputs());
     let (ref_lobe, _) = choose_lobe_input(reference.used_inputs());
     let acc = accuracy(&live, &params, lobe, reference, &reference.default_params(), ref_lobe, &AccuracyOptions::default());

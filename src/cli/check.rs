@@ -58,7 +58,7 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
             "nodes_after": nodes_after,
             "rewrites": report.fired.iter().map(|(k, v)| json!({"rule": k, "count": v})).collect::<Vec<_>>(),
             "rounding_changes": report.rounding.iter().map(|r| {
-                let (line, col) = crate::front::span::line_col(&f.source, r.span.start as usize);
+                let (line, col) = crate::base::span::line_col(&f.source, r.span.start as usize);
                 json!({"rule": r.rule, "line": line, "col": col, "detail": r.detail})
             }).collect::<Vec<_>>(),
             "passes": report.passes,
@@ -89,7 +89,7 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
         println!("  rewrites    {} ({} passes)", r.join(", "), report.passes);
     }
     for r in &report.rounding {
-        let (line, col) = crate::front::span::line_col(&f.source, r.span.start as usize);
+        let (line, col) = crate::base::span::line_col(&f.source, r.span.start as usize);
         println!("  rounding    {}:{line}:{col} {}: {}", f.file, r.rule, r.detail);
     }
     println!(

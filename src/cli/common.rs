@@ -1,14 +1,10 @@
 //! Helpers every subcommand uses: loading a formula (file, `-` for stdin, or `--expr`), parsing
 //! `name=value,…` lists, and one error type that knows how to print itself and which exit code to use.
 
-use crate::front::diag::Diagnostics;
+use crate::base::diag::Diagnostics;
 use crate::ir::Formula;
 use crate::{Backend, Kernel, Options};
 use std::fmt;
-use std::io::Read;
-
-/// Largest formula source accepted (a .brdf file is a few lines; this bounds time and memory on garbage).
-pub const MAX_SOURCE_BYTES: usize = 1 << 20;
 
 /// An error a subcommand reports: rendered diagnostics, or a plain message with an optional hint.
 #[derive(Debug)]
@@ -48,60 +44,27 @@ impl fmt::Display for CliError {
     }
 }
 
+/// A single located-nowhere diagnostic (an unreadable file, say) prints as a plain message with its hints.
+impl From<crate::base::diag::Diagnostic> for CliError {
+    fn from(d: crate::base::diag::Diagnostic) -> CliError {
+        CliError::Msg { msg: d.message, hint: (!d.hints.is_empty()).then(|| d.hints.join("; ")) }
+    }
+}
+
+/// A failed numerical check prints as its message and hint.
+impl From<crate::numerics::CheckError> for CliError {
+    fn from(e: crate::numerics::CheckError) -> Self {
+        CliError::Msg { msg: e.msg, hint: e.hint }
+    }
+}
+
 impl From<Diagnostics> for CliError {
     fn from(d: Diagnostics) -> CliError {
         CliError::Diagnostics(d)
     }
 }
 
-/// Reads a formula source: a path, or `-` for standard input. Refuses non-UTF-8 and oversized input.
-pub fn read_source(path: &str) -> Result<(String, String), CliError> {
-    let mut bytes = Vec::new();
-    let name = if path == "-" {
-        std::io::stdin()
-            .take(MAX_SOURCE_BYTES as u64 + 1)
-            .read_to_end(&mut bytes)
-            .map_err(|e| CliError::msg(format!("cannot read standard input: {e}")))?;
-        "<stdin>".to_string()
-    } else {
-        let file = std::fs::File::open(path).map_err(|e| {
-            CliError::hint(format!("cannot open `{path}`: {e}"), "check the path; `-` reads the formula from standard input")
-        })?;
-        if file.metadata().map(|m| m.is_dir()).unwrap_or(false) {
-            return Err(CliError::hint(format!("`{path}` is a directory"), "give a .brdf file"));
-        }
-        file.take(MAX_SOURCE_BYTES as u64 + 1)
-            .read_to_end(&mut bytes)
-            .map_err(|e| CliError::msg(format!("cannot read `{path}`: {e}")))?;
-        path.to_string()
-    };
-    source_from_bytes(&name, bytes).map(|s| (name, s))
-}
-
-/// Validates raw bytes as a formula source (size, UTF-8, no NUL bytes).
-pub fn source_from_bytes(name: &str, bytes: Vec<u8>) -> Result<String, CliError> {
-    if bytes.len() > MAX_SOURCE_BYTES {
-        return Err(CliError::hint(
-            format!("`{name}` is larger than {} KiB; a formula file is a few lines", MAX_SOURCE_BYTES / 1024),
-            "is this the right file?",
-        ));
-    }
-    match String::from_utf8(bytes) {
-        Ok(s) if s.contains('\0') => Err(CliError::hint(
-            format!("`{name}` contains NUL bytes; it looks like a binary file, not a formula"),
-            "a .brdf file is UTF-8 text",
-        )),
-        Ok(s) => Ok(s),
-        Err(e) => {
-            let at = e.utf8_error().valid_up_to();
-            let (line, col) = crate::front::span::line_col(&String::from_utf8_lossy(&e.into_bytes()[..at]), at);
-            Err(CliError::hint(
-                format!("{name}:{line}:{col}: the file is not valid UTF-8 text (byte offset {at})"),
-                "a .brdf file is UTF-8 text; is this a binary file?",
-            ))
-        }
-    }
-}
+pub use crate::base::source::{read_source, source_from_bytes};
 
 /// Loads and lowers a formula from a path (or `-`), or from `--expr` text when given; warnings go to stderr.
 pub fn load_formula(path: Option<&str>, expr: Option<&str>) -> Result<Formula, CliError> {
@@ -217,9 +180,4 @@ mod tests {
         assert!(parse_assignments("n=inf").is_err());
     }
 
-    #[test]
-    fn binary_input_is_refused() {
-        assert!(source_from_bytes("x", vec![0xff, 0xfe, 0x00]).is_err());
-        assert!(source_from_bytes("x", b"NH\0".to_vec()).is_err());
-    }
 }

@@ -1,10 +1,10 @@
 //! `lobe energy FILE --set n=50 [--mode lobe|full] [--range 1..1000 [--against F.brdf | --against-expr E]] [--json]`
 //!
-//! JSON keys are documented in [`crate::check`].
+//! JSON keys are documented in [`crate::numerics`].
 
 use super::common::{self, CliError};
-use crate::check::energy::{coef_sweep, full_energy, lobe_integral, score_against};
-use crate::check::{choose_lobe_input, json_num, parse_range};
+use crate::numerics::energy::{coef_sweep, full_energy, lobe_integral, score_against};
+use crate::numerics::{choose_lobe_input, json_num, parse_range};
 use crate::ir::Input;
 use crate::{Backend, Evaluator, Kernel};
 use serde_json::json;
@@ -249,7 +249,7 @@ fn plot_range(
     path: &std::path::Path,
     name: &str,
     exact: &[(f64, f64)],
-    score: Option<&crate::check::energy::AgainstScore>,
+    score: Option<&crate::numerics::energy::AgainstScore>,
     force: bool,
 ) -> Result<(), CliError> {
     use crate::report::plot::{self, Format, Series};
@@ -271,8 +271,8 @@ fn plot_range(
 pub(crate) mod tests {
     use super::*;
     use crate::builtins::Builtin;
-    use crate::check::twins::{self, Twin};
-    use crate::front::span::Span;
+    use crate::numerics::twins::{self, Twin};
+    use crate::base::span::Span;
     use crate::ir::{Formula, Ir, Meta, ParamDecl};
     use clap::Parser;
     use std::sync::Arc;
@@ -328,7 +328,7 @@ pub(crate) mod tests {
         let exact = Kernel::new(
             Arc::new(power_formula(Input::NH, &[])),
             Backend::Interp,
-            Arc::new(crate::kernel::FnEvaluator(|_: &[f64; 5], p: &[f64]| (p[0] + 2.0) / (2.0 * std::f64::consts::PI))),
+            Arc::new(crate::backend::FnEvaluator(|_: &[f64; 5], p: &[f64]| (p[0] + 2.0) / (2.0 * std::f64::consts::PI))),
             std::time::Duration::ZERO,
         );
         let v = json(&report(&args(&["--range", "1..40", "--against-expr", "x", "--json"]), &k, Some(&exact)).unwrap());
@@ -350,7 +350,7 @@ pub(crate) mod tests {
 
     #[test]
     fn zero_lobe_is_a_clear_error() {
-        let zero = Twin { name: "zero", params: &["n"], defaults: vec![50.0], ev: Box::new(crate::kernel::FnEvaluator(|_: &[f64; 5], _: &[f64]| 0.0)) };
+        let zero = Twin { name: "zero", params: &["n"], defaults: vec![50.0], ev: Box::new(crate::backend::FnEvaluator(|_: &[f64; 5], _: &[f64]| 0.0)) };
         let k = twin_kernel(zero, Input::NH, &[]);
         let e = report(&args(&[]), &k, None).unwrap_err();
         assert!(e.render(false).contains("integral is zero; cannot normalise"));

@@ -32,8 +32,15 @@ pub struct EvalArgs {
 pub fn run(a: &EvalArgs) -> Result<(), CliError> {
     let set: Vec<(String, f64)> = a.set.concat();
     let f = common::load_formula(a.file.as_deref(), a.expr.as_deref())?;
-    let opts = crate::Options { backend: a.backend, bake: set.clone(), normalize: a.normalize, ..Default::default() };
-    let k = crate::compile_formula(f, &opts)?;
+    let k = if a.normalize {
+        // The coefficient depends on every parameter: bake them all (--set values, declared defaults for the rest).
+        let mut bake = set.clone();
+        bake.extend(f.params.iter().filter(|p| !set.iter().any(|(k, _)| *k == p.name)).map(|p| (p.name.clone(), p.default)));
+        let s = crate::simplified(&f, &crate::Options { bake, ..Default::default() })?;
+        crate::build_kernel(std::sync::Arc::new(crate::numerics::normalize::bake_coefficient(s)?), a.backend)?
+    } else {
+        crate::compile_formula(f, &crate::Options { backend: a.backend, bake: set.clone(), ..Default::default() })?
+    };
     let mut x = [0.0; N_INPUTS];
     for (name, v) in a.at.concat() {
         let i = Input::from_name(&name).ok_or_else(|| {

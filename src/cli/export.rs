@@ -1,7 +1,7 @@
 //! `lobe export --glsl|--wgsl FILE [--set n=50] [-o out.glsl]`
 
 use super::common::{self, CliError};
-use crate::report::glsl::{self, Dialect};
+use crate::backend::glsl::{self, Dialect};
 
 #[derive(clap::Args, Debug)]
 pub struct ExportArgs {

@@ -1,11 +1,11 @@
 //! `lobe fit FILE --reference REF --param a=1..1000[:step] [--param …] [--metric mean-abs] [--json]`
 //!
-//! JSON keys are documented in [`crate::check`].
+//! JSON keys are documented in [`crate::numerics`].
 
 use super::common::{self, CliError};
 use super::energy::resolve_lobe;
-use crate::check::fit::{fit, FitOptions, FreeParam, Metric};
-use crate::check::{json_num, parse_range};
+use crate::numerics::fit::{fit, FitOptions, FreeParam, Metric};
+use crate::numerics::{json_num, parse_range};
 use crate::{Backend, Kernel};
 use serde_json::json;
 use std::io::IsTerminal;
@@ -164,7 +164,7 @@ pub fn report(a: &FitArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::check::twins;
+    use crate::numerics::twins;
     use crate::cli::energy::tests::twin_kernel;
     use crate::ir::Input;
     use clap::Parser;

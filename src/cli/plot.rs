@@ -1,7 +1,7 @@
 //! `lobe plot FILES… --set n=50 -o lobes.png [--polar] [--log] [--reference REF [--error]]`
 
 use super::common::{self, CliError};
-use crate::check::{choose_lobe_input, lobe_inputs};
+use crate::numerics::{choose_lobe_input, lobe_inputs};
 use crate::report::plot::{self, Format, LobeOptions, Series};
 use crate::{Backend, Evaluator, Kernel};
 

@@ -1,11 +1,11 @@
 //! `lobe sweep FILE [--set …] [--bound 1e6] [--deny nan,inf] [--json]` (also reachable as `lobe check --sweep`).
 //!
-//! Evaluates the *unclamped* formula (root `max(raw, 0)` peeled) over the domain; see [`crate::check::sweep`].
+//! Evaluates the *unclamped* formula (root `max(raw, 0)` peeled) over the domain; see [`crate::numerics::sweep`].
 //! Exits with status 1 when a kind listed in `--deny` occurs (after printing the report).
 
 use super::common::{self, CliError};
-use crate::check::json_num;
-use crate::check::sweep::{sweep, Example, RegionStats, SweepOptions};
+use crate::numerics::json_num;
+use crate::numerics::sweep::{sweep, Example, RegionStats, SweepOptions};
 use crate::ir::Formula;
 use crate::{Backend, Options};
 use serde_json::json;

@@ -5,7 +5,7 @@ use super::common::{self, CliError};
 use crate::render::image;
 use crate::render::scene::{self, LoadOptions, LobeCompiler};
 use crate::render::{self as r, RenderOptions};
-use crate::watch::{watch, Next};
+use crate::base::watch::{watch, Next};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -70,7 +70,7 @@ pub fn run(a: &WatchArgs) -> Result<(), CliError> {
             Some(b) => {
                 reloads += 1;
                 let name = a.file.display().to_string();
-                match common::source_from_bytes(&name, b).and_then(|src| reload(a, src)) {
+                match common::source_from_bytes(&name, b).map_err(CliError::from).and_then(|src| reload(a, src)) {
                     Ok(line) => eprintln!("{line}"),
                     Err(e) => {
                         let color = std::io::IsTerminal::is_terminal(&std::io::stderr());

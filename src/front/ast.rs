@@ -5,7 +5,7 @@
 //! lowered with an explicit stack. The parser builds bottom-up, so every operand has a smaller id than its
 //! user. Every node carries the byte span of its source text. Names borrow from the source.
 
-use super::span::Span;
+use crate::base::span::Span;
 
 /// Index of an expression in [`Ast::exprs`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]

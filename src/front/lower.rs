@@ -9,8 +9,8 @@
 //! Warnings (unused `let`/`param`, no input read) are produced only for files without errors.
 
 use super::ast::{Ast, BinOp as AstOp, ExprId, ExprKind, Ident, Lit, StmtKind};
-use super::diag::Diagnostic;
-use super::span::Span;
+use crate::base::diag::Diagnostic;
+use crate::base::span::Span;
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Input, Ir, Meta, NodeId, ParamDecl};
 use std::collections::HashMap;

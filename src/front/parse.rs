@@ -8,9 +8,9 @@
 //! Errors at a [`Tok::Error`] token are dropped: the lexer has already reported that character.
 
 use super::ast::{Ast, BinOp, ExprId, ExprKind, Stmt, StmtKind};
-use super::diag::Diagnostic;
+use crate::base::diag::Diagnostic;
 use super::lex::{Lexed, Tok};
-use super::span::Span;
+use crate::base::span::Span;
 use lalrpop_util::{ErrorRecovery, ParseError};
 use std::convert::Infallible;
 

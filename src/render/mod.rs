@@ -31,7 +31,7 @@ pub mod scene;
 pub mod shade;
 
 use crate::ir::InputSet;
-use crate::kernel::Evaluator;
+use crate::backend::Evaluator;
 use camera::Camera;
 use glam::DVec3;
 use image::{Image, Transfer};

@@ -44,10 +44,10 @@
 use super::camera::Camera;
 use super::mesh::{self, Mesh};
 use super::{Light, LightKind, Material, Object, Scene, MAX_SIZE};
-use crate::front::diag::{Diagnostic, Diagnostics};
-use crate::front::span::Span;
+use crate::base::diag::{Diagnostic, Diagnostics};
+use crate::base::span::Span;
 use crate::ir::{InputSet, ParamDecl};
-use crate::kernel::{Backend, Evaluator};
+use crate::backend::{Backend, Evaluator};
 use glam::DVec3;
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -56,10 +56,10 @@ use std::sync::Arc;
 use toml::Spanned;
 
 /// Turns formula source into an evaluator. `declare` lists the parameters (to check scene values against);
-/// `compile` bakes `values` (all parameters, by name) into the kernel.
+/// `build` bakes `values` (all parameters, by name) into the kernel.
 pub trait BrdfCompiler: Sync {
     fn declare(&self, file: &str, src: &str) -> Result<Vec<ParamDecl>, Diagnostics>;
-    fn compile(&self, file: &str, src: &str, values: &[(String, f64)]) -> Result<CompiledBrdf, Diagnostics>;
+    fn build(&self, file: &str, src: &str, values: &[(String, f64)]) -> Result<CompiledBrdf, Diagnostics>;
 }
 
 /// A compiled material formula.
@@ -69,7 +69,7 @@ pub struct CompiledBrdf {
     pub used: InputSet,
 }
 
-/// The real pipeline: `lobe::compile` with the chosen backend.
+/// The real pipeline: `lobe::compile_source` with the chosen backend.
 pub struct LobeCompiler {
     pub backend: Backend,
 }
@@ -78,9 +78,9 @@ impl BrdfCompiler for LobeCompiler {
     fn declare(&self, file: &str, src: &str) -> Result<Vec<ParamDecl>, Diagnostics> {
         Ok(crate::front::parse(file, src)?.params)
     }
-    fn compile(&self, file: &str, src: &str, values: &[(String, f64)]) -> Result<CompiledBrdf, Diagnostics> {
+    fn build(&self, file: &str, src: &str, values: &[(String, f64)]) -> Result<CompiledBrdf, Diagnostics> {
         let opts = crate::Options { backend: self.backend, bake: values.to_vec(), ..crate::Options::default() };
-        let k = crate::compile(file, src, &opts)?;
+        let k = crate::compile_source(file, src, &opts)?;
         Ok(CompiledBrdf { used: k.used_inputs(), evaluator: Arc::new(k) })
     }
 }
@@ -422,12 +422,11 @@ fn build_material(
             (Some(p), None) => {
                 let path: PathBuf = base.join(p.get_ref());
                 let file = path.display().to_string();
-                let src = match crate::cli::common::read_source(&file) {
+                let src = match crate::base::source::read_source(&file) {
                     Ok((_, s)) => s,
-                    Err(e) => {
-                        let msg = e.render(false);
-                        let msg = msg.trim().trim_start_matches("error: ").replace("\n  = help:", ";");
-                        return Err(here(p.span(), format!("materials.{mname}.brdf: {msg}"), "this path (relative to the scene file)"));
+                    Err(mut d) => {
+                        d.message = format!("materials.{mname}.brdf: {}", d.message);
+                        return Err(MatError::Scene(d.at(span_of(p.span()), "this path (relative to the scene file)")));
                     }
                 };
                 (file, src, p.span())
@@ -437,7 +436,7 @@ fn build_material(
             (None, None) => return Err(here(m.span(), format!("materials.{mname}: needs `brdf = \"path.brdf\"` or `formula = \"…\"`"), "this material")),
         }
     };
-    let (line, col) = crate::front::span::line_col(scene_src, key_span.start);
+    let (line, col) = crate::base::span::line_col(scene_src, key_span.start);
     let with_note = |mut fd: Diagnostics| {
         for it in &mut fd.items {
             it.hints.push(format!("used by [materials.{mname}] at {scene_name}:{line}:{col}"));
@@ -450,7 +449,7 @@ fn build_material(
         match decls.iter().position(|p| p.name == name) {
             Some(i) => {
                 let p = &decls[i];
-                if !(v.is_finite() && v >= p.lo && v <= p.hi) {
+                if !p.admits(v) {
                     return Err(format!("value {v} for `{name}` is outside the formula's declared range {}..{}", p.lo, p.hi));
                 }
                 values[i].1 = v;
@@ -485,7 +484,7 @@ fn build_material(
             Err(msg) => return Err(here(m.span(), format!("--set {k}={v} for material `{mname}`: {msg}"), "this material")),
         }
     }
-    let compiled = compiler.compile(&file, &src, &values).map_err(with_note)?;
+    let compiled = compiler.build(&file, &src, &values).map_err(with_note)?;
     for (k, val) in [("ka", d.ka), ("kd", d.kd), ("ks", d.ks)] {
         if !(val.is_finite() && val >= 0.0) {
             return Err(here(m.span(), format!("materials.{mname}.{k} = {val} must be a finite number ≥ 0"), "this material"));
@@ -493,7 +492,8 @@ fn build_material(
     }
     let params: Vec<f64> = values.iter().map(|(_, v)| *v).collect();
     let coef = if d.normalize {
-        normalization_coef(compiled.evaluator.as_ref(), compiled.used, &params)
+        crate::numerics::normalize::coefficient(compiled.evaluator.as_ref(), compiled.used, &params)
+            .map_err(|e| e.to_string())
             .map_err(|msg| here(m.span(), format!("materials.{mname}.normalize: {msg}"), "this material"))?
     } else {
         1.0
@@ -510,14 +510,6 @@ fn build_material(
         specular: d.specular.into(),
         coef,
     })
-}
-
-/// The papers' normalisation coefficient `1/(2π·Int)` of a compiled material, with the lobe variable chosen
-/// from the inputs it reads — the energy checker's exact adaptive quadrature (relative accuracy ~1e-11), so
-/// a scene never needs a fitted coefficient formula.
-pub fn normalization_coef(ev: &dyn Evaluator, used: InputSet, params: &[f64]) -> Result<f64, String> {
-    let (lobe, _) = crate::check::choose_lobe_input(used);
-    crate::check::energy::normalization_coef(ev, params, lobe).map_err(|e| e.to_string())
 }
 
 type MeshErr = (std::ops::Range<usize>, String, String);
@@ -596,19 +588,6 @@ fn build_mesh(base: &Path, i: usize, d: &ObjectDef) -> Result<Mesh, MeshErr> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn phong_coefficient_is_n_plus_2_over_2pi() {
-        let ev = crate::kernel::FnEvaluator(|x: &[f64; 5], p: &[f64]| x[3].clamp(0.0, 1.0).powf(p[0]));
-        let mut vr = InputSet::default();
-        vr.insert(crate::ir::Input::VR);
-        for n in [1.0, 10.0, 100.0] {
-            let c = normalization_coef(&ev, vr, &[n]).unwrap();
-            let exact = (n + 2.0) / (2.0 * std::f64::consts::PI);
-            assert!((c - exact).abs() / exact < 1e-6, "{n}: {c} vs {exact}");
-        }
-        assert!(normalization_coef(&crate::kernel::FnEvaluator(|_: &[f64; 5], _: &[f64]| 0.0), vr, &[1.0]).is_err());
-    }
 
     #[test]
     fn keys_are_named_from_offsets() {

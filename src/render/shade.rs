@@ -10,7 +10,7 @@
 use super::raster::{GBuffer, Setup, EMPTY};
 use super::{LightKind, Scene};
 use crate::ir::Input;
-use crate::kernel::Columns;
+use crate::backend::Columns;
 use glam::DVec3;
 
 /// Reusable per-thread buffers, so shading a tile allocates nothing in the steady state.

@@ -80,7 +80,7 @@ pub mod range;
 pub mod sexpr;
 
 use crate::builtins::Builtin;
-use crate::front::span::Span;
+use crate::base::span::Span;
 use crate::ir::{BinOp, Formula, InputSet, Ir, Node, NodeId, ParamDecl};
 use range::Range;
 use std::collections::BTreeMap;
@@ -164,7 +164,7 @@ impl Report {
     pub fn render(&self, f: &Formula) -> String {
         let mut out = self.to_string();
         for r in &self.rounding {
-            let (line, col) = crate::front::span::line_col(&f.source, r.span.start as usize);
+            let (line, col) = crate::base::span::line_col(&f.source, r.span.start as usize);
             let from = format!("at {}..{}", r.span.start, r.span.end);
             out = out.replacen(&from, &format!("at {}:{line}:{col}", f.file), 1);
         }

@@ -6,7 +6,7 @@
 //! builds exactly what is written (input names are raw inputs).
 
 use crate::builtins::Builtin;
-use crate::front::span::Span;
+use crate::base::span::Span;
 use crate::ir::{BinOp, Formula, Input, Ir, Meta, Node, NodeId, ParamDecl};
 
 /// Parameters beyond the implicit `n` (`n = 50 in 1..1000` unless listed): `(name, default, lo, hi)`.

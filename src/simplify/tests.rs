@@ -3,9 +3,9 @@
 
 use super::sexpr::{formula, formula_literal};
 use super::*;
-use crate::interp::Interp;
+use crate::backend::interp::Interp;
 use crate::ir::Input;
-use crate::kernel::Evaluator;
+use crate::backend::Evaluator;
 
 /// Sample inputs: interior points and the hard ones (0, 1, 1 − ulp, tiny, just above 0).
 const SAMPLES: [f64; 8] = [0.0, 1.0, 0.999_999_999_999_999_9, 1e-300, 5e-324, 0.5, 0.3, 0.87];

@@ -1,9 +1,9 @@
 //! Accuracy, fit and sweep through the public API on interpreter kernels, twins, and the catalogue files.
 
 use crate::energy::power_lobe;
-use lobe::check::accuracy::{accuracy, AccuracyOptions};
-use lobe::check::sweep::{sweep, SweepOptions};
-use lobe::check::{published, twins};
+use lobe::numerics::accuracy::{accuracy, AccuracyOptions};
+use lobe::numerics::sweep::{sweep, SweepOptions};
+use lobe::numerics::{published, twins};
 use lobe::ir::Input;
 use lobe::{build_kernel, Backend};
 use std::sync::Arc;
@@ -43,7 +43,7 @@ fn catalogue_modified_schlick_reproduces_mean_error() {
     let load = |name: &str| {
         let path = format!("{dir}/{name}.brdf");
         let src = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
-        lobe::compile(&path, &src, &lobe::Options { backend: Backend::Jit, ..Default::default() })
+        lobe::compile_source(&path, &src, &lobe::Options { backend: Backend::Jit, ..Default::default() })
             .unwrap_or_else(|d| panic!("{}", d.render(false)))
     };
     let (ms, b) = (load("modified_schlick"), load("blinn"));

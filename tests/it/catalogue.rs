@@ -239,7 +239,7 @@ fn compile_example(name: &str, backend: Backend, n: f64) -> lobe::Kernel {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/brdfs").join(format!("{name}.brdf"));
     let src = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let opts = Options { backend, bake: vec![("n".into(), n)], ..Options::default() };
-    lobe::compile(&path.display().to_string(), &src, &opts).unwrap_or_else(|d| panic!("{}", d.render(false)))
+    lobe::compile_source(&path.display().to_string(), &src, &opts).unwrap_or_else(|d| panic!("{}", d.render(false)))
 }
 
 #[test]
@@ -310,7 +310,7 @@ fn normalisation_formulas_parse_and_evaluate() {
         let src = std::fs::read_to_string(&path).unwrap();
         let bake: Vec<(String, f64)> = set.iter().map(|(k, v)| (k.to_string(), *v)).collect();
         for backend in [Backend::Interp, Backend::Jit] {
-            let k = lobe::compile(name, &src, &Options { backend, bake: bake.clone(), ..Options::default() })
+            let k = lobe::compile_source(name, &src, &Options { backend, bake: bake.clone(), ..Options::default() })
                 .unwrap_or_else(|d| panic!("{}", d.render(false)));
             let got = k.eval(&[0.0; 5], &k.default_params());
             assert!((got - want).abs() <= 1e-12 * want.abs(), "{name}: got {got}, want {want}");

@@ -2,7 +2,7 @@
 //!
 //! (a) random well-formed formulas (proptest over expression trees lowered into `ir::Ir`: inputs raw and
 //!     clamped, live and baked parameters, special constants, every builtin, trees up to depth 7) on random
-//!     and hard inputs; (b) the catalogue: every `examples/brdfs/*.brdf` through `lobe::compile` (runs once the
+//!     and hard inputs; (b) the catalogue: every `examples/brdfs/*.brdf` through `lobe::compile_source` (runs once the
 //!     front end and the examples are present), and hand-built IR for seven catalogue formulas checked against
 //!     hand-written Rust twins as well.
 //!
@@ -10,7 +10,7 @@
 //! the same libm functions and Cranelift does not reassociate or fuse floating-point operations.)
 
 use lobe::builtins::{self, Builtin};
-use lobe::front::span::Span;
+use lobe::base::span::Span;
 use lobe::ir::{BinOp, Formula, Input, Ir, Meta, NodeId, ParamDecl, N_INPUTS};
 use lobe::{compile_formula, Backend, Columns, Evaluator, Kernel, Options};
 use proptest::prelude::*;
@@ -211,7 +211,7 @@ fn check(jit: &Kernel, interp: &Kernel, pts: &[[f64; N_INPUTS]]) -> Result<(), S
 }
 
 fn both(f: Formula, bake: Vec<(String, f64)>) -> (Kernel, Kernel) {
-    let opts = |backend| Options { backend, bake: bake.clone(), no_simplify: false, normalize: false };
+    let opts = |backend| Options { backend, bake: bake.clone(), no_simplify: false };
     let jit = compile_formula(f.clone(), &opts(Backend::Jit)).expect("jit compiles");
     let interp = compile_formula(f, &opts(Backend::Interp)).expect("interp builds");
     assert_eq!(jit.backend, Backend::Jit);
@@ -225,7 +225,7 @@ fn cases() -> u32 {
 /// (a) 10 000 random formulas (set LOBE_DIFF_CASES to change), each on ~20 points × 4 parameter sets.
 #[test]
 fn random_formulas_agree() {
-    let random = lobe::jit::measure::sample_points(8, 42);
+    let random = lobe::report::measure::sample_points(8, 42);
     let pts = points(&random);
     let mut runner = TestRunner::new(Config { cases: cases(), failure_persistence: None, ..Config::default() });
     // Baked values must be finite (`resolve_bake` rejects the rest, as `--set` does).
@@ -376,7 +376,7 @@ fn catalogue() -> Vec<(&'static str, E, Twin)> {
 /// (b, in this branch) the catalogue by hand-built IR: JIT = interpreter = Rust twin (after `max(·, 0)`).
 #[test]
 fn catalogue_formulas_agree_with_rust_twins() {
-    let mut pts = points(&lobe::jit::measure::sample_points(200, 9));
+    let mut pts = points(&lobe::report::measure::sample_points(200, 9));
     pts.retain(|p| p.iter().all(|v| (0.0..=1.0).contains(v)));
     for (name, e, twin) in catalogue() {
         let (jit, interp) = both(formula(&e, true), vec![]);
@@ -395,7 +395,7 @@ fn catalogue_formulas_agree_with_rust_twins() {
     }
 }
 
-/// (b) every catalogue file through `lobe::compile`, both backends: every file must compile and agree.
+/// (b) every catalogue file through `lobe::compile_source`, both backends: every file must compile and agree.
 #[test]
 fn catalogue_files_agree() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/brdfs");
@@ -404,12 +404,12 @@ fn catalogue_files_agree() {
         entries.filter_map(|e| e.ok()).map(|e| e.path()).filter(|p| p.extension().is_some_and(|x| x == "brdf")).collect();
     files.sort();
     assert!(!files.is_empty(), "{} has no .brdf files", dir.display());
-    let pts = points(&lobe::jit::measure::sample_points(64, 5));
+    let pts = points(&lobe::report::measure::sample_points(64, 5));
     for path in files {
         let name = path.display().to_string();
         let src = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
         let build = |backend| {
-            lobe::compile(&name, &src, &Options { backend, ..Options::default() })
+            lobe::compile_source(&name, &src, &Options { backend, ..Options::default() })
                 .unwrap_or_else(|d| panic!("{name} does not compile:\n{}", d.render(false)))
         };
         let (jit, interp) = (build(Backend::Jit), build(Backend::Interp));

@@ -1,8 +1,8 @@
 //! Energy checks through the public API, on the interpreter kernel (the path compiled .brdf files take) and on
 //! the hand-written twins.
 
-use lobe::check::energy::{albedo, full_energy, lobe_integral, normalization_coef};
-use lobe::check::{published, twins};
+use lobe::numerics::energy::{albedo, full_energy, lobe_integral, normalization_coef};
+use lobe::numerics::{published, twins};
 use lobe::ir::{Formula, Input};
 use lobe::{build_kernel, Backend};
 use std::f64::consts::PI;
@@ -62,7 +62,7 @@ fn normalised_phong_never_exceeds_unit_albedo() {
     // pbrt-style furnace check: Phong scaled by (n+2)/2π has ρ(0) = 1 and loses energy towards grazing.
     for n in [1.0, 30.0, 300.0] {
         let t = twins::phong();
-        let scaled = lobe::kernel::FnEvaluator(move |x: &[f64; 5], p: &[f64]| (p[0] + 2.0) / (2.0 * PI) * t.ev.eval(x, p));
+        let scaled = lobe::backend::FnEvaluator(move |x: &[f64; 5], p: &[f64]| (p[0] + 2.0) / (2.0 * PI) * t.ev.eval(x, p));
         let full = full_energy(&scaled, &[n]).unwrap();
         assert!((full.albedo[0].1 - 1.0).abs() < 1e-6, "n={n}: {}", full.albedo[0].1);
         assert!(full.albedo.iter().all(|r| r.1 < 1.0 + 1e-6), "n={n}");
@@ -93,9 +93,9 @@ fn catalogue_files_match_their_twins() {
     for (name, twin, p) in cases {
         let path = format!("{}/examples/brdfs/{name}.brdf", env!("CARGO_MANIFEST_DIR"));
         let src = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
-        let k = lobe::compile(&path, &src, &lobe::Options { backend: Backend::Interp, ..Default::default() })
+        let k = lobe::compile_source(&path, &src, &lobe::Options { backend: Backend::Interp, ..Default::default() })
             .unwrap_or_else(|d| panic!("{}", d.render(false)));
-        let (lobe_in, _) = lobe::check::choose_lobe_input(k.used_inputs());
+        let (lobe_in, _) = lobe::numerics::choose_lobe_input(k.used_inputs());
         let a = normalization_coef(&k, &p, lobe_in).unwrap();
         let b = normalization_coef(twin().ev.as_ref(), &p, lobe_in).unwrap();
         assert!((a / b - 1.0).abs() < 1e-9, "{name}: {a} vs {b}");

@@ -2,7 +2,7 @@
 //! Debian's glslang-tools, installed by .ci/run when possible), and the text of a few exports is pinned by
 //! golden files (tests/golden/export/, `LOBE_BLESS=1` rewrites them).
 
-use lobe::report::glsl::{self, Dialect};
+use lobe::backend::glsl::{self, Dialect};
 use lobe::{Backend, Options};
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -28,7 +28,7 @@ fn formula(path: &Path, bake: &[(&str, f64)]) -> lobe::Formula {
         bake: bake.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
         ..Options::default()
     };
-    let k = lobe::compile(&path.display().to_string(), &src, &opts).unwrap_or_else(|d| panic!("{}", d.render(false)));
+    let k = lobe::compile_source(&path.display().to_string(), &src, &opts).unwrap_or_else(|d| panic!("{}", d.render(false)));
     (*k.formula).clone()
 }
 

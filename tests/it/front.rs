@@ -3,7 +3,7 @@
 //! in Rust; and robustness on hostile input (never a panic, never a stack overflow).
 
 use lobe::front::{parse, parse_with_warnings};
-use lobe::interp::Interp;
+use lobe::backend::interp::Interp;
 use lobe::{Evaluator, Formula};
 
 /// Inputs in NL, NV, NH, VR, VH order.

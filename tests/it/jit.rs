@@ -1,10 +1,10 @@
 //! JIT-specific behaviour: live parameters, the cache, memory release, length validation, diagnostics.
 
 use lobe::builtins::Builtin;
-use lobe::front::span::Span;
-use lobe::interp::Interp;
+use lobe::base::span::Span;
+use lobe::backend::interp::Interp;
 use lobe::ir::{BinOp, Formula, Input, Ir, Meta, NodeId, ParamDecl};
-use lobe::jit;
+use lobe::backend::jit;
 use lobe::{Backend, Columns, Evaluator};
 use std::sync::Arc;
 
@@ -58,7 +58,7 @@ fn modified_schlick(k: f64) -> Formula {
 #[test]
 fn scalar_matches_interpreter_and_closed_form() {
     let f = blinn();
-    let k = jit::compile(&f).expect("compiles");
+    let k = jit::jit_kernel(&f).expect("compiles");
     let i = Interp::new(&f);
     for &(nh, n) in &[(0.9, 2.0), (0.5, 50.0), (1.0, 1000.0), (0.0, 1.0), (1.5, 3.0), (-0.2, 2.0)] {
         let x = [0.0, 0.0, nh, 0.0, 0.0];
@@ -71,7 +71,7 @@ fn scalar_matches_interpreter_and_closed_form() {
 #[test]
 fn live_parameter_change_needs_no_recompile() {
     let f = modified_schlick(1.25);
-    let k = jit::compile_uncached(&f).expect("compiles");
+    let k = jit::jit_kernel_uncached(&f).expect("compiles");
     let x = [0.0, 0.0, 0.8, 0.0, 0.0];
     let closed = |n: f64| 2.0 * 0.8 / (1.25 * (n - n * 0.8 + 1.25 * 0.8) * (n - n * 0.8 + 1.25 * 0.8));
     let a = k.eval(&x, &[10.0]);
@@ -88,7 +88,7 @@ fn live_parameter_change_needs_no_recompile() {
 #[test]
 fn batched_matches_scalar_for_every_length() {
     let f = modified_schlick(1.25);
-    let k = jit::compile(&f).expect("compiles");
+    let k = jit::jit_kernel(&f).expect("compiles");
     for len in [0usize, 1, 2, 3, 7, 8, 1000, 1001] {
         let nh: Vec<f64> = (0..len).map(|i| i as f64 / (len.max(2) - 1) as f64).collect();
         let cols = Columns::new([&[], &[], &nh, &[], &[]]);
@@ -104,7 +104,7 @@ fn batched_matches_scalar_for_every_length() {
 #[test]
 fn short_params_and_ragged_columns_follow_interpreter_semantics() {
     let f = blinn();
-    let k = jit::compile(&f).expect("compiles");
+    let k = jit::jit_kernel(&f).expect("compiles");
     let i = Interp::new(&f);
     // Missing parameter: NaN, not an out-of-bounds read.
     assert!(k.eval(&[0.0, 0.0, 0.5, 0.0, 0.0], &[]).is_nan());
@@ -123,13 +123,13 @@ fn short_params_and_ragged_columns_follow_interpreter_semantics() {
 
 #[test]
 fn cache_returns_the_same_code_for_the_same_structure() {
-    let a = jit::compile(&modified_schlick(1.375)).expect("compiles");
+    let a = jit::jit_kernel(&modified_schlick(1.375)).expect("compiles");
     let mut other = modified_schlick(1.375);
     other.file = "elsewhere.brdf".into();
-    let b = jit::compile(&other).expect("compiles");
+    let b = jit::jit_kernel(&other).expect("compiles");
     assert!(a.same_code(&b));
     assert!(b.cached);
-    let c = jit::compile(&modified_schlick(1.5)).expect("compiles");
+    let c = jit::jit_kernel(&modified_schlick(1.5)).expect("compiles");
     assert!(!a.same_code(&c));
 }
 
@@ -170,7 +170,7 @@ fn memory_child() {
     let Some(_) = statm_resident_pages() else { return };
     let run = |range: std::ops::Range<u32>| {
         for i in range {
-            let k = jit::compile_uncached(&modified_schlick(1.0 + f64::from(i) * 1e-6)).expect("compiles");
+            let k = jit::jit_kernel_uncached(&modified_schlick(1.0 + f64::from(i) * 1e-6)).expect("compiles");
             std::hint::black_box(k.eval(&[0.0, 0.0, 0.5, 0.0, 0.0], &[50.0]));
             // Also build the lazily compiled batched kernel, whose code lives in the same module.
             let nh = [0.1, 0.2, 0.3];
@@ -191,7 +191,7 @@ fn memory_child() {
     assert!(grown_kb < bound_kb, "RSS grew by {grown_kb} KiB over {n} compiles (bound {bound_kb} KiB)");
 }
 
-/// Every nasty input in tests/corpus through `lobe::compile` with both backends, then evaluation on a few
+/// Every nasty input in tests/corpus through `lobe::compile_source` with both backends, then evaluation on a few
 /// points (scalar and batched): errors are fine, panics are not. Runs on a thread with an 8 MiB stack (the
 /// CLI's main-thread size), so a front end that recurses per nesting level is held to that budget.
 #[test]
@@ -209,7 +209,7 @@ fn corpus_inputs_never_panic() {
             let name = path.display().to_string();
             for backend in [Backend::Jit, Backend::Interp] {
                 let opts = lobe::Options { backend, ..Default::default() };
-                match lobe::compile(&name, &src, &opts) {
+                match lobe::compile_source(&name, &src, &opts) {
                     Ok(k) => {
                         let p = k.default_params();
                         for x in &pts {
@@ -265,12 +265,12 @@ fn unusual_shapes_compile_and_agree() {
     }
     shapes.push(formula(ir, acc, vec![]));
 
-    let pts: Vec<[f64; 5]> = lobe::jit::measure::sample_points(9, 3);
+    let pts: Vec<[f64; 5]> = lobe::report::measure::sample_points(9, 3);
     let cols: Vec<Vec<f64>> = (0..5).map(|i| pts.iter().map(|p| p[i]).collect()).collect();
     let columns = Columns::new(std::array::from_fn(|i| cols[i].as_slice()));
     for f in shapes {
         let params = f.default_params();
-        let k = jit::compile(&f).expect("compiles");
+        let k = jit::jit_kernel(&f).expect("compiles");
         let i = Interp::new(&f);
         let mut out = vec![0.0; pts.len()];
         k.eval_batch(&columns, &params, &mut out);
@@ -303,8 +303,8 @@ fn scalar_arithmetic_kernel_has_no_stack_traffic_or_calls() {
 #[test]
 fn measure_kernel_reports_all_paths() {
     let k = lobe::build_kernel(Arc::new(modified_schlick(1.25)), Backend::Jit).expect("builds");
-    let opts = jit::measure::MeasureOptions { points: 64, samples: 5 };
-    let m = jit::measure::measure_kernel(&k, &[50.0], opts).expect("measures");
+    let opts = lobe::report::measure::MeasureOptions { points: 64, samples: 5 };
+    let m = lobe::report::measure::measure_kernel(&k, &[50.0], opts).expect("measures");
     for t in [m.scalar_jit, m.batched_jit, m.interp] {
         assert!(t.min_ns > 0.0 && t.min_ns.is_finite(), "{t:?}");
         assert!(t.min_ns <= t.p25_ns && t.p25_ns <= t.median_ns && t.median_ns <= t.p75_ns, "{t:?}");

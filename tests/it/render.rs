@@ -8,7 +8,7 @@
 
 use glam::DVec3;
 use lobe::ir::{Input, InputSet, N_INPUTS};
-use lobe::kernel::{Columns, Evaluator};
+use lobe::backend::{Columns, Evaluator};
 use lobe::render::compare::{self, CompareJob};
 use lobe::render::image::{Image, Transfer};
 use lobe::render::scene::{self, LoadOptions, LobeCompiler};

@@ -13,7 +13,7 @@
 //!   through the tree; a − a·x contributes its cancellation error), times 2.
 
 use lobe::builtins::Builtin;
-use lobe::interp::Interp;
+use lobe::backend::interp::Interp;
 use lobe::ir::Node;
 use lobe::simplify::sexpr::{formula, formula_literal, ParamSpec};
 use lobe::simplify::{simplify, simplify_report, simplify_with, Policy};

@@ -96,7 +96,7 @@ impl<V> Lru<V> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::front::span::Span;
+    use crate::base::span::Span;
     use crate::ir::Input;
 
     fn key(c: f64) -> Key {

@@ -20,7 +20,7 @@
 use super::quad::integrate;
 use super::{dir, inputs_from_dirs, lobe_inputs, CheckError};
 use crate::ir::Input;
-use crate::kernel::Evaluator;
+use crate::backend::Evaluator;
 use rayon::prelude::*;
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -354,8 +354,8 @@ pub fn full_energy(ev: &dyn Evaluator, params: &[f64]) -> Result<FullEnergy, Che
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::check::twins;
-    use crate::kernel::FnEvaluator;
+    use crate::numerics::twins;
+    use crate::backend::FnEvaluator;
 
     #[test]
     fn phong_closed_form_to_1e_9() {

@@ -17,7 +17,7 @@
 
 use super::{lobe_inputs, CheckError};
 use crate::ir::Input;
-use crate::kernel::{Columns, Evaluator};
+use crate::backend::{Columns, Evaluator};
 use crate::N_INPUTS;
 use rayon::prelude::*;
 
@@ -249,7 +249,7 @@ pub fn accuracy(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::check::twins;
+    use crate::numerics::twins;
 
     fn run(t: &twins::Twin, p: &[f64], opts: &AccuracyOptions) -> AccuracyReport {
         let b = twins::blinn();

@@ -10,7 +10,7 @@
 
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Node, N_INPUTS};
-use crate::kernel::{Columns, Evaluator};
+use super::{Columns, Evaluator};
 use std::cell::RefCell;
 
 #[derive(Clone, Copy, Debug)]
@@ -117,7 +117,7 @@ impl Evaluator for Interp {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::front::span::Span;
+    use crate::base::span::Span;
     use crate::ir::{Input, Ir, Meta, ParamDecl};
 
     fn blinn() -> Formula {

@@ -18,7 +18,7 @@
 
 use crate::builtins::Builtin;
 use crate::ir::{Formula, InputSet, Node, ParamDecl, N_INPUTS};
-use crate::kernel::{Columns, Evaluator};
+use crate::backend::{Columns, Evaluator};
 use rayon::prelude::*;
 
 impl Formula {
@@ -252,10 +252,10 @@ fn coprime_stride(m: u64) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::front::span::Span;
-    use crate::interp::Interp;
+    use crate::base::span::Span;
+    use crate::backend::interp::Interp;
     use crate::ir::{BinOp, Input, Ir, Meta};
-    use crate::kernel::FnEvaluator;
+    use crate::backend::FnEvaluator;
 
     fn n_decl() -> ParamDecl {
         ParamDecl { name: "n".into(), default: 50.0, lo: 1.0, hi: 1000.0, span: None }

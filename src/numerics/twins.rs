@@ -6,7 +6,7 @@
 //! clamped before a power to mean what the paper plots (F_ST, F_SCOS, F_SCOS2 beyond their zero), the twin
 //! clamps the base at 0, and says so.
 
-use crate::kernel::{Evaluator, FnEvaluator};
+use crate::backend::{Evaluator, FnEvaluator};
 use crate::N_INPUTS;
 
 const NH: usize = 2;

@@ -29,13 +29,15 @@
 //!   `maxpd`/`minpd` per clamp), 0.75–0.94× with libm calls (per-lane calls dominate);
 //! - interpreter / JIT: 2.2–3× for pow/exp-bound formulas, 7.4–9.4× scalar and 28–45× batched for arithmetic.
 
+// The one module allowed `unsafe`: calling and freeing generated code (each block has its `# Safety` note).
+#![allow(unsafe_code)]
+
 pub mod cache;
 mod codegen;
-pub mod measure;
 
-use crate::front::diag::Diagnostic;
+use crate::base::diag::Diagnostic;
 use crate::ir::{Formula, InputSet, Ir, NodeId, N_INPUTS};
-use crate::kernel::{Columns, Evaluator};
+use crate::backend::{Columns, Evaluator};
 use cranelift_codegen::ir::UserFuncName;
 use cranelift_codegen::isa::OwnedTargetIsa;
 use cranelift_codegen::settings::{self, Configurable};
@@ -244,7 +246,7 @@ impl Jit {
 
     /// Compiles a compacted IR (every node reachable from `root`, root last) into a fresh module. Only the
     /// scalar kernel is built now; the batched one on the first batch call.
-    pub fn compile(&mut self, ir: &Ir, root: NodeId) -> Result<Compiled, JitError> {
+    pub fn translate(&mut self, ir: &Ir, root: NodeId) -> Result<Compiled, JitError> {
         if root.index() >= ir.len() {
             return Err(JitError::Internal("root outside the arena".into()));
         }
@@ -341,14 +343,14 @@ pub struct JitKernel {
 }
 
 /// Compiles a simplified formula (through the cache).
-pub fn compile(f: &Formula) -> Result<JitKernel, JitError> {
+pub fn jit_kernel(f: &Formula) -> Result<JitKernel, JitError> {
     let (ir, root) = f.ir.compact(f.root);
     let key = cache::Key::new(&ir, root);
     let hit = lock_cache().get(&key);
     let (code, cached) = match hit {
         Some(c) => (c, true),
         None => {
-            let c = Arc::new(with_jit(|j| j.compile(&ir, root))?);
+            let c = Arc::new(with_jit(|j| j.translate(&ir, root))?);
             lock_cache().insert(key, c.clone());
             (c, false)
         }
@@ -362,7 +364,7 @@ pub fn disassemble(f: &Formula) -> Result<(String, String), JitError> {
     let (ir, root) = f.ir.compact(f.root);
     let mut j = Jit::new();
     j.disasm = true;
-    let c = j.compile(&ir, root)?;
+    let c = j.translate(&ir, root)?;
     {
         let mut guard = c.module.lock().map_err(|_| JitError::Internal("module lock poisoned".into()))?;
         let module = guard.as_mut().ok_or(JitError::Internal("module freed".into()))?;
@@ -373,9 +375,9 @@ pub fn disassemble(f: &Formula) -> Result<(String, String), JitError> {
 }
 
 /// Compiles without consulting or filling the cache (for compile-time measurements and tests).
-pub fn compile_uncached(f: &Formula) -> Result<JitKernel, JitError> {
+pub fn jit_kernel_uncached(f: &Formula) -> Result<JitKernel, JitError> {
     let (ir, root) = f.ir.compact(f.root);
-    let code = Arc::new(with_jit(|j| j.compile(&ir, root))?);
+    let code = Arc::new(with_jit(|j| j.translate(&ir, root))?);
     Ok(JitKernel { n_params: f.params.len().max(code.params_read), scalar: code.scalar, code, cached: false })
 }
 
@@ -456,20 +458,20 @@ impl Evaluator for JitKernel {
 
 /// Compiles `f` with the JIT and reports failure as a diagnostic on the formula's file.
 pub fn kernel_evaluator(f: &Formula) -> Result<Arc<dyn Evaluator>, Diagnostic> {
-    compile(f).map(|k| Arc::new(k) as Arc<dyn Evaluator>).map_err(|e| e.to_diagnostic())
+    jit_kernel(f).map(|k| Arc::new(k) as Arc<dyn Evaluator>).map_err(|e| e.to_diagnostic())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::front::span::Span;
+    use crate::base::span::Span;
     use crate::ir::Input;
 
     #[test]
     fn bad_root_is_an_error_not_a_panic() {
         let mut ir = Ir::new();
         ir.input(Input::NH, Span::default());
-        let e = Jit::new().compile(&ir, NodeId(7)).err().map(|e| e.to_string());
+        let e = Jit::new().translate(&ir, NodeId(7)).err().map(|e| e.to_string());
         assert_eq!(e.as_deref(), Some("internal JIT error: root outside the arena"));
     }
 

@@ -6,10 +6,10 @@
 //! Results go through `black_box` so nothing is optimised away. Numbers are only comparable within one run on
 //! one machine; tests never assert on them.
 
-use super::JitError;
-use crate::interp::Interp;
+use crate::backend::jit::JitError;
+use crate::backend::interp::Interp;
 use crate::ir::N_INPUTS;
-use crate::kernel::{Columns, Evaluator, Kernel};
+use crate::backend::{Columns, Evaluator, Kernel};
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
@@ -103,11 +103,11 @@ pub fn measure_kernel(k: &Kernel, params: &[f64], opts: MeasureOptions) -> Resul
     let mut compiles: Vec<Duration> = (0..5)
         .map(|_| {
             let t = Instant::now();
-            super::compile_uncached(f).map(|_| t.elapsed())
+            crate::backend::jit::jit_kernel_uncached(f).map(|_| t.elapsed())
         })
         .collect::<Result<_, _>>()?;
     compiles.sort();
-    let jit = super::compile(f)?;
+    let jit = crate::backend::jit::jit_kernel(f)?;
     let interp = Interp::new(f);
 
     let n = opts.points.max(1);

@@ -50,6 +50,7 @@
 pub mod accuracy;
 pub mod energy;
 pub mod fit;
+pub mod normalize;
 pub mod published;
 pub mod quad;
 pub mod sweep;
@@ -85,12 +86,6 @@ impl fmt::Display for CheckError {
 }
 
 impl std::error::Error for CheckError {}
-
-impl From<CheckError> for crate::cli::common::CliError {
-    fn from(e: CheckError) -> Self {
-        crate::cli::common::CliError::Msg { msg: e.msg, hint: e.hint }
-    }
-}
 
 /// The inputs for lobe angle `c = cos θ` under the lobe convention (module docs); `lobe` is additionally set
 /// to `c` (a no-op for NH, VR and NV).
@@ -144,7 +139,7 @@ pub fn inputs_from_dirs(l: V3, v: V3) -> [f64; N_INPUTS] {
 /// Checks parameter values against declarations (range and finiteness), for checks that vary them.
 pub fn check_param_values(decls: &[crate::ir::ParamDecl], params: &[f64]) -> Result<(), CheckError> {
     for (d, v) in decls.iter().zip(params) {
-        if !v.is_finite() || *v < d.lo || *v > d.hi {
+        if !d.admits(*v) {
             return Err(CheckError::hint(
                 format!("parameter `{}` = {v} is outside its declared range {}..{}", d.name, d.lo, d.hi),
                 format!("choose {} in {}..{}", d.name, d.lo, d.hi),

@@ -12,7 +12,7 @@
 
 use super::{lobe_inputs, CheckError};
 use crate::ir::Input;
-use crate::kernel::{Columns, Evaluator};
+use crate::backend::{Columns, Evaluator};
 use crate::N_INPUTS;
 use rayon::prelude::*;
 
@@ -366,8 +366,8 @@ fn nelder_mead(eval: &mut impl FnMut(&[f64]) -> (f64, Vec<f64>), x0: &[f64], ste
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::check::twins;
-    use crate::kernel::FnEvaluator;
+    use crate::numerics::twins;
+    use crate::backend::FnEvaluator;
     use std::sync::atomic::{AtomicUsize, Ordering};
 
     #[test]

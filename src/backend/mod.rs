@@ -1,0 +1,12 @@
+//! Backends: everything that turns a simplified [`Formula`](crate::ir::Formula) into something that runs or
+//! prints. [`Evaluator`] is the one interface the renderer and the numerics call; [`Kernel`] pairs a formula
+//! with its evaluator. [`interp`] is the reference semantics, [`jit`] compiles the same IR with Cranelift (the
+//! only `unsafe` in lobe), [`glsl`] emits GLSL/WGSL text from it. All three read builtins from the one table.
+
+mod kernel;
+
+pub mod glsl;
+pub mod interp;
+pub mod jit;
+
+pub use kernel::{Backend, Columns, Evaluator, FnEvaluator, Kernel};

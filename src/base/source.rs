@@ -1,0 +1,71 @@
+//! Reading formula sources: a path, or `-` for standard input. Bounded (a .brdf file is a few lines, so a
+//! large or binary file is refused before it costs time or memory), UTF-8 only, no NUL bytes. Failures are a
+//! [`Diagnostic`] with a hint, made once here; callers attach it to their own location (a scene key, say).
+
+use super::diag::Diagnostic;
+use super::span::line_col;
+use std::io::Read;
+
+/// Largest formula source accepted.
+pub const MAX_SOURCE_BYTES: usize = 1 << 20;
+
+/// Reads a formula source from `path`, or standard input for `-`. Returns the display name and the text.
+pub fn read_source(path: &str) -> Result<(String, String), Diagnostic> {
+    let mut bytes = Vec::new();
+    let name = if path == "-" {
+        std::io::stdin()
+            .take(MAX_SOURCE_BYTES as u64 + 1)
+            .read_to_end(&mut bytes)
+            .map_err(|e| Diagnostic::error(format!("cannot read standard input: {e}")))?;
+        "<stdin>".to_string()
+    } else {
+        let file = std::fs::File::open(path).map_err(|e| {
+            Diagnostic::error(format!("cannot open `{path}`: {e}"))
+                .hint("check the path; `-` reads the formula from standard input")
+        })?;
+        if file.metadata().map(|m| m.is_dir()).unwrap_or(false) {
+            return Err(Diagnostic::error(format!("`{path}` is a directory")).hint("give a .brdf file"));
+        }
+        file.take(MAX_SOURCE_BYTES as u64 + 1)
+            .read_to_end(&mut bytes)
+            .map_err(|e| Diagnostic::error(format!("cannot read `{path}`: {e}")))?;
+        path.to_string()
+    };
+    source_from_bytes(&name, bytes).map(|s| (name, s))
+}
+
+/// Validates raw bytes as a formula source (size, UTF-8, no NUL bytes).
+pub fn source_from_bytes(name: &str, bytes: Vec<u8>) -> Result<String, Diagnostic> {
+    if bytes.len() > MAX_SOURCE_BYTES {
+        return Err(Diagnostic::error(format!(
+            "`{name}` is larger than {} KiB; a formula file is a few lines",
+            MAX_SOURCE_BYTES / 1024
+        ))
+        .hint("is this the right file?"));
+    }
+    match String::from_utf8(bytes) {
+        Ok(s) if s.contains('\0') => Err(Diagnostic::error(format!(
+            "`{name}` contains NUL bytes; it looks like a binary file, not a formula"
+        ))
+        .hint("a .brdf file is UTF-8 text")),
+        Ok(s) => Ok(s),
+        Err(e) => {
+            let at = e.utf8_error().valid_up_to();
+            let (line, col) = line_col(&String::from_utf8_lossy(&e.into_bytes()[..at]), at);
+            Err(Diagnostic::error(format!("{name}:{line}:{col}: the file is not valid UTF-8 text (byte offset {at})"))
+                .hint("a .brdf file is UTF-8 text; is this a binary file?"))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn binary_input_is_refused() {
+        assert!(source_from_bytes("x", vec![0xff, 0xfe, 0x00]).is_err());
+        assert!(source_from_bytes("x", b"NH\0".to_vec()).is_err());
+        assert!(source_from_bytes("x", vec![b'1'; MAX_SOURCE_BYTES + 1]).is_err());
+    }
+}

@@ -1,0 +1,54 @@
+//! Energy normalisation: F → coef·F with the papers' exact coefficient `1/(2π·Int)` (lobe convention, the
+//! lobe variable chosen from the inputs the formula reads). [`coefficient`] is the one place it is computed:
+//! scene materials keep it beside their kernel and multiply at shading time; `eval --normalize` bakes it into
+//! the IR with [`bake_coefficient`]. Cost: one adaptive quadrature, a few hundred evaluations.
+
+use super::{choose_lobe_input, energy, CheckError};
+use crate::backend::interp::Interp;
+use crate::backend::Evaluator;
+use crate::ir::{BinOp, Formula, InputSet};
+
+/// The exact normalisation coefficient of a kernel reading `used`, at `params`.
+pub fn coefficient(ev: &dyn Evaluator, used: InputSet, params: &[f64]) -> Result<f64, CheckError> {
+    let (lobe, _) = choose_lobe_input(used);
+    energy::normalization_coef(ev, params, lobe)
+}
+
+/// `coef · f`, simplified, for a formula whose parameters are all baked (the coefficient depends on every
+/// parameter, so a live one would make the baked constant wrong). Evaluated on the reference interpreter.
+pub fn bake_coefficient(f: Formula) -> Result<Formula, CheckError> {
+    let live: Vec<&str> = f.ir.used_params(f.root).iter().map(|&i| f.params[i as usize].name.as_str()).collect();
+    if !live.is_empty() {
+        return Err(CheckError::hint(
+            format!("cannot normalise {}: parameter(s) {} are not baked", f.display_name(), live.join(", ")),
+            "give every parameter a value (--set) before normalising",
+        ));
+    }
+    let coef = coefficient(&Interp::new(&f), f.used_inputs(), &f.default_params())
+        .map_err(|e| CheckError { msg: format!("cannot normalise {}: {}", f.display_name(), e.msg), hint: e.hint })?;
+    let mut g = f;
+    let span = g.ir.span(g.root);
+    let c = g.ir.konst(coef, span);
+    g.root = g.ir.bin(BinOp::Mul, c, g.root, span);
+    Ok(crate::simplify::simplify(&g, &[]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::backend::FnEvaluator;
+    use crate::ir::Input;
+
+    #[test]
+    fn phong_coefficient_is_n_plus_2_over_2pi() {
+        let ev = FnEvaluator(|x: &[f64; 5], p: &[f64]| x[3].clamp(0.0, 1.0).powf(p[0]));
+        let mut vr = InputSet::default();
+        vr.insert(Input::VR);
+        for n in [1.0, 10.0, 100.0] {
+            let c = coefficient(&ev, vr, &[n]).unwrap();
+            let exact = (n + 2.0) / (2.0 * std::f64::consts::PI);
+            assert!((c - exact).abs() / exact < 1e-6, "{n}: {c} vs {exact}");
+        }
+        assert!(coefficient(&FnEvaluator(|_: &[f64; 5], _: &[f64]| 0.0), vr, &[1.0]).is_err());
+    }
+}
