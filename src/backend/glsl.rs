@@ -31,6 +31,80 @@ pub fn function_name(f: &Formula) -> String {
     format!("lobe_{}", name.trim_matches('_'))
 }
 
+/// Words a parameter may not be called in either language: GLSL and WGSL keywords and reserved words, GLSL
+/// built-in functions and types, the input names and lobe's temporaries (`t0`, `t1`, …). Mangling for both
+/// dialects at once keeps one exported signature for a formula whichever language is asked for.
+const RESERVED: &[&str] = &[
+    // GLSL keywords, types and reserved words
+    "attribute", "const", "uniform", "varying", "buffer", "shared", "coherent", "volatile", "restrict", "readonly",
+    "writeonly", "layout", "centroid", "flat", "smooth", "noperspective", "patch", "sample", "break", "continue",
+    "do", "for", "while", "switch", "case", "default", "if", "else", "subroutine", "in", "out", "inout", "float",
+    "double", "int", "void", "bool", "true", "false", "invariant", "precise", "discard", "return", "mat2", "mat3",
+    "mat4", "dmat2", "dmat3", "dmat4", "vec2", "vec3", "vec4", "ivec2", "ivec3", "ivec4", "bvec2", "bvec3",
+    "bvec4", "dvec2", "dvec3", "dvec4", "uint", "uvec2", "uvec3", "uvec4", "lowp", "mediump", "highp",
+    "precision", "sampler2D", "sampler3D", "samplerCube", "struct", "common", "partition", "active", "asm",
+    "class", "union", "enum", "typedef", "template", "this", "resource", "goto", "inline", "noinline", "public",
+    "static", "extern", "external", "interface", "long", "short", "half", "fixed", "unsigned", "superp", "input",
+    "output", "hvec2", "hvec3", "hvec4", "fvec2", "fvec3", "fvec4", "filter", "sizeof", "cast", "namespace",
+    "using", "main",
+    // GLSL built-in functions a formula could shadow
+    "radians", "degrees", "sin", "cos", "tan", "asin", "acos", "atan", "sinh", "cosh", "tanh", "asinh", "acosh",
+    "atanh", "pow", "exp", "log", "exp2", "log2", "sqrt", "inversesqrt", "abs", "sign", "floor", "trunc", "round",
+    "roundEven", "ceil", "fract", "mod", "modf", "min", "max", "clamp", "mix", "step", "smoothstep", "isnan",
+    "isinf", "fma", "length", "distance", "dot", "cross", "normalize", "reflect", "refract", "faceforward",
+    "uintBitsToFloat", "floatBitsToUint", "floatBitsToInt", "intBitsToFloat",
+    // WGSL keywords and reserved words
+    "alias", "bitcast", "continuing", "diagnostic", "discard", "enable", "fallthrough", "fn", "let", "loop",
+    "override", "requires", "var", "while", "f32", "f16", "i32", "u32", "array", "atomic", "mat2x2", "mat3x3",
+    "mat4x4", "ptr", "sampler", "texture_2d", "vec2f", "vec3f", "vec4f", "NULL", "Self", "abstract", "await",
+    "become", "catch", "cbuffer", "co_await", "co_return", "co_yield", "compile", "concept", "constexpr",
+    "crate", "delete", "dynamic_cast", "explicit", "export", "final", "finally", "friend", "from", "handle",
+    "impl", "import", "instanceof", "macro", "match", "meta", "module", "move", "mut", "mutable", "new", "nil",
+    "noexcept", "null", "of", "operator", "package", "private", "protected", "pub", "ref", "regardless",
+    "self", "signed", "super", "throw", "trait", "try", "type", "typename", "typeof", "unless", "virtual",
+    "where", "with", "yield",
+    // lobe's own names in the emitted function
+    "NL", "NV", "NH", "VR", "VH",
+];
+
+/// Shader identifiers for the formula's parameters (by index). A name that is reserved in GLSL or WGSL, looks
+/// like a temporary (`t0`), starts with `gl_` or `_`, or contains `__` (reserved in both languages) becomes
+/// `p_NAME` with underscores collapsed, made unique; every other name is kept, so an exported signature reads
+/// as the .brdf file does.
+pub fn param_names(f: &Formula) -> Vec<String> {
+    let needs_mangling = |n: &str| {
+        RESERVED.contains(&n)
+            || n.starts_with("gl_")
+            || n.starts_with('_')
+            || n.contains("__")
+            || n.starts_with("lobe_")
+            || (n.len() > 1 && n.starts_with('t') && n[1..].bytes().all(|b| b.is_ascii_digit()))
+    };
+    let mut out: Vec<String> = Vec::with_capacity(f.params.len());
+    for p in &f.params {
+        let mut name = if needs_mangling(&p.name) {
+            let collapsed: Vec<&str> = p.name.split('_').filter(|s| !s.is_empty()).collect();
+            format!("p_{}", collapsed.join("_"))
+        } else {
+            p.name.clone()
+        };
+        let base = name.clone();
+        let mut k = 1;
+        while out.contains(&name) || f.params.iter().any(|q| q.name == name && q.name != p.name) {
+            name = format!("{base}_{k}");
+            k += 1;
+        }
+        out.push(name);
+    }
+    out
+}
+
+/// Text safe inside a `//` comment: control characters and Unicode line separators (which would end the
+/// comment and inject code) become spaces.
+fn comment_text(s: &str) -> String {
+    s.chars().map(|c| if c.is_control() || matches!(c, '\u{2028}' | '\u{2029}') { ' ' } else { c }).collect()
+}
+
 fn literal(v: f64, d: Dialect) -> String {
     let bits = |b: u32| match d {
         Dialect::Glsl => format!("uintBitsToFloat({b:#010x}u)"),
@@ -73,11 +147,24 @@ pub fn export(f: &Formula, d: Dialect) -> String {
         Dialect::Glsl => "GLSL",
         Dialect::Wgsl => "WGSL",
     };
-    let _ = writeln!(out, "// {} — exported by lobe {} as {lang}.", f.display_name(), env!("CARGO_PKG_VERSION"));
+    let _ = writeln!(out, "// {} — exported by lobe {} as {lang}.", comment_text(&f.display_name()), env!("CARGO_PKG_VERSION"));
     if let Some(c) = &f.meta.citation {
-        let _ = writeln!(out, "// Source: {c}");
+        let _ = writeln!(out, "// Source: {}", comment_text(c));
     }
-    let _ = writeln!(out, "// Formula (simplified): {}", f.to_text());
+    // The let form, not the expanded tree: shared subexpressions would otherwise grow exponentially.
+    let program = f.to_program_text();
+    match program.lines().count() {
+        0 | 1 => {
+            let _ = writeln!(out, "// Formula (simplified): {}", comment_text(&program));
+        }
+        _ => {
+            let _ = writeln!(out, "// Formula (simplified):");
+            for line in program.lines() {
+                let _ = writeln!(out, "//   {}", comment_text(line));
+            }
+        }
+    }
+    let pnames = param_names(f);
     let baked: Vec<String> = f
         .params
         .iter()
@@ -100,7 +187,7 @@ pub fn export(f: &Formula, d: Dialect) -> String {
         })
         .collect();
     for p in &live_params {
-        let pname = &f.params[*p as usize].name;
+        let pname = &pnames[*p as usize];
         args.push(match d {
             Dialect::Glsl => format!("float {pname}"),
             Dialect::Wgsl => format!("{pname}: f32"),
@@ -124,7 +211,7 @@ pub fn export(f: &Formula, d: Dialect) -> String {
         let e = match *node {
             Node::Const(b) => literal(f64::from_bits(b), d),
             Node::Input(i) => i.name().to_string(),
-            Node::Param(p) => f.params[p as usize].name.clone(),
+            Node::Param(p) => pnames[p as usize].clone(),
             Node::Neg(a) => format!("(-{})", t(a)),
             Node::Binary(op, a, b) => format!("({} {} {})", t(a), op.symbol(), t(b)),
             Node::Call(b, a) => {
@@ -167,4 +254,26 @@ pub fn glsl_test_shader(f: &Formula) -> String {
         function_name(f),
         call_args.join(", ")
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hostile_names_are_mangled_and_metadata_cannot_inject_code() {
+        let src = "@name \"x\\r#define pow(a,b) 0.0\"\nparam t0 = 1\nparam float = 2\nparam gl_Position = 3\nparam fn = 4\n\
+                   param p_float = 5\nparam a__b = 6\nNH^n * t0 + float + gl_Position + fn + p_float + a__b\n";
+        let src = src.replace("\\r", "\r");
+        let f = crate::front::parse("hostile.brdf", &src).unwrap_or_else(|d| panic!("{}", d.render(false)));
+        let names = param_names(&f);
+        assert_eq!(names, ["n", "p_t0", "p_float_1", "p_gl_Position", "p_fn", "p_float", "p_a_b"]);
+        for d in [Dialect::Glsl, Dialect::Wgsl] {
+            let text = export(&f, d);
+            assert!(text.lines().all(|l| l.starts_with("//") || !l.contains("define")), "{text}");
+            assert!(!text.contains('\r'), "{text}");
+            let code: String = text.lines().filter(|l| !l.starts_with("//")).collect::<Vec<_>>().join("\n");
+            assert!(code.contains("p_gl_Position") && !code.contains(" gl_Position"), "{text}");
+        }
+    }
 }

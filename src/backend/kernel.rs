@@ -124,7 +124,7 @@ impl Evaluator for Kernel {
 impl std::fmt::Debug for Kernel {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Kernel")
-            .field("formula", &self.formula.to_text())
+            .field("formula", &self.formula.to_program_text())
             .field("backend", &self.backend)
             .field("compile_time", &self.compile_time)
             .finish()

@@ -7,6 +7,7 @@
 
 use std::collections::hash_map::DefaultHasher;
 use std::hash::{Hash, Hasher};
+use std::io::Read;
 use std::path::Path;
 use std::time::{Duration, SystemTime};
 
@@ -18,9 +19,12 @@ struct Stamp {
     hash: u64,
 }
 
+/// The file's stamp and content: regular files only (a FIFO would block the poll), at most one byte more than
+/// a formula source may have (so an oversized file is reported as such, not read whole).
 fn stamp(path: &Path) -> Option<(Stamp, Vec<u8>)> {
-    let meta = std::fs::metadata(path).ok()?;
-    let bytes = std::fs::read(path).ok()?;
+    let meta = std::fs::metadata(path).ok().filter(|m| m.is_file())?;
+    let mut bytes = Vec::new();
+    std::fs::File::open(path).ok()?.take(super::source::MAX_SOURCE_BYTES as u64 + 1).read_to_end(&mut bytes).ok()?;
     let mut h = DefaultHasher::new();
     bytes.hash(&mut h);
     Some((Stamp { modified: meta.modified().ok(), len: meta.len(), hash: h.finish() }, bytes))

@@ -5,12 +5,9 @@
 //! comparison metrics are computed on; `--srgb` applies the sRGB transfer curve instead, which is what a
 //! physically based pipeline would display. NaN channels become 0.
 //!
-//! Output is written atomically: the PNG is encoded in memory, written to a temporary file in the target's
-//! directory, synced, and renamed over the target. Nothing touches the output path unless everything
-//! before succeeded, and an existing file that is not a PNG lobe wrote is refused unless forced.
+//! Output is written by [`crate::base::output`]: atomically, regular files only, and an existing file that is
+//! not a PNG lobe wrote is refused unless forced.
 
-use std::io::Write;
-use std::path::{Path, PathBuf};
 
 /// How linear radiance becomes an 8-bit value.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -109,55 +106,9 @@ pub fn is_lobe_png(bytes: &[u8]) -> bool {
     }
 }
 
-/// Checks that `path` may be (over)written: it must not be a directory, its directory must exist, and an
-/// existing file must be one lobe wrote (`is_ours`, e.g. [`is_lobe_png`]) unless `force`. Every command that
-/// writes a file goes through this and [`write_atomic`].
-pub fn check_output_path(path: &Path, force: bool, is_ours: fn(&[u8]) -> bool) -> Result<(), String> {
-    if path.is_dir() {
-        return Err(format!("`{}` is a directory", path.display()));
-    }
-    let dir = parent_dir(path);
-    if !dir.is_dir() {
-        return Err(format!("the directory `{}` does not exist", dir.display()));
-    }
-    if path.exists() && !force {
-        let bytes = std::fs::read(path).map_err(|e| format!("cannot read existing `{}`: {e}", path.display()))?;
-        if !is_ours(&bytes) {
-            return Err(format!(
-                "`{}` exists and was not written by lobe; not overwriting it (refusing to overwrite without --force)",
-                path.display()
-            ));
-        }
-    }
-    Ok(())
-}
-
-fn parent_dir(path: &Path) -> PathBuf {
-    match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    }
-}
-
-/// Writes `bytes` to `path` atomically: a temporary file in the same directory, fsync, rename. On any
-/// failure the temporary file is removed and `path` is untouched.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), String> {
-    let dir = parent_dir(path);
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
-    let tmp = dir.join(format!(".{name}.lobe-tmp-{}", std::process::id()));
-    let result = (|| -> std::io::Result<()> {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        drop(f);
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(format!("cannot write `{}`: {e}", path.display()));
-    }
-    Ok(())
-}
+/// Output files follow one policy for every command (regular files only, authorship from a bounded prefix,
+/// atomic replace): [`crate::base::output`].
+pub use crate::base::output::{check as check_output_path, write as write_output, write_atomic};
 
 #[cfg(test)]
 mod tests {

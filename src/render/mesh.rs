@@ -134,22 +134,34 @@ pub struct ObjError {
     pub line: Option<usize>,
 }
 
-/// Loads every model of an OBJ file into one mesh (triangulated; smooth normals computed when absent).
-///
-/// tobj reports only an error kind, so on failure the file is scanned once more by [`locate_obj_fault`] to
-/// name the offending line.
+/// Largest OBJ file read (a bound on time and memory for a wrong path such as /dev/zero; ~4 M triangles).
+pub const MAX_OBJ_BYTES: u64 = 256 << 20;
+
+/// Loads every model of an OBJ file into one mesh (triangulated; smooth normals computed when the file has
+/// none). The text is first checked line by line by [`obj_fault`] — tobj reports only an error kind, and
+/// accepts values the renderer cannot use (`vn 0 0 0`, coordinates beyond f32) — so every fault is named with
+/// its line.
 pub fn load_obj(path: &std::path::Path) -> Result<Mesh, ObjError> {
-    let text = std::fs::read(path).map_err(|e| ObjError { message: format!("cannot read: {e}"), line: None })?;
+    use std::io::Read;
+    let unreadable = |e: std::io::Error| ObjError { message: format!("cannot read: {e}"), line: None };
+    let file = std::fs::File::open(path).map_err(unreadable)?;
+    if !file.metadata().map(|m| m.is_file()).unwrap_or(false) {
+        return Err(ObjError { message: "not a regular file".into(), line: None });
+    }
+    let mut text = Vec::new();
+    file.take(MAX_OBJ_BYTES + 1).read_to_end(&mut text).map_err(unreadable)?;
+    if text.len() as u64 > MAX_OBJ_BYTES {
+        return Err(ObjError { message: format!("larger than {} MiB; is this the right file?", MAX_OBJ_BYTES >> 20), line: None });
+    }
+    if let Some((line, message)) = obj_fault(&String::from_utf8_lossy(&text)) {
+        return Err(ObjError { message, line: Some(line) });
+    }
     let opts = tobj::LoadOptions { single_index: true, triangulate: true, ignore_points: true, ignore_lines: true };
     let mut reader = std::io::BufReader::new(&text[..]);
     let loaded = tobj::load_obj_buf(&mut reader, &opts, |_| Err(tobj::LoadError::OpenFileFailed));
     let models = match loaded {
         Ok((models, _materials)) => models,
-        Err(e) => {
-            let src = String::from_utf8_lossy(&text);
-            let line = locate_obj_fault(&src);
-            return Err(ObjError { message: format!("not a valid OBJ file ({e})"), line });
-        }
+        Err(e) => return Err(ObjError { message: format!("not a valid OBJ file ({e})"), line: None }),
     };
     let mut positions = Vec::new();
     let mut normals = Vec::new();
@@ -173,10 +185,7 @@ pub fn load_obj(path: &std::path::Path) -> Result<Mesh, ObjError> {
         }
     }
     if triangles.is_empty() {
-        return Err(ObjError { message: "the file has no faces".into(), line: locate_obj_fault(&String::from_utf8_lossy(&text)) });
-    }
-    if positions.iter().any(|p| !p.is_finite()) {
-        return Err(ObjError { message: "a vertex coordinate is not a finite number".into(), line: None });
+        return Err(ObjError { message: "the file has no faces".into(), line: None });
     }
     Ok(if all_have_normals {
         let normals = normals.into_iter().map(|n: DVec3| n.try_normalize().unwrap_or(DVec3::Y)).collect();
@@ -186,51 +195,69 @@ pub fn load_obj(path: &std::path::Path) -> Result<Mesh, ObjError> {
     })
 }
 
-/// Finds the first line a strict reading of the OBJ subset we use (`v`, `vn`, `vt`, `f`) rejects: a vertex
-/// without three numbers, or a face with fewer than three corners or an index out of range.
-pub fn locate_obj_fault(src: &str) -> Option<usize> {
+/// The first line of `src` that the OBJ subset lobe reads (`v`, `vn`, `vt`, `f`) rejects, with the reason:
+/// a vertex without three numbers finite in f32 (what tobj stores), a zero or non-finite normal, a face
+/// with fewer than three corners or an index out of range, or a face corner without a normal index in a file
+/// that has normals (half the faces would silently get computed normals).
+pub fn obj_fault(src: &str) -> Option<(usize, String)> {
     let (mut nv, mut nvt, mut nvn) = (0i64, 0i64, 0i64);
+    let has_normals = src.lines().any(|l| l.split_whitespace().next() == Some("vn"));
     for (i, line) in src.lines().enumerate() {
         let mut it = line.split_whitespace();
         let Some(kw) = it.next() else { continue };
         let rest: Vec<&str> = it.collect();
-        let numbers_ok = |k: usize| rest.len() >= k && rest.iter().all(|s| s.parse::<f64>().map(|v| v.is_finite()).unwrap_or(false));
-        let ok = match kw {
+        let numbers = |k: usize| -> Option<Vec<f32>> {
+            let v: Vec<f32> = rest.iter().map(|s| s.parse::<f32>().ok().filter(|v| v.is_finite())).collect::<Option<_>>()?;
+            (v.len() >= k).then_some(v)
+        };
+        let fault = match kw {
             "v" => {
                 nv += 1;
-                numbers_ok(3)
+                numbers(3).is_none().then(|| "a vertex needs three numbers, each finite in single precision (|x| < 3.4e38)".to_string())
             }
             "vn" => {
                 nvn += 1;
-                numbers_ok(3)
+                match numbers(3) {
+                    None => Some("a normal needs three finite numbers".to_string()),
+                    Some(n) if n[..3].iter().all(|c| *c == 0.0) => Some("a normal of zero length has no direction".to_string()),
+                    Some(_) => None,
+                }
             }
             "vt" => {
                 nvt += 1;
-                numbers_ok(1)
+                numbers(1).is_none().then(|| "a texture coordinate needs finite numbers".to_string())
             }
             "f" => {
-                rest.len() >= 3
-                    && rest.iter().all(|corner| {
-                        corner.split('/').enumerate().all(|(k, s)| {
-                            if s.is_empty() {
-                                return k > 0; // `1//2`: the texture index may be missing
-                            }
-                            let count = [nv, nvt, nvn][k.min(2)];
-                            match s.parse::<i64>() {
-                                Ok(idx) if idx > 0 => idx <= count,
-                                Ok(idx) if idx < 0 => -idx <= count,
-                                _ => false,
-                            }
-                        })
-                    })
+                let index_ok = |k: usize, s: &str| {
+                    let count = [nv, nvt, nvn][k.min(2)];
+                    match s.parse::<i64>() {
+                        Ok(idx) if idx > 0 => idx <= count,
+                        Ok(idx) if idx < 0 => -idx <= count,
+                        _ => false,
+                    }
+                };
+                if rest.len() < 3 {
+                    Some("a face needs at least three corners".to_string())
+                } else if !rest.iter().all(|c| c.split('/').enumerate().all(|(k, s)| (s.is_empty() && k == 1) || index_ok(k, s))) {
+                    Some("a face index is missing, malformed or out of range".to_string())
+                } else if has_normals && rest.iter().any(|c| c.split('/').nth(2).is_none_or(str::is_empty)) {
+                    Some("this face has a corner without a normal index (v//vn) although the file has normals; give every corner one, or remove the `vn` lines to have smooth normals computed".to_string())
+                } else {
+                    None
+                }
             }
-            _ => true,
+            _ => None,
         };
-        if !ok {
-            return Some(i + 1);
+        if let Some(m) = fault {
+            return Some((i + 1, m));
         }
     }
     None
+}
+
+/// The line of [`obj_fault`].
+pub fn locate_obj_fault(src: &str) -> Option<usize> {
+    obj_fault(src).map(|(line, _)| line)
 }
 
 #[cfg(test)]
@@ -285,5 +312,16 @@ mod tests {
         assert_eq!(locate_obj_fault("v 0 0 0\nv 1 x 0\n"), Some(2));
         assert_eq!(locate_obj_fault("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n"), Some(4));
         assert_eq!(locate_obj_fault("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1//1 2 3\n"), Some(4));
+    }
+
+    #[test]
+    fn obj_values_the_renderer_cannot_use_are_located() {
+        let tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+        assert_eq!(locate_obj_fault(&format!("{tri}v 1e39 0 0\n")), Some(4));
+        assert!(obj_fault(&format!("{tri}vn 0 0 0\nf 1//1 2//1 3//1\n")).unwrap().1.contains("zero length"));
+        assert_eq!(locate_obj_fault(&format!("{tri}vn nan 0 1\nf 1//1 2//1 3//1\n")), Some(4));
+        assert!(obj_fault(&format!("{tri}vn 0 0 1\nf 1//1 2//1 3\n")).unwrap().1.contains("normal index"));
+        assert_eq!(obj_fault(&format!("{tri}vn 0 0 1\nf 1//1 2//1 3//1\n")), None);
+        assert_eq!(obj_fault(&format!("{tri}f 1 2 3\n")), None);
     }
 }

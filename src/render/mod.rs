@@ -144,7 +144,7 @@ pub struct RenderStats {
     /// Kernel evaluations (lit visible pixels × lights).
     pub evals: u64,
     pub kernel_calls: u64,
-    /// Kernel results that were NaN (shaded as 0).
+    /// Kernel results that were NaN or ±inf (shaded as no light).
     pub nan: u64,
     pub setup: Duration,
     pub raster_cpu: Duration,

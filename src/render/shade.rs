@@ -140,7 +140,8 @@ pub fn shade_tile(scene: &Scene, s: &Setup, n: usize, sc: &mut Scratch) -> Shade
             for i in 0..count {
                 let k = sc.lit[i] as usize;
                 let mut f = sc.out[i];
-                if f.is_nan() {
+                // NaN and ±inf are no light, and counted: an infinite lobe is a defect, not a highlight.
+                if !f.is_finite() {
                     counts.nan += 1;
                     f = 0.0;
                 }

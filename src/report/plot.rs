@@ -97,18 +97,16 @@ pub fn lobes(series: &[Series], o: &LobeOptions, format: Format) -> DrawResult<V
     if o.polar && o.log {
         return Err("--log applies to cartesian plots only (a log radius has no zero)".into());
     }
-    let ymax = series
-        .iter()
-        .flat_map(|s| s.points.iter().map(|p| p.1))
-        .filter(|v| v.is_finite())
-        .fold(0.0f64, f64::max)
-        .max(1e-12);
-    let ymin_pos = series
-        .iter()
-        .flat_map(|s| s.points.iter().map(|p| p.1))
-        .filter(|v| v.is_finite() && *v > 0.0)
-        .fold(f64::INFINITY, f64::min)
-        .max(ymax * 1e-12);
+    let values = || series.iter().flat_map(|s| s.points.iter().map(|p| p.1)).filter(|v| v.is_finite());
+    if values().next().is_none() {
+        return Err("nothing to plot: no curve has a finite value (is the formula NaN or infinite everywhere?)".into());
+    }
+    let ymax = values().fold(0.0f64, f64::max).max(1e-12);
+    let ymin_pos = values().filter(|v| *v > 0.0).fold(f64::INFINITY, f64::min);
+    if o.log && !ymin_pos.is_finite() {
+        return Err("nothing to plot on a log scale: no curve has a positive finite value (drop --log)".into());
+    }
+    let ymin_pos = ymin_pos.max(ymax * 1e-12);
     macro_rules! body {
         ($root:expr) => {{
             let root = $root;
@@ -288,6 +286,17 @@ mod tests {
         }
         let o = LobeOptions { title: "t".into(), polar: true, log: true, size: (320, 240) };
         assert!(lobes(&[cos_n(5.0)], &o, Format::Png).is_err());
+    }
+
+    #[test]
+    fn curves_with_nothing_to_show_are_refused_not_looped_on() {
+        let zero = Series { name: "0".into(), points: (0..=90).map(|d| (d as f64, 0.0)).collect() };
+        let nan = Series { name: "nan".into(), points: (0..=90).map(|d| (d as f64, f64::NAN)).collect() };
+        let log = LobeOptions { title: "t".into(), polar: false, log: true, size: (320, 240) };
+        assert!(lobes(&[zero.clone(), nan.clone()], &log, Format::Png).unwrap_err().contains("log"));
+        let lin = LobeOptions { log: false, ..log };
+        assert!(lobes(&[nan], &lin, Format::Png).unwrap_err().contains("finite"));
+        assert!(lobes(&[zero], &lin, Format::Png).is_ok());
     }
 
     #[test]

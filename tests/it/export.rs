@@ -96,3 +96,23 @@ fn export_takes_only_used_inputs_and_live_params() {
     let text = glsl::export(&baked, Dialect::Glsl);
     assert!(text.contains("float lobe_modified_schlick(float NH)"), "{text}");
 }
+
+#[test]
+fn hostile_parameter_names_export_valid_glsl() {
+    let Some(v) = validator() else {
+        eprintln!("glslangValidator not installed: hostile names checked by the unit test only");
+        return;
+    };
+    let src = "@name \"x\r#define pow(a,b) 0.0\"\nparam t0 = 1\nparam float = 2\nparam gl_Position = 3\nparam output = 4\n\
+               param fn = 5\nparam var = 6\nparam loop = 7\nparam f32 = 8\nparam main = 9\nparam __x = 1\n\
+               let a = pow(NH, n)\nlet b = a * a + t0\nb * b * float * gl_Position * output * fn * var * loop * f32 * main * __x\n";
+    let f = lobe::front::parse("hostile.brdf", src).unwrap_or_else(|d| panic!("{}", d.render(false)));
+    let dir = std::env::temp_dir().join(format!("lobe-glsl-hostile-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("hostile.frag");
+    let shader = glsl::glsl_test_shader(&f);
+    std::fs::write(&file, &shader).unwrap();
+    let out = Command::new(&v).arg(&file).output().unwrap();
+    assert!(out.status.success(), "not valid GLSL:\n{}\n{shader}", String::from_utf8_lossy(&out.stdout));
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,6 +1,16 @@
 // Cook-Torrance — exported by lobe VERSION as GLSL.
 // Source: R. L. Cook, K. E. Torrance, A reflectance model for computer graphics, ACM TOG 1982; Master's thesis “Development of rendering methods and software for computer graphics systems”, VNTU, Vinnytsia, 2022, eq. (1.10)
-// Formula (simplified): (F0 + (1 - F0) * ((1 - clamp(VH, 0, 1)) * (1 - clamp(VH, 0, 1)) * ((1 - clamp(VH, 0, 1)) * (1 - clamp(VH, 0, 1))) * (1 - clamp(VH, 0, 1)))) * (1 / (m * m * (clamp(NH, 0, 1) * clamp(NH, 0, 1) * (clamp(NH, 0, 1) * clamp(NH, 0, 1)))) * exp((clamp(NH, 0, 1) * clamp(NH, 0, 1) - 1) / (m * m * (clamp(NH, 0, 1) * clamp(NH, 0, 1))))) * min(1, min(2 * clamp(NH, 0, 1) * clamp(NV, 0, 1) / clamp(VH, 0, 1), 2 * clamp(NH, 0, 1) * clamp(NL, 0, 1) / clamp(VH, 0, 1))) / (pi * clamp(NL, 0, 1) * clamp(NV, 0, 1))
+// Formula (simplified):
+//   let nh = clamp(NH, 0, 1)
+//   let t1 = nh * nh
+//   let t2 = m * m
+//   let vh = clamp(VH, 0, 1)
+//   let nl = clamp(NL, 0, 1)
+//   let t3 = 2 * nh
+//   let nv = clamp(NV, 0, 1)
+//   let t4 = 1 - vh
+//   let t5 = t4 * t4
+//   (F0 + (1 - F0) * (t5 * t5 * t4)) * (1 / (t2 * (t1 * t1)) * exp((t1 - 1) / (t2 * t1))) * min(1, min(t3 * nv / vh, t3 * nl / vh)) / (pi * nl * nv)
 // Baked or unused parameters (folded into constants): n
 // Inputs are cosines (clamped to [0, 1] here, as lobe does); the result is clamped at 0.
 // lobe evaluates in f64; this runs in f32. GPU min/max need not propagate NaN, and

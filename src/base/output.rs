@@ -1,0 +1,231 @@
+//! Writing output files without losing anything the user has.
+//!
+//! Policy, the same for every command and every output (images, plots, shaders, tables):
+//! - only **regular files** are written or replaced: a directory, device node, FIFO or socket at the output
+//!   path is refused, even with `--force` (`-o /dev/null --force` must not replace `/dev/null`);
+//! - an existing file is replaced only if lobe wrote it (recognised from a bounded **prefix** — a PNG's
+//!   `Software: lobe` chunk or a text header — so a 2 GB foreign file costs one 64 KiB read) or with `--force`;
+//! - the write is **atomic**: a temporary file `.NAME.lobe-tmp-PID` in the target's directory, synced, then
+//!   renamed over the target, so a failure or a kill never leaves a truncated file at the user's path;
+//! - a **symlink** is followed: the file it points to is replaced and the link stays a link (a dangling link
+//!   is refused); the **permissions** of a replaced file are kept;
+//! - temporary files are removed on failure, on SIGINT/SIGTERM/SIGHUP ([`remove_temporaries`], called by the
+//!   CLI's signal handler), and — for ones a killed process left behind — on the next write to the same
+//!   directory.
+//!
+//! [`check`] answers "may I write here?" early (before a long render); [`write`] checks again right before
+//! replacing, so a file another program put there in between (e.g. during `lobe watch`) is not clobbered.
+
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+/// How much of an existing file is read to decide whether lobe wrote it.
+pub const PREFIX_BYTES: u64 = 64 * 1024;
+
+/// Temporary files being written right now, so a signal handler can remove them.
+static IN_FLIGHT: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// Checks that `path` may be (over)written: its directory exists; if something is there it is a regular file
+/// (after following symlinks), and, unless `force`, one that `is_ours` recognises from its first
+/// [`PREFIX_BYTES`].
+pub fn check(path: &Path, force: bool, is_ours: fn(&[u8]) -> bool) -> Result<(), String> {
+    let target = resolve(path)?;
+    let dir = parent_dir(&target);
+    if !dir.is_dir() {
+        return Err(format!("the directory `{}` does not exist", dir.display()));
+    }
+    let meta = match std::fs::metadata(&target) {
+        Ok(m) => m,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(format!("cannot inspect `{}`: {e}", path.display())),
+    };
+    if !meta.is_file() {
+        return Err(format!(
+            "`{}` is {}, not a regular file; lobe writes only regular files",
+            path.display(),
+            kind_of(&meta)
+        ));
+    }
+    if !force {
+        let mut prefix = Vec::new();
+        std::fs::File::open(&target)
+            .and_then(|f| f.take(PREFIX_BYTES).read_to_end(&mut prefix))
+            .map_err(|e| format!("cannot read existing `{}`: {e}", path.display()))?;
+        if !is_ours(&prefix) {
+            return Err(format!(
+                "`{}` exists and was not written by lobe; not overwriting it (refusing to overwrite without --force)",
+                path.display()
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// [`check`], then [`write_atomic`]: the one way lobe replaces a file.
+pub fn write(path: &Path, bytes: &[u8], force: bool, is_ours: fn(&[u8]) -> bool) -> Result<(), String> {
+    check(path, force, is_ours)?;
+    write_atomic(path, bytes)
+}
+
+/// Writes `bytes` to `path` (following a symlink to its target) atomically: a temporary file in the same
+/// directory, fsync, rename; the replaced file's permissions are kept. On failure the temporary file is
+/// removed and `path` is untouched. Refuses non-regular targets. Does not check authorship: see [`write`].
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), String> {
+    let target = resolve(path)?;
+    let existing = std::fs::metadata(&target).ok();
+    if let Some(m) = &existing {
+        if !m.is_file() {
+            return Err(format!("`{}` is {}, not a regular file; lobe writes only regular files", path.display(), kind_of(m)));
+        }
+    }
+    let dir = parent_dir(&target);
+    let name = target.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
+    remove_stale_temporaries(&dir, &name);
+    let tmp = dir.join(format!(".{name}.lobe-tmp-{}", std::process::id()));
+    lock_in_flight().push(tmp.clone());
+    let result = (|| -> std::io::Result<()> {
+        let mut f = std::fs::OpenOptions::new().write(true).create_new(true).open(&tmp)?;
+        f.write_all(bytes)?;
+        if let Some(m) = &existing {
+            f.set_permissions(m.permissions())?;
+        }
+        f.sync_all()?;
+        drop(f);
+        std::fs::rename(&tmp, &target)
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    lock_in_flight().retain(|p| p != &tmp);
+    result.map_err(|e| format!("cannot write `{}`: {e}", path.display()))
+}
+
+/// Removes the temporary files of writes in progress (for a signal handler: the process is about to exit).
+pub fn remove_temporaries() {
+    for p in lock_in_flight().drain(..) {
+        let _ = std::fs::remove_file(p);
+    }
+}
+
+fn lock_in_flight() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
+    IN_FLIGHT.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Temporaries for `name` left by processes that no longer run (killed mid-write). Only on systems with
+/// `/proc`, where "no longer runs" can be told; elsewhere they are left alone.
+fn remove_stale_temporaries(dir: &Path, name: &str) {
+    if !Path::new("/proc/self").exists() {
+        return;
+    }
+    let prefix = format!(".{name}.lobe-tmp-");
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    for e in entries.flatten() {
+        let file = e.file_name();
+        let Some(pid) = file.to_str().and_then(|f| f.strip_prefix(&prefix)).and_then(|p| p.parse::<u32>().ok()) else {
+            continue;
+        };
+        let regular = e.file_type().map(|t| t.is_file()).unwrap_or(false);
+        if regular && pid != std::process::id() && !Path::new(&format!("/proc/{pid}")).exists() {
+            let _ = std::fs::remove_file(e.path());
+        }
+    }
+}
+
+/// The path to write: `path` itself, or the file a symlink at `path` points to.
+fn resolve(path: &Path) -> Result<PathBuf, String> {
+    match std::fs::symlink_metadata(path) {
+        Ok(m) if m.file_type().is_symlink() => std::fs::canonicalize(path)
+            .map_err(|e| format!("`{}` is a symbolic link whose target cannot be resolved: {e}", path.display())),
+        _ => Ok(path.to_path_buf()),
+    }
+}
+
+fn parent_dir(path: &Path) -> PathBuf {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+fn kind_of(m: &std::fs::Metadata) -> &'static str {
+    let t = m.file_type();
+    if t.is_dir() {
+        return "a directory";
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if t.is_char_device() {
+            return "a character device";
+        }
+        if t.is_block_device() {
+            return "a block device";
+        }
+        if t.is_fifo() {
+            return "a FIFO (named pipe)";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    "not a regular file"
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scratch(tag: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("lobe-out-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+    fn ours(b: &[u8]) -> bool {
+        b.starts_with(b"LOBE")
+    }
+
+    #[test]
+    fn refuses_foreign_and_non_regular_files() {
+        let d = scratch("foreign");
+        let p = d.join("notes.txt");
+        std::fs::write(&p, "precious").unwrap();
+        assert!(write(&p, b"LOBE x", false, ours).is_err());
+        assert_eq!(std::fs::read(&p).unwrap(), b"precious");
+        assert!(write(&p, b"LOBE x", true, ours).is_ok());
+        assert!(write(&p, b"LOBE y", false, ours).is_ok());
+        assert!(check(&d, true, ours).unwrap_err().contains("directory"));
+        assert!(check(&d.join("missing/x"), false, ours).is_err());
+        #[cfg(unix)]
+        {
+            let e = check(Path::new("/dev/null"), true, ours).unwrap_err();
+            assert!(e.contains("character device"), "{e}");
+            assert!(write_atomic(Path::new("/dev/null"), b"LOBE").is_err());
+        }
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn keeps_links_and_modes_and_cleans_stale_temporaries() {
+        use std::os::unix::fs::PermissionsExt;
+        let d = scratch("link");
+        let real = d.join("real.png");
+        std::fs::write(&real, b"LOBE old").unwrap();
+        std::fs::set_permissions(&real, std::fs::Permissions::from_mode(0o600)).unwrap();
+        let link = d.join("link.png");
+        std::os::unix::fs::symlink(&real, &link).unwrap();
+        // A temporary left by a process that no longer exists (pid beyond any real one).
+        let stale = d.join(".real.png.lobe-tmp-4294967295");
+        std::fs::write(&stale, b"").unwrap();
+        write(&link, b"LOBE new", false, ours).unwrap();
+        assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink());
+        assert_eq!(std::fs::read(&real).unwrap(), b"LOBE new");
+        assert_eq!(std::fs::metadata(&real).unwrap().permissions().mode() & 0o777, 0o600);
+        assert!(!stale.exists());
+        std::os::unix::fs::symlink(d.join("nowhere"), d.join("dangling")).unwrap();
+        assert!(write(&d.join("dangling"), b"LOBE", true, ours).is_err());
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+}

@@ -1,0 +1,198 @@
+//! Hostile but fair input, end to end through the `lobe` binary: every case runs under a timeout and must end
+//! with a clear message and exit code 1 (or a correct result), write nothing it should not, and replace
+//! nothing the user has. Needs `mkfifo` (coreutils) for the FIFO cases; they are skipped without it.
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// What a run did.
+struct Run {
+    code: Option<i32>,
+    stdout: Vec<u8>,
+    stderr: String,
+}
+
+/// Runs lobe with `args`, killing it (and failing the test) after `limit`. Output is read on threads so a
+/// large stream cannot block the child.
+fn lobe_within(limit: Duration, args: &[&str]) -> Run {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_lobe"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .env("NO_COLOR", "1")
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn lobe");
+    let mut out = child.stdout.take().unwrap();
+    let mut err = child.stderr.take().unwrap();
+    let t_out = std::thread::spawn(move || {
+        let mut b = Vec::new();
+        let _ = (&mut out).take(64 << 20).read_to_end(&mut b);
+        b
+    });
+    let t_err = std::thread::spawn(move || {
+        let mut b = Vec::new();
+        let _ = (&mut err).take(64 << 20).read_to_end(&mut b);
+        b
+    });
+    let start = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("`lobe {}` did not finish within {limit:?}", args.join(" "));
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    Run { code: status.code(), stdout: t_out.join().unwrap(), stderr: String::from_utf8_lossy(&t_err.join().unwrap()).into_owned() }
+}
+
+fn lobe(args: &[&str]) -> Run {
+    lobe_within(Duration::from_secs(20), args)
+}
+
+/// Exit code 1, an `error` line containing `needle`, no panic.
+fn refused(r: &Run, what: &str, needle: &str) {
+    assert_eq!(r.code, Some(1), "{what}: exit {:?}\n{}", r.code, r.stderr);
+    assert!(!r.stderr.contains("panicked"), "{what} panicked:\n{}", r.stderr);
+    assert!(r.stderr.contains("error") && r.stderr.contains(needle), "{what}: expected `{needle}` in:\n{}", r.stderr);
+}
+
+fn scratch(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("lobe-hostile-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn s(p: &Path) -> String {
+    p.display().to_string()
+}
+
+fn mkfifo(p: &Path) -> bool {
+    Command::new("mkfifo").arg(p).status().map(|s| s.success()).unwrap_or(false)
+}
+
+#[cfg(unix)]
+#[test]
+fn outputs_that_are_not_regular_files_are_refused_even_with_force() {
+    use std::os::unix::fs::FileTypeExt;
+    let d = scratch("nonregular");
+    let fifo = d.join("pipe.png");
+    let have_fifo = mkfifo(&fifo);
+    let mut targets = vec!["/dev/null".to_string(), "/dev/zero".to_string(), "/dev/full".to_string()];
+    if have_fifo {
+        targets.push(s(&fifo));
+    }
+    for t in &targets {
+        for force in [false, true] {
+            let mut args = vec!["render", "examples/scenes/paper_sphere.toml", "--size", "16", "-o", t];
+            args.extend(force.then_some("--force"));
+            refused(&lobe(&args), &format!("render -o {t} force={force}"), "not a regular file");
+        }
+    }
+    if have_fifo {
+        let r = lobe(&["plot", "examples/brdfs/phong.brdf", "--set", "n=5", "-o", &s(&fifo), "--force"]);
+        refused(&r, "plot -o FIFO --force", "not a regular file");
+    }
+    assert!(std::fs::metadata("/dev/null").unwrap().file_type().is_char_device(), "/dev/null was replaced");
+    if have_fifo {
+        assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo(), "the FIFO was replaced");
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn a_huge_foreign_output_is_refused_after_reading_only_its_start() {
+    let d = scratch("huge");
+    let big = d.join("big.png");
+    // 4 GiB sparse: reading it whole would take seconds and gigabytes.
+    let f = std::fs::File::create(&big).unwrap();
+    f.set_len(4 << 30).unwrap();
+    drop(f);
+    let r = lobe_within(Duration::from_secs(10), &["render", "examples/scenes/paper_sphere.toml", "--size", "16", "-o", &s(&big)]);
+    refused(&r, "render over a 4 GiB foreign file", "not written by lobe");
+    assert_eq!(std::fs::metadata(&big).unwrap().len(), 4 << 30);
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[cfg(unix)]
+#[test]
+fn replacing_an_output_keeps_its_link_and_its_mode() {
+    use std::os::unix::fs::PermissionsExt;
+    let d = scratch("link");
+    let real = d.join("real.png");
+    let link = d.join("link.png");
+    let r = lobe(&["render", "examples/scenes/paper_sphere.toml", "--size", "16", "-o", &s(&real)]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    std::fs::set_permissions(&real, std::fs::Permissions::from_mode(0o600)).unwrap();
+    std::os::unix::fs::symlink(&real, &link).unwrap();
+    let r = lobe(&["render", "examples/scenes/paper_sphere.toml", "--size", "24", "-o", &s(&link)]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink(), "the link became a file");
+    assert_eq!(std::fs::metadata(&real).unwrap().permissions().mode() & 0o777, 0o600, "the mode was reset");
+    let png = lobe::render::image::Image::decode_png(&std::fs::read(&real).unwrap()).unwrap();
+    assert_eq!(png.width, 24, "the link's target was not rewritten");
+    let leftovers: Vec<_> = std::fs::read_dir(&d).unwrap().flatten().filter(|e| e.file_name().to_string_lossy().contains("lobe-tmp")).collect();
+    assert!(leftovers.is_empty(), "temporary files left behind");
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn log_plots_with_nothing_positive_end_with_an_error() {
+    let d = scratch("plot");
+    let out = d.join("p.png");
+    for (expr, log) in [("0*NH", true), ("0*NH/0", false), ("0*NH/0", true)] {
+        let file = d.join("f.brdf");
+        std::fs::write(&file, expr).unwrap();
+        let file = s(&file);
+        let mut args = vec!["plot", &file, "-o", out.to_str().unwrap()];
+        args.extend(log.then_some("--log"));
+        refused(&lobe_within(Duration::from_secs(10), &args), &format!("plot {expr} log={log}"), "nothing to plot");
+        assert!(!out.exists(), "a failed plot wrote {}", out.display());
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn shader_export_mangles_hostile_names_and_metadata() {
+    let d = scratch("export");
+    let f = d.join("hostile.brdf");
+    std::fs::write(&f, "@name \"x\r#define pow(a,b) 0.0\"\nparam t0 = 1\nparam float = 2\nparam gl_Position = 3\nparam output = 4\nparam fn = 5\nparam var = 6\nparam loop = 7\nparam f32 = 8\npow(NH, n) * t0 * float * gl_Position * output * fn * var * loop * f32\n").unwrap();
+    for dialect in ["--glsl", "--wgsl"] {
+        let r = lobe(&["export", dialect, &s(&f)]);
+        assert_eq!(r.code, Some(0), "{}", r.stderr);
+        let text = String::from_utf8_lossy(&r.stdout);
+        assert!(!text.contains('\r'), "{text}");
+        assert!(text.lines().all(|l| l.trim_start().starts_with("//") || !l.contains("#define")), "{text}");
+        for name in ["t0", "float", "gl_Position", "output", "fn", "var", "loop", "f32"] {
+            assert!(text.contains(&format!("p_{name}")), "{name} not mangled:\n{text}");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn obj_values_the_renderer_cannot_use_name_their_line() {
+    let d = scratch("obj");
+    let scene = |obj: &str| {
+        std::fs::write(d.join("m.obj"), obj).unwrap();
+        let toml = "[camera]\nposition = [0, 0, 6]\n[[light]]\nkind = \"point\"\nposition = [10, 0, 10]\n\
+                    [materials.m]\nformula = \"NH^n\"\n[[object]]\nshape = \"mesh\"\npath = \"m.obj\"\nmaterial = \"m\"\n";
+        std::fs::write(d.join("s.toml"), toml).unwrap();
+        lobe(&["render", &s(&d.join("s.toml")), "--size", "16", "-o", &s(&d.join("o.png"))])
+    };
+    let tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+    refused(&scene(&format!("{tri}vn 0 0 0\nf 1//1 2//1 3//1\n")), "vn 0 0 0", "m.obj:4");
+    refused(&scene(&format!("{tri}vn nan 0 1\nf 1//1 2//1 3//1\n")), "vn nan", "m.obj:4");
+    refused(&scene(&format!("{tri}v 1e39 0 0\nf 1 2 3\n")), "v 1e39", "m.obj:4");
+    refused(&scene(&format!("{tri}vn 0 0 1\nf 1//1 2//1 3\n")), "missing normal index", "m.obj:5");
+    assert!(!d.join("o.png").exists());
+    let _ = std::fs::remove_dir_all(&d);
+}
