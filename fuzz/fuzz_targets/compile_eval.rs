@@ -1,4 +1,4 @@
-//! Source text → `lobe::compile` → evaluation on a few points, with both backends.
+//! Source text → `lobe::compile_source` → evaluation on a few points, with both backends.
 //!
 //! Invariants checked: no panic anywhere (front end, simplifier, JIT, evaluation); when both backends accept
 //! the text, they agree (within 4 ulp, both NaN, or the same infinity) in scalar and batched form.
@@ -30,7 +30,7 @@ fn agree(a: f64, b: f64) -> bool {
 
 fuzz_target!(|data: &[u8]| {
     let src = String::from_utf8_lossy(data);
-    let build = |backend| lobe::compile("fuzz.brdf", &src, &Options { backend, ..Options::default() });
+    let build = |backend| lobe::compile_source("fuzz.brdf", &src, &Options { backend, ..Options::default() });
     let (jit, interp) = match (build(Backend::Jit), build(Backend::Interp)) {
         (Ok(j), Ok(i)) => (j, i),
         (Err(d), _) | (_, Err(d)) => {

@@ -108,6 +108,23 @@ pub fn remove_temporaries() {
     }
 }
 
+/// Installs a handler for SIGINT, SIGTERM and SIGHUP that removes in-flight temporaries and exits with the
+/// conventional 128 + signal status. A no-op where signals cannot be caught.
+pub fn clean_up_on_signals() {
+    #[cfg(unix)]
+    {
+        use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+        if let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP]) {
+            std::thread::spawn(move || {
+                if let Some(sig) = signals.forever().next() {
+                    remove_temporaries();
+                    std::process::exit(128 + sig);
+                }
+            });
+        }
+    }
+}
+
 fn lock_in_flight() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
     IN_FLIGHT.lock().unwrap_or_else(|e| e.into_inner())
 }

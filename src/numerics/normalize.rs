@@ -9,9 +9,18 @@ use crate::backend::Evaluator;
 use crate::ir::{BinOp, Formula, InputSet};
 
 /// The exact normalisation coefficient of a kernel reading `used`, at `params`.
+/// A lobe whose integral is so small that `1/(2π·Int)` overflows (e.g. `NH^n * 1e-310`) is refused rather
+/// than normalised to infinity.
 pub fn coefficient(ev: &dyn Evaluator, used: InputSet, params: &[f64]) -> Result<f64, CheckError> {
     let (lobe, _) = choose_lobe_input(used);
-    energy::normalization_coef(ev, params, lobe)
+    let coef = energy::normalization_coef(ev, params, lobe)?;
+    if !coef.is_finite() {
+        return Err(CheckError::hint(
+            format!("the lobe integral is too small to normalise: 1/(2π·Int) overflows double precision ({coef})"),
+            "the formula is scaled by a tiny constant; drop the constant (normalisation removes any scale anyway)",
+        ));
+    }
+    Ok(coef)
 }
 
 /// `coef · f`, simplified, for a formula whose parameters are all baked (the coefficient depends on every
@@ -50,5 +59,7 @@ mod tests {
             assert!((c - exact).abs() / exact < 1e-6, "{n}: {c} vs {exact}");
         }
         assert!(coefficient(&FnEvaluator(|_: &[f64; 5], _: &[f64]| 0.0), vr, &[1.0]).is_err());
+        let tiny = FnEvaluator(|x: &[f64; 5], p: &[f64]| x[3].clamp(0.0, 1.0).powf(p[0]) * 1e-300 * 1e-10);
+        assert!(coefficient(&tiny, vr, &[50.0]).unwrap_err().msg.contains("overflows"));
     }
 }
