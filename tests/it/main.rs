@@ -4,6 +4,7 @@ mod cli;
 mod differential;
 mod export;
 mod front;
+mod fuzz;
 mod hostile;
 mod jit;
 mod parse_errors;
