@@ -100,10 +100,7 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
             })
             .collect()
     };
-    let mut rows = vec![];
-    for set in &sets {
-        rows.push(compare::compare_formulas(&job, set, compiler, &ropts)?);
-    }
+    let rows = compare::compare_sweep(&job, &sets, compiler, &ropts)?;
     let scale = rows.iter().map(|c| c.metrics.max_gray_diff).fold(0.0, f64::max).max(1.0);
     if let Some(out) = &a.output {
         let png = compare::sweep_image(&rows, scale).encode_png().map_err(CliError::msg)?;

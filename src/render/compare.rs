@@ -5,6 +5,10 @@
 //! rounded), then the mean of |g_A − g_B| over every pixel of the window — background included. Because
 //! background pixels are equal in both images, the value scales with the fraction of the window the object
 //! covers; [`Metrics::manhattan_covered`] divides by the covered pixels only, which does not depend on framing.
+//!
+//! Formula comparisons ([`compare_formulas`], [`compare_sweep`]) render one scene with every material's formula
+//! replaced by A, then by B. A sweep over n parses the scene and builds its meshes once
+//! ([`super::scene::Geometry`]) and recompiles only the two formulas per n.
 
 use super::image::Image;
 
@@ -125,8 +129,8 @@ pub struct Comparison {
     pub nan: [u64; 2],
 }
 
-/// What [`compare_formulas`] renders: a scene (name, TOML text, base directory for relative paths) and two
-/// formulas (file name, source).
+/// What [`compare_formulas`] and [`compare_sweep`] render: a scene (name, TOML text, base directory for
+/// relative paths) and two formulas (file name, source).
 pub struct CompareJob<'a> {
     pub scene_name: &'a str,
     pub scene_src: &'a str,
@@ -144,25 +148,45 @@ pub fn compare_formulas(
     compiler: &dyn super::scene::BrdfCompiler,
     ropts: &super::RenderOptions,
 ) -> Result<Comparison, crate::Diagnostics> {
+    let geometry = super::scene::parse_geometry_deferred(job.scene_name, job.scene_src, job.base, job.size)?;
+    compare_in(&geometry, job.a, job.b, set, compiler, ropts)
+}
+
+/// [`compare_formulas`] at each of `sets` (one comparison per set, in order; `lobe compare --sweep-n`). The
+/// scene is parsed and its meshes built once; each comparison only compiles the two formulas with its values.
+/// Errors are those of the first set's comparison, as if each had been run alone.
+pub fn compare_sweep(
+    job: &CompareJob,
+    sets: &[Vec<(String, f64)>],
+    compiler: &dyn super::scene::BrdfCompiler,
+    ropts: &super::RenderOptions,
+) -> Result<Vec<Comparison>, crate::Diagnostics> {
+    let geometry = super::scene::parse_geometry_deferred(job.scene_name, job.scene_src, job.base, job.size)?;
+    sets.iter().map(|set| compare_in(&geometry, job.a, job.b, set, compiler, ropts)).collect()
+}
+
+/// One comparison in already loaded geometry: materials with formula A, render; formula B, render; metrics.
+pub fn compare_in(
+    geometry: &super::scene::Geometry,
+    a: (&str, &str),
+    b: (&str, &str),
+    set: &[(String, f64)],
+    compiler: &dyn super::scene::BrdfCompiler,
+    ropts: &super::RenderOptions,
+) -> Result<Comparison, crate::Diagnostics> {
+    let fail = |m: String| crate::Diagnostics::single(geometry.name(), crate::Diagnostic::error(m));
     let mut frames = vec![];
     let mut nan = [0u64; 2];
-    for (k, (file, src)) in [job.a, job.b].into_iter().enumerate() {
-        let opts = super::scene::LoadOptions {
-            size: job.size,
-            set: set.to_vec(),
-            formula_override: Some((file.to_string(), src.to_string())),
-        };
-        let scene = super::scene::parse_scene(job.scene_name, job.scene_src, job.base, &opts, compiler)?;
-        let (frame, stats) = super::render(&scene, ropts)
-            .map_err(|m| crate::Diagnostics::single(job.scene_name, crate::Diagnostic::error(m)))?;
+    for (k, formula) in [a, b].into_iter().enumerate() {
+        let scene = geometry.with_materials(set, Some(formula), compiler)?;
+        let (frame, stats) = super::render(&scene, ropts).map_err(fail)?;
         nan[k] = stats.nan;
         frames.push(frame);
     }
     let (fb, fa) = (frames.pop(), frames.pop());
     let (Some(a), Some(b)) = (fa, fb) else { unreachable!("two frames were rendered") };
     let covered: Vec<bool> = a.covered.iter().zip(&b.covered).map(|(x, y)| *x || *y).collect();
-    let metrics = metrics(&a.image, &b.image, &covered)
-        .map_err(|m| crate::Diagnostics::single(job.scene_name, crate::Diagnostic::error(m)))?;
+    let metrics = metrics(&a.image, &b.image, &covered).map_err(fail)?;
     let n = set.iter().rev().find(|(k, _)| k == "n").map(|(_, v)| *v);
     Ok(Comparison { n, metrics, a, b, nan })
 }

@@ -95,7 +95,9 @@ impl std::fmt::Debug for Material {
 /// A mesh in world space with its material.
 #[derive(Clone, Debug)]
 pub struct Object {
-    pub mesh: Mesh,
+    /// Shared: scenes made from one [`scene::Geometry`] (e.g. each row of `lobe compare --sweep-n`) use the
+    /// same mesh.
+    pub mesh: Arc<Mesh>,
     pub material: usize,
     pub cull_backfaces: bool,
 }

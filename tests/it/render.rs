@@ -427,3 +427,92 @@ fn cli_render_and_compare_end_to_end() {
     assert_eq!((im.width, im.height), (3 * 64, 2 * 64));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+// ---- Geometry once: stage 1 (parse, check, tessellate) shared by many material builds ----
+
+/// `compare_sweep` (one parse and tessellation, materials rebuilt per n) gives the same images and metrics as
+/// loading the whole scene afresh for each formula and n, the way each comparison was made before.
+#[test]
+fn sweep_matches_rendering_each_n_separately() {
+    let read = |f: &str| std::fs::read_to_string(root().join("examples/brdfs").join(f)).unwrap();
+    let (phong, msh) = (read("phong.brdf"), read("modified_schlick_vr.brdf"));
+    let scene_src = std::fs::read_to_string(scene_file("paper_sphere.toml")).unwrap();
+    let base = scene_file("");
+    let ropts = RenderOptions { tile: 32, ..RenderOptions::default() };
+    let job = CompareJob { scene_name: "paper", scene_src: &scene_src, base: &base, a: ("phong", &phong), b: ("msh", &msh), size: Some((80, 64)) };
+    let ns = [5.0, 50.0, 500.0];
+    let sets: Vec<Vec<(String, f64)>> = ns.iter().map(|&n| vec![("n".to_string(), n)]).collect();
+    let rows = compare::compare_sweep(&job, &sets, &JIT, &ropts).unwrap();
+    assert_eq!(rows.len(), ns.len());
+    for (row, set) in rows.iter().zip(&sets) {
+        let alone = |(file, src): (&str, &str)| {
+            let opts = LoadOptions { size: job.size, set: set.clone(), formula_override: Some((file.into(), src.into())) };
+            let s = scene::parse_scene("paper", &scene_src, &base, &opts, &JIT).unwrap();
+            r::render(&s, &ropts).unwrap()
+        };
+        let ((fa, sa), (fb, sb)) = (alone(job.a), alone(job.b));
+        assert!(row.a.image == fa.image && row.b.image == fb.image, "n={:?}: images differ", row.n);
+        let covered: Vec<bool> = fa.covered.iter().zip(&fb.covered).map(|(x, y)| *x || *y).collect();
+        assert_eq!(row.metrics, compare::metrics(&fa.image, &fb.image, &covered).unwrap());
+        assert_eq!(row.nan, [sa.nan, sb.nan]);
+        assert_eq!(row.n, Some(set[0].1));
+        // And a one-row comparison is the same row.
+        assert_eq!(compare::compare_formulas(&job, set, &JIT, &ropts).unwrap().metrics, row.metrics);
+    }
+    assert!(rows[0].metrics.manhattan > rows[2].metrics.manhattan);
+}
+
+/// Scenes made from one geometry share its meshes, differ only in their materials, and render exactly as a
+/// full load does.
+#[test]
+fn geometry_is_loaded_once_and_shared_by_its_scenes() {
+    let g = scene::load_geometry(&scene_file("torus.toml"), Some((90, 70))).unwrap_or_else(|d| panic!("{}", d.render(false)));
+    assert_eq!((g.width, g.height), (90, 70));
+    let s1 = g.with_materials(&[], None, &JIT).unwrap();
+    let s2 = g.with_materials(&[("n".into(), 7.0)], None, &JIT).unwrap();
+    for ((o, p), q) in g.objects.iter().zip(&s1.objects).zip(&s2.objects) {
+        assert!(Arc::ptr_eq(&o.mesh, &p.mesh) && Arc::ptr_eq(&o.mesh, &q.mesh), "meshes are copied");
+    }
+    assert_eq!(s2.materials[0].params[0], 7.0);
+    assert_ne!(s1.materials[0].params, s2.materials[0].params);
+    assert!(render(&s1, 2).0.image == render(&load("torus.toml", &sized(90, 70)), 2).0.image);
+    let set7 = LoadOptions { set: vec![("n".into(), 7.0)], ..sized(90, 70) };
+    assert!(render(&s2, 2).0.image == render(&load("torus.toml", &set7), 2).0.image);
+}
+
+/// The two stages report what the single pass did: a full load lists size/camera/light errors, then material
+/// errors, then object errors; `parse_geometry` alone reports the first and last groups; `lobe compare`'s
+/// path reports exactly what a full load with the replacement formula does.
+#[test]
+fn staged_loading_keeps_the_diagnostics() {
+    let src = GOOD
+        .replace("position = [0, 0, 6]", "position = [0, 0, 0]")
+        .replace("formula = \"VR^n\"", "formula = \"VR^n\"\nparams = { m = 3 }")
+        .replace("material = \"m\"", "material = \"mm\"");
+    let full = scene_err(&src);
+    let (cam, mat, obj) = (full.find("[camera]").unwrap(), full.find("no parameter `m`").unwrap(), full.find("unknown material `mm`").unwrap());
+    assert!(cam < mat && mat < obj, "{full}");
+    let geo = match scene::parse_geometry("bad.toml", &src, &scene_file(""), None) {
+        Ok(_) => panic!("accepted"),
+        Err(d) => d.render(false),
+    };
+    assert!(geo.contains("[camera]") && geo.contains("unknown material `mm`") && !geo.contains("no parameter"), "{geo}");
+    assert!(geo.contains("bad.toml:1:1") && geo.contains("bad.toml:11:12"), "{geo}");
+
+    // compare: geometry errors and an out-of-range --set together, as one full load reports them.
+    let phong = std::fs::read_to_string(root().join("examples/brdfs/phong.brdf")).unwrap();
+    let base = scene_file("");
+    let job = CompareJob { scene_name: "bad.toml", scene_src: &src, base: &base, a: ("phong.brdf", &phong), b: ("b", "VR^n"), size: None };
+    let set = vec![("n".to_string(), 1e9)];
+    let cmp = match compare::compare_sweep(&job, std::slice::from_ref(&set), &JIT, &RenderOptions::default()) {
+        Ok(_) => panic!("accepted"),
+        Err(d) => d.render(false),
+    };
+    let opts = LoadOptions { set, formula_override: Some(("phong.brdf".into(), phong.clone())), ..LoadOptions::default() };
+    let alone = match scene::parse_scene("bad.toml", &src, &base, &opts, &JIT) {
+        Ok(_) => panic!("accepted"),
+        Err(d) => d.render(false),
+    };
+    assert_eq!(cmp, alone);
+    assert!(cmp.contains("[camera]") && cmp.contains("--set n=1000000000") && cmp.contains("unknown material `mm`"), "{cmp}");
+}

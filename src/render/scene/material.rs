@@ -1,0 +1,210 @@
+//! `[materials.*]` tables → [`Material`]s: where the formula comes from (a `brdf` file, an inline `formula`, or
+//! the caller's override), parameter values (the formula's defaults, then the table's `params`, then `--set`,
+//! each checked against the declared range), compilation, and the optional energy normalisation
+//! ([`crate::numerics::normalize::coefficient`]).
+//!
+//! Formulas go through a [`BrdfCompiler`] rather than straight to [`crate::compile_source`]: [`LobeCompiler`] is
+//! the real front end and backends, and the trait lets embedders and tests supply kernels of their own. This is
+//! the only step that depends on parameter values, so it is the one step [`super::Geometry::with_materials`]
+//! repeats.
+
+use super::schema::MaterialDef;
+use crate::backend::{Backend, Evaluator};
+use crate::base::diag::{Diagnostic, Diagnostics};
+use crate::base::span::Span;
+use crate::ir::{InputSet, ParamDecl};
+use crate::render::Material;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use toml::Spanned;
+
+/// Turns formula source into an evaluator. `declare` lists the parameters (to check scene values against);
+/// `build` bakes `values` (all parameters, by name) into the kernel.
+pub trait BrdfCompiler: Sync {
+    fn declare(&self, file: &str, src: &str) -> Result<Vec<ParamDecl>, Diagnostics>;
+    fn build(&self, file: &str, src: &str, values: &[(String, f64)]) -> Result<CompiledBrdf, Diagnostics>;
+}
+
+/// A compiled material formula.
+#[derive(Clone)]
+pub struct CompiledBrdf {
+    pub evaluator: Arc<dyn Evaluator>,
+    pub used: InputSet,
+}
+
+/// The real pipeline: `lobe::compile_source` with the chosen backend.
+pub struct LobeCompiler {
+    pub backend: Backend,
+}
+
+impl BrdfCompiler for LobeCompiler {
+    fn declare(&self, file: &str, src: &str) -> Result<Vec<ParamDecl>, Diagnostics> {
+        Ok(crate::front::parse(file, src)?.params)
+    }
+    fn build(&self, file: &str, src: &str, values: &[(String, f64)]) -> Result<CompiledBrdf, Diagnostics> {
+        let opts = crate::Options { backend: self.backend, bake: values.to_vec(), ..crate::Options::default() };
+        let k = crate::compile_source(file, src, &opts)?;
+        Ok(CompiledBrdf { used: k.used_inputs(), evaluator: Arc::new(k) })
+    }
+}
+
+/// The scene file the tables came from: its name and text (for spans and notes) and the directory relative
+/// `brdf` paths are resolved against.
+pub(super) struct SceneText<'a> {
+    pub name: &'a str,
+    pub src: &'a str,
+    pub base: &'a Path,
+}
+
+/// What to compile: `set` applies to every material whose formula declares the name (an error if none does);
+/// `formula` = (file name, source) replaces every material's formula, and then scene `params` it does not
+/// declare are ignored.
+pub(super) struct Choice<'a> {
+    pub set: &'a [(String, f64)],
+    pub formula: Option<(&'a str, &'a str)>,
+}
+
+/// Builds every material, in table (name) order. Scene errors are pushed onto `ds`, which holds whatever the
+/// load found before the materials. A formula that fails to compile ends the load at once: the result is then
+/// `ds` if it has errors, else the formula's own diagnostics (with a note naming the scene key).
+pub(super) fn build_all(
+    at: &SceneText,
+    tables: &BTreeMap<String, Spanned<MaterialDef>>,
+    choice: &Choice,
+    compiler: &dyn BrdfCompiler,
+    ds: &mut Diagnostics,
+) -> Result<Vec<Material>, Diagnostics> {
+    let mut materials = vec![];
+    let mut set_used = vec![false; choice.set.len()];
+    for (mname, m) in tables {
+        match build_material(at, mname, m, choice, compiler, &mut set_used) {
+            Ok(mat) => materials.push(mat),
+            Err(MatError::Scene(d)) => ds.push(d),
+            Err(MatError::Formula(fd)) => return Err(if ds.has_errors() { ds.clone() } else { fd }),
+        }
+    }
+    for (i, (k, _)) in choice.set.iter().enumerate() {
+        if !set_used[i] && !tables.is_empty() {
+            ds.push(Diagnostic::error(format!("--set {k}: no material's formula declares a parameter `{k}`")).hint("every formula has `n`; see each .brdf file's `param` lines"));
+        }
+    }
+    Ok(materials)
+}
+
+fn span_of(r: std::ops::Range<usize>) -> Span {
+    Span::new(r.start, r.end)
+}
+
+enum MatError {
+    Scene(Diagnostic),
+    Formula(Diagnostics),
+}
+
+fn build_material(
+    at: &SceneText,
+    mname: &str,
+    m: &Spanned<MaterialDef>,
+    choice: &Choice,
+    compiler: &dyn BrdfCompiler,
+    set_used: &mut [bool],
+) -> Result<Material, MatError> {
+    let d = m.get_ref();
+    let here = |s: std::ops::Range<usize>, msg: String, label: &str| MatError::Scene(Diagnostic::error(msg).at(span_of(s), label.to_string()));
+    // Where the formula comes from, and the scene span to blame.
+    let (file, src, key_span) = if let Some((f, s)) = choice.formula {
+        (f.to_string(), s.to_string(), m.span())
+    } else {
+        match (&d.brdf, &d.formula) {
+            (Some(p), None) => {
+                let path: PathBuf = at.base.join(p.get_ref());
+                let file = path.display().to_string();
+                let src = match crate::base::source::read_source(&file) {
+                    Ok((_, s)) => s,
+                    Err(mut d) => {
+                        d.message = format!("materials.{mname}.brdf: {}", d.message);
+                        return Err(MatError::Scene(d.at(span_of(p.span()), "this path (relative to the scene file)")));
+                    }
+                };
+                (file, src, p.span())
+            }
+            (None, Some(f)) => (format!("{} [materials.{mname}.formula]", at.name), f.get_ref().clone(), f.span()),
+            (Some(_), Some(f)) => return Err(here(f.span(), format!("materials.{mname}: give `brdf` or `formula`, not both"), "second source")),
+            (None, None) => return Err(here(m.span(), format!("materials.{mname}: needs `brdf = \"path.brdf\"` or `formula = \"…\"`"), "this material")),
+        }
+    };
+    let (line, col) = crate::base::span::line_col(at.src, key_span.start);
+    let with_note = |mut fd: Diagnostics| {
+        for it in &mut fd.items {
+            it.hints.push(format!("used by [materials.{mname}] at {}:{line}:{col}", at.name));
+        }
+        MatError::Formula(fd)
+    };
+    let decls = compiler.declare(&file, &src).map_err(with_note)?;
+    let mut values: Vec<(String, f64)> = decls.iter().map(|p| (p.name.clone(), p.default)).collect();
+    let mut assign = |name: &str, v: f64| -> Result<bool, String> {
+        match decls.iter().position(|p| p.name == name) {
+            Some(i) => {
+                let p = &decls[i];
+                if !p.admits(v) {
+                    return Err(format!("value {v} for `{name}` is outside the formula's declared range {}..{}", p.lo, p.hi));
+                }
+                values[i].1 = v;
+                Ok(true)
+            }
+            None => Ok(false),
+        }
+    };
+    for (k, v) in &d.params {
+        match assign(k.get_ref(), *v.get_ref()) {
+            Ok(true) => {}
+            Ok(false) if choice.formula.is_some() => {}
+            Ok(false) => {
+                let names: Vec<&str> = decls.iter().map(|p| p.name.as_str()).collect();
+                let hint = match crate::front::suggest(k.get_ref(), names.iter().copied()) {
+                    Some(s) => format!("did you mean `{s}`?"),
+                    None => format!("the formula's parameters are: {}", names.join(", ")),
+                };
+                return Err(MatError::Scene(
+                    Diagnostic::error(format!("materials.{mname}.params: the formula has no parameter `{}`", k.get_ref()))
+                        .at(span_of(k.span()), "unknown parameter")
+                        .hint(hint),
+                ));
+            }
+            Err(msg) => return Err(here(v.span(), format!("materials.{mname}.params.{}: {msg}", k.get_ref()), "out of range")),
+        }
+    }
+    for (i, (k, v)) in choice.set.iter().enumerate() {
+        match assign(k, *v) {
+            Ok(true) => set_used[i] = true,
+            Ok(false) => {}
+            Err(msg) => return Err(here(m.span(), format!("--set {k}={v} for material `{mname}`: {msg}"), "this material")),
+        }
+    }
+    let compiled = compiler.build(&file, &src, &values).map_err(with_note)?;
+    for (k, val) in [("ka", d.ka), ("kd", d.kd), ("ks", d.ks)] {
+        if !(val.is_finite() && val >= 0.0) {
+            return Err(here(m.span(), format!("materials.{mname}.{k} = {val} must be a finite number ≥ 0"), "this material"));
+        }
+    }
+    let params: Vec<f64> = values.iter().map(|(_, v)| *v).collect();
+    let coef = if d.normalize {
+        crate::numerics::normalize::coefficient(compiled.evaluator.as_ref(), compiled.used, &params)
+            .map_err(|e| e.to_string())
+            .map_err(|msg| here(m.span(), format!("materials.{mname}.normalize: {msg}"), "this material"))?
+    } else {
+        1.0
+    };
+    Ok(Material {
+        name: mname.to_string(),
+        evaluator: compiled.evaluator,
+        used: compiled.used,
+        params,
+        ka: d.ka,
+        kd: d.kd,
+        ks: d.ks,
+        color: d.color.into(),
+        specular: d.specular.into(),
+        coef,
+    })
+}
