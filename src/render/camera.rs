@@ -24,6 +24,9 @@ impl Camera {
         if dir.length() < 1e-12 {
             return Err("`look_at` equals `position`: the camera has no viewing direction".into());
         }
+        if self.up.length() < 1e-12 {
+            return Err("`up` must be a non-zero vector".into());
+        }
         if dir.normalize().cross(self.up).length() < 1e-9 {
             return Err("`up` is parallel to the viewing direction".into());
         }

@@ -187,6 +187,11 @@ fn build_material(
             return Err(here(m.span(), format!("materials.{mname}.{k} = {val} must be a finite number ≥ 0"), "this material"));
         }
     }
+    for (k, rgb) in [("color", d.color), ("specular", d.specular)] {
+        if !rgb.iter().all(|c| c.is_finite() && *c >= 0.0) {
+            return Err(here(m.span(), format!("materials.{mname}.{k} = {rgb:?} must be three finite numbers ≥ 0"), "this material"));
+        }
+    }
     let params: Vec<f64> = values.iter().map(|(_, v)| *v).collect();
     let coef = if d.normalize {
         crate::numerics::normalize::coefficient(compiled.evaluator.as_ref(), compiled.used, &params)

@@ -68,7 +68,7 @@ use super::{Light, LightKind, Object, Scene, MAX_SIZE};
 use crate::base::diag::{Diagnostic, Diagnostics};
 use crate::base::span::Span;
 use glam::DVec3;
-use schema::{LightType, MaterialDef, SceneFile};
+use schema::{LightType, MaterialDef, SceneFile, V3};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -199,14 +199,28 @@ pub(in crate::render) fn parse_geometry_deferred(name: &str, src: &str, base: &P
     check(name, src, base, size)
 }
 
+/// Largest scene file read: a scene is a page of TOML (meshes live in their own files).
+pub const MAX_SCENE_BYTES: u64 = 4 << 20;
+
 fn read_scene(path: &Path) -> Result<(String, String, PathBuf), Diagnostics> {
+    use std::io::Read;
     let name = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|e| {
-        Diagnostics::single(
-            name.clone(),
-            Diagnostic::error(format!("cannot read scene `{name}`: {e}")).hint("check the path; examples are in examples/scenes/"),
-        )
-    })?;
+    let fail = |d: Diagnostic| Diagnostics::single(name.clone(), d);
+    let cannot = |e: std::io::Error| {
+        fail(Diagnostic::error(format!("cannot read scene `{name}`: {e}")).hint("check the path; examples are in examples/scenes/"))
+    };
+    let file = std::fs::File::open(path).map_err(cannot)?;
+    if !file.metadata().map_err(cannot)?.is_file() {
+        return Err(fail(Diagnostic::error(format!("scene `{name}` is not a regular file")).hint("a scene is a TOML file")));
+    }
+    let mut bytes = Vec::new();
+    file.take(MAX_SCENE_BYTES + 1).read_to_end(&mut bytes).map_err(cannot)?;
+    if bytes.len() as u64 > MAX_SCENE_BYTES {
+        return Err(fail(
+            Diagnostic::error(format!("scene `{name}` is larger than {} MiB", MAX_SCENE_BYTES >> 20))
+                .hint("a scene is a page of TOML; put large meshes in .obj files referenced by `path`"),
+        ));
+    }
     let src = String::from_utf8(bytes).map_err(|_| {
         Diagnostics::single(name.clone(), Diagnostic::error(format!("scene `{name}` is not UTF-8 text")).hint("a scene is a TOML file"))
     })?;
@@ -220,13 +234,18 @@ fn check(name: &str, src: &str, base: &Path, size: Option<(usize, usize)>) -> Re
         Ok(f) => f,
         Err(e) => {
             let msg = e.message().trim().to_string();
-            let key = e.span().and_then(|s| key_at(src, s.start));
+            // A missing table or key has no place of its own in the text; do not blame the key at its span.
+            let missing = msg.starts_with("missing field");
+            let key = e.span().filter(|_| !missing).and_then(|s| key_at(src, s.start));
             let mut d = match &key {
                 Some(k) => Diagnostic::error(format!("`{k}`: {msg}")),
-                None => Diagnostic::error(msg),
+                None => Diagnostic::error(msg.clone()),
             };
-            if let Some(s) = e.span() {
+            if let Some(s) = e.span().filter(|_| !missing) {
                 d = d.at(span_of(s), key.map(|k| format!("in `{k}`")).unwrap_or_else(|| "here".into()));
+            }
+            if msg.contains("missing field `camera`") {
+                d = d.hint("add a [camera] table with at least `position = [x, y, z]`");
             }
             if e.message().contains("unknown field") {
                 d = d.hint("the scene format is documented in src/render/scene/mod.rs; examples are in examples/scenes/");
@@ -265,10 +284,30 @@ fn check(name: &str, src: &str, base: &Path, size: Option<(usize, usize)>) -> Re
         err(&mut before, file.camera.span(), format!("[camera]: {m}"), "this camera");
     }
 
+    // Colours and positions: finite, colours not negative (a NaN colour would blank a whole channel).
+    let colour = |ds: &mut Vec<Diagnostic>, v: Option<&Spanned<V3>>, key: &str| -> DVec3 {
+        let Some(v) = v else { return DVec3::ZERO };
+        if !v.get_ref().iter().all(|c| c.is_finite() && *c >= 0.0) {
+            err(ds, v.span(), format!("`{key}` = {:?} must be three finite numbers ≥ 0", v.get_ref()), "linear RGB");
+        }
+        DVec3::from(*v.get_ref())
+    };
+    let background = colour(&mut before, file.background.as_ref(), "background");
+    let ambient = colour(&mut before, file.ambient.as_ref(), "ambient");
+
     // Lights.
     let mut lights = vec![];
     for (i, l) in file.lights.iter().enumerate() {
         let d = l.get_ref();
+        let finite = |v: &Option<V3>| v.is_none_or(|v| v.iter().all(|c| c.is_finite()));
+        if !(finite(&d.position) && finite(&d.direction)) {
+            err(&mut before, l.span(), format!("light[{i}]: `position` and `direction` must be finite"), "this light");
+            continue;
+        }
+        if !d.color.iter().all(|c| c.is_finite() && *c >= 0.0) {
+            err(&mut before, l.span(), format!("light[{i}]: `color` = {:?} must be three finite numbers ≥ 0", d.color), "this light");
+            continue;
+        }
         let kind = match (d.kind, d.position, d.direction) {
             (LightType::Point, Some(p), None) => Some(LightKind::Point(p.into())),
             (LightType::Directional, None, Some(dir)) => match DVec3::from(dir).try_normalize() {
@@ -315,8 +354,8 @@ fn check(name: &str, src: &str, base: &Path, size: Option<(usize, usize)>) -> Re
         width,
         height,
         camera,
-        background: file.background.into(),
-        ambient: file.ambient.into(),
+        background,
+        ambient,
         lights,
         objects,
         name: name.to_string(),

@@ -16,10 +16,8 @@ pub(super) type V3 = [f64; 3];
 pub(super) struct SceneFile {
     pub width: Option<Spanned<i64>>,
     pub height: Option<Spanned<i64>>,
-    #[serde(default)]
-    pub background: V3,
-    #[serde(default)]
-    pub ambient: V3,
+    pub background: Option<Spanned<V3>>,
+    pub ambient: Option<Spanned<V3>>,
     pub camera: Spanned<CameraDef>,
     #[serde(default, rename = "light")]
     pub lights: Vec<Spanned<LightDef>>,
