@@ -1,8 +1,10 @@
 //! The bottom layer: what every stage above uses to talk about the user's text. Byte [`span`]s, [`diag`]nostics
-//! rendered once with carets, reading a formula [`source`] (bounded, UTF-8) into a string or a diagnostic, and
-//! polling a file for changes ([`watch`]). Nothing here knows about formulas, kernels or the CLI.
+//! rendered once with carets, reading a formula [`source`] (bounded, UTF-8) into a string or a diagnostic,
+//! polling a file for changes ([`watch`]), and the one rule for numbers in JSON output ([`json`]).
+//! Nothing here knows about formulas, kernels or the CLI.
 
 pub mod diag;
+pub mod json;
 pub mod source;
 pub mod span;
 pub mod watch;
