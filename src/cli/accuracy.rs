@@ -2,26 +2,19 @@
 //!
 //! JSON keys are documented in [`crate::numerics`].
 
+use super::args::{self, AgainstReference, BackendArg, Json, Params};
 use super::common::{self, CliError};
-use super::energy::resolve_lobe;
+use crate::base::json;
 use crate::numerics::accuracy::{accuracy, AccuracyOptions};
-use crate::numerics::json_num;
-use crate::{Backend, Kernel};
-use serde_json::json;
+use crate::Kernel;
 
 #[derive(clap::Args, Debug)]
+#[command(mut_arg("set", args::help("Values of the formula's other parameters, e.g. `a=268` (n is swept over 1..1000)")))]
 pub struct AccuracyArgs {
-    /// Formula file (.brdf), or `-` for standard input.
-    pub file: Option<String>,
-    /// The formula inline instead of a file.
-    #[arg(long, conflicts_with = "file")]
-    pub expr: Option<String>,
-    /// The reference lobe (normally Blinn, cos^n).
-    #[arg(long)]
-    pub reference: String,
-    /// Values of the formula's other parameters, e.g. `a=268` (n is swept over 1..1000).
-    #[arg(long, value_parser = common::parse_assignments, action = clap::ArgAction::Append)]
-    pub set: Vec<Vec<(String, f64)>>,
+    #[command(flatten)]
+    pub against: AgainstReference,
+    #[command(flatten)]
+    pub set: Params,
     /// Cut-off level 2^−q for the relative-error and lobe-size metrics.
     #[arg(long, default_value_t = 8.0)]
     pub q: f64,
@@ -31,20 +24,14 @@ pub struct AccuracyArgs {
     /// Largest n.
     #[arg(long, default_value_t = 1000)]
     pub n_max: u32,
-    /// The lobe variable (NH or VR); default: the one the formula reads.
-    #[arg(long)]
-    pub lobe: Option<String>,
-    #[arg(long, default_value = "jit")]
-    pub backend: Backend,
-    /// Print one JSON object (keys documented in the crate docs of `check`).
-    #[arg(long)]
-    pub json: bool,
+    #[command(flatten)]
+    pub backend: BackendArg,
+    #[command(flatten)]
+    pub json: Json,
 }
 
 pub fn run(a: &AccuracyArgs) -> Result<(), CliError> {
-    let set: Vec<(String, f64)> = a.set.concat();
-    let k = common::load_kernel(a.file.as_deref(), a.expr.as_deref(), &set, a.backend)?;
-    let r = common::load_kernel(Some(&a.reference), None, &[], a.backend)?;
+    let (k, r) = a.against.kernels(&a.set.list(), a.backend.kind)?;
     print!("{}", report(a, &k, &r)?);
     Ok(())
 }
@@ -52,17 +39,13 @@ pub fn run(a: &AccuracyArgs) -> Result<(), CliError> {
 /// The command's output for already compiled kernels (formula `k`, reference `r`).
 pub fn report(a: &AccuracyArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
     let mut out = String::new();
-    let set: Vec<(String, f64)> = a.set.concat();
+    let set = a.set.list();
     if set.iter().any(|(k, _)| k == "n") {
         return Err(CliError::hint("accuracy sweeps n itself; --set n is not allowed", "set only the other parameters"));
     }
     let t = std::time::Instant::now();
     let params = common::param_values(&k.formula, &set);
-    let (lobe, note) = resolve_lobe(a.lobe.as_deref(), k.used_inputs())?;
-    let (ref_lobe, _) = resolve_lobe(None, r.used_inputs())?;
-    if let (Some(n), false) = (&note, a.json) {
-        eprintln!("note: {n}");
-    }
+    let (lobe, ref_lobe) = a.against.lobes(k, r, a.json.on)?;
     for (f, what) in [(&k.formula, "formula"), (&r.formula, "reference")] {
         if let Some(d) = f.params.first() {
             if d.lo > 1.0 || d.hi < f64::from(a.n_max) {
@@ -73,22 +56,20 @@ pub fn report(a: &AccuracyArgs, k: &Kernel, r: &Kernel) -> Result<String, CliErr
     let opts = AccuracyOptions { q: a.q, n_max: a.n_max, epicenter_from: a.epicenter_from, ..Default::default() };
     let rep = accuracy(k, &params, lobe, r, &r.default_params(), ref_lobe, &opts)?;
     let secs = t.elapsed().as_secs_f64();
-    if a.json {
-        outln!(out, 
-            "{}",
-            json!({
-                "mean_abs_grid": json_num(rep.mean_abs_grid),
-                "epicenter_max_rel_pct": json_num(rep.epicenter.value * 100.0), "epicenter_worst_n": json_num(rep.epicenter.n),
-                "inflection_max_rel_pct": json_num(rep.inflection.value * 100.0), "inflection_worst_n": json_num(rep.inflection.n),
-                "max_abs": json_num(rep.max_abs.value), "max_abs_n": json_num(rep.max_abs.n),
-                "max_abs_angle_deg": json_num(rep.max_abs.angle_deg),
-                "cutoff_max_rel_pct": json_num(rep.cutoff_rel.value * 100.0), "cutoff_worst_n": json_num(rep.cutoff_rel.n),
-                "cutoff_worst_angle_deg": json_num(rep.cutoff_rel.angle_deg),
-                "lobe_ratio_min": json_num(rep.lobe_ratio_min.value), "lobe_ratio_min_n": json_num(rep.lobe_ratio_min.n),
-                "lobe_ratio_max": json_num(rep.lobe_ratio_max.value), "lobe_ratio_max_n": json_num(rep.lobe_ratio_max.n),
-                "q": a.q, "nan_points": rep.nan_points, "seconds": secs,
-            })
-        );
+    if a.json.on {
+        let v = json::value;
+        let obj = serde_json::json!({
+            "mean_abs_grid": v(rep.mean_abs_grid),
+            "epicenter_max_rel_pct": v(rep.epicenter.value * 100.0), "epicenter_worst_n": v(rep.epicenter.n),
+            "inflection_max_rel_pct": v(rep.inflection.value * 100.0), "inflection_worst_n": v(rep.inflection.n),
+            "max_abs": v(rep.max_abs.value), "max_abs_n": v(rep.max_abs.n), "max_abs_angle_deg": v(rep.max_abs.angle_deg),
+            "cutoff_max_rel_pct": v(rep.cutoff_rel.value * 100.0), "cutoff_worst_n": v(rep.cutoff_rel.n),
+            "cutoff_worst_angle_deg": v(rep.cutoff_rel.angle_deg),
+            "lobe_ratio_min": v(rep.lobe_ratio_min.value), "lobe_ratio_min_n": v(rep.lobe_ratio_min.n),
+            "lobe_ratio_max": v(rep.lobe_ratio_max.value), "lobe_ratio_max_n": v(rep.lobe_ratio_max.n),
+            "q": v(a.q), "nan_points": rep.nan_points, "seconds": v(secs),
+        });
+        outln!(out, "{obj}");
         return Ok(out);
     }
     outln!(out, "{} vs {} (n = 1..{}, lobe variable {}):", k.formula.display_name(), r.formula.display_name(), a.n_max, lobe.name());

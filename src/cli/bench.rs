@@ -5,6 +5,7 @@
 //! the papers' grid, and its energy at the benchmark n. The table is sorted by cost with the Pareto front
 //! marked; `--plot` draws cost against error.
 
+use super::args::{self, Force, Json, Params};
 use super::common::{self, CliError};
 use crate::numerics::accuracy::{accuracy, AccuracyOptions};
 use crate::numerics::{choose_lobe_input, energy};
@@ -17,30 +18,29 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 #[derive(clap::Args, Debug)]
+#[command(mut_arg("set", args::help("Parameter values for the timing and energy columns (the error columns sweep n over 1..1000)")))]
+#[command(mut_arg("json", args::help("Print a JSON list of objects instead of the table")))]
 pub struct BenchArgs {
     /// Formula files (default: every examples/brdfs/*.brdf).
     pub files: Vec<String>,
     /// The reference lobe for the error columns.
     #[arg(long, default_value = "examples/brdfs/blinn.brdf")]
     pub reference: String,
-    /// Parameter values for the timing and energy columns (the error columns sweep n over 1..1000).
-    #[arg(long, value_parser = common::parse_assignments, action = clap::ArgAction::Append)]
-    pub set: Vec<Vec<(String, f64)>>,
+    #[command(flatten)]
+    pub set: Params,
     /// Timed samples per path (the median and quartiles are reported).
     #[arg(long, default_value_t = 31)]
     pub samples: usize,
-    /// Print a JSON list of objects instead of the table.
-    #[arg(long)]
-    pub json: bool,
+    #[command(flatten)]
+    pub json: Json,
     /// Write a cost-versus-error scatter plot (.png or .svg).
     #[arg(long)]
     pub plot: Option<PathBuf>,
     /// Skip the full-geometry albedo column (the slowest check).
     #[arg(long)]
     pub no_albedo: bool,
-    /// Replace an existing plot file even if lobe did not write it.
-    #[arg(long)]
-    pub force: bool,
+    #[command(flatten)]
+    pub force: Force,
 }
 
 fn catalogue() -> Result<Vec<String>, CliError> {
@@ -117,7 +117,7 @@ fn row(f: &Formula, path: &str, set: &[(String, f64)], reference: &crate::Kernel
 pub fn run(a: &BenchArgs) -> Result<(), CliError> {
     let files = if a.files.is_empty() { catalogue()? } else { a.files.clone() };
     let set: Vec<(String, f64)> = {
-        let s = a.set.concat();
+        let s = a.set.list();
         if s.iter().any(|(k, _)| k == "n") {
             s
         } else {
@@ -132,7 +132,7 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
     common::check_set_names(&formulas.iter().collect::<Vec<_>>(), &set)?;
     let reference = common::load_kernel(Some(&a.reference), None, &[], Backend::Jit)?;
     let mut rows = Vec::new();
-    let progress = !a.json && std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let progress = !a.json.on && std::io::IsTerminal::is_terminal(&std::io::stderr());
     for (f, path) in formulas.iter().zip(&files) {
         if progress {
             eprint!("\rmeasuring {:<40}", f.display_name());
@@ -143,7 +143,7 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
         eprint!("\r{:<52}\r", "");
     }
     bench::mark_pareto(&mut rows);
-    if a.json {
+    if a.json.on {
         println!("{}", serde_json::to_string_pretty(&rows).map_err(|e| CliError::msg(e.to_string()))?);
     } else {
         let n = set.iter().find(|(k, _)| k == "n").map(|(_, v)| *v).unwrap_or(50.0);
@@ -158,7 +158,7 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
             .collect();
         let bytes = plot::speed_error(&pts, "Speed against error", "scalar JIT ns/eval (log)", "mean |Δ| vs reference (log)", format)
             .map_err(CliError::msg)?;
-        common::write_output(path, &bytes, a.force, common::is_lobe_output)?;
+        a.force.write(path, &bytes, common::is_lobe_output)?;
         eprintln!("wrote {}", path.display());
     }
     Ok(())

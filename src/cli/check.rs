@@ -2,29 +2,27 @@
 //! rewrites that fired, the inputs it reads (and so the ones a renderer skips), parameters baked or live, and
 //! the compile time on each backend.
 
-use super::common::{self, CliError};
+use super::args::{self, FormulaSource, Json, Params};
+use super::common::CliError;
+use crate::base::json;
 use crate::ir::Input;
 use crate::{Backend, Options};
 use serde_json::json;
 
 #[derive(clap::Args, Debug)]
+#[command(mut_arg("set", args::help("Parameters to bake as constants, e.g. `n=50`")))]
 pub struct CheckArgs {
-    /// Formula file (.brdf), or `-` for standard input.
-    pub file: Option<String>,
-    /// The formula inline instead of a file.
-    #[arg(long, conflicts_with = "file")]
-    pub expr: Option<String>,
-    /// Parameters to bake as constants, e.g. `n=50`.
-    #[arg(long, value_parser = common::parse_assignments, action = clap::ArgAction::Append)]
-    pub set: Vec<Vec<(String, f64)>>,
-    /// Print one JSON object.
-    #[arg(long)]
-    pub json: bool,
+    #[command(flatten)]
+    pub formula: FormulaSource,
+    #[command(flatten)]
+    pub set: Params,
+    #[command(flatten)]
+    pub json: Json,
 }
 
 pub fn run(a: &CheckArgs) -> Result<(), CliError> {
-    let set = a.set.concat();
-    let f = common::load_formula(a.file.as_deref(), a.expr.as_deref())?;
+    let set = a.set.list();
+    let f = a.formula.load()?;
     let bake = crate::resolve_bake(&f, &set)?;
     let (simplified, report) = crate::simplify::simplify_report(&f, &bake);
     let (nodes_before, nodes_after) = (report.nodes_before, report.nodes_after);
@@ -41,12 +39,12 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
         .map(|(i, p)| {
             let baked = bake.iter().find(|(j, _)| *j == i).map(|(_, v)| *v);
             json!({
-                "name": p.name, "default": p.default, "lo": p.lo, "hi": p.hi,
-                "baked": baked, "live": live.contains(&(i as u16)),
+                "name": p.name, "default": json::value(p.default), "lo": json::value(p.lo), "hi": json::value(p.hi),
+                "baked": baked.map(json::value), "live": live.contains(&(i as u16)),
             })
         })
         .collect();
-    if a.json {
+    if a.json.on {
         let obj = json!({
             "file": f.file,
             "name": f.display_name(),
@@ -64,7 +62,10 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
             "passes": report.passes,
             "used_inputs": used.iter().map(|i| i.name()).collect::<Vec<_>>(),
             "unused_inputs": unused,
-            "compile_us": { "jit": jit.compile_time.as_secs_f64() * 1e6, "interp": interp.compile_time.as_secs_f64() * 1e6 },
+            "compile_us": {
+                "jit": json::value(jit.compile_time.as_secs_f64() * 1e6),
+                "interp": json::value(interp.compile_time.as_secs_f64() * 1e6),
+            },
         });
         println!("{obj}");
         return Ok(());

@@ -1,5 +1,6 @@
-//! Helpers every subcommand uses: loading a formula (file, `-` for stdin, or `--expr`), parsing
-//! `name=value,…` lists, and one error type that knows how to print itself and which exit code to use.
+//! Helpers the subcommands share: loading a formula (file, `-` for stdin, or `--expr`), parsing and
+//! applying `name=value,…` lists, hints for misspelt names, `--json` documents, recognising lobe's own
+//! output files, and one error type that knows how to print itself and which exit code to use.
 
 use crate::base::diag::Diagnostics;
 use crate::ir::Formula;
@@ -129,16 +130,10 @@ pub fn param_values(f: &Formula, set: &[(String, f64)]) -> Vec<f64> {
 }
 
 
-/// Writes an output file the way every lobe command does ([`crate::render::image::check_output_path`], then
-/// [`crate::render::image::write_atomic`]): to a temporary file in the same directory, renamed over the target,
-/// so a failure never leaves a half-written or truncated file at the user's path. An existing file is replaced
-/// only if `force` is set or `is_ours` recognises it as something lobe wrote earlier: nothing the user wrote is
-/// clobbered without asking.
-pub fn write_output(path: &std::path::Path, bytes: &[u8], force: bool, is_ours: fn(&[u8]) -> bool) -> Result<(), CliError> {
-    use crate::render::image;
-    image::check_output_path(path, force, is_ours)
-        .map_err(|m| CliError::hint(m, "choose another output path, or pass --force to replace it"))?;
-    image::write_atomic(path, bytes).map_err(CliError::msg)
+/// A `--json` document. Serialising lobe's result types does not fail; should it, the error is reported,
+/// not unwrapped.
+pub fn to_json<T: serde::Serialize + ?Sized>(v: &T) -> Result<String, CliError> {
+    serde_json::to_string(v).map_err(|e| CliError::msg(format!("cannot write JSON: {e}")))
 }
 
 /// Recognises files lobe wrote: PNGs carry a `Software: lobe` tEXt chunk, SVGs and text exports a lobe header.
@@ -158,14 +153,19 @@ pub fn check_set_names(formulas: &[&Formula], set: &[(String, f64)]) -> Result<(
     for (k, _) in set {
         if !formulas.iter().any(|f| f.param_index(k).is_some()) {
             let names: Vec<&str> = formulas.iter().flat_map(|f| f.params.iter().map(|p| p.name.as_str())).collect();
-            let hint = match crate::front::suggest(k, names.iter().copied()) {
-                Some(s) => format!("did you mean `{s}`?"),
-                None => format!("the formulas' parameters are: {}", names.join(", ")),
-            };
+            let hint = did_you_mean(k, &names, "the formulas' parameters are: ");
             return Err(CliError::hint(format!("--set: no formula has a parameter `{k}`"), hint));
         }
     }
     Ok(())
+}
+
+/// The hint for `name`, which is none of `known`: the closest of them, or else `intro` and the whole list.
+pub fn did_you_mean(name: &str, known: &[&str], intro: &str) -> String {
+    match crate::front::suggest(name, known.iter().copied()) {
+        Some(s) => format!("did you mean `{s}`?"),
+        None => format!("{intro}{}", known.join(", ")),
+    }
 }
 
 #[cfg(test)]

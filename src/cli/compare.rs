@@ -1,17 +1,24 @@
 //! `lobe compare A.brdf B.brdf [--scene S.toml] [--set n=50] -o cmp.png [--json] [--sweep-n 5,10,…]`
+//!
+//! Numbers in `--json` follow [`crate::base::json`]: two identical images have `"psnr": "inf"`.
 
+use super::args::{self, BackendArg, Json, Output, Params};
 use super::common::{self, CliError};
-use crate::render::compare::{self, CompareJob, Comparison};
+use crate::base::json;
+use crate::render::compare::{self, CompareJob, Comparison, Metrics};
 use crate::render::image::{self, Transfer};
 use crate::render::scene::LobeCompiler;
 use crate::render::RenderOptions;
-use crate::Backend;
+use serde::Serialize;
 use std::path::PathBuf;
 
 /// The papers' comparison scene, used when `--scene` is not given.
 pub const PAPER_SCENE: &str = include_str!("../../examples/scenes/paper_sphere.toml");
 
 #[derive(clap::Args, Debug)]
+#[command(mut_arg("set", args::help("Parameter values for both formulas, e.g. `n=50`")))]
+#[command(mut_arg("output", args::help("Output PNG: A | B | difference heat map (one row per n when sweeping)")))]
+#[command(mut_arg("json", args::help("Print JSON: an object with `manhattan`, `rmse`, `psnr`, … ; with --sweep-n an array of them, one per n")))]
 pub struct CompareArgs {
     /// First formula (.brdf).
     pub a: String,
@@ -20,54 +27,50 @@ pub struct CompareArgs {
     /// Scene whose materials both formulas replace (default: the papers' sphere).
     #[arg(long)]
     pub scene: Option<PathBuf>,
-    /// Parameter values for both formulas, e.g. `n=50`.
-    #[arg(long, value_parser = common::parse_assignments, action = clap::ArgAction::Append)]
-    pub set: Vec<Vec<(String, f64)>>,
+    #[command(flatten)]
+    pub set: Params,
     /// Compare at each of these n (e.g. 5,10,15,20,50,100,250,500): one row per n.
     #[arg(long, value_delimiter = ',')]
     pub sweep_n: Vec<f64>,
-    /// Output PNG: A | B | difference heat map (one row per n when sweeping).
-    #[arg(short, long)]
-    pub output: Option<PathBuf>,
+    #[command(flatten)]
+    pub out: Output,
     /// Image size: `N` or `WxH` (default: the scene's).
     #[arg(long, value_parser = super::render::parse_size)]
     pub size: Option<(usize, usize)>,
-    #[arg(long, default_value = "jit")]
-    pub backend: Backend,
+    #[command(flatten)]
+    pub backend: BackendArg,
+    /// Worker threads (default: one per core).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
     /// Encode with the sRGB curve (the papers' metric is defined on the linear clamp; default).
     #[arg(long)]
     pub srgb: bool,
-    /// Print JSON: an object with `manhattan`, `rmse`, `psnr`, … ; with --sweep-n an array of them, one per n.
-    #[arg(long)]
-    pub json: bool,
-    /// Overwrite an existing output file even if lobe did not write it.
-    #[arg(long)]
-    pub force: bool,
+    #[command(flatten)]
+    pub json: Json,
 }
 
-fn json_num(v: f64) -> serde_json::Value {
-    if v.is_finite() {
-        serde_json::json!(v)
-    } else {
-        serde_json::Value::Null
-    }
+/// One comparison in the `--json` output: the two files, the n it ran at (with --sweep-n), the metrics, the
+/// image size and the NaN counts of A and B.
+#[derive(Serialize)]
+struct Row<'a> {
+    a: &'a str,
+    b: &'a str,
+    #[serde(serialize_with = "json::opt_num")]
+    n: Option<f64>,
+    #[serde(flatten)]
+    metrics: &'a Metrics,
+    width: usize,
+    height: usize,
+    nan: [u64; 2],
 }
 
-fn row_json(a: &CompareArgs, c: &Comparison) -> serde_json::Value {
-    let m = &c.metrics;
-    serde_json::json!({
-        "a": a.a, "b": a.b, "n": c.n,
-        "manhattan": m.manhattan, "manhattan_covered": m.manhattan_covered, "max_gray_diff": m.max_gray_diff,
-        "rmse": m.rmse, "psnr": json_num(m.psnr),
-        "width": c.a.image.width, "height": c.a.image.height, "nan": c.nan,
-    })
+fn row<'a>(a: &'a CompareArgs, c: &'a Comparison) -> Row<'a> {
+    Row { a: &a.a, b: &a.b, n: c.n, metrics: &c.metrics, width: c.a.image.width, height: c.a.image.height, nan: c.nan }
 }
 
 pub fn run(a: &CompareArgs) -> Result<(), CliError> {
-    if let Some(out) = &a.output {
-        image::check_output_path(out, a.force, image::is_lobe_png).map_err(|m| CliError::hint(m, "choose another -o path"))?;
+    if let Some(out) = &a.out.path {
+        a.out.force.check(out, image::is_lobe_png)?;
     }
     let (fa, sa) = common::read_source(&a.a)?;
     let (fb, sb) = common::read_source(&a.b)?;
@@ -85,9 +88,9 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
         transfer: if a.srgb { Transfer::Srgb } else { Transfer::Linear },
         ..RenderOptions::default()
     };
-    let lobe_compiler = LobeCompiler { backend: a.backend };
+    let lobe_compiler = LobeCompiler { backend: a.backend.kind };
     let compiler: &dyn crate::render::scene::BrdfCompiler = &lobe_compiler;
-    let base_set = a.set.concat();
+    let base_set = a.set.list();
     let sets: Vec<Vec<(String, f64)>> = if a.sweep_n.is_empty() {
         vec![base_set.clone()]
     } else {
@@ -102,13 +105,17 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
     };
     let rows = compare::compare_sweep(&job, &sets, compiler, &ropts)?;
     let scale = rows.iter().map(|c| c.metrics.max_gray_diff).fold(0.0, f64::max).max(1.0);
-    if let Some(out) = &a.output {
+    if let Some(out) = &a.out.path {
         let png = compare::sweep_image(&rows, scale).encode_png().map_err(CliError::msg)?;
-        image::write_atomic(out, &png).map_err(CliError::msg)?;
+        a.out.force.write(out, &png, image::is_lobe_png)?;
     }
-    if a.json {
-        let v = if a.sweep_n.is_empty() { row_json(a, &rows[0]) } else { rows.iter().map(|c| row_json(a, c)).collect() };
-        println!("{v}");
+    if a.json.on {
+        let json = if a.sweep_n.is_empty() {
+            common::to_json(&row(a, &rows[0]))?
+        } else {
+            common::to_json(&rows.iter().map(|c| row(a, c)).collect::<Vec<_>>())?
+        };
+        println!("{json}");
     } else {
         println!("{} vs {} ({}×{}, scene {scene_name})", a.a, a.b, rows[0].a.image.width, rows[0].a.image.height);
         println!("{:>8} {:>10} {:>12} {:>8} {:>8} {:>8}", "n", "manhattan", "(covered px)", "max", "rmse", "psnr");
@@ -117,7 +124,7 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
             let n = c.n.map(|n| n.to_string()).unwrap_or_else(|| "-".into());
             println!("{n:>8} {:>10.4} {:>12.4} {:>8.2} {:>8.4} {:>8.2}", m.manhattan, m.manhattan_covered, m.max_gray_diff, m.rmse, m.psnr);
         }
-        if let Some(out) = &a.output {
+        if let Some(out) = &a.out.path {
             println!("wrote {} (A | B | |Δgray| heat map, white = {scale:.1} gray levels)", out.display());
         }
     }

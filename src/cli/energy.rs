@@ -2,10 +2,12 @@
 //!
 //! JSON keys are documented in [`crate::numerics`].
 
+use super::args::{self, BackendArg, Force, FormulaSource, Json, LobeVar, Params};
 use super::common::{self, CliError};
-use crate::numerics::energy::{coef_sweep, full_energy, lobe_integral, score_against};
-use crate::numerics::{choose_lobe_input, json_num, parse_range};
+use crate::base::json;
 use crate::ir::Input;
+use crate::numerics::energy::{coef_sweep, full_energy, lobe_integral, score_against};
+use crate::numerics::parse_range;
 use crate::{Backend, Evaluator, Kernel};
 use serde_json::json;
 
@@ -19,15 +21,12 @@ pub enum Mode {
 }
 
 #[derive(clap::Args, Debug)]
+#[command(mut_arg("set", args::help("Parameter values, e.g. `n=50,a=16` (n is swept instead with --range)")))]
 pub struct EnergyArgs {
-    /// Formula file (.brdf), or `-` for standard input.
-    pub file: Option<String>,
-    /// The formula inline instead of a file.
-    #[arg(long, conflicts_with = "file")]
-    pub expr: Option<String>,
-    /// Parameter values, e.g. `n=50,a=16` (n is swept instead with --range).
-    #[arg(long, value_parser = common::parse_assignments, action = clap::ArgAction::Append)]
-    pub set: Vec<Vec<(String, f64)>>,
+    #[command(flatten)]
+    pub formula: FormulaSource,
+    #[command(flatten)]
+    pub set: Params,
     /// `lobe` (1/(2π∫f cosθ sinθ dθ)) or `full` (albedo ρ(θᵢ) from real geometry).
     #[arg(long, value_enum, default_value = "lobe")]
     pub mode: Mode,
@@ -43,44 +42,32 @@ pub struct EnergyArgs {
     /// The fitted coefficient inline, e.g. `0.125*n - 45.76/(n + 46.578) + 1.317`.
     #[arg(long, requires = "range")]
     pub against_expr: Option<String>,
-    /// The lobe variable (NH or VR); default: the one the formula reads.
-    #[arg(long)]
-    pub lobe: Option<String>,
-    #[arg(long, default_value = "jit")]
-    pub backend: Backend,
-    /// Print one JSON object (keys documented in the crate docs of `check`).
-    #[arg(long)]
-    pub json: bool,
+    #[command(flatten)]
+    pub lobe: LobeVar,
+    #[command(flatten)]
+    pub backend: BackendArg,
+    #[command(flatten)]
+    pub json: Json,
     /// With --range: also plot coef(n) (and the fitted coefficient with --against) to this .png or .svg.
     #[arg(long, requires = "range")]
     pub plot: Option<std::path::PathBuf>,
-    /// Replace an existing plot file even if lobe did not write it.
-    #[arg(long)]
-    pub force: bool,
-}
-
-/// The lobe variable from `--lobe`, or chosen from the inputs the formula reads (with a note).
-pub fn resolve_lobe(arg: Option<&str>, used: crate::ir::InputSet) -> Result<(Input, Option<String>), CliError> {
-    match arg {
-        Some(s) => Input::from_name(s).map(|i| (i, None)).ok_or_else(|| {
-            CliError::hint(format!("--lobe: `{s}` is not an input"), "the lobe variable is NH (Blinn-style) or VR (Phong-style)")
-        }),
-        None => Ok(choose_lobe_input(used)),
-    }
+    #[command(flatten)]
+    pub force: Force,
 }
 
 pub fn run(a: &EnergyArgs) -> Result<(), CliError> {
-    let set: Vec<(String, f64)> = a.set.concat();
+    let set = a.set.list();
     if a.range.is_some() && set.iter().any(|(k, _)| k == "n") {
         return Err(CliError::hint("--set n conflicts with --range", "--range sweeps n; drop n from --set"));
     }
-    let k = common::load_kernel(a.file.as_deref(), a.expr.as_deref(), &set, a.backend)?;
+    let backend: Backend = a.backend.kind;
+    let k = a.formula.kernel(&set, backend)?;
     let against = match (&a.against, &a.against_expr) {
         (None, None) => None,
         (file, expr) => {
             // A fitted coefficient reads no input by design: its "reads no input" warning is noise here.
             let f = common::load_formula_with(file.as_deref(), expr.as_deref(), false)?;
-            Some(crate::compile_formula(f, &crate::Options { backend: a.backend, ..Default::default() })?)
+            Some(crate::compile_formula(f, &crate::Options { backend, ..Default::default() })?)
         }
     };
     print!("{}", report(a, &k, against.as_ref())?);
@@ -90,33 +77,29 @@ pub fn run(a: &EnergyArgs) -> Result<(), CliError> {
 /// The command's output for already compiled kernels (the formula, and the fitted coefficient if any).
 pub fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<String, CliError> {
     let mut out = String::new();
-    let set: Vec<(String, f64)> = a.set.concat();
-    let params = common::param_values(&k.formula, &set);
-    let (lobe, note) = resolve_lobe(a.lobe.as_deref(), k.used_inputs())?;
+    let params = common::param_values(&k.formula, &a.set.list());
+    let lobe: Input = a.lobe.resolve(k.used_inputs(), a.json.on)?;
     let name = k.formula.display_name();
-    if let (Some(n), false) = (&note, a.json) {
-        eprintln!("note: {n}");
-    }
-    let params_json: serde_json::Map<String, serde_json::Value> =
-        k.formula.params.iter().zip(&params).map(|(d, v)| (d.name.clone(), json_num(*v))).collect();
+    // `params` of the JSON output; under --range, n is the swept variable, not a parameter.
+    let shown = k.formula.params.iter().zip(&params).filter(|(d, _)| a.range.is_none() || d.name != "n");
+    let params_json = json::named(shown.map(|(d, v)| (d.name.as_str(), *v)));
 
     if a.mode == Mode::Full {
         if a.range.is_some() {
             return Err(CliError::hint("--range works in lobe mode only", "drop --mode full, or drop --range"));
         }
         let r = full_energy(k, &params)?;
-        if a.json {
-            let rows: Vec<_> = r.albedo.iter().map(|(t, v)| json!({"theta_i_deg": t, "rho": json_num(*v)})).collect();
+        if a.json.on {
+            let v = json::value;
+            let rows: Vec<_> = r.albedo.iter().map(|(t, rho)| json!({"theta_i_deg": v(*t), "rho": v(*rho)})).collect();
             let rec = &r.reciprocity;
-            outln!(out, 
-                "{}",
-                json!({
-                    "mode": "full", "params": params_json, "coef": json_num(r.coef), "albedo_max": json_num(r.albedo_max),
-                    "theta_i_at_max_deg": r.theta_i_at_max_deg, "albedo": rows,
-                    "reciprocity_max_rel": json_num(rec.max_rel),
-                    "reciprocity_worst": {"theta_l_deg": rec.theta_l_deg, "theta_v_deg": rec.theta_v_deg, "phi_v_deg": rec.phi_v_deg},
-                })
-            );
+            let obj = json!({
+                "mode": "full", "params": params_json, "coef": v(r.coef), "albedo_max": v(r.albedo_max),
+                "theta_i_at_max_deg": v(r.theta_i_at_max_deg), "albedo": rows,
+                "reciprocity_max_rel": v(rec.max_rel),
+                "reciprocity_worst": {"theta_l_deg": v(rec.theta_l_deg), "theta_v_deg": v(rec.theta_v_deg), "phi_v_deg": v(rec.phi_v_deg)},
+            });
+            outln!(out, "{obj}");
         } else {
             outln!(out, "{name}: hemispherical-directional albedo ρ(θᵢ) = ∫ f·cosθₒ dωₒ");
             outln!(out, "  θᵢ (deg)   ρ(θᵢ)");
@@ -145,12 +128,10 @@ pub fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<St
 
     let Some(range) = &a.range else {
         let r = lobe_integral(k, &params, lobe)?;
-        if a.json {
-            outln!(out, 
-                "{}",
-                json!({"mode": "lobe", "params": params_json, "coef": json_num(r.coef()), "integral": json_num(r.integral),
-                       "lobe_input": lobe.name(), "evals": r.evals})
-            );
+        if a.json.on {
+            let obj = json!({"mode": "lobe", "params": params_json, "coef": json::value(r.coef()),
+                             "integral": json::value(r.integral), "lobe_input": lobe.name(), "evals": r.evals});
+            outln!(out, "{obj}");
         } else {
             let shown: Vec<String> = k.formula.params.iter().zip(&params).map(|(d, v)| format!("{}={v}", d.name)).collect();
             outln!(out, "{name} ({}): coef = 1/(2π·Int) = {:.9}", shown.join(", "), r.coef());
@@ -181,10 +162,12 @@ pub fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<St
     }
     let ns: Vec<f64> = (0..count).map(|i| lo + i as f64 * a.step).collect();
     let results = coef_sweep(k, &params, lobe, &ns);
-    let mut exact = Vec::with_capacity(ns.len());
+    // (n, Int(n)) to score a fitted coefficient against, and (n, coef(n)) to print.
+    let (mut exact, mut coefs) = (Vec::with_capacity(ns.len()), Vec::with_capacity(ns.len()));
     for (n, r) in ns.iter().zip(results) {
         let r = r.map_err(|e| CliError::Msg { msg: format!("at n = {n}: {}", e.msg), hint: e.hint })?;
         exact.push((*n, r.integral));
+        coefs.push((*n, r.coef()));
     }
     let score = against.map(|ak| {
         // The fitted formula's parameters: n from the sweep, others by name from this formula, else defaults.
@@ -204,17 +187,15 @@ pub fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<St
         })
     });
     if let Some(path) = &a.plot {
-        plot_range(path, &name, &exact, score.as_ref(), a.force)?;
+        plot_range(path, &name, &coefs, score.as_ref(), a.force)?;
     }
-    if a.json {
-        let rows: Vec<_> = exact.iter().map(|(n, i)| json!({"n": n, "coef": json_num(1.0 / (2.0 * std::f64::consts::PI * i))})).collect();
-        let mut fixed = params_json.clone();
-        fixed.remove("n");
-        let mut obj = json!({"mode": "lobe", "params": fixed, "lobe_input": lobe.name(), "range": rows});
+    if a.json.on {
+        let rows: Vec<_> = coefs.iter().map(|(n, c)| json!({"n": json::value(*n), "coef": json::value(*c)})).collect();
+        let mut obj = json!({"mode": "lobe", "params": params_json, "lobe_input": lobe.name(), "range": rows});
         if let Some(s) = &score {
-            obj["against_max_abs"] = json_num(s.max_abs);
-            obj["against_worst_n"] = json_num(s.worst_n);
-            obj["against_mean_abs"] = json_num(s.mean_abs);
+            obj["against_max_abs"] = json::value(s.max_abs);
+            obj["against_worst_n"] = json::value(s.worst_n);
+            obj["against_mean_abs"] = json::value(s.mean_abs);
         }
         outln!(out, "{obj}");
         return Ok(out);
@@ -223,8 +204,8 @@ pub fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<St
     match &score {
         None => {
             outln!(out, "{:>10}  {:>16}", "n", "coef");
-            for (n, i) in &exact {
-                outln!(out, "{n:>10}  {:>16.9}", 1.0 / (2.0 * std::f64::consts::PI * i));
+            for (n, c) in &coefs {
+                outln!(out, "{n:>10}  {c:>16.9}");
             }
         }
         Some(s) => {
@@ -248,21 +229,21 @@ pub fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<St
 fn plot_range(
     path: &std::path::Path,
     name: &str,
-    exact: &[(f64, f64)],
+    coefs: &[(f64, f64)],
     score: Option<&crate::numerics::energy::AgainstScore>,
-    force: bool,
+    force: Force,
 ) -> Result<(), CliError> {
     use crate::report::plot::{self, Format, Series};
     let format = Format::from_path(path).map_err(|e| CliError::hint(e, "use --plot coef.png or coef.svg"))?;
     let mut series = vec![Series {
         name: "exact coef(n) = 1/(2π·Int)".into(),
-        points: exact.iter().map(|(n, i)| (*n, 1.0 / (2.0 * std::f64::consts::PI * i))).collect(),
+        points: coefs.to_vec(),
     }];
     if let Some(s) = score {
         series.push(Series { name: "fitted coef(n)".into(), points: s.rows.iter().map(|r| (r.0, r.2)).collect() });
     }
     let bytes = plot::curves(&series, &format!("{name}: normalisation coefficient"), "n", "coef", format).map_err(CliError::msg)?;
-    common::write_output(path, &bytes, force, common::is_lobe_output)?;
+    force.write(path, &bytes, common::is_lobe_output)?;
     eprintln!("wrote {}", path.display());
     Ok(())
 }

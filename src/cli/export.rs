@@ -1,30 +1,25 @@
 //! `lobe export --glsl|--wgsl FILE [--set n=50] [-o out.glsl]`
 
-use super::common::{self, CliError};
+use super::args::{self, FormulaSource, Output, Params};
+use super::common::CliError;
 use crate::backend::glsl::{self, Dialect};
 
 #[derive(clap::Args, Debug)]
+#[command(mut_arg("set", args::help("Parameters baked as constants, e.g. `n=50`; the others become function arguments")))]
+#[command(mut_arg("output", args::help("Write to this file instead of standard output")))]
 pub struct ExportArgs {
-    /// Formula file (.brdf), or `-` for standard input.
-    pub file: Option<String>,
-    /// The formula inline instead of a file.
-    #[arg(long, conflicts_with = "file")]
-    pub expr: Option<String>,
+    #[command(flatten)]
+    pub formula: FormulaSource,
     /// Emit GLSL (the default).
     #[arg(long, conflicts_with = "wgsl")]
     pub glsl: bool,
     /// Emit WGSL.
     #[arg(long)]
     pub wgsl: bool,
-    /// Parameters baked as constants, e.g. `n=50`; the others become function arguments.
-    #[arg(long, value_parser = common::parse_assignments, action = clap::ArgAction::Append)]
-    pub set: Vec<Vec<(String, f64)>>,
-    /// Write to this file instead of standard output.
-    #[arg(short, long)]
-    pub output: Option<std::path::PathBuf>,
-    /// Replace an existing output file even if lobe did not write it.
-    #[arg(long)]
-    pub force: bool,
+    #[command(flatten)]
+    pub set: Params,
+    #[command(flatten)]
+    pub out: Output,
 }
 
 fn is_ours(bytes: &[u8]) -> bool {
@@ -32,12 +27,11 @@ fn is_ours(bytes: &[u8]) -> bool {
 }
 
 pub fn run(a: &ExportArgs) -> Result<(), CliError> {
-    let set = a.set.concat();
-    let k = common::load_kernel(a.file.as_deref(), a.expr.as_deref(), &set, crate::Backend::Interp)?;
+    let k = a.formula.kernel(&a.set.list(), crate::Backend::Interp)?;
     let d = if a.wgsl { Dialect::Wgsl } else { Dialect::Glsl };
     let text = glsl::export(&k.formula, d);
-    match &a.output {
-        Some(p) => common::write_output(p, text.as_bytes(), a.force, is_ours),
+    match &a.out.path {
+        Some(p) => a.out.force.write(p, text.as_bytes(), is_ours),
         None => {
             print!("{text}");
             Ok(())

@@ -2,30 +2,24 @@
 //!
 //! JSON keys are documented in [`crate::numerics`].
 
+use super::args::{self, AgainstReference, BackendArg, Json, Params};
 use super::common::{self, CliError};
-use super::energy::resolve_lobe;
+use crate::base::json;
 use crate::numerics::fit::{fit, FitOptions, FreeParam, Metric};
-use crate::numerics::{json_num, parse_range};
-use crate::{Backend, Kernel};
-use serde_json::json;
+use crate::numerics::parse_range;
+use crate::Kernel;
 use std::io::IsTerminal;
 
 #[derive(clap::Args, Debug)]
+#[command(mut_arg("set", args::help("Fixed values of other parameters, e.g. `k=2`")))]
 pub struct FitArgs {
-    /// Formula file (.brdf), or `-` for standard input.
-    pub file: Option<String>,
-    /// The formula inline instead of a file.
-    #[arg(long, conflicts_with = "file")]
-    pub expr: Option<String>,
-    /// The reference lobe (normally Blinn, cos^n).
-    #[arg(long)]
-    pub reference: String,
+    #[command(flatten)]
+    pub against: AgainstReference,
     /// A parameter to search: `name=lo..hi` (integers when lo and hi are) or `name=lo..hi:step`.
     #[arg(long, required = true)]
     pub param: Vec<String>,
-    /// Fixed values of other parameters, e.g. `k=2`.
-    #[arg(long, value_parser = common::parse_assignments, action = clap::ArgAction::Append)]
-    pub set: Vec<Vec<(String, f64)>>,
+    #[command(flatten)]
+    pub set: Params,
     /// What to minimise: mean-abs (the papers'), max-abs, epicenter.
     #[arg(long, default_value = "mean-abs")]
     pub metric: Metric,
@@ -38,21 +32,20 @@ pub struct FitArgs {
     /// Largest n of the metric.
     #[arg(long, default_value_t = 1000)]
     pub n_max: u32,
-    /// The lobe variable (NH or VR); default: the one the formula reads.
-    #[arg(long)]
-    pub lobe: Option<String>,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
-    #[arg(long, default_value = "jit")]
-    pub backend: Backend,
-    /// Print one JSON object (keys documented in the crate docs of `check`).
-    #[arg(long)]
-    pub json: bool,
+    #[command(flatten)]
+    pub backend: BackendArg,
+    #[command(flatten)]
+    pub json: Json,
 }
 
+/// A `--param`: name, lo, hi and the step, if given.
+pub type FreeSpec = (String, f64, f64, Option<f64>);
+
 /// Parses `name=lo..hi[:step]`.
-pub fn parse_free(s: &str) -> Result<(String, f64, f64, Option<f64>), String> {
+pub fn parse_free(s: &str) -> Result<FreeSpec, String> {
     let (name, rest) = s.split_once('=').ok_or_else(|| format!("`{s}` is not of the form name=lo..hi (e.g. a=1..1000)"))?;
     let (range, step) = match rest.split_once(':') {
         Some((r, st)) => (r, Some(st.trim().parse::<f64>().map_err(|_| format!("`{st}` is not a step in `{s}`"))?)),
@@ -62,19 +55,22 @@ pub fn parse_free(s: &str) -> Result<(String, f64, f64, Option<f64>), String> {
     Ok((name.trim().to_string(), lo, hi, step))
 }
 
+/// Every `--param`, parsed.
+fn free_specs(a: &FitArgs) -> Result<Vec<FreeSpec>, CliError> {
+    a.param
+        .iter()
+        .map(|p| parse_free(p).map_err(|e| CliError::hint(format!("--param: {e}"), "e.g. --param a=1..1000 or a=0.1..0.9:0.1")))
+        .collect()
+}
+
 pub fn run(a: &FitArgs) -> Result<(), CliError> {
-    let set: Vec<(String, f64)> = a.set.concat();
-    let mut free_spec = vec![];
-    for p in &a.param {
-        free_spec.push(parse_free(p).map_err(|e| CliError::hint(format!("--param: {e}"), "e.g. --param a=1..1000 or a=0.1..0.9:0.1"))?);
-    }
-    for (name, ..) in &free_spec {
-        if set.iter().any(|(k, _)| k == name) {
+    let set = a.set.list();
+    for (name, ..) in free_specs(a)? {
+        if set.iter().any(|(k, _)| *k == name) {
             return Err(CliError::hint(format!("`{name}` is both searched (--param) and fixed (--set)"), "drop one of them"));
         }
     }
-    let k = common::load_kernel(a.file.as_deref(), a.expr.as_deref(), &set, a.backend)?;
-    let r = common::load_kernel(Some(&a.reference), None, &[], a.backend)?;
+    let (k, r) = a.against.kernels(&set, a.backend.kind)?;
     print!("{}", report(a, &k, &r)?);
     Ok(())
 }
@@ -82,19 +78,12 @@ pub fn run(a: &FitArgs) -> Result<(), CliError> {
 /// The command's output for already compiled kernels (formula `k`, reference `r`).
 pub fn report(a: &FitArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
     let mut out = String::new();
-    let set: Vec<(String, f64)> = a.set.concat();
-    let mut free_spec = vec![];
-    for p in &a.param {
-        free_spec.push(parse_free(p).map_err(|e| CliError::hint(format!("--param: {e}"), "e.g. --param a=1..1000 or a=0.1..0.9:0.1"))?);
-    }
+    let set = a.set.list();
     let mut free = vec![];
-    for (name, lo, hi, step) in free_spec {
+    for (name, lo, hi, step) in free_specs(a)? {
         let Some(index) = k.formula.param_index(&name) else {
             let names: Vec<&str> = k.formula.params.iter().map(|p| p.name.as_str()).collect();
-            let hint = match crate::front::suggest(&name, names.iter().copied()) {
-                Some(s) => format!("did you mean `{s}`?"),
-                None => format!("its parameters are: {}", names.join(", ")),
-            };
+            let hint = common::did_you_mean(&name, &names, "its parameters are: ");
             return Err(CliError::hint(format!("--param: the formula has no parameter `{name}`"), hint));
         };
         let d = &k.formula.params[index];
@@ -107,16 +96,12 @@ pub fn report(a: &FitArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
         free.push(FreeParam { index, name, lo, hi, step });
     }
     let params = common::param_values(&k.formula, &set);
-    let (lobe, note) = resolve_lobe(a.lobe.as_deref(), k.used_inputs())?;
-    let (ref_lobe, _) = resolve_lobe(None, r.used_inputs())?;
-    if let (Some(n), false) = (&note, a.json) {
-        eprintln!("note: {n}");
-    }
+    let (lobe, ref_lobe) = a.against.lobes(k, r, a.json.on)?;
     let mut total = 1usize;
     for f in &free {
         total = total.saturating_mul(f.grid()?.len());
     }
-    let bar = if a.quiet || a.json || !std::io::stderr().is_terminal() {
+    let bar = if a.quiet || a.json.on || !std::io::stderr().is_terminal() {
         indicatif::ProgressBar::hidden()
     } else {
         let b = indicatif::ProgressBar::new(total as u64);
@@ -131,17 +116,17 @@ pub fn report(a: &FitArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
     bar.finish_and_clear();
     let secs = t.elapsed().as_secs_f64();
     let names: Vec<&str> = free.iter().map(|f| f.name.as_str()).collect();
-    if a.json {
+    if a.json.on {
         let best: Vec<_> = rep
             .best
             .iter()
             .map(|c| {
-                let p: serde_json::Map<String, serde_json::Value> =
-                    free.iter().map(|f| (f.name.clone(), json_num(c.params[f.index]))).collect();
-                json!({"params": p, "score": json_num(c.score), "refined": c.refined})
+                let p = json::named(free.iter().map(|f| (f.name.as_str(), c.params[f.index])));
+                serde_json::json!({"params": p, "score": json::value(c.score), "refined": c.refined})
             })
             .collect();
-        outln!(out, "{}", json!({"best": best, "metric": a.metric.name(), "evaluated": rep.evaluated, "seconds": secs}));
+        let obj = serde_json::json!({"best": best, "metric": a.metric.name(), "evaluated": rep.evaluated, "seconds": json::value(secs)});
+        outln!(out, "{obj}");
         return Ok(out);
     }
     outln!(out, 

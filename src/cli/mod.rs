@@ -1,7 +1,6 @@
-//! Command-line plumbing shared by the subcommands: reading sources, `--set`/`--at` lists, errors.
-//!
-//! Each subcommand lives in its own file as a clap `Args` struct and a `run` function that calls library
-//! code; no numerical or rendering logic lives here.
+//! The `lobe` subcommands: one file each, holding a clap `Args` struct and a `run` function that calls the
+//! library and prints. Flags several commands share are flattened from [`args`]; loading formulas, `--set`
+//! lists and the error type are in [`common`]. No numerical or rendering logic lives here.
 
 /// `writeln!` into the report string (formatting into a `String` cannot fail).
 macro_rules! outln {
@@ -11,6 +10,7 @@ macro_rules! outln {
     }};
 }
 
+pub mod args;
 pub mod bench;
 pub mod check;
 pub mod common;

@@ -1,21 +1,22 @@
 //! `lobe plot FILES… --set n=50 -o lobes.png [--polar] [--log] [--reference REF [--error]]`
 
+use super::args::{self, Output, Params};
 use super::common::{self, CliError};
 use crate::numerics::{choose_lobe_input, lobe_inputs};
 use crate::report::plot::{self, Format, LobeOptions, Series};
 use crate::{Backend, Evaluator, Kernel};
 
 #[derive(clap::Args, Debug)]
+#[command(mut_arg("set", args::help("Parameter values, e.g. `n=50,a=16` (each formula takes the ones it declares)")))]
+#[command(mut_arg("output", |a| a.required(true).help("Output image (.png or .svg)")))]
 pub struct PlotArgs {
     /// Formula files (.brdf) to overlay.
     #[arg(required = true)]
     pub files: Vec<String>,
-    /// Parameter values, e.g. `n=50,a=16` (each formula takes the ones it declares).
-    #[arg(long, value_parser = common::parse_assignments, action = clap::ArgAction::Append)]
-    pub set: Vec<Vec<(String, f64)>>,
-    /// Output image (.png or .svg).
-    #[arg(short, long)]
-    pub output: std::path::PathBuf,
+    #[command(flatten)]
+    pub set: Params,
+    #[command(flatten)]
+    pub out: Output,
     /// Polar plot (radius = value) instead of value against angle.
     #[arg(long)]
     pub polar: bool,
@@ -31,9 +32,6 @@ pub struct PlotArgs {
     /// Image size in pixels, WxH.
     #[arg(long, default_value = "900x600", value_parser = parse_size)]
     pub size: (u32, u32),
-    /// Replace an existing output file even if lobe did not write it.
-    #[arg(long)]
-    pub force: bool,
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -58,8 +56,9 @@ fn sample(k: &Kernel, params: &[f64]) -> Vec<(f64, f64)> {
 }
 
 pub fn run(a: &PlotArgs) -> Result<(), CliError> {
-    let format = Format::from_path(&a.output).map_err(|e| CliError::hint(e, "use -o lobes.png or -o lobes.svg"))?;
-    let set = a.set.concat();
+    let output = a.out.required();
+    let format = Format::from_path(output).map_err(|e| CliError::hint(e, "use -o lobes.png or -o lobes.svg"))?;
+    let set = a.set.list();
     let mut files = a.files.clone();
     if let Some(r) = &a.reference {
         files.push(r.clone());
@@ -87,7 +86,7 @@ pub fn run(a: &PlotArgs) -> Result<(), CliError> {
     }
     let opts = LobeOptions { title, polar: a.polar, log: a.log, size: a.size };
     let bytes = plot::lobes(&series, &opts, format).map_err(CliError::msg)?;
-    common::write_output(&a.output, &bytes, a.force, common::is_lobe_output)?;
-    eprintln!("wrote {}", a.output.display());
+    a.out.force.write(output, &bytes, common::is_lobe_output)?;
+    eprintln!("wrote {}", output.display());
     Ok(())
 }

@@ -1,29 +1,28 @@
 //! `lobe render SCENE [-o out.png] [--size 1024] [--set n=200] [--backend jit|interp] [--threads N] [--stats]`
 
-use super::common::{self, CliError};
+use super::args::{self, BackendArg, Output, Params};
+use super::common::CliError;
 use crate::render::image::{self, Transfer};
 use crate::render::scene::{self, LobeCompiler, LoadOptions};
 use crate::render::{self as r, RenderOptions, RenderStats};
-use crate::Backend;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 #[derive(clap::Args, Debug)]
+#[command(mut_arg("output", args::help("Output PNG (default: the scene's name with .png, in the current directory)")))]
+#[command(mut_arg("set", args::help("Parameter values for every material that declares them, e.g. `n=200`")))]
 pub struct RenderArgs {
     /// Scene file (.toml); see examples/scenes/.
     pub scene: PathBuf,
-    /// Output PNG (default: the scene's name with .png, in the current directory).
-    #[arg(short, long)]
-    pub output: Option<PathBuf>,
+    #[command(flatten)]
+    pub out: Output,
     /// Image size: `N` (square) or `WxH`, each at most 4096.
     #[arg(long, value_parser = parse_size)]
     pub size: Option<(usize, usize)>,
-    /// Parameter values for every material that declares them, e.g. `n=200`.
-    #[arg(long, value_parser = common::parse_assignments, action = clap::ArgAction::Append)]
-    pub set: Vec<Vec<(String, f64)>>,
-    /// Evaluation backend for the materials.
-    #[arg(long, default_value = "jit")]
-    pub backend: Backend,
+    #[command(flatten)]
+    pub set: Params,
+    #[command(flatten)]
+    pub backend: BackendArg,
     /// Worker threads (default: one per core).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
@@ -39,9 +38,6 @@ pub struct RenderArgs {
     /// No progress bar.
     #[arg(short, long)]
     pub quiet: bool,
-    /// Overwrite an existing output file even if lobe did not write it.
-    #[arg(long)]
-    pub force: bool,
 }
 
 /// `N` or `WxH`, each 1..=4096.
@@ -67,11 +63,11 @@ pub fn default_output(scene: &Path) -> PathBuf {
 }
 
 pub fn run(a: &RenderArgs) -> Result<(), CliError> {
-    let out = a.output.clone().unwrap_or_else(|| default_output(&a.scene));
+    let out = a.out.path.clone().unwrap_or_else(|| default_output(&a.scene));
     // Refuse a bad output path before doing any work, and write nothing unless everything succeeds.
-    image::check_output_path(&out, a.force, image::is_lobe_png).map_err(|m| CliError::hint(m, "choose another -o path"))?;
-    let opts = LoadOptions { size: a.size, set: a.set.concat(), formula_override: None };
-    let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: a.backend })?;
+    a.out.force.check(&out, image::is_lobe_png)?;
+    let opts = LoadOptions { size: a.size, set: a.set.list(), formula_override: None };
+    let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: a.backend.kind })?;
     let ropts = RenderOptions {
         threads: a.threads,
         tile: a.tile as usize,
@@ -82,7 +78,7 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
     let t = Instant::now();
     let png = frame.image.encode_png().map_err(CliError::msg)?;
     let encode = t.elapsed();
-    image::write_atomic(&out, &png).map_err(CliError::msg)?;
+    a.out.force.write(&out, &png, image::is_lobe_png)?;
     if stats.nan > 0 {
         eprintln!("warning: {} kernel evaluations returned NaN and were shaded as 0", stats.nan);
     }

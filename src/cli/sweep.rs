@@ -3,23 +3,21 @@
 //! Evaluates the *unclamped* formula (root `max(raw, 0)` peeled) over the domain; see [`crate::numerics::sweep`].
 //! Exits with status 1 when a kind listed in `--deny` occurs (after printing the report).
 
+use super::args::{self, BackendArg, FormulaSource, Json, Params};
 use super::common::{self, CliError};
-use crate::numerics::json_num;
-use crate::numerics::sweep::{sweep, Example, RegionStats, SweepOptions};
+use crate::base::json;
 use crate::ir::Formula;
-use crate::{Backend, Options};
-use serde_json::json;
+use crate::numerics::sweep::{sweep, Example, RegionStats, SweepOptions};
+use crate::Options;
+use serde::Serialize;
 
 #[derive(clap::Args, Debug)]
+#[command(mut_arg("set", args::help("Fix parameters instead of sweeping their declared ranges, e.g. `a=16`")))]
 pub struct SweepArgs {
-    /// Formula file (.brdf), or `-` for standard input.
-    pub file: Option<String>,
-    /// The formula inline instead of a file.
-    #[arg(long, conflicts_with = "file")]
-    pub expr: Option<String>,
-    /// Fix parameters instead of sweeping their declared ranges, e.g. `a=16`.
-    #[arg(long, value_parser = common::parse_assignments, action = clap::ArgAction::Append)]
-    pub set: Vec<Vec<(String, f64)>>,
+    #[command(flatten)]
+    pub formula: FormulaSource,
+    #[command(flatten)]
+    pub set: Params,
     /// Values above this are counted as over the bound.
     #[arg(long, default_value_t = 1e6)]
     pub bound: f64,
@@ -29,11 +27,29 @@ pub struct SweepArgs {
     /// Fail (exit 1) if any of these occur: nan, inf, negative, bound.
     #[arg(long, value_delimiter = ',')]
     pub deny: Vec<String>,
-    #[arg(long, default_value = "jit")]
-    pub backend: Backend,
-    /// Print one JSON object (keys documented in the crate docs of `check`).
-    #[arg(long)]
-    pub json: bool,
+    #[command(flatten)]
+    pub backend: BackendArg,
+    #[command(flatten)]
+    pub json: Json,
+}
+
+/// The `--json` object: the total counts, then each region's counts with its first examples.
+#[derive(Serialize)]
+struct SweepJson<'a> {
+    #[serde(flatten)]
+    total: &'a RegionStats,
+    #[serde(serialize_with = "json::num")]
+    bound: f64,
+    exhaustive: bool,
+    regions: Vec<RegionJson<'a>>,
+}
+
+#[derive(Serialize)]
+struct RegionJson<'a> {
+    region: &'static str,
+    #[serde(flatten)]
+    counts: &'a RegionStats,
+    first: serde_json::Value,
 }
 
 const KINDS: [&str; 4] = ["nan", "inf", "negative", "bound"];
@@ -41,16 +57,16 @@ const KINDS: [&str; 4] = ["nan", "inf", "negative", "bound"];
 fn example_json(e: &Option<Example>, names: &[String]) -> serde_json::Value {
     match e {
         None => serde_json::Value::Null,
-        Some(e) => {
-            let inputs: serde_json::Map<_, _> = crate::Input::ALL.iter().map(|i| (i.name().to_string(), json_num(e.inputs[i.index()]))).collect();
-            let params: serde_json::Map<_, _> = names.iter().cloned().zip(e.params.iter().map(|v| json_num(*v))).collect();
-            json!({"inputs": inputs, "params": params, "value": json_num(e.value)})
-        }
+        Some(e) => serde_json::json!({
+            "inputs": json::named(crate::Input::ALL.iter().map(|i| (i.name(), e.inputs[i.index()]))),
+            "params": json::named(names.iter().map(String::as_str).zip(e.params.iter().copied())),
+            "value": json::value(e.value),
+        }),
     }
 }
 
-/// A compact number: plain for ordinary magnitudes, scientific otherwise.
-fn num(v: f64) -> String {
+/// A number for the text report: plain for ordinary magnitudes, scientific otherwise.
+fn compact(v: f64) -> String {
     if v == 0.0 || !v.is_finite() || (1e-4..1e6).contains(&v.abs()) {
         format!("{v}")
     } else {
@@ -59,9 +75,9 @@ fn num(v: f64) -> String {
 }
 
 fn example_text(e: &Example, used: crate::ir::InputSet, names: &[String]) -> String {
-    let mut parts: Vec<String> = used.iter().map(|i| format!("{}={}", i.name(), num(e.inputs[i.index()]))).collect();
-    parts.extend(names.iter().zip(&e.params).map(|(n, v)| format!("{n}={}", num(*v))));
-    format!("{} → {}", parts.join(" "), num(e.value))
+    let mut parts: Vec<String> = used.iter().map(|i| format!("{}={}", i.name(), compact(e.inputs[i.index()]))).collect();
+    parts.extend(names.iter().zip(&e.params).map(|(n, v)| format!("{n}={}", compact(*v))));
+    format!("{} → {}", parts.join(" "), compact(e.value))
 }
 
 pub fn run(a: &SweepArgs) -> Result<(), CliError> {
@@ -73,7 +89,7 @@ pub fn run(a: &SweepArgs) -> Result<(), CliError> {
     if !(a.bound.is_finite() || a.bound == f64::INFINITY) {
         return Err(CliError::hint("--bound must be a number", "e.g. --bound 1e6"));
     }
-    let f = common::load_formula(a.file.as_deref(), a.expr.as_deref())?;
+    let f = a.formula.load()?;
     let (text, denied) = report(a, &f)?;
     print!("{text}");
     if !denied.is_empty() {
@@ -86,10 +102,10 @@ pub fn run(a: &SweepArgs) -> Result<(), CliError> {
 /// The command's output for a lowered formula, and the `--deny` kinds that occurred.
 pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliError> {
     let mut out = String::new();
-    let set: Vec<(String, f64)> = a.set.concat();
+    let set = a.set.list();
     let mut decls = f.params.clone();
     let u = f.unclamped();
-    let k = crate::compile_formula(u, &Options { backend: a.backend, bake: set.clone(), ..Options::default() })?;
+    let k = crate::compile_formula(u, &Options { backend: a.backend.kind, bake: set.clone(), ..Options::default() })?;
     // Baked parameters are fixed: sweep them at their value only.
     for (name, v) in &set {
         if let Some(i) = f.param_index(name) {
@@ -108,23 +124,23 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliEr
         "negative" => s.negative,
         _ => s.over_bound,
     };
-    if a.json {
-        let regions: Vec<_> = rep
+    if a.json.on {
+        let regions = rep
             .regions
             .iter()
-            .map(|r| {
-                json!({"region": r.region, "evaluated": r.evaluated, "nan": r.nan, "inf": r.inf, "negative": r.negative,
-                       "over_bound": r.over_bound,
-                       "first": {"nan": example_json(&r.first_nan, &names), "inf": example_json(&r.first_inf, &names),
-                                 "negative": example_json(&r.first_negative, &names),
-                                 "over_bound": example_json(&r.first_over_bound, &names)}})
+            .map(|r| RegionJson {
+                region: r.region,
+                counts: r,
+                first: serde_json::json!({
+                    "nan": example_json(&r.first_nan, &names),
+                    "inf": example_json(&r.first_inf, &names),
+                    "negative": example_json(&r.first_negative, &names),
+                    "over_bound": example_json(&r.first_over_bound, &names),
+                }),
             })
             .collect();
-        outln!(out, 
-            "{}",
-            json!({"nan": t.nan, "inf": t.inf, "negative": t.negative, "over_bound": t.over_bound, "evaluated": t.evaluated,
-                   "bound": json_num(rep.bound), "exhaustive": rep.exhaustive, "regions": regions})
-        );
+        let obj = SweepJson { total: t, bound: rep.bound, exhaustive: rep.exhaustive, regions };
+        outln!(out, "{}", common::to_json(&obj)?);
     } else {
         outln!(out, 
             "{}: unclamped formula {} over {} points ({}; inputs read: {})",

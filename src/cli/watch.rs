@@ -1,6 +1,7 @@
 //! `lobe watch FILE --scene SCENE -o out.png [--size 512] [--set n=50]`: recompile and re-render whenever
 //! the .brdf file changes. On an error the diagnostics are printed and the last good image is kept.
 
+use super::args::{Output, Params};
 use super::common::{self, CliError};
 use crate::render::image;
 use crate::render::scene::{self, LoadOptions, LobeCompiler};
@@ -10,55 +11,51 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 #[derive(clap::Args, Debug)]
+#[command(mut_arg("output", |a| a.required(true).help("Output PNG, rewritten after every successful reload")))]
 pub struct WatchArgs {
     /// The formula file to watch.
     pub file: PathBuf,
     /// The scene to render it in (every material's formula is replaced by FILE).
     #[arg(long, default_value = "examples/scenes/paper_sphere.toml")]
     pub scene: PathBuf,
-    /// Output PNG, rewritten after every successful reload.
-    #[arg(short, long)]
-    pub output: PathBuf,
+    #[command(flatten)]
+    pub out: Output,
     /// Image size: `N` or `WxH`.
     #[arg(long, value_parser = super::render::parse_size, default_value = "512")]
     pub size: (usize, usize),
-    /// Parameter values, e.g. `n=50`.
-    #[arg(long, value_parser = common::parse_assignments, action = clap::ArgAction::Append)]
-    pub set: Vec<Vec<(String, f64)>>,
+    #[command(flatten)]
+    pub set: Params,
     /// Poll interval in milliseconds.
     #[arg(long, default_value_t = 100)]
     pub interval_ms: u64,
     /// Stop after this many reloads (for scripts; default: run until interrupted).
     #[arg(long)]
     pub count: Option<usize>,
-    /// Overwrite an existing output file even if lobe did not write it.
-    #[arg(long)]
-    pub force: bool,
 }
 
 /// One reload: compile the formula into the scene, render, write. Returns a one-line summary.
 fn reload(a: &WatchArgs, src: String) -> Result<String, CliError> {
     let t0 = Instant::now();
     let name = a.file.display().to_string();
-    let opts = LoadOptions { size: Some(a.size), set: a.set.concat(), formula_override: Some((name, src)) };
+    let opts = LoadOptions { size: Some(a.size), set: a.set.list(), formula_override: Some((name, src)) };
     let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: crate::Backend::Jit })?;
     let compile = t0.elapsed();
     let ropts = RenderOptions { progress: false, ..RenderOptions::default() };
     let (frame, stats) = r::render(&sc, &ropts).map_err(CliError::msg)?;
     let png = frame.image.encode_png().map_err(CliError::msg)?;
-    image::write_atomic(&a.output, &png).map_err(CliError::msg)?;
+    a.out.force.write(a.out.required(), &png, image::is_lobe_png)?;
     let nan = if stats.nan > 0 { format!(", {} NaN shaded as 0", stats.nan) } else { String::new() };
     Ok(format!(
         "reloaded in {:.1} ms (scene + compile {:.1} ms, render {:.1} ms){nan} → {}",
         t0.elapsed().as_secs_f64() * 1e3,
         compile.as_secs_f64() * 1e3,
         stats.render_wall.as_secs_f64() * 1e3,
-        a.output.display()
+        a.out.required().display()
     ))
 }
 
 pub fn run(a: &WatchArgs) -> Result<(), CliError> {
-    image::check_output_path(&a.output, a.force, image::is_lobe_png).map_err(|m| CliError::hint(m, "choose another -o path"))?;
+    a.out.force.check(a.out.required(), image::is_lobe_png)?;
     if !a.scene.is_file() {
         return Err(CliError::hint(format!("scene `{}` not found", a.scene.display()), "examples are in examples/scenes/"));
     }

@@ -16,6 +16,8 @@
 //! `energy --mode full` measures at θᵢ = 0.
 //!
 //! # JSON keys (`--json`, one object per command; stable)
+//! Numbers follow [`crate::base::json`]: finite values are numbers, NaN and ±inf the strings `"NaN"`, `"inf"`,
+//! `"-inf"`.
 //! - `energy`: `coef` (1/(2π·Int); lobe mode), `integral`, `lobe_input`, `params`; with `--range`: `range` =
 //!   list of {`n`, `coef`}; with `--against`: `against_max_abs` (max |coef_fit·2π·Int − 1|),
 //!   `against_worst_n`, `against_mean_abs`; full mode: `coef` (= 1/`albedo_max`), `albedo_max`,
@@ -147,16 +149,6 @@ pub fn check_param_values(decls: &[crate::ir::ParamDecl], params: &[f64]) -> Res
         }
     }
     Ok(())
-}
-
-/// A number for `--json` output: finite values as numbers, NaN and ±inf as the strings "NaN", "inf", "-inf"
-/// (JSON has no non-finite numbers; `null` would hide which one it was).
-pub fn json_num(v: f64) -> serde_json::Value {
-    if v.is_finite() {
-        serde_json::json!(v)
-    } else {
-        serde_json::json!(v.to_string())
-    }
 }
 
 /// Parses `lo..hi` (both numbers) as used by `--range` and `--param`.

@@ -94,18 +94,24 @@ pub struct Example {
     pub value: f64,
 }
 
-/// Counts for one region.
-#[derive(Clone, Debug, Default, PartialEq)]
+/// Counts for one region. Serialises as the counts alone (`evaluated`, `nan`, …): the region's name and the
+/// examples, whose parameters need their names, are the caller's to add.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct RegionStats {
+    #[serde(skip)]
     pub region: &'static str,
     pub evaluated: u64,
     pub nan: u64,
     pub inf: u64,
     pub negative: u64,
     pub over_bound: u64,
+    #[serde(skip)]
     pub first_nan: Option<Example>,
+    #[serde(skip)]
     pub first_inf: Option<Example>,
+    #[serde(skip)]
     pub first_negative: Option<Example>,
+    #[serde(skip)]
     pub first_over_bound: Option<Example>,
 }
 

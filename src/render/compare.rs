@@ -16,14 +16,19 @@ use super::image::Image;
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct Metrics {
     /// Mean |Δ gray| over all pixels (the papers' number), 0..255 scale.
+    #[serde(serialize_with = "crate::base::json::num")]
     pub manhattan: f64,
     /// Mean |Δ gray| over the pixels an object covers in either image.
+    #[serde(serialize_with = "crate::base::json::num")]
     pub manhattan_covered: f64,
     /// Largest |Δ gray|.
+    #[serde(serialize_with = "crate::base::json::num")]
     pub max_gray_diff: f64,
     /// Root mean square of the per-channel differences, 0..255 scale.
+    #[serde(serialize_with = "crate::base::json::num")]
     pub rmse: f64,
     /// 20·log10(255 / rmse); infinite for identical images.
+    #[serde(serialize_with = "crate::base::json::num")]
     pub psnr: f64,
 }
 

@@ -173,3 +173,35 @@ fn bench_and_plot_write_what_they_say() {
     assert_clean_error(&o, "plot with an unknown parameter", "no formula has a parameter `q`");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The shared flags (`cli::args`) parse alike in every command: each subcommand's help lists them, `--expr`
+/// conflicts with FILE, repeated `--set` accumulates, `-o` is required where the command cannot do without
+/// it, and `--force` is what the refusal to overwrite asks for.
+#[test]
+fn shared_flags_parse_alike_in_every_command() {
+    let all = ["eval", "watch", "bench", "plot", "check", "export", "energy", "accuracy", "fit", "sweep", "render", "compare"];
+    for cmd in all {
+        let o = lobe(&[cmd, "--help"], None);
+        assert!(o.status.success(), "{cmd} --help: {}", stderr(&o));
+        assert!(String::from_utf8_lossy(&o.stdout).contains("--set <SET>"), "{cmd} --help lists no --set");
+    }
+    let o = lobe(&["check", "examples/brdfs/blinn.brdf", "--expr", "NH^n"], None);
+    assert_eq!(o.status.code(), Some(2), "FILE with --expr: {}", stderr(&o));
+    assert!(stderr(&o).contains("cannot be used with"), "{}", stderr(&o));
+    let o = lobe(&["eval", "--expr", "param a = 1 in 0..10\nNH^n*a", "--set", "n=2", "--set", "a=3", "--at", "NH=0.5"], None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(String::from_utf8_lossy(&o.stdout).trim(), "0.75");
+    for cmd in [&["plot", "examples/brdfs/blinn.brdf"][..], &["watch", "examples/brdfs/blinn.brdf"]] {
+        let o = lobe(cmd, None);
+        assert_eq!(o.status.code(), Some(2), "{cmd:?} without -o: {}", stderr(&o));
+        assert!(stderr(&o).contains("--output <OUTPUT>"), "{}", stderr(&o));
+    }
+    let dir = std::env::temp_dir().join(format!("lobe-shared-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mine = dir.join("mine.png");
+    std::fs::write(&mine, "not a lobe image").unwrap();
+    let o = lobe(&["render", "examples/scenes/paper_sphere.toml", "--size", "8", "-q", "-o", &mine.display().to_string()], None);
+    assert_clean_error(&o, "render over a foreign file", "--force");
+    assert_eq!(std::fs::read_to_string(&mine).unwrap(), "not a lobe image");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,0 +1,63 @@
+//! The one rule for numbers in `--json` output. JSON has no NaN or infinity, and `null` would hide which of
+//! them a check produced, so a finite value is written as a number and a non-finite one as the string `"NaN"`,
+//! `"inf"` or `"-inf"`. Result types apply it per field with
+//! `#[serde(serialize_with = "crate::base::json::num")]`; objects built with `serde_json::json!` wrap their
+//! numbers in [`value`].
+
+use serde::Serializer;
+
+/// `serialize_with` helper for an `f64` field.
+pub fn num<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+    if v.is_finite() {
+        s.serialize_f64(*v)
+    } else {
+        s.collect_str(v)
+    }
+}
+
+/// `serialize_with` helper for an `Option<f64>` field: `None` is `null`.
+pub fn opt_num<S: Serializer>(v: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
+    match v {
+        Some(v) => num(v, s),
+        None => s.serialize_none(),
+    }
+}
+
+/// A number as a `serde_json::Value` under the same rule.
+pub fn value(v: f64) -> serde_json::Value {
+    if v.is_finite() {
+        serde_json::Value::from(v)
+    } else {
+        serde_json::Value::String(v.to_string())
+    }
+}
+
+/// An object mapping each name to its value (parameters, inputs).
+pub fn named<'a>(pairs: impl IntoIterator<Item = (&'a str, f64)>) -> serde_json::Value {
+    serde_json::Value::Object(pairs.into_iter().map(|(k, v)| (k.to_string(), value(v))).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(serde::Serialize)]
+    struct One(#[serde(serialize_with = "num")] f64);
+
+    #[derive(serde::Serialize)]
+    struct Maybe(#[serde(serialize_with = "opt_num")] Option<f64>);
+
+    #[test]
+    fn finite_numbers_stay_numbers_and_the_others_are_named() {
+        for v in [0.125, 268.0, -2.5e-300, 0.0, f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            assert_eq!(serde_json::to_value(One(v)).unwrap(), value(v), "{v}");
+        }
+        assert_eq!(serde_json::to_string(&One(268.0)).unwrap(), "268.0");
+        assert_eq!(value(f64::NAN), serde_json::json!("NaN"));
+        assert_eq!(value(f64::INFINITY), serde_json::json!("inf"));
+        assert_eq!(value(f64::NEG_INFINITY), serde_json::json!("-inf"));
+        assert_eq!(serde_json::to_value(Maybe(None)).unwrap(), serde_json::Value::Null);
+        assert_eq!(serde_json::to_value(Maybe(Some(f64::NAN))).unwrap(), value(f64::NAN));
+        assert_eq!(named([("n", 50.0), ("a", f64::INFINITY)]), serde_json::json!({"n": 50.0, "a": "inf"}));
+    }
+}

@@ -1,0 +1,203 @@
+//! The flags several commands share, each a clap struct flattened into the commands that take it
+//! (`#[command(flatten)]`), so it is spelled, parsed and documented once. Where a flag means something
+//! narrower in one command (which parameters `--set` fixes, what `-o` writes), that command rewords the help
+//! with `#[command(mut_arg("set", args::help("…")))]`; the name, syntax and parsing stay the shared ones.
+
+use super::common::{self, CliError};
+use crate::ir::{Formula, Input, InputSet};
+use crate::render::image;
+use crate::{Backend, Kernel};
+use std::path::{Path, PathBuf};
+
+/// A help text for `mut_arg`, written without a final full stop (clap drops it from doc comments).
+pub fn help(text: &'static str) -> impl FnOnce(clap::Arg) -> clap::Arg {
+    move |a| a.help(text)
+}
+
+/// The formula a command reads: a file, `-` for standard input, or `--expr` text.
+#[derive(clap::Args, Clone, Debug, Default)]
+pub struct FormulaSource {
+    /// Formula file (.brdf), or `-` for standard input.
+    pub file: Option<String>,
+    /// The formula inline instead of a file.
+    #[arg(long, conflicts_with = "file")]
+    pub expr: Option<String>,
+}
+
+impl FormulaSource {
+    /// Loads and lowers the formula; warnings go to stderr.
+    pub fn load(&self) -> Result<Formula, CliError> {
+        common::load_formula(self.file.as_deref(), self.expr.as_deref())
+    }
+
+    /// Loads the formula and compiles it with `set` baked in.
+    pub fn kernel(&self, set: &[(String, f64)], backend: Backend) -> Result<Kernel, CliError> {
+        common::load_kernel(self.file.as_deref(), self.expr.as_deref(), set, backend)
+    }
+}
+
+/// `--set name=value,…`, repeatable.
+#[derive(clap::Args, Clone, Debug, Default)]
+pub struct Params {
+    /// Parameter values, e.g. `n=50,a=16`.
+    #[arg(id = "set", long = "set", value_name = "SET", value_parser = common::parse_assignments, action = clap::ArgAction::Append)]
+    pub groups: Vec<Vec<(String, f64)>>,
+}
+
+impl Params {
+    /// Every assignment, in the order given.
+    pub fn list(&self) -> Vec<(String, f64)> {
+        self.groups.concat()
+    }
+}
+
+/// `--backend jit|interp`.
+#[derive(clap::Args, Clone, Copy, Debug)]
+pub struct BackendArg {
+    /// Evaluation backend: `jit` (Cranelift) or `interp` (the reference interpreter).
+    #[arg(id = "backend", long = "backend", value_name = "BACKEND", default_value = "jit")]
+    pub kind: Backend,
+}
+
+/// `--json`: one JSON object on standard output instead of the report.
+#[derive(clap::Args, Clone, Copy, Debug)]
+pub struct Json {
+    /// Print one JSON object (its keys are listed in README.md).
+    #[arg(id = "json", long = "json")]
+    pub on: bool,
+}
+
+/// `--lobe NH|VR`: the lobe variable of the formula under a lobe check.
+#[derive(clap::Args, Clone, Debug)]
+pub struct LobeVar {
+    /// The lobe variable (NH or VR); default: the one the formula reads.
+    #[arg(id = "lobe", long = "lobe", value_name = "LOBE")]
+    pub name: Option<String>,
+}
+
+impl LobeVar {
+    /// The lobe variable from `--lobe`, or the one a formula reading `used` reads (printing a note on stderr
+    /// about an ambiguous choice unless `quiet`).
+    pub fn resolve(&self, used: InputSet, quiet: bool) -> Result<Input, CliError> {
+        match &self.name {
+            Some(s) => Input::from_name(s).ok_or_else(|| {
+                CliError::hint(format!("--lobe: `{s}` is not an input"), "the lobe variable is NH (Blinn-style) or VR (Phong-style)")
+            }),
+            None => {
+                let (lobe, note) = crate::numerics::choose_lobe_input(used);
+                if let (Some(n), false) = (note, quiet) {
+                    eprintln!("note: {n}");
+                }
+                Ok(lobe)
+            }
+        }
+    }
+}
+
+/// A formula measured against a reference lobe (`accuracy`, `fit`): the formula, `--reference` and `--lobe`.
+#[derive(clap::Args, Clone, Debug)]
+pub struct AgainstReference {
+    #[command(flatten)]
+    pub formula: FormulaSource,
+    /// The reference lobe (normally Blinn, cos^n).
+    #[arg(long)]
+    pub reference: String,
+    #[command(flatten)]
+    pub lobe: LobeVar,
+}
+
+impl AgainstReference {
+    /// The formula compiled with `set` baked, and the reference with its defaults, both on `backend`.
+    pub fn kernels(&self, set: &[(String, f64)], backend: Backend) -> Result<(Kernel, Kernel), CliError> {
+        Ok((self.formula.kernel(set, backend)?, common::load_kernel(Some(&self.reference), None, &[], backend)?))
+    }
+
+    /// The lobe variables of the formula `k` ([`LobeVar::resolve`]) and of the reference `r` (the one it reads).
+    pub fn lobes(&self, k: &Kernel, r: &Kernel, quiet: bool) -> Result<(Input, Input), CliError> {
+        Ok((self.lobe.resolve(k.used_inputs(), quiet)?, crate::numerics::choose_lobe_input(r.used_inputs()).0))
+    }
+}
+
+/// `--force`: replace an output file lobe did not write.
+#[derive(clap::Args, Clone, Copy, Debug)]
+pub struct Force {
+    /// Replace an existing output file even if lobe did not write it.
+    #[arg(id = "force", long = "force")]
+    pub on: bool,
+}
+
+impl Force {
+    /// Refuses `path` if it is a directory, its directory is missing, or it exists and is neither recognised
+    /// by `is_ours` nor `--force`d. Commands call this before doing the work, so a bad path costs nothing.
+    pub fn check(&self, path: &Path, is_ours: fn(&[u8]) -> bool) -> Result<(), CliError> {
+        image::check_output_path(path, self.on, is_ours)
+            .map_err(|m| CliError::hint(m, "choose another output path, or pass --force to replace it"))
+    }
+
+    /// Checks `path` as [`Force::check`] does, then writes `bytes` to a temporary file in the same directory
+    /// and renames it over `path`: a failure never leaves a half-written file at the user's path.
+    pub fn write(&self, path: &Path, bytes: &[u8], is_ours: fn(&[u8]) -> bool) -> Result<(), CliError> {
+        self.check(path, is_ours)?;
+        image::write_atomic(path, bytes).map_err(CliError::msg)
+    }
+}
+
+/// `-o/--output FILE` with `--force`. Commands that must have an output mark it required with `mut_arg`.
+#[derive(clap::Args, Clone, Debug)]
+pub struct Output {
+    /// Write to this file.
+    #[arg(id = "output", short = 'o', long = "output", value_name = "OUTPUT")]
+    pub path: Option<PathBuf>,
+    #[command(flatten)]
+    pub force: Force,
+}
+
+impl Output {
+    /// The path of a command whose `-o` is required (clap has rejected the command line without it).
+    pub fn required(&self) -> &Path {
+        self.path.as_deref().expect("-o is a required argument of this command")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::{Args, FromArgMatches};
+
+    #[derive(clap::Args, Debug)]
+    #[command(mut_arg("set", help("Narrower help")))]
+    struct Every {
+        #[command(flatten)]
+        formula: FormulaSource,
+        #[command(flatten)]
+        set: Params,
+        #[command(flatten)]
+        backend: BackendArg,
+        #[command(flatten)]
+        json: Json,
+        #[command(flatten)]
+        out: Output,
+    }
+
+    fn parse(argv: &[&str]) -> Result<Every, clap::Error> {
+        let cmd = Every::augment_args(clap::Command::new("t"));
+        cmd.clone().debug_assert();
+        Every::from_arg_matches(&cmd.try_get_matches_from(argv)?)
+    }
+
+    #[test]
+    fn flattened_flags_parse_as_one_command() {
+        let a = parse(&["t", "f.brdf", "--set", "n=2,a=3", "--set", "k=1", "--backend", "interp", "--json", "-o", "x", "--force"])
+            .unwrap();
+        assert_eq!(a.formula.file.as_deref(), Some("f.brdf"));
+        assert_eq!(a.set.list(), vec![("n".into(), 2.0), ("a".into(), 3.0), ("k".into(), 1.0)]);
+        assert_eq!((a.backend.kind, a.json.on, a.out.force.on), (Backend::Interp, true, true));
+        assert_eq!(a.out.path.as_deref(), Some(Path::new("x")));
+        let d = parse(&["t"]).unwrap();
+        assert_eq!((d.backend.kind, d.json.on, d.out.path, d.set.list()), (Backend::Jit, false, None, vec![]));
+        assert!(parse(&["t", "f.brdf", "--expr", "NH"]).is_err());
+        assert!(parse(&["t", "--set", "n"]).is_err());
+        let help = Every::augment_args(clap::Command::new("t")).render_help().to_string();
+        assert!(help.contains("Narrower help") && !help.contains("e.g. `n=50,a=16`"), "{help}");
+    }
+}
