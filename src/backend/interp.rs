@@ -5,8 +5,9 @@
 //! one forward loop with a `match` per instruction. Evaluation is in f64 and calls the builtins table's own
 //! functions, so the JIT (which calls the same functions) agrees bit for bit on transcendental builtins.
 //!
-//! Cost: one dispatch and one scratch write per node — roughly 2–4 ns per node on the development machine,
-//! which is what the JIT is measured against (see README, performance).
+//! Cost: one dispatch (the `match`) and one scratch write per live node, so time grows linearly with the
+//! simplified formula's size; this per-node overhead is what the JIT removes (measured ratios and times:
+//! BENCHMARKS.md).
 
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Node, N_INPUTS};

@@ -2,8 +2,9 @@
 //!
 //! Design: polling (modification time, length, and a hash of the content) rather than inotify — no extra
 //! dependency, works on every file system including network mounts and editors that replace files by rename,
-//! and costs one `stat` per interval (default 100 ms). A change is only reported once the content is stable
-//! across two polls, so a half-saved file is not compiled.
+//! and costs one `stat` plus one read and hash of the (small) file per interval (`lobe watch` polls every
+//! 100 ms by default). A change is only reported once the content is stable across two polls, so a half-saved
+//! file is not compiled.
 
 use std::collections::hash_map::DefaultHasher;
 use std::hash::{Hash, Hasher};

@@ -17,8 +17,8 @@
 //! Parentheses nested deeper than [`MAX_DEPTH`] stop the lexer at once (a 100 000-deep `((((…` is rejected
 //! after 201 tokens).
 //!
-//! Cost: one logos pass plus one linear pass of the adapter, each filling a token `Vec`; a 1 MiB formula
-//! (500 000 tokens) lexes in about 90 ms in release on the loaded development machine.
+//! Cost: one logos pass plus one linear pass of the adapter, each filling a token `Vec`: linear in the input,
+//! and the cheapest of the three front-end stages (measured times: BENCHMARKS.md).
 
 use crate::base::diag::Diagnostic;
 use crate::base::span::Span;

@@ -22,10 +22,9 @@
 //!
 //! Robustness: nothing here recurses on the input's depth (the parser's stack and the AST are `Vec`s;
 //! lowering uses an explicit stack), parentheses deeper than [`lex::MAX_DEPTH`] are refused at once, and at
-//! most [`MAX_ERRORS`] errors are shown. Measured on the shared 2-core development machine (under load, best
-//! of 3): a 1 MiB `1+1+…` chain (500 000 additions) takes 0.48 s in release — lex 0.09 s, parse 0.14 s,
-//! lower 0.27 s, most of which is `Ir::push` hash-consing — and 1.4 s in the dev profile (opt-level 1); a
-//! 100 000-deep `((((…` is rejected in 3 ms (release); a two-line formula parses in about 25 µs (dev profile).
+//! most [`MAX_ERRORS`] errors are shown. Cost is linear in the input; lowering dominates (most of it
+//! `Ir::push` hash-consing), then parsing, then lexing, and over-deep nesting is rejected after
+//! [`lex::MAX_DEPTH`] + 1 tokens. Measured times: BENCHMARKS.md.
 
 pub mod ast;
 pub mod lex;

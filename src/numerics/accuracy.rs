@@ -1,25 +1,190 @@
-//! Accuracy of a lobe against a reference lobe (normally Blinn, cos^n), with the papers' metrics.
+//! Accuracy of a lobe against a reference lobe (normally Blinn, cos^n), with the papers' metrics — and the one
+//! definition of the papers' grid, shared with [`fit`](super::fit).
 //!
 //! Both formulas are evaluated under the lobe convention of the [module docs](super) with the lobe variable
-//! `c = cos(angle)` and `n` swept over 1..=1000 (other parameters fixed). Metrics:
-//! - `mean_abs_grid`: mean |F − R| over angle 0°..90° step 1° × n = 1..1000 (91 000 points, the papers' grid);
-//! - epicentre: max over n ∈ [n₀, 1000] (n₀ = 2, or 9 for F_dsh) of |F − R|/R at x = acos(exp(−1.2/n))
-//!   (where cos^n = e^−1.2 ≈ 0.3);
-//! - inflection: max over n ∈ [3, 1000] of |F − R|/R at x = atan(1/√(n−1));
+//! `c = cos(angle)` and `n` swept over 1..=n_max (1000 in the papers; other parameters fixed). Metrics:
+//! - `mean_abs_grid`: mean |F − R| over angle 0°..90° step 1° × n = 1..1000 (91 000 points, the papers' grid:
+//!   [`AngleGrid::papers`]); the sum of each n's row ([`RowError`]) is added in order of n ([`papers_mean`]);
+//! - epicentre: max over n ∈ [n₀, 1000] (n₀ = [`EPICENTER_FROM`] = 2, or 9 for F_dsh) of |F − R|/|R| at
+//!   c = exp(−1.2/n), angle acos(c), where cos^n = e^−1.2 ≈ 0.3 ([`epicenter_cos`]);
+//! - inflection: max over n ∈ [3, 1000] of |F − R|/|R| at x = atan(1/√(n−1));
 //! - max absolute error over angles per n (on a fine grid, step 0.05°), the worst n and angle;
 //! - max relative error over angles where R ≥ 2^−q (up to the reference's cut-off), worst n and angle;
-//! - lobe-size ratio: cut-off angle of F (first angle from the normal where F < 2^−q, bisected to 1e-12 rad)
+//! - lobe-size ratio: cut-off angle of F (first angle from the normal where F < 2^−q, bisected to 1e-13 rad)
 //!   over the cut-off angle of R (acos(2^(−q/n)) for Blinn), its min and max over n.
+//!
+//! The reference on the papers' grid and at the epicentres is evaluated once ([`PapersReference`]); a fit
+//! reuses it for every candidate. A NaN anywhere makes the mean NaN and is the worst error of every other
+//! metric.
 //!
 //! Evaluation is batched (`Evaluator::eval_batch` over precomputed SoA columns) and parallel over n (rayon).
 //! Cost: 2 × 1000 × (91 + 1801) batched evaluations plus ~100 scalar ones per n for the cut-offs —
 //! about 4 M evaluations for the whole report.
 
 use super::{lobe_inputs, CheckError};
-use crate::ir::Input;
 use crate::backend::{Columns, Evaluator};
+use crate::ir::Input;
 use crate::N_INPUTS;
 use rayon::prelude::*;
+
+/// Number of angles of the papers' grid: 0°..90° in steps of 1°.
+pub const PAPERS_ANGLES: usize = 91;
+
+/// Smallest n of the papers' epicentre metric (F_dsh uses 9, see [`AccuracyOptions::epicenter_from`]).
+pub const EPICENTER_FROM: u32 = 2;
+
+/// The lobe cosine at the epicentre of `n`: where cos^n = e^−1.2 ≈ 0.3, i.e. c = exp(−1.2/n) (the angle is
+/// acos(c)). Both the reference and the formula are evaluated at exactly this c.
+pub fn epicenter_cos(n: f64) -> f64 {
+    (-1.2 / n).exp()
+}
+
+/// Relative error |F − R| / |R|.
+pub fn rel(f: f64, r: f64) -> f64 {
+    (f - r).abs() / r.abs()
+}
+
+/// `p` with its first slot (n) replaced, or `[n]` when empty.
+pub fn with_n(p: &[f64], n: f64) -> Vec<f64> {
+    let mut v = p.to_vec();
+    if v.is_empty() {
+        v.push(n)
+    } else {
+        v[0] = n
+    }
+    v
+}
+
+/// Lobe angles (degrees) and their five input columns under the lobe convention, for batched evaluation.
+pub struct AngleGrid {
+    deg: Vec<f64>,
+    cols: [Vec<f64>; N_INPUTS],
+}
+
+impl AngleGrid {
+    pub fn new(deg: Vec<f64>, lobe: Input) -> AngleGrid {
+        let mut cols: [Vec<f64>; N_INPUTS] = Default::default();
+        for d in &deg {
+            let x = lobe_inputs(d.to_radians().cos(), lobe);
+            for k in 0..N_INPUTS {
+                cols[k].push(x[k]);
+            }
+        }
+        AngleGrid { deg, cols }
+    }
+
+    /// The papers' grid: [`PAPERS_ANGLES`] angles, 0°..90° step 1°.
+    pub fn papers(lobe: Input) -> AngleGrid {
+        AngleGrid::new((0..PAPERS_ANGLES as u32).map(f64::from).collect(), lobe)
+    }
+
+    /// The fine grid of the max-error and cut-off metrics: 0°..90° step 0.05° (1 801 angles).
+    pub fn fine(lobe: Input) -> AngleGrid {
+        AngleGrid::new((0..=1800).map(|i| i as f64 * 0.05).collect(), lobe)
+    }
+
+    /// The angles in degrees.
+    pub fn deg(&self) -> &[f64] {
+        &self.deg
+    }
+
+    /// `ev` at every angle into `out` (one batched call; `out` has one slot per angle).
+    pub fn eval_into(&self, ev: &dyn Evaluator, params: &[f64], out: &mut [f64]) {
+        let c = Columns::new([&self.cols[0], &self.cols[1], &self.cols[2], &self.cols[3], &self.cols[4]]);
+        ev.eval_batch(&c, params, out);
+    }
+
+    /// `ev` at every angle.
+    pub fn eval(&self, ev: &dyn Evaluator, params: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; self.deg.len()];
+        self.eval_into(ev, params, &mut out);
+        out
+    }
+}
+
+/// The reference lobe on the papers' grid, evaluated once: one row of [`PAPERS_ANGLES`] values per
+/// n = 1..=n_max, and its value at each n's epicentre ([`epicenter_cos`]).
+pub struct PapersReference {
+    rows: Vec<f64>,
+    epicenter: Vec<f64>,
+}
+
+impl PapersReference {
+    /// Evaluates `reference` (lobe variable `ref_lobe`, parameters `ref_params` with n replaced) for
+    /// n = 1..=n_max, in parallel over n.
+    pub fn new(reference: &dyn Evaluator, ref_params: &[f64], ref_lobe: Input, n_max: u32) -> PapersReference {
+        let grid = AngleGrid::papers(ref_lobe);
+        let per_n: Vec<(Vec<f64>, f64)> = (1..=n_max)
+            .into_par_iter()
+            .map(|ni| {
+                let n = f64::from(ni);
+                let p = with_n(ref_params, n);
+                (grid.eval(reference, &p), reference.eval(&lobe_inputs(epicenter_cos(n), ref_lobe), &p))
+            })
+            .collect();
+        let mut rows = Vec::with_capacity(per_n.len() * PAPERS_ANGLES);
+        let mut epicenter = Vec::with_capacity(per_n.len());
+        for (row, e) in per_n {
+            rows.extend(row);
+            epicenter.push(e);
+        }
+        PapersReference { rows, epicenter }
+    }
+
+    /// The reference at the papers' angles for `n` (1 ≤ n ≤ n_max).
+    pub fn row(&self, n: u32) -> &[f64] {
+        let i = (n as usize - 1) * PAPERS_ANGLES;
+        &self.rows[i..i + PAPERS_ANGLES]
+    }
+
+    /// The reference at the epicentre of `n` (1 ≤ n ≤ n_max).
+    pub fn at_epicenter(&self, n: u32) -> f64 {
+        self.epicenter[n as usize - 1]
+    }
+}
+
+/// |F − R| over one row of a grid: the sum and the max of the differences that are not NaN, and how many are.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RowError {
+    pub sum: f64,
+    pub max: f64,
+    pub nan: usize,
+}
+
+impl RowError {
+    pub fn new(f: &[f64], r: &[f64]) -> RowError {
+        let mut e = RowError::default();
+        for (a, b) in f.iter().zip(r) {
+            let d = (a - b).abs();
+            if d.is_nan() {
+                e.nan += 1;
+            } else {
+                e.sum += d;
+                e.max = e.max.max(d);
+            }
+        }
+        e
+    }
+}
+
+/// The papers' mean |F − R|: the per-n row sums added in order of n, over [`PAPERS_ANGLES`] × n_max points;
+/// NaN when `nan` points were NaN.
+pub fn papers_mean(row_sums: impl IntoIterator<Item = f64>, nan: usize, n_max: u32) -> f64 {
+    let sum = row_sums.into_iter().fold(0.0, |s, r| s + r);
+    if nan > 0 {
+        f64::NAN
+    } else {
+        sum / (PAPERS_ANGLES as f64 * f64::from(n_max))
+    }
+}
+
+/// The smallest usable `n_max` for the papers' metrics is 3 (the inflection metric starts there).
+pub fn check_n_max(n_max: u32) -> Result<(), CheckError> {
+    if n_max < 3 {
+        return Err(CheckError::new("n_max must be at least 3"));
+    }
+    Ok(())
+}
 
 /// Options for [`accuracy`].
 #[derive(Clone, Debug, PartialEq)]
@@ -36,7 +201,7 @@ pub struct AccuracyOptions {
 
 impl Default for AccuracyOptions {
     fn default() -> Self {
-        AccuracyOptions { q: 8.0, n_max: 1000, epicenter_from: 2, inflection_from: 3 }
+        AccuracyOptions { q: 8.0, n_max: 1000, epicenter_from: EPICENTER_FROM, inflection_from: 3 }
     }
 }
 
@@ -78,40 +243,6 @@ pub struct AccuracyReport {
     pub nan_points: usize,
 }
 
-struct Grid {
-    deg: Vec<f64>,
-    cols: [Vec<f64>; N_INPUTS],
-}
-
-impl Grid {
-    fn new(deg: Vec<f64>, lobe: Input) -> Grid {
-        let mut cols: [Vec<f64>; N_INPUTS] = Default::default();
-        for d in &deg {
-            let x = lobe_inputs(d.to_radians().cos(), lobe);
-            for k in 0..N_INPUTS {
-                cols[k].push(x[k]);
-            }
-        }
-        Grid { deg, cols }
-    }
-    fn eval(&self, ev: &dyn Evaluator, params: &[f64]) -> Vec<f64> {
-        let mut out = vec![0.0; self.deg.len()];
-        let c = Columns::new([&self.cols[0], &self.cols[1], &self.cols[2], &self.cols[3], &self.cols[4]]);
-        ev.eval_batch(&c, params, &mut out);
-        out
-    }
-}
-
-fn with_n(p: &[f64], n: f64) -> Vec<f64> {
-    let mut v = p.to_vec();
-    if v.is_empty() {
-        v.push(n)
-    } else {
-        v[0] = n
-    }
-    v
-}
-
 /// The first angle (degrees) from the normal where `f < level`, bisected between fine-grid samples;
 /// 90 when the lobe never drops below `level`.
 fn cutoff_deg(f: &dyn Fn(f64) -> f64, deg: &[f64], vals: &[f64], level: f64) -> f64 {
@@ -134,10 +265,6 @@ fn cutoff_deg(f: &dyn Fn(f64) -> f64, deg: &[f64], vals: &[f64], level: f64) -> 
     (0.5 * (a + b)).to_degrees()
 }
 
-fn rel(f: f64, r: f64) -> f64 {
-    (f - r).abs() / r.abs()
-}
-
 /// Compares `ev` (lobe variable `lobe`, parameters `params`, n replaced) with `reference`.
 #[allow(clippy::too_many_arguments)]
 pub fn accuracy(
@@ -152,13 +279,10 @@ pub fn accuracy(
     if !(opts.q > 0.0 && opts.q.is_finite() && opts.q <= 1000.0) {
         return Err(CheckError::hint(format!("q = {} is not a usable cut-off exponent", opts.q), "use q in (0, 1000], e.g. 8"));
     }
-    if opts.n_max < 3 {
-        return Err(CheckError::new("n_max must be at least 3"));
-    }
-    let coarse: Vec<f64> = (0..=90).map(f64::from).collect();
-    let fine: Vec<f64> = (0..=1800).map(|i| i as f64 * 0.05).collect();
-    let (gc, gcr) = (Grid::new(coarse.clone(), lobe), Grid::new(coarse, ref_lobe));
-    let (gf, gfr) = (Grid::new(fine.clone(), lobe), Grid::new(fine, ref_lobe));
+    check_n_max(opts.n_max)?;
+    let reference_grid = PapersReference::new(reference, ref_params, ref_lobe, opts.n_max);
+    let gc = AngleGrid::papers(lobe);
+    let (gf, gfr) = (AngleGrid::fine(lobe), AngleGrid::fine(ref_lobe));
     let level = 2f64.powf(-opts.q);
     struct PerN {
         sum_abs: f64,
@@ -174,17 +298,8 @@ pub fn accuracy(
         .map(|ni| {
             let n = f64::from(ni);
             let (p, pr) = (with_n(params, n), with_n(ref_params, n));
-            let (f, r) = (gc.eval(ev, &p), gcr.eval(reference, &pr));
-            let mut nan = 0;
-            let mut sum_abs = 0.0;
-            for (a, b) in f.iter().zip(&r) {
-                let d = (a - b).abs();
-                if d.is_nan() {
-                    nan += 1;
-                } else {
-                    sum_abs += d;
-                }
-            }
+            let coarse = RowError::new(&gc.eval(ev, &p), reference_grid.row(ni));
+            let mut nan = coarse.nan;
             let (f, r) = (gf.eval(ev, &p), gfr.eval(reference, &pr));
             let mut max_abs = Worst::none();
             let mut cutoff_rel = Worst::none();
@@ -193,24 +308,28 @@ pub fn accuracy(
                 if d.is_nan() {
                     nan += 1;
                 }
-                max_abs.take(Worst { value: d, n, angle_deg: gf.deg[i] });
+                max_abs.take(Worst { value: d, n, angle_deg: gf.deg()[i] });
                 if r[i] >= level {
-                    cutoff_rel.take(Worst { value: rel(f[i], r[i]), n, angle_deg: gf.deg[i] });
+                    cutoff_rel.take(Worst { value: rel(f[i], r[i]), n, angle_deg: gf.deg()[i] });
                 }
             }
             let fe = |x: f64| ev.eval(&lobe_inputs(x.cos(), lobe), &p);
             let fr = |x: f64| reference.eval(&lobe_inputs(x.cos(), ref_lobe), &pr);
-            let cf = cutoff_deg(&fe, &gf.deg, &f, level);
-            let cr = cutoff_deg(&fr, &gfr.deg, &r, level);
+            let cf = cutoff_deg(&fe, gf.deg(), &f, level);
+            let cr = cutoff_deg(&fr, gfr.deg(), &r, level);
             let ratio = Worst { value: cf / cr, n, angle_deg: cf };
-            let at = |x: f64| {
+            let epi = (ni >= opts.epicenter_from).then(|| {
+                let c = epicenter_cos(n);
+                let v = rel(ev.eval(&lobe_inputs(c, lobe), &p), reference_grid.at_epicenter(ni));
+                Worst { value: v, n, angle_deg: c.acos().to_degrees() }
+            });
+            let infl = (ni >= opts.inflection_from.max(2)).then(|| {
+                let x = (1.0 / (n - 1.0).sqrt()).atan();
                 let c = x.cos();
                 let v = rel(ev.eval(&lobe_inputs(c, lobe), &p), reference.eval(&lobe_inputs(c, ref_lobe), &pr));
                 Worst { value: v, n, angle_deg: x.to_degrees() }
-            };
-            let epi = (ni >= opts.epicenter_from).then(|| at((-1.2 / n).exp().acos()));
-            let infl = (ni >= opts.inflection_from.max(2)).then(|| at((1.0 / (n - 1.0).sqrt()).atan()));
-            PerN { sum_abs, nan, max_abs, cutoff_rel, ratio, epi, infl }
+            });
+            PerN { sum_abs: coarse.sum, nan, max_abs, cutoff_rel, ratio, epi, infl }
         })
         .collect();
     let mut rep = AccuracyReport {
@@ -224,9 +343,7 @@ pub fn accuracy(
         lobe_ratio_max: Worst::none(),
         nan_points: 0,
     };
-    let mut sum = 0.0;
     for p in &per_n {
-        sum += p.sum_abs;
         rep.nan_points += p.nan;
         rep.max_abs.take(p.max_abs);
         rep.max_abs_per_n.push((p.max_abs.n, p.max_abs.value, p.max_abs.angle_deg));
@@ -242,7 +359,8 @@ pub fn accuracy(
             rep.inflection.take(e);
         }
     }
-    rep.mean_abs_grid = if rep.nan_points > 0 { f64::NAN } else { sum / (91.0 * f64::from(opts.n_max)) };
+    // A NaN anywhere (either grid) makes the mean NaN.
+    rep.mean_abs_grid = papers_mean(per_n.iter().map(|p| p.sum_abs), rep.nan_points, opts.n_max);
     Ok(rep)
 }
 

@@ -4,9 +4,9 @@
 //! Lobe mode. `coef = 1 / (2π·Int)`, `Int = ∫₀^{π/2} max(f(cos θ), 0) cos θ sin θ dθ`. With `c = cos θ` this is
 //! `Int = ∫₀¹ max(f(c), 0)·c dc` — integrating in `c` turns the n = 1000 spike at θ = 0 into a smooth
 //! boundary layer at c = 1 of width ~1/n, which a geometric ladder of breakpoints 1 − 2^−k (k = 1..24)
-//! resolves. Kinks where a lobe is clamped to zero are located first (a scan of 80 points plus bisection to
-//! 1 ulp) and become breakpoints too, so adaptive GK15 (see [`quad`](super::quad)) meets a 1e-11 relative
-//! tolerance in typically 400–1500 evaluations. Inputs follow the lobe convention of the [module
+//! resolves. Kinks where a lobe is clamped to zero are located first (a scan of 83 points — 65 uniform plus
+//! the ladder — then bisection to 1 ulp) and become breakpoints too, so adaptive GK15 (see
+//! [`quad`](super::quad)) meets a 1e-11 relative tolerance in typically 400–1500 evaluations. Inputs follow the lobe convention of the [module
 //! docs](super).
 //!
 //! Full mode. `ρ(θᵢ) = ∫_{H²} f(L, V) (N·V) dω_V` with N = +z, L at θᵢ in the xz-plane, V over the upper
@@ -15,7 +15,8 @@
 //! mirror symmetry (y → −y) halves the azimuth range. Nested adaptive GK15 in α (with a ladder near α = 0)
 //! and φ. Reciprocity compares f(L, V) with f(V, L) on a direction grid.
 //!
-//! Measured cost: see the module docs of [`check`](super) and `benches/energy.rs`.
+//! Cost: see the module docs of [`numerics`](super) (evaluation counts); measured times in BENCHMARKS.md
+//! (`benches/energy.rs` reproduces them).
 
 use super::quad::integrate;
 use super::{dir, inputs_from_dirs, lobe_inputs, CheckError};

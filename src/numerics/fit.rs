@@ -1,19 +1,25 @@
 //! Parameter fitting: find the parameter values that make a lobe closest to a reference lobe.
 //!
-//! Design: the papers' search, made fast. The reference is evaluated once on the metric's grid (for mean |Δ|:
-//! 91 angles × n = 1..1000, the lobe convention of the [module docs](super)); each candidate is then scored
-//! with batched evaluations of the formula only (91 points per n), in parallel over candidates (rayon).
-//! Stage 1 is exhaustive over a grid (integers for integer ranges, or `lo..hi:step`); stage 2 refines the
-//! best grid point continuously — golden-section search for one free parameter, Nelder–Mead (clamped to
-//! the ranges) for several — within one grid step of it.
+//! Design: the papers' search, made fast. The metrics are the papers' ones as [`accuracy`](super::accuracy)
+//! defines them — the same grid ([`AngleGrid::papers`], 91 angles × n = 1..n_max under the lobe convention of
+//! the [module docs](super)), the same epicentre ([`epicenter_cos`]), the same per-row sums
+//! ([`RowError`], [`papers_mean`]) — so a candidate's score is bit for bit what `accuracy` reports for it. The
+//! reference is evaluated once ([`PapersReference`]); each candidate is then scored with batched evaluations
+//! of the formula only (91 points per n), in parallel over candidates (rayon). Stage 1 is exhaustive over a
+//! grid (integers for integer ranges, or `lo..hi:step`); stage 2 refines the best grid point continuously —
+//! golden-section search for one free parameter, Nelder–Mead (clamped to the ranges) for several — within
+//! one grid step of it.
 //!
-//! Cost: one mean-|Δ| score is 91 000 formula evaluations; a = 1..1000 for F_ST is 91 M evaluations (~1–2 s
-//! on the JIT on 2 cores, several seconds on the interpreter) plus ~60 scores for the refinement.
+//! Cost: one mean-|Δ| score is 91 000 formula evaluations; a = 1..1000 for F_ST is 91 M evaluations plus ~60
+//! scores for the refinement, so the evaluator's speed decides (measured times: BENCHMARKS.md).
 
+use super::accuracy::{
+    check_n_max, epicenter_cos, papers_mean, rel, with_n, AngleGrid, PapersReference, RowError, EPICENTER_FROM,
+    PAPERS_ANGLES,
+};
 use super::{lobe_inputs, CheckError};
+use crate::backend::Evaluator;
 use crate::ir::Input;
-use crate::backend::{Columns, Evaluator};
-use crate::N_INPUTS;
 use rayon::prelude::*;
 
 /// What a fit minimises.
@@ -120,78 +126,52 @@ pub struct FitReport {
     pub evaluated: usize,
 }
 
-/// Scores candidates against a reference evaluated once.
+/// Scores candidates against a reference evaluated once on the papers' grid ([`PapersReference`]).
 pub struct Scorer<'a> {
     ev: &'a dyn Evaluator,
     lobe: Input,
     metric: Metric,
     n_max: u32,
-    cols: [Vec<f64>; N_INPUTS],
-    /// Reference values, row n−1, 91 angles.
-    reference: Vec<Vec<f64>>,
-    /// Reference at the epicentre for n = 2..=n_max.
-    ref_epi: Vec<f64>,
+    grid: AngleGrid,
+    reference: PapersReference,
 }
 
 impl<'a> Scorer<'a> {
     pub fn new(ev: &'a dyn Evaluator, lobe: Input, reference: &dyn Evaluator, ref_params: &[f64], ref_lobe: Input, metric: Metric, n_max: u32) -> Scorer<'a> {
-        let mut cols: [Vec<f64>; N_INPUTS] = Default::default();
-        let mut rcols: [Vec<f64>; N_INPUTS] = Default::default();
-        for d in 0..=90 {
-            let c = f64::from(d).to_radians().cos();
-            let (x, xr) = (lobe_inputs(c, lobe), lobe_inputs(c, ref_lobe));
-            for k in 0..N_INPUTS {
-                cols[k].push(x[k]);
-                rcols[k].push(xr[k]);
-            }
-        }
-        let rc = Columns::new([&rcols[0], &rcols[1], &rcols[2], &rcols[3], &rcols[4]]);
-        let reference_rows = (1..=n_max)
-            .map(|n| {
-                let mut out = vec![0.0; 91];
-                reference.eval_batch(&rc, &with_n(ref_params, f64::from(n)), &mut out);
-                out
-            })
-            .collect();
-        let ref_epi = (2..=n_max)
-            .map(|n| {
-                let n = f64::from(n);
-                reference.eval(&lobe_inputs((-1.2 / n).exp(), ref_lobe), &with_n(ref_params, n))
-            })
-            .collect();
-        Scorer { ev, lobe, metric, n_max, cols, reference: reference_rows, ref_epi }
+        let reference = PapersReference::new(reference, ref_params, ref_lobe, n_max);
+        Scorer { ev, lobe, metric, n_max, grid: AngleGrid::papers(lobe), reference }
     }
 
-    /// The metric for one full parameter vector (n is replaced as the metric sweeps it). NaN scores +inf.
+    /// The metric for one full parameter vector (n is replaced as the metric sweeps it). A NaN anywhere
+    /// scores +inf. Mean |Δ| is [`papers_mean`], bit for bit what [`accuracy`](super::accuracy::accuracy)
+    /// reports as `mean_abs_grid` for the same parameters.
     pub fn score(&self, params: &[f64]) -> f64 {
-        let c = Columns::new([&self.cols[0], &self.cols[1], &self.cols[2], &self.cols[3], &self.cols[4]]);
-        let mut p = params.to_vec();
+        let mut p = with_n(params, 1.0);
         let s = match self.metric {
             Metric::MeanAbs | Metric::MaxAbs => {
-                let mut out = [0.0; 91];
-                let (mut sum, mut max) = (0.0, 0.0f64);
+                let mut out = [0.0; PAPERS_ANGLES];
+                let mut rows = Vec::with_capacity(self.n_max as usize);
                 for n in 1..=self.n_max {
                     p[0] = f64::from(n);
-                    self.ev.eval_batch(&c, &p, &mut out);
-                    for (a, b) in out.iter().zip(&self.reference[n as usize - 1]) {
-                        let d = (a - b).abs();
-                        sum += d;
-                        max = if d.is_nan() { f64::NAN } else { max.max(d) };
-                    }
+                    self.grid.eval_into(self.ev, &p, &mut out);
+                    rows.push(RowError::new(&out, self.reference.row(n)));
                 }
+                let nan = rows.iter().map(|r| r.nan).sum();
                 if self.metric == Metric::MeanAbs {
-                    sum / (91.0 * f64::from(self.n_max))
+                    papers_mean(rows.iter().map(|r| r.sum), nan, self.n_max)
+                } else if nan > 0 {
+                    f64::NAN
                 } else {
-                    max
+                    rows.iter().fold(0.0f64, |m, r| m.max(r.max))
                 }
             }
             Metric::Epicenter => {
                 let mut max = 0.0f64;
-                for n in 2..=self.n_max {
+                for n in EPICENTER_FROM..=self.n_max {
                     p[0] = f64::from(n);
-                    let r = self.ref_epi[n as usize - 2];
-                    let d = (self.ev.eval(&lobe_inputs((-1.2 / p[0]).exp(), self.lobe), &p) - r).abs() / r;
-                    max = if d.is_nan() { f64::NAN } else { max.max(d) };
+                    let c = epicenter_cos(p[0]);
+                    let d = rel(self.ev.eval(&lobe_inputs(c, self.lobe), &p), self.reference.at_epicenter(n));
+                    max = if d.is_nan() || max.is_nan() { f64::NAN } else { max.max(d) };
                 }
                 max
             }
@@ -202,16 +182,6 @@ impl<'a> Scorer<'a> {
             s
         }
     }
-}
-
-fn with_n(p: &[f64], n: f64) -> Vec<f64> {
-    let mut v = p.to_vec();
-    if v.is_empty() {
-        v.push(n)
-    } else {
-        v[0] = n
-    }
-    v
 }
 
 /// Fits `free` parameters of `ev` to `reference` (see module docs). `progress` is called once per scored
@@ -237,9 +207,7 @@ pub fn fit(
             if f.index == 0 { "n is swept by the metric itself; fit the other parameters" } else { "not a parameter of the formula" },
         ));
     }
-    if opts.n_max < 3 {
-        return Err(CheckError::new("n_max must be at least 3"));
-    }
+    check_n_max(opts.n_max)?;
     let grids: Vec<Vec<f64>> = free.iter().map(FreeParam::grid).collect::<Result<_, _>>()?;
     let total: usize = grids.iter().map(Vec::len).product();
     if total > 2_000_000 {
@@ -366,8 +334,9 @@ fn nelder_mead(eval: &mut impl FnMut(&[f64]) -> (f64, Vec<f64>), x0: &[f64], ste
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::numerics::twins;
     use crate::backend::FnEvaluator;
+    use crate::numerics::accuracy::{accuracy, AccuracyOptions};
+    use crate::numerics::twins;
     use std::sync::atomic::{AtomicUsize, Ordering};
 
     #[test]
@@ -407,6 +376,32 @@ mod tests {
         let f2 = FnEvaluator(|x: &[f64; 5], p: &[f64]| x[2].max(0.0).powf(p[1] * p[0]));
         let r = fit(&f2, &[1.0, 1.0], Input::NH, &g, &[1.0], Input::NH, &free, &opts, &|| {}).unwrap();
         assert!(r.best[0].refined && (r.best[0].params[1] - 1.1).abs() < 1e-4, "{:?}", r.best[0]);
+    }
+
+    #[test]
+    fn scores_are_the_accuracy_reports_numbers() {
+        // One definition of the papers' grid and epicentre: a fit's score is, bit for bit, what `accuracy`
+        // reports for the same parameters.
+        let (st, b) = (twins::f_st(), twins::blinn());
+        let p = [1.0, 268.0];
+        let opts = AccuracyOptions { n_max: 100, ..Default::default() };
+        let acc = accuracy(st.ev.as_ref(), &p, Input::NH, b.ev.as_ref(), &[1.0], Input::NH, &opts).unwrap();
+        let score = |metric| Scorer::new(st.ev.as_ref(), Input::NH, b.ev.as_ref(), &[1.0], Input::NH, metric, 100).score(&p);
+        assert_eq!(score(Metric::MeanAbs).to_bits(), acc.mean_abs_grid.to_bits());
+        assert_eq!(score(Metric::Epicenter).to_bits(), acc.epicenter.value.to_bits());
+    }
+
+    #[test]
+    fn a_nan_anywhere_scores_infinity() {
+        // NaN at one n in the middle of the sweep (not only at the last one) makes every metric +inf.
+        let b = twins::blinn();
+        let f = FnEvaluator(|x: &[f64; 5], p: &[f64]| if p[0] == 5.0 { f64::NAN } else { x[2].max(0.0).powf(p[0]) });
+        for metric in [Metric::MeanAbs, Metric::MaxAbs, Metric::Epicenter] {
+            let s = Scorer::new(&f, Input::NH, b.ev.as_ref(), &[1.0], Input::NH, metric, 20).score(&[1.0]);
+            assert_eq!(s, f64::INFINITY, "{metric:?}");
+        }
+        let s = Scorer::new(b.ev.as_ref(), Input::NH, b.ev.as_ref(), &[1.0], Input::NH, Metric::MaxAbs, 20).score(&[1.0]);
+        assert_eq!(s, 0.0);
     }
 
     #[test]

@@ -18,36 +18,35 @@
 //! # JSON keys (`--json`, one object per command; stable)
 //! Numbers follow [`crate::base::json`]: finite values are numbers, NaN and ±inf the strings `"NaN"`, `"inf"`,
 //! `"-inf"`.
-//! - `energy`: `coef` (1/(2π·Int); lobe mode), `integral`, `lobe_input`, `params`; with `--range`: `range` =
-//!   list of {`n`, `coef`}; with `--against`: `against_max_abs` (max |coef_fit·2π·Int − 1|),
-//!   `against_worst_n`, `against_mean_abs`; full mode: `coef` (= 1/`albedo_max`), `albedo_max`,
-//!   `theta_i_at_max_deg`, `albedo` (list of {`theta_i_deg`, `rho`}), `reciprocity_max_rel`,
-//!   `reciprocity_worst` ({`theta_l_deg`, `theta_v_deg`, `phi_v_deg`}).
+//! - `energy`: `mode` (`lobe` or `full`), `params`; lobe mode: `coef` (1/(2π·Int)), `integral`, `evals`,
+//!   `lobe_input`; with `--range`: `range` = list of {`n`, `coef`} instead of `coef`/`integral`/`evals`; with
+//!   `--against`: `against_max_abs` (max |coef_fit·2π·Int − 1|), `against_worst_n`, `against_mean_abs`; full
+//!   mode: `coef` (= 1/`albedo_max`), `albedo_max`, `theta_i_at_max_deg`, `albedo` (list of {`theta_i_deg`,
+//!   `rho`}), `reciprocity_max_rel`, `reciprocity_worst` ({`theta_l_deg`, `theta_v_deg`, `phi_v_deg`}).
 //! - `accuracy`: `mean_abs_grid`, `epicenter_max_rel_pct` (+ `epicenter_worst_n`), `inflection_max_rel_pct`
 //!   (+ `inflection_worst_n`), `max_abs` (+ `max_abs_n`, `max_abs_angle_deg`), `cutoff_max_rel_pct`
-//!   (+ `cutoff_worst_n`, `cutoff_worst_angle_deg`), `lobe_ratio_min`, `lobe_ratio_max` (+ `_n`), `q`.
-//! - `fit`: `best` = list of {`params` (object name → value), `score`}, best first; `metric`, `evaluated`.
-//! - `sweep`: `nan`, `inf`, `negative`, `over_bound` counts, `evaluated`, `bound`, `regions` = list of
-//!   {`region`, `evaluated`, `nan`, `inf`, `negative`, `over_bound`, `first`} where `first` maps each kind
-//!   to its first example ({`inputs`, `params`, `value`}).
+//!   (+ `cutoff_worst_n`, `cutoff_worst_angle_deg`), `lobe_ratio_min`, `lobe_ratio_max` (+ `_n`), `nan_points`,
+//!   `q`, `seconds`.
+//! - `fit`: `best` = list of {`params` (object name → value), `score`, `refined`}, best first; `metric`,
+//!   `evaluated`, `seconds`.
+//! - `sweep`: `nan`, `inf`, `negative`, `over_bound` counts, `evaluated`, `exhaustive`, `bound`, `regions` =
+//!   list of {`region`, `evaluated`, `nan`, `inf`, `negative`, `over_bound`, `first`} where `first` maps each
+//!   kind to its first example ({`inputs`, `params`, `value`}) or `null`.
 //!
-//! # Measured cost
-//! `cargo bench --bench energy --profile dev` (crate at opt-level 1, dependencies at 2; 2 cores shared with
-//! other builds, so these are upper bounds — a release build is faster):
-//! - one exact coefficient ([`energy::normalization_coef`]): 520–620 evaluations; 20 µs (modified Schlick
-//!   twin, n = 50), 56 µs (Phong twin, n = 1000), 77 µs (F_ST twin, n = 1000, a = 268), 218 µs (F_kutlog twin,
-//!   acos + pow), 107–120 µs on the reference *interpreter* for Blinn — all well under the 1 ms target;
-//! - a whole accuracy report (91 000-point grid + 1 801 × 1000 fine grid + cut-offs, 2 formulas): 226 ms on
-//!   twins, 320 ms with the interpreter as reference;
-//! - full-mode energy (91 incidence angles, nested adaptive GK15, + 8 208 reciprocity pairs): 118 ms (Phong
-//!   twin, n = 50);
-//! - a fit over a ∈ 200..340 (141 candidates × 91 000 evaluations + refinement): ~2 s in the test profile on
-//!   twins; a ∈ 1..1000 is ~7× that.
+//! # Cost
+//! Every check is a count of formula evaluations, so the evaluator's time per evaluation sets its time (on
+//! arithmetic formulas the JIT is roughly 10× faster than the interpreter per scalar call and 30–45× per
+//! batched element):
+//! - one exact coefficient ([`energy::normalization_coef`]): a few hundred to ~2 000 evaluations (adaptive
+//!   GK15 over a ladder of breakpoints; 520–620 in the cases of `benches/energy.rs`);
+//! - a whole accuracy report: the papers' grid (91 × 1000; the reference's rows once) and the fine grid
+//!   (1 801 × 1000) for both formulas, plus ~100 scalar evaluations per n for the cut-offs — about 4 M;
+//! - full-mode energy: 91 incidence angles, each a nested adaptive GK15 over the hemisphere, plus 8 664
+//!   reciprocity pairs (two evaluations each);
+//! - a fit: one mean-|Δ| score is 91 000 evaluations of the formula (the reference is evaluated once), times
+//!   the number of grid candidates (141 for a ∈ 200..340, 1000 for a ∈ 1..1000), plus ~60 scores to refine.
 //!
-//! End to end on the JIT (trial merge with main's front end and JIT, debug binary, loaded 2-core machine):
-//! `energy kutlog.brdf --range 1..1000` (1000 exact coefficients) 0.32 s; `energy modified_schlick.brdf --range
-//! 2..1000 --against norm/modified_schlick_2_24.brdf` 0.04 s; `accuracy` 0.2–0.4 s; `energy --mode full`
-//! 0.15–0.23 s; `fit fst.brdf --param a=1..1000` 6.2 s wall (2.8 s CPU) — finds a = 268.
+//! Measured times, on the JIT, the interpreter and the twins: BENCHMARKS.md.
 
 pub mod accuracy;
 pub mod energy;

@@ -1,7 +1,7 @@
 //! The papers' published numbers, what lobe computes for them, and a verdict — errata pinned by tests.
 //!
 //! Every row is recomputed by the tests from the hand-written [`twins`](super::twins) with lobe's own
-//! quadrature and metrics; the test asserts both the pinned computed value (to 1e-6 relative) and the verdict,
+//! quadrature and metrics; the test asserts both the pinned computed value (to 2·10⁻⁶ relative) and the verdict,
 //! so a change in either is a visible diff. Independent closed forms back the key rows (Phong, F_SCOS and
 //! the quadratic model in `energy.rs` tests).
 //!

@@ -18,7 +18,7 @@ pub struct BenchRow {
     pub jit_spread: f64,
     pub jit_batch_ns: f64,
     pub interp_ns: f64,
-    /// Hand-written Rust (`check::twins`), where lobe has a twin of the formula, called like the kernel.
+    /// Hand-written Rust (`numerics::twins`), where lobe has a twin of the formula, called like the kernel.
     pub native_ns: Option<f64>,
     pub mean_abs_grid: f64,
     pub epicenter_max_rel_pct: f64,

@@ -11,8 +11,9 @@
 //! the node it replaces (so notes point at the user's text), and the result is compacted ([`Ir::compact`]), so
 //! a `let` used only in a branch that folded away, and any input only it read, disappear from
 //! [`Formula::used_inputs`]. Each rewrite below is introduced by its pattern in a comment (`// x*1 → x`) and
-//! counted by name in the [`Report`]. Cost: 0.1–0.3 ms for a 35-node catalogue formula (debug build, loaded
-//! machine); perf shows ~60 % of it in SipHash inside `Ir::push`, so a faster hasher there would halve it.
+//! counted by name in the [`Report`]. Cost: linear in the nodes per pass, dominated by hash-consing — perf
+//! showed ~60 % of the time in SipHash inside `Ir::push`, so a faster hasher there would halve it (measured
+//! times: BENCHMARKS.md).
 //!
 //! Constants fold through [`BinOp::apply`] and [`Builtin::eval`] — the functions every backend uses — so
 //! folding never changes a value.
@@ -44,10 +45,10 @@
 //!
 //! # Rewrites that change rounding (listed in [`Report::rounding`]; off under [`Policy::exact`])
 //! - `pow(x, k) → multiplication chain` for integer 2 ≤ |k| ≤ [`MAX_POW_CHAIN`] (shortest addition chains up
-//!   to 16, binary above; negative k → `1/x^|k|`): ~5× faster than libm `pow` natively (x^50: 11 vs 75 ns, x^268:
-//!   15–24 vs 80–90 ns, loaded 2-core machine), and the JIT needs it to match Rust. Error bound (k−1)·u.
-//!   Measured against a double-double reference, x uniform in [0, 1], normal results (test
-//!   `accuracy_pow_chain_vs_libm`; glibc `pow` itself measured ≤ 0.5 ulp, i.e. correctly rounded here):
+//!   to 16, binary above; negative k → `1/x^|k|`): ~5× faster than libm `pow` natively (BENCHMARKS.md), and
+//!   the JIT needs it to match Rust. Error bound (k−1)·u. Measured against a double-double reference, x
+//!   uniform in [0, 1], normal results (test `accuracy_pow_chain_vs_libm` in `tests/it/simplify.rs`; glibc
+//!   `pow` itself measured ≤ 0.5 ulp, i.e. correctly rounded here):
 //!
 //!   | k | 2 | 3 | 4 | 5 | 8 | 10 | 12 | 15 | 16 | 50 | 268 | 1000 |
 //!   |---|---|---|---|---|---|----|----|----|----|----|-----|------|
@@ -59,11 +60,12 @@
 //!   intermediates loses relative accuracy; the absolute error stays < 2^−1022.
 //! - `pow(x, 0.5) → sqrt(x)` where x cannot be −0 or −inf: sqrt is correctly rounded; glibc's pow(x, 0.5)
 //!   differs by 1 ulp on 81 of 10⁵ samples in [0, 1] and on 1 of the 1999 doubles below 1, sqrt always the
-//!   closer (test `pow_half_vs_sqrt_differences`). ~7× faster. Fed into asin/acos near 1, that ulp becomes
-//!   1.5·10⁻⁸ absolute (asin(pow(1 − 2⁻⁵³, 0.5)): pow gives 1.0, sqrt the correctly rounded 1 − 2⁻⁵³).
+//!   closer (test `pow_half_vs_sqrt_differences` in `tests/it/simplify.rs`). ~7× faster. Fed into asin/acos
+//!   near 1, that ulp becomes 1.5·10⁻⁸ absolute (asin(pow(1 − 2⁻⁵³, 0.5)): pow gives 1.0, sqrt the correctly
+//!   rounded 1 − 2⁻⁵³).
 //! - `a − a·x → a·(1 − x)` when a is finite and x ∈ [0, 1] (Schlick's `n − n·c`): 1 − x is exact for
 //!   x ∈ [0.5, 1] (Sterbenz), so the product rounds once (≤ 0.5 ulp) where the original cancels. Measured
-//!   (test `accuracy_factoring_near_one`, error in ulps of the exact a·(1 − x)):
+//!   (test `accuracy_factoring_near_one` in `tests/it/simplify.rs`, error in ulps of the exact a·(1 − x)):
 //!
 //!   | a | x range | a − a·x max / mean | a·(1 − x) max / mean |
 //!   |---|---------|--------------------|----------------------|

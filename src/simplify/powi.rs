@@ -8,7 +8,8 @@
 //!
 //! Rounding: each multiply rounds once, and a product's relative error is the sum of its factors' plus one
 //! rounding, so a chain for x^k is within (k − 1)·u of the exact power (u = 2^−53) — the bound grows with k,
-//! unlike libm `pow` (< 1 ulp). Measured (`accuracy` tests): see the simplifier's module docs.
+//! unlike libm `pow` (< 1 ulp). Measured (the `accuracy_*` tests in `tests/it/simplify.rs`): see the
+//! simplifier's module docs.
 
 /// Shortest addition chains for k ≤ 16 (index k); each element after the first is a sum of two earlier ones.
 const CHAINS: [&[u32]; 17] = [

@@ -1,4 +1,4 @@
-//! A tiny s-expression reader that builds IR directly, for tests written before (or without) the parser.
+//! A tiny s-expression reader that builds IR directly, for tests that bypass the front end.
 //!
 //! `(op arg …)` with op one of `+ - * /` (n-ary, left-associative; `(- x)` is negation), `neg`, or a builtin
 //! name; atoms are numbers, `pi`, `-0`, `nan`, `inf`, input names and parameter names. [`formula`] mirrors the

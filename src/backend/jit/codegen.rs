@@ -1,8 +1,12 @@
-//! IR → Cranelift IR: one translator method per IR node kind, two function shapes.
+//! IR → Cranelift IR: one translator, generic over the lane type, with one method per IR node kind; two
+//! function shapes.
 //!
-//! * scalar: `extern "C" fn(x: *const f64 /* NL NV NH VR VH */, params: *const f64) -> f64`
+//! * scalar: `extern "C" fn(x: *const f64 /* NL NV NH VR VH */, params: *const f64) -> f64`, in `F64`;
 //! * batched: `extern "C" fn(cols: *const *const f64 /* 5 column pointers */, params: *const f64,
-//!   out: *mut f64, len: usize)`; arithmetic in `F64X2` lanes, a one-element scalar tail for odd `len`.
+//!   out: *mut f64, len: usize)`; the loop in `F64X2` lanes, the remaining element (odd `len`) in `F64`.
+//!
+//! Both shapes translate with the same [`Translator`]; what differs between lane types (splatting a scalar,
+//! extracting a lane for a libm call, the select that becomes `maxpd`/`minpd`) is the [`Lanes`] trait.
 //!
 //! Neither checks anything at run time; the safe wrapper in `mod.rs` validates lengths before calling.
 //!
@@ -17,7 +21,7 @@
 use super::JitError;
 use crate::builtins::{Builtin, Lowering};
 use crate::ir::{BinOp, Input, Ir, Node, NodeId, N_INPUTS};
-use cranelift_codegen::ir::condcodes::FloatCC;
+use cranelift_codegen::ir::condcodes::{FloatCC, IntCC};
 use cranelift_codegen::ir::immediates::Ieee64;
 use cranelift_codegen::ir::{
     types, AbiParam, BlockArg, Endianness, FuncRef, InstBuilder, MemFlagsData, Signature, Type, Value,
@@ -26,6 +30,7 @@ use cranelift_codegen::Context;
 use cranelift_frontend::{FunctionBuilder, FunctionBuilderContext};
 use cranelift_jit::JITModule;
 use cranelift_module::{FuncId, Linkage, Module};
+use std::marker::PhantomData;
 
 /// Builtins that lower to calls, with the module-level function id of each (indexed by `Builtin as usize`).
 pub(super) type Imports = [Option<FuncId>; Builtin::ALL.len()];
@@ -80,28 +85,112 @@ pub(super) fn used_symbols(ir: &Ir) -> Vec<(&'static str, *const u8)> {
     out
 }
 
+/// A lane type the translator emits: how many elements one value holds and the few operations whose
+/// instructions differ by lane type. At the boundary (constants, parameters, libm calls) values are `F64`
+/// scalars; `splat` and `lane` convert. `F64` serves the scalar kernel and the batch tail, `F64X2` the batch
+/// loop. Another lane type (the planned `F32X4`) is one more impl, converting in `splat`/`lane`; it would
+/// also need its own column loads (`Translator::input` loads `TY` from `f64` columns) and a tail loop
+/// (the batch tail handles one element).
+trait Lanes {
+    /// The Cranelift type of one value.
+    const TY: Type;
+    /// Elements per value (a power of two).
+    const LANES: u8;
+    /// Every lane set to the `F64` scalar `s`.
+    fn splat(b: &mut FunctionBuilder, s: Value) -> Value;
+    /// Lane `i` of `v` as an `F64` scalar.
+    fn lane(b: &mut FunctionBuilder, v: Value, i: u8) -> Value;
+    /// `cond ? x : y` lane-wise, `cond` being an `fcmp` of two values of this type, in the shape Cranelift's
+    /// x64 backend matches to `min/max{sd,pd}`.
+    fn select(b: &mut FunctionBuilder, cond: Value, x: Value, y: Value) -> Value;
+    /// A value from its lanes (`F64` scalars, lane 0 first).
+    fn from_lanes(b: &mut FunctionBuilder, lanes: &[Value]) -> Value {
+        let mut v = Self::splat(b, lanes[0]);
+        for (i, l) in lanes.iter().enumerate().skip(1) {
+            v = b.ins().insertlane(v, *l, i as u8);
+        }
+        v
+    }
+}
+
+/// One `f64`: the scalar kernel and the batch tail.
+struct F64;
+
+impl Lanes for F64 {
+    const TY: Type = types::F64;
+    const LANES: u8 = 1;
+    fn splat(_: &mut FunctionBuilder, s: Value) -> Value {
+        s
+    }
+    fn lane(_: &mut FunctionBuilder, v: Value, _: u8) -> Value {
+        v
+    }
+    fn select(b: &mut FunctionBuilder, cond: Value, x: Value, y: Value) -> Value {
+        b.ins().select(cond, x, y)
+    }
+}
+
+/// Two `f64` lanes (SSE2 on x86-64, NEON on aarch64): the batch loop.
+struct F64X2;
+
+impl Lanes for F64X2 {
+    const TY: Type = types::F64X2;
+    const LANES: u8 = 2;
+    fn splat(b: &mut FunctionBuilder, s: Value) -> Value {
+        b.ins().splat(Self::TY, s)
+    }
+    fn lane(b: &mut FunctionBuilder, v: Value, i: u8) -> Value {
+        b.ins().extractlane(v, i)
+    }
+    fn select(b: &mut FunctionBuilder, cond: Value, x: Value, y: Value) -> Value {
+        let flags = MemFlagsData::new().with_endianness(Endianness::Little);
+        let mask = b.ins().bitcast(Self::TY, flags, cond);
+        b.ins().bitselect(mask, x, y)
+    }
+}
+
 /// Where input values come from.
 #[derive(Clone, Copy)]
 enum Source {
     /// `x[i]` from the scalar kernel's input pointer.
     Ptr(Value),
-    /// `col_i[off]` (one lane or two) from the batched kernel's hoisted column bases.
+    /// `col_i[off]` (one value of the lane type) from the batched kernel's hoisted column bases.
     Cols { bases: [Option<Value>; N_INPUTS], off: Value },
 }
 
-/// Translates IR nodes into Cranelift values, in one lane type at a time.
-struct Translator<'a, 'b> {
-    b: &'a mut FunctionBuilder<'b>,
+type Callees = [Option<FuncRef>; Builtin::ALL.len()];
+
+/// What every translator of one function shares, whatever its lane type.
+struct Shared<'a> {
     ir: &'a Ir,
-    /// `F64` or `F64X2`.
-    ty: Type,
-    /// Scalar value of each node (the scalar kernel, the tail, and loop invariants).
-    scalar: Vec<Option<Value>>,
-    /// Vector value of each node (the batched loop body; invariants are splats).
-    vector: Vec<Option<Value>>,
+    /// The `params` pointer.
     params: Value,
+    callees: Callees,
+    /// `F64` values of the loop invariants computed before the loop (none in the scalar kernel): a per-lane
+    /// call uses them directly instead of extracting a lane from their splat.
+    invariants: Vec<Option<Value>>,
+}
+
+impl Shared<'_> {
+    /// A translator in lane type `L` whose table starts as `vals` (e.g. the invariants' splats).
+    fn translator<'a, 'b, L: Lanes>(
+        &'a self,
+        b: &'a mut FunctionBuilder<'b>,
+        vals: Vec<Option<Value>>,
+        source: Source,
+    ) -> Translator<'a, 'b, L> {
+        Translator { b, cx: self, vals, source, lanes: PhantomData }
+    }
+}
+
+/// Translates IR nodes into Cranelift values of lane type `L`: one method per IR node kind, for every lane type.
+struct Translator<'a, 'b, L> {
+    b: &'a mut FunctionBuilder<'b>,
+    cx: &'a Shared<'a>,
+    /// Value of each translated node, in lane type `L`.
+    vals: Vec<Option<Value>>,
     source: Source,
-    callees: [Option<FuncRef>; Builtin::ALL.len()],
+    lanes: PhantomData<L>,
 }
 
 fn mem() -> MemFlagsData {
@@ -109,29 +198,30 @@ fn mem() -> MemFlagsData {
     MemFlagsData::new().with_notrap()
 }
 
-impl<'a, 'b> Translator<'a, 'b> {
-    fn vector_mode(&self) -> bool {
-        self.ty.is_vector()
-    }
-
-    /// The value of an already translated operand in the current lane type.
+impl<L: Lanes> Translator<'_, '_, L> {
+    /// The value of an already translated operand.
     fn arg(&self, id: NodeId) -> Result<Value, JitError> {
-        let table = if self.vector_mode() { &self.vector } else { &self.scalar };
-        table
+        self.vals
             .get(id.index())
             .copied()
             .flatten()
             .ok_or_else(|| JitError::Internal(format!("operand t{} used before it was translated", id.0)))
     }
 
-    /// The scalar value of an operand if it is known (an invariant), for calls in vector mode.
-    fn scalar_arg(&self, id: NodeId) -> Option<Value> {
-        self.scalar.get(id.index()).copied().flatten()
+    /// Lane `lane` of an operand as an `F64` scalar (an invariant's scalar value when there is one).
+    fn arg_lane(&mut self, id: NodeId, lane: u8) -> Result<Value, JitError> {
+        match self.cx.invariants.get(id.index()).copied().flatten() {
+            Some(s) => Ok(s),
+            None => {
+                let v = self.arg(id)?;
+                Ok(L::lane(self.b, v, lane))
+            }
+        }
     }
 
-    /// Translates node `id` in the current lane type and records the result.
+    /// Translates node `id` and records the result.
     fn node(&mut self, id: NodeId) -> Result<Value, JitError> {
-        let v = match *self.ir.node(id) {
+        let v = match *self.cx.ir.node(id) {
             Node::Const(bits) => self.konst(bits),
             Node::Input(i) => self.input(i)?,
             Node::Param(p) => self.param(p),
@@ -139,43 +229,43 @@ impl<'a, 'b> Translator<'a, 'b> {
             Node::Binary(op, a, b) => self.binary(op, a, b)?,
             Node::Call(f, args) => self.call(f, args)?,
         };
-        let table = if self.vector_mode() { &mut self.vector } else { &mut self.scalar };
-        match table.get_mut(id.index()) {
+        match self.vals.get_mut(id.index()) {
             Some(slot) => *slot = Some(v),
             None => return Err(JitError::Internal(format!("node t{} outside the arena", id.0))),
         }
         Ok(v)
     }
 
-    fn splat_if_vector(&mut self, v: Value) -> Value {
-        if self.vector_mode() {
-            self.b.ins().splat(self.ty, v)
-        } else {
-            v
+    /// Translates, in order, every node among the first `n` for which `pick` holds.
+    fn nodes(&mut self, n: usize, pick: impl Fn(NodeId) -> bool) -> Result<(), JitError> {
+        for id in self.cx.ir.ids().take(n) {
+            if pick(id) {
+                self.node(id)?;
+            }
         }
+        Ok(())
     }
 
     fn konst(&mut self, bits: u64) -> Value {
         let c = self.b.ins().f64const(Ieee64::with_bits(bits));
-        self.splat_if_vector(c)
+        L::splat(self.b, c)
     }
 
     fn input(&mut self, i: Input) -> Result<Value, JitError> {
-        let off = (i.index() * 8) as i32;
         Ok(match self.source {
-            Source::Ptr(x) => self.b.ins().load(types::F64, mem(), x, off),
+            Source::Ptr(x) => self.b.ins().load(L::TY, mem(), x, (i.index() * 8) as i32),
             Source::Cols { bases, off } => {
                 let base =
                     bases[i.index()].ok_or_else(|| JitError::Internal(format!("input {} has no column", i.name())))?;
                 let addr = self.b.ins().iadd(base, off);
-                self.b.ins().load(self.ty, mem(), addr, 0)
+                self.b.ins().load(L::TY, mem(), addr, 0)
             }
         })
     }
 
     fn param(&mut self, p: u16) -> Value {
-        let v = self.b.ins().load(types::F64, mem(), self.params, i32::from(p) * 8);
-        self.splat_if_vector(v)
+        let v = self.b.ins().load(types::F64, mem(), self.cx.params, i32::from(p) * 8);
+        L::splat(self.b, v)
     }
 
     fn neg(&mut self, a: NodeId) -> Result<Value, JitError> {
@@ -220,15 +310,15 @@ impl<'a, 'b> Translator<'a, 'b> {
 
     /// A non-NaN constant operand, if `id` is one (for the min/max specialisations below).
     fn ordered_const(&self, id: NodeId) -> Option<f64> {
-        self.ir.node(id).as_const().filter(|c| !c.is_nan())
+        self.cx.ir.node(id).as_const().filter(|c| !c.is_nan())
     }
 
     /// IEEE-2019 `maximum(a, b)`. Against a non-NaN constant `c` (the lowering's `clamp(INPUT, 0, 1)` and
-    /// `max(raw, 0)`), a single `maxsd`/`maxpd` replaces Cranelift's general sequence (branches in scalar code, eight
-    /// instructions in vector code):
+    /// `max(raw, 0)`), a single `maxsd`/`maxpd` replaces Cranelift's general sequence (branches in scalar
+    /// code, eight instructions in vector code):
     /// `v < c ? c : v` (x86 pseudo-max, operands ordered so that a NaN `v` is returned) equals `maximum(v, c)`
     /// for every `v` except `v = −0, c = +0`, which `+ 0.0` repairs (−0 + 0 = +0, and it is the identity on
-    /// everything else, NaN included). Measured: ~1.3 ns less per clamp on the catalogue formulas.
+    /// everything else, NaN included).
     fn max(&mut self, a: NodeId, b: NodeId) -> Result<Value, JitError> {
         let (va, vb) = (self.arg(a)?, self.arg(b)?);
         let (v, c, cv) = match (self.ordered_const(b), self.ordered_const(a)) {
@@ -238,7 +328,7 @@ impl<'a, 'b> Translator<'a, 'b> {
         };
         // pmax(c, v) = v < c ? c : v  (lowered to one maxsd / maxpd)
         let lt = self.b.ins().fcmp(FloatCC::LessThan, v, cv);
-        let m = self.select(lt, cv, v);
+        let m = L::select(self.b, lt, cv, v);
         Ok(if c == 0.0 && c.is_sign_positive() {
             let z = self.konst(0);
             self.b.ins().fadd(m, z)
@@ -258,17 +348,6 @@ impl<'a, 'b> Translator<'a, 'b> {
         self.min_value(va, b)
     }
 
-    /// `cond ? x : y` lane-wise, in the shape Cranelift's x64 backend matches to `min/max{sd,pd}`.
-    fn select(&mut self, cond: Value, x: Value, y: Value) -> Value {
-        if self.vector_mode() {
-            let flags = MemFlagsData::new().with_endianness(Endianness::Little);
-            let mask = self.b.ins().bitcast(self.ty, flags, cond);
-            self.b.ins().bitselect(mask, x, y)
-        } else {
-            self.b.ins().select(cond, x, y)
-        }
-    }
-
     /// `minimum(v, b)` with `v` already translated.
     fn min_value(&mut self, v: Value, b: NodeId) -> Result<Value, JitError> {
         let vb = self.arg(b)?;
@@ -276,45 +355,24 @@ impl<'a, 'b> Translator<'a, 'b> {
             Some(c) if c.to_bits() != (-0.0f64).to_bits() => {
                 // pmin(c, v) = c < v ? c : v  (lowered to one minsd / minpd)
                 let lt = self.b.ins().fcmp(FloatCC::LessThan, vb, v);
-                Ok(self.select(lt, vb, v))
+                Ok(L::select(self.b, lt, vb, v))
             }
             _ => Ok(self.b.ins().fmin(v, vb)),
         }
     }
 
-    /// A call to the table's `extern "C"` function; in vector mode, once per lane.
+    /// A call to the table's `extern "C"` function, once per lane.
     fn extern_call(&mut self, f: Builtin, args: &[NodeId]) -> Result<Value, JitError> {
-        let callee = self.callees[f as usize]
+        let callee = self.cx.callees[f as usize]
             .ok_or_else(|| JitError::Internal(format!("builtin `{}` was not imported", f.name())))?;
-        if !self.vector_mode() {
-            let vals = args.iter().map(|a| self.arg(*a)).collect::<Result<Vec<_>, _>>()?;
+        let mut results = Vec::with_capacity(usize::from(L::LANES));
+        for lane in 0..L::LANES {
+            let vals = args.iter().map(|a| self.arg_lane(*a, lane)).collect::<Result<Vec<_>, _>>()?;
             let inst = self.b.ins().call(callee, &vals);
-            return self.b.inst_results(inst).first().copied().ok_or(JitError::Internal("call without result".into()));
+            let r = self.b.inst_results(inst).first().copied();
+            results.push(r.ok_or(JitError::Internal("call without result".into()))?);
         }
-        let mut lanes = [None, None];
-        for (lane, slot) in lanes.iter_mut().enumerate() {
-            let mut vals = Vec::with_capacity(args.len());
-            for a in args {
-                // Invariant operands are used in scalar form directly, without a lane extraction.
-                let v = match self.scalar_arg(*a) {
-                    Some(s) => s,
-                    None => {
-                        let v = self.arg(*a)?;
-                        self.b.ins().extractlane(v, lane as u8)
-                    }
-                };
-                vals.push(v);
-            }
-            let inst = self.b.ins().call(callee, &vals);
-            *slot = self.b.inst_results(inst).first().copied();
-        }
-        match lanes {
-            [Some(l0), Some(l1)] => {
-                let v = self.b.ins().splat(self.ty, l0);
-                Ok(self.b.ins().insertlane(v, l1, 1))
-            }
-            _ => Err(JitError::Internal("call without result".into())),
-        }
+        Ok(L::from_lanes(self.b, &results))
     }
 }
 
@@ -334,7 +392,7 @@ fn import_callees(
     module: &mut JITModule,
     func: &mut cranelift_codegen::ir::Function,
     imports: &Imports,
-) -> [Option<FuncRef>; Builtin::ALL.len()] {
+) -> Callees {
     let mut callees = [None; Builtin::ALL.len()];
     for (slot, id) in callees.iter_mut().zip(imports.iter()) {
         if let Some(id) = id {
@@ -381,26 +439,27 @@ pub(super) fn build_scalar(
         [x, p] => (x, p),
         _ => return Err(JitError::Internal("scalar signature".into())),
     };
-    let mut t = Translator {
-        b: &mut b,
-        ir,
-        ty: types::F64,
-        scalar: vec![None; ir.len()],
-        vector: vec![],
-        params,
-        source: Source::Ptr(x),
-        callees,
-    };
-    for id in ir.ids().take(root.index() + 1) {
-        t.node(id)?;
-    }
+    let cx = Shared { ir, params, callees, invariants: vec![] };
+    let mut t = cx.translator::<F64>(&mut b, vec![None; ir.len()], Source::Ptr(x));
+    t.nodes(root.index() + 1, |_| true)?;
     let r = t.arg(root)?;
     b.ins().return_(&[r]);
     b.finalize(module.target_config());
     Ok(())
 }
 
-/// Builds the batched kernel into `ctx` (a compacted arena: root last).
+/// The lane type of the batch loop.
+type V = F64X2;
+
+/// Builds the batched kernel into `ctx` (a compacted arena: root last), the loop in lane type [`V`]:
+///
+/// ```text
+/// entry:       column bases; loop invariants in F64, splatted to V where the loop reads them
+/// header(i):   i < len & !(V::LANES − 1) ? body : tail_check
+/// body:        the V::LANES elements at i; header(i + V::LANES)
+/// tail_check:  len & (V::LANES − 1) ≠ 0 ? tail : exit
+/// tail:        the last element, in F64 (one element: V has at most two lanes)
+/// ```
 pub(super) fn build_batch(
     module: &mut JITModule,
     ctx: &mut Context,
@@ -409,6 +468,8 @@ pub(super) fn build_batch(
     root: NodeId,
     imports: &Imports,
 ) -> Result<(), JitError> {
+    // A wider lane type leaves up to LANES − 1 elements and needs a tail loop instead of one tail element.
+    const { assert!(V::LANES == 1 || V::LANES == 2, "the batch tail handles one element") };
     let ptr = module.target_config().pointer_type();
     ctx.func.signature = batch_signature(module);
     let callees = import_callees(module, &mut ctx.func, imports);
@@ -431,27 +492,16 @@ pub(super) fn build_batch(
         _ => return Err(JitError::Internal("batch signature".into())),
     };
 
-    // Entry: column bases, invariants (scalar), their splats, the even length.
+    // Entry: column bases, invariants (F64), their splats, the length of the vector part.
     let mut bases = [None; N_INPUTS];
     for i in used.iter() {
         bases[i.index()] = Some(b.ins().load(ptr, mem(), cols, (i.index() * 8) as i32));
     }
     let zero = b.ins().iconst(ptr, 0);
-    let mut t = Translator {
-        b: &mut b,
-        ir,
-        ty: types::F64,
-        scalar: vec![None; ir.len()],
-        vector: vec![None; ir.len()],
-        params,
-        source: Source::Cols { bases, off: zero },
-        callees,
-    };
-    for id in ir.ids().take(n) {
-        if inv[id.index()] {
-            t.node(id)?;
-        }
-    }
+    let mut cx = Shared { ir, params, callees, invariants: vec![] };
+    let mut t = cx.translator::<F64>(&mut b, vec![None; ir.len()], Source::Cols { bases, off: zero });
+    t.nodes(n, |id| inv[id.index()])?;
+    cx.invariants = t.vals;
     // Splat each invariant that a loop node (or the stored root) reads.
     let mut need_splat = vec![false; ir.len()];
     for id in ir.ids().take(n) {
@@ -460,63 +510,74 @@ pub(super) fn build_batch(
         }
     }
     need_splat[root.index()] |= inv[root.index()];
+    let mut splats = vec![None; ir.len()];
     for id in ir.ids().take(n) {
         if need_splat[id.index()] {
-            let s = t.arg(id)?;
-            t.vector[id.index()] = Some(t.b.ins().splat(types::F64X2, s));
+            let s = cx.invariants[id.index()]
+                .ok_or_else(|| JitError::Internal(format!("invariant t{} was not translated", id.0)))?;
+            splats[id.index()] = Some(V::splat(&mut b, s));
         }
     }
-    let even = t.b.ins().band_imm_s(len, !1i64);
-    t.b.ins().jump(header, &[BlockArg::Value(zero)]);
+    let vector_end = b.ins().band_imm_s(len, -i64::from(V::LANES));
+    b.ins().jump(header, &[BlockArg::Value(zero)]);
 
-    // header(i): i < even ? body : tail_check
-    t.b.switch_to_block(header);
-    let i = t.b.append_block_param(header, ptr);
-    let more = t.b.ins().icmp(cranelift_codegen::ir::condcodes::IntCC::UnsignedLessThan, i, even);
-    t.b.ins().brif(more, body, &[], tail_check, &[]);
+    // header(i): i < vector_end ? body : tail_check
+    b.switch_to_block(header);
+    let i = b.append_block_param(header, ptr);
+    let more = b.ins().icmp(IntCC::UnsignedLessThan, i, vector_end);
+    b.ins().brif(more, body, &[], tail_check, &[]);
 
-    // body: two lanes per iteration.
-    t.b.switch_to_block(body);
-    t.b.seal_block(body);
-    let off = t.b.ins().ishl_imm_u(i, 3);
-    t.source = Source::Cols { bases, off };
-    t.ty = types::F64X2;
-    for id in ir.ids().take(n) {
-        if !inv[id.index()] {
-            t.node(id)?;
-        }
-    }
-    let r = t.arg(root)?;
-    let dst = t.b.ins().iadd(out, off);
-    t.b.ins().store(mem(), r, dst, 0);
-    let next = t.b.ins().iadd_imm_u(i, 2);
-    t.b.ins().jump(header, &[BlockArg::Value(next)]);
-    t.b.seal_block(header);
+    // The loop-variant nodes of one step, translated in each lane type over the shared invariants.
+    let step = LoopStep { cx: &cx, inv: &inv, bases, out, root };
 
-    // tail_check: one element left when len is odd.
-    t.b.switch_to_block(tail_check);
-    t.b.seal_block(tail_check);
-    let odd = t.b.ins().band_imm_s(len, 1);
-    t.b.ins().brif(odd, tail, &[], exit, &[]);
+    // body: V::LANES elements per iteration.
+    b.switch_to_block(body);
+    b.seal_block(body);
+    step.emit::<V>(&mut b, splats, i)?;
+    let next = b.ins().iadd_imm_u(i, i64::from(V::LANES));
+    b.ins().jump(header, &[BlockArg::Value(next)]);
+    b.seal_block(header);
 
-    t.b.switch_to_block(tail);
-    t.b.seal_block(tail);
-    let off = t.b.ins().ishl_imm_u(even, 3);
-    t.source = Source::Cols { bases, off };
-    t.ty = types::F64;
-    for id in ir.ids().take(n) {
-        if !inv[id.index()] {
-            t.node(id)?;
-        }
-    }
-    let r = t.arg(root)?;
-    let dst = t.b.ins().iadd(out, off);
-    t.b.ins().store(mem(), r, dst, 0);
-    t.b.ins().jump(exit, &[]);
+    // tail_check: one element left when len is not a multiple of V::LANES.
+    b.switch_to_block(tail_check);
+    b.seal_block(tail_check);
+    let rest = b.ins().band_imm_s(len, i64::from(V::LANES - 1));
+    b.ins().brif(rest, tail, &[], exit, &[]);
 
-    t.b.switch_to_block(exit);
-    t.b.seal_block(exit);
-    t.b.ins().return_(&[]);
+    b.switch_to_block(tail);
+    b.seal_block(tail);
+    step.emit::<F64>(&mut b, cx.invariants.clone(), vector_end)?;
+    b.ins().jump(exit, &[]);
+
+    b.switch_to_block(exit);
+    b.seal_block(exit);
+    b.ins().return_(&[]);
     b.finalize(module.target_config());
     Ok(())
+}
+
+/// What one step of the batch loop needs, whatever its lane type.
+struct LoopStep<'a> {
+    /// With the invariants' `F64` values.
+    cx: &'a Shared<'a>,
+    /// Which nodes are loop invariants (computed in the entry block).
+    inv: &'a [bool],
+    bases: [Option<Value>; N_INPUTS],
+    out: Value,
+    root: NodeId,
+}
+
+impl LoopStep<'_> {
+    /// Translates the loop-variant nodes for the `L::LANES` elements at index `i` (`vals` holds the invariants
+    /// as `L` values) and stores the root to `out[i..]`.
+    fn emit<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Option<Value>>, i: Value) -> Result<(), JitError> {
+        let off = b.ins().ishl_imm_u(i, 3);
+        let source = Source::Cols { bases: self.bases, off };
+        let mut t = self.cx.translator::<L>(b, vals, source);
+        t.nodes(self.root.index() + 1, |id| !self.inv[id.index()])?;
+        let r = t.arg(self.root)?;
+        let dst = b.ins().iadd(self.out, off);
+        b.ins().store(mem(), r, dst, 0);
+        Ok(())
+    }
 }

@@ -2,7 +2,8 @@
 //!
 //! Design (after bytecodealliance/cranelift-jit-demo, stricter):
 //! - a [`Jit`] owns the reusable Cranelift contexts; one per thread (compiles run in parallel);
-//! - `codegen` has one translator method per IR node kind, never sees user text, never panics;
+//! - `codegen` has one translator, generic over the lane type (`F64` for the scalar kernel and the batch tail,
+//!   `F64X2` for the batch loop), with one method per IR node kind; it never sees user text, never panics;
 //! - builtins come from the one table: `Lowering::Inline` becomes a native instruction, `Call1/Call2` a call
 //!   to the same `extern "C"` function the interpreter calls (so the two backends agree bit for bit there),
 //!   registered with `JITBuilder::symbol` before anything is finalized (an unresolved import would panic
@@ -16,18 +17,14 @@
 //! The only `unsafe` in lobe is here: calling the generated code (the safe wrapper validates every length
 //! first, so no input from safe code can make it read or write out of bounds) and freeing its memory.
 //!
-//! Measured cost (release build, 2-core VM shared with four other builds — load ≈ 8–9, so absolute times are
-//! inflated; ratios are within one run, minimum over 400 samples of 1024 points; catalogue formulas with the
-//! lowering's clamps and `max(·, 0)`, hand-built IR because the simplifier is still a placeholder):
-//! - build (scalar kernel, uncached): median 85–130 µs per catalogue formula (a trivial Cranelift module alone
-//!   is ~40 µs here); the batched kernel adds ~350–500 µs on its first use; a cache hit is a hash lookup;
-//! - scalar JIT vs the hand-written Rust twin behind the same `Evaluator` interface: 0.98–1.06× for the pow
-//!   formulas (libm dominates), 1.13–1.16× Gaussian, 1.16–1.32× for the arithmetic ones (Schlick, modified
-//!   Schlick, SCOS2: ~1–2 ns per call of dispatch and less tuned scheduling); vs the twin inlined into the
-//!   loop (no dynamic dispatch at all): 1.02–1.8×;
-//! - batched JIT vs a Rust loop over the same columns: 0.20–0.36× for arithmetic formulas (F64X2 lanes, one
-//!   `maxpd`/`minpd` per clamp), 0.75–0.94× with libm calls (per-lane calls dominate);
-//! - interpreter / JIT: 2.2–3× for pow/exp-bound formulas, 7.4–9.4× scalar and 28–45× batched for arithmetic.
+//! Cost model. Compiling is Cranelift's work: a fixed per-module cost plus roughly linear in the nodes; the
+//! batched kernel (a loop and two copies of the body) costs more than the scalar one, hence built lazily. A
+//! scalar call pays a fixed dispatch (`Kernel` → `dyn Evaluator` → length check → generated code) on top of
+//! the body, which dominates short arithmetic formulas; the batched kernel pays it once per batch, runs two
+//! lanes per instruction, hoists loop-invariant work, and does each clamp against a constant as one
+//! `maxpd`/`minpd`. Formulas with libm calls (`pow`, `exp`, `acos`) spend most of their time in those calls on
+//! every backend (the batched kernel calls once per lane). Measured compile times and ns/eval against the
+//! interpreter and hand-written Rust: BENCHMARKS.md.
 
 // The one module allowed `unsafe`: calling and freeing generated code (each block has its `# Safety` note).
 #![allow(unsafe_code)]
