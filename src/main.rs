@@ -40,6 +40,8 @@ enum Cmd {
 }
 
 fn main() {
+    // A killed write must not leave `.NAME.lobe-tmp-PID` files behind.
+    lobe::base::output::clean_up_on_signals();
     // `lobe check --sweep FILE` is the spelling of `lobe sweep FILE`.
     let mut args: Vec<std::ffi::OsString> = std::env::args_os().collect();
     if args.get(1).is_some_and(|a| a == "check") && args.iter().any(|a| a == "--sweep") {

@@ -54,7 +54,13 @@ pub fn report(a: &AccuracyArgs, k: &Kernel, r: &Kernel) -> Result<String, CliErr
         }
     }
     let opts = AccuracyOptions { q: a.q, n_max: a.n_max, epicenter_from: a.epicenter_from, ..Default::default() };
-    let rep = accuracy(k, &params, lobe, r, &r.default_params(), ref_lobe, &opts)?;
+    let mut rep = accuracy(k, &params, lobe, r, &r.default_params(), ref_lobe, &opts)?;
+    // A relative error with no n where it is defined (the reference is 0 there) is undefined: NaN, said so.
+    for m in [&mut rep.epicenter, &mut rep.inflection, &mut rep.cutoff_rel] {
+        if m.n.is_nan() {
+            m.value = f64::NAN;
+        }
+    }
     let secs = t.elapsed().as_secs_f64();
     if a.json.on {
         let v = json::value;
@@ -91,6 +97,9 @@ pub fn report(a: &AccuracyArgs, k: &Kernel, r: &Kernel) -> Result<String, CliErr
         "  lobe-size ratio (cut-off angle / reference's):   {:.4} (n = {}) … {:.4} (n = {})",
         rep.lobe_ratio_min.value, rep.lobe_ratio_min.n, rep.lobe_ratio_max.value, rep.lobe_ratio_max.n
     );
+    if [&rep.epicenter, &rep.inflection, &rep.cutoff_rel].iter().any(|m| m.n.is_nan()) {
+        outln!(out, "  (a relative error shown as NaN is undefined: the reference is 0 wherever it applies)");
+    }
     if rep.nan_points > 0 {
         outln!(out, "  {} grid points were NaN (counted as the worst error); run `lobe sweep` on the file", rep.nan_points);
     }

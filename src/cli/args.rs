@@ -45,9 +45,17 @@ pub struct Params {
 }
 
 impl Params {
-    /// Every assignment, in the order given.
+    /// Every assignment, one per name: a later `--set` flag overrides an earlier one (as a later `--at` does);
+    /// a name twice within one flag is refused when parsing.
     pub fn list(&self) -> Vec<(String, f64)> {
-        self.groups.concat()
+        let mut out: Vec<(String, f64)> = Vec::new();
+        for (k, v) in self.groups.concat() {
+            match out.iter_mut().find(|(j, _)| *j == k) {
+                Some(slot) => slot.1 = v,
+                None => out.push((k, v)),
+            }
+        }
+        out
     }
 }
 
@@ -153,6 +161,17 @@ pub struct Output {
 }
 
 impl Output {
+    /// Refuses a name whose extension says another format than the PNG lobe writes (`x.jpg`, `x.svg`).
+    pub fn png_only(path: &Path) -> Result<(), CliError> {
+        match path.extension().and_then(|e| e.to_str()) {
+            Some(e) if !e.eq_ignore_ascii_case("png") => Err(CliError::hint(
+                format!("`{}`: this command writes PNG images, not .{e}", path.display()),
+                "name the output .png",
+            )),
+            _ => Ok(()),
+        }
+    }
+
     /// The path of a command whose `-o` is required (clap has rejected the command line without it).
     pub fn required(&self) -> &Path {
         self.path.as_deref().expect("-o is a required argument of this command")

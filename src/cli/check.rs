@@ -50,8 +50,9 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
             "name": f.display_name(),
             "citation": f.meta.citation,
             "params": params,
-            "formula": f.to_text(),
-            "simplified": simplified.to_text(),
+            // The let form: printing shared `let`s as a tree grows exponentially with their depth.
+            "formula": f.to_program_text(),
+            "simplified": simplified.to_program_text(),
             "nodes_before": nodes_before,
             "nodes_after": nodes_after,
             "rewrites": report.fired.iter().map(|(k, v)| json!({"rule": k, "count": v})).collect::<Vec<_>>(),
@@ -82,7 +83,7 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
         };
         println!("  param       {} = {} in {}..{}  ({state})", p.name, p.default, p.lo, p.hi);
     }
-    println!("  formula     {}", f.to_text());
+    println!("  formula     {}", f.to_program_text().replace('\n', "\n              "));
     println!("  simplified  {}", simplified.to_program_text().replace('\n', "\n              "));
     println!("  nodes       {nodes_before} → {nodes_after}");
     if !report.fired.is_empty() {

@@ -113,6 +113,9 @@ pub fn parse_assignments(s: &str) -> Result<Vec<(String, f64)>, String> {
         if !v.is_finite() {
             return Err(format!("`{part}`: the value must be finite"));
         }
+        if out.iter().any(|(j, _)| j == k) {
+            return Err(format!("`{k}` is given twice in `{s}`; give each name once"));
+        }
         out.push((k.to_string(), v));
     }
     Ok(out)
@@ -178,6 +181,7 @@ mod tests {
         assert!(parse_assignments("n").is_err());
         assert!(parse_assignments("n=abc").is_err());
         assert!(parse_assignments("n=inf").is_err());
+        assert!(parse_assignments("n=5,n=6").unwrap_err().contains("twice"));
     }
 
 }

@@ -70,6 +70,7 @@ fn row<'a>(a: &'a CompareArgs, c: &'a Comparison) -> Row<'a> {
 
 pub fn run(a: &CompareArgs) -> Result<(), CliError> {
     if let Some(out) = &a.out.path {
+        Output::png_only(out)?;
         a.out.force.check(out, image::is_lobe_png)?;
     }
     let (fa, sa) = common::read_source(&a.a)?;
@@ -130,7 +131,7 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
     }
     for c in &rows {
         if c.nan != [0, 0] {
-            eprintln!("warning: NaN kernel results shaded as 0 (A: {}, B: {})", c.nan[0], c.nan[1]);
+            eprintln!("warning: NaN or ±inf kernel results shaded as no light (A: {}, B: {})", c.nan[0], c.nan[1]);
         }
     }
     Ok(())

@@ -24,8 +24,8 @@ pub struct FitArgs {
     #[arg(long, default_value = "mean-abs")]
     pub metric: Metric,
     /// How many candidates to print.
-    #[arg(long, default_value_t = 5)]
-    pub top: usize,
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u16).range(1..))]
+    pub top: u16,
     /// Skip the continuous refinement after the grid.
     #[arg(long)]
     pub no_refine: bool,
@@ -110,10 +110,16 @@ pub fn report(a: &FitArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
         }
         b
     };
-    let opts = FitOptions { metric: a.metric, top: a.top.max(1), refine: !a.no_refine, n_max: a.n_max };
+    let opts = FitOptions { metric: a.metric, top: usize::from(a.top), refine: !a.no_refine, n_max: a.n_max };
     let t = std::time::Instant::now();
     let rep = fit(k, &params, lobe, r, &r.default_params(), ref_lobe, &free, &opts, &|| bar.inc(1))?;
     bar.finish_and_clear();
+    if !rep.best.first().is_some_and(|c| c.score.is_finite()) {
+        return Err(CliError::hint(
+            "no candidate has a finite score: the formula or the reference is NaN or infinite on the papers' grid",
+            "run `lobe sweep` on both files to see where",
+        ));
+    }
     let secs = t.elapsed().as_secs_f64();
     let names: Vec<&str> = free.iter().map(|f| f.name.as_str()).collect();
     if a.json.on {

@@ -65,6 +65,7 @@ pub fn default_output(scene: &Path) -> PathBuf {
 pub fn run(a: &RenderArgs) -> Result<(), CliError> {
     let out = a.out.path.clone().unwrap_or_else(|| default_output(&a.scene));
     // Refuse a bad output path before doing any work, and write nothing unless everything succeeds.
+    Output::png_only(&out)?;
     a.out.force.check(&out, image::is_lobe_png)?;
     let opts = LoadOptions { size: a.size, set: a.set.list(), formula_override: None };
     let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: a.backend.kind })?;
@@ -80,7 +81,7 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
     let encode = t.elapsed();
     a.out.force.write(&out, &png, image::is_lobe_png)?;
     if stats.nan > 0 {
-        eprintln!("warning: {} kernel evaluations returned NaN and were shaded as 0", stats.nan);
+        eprintln!("warning: {} kernel evaluations returned NaN or ±inf and were shaded as no light", stats.nan);
     }
     if a.stats {
         eprint!("{}", format_stats(&stats, encode));

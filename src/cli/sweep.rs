@@ -22,7 +22,7 @@ pub struct SweepArgs {
     #[arg(long, default_value_t = 1e6)]
     pub bound: f64,
     /// Evaluation budget (the full grid is subsampled above it).
-    #[arg(long, default_value_t = 2_000_000)]
+    #[arg(long, default_value_t = 2_000_000, value_parser = clap::value_parser!(u64).range(1..))]
     pub max_evals: u64,
     /// Fail (exit 1) if any of these occur: nan, inf, negative, bound.
     #[arg(long, value_delimiter = ',')]
@@ -145,7 +145,7 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliEr
         outln!(out, 
             "{}: unclamped formula {} over {} points ({}; inputs read: {})",
             f.display_name(),
-            k.formula.to_text(),
+            k.formula.to_program_text().replace('\n', "; "),
             t.evaluated,
             if rep.exhaustive { "exhaustive grid" } else { "subsampled grid" },
             if used.is_empty() { "none".to_string() } else { used.to_string() }

@@ -44,7 +44,7 @@ fn reload(a: &WatchArgs, src: String) -> Result<String, CliError> {
     let (frame, stats) = r::render(&sc, &ropts).map_err(CliError::msg)?;
     let png = frame.image.encode_png().map_err(CliError::msg)?;
     a.out.force.write(a.out.required(), &png, image::is_lobe_png)?;
-    let nan = if stats.nan > 0 { format!(", {} NaN shaded as 0", stats.nan) } else { String::new() };
+    let nan = if stats.nan > 0 { format!(", {} NaN/inf shaded as no light", stats.nan) } else { String::new() };
     Ok(format!(
         "reloaded in {:.1} ms (scene + compile {:.1} ms, render {:.1} ms){nan} → {}",
         t0.elapsed().as_secs_f64() * 1e3,
@@ -55,12 +55,14 @@ fn reload(a: &WatchArgs, src: String) -> Result<String, CliError> {
 }
 
 pub fn run(a: &WatchArgs) -> Result<(), CliError> {
+    Output::png_only(a.out.required())?;
     a.out.force.check(a.out.required(), image::is_lobe_png)?;
     if !a.scene.is_file() {
         return Err(CliError::hint(format!("scene `{}` not found", a.scene.display()), "examples are in examples/scenes/"));
     }
     eprintln!("watching {} (scene {}); Ctrl-C to stop", a.file.display(), a.scene.display());
     let mut reloads = 0;
+    let mut last_failed = false;
     watch(&a.file, Duration::from_millis(a.interval_ms.max(10)), |bytes| {
         match bytes {
             None => eprintln!("{} is missing; waiting for it to appear", a.file.display()),
@@ -68,8 +70,12 @@ pub fn run(a: &WatchArgs) -> Result<(), CliError> {
                 reloads += 1;
                 let name = a.file.display().to_string();
                 match common::source_from_bytes(&name, b).map_err(CliError::from).and_then(|src| reload(a, src)) {
-                    Ok(line) => eprintln!("{line}"),
+                    Ok(line) => {
+                        last_failed = false;
+                        eprintln!("{line}")
+                    }
                     Err(e) => {
+                        last_failed = true;
                         let color = std::io::IsTerminal::is_terminal(&std::io::stderr());
                         eprint!("{}", e.render(color));
                         eprintln!("(keeping the last good image; fix the file and save again)");
@@ -83,5 +89,9 @@ pub fn run(a: &WatchArgs) -> Result<(), CliError> {
             Next::Continue
         }
     });
+    // With --count (scripts), the exit status says whether the last reload produced an image.
+    if a.count.is_some() && last_failed {
+        return Err(CliError::Failed);
+    }
     Ok(())
 }

@@ -180,10 +180,32 @@ pub fn compare_in(
     ropts: &super::RenderOptions,
 ) -> Result<Comparison, crate::Diagnostics> {
     let fail = |m: String| crate::Diagnostics::single(geometry.name(), crate::Diagnostic::error(m));
+    // `set` applies to both formulas: each takes the names it declares; a name neither declares is a typo. (A
+    // formula that does not parse keeps the whole set; its own diagnostics come from `with_materials`.)
+    let declared = [compiler.declare(a.0, a.1).ok(), compiler.declare(b.0, b.1).ok()];
+    if let [Some(da), Some(db)] = &declared {
+        if let Some((k, _)) = set.iter().find(|(k, _)| !da.iter().chain(db).any(|p| p.name == *k)) {
+            return Err(crate::Diagnostics::single(
+                geometry.name(),
+                crate::Diagnostic::error(format!("--set {k}: neither formula declares a parameter `{k}`"))
+                    .hint("every formula has `n`; see each file's `param` lines"),
+            ));
+        }
+    }
     let mut frames = vec![];
     let mut nan = [0u64; 2];
     for (k, formula) in [a, b].into_iter().enumerate() {
-        let scene = geometry.with_materials(set, Some(formula), compiler)?;
+        let own: Vec<(String, f64)> = match &declared[k] {
+            Some(d) => set.iter().filter(|(name, _)| d.iter().any(|p| p.name == *name)).cloned().collect(),
+            None => set.to_vec(),
+        };
+        let scene = geometry.with_materials(&own, Some(formula), compiler)?;
+        if scene.objects.is_empty() {
+            return Err(crate::Diagnostics::single(
+                geometry.name(),
+                crate::Diagnostic::error("the scene has no objects: there is nothing to compare").hint("add an [[object]] table"),
+            ));
+        }
         let (frame, stats) = super::render(&scene, ropts).map_err(fail)?;
         nan[k] = stats.nan;
         frames.push(frame);

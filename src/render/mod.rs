@@ -168,8 +168,14 @@ pub struct Frame {
     pub covered: Vec<bool>,
 }
 
-/// Renders `scene`. Fails only if the thread pool cannot be built.
+/// Most worker threads a render starts (more only adds scheduling cost on any machine lobe targets).
+pub const MAX_THREADS: usize = 256;
+
+/// Renders `scene`. Fails only if the thread count is over [`MAX_THREADS`] or the pool cannot be built.
 pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<(Frame, RenderStats), String> {
+    if opts.threads > MAX_THREADS {
+        return Err(format!("--threads {} is more than {MAX_THREADS}; 0 uses one per core", opts.threads));
+    }
     if opts.threads == 0 {
         Ok(render_in_pool(scene, opts))
     } else {

@@ -13,19 +13,30 @@ use serde::Serialize;
 pub struct BenchRow {
     pub name: String,
     pub file: String,
+    #[serde(serialize_with = "crate::base::json::num")]
     pub compile_us: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
     pub jit_ns: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
     pub jit_spread: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
     pub jit_batch_ns: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
     pub interp_ns: f64,
     /// Hand-written Rust (`numerics::twins`), where lobe has a twin of the formula, called like the kernel.
+    #[serde(serialize_with = "crate::base::json::opt_num")]
     pub native_ns: Option<f64>,
+    #[serde(serialize_with = "crate::base::json::num")]
     pub mean_abs_grid: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
     pub epicenter_max_rel_pct: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
     pub max_abs: f64,
     /// Normalisation coefficient at n = 50 (lobe mode).
+    #[serde(serialize_with = "crate::base::json::opt_num")]
     pub coef_n50: Option<f64>,
     /// Maximum hemispherical-directional albedo at n = 50 (unnormalised).
+    #[serde(serialize_with = "crate::base::json::opt_num")]
     pub albedo_max: Option<f64>,
     pub pareto: bool,
 }
