@@ -1,7 +1,9 @@
-//! ns per evaluation for each catalogue formula: hand-written Rust (direct and behind the `Evaluator`
-//! interface), scalar JIT, batched JIT and a Rust loop over the same columns (ns per element), the
-//! interpreter, and fasteval. Every contestant evaluates the same 1024 pseudo-random points per iteration;
-//! criterion reports time per element (`Throughput::Elements`).
+//! ns per evaluation for each benched catalogue formula (`common/formulas.rs`; the file
+//! `examples/brdfs/<stem>.brdf` compiled as shipped, at its default parameters): its hand-written Rust twin
+//! (direct and behind the `Evaluator` interface), scalar JIT, batched JIT and a Rust loop over the same
+//! columns (ns per element), the interpreter, and fasteval — how far a compiled kernel is from hand-written
+//! code and from a generic expression evaluator. Every contestant evaluates the same 1024 pseudo-random
+//! points per iteration; criterion reports time per element (`Throughput::Elements`).
 //!
 //! Run: `cargo bench --bench eval` (or `-- schlick` for one formula).
 
@@ -20,18 +22,16 @@ fn bench_eval(c: &mut Criterion) {
     let columns = Columns::new(std::array::from_fn(|i| cols[i].as_slice()));
     let mut out = vec![0.0; POINTS];
 
-    for e in common::catalogue() {
-        let (jit, from_text) = e.kernel(Backend::Jit);
-        let (interp, _) = e.kernel(Backend::Interp);
+    for e in common::BENCHED {
+        let jit = e.kernel(Backend::Jit);
+        let interp = e.kernel(Backend::Interp);
         let twin_k = e.twin_kernel(&jit);
-        let params = e.params;
-        let twin = e.twin;
-        let mut g = c.benchmark_group(format!("eval/{}", e.name));
+        let defaults = jit.default_params();
+        let params = defaults.as_slice();
+        let twin = e.twin();
+        let mut g = c.benchmark_group(format!("eval/{}", e.id));
         g.throughput(Throughput::Elements(POINTS as u64));
         g.warm_up_time(Duration::from_millis(300)).measurement_time(Duration::from_secs(1)).sample_size(20);
-        if !from_text {
-            eprintln!("note: {}: front end not available, benchmarking the hand-built IR", e.name);
-        }
 
         g.bench_function("rust_direct", |b| {
             b.iter(|| {
@@ -70,34 +70,18 @@ fn bench_eval(c: &mut Criterion) {
         });
 
         // fasteval: compiled expression, variables through a callback namespace.
-        let parser = fasteval::Parser::new();
-        let mut slab = fasteval::Slab::new();
-        use fasteval::{Compiler, Evaler};
-        let compiled = parser.parse(e.fasteval, &mut slab.ps).map(|p| p.from(&slab.ps).compile(&slab.ps, &mut slab.cs));
-        match compiled {
-            Ok(compiled) => {
-                g.bench_function("fasteval", |b| {
-                    b.iter(|| {
-                        let mut acc = 0.0;
-                        for r in &rows {
-                            let mut ns = |name: &str, _: Vec<f64>| match name {
-                                "NL" => Some(r[0]),
-                                "NV" => Some(r[1]),
-                                "NH" => Some(r[2]),
-                                "VR" => Some(r[3]),
-                                "VH" => Some(r[4]),
-                                "n" => params.first().copied(),
-                                "a" => params.get(1).copied(),
-                                _ => None,
-                            };
-                            acc += compiled.eval(&slab, &mut ns).unwrap_or(f64::NAN);
-                        }
-                        acc
-                    })
-                });
-            }
-            Err(err) => eprintln!("note: fasteval cannot parse {}: {err}", e.name),
-        }
+        use fasteval::Evaler;
+        let (slab, compiled) = e.fasteval().unwrap_or_else(|err| panic!("fasteval cannot parse {}: {err}", e.stem));
+        g.bench_function("fasteval", |b| {
+            b.iter(|| {
+                let mut acc = 0.0;
+                for r in &rows {
+                    let mut ns = |name: &str, _: Vec<f64>| common::formulas::fasteval_var(name, r, &jit, params);
+                    acc += compiled.eval(&slab, &mut ns).unwrap_or(f64::NAN);
+                }
+                acc
+            })
+        });
         g.finish();
     }
 }

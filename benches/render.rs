@@ -1,6 +1,6 @@
-//! Renderer throughput: the papers' sphere at 512², 1024² and 4096² with a batched Rust-closure Phong kernel
-//! (the JIT kernel after the front end is merged: `lobe render examples/scenes/paper_sphere.toml --size 1024
-//! --stats`), and thread scaling at 1024².
+//! Renderer throughput: the papers' sphere (`examples/scenes/paper_sphere.toml`, its catalogue material
+//! JIT-compiled and evaluated in batches, as `lobe render examples/scenes/paper_sphere.toml --size 1024
+//! --stats` does) at 512², 1024² and 4096², and thread scaling at 1024².
 //!
 //! Run: `cargo bench --bench render`. Targets (2 cores): 1024² ≤ 40 ms, 4096² ≤ 0.6 s.
 

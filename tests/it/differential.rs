@@ -2,14 +2,13 @@
 //!
 //! (a) random well-formed formulas (proptest over expression trees lowered into `ir::Ir`: inputs raw and
 //!     clamped, live and baked parameters, special constants, every builtin, trees up to depth 7) on random
-//!     and hard inputs; (b) the catalogue: every `examples/brdfs/*.brdf` through `lobe::compile_source` (runs once the
-//!     front end and the examples are present), and hand-built IR for seven catalogue formulas checked against
-//!     hand-written Rust twins as well.
+//!     and hard inputs; (b) the catalogue: every `examples/brdfs/*.brdf` through `lobe::compile_source`, and
+//!     where a hand-written Rust twin exists (`lobe::numerics::twins`), the twin as a third opinion.
 //!
 //! Agreement: within 4 ulp, or both NaN, or the same infinity. (In practice the JIT is bit-identical: it calls
 //! the same libm functions and Cranelift does not reassociate or fuse floating-point operations.)
 
-use lobe::builtins::{self, Builtin};
+use lobe::builtins::Builtin;
 use lobe::base::span::Span;
 use lobe::ir::{BinOp, Formula, Input, Ir, Meta, NodeId, ParamDecl, N_INPUTS};
 use lobe::{compile_formula, Backend, Columns, Evaluator, Kernel, Options};
@@ -189,15 +188,15 @@ fn param_sets() -> Vec<Vec<f64>> {
 }
 
 /// Compares the JIT (scalar and batched) with the interpreter on every point and parameter set.
-fn check(jit: &Kernel, interp: &Kernel, pts: &[[f64; N_INPUTS]]) -> Result<(), String> {
+fn check(jit: &Kernel, interp: &Kernel, pts: &[[f64; N_INPUTS]], sets: &[Vec<f64>]) -> Result<(), String> {
     let cols: Vec<Vec<f64>> = (0..N_INPUTS).map(|i| pts.iter().map(|p| p[i]).collect()).collect();
     let columns = Columns::new(std::array::from_fn(|i| cols[i].as_slice()));
     let mut out = vec![0.0; pts.len()];
-    for ps in param_sets() {
-        jit.eval_batch(&columns, &ps, &mut out);
+    for ps in sets {
+        jit.eval_batch(&columns, ps, &mut out);
         for (k, x) in pts.iter().enumerate() {
-            let want = interp.eval(x, &ps);
-            let got = jit.eval(x, &ps);
+            let want = interp.eval(x, ps);
+            let got = jit.eval(x, ps);
             if !agree(want, got) || !agree(want, out[k]) {
                 return Err(format!(
                     "{}\n  at x = {x:?}, params = {ps:?}: interp {want:e}, jit scalar {got:e}, jit batched {:e}",
@@ -235,7 +234,7 @@ fn random_formulas_agree() {
         let f = formula(&e, policy);
         let bake = bake.map(|(p, v)| vec![(f.params[p as usize].name.clone(), v)]).unwrap_or_default();
         let (jit, interp) = both(f, bake);
-        check(&jit, &interp, &pts).map_err(TestCaseError::fail)
+        check(&jit, &interp, &pts, &param_sets()).map_err(TestCaseError::fail)
     });
     if let Err(e) = result {
         panic!("{e}");
@@ -258,169 +257,83 @@ fn every_builtin_on_dense_inputs() {
             .map(|(i, c)| E::Bin(BinOp::Mul, Box::new(E::In(*i, c)), Box::new(E::P(0))))
             .collect();
         let (jit, interp) = both(formula(&E::Call(f, args), false), vec![]);
-        check(&jit, &interp, &pts).unwrap_or_else(|e| panic!("{f}: {e}"));
-        check(&jit, &interp, &pts[..1]).unwrap_or_else(|e| panic!("{f}: {e}"));
+        check(&jit, &interp, &pts, &param_sets()).unwrap_or_else(|e| panic!("{f}: {e}"));
+        check(&jit, &interp, &pts[..1], &param_sets()).unwrap_or_else(|e| panic!("{f}: {e}"));
     }
 }
 
 // ---- the catalogue -------------------------------------------------------------------------------------------
 
-fn c(v: f64) -> E {
-    E::C(v)
-}
-fn i(x: Input) -> E {
-    E::In(x, true)
-}
-fn n() -> E {
-    E::P(0)
-}
-fn bin(op: BinOp, a: E, b: E) -> E {
-    E::Bin(op, Box::new(a), Box::new(b))
-}
-fn add(a: E, b: E) -> E {
-    bin(BinOp::Add, a, b)
-}
-fn sub(a: E, b: E) -> E {
-    bin(BinOp::Sub, a, b)
-}
-fn mul(a: E, b: E) -> E {
-    bin(BinOp::Mul, a, b)
-}
-fn div(a: E, b: E) -> E {
-    bin(BinOp::Div, a, b)
-}
-fn call(f: Builtin, args: Vec<E>) -> E {
-    E::Call(f, args)
-}
-
-type Twin = fn(&[f64; N_INPUTS], &[f64]) -> f64;
-
-/// Seven catalogue formulas as the lowering would produce them (inputs clamped, root `max(·, 0)`), each with
-/// a hand-written Rust twin computed independently of the IR.
-fn catalogue() -> Vec<(&'static str, E, Twin)> {
-    vec![
-        ("phong", call(Builtin::Pow, vec![i(Input::VR), n()]), |x, p| builtins::clamp(x[3], 0.0, 1.0).powf(p[0])),
-        ("blinn", call(Builtin::Pow, vec![i(Input::NH), n()]), |x, p| builtins::clamp(x[2], 0.0, 1.0).powf(p[0])),
-        ("schlick", div(i(Input::NH), add(sub(n(), mul(n(), i(Input::NH))), i(Input::NH))), |x, p| {
-            let c = builtins::clamp(x[2], 0.0, 1.0);
-            c / (p[0] - p[0] * c + c)
-        }),
-        (
-            "modified_schlick",
-            div(
-                mul(c(2.0), i(Input::NH)),
-                mul(
-                    c(1.25),
-                    call(Builtin::Pow, vec![add(sub(n(), mul(n(), i(Input::NH))), mul(c(1.25), i(Input::NH))), c(2.0)]),
-                ),
-            ),
-            |x, p| {
-                let c = builtins::clamp(x[2], 0.0, 1.0);
-                2.0 * c / (1.25 * (p[0] - p[0] * c + 1.25 * c).powf(2.0))
-            },
-        ),
-        (
-            "scos2",
-            call(
-                Builtin::Pow,
-                vec![
-                    add(
-                        mul(
-                            mul(
-                                div(
-                                    E::Neg(Box::new(c(1.1))),
-                                    sub(add(E::Neg(Box::new(n())), mul(n(), i(Input::NH))), mul(c(2.0), i(Input::NH))),
-                                ),
-                                n(),
-                            ),
-                            sub(i(Input::NH), c(1.0)),
-                        ),
-                        c(1.0),
-                    ),
-                    c(2.0),
-                ],
-            ),
-            |x, p| {
-                let (c, n) = (builtins::clamp(x[2], 0.0, 1.0), p[0]);
-                ((-1.1 / (-n + n * c - 2.0 * c)) * n * (c - 1.0) + 1.0).powf(2.0)
-            },
-        ),
-        (
-            "f_st",
-            call(Builtin::Pow, vec![add(mul(div(n(), E::P(1)), sub(i(Input::NH), c(1.0))), c(1.0)), E::P(1)]),
-            |x, p| {
-                let c = builtins::clamp(x[2], 0.0, 1.0);
-                (p[0] / p[1] * (c - 1.0) + 1.0).powf(p[1])
-            },
-        ),
-        (
-            "gaussian",
-            call(
-                Builtin::Exp,
-                vec![div(
-                    mul(
-                        E::Neg(Box::new(n())),
-                        call(Builtin::Pow, vec![call(Builtin::Acos, vec![i(Input::NH)]), c(2.0)]),
-                    ),
-                    c(2.0),
-                )],
-            ),
-            |x, p| {
-                let c = builtins::clamp(x[2], 0.0, 1.0);
-                (-p[0] * c.acos().powf(2.0) / 2.0).exp()
-            },
-        ),
-    ]
-}
-
-/// (b, in this branch) the catalogue by hand-built IR: JIT = interpreter = Rust twin (after `max(·, 0)`).
-#[test]
-fn catalogue_formulas_agree_with_rust_twins() {
-    let mut pts = points(&lobe::report::measure::sample_points(200, 9));
-    pts.retain(|p| p.iter().all(|v| (0.0..=1.0).contains(v)));
-    for (name, e, twin) in catalogue() {
-        let (jit, interp) = both(formula(&e, true), vec![]);
-        check(&jit, &interp, &pts).unwrap_or_else(|e| panic!("{name}: {e}"));
-        for ps in [[1.0, 16.0], [50.0, 16.0], [1000.0, 268.0]] {
-            for x in &pts {
-                let want = builtins::fmax(twin(x, &ps), 0.0);
-                let got = jit.eval(x, &ps);
-                // Not 4 ulp: the simplifier rewrites n - n*c into n*(1 - c), which is *more* accurate than the
-                // twin near c = 1 (the twin's cancellation costs up to ~n ulp there), so the twin is only a
-                // reference to within its own conditioning.
-                let close = agree(want, got) || (want - got).abs() <= 1e-12 * want.abs().max(got.abs());
-                assert!(close, "{name} at {x:?} n={}: twin {want:e}, jit {got:e}", ps[0]);
-            }
-        }
-    }
-}
-
-/// (b) every catalogue file through `lobe::compile_source`, both backends: every file must compile and agree.
-#[test]
-fn catalogue_files_agree() {
+/// Every `examples/brdfs/*.brdf` compiled by `lobe::compile_source` for both backends, as (stem, JIT,
+/// interpreter), sorted by stem.
+fn catalogue() -> Vec<(String, Kernel, Kernel)> {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/brdfs");
     let entries = std::fs::read_dir(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
     let mut files: Vec<_> =
         entries.filter_map(|e| e.ok()).map(|e| e.path()).filter(|p| p.extension().is_some_and(|x| x == "brdf")).collect();
     files.sort();
     assert!(!files.is_empty(), "{} has no .brdf files", dir.display());
+    files
+        .iter()
+        .map(|path| {
+            let name = path.display().to_string();
+            let src = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{name}: {e}"));
+            let build = |backend| {
+                lobe::compile_source(&name, &src, &Options { backend, ..Options::default() })
+                    .unwrap_or_else(|d| panic!("{name} does not compile:\n{}", d.render(false)))
+            };
+            let stem = path.file_stem().unwrap().to_string_lossy().into_owned();
+            (stem, build(Backend::Jit), build(Backend::Interp))
+        })
+        .collect()
+}
+
+/// (b) every catalogue file, both backends: every file must compile, and the JIT (scalar and batched) agrees
+/// with the interpreter at its defaults and at the random formulas' parameter sets.
+#[test]
+fn catalogue_files_agree() {
     let pts = points(&lobe::report::measure::sample_points(64, 5));
-    for path in files {
-        let name = path.display().to_string();
-        let src = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
-        let build = |backend| {
-            lobe::compile_source(&name, &src, &Options { backend, ..Options::default() })
-                .unwrap_or_else(|d| panic!("{name} does not compile:\n{}", d.render(false)))
+    for (stem, jit, interp) in catalogue() {
+        let mut sets = param_sets();
+        sets.push(jit.default_params());
+        check(&jit, &interp, &pts, &sets).unwrap_or_else(|e| panic!("{stem}: {e}"));
+    }
+}
+
+/// (b) and the hand-written Rust twins (`lobe::numerics::twins`, the ones the benches time): every twin
+/// mirrors a catalogue file with the same parameters and defaults, and JIT = interpreter = twin on every point, with each
+/// parameter at its lower bound, default and upper bound (and F_ST's best fit a = 268).
+#[test]
+fn catalogue_files_agree_with_rust_twins() {
+    let pts = points(&lobe::report::measure::sample_points(200, 9));
+    let catalogue = catalogue();
+    for def in lobe::numerics::twins::DEFS {
+        let Some((stem, jit, interp)) = catalogue.iter().find(|(stem, ..)| stem == def.stem) else {
+            panic!("twin {}: no file examples/brdfs/{}.brdf", def.name, def.stem)
         };
-        let (jit, interp) = (build(Backend::Jit), build(Backend::Interp));
-        let defaults = jit.default_params();
-        let cols: Vec<Vec<f64>> = (0..N_INPUTS).map(|i| pts.iter().map(|p| p[i]).collect()).collect();
-        let columns = Columns::new(std::array::from_fn(|i| cols[i].as_slice()));
-        let mut out = vec![0.0; pts.len()];
-        jit.eval_batch(&columns, &defaults, &mut out);
-        for (k, x) in pts.iter().enumerate() {
-            let (want, got) = (interp.eval(x, &defaults), jit.eval(x, &defaults));
-            assert!(agree(want, got) && agree(want, out[k]), "{name} at {x:?}: {want:e} vs {got:e} / {:e}", out[k]);
+        let names: Vec<&str> = jit.formula.params.iter().map(|p| p.name.as_str()).collect();
+        assert_eq!(names, def.params, "{stem}: the twin's parameters");
+        assert_eq!(jit.default_params(), def.defaults, "{stem}: the twin's defaults");
+        // Every combination of each parameter's values.
+        let mut sets = vec![vec![]];
+        for p in &jit.formula.params {
+            let mut values = vec![p.lo, p.default, p.hi];
+            if p.name == "a" {
+                values.push(268.0);
+            }
+            sets = sets.iter().flat_map(|s| values.iter().map(move |v| [s.as_slice(), &[*v]].concat())).collect();
+        }
+        check(jit, interp, &pts, &sets).unwrap_or_else(|e| panic!("{stem}: {e}"));
+        for ps in &sets {
+            for x in &pts {
+                let want = (def.f)(x, ps);
+                let got = jit.eval(x, ps);
+                // Not 4 ulp: the simplifier rewrites n - n*c into n*(1 - c), which is *more* accurate than the
+                // twin near c = 1 (the twin's cancellation costs up to ~n ulp there), so the twin is only a
+                // reference to within its own conditioning.
+                let close = agree(want, got) || (want - got).abs() <= 1e-12 * want.abs().max(got.abs());
+                assert!(close, "{stem} at {x:?}, params {ps:?}: twin {want:e}, jit {got:e}");
+            }
         }
     }
 }

@@ -1,4 +1,5 @@
 //! lobe's integration tests: one binary, one module per area.
+mod benched;
 mod catalogue;
 mod cli;
 mod differential;
