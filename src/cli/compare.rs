@@ -70,8 +70,8 @@ fn row<'a>(a: &'a CompareArgs, c: &'a Comparison) -> Row<'a> {
 
 pub fn run(a: &CompareArgs) -> Result<(), CliError> {
     if let Some(out) = &a.out.path {
-        Output::png_only(out)?;
         a.out.force.check(out, image::is_lobe_png)?;
+        Output::png_only(out)?;
     }
     let (fa, sa) = common::read_source(&a.a)?;
     let (fb, sb) = common::read_source(&a.b)?;

@@ -65,8 +65,8 @@ pub fn default_output(scene: &Path) -> PathBuf {
 pub fn run(a: &RenderArgs) -> Result<(), CliError> {
     let out = a.out.path.clone().unwrap_or_else(|| default_output(&a.scene));
     // Refuse a bad output path before doing any work, and write nothing unless everything succeeds.
-    Output::png_only(&out)?;
     a.out.force.check(&out, image::is_lobe_png)?;
+    Output::png_only(&out)?;
     let opts = LoadOptions { size: a.size, set: a.set.list(), formula_override: None };
     let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: a.backend.kind })?;
     let ropts = RenderOptions {

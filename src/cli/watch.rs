@@ -55,8 +55,8 @@ fn reload(a: &WatchArgs, src: String) -> Result<String, CliError> {
 }
 
 pub fn run(a: &WatchArgs) -> Result<(), CliError> {
-    Output::png_only(a.out.required())?;
     a.out.force.check(a.out.required(), image::is_lobe_png)?;
+    Output::png_only(a.out.required())?;
     if !a.scene.is_file() {
         return Err(CliError::hint(format!("scene `{}` not found", a.scene.display()), "examples are in examples/scenes/"));
     }

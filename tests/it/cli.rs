@@ -136,10 +136,11 @@ fn watch_renders_on_start_and_keeps_the_last_good_image_on_errors() {
     assert!(stderr(&r).contains("reloaded in"), "{}", stderr(&r));
     let first = std::fs::read(&out).unwrap();
     assert_eq!(&first[1..4], b"PNG");
-    // A broken formula: diagnostics on stderr, exit 0 (watch keeps running), the image untouched.
+    // A broken formula: diagnostics on stderr, the image untouched; with --count the exit status says the last
+    // reload failed (without --count watch keeps running).
     std::fs::write(&brdf, "VR^^n\n").unwrap();
     let r = lobe(&["watch", &b, "--scene", "examples/scenes/paper_sphere.toml", "-o", &o, "--size", "48", "--count", "1"], None);
-    assert!(r.status.success());
+    assert_eq!(r.status.code(), Some(1), "{}", stderr(&r));
     assert!(stderr(&r).contains("keeping the last good image"), "{}", stderr(&r));
     assert_eq!(std::fs::read(&out).unwrap(), first);
     let _ = std::fs::remove_dir_all(&dir);

@@ -30,8 +30,8 @@ fn ulps(a: f64, b: f64) -> u64 {
     key(a).abs_diff(key(b))
 }
 
-/// The agreement rule of the task: ≤ 4 ulp, both NaN, or the same infinity.
-fn agree(a: f64, b: f64) -> bool {
+/// The agreement rule of the task: ≤ 4 ulp, both NaN, or the same infinity (shared with the fuzz test).
+pub(crate) fn agree(a: f64, b: f64) -> bool {
     if a.is_nan() || b.is_nan() {
         return a.is_nan() && b.is_nan();
     }

@@ -11,6 +11,7 @@
 //! LOBE_FUZZ_SEED=$RANDOM cargo test --release --test it fuzz -- --nocapture`; a failure prints the seed, the
 //! case and the program, so it reproduces.
 
+use crate::differential::agree;
 use lobe::backend::glsl::{self, Dialect};
 use lobe::builtins::Builtin;
 use lobe::{Backend, Columns, Evaluator, Kernel, Options, N_INPUTS};
@@ -137,25 +138,6 @@ fn mutate(r: &mut Rng, src: &str) -> String {
         }
     }
     chars.into_iter().collect()
-}
-
-/// ≤ 4 ulp, both NaN, or the same infinity.
-fn agree(a: f64, b: f64) -> bool {
-    if a.is_nan() || b.is_nan() {
-        return a.is_nan() && b.is_nan();
-    }
-    if a.is_infinite() || b.is_infinite() {
-        return a == b;
-    }
-    let key = |x: f64| {
-        let b = x.to_bits() as i64;
-        if b < 0 {
-            i64::MIN.wrapping_sub(b)
-        } else {
-            b
-        }
-    };
-    key(a).abs_diff(key(b)) <= 4
 }
 
 fn hard_points() -> Vec<[f64; N_INPUTS]> {

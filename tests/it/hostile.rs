@@ -196,3 +196,115 @@ fn obj_values_the_renderer_cannot_use_name_their_line() {
     assert!(!d.join("o.png").exists());
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// 40 lines of `let aK = sin(aK-1) + cos(aK-1)`: printed as a tree this is 2^40 nodes. Every command prints the
+/// shared form, so output stays proportional to the file.
+#[test]
+fn deep_shared_lets_print_and_export_in_their_let_form() {
+    let d = scratch("lets");
+    let mut src = String::from("let a0 = NH\n");
+    for k in 1..=40 {
+        src.push_str(&format!("let a{k} = sin(a{}) + cos(a{})\n", k - 1, k - 1));
+    }
+    src.push_str("a40\n");
+    let f = d.join("chain.brdf");
+    std::fs::write(&f, &src).unwrap();
+    let f = s(&f);
+    for args in [
+        vec!["check", &f],
+        vec!["check", &f, "--json"],
+        vec!["export", "--glsl", &f],
+        vec!["export", "--wgsl", &f],
+        vec!["sweep", &f, "--max-evals", "2000"],
+        vec!["eval", &f, "--at", "NH=0.5"],
+    ] {
+        let r = lobe_within(std::time::Duration::from_secs(20), &args);
+        assert_eq!(r.code, Some(0), "{args:?}: {}", r.stderr);
+        assert!(r.stdout.len() < 64 * 1024, "{args:?} printed {} bytes", r.stdout.len());
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn scene_files_are_bounded_and_their_numbers_checked() {
+    let r = lobe_within(Duration::from_secs(10), &["render", "/dev/zero", "-o", "/tmp/never.png"]);
+    refused(&r, "scene /dev/zero", "not a regular file");
+    let d = scratch("scene");
+    let good = "[camera]\nposition = [0, 0, 6]\n[[light]]\nkind = \"point\"\nposition = [10, 0, 10]\n\
+                [materials.m]\nformula = \"NH^n\"\n[[object]]\nshape = \"sphere\"\nmaterial = \"m\"\n";
+    let out = d.join("o.png");
+    let run = |name: &str, toml: &str| {
+        let p = d.join(name);
+        std::fs::write(&p, toml).unwrap();
+        lobe(&["render", &s(&p), "--size", "16", "-o", &s(&out)])
+    };
+    for (name, toml, needle) in [
+        ("nan_light.toml", good.replace("position = [10, 0, 10]", "position = [10, 0, 10]\ncolor = [nan, 1, 1]"), "color"),
+        ("inf_light.toml", good.replace("position = [10, 0, 10]", "position = [inf, 0, 10]"), "finite"),
+        ("neg_ambient.toml", format!("ambient = [-1, 0, 0]\n{good}"), "ambient"),
+        ("nan_background.toml", format!("background = [0, nan, 0]\n{good}"), "background"),
+        ("zero_up.toml", good.replace("position = [0, 0, 6]", "position = [0, 0, 6]\nup = [0, 0, 0]"), "non-zero"),
+        ("no_camera.toml", good.replace("[camera]\nposition = [0, 0, 6]\n", ""), "[camera]"),
+        ("nan_colour.toml", good.replace("formula = \"NH^n\"", "formula = \"NH^n\"\ncolor = [1, nan, 1]"), "color"),
+    ] {
+        let r = run(name, &toml);
+        refused(&r, name, needle);
+        assert!(!r.stderr.contains("`width`"), "{name} blames width:\n{}", r.stderr);
+    }
+    assert!(!out.exists());
+    let r = lobe_within(Duration::from_secs(10), &["render", "examples/scenes/paper_sphere.toml", "--size", "16", "--threads", "20000", "-o", &s(&out)]);
+    refused(&r, "--threads 20000", "--threads");
+    for ext in ["x.jpg", "x.svg"] {
+        let r = lobe(&["render", "examples/scenes/paper_sphere.toml", "--size", "16", "-o", &s(&d.join(ext))]);
+        refused(&r, ext, "PNG");
+        assert!(!d.join(ext).exists());
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn numerical_commands_refuse_what_they_cannot_answer() {
+    let d = scratch("numerics");
+    let write = |name: &str, text: &str| {
+        let p = d.join(name);
+        std::fs::write(&p, text).unwrap();
+        s(&p)
+    };
+    let nan = write("nan.brdf", "param a = 1 in 1..4\n0*NH/0 + a\n");
+    let zero = write("zero.brdf", "0*NH\n");
+    let a_only = write("a_only.brdf", "param a = 16 in 1..1000\nNH^a\n");
+    // fit with NaN everywhere: no "best".
+    let r = lobe(&["fit", &nan, "--reference", "examples/brdfs/blinn.brdf", "--param", "a=1..4", "--n-max", "20"]);
+    refused(&r, "fit NaN", "no candidate has a finite score");
+    // accuracy against a reference that is zero: relative errors are undefined, not -inf %.
+    let r = lobe(&["accuracy", "examples/brdfs/blinn.brdf", "--reference", &zero, "--n-max", "20"]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    let text = String::from_utf8_lossy(&r.stdout);
+    assert!(!text.contains("-inf") && text.contains("undefined"), "{text}");
+    // compare: a --set name only B declares applies to B.
+    let r = lobe(&["compare", "examples/brdfs/blinn.brdf", &a_only, "--set", "a=16", "--size", "16", "--json"]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    let r = lobe(&["compare", "examples/brdfs/blinn.brdf", &a_only, "--set", "zz=16", "--size", "16"]);
+    refused(&r, "compare --set zz", "neither formula");
+    // Duplicate names in one list; zero budgets.
+    for args in [["--set", "n=5,n=6", "--at", "NH=0.5"], ["--set", "n=5", "--at", "NH=0.5,NH=0.9"]] {
+        let r = lobe(&[&["eval", "examples/brdfs/blinn.brdf"][..], &args[..]].concat());
+        assert!(r.code == Some(2) && r.stderr.contains("twice"), "{args:?}: {:?} {}", r.code, r.stderr);
+    }
+    assert_eq!(lobe(&["sweep", "examples/brdfs/blinn.brdf", "--max-evals", "0"]).code, Some(2));
+    let r = lobe(&["fit", &a_only, "--reference", "examples/brdfs/blinn.brdf", "--param", "a=1..4", "--top", "0"]);
+    assert_eq!(r.code, Some(2));
+    // A lobe scaled so small its coefficient overflows.
+    refused(&lobe(&["eval", "--expr", "NH^n*1e-300*1e-10", "--normalize", "--at", "NH=1"]), "normalize tiny", "overflows");
+    // watch --count 1 on a broken file: no image and a failing status.
+    let broken = write("broken.brdf", "NH^^n\n");
+    let out = d.join("w.png");
+    let r = lobe(&["watch", &broken, "--scene", "examples/scenes/paper_sphere.toml", "-o", &s(&out), "--size", "16", "--count", "1"]);
+    assert_eq!(r.code, Some(1), "{}", r.stderr);
+    assert!(!out.exists());
+    // compare on a scene without objects.
+    let empty = write("empty.toml", "[camera]\nposition = [0, 0, 6]\n");
+    let r = lobe(&["compare", "examples/brdfs/blinn.brdf", "examples/brdfs/phong.brdf", "--scene", &empty, "--size", "16"]);
+    refused(&r, "compare without objects", "no objects");
+    let _ = std::fs::remove_dir_all(&d);
+}

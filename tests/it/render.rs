@@ -391,8 +391,8 @@ fn render_stats_report() {
     }
 }
 
-/// `lobe render` and `lobe compare` end to end (with the hidden Rust-twin compiler, so this runs before the
-/// front end is merged): a decodable PNG of the requested size, the stats line, and the JSON keys.
+/// `lobe render` and `lobe compare` end to end (also through the hidden Rust-twin compiler): a decodable PNG of
+/// the requested size, the stats line, and the JSON keys.
 #[test]
 fn cli_render_and_compare_end_to_end() {
     let dir = std::env::temp_dir().join(format!("lobe-render-e2e-{}", std::process::id()));
