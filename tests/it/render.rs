@@ -467,10 +467,10 @@ fn sweep_matches_rendering_each_n_separately() {
 #[test]
 fn geometry_is_loaded_once_and_shared_by_its_scenes() {
     let g = scene::load_geometry(&scene_file("torus.toml"), Some((90, 70))).unwrap_or_else(|d| panic!("{}", d.render(false)));
-    assert_eq!((g.width, g.height), (90, 70));
+    assert_eq!((g.scene.width, g.scene.height), (90, 70));
     let s1 = g.with_materials(&[], None, &JIT).unwrap();
     let s2 = g.with_materials(&[("n".into(), 7.0)], None, &JIT).unwrap();
-    for ((o, p), q) in g.objects.iter().zip(&s1.objects).zip(&s2.objects) {
+    for ((o, p), q) in g.scene.objects.iter().zip(&s1.objects).zip(&s2.objects) {
         assert!(Arc::ptr_eq(&o.mesh, &p.mesh) && Arc::ptr_eq(&o.mesh, &q.mesh), "meshes are copied");
     }
     assert_eq!(s2.materials[0].params[0], 7.0);

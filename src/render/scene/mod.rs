@@ -90,15 +90,10 @@ pub struct LoadOptions {
 /// docs). Make [`Scene`]s from it with [`Geometry::with_materials`], as many as needed.
 #[derive(Clone, Debug)]
 pub struct Geometry {
-    pub width: usize,
-    pub height: usize,
-    pub camera: Camera,
-    pub background: DVec3,
-    pub ambient: DVec3,
-    pub lights: Vec<Light>,
-    /// Meshes in world space, shared with every scene made from this geometry; `material` indexes the
-    /// material tables in name order (the order of [`Scene::materials`]).
-    pub objects: Vec<Object>,
+    /// Everything but the materials (`materials` is empty). Its objects' meshes are in world space and shared
+    /// with every scene made from this geometry; `Object::material` indexes the material tables in name order
+    /// (the order of [`Scene::materials`]).
+    pub scene: Scene,
     /// The scene file's name and text (for diagnostics) and the directory relative paths start from.
     name: String,
     src: String,
@@ -127,16 +122,7 @@ impl Geometry {
         if ds.has_errors() {
             return Err(ds);
         }
-        Ok(Scene {
-            width: self.width,
-            height: self.height,
-            camera: self.camera,
-            background: self.background,
-            ambient: self.ambient,
-            lights: self.lights.clone(),
-            materials,
-            objects: self.objects.clone(),
-        })
+        Ok(Scene { materials, ..self.scene.clone() })
     }
 }
 
@@ -351,13 +337,7 @@ fn check(name: &str, src: &str, base: &Path, size: Option<(usize, usize)>) -> Re
         }
     }
     Ok(Geometry {
-        width,
-        height,
-        camera,
-        background,
-        ambient,
-        lights,
-        objects,
+        scene: Scene { width, height, camera, background, ambient, lights, materials: vec![], objects },
         name: name.to_string(),
         src: src.to_string(),
         base: base.to_path_buf(),
