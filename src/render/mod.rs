@@ -15,12 +15,11 @@
 //! Determinism: every tile is computed from its own bin in scene order and written to its own pixels, and
 //! all counters are integers, so 1 thread and N threads give byte-identical images and equal counts.
 //!
-//! Measured cost (release, the 2-core machine shared with other builds at load ≈ 8, so upper bounds; paper
-//! sphere, Rust-twin Phong kernel; `benches/render.rs` and the `render_stats_report` test): 1024² in 30 ms
-//! with 2 threads (35 Mpixel/s; 43 ms on 1), 4096² in 0.49 s. Shading is ≈ 160 ns per visible pixel
-//! (normals, vectors, kernel, 8-bit conversion) and dominates; raster ≈ 15 ns per visible pixel; setup and
-//! binning < 0.5 ms; the 85 % of 4096² tiles the sphere does not touch cost only the background fill. PNG
-//! encoding (measured separately) adds ≈ 70 ms at 4096².
+//! Cost model: shading dominates — per visible pixel, scalar f64 interpolation of position and normal, the
+//! L/V/H/R vectors and cosines the formula reads, the kernel, and the 8-bit conversion — then rasterisation
+//! (a few edge-function steps per covered pixel); setup and binning are per triangle and small; tiles the
+//! scene does not touch cost only the background fill. PNG encoding is a separate, serial stage. Measured
+//! numbers: BENCHMARKS.md.
 
 pub mod camera;
 pub mod compare;
