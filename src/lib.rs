@@ -86,14 +86,19 @@ pub fn resolve_bake(f: &Formula, set: &[(String, f64)]) -> Result<Vec<(usize, f6
                 let p = &f.params[i];
                 if !p.admits(*v) {
                     let mut d = Diagnostic::error(format!(
-                        "value {v} for parameter `{name}` is outside its declared range {}..{}",
+                        "value {} for parameter `{name}` is outside its declared range {}..{}",
+                        ir::print::number(*v),
                         ir::print::number(p.lo),
                         ir::print::number(p.hi)
                     ));
                     if let Some(s) = p.span {
                         d = d.at(s, "declared here");
                     }
-                    ds.push(d.hint(format!("choose a value in {}..{} or widen the range in the file", p.lo, p.hi)));
+                    ds.push(d.hint(format!(
+                        "choose a value in {}..{} or widen the range in the file",
+                        ir::print::number(p.lo),
+                        ir::print::number(p.hi)
+                    )));
                 } else {
                     out.push((i, *v));
                 }
@@ -102,6 +107,9 @@ pub fn resolve_bake(f: &Formula, set: &[(String, f64)]) -> Result<Vec<(usize, f6
                 let names: Vec<&str> = f.params.iter().map(|p| p.name.as_str()).collect();
                 let mut d = Diagnostic::error(format!("the formula has no parameter `{name}`"));
                 d = match front::suggest(name, names.iter().copied()) {
+                    _ if Input::from_name(name).is_some() => {
+                        d.hint(format!("`{name}` is an input (a cosine), not a parameter; `lobe eval` takes inputs with --at {name}=…"))
+                    }
                     Some(s) => d.hint(format!("did you mean `{s}`?")),
                     None => d.hint(format!("its parameters are: {}", names.join(", "))),
                 };

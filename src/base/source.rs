@@ -44,6 +44,8 @@ pub fn source_from_bytes(name: &str, bytes: Vec<u8>) -> Result<String, Diagnosti
         .hint("is this the right file?"));
     }
     match String::from_utf8(bytes) {
+        // A UTF-8 byte-order mark (some Windows editors write one) is not part of the formula.
+        Ok(s) if s.starts_with('\u{feff}') => source_from_bytes(name, s.into_bytes().split_off(3)),
         Ok(s) if s.contains('\0') => Err(Diagnostic::error(format!(
             "`{name}` contains NUL bytes; it looks like a binary file, not a formula"
         ))
@@ -67,5 +69,6 @@ mod tests {
         assert!(source_from_bytes("x", vec![0xff, 0xfe, 0x00]).is_err());
         assert!(source_from_bytes("x", b"NH\0".to_vec()).is_err());
         assert!(source_from_bytes("x", vec![b'1'; MAX_SOURCE_BYTES + 1]).is_err());
+        assert_eq!(source_from_bytes("x", "\u{feff}NH^n".as_bytes().to_vec()).unwrap(), "NH^n");
     }
 }

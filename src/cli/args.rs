@@ -19,8 +19,8 @@ pub fn help(text: &'static str) -> impl FnOnce(clap::Arg) -> clap::Arg {
 pub struct FormulaSource {
     /// Formula file (.brdf), or `-` for standard input.
     pub file: Option<String>,
-    /// The formula inline instead of a file.
-    #[arg(long, conflicts_with = "file")]
+    /// The formula inline instead of a file (may start with `-`: `--expr -NH`).
+    #[arg(long, conflicts_with = "file", allow_hyphen_values = true)]
     pub expr: Option<String>,
 }
 

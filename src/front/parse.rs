@@ -161,6 +161,24 @@ fn syntax_error(src: &str, toks: &[(usize, Tok, usize)], e: &ParseError<usize, T
         let (ptext, ctext) = (src.get(pl..pr).unwrap_or(""), cur.and_then(|(l, _, r)| src.get(l..r)).unwrap_or(""));
         // `2 NH`, `a (b)`, `) (`: two operands in a row.
         let operator_expected = expected.iter().any(|e| e.trim_matches('"') == "*");
+        // `0x10`, `0b101`: other bases are not numbers in lobe (not a missing `*`).
+        let radix = match ctext.as_bytes().first() {
+            Some(b'x' | b'X') => Some(16),
+            Some(b'b' | b'B') => Some(2),
+            Some(b'o' | b'O') => Some(8),
+            _ => None,
+        };
+        if let (Some(radix), true) = (radix, ptext == "0" && pr == cur_span.start as usize) {
+            let value = i64::from_str_radix(&ctext[1..], radix).ok();
+            return Some(
+                Diagnostic::error(format!("`{ptext}{ctext}` is not a number: lobe's numbers are decimal"))
+                    .at(Span::new(pl, cur_span.end as usize), "written here")
+                    .hint(match value {
+                        Some(v) => format!("write `{v}`"),
+                        None => "write the value in decimal".to_string(),
+                    }),
+            );
+        }
         if pt.ends_operand() && ct.starts_operand() && !ctext.is_empty() && operator_expected {
             return Some(
                 Diagnostic::error(format!("missing operator between `{ptext}` and `{ctext}`"))

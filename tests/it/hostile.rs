@@ -308,3 +308,22 @@ fn numerical_commands_refuse_what_they_cannot_answer() {
     refused(&r, "compare without objects", "no objects");
     let _ = std::fs::remove_dir_all(&d);
 }
+
+#[test]
+fn messages_say_what_the_user_meant() {
+    let d = scratch("messages");
+    let r = lobe(&["eval", "--expr", "0x10 * NH", "--at", "NH=1"]);
+    refused(&r, "0x10", "write `16`");
+    assert!(!r.stderr.contains("0 * x10"), "{}", r.stderr);
+    let r = lobe(&["eval", "--expr", "-NH+1", "--at", "NH=0.25"]);
+    assert_eq!((r.code, String::from_utf8_lossy(&r.stdout).trim()), (Some(0), "0.75"), "{}", r.stderr);
+    let bom = d.join("bom.brdf");
+    std::fs::write(&bom, "\u{feff}NH^n\n").unwrap();
+    let r = lobe(&["eval", &s(&bom), "--set", "n=2", "--at", "NH=0.5"]);
+    assert_eq!((r.code, String::from_utf8_lossy(&r.stdout).trim()), (Some(0), "0.25"), "{}", r.stderr);
+    refused(&lobe(&["eval", "examples/brdfs/blinn.brdf", "--set", "NH=5"]), "--set NH", "--at NH");
+    let r = lobe(&["eval", "examples/brdfs/blinn.brdf", "--set", "n=1e300"]);
+    refused(&r, "--set n=1e300", "1e300");
+    assert!(!r.stderr.contains("000000000000"), "{}", r.stderr);
+    let _ = std::fs::remove_dir_all(&d);
+}
