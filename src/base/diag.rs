@@ -4,7 +4,10 @@
 //! [`Diagnostic`]s; [`Diagnostics::render`] turns them into `file:line:col` text with the offending source
 //! underlined (codespan-reporting), which the CLI prints and the snapshot tests compare whole.
 
-use super::span::Span;
+use super::span::{line_col, Span};
+
+/// Longest source line a diagnostic quotes; longer ones are referred to by line and column.
+pub const MAX_ECHOED_LINE: usize = 1000;
 use codespan_reporting::diagnostic::{Diagnostic as CsDiag, Label};
 use codespan_reporting::files::SimpleFile;
 use codespan_reporting::term::{self, termcolor::Buffer};
@@ -95,15 +98,30 @@ impl Diagnostics {
                 let b = (s.end as usize).clamp(a, len);
                 a..b
             };
+            // A label on a very long line (a minified or binary-ish file) would echo the whole line: name its
+            // place instead.
+            let too_long = |s: Span| {
+                let (r, bytes) = (clip(s), self.source.as_bytes());
+                let start = bytes[..r.start].iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
+                let end = bytes[r.end..].iter().position(|&b| b == b'\n').map_or(len, |i| r.end + i);
+                end - start > MAX_ECHOED_LINE
+            };
             let mut labels = vec![];
-            if let Some((s, l)) = &d.primary {
-                labels.push(Label::primary((), clip(*s)).with_message(l));
-            }
-            for (s, l) in &d.secondary {
-                labels.push(Label::secondary((), clip(*s)).with_message(l));
+            let mut placed = vec![];
+            let spans = d.primary.iter().map(|p| (p, true)).chain(d.secondary.iter().map(|p| (p, false)));
+            for ((s, l), primary) in spans {
+                if too_long(*s) {
+                    let (line, col) = line_col(&self.source, clip(*s).start);
+                    placed.push(format!("at {}:{line}:{col}: {l} (the line is too long to show)", self.file));
+                } else if primary {
+                    labels.push(Label::primary((), clip(*s)).with_message(l));
+                } else {
+                    labels.push(Label::secondary((), clip(*s)).with_message(l));
+                }
             }
             cs = cs.with_labels(labels);
-            let mut notes: Vec<String> = d.hints.iter().map(|h| format!("help: {h}")).collect();
+            let mut notes: Vec<String> = placed;
+            notes.extend(d.hints.iter().map(|h| format!("help: {h}")));
             if d.primary.is_none() && !self.file.is_empty() {
                 notes.insert(0, format!("in {}", self.file));
             }

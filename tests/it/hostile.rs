@@ -327,3 +327,14 @@ fn messages_say_what_the_user_meant() {
     assert!(!r.stderr.contains("000000000000"), "{}", r.stderr);
     let _ = std::fs::remove_dir_all(&d);
 }
+
+#[test]
+fn a_long_line_is_not_echoed_whole() {
+    let d = scratch("longline");
+    let f = d.join("long.brdf");
+    std::fs::write(&f, format!("{}NH ^^ n\n", "1 + ".repeat(100_000))).unwrap();
+    let r = lobe(&["eval", &s(&f)]);
+    refused(&r, "long line", "too long to show");
+    assert!(r.stderr.len() < 10_000, "{} bytes of stderr", r.stderr.len());
+    let _ = std::fs::remove_dir_all(&d);
+}
