@@ -338,3 +338,18 @@ fn a_long_line_is_not_echoed_whole() {
     assert!(r.stderr.len() < 10_000, "{} bytes of stderr", r.stderr.len());
     let _ = std::fs::remove_dir_all(&d);
 }
+
+#[test]
+fn an_infinite_lobe_is_no_light_and_counted() {
+    let d = scratch("inf");
+    let toml = "[camera]\nposition = [0, 0, 6]\n[[light]]\nkind = \"point\"\nposition = [10, 0, 10]\n\
+                [materials.m]\nformula = \"NH/0\"\nka = 0\nkd = 0\nks = 1\n[[object]]\nshape = \"sphere\"\nmaterial = \"m\"\n";
+    std::fs::write(d.join("s.toml"), toml).unwrap();
+    let out = d.join("o.png");
+    let r = lobe(&["render", &s(&d.join("s.toml")), "--size", "32", "-o", &s(&out), "--stats"]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert!(r.stderr.contains("NaN or ±inf"), "{}", r.stderr);
+    let im = lobe::render::image::Image::decode_png(&std::fs::read(&out).unwrap()).unwrap();
+    assert!(im.rgb.iter().all(|&c| c == 0), "an infinite lobe was drawn as light");
+    let _ = std::fs::remove_dir_all(&d);
+}

@@ -147,7 +147,8 @@ fn build_material(
             Some(i) => {
                 let p = &decls[i];
                 if !p.admits(v) {
-                    return Err(format!("value {v} for `{name}` is outside the formula's declared range {}..{}", p.lo, p.hi));
+                    let num = crate::ir::print::number;
+                    return Err(format!("value {} for `{name}` is outside the formula's declared range {}..{}", num(v), num(p.lo), num(p.hi)));
                 }
                 values[i].1 = v;
                 Ok(true)
