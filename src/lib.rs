@@ -105,15 +105,12 @@ pub fn resolve_bake(f: &Formula, set: &[(String, f64)]) -> Result<Vec<(usize, f6
             }
             None => {
                 let names: Vec<&str> = f.params.iter().map(|p| p.name.as_str()).collect();
-                let mut d = Diagnostic::error(format!("the formula has no parameter `{name}`"));
-                d = match front::suggest(name, names.iter().copied()) {
-                    _ if Input::from_name(name).is_some() => {
-                        d.hint(format!("`{name}` is an input (a cosine), not a parameter; `lobe eval` takes inputs with --at {name}=…"))
-                    }
-                    Some(s) => d.hint(format!("did you mean `{s}`?")),
-                    None => d.hint(format!("its parameters are: {}", names.join(", "))),
+                let hint = if Input::from_name(name).is_some() {
+                    format!("`{name}` is an input (a cosine), not a parameter; `lobe eval` takes inputs with --at {name}=…")
+                } else {
+                    front::did_you_mean(name, &names, "its parameters are: ")
                 };
-                ds.push(d);
+                ds.push(Diagnostic::error(format!("the formula has no parameter `{name}`")).hint(hint));
             }
         }
     }

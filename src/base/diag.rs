@@ -5,13 +5,13 @@
 //! underlined (codespan-reporting), which the CLI prints and the snapshot tests compare whole.
 
 use super::span::{line_col, Span};
-
-/// Longest source line a diagnostic quotes; longer ones are referred to by line and column.
-pub const MAX_ECHOED_LINE: usize = 1000;
 use codespan_reporting::diagnostic::{Diagnostic as CsDiag, Label};
 use codespan_reporting::files::SimpleFile;
 use codespan_reporting::term::{self, termcolor::Buffer};
 use std::fmt;
+
+/// Longest source line a diagnostic quotes; longer ones are referred to by line and column.
+pub const MAX_ECHOED_LINE: usize = 1000;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Severity {

@@ -40,13 +40,7 @@ pub fn check(path: &Path, force: bool, is_ours: fn(&[u8]) -> bool) -> Result<(),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
         Err(e) => return Err(format!("cannot inspect `{}`: {e}", path.display())),
     };
-    if !meta.is_file() {
-        return Err(format!(
-            "`{}` is {}, not a regular file; lobe writes only regular files",
-            path.display(),
-            kind_of(&meta)
-        ));
-    }
+    regular(path, &meta)?;
     if !force {
         let mut prefix = Vec::new();
         std::fs::File::open(&target)
@@ -75,9 +69,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), String> {
     let target = resolve(path)?;
     let existing = std::fs::metadata(&target).ok();
     if let Some(m) = &existing {
-        if !m.is_file() {
-            return Err(format!("`{}` is {}, not a regular file; lobe writes only regular files", path.display(), kind_of(m)));
-        }
+        regular(path, m)?;
     }
     let dir = parent_dir(&target);
     let name = target.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
@@ -163,6 +155,14 @@ fn parent_dir(path: &Path) -> PathBuf {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),
     }
+}
+
+/// Refuses anything but a regular file at `path` (described by `m`), naming what it is.
+fn regular(path: &Path, m: &std::fs::Metadata) -> Result<(), String> {
+    if m.is_file() {
+        return Ok(());
+    }
+    Err(format!("`{}` is {}, not a regular file; lobe writes only regular files", path.display(), kind_of(m)))
 }
 
 fn kind_of(m: &std::fs::Metadata) -> &'static str {

@@ -9,6 +9,32 @@ use std::io::Read;
 /// Largest formula source accepted.
 pub const MAX_SOURCE_BYTES: usize = 1 << 20;
 
+/// Why [`read_regular_file`] read nothing.
+#[derive(Debug)]
+pub enum ReadError {
+    Io(std::io::Error),
+    /// A directory, device node, FIFO or socket: reading it could block or never end.
+    NotRegular,
+    /// More than the caller's limit.
+    TooLarge,
+}
+
+/// The bytes of the regular file at `path`, if it holds at most `max` bytes; never reads more than `max + 1`.
+/// For inputs that only make sense as files (scenes, meshes); formula sources also accept pipes (`-`,
+/// `<(…)`) and use [`read_source`].
+pub fn read_regular_file(path: &std::path::Path, max: u64) -> Result<Vec<u8>, ReadError> {
+    let file = std::fs::File::open(path).map_err(ReadError::Io)?;
+    if !file.metadata().map_err(ReadError::Io)?.is_file() {
+        return Err(ReadError::NotRegular);
+    }
+    let mut bytes = Vec::new();
+    file.take(max + 1).read_to_end(&mut bytes).map_err(ReadError::Io)?;
+    if bytes.len() as u64 > max {
+        return Err(ReadError::TooLarge);
+    }
+    Ok(bytes)
+}
+
 /// Reads a formula source from `path`, or standard input for `-`. Returns the display name and the text.
 pub fn read_source(path: &str) -> Result<(String, String), Diagnostic> {
     let mut bytes = Vec::new();

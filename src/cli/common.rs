@@ -163,13 +163,7 @@ pub fn check_set_names(formulas: &[&Formula], set: &[(String, f64)]) -> Result<(
     Ok(())
 }
 
-/// The hint for `name`, which is none of `known`: the closest of them, or else `intro` and the whole list.
-pub fn did_you_mean(name: &str, known: &[&str], intro: &str) -> String {
-    match crate::front::suggest(name, known.iter().copied()) {
-        Some(s) => format!("did you mean `{s}`?"),
-        None => format!("{intro}{}", known.join(", ")),
-    }
-}
+pub use crate::front::did_you_mean;
 
 #[cfg(test)]
 mod tests {

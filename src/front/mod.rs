@@ -83,6 +83,14 @@ pub fn parse_with_warnings(file: &str, src: &str) -> Result<(Formula, Diagnostic
     }
 }
 
+/// The hint for `name`, which is none of `known`: the closest of them, or else `intro` and the whole list.
+pub fn did_you_mean(name: &str, known: &[&str], intro: &str) -> String {
+    match suggest(name, known.iter().copied()) {
+        Some(s) => format!("did you mean `{s}`?"),
+        None => format!("{intro}{}", known.join(", ")),
+    }
+}
+
 /// The closest candidate by edit distance, if close enough to be a plausible typo.
 pub fn suggest<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
     let lname = name.to_lowercase();

@@ -142,17 +142,15 @@ pub const MAX_OBJ_BYTES: u64 = 256 << 20;
 /// accepts values the renderer cannot use (`vn 0 0 0`, coordinates beyond f32) — so every fault is named with
 /// its line.
 pub fn load_obj(path: &std::path::Path) -> Result<Mesh, ObjError> {
-    use std::io::Read;
-    let unreadable = |e: std::io::Error| ObjError { message: format!("cannot read: {e}"), line: None };
-    let file = std::fs::File::open(path).map_err(unreadable)?;
-    if !file.metadata().map(|m| m.is_file()).unwrap_or(false) {
-        return Err(ObjError { message: "not a regular file".into(), line: None });
-    }
-    let mut text = Vec::new();
-    file.take(MAX_OBJ_BYTES + 1).read_to_end(&mut text).map_err(unreadable)?;
-    if text.len() as u64 > MAX_OBJ_BYTES {
-        return Err(ObjError { message: format!("larger than {} MiB; is this the right file?", MAX_OBJ_BYTES >> 20), line: None });
-    }
+    use crate::base::source::{read_regular_file, ReadError};
+    let text = read_regular_file(path, MAX_OBJ_BYTES).map_err(|e| ObjError {
+        message: match e {
+            ReadError::Io(e) => format!("cannot read: {e}"),
+            ReadError::NotRegular => "not a regular file".into(),
+            ReadError::TooLarge => format!("larger than {} MiB; is this the right file?", MAX_OBJ_BYTES >> 20),
+        },
+        line: None,
+    })?;
     if let Some((line, message)) = obj_fault(&String::from_utf8_lossy(&text)) {
         return Err(ObjError { message, line: Some(line) });
     }

@@ -24,8 +24,12 @@ fn stderr(o: &Output) -> String {
 
 /// Asserts a clean failure: exit code 1 and an `error:` line, no panic or signal.
 fn assert_clean_error(o: &Output, what: &str, needle: &str) {
-    let e = stderr(o);
-    assert_eq!(o.status.code(), Some(1), "{what}: exit status {:?}, stderr:\n{e}", o.status);
+    assert_clean_exit(o.status.code(), &stderr(o), what, needle);
+}
+
+/// [`assert_clean_error`] on an exit code and standard error (for runners that collect output themselves).
+pub(crate) fn assert_clean_exit(code: Option<i32>, e: &str, what: &str, needle: &str) {
+    assert_eq!(code, Some(1), "{what}: exit status {code:?}, stderr:\n{e}");
     assert!(!e.contains("panicked") && !e.contains("RUST_BACKTRACE"), "{what} panicked:\n{e}");
     assert!(e.contains("error"), "{what}: no error message:\n{e}");
     assert!(e.contains(needle), "{what}: expected `{needle}` in:\n{e}");

@@ -59,9 +59,7 @@ fn lobe(args: &[&str]) -> Run {
 
 /// Exit code 1, an `error` line containing `needle`, no panic.
 fn refused(r: &Run, what: &str, needle: &str) {
-    assert_eq!(r.code, Some(1), "{what}: exit {:?}\n{}", r.code, r.stderr);
-    assert!(!r.stderr.contains("panicked"), "{what} panicked:\n{}", r.stderr);
-    assert!(r.stderr.contains("error") && r.stderr.contains(needle), "{what}: expected `{needle}` in:\n{}", r.stderr);
+    crate::cli::assert_clean_exit(r.code, &r.stderr, what, needle);
 }
 
 fn scratch(tag: &str) -> PathBuf {

@@ -162,10 +162,7 @@ fn build_material(
             Ok(false) if choice.formula.is_some() => {}
             Ok(false) => {
                 let names: Vec<&str> = decls.iter().map(|p| p.name.as_str()).collect();
-                let hint = match crate::front::suggest(k.get_ref(), names.iter().copied()) {
-                    Some(s) => format!("did you mean `{s}`?"),
-                    None => format!("the formula's parameters are: {}", names.join(", ")),
-                };
+                let hint = crate::front::did_you_mean(k.get_ref(), &names, "the formula's parameters are: ");
                 return Err(MatError::Scene(
                     Diagnostic::error(format!("materials.{mname}.params: the formula has no parameter `{}`", k.get_ref()))
                         .at(span_of(k.span()), "unknown parameter")
@@ -189,7 +186,7 @@ fn build_material(
         }
     }
     for (k, rgb) in [("color", d.color), ("specular", d.specular)] {
-        if !rgb.iter().all(|c| c.is_finite() && *c >= 0.0) {
+        if !super::schema::is_colour(&rgb) {
             return Err(here(m.span(), format!("materials.{mname}.{k} = {rgb:?} must be three finite numbers ≥ 0"), "this material"));
         }
     }

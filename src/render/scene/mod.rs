@@ -68,7 +68,7 @@ use super::{Light, LightKind, Object, Scene, MAX_SIZE};
 use crate::base::diag::{Diagnostic, Diagnostics};
 use crate::base::span::Span;
 use glam::DVec3;
-use schema::{LightType, MaterialDef, SceneFile, V3};
+use schema::{is_colour, LightType, MaterialDef, SceneFile, V3};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -189,24 +189,19 @@ pub(in crate::render) fn parse_geometry_deferred(name: &str, src: &str, base: &P
 pub const MAX_SCENE_BYTES: u64 = 4 << 20;
 
 fn read_scene(path: &Path) -> Result<(String, String, PathBuf), Diagnostics> {
-    use std::io::Read;
+    use crate::base::source::{read_regular_file, ReadError};
     let name = path.display().to_string();
     let fail = |d: Diagnostic| Diagnostics::single(name.clone(), d);
-    let cannot = |e: std::io::Error| {
-        fail(Diagnostic::error(format!("cannot read scene `{name}`: {e}")).hint("check the path; examples are in examples/scenes/"))
-    };
-    let file = std::fs::File::open(path).map_err(cannot)?;
-    if !file.metadata().map_err(cannot)?.is_file() {
-        return Err(fail(Diagnostic::error(format!("scene `{name}` is not a regular file")).hint("a scene is a TOML file")));
-    }
-    let mut bytes = Vec::new();
-    file.take(MAX_SCENE_BYTES + 1).read_to_end(&mut bytes).map_err(cannot)?;
-    if bytes.len() as u64 > MAX_SCENE_BYTES {
-        return Err(fail(
-            Diagnostic::error(format!("scene `{name}` is larger than {} MiB", MAX_SCENE_BYTES >> 20))
+    let bytes = read_regular_file(path, MAX_SCENE_BYTES).map_err(|e| {
+        fail(match e {
+            ReadError::Io(e) => {
+                Diagnostic::error(format!("cannot read scene `{name}`: {e}")).hint("check the path; examples are in examples/scenes/")
+            }
+            ReadError::NotRegular => Diagnostic::error(format!("scene `{name}` is not a regular file")).hint("a scene is a TOML file"),
+            ReadError::TooLarge => Diagnostic::error(format!("scene `{name}` is larger than {} MiB", MAX_SCENE_BYTES >> 20))
                 .hint("a scene is a page of TOML; put large meshes in .obj files referenced by `path`"),
-        ));
-    }
+        })
+    })?;
     let src = String::from_utf8(bytes).map_err(|_| {
         Diagnostics::single(name.clone(), Diagnostic::error(format!("scene `{name}` is not UTF-8 text")).hint("a scene is a TOML file"))
     })?;
@@ -273,7 +268,7 @@ fn check(name: &str, src: &str, base: &Path, size: Option<(usize, usize)>) -> Re
     // Colours and positions: finite, colours not negative (a NaN colour would blank a whole channel).
     let colour = |ds: &mut Vec<Diagnostic>, v: Option<&Spanned<V3>>, key: &str| -> DVec3 {
         let Some(v) = v else { return DVec3::ZERO };
-        if !v.get_ref().iter().all(|c| c.is_finite() && *c >= 0.0) {
+        if !is_colour(v.get_ref()) {
             err(ds, v.span(), format!("`{key}` = {:?} must be three finite numbers ≥ 0", v.get_ref()), "linear RGB");
         }
         DVec3::from(*v.get_ref())
@@ -290,7 +285,7 @@ fn check(name: &str, src: &str, base: &Path, size: Option<(usize, usize)>) -> Re
             err(&mut before, l.span(), format!("light[{i}]: `position` and `direction` must be finite"), "this light");
             continue;
         }
-        if !d.color.iter().all(|c| c.is_finite() && *c >= 0.0) {
+        if !is_colour(&d.color) {
             err(&mut before, l.span(), format!("light[{i}]: `color` = {:?} must be three finite numbers ≥ 0", d.color), "this light");
             continue;
         }

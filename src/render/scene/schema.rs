@@ -11,6 +11,11 @@ use toml::Spanned;
 
 pub(super) type V3 = [f64; 3];
 
+/// A usable linear-RGB colour: three finite numbers ≥ 0 (a NaN would blank a whole channel).
+pub(super) fn is_colour(c: &V3) -> bool {
+    c.iter().all(|v| v.is_finite() && *v >= 0.0)
+}
+
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(super) struct SceneFile {
