@@ -13,8 +13,9 @@
 //!   CLI's signal handler), and — for ones a killed process left behind — on the next write to the same
 //!   directory.
 //!
-//! [`check`] answers "may I write here?" early (before a long render); [`write`] checks again right before
-//! replacing, so a file another program put there in between (e.g. during `lobe watch`) is not clobbered.
+//! [`check`] answers "may I write here?"; commands call it early (before a long render) and again right before
+//! [`write_atomic`], so a file another program put there in between (e.g. during `lobe watch`) is not
+//! clobbered.
 
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
@@ -56,15 +57,10 @@ pub fn check(path: &Path, force: bool, is_ours: fn(&[u8]) -> bool) -> Result<(),
     Ok(())
 }
 
-/// [`check`], then [`write_atomic`]: the one way lobe replaces a file.
-pub fn write(path: &Path, bytes: &[u8], force: bool, is_ours: fn(&[u8]) -> bool) -> Result<(), String> {
-    check(path, force, is_ours)?;
-    write_atomic(path, bytes)
-}
-
 /// Writes `bytes` to `path` (following a symlink to its target) atomically: a temporary file in the same
 /// directory, fsync, rename; the replaced file's permissions are kept. On failure the temporary file is
-/// removed and `path` is untouched. Refuses non-regular targets. Does not check authorship: see [`write`].
+/// removed and `path` is untouched. Refuses non-regular targets. Does not check authorship: callers run
+/// [`check`] right before it.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), String> {
     let target = resolve(path)?;
     let existing = std::fs::metadata(&target).ok();
@@ -201,6 +197,11 @@ mod tests {
     }
     fn ours(b: &[u8]) -> bool {
         b.starts_with(b"LOBE")
+    }
+    /// What a command does: check, then write.
+    fn write(path: &Path, bytes: &[u8], force: bool, is_ours: fn(&[u8]) -> bool) -> Result<(), String> {
+        check(path, force, is_ours)?;
+        write_atomic(path, bytes)
     }
 
     #[test]

@@ -5,7 +5,7 @@
 
 use super::common::{self, CliError};
 use crate::ir::{Formula, Input, InputSet};
-use crate::render::image;
+use crate::base::output;
 use crate::{Backend, Kernel};
 use std::path::{Path, PathBuf};
 
@@ -135,10 +135,11 @@ pub struct Force {
 }
 
 impl Force {
-    /// Refuses `path` if it is a directory, its directory is missing, or it exists and is neither recognised
-    /// by `is_ours` nor `--force`d. Commands call this before doing the work, so a bad path costs nothing.
+    /// Refuses `path` if it is not a regular file, its directory is missing, or it exists and is neither
+    /// recognised by `is_ours` nor `--force`d ([`output::check`]). Commands call this before doing the work, so
+    /// a bad path costs nothing.
     pub fn check(&self, path: &Path, is_ours: fn(&[u8]) -> bool) -> Result<(), CliError> {
-        image::check_output_path(path, self.on, is_ours)
+        output::check(path, self.on, is_ours)
             .map_err(|m| CliError::hint(m, "choose another output path, or pass --force to replace it"))
     }
 
@@ -146,7 +147,7 @@ impl Force {
     /// and renames it over `path`: a failure never leaves a half-written file at the user's path.
     pub fn write(&self, path: &Path, bytes: &[u8], is_ours: fn(&[u8]) -> bool) -> Result<(), CliError> {
         self.check(path, is_ours)?;
-        image::write_atomic(path, bytes).map_err(CliError::msg)
+        output::write_atomic(path, bytes).map_err(CliError::msg)
     }
 }
 

@@ -106,13 +106,10 @@ pub fn is_lobe_png(bytes: &[u8]) -> bool {
     }
 }
 
-/// Output files follow one policy for every command (regular files only, authorship from a bounded prefix,
-/// atomic replace): [`crate::base::output`].
-pub use crate::base::output::{check as check_output_path, write as write_output, write_atomic};
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::base::output::{check as check_output_path, write_atomic};
 
     #[test]
     fn transfer_matches_definitions() {
