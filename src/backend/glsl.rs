@@ -68,7 +68,8 @@ const RESERVED: &[&str] = &[
 ];
 
 /// Shader identifiers for the formula's parameters (by index). A name that is reserved in GLSL or WGSL, looks
-/// like a temporary (`t0`), starts with `gl_` or `_`, or contains `__` (reserved in both languages) becomes
+/// like a temporary (`t0`) or the exported function (`lobe_…`), starts with `gl_` or `_`, or contains `__`
+/// (reserved in both languages) becomes
 /// `p_NAME` with underscores collapsed, made unique; every other name is kept, so an exported signature reads
 /// as the .brdf file does.
 pub fn param_names(f: &Formula) -> Vec<String> {
