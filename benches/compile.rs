@@ -18,7 +18,7 @@ fn bench_compile(c: &mut Criterion) {
         let mut g = c.benchmark_group(format!("compile/{}", e.id));
         g.warm_up_time(Duration::from_millis(300)).measurement_time(Duration::from_secs(1)).sample_size(30);
         g.bench_function("jit_codegen", |b| {
-            b.iter(|| lobe::backend::jit::jit_kernel_uncached(black_box(&k.formula)).map(|k| k.nodes()))
+            b.iter(|| lobe::backend::jit::jit_kernel_uncached(black_box(&k.formula), lobe::Mode::Precise).map(|k| k.nodes()))
         });
         let opts = Options { backend: Backend::Jit, ..Options::default() };
         let old = lobe::backend::jit::set_cache_capacity(0);

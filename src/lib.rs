@@ -31,6 +31,7 @@ pub mod render;
 pub mod report;
 pub mod cli;
 
+pub use builtins::Mode;
 pub use backend::{Backend, Columns, Evaluator, Kernel};
 pub use base::diag::{Diagnostic, Diagnostics};
 pub use ir::{Formula, Input, N_INPUTS};
@@ -47,6 +48,8 @@ pub struct Options {
     pub bake: Vec<(String, f64)>,
     /// Skip the simplifier (for testing the simplifier itself against the unsimplified formula).
     pub no_simplify: bool,
+    /// Which definition of the transcendental builtins the kernel runs.
+    pub math: Mode,
 }
 
 /// Parses, lowers and simplifies a formula, then builds its kernel for the chosen backend.
@@ -57,7 +60,7 @@ pub fn compile_source(file: &str, src: &str, opts: &Options) -> Result<Kernel, D
 
 /// [`compile_source`] for an already lowered formula.
 pub fn compile_formula(f: Formula, opts: &Options) -> Result<Kernel, Diagnostics> {
-    build_kernel(Arc::new(simplified(&f, opts)?), opts.backend)
+    build_kernel(Arc::new(simplified(&f, opts)?), opts.backend, opts.math)
 }
 
 /// The simplified formula with `opts.bake` folded in (`--set` names and ranges checked first).
@@ -67,13 +70,13 @@ pub fn simplified(f: &Formula, opts: &Options) -> Result<Formula, Diagnostics> {
 }
 
 /// Builds the evaluator for an already simplified formula.
-pub fn build_kernel(f: Arc<Formula>, backend: Backend) -> Result<Kernel, Diagnostics> {
+pub fn build_kernel(f: Arc<Formula>, backend: Backend, math: Mode) -> Result<Kernel, Diagnostics> {
     let t = Instant::now();
     let ev: Arc<dyn Evaluator> = match backend {
-        Backend::Interp => Arc::new(backend::interp::Interp::new(&f)),
-        Backend::Jit => backend::jit::kernel_evaluator(&f).map_err(|d| Diagnostics::single(&f.file, d))?,
+        Backend::Interp => Arc::new(backend::interp::Interp::with_mode(&f, math)),
+        Backend::Jit => backend::jit::kernel_evaluator(&f, math).map_err(|d| Diagnostics::single(&f.file, d))?,
     };
-    Ok(Kernel::new(f, backend, ev, t.elapsed()))
+    Ok(Kernel::new(f, backend, math, ev, t.elapsed()))
 }
 
 /// Checks `--set` names and ranges against the formula's declared parameters.

@@ -19,6 +19,6 @@ impl Benched {
     /// The Rust twin behind the same `Evaluator` interface as the JIT (same dispatch cost).
     pub fn twin_kernel(&self, like: &Kernel) -> Kernel {
         let ev = Arc::new(lobe::backend::FnEvaluator(self.twin()));
-        Kernel::new(like.formula.clone(), Backend::Interp, ev, Default::default())
+        Kernel::new(like.formula.clone(), Backend::Interp, lobe::Mode::Precise, ev, Default::default())
     }
 }

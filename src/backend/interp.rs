@@ -2,14 +2,15 @@
 //!
 //! Design: the IR arena is already in topological order, so "compiling" for the interpreter is flattening the
 //! live nodes into a `Vec<Instr>` with operand slots resolved to indices into a scratch array; evaluation is
-//! one forward loop with a `match` per instruction. Evaluation is in f64 and calls the builtins table's own
-//! functions, so the JIT (which calls the same functions) agrees bit for bit on transcendental builtins.
+//! one forward loop with a `match` per instruction. Evaluation is in f64; builtins run the table's definition in
+//! the interpreter's math mode ([`Builtin::eval_in`]: the math library's code on `f64`), the same code the JIT
+//! emits, so the two agree bit for bit.
 //!
 //! Cost: one dispatch (the `match`) and one scratch write per live node, so time grows linearly with the
 //! simplified formula's size; this per-node overhead is what the JIT removes (measured ratios and times:
 //! BENCHMARKS.md).
 
-use crate::builtins::Builtin;
+use crate::builtins::{Builtin, Mode};
 use crate::ir::{BinOp, Formula, Node, N_INPUTS};
 use super::{Columns, Evaluator};
 use std::cell::RefCell;
@@ -32,6 +33,8 @@ pub struct Interp {
     code: Vec<Instr>,
     /// Number of parameters the formula declares (the params slice must be at least this long).
     n_params: usize,
+    /// Which definition of the transcendental builtins runs.
+    mode: Mode,
 }
 
 thread_local! {
@@ -39,7 +42,12 @@ thread_local! {
 }
 
 impl Interp {
+    /// The interpreter in precise math mode.
     pub fn new(f: &Formula) -> Interp {
+        Interp::with_mode(f, Mode::Precise)
+    }
+
+    pub fn with_mode(f: &Formula, mode: Mode) -> Interp {
         let (ir, root) = f.ir.compact(f.root);
         let code = ir
             .nodes()
@@ -58,7 +66,7 @@ impl Interp {
             })
             .collect::<Vec<_>>();
         debug_assert_eq!(root.index() + 1, code.len(), "compact puts the root last");
-        Interp { code, n_params: f.params.len() }
+        Interp { code, n_params: f.params.len(), mode }
     }
 
     /// Number of instructions (live IR nodes).
@@ -79,9 +87,9 @@ impl Interp {
                 Instr::Param(p) => params.get(p as usize).copied().unwrap_or(f64::NAN),
                 Instr::Neg(a) => -s[a as usize],
                 Instr::Bin(op, a, b) => op.apply(s[a as usize], s[b as usize]),
-                Instr::Call1(f, a) => f.eval(&[s[a as usize]]),
-                Instr::Call2(f, a, b) => f.eval(&[s[a as usize], s[b as usize]]),
-                Instr::Call3(f, a, b, c) => f.eval(&[s[a as usize], s[b as usize], s[c as usize]]),
+                Instr::Call1(f, a) => f.eval_in(self.mode, &[s[a as usize]]),
+                Instr::Call2(f, a, b) => f.eval_in(self.mode, &[s[a as usize], s[b as usize]]),
+                Instr::Call3(f, a, b, c) => f.eval_in(self.mode, &[s[a as usize], s[b as usize], s[c as usize]]),
             };
             s.push(v);
         }

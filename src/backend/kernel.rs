@@ -8,6 +8,7 @@
 //! The checks are written against [`Evaluator`], not `Kernel`, so they can also run on a plain Rust closure
 //! (the hand-written twins used in tests and benches).
 
+use crate::builtins::Mode;
 use crate::ir::{Formula, Input, InputSet, N_INPUTS};
 use std::sync::Arc;
 use std::time::Duration;
@@ -87,14 +88,22 @@ impl std::str::FromStr for Backend {
 pub struct Kernel {
     pub formula: Arc<Formula>,
     pub backend: Backend,
+    /// The math mode the builtins were compiled in.
+    pub math: Mode,
     evaluator: Arc<dyn Evaluator>,
     /// Code generation time (zero for the interpreter beyond its flattening).
     pub compile_time: Duration,
 }
 
 impl Kernel {
-    pub fn new(formula: Arc<Formula>, backend: Backend, evaluator: Arc<dyn Evaluator>, compile_time: Duration) -> Kernel {
-        Kernel { formula, backend, evaluator, compile_time }
+    pub fn new(
+        formula: Arc<Formula>,
+        backend: Backend,
+        math: Mode,
+        evaluator: Arc<dyn Evaluator>,
+        compile_time: Duration,
+    ) -> Kernel {
+        Kernel { formula, backend, math, evaluator, compile_time }
     }
 
     /// Inputs the formula reads; the renderer computes only these.
@@ -126,6 +135,7 @@ impl std::fmt::Debug for Kernel {
         f.debug_struct("Kernel")
             .field("formula", &self.formula.to_program_text())
             .field("backend", &self.backend)
+            .field("math", &self.math)
             .field("compile_time", &self.compile_time)
             .finish()
     }

@@ -31,7 +31,7 @@ pub struct AccuracyArgs {
 }
 
 pub fn run(a: &AccuracyArgs) -> Result<(), CliError> {
-    let (k, r) = a.against.kernels(&a.set.list(), a.backend.kind)?;
+    let (k, r) = a.against.kernels(&a.set.list(), &a.backend)?;
     print!("{}", report(a, &k, &r)?);
     Ok(())
 }

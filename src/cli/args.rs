@@ -31,8 +31,8 @@ impl FormulaSource {
     }
 
     /// Loads the formula and compiles it with `set` baked in.
-    pub fn kernel(&self, set: &[(String, f64)], backend: Backend) -> Result<Kernel, CliError> {
-        common::load_kernel(self.file.as_deref(), self.expr.as_deref(), set, backend)
+    pub fn kernel(&self, set: &[(String, f64)], backend: Backend, math: crate::Mode) -> Result<Kernel, CliError> {
+        common::load_kernel(self.file.as_deref(), self.expr.as_deref(), set, backend, math)
     }
 }
 
@@ -59,12 +59,30 @@ impl Params {
     }
 }
 
-/// `--backend jit|interp`.
+/// `--backend jit|interp` and `--math precise|fast`.
 #[derive(clap::Args, Clone, Copy, Debug)]
 pub struct BackendArg {
     /// Evaluation backend: `jit` (Cranelift) or `interp` (the reference interpreter).
     #[arg(id = "backend", long = "backend", value_name = "BACKEND", default_value = "jit")]
     pub kind: Backend,
+    #[command(flatten)]
+    pub math: MathArg,
+}
+
+impl BackendArg {
+    /// Compile options for this backend and math mode with `bake` baked in.
+    pub fn options(&self, bake: Vec<(String, f64)>) -> crate::Options {
+        crate::Options { backend: self.kind, bake, math: self.math.mode, ..crate::Options::default() }
+    }
+}
+
+/// `--math precise|fast`: which definition of the transcendental builtins kernels run.
+#[derive(clap::Args, Clone, Copy, Debug)]
+pub struct MathArg {
+    /// Math mode: `precise` (every builtin within a few ulp, the default) or `fast` (within 1e-6, fewer
+    /// operations); `lobe check` lists each builtin's bound.
+    #[arg(id = "math", long = "math", value_name = "MODE", default_value = "precise")]
+    pub mode: crate::Mode,
 }
 
 /// `--json`: one JSON object on standard output instead of the report.
@@ -116,8 +134,11 @@ pub struct AgainstReference {
 
 impl AgainstReference {
     /// The formula compiled with `set` baked, and the reference with its defaults, both on `backend`.
-    pub fn kernels(&self, set: &[(String, f64)], backend: Backend) -> Result<(Kernel, Kernel), CliError> {
-        Ok((self.formula.kernel(set, backend)?, common::load_kernel(Some(&self.reference), None, &[], backend)?))
+    /// The formula's kernel in `b`'s backend and math mode, and the reference's (precise: it is the yardstick).
+    pub fn kernels(&self, set: &[(String, f64)], b: &BackendArg) -> Result<(Kernel, Kernel), CliError> {
+        let k = self.formula.kernel(set, b.kind, b.math.mode)?;
+        let r = common::load_kernel(Some(&self.reference), None, &[], b.kind, crate::Mode::Precise)?;
+        Ok((k, r))
     }
 
     /// The lobe variables of the formula `k` ([`LobeVar::resolve`]) and of the reference `r` (the one it reads).

@@ -130,7 +130,7 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
     };
     let formulas = files.iter().map(|p| common::load_formula(Some(p), None)).collect::<Result<Vec<_>, _>>()?;
     common::check_set_names(&formulas.iter().collect::<Vec<_>>(), &set)?;
-    let reference = common::load_kernel(Some(&a.reference), None, &[], Backend::Jit)?;
+    let reference = common::load_kernel(Some(&a.reference), None, &[], Backend::Jit, crate::Mode::Precise)?;
     let mut rows = Vec::new();
     let progress = !a.json.on && std::io::IsTerminal::is_terminal(&std::io::stderr());
     for (f, path) in formulas.iter().zip(&files) {

@@ -92,9 +92,15 @@ pub fn load_formula_with(path: Option<&str>, expr: Option<&str>, show_warnings: 
 }
 
 /// Loads a formula and compiles it with `--set` values baked in.
-pub fn load_kernel(path: Option<&str>, expr: Option<&str>, set: &[(String, f64)], backend: Backend) -> Result<Kernel, CliError> {
+pub fn load_kernel(
+    path: Option<&str>,
+    expr: Option<&str>,
+    set: &[(String, f64)],
+    backend: Backend,
+    math: crate::Mode,
+) -> Result<Kernel, CliError> {
     let f = load_formula(path, expr)?;
-    let opts = Options { backend, bake: set.to_vec(), ..Options::default() };
+    let opts = Options { backend, bake: set.to_vec(), math, ..Options::default() };
     Ok(crate::compile_formula(f, &opts)?)
 }
 

@@ -61,13 +61,13 @@ pub fn run(a: &EnergyArgs) -> Result<(), CliError> {
         return Err(CliError::hint("--set n conflicts with --range", "--range sweeps n; drop n from --set"));
     }
     let backend: Backend = a.backend.kind;
-    let k = a.formula.kernel(&set, backend)?;
+    let k = a.formula.kernel(&set, backend, a.backend.math.mode)?;
     let against = match (&a.against, &a.against_expr) {
         (None, None) => None,
         (file, expr) => {
             // A fitted coefficient reads no input by design: its "reads no input" warning is noise here.
             let f = common::load_formula_with(file.as_deref(), expr.as_deref(), false)?;
-            Some(crate::compile_formula(f, &crate::Options { backend, ..Default::default() })?)
+            Some(crate::compile_formula(f, &a.backend.options(vec![]))?)
         }
     };
     print!("{}", report(a, &k, against.as_ref())?);
@@ -276,7 +276,7 @@ pub(crate) mod tests {
 
     /// A kernel whose evaluator is a twin, with a formula declaring the twin's parameters and reading `input`.
     pub fn twin_kernel(t: Twin, input: Input, extra: &[(&str, f64, f64, f64)]) -> Kernel {
-        Kernel::new(Arc::new(power_formula(input, extra)), Backend::Interp, Arc::from(t.ev), std::time::Duration::ZERO)
+        Kernel::new(Arc::new(power_formula(input, extra)), Backend::Interp, crate::Mode::Precise, Arc::from(t.ev), std::time::Duration::ZERO)
     }
 
     #[derive(Parser)]
@@ -309,6 +309,7 @@ pub(crate) mod tests {
         let exact = Kernel::new(
             Arc::new(power_formula(Input::NH, &[])),
             Backend::Interp,
+            crate::Mode::Precise,
             Arc::new(crate::backend::FnEvaluator(|_: &[f64; 5], p: &[f64]| (p[0] + 2.0) / (2.0 * std::f64::consts::PI))),
             std::time::Duration::ZERO,
         );

@@ -34,9 +34,9 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
         let mut bake = set.clone();
         bake.extend(f.params.iter().filter(|p| !set.iter().any(|(k, _)| *k == p.name)).map(|p| (p.name.clone(), p.default)));
         let s = crate::simplified(&f, &crate::Options { bake, ..Default::default() })?;
-        crate::build_kernel(std::sync::Arc::new(crate::numerics::normalize::bake_coefficient(s)?), a.backend.kind)?
+        crate::build_kernel(std::sync::Arc::new(crate::numerics::normalize::bake_coefficient(s)?), a.backend.kind, a.backend.math.mode)?
     } else {
-        crate::compile_formula(f, &crate::Options { backend: a.backend.kind, bake: set.clone(), ..Default::default() })?
+        crate::compile_formula(f, &a.backend.options(set.clone()))?
     };
     let mut x = [0.0; N_INPUTS];
     for (name, v) in a.at.concat() {

@@ -27,7 +27,7 @@ fn is_ours(bytes: &[u8]) -> bool {
 }
 
 pub fn run(a: &ExportArgs) -> Result<(), CliError> {
-    let k = a.formula.kernel(&a.set.list(), crate::Backend::Interp)?;
+    let k = a.formula.kernel(&a.set.list(), crate::Backend::Interp, crate::Mode::Precise)?;
     let d = if a.wgsl { Dialect::Wgsl } else { Dialect::Glsl };
     let text = glsl::export(&k.formula, d);
     match &a.out.path {

@@ -70,7 +70,7 @@ pub fn run(a: &FitArgs) -> Result<(), CliError> {
             return Err(CliError::hint(format!("`{name}` is both searched (--param) and fixed (--set)"), "drop one of them"));
         }
     }
-    let (k, r) = a.against.kernels(&set, a.backend.kind)?;
+    let (k, r) = a.against.kernels(&set, &a.backend)?;
     print!("{}", report(a, &k, &r)?);
     Ok(())
 }

@@ -8,7 +8,7 @@ use super::common::{self, CliError};
 use crate::base::json;
 use crate::ir::Formula;
 use crate::numerics::sweep::{sweep, Example, RegionStats, SweepOptions};
-use crate::Options;
+
 use serde::Serialize;
 
 #[derive(clap::Args, Debug)]
@@ -105,7 +105,7 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliEr
     let set = a.set.list();
     let mut decls = f.params.clone();
     let u = f.unclamped();
-    let k = crate::compile_formula(u, &Options { backend: a.backend.kind, bake: set.clone(), ..Options::default() })?;
+    let k = crate::compile_formula(u, &a.backend.options(set.clone()))?;
     // Baked parameters are fixed: sweep them at their value only.
     for (name, v) in &set {
         if let Some(i) = f.param_index(name) {

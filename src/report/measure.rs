@@ -103,12 +103,12 @@ pub fn measure_kernel(k: &Kernel, params: &[f64], opts: MeasureOptions) -> Resul
     let mut compiles: Vec<Duration> = (0..5)
         .map(|_| {
             let t = Instant::now();
-            crate::backend::jit::jit_kernel_uncached(f).map(|_| t.elapsed())
+            crate::backend::jit::jit_kernel_uncached(f, k.math).map(|_| t.elapsed())
         })
         .collect::<Result<_, _>>()?;
     compiles.sort();
-    let jit = crate::backend::jit::jit_kernel(f)?;
-    let interp = Interp::new(f);
+    let jit = crate::backend::jit::jit_kernel(f, k.math)?;
+    let interp = Interp::with_mode(f, k.math);
 
     let n = opts.points.max(1);
     let rows = sample_points(n, 0x5EED);

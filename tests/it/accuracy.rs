@@ -11,12 +11,18 @@ use std::sync::Arc;
 #[test]
 fn batched_interpreter_matches_scalar_twin() {
     // Interp::eval_batch (the batched path) against the Rust twin: identical metrics.
-    let k = build_kernel(Arc::new(power_lobe(Input::NH)), Backend::Interp).unwrap();
+    let k = build_kernel(Arc::new(power_lobe(Input::NH)), Backend::Interp, lobe::Mode::Precise).unwrap();
     let s = twins::schlick();
     let opts = AccuracyOptions { n_max: 60, ..Default::default() };
     let a = accuracy(s.ev.as_ref(), &[1.0], Input::NH, &k, &[1.0], Input::NH, &opts).unwrap();
     let b = accuracy(s.ev.as_ref(), &[1.0], Input::NH, twins::blinn().ev.as_ref(), &[1.0], Input::NH, &opts).unwrap();
-    assert_eq!(a, b);
+    // The kernel's pow is lobe's (≤ 1 ulp), the twin's libm's: the metrics agree to rounding, at the same places.
+    let close = |x: f64, y: f64| (x - y).abs() <= 1e-13 * y.abs().max(1e-300);
+    assert!(close(a.mean_abs_grid, b.mean_abs_grid) && close(a.max_abs.value, b.max_abs.value));
+    assert_eq!((a.max_abs.n, a.max_abs.angle_deg, a.epicenter.n), (b.max_abs.n, b.max_abs.angle_deg, b.epicenter.n));
+    for (x, y) in a.max_abs_per_n.iter().zip(&b.max_abs_per_n) {
+        assert!(x.0 == y.0 && close(x.1, y.1) && x.2 == y.2, "{x:?} vs {y:?}");
+    }
 }
 
 #[test]
@@ -31,7 +37,7 @@ fn published_error_rows_keep_their_verdicts() {
 fn sweep_of_the_clamped_kernel_is_clean() {
     // Blinn with the lowering's clamps: no NaN, inf or negative anywhere, including negative and >1 cosines.
     let f = power_lobe(Input::NH);
-    let k = build_kernel(Arc::new(f.clone()), Backend::Interp).unwrap();
+    let k = build_kernel(Arc::new(f.clone()), Backend::Interp, lobe::Mode::Precise).unwrap();
     let r = sweep(&k, f.used_inputs(), &f.params, &SweepOptions::default());
     assert_eq!((r.total.nan, r.total.inf, r.total.negative), (0, 0, 0));
     assert!(r.regions.iter().any(|s| s.region == "negative" && s.evaluated > 0));

@@ -5,13 +5,14 @@
 //!     and hard inputs; (b) the catalogue: every `examples/brdfs/*.brdf` through `lobe::compile_source`, and
 //!     where a hand-written Rust twin exists (`lobe::numerics::twins`), the twin as a third opinion.
 //!
-//! Agreement: within 4 ulp, or both NaN, or the same infinity. (In practice the JIT is bit-identical: it calls
-//! the same libm functions and Cranelift does not reassociate or fuse floating-point operations.)
+//! Both math modes. Agreement between backends: the same bits (or both NaN) — the JIT emits the math library's
+//! code the interpreter runs, and Cranelift neither reassociates nor fuses floating-point operations. Against
+//! the Rust twins (which call libm): within 4 ulp, or both NaN, or the same infinity.
 
 use lobe::builtins::Builtin;
 use lobe::base::span::Span;
 use lobe::ir::{BinOp, Formula, Input, Ir, Meta, NodeId, ParamDecl, N_INPUTS};
-use lobe::{compile_formula, Backend, Columns, Evaluator, Kernel, Options};
+use lobe::{compile_formula, Backend, Columns, Evaluator, Kernel, Mode, Options};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestCaseError, TestRunner};
 
@@ -197,10 +198,11 @@ fn check(jit: &Kernel, interp: &Kernel, pts: &[[f64; N_INPUTS]], sets: &[Vec<f64
         for (k, x) in pts.iter().enumerate() {
             let want = interp.eval(x, ps);
             let got = jit.eval(x, ps);
-            if !agree(want, got) || !agree(want, out[k]) {
+            if !identical(want, got) || !identical(want, out[k]) {
                 return Err(format!(
-                    "{}\n  at x = {x:?}, params = {ps:?}: interp {want:e}, jit scalar {got:e}, jit batched {:e}",
+                    "{} ({} math)\n  at x = {x:?}, params = {ps:?}: interp {want:e}, jit scalar {got:e}, jit batched {:e}",
                     interp.formula.to_text(),
+                    interp.math,
                     out[k]
                 ));
             }
@@ -209,8 +211,13 @@ fn check(jit: &Kernel, interp: &Kernel, pts: &[[f64; N_INPUTS]], sets: &[Vec<f64
     Ok(())
 }
 
-fn both(f: Formula, bake: Vec<(String, f64)>) -> (Kernel, Kernel) {
-    let opts = |backend| Options { backend, bake: bake.clone(), no_simplify: false };
+/// The same bits, or both NaN (payloads may differ).
+fn identical(a: f64, b: f64) -> bool {
+    a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan())
+}
+
+fn both(f: Formula, bake: Vec<(String, f64)>, math: Mode) -> (Kernel, Kernel) {
+    let opts = |backend| Options { backend, bake: bake.clone(), no_simplify: false, math };
     let jit = compile_formula(f.clone(), &opts(Backend::Jit)).expect("jit compiles");
     let interp = compile_formula(f, &opts(Backend::Interp)).expect("interp builds");
     assert_eq!(jit.backend, Backend::Jit);
@@ -229,11 +236,12 @@ fn random_formulas_agree() {
     let mut runner = TestRunner::new(Config { cases: cases(), failure_persistence: None, ..Config::default() });
     // Baked values must be finite (`resolve_bake` rejects the rest, as `--set` does).
     let finite: Vec<f64> = SPECIAL.iter().copied().filter(|v| v.is_finite()).collect();
-    let strategy = (expr(), any::<bool>(), prop::option::of((0..N_PARAMS, prop::sample::select(finite))));
-    let result = runner.run(&strategy, |(e, policy, bake)| {
+    let modes = prop::sample::select(Mode::ALL.to_vec());
+    let strategy = (expr(), any::<bool>(), prop::option::of((0..N_PARAMS, prop::sample::select(finite))), modes);
+    let result = runner.run(&strategy, |(e, policy, bake, math)| {
         let f = formula(&e, policy);
         let bake = bake.map(|(p, v)| vec![(f.params[p as usize].name.clone(), v)]).unwrap_or_default();
-        let (jit, interp) = both(f, bake);
+        let (jit, interp) = both(f, bake, math);
         check(&jit, &interp, &pts, &param_sets()).map_err(TestCaseError::fail)
     });
     if let Err(e) = result {
@@ -256,17 +264,19 @@ fn every_builtin_on_dense_inputs() {
             .zip([false, false, true])
             .map(|(i, c)| E::Bin(BinOp::Mul, Box::new(E::In(*i, c)), Box::new(E::P(0))))
             .collect();
-        let (jit, interp) = both(formula(&E::Call(f, args), false), vec![]);
-        check(&jit, &interp, &pts, &param_sets()).unwrap_or_else(|e| panic!("{f}: {e}"));
-        check(&jit, &interp, &pts[..1], &param_sets()).unwrap_or_else(|e| panic!("{f}: {e}"));
+        for math in Mode::ALL {
+            let (jit, interp) = both(formula(&E::Call(f, args.clone()), false), vec![], math);
+            check(&jit, &interp, &pts, &param_sets()).unwrap_or_else(|e| panic!("{f}: {e}"));
+            check(&jit, &interp, &pts[..1], &param_sets()).unwrap_or_else(|e| panic!("{f}: {e}"));
+        }
     }
 }
 
 // ---- the catalogue -------------------------------------------------------------------------------------------
 
-/// Every `examples/brdfs/*.brdf` compiled by `lobe::compile_source` for both backends, as (stem, JIT,
-/// interpreter), sorted by stem.
-fn catalogue() -> Vec<(String, Kernel, Kernel)> {
+/// Every `examples/brdfs/*.brdf` compiled by `lobe::compile_source` for both backends in math mode `math`, as
+/// (stem, JIT, interpreter), sorted by stem.
+fn catalogue(math: Mode) -> Vec<(String, Kernel, Kernel)> {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/brdfs");
     let entries = std::fs::read_dir(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
     let mut files: Vec<_> =
@@ -279,7 +289,7 @@ fn catalogue() -> Vec<(String, Kernel, Kernel)> {
             let name = path.display().to_string();
             let src = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{name}: {e}"));
             let build = |backend| {
-                lobe::compile_source(&name, &src, &Options { backend, ..Options::default() })
+                lobe::compile_source(&name, &src, &Options { backend, math, ..Options::default() })
                     .unwrap_or_else(|d| panic!("{name} does not compile:\n{}", d.render(false)))
             };
             let stem = path.file_stem().unwrap().to_string_lossy().into_owned();
@@ -293,7 +303,7 @@ fn catalogue() -> Vec<(String, Kernel, Kernel)> {
 #[test]
 fn catalogue_files_agree() {
     let pts = points(&lobe::report::measure::sample_points(64, 5));
-    for (stem, jit, interp) in catalogue() {
+    for (stem, jit, interp) in Mode::ALL.into_iter().flat_map(catalogue) {
         let mut sets = param_sets();
         sets.push(jit.default_params());
         check(&jit, &interp, &pts, &sets).unwrap_or_else(|e| panic!("{stem}: {e}"));
@@ -306,7 +316,7 @@ fn catalogue_files_agree() {
 #[test]
 fn catalogue_files_agree_with_rust_twins() {
     let pts = points(&lobe::report::measure::sample_points(200, 9));
-    let catalogue = catalogue();
+    let catalogue = catalogue(Mode::Precise);
     for def in lobe::numerics::twins::DEFS {
         let Some((stem, jit, interp)) = catalogue.iter().find(|(stem, ..)| stem == def.stem) else {
             panic!("twin {}: no file examples/brdfs/{}.brdf", def.name, def.stem)

@@ -15,7 +15,7 @@ pub fn power_lobe(input: Input) -> Formula {
 
 #[test]
 fn phong_coefficient_is_exact_on_the_interpreter() {
-    let k = build_kernel(Arc::new(power_lobe(Input::VR)), Backend::Interp).unwrap();
+    let k = build_kernel(Arc::new(power_lobe(Input::VR)), Backend::Interp, lobe::Mode::Precise).unwrap();
     for n in [1.0, 10.0, 100.0, 1000.0] {
         let c = normalization_coef(&k, &[n], Input::VR).unwrap();
         let exact = (n + 2.0) / (2.0 * PI);
@@ -25,12 +25,13 @@ fn phong_coefficient_is_exact_on_the_interpreter() {
 
 #[test]
 fn kernel_and_twin_agree() {
-    let k = build_kernel(Arc::new(power_lobe(Input::NH)), Backend::Interp).unwrap();
+    let k = build_kernel(Arc::new(power_lobe(Input::NH)), Backend::Interp, lobe::Mode::Precise).unwrap();
     let t = twins::blinn();
     for n in [3.0, 77.0, 999.0] {
         let a = lobe_integral(&k, &[n], Input::NH).unwrap().integral;
         let b = lobe_integral(t.ev.as_ref(), &[n], Input::NH).unwrap().integral;
-        assert_eq!(a, b);
+        // The kernel's pow is lobe's (≤ 1 ulp), the twin's is libm's: the integrals agree to rounding.
+        assert!((a / b - 1.0).abs() < 1e-14, "n={n}: {a} vs {b}");
     }
 }
 
@@ -48,7 +49,7 @@ fn simpson(f: impl Fn(f64) -> f64, a: f64, b: f64, m: usize) -> f64 {
 fn blinn_albedo_at_normal_incidence_uses_the_real_half_vector() {
     // With L = N and V at θ, NH = cos(θ/2): ρ(0) = 2π ∫₀^{π/2} cos(θ/2)^n cos θ sin θ dθ — not the lobe
     // convention's 2π/(n+2). The full mode measures the real geometry.
-    let k = build_kernel(Arc::new(power_lobe(Input::NH)), Backend::Interp).unwrap();
+    let k = build_kernel(Arc::new(power_lobe(Input::NH)), Backend::Interp, lobe::Mode::Precise).unwrap();
     for n in [1.0, 20.0, 200.0] {
         let r = albedo(&k, &[n], 0.0).unwrap();
         let exact = 2.0 * PI * simpson(|t| (t / 2.0).cos().powf(n) * t.cos() * t.sin(), 0.0, PI / 2.0, 20_000);

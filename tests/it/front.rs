@@ -2,6 +2,7 @@
 //! through the reference interpreter on the *unsimplified* formula and compared with values computed by hand
 //! in Rust; and robustness on hostile input (never a panic, never a stack overflow).
 
+use lobe::builtins::Builtin;
 use lobe::front::{parse, parse_with_warnings};
 use lobe::backend::interp::Interp;
 use lobe::{Evaluator, Formula};
@@ -351,16 +352,17 @@ fn value(e: &E, x: &[f64; 5]) -> f64 {
                 '-' => a - b,
                 '*' => a * b,
                 '/' => a / b,
-                _ => a.powf(b),
+                _ => Builtin::Pow.eval(&[a, b]),
             }
         }
         E::Call(f, args) => {
             let v: Vec<f64> = args.iter().map(|a| value(a, x)).collect();
             match *f {
-                "cos" => v[0].cos(),
-                "exp" => v[0].exp(),
+                // The builtins table is the reference for transcendental functions (lobe's math library).
+                "cos" => Builtin::Cos.eval(&v),
+                "exp" => Builtin::Exp.eval(&v),
                 "sqrt" => v[0].sqrt(),
-                "acos" => nanmin(nanmax(v[0], -1.0), 1.0).acos(),
+                "acos" => Builtin::Acos.eval(&v),
                 "min" => nanmin(v[0], v[1]),
                 "max" => nanmax(v[0], v[1]),
                 _ => nanmin(nanmax(v[0], v[1]), v[2]),

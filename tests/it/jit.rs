@@ -58,7 +58,7 @@ fn modified_schlick(k: f64) -> Formula {
 #[test]
 fn scalar_matches_interpreter_and_closed_form() {
     let f = blinn();
-    let k = jit::jit_kernel(&f).expect("compiles");
+    let k = jit::jit_kernel(&f, lobe::Mode::Precise).expect("compiles");
     let i = Interp::new(&f);
     for &(nh, n) in &[(0.9, 2.0), (0.5, 50.0), (1.0, 1000.0), (0.0, 1.0), (1.5, 3.0), (-0.2, 2.0)] {
         let x = [0.0, 0.0, nh, 0.0, 0.0];
@@ -71,7 +71,7 @@ fn scalar_matches_interpreter_and_closed_form() {
 #[test]
 fn live_parameter_change_needs_no_recompile() {
     let f = modified_schlick(1.25);
-    let k = jit::jit_kernel_uncached(&f).expect("compiles");
+    let k = jit::jit_kernel_uncached(&f, lobe::Mode::Precise).expect("compiles");
     let x = [0.0, 0.0, 0.8, 0.0, 0.0];
     let closed = |n: f64| 2.0 * 0.8 / (1.25 * (n - n * 0.8 + 1.25 * 0.8) * (n - n * 0.8 + 1.25 * 0.8));
     let a = k.eval(&x, &[10.0]);
@@ -88,7 +88,7 @@ fn live_parameter_change_needs_no_recompile() {
 #[test]
 fn batched_matches_scalar_for_every_length() {
     let f = modified_schlick(1.25);
-    let k = jit::jit_kernel(&f).expect("compiles");
+    let k = jit::jit_kernel(&f, lobe::Mode::Precise).expect("compiles");
     for len in [0usize, 1, 2, 3, 7, 8, 1000, 1001] {
         let nh: Vec<f64> = (0..len).map(|i| i as f64 / (len.max(2) - 1) as f64).collect();
         let cols = Columns::new([&[], &[], &nh, &[], &[]]);
@@ -104,7 +104,7 @@ fn batched_matches_scalar_for_every_length() {
 #[test]
 fn short_params_and_ragged_columns_follow_interpreter_semantics() {
     let f = blinn();
-    let k = jit::jit_kernel(&f).expect("compiles");
+    let k = jit::jit_kernel(&f, lobe::Mode::Precise).expect("compiles");
     let i = Interp::new(&f);
     // Missing parameter: NaN, not an out-of-bounds read.
     assert!(k.eval(&[0.0, 0.0, 0.5, 0.0, 0.0], &[]).is_nan());
@@ -123,19 +123,19 @@ fn short_params_and_ragged_columns_follow_interpreter_semantics() {
 
 #[test]
 fn cache_returns_the_same_code_for_the_same_structure() {
-    let a = jit::jit_kernel(&modified_schlick(1.375)).expect("compiles");
+    let a = jit::jit_kernel(&modified_schlick(1.375), lobe::Mode::Precise).expect("compiles");
     let mut other = modified_schlick(1.375);
     other.file = "elsewhere.brdf".into();
-    let b = jit::jit_kernel(&other).expect("compiles");
+    let b = jit::jit_kernel(&other, lobe::Mode::Precise).expect("compiles");
     assert!(a.same_code(&b));
     assert!(b.cached);
-    let c = jit::jit_kernel(&modified_schlick(1.5)).expect("compiles");
+    let c = jit::jit_kernel(&modified_schlick(1.5), lobe::Mode::Precise).expect("compiles");
     assert!(!a.same_code(&c));
 }
 
 #[test]
 fn build_kernel_uses_the_jit() {
-    let k = lobe::build_kernel(Arc::new(blinn()), Backend::Jit).expect("builds");
+    let k = lobe::build_kernel(Arc::new(blinn()), Backend::Jit, lobe::Mode::Precise).expect("builds");
     assert_eq!(k.backend, Backend::Jit);
     let x = [0.0, 0.0, 0.5, 0.0, 0.0];
     assert_eq!(k.eval(&x, &[3.0]), 0.125);
@@ -170,7 +170,7 @@ fn memory_child() {
     let Some(_) = statm_resident_pages() else { return };
     let run = |range: std::ops::Range<u32>| {
         for i in range {
-            let k = jit::jit_kernel_uncached(&modified_schlick(1.0 + f64::from(i) * 1e-6)).expect("compiles");
+            let k = jit::jit_kernel_uncached(&modified_schlick(1.0 + f64::from(i) * 1e-6), lobe::Mode::Precise).expect("compiles");
             std::hint::black_box(k.eval(&[0.0, 0.0, 0.5, 0.0, 0.0], &[50.0]));
             // Also build the lazily compiled batched kernel, whose code lives in the same module.
             let nh = [0.1, 0.2, 0.3];
@@ -270,7 +270,7 @@ fn unusual_shapes_compile_and_agree() {
     let columns = Columns::new(std::array::from_fn(|i| cols[i].as_slice()));
     for f in shapes {
         let params = f.default_params();
-        let k = jit::jit_kernel(&f).expect("compiles");
+        let k = jit::jit_kernel(&f, lobe::Mode::Precise).expect("compiles");
         let i = Interp::new(&f);
         let mut out = vec![0.0; pts.len()];
         k.eval_batch(&columns, &params, &mut out);
@@ -287,7 +287,7 @@ fn unusual_shapes_compile_and_agree() {
 /// calls (clamp/max are inline instructions).
 #[test]
 fn scalar_arithmetic_kernel_has_no_stack_traffic_or_calls() {
-    let (scalar, batch) = jit::disassemble(&modified_schlick(1.25)).expect("compiles");
+    let (scalar, batch) = jit::disassemble(&modified_schlick(1.25), lobe::Mode::Precise).expect("compiles");
     assert!(!scalar.is_empty() && !batch.is_empty());
     for bad in ["rsp", "call"] {
         let hits: Vec<&str> = scalar.lines().filter(|l| l.contains(bad) && !l.contains("rbp")).collect();
@@ -302,7 +302,7 @@ fn scalar_arithmetic_kernel_has_no_stack_traffic_or_calls() {
 /// `measure_kernel` runs all three paths and reports sane (finite, positive, ordered) statistics.
 #[test]
 fn measure_kernel_reports_all_paths() {
-    let k = lobe::build_kernel(Arc::new(modified_schlick(1.25)), Backend::Jit).expect("builds");
+    let k = lobe::build_kernel(Arc::new(modified_schlick(1.25)), Backend::Jit, lobe::Mode::Precise).expect("builds");
     let opts = lobe::report::measure::MeasureOptions { points: 64, samples: 5 };
     let m = lobe::report::measure::measure_kernel(&k, &[50.0], opts).expect("measures");
     for t in [m.scalar_jit, m.batched_jit, m.interp] {

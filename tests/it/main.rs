@@ -8,6 +8,7 @@ mod front;
 mod fuzz;
 mod hostile;
 mod jit;
+mod mathlib;
 mod parse_errors;
 mod simplify;
 mod accuracy;

@@ -1,13 +1,14 @@
 //! A bounded cache of compiled code keyed by the simplified IR's structure.
 //!
 //! Key: the nodes reachable from the root, in topological order (what [`Ir::compact`] produces), plus the root
-//! index. Spans and names are not part of the key, so the same formula from two files, or compiled twice,
+//! index and the math mode. Spans and names are not part of the key, so the same formula from two files, or compiled twice,
 //! hits. Constants are keyed by bit pattern, so `0` and `-0` are different formulas, as they are to IEEE.
 //!
 //! Bounded LRU: at most `capacity` entries; inserting into a full cache evicts the least recently used one
 //! (an O(capacity) scan, negligible next to a compile). Entries hold `Arc`s, so evicted code lives on until
 //! the last kernel using it is dropped, then its JIT memory is freed.
 
+use crate::builtins::Mode;
 use crate::ir::{Ir, Node};
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -17,12 +18,13 @@ use std::sync::Arc;
 pub struct Key {
     nodes: Vec<Node>,
     root: u32,
+    mode: Mode,
 }
 
 impl Key {
     /// `ir` must be compacted (nodes reachable from `root` only).
-    pub fn new(ir: &Ir, root: crate::ir::NodeId) -> Key {
-        Key { nodes: ir.nodes().to_vec(), root: root.0 }
+    pub fn new(ir: &Ir, root: crate::ir::NodeId, mode: Mode) -> Key {
+        Key { nodes: ir.nodes().to_vec(), root: root.0, mode }
     }
 }
 
@@ -104,7 +106,7 @@ mod tests {
         let x = ir.input(Input::NH, Span::default());
         let k = ir.konst(c, Span::default());
         let r = ir.bin(crate::ir::BinOp::Mul, x, k, Span::default());
-        Key::new(&ir, r)
+        Key::new(&ir, r, crate::Mode::Precise)
     }
 
     #[test]

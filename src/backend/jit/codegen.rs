@@ -19,7 +19,8 @@
 //! is a [`JitError`] rather than a panic.
 
 use super::JitError;
-use crate::builtins::{Builtin, Lowering};
+use crate::builtins::math::{self, Emit};
+use crate::builtins::{Builtin, Lowering, Mode};
 use crate::ir::{BinOp, Input, Ir, Node, NodeId, N_INPUTS};
 use cranelift_codegen::ir::condcodes::{FloatCC, IntCC};
 use cranelift_codegen::ir::immediates::Ieee64;
@@ -32,57 +33,39 @@ use cranelift_jit::JITModule;
 use cranelift_module::{FuncId, Linkage, Module};
 use std::marker::PhantomData;
 
-/// Builtins that lower to calls, with the module-level function id of each (indexed by `Builtin as usize`).
+/// Builtins with a C-library fallback (huge trigonometric arguments), with the module-level function id of
+/// each (indexed by `Builtin as usize`).
 pub(super) type Imports = [Option<FuncId>; Builtin::ALL.len()];
 
-/// Declares (as imports) exactly the `Call*` builtins the formula uses. The caller registered each symbol with
-/// the `JITBuilder`, so `finalize_definitions` can resolve every import.
+/// Builtins of `ir` that call a fallback symbol: the table's symbol and its C-library function.
+fn fallbacks(ir: &Ir) -> impl Iterator<Item = (Builtin, &'static str, extern "C" fn(f64) -> f64)> + '_ {
+    let mut seen = [false; Builtin::ALL.len()];
+    ir.nodes().iter().filter_map(move |n| match n {
+        Node::Call(b, _) if !std::mem::replace(&mut seen[*b as usize], true) => {
+            let info = b.info();
+            let f = b.libm1().filter(|_| info.lowering == Lowering::Math && !info.symbol.is_empty())?;
+            Some((*b, info.symbol, f))
+        }
+        _ => None,
+    })
+}
+
+/// Declares (as imports) the fallback functions the formula may call. The caller registered each symbol with
+/// the `JITBuilder` ([`used_symbols`]), so `finalize_definitions` can resolve every import.
 pub(super) fn declare_imports(module: &mut JITModule, ir: &Ir) -> Result<Imports, JitError> {
     let mut imports: Imports = [None; Builtin::ALL.len()];
-    for n in ir.nodes() {
-        if let Node::Call(b, _) = n {
-            let info = b.info();
-            let arity = match info.lowering {
-                Lowering::Inline => continue,
-                Lowering::Call1(_) => 1,
-                Lowering::Call2(_) => 2,
-            };
-            if imports[*b as usize].is_some() {
-                continue;
-            }
-            if info.symbol.is_empty() {
-                return Err(JitError::Internal(format!("builtin `{}` has a call lowering but no symbol", info.name)));
-            }
-            let mut sig = module.make_signature();
-            for _ in 0..arity {
-                sig.params.push(AbiParam::new(types::F64));
-            }
-            sig.returns.push(AbiParam::new(types::F64));
-            let id = module.declare_function(info.symbol, Linkage::Import, &sig)?;
-            imports[*b as usize] = Some(id);
-        }
+    for (b, symbol, _) in fallbacks(ir) {
+        let mut sig = module.make_signature();
+        sig.params.push(AbiParam::new(types::F64));
+        sig.returns.push(AbiParam::new(types::F64));
+        imports[b as usize] = Some(module.declare_function(symbol, Linkage::Import, &sig)?);
     }
     Ok(imports)
 }
 
-/// Builtins used by `ir` that need a symbol, with the function pointer to register.
+/// The fallback symbols `ir` needs, with the function pointer to register.
 pub(super) fn used_symbols(ir: &Ir) -> Vec<(&'static str, *const u8)> {
-    let mut seen = [false; Builtin::ALL.len()];
-    let mut out = vec![];
-    for n in ir.nodes() {
-        if let Node::Call(b, _) = n {
-            if std::mem::replace(&mut seen[*b as usize], true) {
-                continue;
-            }
-            let info = b.info();
-            match info.lowering {
-                Lowering::Inline => {}
-                Lowering::Call1(f) => out.push((info.symbol, f as *const u8)),
-                Lowering::Call2(f) => out.push((info.symbol, f as *const u8)),
-            }
-        }
-    }
-    out
+    fallbacks(ir).map(|(_, symbol, f)| (symbol, f as *const u8)).collect()
 }
 
 /// A lane type the translator emits: how many elements one value holds and the few operations whose
@@ -94,15 +77,27 @@ pub(super) fn used_symbols(ir: &Ir) -> Vec<(&'static str, *const u8)> {
 trait Lanes {
     /// The Cranelift type of one value.
     const TY: Type;
+    /// The integer type of the same shape (for bit operations).
+    const ITY: Type;
     /// Elements per value (a power of two).
     const LANES: u8;
     /// Every lane set to the `F64` scalar `s`.
     fn splat(b: &mut FunctionBuilder, s: Value) -> Value;
+    /// Every lane set to the constant with bits `bits`.
+    fn konst(b: &mut FunctionBuilder, bits: u64) -> Value;
+    /// Every lane set to the integer `v` (type `ITY`).
+    fn iconst(b: &mut FunctionBuilder, v: u64) -> Value;
+    /// Reinterprets `v` as type `ty` (`TY` ↔ `ITY`, or a mask as `TY`).
+    fn bitcast(b: &mut FunctionBuilder, ty: Type, v: Value) -> Value;
     /// Lane `i` of `v` as an `F64` scalar.
     fn lane(b: &mut FunctionBuilder, v: Value, i: u8) -> Value;
-    /// `cond ? x : y` lane-wise, `cond` being an `fcmp` of two values of this type, in the shape Cranelift's
-    /// x64 backend matches to `min/max{sd,pd}`.
+    /// `cond ? x : y` lane-wise, `cond` being an `fcmp` of two values of this type (or a combination of such
+    /// masks), in the shape Cranelift's x64 backend matches to `min/max{sd,pd}`.
     fn select(b: &mut FunctionBuilder, cond: Value, x: Value, y: Value) -> Value;
+    /// The complement of a mask.
+    fn not(b: &mut FunctionBuilder, m: Value) -> Value;
+    /// Whether any lane of the mask `m` is set, as a value `brif` can test.
+    fn any(b: &mut FunctionBuilder, m: Value) -> Value;
     /// A value from its lanes (`F64` scalars, lane 0 first).
     fn from_lanes(b: &mut FunctionBuilder, lanes: &[Value]) -> Value {
         let mut v = Self::splat(b, lanes[0]);
@@ -118,15 +113,32 @@ struct F64;
 
 impl Lanes for F64 {
     const TY: Type = types::F64;
+    const ITY: Type = types::I64;
     const LANES: u8 = 1;
     fn splat(_: &mut FunctionBuilder, s: Value) -> Value {
         s
+    }
+    fn konst(b: &mut FunctionBuilder, bits: u64) -> Value {
+        b.ins().f64const(Ieee64::with_bits(bits))
+    }
+    fn iconst(b: &mut FunctionBuilder, v: u64) -> Value {
+        b.ins().iconst(types::I64, v as i64)
+    }
+    fn bitcast(b: &mut FunctionBuilder, ty: Type, v: Value) -> Value {
+        b.ins().bitcast(ty, MemFlagsData::new(), v)
     }
     fn lane(_: &mut FunctionBuilder, v: Value, _: u8) -> Value {
         v
     }
     fn select(b: &mut FunctionBuilder, cond: Value, x: Value, y: Value) -> Value {
         b.ins().select(cond, x, y)
+    }
+    /// A scalar `fcmp` is 0 or 1, so its complement flips bit 0 (`bnot` would give 0xfe: still true).
+    fn not(b: &mut FunctionBuilder, m: Value) -> Value {
+        b.ins().bxor_imm_u(m, 1)
+    }
+    fn any(_: &mut FunctionBuilder, m: Value) -> Value {
+        m
     }
 }
 
@@ -135,17 +147,38 @@ struct F64X2;
 
 impl Lanes for F64X2 {
     const TY: Type = types::F64X2;
+    const ITY: Type = types::I64X2;
     const LANES: u8 = 2;
     fn splat(b: &mut FunctionBuilder, s: Value) -> Value {
         b.ins().splat(Self::TY, s)
+    }
+    fn konst(b: &mut FunctionBuilder, bits: u64) -> Value {
+        let bytes: Vec<u8> = [bits, bits].iter().flat_map(|w| w.to_le_bytes()).collect();
+        let c = b.func.dfg.constants.insert(bytes.into());
+        b.ins().vconst(Self::TY, c)
+    }
+    fn iconst(b: &mut FunctionBuilder, v: u64) -> Value {
+        let bytes: Vec<u8> = [v, v].iter().flat_map(|w| w.to_le_bytes()).collect();
+        let c = b.func.dfg.constants.insert(bytes.into());
+        b.ins().vconst(Self::ITY, c)
+    }
+    fn bitcast(b: &mut FunctionBuilder, ty: Type, v: Value) -> Value {
+        let flags = MemFlagsData::new().with_endianness(Endianness::Little);
+        b.ins().bitcast(ty, flags, v)
     }
     fn lane(b: &mut FunctionBuilder, v: Value, i: u8) -> Value {
         b.ins().extractlane(v, i)
     }
     fn select(b: &mut FunctionBuilder, cond: Value, x: Value, y: Value) -> Value {
-        let flags = MemFlagsData::new().with_endianness(Endianness::Little);
-        let mask = b.ins().bitcast(Self::TY, flags, cond);
+        let mask = Self::bitcast(b, Self::TY, cond);
         b.ins().bitselect(mask, x, y)
+    }
+    /// A vector `fcmp` sets all bits of a lane or none.
+    fn not(b: &mut FunctionBuilder, m: Value) -> Value {
+        b.ins().bnot(m)
+    }
+    fn any(b: &mut FunctionBuilder, m: Value) -> Value {
+        b.ins().vany_true(m)
     }
 }
 
@@ -166,9 +199,11 @@ struct Shared<'a> {
     /// The `params` pointer.
     params: Value,
     callees: Callees,
-    /// `F64` values of the loop invariants computed before the loop (none in the scalar kernel): a per-lane
-    /// call uses them directly instead of extracting a lane from their splat.
+    /// `F64` values of the loop invariants computed before the loop (none in the scalar kernel): the batch
+    /// tail uses them directly.
     invariants: Vec<Option<Value>>,
+    /// Which library code the transcendental builtins emit.
+    mode: Mode,
 }
 
 impl Shared<'_> {
@@ -179,7 +214,7 @@ impl Shared<'_> {
         vals: Vec<Option<Value>>,
         source: Source,
     ) -> Translator<'a, 'b, L> {
-        Translator { b, cx: self, vals, source, lanes: PhantomData }
+        Translator { b, cx: self, vals, source, error: None, lanes: PhantomData }
     }
 }
 
@@ -190,6 +225,8 @@ struct Translator<'a, 'b, L> {
     /// Value of each translated node, in lane type `L`.
     vals: Vec<Option<Value>>,
     source: Source,
+    /// An error raised inside an [`Emit`] method (which cannot return one), reported after the builtin.
+    error: Option<JitError>,
     lanes: PhantomData<L>,
 }
 
@@ -206,17 +243,6 @@ impl<L: Lanes> Translator<'_, '_, L> {
             .copied()
             .flatten()
             .ok_or_else(|| JitError::Internal(format!("operand t{} used before it was translated", id.0)))
-    }
-
-    /// Lane `lane` of an operand as an `F64` scalar (an invariant's scalar value when there is one).
-    fn arg_lane(&mut self, id: NodeId, lane: u8) -> Result<Value, JitError> {
-        match self.cx.invariants.get(id.index()).copied().flatten() {
-            Some(s) => Ok(s),
-            None => {
-                let v = self.arg(id)?;
-                Ok(L::lane(self.b, v, lane))
-            }
-        }
     }
 
     /// Translates node `id` and records the result.
@@ -247,8 +273,7 @@ impl<L: Lanes> Translator<'_, '_, L> {
     }
 
     fn konst(&mut self, bits: u64) -> Value {
-        let c = self.b.ins().f64const(Ieee64::with_bits(bits));
-        L::splat(self.b, c)
+        L::konst(self.b, bits)
     }
 
     fn input(&mut self, i: Input) -> Result<Value, JitError> {
@@ -285,10 +310,16 @@ impl<L: Lanes> Translator<'_, '_, L> {
     }
 
     fn call(&mut self, f: Builtin, args: [NodeId; 3]) -> Result<Value, JitError> {
-        match f.info().lowering {
-            Lowering::Inline => self.inline(f, args),
-            Lowering::Call1(_) | Lowering::Call2(_) => self.extern_call(f, &args[..f.arity()]),
+        if f.info().lowering == Lowering::Inline {
+            return self.inline(f, args);
         }
+        let vals = args[..f.arity()].iter().map(|a| self.arg(*a)).collect::<Result<Vec<_>, _>>()?;
+        let mode = self.cx.mode;
+        let v = f.emit(self, mode, &vals);
+        if let Some(e) = self.error.take() {
+            return Err(e);
+        }
+        v.ok_or_else(|| JitError::Internal(format!("builtin `{}` has no library code", f.name())))
     }
 
     /// sqrt, abs, min, max, clamp: native instructions with exactly the table's semantics.
@@ -360,19 +391,147 @@ impl<L: Lanes> Translator<'_, '_, L> {
             _ => Ok(self.b.ins().fmin(v, vb)),
         }
     }
+}
 
-    /// A call to the table's `extern "C"` function, once per lane.
-    fn extern_call(&mut self, f: Builtin, args: &[NodeId]) -> Result<Value, JitError> {
-        let callee = self.cx.callees[f as usize]
-            .ok_or_else(|| JitError::Internal(format!("builtin `{}` was not imported", f.name())))?;
-        let mut results = Vec::with_capacity(usize::from(L::LANES));
-        for lane in 0..L::LANES {
-            let vals = args.iter().map(|a| self.arg_lane(*a, lane)).collect::<Result<Vec<_>, _>>()?;
-            let inst = self.b.ins().call(callee, &vals);
-            let r = self.b.inst_results(inst).first().copied();
-            results.push(r.ok_or(JitError::Internal("call without result".into()))?);
+/// The math library's primitives as Cranelift instructions in lane type `L`: one instruction each (the bit
+/// operations a short integer sequence), so the JIT runs exactly the code the interpreter runs on `f64`.
+impl<L: Lanes> Emit for Translator<'_, '_, L> {
+    type V = Value;
+    type M = Value;
+    fn konst(&mut self, c: f64) -> Value {
+        L::konst(self.b, c.to_bits())
+    }
+    fn add(&mut self, a: Value, b: Value) -> Value {
+        self.b.ins().fadd(a, b)
+    }
+    fn sub(&mut self, a: Value, b: Value) -> Value {
+        self.b.ins().fsub(a, b)
+    }
+    fn mul(&mut self, a: Value, b: Value) -> Value {
+        self.b.ins().fmul(a, b)
+    }
+    fn div(&mut self, a: Value, b: Value) -> Value {
+        self.b.ins().fdiv(a, b)
+    }
+    fn neg(&mut self, a: Value) -> Value {
+        self.b.ins().fneg(a)
+    }
+    fn abs(&mut self, a: Value) -> Value {
+        self.b.ins().fabs(a)
+    }
+    fn sqrt(&mut self, a: Value) -> Value {
+        self.b.ins().sqrt(a)
+    }
+    fn lt(&mut self, a: Value, b: Value) -> Value {
+        self.b.ins().fcmp(FloatCC::LessThan, a, b)
+    }
+    fn le(&mut self, a: Value, b: Value) -> Value {
+        self.b.ins().fcmp(FloatCC::LessThanOrEqual, a, b)
+    }
+    fn eq(&mut self, a: Value, b: Value) -> Value {
+        self.b.ins().fcmp(FloatCC::Equal, a, b)
+    }
+    fn and(&mut self, a: Value, b: Value) -> Value {
+        self.b.ins().band(a, b)
+    }
+    fn or(&mut self, a: Value, b: Value) -> Value {
+        self.b.ins().bor(a, b)
+    }
+    fn not(&mut self, a: Value) -> Value {
+        L::not(self.b, a)
+    }
+    fn select(&mut self, m: Value, a: Value, b: Value) -> Value {
+        L::select(self.b, m, a, b)
+    }
+    fn mask_bits(&mut self, x: Value, and: u64, or: u64) -> Value {
+        let i = L::bitcast(self.b, L::ITY, x);
+        let m = L::iconst(self.b, and);
+        let mut i = self.b.ins().band(i, m);
+        if or != 0 {
+            let o = L::iconst(self.b, or);
+            i = self.b.ins().bor(i, o);
         }
-        Ok(L::from_lanes(self.b, &results))
+        L::bitcast(self.b, L::TY, i)
+    }
+    fn pow2i(&mut self, k: Value) -> Value {
+        let magic = L::konst(self.b, math::MAGIC.to_bits());
+        let t = self.b.ins().fadd(k, magic);
+        let i = L::bitcast(self.b, L::ITY, t);
+        let bias = L::iconst(self.b, 1023u64.wrapping_sub(math::MAGIC.to_bits()));
+        let i = self.b.ins().iadd(i, bias);
+        let i = self.b.ins().ishl_imm_u(i, 52);
+        L::bitcast(self.b, L::TY, i)
+    }
+    fn exponent_field(&mut self, x: Value) -> Value {
+        const TWO52: f64 = 4503599627370496.0;
+        let i = L::bitcast(self.b, L::ITY, x);
+        let i = self.b.ins().ushr_imm_u(i, 52);
+        let m = L::iconst(self.b, 0x7ff);
+        let i = self.b.ins().band(i, m);
+        let o = L::iconst(self.b, TWO52.to_bits());
+        let i = self.b.ins().bor(i, o);
+        let f = L::bitcast(self.b, L::TY, i);
+        let t = L::konst(self.b, TWO52.to_bits());
+        self.b.ins().fsub(f, t)
+    }
+    /// Per lane: the index as an integer (the magic-number conversion), clamped with an unsigned `umin` to the
+    /// table's last element — so whatever `x` holds, the load stays inside the table — then a load from the
+    /// `'static` table, whose address is a constant in the code.
+    fn lookup(&mut self, table: &'static [f64], x: Value) -> Value {
+        if table.is_empty() {
+            self.error = Some(JitError::Internal("lookup in an empty table".into()));
+            return x;
+        }
+        let magic = L::konst(self.b, math::MAGIC.to_bits());
+        let t = self.b.ins().fadd(x, magic);
+        let i = L::bitcast(self.b, L::ITY, t);
+        let m = L::iconst(self.b, math::MAGIC.to_bits());
+        let i = self.b.ins().isub(i, m);
+        let base = self.b.ins().iconst(types::I64, table.as_ptr() as i64);
+        let last = self.b.ins().iconst(types::I64, table.len() as i64 - 1);
+        let mut lanes = Vec::with_capacity(usize::from(L::LANES));
+        for lane in 0..L::LANES {
+            let il = if L::LANES == 1 { i } else { self.b.ins().extractlane(i, lane) };
+            let il = self.b.ins().umin(il, last);
+            let off = self.b.ins().ishl_imm_u(il, 3);
+            let addr = self.b.ins().iadd(base, off);
+            let flags = MemFlagsData::new().with_notrap().with_readonly().with_aligned();
+            lanes.push(self.b.ins().load(types::F64, flags, addr, 0));
+        }
+        L::from_lanes(self.b, &lanes)
+    }
+    /// `any(m) ? per-lane (m ? libm(x) : r) : r`: the call is in a block of its own, skipped unless a lane needs it.
+    fn fallback(&mut self, m: Value, x: Value, r: Value, f: Builtin) -> Value {
+        let Some(callee) = self.cx.callees[f as usize] else {
+            self.error = Some(JitError::Internal(format!("fallback of `{}` was not imported", f.name())));
+            return r;
+        };
+        let slow = self.b.create_block();
+        let join = self.b.create_block();
+        let out = self.b.append_block_param(join, L::TY);
+        let any = L::any(self.b, m);
+        self.b.ins().brif(any, slow, &[], join, &[BlockArg::Value(r)]);
+        self.b.switch_to_block(slow);
+        self.b.seal_block(slow);
+        let mut lanes = Vec::with_capacity(usize::from(L::LANES));
+        for lane in 0..L::LANES {
+            let xi = L::lane(self.b, x, lane);
+            let ri = L::lane(self.b, r, lane);
+            let inst = self.b.ins().call(callee, &[xi]);
+            let yi = self.b.inst_results(inst)[0];
+            let v = if L::LANES == 1 {
+                self.b.ins().select(m, yi, ri)
+            } else {
+                let mi = self.b.ins().extractlane(m, lane);
+                self.b.ins().select(mi, yi, ri)
+            };
+            lanes.push(v);
+        }
+        let v = L::from_lanes(self.b, &lanes);
+        self.b.ins().jump(join, &[BlockArg::Value(v)]);
+        self.b.switch_to_block(join);
+        self.b.seal_block(join);
+        out
     }
 }
 
@@ -427,6 +586,7 @@ pub(super) fn build_scalar(
     ir: &Ir,
     root: NodeId,
     imports: &Imports,
+    mode: Mode,
 ) -> Result<(), JitError> {
     ctx.func.signature = scalar_signature(module);
     let callees = import_callees(module, &mut ctx.func, imports);
@@ -439,7 +599,7 @@ pub(super) fn build_scalar(
         [x, p] => (x, p),
         _ => return Err(JitError::Internal("scalar signature".into())),
     };
-    let cx = Shared { ir, params, callees, invariants: vec![] };
+    let cx = Shared { ir, params, callees, invariants: vec![], mode };
     let mut t = cx.translator::<F64>(&mut b, vec![None; ir.len()], Source::Ptr(x));
     t.nodes(root.index() + 1, |_| true)?;
     let r = t.arg(root)?;
@@ -467,6 +627,7 @@ pub(super) fn build_batch(
     ir: &Ir,
     root: NodeId,
     imports: &Imports,
+    mode: Mode,
 ) -> Result<(), JitError> {
     // A wider lane type leaves up to LANES − 1 elements and needs a tail loop instead of one tail element.
     const { assert!(V::LANES == 1 || V::LANES == 2, "the batch tail handles one element") };
@@ -498,7 +659,7 @@ pub(super) fn build_batch(
         bases[i.index()] = Some(b.ins().load(ptr, mem(), cols, (i.index() * 8) as i32));
     }
     let zero = b.ins().iconst(ptr, 0);
-    let mut cx = Shared { ir, params, callees, invariants: vec![] };
+    let mut cx = Shared { ir, params, callees, invariants: vec![], mode };
     let mut t = cx.translator::<F64>(&mut b, vec![None; ir.len()], Source::Cols { bases, off: zero });
     t.nodes(n, |id| inv[id.index()])?;
     cx.invariants = t.vals;

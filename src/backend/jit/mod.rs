@@ -35,6 +35,7 @@ mod codegen;
 use crate::base::diag::Diagnostic;
 use crate::ir::{Formula, InputSet, Ir, NodeId, N_INPUTS};
 use crate::backend::{Columns, Evaluator};
+use crate::builtins::Mode;
 use cranelift_codegen::ir::UserFuncName;
 use cranelift_codegen::isa::OwnedTargetIsa;
 use cranelift_codegen::settings::{self, Configurable};
@@ -127,6 +128,8 @@ pub struct Compiled {
     ir: Ir,
     root: NodeId,
     imports: codegen::Imports,
+    /// The math mode the code was generated in.
+    mode: Mode,
     /// Number of parameter slots the code reads (`max index + 1`).
     params_read: usize,
     /// Inputs the code reads (their columns must be full length).
@@ -142,7 +145,7 @@ impl Compiled {
             let mut guard = self.module.lock().map_err(|_| "JIT module lock poisoned".to_string())?;
             let module = guard.as_mut().ok_or("JIT module already freed")?;
             let f =
-                with_jit(|j| j.define_batch(module, &self.ir, self.root, &self.imports)).map_err(|e| e.to_string())?;
+                with_jit(|j| j.define_batch(module, &self.ir, self.root, &self.imports, self.mode)).map_err(|e| e.to_string())?;
             Ok(f)
         });
         r.as_ref().ok().copied()
@@ -197,12 +200,13 @@ impl Jit {
         module: &mut JITModule,
         ir: &Ir,
         root: NodeId,
+        mode: Mode,
     ) -> Result<(FuncId, codegen::Imports), JitError> {
         let imports = codegen::declare_imports(module, ir)?;
         let id = module.declare_anonymous_function(&codegen::scalar_signature(module))?;
         module.clear_context(&mut self.ctx);
         self.ctx.func.name = UserFuncName::user(0, id.as_u32());
-        codegen::build_scalar(module, &mut self.ctx, &mut self.fctx, ir, root, &imports)?;
+        codegen::build_scalar(module, &mut self.ctx, &mut self.fctx, ir, root, &imports, mode)?;
         self.ctx.set_disasm(self.disasm);
         module.define_function(id, &mut self.ctx)?;
         self.keep_listing();
@@ -219,11 +223,12 @@ impl Jit {
         ir: &Ir,
         root: NodeId,
         imports: &codegen::Imports,
+        mode: Mode,
     ) -> Result<BatchFn, JitError> {
         let id = module.declare_anonymous_function(&codegen::batch_signature(module))?;
         module.clear_context(&mut self.ctx);
         self.ctx.func.name = UserFuncName::user(0, id.as_u32());
-        let built = codegen::build_batch(module, &mut self.ctx, &mut self.fctx, ir, root, imports);
+        let built = codegen::build_batch(module, &mut self.ctx, &mut self.fctx, ir, root, imports, mode);
         let defined = built.and_then(|()| {
             self.ctx.set_disasm(self.disasm);
             module.define_function(id, &mut self.ctx).map_err(JitError::from)
@@ -243,7 +248,7 @@ impl Jit {
 
     /// Compiles a compacted IR (every node reachable from `root`, root last) into a fresh module. Only the
     /// scalar kernel is built now; the batched one on the first batch call.
-    pub fn translate(&mut self, ir: &Ir, root: NodeId) -> Result<Compiled, JitError> {
+    pub fn translate(&mut self, ir: &Ir, root: NodeId, mode: Mode) -> Result<Compiled, JitError> {
         if root.index() >= ir.len() {
             return Err(JitError::Internal("root outside the arena".into()));
         }
@@ -252,7 +257,7 @@ impl Jit {
             builder.symbol(sym, ptr);
         }
         let mut module = JITModule::new(builder);
-        let defined = self.define_scalar(&mut module, ir, root).and_then(|(id, imports)| {
+        let defined = self.define_scalar(&mut module, ir, root, mode).and_then(|(id, imports)| {
             let p = module.get_finalized_function(id);
             if p.is_null() {
                 Err(JitError::Internal("finalized function has no address".into()))
@@ -281,6 +286,7 @@ impl Jit {
             ir: ir.clone(),
             root,
             imports,
+            mode,
             params_read,
             inputs: ir.used_inputs(root),
             nodes: root.index() + 1,
@@ -339,15 +345,15 @@ pub struct JitKernel {
     pub cached: bool,
 }
 
-/// Compiles a simplified formula (through the cache).
-pub fn jit_kernel(f: &Formula) -> Result<JitKernel, JitError> {
+/// Compiles a simplified formula (through the cache) with the builtins of math mode `mode`.
+pub fn jit_kernel(f: &Formula, mode: Mode) -> Result<JitKernel, JitError> {
     let (ir, root) = f.ir.compact(f.root);
-    let key = cache::Key::new(&ir, root);
+    let key = cache::Key::new(&ir, root, mode);
     let hit = lock_cache().get(&key);
     let (code, cached) = match hit {
         Some(c) => (c, true),
         None => {
-            let c = Arc::new(with_jit(|j| j.translate(&ir, root))?);
+            let c = Arc::new(with_jit(|j| j.translate(&ir, root, mode))?);
             lock_cache().insert(key, c.clone());
             (c, false)
         }
@@ -357,24 +363,24 @@ pub fn jit_kernel(f: &Formula) -> Result<JitKernel, JitError> {
 
 /// The machine code (Cranelift's listing) of the scalar and the batched kernel, for `lobe` reports and for
 /// checking what the code generator emits (e.g. that the scalar kernel has no stack traffic).
-pub fn disassemble(f: &Formula) -> Result<(String, String), JitError> {
+pub fn disassemble(f: &Formula, mode: Mode) -> Result<(String, String), JitError> {
     let (ir, root) = f.ir.compact(f.root);
     let mut j = Jit::new();
     j.disasm = true;
-    let c = j.translate(&ir, root)?;
+    let c = j.translate(&ir, root, mode)?;
     {
         let mut guard = c.module.lock().map_err(|_| JitError::Internal("module lock poisoned".into()))?;
         let module = guard.as_mut().ok_or(JitError::Internal("module freed".into()))?;
-        j.define_batch(module, &c.ir, c.root, &c.imports)?;
+        j.define_batch(module, &c.ir, c.root, &c.imports, c.mode)?;
     }
     let mut l = std::mem::take(&mut j.listing).into_iter();
     Ok((l.next().unwrap_or_default(), l.next().unwrap_or_default()))
 }
 
 /// Compiles without consulting or filling the cache (for compile-time measurements and tests).
-pub fn jit_kernel_uncached(f: &Formula) -> Result<JitKernel, JitError> {
+pub fn jit_kernel_uncached(f: &Formula, mode: Mode) -> Result<JitKernel, JitError> {
     let (ir, root) = f.ir.compact(f.root);
-    let code = Arc::new(with_jit(|j| j.translate(&ir, root))?);
+    let code = Arc::new(with_jit(|j| j.translate(&ir, root, mode))?);
     Ok(JitKernel { n_params: f.params.len().max(code.params_read), scalar: code.scalar, code, cached: false })
 }
 
@@ -454,8 +460,8 @@ impl Evaluator for JitKernel {
 }
 
 /// Compiles `f` with the JIT and reports failure as a diagnostic on the formula's file.
-pub fn kernel_evaluator(f: &Formula) -> Result<Arc<dyn Evaluator>, Diagnostic> {
-    jit_kernel(f).map(|k| Arc::new(k) as Arc<dyn Evaluator>).map_err(|e| e.to_diagnostic())
+pub fn kernel_evaluator(f: &Formula, mode: Mode) -> Result<Arc<dyn Evaluator>, Diagnostic> {
+    jit_kernel(f, mode).map(|k| Arc::new(k) as Arc<dyn Evaluator>).map_err(|e| e.to_diagnostic())
 }
 
 #[cfg(test)]
@@ -468,7 +474,7 @@ mod tests {
     fn bad_root_is_an_error_not_a_panic() {
         let mut ir = Ir::new();
         ir.input(Input::NH, Span::default());
-        let e = Jit::new().translate(&ir, NodeId(7)).err().map(|e| e.to_string());
+        let e = Jit::new().translate(&ir, NodeId(7), Mode::Precise).err().map(|e| e.to_string());
         assert_eq!(e.as_deref(), Some("internal JIT error: root outside the arena"));
     }
 

@@ -1,0 +1,471 @@
+//! The one table of builtin functions.
+//!
+//! Every backend reads this table and nothing else: the front end checks names and arity against it; the
+//! interpreter and constant folding call [`Builtin::eval_in`]; the JIT emits sqrt/abs/min/max/clamp as native
+//! instructions ([`Lowering::Inline`], modelled exactly by the functions here) and every transcendental
+//! builtin ([`Lowering::Math`]) as the straight-line code of [`math`], the same definition the interpreter runs,
+//! so the two agree bit for bit in each [`Mode`]; the GLSL export prints [`BuiltinInfo::glsl`]. Each row states
+//! its error bound in each mode ([`Bound`]), which `lobe check` prints and the tests verify; the C library's
+//! version ([`BuiltinInfo::libm`]) is kept as the reference the bounds are measured against and as the
+//! fallback for huge trigonometric arguments.
+//!
+//! Domain policy: `acos` and `asin` clamp their argument to [−1, 1] (a cosine computed from rounded vectors can
+//! be 1 + 1 ulp, and acos of it must not be NaN). Everything else follows IEEE 754 and C99 (pow's special cases,
+//! NaN in → NaN out).
+
+pub mod math;
+
+pub use math::Mode;
+use std::fmt;
+
+/// A builtin function. The discriminant order is the table order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Builtin {
+    Pow,
+    Cos,
+    Sin,
+    Tan,
+    Acos,
+    Asin,
+    Atan,
+    Exp,
+    Ln,
+    Sqrt,
+    Abs,
+    Min,
+    Max,
+    Clamp,
+}
+
+/// How the JIT lowers a builtin.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Lowering {
+    /// A native instruction (sqrt, fabs, fmin, fmax); [`Builtin::eval_in`] is its exact model.
+    Inline,
+    /// The library's straight-line code ([`math`]), emitted into the kernel in the kernel's lane type.
+    Math,
+}
+
+/// The C library's version of a builtin (Rust's `f64` methods: the platform libm).
+#[derive(Clone, Copy, Debug)]
+pub enum Libm {
+    F1(extern "C" fn(f64) -> f64),
+    F2(extern "C" fn(f64, f64) -> f64),
+    /// Inline builtins: exact, nothing to compare with but themselves.
+    Exact,
+}
+
+/// A builtin's stated accuracy. `ulp` is the bound in precise mode, in units in the last place of the correctly
+/// rounded result; `fast_rel` the bound in fast mode, relative (absolute where |result| < 1).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Bound {
+    pub ulp: f64,
+    pub fast_rel: f64,
+}
+
+impl Bound {
+    const EXACT: Bound = Bound { ulp: 0.5, fast_rel: 0.0 };
+    const fn math(ulp: f64) -> Bound {
+        Bound { ulp, fast_rel: 1e-6 }
+    }
+
+    /// The bound as text in `mode`: "≤ 1 ulp", "≤ 1e-6 rel." or "correctly rounded".
+    pub fn describe(&self, mode: Mode) -> String {
+        match mode {
+            _ if self.fast_rel == 0.0 => "correctly rounded".into(),
+            Mode::Precise => format!("≤ {} ulp", self.ulp),
+            Mode::Fast => format!("≤ {:e} rel.", self.fast_rel),
+        }
+    }
+}
+
+/// One row of the table.
+#[derive(Clone, Copy, Debug)]
+pub struct BuiltinInfo {
+    pub builtin: Builtin,
+    /// Name in the .brdf language.
+    pub name: &'static str,
+    pub arity: usize,
+    pub lowering: Lowering,
+    /// The C library's version: the reference for accuracy, and the JIT's fallback (under [`Self::symbol`])
+    /// for trigonometric arguments beyond the library's reduction.
+    pub libm: Libm,
+    /// Symbol the JIT registers for the libm fallback (empty when there is none).
+    pub symbol: &'static str,
+    pub bound: Bound,
+    /// GLSL spelling; `{0}`, `{1}`, `{2}` are the arguments.
+    pub glsl: &'static str,
+    /// One line for `lobe help` and hints.
+    pub doc: &'static str,
+}
+
+extern "C" fn lobe_pow(x: f64, y: f64) -> f64 {
+    x.powf(y)
+}
+extern "C" fn lobe_cos(x: f64) -> f64 {
+    x.cos()
+}
+extern "C" fn lobe_sin(x: f64) -> f64 {
+    x.sin()
+}
+extern "C" fn lobe_tan(x: f64) -> f64 {
+    x.tan()
+}
+extern "C" fn lobe_acos(x: f64) -> f64 {
+    clamp(x, -1.0, 1.0).acos()
+}
+extern "C" fn lobe_asin(x: f64) -> f64 {
+    clamp(x, -1.0, 1.0).asin()
+}
+extern "C" fn lobe_atan(x: f64) -> f64 {
+    x.atan()
+}
+extern "C" fn lobe_exp(x: f64) -> f64 {
+    x.exp()
+}
+extern "C" fn lobe_ln(x: f64) -> f64 {
+    x.ln()
+}
+
+/// IEEE 754-2019 `minimum`: NaN if either is NaN, −0 < +0. This is Cranelift's `fmin`.
+pub fn fmin(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else if a == b {
+        // Equal values differ only in the sign of zero: prefer −0.
+        if a.is_sign_negative() {
+            a
+        } else {
+            b
+        }
+    } else if a < b {
+        a
+    } else {
+        b
+    }
+}
+
+/// IEEE 754-2019 `maximum`: NaN if either is NaN, +0 > −0. This is Cranelift's `fmax`.
+pub fn fmax(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else if a == b {
+        if a.is_sign_positive() {
+            a
+        } else {
+            b
+        }
+    } else if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+/// `clamp(x, lo, hi) = min(max(x, lo), hi)` with the NaN-propagating min/max above.
+pub fn clamp(x: f64, lo: f64, hi: f64) -> f64 {
+    fmin(fmax(x, lo), hi)
+}
+
+const TABLE: [BuiltinInfo; 14] = [
+    BuiltinInfo {
+        builtin: Builtin::Pow,
+        name: "pow",
+        arity: 2,
+        lowering: Lowering::Math,
+        libm: Libm::F2(lobe_pow),
+        symbol: "",
+        bound: Bound::math(1.0),
+        glsl: "pow({0}, {1})",
+        doc: "pow(x, y) = x^y; integer constant exponents become multiplications",
+    },
+    BuiltinInfo {
+        builtin: Builtin::Cos,
+        name: "cos",
+        arity: 1,
+        lowering: Lowering::Math,
+        libm: Libm::F1(lobe_cos),
+        symbol: "lobe_cos",
+        bound: Bound::math(1.0),
+        glsl: "cos({0})",
+        doc: "cosine of an angle in radians",
+    },
+    BuiltinInfo {
+        builtin: Builtin::Sin,
+        name: "sin",
+        arity: 1,
+        lowering: Lowering::Math,
+        libm: Libm::F1(lobe_sin),
+        symbol: "lobe_sin",
+        bound: Bound::math(1.0),
+        glsl: "sin({0})",
+        doc: "sine of an angle in radians",
+    },
+    BuiltinInfo {
+        builtin: Builtin::Tan,
+        name: "tan",
+        arity: 1,
+        lowering: Lowering::Math,
+        libm: Libm::F1(lobe_tan),
+        symbol: "lobe_tan",
+        bound: Bound::math(2.5),
+        glsl: "tan({0})",
+        doc: "tangent of an angle in radians",
+    },
+    BuiltinInfo {
+        builtin: Builtin::Acos,
+        name: "acos",
+        arity: 1,
+        lowering: Lowering::Math,
+        libm: Libm::F1(lobe_acos),
+        symbol: "",
+        bound: Bound::math(1.0),
+        glsl: "acos(clamp({0}, -1.0, 1.0))",
+        doc: "arc cosine in radians; the argument is clamped to [-1, 1]",
+    },
+    BuiltinInfo {
+        builtin: Builtin::Asin,
+        name: "asin",
+        arity: 1,
+        lowering: Lowering::Math,
+        libm: Libm::F1(lobe_asin),
+        symbol: "",
+        bound: Bound::math(1.0),
+        glsl: "asin(clamp({0}, -1.0, 1.0))",
+        doc: "arc sine in radians; the argument is clamped to [-1, 1]",
+    },
+    BuiltinInfo {
+        builtin: Builtin::Atan,
+        name: "atan",
+        arity: 1,
+        lowering: Lowering::Math,
+        libm: Libm::F1(lobe_atan),
+        symbol: "",
+        bound: Bound::math(1.0),
+        glsl: "atan({0})",
+        doc: "arc tangent in radians",
+    },
+    BuiltinInfo {
+        builtin: Builtin::Exp,
+        name: "exp",
+        arity: 1,
+        lowering: Lowering::Math,
+        libm: Libm::F1(lobe_exp),
+        symbol: "",
+        bound: Bound::math(1.0),
+        glsl: "exp({0})",
+        doc: "e^x",
+    },
+    BuiltinInfo {
+        builtin: Builtin::Ln,
+        name: "ln",
+        arity: 1,
+        lowering: Lowering::Math,
+        libm: Libm::F1(lobe_ln),
+        symbol: "",
+        bound: Bound::math(1.0),
+        glsl: "log({0})",
+        doc: "natural logarithm",
+    },
+    BuiltinInfo {
+        builtin: Builtin::Sqrt,
+        name: "sqrt",
+        arity: 1,
+        lowering: Lowering::Inline,
+        libm: Libm::Exact,
+        symbol: "",
+        bound: Bound::EXACT,
+        glsl: "sqrt({0})",
+        doc: "square root (NaN below 0)",
+    },
+    BuiltinInfo {
+        builtin: Builtin::Abs,
+        name: "abs",
+        arity: 1,
+        lowering: Lowering::Inline,
+        libm: Libm::Exact,
+        symbol: "",
+        bound: Bound::EXACT,
+        glsl: "abs({0})",
+        doc: "absolute value",
+    },
+    BuiltinInfo {
+        builtin: Builtin::Min,
+        name: "min",
+        arity: 2,
+        lowering: Lowering::Inline,
+        libm: Libm::Exact,
+        symbol: "",
+        bound: Bound::EXACT,
+        glsl: "min({0}, {1})",
+        doc: "smaller of two values (NaN if either is NaN)",
+    },
+    BuiltinInfo {
+        builtin: Builtin::Max,
+        name: "max",
+        arity: 2,
+        lowering: Lowering::Inline,
+        libm: Libm::Exact,
+        symbol: "",
+        bound: Bound::EXACT,
+        glsl: "max({0}, {1})",
+        doc: "larger of two values (NaN if either is NaN)",
+    },
+    BuiltinInfo {
+        builtin: Builtin::Clamp,
+        name: "clamp",
+        arity: 3,
+        lowering: Lowering::Inline,
+        libm: Libm::Exact,
+        symbol: "",
+        bound: Bound::EXACT,
+        glsl: "clamp({0}, {1}, {2})",
+        doc: "clamp(x, lo, hi) = min(max(x, lo), hi)",
+    },
+];
+
+impl Builtin {
+    pub const ALL: [Builtin; 14] = [
+        Builtin::Pow,
+        Builtin::Cos,
+        Builtin::Sin,
+        Builtin::Tan,
+        Builtin::Acos,
+        Builtin::Asin,
+        Builtin::Atan,
+        Builtin::Exp,
+        Builtin::Ln,
+        Builtin::Sqrt,
+        Builtin::Abs,
+        Builtin::Min,
+        Builtin::Max,
+        Builtin::Clamp,
+    ];
+
+    pub fn info(self) -> &'static BuiltinInfo {
+        &TABLE[self as usize]
+    }
+    pub fn name(self) -> &'static str {
+        self.info().name
+    }
+    pub fn arity(self) -> usize {
+        self.info().arity
+    }
+
+    pub fn from_name(name: &str) -> Option<Builtin> {
+        TABLE.iter().find(|r| r.name == name).map(|r| r.builtin)
+    }
+
+    /// All rows of the table.
+    pub fn table() -> &'static [BuiltinInfo] {
+        &TABLE
+    }
+
+    /// Reference semantics in precise mode; `args` has exactly `arity()` values.
+    pub fn eval(self, args: &[f64]) -> f64 {
+        self.eval_in(Mode::Precise, args)
+    }
+
+    /// Reference semantics in `mode`: what every backend computes, bit for bit.
+    pub fn eval_in(self, mode: Mode, args: &[f64]) -> f64 {
+        match self {
+            Builtin::Sqrt => args[0].sqrt(),
+            Builtin::Abs => args[0].abs(),
+            Builtin::Min => fmin(args[0], args[1]),
+            Builtin::Max => fmax(args[0], args[1]),
+            Builtin::Clamp => clamp(args[0], args[1], args[2]),
+            _ => self.emit(&mut math::Direct, mode, args).unwrap_or(f64::NAN),
+        }
+    }
+
+    /// The library code of a [`Lowering::Math`] builtin on `args` (exactly `arity()` values), emitted through
+    /// `e`; `None` for the inline builtins, whose lowering is the backend's.
+    pub fn emit<E: math::Emit>(self, e: &mut E, mode: Mode, args: &[E::V]) -> Option<E::V> {
+        use math::*;
+        let fast = mode == Mode::Fast;
+        let x = args[0];
+        Some(match self {
+            Builtin::Pow if fast => pow_fast(e, x, args[1]),
+            Builtin::Pow => pow(e, x, args[1]),
+            Builtin::Exp if fast => exp_fast(e, x),
+            Builtin::Exp => exp(e, x),
+            Builtin::Ln if fast => ln_fast(e, x),
+            Builtin::Ln => ln(e, x),
+            Builtin::Cos => cos(e, x, mode),
+            Builtin::Sin => sin(e, x, mode),
+            Builtin::Tan => tan(e, x, mode),
+            Builtin::Acos => acos(e, x, mode),
+            Builtin::Asin => asin(e, x, mode),
+            Builtin::Atan => atan(e, x),
+            Builtin::Sqrt | Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Clamp => return None,
+        })
+    }
+
+    /// The C library's value (the reference the bounds are measured against); for inline builtins, `eval`.
+    pub fn libm(self, args: &[f64]) -> f64 {
+        match self.info().libm {
+            Libm::F1(f) => f(args[0]),
+            Libm::F2(f) => f(args[0], args[1]),
+            Libm::Exact => self.eval(args),
+        }
+    }
+
+    /// The one-argument C library function, if that is what this builtin's libm is.
+    pub fn libm1(self) -> Option<extern "C" fn(f64) -> f64> {
+        match self.info().libm {
+            Libm::F1(f) => Some(f),
+            _ => None,
+        }
+    }
+}
+
+impl fmt::Display for Builtin {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn table_rows_are_in_enum_order_and_consistent() {
+        for (i, b) in Builtin::ALL.iter().enumerate() {
+            let r = &TABLE[i];
+            assert_eq!(r.builtin, *b);
+            assert_eq!(Builtin::from_name(r.name), Some(*b));
+            let inline = matches!(b, Builtin::Sqrt | Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Clamp);
+            assert_eq!(r.lowering == Lowering::Inline, inline, "{}", r.name);
+            match r.libm {
+                Libm::F1(_) => assert_eq!(r.arity, 1, "{}", r.name),
+                Libm::F2(_) => assert_eq!(r.arity, 2, "{}", r.name),
+                Libm::Exact => assert!(inline, "{}", r.name),
+            }
+            // The library emits exactly the Math rows.
+            let args = vec![0.5; r.arity];
+            assert_eq!(b.emit(&mut math::Direct, Mode::Precise, &args).is_some(), !inline, "{}", r.name);
+            // Only the trigonometric functions fall back to the C library (for huge arguments).
+            let trig = matches!(b, Builtin::Sin | Builtin::Cos | Builtin::Tan);
+            assert_eq!(!r.symbol.is_empty(), trig, "{}", r.name);
+        }
+    }
+
+    #[test]
+    fn min_max_follow_ieee_2019() {
+        assert!(fmin(f64::NAN, 1.0).is_nan());
+        assert!(fmax(1.0, f64::NAN).is_nan());
+        assert!(fmin(0.0, -0.0).is_sign_negative());
+        assert!(fmax(-0.0, 0.0).is_sign_positive());
+        assert_eq!(clamp(2.0, 0.0, 1.0), 1.0);
+        assert_eq!(clamp(-2.0, 0.0, 1.0), 0.0);
+    }
+
+    #[test]
+    fn acos_clamps_its_domain() {
+        let one_plus = f64::from_bits(1f64.to_bits() + 1);
+        assert_eq!(Builtin::Acos.eval(&[one_plus]), 0.0);
+        assert_eq!(Builtin::Acos.eval(&[-1.5]), std::f64::consts::PI);
+        assert!(Builtin::Acos.eval(&[f64::NAN]).is_nan());
+    }
+}
