@@ -104,6 +104,11 @@ pub trait Emit {
     /// unsigned (see [`table_index`]): callers pass integer-valued `x` in `0..len`; any other `x` (negative,
     /// NaN) still reads inside the table.
     fn lookup(&mut self, table: &'static [f64], x: Self::V) -> Self::V;
+    /// `any(m) ? slow() : r`: code for rare lanes (special cases), run only when some lane needs it. `slow` must
+    /// return `r`'s value in every lane where `m` is false, so the result does not depend on the lane shape.
+    fn rare(&mut self, m: Self::M, r: Self::V, slow: &mut dyn FnMut(&mut Self) -> Self::V) -> Self::V
+    where
+        Self: Sized;
     /// `m ? libm(x) : r` lane by lane, `libm` being the C library's version of `f` ([`Builtin::libm1`]).
     fn fallback(&mut self, m: Self::M, x: Self::V, r: Self::V, f: Builtin) -> Self::V;
 }
@@ -193,6 +198,13 @@ impl Emit for Direct {
     }
     fn exponent_field(&mut self, x: f64) -> f64 {
         exponent_field(x)
+    }
+    fn rare(&mut self, m: bool, r: f64, slow: &mut dyn FnMut(&mut Self) -> f64) -> f64 {
+        if m {
+            slow(self)
+        } else {
+            r
+        }
     }
     fn lookup(&mut self, table: &'static [f64], x: f64) -> f64 {
         table[table_index(x, table.len())]
@@ -659,7 +671,21 @@ pub fn pow<E: Emit>(e: &mut E, x: E::V, y: E::V) -> E::V {
     let pl = e.add(pe, yl);
     let (ph, pl) = fast_two_sum(e, p, pl);
     let mag = exp_dd(e, ph, pl);
-    pow_specials(e, x, y, mag)
+    pow_finish(e, x, y, mag)
+}
+
+/// pow's special cases, computed only when some lane has one: x not in (0, inf) or |y| not below 2^64 (NaN
+/// included). Elsewhere [`pow_specials`] returns `mag` unchanged (x = 1 and y = 0 already give exactly 1).
+fn pow_finish<E: Emit>(e: &mut E, x: E::V, y: E::V, mag: E::V) -> E::V {
+    let zero = e.konst(0.0);
+    let pos = e.lt(zero, x);
+    let fin = ltk(e, x, f64::INFINITY);
+    let ay = e.abs(y);
+    let small = ltk(e, ay, 18446744073709551616.0);
+    let normal = e.and(pos, fin);
+    let normal = e.and(normal, small);
+    let special = e.not(normal);
+    e.rare(special, mag, &mut |e| pow_specials(e, x, y, mag))
 }
 
 pub fn pow_fast<E: Emit>(e: &mut E, x: E::V, y: E::V) -> E::V {
@@ -668,7 +694,7 @@ pub fn pow_fast<E: Emit>(e: &mut E, x: E::V, y: E::V) -> E::V {
     let l = ln_fast_reduced(e, k, f);
     let a = e.mul(ys, l);
     let mag = exp_fast(e, a);
-    pow_specials(e, x, y, mag)
+    pow_finish(e, x, y, mag)
 }
 
 // ---- acos, asin ----

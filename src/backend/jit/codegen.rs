@@ -500,6 +500,21 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
         }
         L::from_lanes(self.b, &lanes)
     }
+    /// `any(m) ? slow() : r`, the slow code in a block of its own.
+    fn rare(&mut self, m: Value, r: Value, slow: &mut dyn FnMut(&mut Self) -> Value) -> Value {
+        let cold = self.b.create_block();
+        let join = self.b.create_block();
+        let out = self.b.append_block_param(join, L::TY);
+        let any = L::any(self.b, m);
+        self.b.ins().brif(any, cold, &[], join, &[BlockArg::Value(r)]);
+        self.b.switch_to_block(cold);
+        self.b.seal_block(cold);
+        let v = slow(self);
+        self.b.ins().jump(join, &[BlockArg::Value(v)]);
+        self.b.switch_to_block(join);
+        self.b.seal_block(join);
+        out
+    }
     /// `any(m) ? per-lane (m ? libm(x) : r) : r`: the call is in a block of its own, skipped unless a lane needs it.
     fn fallback(&mut self, m: Value, x: Value, r: Value, f: Builtin) -> Value {
         let Some(callee) = self.cx.callees[f as usize] else {
@@ -535,16 +550,55 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
     }
 }
 
-/// Which nodes depend on no input (computed once per batch, outside the loop).
-fn invariants(ir: &Ir) -> Vec<bool> {
-    let mut inv = vec![false; ir.len()];
-    for id in ir.ids() {
-        let n = ir.node(id);
-        let mut all = !matches!(n, Node::Input(_));
-        n.for_each_arg(|a| all &= inv.get(a.index()).copied().unwrap_or(false));
-        inv[id.index()] = all;
+/// Where each node of a compacted IR is computed: the prepared parameter block or the kernels.
+///
+/// Nodes that read no input are *invariant*. The non-trivial ones a kernel needs (read by an input-dependent
+/// node, or the root itself when the formula reads no input) are *carried*: the prepare function computes them
+/// once per parameter set into a block of `f64`s, and both kernels load them from there, so per-call and
+/// per-element work is only what depends on the inputs. Constants and bare parameters are not carried (a
+/// constant is an immediate, a parameter one load).
+pub(super) struct Plan {
+    inv: Vec<bool>,
+    /// Block slot of each carried node, in block order.
+    pub carried: Vec<NodeId>,
+    root: NodeId,
+}
+
+impl Plan {
+    pub(super) fn new(ir: &Ir, root: NodeId) -> Plan {
+        let n = root.index() + 1;
+        let mut inv = vec![false; ir.len()];
+        for id in ir.ids() {
+            let node = ir.node(id);
+            let mut all = !matches!(node, Node::Input(_));
+            node.for_each_arg(|a| all &= inv.get(a.index()).copied().unwrap_or(false));
+            inv[id.index()] = all;
+        }
+        let mut needed = vec![false; ir.len()];
+        for id in ir.ids().take(n) {
+            if !inv[id.index()] {
+                ir.node(id).for_each_arg(|a| needed[a.index()] |= inv[a.index()]);
+            }
+        }
+        needed[root.index()] |= inv[root.index()];
+        let trivial = |id: NodeId| matches!(ir.node(id), Node::Const(_) | Node::Param(_));
+        let carried = ir.ids().take(n).filter(|id| needed[id.index()] && !trivial(*id)).collect();
+        Plan { inv, carried, root }
     }
-    inv
+
+    /// Whether node `id` is computed per call / per element (reads an input).
+    fn variant(&self, id: NodeId) -> bool {
+        !self.inv[id.index()]
+    }
+
+    /// Node values loaded from the block (`block[k]` for the k-th carried node) as `F64`, indexed by node.
+    fn load_carried(&self, b: &mut FunctionBuilder, block: Value, len: usize) -> Vec<Option<Value>> {
+        let mut vals = vec![None; len];
+        for (k, id) in self.carried.iter().enumerate() {
+            vals[id.index()] = Some(b.ins().load(types::F64, mem(), block, (k * 8) as i32));
+        }
+        vals
+    }
 }
 
 fn import_callees(
@@ -561,47 +615,95 @@ fn import_callees(
     callees
 }
 
-/// `fn(x: *const f64, params: *const f64) -> f64` in the host's C calling convention.
+fn signature(module: &JITModule, pointers: usize, ret: bool) -> Signature {
+    let ptr = module.target_config().pointer_type();
+    let mut s = module.make_signature();
+    s.params.extend(std::iter::repeat_n(AbiParam::new(ptr), pointers));
+    if ret {
+        s.returns.push(AbiParam::new(types::F64));
+    }
+    s
+}
+
+/// `fn(params: *const f64, block: *mut f64)`.
+pub(super) fn prepare_signature(module: &JITModule) -> Signature {
+    signature(module, 2, false)
+}
+
+/// `fn(x: *const f64, params: *const f64, block: *const f64) -> f64` in the host's C calling convention.
 pub(super) fn scalar_signature(module: &JITModule) -> Signature {
-    let ptr = module.target_config().pointer_type();
-    let mut s = module.make_signature();
-    s.params.extend([AbiParam::new(ptr), AbiParam::new(ptr)]);
-    s.returns.push(AbiParam::new(types::F64));
-    s
+    signature(module, 3, true)
 }
 
-/// `fn(cols: *const *const f64, params: *const f64, out: *mut f64, len: usize)`.
+/// `fn(cols: *const *const f64, params: *const f64, block: *const f64, out: *mut f64, len: usize)`.
 pub(super) fn batch_signature(module: &JITModule) -> Signature {
-    let ptr = module.target_config().pointer_type();
-    let mut s = module.make_signature();
-    s.params.extend([AbiParam::new(ptr); 4]);
-    s
+    signature(module, 5, false)
 }
 
-/// Builds the scalar kernel into `ctx` (a compacted arena: root last).
-pub(super) fn build_scalar(
+/// What every function builder needs.
+pub(super) struct Build<'a> {
+    pub ir: &'a Ir,
+    pub plan: &'a Plan,
+    pub imports: &'a Imports,
+    pub mode: Mode,
+}
+
+/// A function builder over `ctx` with an entry block holding the function's parameters.
+fn begin<'f>(
     module: &mut JITModule,
-    ctx: &mut Context,
-    fctx: &mut FunctionBuilderContext,
-    ir: &Ir,
-    root: NodeId,
+    ctx: &'f mut Context,
+    fctx: &'f mut FunctionBuilderContext,
+    sig: Signature,
     imports: &Imports,
-    mode: Mode,
-) -> Result<(), JitError> {
-    ctx.func.signature = scalar_signature(module);
+) -> (FunctionBuilder<'f>, Callees, Vec<Value>) {
+    ctx.func.signature = sig;
     let callees = import_callees(module, &mut ctx.func, imports);
     let mut b = FunctionBuilder::new(&mut ctx.func, fctx);
     let entry = b.create_block();
     b.append_block_params_for_function_params(entry);
     b.switch_to_block(entry);
     b.seal_block(entry);
-    let (x, params) = match *b.block_params(entry) {
-        [x, p] => (x, p),
-        _ => return Err(JitError::Internal("scalar signature".into())),
-    };
-    let cx = Shared { ir, params, callees, invariants: vec![], mode };
-    let mut t = cx.translator::<F64>(&mut b, vec![None; ir.len()], Source::Ptr(x));
-    t.nodes(root.index() + 1, |_| true)?;
+    let args = b.block_params(entry).to_vec();
+    (b, callees, args)
+}
+
+/// Builds the prepare function: every carried node computed in `F64` and stored to the block.
+pub(super) fn build_prepare(
+    module: &mut JITModule,
+    ctx: &mut Context,
+    fctx: &mut FunctionBuilderContext,
+    w: &Build,
+) -> Result<(), JitError> {
+    let (mut b, callees, args) = begin(module, ctx, fctx, prepare_signature(module), w.imports);
+    let [params, block] = args[..] else { return Err(JitError::Internal("prepare signature".into())) };
+    let cx = Shared { ir: w.ir, params, callees, invariants: vec![], mode: w.mode };
+    // Invariant nodes read no input: the source is never used.
+    let mut t = cx.translator::<F64>(&mut b, vec![None; w.ir.len()], Source::Ptr(params));
+    t.nodes(w.plan.root.index() + 1, |id| !w.plan.variant(id))?;
+    let vals = std::mem::take(&mut t.vals);
+    for (k, id) in w.plan.carried.iter().enumerate() {
+        let v = vals[id.index()].ok_or_else(|| JitError::Internal(format!("carried t{} not translated", id.0)))?;
+        b.ins().store(mem(), v, block, (k * 8) as i32);
+    }
+    b.ins().return_(&[]);
+    b.finalize(module.target_config());
+    Ok(())
+}
+
+/// Builds the scalar kernel: carried nodes loaded from the block, the rest computed.
+pub(super) fn build_scalar(
+    module: &mut JITModule,
+    ctx: &mut Context,
+    fctx: &mut FunctionBuilderContext,
+    w: &Build,
+) -> Result<(), JitError> {
+    let (mut b, callees, args) = begin(module, ctx, fctx, scalar_signature(module), w.imports);
+    let [x, params, block] = args[..] else { return Err(JitError::Internal("scalar signature".into())) };
+    let cx = Shared { ir: w.ir, params, callees, invariants: vec![], mode: w.mode };
+    let vals = w.plan.load_carried(&mut b, block, w.ir.len());
+    let mut t = cx.translator::<F64>(&mut b, vals, Source::Ptr(x));
+    let root = w.plan.root;
+    t.nodes(root.index() + 1, |id| w.plan.variant(id) || matches!(w.ir.node(id), Node::Const(_) | Node::Param(_)))?;
     let r = t.arg(root)?;
     b.ins().return_(&[r]);
     b.finalize(module.target_config());
@@ -614,68 +716,51 @@ type V = F64X2;
 /// Builds the batched kernel into `ctx` (a compacted arena: root last), the loop in lane type [`V`]:
 ///
 /// ```text
-/// entry:       column bases; loop invariants in F64, splatted to V where the loop reads them
+/// entry:       column bases; carried nodes loaded from the block, constants and parameters, in F64;
+///              splatted to V where the loop reads them
 /// header(i):   i < len & !(V::LANES − 1) ? body : tail_check
 /// body:        the V::LANES elements at i; header(i + V::LANES)
 /// tail_check:  len & (V::LANES − 1) ≠ 0 ? tail : exit
 /// tail:        the last element, in F64 (one element: V has at most two lanes)
 /// ```
+///
+/// The carried nodes are computed by the prepare function, not here: Cranelift's optimizer would move their
+/// pure computation into the loop (it removes loop-invariant block parameters and elaborates pure values at
+/// their use), while a load from the block stays where it is written.
 pub(super) fn build_batch(
     module: &mut JITModule,
     ctx: &mut Context,
     fctx: &mut FunctionBuilderContext,
-    ir: &Ir,
-    root: NodeId,
-    imports: &Imports,
-    mode: Mode,
+    w: &Build,
 ) -> Result<(), JitError> {
     // A wider lane type leaves up to LANES − 1 elements and needs a tail loop instead of one tail element.
     const { assert!(V::LANES == 1 || V::LANES == 2, "the batch tail handles one element") };
     let ptr = module.target_config().pointer_type();
-    ctx.func.signature = batch_signature(module);
-    let callees = import_callees(module, &mut ctx.func, imports);
-    let inv = invariants(ir);
+    let (ir, plan, root) = (w.ir, w.plan, w.plan.root);
     let used = ir.used_inputs(root);
     let n = root.index() + 1;
-
-    let mut b = FunctionBuilder::new(&mut ctx.func, fctx);
-    let entry = b.create_block();
+    let (mut b, callees, args) = begin(module, ctx, fctx, batch_signature(module), w.imports);
+    let [cols, params, block, out, len] = args[..] else { return Err(JitError::Internal("batch signature".into())) };
     let header = b.create_block();
     let body = b.create_block();
     let tail_check = b.create_block();
     let tail = b.create_block();
     let exit = b.create_block();
-    b.append_block_params_for_function_params(entry);
-    b.switch_to_block(entry);
-    b.seal_block(entry);
-    let (cols, params, out, len) = match *b.block_params(entry) {
-        [c, p, o, l] => (c, p, o, l),
-        _ => return Err(JitError::Internal("batch signature".into())),
-    };
 
-    // Entry: column bases, invariants (F64), their splats, the length of the vector part.
+    // Entry: column bases, the invariants the loop reads (F64), their splats, the length of the vector part.
     let mut bases = [None; N_INPUTS];
     for i in used.iter() {
         bases[i.index()] = Some(b.ins().load(ptr, mem(), cols, (i.index() * 8) as i32));
     }
     let zero = b.ins().iconst(ptr, 0);
-    let mut cx = Shared { ir, params, callees, invariants: vec![], mode };
-    let mut t = cx.translator::<F64>(&mut b, vec![None; ir.len()], Source::Cols { bases, off: zero });
-    t.nodes(n, |id| inv[id.index()])?;
-    cx.invariants = t.vals;
-    // Splat each invariant that a loop node (or the stored root) reads.
-    let mut need_splat = vec![false; ir.len()];
-    for id in ir.ids().take(n) {
-        if !inv[id.index()] {
-            ir.node(id).for_each_arg(|a| need_splat[a.index()] |= inv[a.index()]);
-        }
-    }
-    need_splat[root.index()] |= inv[root.index()];
+    let mut cx = Shared { ir, params, callees, invariants: vec![], mode: w.mode };
+    let vals = plan.load_carried(&mut b, block, ir.len());
+    let mut t = cx.translator::<F64>(&mut b, vals, Source::Cols { bases, off: zero });
+    t.nodes(n, |id| !plan.variant(id) && matches!(ir.node(id), Node::Const(_) | Node::Param(_)))?;
+    cx.invariants = std::mem::take(&mut t.vals);
     let mut splats = vec![None; ir.len()];
     for id in ir.ids().take(n) {
-        if need_splat[id.index()] {
-            let s = cx.invariants[id.index()]
-                .ok_or_else(|| JitError::Internal(format!("invariant t{} was not translated", id.0)))?;
+        if let (false, Some(s)) = (plan.variant(id), cx.invariants[id.index()]) {
             splats[id.index()] = Some(V::splat(&mut b, s));
         }
     }
@@ -689,7 +774,7 @@ pub(super) fn build_batch(
     b.ins().brif(more, body, &[], tail_check, &[]);
 
     // The loop-variant nodes of one step, translated in each lane type over the shared invariants.
-    let step = LoopStep { cx: &cx, inv: &inv, bases, out, root };
+    let step = LoopStep { cx: &cx, plan, bases, out };
 
     // body: V::LANES elements per iteration.
     b.switch_to_block(body);
@@ -721,11 +806,9 @@ pub(super) fn build_batch(
 struct LoopStep<'a> {
     /// With the invariants' `F64` values.
     cx: &'a Shared<'a>,
-    /// Which nodes are loop invariants (computed in the entry block).
-    inv: &'a [bool],
+    plan: &'a Plan,
     bases: [Option<Value>; N_INPUTS],
     out: Value,
-    root: NodeId,
 }
 
 impl LoopStep<'_> {
@@ -735,8 +818,9 @@ impl LoopStep<'_> {
         let off = b.ins().ishl_imm_u(i, 3);
         let source = Source::Cols { bases: self.bases, off };
         let mut t = self.cx.translator::<L>(b, vals, source);
-        t.nodes(self.root.index() + 1, |id| !self.inv[id.index()])?;
-        let r = t.arg(self.root)?;
+        let root = self.plan.root;
+        t.nodes(root.index() + 1, |id| self.plan.variant(id))?;
+        let r = t.arg(root)?;
         let dst = b.ins().iadd(self.out, off);
         b.ins().store(mem(), r, dst, 0);
         Ok(())

@@ -45,6 +45,7 @@ use cranelift_jit::{JITBuilder, JITModule};
 use cranelift_module::{default_libcall_names, FuncId, Module, ModuleError};
 use std::cell::RefCell;
 use std::fmt;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 
 /// Why code generation failed. None of these is caused by the formula's text (the front end rejects bad
@@ -109,8 +110,9 @@ fn host_isa() -> Result<OwnedTargetIsa, JitError> {
     .map_err(JitError::Host)
 }
 
-type ScalarFn = unsafe extern "C" fn(*const f64, *const f64) -> f64;
-type BatchFn = unsafe extern "C" fn(*const *const f64, *const f64, *mut f64, usize);
+type ScalarFn = unsafe extern "C" fn(*const f64, *const f64, *const f64) -> f64;
+type PrepareFn = unsafe extern "C" fn(*const f64, *mut f64);
+type BatchFn = unsafe extern "C" fn(*const *const f64, *const f64, *const f64, *mut f64, usize);
 
 /// Finalized machine code for one formula: the module that owns the memory and the entry points.
 ///
@@ -122,11 +124,17 @@ pub struct Compiled {
     /// `Sync` without `unsafe`.
     module: Mutex<Option<JITModule>>,
     scalar: ScalarFn,
+    /// Computes the prepared parameter block (`None` when nothing is carried: `block_len` = 0).
+    prepare: Option<PrepareFn>,
+    /// Number of `f64`s in the prepared parameter block.
+    block_len: usize,
+    /// Unique per compiled module (keys the per-thread cache of prepared blocks; addresses can be reused).
+    id: u64,
     /// The batched kernel, or why it could not be built (then batches fall back to scalar calls).
     batch: OnceLock<Result<BatchFn, String>>,
-    /// The compacted IR and the imports, kept to build the batched kernel later.
+    /// The compacted IR, its plan and the imports, kept to build the batched kernel later.
     ir: Ir,
-    root: NodeId,
+    plan: codegen::Plan,
     imports: codegen::Imports,
     /// The math mode the code was generated in.
     mode: Mode,
@@ -144,11 +152,72 @@ impl Compiled {
         let r = self.batch.get_or_init(|| {
             let mut guard = self.module.lock().map_err(|_| "JIT module lock poisoned".to_string())?;
             let module = guard.as_mut().ok_or("JIT module already freed")?;
-            let f =
-                with_jit(|j| j.define_batch(module, &self.ir, self.root, &self.imports, self.mode)).map_err(|e| e.to_string())?;
+            let w = codegen::Build { ir: &self.ir, plan: &self.plan, imports: &self.imports, mode: self.mode };
+            let f = with_jit(|j| j.define_batch(module, &w)).map_err(|e| e.to_string())?;
             Ok(f)
         });
         r.as_ref().ok().copied()
+    }
+}
+
+/// A prepared parameter block: what the prepare function computed for one kernel and one parameter vector.
+struct Prepared {
+    id: u64,
+    /// The parameters' bit patterns (so −0/+0 and NaN payloads count as different, as they may to the code).
+    params: Vec<u64>,
+    block: Vec<f64>,
+}
+
+/// Blocks kept per thread (most recent first): a scalar evaluation with the same parameters as a recent one
+/// reuses its block, which is how parameter-only work runs once per parameter set and not per call.
+const PREPARED_KEEP: usize = 8;
+
+thread_local! {
+    static PREPARED: RefCell<Vec<Prepared>> = const { RefCell::new(Vec::new()) };
+}
+
+impl Compiled {
+    /// Computes the prepared block for `params` into `block` (`block_len` long; nothing when empty).
+    fn prepare_into(&self, params: &[f64], block: &mut [f64]) {
+        if let (Some(prepare), true) = (self.prepare, block.len() == self.block_len) {
+            // Safety: callers pass `params` with every slot the code reads (`JitKernel` pads it to `n_params`);
+            // `block` has exactly the `block_len` slots the prepare function writes (checked just above).
+            unsafe { prepare(params.as_ptr(), block.as_mut_ptr()) }
+        }
+    }
+
+    /// Runs `f` with the prepared block for `params`: from this thread's cache when the same kernel ran with
+    /// the same parameters recently, else freshly computed (and kept). Formulas with nothing to carry skip it.
+    fn with_block<R>(&self, params: &[f64], f: impl FnOnce(&[f64]) -> R) -> R {
+        if self.block_len == 0 {
+            return f(&[]);
+        }
+        let same = |e: &Prepared| {
+            e.id == self.id && e.params.len() == params.len() && e.params.iter().zip(params).all(|(a, b)| *a == b.to_bits())
+        };
+        PREPARED.with(|cache| match cache.try_borrow_mut() {
+            Ok(mut c) => {
+                match c.iter().position(same) {
+                    Some(0) => {}
+                    Some(i) => {
+                        let e = c.remove(i);
+                        c.insert(0, e);
+                    }
+                    None => {
+                        let mut block = vec![0.0; self.block_len];
+                        self.prepare_into(params, &mut block);
+                        c.insert(0, Prepared { id: self.id, params: params.iter().map(|p| p.to_bits()).collect(), block });
+                        c.truncate(PREPARED_KEEP);
+                    }
+                }
+                f(&c[0].block)
+            }
+            Err(_) => {
+                let mut block = vec![0.0; self.block_len];
+                self.prepare_into(params, &mut block);
+                f(&block)
+            }
+        })
     }
 }
 
@@ -194,60 +263,70 @@ impl Jit {
         }
     }
 
-    /// Declares the imports and defines the scalar kernel in `module`, then finalizes it.
-    fn define_scalar(
+    /// Defines one function of signature `sig` in `module`, built by `build`.
+    fn define(
         &mut self,
         module: &mut JITModule,
-        ir: &Ir,
-        root: NodeId,
-        mode: Mode,
-    ) -> Result<(FuncId, codegen::Imports), JitError> {
-        let imports = codegen::declare_imports(module, ir)?;
-        let id = module.declare_anonymous_function(&codegen::scalar_signature(module))?;
+        sig: &cranelift_codegen::ir::Signature,
+        build: impl FnOnce(&mut JITModule, &mut Context, &mut FunctionBuilderContext) -> Result<(), JitError>,
+    ) -> Result<FuncId, JitError> {
+        let id = module.declare_anonymous_function(sig)?;
         module.clear_context(&mut self.ctx);
         self.ctx.func.name = UserFuncName::user(0, id.as_u32());
-        codegen::build_scalar(module, &mut self.ctx, &mut self.fctx, ir, root, &imports, mode)?;
-        self.ctx.set_disasm(self.disasm);
-        module.define_function(id, &mut self.ctx)?;
-        self.keep_listing();
-        module.clear_context(&mut self.ctx);
-        module.finalize_definitions()?;
-        Ok((id, imports))
-    }
-
-    /// Adds the batched kernel to an already finalized module (new code goes to new pages; the scalar
-    /// kernel's pages are untouched, so it may run concurrently).
-    fn define_batch(
-        &mut self,
-        module: &mut JITModule,
-        ir: &Ir,
-        root: NodeId,
-        imports: &codegen::Imports,
-        mode: Mode,
-    ) -> Result<BatchFn, JitError> {
-        let id = module.declare_anonymous_function(&codegen::batch_signature(module))?;
-        module.clear_context(&mut self.ctx);
-        self.ctx.func.name = UserFuncName::user(0, id.as_u32());
-        let built = codegen::build_batch(module, &mut self.ctx, &mut self.fctx, ir, root, imports, mode);
+        let built = build(module, &mut self.ctx, &mut self.fctx);
         let defined = built.and_then(|()| {
             self.ctx.set_disasm(self.disasm);
             module.define_function(id, &mut self.ctx).map_err(JitError::from)
         });
         self.keep_listing();
         module.clear_context(&mut self.ctx);
-        defined?;
-        module.finalize_definitions()?;
+        defined.map(|()| id)
+    }
+
+    /// The finalized address of `id`, checked.
+    fn address(module: &JITModule, id: FuncId) -> Result<*const u8, JitError> {
         let p = module.get_finalized_function(id);
         if p.is_null() {
-            return Err(JitError::Internal("finalized batch function has no address".into()));
+            return Err(JitError::Internal("finalized function has no address".into()));
         }
+        Ok(p)
+    }
+
+    /// Defines the scalar kernel and, when the plan carries nodes, the prepare function; finalizes them.
+    fn define_scalar(&mut self, module: &mut JITModule, w: &codegen::Build) -> Result<(ScalarFn, Option<PrepareFn>), JitError> {
+        let scalar = self.define(module, &codegen::scalar_signature(module), |m, c, f| codegen::build_scalar(m, c, f, w))?;
+        let prepare = if w.plan.carried.is_empty() {
+            None
+        } else {
+            Some(self.define(module, &codegen::prepare_signature(module), |m, c, f| codegen::build_prepare(m, c, f, w))?)
+        };
+        module.finalize_definitions()?;
+        let scalar = Self::address(module, scalar)?;
+        let prepare = prepare.map(|id| Self::address(module, id)).transpose()?;
+        // Safety: each address is the entry of a function just compiled with exactly the signature of the type it
+        // becomes (declared with the host's C calling convention); it stays valid while `module` lives, and the
+        // caller's `Compiled` owns the module.
+        Ok(unsafe {
+            (
+                std::mem::transmute::<*const u8, ScalarFn>(scalar),
+                prepare.map(|p| std::mem::transmute::<*const u8, PrepareFn>(p)),
+            )
+        })
+    }
+
+    /// Adds the batched kernel to an already finalized module (new code goes to new pages; the scalar
+    /// kernel's pages are untouched, so it may run concurrently).
+    fn define_batch(&mut self, module: &mut JITModule, w: &codegen::Build) -> Result<BatchFn, JitError> {
+        let id = self.define(module, &codegen::batch_signature(module), |m, c, f| codegen::build_batch(m, c, f, w))?;
+        module.finalize_definitions()?;
+        let p = Self::address(module, id)?;
         // Safety: `p` is the entry of the function just compiled with exactly `BatchFn`'s signature (declared
         // with the host's C calling convention); it stays valid while the module lives, which `Compiled` owns.
         Ok(unsafe { std::mem::transmute::<*const u8, BatchFn>(p) })
     }
 
     /// Compiles a compacted IR (every node reachable from `root`, root last) into a fresh module. Only the
-    /// scalar kernel is built now; the batched one on the first batch call.
+    /// scalar kernel (and the prepare function) is built now; the batched one on the first batch call.
     pub fn translate(&mut self, ir: &Ir, root: NodeId, mode: Mode) -> Result<Compiled, JitError> {
         if root.index() >= ir.len() {
             return Err(JitError::Internal("root outside the arena".into()));
@@ -257,15 +336,12 @@ impl Jit {
             builder.symbol(sym, ptr);
         }
         let mut module = JITModule::new(builder);
-        let defined = self.define_scalar(&mut module, ir, root, mode).and_then(|(id, imports)| {
-            let p = module.get_finalized_function(id);
-            if p.is_null() {
-                Err(JitError::Internal("finalized function has no address".into()))
-            } else {
-                Ok((p, imports))
-            }
+        let plan = codegen::Plan::new(ir, root);
+        let defined = codegen::declare_imports(&mut module, ir).and_then(|imports| {
+            let w = codegen::Build { ir, plan: &plan, imports: &imports, mode };
+            self.define_scalar(&mut module, &w).map(|fns| (fns, imports))
         });
-        let (p, imports) = match defined {
+        let ((scalar, prepare), imports) = match defined {
             Ok(x) => x,
             Err(e) => {
                 // Safety: no pointer into the module escaped, so nothing can call into the memory being freed.
@@ -275,16 +351,17 @@ impl Jit {
                 return Err(e);
             }
         };
-        // Safety: `p` is the entry of the function just compiled with exactly `ScalarFn`'s signature (declared
-        // with the host's C calling convention); it stays valid while `module` lives, and `Compiled` owns it.
-        let scalar = unsafe { std::mem::transmute::<*const u8, ScalarFn>(p) };
         let params_read = ir.used_params(root).last().map_or(0, |p| *p as usize + 1);
+        static NEXT_ID: AtomicU64 = AtomicU64::new(1);
         Ok(Compiled {
             module: Mutex::new(Some(module)),
             scalar,
+            prepare,
+            block_len: plan.carried.len(),
+            id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
             batch: OnceLock::new(),
             ir: ir.clone(),
-            root,
+            plan,
             imports,
             mode,
             params_read,
@@ -371,7 +448,8 @@ pub fn disassemble(f: &Formula, mode: Mode) -> Result<(String, String), JitError
     {
         let mut guard = c.module.lock().map_err(|_| JitError::Internal("module lock poisoned".into()))?;
         let module = guard.as_mut().ok_or(JitError::Internal("module freed".into()))?;
-        j.define_batch(module, &c.ir, c.root, &c.imports, c.mode)?;
+        let w = codegen::Build { ir: &c.ir, plan: &c.plan, imports: &c.imports, mode: c.mode };
+        j.define_batch(module, &w)?;
     }
     let mut l = std::mem::take(&mut j.listing).into_iter();
     Ok((l.next().unwrap_or_default(), l.next().unwrap_or_default()))
@@ -426,20 +504,25 @@ impl JitKernel {
             return self.batch_by_scalar(cols, params, out);
         };
         let ptrs: [*const f64; N_INPUTS] = std::array::from_fn(|i| cols.cols[i].as_ptr());
+        let mut block = vec![0.0; self.code.block_len];
+        self.code.prepare_into(params, &mut block);
         // Safety: the caller checked `params.len() >= self.n_params` (every slot the code reads) and that every
-        // column the code reads has exactly `out.len()` elements; the code reads `len` elements of those
-        // columns and writes `len` elements of `out`, which is exclusively borrowed. Unread columns are never
-        // dereferenced. The code is alive as long as `self.code`.
-        unsafe { batch(ptrs.as_ptr(), params.as_ptr(), out.as_mut_ptr(), out.len()) }
+        // column the code reads has exactly `out.len()` elements; `block` has the `block_len` slots the code
+        // reads. The code reads `len` elements of those columns and writes `len` elements of `out`, which is
+        // exclusively borrowed. Unread columns are never dereferenced. The code is alive as long as `self.code`.
+        unsafe { batch(ptrs.as_ptr(), params.as_ptr(), block.as_ptr(), out.as_mut_ptr(), out.len()) }
     }
 }
 
 impl Evaluator for JitKernel {
     fn eval(&self, x: &[f64; N_INPUTS], params: &[f64]) -> f64 {
         if params.len() >= self.n_params {
-            // Safety: `x` has the 5 inputs the code may read; `params` has every slot it reads (checked just
-            // above); `self.scalar` is `self.code.scalar`, alive as long as `self.code`.
-            unsafe { (self.scalar)(x.as_ptr(), params.as_ptr()) }
+            self.code.with_block(params, |block| {
+                // Safety: `x` has the 5 inputs the code may read; `params` has every slot it reads (checked just
+                // above); `block` is the prepared block for `params` with the `block_len` slots the code reads
+                // (`with_block` guarantees it); `self.scalar` is `self.code.scalar`, alive as long as `self.code`.
+                unsafe { (self.scalar)(x.as_ptr(), params.as_ptr(), block.as_ptr()) }
+            })
         } else {
             let p = self.padded(params);
             self.eval(x, &p)
