@@ -34,6 +34,10 @@ pub trait Evaluator: Send + Sync {
     /// One evaluation. `x` holds the cosines (NL, NV, NH, VR, VH), `params` the parameter values.
     fn eval(&self, x: &[f64; N_INPUTS], params: &[f64]) -> f64;
 
+    /// Builds whatever the first batch call would build lazily (the JIT's batched kernel), so that timing a
+    /// batch measures evaluation only. The default does nothing.
+    fn warm_up(&self) {}
+
     /// A batch: `out[i] = f(cols[..][i])`. The default loops over [`Evaluator::eval`].
     fn eval_batch(&self, cols: &Columns, params: &[f64], out: &mut [f64]) {
         let mut x = [0.0; N_INPUTS];
@@ -127,6 +131,9 @@ impl Evaluator for Kernel {
     }
     fn eval_batch(&self, cols: &Columns, params: &[f64], out: &mut [f64]) {
         self.evaluator.eval_batch(cols, params, out)
+    }
+    fn warm_up(&self) {
+        self.evaluator.warm_up()
     }
 }
 

@@ -71,6 +71,12 @@ impl Diagnostics {
         ds.push(d);
         ds
     }
+    /// A single error located in `source`.
+    pub fn single_in(file: impl Into<String>, source: impl Into<String>, d: Diagnostic) -> Diagnostics {
+        let mut ds = Diagnostics::new(file, source);
+        ds.push(d);
+        ds
+    }
     pub fn push(&mut self, d: Diagnostic) {
         self.items.push(d);
     }

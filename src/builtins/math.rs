@@ -11,11 +11,11 @@
 //! library through [`Emit::fallback`], a branch taken only when some lane needs it.
 //!
 //! Precise mode: the algorithms and minimax coefficients of fdlibm (Sun Microsystems, freely redistributable),
-//! rewritten with selects. Each is within 1 ulp of the correctly rounded result except `tan` (a quotient of
-//! the sine and cosine kernels, ≤ 2.5 ulp) and `pow`, which computes ln|x| and y·ln|x| in double-double
-//! (error-free products by Veltkamp splitting, since there is no FMA) so that exp's argument is exact to far
-//! below an ulp even when |y·ln x| is near 709; the bounds the table states are checked in tests against a
-//! high-precision reference.
+//! rewritten with selects; `tan` is the quotient of the sine and cosine kernels, and `pow` computes ln|x| and
+//! y·ln|x| in double-double (a 47-entry table of ln(j/64), error-free products by Veltkamp splitting since
+//! there is no FMA), so exp's argument is exact far below an ulp even when |y·ln x| is near 745. Measured over
+//! 10^5 points per function (edge classes included) every function is within 1 ulp of the C library (tan 2);
+//! the table states 2 ulp (tan 3) against the correctly rounded result, and the tests hold it to that.
 //!
 //! Fast mode: the same reductions with shorter polynomials (Taylor series of degree 7–9 where the argument is
 //! small), a single scaling step in exp, pow in plain double (error ≈ |y·ln x|·2^−53 ≤ 1e−13 relative), and no

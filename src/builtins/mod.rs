@@ -64,14 +64,18 @@ pub struct Bound {
 }
 
 impl Bound {
-    const EXACT: Bound = Bound { ulp: 0.5, fast_rel: 0.0 };
+    /// abs, min, max, clamp: no rounding at all.
+    const EXACT: Bound = Bound { ulp: 0.0, fast_rel: 0.0 };
+    /// sqrt: IEEE's correctly rounded square root.
+    const ROUNDED: Bound = Bound { ulp: 0.5, fast_rel: 0.0 };
     const fn math(ulp: f64) -> Bound {
         Bound { ulp, fast_rel: 1e-6 }
     }
 
-    /// The bound as text in `mode`: "≤ 1 ulp", "≤ 1e-6 rel." or "correctly rounded".
+    /// The bound as text in `mode`: "≤ 2 ulp", "≤ 1e-6 rel.", "correctly rounded" or "exact".
     pub fn describe(&self, mode: Mode) -> String {
         match mode {
+            _ if self.ulp == 0.0 => "exact".into(),
             _ if self.fast_rel == 0.0 => "correctly rounded".into(),
             Mode::Precise => format!("≤ {} ulp", self.ulp),
             Mode::Fast => format!("≤ {:e} rel.", self.fast_rel),
@@ -175,7 +179,7 @@ const TABLE: [BuiltinInfo; 14] = [
         lowering: Lowering::Math,
         libm: Libm::F2(lobe_pow),
         symbol: "",
-        bound: Bound::math(1.0),
+        bound: Bound::math(2.0),
         glsl: "pow({0}, {1})",
         doc: "pow(x, y) = x^y; integer constant exponents become multiplications",
     },
@@ -186,7 +190,7 @@ const TABLE: [BuiltinInfo; 14] = [
         lowering: Lowering::Math,
         libm: Libm::F1(lobe_cos),
         symbol: "lobe_cos",
-        bound: Bound::math(1.0),
+        bound: Bound::math(2.0),
         glsl: "cos({0})",
         doc: "cosine of an angle in radians",
     },
@@ -197,7 +201,7 @@ const TABLE: [BuiltinInfo; 14] = [
         lowering: Lowering::Math,
         libm: Libm::F1(lobe_sin),
         symbol: "lobe_sin",
-        bound: Bound::math(1.0),
+        bound: Bound::math(2.0),
         glsl: "sin({0})",
         doc: "sine of an angle in radians",
     },
@@ -208,7 +212,7 @@ const TABLE: [BuiltinInfo; 14] = [
         lowering: Lowering::Math,
         libm: Libm::F1(lobe_tan),
         symbol: "lobe_tan",
-        bound: Bound::math(2.5),
+        bound: Bound::math(3.0),
         glsl: "tan({0})",
         doc: "tangent of an angle in radians",
     },
@@ -219,7 +223,7 @@ const TABLE: [BuiltinInfo; 14] = [
         lowering: Lowering::Math,
         libm: Libm::F1(lobe_acos),
         symbol: "",
-        bound: Bound::math(1.0),
+        bound: Bound::math(2.0),
         glsl: "acos(clamp({0}, -1.0, 1.0))",
         doc: "arc cosine in radians; the argument is clamped to [-1, 1]",
     },
@@ -230,7 +234,7 @@ const TABLE: [BuiltinInfo; 14] = [
         lowering: Lowering::Math,
         libm: Libm::F1(lobe_asin),
         symbol: "",
-        bound: Bound::math(1.0),
+        bound: Bound::math(2.0),
         glsl: "asin(clamp({0}, -1.0, 1.0))",
         doc: "arc sine in radians; the argument is clamped to [-1, 1]",
     },
@@ -241,7 +245,7 @@ const TABLE: [BuiltinInfo; 14] = [
         lowering: Lowering::Math,
         libm: Libm::F1(lobe_atan),
         symbol: "",
-        bound: Bound::math(1.0),
+        bound: Bound::math(2.0),
         glsl: "atan({0})",
         doc: "arc tangent in radians",
     },
@@ -252,7 +256,7 @@ const TABLE: [BuiltinInfo; 14] = [
         lowering: Lowering::Math,
         libm: Libm::F1(lobe_exp),
         symbol: "",
-        bound: Bound::math(1.0),
+        bound: Bound::math(2.0),
         glsl: "exp({0})",
         doc: "e^x",
     },
@@ -263,7 +267,7 @@ const TABLE: [BuiltinInfo; 14] = [
         lowering: Lowering::Math,
         libm: Libm::F1(lobe_ln),
         symbol: "",
-        bound: Bound::math(1.0),
+        bound: Bound::math(2.0),
         glsl: "log({0})",
         doc: "natural logarithm",
     },
@@ -274,7 +278,7 @@ const TABLE: [BuiltinInfo; 14] = [
         lowering: Lowering::Inline,
         libm: Libm::Exact,
         symbol: "",
-        bound: Bound::EXACT,
+        bound: Bound::ROUNDED,
         glsl: "sqrt({0})",
         doc: "square root (NaN below 0)",
     },

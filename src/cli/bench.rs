@@ -39,6 +39,10 @@ pub struct BenchArgs {
     /// Skip the full-geometry albedo column (the slowest check).
     #[arg(long)]
     pub no_albedo: bool,
+    /// Math mode of the timed kernels: `precise`, `fast`, or `both` (two rows per formula; the plot shows
+    /// what fast math buys).
+    #[arg(long = "math", value_name = "MODE", default_value = "precise", value_parser = ["precise", "fast", "both"])]
+    pub math: String,
     #[command(flatten)]
     pub force: Force,
 }
@@ -77,11 +81,47 @@ fn time_twin(ev: &dyn crate::Evaluator, params: &[f64], samples: usize) -> f64 {
     ns[ns.len() / 2]
 }
 
-fn row(f: &Formula, path: &str, set: &[(String, f64)], reference: &crate::Kernel, a: &BenchArgs) -> Result<BenchRow, CliError> {
+/// The largest (ulps, relative) distance of `kernel`'s batched values from the precise interpreter's over the
+/// timed points (NaN on one side only counts as infinitely far).
+fn error_vs_precise(kernel: &crate::Kernel, params: &[f64]) -> (f64, f64) {
+    let pts = sample_points(4096, 0x5EED);
+    let cols: Vec<Vec<f64>> = (0..crate::N_INPUTS).map(|i| pts.iter().map(|r| r[i]).collect()).collect();
+    let columns = crate::Columns::new(std::array::from_fn(|i| cols[i].as_slice()));
+    let mut got: Vec<f64> = vec![0.0; pts.len()];
+    crate::Evaluator::eval_batch(kernel, &columns, params, &mut got);
+    let reference = crate::backend::interp::Interp::with_mode(&kernel.formula, crate::Mode::Precise);
+    let mut worst = (0.0f64, 0.0f64);
+    for (p, g) in pts.iter().zip(&got) {
+        let want = crate::Evaluator::eval(&reference, p, params);
+        let (u, r) = if want.is_nan() && g.is_nan() || want == *g {
+            (0.0, 0.0)
+        } else if !want.is_finite() || !g.is_finite() {
+            (f64::INFINITY, f64::INFINITY)
+        } else {
+            let key = |x: f64| {
+                let b = x.to_bits() as i64;
+                if b < 0 { i64::MIN.wrapping_sub(b) } else { b }
+            };
+            (key(*g).abs_diff(key(want)) as f64, (g - want).abs() / want.abs().max(f64::MIN_POSITIVE))
+        };
+        worst = (worst.0.max(u), worst.1.max(r));
+    }
+    worst
+}
+
+fn row(
+    f: &Formula,
+    path: &str,
+    set: &[(String, f64)],
+    reference: &crate::Kernel,
+    a: &BenchArgs,
+    math: crate::Mode,
+) -> Result<BenchRow, CliError> {
     let set = common::set_for(f, set);
     let params = common::param_values(f, &set);
-    let baked = crate::compile_formula(f.clone(), &Options { backend: Backend::Jit, bake: set.clone(), ..Options::default() })?;
-    let live = crate::compile_formula(f.clone(), &Options { backend: Backend::Jit, ..Options::default() })?;
+    let opts = |bake: Vec<(String, f64)>| Options { backend: Backend::Jit, bake, math, ..Options::default() };
+    let baked = crate::compile_formula(f.clone(), &opts(set.clone()))?;
+    let live = crate::compile_formula(f.clone(), &opts(vec![]))?;
     let m = measure_kernel(&baked, &params, MeasureOptions { points: 4096, samples: a.samples })
         .map_err(|e| CliError::msg(format!("{path}: {e}")))?;
     let stem = Path::new(path).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
@@ -96,9 +136,13 @@ fn row(f: &Formula, path: &str, set: &[(String, f64)], reference: &crate::Kernel
     let coef_n50 = energy::normalization_coef(&baked, &params, lobe).ok();
     let albedo_max = if a.no_albedo { None } else { energy::full_energy(&baked, &params).ok().map(|e| e.albedo_max) };
     let spread = (m.scalar_jit.p75_ns - m.scalar_jit.p25_ns) / 2.0 / m.scalar_jit.median_ns;
+    let (max_ulp_vs_precise, max_rel_vs_precise) = error_vs_precise(&baked, &params);
     Ok(BenchRow {
         name: f.display_name(),
         file: path.to_string(),
+        math: math.name().to_string(),
+        max_ulp_vs_precise,
+        max_rel_vs_precise,
         compile_us: m.compile.as_secs_f64() * 1e6,
         jit_ns: m.scalar_jit.median_ns,
         jit_spread: spread,
@@ -133,11 +177,18 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
     let reference = common::load_kernel(Some(&a.reference), None, &[], Backend::Jit, crate::Mode::Precise)?;
     let mut rows = Vec::new();
     let progress = !a.json.on && std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let modes = match a.math.as_str() {
+        "fast" => vec![crate::Mode::Fast],
+        "both" => vec![crate::Mode::Precise, crate::Mode::Fast],
+        _ => vec![crate::Mode::Precise],
+    };
     for (f, path) in formulas.iter().zip(&files) {
-        if progress {
-            eprint!("\rmeasuring {:<40}", f.display_name());
+        for &math in &modes {
+            if progress {
+                eprint!("\rmeasuring {:<40}", format!("{} ({math})", f.display_name()));
+            }
+            rows.push(row(f, path, &set, &reference, a, math)?);
         }
-        rows.push(row(f, path, &set, &reference, a)?);
     }
     if progress {
         eprint!("\r{:<52}\r", "");
@@ -154,7 +205,13 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
     if let (Some(path), Some(format)) = (&a.plot, plot_format) {
         let pts: Vec<CostError> = rows
             .iter()
-            .map(|r| CostError { name: r.name.clone(), cost: r.jit_ns, error: r.mean_abs_grid, pareto: r.pareto })
+            .map(|r| CostError {
+                name: if modes.len() > 1 { format!("{} ({})", r.name, r.math) } else { r.name.clone() },
+                cost: r.jit_ns,
+                error: r.mean_abs_grid,
+                pareto: r.pareto,
+                series: r.math.clone(),
+            })
             .collect();
         let bytes = plot::speed_error(&pts, "Speed against error", "scalar JIT ns/eval (log)", "mean |Δ| vs reference (log)", format)
             .map_err(CliError::msg)?;

@@ -18,6 +18,21 @@ pub struct CheckArgs {
     pub set: Params,
     #[command(flatten)]
     pub json: Json,
+    #[command(flatten)]
+    pub math: super::args::MathArg,
+}
+
+/// The builtins the simplified formula calls, each with its stated bound in `mode` (sorted by table order).
+fn builtin_bounds(f: &crate::Formula, mode: crate::Mode) -> Vec<(&'static str, String)> {
+    let mut used = vec![];
+    f.ir.walk(f.root, |n| {
+        if let crate::ir::Node::Call(b, _) = n {
+            used.push(*b);
+        }
+    });
+    used.sort();
+    used.dedup();
+    used.into_iter().map(|b| (b.name(), b.info().bound.describe(mode))).collect()
 }
 
 pub fn run(a: &CheckArgs) -> Result<(), CliError> {
@@ -29,7 +44,8 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
     let used = simplified.used_inputs();
     let unused: Vec<&str> = Input::ALL.iter().filter(|i| !used.contains(**i)).map(|i| i.name()).collect();
     let live = simplified.ir.used_params(simplified.root);
-    let opts = |backend| Options { backend, bake: set.clone(), ..Options::default() };
+    let opts = |backend| Options { backend, bake: set.clone(), math: a.math.mode, ..Options::default() };
+    let bounds = builtin_bounds(&simplified, a.math.mode);
     let jit = crate::compile_formula(f.clone(), &opts(Backend::Jit))?;
     let interp = crate::compile_formula(f.clone(), &opts(Backend::Interp))?;
     let params: Vec<serde_json::Value> = f
@@ -63,6 +79,8 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
             "passes": report.passes,
             "used_inputs": used.iter().map(|i| i.name()).collect::<Vec<_>>(),
             "unused_inputs": unused,
+            "math": a.math.mode.name(),
+            "builtins": bounds.iter().map(|(n, b)| json!({"name": n, "bound": b})).collect::<Vec<_>>(),
             "compile_us": {
                 "jit": json::value(jit.compile_time.as_secs_f64() * 1e6),
                 "interp": json::value(interp.compile_time.as_secs_f64() * 1e6),
@@ -99,6 +117,10 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
         if used.is_empty() { "no input (a constant)".to_string() } else { used.to_string() },
         if unused.is_empty() { String::new() } else { format!("   (a renderer skips {})", unused.join(", ")) }
     );
+    if !bounds.is_empty() {
+        let b: Vec<String> = bounds.iter().map(|(n, b)| format!("{n} {b}")).collect();
+        println!("  builtins    {} ({} math)", b.join(", "), a.math.mode);
+    }
     println!(
         "  compile     jit {:.0} µs, interpreter {:.0} µs",
         jit.compile_time.as_secs_f64() * 1e6,

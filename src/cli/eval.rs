@@ -1,4 +1,5 @@
-//! `lobe eval FILE --set n=50 --at NH=0.95,NL=0.7 [--normalize] [--backend jit|interp] [--json]`
+//! `lobe eval FILE --set n=50 --at NH=0.95,NL=0.7 [--normalize] [--backend jit|interp] [--math precise|fast] [--json]`
+//! `lobe eval FILE --points PATH|- [--json]`: every row of a CSV through the batched kernel ([`super::points`]).
 
 use super::args::{self, BackendArg, FormulaSource, Json, Params};
 use super::common::{self, CliError};
@@ -16,6 +17,10 @@ pub struct EvalArgs {
     /// Input cosines, e.g. `NH=0.95,NL=0.7`; unset inputs are 0.
     #[arg(long, value_parser = common::parse_assignments, action = clap::ArgAction::Append)]
     pub at: Vec<Vec<(String, f64)>>,
+    /// Evaluate every row of a CSV file (`-`: standard input) whose header names inputs and, optionally,
+    /// parameters; prints one value per line (or `{"values": […]}` with --json).
+    #[arg(long, value_name = "PATH", conflicts_with = "at")]
+    pub points: Option<String>,
     /// Multiply by the exact energy normalisation coefficient 1/(2π·Int), computed at compile time (bakes
     /// every parameter).
     #[arg(long)]
@@ -47,6 +52,9 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
         x[i.index()] = v;
     }
     let params = common::param_values(&k.formula, &set);
+    if let Some(path) = &a.points {
+        return run_points(a, &k, path, &params, &set);
+    }
     let v = k.eval(&x, &params);
     if a.json.on {
         let obj = serde_json::json!({
@@ -57,6 +65,38 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
         println!("{obj}");
     } else {
         println!("{v}");
+    }
+    Ok(())
+}
+
+fn run_points(a: &EvalArgs, k: &crate::Kernel, path: &str, params: &[f64], set: &[(String, f64)]) -> Result<(), CliError> {
+    let text = super::points::read(path)?;
+    let name = if path == "-" { "<stdin>" } else { path };
+    let mut baked: Vec<String> = set.iter().map(|(n, _)| n.clone()).collect();
+    if a.normalize {
+        baked.extend(k.formula.params.iter().map(|p| p.name.clone()));
+    }
+    let pts = super::points::parse(name, &text, &k.formula, &baked)?;
+    k.warm_up();
+    let t = std::time::Instant::now();
+    let values = super::points::evaluate(k, &pts, params);
+    let elapsed = t.elapsed();
+    if a.json.on {
+        let obj = serde_json::json!({
+            "values": values.iter().map(|v| json::value(*v)).collect::<Vec<_>>(),
+            "points": values.len(),
+            "backend": k.backend.name(),
+            "math": k.math.name(),
+            "compile_us": json::value(k.compile_time.as_secs_f64() * 1e6),
+            "eval_ns_per_point": json::value(elapsed.as_nanos() as f64 / values.len().max(1) as f64),
+        });
+        println!("{obj}");
+    } else {
+        let mut out = String::with_capacity(values.len() * 20);
+        for v in &values {
+            out.push_str(&format!("{v}\n"));
+        }
+        print!("{out}");
     }
     Ok(())
 }

@@ -18,6 +18,7 @@ pub mod compare;
 pub mod eval;
 pub mod export;
 pub mod plot;
+pub mod points;
 pub mod accuracy;
 pub mod energy;
 pub mod fit;

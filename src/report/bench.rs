@@ -13,6 +13,8 @@ use serde::Serialize;
 pub struct BenchRow {
     pub name: String,
     pub file: String,
+    /// The math mode the kernel was compiled in (`precise` or `fast`).
+    pub math: String,
     #[serde(serialize_with = "crate::base::json::num")]
     pub compile_us: f64,
     #[serde(serialize_with = "crate::base::json::num")]
@@ -38,6 +40,12 @@ pub struct BenchRow {
     /// Maximum hemispherical-directional albedo at n = 50 (unnormalised).
     #[serde(serialize_with = "crate::base::json::opt_num")]
     pub albedo_max: Option<f64>,
+    /// The batched kernel's largest distance from the precise interpreter over the timed points, in ulps
+    /// (0 in precise mode: the JIT computes the interpreter's bits), and relative.
+    #[serde(serialize_with = "crate::base::json::num")]
+    pub max_ulp_vs_precise: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
+    pub max_rel_vs_precise: f64,
     pub pareto: bool,
 }
 
@@ -76,18 +84,19 @@ pub fn table(rows: &[BenchRow]) -> String {
     rows.sort_by(|a, b| a.jit_ns.total_cmp(&b.jit_ns));
     let mut out = String::new();
     out.push_str(&format!(
-        "{:<2}{:<28} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>11} {:>9} {:>9} {:>8} {:>8}\n",
-        "", "formula", "compile", "jit ns", "batch ns", "interp", "rust ns", "interp/", "mean |Δ|", "epic. %", "max |Δ|", "coef50", "albedo"
+        "{:<2}{:<28} {:<7} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>9} {:>11} {:>9} {:>9} {:>8} {:>8}\n",
+        "", "formula", "math", "compile", "jit ns", "batch ns", "interp", "rust ns", "interp/", "ulp vs", "mean |Δ|", "epic. %", "max |Δ|", "coef50", "albedo"
     ));
     out.push_str(&format!(
-        "{:<2}{:<28} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>11} {:>9} {:>9} {:>8} {:>8}\n",
-        "", "", "µs", "(±spread)", "/elem", "ns", "", "jit", "vs ref", "max", "", "n=50", "max"
+        "{:<2}{:<28} {:<7} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>9} {:>11} {:>9} {:>9} {:>8} {:>8}\n",
+        "", "", "", "µs", "(±spread)", "/elem", "ns", "", "jit", "precise", "vs ref", "max", "", "n=50", "max"
     ));
     for r in rows {
         out.push_str(&format!(
-            "{:<2}{:<28} {:>9.1} {:>6.2} ±{:>2.0}% {:>9.2} {:>9.1} {:>9} {:>7.1}× {:>11.3e} {:>9.2} {:>9.3e} {:>8} {:>8}\n",
+            "{:<2}{:<28} {:<7} {:>9.1} {:>6.2} ±{:>2.0}% {:>9.2} {:>9.1} {:>9} {:>7.1}× {:>9} {:>11.3e} {:>9.2} {:>9.3e} {:>8} {:>8}\n",
             if r.pareto { "*" } else { "" },
             truncate(&r.name, 28),
+            r.math,
             r.compile_us,
             r.jit_ns,
             r.jit_spread * 100.0,
@@ -95,6 +104,7 @@ pub fn table(rows: &[BenchRow]) -> String {
             r.interp_ns,
             fmt_opt(r.native_ns, 2),
             r.interp_ns / r.jit_ns,
+            fmt_ulps(r.max_ulp_vs_precise),
             r.mean_abs_grid,
             r.epicenter_max_rel_pct,
             r.max_abs,
@@ -104,6 +114,17 @@ pub fn table(rows: &[BenchRow]) -> String {
     }
     out.push_str("* = Pareto front: no other formula is both faster and more accurate.\n");
     out
+}
+
+/// Ulps as a short number: "0", "3", "1.2e5"; "nan" when a value was NaN on one side only.
+fn fmt_ulps(u: f64) -> String {
+    if !u.is_finite() {
+        "nan".into()
+    } else if u < 1e4 {
+        format!("{u:.0}")
+    } else {
+        format!("{u:.1e}")
+    }
 }
 
 fn truncate(s: &str, n: usize) -> String {
@@ -124,6 +145,7 @@ mod tests {
         BenchRow {
             name: name.into(),
             file: String::new(),
+            math: "precise".into(),
             compile_us: 0.0,
             jit_ns: ns,
             jit_spread: 0.0,
@@ -135,6 +157,8 @@ mod tests {
             max_abs: 0.0,
             coef_n50: None,
             albedo_max: None,
+            max_ulp_vs_precise: 0.0,
+            max_rel_vs_precise: 0.0,
             pareto: false,
         }
     }

@@ -196,6 +196,8 @@ pub struct CostError {
     /// Error against the reference, e.g. mean |Δ| on the papers' grid.
     pub error: f64,
     pub pareto: bool,
+    /// Which series the point belongs to (e.g. the math mode).
+    pub series: String,
 }
 
 /// Cost (x, log) against error (y, log), labelled, with the Pareto front joined by a line.
@@ -310,11 +312,11 @@ mod tests {
     #[test]
     fn scatter_needs_positive_points() {
         let p = vec![
-            CostError { name: "a".into(), cost: 2.0, error: 0.01, pareto: true },
-            CostError { name: "b".into(), cost: 5.0, error: 0.1, pareto: false },
+            CostError { name: "a".into(), cost: 2.0, error: 0.01, pareto: true, series: String::new() },
+            CostError { name: "b".into(), cost: 5.0, error: 0.1, pareto: false, series: String::new() },
         ];
         assert!(speed_error(&p, "t", "ns", "err", Format::Png).is_ok());
-        let z = vec![CostError { name: "z".into(), cost: 0.0, error: 0.0, pareto: false }];
+        let z = vec![CostError { name: "z".into(), cost: 0.0, error: 0.0, pareto: false, series: String::new() }];
         assert!(speed_error(&z, "t", "ns", "err", Format::Svg).is_err());
     }
 }

@@ -529,6 +529,10 @@ impl Evaluator for JitKernel {
         }
     }
 
+    fn warm_up(&self) {
+        self.prepare_batch();
+    }
+
     fn eval_batch(&self, cols: &Columns, params: &[f64], out: &mut [f64]) {
         let columns_ok = self.code.inputs.iter().all(|i| cols.col(i).len() == out.len());
         if !columns_ok {
