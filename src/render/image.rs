@@ -27,7 +27,9 @@ impl Transfer {
             Transfer::Srgb if c <= 0.003_130_8 => 12.92 * c,
             Transfer::Srgb => 1.055 * c.powf(1.0 / 2.4) - 0.055,
         };
-        (c * 255.0).round() as u8
+        // c·255 + 0.5 truncated is round-half-up for c ≥ 0, and, unlike `round`, needs no libm call on the
+        // baseline x86-64 target (no SSE4.1): this runs three times per pixel.
+        (c * 255.0 + 0.5) as u8
     }
 }
 
@@ -113,6 +115,11 @@ mod tests {
 
     #[test]
     fn transfer_matches_definitions() {
+        // c·255 + 0.5 truncated rounds half up, like `round` on these values.
+        for k in 0..=2550 {
+            let c = k as f64 / 2550.0;
+            assert_eq!(Transfer::Linear.encode(c), (c * 255.0).round() as u8, "{c}");
+        }
         assert_eq!(Transfer::Linear.encode(0.5), 128);
         assert_eq!(Transfer::Linear.encode(2.0), 255);
         assert_eq!(Transfer::Linear.encode(f64::NAN), 0);
