@@ -138,7 +138,7 @@ impl Default for RenderOptions {
     }
 }
 
-/// What a render measured. Times named `*_cpu` are summed over threads.
+/// What a render measured. Times named `*_cpu` are thread CPU time summed over threads.
 #[derive(Clone, Debug, Default)]
 pub struct RenderStats {
     pub width: usize,
@@ -292,6 +292,16 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
 /// A shaded tile: 8-bit pixels and coverage (row-major, tile-sized) and its counters.
 type TileOut = (Vec<u8>, Vec<bool>, shade::ShadeCounts);
 
+/// This thread's CPU time in ns (the wall clock where the platform has no thread clock): stage times are CPU
+/// time, so a shared machine does not inflate them.
+fn thread_cpu() -> u64 {
+    static START: std::sync::OnceLock<Instant> = std::sync::OnceLock::new();
+    match cpu_time::ThreadTime::try_now() {
+        Ok(t) => t.as_duration().as_nanos() as u64,
+        Err(_) => START.get_or_init(Instant::now).elapsed().as_nanos() as u64,
+    }
+}
+
 /// CPU time per stage, summed over threads (ns).
 #[derive(Default)]
 struct Timers {
@@ -317,16 +327,21 @@ fn tile_pixels(
     if setup.bins[t].is_empty() {
         return None;
     }
-    let t0 = Instant::now();
+    let c0 = thread_cpu();
     raster::raster_tile(setup, t, &mut sc.gb);
+    let c1 = thread_cpu();
     let t1 = Instant::now();
-    let (counts, kernel_ns) = shade::shade_tile(scene, plans, setup, n, sc, transfer, bg);
+    let (counts, kernel_wall) = shade::shade_tile(scene, plans, setup, n, sc, transfer, bg);
     let px = sc.rgb.clone();
     let cov = sc.gb.tri.iter().map(|&t| t != raster::EMPTY).collect();
-    let t2 = Instant::now();
-    timers.raster.fetch_add((t1 - t0).as_nanos() as u64, Ordering::Relaxed);
-    timers.shade.fetch_add((t2 - t1).as_nanos() as u64, Ordering::Relaxed);
-    timers.kernel.fetch_add(kernel_ns, Ordering::Relaxed);
+    let (c2, wall) = (thread_cpu(), t1.elapsed().as_nanos().max(1) as u64);
+    let shade_cpu = c2.saturating_sub(c1);
+    // The kernel is timed by the wall clock (a thread-CPU clock read costs ~0.3 µs, too much per call);
+    // scaled by this tile's CPU/wall ratio, it is the kernel's share of the CPU time.
+    let kernel_cpu = (kernel_wall as u128 * shade_cpu as u128 / wall as u128) as u64;
+    timers.raster.fetch_add(c1.saturating_sub(c0), Ordering::Relaxed);
+    timers.shade.fetch_add(shade_cpu, Ordering::Relaxed);
+    timers.kernel.fetch_add(kernel_cpu.min(shade_cpu), Ordering::Relaxed);
     Some((px, cov, counts))
 }
 
