@@ -4,22 +4,28 @@
 //! 1. setup (serial): project and clip every triangle, snap to 1/256 pixel, bin into 64×64 tiles
 //!    ([`raster::setup`]);
 //! 2. per tile, tiles in parallel with rayon: rasterise the tile's bin into a tile-sized G-buffer (integer
-//!    edge functions, top-left rule, 1/w depth test), then shade the visible pixels with one batched kernel
-//!    call per light and material ([`shade::shade_tile`]), and convert to 8 bits into the frame;
-//!    tiles no triangle touches are filled with the background and cost nothing else;
+//!    edge functions, top-left rule, 1/w depth test), then shade the visible pixels in structure-of-arrays
+//!    spans of up to [`shade::SPAN`] pixels, following each material's [`plan::ShadingPlan`] (computed once
+//!    per frame: which cosines the formula reads, the uniforms, the cut-off), with one batched kernel call per
+//!    span and light ([`shade::shade_tile`]), and convert to 8 bits into the frame; tiles no triangle touches
+//!    are filled with the background and cost nothing else;
 //! 3. PNG encoding and atomic output ([`image`]).
 //!
 //! Materials are `Arc<dyn Evaluator>` plus the set of inputs the formula reads, so the same renderer runs
-//! the JIT, the interpreter, or a plain Rust closure (tests and benches).
+//! the JIT, the interpreter, or a plain Rust closure (tests and benches); everything but F is the same Rust
+//! code on every backend, so "JIT vs interpreter" compares the kernels in the same shading.
 //!
 //! Determinism: every tile is computed from its own bin in scene order and written to its own pixels, and
 //! all counters are integers, so 1 thread and N threads give byte-identical images and equal counts.
 //!
-//! Cost model: shading dominates — per visible pixel, scalar f64 interpolation of position and normal, the
-//! L/V/H/R vectors and cosines the formula reads, the kernel, and the 8-bit conversion — then rasterisation
-//! (a few edge-function steps per covered pixel); setup and binning are per triangle and small; tiles the
-//! scene does not touch cost only the background fill. PNG encoding is a separate, serial stage. Measured
-//! numbers: BENCHMARKS.md.
+//! Cost model: shading dominates — per visible pixel the SoA geometry (interpolation, three inverse lengths,
+//! the cosines the formula reads, compaction of the lit pixels, the colour sum, the 8-bit conversion:
+//! ~15–20 ns on this project's machine, SSE2 f64 lanes), plus per lit pixel and light the kernel (JIT ~1 ns
+//! for arithmetic formulas, the interpreter ~35 ns) — then rasterisation (a few edge-function steps per
+//! covered pixel, ~5 ns); setup and binning are per triangle and small; tiles the scene does not touch cost
+//! only the background fill. PNG encoding is a separate, serial stage. Stage times are thread CPU time
+//! (`cpu-time`), so a loaded machine does not inflate them; the kernel's share is its wall time scaled by the
+//! tile's CPU/wall ratio. Measured numbers: BENCHMARKS.md.
 
 pub mod camera;
 pub mod compare;

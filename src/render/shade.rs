@@ -1,15 +1,16 @@
 //! Per-tile shading in structure-of-arrays columns: I = ka·Ia·C + Σ_lights Il·(kd·NL·C + ks·coef·F·Cs).
 //!
-//! Design: the visible pixels of a tile are grouped by material (one group per material present). For a group,
-//! every quantity is a column of f64 with one entry per pixel, and every step of the material's
+//! Design: the visible pixels of a tile are grouped by material and cut into spans of up to [`SPAN`] pixels.
+//! In a span every quantity is a column of f64 with one entry per pixel, and every step of the material's
 //! [`ShadingPlan`] is one branch-free loop over those columns, which LLVM vectorises (SSE2 f64x2 on the
-//! baseline x86-64 target; wider with `-C target-cpu`). Position and normal are interpolated per run of pixels
-//! covered by one triangle (the triangle's attributes are loop constants there). Per light, the lit pixels
-//! (NL > 0, lobe cosine above the cut-off if the material has one) are compacted into the kernel's columns
-//! (branch-free: the write index advances by the mask) and the kernel is called once with
-//! [`Evaluator::eval_batch`] — the JIT's F64X2 batch loop or the interpreter. F is scattered back (a NaN or
-//! ±inf is counted and becomes 0: no light) and the colour sum runs over the whole group, unlit pixels
-//! adding exactly +0. Nothing here allocates in the steady state ([`Scratch`] is per thread).
+//! baseline x86-64 target; the inverse lengths take an f32 estimate and one f64 Newton step instead of an f64
+//! square root and division). Position and normal are interpolated per run of pixels covered by one triangle
+//! (its attributes are loop constants there). Per light, the lit pixels (NL > 0, lobe cosine above the
+//! cut-off if the material has one) are compacted into the kernel's columns (branch-free: the write index
+//! advances by the mask) and the kernel is called once for the span with [`Evaluator::eval_batch`] — the
+//! JIT's F64X2 batch loop or the interpreter. F is scattered back (a NaN or ±inf is counted and becomes 0:
+//! no light) and the colour sum runs over the whole span, unlit pixels adding exactly +0. Nothing here
+//! allocates in the steady state ([`Scratch`] is per thread).
 //!
 //! The plan documents which steps run for which inputs, so a JIT-compiled shading program can replace these
 //! loops one for one. Cost model: see [`super::plan`]; measured numbers: BENCHMARKS.md.
