@@ -1,10 +1,10 @@
-//! `lobe render SCENE [-o out.png] [--size 1024] [--set n=200] [--backend jit|interp] [--threads N] [--stats]`
+//! `lobe render SCENE [-o out.png] [--size 1024] [--set n=200] [--backend jit|interp] [--threads N] [--stats [--json]]`
 
-use super::args::{self, BackendArg, Output, Params};
+use super::args::{self, BackendArg, Json, Output, Params};
 use super::common::CliError;
 use crate::render::image::{self, Transfer};
 use crate::render::scene::{self, LobeCompiler, LoadOptions};
-use crate::render::{self as r, RenderOptions, RenderStats};
+use crate::render::{self as r, CutoffEffect, RenderOptions, RenderStats};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -32,9 +32,11 @@ pub struct RenderArgs {
     /// Encode with the sRGB curve instead of the papers' linear clamp to 0..255.
     #[arg(long)]
     pub srgb: bool,
-    /// Print throughput and time per stage.
+    /// Print throughput and time per stage (and what a material's `cutoff` changes: one more render).
     #[arg(long)]
     pub stats: bool,
+    #[command(flatten)]
+    pub json: Json,
     /// No progress bar.
     #[arg(short, long)]
     pub quiet: bool,
@@ -74,17 +76,27 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
         tile: a.tile as usize,
         transfer: if a.srgb { Transfer::Srgb } else { Transfer::Linear },
         progress: !a.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr()),
+        cutoff: true,
     };
+    let t0 = Instant::now();
     let (frame, stats) = r::render(&sc, &ropts).map_err(CliError::msg)?;
     let t = Instant::now();
     let png = frame.image.encode_png().map_err(CliError::msg)?;
     let encode = t.elapsed();
     a.out.force.write(&out, &png, image::is_lobe_png)?;
+    let wall = t0.elapsed();
     if stats.nan > 0 {
         eprintln!("warning: {} kernel evaluations returned NaN or ±inf and were shaded as no light", stats.nan);
     }
-    if a.stats {
-        eprint!("{}", format_stats(&stats, encode));
+    if a.stats || a.json.on {
+        let cut = r::cutoff_effect(&sc, &ropts, &frame, &stats).map_err(CliError::msg)?;
+        let t = Times { encode, wall };
+        if a.json.on {
+            println!("{}", stats_json(&stats, &t, a.backend.kind.name(), cut.as_ref()));
+        } else {
+            eprint!("{}", format_stats(&stats, encode));
+            eprint!("{}", format_cutoff(cut.as_ref()));
+        }
     }
     if !a.quiet {
         eprintln!("wrote {} ({}×{})", out.display(), stats.width, stats.height);
@@ -92,13 +104,74 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
     Ok(())
 }
 
+/// The math mode of the kernels. Every kernel is compiled precise until the `--math` option exists; this is
+/// the one place the render report takes it from.
+pub const MATH: &str = "precise";
+
+/// Wall times the CLI measures around the render.
+pub struct Times {
+    pub encode: std::time::Duration,
+    /// Render, encode and write.
+    pub wall: std::time::Duration,
+}
+
+/// The `--stats --json` object (keys listed in README.md). Times in ms except the per-pixel/per-element ns.
+pub fn stats_json(s: &RenderStats, t: &Times, backend: &str, cut: Option<&CutoffEffect>) -> serde_json::Value {
+    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+    let cutoff = cut.map(|c| {
+        serde_json::json!({
+            "skipped_evals": c.skipped,
+            "max_channel_diff": c.max_channel_diff,
+            "pixels_differing": c.pixels_differing,
+            "manhattan": c.metrics.manhattan,
+            "psnr": if c.metrics.psnr.is_finite() { serde_json::json!(c.metrics.psnr) } else { serde_json::Value::Null },
+        })
+    });
+    serde_json::json!({
+        "width": s.width,
+        "height": s.height,
+        "threads": s.threads,
+        "backend": backend,
+        "math": MATH,
+        "triangles": s.triangles,
+        "tiles_touched": s.tiles_touched,
+        "visible_px": s.visible_pixels,
+        "evals": s.evals,
+        "kernel_calls": s.kernel_calls,
+        "nan": s.nan,
+        "shade_ns_per_px": s.shade_ns_per_px(),
+        "geometry_ns_per_px": s.geometry_ns_per_px(),
+        "kernel_ns_per_eval": s.kernel_ns_per_eval(),
+        "setup_ms": ms(s.setup),
+        "raster_ms": ms(s.raster_cpu),
+        "shade_ms": ms(s.shade_cpu),
+        "kernel_ms": ms(s.kernel_cpu),
+        "render_ms": ms(s.render_wall),
+        "encode_ms": ms(t.encode),
+        "wall_ms": ms(t.wall),
+        "mpixels_per_s": s.mpixels_per_s(),
+        "cutoff": cutoff,
+    })
+}
+
+/// The `--stats` lines about the cut-off (empty without one).
+pub fn format_cutoff(cut: Option<&CutoffEffect>) -> String {
+    match cut {
+        None => String::new(),
+        Some(c) => format!(
+            "  cut-off: {} evaluations skipped; against the full render: max channel difference {}, {} pixels differ, mean |Δ gray| {:.4}\n",
+            c.skipped, c.max_channel_diff, c.pixels_differing, c.metrics.manhattan
+        ),
+    }
+}
+
 /// The `--stats` report.
 pub fn format_stats(s: &RenderStats, encode: std::time::Duration) -> String {
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     format!(
         "render: {}×{} px, {} thread(s), {} triangles, {}/{} tiles touched\n\
-         \x20 time: {:.2} ms wall ({:.2} Mpixel/s); setup+binning {:.2} ms; raster {:.2} ms cpu; shading {:.2} ms cpu; encode {:.2} ms\n\
-         \x20 shading: {} visible px, {} kernel evaluations in {} batched calls, {} NaN\n",
+         \x20 time: {:.2} ms wall ({:.2} Mpixel/s); setup+binning {:.2} ms; raster {:.2} ms cpu; shading {:.2} ms cpu (kernel {:.2}); encode {:.2} ms\n\
+         \x20 shading: {} visible px, {:.1} ns cpu per visible px ({:.1} outside the kernel), {} kernel evaluations ({:.2} ns each) in {} batched calls, {} NaN\n",
         s.width,
         s.height,
         s.threads,
@@ -110,9 +183,13 @@ pub fn format_stats(s: &RenderStats, encode: std::time::Duration) -> String {
         ms(s.setup),
         ms(s.raster_cpu),
         ms(s.shade_cpu),
+        ms(s.kernel_cpu),
         ms(encode),
         s.visible_pixels,
+        s.shade_ns_per_px(),
+        s.geometry_ns_per_px(),
         s.evals,
+        s.kernel_ns_per_eval(),
         s.kernel_calls,
         s.nan
     )

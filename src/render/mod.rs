@@ -4,27 +4,34 @@
 //! 1. setup (serial): project and clip every triangle, snap to 1/256 pixel, bin into 64×64 tiles
 //!    ([`raster::setup`]);
 //! 2. per tile, tiles in parallel with rayon: rasterise the tile's bin into a tile-sized G-buffer (integer
-//!    edge functions, top-left rule, 1/w depth test), then shade the visible pixels with one batched kernel
-//!    call per light and material ([`shade::shade_tile`]), and convert to 8 bits into the frame;
-//!    tiles no triangle touches are filled with the background and cost nothing else;
+//!    edge functions, top-left rule, 1/w depth test), then shade the visible pixels in structure-of-arrays
+//!    spans of up to [`shade::SPAN`] pixels, following each material's [`plan::ShadingPlan`] (computed once
+//!    per frame: which cosines the formula reads, the uniforms, the cut-off), with one batched kernel call per
+//!    span and light ([`shade::shade_tile`]), and convert to 8 bits into the frame; tiles no triangle touches
+//!    are filled with the background and cost nothing else;
 //! 3. PNG encoding and atomic output ([`image`]).
 //!
 //! Materials are `Arc<dyn Evaluator>` plus the set of inputs the formula reads, so the same renderer runs
-//! the JIT, the interpreter, or a plain Rust closure (tests and benches).
+//! the JIT, the interpreter, or a plain Rust closure (tests and benches); everything but F is the same Rust
+//! code on every backend, so "JIT vs interpreter" compares the kernels in the same shading.
 //!
 //! Determinism: every tile is computed from its own bin in scene order and written to its own pixels, and
 //! all counters are integers, so 1 thread and N threads give byte-identical images and equal counts.
 //!
-//! Cost model: shading dominates — per visible pixel, scalar f64 interpolation of position and normal, the
-//! L/V/H/R vectors and cosines the formula reads, the kernel, and the 8-bit conversion — then rasterisation
-//! (a few edge-function steps per covered pixel); setup and binning are per triangle and small; tiles the
-//! scene does not touch cost only the background fill. PNG encoding is a separate, serial stage. Measured
-//! numbers: BENCHMARKS.md.
+//! Cost model: shading dominates — per visible pixel the SoA geometry (interpolation, three inverse lengths,
+//! the cosines the formula reads, compaction of the lit pixels, the colour sum, the 8-bit conversion:
+//! ~15–20 ns on this project's machine, SSE2 f64 lanes), plus per lit pixel and light the kernel (JIT ~1 ns
+//! for arithmetic formulas, the interpreter ~35 ns) — then rasterisation (a few edge-function steps per
+//! covered pixel, ~5 ns); setup and binning are per triangle and small; tiles the scene does not touch cost
+//! only the background fill. PNG encoding is a separate, serial stage. Stage times are thread CPU time
+//! (`cpu-time`), so a loaded machine does not inflate them; the kernel's share is its wall time scaled by the
+//! tile's CPU/wall ratio. Measured numbers: BENCHMARKS.md.
 
 pub mod camera;
 pub mod compare;
 pub mod image;
 pub mod mesh;
+pub mod plan;
 pub mod raster;
 pub mod scene;
 pub mod shade;
@@ -75,6 +82,8 @@ pub struct Material {
     pub specular: DVec3,
     /// Energy normalisation factor applied to F (1 when `normalize` is off).
     pub coef: f64,
+    /// The papers' cut-off (scene key `cutoff = q`): F is not evaluated where the lobe is below 2^−q.
+    pub cutoff: Option<plan::Cutoff>,
 }
 
 impl std::fmt::Debug for Material {
@@ -87,6 +96,7 @@ impl std::fmt::Debug for Material {
             .field("kd", &self.kd)
             .field("ks", &self.ks)
             .field("coef", &self.coef)
+            .field("cutoff", &self.cutoff)
             .finish()
     }
 }
@@ -124,15 +134,17 @@ pub struct RenderOptions {
     pub transfer: Transfer,
     /// Show a progress bar on stderr if the render takes longer than half a second.
     pub progress: bool,
+    /// Apply the materials' cut-offs (off: evaluate F everywhere, to measure what the cut-off changes).
+    pub cutoff: bool,
 }
 
 impl Default for RenderOptions {
     fn default() -> RenderOptions {
-        RenderOptions { threads: 0, tile: 64, transfer: Transfer::Linear, progress: false }
+        RenderOptions { threads: 0, tile: 64, transfer: Transfer::Linear, progress: false, cutoff: true }
     }
 }
 
-/// What a render measured. Times named `*_cpu` are summed over threads.
+/// What a render measured. Times named `*_cpu` are thread CPU time summed over threads.
 #[derive(Clone, Debug, Default)]
 pub struct RenderStats {
     pub width: usize,
@@ -147,9 +159,14 @@ pub struct RenderStats {
     pub kernel_calls: u64,
     /// Kernel results that were NaN or ±inf (shaded as no light).
     pub nan: u64,
+    /// Lit pixel × light pairs whose kernel evaluation a material's cut-off skipped.
+    pub cut: u64,
     pub setup: Duration,
     pub raster_cpu: Duration,
+    /// Shading, including the kernel time and the conversion to 8 bits.
     pub shade_cpu: Duration,
+    /// The part of `shade_cpu` spent inside the kernel's batched calls.
+    pub kernel_cpu: Duration,
     /// Wall time of setup + tiles (excludes encoding).
     pub render_wall: Duration,
 }
@@ -157,6 +174,18 @@ pub struct RenderStats {
 impl RenderStats {
     pub fn mpixels_per_s(&self) -> f64 {
         (self.width * self.height) as f64 / self.render_wall.as_secs_f64().max(1e-12) / 1e6
+    }
+    /// Shading CPU time per visible pixel, ns.
+    pub fn shade_ns_per_px(&self) -> f64 {
+        self.shade_cpu.as_nanos() as f64 / self.visible_pixels.max(1) as f64
+    }
+    /// Shading CPU time outside the kernel per visible pixel, ns: the geometry and colour cost.
+    pub fn geometry_ns_per_px(&self) -> f64 {
+        (self.shade_cpu.saturating_sub(self.kernel_cpu)).as_nanos() as f64 / self.visible_pixels.max(1) as f64
+    }
+    /// Kernel CPU time per evaluation, ns (0 when nothing was evaluated).
+    pub fn kernel_ns_per_eval(&self) -> f64 {
+        if self.evals == 0 { 0.0 } else { self.kernel_cpu.as_nanos() as f64 / self.evals as f64 }
     }
 }
 
@@ -200,8 +229,8 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
     let setup_time = t0.elapsed();
 
     let bg = scene.background.to_array().map(|c| opts.transfer.encode(c));
-    let raster_ns = AtomicU64::new(0);
-    let shade_ns = AtomicU64::new(0);
+    let plans: Vec<plan::ShadingPlan> = scene.materials.iter().map(|m| plan::ShadingPlan::new(m, scene.ambient, opts.cutoff)).collect();
+    let timers = Timers::default();
     let progress = Progress::new(opts.progress, setup.bins.len() as u64);
     let mut rgb = vec![0u8; w * h * 3];
     let mut covered = vec![false; w * h];
@@ -214,14 +243,18 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
                 .into_par_iter()
                 .map_init(shade::Scratch::default, |sc, tx| {
                     let t = ty * setup.tiles_x + tx;
-                    let out = tile_pixels(scene, &setup, t, sc, opts.transfer, bg, &raster_ns, &shade_ns);
+                    let out = tile_pixels(scene, &plans, &setup, t, sc, opts.transfer, bg, &timers);
                     progress.tick();
                     out
                 })
                 .collect();
-            // Background everywhere first; empty tiles need nothing more.
-            for p in band.chunks_exact_mut(3) {
+            // Background everywhere first (one row built, then copied); empty tiles need nothing more.
+            let (first, rest) = band.split_at_mut((w * 3).min(band.len()));
+            for p in first.chunks_exact_mut(3) {
                 p.copy_from_slice(&bg);
+            }
+            for row in rest.chunks_exact_mut(w * 3) {
+                row.copy_from_slice(first);
             }
             let mut counts = shade::ShadeCounts::default();
             for (tx, tile) in tiles.into_iter().enumerate() {
@@ -252,9 +285,11 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
         evals: counts.evals,
         kernel_calls: counts.kernel_calls,
         nan: counts.nan,
+        cut: counts.cut,
         setup: setup_time,
-        raster_cpu: Duration::from_nanos(raster_ns.load(Ordering::Relaxed)),
-        shade_cpu: Duration::from_nanos(shade_ns.load(Ordering::Relaxed)),
+        raster_cpu: Duration::from_nanos(timers.raster.load(Ordering::Relaxed)),
+        shade_cpu: Duration::from_nanos(timers.shade.load(Ordering::Relaxed)),
+        kernel_cpu: Duration::from_nanos(timers.kernel.load(Ordering::Relaxed)),
         render_wall: t0.elapsed(),
     };
     (Frame { image: Image { width: w, height: h, rgb }, covered }, stats)
@@ -263,42 +298,89 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
 /// A shaded tile: 8-bit pixels and coverage (row-major, tile-sized) and its counters.
 type TileOut = (Vec<u8>, Vec<bool>, shade::ShadeCounts);
 
+/// This thread's CPU time in ns (the wall clock where the platform has no thread clock): stage times are CPU
+/// time, so a shared machine does not inflate them.
+fn thread_cpu() -> u64 {
+    static START: std::sync::OnceLock<Instant> = std::sync::OnceLock::new();
+    match cpu_time::ThreadTime::try_now() {
+        Ok(t) => t.as_duration().as_nanos() as u64,
+        Err(_) => START.get_or_init(Instant::now).elapsed().as_nanos() as u64,
+    }
+}
+
+/// CPU time per stage, summed over threads (ns).
+#[derive(Default)]
+struct Timers {
+    raster: AtomicU64,
+    shade: AtomicU64,
+    kernel: AtomicU64,
+}
+
 /// One tile's output; `None` for a tile no triangle touches.
 #[allow(clippy::too_many_arguments)]
 fn tile_pixels(
     scene: &Scene,
+    plans: &[plan::ShadingPlan],
     setup: &raster::Setup,
     t: usize,
     sc: &mut shade::Scratch,
     transfer: Transfer,
     bg: [u8; 3],
-    raster_ns: &AtomicU64,
-    shade_ns: &AtomicU64,
+    timers: &Timers,
 ) -> Option<TileOut> {
     let (_, _, tw, th) = raster::tile_rect(setup, t);
     let n = tw * th;
     if setup.bins[t].is_empty() {
         return None;
     }
-    let t0 = Instant::now();
+    let c0 = thread_cpu();
     raster::raster_tile(setup, t, &mut sc.gb);
+    let c1 = thread_cpu();
     let t1 = Instant::now();
-    let counts = shade::shade_tile(scene, setup, n, sc);
-    let mut px = Vec::with_capacity(n * 3);
-    let mut cov = Vec::with_capacity(n);
-    for (i, c) in sc.accum.iter().enumerate() {
-        if sc.gb.tri[i] == raster::EMPTY {
-            px.extend_from_slice(&bg);
-            cov.push(false);
-        } else {
-            px.extend(c.to_array().map(|v| transfer.encode(v)));
-            cov.push(true);
-        }
-    }
-    let t2 = Instant::now();
-    raster_ns.fetch_add((t1 - t0).as_nanos() as u64, Ordering::Relaxed);
-    shade_ns.fetch_add((t2 - t1).as_nanos() as u64, Ordering::Relaxed);
+    let (counts, kernel_wall) = shade::shade_tile(scene, plans, setup, n, sc, transfer, bg);
+    let px = sc.rgb.clone();
+    let cov = sc.gb.tri.iter().map(|&t| t != raster::EMPTY).collect();
+    let (c2, wall) = (thread_cpu(), t1.elapsed().as_nanos().max(1) as u64);
+    let shade_cpu = c2.saturating_sub(c1);
+    // The kernel is timed by the wall clock (a thread-CPU clock read costs ~0.3 µs, too much per call);
+    // scaled by this tile's CPU/wall ratio, it is the kernel's share of the CPU time.
+    let kernel_cpu = (kernel_wall as u128 * shade_cpu as u128 / wall as u128) as u64;
+    timers.raster.fetch_add(c1.saturating_sub(c0), Ordering::Relaxed);
+    timers.shade.fetch_add(shade_cpu, Ordering::Relaxed);
+    timers.kernel.fetch_add(kernel_cpu.min(shade_cpu), Ordering::Relaxed);
     Some((px, cov, counts))
+}
+
+/// What the materials' cut-offs change in a frame: the frame rendered again without them, compared.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CutoffEffect {
+    /// Kernel evaluations the cut-off skipped (lit pixel × light pairs).
+    pub skipped: u64,
+    /// Largest difference of one channel, in 8-bit levels.
+    pub max_channel_diff: u8,
+    /// Pixels with any channel different.
+    pub pixels_differing: u64,
+    /// The papers' grayscale metrics of the difference.
+    pub metrics: compare::Metrics,
+}
+
+/// Renders `scene` again with every cut-off off and compares with `frame` (rendered with them); `None` if no
+/// material has a cut-off. Costs one more render.
+pub fn cutoff_effect(scene: &Scene, opts: &RenderOptions, frame: &Frame, stats: &RenderStats) -> Result<Option<CutoffEffect>, String> {
+    if !opts.cutoff || scene.materials.iter().all(|m| m.cutoff.is_none()) {
+        return Ok(None);
+    }
+    let (full, _) = render(scene, &RenderOptions { cutoff: false, progress: false, ..*opts })?;
+    let (a, b) = (&frame.image.rgb, &full.image.rgb);
+    let mut max = 0u8;
+    let mut differing = 0u64;
+    for (p, q) in a.chunks_exact(3).zip(b.chunks_exact(3)) {
+        let d = p.iter().zip(q).map(|(x, y)| x.abs_diff(*y)).max().unwrap_or(0);
+        max = max.max(d);
+        differing += u64::from(d > 0);
+    }
+    let metrics = compare::metrics(&frame.image, &full.image, &frame.covered)?;
+    Ok(Some(CutoffEffect { skipped: stats.cut, max_channel_diff: max, pixels_differing: differing, metrics }))
 }
 
 /// An indicatif bar that appears only once a render has run for half a second.

@@ -1,17 +1,31 @@
-//! Per-tile shading: I = ka·Ia·C + Σ_lights Il·(kd·NL·C + ks·coef·F·Cs), with F the material's BRDF kernel.
+//! Per-tile shading in structure-of-arrays columns: I = ka·Ia·C + Σ_lights Il·(kd·NL·C + ks·coef·F·Cs).
 //!
-//! Design: the visible pixels of a tile are gathered once (interpolated unit normal, position, view vector),
-//! grouped by material; then, for each light and material, the lit pixels (NL > 0) are packed into
-//! structure-of-arrays columns and the kernel's `eval_batch` is called once. Only the inputs the formula
-//! reads are computed: no reflected vector unless VR is read, no half vector unless NH or VH is read. The
-//! cosines are passed raw; clamping them to [0, 1] is the formula's own domain policy (written into its IR).
-//! A NaN from the kernel contributes 0 and is counted.
+//! Design: the visible pixels of a tile are grouped by material and cut into spans of up to [`SPAN`] pixels.
+//! In a span every quantity is a column of f64 with one entry per pixel, and every step of the material's
+//! [`ShadingPlan`] is one branch-free loop over those columns, which LLVM vectorises (SSE2 f64x2 on the
+//! baseline x86-64 target; the inverse lengths take an f32 estimate and one f64 Newton step instead of an f64
+//! square root and division). Position and normal are interpolated per run of pixels covered by one triangle
+//! (its attributes are loop constants there). Per light, the lit pixels (NL > 0, lobe cosine above the
+//! cut-off if the material has one) are compacted into the kernel's columns (branch-free: the write index
+//! advances by the mask) and the kernel is called once for the span with [`Evaluator::eval_batch`] — the
+//! JIT's F64X2 batch loop or the interpreter. F is scattered back (a NaN or ±inf is counted and becomes 0:
+//! no light) and the colour sum runs over the whole span, unlit pixels adding exactly +0. Nothing here
+//! allocates in the steady state ([`Scratch`] is per thread).
+//!
+//! The plan documents which steps run for which inputs, so a JIT-compiled shading program can replace these
+//! loops one for one. Cost model: see [`super::plan`]; measured numbers: BENCHMARKS.md.
 
+use super::image::Transfer;
+use super::plan::ShadingPlan;
 use super::raster::{GBuffer, Setup, EMPTY};
 use super::{LightKind, Scene};
+use crate::backend::{Columns, Evaluator};
 use crate::ir::Input;
-use crate::backend::Columns;
-use glam::DVec3;
+use std::time::Instant;
+
+/// Pixels shaded together: every column of a span (~25 of them, 2 KiB each) stays in the L1 cache between
+/// the steps, and the kernel call per span and light (~50 ns of dispatch) is well amortised.
+pub const SPAN: usize = 256;
 
 /// Reusable per-thread buffers, so shading a tile allocates nothing in the steady state.
 #[derive(Default)]
@@ -19,13 +33,38 @@ pub struct Scratch {
     pub gb: GBuffer,
     /// (material, tile-local pixel index) of the visible pixels, sorted.
     vis: Vec<(u32, u32)>,
-    n: Vec<DVec3>,
-    p: Vec<DVec3>,
-    v: Vec<DVec3>,
-    /// Colour accumulated per tile pixel (linear).
-    pub accum: Vec<DVec3>,
+    g: Group,
+    /// The tile's 8-bit pixels (row-major, `tw × th × 3`).
+    pub rgb: Vec<u8>,
+}
+
+/// The columns of one span of one material's pixels; each is resized to the span's size.
+#[derive(Default)]
+struct Group {
+    /// Tile-local pixel index and triangle of each pixel.
+    pix: Vec<u32>,
+    tri: Vec<u32>,
+    b0: Vec<f64>,
+    b1: Vec<f64>,
+    p: [Vec<f64>; 3],
+    n: [Vec<f64>; 3],
+    v: [Vec<f64>; 3],
+    inv_n: Vec<f64>,
+    inv_v: Vec<f64>,
+    nv: Vec<f64>,
+    nl: Vec<f64>,
+    vl: Vec<f64>,
+    nh: Vec<f64>,
+    vh: Vec<f64>,
+    vr: Vec<f64>,
+    /// F per pixel for the current light (0 where not evaluated).
+    f: Vec<f64>,
+    acc: [Vec<f64>; 3],
+    /// 8-bit colours.
+    q: [Vec<u8>; 3],
+    /// The kernel batch: group positions of the evaluated pixels, their inputs, and F.
+    idx: Vec<u32>,
     cols: [Vec<f64>; 5],
-    lit: Vec<u32>,
     out: Vec<f64>,
 }
 
@@ -36,6 +75,8 @@ pub struct ShadeCounts {
     pub evals: u64,
     pub kernel_calls: u64,
     pub nan: u64,
+    /// Lit pixel × light pairs whose kernel evaluation the cut-off skipped.
+    pub cut: u64,
 }
 
 impl std::ops::AddAssign for ShadeCounts {
@@ -44,112 +85,358 @@ impl std::ops::AddAssign for ShadeCounts {
         self.evals += o.evals;
         self.kernel_calls += o.kernel_calls;
         self.nan += o.nan;
+        self.cut += o.cut;
     }
 }
 
-/// Shades the tile whose G-buffer is in `sc.gb` (`n` pixels); the result is left in `sc.accum`.
-pub fn shade_tile(scene: &Scene, s: &Setup, n: usize, sc: &mut Scratch) -> ShadeCounts {
+/// Shades the tile whose G-buffer is in `sc.gb` (`tw × th` pixels) with the per-material `plans`; the 8-bit
+/// result (background where nothing is visible) is left in `sc.rgb`. Returns the counters and the time
+/// spent inside the kernel, in nanoseconds.
+pub fn shade_tile(scene: &Scene, plans: &[ShadingPlan], s: &Setup, n: usize, sc: &mut Scratch, transfer: Transfer, bg: [u8; 3]) -> (ShadeCounts, u64) {
     let mut counts = ShadeCounts::default();
-    let eye = scene.camera.position;
+    let mut kernel_ns = 0;
     sc.vis.clear();
+    let mut mixed = false;
     for (o, &t) in sc.gb.tri.iter().enumerate() {
         if t != EMPTY {
-            sc.vis.push((s.tris[t as usize].material, o as u32));
+            let m = s.tris[t as usize].material;
+            mixed |= sc.vis.first().is_some_and(|f| f.0 != m);
+            sc.vis.push((m, o as u32));
         }
     }
-    sc.vis.sort_unstable();
+    // Pixels are pushed in index order, so one material needs no sort.
+    if mixed {
+        sc.vis.sort_unstable();
+    }
     counts.visible = sc.vis.len() as u64;
-    sc.accum.clear();
-    sc.accum.resize(n, scene.background);
-    sc.n.clear();
-    sc.p.clear();
-    sc.v.clear();
-    for &(m, o) in &sc.vis {
-        let tri = &s.tris[sc.gb.tri[o as usize] as usize];
-        let [b0, b1] = sc.gb.bary[o as usize];
-        let b2 = 1.0 - b0 - b1;
-        let p = tri.pos[0] * b0 + tri.pos[1] * b1 + tri.pos[2] * b2;
-        let v = (eye - p).normalize_or_zero();
-        let mut nrm = (tri.normal[0] * b0 + tri.normal[1] * b1 + tri.normal[2] * b2).normalize_or_zero();
-        if tri.two_sided && nrm.dot(v) < 0.0 {
-            nrm = -nrm;
-        }
-        sc.n.push(nrm);
-        sc.p.push(p);
-        sc.v.push(v);
-        let mat = &scene.materials[m as usize];
-        sc.accum[o as usize] = scene.ambient * mat.color * mat.ka;
+    sc.rgb.resize(n * 3, 0);
+    for p in sc.rgb[..n * 3].chunks_exact_mut(3) {
+        p.copy_from_slice(&bg);
     }
-    // Material groups: contiguous runs of `vis`.
+    let eye = scene.camera.position.to_array();
     let mut start = 0;
     while start < sc.vis.len() {
         let m = sc.vis[start].0;
         let end = start + sc.vis[start..].iter().take_while(|(mm, _)| *mm == m).count();
+        let plan = &plans[m as usize];
         let mat = &scene.materials[m as usize];
-        let used = mat.used;
-        let need_h = used.contains(Input::NH) || used.contains(Input::VH);
-        for light in &scene.lights {
-            sc.lit.clear();
-            for c in &mut sc.cols {
-                c.clear();
+        for span in sc.vis[start..end].chunks(SPAN) {
+            let g = &mut sc.g;
+            gather(g, span, &sc.gb);
+            surface(g, s, eye);
+            view(g, eye);
+            for (c, a) in g.acc.iter_mut().enumerate() {
+                a.clear();
+                a.resize(span.len(), plan.ambient[c]);
             }
-            for k in start..end {
-                let (nrm, p, v) = (sc.n[k], sc.p[k], sc.v[k]);
-                let l = match light.kind {
-                    LightKind::Point(pos) => (pos - p).normalize_or_zero(),
-                    LightKind::Directional(dir) => -dir,
-                };
-                let nl = nrm.dot(l);
-                if nl <= 0.0 || nl.is_nan() {
-                    continue;
+            for light in &scene.lights {
+                light_step(g, light.kind, plan.view_light);
+                if plan.half {
+                    half(g);
                 }
-                sc.lit.push(k as u32);
-                sc.cols[0].push(nl);
-                if used.contains(Input::NV) {
-                    sc.cols[1].push(nrm.dot(v));
+                if plan.reflect {
+                    reflect(g);
                 }
-                if need_h {
-                    let h = (l + v).normalize_or_zero();
-                    if used.contains(Input::NH) {
-                        sc.cols[2].push(nrm.dot(h));
-                    }
-                    if used.contains(Input::VH) {
-                        sc.cols[4].push(v.dot(h));
-                    }
+                if plan.specular {
+                    kernel_ns += kernel(g, plan, mat.evaluator.as_ref(), &mat.params, &mut counts);
                 }
-                if used.contains(Input::VR) {
-                    let r = nrm * (2.0 * nl) - l;
-                    sc.cols[3].push(v.dot(r));
-                }
+                colour(g, plan, light.color.to_array());
             }
-            let count = sc.lit.len();
-            if count == 0 {
-                continue;
-            }
-            sc.out.clear();
-            sc.out.resize(count, 0.0);
-            let specular = mat.ks != 0.0;
-            if specular {
-                let cols = Columns::new([&sc.cols[0], &sc.cols[1], &sc.cols[2], &sc.cols[3], &sc.cols[4]]);
-                mat.evaluator.eval_batch(&cols, &mat.params, &mut sc.out);
-                counts.kernel_calls += 1;
-                counts.evals += count as u64;
-            }
-            let diffuse = mat.color * mat.kd;
-            let spec = mat.specular * (mat.ks * mat.coef);
-            for i in 0..count {
-                let k = sc.lit[i] as usize;
-                let mut f = sc.out[i];
-                // NaN and ±inf are no light, and counted: an infinite lobe is a defect, not a highlight.
-                if !f.is_finite() {
-                    counts.nan += 1;
-                    f = 0.0;
-                }
-                let o = sc.vis[k].1 as usize;
-                sc.accum[o] += light.color * (diffuse * sc.cols[0][i] + spec * f);
-            }
+            encode(g, &mut sc.rgb, transfer);
         }
         start = end;
     }
-    counts
+    (counts, kernel_ns)
+}
+
+fn fit<T: Copy + Default>(v: &mut Vec<T>, m: usize) -> &mut [T] {
+    v.resize(m, T::default());
+    &mut v[..m]
+}
+
+/// The span's pixel indices, triangles and barycentrics, as columns.
+fn gather(g: &mut Group, span: &[(u32, u32)], gb: &GBuffer) {
+    let m = span.len();
+    let (pix, tri, b0, b1) = (fit(&mut g.pix, m), fit(&mut g.tri, m), fit(&mut g.b0, m), fit(&mut g.b1, m));
+    for (i, &(_, o)) in span.iter().enumerate() {
+        let [u, w] = gb.bary[o as usize];
+        pix[i] = o;
+        tri[i] = gb.tri[o as usize];
+        b0[i] = u;
+        b1[i] = w;
+    }
+}
+
+/// 1/√x to ~1e-14 relative without an f64 square root or division, which the f64 loops would otherwise
+/// queue three times per pixel on the divider: an f32 estimate (four lanes per instruction), then one
+/// Newton step in f64. x = 0, or beyond the f32 range (lengths over ~1e19), gives NaN or 0: no light.
+#[inline(always)]
+fn rsqrt(x: f64) -> f64 {
+    let y = f64::from(1.0 / (x as f32).sqrt());
+    y * (1.5 - 0.5 * x * y * y)
+}
+
+/// The surface step: p and n interpolated, one loop per run of pixels of one triangle (its vertices are
+/// constants there): a = v2 + b0·(v0 − v2) + b1·(v1 − v2). Two-sided triangles turn n towards the viewer.
+fn surface(g: &mut Group, s: &Setup, eye: [f64; 3]) {
+    let m = g.pix.len();
+    for c in 0..3 {
+        fit(&mut g.p[c], m);
+        fit(&mut g.n[c], m);
+    }
+    let mut k = 0;
+    while k < m {
+        let t = g.tri[k];
+        let e = k + g.tri[k..].iter().take_while(|&&x| x == t).count();
+        let tri = &s.tris[t as usize];
+        let (b0, b1) = (&g.b0[k..e], &g.b1[k..e]);
+        let (a, d0, d1) = (tri.pos[2], tri.pos[0] - tri.pos[2], tri.pos[1] - tri.pos[2]);
+        let (na, n0, n1) = (tri.normal[2], tri.normal[0] - tri.normal[2], tri.normal[1] - tri.normal[2]);
+        let [px, py, pz] = &mut g.p;
+        let [nx, ny, nz] = &mut g.n;
+        let (px, py, pz, nx, ny, nz) = (&mut px[k..e], &mut py[k..e], &mut pz[k..e], &mut nx[k..e], &mut ny[k..e], &mut nz[k..e]);
+        for i in 0..e - k {
+            let (u, w) = (b0[i], b1[i]);
+            px[i] = a.x + u * d0.x + w * d1.x;
+            py[i] = a.y + u * d0.y + w * d1.y;
+            pz[i] = a.z + u * d0.z + w * d1.z;
+            nx[i] = na.x + u * n0.x + w * n1.x;
+            ny[i] = na.y + u * n0.y + w * n1.y;
+            nz[i] = na.z + u * n0.z + w * n1.z;
+        }
+        if tri.two_sided {
+            let [nx, ny, nz] = &mut g.n;
+            let [px, py, pz] = &g.p;
+            for i in k..e {
+                if nx[i] * (eye[0] - px[i]) + ny[i] * (eye[1] - py[i]) + nz[i] * (eye[2] - pz[i]) < 0.0 {
+                    nx[i] = -nx[i];
+                    ny[i] = -ny[i];
+                    nz[i] = -nz[i];
+                }
+            }
+        }
+        k = e;
+    }
+}
+
+/// The view step: v = eye − p, 1/|n|, 1/|v|, NV.
+fn view(g: &mut Group, eye: [f64; 3]) {
+    let m = g.pix.len();
+    let (inv_n, inv_v, nv) = (fit(&mut g.inv_n, m), fit(&mut g.inv_v, m), fit(&mut g.nv, m));
+    let [vx, vy, vz] = &mut g.v;
+    let (vx, vy, vz) = (fit(vx, m), fit(vy, m), fit(vz, m));
+    let [px, py, pz] = &g.p;
+    let [nx, ny, nz] = &g.n;
+    let (px, py, pz, nx, ny, nz) = (&px[..m], &py[..m], &pz[..m], &nx[..m], &ny[..m], &nz[..m]);
+    for i in 0..m {
+        let (x, y, z) = (eye[0] - px[i], eye[1] - py[i], eye[2] - pz[i]);
+        let inn = rsqrt(nx[i] * nx[i] + ny[i] * ny[i] + nz[i] * nz[i]);
+        let ivv = rsqrt(x * x + y * y + z * z);
+        vx[i] = x;
+        vy[i] = y;
+        vz[i] = z;
+        inv_n[i] = inn;
+        inv_v[i] = ivv;
+        nv[i] = (nx[i] * x + ny[i] * y + nz[i] * z) * inn * ivv;
+    }
+}
+
+/// The light step (NL, and VL if the plan needs it) for one light.
+fn light_step(g: &mut Group, kind: LightKind, view_light: bool) {
+    match (kind, view_light) {
+        (LightKind::Point(lp), true) => light_loop::<true, true>(g, lp.to_array()),
+        (LightKind::Point(lp), false) => light_loop::<true, false>(g, lp.to_array()),
+        (LightKind::Directional(d), true) => light_loop::<false, true>(g, (-d).to_array()),
+        (LightKind::Directional(d), false) => light_loop::<false, false>(g, (-d).to_array()),
+    }
+}
+
+/// `POINT`: `l` is the light's position (l = pos − p, normalised here); else `l` is the unit direction
+/// towards the light. `VL`: also compute V̂·L̂.
+fn light_loop<const POINT: bool, const VL: bool>(g: &mut Group, l: [f64; 3]) {
+    let m = g.pix.len();
+    let (nl, vl) = (fit(&mut g.nl, m), fit(&mut g.vl, m));
+    let [px, py, pz] = &g.p;
+    let [nx, ny, nz] = &g.n;
+    let [vx, vy, vz] = &g.v;
+    let (px, py, pz, nx, ny, nz) = (&px[..m], &py[..m], &pz[..m], &nx[..m], &ny[..m], &nz[..m]);
+    let (vx, vy, vz, inv_n, inv_v) = (&vx[..m], &vy[..m], &vz[..m], &g.inv_n[..m], &g.inv_v[..m]);
+    for i in 0..m {
+        let (x, y, z, il) = if POINT {
+            let (x, y, z) = (l[0] - px[i], l[1] - py[i], l[2] - pz[i]);
+            (x, y, z, rsqrt(x * x + y * y + z * z))
+        } else {
+            (l[0], l[1], l[2], 1.0)
+        };
+        nl[i] = (nx[i] * x + ny[i] * y + nz[i] * z) * inv_n[i] * il;
+        if VL {
+            vl[i] = (vx[i] * x + vy[i] * y + vz[i] * z) * inv_v[i] * il;
+        }
+    }
+}
+
+/// The half step: |L̂ + V̂|² = 2 + 2VL, so NH = (NL + NV)/|L̂ + V̂| and VH = (1 + VL)/|L̂ + V̂| (both 0 where
+/// L = −V and H is undefined, as a zero half vector gives).
+fn half(g: &mut Group) {
+    let m = g.pix.len();
+    let (nh, vh) = (fit(&mut g.nh, m), fit(&mut g.vh, m));
+    let (nl, nv, vl) = (&g.nl[..m], &g.nv[..m], &g.vl[..m]);
+    for i in 0..m {
+        let h2 = 2.0 + 2.0 * vl[i];
+        let ih = if h2 > 1e-300 { 1.0 / h2.sqrt() } else { 0.0 };
+        nh[i] = (nl[i] + nv[i]) * ih;
+        vh[i] = (1.0 + vl[i]) * ih;
+    }
+}
+
+/// The reflect step: V̂·R̂ = 2·NL·NV − VL.
+fn reflect(g: &mut Group) {
+    let m = g.pix.len();
+    let vr = fit(&mut g.vr, m);
+    let (nl, nv, vl) = (&g.nl[..m], &g.nv[..m], &g.vl[..m]);
+    for i in 0..m {
+        vr[i] = 2.0 * nl[i] * nv[i] - vl[i];
+    }
+}
+
+/// The kernel step: compacts the pixels to evaluate, calls the kernel once, scatters F back into `g.f` (0
+/// where not evaluated, and where F is NaN or ±inf — counted: an infinite lobe is a defect, not a highlight).
+/// Returns the nanoseconds spent in the kernel.
+fn kernel(g: &mut Group, plan: &ShadingPlan, ev: &dyn Evaluator, params: &[f64], counts: &mut ShadeCounts) -> u64 {
+    let m = g.pix.len();
+    let nl = &g.nl[..m];
+    let idx = fit(&mut g.idx, m);
+    let mut lit = 0;
+    let mut count = 0;
+    match plan.cutoff {
+        None => {
+            for (i, &c) in nl.iter().enumerate() {
+                idx[count] = i as u32;
+                count += usize::from(c > 0.0);
+            }
+            lit = count;
+        }
+        Some(cut) => {
+            let lobe = if cut.input == Input::NH { &g.nh[..m] } else { &g.vr[..m] };
+            for (i, (&c, &x)) in nl.iter().zip(lobe).enumerate() {
+                idx[count] = i as u32;
+                lit += usize::from(c > 0.0);
+                count += usize::from(c > 0.0 && x >= cut.cos);
+            }
+        }
+    }
+    counts.cut += (lit - count) as u64;
+    let f = fit(&mut g.f, m);
+    f.fill(0.0);
+    if count == 0 {
+        return 0;
+    }
+    let idx = &g.idx[..count];
+    let sources: [&[f64]; 5] = [&g.nl, &g.nv, &g.nh, &g.vr, &g.vh];
+    for (k, (col, src)) in g.cols.iter_mut().zip(sources).enumerate() {
+        col.clear();
+        if k == Input::NL.index() || plan.reads.contains(Input::ALL[k]) {
+            col.extend(idx.iter().map(|&i| src[i as usize]));
+        }
+    }
+    let out = fit(&mut g.out, count);
+    let cols = Columns::new([&g.cols[0], &g.cols[1], &g.cols[2], &g.cols[3], &g.cols[4]]);
+    let t = Instant::now();
+    ev.eval_batch(&cols, params, out);
+    let ns = t.elapsed().as_nanos() as u64;
+    counts.kernel_calls += 1;
+    counts.evals += count as u64;
+    for (&i, &v) in idx.iter().zip(out.iter()) {
+        if v.is_finite() {
+            f[i as usize] = v;
+        } else {
+            counts.nan += 1;
+        }
+    }
+    ns
+}
+
+/// The colour step for one light: acc += Il·(kd·C·max(NL, 0) + ks·coef·Cs·F). Unlit pixels add exactly +0
+/// (F is 0 there and NL is clamped), so the sum equals skipping them.
+fn colour(g: &mut Group, plan: &ShadingPlan, il: [f64; 3]) {
+    let m = g.pix.len();
+    let nl = &g.nl[..m];
+    let [r, gg, b] = &mut g.acc;
+    let (r, gg, b) = (&mut r[..m], &mut gg[..m], &mut b[..m]);
+    let (d, s) = (plan.diffuse, plan.spec);
+    if plan.specular {
+        // Filled by the kernel step for this light.
+        let f = &g.f[..m];
+        for i in 0..m {
+            let n = if nl[i] > 0.0 { nl[i] } else { 0.0 };
+            r[i] += il[0] * (d[0] * n + s[0] * f[i]);
+            gg[i] += il[1] * (d[1] * n + s[1] * f[i]);
+            b[i] += il[2] * (d[2] * n + s[2] * f[i]);
+        }
+    } else {
+        for i in 0..m {
+            let n = if nl[i] > 0.0 { nl[i] } else { 0.0 };
+            r[i] += il[0] * (d[0] * n);
+            gg[i] += il[1] * (d[1] * n);
+            b[i] += il[2] * (d[2] * n);
+        }
+    }
+}
+
+/// Converts the span's colours to 8 bits into the tile: a vectorised pass per channel (the linear transfer
+/// inline; sRGB through [`Transfer::encode`]), then one scatter.
+fn encode(g: &mut Group, rgb: &mut [u8], transfer: Transfer) {
+    let m = g.pix.len();
+    for (c, acc) in g.acc.iter().enumerate() {
+        let q = fit(&mut g.q[c], m);
+        match transfer {
+            // Transfer::encode's linear branch, bit for bit, in a form LLVM vectorises: the comparisons turn
+            // NaN into 0, and floor(y) comes from adding 1.5·2^52 (which rounds y to an integer in the low
+            // mantissa bits) and stepping down where that rounded up — no float-to-int conversion.
+            Transfer::Linear => {
+                const M: f64 = 6_755_399_441_055_744.0;
+                for (q, &x) in q.iter_mut().zip(&acc[..m]) {
+                    let c = if x > 0.0 { x } else { 0.0 };
+                    let c = if c < 1.0 { c } else { 1.0 };
+                    let y = c * 255.0 + 0.5;
+                    let t = y + M;
+                    *q = (t.to_bits() as u32).wrapping_sub(u32::from(t - M > y)) as u8;
+                }
+            }
+            Transfer::Srgb => {
+                for (q, &x) in q.iter_mut().zip(&acc[..m]) {
+                    *q = transfer.encode(x);
+                }
+            }
+        }
+    }
+    let [r, gg, b] = &g.q;
+    for (k, &o) in g.pix.iter().enumerate() {
+        let o = o as usize * 3;
+        rgb[o] = r[k];
+        rgb[o + 1] = gg[k];
+        rgb[o + 2] = b[k];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn vectorised_linear_encoding_is_transfer_encode_bit_for_bit() {
+        let mut vals: Vec<f64> = (0..=5100).map(|k| k as f64 / 5100.0).collect();
+        // Exact half levels, values just around them, out of range, NaN, ±inf.
+        for k in 0..=255 {
+            let h = (k as f64 + 0.5) / 255.0;
+            vals.extend([h, h.next_up(), h.next_down()]);
+        }
+        vals.extend([-1.0, -0.0, 1.0 + 1e-12, 7.0, f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e-300]);
+        let mut g = Group { pix: (0..vals.len() as u32).collect(), acc: [vals.clone(), vals.clone(), vals.clone()], ..Group::default() };
+        let mut rgb = vec![0u8; vals.len() * 3];
+        encode(&mut g, &mut rgb, Transfer::Linear);
+        for (i, v) in vals.iter().enumerate() {
+            assert_eq!(rgb[i * 3], Transfer::Linear.encode(*v), "{v}");
+        }
+    }
 }

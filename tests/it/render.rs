@@ -158,7 +158,7 @@ impl Evaluator for Spy {
 }
 
 #[test]
-fn only_read_inputs_are_computed_and_each_tile_calls_the_kernel_once_per_light() {
+fn only_read_inputs_are_computed_and_each_span_calls_the_kernel_once_per_light() {
     let mut s = load("torus.toml", &sized(160, 120));
     let mut used = InputSet::default();
     used.insert(Input::NH);
@@ -170,8 +170,9 @@ fn only_read_inputs_are_computed_and_each_tile_calls_the_kernel_once_per_light()
     let (_, st) = render(&s, 2);
     assert_eq!(spy.calls.load(Ordering::Relaxed), st.kernel_calls);
     assert_eq!(spy.evals.load(Ordering::Relaxed), st.evals);
-    // One material: at most one call per touched tile per light.
-    assert!(st.kernel_calls <= (st.tiles_touched * s.lights.len()) as u64);
+    // One material: at most one call per span of visible pixels (per tile) and light.
+    let spans = st.tiles_touched as u64 + st.visible_pixels / r::shade::SPAN as u64;
+    assert!(st.kernel_calls <= spans * s.lights.len() as u64, "{} calls for {spans} spans", st.kernel_calls);
     assert!(st.kernel_calls > 0 && st.evals > st.kernel_calls * 10);
 }
 
@@ -186,6 +187,42 @@ fn nan_from_the_kernel_is_shaded_as_zero_and_counted() {
     assert!(st.nan > 0);
     assert_eq!(st.nan, st.evals);
     assert!(f.image.rgb.iter().all(|&c| c == 0), "NaN must shade as black here");
+}
+
+#[test]
+fn cutoff_skips_evaluations_below_the_level_and_reports_what_it_changes() {
+    // Phong (VR^50) with the papers' q = 8: F < 2^-8 beyond acos(2^(-8/50)) ≈ 31.7°.
+    let src = std::fs::read_to_string(scene_file("paper_sphere.toml")).unwrap().replace("modified_schlick_vr.brdf", "phong.brdf");
+    let cut_src = src.replace("\nks = 0.5\n", "\nks = 0.5\ncutoff = 8\n");
+    let opts = sized(128, 128);
+    let full = scene::parse_scene("p.toml", &src, &scene_file(""), &opts, &JIT).unwrap();
+    let cut = scene::parse_scene("p.toml", &cut_src, &scene_file(""), &opts, &JIT).unwrap();
+    let c = cut.materials[0].cutoff.expect("a cut-off");
+    assert_eq!(c.input, Input::VR);
+    let exact = (-8.0f64 / 50.0).exp2().acos().to_degrees();
+    assert!((c.angle_deg() - exact).abs() < 0.05, "{} vs {exact}", c.angle_deg());
+    let (f_full, st_full) = render(&full, 2);
+    let (f_cut, st_cut) = render(&cut, 2);
+    assert!(st_cut.cut > 0 && st_cut.evals + st_cut.cut == st_full.evals, "{} + {} vs {}", st_cut.evals, st_cut.cut, st_full.evals);
+    assert_eq!(st_full.cut, 0);
+    // What was skipped is below 2^-8·ks·255 = 0.5 levels: at most one level anywhere.
+    let ropts = RenderOptions { threads: 2, tile: 32, ..RenderOptions::default() };
+    let eff = r::cutoff_effect(&cut, &ropts, &f_cut, &st_cut).unwrap().expect("an effect");
+    assert_eq!(eff.skipped, st_cut.cut);
+    assert!(eff.max_channel_diff <= 1, "{eff:?}");
+    let differing = f_cut.image.rgb.chunks_exact(3).zip(f_full.image.rgb.chunks_exact(3)).filter(|(a, b)| a != b).count() as u64;
+    assert_eq!(eff.pixels_differing, differing);
+    assert!(r::cutoff_effect(&full, &ropts, &f_full, &st_full).unwrap().is_none());
+    // With the cut-off off, the frame is the full one.
+    let (f_off, st_off) = r::render(&cut, &RenderOptions { cutoff: false, ..ropts }).unwrap();
+    assert_eq!((f_off.image.rgb == f_full.image.rgb, st_off.evals), (true, st_full.evals));
+    // A formula of several cosines has no one lobe angle: a scene error at the key.
+    let ct = src.replace("phong.brdf", "cook_torrance.brdf").replace("params = { n = 50 }", "cutoff = 8");
+    let msg = match scene::parse_scene("ct.toml", &ct, &scene_file(""), &opts, &JIT) {
+        Ok(_) => panic!("a cut-off on Cook–Torrance must be refused"),
+        Err(d) => d.render(false),
+    };
+    assert!(msg.contains("materials.glossy.cutoff") && msg.contains("one lobe cosine") && msg.contains("ct.toml:"), "{msg}");
 }
 
 #[test]
@@ -406,6 +443,16 @@ fn cli_render_and_compare_end_to_end() {
     assert!(err.contains("Mpixel/s") && err.contains("2 thread(s)") && err.contains("encode"), "{err}");
     let im = Image::decode_png(&std::fs::read(&out).unwrap()).unwrap();
     assert_eq!((im.width, im.height), (80, 60));
+    // --stats --json: one object on stdout with the stage split.
+    let o = lobe(&["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "--size", "64", "--stats", "--json", "--threads", "1", "--backend", "interp"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    for k in ["visible_px", "shade_ns_per_px", "geometry_ns_per_px", "kernel_ns_per_eval", "raster_ms", "encode_ms", "wall_ms"] {
+        assert!(v[k].as_f64().is_some_and(|x| x >= 0.0), "{k}: {v}");
+    }
+    assert!(v["visible_px"].as_u64().unwrap() > 0 && v["evals"].as_u64().unwrap() > 0);
+    assert_eq!((v["threads"].as_u64(), v["backend"].as_str(), v["math"].as_str()), (Some(1), Some("interp"), Some("precise")));
+    assert!(v["cutoff"].is_null());
     // Re-rendering over our own PNG is allowed.
     assert!(lobe(&["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "--size", "16", "-q"]).status.success());
 

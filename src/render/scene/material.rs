@@ -1,7 +1,7 @@
 //! `[materials.*]` tables → [`Material`]s: where the formula comes from (a `brdf` file, an inline `formula`, or
 //! the caller's override), parameter values (the formula's defaults, then the table's `params`, then `--set`,
 //! each checked against the declared range), compilation, and the optional energy normalisation
-//! ([`crate::numerics::normalize::coefficient`]).
+//! ([`crate::numerics::normalize::coefficient`]) and cut-off ([`crate::render::plan::Cutoff`]).
 //!
 //! Formulas go through a [`BrdfCompiler`] rather than straight to [`crate::compile_source`]: [`LobeCompiler`] is
 //! the real front end and backends, and the trait lets embedders and tests supply kernels of their own. This is
@@ -198,6 +198,13 @@ fn build_material(
     } else {
         1.0
     };
+    let cutoff = match &d.cutoff {
+        Some(q) => Some(
+            crate::render::plan::Cutoff::find(compiled.evaluator.as_ref(), compiled.used, &params, *q.get_ref())
+                .map_err(|msg| here(q.span(), format!("materials.{mname}.cutoff: {msg}"), "cut-off exponent"))?,
+        ),
+        None => None,
+    };
     Ok(Material {
         name: mname.to_string(),
         evaluator: compiled.evaluator,
@@ -209,5 +216,6 @@ fn build_material(
         color: d.color.into(),
         specular: d.specular.into(),
         coef,
+        cutoff,
     })
 }

@@ -26,6 +26,7 @@
 //! color = [1, 1, 1]              # multiplies the ambient and diffuse terms
 //! specular = [1, 1, 1]           # multiplies the specular term
 //! normalize = false              # multiply F by the energy coefficient 1/(2π·Int(n))
+//! cutoff = 8                     # optional: skip F where the lobe is below 2^-q (formulas of NH or VR only)
 //!
 //! [[object]]
 //! shape = "sphere"               # "sphere" (radius, tessellation, slices), "torus" (major_radius,

@@ -91,6 +91,9 @@ pub(super) struct MaterialDef {
     pub specular: V3,
     #[serde(default)]
     pub normalize: bool,
+    /// The papers' cut-off exponent q: F is not evaluated where the lobe is below 2^−q.
+    #[serde(default)]
+    pub cutoff: Option<Spanned<f64>>,
 }
 
 fn default_ka() -> f64 {
