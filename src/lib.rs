@@ -38,6 +38,14 @@ pub use ir::{Formula, Input, N_INPUTS};
 use std::sync::Arc;
 use std::time::Instant;
 
+/// Picks the formula to compile among the accuracy pass's candidates by measuring them. The measuring needs
+/// the truth evaluator and a backend, which live above this file (`numerics::robust::Chooser`), so it is
+/// passed in rather than called.
+pub trait FormulaChooser: Send + Sync + std::fmt::Debug {
+    /// `original` as lowered, the baked values, and its plain simplification; returns the formula to compile.
+    fn choose(&self, original: &Formula, bake: &[(usize, f64)], simplified: Formula) -> Formula;
+}
+
 /// How to compile a formula.
 #[derive(Clone, Debug, Default)]
 pub struct Options {
@@ -47,6 +55,8 @@ pub struct Options {
     pub bake: Vec<(String, f64)>,
     /// Skip the simplifier (for testing the simplifier itself against the unsimplified formula).
     pub no_simplify: bool,
+    /// The accuracy pass (`numerics::robust::with_pass`); `None` compiles the plain simplification.
+    pub accuracy: Option<Arc<dyn FormulaChooser>>,
 }
 
 /// Parses, lowers and simplifies a formula, then builds its kernel for the chosen backend.
@@ -63,7 +73,14 @@ pub fn compile_formula(f: Formula, opts: &Options) -> Result<Kernel, Diagnostics
 /// The simplified formula with `opts.bake` folded in (`--set` names and ranges checked first).
 pub fn simplified(f: &Formula, opts: &Options) -> Result<Formula, Diagnostics> {
     let bake = resolve_bake(f, &opts.bake)?;
-    Ok(if opts.no_simplify { simplify::bake_only(f, &bake) } else { simplify::simplify(f, &bake) })
+    if opts.no_simplify {
+        return Ok(simplify::bake_only(f, &bake));
+    }
+    let s = simplify::simplify(f, &bake);
+    Ok(match &opts.accuracy {
+        Some(c) => c.choose(f, &bake, s),
+        None => s,
+    })
 }
 
 /// Builds the evaluator for an already simplified formula.

@@ -1,6 +1,6 @@
 //! `lobe eval FILE --set n=50 --at NH=0.95,NL=0.7 [--normalize] [--backend jit|interp] [--json]`
 
-use super::args::{self, BackendArg, FormulaSource, Json, Params};
+use super::args::{self, BackendArg, FormulaSource, Json, Params, PreferArg};
 use super::common::{self, CliError};
 use crate::base::json;
 use crate::ir::{Input, N_INPUTS};
@@ -23,20 +23,23 @@ pub struct EvalArgs {
     #[command(flatten)]
     pub backend: BackendArg,
     #[command(flatten)]
+    pub prefer: PreferArg,
+    #[command(flatten)]
     pub json: Json,
 }
 
 pub fn run(a: &EvalArgs) -> Result<(), CliError> {
     let set = a.set.list();
     let f = a.formula.load()?;
+    let pass = |opts| crate::numerics::robust::with_pass(opts, a.prefer.pass(crate::numerics::robust::PassOptions::default().points));
     let k = if a.normalize {
         // The coefficient depends on every parameter: bake them all (--set values, declared defaults for the rest).
         let mut bake = set.clone();
         bake.extend(f.params.iter().filter(|p| !set.iter().any(|(k, _)| *k == p.name)).map(|p| (p.name.clone(), p.default)));
-        let s = crate::simplified(&f, &crate::Options { bake, ..Default::default() })?;
+        let s = crate::simplified(&f, &pass(crate::Options { bake, ..Default::default() }))?;
         crate::build_kernel(std::sync::Arc::new(crate::numerics::normalize::bake_coefficient(s)?), a.backend.kind)?
     } else {
-        crate::compile_formula(f, &crate::Options { backend: a.backend.kind, bake: set.clone(), ..Default::default() })?
+        crate::compile_formula(f, &pass(crate::Options { backend: a.backend.kind, bake: set.clone(), ..Default::default() }))?
     };
     let mut x = [0.0; N_INPUTS];
     for (name, v) in a.at.concat() {

@@ -54,7 +54,9 @@ pub mod fit;
 pub mod normalize;
 pub mod published;
 pub mod quad;
+pub mod robust;
 pub mod sweep;
+pub mod truth;
 pub mod twins;
 
 use crate::ir::{Input, InputSet, N_INPUTS};

@@ -210,7 +210,7 @@ fn check(jit: &Kernel, interp: &Kernel, pts: &[[f64; N_INPUTS]], sets: &[Vec<f64
 }
 
 fn both(f: Formula, bake: Vec<(String, f64)>) -> (Kernel, Kernel) {
-    let opts = |backend| Options { backend, bake: bake.clone(), no_simplify: false };
+    let opts = |backend| Options { backend, bake: bake.clone(), no_simplify: false, accuracy: None };
     let jit = compile_formula(f.clone(), &opts(Backend::Jit)).expect("jit compiles");
     let interp = compile_formula(f, &opts(Backend::Interp)).expect("interp builds");
     assert_eq!(jit.backend, Backend::Jit);
