@@ -16,9 +16,11 @@
 //! The domain ([`sample`]): every input the formula reads in [0, 1], a quarter of the values from the edge
 //! classes (0, 1, 1 − 2⁻⁵³, 1 − 2⁻⁵², the smallest denormal, a denormal, 2⁻¹⁰²², 10⁻³⁰⁰, 1.6·10⁻¹⁶², 10⁻¹⁵⁴,
 //! 10⁻⁷⁷, 10⁻²⁰, ½), a quarter 1 − 10⁻ᵘ (u ∈ [0, 16]), a fifth log-uniform down to 10⁻³²³, the rest uniform;
-//! live parameters over their declared ranges (endpoints, uniform, log-uniform). Inputs are drawn
-//! independently: combinations that no real geometry produces (VH ≪ NH·NV, say) are included, which is the
-//! conservative choice for a kernel that may be fed any cosines. Deterministic (fixed seed).
+//! live parameters over their declared ranges (endpoints, uniform, log-uniform). A formula that reads VH with
+//! NL or NV gets geometrically possible combinations only: N·(L + V) = |L + V|·NH and |L + V| = 2·VH, so
+//! NL + NV = 2·NH·VH (VH = 0 means L = −V, where NL = NV = 0); the total is split at a random fraction drawn
+//! like an input (edge classes included). Other inputs are drawn independently, the conservative choice for a
+//! kernel that may be fed any cosines. Deterministic (fixed seed).
 //!
 //! The pass ([`improve`]): start from the simplified formula (the fastest form lobe builds), try each candidate
 //! of `simplify::accuracy` in turn on the current best, keep it when it is more accurate — fewer non-finite
@@ -126,6 +128,14 @@ pub fn sample(f: &Formula, bake: &[(usize, f64)], n: usize, seed: u64) -> Vec<Po
                 if used.contains(i) {
                     x[i.index()] = input_value(&mut r);
                 }
+            }
+            // Geometry: N·(L + V) = |L + V|·NH and |L + V| = 2·VH, so NL + NV = 2·NH·VH; split that total.
+            if used.contains(Input::VH) && (used.contains(Input::NL) || used.contains(Input::NV)) {
+                let total = 2.0 * x[Input::NH.index()] * x[Input::VH.index()];
+                let nl = (input_value(&mut r) * total).min(1.0);
+                let nv = (total - nl).min(1.0);
+                x[Input::NL.index()] = (total - nv).min(1.0);
+                x[Input::NV.index()] = nv;
             }
             let p = f
                 .params

@@ -11,8 +11,9 @@
 //!   are below ~10⁻¹⁶², but sqrt(a)·sqrt(b) ≥ sqrt(4.9·10⁻³²⁴) never does (Ward's 1/sqrt(NL·NV)). One more
 //!   sqrt (cost +3), one more rounding (≤ 1.5 ulp instead of ≤ 1).
 //! - `quotient-chain`: a maximal tree of `*` and `/` is flattened into numerator and denominator factors and
-//!   rebuilt as `(safe numerators) · n₁ / d₁ · n₂ / d₂ … / (safe denominators)`: the factors that may be tiny
-//!   or huge are multiplied and divided alternately, one at a time, so no product of two of them is formed. Then `exp(E)/(m²·NH⁴)` at NH = 10⁻¹⁰⁰ is `0/m²/NH/NH/NH/NH = 0` instead of
+//!   rebuilt as `(numerators) / (safe denominators) / d₁ / d₂ / …`: each divisor that may be tiny or huge
+//!   divides on its own, so no product of two of them is formed (the numerator is multiplied out first: in a
+//!   BRDF the factor that vanishes, exp(−1/x²), is there, and it must meet the divisions as 0, not as ∞·0). Then `exp(E)/(m²·NH⁴)` at NH = 10⁻¹⁰⁰ is `0/m²/NH/NH/NH/NH = 0` instead of
 //!   `inf·0 = NaN` (NH⁴ = 0), and Cook–Torrance's `…/(π·NL·NV)` stays finite when NL·NV underflows. Integer
 //!   powers `x·x` in a denominator are split into their base. A factor is *safe* when its range lies in
 //!   [2⁻³⁰⁰, 2³⁰⁰] in magnitude. Cost: one division per unsafe factor (~3 multiplications each).
@@ -180,8 +181,7 @@ fn quotient_chain(f: &Formula, ranges: &[Range]) -> (Ir, NodeId, bool) {
     rebuild(f, |ir, map, id, _| {
         let (num, den) = lists[id.index()].as_ref()?;
         let (safe_den, unsafe_den): (Vec<NodeId>, Vec<NodeId>) = den.iter().partition(|d| safe(ranges[d.index()]));
-        let (safe_num, unsafe_num): (Vec<NodeId>, Vec<NodeId>) = num.iter().partition(|d| safe(ranges[d.index()]));
-        let separate = unsafe_den.len() >= 2 || (unsafe_den.len() == 1 && (!safe_den.is_empty() || unsafe_num.len() >= 2));
+        let separate = unsafe_den.len() >= 2 || (unsafe_den.len() == 1 && !safe_den.is_empty());
         if !separate {
             // At most one unsafe divisor, and nothing it must be kept apart from.
             return None;
@@ -192,28 +192,17 @@ fn quotient_chain(f: &Formula, ranges: &[Range]) -> (Ir, NodeId, bool) {
             let first = it.next()?;
             Some(it.fold(first, |acc, x| ir.bin(BinOp::Mul, acc, x, s)))
         };
-        // Safe factors first, then unsafe multipliers and divisors alternately (a tiny product is divided
-        // before the next tiny factor multiplies it), then the safe divisors at once.
-        let mut v = prod(ir, &safe_num);
-        for i in 0..unsafe_num.len().max(unsafe_den.len()) {
-            if let Some(x) = unsafe_num.get(i) {
-                let x = map[x.index()];
-                v = Some(match v {
-                    Some(v) => ir.bin(BinOp::Mul, v, x, s),
-                    None => x,
-                });
-            }
-            if let Some(d) = unsafe_den.get(i) {
-                let num = match v {
-                    Some(v) => v,
-                    None => ir.konst(1.0, s),
-                };
-                v = Some(ir.bin(BinOp::Div, num, map[d.index()], s));
-            }
-        }
-        let mut v = v?;
+        // The whole numerator first (in a BRDF the factor that vanishes, exp(−1/x²), is there, and it must meet
+        // the divisions as 0, not as ∞·0), then the safe divisors at once, then each unsafe divisor.
+        let mut v = match prod(ir, num) {
+            Some(v) => v,
+            None => ir.konst(1.0, s),
+        };
         if let Some(d) = prod(ir, &safe_den) {
             v = ir.bin(BinOp::Div, v, d, s);
+        }
+        for d in unsafe_den {
+            v = ir.bin(BinOp::Div, v, map[d.index()], s);
         }
         Some(v)
     })

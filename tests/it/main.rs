@@ -13,3 +13,4 @@ mod simplify;
 mod accuracy;
 mod energy;
 mod render;
+mod robust;
