@@ -96,6 +96,18 @@ fn row(f: &Formula, path: &str, set: &[(String, f64)], reference: &crate::Kernel
     let coef_n50 = energy::normalization_coef(&baked, &params, lobe).ok();
     let albedo_max = if a.no_albedo { None } else { energy::full_energy(&baked, &params).ok().map(|e| e.albedo_max) };
     let spread = (m.scalar_jit.p75_ns - m.scalar_jit.p25_ns) / 2.0 / m.scalar_jit.median_ns;
+    // Numerical error and cost of the accuracy pass's kernel (numerics::robust).
+    let bake = crate::resolve_bake(f, &set)?;
+    let pass = crate::numerics::robust::improve(f, &bake, &Default::default());
+    let robust_jit_ns = if pass.trials.iter().any(|t| t.kept) {
+        let k = crate::build_kernel(std::sync::Arc::new(pass.formula.clone()), Backend::Jit)?;
+        measure_kernel(&k, &params, MeasureOptions { points: 4096, samples: a.samples })
+            .map_err(|e| CliError::msg(format!("{path}: {e}")))?
+            .scalar_jit
+            .median_ns
+    } else {
+        m.scalar_jit.median_ns
+    };
     Ok(BenchRow {
         name: f.display_name(),
         file: path.to_string(),
@@ -110,6 +122,10 @@ fn row(f: &Formula, path: &str, set: &[(String, f64)], reference: &crate::Kernel
         max_abs,
         coef_n50,
         albedo_max,
+        bits_error_avg: pass.after.avg_bits,
+        bits_error_max: pass.after.max_bits,
+        bits_error_max_before: pass.before.max_bits,
+        robust_jit_ns,
         pareto: false,
     })
 }

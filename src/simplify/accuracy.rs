@@ -66,10 +66,17 @@ impl Rule {
     /// The rewritten formula, or `None` when the rule does not apply. The result is simplified again (default
     /// policy) so constants fold.
     pub fn apply(self, f: &Formula) -> Option<Formula> {
+        self.apply_at(f, None)
+    }
+
+    /// [`Rule::apply`] at one site only (the `k`-th place the rule matches, in arena order), so the chooser
+    /// can keep it where it helps and leave it where it only costs (Beckmann: the product whose exp factor
+    /// vanishes, not the exponent's own quotient). Only `quotient-chain` has sites; the others apply everywhere.
+    pub fn apply_at(self, f: &Formula, site: Option<usize>) -> Option<Formula> {
         let ranges = node_ranges(f, &Policy::default());
         let (ir, root, fired) = match self {
             Rule::SplitSqrt => split_sqrt(f, &ranges),
-            Rule::QuotientChain => quotient_chain(f, &ranges),
+            Rule::QuotientChain => quotient_chain(f, &ranges, site),
             Rule::FactorQuadratic => factor_quadratic(f),
         };
         if !fired {
@@ -150,7 +157,7 @@ fn safe(r: Range) -> bool {
 }
 
 // x / (a*b*…) → x / (safe factors) / a / b / …   dividing by each factor that may be tiny or huge on its own
-fn quotient_chain(f: &Formula, ranges: &[Range]) -> (Ir, NodeId, bool) {
+fn quotient_chain(f: &Formula, ranges: &[Range], only: Option<usize>) -> (Ir, NodeId, bool) {
     // Per old node: (numerator, denominator) factor lists of old atomic nodes, if it is a short product tree.
     let mut lists: Vec<Option<(Vec<NodeId>, Vec<NodeId>)>> = Vec::with_capacity(f.ir.len());
     for id in f.ir.ids() {
@@ -160,30 +167,31 @@ fn quotient_chain(f: &Formula, ranges: &[Range]) -> (Ir, NodeId, bool) {
             None => (vec![x], vec![]),
         };
         let l = match *f.ir.node(id) {
-            Node::Binary(BinOp::Mul, a, b) => {
+            Node::Binary(op @ (BinOp::Mul | BinOp::Div), a, b) => {
                 let (mut n, mut d) = of(a, &lists);
-                let (n2, d2) = of(b, &lists);
+                let (mut n2, mut d2) = of(b, &lists);
+                if op == BinOp::Div {
+                    std::mem::swap(&mut n2, &mut d2);
+                }
                 n.extend(n2);
                 d.extend(d2);
-                Some((n, d))
-            }
-            Node::Binary(BinOp::Div, a, b) => {
-                let (mut n, mut d) = of(a, &lists);
-                let (n2, d2) = of(b, &lists);
-                n.extend(d2);
-                d.extend(n2);
                 Some((n, d))
             }
             _ => None,
         };
         lists.push(l.filter(|(n, d)| n.len() + d.len() <= MAX_FACTORS));
     }
+    let mut site = 0;
     rebuild(f, |ir, map, id, _| {
         let (num, den) = lists[id.index()].as_ref()?;
         let (safe_den, unsafe_den): (Vec<NodeId>, Vec<NodeId>) = den.iter().partition(|d| safe(ranges[d.index()]));
         let separate = unsafe_den.len() >= 2 || (unsafe_den.len() == 1 && !safe_den.is_empty());
         if !separate {
             // At most one unsafe divisor, and nothing it must be kept apart from.
+            return None;
+        }
+        site += 1;
+        if only.is_some_and(|k| k + 1 != site) {
             return None;
         }
         let s = f.ir.span(id);
@@ -286,6 +294,9 @@ mod tests {
         // NH⁴ split into four divisions by NH; m² (safe) divides once.
         assert!(t.contains("/ nh / nh / nh / nh"), "{t}");
         assert!(cost(&g) > cost(&f));
+        // One site at a time: the first is 1/(m²·NH⁴), the last the whole product.
+        let sites: Vec<Formula> = (0..4).filter_map(|k| Rule::QuotientChain.apply_at(&f, Some(k))).collect();
+        assert_eq!(sites.len(), 3, "{:?}", sites.iter().map(|g| g.to_text()).collect::<Vec<_>>());
         // A single divisor is left alone.
         assert!(Rule::QuotientChain.apply(&parse("NH / NL")).is_none());
     }
