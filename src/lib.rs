@@ -10,7 +10,8 @@
 //! simplify   fixpoint rewrites, baked parameters, integer powers, used inputs
 //! backend    the Evaluator interface and Kernel; interpreter (reference), Cranelift JIT, GLSL/WGSL emission
 //! lib.rs     the compile entry points: compile_source, compile_formula, build_kernel
-//! numerics   energy and normalisation, accuracy against a reference, the domain sweep, fits, twins
+//! numerics   energy and normalisation, accuracy against a reference, the domain sweep, fits, twins; the
+//!            higher-precision truth and the accuracy pass's measured choice (passed down as a FormulaChooser)
 //! render     scenes, shapes, camera, rasteriser, shading, images, image comparison
 //! report     bench measurement and tables, plots
 //! cli        clap subcommands over the layers above (main.rs dispatches)

@@ -124,7 +124,7 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
             "passes": report.passes,
             "used_inputs": used.iter().map(|i| i.name()).collect::<Vec<_>>(),
             "unused_inputs": unused,
-            "points": a.points,
+            "points": pass.points,
             "bits_error_avg": json::value(pass.after.avg_bits),
             "bits_error_max": json::value(pass.after.max_bits),
             "bits_error_worst": worst_json(&f, &pass.after.worst),
@@ -176,7 +176,7 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
         if used.is_empty() { "no input (a constant)".to_string() } else { used.to_string() },
         if unused.is_empty() { String::new() } else { format!("   (a renderer skips {})", unused.join(", ")) }
     );
-    print_accuracy(&f, &pass, a.points, pass_ms);
+    print_accuracy(&f, &pass, a.points as usize, pass_ms);
     println!(
         "  compile     jit {:.0} µs, interpreter {:.0} µs",
         jit.compile_time.as_secs_f64() * 1e6,
@@ -186,8 +186,12 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
 }
 
 /// The accuracy section of the text report.
-fn print_accuracy(f: &Formula, pass: &robust::Outcome, points: u64, ms: f64) {
-    println!("  accuracy    bits of error vs the truth (~104-bit, unbounded exponent) at {points} domain points ({ms:.0} ms)");
+fn print_accuracy(f: &Formula, pass: &robust::Outcome, asked: usize, ms: f64) {
+    let reduced = if pass.points < asked { format!(", fewer than the {asked} asked: the formula is costly") } else { String::new() };
+    println!(
+        "  accuracy    bits of error vs the truth (~104-bit, unbounded exponent) at {} domain points{reduced} ({ms:.0} ms)",
+        pass.points
+    );
     println!("    before    {}", stats_line(f, &pass.before));
     for t in &pass.trials {
         println!(

@@ -336,6 +336,11 @@ impl Default for PassOptions {
     }
 }
 
+/// Most truth work per measurement, in static cost units × points ([`cost`]); a formula above ~200 cost units
+/// (40 shared trigonometric `let`s, say) is measured on fewer points than asked, and the report says how many.
+/// Every catalogue formula (cost ≤ ~150) gets 10⁵ points.
+pub const MAX_WORK: f64 = 2e7;
+
 /// One candidate tried by the pass.
 #[derive(Clone, Debug)]
 pub struct Trial {
@@ -357,6 +362,8 @@ pub struct Outcome {
     pub cost_before: f64,
     pub cost_after: f64,
     pub trials: Vec<Trial>,
+    /// Domain points measured (fewer than asked for a costly formula; [`MAX_WORK`]).
+    pub points: usize,
 }
 
 /// `a` is more accurate than `b` (module docs: non-finite first, then well-conditioned max, then average).
@@ -374,7 +381,8 @@ fn better(a: &ErrorStats, b: &ErrorStats) -> bool {
 pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcome {
     let base = crate::simplify::simplify(orig, bake);
     let truth_f = crate::simplify::bake_only(orig, bake);
-    let points = sample(orig, bake, o.points, o.seed);
+    let n = o.points.min((MAX_WORK / cost(&truth_f).max(1.0)) as usize).max(64);
+    let points = sample(orig, bake, n, o.seed);
     let run = |f: &Formula| measure(&Interp::new(f), &truth_f, &points);
     let before = run(&base);
     let cost_before = cost(&base);
@@ -435,7 +443,7 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
             i += 1;
         }
     }
-    Outcome { formula: cur, before, after: cur_stats, cost_before, cost_after: cur_cost, trials }
+    Outcome { formula: cur, before, after: cur_stats, cost_before, cost_after: cur_cost, trials, points: n }
 }
 
 /// The accuracy pass as the compile step's chooser ([`crate::FormulaChooser`]).

@@ -1,5 +1,7 @@
 //! IR → IR rewrites to a fixpoint: constant folding, exact algebraic identities, integer powers as
 //! multiplication chains, range-based removal of redundant clamps, baked parameters, dead-input elimination.
+//! The accuracy pass's candidate rewrites (overflow, underflow, cancellation) are in [`accuracy`]; they are
+//! proposed here and chosen by measurement above the backends (`numerics::robust`).
 //!
 //! # Design
 //! Like rhai's optimizer and OSL's `constfold.cpp`: a loop of passes until a pass fires no rewrite (capped at
