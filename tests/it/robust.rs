@@ -13,15 +13,17 @@ fn load(stem: &str) -> Formula {
     lobe::front::parse(&path, &src).unwrap()
 }
 
+fn jit_options(set: &[(&str, f64)]) -> Options {
+    Options { backend: Backend::Jit, bake: set.iter().map(|(k, v)| (k.to_string(), *v)).collect(), ..Default::default() }
+}
+
 /// The catalogue file compiled on the JIT through the accuracy pass at its defaults.
 fn robust_kernel(stem: &str, set: &[(&str, f64)]) -> Kernel {
-    let opts = Options { backend: Backend::Jit, bake: set.iter().map(|(k, v)| (k.to_string(), *v)).collect(), ..Default::default() };
-    lobe::compile_formula(load(stem), &robust::with_pass(opts, PassOptions::default())).unwrap()
+    lobe::compile_formula(load(stem), &robust::with_pass(jit_options(set), PassOptions::default())).unwrap()
 }
 
 fn plain_kernel(stem: &str, set: &[(&str, f64)]) -> Kernel {
-    let opts = Options { backend: Backend::Jit, bake: set.iter().map(|(k, v)| (k.to_string(), *v)).collect(), ..Default::default() };
-    lobe::compile_formula(load(stem), &opts).unwrap()
+    lobe::compile_formula(load(stem), &jit_options(set)).unwrap()
 }
 
 /// Inputs NL, NV, NH, VR, VH.
