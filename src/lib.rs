@@ -10,7 +10,8 @@
 //! simplify   fixpoint rewrites, baked parameters, integer powers, used inputs
 //! backend    the Evaluator interface and Kernel; interpreter (reference), Cranelift JIT, GLSL/WGSL emission
 //! lib.rs     the compile entry points: compile_source, compile_formula, build_kernel
-//! numerics   energy and normalisation, accuracy against a reference, the domain sweep, fits, twins
+//! numerics   energy and normalisation, accuracy against a reference, the domain sweep, fits, twins; the
+//!            higher-precision truth and the accuracy pass's measured choice (passed down as a FormulaChooser)
 //! render     scenes, shapes, camera, rasteriser, shading, images, image comparison
 //! report     bench measurement and tables, plots
 //! cli        clap subcommands over the layers above (main.rs dispatches)
@@ -39,6 +40,14 @@ pub use ir::{Formula, Input, N_INPUTS};
 use std::sync::Arc;
 use std::time::Instant;
 
+/// Picks the formula to compile among the accuracy pass's candidates by measuring them. The measuring needs
+/// the truth evaluator and a backend, which live above this file (`numerics::robust::Chooser`), so it is
+/// passed in rather than called.
+pub trait FormulaChooser: Send + Sync + std::fmt::Debug {
+    /// `original` as lowered, the baked values, and its plain simplification; returns the formula to compile.
+    fn choose(&self, original: &Formula, bake: &[(usize, f64)], simplified: Formula) -> Formula;
+}
+
 /// How to compile a formula.
 #[derive(Clone, Debug, Default)]
 pub struct Options {
@@ -50,6 +59,8 @@ pub struct Options {
     pub no_simplify: bool,
     /// Which definition of the transcendental builtins the kernel runs.
     pub math: Mode,
+    /// The accuracy pass (`numerics::robust::with_pass`); `None` compiles the plain simplification.
+    pub accuracy: Option<Arc<dyn FormulaChooser>>,
 }
 
 /// Parses, lowers and simplifies a formula, then builds its kernel for the chosen backend.
@@ -66,7 +77,14 @@ pub fn compile_formula(f: Formula, opts: &Options) -> Result<Kernel, Diagnostics
 /// The simplified formula with `opts.bake` folded in (`--set` names and ranges checked first).
 pub fn simplified(f: &Formula, opts: &Options) -> Result<Formula, Diagnostics> {
     let bake = resolve_bake(f, &opts.bake)?;
-    Ok(if opts.no_simplify { simplify::bake_only(f, &bake) } else { simplify::simplify(f, &bake) })
+    if opts.no_simplify {
+        return Ok(simplify::bake_only(f, &bake));
+    }
+    let s = simplify::simplify(f, &bake);
+    Ok(match &opts.accuracy {
+        Some(c) => c.choose(f, &bake, s),
+        None => s,
+    })
 }
 
 /// Builds the evaluator for an already simplified formula.

@@ -1,11 +1,12 @@
 //! The bottom layer: what every stage above uses to talk about the user's files. Byte [`span`]s,
 //! [`diag`]nostics rendered once with carets, reading a formula [`source`] (bounded, UTF-8) into a string or a
 //! diagnostic, writing [`output`] files without losing the user's, polling a file for changes ([`watch`]), and
-//! the one rule for numbers in JSON output ([`json`]). Nothing here knows about formulas, kernels or the CLI.
+//! the one rule for numbers in JSON output ([`json`]), and a deterministic [`rng`] for reproducible samples. Nothing here knows about formulas, kernels or the CLI.
 
 pub mod diag;
 pub mod json;
 pub mod output;
+pub mod rng;
 pub mod source;
 pub mod span;
 pub mod watch;

@@ -30,9 +30,19 @@ impl FormulaSource {
         common::load_formula(self.file.as_deref(), self.expr.as_deref())
     }
 
-    /// Loads the formula and compiles it with `set` baked in.
+    /// Loads the formula and compiles it with `set` baked in (the accuracy pass at its defaults).
     pub fn kernel(&self, set: &[(String, f64)], backend: Backend, math: crate::Mode) -> Result<Kernel, CliError> {
         common::load_kernel(self.file.as_deref(), self.expr.as_deref(), set, backend, math)
+    }
+
+    /// [`FormulaSource::kernel`] with the accuracy pass set by `--prefer`.
+    pub fn kernel_with(&self, set: &[(String, f64)], backend: Backend, prefer: &PreferArg) -> Result<Kernel, CliError> {
+        let f = self.load()?;
+        let opts = crate::numerics::robust::with_pass(
+            crate::Options { backend, bake: set.to_vec(), ..Default::default() },
+            prefer.pass(crate::numerics::robust::PassOptions::default().points),
+        );
+        Ok(crate::compile_formula(f, &opts)?)
     }
 }
 
@@ -83,6 +93,32 @@ pub struct MathArg {
     /// operations); `lobe check` lists each builtin's bound.
     #[arg(id = "math", long = "math", value_name = "MODE", default_value = "precise")]
     pub mode: crate::Mode,
+}
+
+/// `--prefer speed|accuracy` and `--max-cost RATIO`: what the accuracy pass keeps (`numerics::robust`).
+#[derive(clap::Args, Clone, Copy, Debug)]
+pub struct PreferArg {
+    /// `accuracy`: keep rewrites that lower the measured error within --max-cost × the fastest form's cost;
+    /// `speed`: keep only rewrites that cost nothing.
+    #[arg(id = "prefer", long = "prefer", value_name = "PREFER", default_value = "accuracy")]
+    pub prefer: crate::numerics::robust::Prefer,
+    /// Cost budget of `--prefer accuracy`, as a multiple of the fastest form's static cost (≥ 1).
+    #[arg(id = "max_cost", long = "max-cost", value_name = "RATIO", default_value_t = 1.3, value_parser = parse_ratio)]
+    pub max_cost: f64,
+}
+
+fn parse_ratio(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v >= 1.0 && !v.is_nan() => Ok(v),
+        _ => Err(format!("`{s}` is not a cost ratio ≥ 1 (e.g. 1.3, or inf for the most accurate form)")),
+    }
+}
+
+impl PreferArg {
+    /// The pass settings, measured on `points` domain points.
+    pub fn pass(&self, points: usize) -> crate::numerics::robust::PassOptions {
+        crate::numerics::robust::PassOptions { prefer: self.prefer, max_cost: self.max_cost, points, ..Default::default() }
+    }
 }
 
 /// `--json`: one JSON object on standard output instead of the report.

@@ -137,6 +137,18 @@ fn row(
     let albedo_max = if a.no_albedo { None } else { energy::full_energy(&baked, &params).ok().map(|e| e.albedo_max) };
     let spread = (m.scalar_jit.p75_ns - m.scalar_jit.p25_ns) / 2.0 / m.scalar_jit.median_ns;
     let (max_ulp_vs_precise, max_rel_vs_precise) = error_vs_precise(&baked, &params);
+    // Numerical error and cost of the accuracy pass's kernel (numerics::robust).
+    let bake = crate::resolve_bake(f, &set)?;
+    let pass = crate::numerics::robust::improve(f, &bake, &Default::default());
+    let robust_jit_ns = if pass.trials.iter().any(|t| t.kept) {
+        let k = crate::build_kernel(std::sync::Arc::new(pass.formula.clone()), Backend::Jit, math)?;
+        measure_kernel(&k, &params, MeasureOptions { points: 4096, samples: a.samples })
+            .map_err(|e| CliError::msg(format!("{path}: {e}")))?
+            .scalar_jit
+            .median_ns
+    } else {
+        m.scalar_jit.median_ns
+    };
     Ok(BenchRow {
         name: f.display_name(),
         file: path.to_string(),
@@ -154,6 +166,10 @@ fn row(
         max_abs,
         coef_n50,
         albedo_max,
+        bits_error_avg: pass.after.avg_bits,
+        bits_error_max: pass.after.max_bits,
+        bits_error_max_before: pass.before.max_bits,
+        robust_jit_ns,
         pareto: false,
     })
 }

@@ -1,11 +1,14 @@
 //! `lobe check FILE [--set n=50] [--json]`: what lobe made of a formula — the simplified expression, the
 //! rewrites that fired, the inputs it reads (and so the ones a renderer skips), parameters baked or live, and
-//! the compile time on each backend.
+//! the compile time on each backend; and the accuracy pass's report (`numerics::robust`): bits of error
+//! against the higher-precision truth over the formula's domain before and after the pass, with the worst
+//! input, which rewrite bought what, and where the formula is ill-conditioned by nature.
 
-use super::args::{self, FormulaSource, Json, Params};
+use super::args::{self, FormulaSource, Json, Params, PreferArg};
 use super::common::CliError;
 use crate::base::json;
-use crate::ir::Input;
+use crate::ir::{Formula, Input};
+use crate::numerics::robust::{self, ErrorStats, Worst};
 use crate::{Backend, Options};
 use serde_json::json;
 
@@ -16,6 +19,12 @@ pub struct CheckArgs {
     pub formula: FormulaSource,
     #[command(flatten)]
     pub set: Params,
+    #[command(flatten)]
+    pub prefer: PreferArg,
+    /// Domain points the accuracy report measures (inputs in [0, 1] with edge classes, parameters over
+    /// their ranges).
+    #[arg(long, default_value_t = 100_000, value_parser = clap::value_parser!(u64).range(1..=100_000_000))]
+    pub points: u64,
     #[command(flatten)]
     pub json: Json,
     #[command(flatten)]
@@ -35,6 +44,55 @@ fn builtin_bounds(f: &crate::Formula, mode: crate::Mode) -> Vec<(&'static str, S
     used.into_iter().map(|b| (b.name(), b.info().bound.describe(mode))).collect()
 }
 
+/// A point as `NH=…, NL=… (n=…)`: the inputs the formula reads and its live parameters.
+fn point_text(f: &Formula, w: &Worst) -> String {
+    let used = f.used_inputs();
+    let live = f.ir.used_params(f.root);
+    let mut parts: Vec<String> = used.iter().map(|i| format!("{}={:e}", i.name(), w.point.x[i.index()])).collect();
+    parts.extend(live.iter().map(|&k| format!("{}={}", f.params[k as usize].name, w.point.p[k as usize])));
+    format!("{} → {:e} (true {:e})", parts.join(", "), w.got, w.truth)
+}
+
+fn worst_json(f: &Formula, w: &Option<Worst>) -> serde_json::Value {
+    match w {
+        None => serde_json::Value::Null,
+        Some(w) => {
+            let used = f.used_inputs();
+            json!({
+                "inputs": json::named(used.iter().map(|i| (i.name(), w.point.x[i.index()]))),
+                "params": json::named(f.params.iter().zip(&w.point.p).map(|(d, v)| (d.name.as_str(), *v))),
+                "value": json::value(w.got), "truth": json::value(w.truth), "bits": json::value(w.bits),
+            })
+        }
+    }
+}
+
+fn stats_json(f: &Formula, s: &ErrorStats) -> serde_json::Value {
+    json!({
+        "bits_error_avg": json::value(s.avg_bits), "bits_error_max": json::value(s.max_bits),
+        "bits_error_worst": worst_json(f, &s.worst),
+        "bits_error_max_well_conditioned": json::value(s.max_bits_well),
+        "nonfinite_where_finite": s.nonfinite, "ill_conditioned": s.ill_conditioned, "undefined": s.undefined,
+    })
+}
+
+fn stats_line(f: &Formula, s: &ErrorStats) -> String {
+    let mut out = format!("avg {:.2} bits, max {:.2} bits", s.avg_bits, s.max_bits);
+    if let Some(w) = &s.worst {
+        out.push_str(&format!(" at {}", point_text(f, w)));
+    }
+    if s.ill_conditioned > 0 {
+        out.push_str(&format!("; max {:.2} bits where well conditioned", s.max_bits_well));
+    }
+    if s.nonfinite > 0 {
+        out.push_str(&format!("; NaN/inf where the true value is finite at {} points", s.nonfinite));
+        if let Some(w) = &s.first_nonfinite {
+            out.push_str(&format!(", e.g. {}", point_text(f, w)));
+        }
+    }
+    out
+}
+
 pub fn run(a: &CheckArgs) -> Result<(), CliError> {
     let set = a.set.list();
     let f = a.formula.load()?;
@@ -44,6 +102,9 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
     let used = simplified.used_inputs();
     let unused: Vec<&str> = Input::ALL.iter().filter(|i| !used.contains(**i)).map(|i| i.name()).collect();
     let live = simplified.ir.used_params(simplified.root);
+    let t_pass = std::time::Instant::now();
+    let pass = robust::improve(&f, &bake, &a.prefer.pass(a.points as usize));
+    let pass_ms = t_pass.elapsed().as_secs_f64() * 1e3;
     let opts = |backend| Options { backend, bake: set.clone(), math: a.math.mode, ..Options::default() };
     let bounds = builtin_bounds(&simplified, a.math.mode);
     let jit = crate::compile_formula(f.clone(), &opts(Backend::Jit))?;
@@ -81,6 +142,22 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
             "unused_inputs": unused,
             "math": a.math.mode.name(),
             "builtins": bounds.iter().map(|(n, b)| json!({"name": n, "bound": b})).collect::<Vec<_>>(),
+            "points": pass.points,
+            "bits_error_avg": json::value(pass.after.avg_bits),
+            "bits_error_max": json::value(pass.after.max_bits),
+            "bits_error_worst": worst_json(&f, &pass.after.worst),
+            "bits_error_max_well_conditioned": json::value(pass.after.max_bits_well),
+            "nonfinite_where_finite": pass.after.nonfinite,
+            "ill_conditioned": pass.after.ill_conditioned,
+            "undefined": pass.after.undefined,
+            "before": stats_json(&f, &pass.before),
+            "accuracy_rewrites": pass.trials.iter().map(|t| json!({
+                "rule": t.rule, "kept": t.kept, "reason": t.reason, "cost_ratio": json::value(t.cost / pass.cost_before),
+                "bits_error_avg": json::value(t.stats.avg_bits), "bits_error_max": json::value(t.stats.max_bits),
+                "nonfinite_where_finite": t.stats.nonfinite,
+            })).collect::<Vec<_>>(),
+            "compiled": pass.formula.to_program_text(),
+            "cost_ratio": json::value(pass.cost_after / pass.cost_before),
             "compile_us": {
                 "jit": json::value(jit.compile_time.as_secs_f64() * 1e6),
                 "interp": json::value(interp.compile_time.as_secs_f64() * 1e6),
@@ -121,10 +198,59 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
         let b: Vec<String> = bounds.iter().map(|(n, b)| format!("{n} {b}")).collect();
         println!("  builtins    {} ({} math)", b.join(", "), a.math.mode);
     }
+    print_accuracy(&f, &pass, a.points as usize, pass_ms);
     println!(
         "  compile     jit {:.0} µs, interpreter {:.0} µs",
         jit.compile_time.as_secs_f64() * 1e6,
         interp.compile_time.as_secs_f64() * 1e6
     );
     Ok(())
+}
+
+/// The accuracy section of the text report.
+fn print_accuracy(f: &Formula, pass: &robust::Outcome, asked: usize, ms: f64) {
+    let reduced = if pass.points < asked { format!(", fewer than the {asked} asked: the formula is costly") } else { String::new() };
+    println!(
+        "  accuracy    bits of error vs the truth (~104-bit, unbounded exponent) at {} domain points{reduced} ({ms:.0} ms)",
+        pass.points
+    );
+    println!("    before    {}", stats_line(f, &pass.before));
+    for t in &pass.trials {
+        println!(
+            "    {:<9} {} — {}: {}; avg {:.2} → {:.2}, max {:.2} → {:.2} bits{}",
+            if t.kept { "kept" } else { "dropped" },
+            t.rule,
+            t.describe,
+            t.reason,
+            pass.before.avg_bits,
+            t.stats.avg_bits,
+            pass.before.max_bits,
+            t.stats.max_bits,
+            if t.stats.nonfinite != pass.before.nonfinite {
+                format!(", NaN/inf where finite {} → {}", pass.before.nonfinite, t.stats.nonfinite)
+            } else {
+                String::new()
+            }
+        );
+    }
+    println!("    after     {}", stats_line(f, &pass.after));
+    if pass.trials.iter().any(|t| t.kept) {
+        println!("    compiled  {}", pass.formula.to_program_text().replace('\n', "\n              "));
+        println!("    cost      {:.2}× the fastest form (static cost model)", pass.cost_after / pass.cost_before);
+    }
+    let a = &pass.after;
+    if a.ill_conditioned > 0 {
+        let pct = 100.0 * a.ill_conditioned as f64 / a.points.max(1) as f64;
+        println!(
+            "    ill-conditioned by nature at {} points ({pct:.1} %): there a 1-ulp change of an input moves the true value by more than {} ulps, so no f64 evaluation is accurate; the error there is the formula's, not lobe's",
+            a.ill_conditioned,
+            robust::ILL_CONDITIONED_ULPS
+        );
+    }
+    if a.undefined > 0 {
+        println!(
+            "    not finite in exact arithmetic (0/0, ∞·0, or a pole such as an input exactly 0) at {} points; not counted",
+            a.undefined
+        );
+    }
 }

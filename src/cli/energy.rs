@@ -130,13 +130,22 @@ pub fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<St
         let r = lobe_integral(k, &params, lobe)?;
         if a.json.on {
             let obj = json!({"mode": "lobe", "params": params_json, "coef": json::value(r.coef()),
-                             "integral": json::value(r.integral), "lobe_input": lobe.name(), "evals": r.evals});
+                             "integral": json::value(r.integral), "lobe_input": lobe.name(), "evals": r.evals,
+                             "skipped_nan_up_to": r.skipped.map(|s| json::value(s.0)),
+                             "skipped_bound": r.skipped.map(|s| json::value(s.1))});
             outln!(out, "{obj}");
         } else {
             let shown: Vec<String> = k.formula.params.iter().zip(&params).map(|(d, v)| format!("{}={v}", d.name)).collect();
             outln!(out, "{name} ({}): coef = 1/(2π·Int) = {:.9}", shown.join(", "), r.coef());
             outln!(out, "  Int = ∫₀¹ max(f(c),0)·c dc = {:.12e} (± {:.1e}, {} evaluations)", r.integral, r.error, r.evals);
             outln!(out, "  lobe variable {} = cos θ; NL = 1, NV = cos θ (light at the normal)", lobe.name());
+            if let Some((c, bound)) = r.skipped {
+                outln!(
+                    out,
+                    "  skipped: the formula is NaN (0/0 or ∞·0) for {} ≤ {c:e}; taken as its limit from the right (that piece adds ≤ {bound:.1e} to Int)",
+                    lobe.name()
+                );
+            }
             for c in &r.kinks {
                 outln!(out, "  the lobe is clamped to zero beyond θ = {:.6}° ({} = {c:.9})", c.acos().to_degrees(), lobe.name());
             }

@@ -1,7 +1,7 @@
 //! `lobe eval FILE --set n=50 --at NH=0.95,NL=0.7 [--normalize] [--backend jit|interp] [--math precise|fast] [--json]`
 //! `lobe eval FILE --points PATH|- [--json]`: every row of a CSV through the batched kernel ([`super::points`]).
 
-use super::args::{self, BackendArg, FormulaSource, Json, Params};
+use super::args::{self, BackendArg, FormulaSource, Json, Params, PreferArg};
 use super::common::{self, CliError};
 use crate::base::json;
 use crate::ir::{Input, N_INPUTS};
@@ -28,20 +28,23 @@ pub struct EvalArgs {
     #[command(flatten)]
     pub backend: BackendArg,
     #[command(flatten)]
+    pub prefer: PreferArg,
+    #[command(flatten)]
     pub json: Json,
 }
 
 pub fn run(a: &EvalArgs) -> Result<(), CliError> {
     let set = a.set.list();
     let f = a.formula.load()?;
+    let pass = |opts| crate::numerics::robust::with_pass(opts, a.prefer.pass(crate::numerics::robust::PassOptions::default().points));
     let k = if a.normalize {
         // The coefficient depends on every parameter: bake them all (--set values, declared defaults for the rest).
         let mut bake = set.clone();
         bake.extend(f.params.iter().filter(|p| !set.iter().any(|(k, _)| *k == p.name)).map(|p| (p.name.clone(), p.default)));
-        let s = crate::simplified(&f, &crate::Options { bake, ..Default::default() })?;
+        let s = crate::simplified(&f, &pass(crate::Options { bake, ..Default::default() }))?;
         crate::build_kernel(std::sync::Arc::new(crate::numerics::normalize::bake_coefficient(s)?), a.backend.kind, a.backend.math.mode)?
     } else {
-        crate::compile_formula(f, &a.backend.options(set.clone()))?
+        crate::compile_formula(f, &pass(a.backend.options(set.clone())))?
     };
     let mut x = [0.0; N_INPUTS];
     for (name, v) in a.at.concat() {

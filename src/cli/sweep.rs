@@ -7,7 +7,7 @@ use super::args::{self, BackendArg, FormulaSource, Json, Params};
 use super::common::{self, CliError};
 use crate::base::json;
 use crate::ir::Formula;
-use crate::numerics::sweep::{sweep, Example, RegionStats, SweepOptions};
+use crate::numerics::sweep::{extent, sweep, Example, RegionStats, SweepOptions};
 
 use serde::Serialize;
 
@@ -154,10 +154,23 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliEr
         for r in rep.regions.iter().chain(std::iter::once(t)) {
             outln!(out, "  {:<10} {:>10} {:>8} {:>8} {:>9} {:>9}", r.region, r.evaluated, r.nan, r.inf, r.negative, r.over_bound);
         }
+        let bound = rep.bound;
         for r in &rep.regions {
             for (kind, e) in [("NaN", &r.first_nan), ("inf", &r.first_inf), ("negative", &r.first_negative), ("over bound", &r.first_over_bound)] {
                 if let Some(e) = e {
                     outln!(out, "  first {kind} in {}: {}", r.region, example_text(e, used, &names));
+                    // How far the region reaches along each input, the rest as in the example.
+                    let bad = |y: f64| match kind {
+                        "NaN" => y.is_nan(),
+                        "inf" => y.is_infinite(),
+                        "negative" => y < 0.0,
+                        _ => y > bound,
+                    };
+                    for i in used.iter() {
+                        if let Some((lo, hi)) = extent(&k, &e.inputs, &e.params, i.index(), bad) {
+                            outln!(out, "    {kind} for {} in [{}, {}] (the rest as in the example)", i.name(), compact(lo), compact(hi));
+                        }
+                    }
                 }
             }
         }

@@ -36,6 +36,10 @@ pub struct LobeIntegral {
     /// Cosines where the lobe switches between zero and clearly positive values (its cut-off), ascending;
     /// underflow to zero is not listed.
     pub kinks: Vec<f64>,
+    /// The formula is NaN for c ∈ [0, `.0`] (0/0 or ∞·0 at the endpoint, e.g. Beckmann's exp(−1/c²)/c⁴ at
+    /// c = 0): that piece is skipped, taking the limit from the right; `.1` bounds what it could have
+    /// contributed (|f| at the edge times the piece's ∫c dc), checked to be below the tolerance.
+    pub skipped: Option<(f64, f64)>,
 }
 
 impl LobeIntegral {
@@ -46,6 +50,8 @@ impl LobeIntegral {
 }
 
 const REL_TOL: f64 = 1e-11;
+/// Widest NaN piece at c = 0 the lobe integral skips (as a limit) rather than refuses.
+const SKIP_MAX: f64 = 1e-6;
 
 fn describe(lobe: Input, c: f64) -> String {
     format!("{} = {c} (θ = {:.4}°)", lobe.name(), c.clamp(-1.0, 1.0).acos().to_degrees())
@@ -72,7 +78,31 @@ pub fn lobe_integral(ev: &dyn Evaluator, params: &[f64], lobe: Input) -> Result<
     xs.dedup();
     let ys: Vec<f64> = xs.iter().map(|&c| f(c)).collect();
     let mut evals = xs.len() + 1;
-    if let Some(i) = ys.iter().position(|y| y.is_nan()) {
+    // A NaN piece [0, c*] at the endpoint (0/0 or ∞·0 as c → 0) is skipped when the lobe is finite right of it
+    // and the piece is negligible; a NaN anywhere else is an error.
+    let lead = ys.iter().take_while(|y| y.is_nan()).count();
+    let mut start = 0.0;
+    let mut skipped = None;
+    if lead > 0 && lead < xs.len() {
+        let (mut a, mut b) = (xs[lead - 1], xs[lead]);
+        for _ in 0..1100 {
+            let m = if b > 2.0 * a.max(1e-300) { (a.max(1e-300) * b).sqrt() } else { 0.5 * (a + b) };
+            if !(m > a && m < b) {
+                break;
+            }
+            evals += 1;
+            if f(m).is_nan() {
+                a = m
+            } else {
+                b = m
+            }
+        }
+        let edge = f(b);
+        evals += 1;
+        skipped = Some((a, crate::builtins::fmax(edge, 0.0) * 0.5 * b * b));
+        start = b;
+    }
+    if let Some(i) = ys.iter().enumerate().position(|(i, y)| y.is_nan() && (i >= lead || lead == xs.len())) {
         return Err(CheckError::hint(
             format!("the formula is NaN at {}", describe(lobe, xs[i])),
             "run `lobe sweep` on the file to see where it is undefined",
@@ -105,9 +135,10 @@ pub fn lobe_integral(ev: &dyn Evaluator, params: &[f64], lobe: Input) -> Result<
             }
         }
     }
-    let mut breaks: Vec<f64> = vec![0.0, 1.0];
+    let mut breaks: Vec<f64> = vec![start, 1.0];
     breaks.extend((1..=24).map(|k| 1.0 - 2f64.powi(-k)));
     breaks.extend(switches);
+    breaks.retain(|&b| b >= start);
     breaks.sort_by(f64::total_cmp);
     breaks.dedup();
     let mut nan_at = None;
@@ -146,7 +177,15 @@ pub fn lobe_integral(ev: &dyn Evaluator, params: &[f64], lobe: Input) -> Result<
             "the formula is ≤ 0 (clamped to 0) at every angle for these parameters",
         ));
     }
-    Ok(LobeIntegral { integral: r.value, error: r.error, evals, kinks })
+    if let Some((c, bound)) = skipped {
+        if c > SKIP_MAX || bound.is_nan() || bound > REL_TOL * r.value {
+            return Err(CheckError::hint(
+                format!("the formula is NaN for {} ≤ {c:e} and that piece is not negligible", lobe.name()),
+                "run `lobe check` on the file: the accuracy pass may remove the NaN",
+            ));
+        }
+    }
+    Ok(LobeIntegral { integral: r.value, error: r.error, evals, kinks, skipped })
 }
 
 /// The exact normalisation coefficient `1 / (2π·Int)` of the papers (lobe convention; module docs).
@@ -419,6 +458,24 @@ mod tests {
         let inner = FnEvaluator(|x: &[f64; 5], _: &[f64]| 1.0 / (x[2] - 0.5).abs());
         let e = normalization_coef(&inner, &[50.0], Input::NH).unwrap_err();
         assert!(e.msg.contains("does not converge"), "{e}");
+    }
+
+    #[test]
+    fn a_nan_piece_at_the_endpoint_is_skipped_and_said() {
+        // Beckmann as f64 computes it: NaN for c ≤ ~1e-77 (c⁴ underflows: ∞·0), true value 0 there.
+        let m2 = 0.09;
+        let beck = FnEvaluator(move |x: &[f64; 5], _: &[f64]| {
+            let c = x[2];
+            1.0 / (m2 * c * c * c * c) * ((c * c - 1.0) / (m2 * c * c)).exp()
+        });
+        let r = lobe_integral(&beck, &[1.0], Input::NH).unwrap();
+        let (c, bound) = r.skipped.unwrap();
+        assert!(c > 1e-80 && c < 1e-76 && bound == 0.0, "{c} {bound}");
+        // Beckmann's lobe coefficient is 1/π: ∫₀¹ D(c)·c dc = 1/2 for every m.
+        assert!((r.coef() * PI - 1.0).abs() < 1e-9, "{}", r.coef());
+        // A NaN piece whose edge value is not negligible is an error.
+        let bad = FnEvaluator(|x: &[f64; 5], _: &[f64]| if x[2] < 1e-3 { f64::NAN } else { 1.0 });
+        assert!(lobe_integral(&bad, &[1.0], Input::NH).unwrap_err().msg.contains("not negligible"));
     }
 
     #[test]

@@ -1,5 +1,6 @@
 //! Numerical checks of a BRDF kernel: energy (normalisation and albedo), accuracy against a reference lobe,
-//! a stability sweep over the whole domain, and a parameter fit.
+//! a stability sweep over the whole domain, and a parameter fit; the ground truth ([`truth`]: any formula in
+//! ~104-bit precision with an unbounded exponent) and the accuracy pass's measurement and choice ([`robust`]).
 //!
 //! Design: every check takes a `&dyn Evaluator` plus a parameter slice (and, where needed, the formula's
 //! parameter declarations or used-input set) — never source text — so the same code runs on the JIT, the
@@ -29,6 +30,12 @@
 //!   `q`, `seconds`.
 //! - `fit`: `best` = list of {`params` (object name → value), `score`, `refined`}, best first; `metric`,
 //!   `evaluated`, `seconds`.
+//! - `check` (accuracy report, [`robust`]): `bits_error_avg`, `bits_error_max`, `bits_error_worst` ({`inputs`,
+//!   `params`, `value`, `truth`, `bits`}), `bits_error_max_well_conditioned`, `nonfinite_where_finite`,
+//!   `ill_conditioned`, `undefined`, `before` (the same keys for the plain simplification), `accuracy_rewrites`
+//!   (list of {`rule`, `kept`, `reason`, `cost_ratio`, `bits_error_avg`, `bits_error_max`,
+//!   `nonfinite_where_finite`}), `compiled`, `cost_ratio`, `points`. `energy` lobe mode also gives
+//!   `skipped_nan_up_to` and `skipped_bound` (null when nothing was skipped).
 //! - `sweep`: `nan`, `inf`, `negative`, `over_bound` counts, `evaluated`, `exhaustive`, `bound`, `regions` =
 //!   list of {`region`, `evaluated`, `nan`, `inf`, `negative`, `over_bound`, `first`} where `first` maps each
 //!   kind to its first example ({`inputs`, `params`, `value`}) or `null`.
@@ -54,7 +61,9 @@ pub mod fit;
 pub mod normalize;
 pub mod published;
 pub mod quad;
+pub mod robust;
 pub mod sweep;
+pub mod truth;
 pub mod twins;
 
 use crate::ir::{Input, InputSet, N_INPUTS};

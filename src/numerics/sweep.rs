@@ -156,6 +156,43 @@ pub struct SweepReport {
 }
 
 /// Sweeps `ev` (normally the [`Formula::unclamped`] kernel) over the domain described in the module docs.
+/// The extent of a bad region along one input: starting from an example `x` where `bad(value)` holds, the
+/// interval of that input in [0, 1] (the others and the parameters fixed) over which it still holds, found by
+/// bisection toward 0 and toward 1 (geometric steps across binades, then halving: ~1 100 evaluations at most).
+/// `None` when the example's value of the input is outside [0, 1]. Assumes the bad set is one interval along
+/// the line, which holds for the underflow and overflow regions this is for (it reports the interval around
+/// the example either way).
+pub fn extent(ev: &dyn Evaluator, x: &[f64; N_INPUTS], params: &[f64], input: usize, bad: impl Fn(f64) -> bool) -> Option<(f64, f64)> {
+    let v = x[input];
+    if !(0.0..=1.0).contains(&v) {
+        return None;
+    }
+    let at = |t: f64| {
+        let mut y = *x;
+        y[input] = t;
+        bad(ev.eval(&y, params))
+    };
+    // Boundary between `inside` (bad) and `outside` (not bad), either order.
+    let edge = |mut inside: f64, mut outside: f64| {
+        for _ in 0..1100 {
+            let (lo, hi) = (inside.min(outside), inside.max(outside));
+            let m = if lo > 0.0 && hi > 4.0 * lo { (lo * hi).sqrt() } else if lo == 0.0 && hi > 1e-300 { hi * 1e-10 } else { 0.5 * (lo + hi) };
+            if !(m > lo && m < hi) {
+                break;
+            }
+            if at(m) {
+                inside = m
+            } else {
+                outside = m
+            }
+        }
+        inside
+    };
+    let lo = if at(0.0) { 0.0 } else { edge(v, 0.0) };
+    let hi = if at(1.0) { 1.0 } else { edge(v, 1.0) };
+    Some((lo, hi))
+}
+
 pub fn sweep(ev: &dyn Evaluator, used: InputSet, decls: &[ParamDecl], opts: &SweepOptions) -> SweepReport {
     let g = grid();
     let used: Vec<usize> = used.iter().map(|i| i.index()).collect();
@@ -266,6 +303,21 @@ mod tests {
 
     fn n_decl() -> ParamDecl {
         ParamDecl { name: "n".into(), default: 50.0, lo: 1.0, hi: 1000.0, span: None }
+    }
+
+    #[test]
+    fn extent_finds_the_underflow_region_of_beckmann() {
+        let beck = crate::backend::FnEvaluator(|x: &[f64; 5], _: &[f64]| {
+            let c = x[2];
+            1.0 / (0.09 * c * c * c * c) * ((c * c - 1.0) / (0.09 * c * c)).exp()
+        });
+        let x = [0.5, 0.5, 1e-300, 0.5, 0.5];
+        let (lo, hi) = extent(&beck, &x, &[], 2, f64::is_nan).unwrap();
+        assert_eq!(lo, 0.0);
+        // c⁴·0.09 underflows to 0 below ~1.2e-77 (then 1/0 · exp(−∞) = NaN).
+        assert!(hi > 1e-78 && hi < 1e-76, "{hi:e}");
+        assert!(beck.eval(&[0.5, 0.5, hi, 0.5, 0.5], &[]).is_nan());
+        assert!(!beck.eval(&[0.5, 0.5, hi * 1.01, 0.5, 0.5], &[]).is_nan());
     }
 
     #[test]

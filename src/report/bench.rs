@@ -46,6 +46,17 @@ pub struct BenchRow {
     pub max_ulp_vs_precise: f64,
     #[serde(serialize_with = "crate::base::json::num")]
     pub max_rel_vs_precise: f64,
+    /// Bits of error against the higher-precision truth (`numerics::robust`, 4096 domain points) of the kernel
+    /// the accuracy pass chose: average and maximum; `bits_error_max_before` is the plain simplification's max.
+    #[serde(serialize_with = "crate::base::json::num")]
+    pub bits_error_avg: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
+    pub bits_error_max: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
+    pub bits_error_max_before: f64,
+    /// Scalar JIT ns/eval of the accuracy pass's kernel (equal to `jit_ns` when it kept no rewrite).
+    #[serde(serialize_with = "crate::base::json::num")]
+    pub robust_jit_ns: f64,
     pub pareto: bool,
 }
 
@@ -84,16 +95,16 @@ pub fn table(rows: &[BenchRow]) -> String {
     rows.sort_by(|a, b| a.jit_ns.total_cmp(&b.jit_ns));
     let mut out = String::new();
     out.push_str(&format!(
-        "{:<2}{:<28} {:<7} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>9} {:>11} {:>9} {:>9} {:>8} {:>8}\n",
-        "", "formula", "math", "compile", "jit ns", "batch ns", "interp", "rust ns", "interp/", "ulp vs", "mean |Δ|", "epic. %", "max |Δ|", "coef50", "albedo"
+        "{:<2}{:<28} {:<7} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>9} {:>11} {:>9} {:>9} {:>8} {:>8} {:>12} {:>8}\n",
+        "", "formula", "math", "compile", "jit ns", "batch ns", "interp", "rust ns", "interp/", "ulp vs", "mean |Δ|", "epic. %", "max |Δ|", "coef50", "albedo", "bits error", "robust"
     ));
     out.push_str(&format!(
-        "{:<2}{:<28} {:<7} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>9} {:>11} {:>9} {:>9} {:>8} {:>8}\n",
-        "", "", "", "µs", "(±spread)", "/elem", "ns", "", "jit", "precise", "vs ref", "max", "", "n=50", "max"
+        "{:<2}{:<28} {:<7} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>9} {:>11} {:>9} {:>9} {:>8} {:>8} {:>12} {:>8}\n",
+        "", "", "", "µs", "(±spread)", "/elem", "ns", "", "jit", "precise", "vs ref", "max", "", "n=50", "max", "avg/max", "ns ×"
     ));
     for r in rows {
         out.push_str(&format!(
-            "{:<2}{:<28} {:<7} {:>9.1} {:>6.2} ±{:>2.0}% {:>9.2} {:>9.1} {:>9} {:>7.1}× {:>9} {:>11.3e} {:>9.2} {:>9.3e} {:>8} {:>8}\n",
+            "{:<2}{:<28} {:<7} {:>9.1} {:>6.2} ±{:>2.0}% {:>9.2} {:>9.1} {:>9} {:>7.1}× {:>9} {:>11.3e} {:>9.2} {:>9.3e} {:>8} {:>8} {:>5.2}/{:<6.2} {:>7.2}×\n",
             if r.pareto { "*" } else { "" },
             truncate(&r.name, 28),
             r.math,
@@ -110,9 +121,13 @@ pub fn table(rows: &[BenchRow]) -> String {
             r.max_abs,
             fmt_opt(r.coef_n50, 3),
             fmt_opt(r.albedo_max, 3),
+            r.bits_error_avg,
+            r.bits_error_max,
+            r.robust_jit_ns / r.jit_ns,
         ));
     }
     out.push_str("* = Pareto front: no other formula is both faster and more accurate.\n");
+    out.push_str("bits error: numerical error of the accuracy pass's kernel vs the higher-precision truth (log2(ulps + 1)); robust ns ×: its ns/eval over jit ns.\n");
     out
 }
 
@@ -159,6 +174,10 @@ mod tests {
             albedo_max: None,
             max_ulp_vs_precise: 0.0,
             max_rel_vs_precise: 0.0,
+            bits_error_avg: 0.0,
+            bits_error_max: 0.0,
+            bits_error_max_before: 0.0,
+            robust_jit_ns: ns,
             pareto: false,
         }
     }

@@ -1,5 +1,7 @@
 //! IR → IR rewrites to a fixpoint: constant folding, exact algebraic identities, integer powers as
 //! multiplication chains, range-based removal of redundant clamps, baked parameters, dead-input elimination.
+//! The accuracy pass's candidate rewrites (overflow, underflow, cancellation) are in [`accuracy`]; they are
+//! proposed here and chosen by measurement above the backends (`numerics::robust`).
 //!
 //! # Design
 //! Like rhai's optimizer and OSL's `constfold.cpp`: a loop of passes until a pass fires no rewrite (capped at
@@ -77,6 +79,7 @@
 //!
 //!   (a = 1 is exact either way.) The one value it changes beyond rounding is the sign of a zero when a = −0.
 
+pub mod accuracy;
 mod powi;
 pub mod range;
 pub mod sexpr;
@@ -270,6 +273,16 @@ pub fn simplify_with(f: &Formula, bake: &[(usize, f64)], policy: &Policy) -> (Fo
         source: f.source.clone(),
     };
     (out, report)
+}
+
+/// The range of every node of `f` under `policy`, computed without rewriting (what the accuracy pass's
+/// guards read). `f`'s arena is hash-consed, so its ids are kept.
+pub fn node_ranges(f: &Formula, policy: &Policy) -> Vec<Range> {
+    let mut rw = Rewriter::new(&f.params, &[], policy);
+    for id in f.ir.ids() {
+        rw.push(*f.ir.node(id), f.ir.span(id));
+    }
+    rw.ranges
 }
 
 /// One pass: builds a fresh arena bottom-up, rewriting each node as it is added.

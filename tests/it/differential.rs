@@ -217,7 +217,7 @@ fn identical(a: f64, b: f64) -> bool {
 }
 
 fn both(f: Formula, bake: Vec<(String, f64)>, math: Mode) -> (Kernel, Kernel) {
-    let opts = |backend| Options { backend, bake: bake.clone(), no_simplify: false, math };
+    let opts = |backend| Options { backend, bake: bake.clone(), no_simplify: false, math, accuracy: None };
     let jit = compile_formula(f.clone(), &opts(Backend::Jit)).expect("jit compiles");
     let interp = compile_formula(f, &opts(Backend::Interp)).expect("interp builds");
     assert_eq!(jit.backend, Backend::Jit);

@@ -296,18 +296,7 @@ fn many_errors_are_capped() {
 
 // ---- random expressions: printed with minimal parentheses, parsed back, compared with direct evaluation ----
 
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
-    }
-}
+use lobe::base::rng::Rng;
 
 enum E {
     Num(f64),

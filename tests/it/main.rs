@@ -14,3 +14,4 @@ mod simplify;
 mod accuracy;
 mod energy;
 mod render;
+mod robust;

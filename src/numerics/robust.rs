@@ -1,0 +1,483 @@
+//! Numerical robustness: bits of error against the truth over a formula's domain, and the accuracy pass's
+//! choice among candidate rewrites.
+//!
+//! # Design
+//! Herbie's measure (Panchekha et al., PLDI 2015): at each input point the error of an f64 result `y` is
+//! `log2(ulps(y, t) + 1)` bits, where `t` is the true value ([`super::truth`]: the formula as written, baked
+//! parameters folded, evaluated in ~104-bit precision with an unbounded exponent) rounded once to f64; 0 bits is
+//! correctly rounded, 64 bits is NaN or ∞ where the truth is finite. [`measure`] reports the average and the
+//! maximum over a sample of the domain with the worst input, counts the points where the result is NaN/∞ but the
+//! truth is finite, the points where the formula is undefined even in exact arithmetic (0/0, ∞·0 at e.g. NH = 0
+//! exactly; left out of the averages), and the points where the formula is *ill-conditioned by nature*: a 1-ulp
+//! change of one input or live parameter moves the true value by more than [`ILL_CONDITIONED_ULPS`] ulps, so no
+//! f64 evaluation can be accurate there (the Gaussian at large n: exp amplifies its argument). The maximum over
+//! well-conditioned points is reported separately.
+//!
+//! The domain ([`sample`]): every input the formula reads in [0, 1], a quarter of the values from the edge
+//! classes (0, 1, 1 − 2⁻⁵³, 1 − 2⁻⁵², the smallest denormal, a denormal, 2⁻¹⁰²², 10⁻³⁰⁰, 1.6·10⁻¹⁶², 10⁻¹⁵⁴,
+//! 10⁻⁷⁷, 10⁻²⁰, ½), a quarter 1 − 10⁻ᵘ (u ∈ [0, 16]), a fifth log-uniform down to 10⁻³²³, the rest uniform;
+//! live parameters over their declared ranges (endpoints, uniform, log-uniform). A formula that reads VH with
+//! NL or NV gets geometrically possible combinations only: N·(L + V) = |L + V|·NH and |L + V| = 2·VH, so
+//! NL + NV = 2·NH·VH (VH = 0 means L = −V, where NL = NV = 0); the total is split at a random fraction drawn
+//! like an input (edge classes included). Other inputs are drawn independently, the conservative choice for a
+//! kernel that may be fed any cosines. Deterministic (fixed seed).
+//!
+//! The pass ([`improve`]): start from the simplified formula (the fastest form lobe builds), try each candidate
+//! of `simplify::accuracy` in turn on the current best, keep it when it is more accurate — fewer non-finite
+//! results where the truth is finite, then a lower maximum over well-conditioned points, then a lower average —
+//! and its static cost ([`crate::simplify::accuracy::cost`]) stays within the budget: `--prefer speed` keeps
+//! only rewrites that cost nothing, `--prefer accuracy` (default) those within `max_cost` (1.3) × the fastest
+//! form's cost — up to [`NONFINITE_BUDGET`] (2×) for a rewrite that removes NaN/∞ results where the true
+//! value is finite, since those are wrong answers, not imprecise ones. Each trial is reported with what it
+//! bought.
+//!
+//! Cost: one truth evaluation per point (1–5 µs for a catalogue formula in release) plus one interpreter
+//! evaluation per point and candidate, plus the condition estimate (two truth evaluations per read input) at the
+//! points with more than 4 bits of error; parallel over points (rayon). 10⁵ points: 0.3–2 s per formula.
+
+use super::truth;
+use crate::base::rng::Rng;
+use crate::backend::interp::Interp;
+use crate::backend::Evaluator;
+use crate::ir::{Formula, Input, N_INPUTS};
+use crate::simplify::accuracy::{cost, pow_call_policy, Rule};
+use rayon::prelude::*;
+
+/// Budget multiple for a candidate that removes NaN/∞ results where the truth is finite (wrong answers rather
+/// than imprecise ones) under `Prefer::Accuracy`, whatever `max_cost` says; `Prefer::Speed` never pays it.
+pub const NONFINITE_BUDGET: f64 = 2.0;
+
+/// A 1-ulp change of an input moving the truth by more than this many ulps marks a point ill-conditioned.
+pub const ILL_CONDITIONED_ULPS: f64 = 16.0;
+
+/// One point of the domain: inputs in [`Input::ALL`] order and the full parameter vector.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Point {
+    pub x: [f64; N_INPUTS],
+    pub p: Vec<f64>,
+}
+
+/// Distance in units in the last place between two f64 (NaN–NaN is 0, NaN–number is 2⁶⁴).
+pub fn ulps(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() {
+        return if a.is_nan() && b.is_nan() { 0.0 } else { 2f64.powi(64) };
+    }
+    let ord = |x: f64| {
+        let b = x.to_bits() as i64;
+        i128::from(if b < 0 { i64::MIN - b } else { b })
+    };
+    (ord(a) - ord(b)).unsigned_abs() as f64
+}
+
+/// Herbie's bits of error: log2(ulps + 1).
+pub fn bits(a: f64, b: f64) -> f64 {
+    (ulps(a, b) + 1.0).log2()
+}
+
+/// The edge classes every input draws from (module docs).
+pub const EDGES: [f64; 13] = [
+    0.0,
+    1.0,
+    1.0 - 1.1102230246251565e-16,
+    1.0 - 2.220446049250313e-16,
+    5e-324,
+    1e-310,
+    2.2250738585072014e-308,
+    1e-300,
+    1.6e-162,
+    1e-154,
+    1e-77,
+    1e-20,
+    0.5,
+];
+
+fn input_value(r: &mut Rng) -> f64 {
+    let u = r.unit();
+    let v = r.unit();
+    if u < 0.25 {
+        EDGES[r.below(EDGES.len() as u64) as usize]
+    } else if u < 0.5 {
+        1.0 - 10f64.powf(-16.0 * v)
+    } else if u < 0.7 {
+        10f64.powf(-323.0 * v)
+    } else {
+        v
+    }
+}
+
+/// `n` points of `f`'s domain (module docs); parameters listed in `bake` keep their baked value.
+pub fn sample(f: &Formula, bake: &[(usize, f64)], n: usize, seed: u64) -> Vec<Point> {
+    let mut r = Rng(seed.max(1));
+    let used = f.used_inputs();
+    (0..n)
+        .map(|_| {
+            let mut x = [0.5; N_INPUTS];
+            for i in Input::ALL {
+                if used.contains(i) {
+                    x[i.index()] = input_value(&mut r);
+                }
+            }
+            // Geometry: N·(L + V) = |L + V|·NH and |L + V| = 2·VH, so NL + NV = 2·NH·VH; split that total.
+            if used.contains(Input::VH) && (used.contains(Input::NL) || used.contains(Input::NV)) {
+                let total = 2.0 * x[Input::NH.index()] * x[Input::VH.index()];
+                let nl = (input_value(&mut r) * total).min(1.0);
+                let nv = (total - nl).min(1.0);
+                x[Input::NL.index()] = (total - nv).min(1.0);
+                x[Input::NV.index()] = nv;
+            }
+            let p = f
+                .params
+                .iter()
+                .enumerate()
+                .map(|(k, d)| {
+                    if let Some((_, v)) = bake.iter().find(|(j, _)| *j == k) {
+                        return *v;
+                    }
+                    let (u, v) = (r.unit(), r.unit());
+                    let val = if u < 0.2 {
+                        d.lo
+                    } else if u < 0.4 {
+                        d.hi
+                    } else if u < 0.7 || d.lo <= 0.0 {
+                        d.lo + v * (d.hi - d.lo)
+                    } else {
+                        d.lo * (d.hi / d.lo).powf(v)
+                    };
+                    val.clamp(d.lo, d.hi)
+                })
+                .collect();
+            Point { x, p }
+        })
+        .collect()
+}
+
+/// The worst point of a measurement.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Worst {
+    pub point: Point,
+    pub got: f64,
+    pub truth: f64,
+    pub bits: f64,
+}
+
+/// Bits of error over a sample (module docs).
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct ErrorStats {
+    pub points: usize,
+    /// Mean bits over the points where the truth is defined.
+    pub avg_bits: f64,
+    pub max_bits: f64,
+    pub worst: Option<Worst>,
+    /// NaN or ±∞ where the true value is finite.
+    pub nonfinite: usize,
+    pub first_nonfinite: Option<Worst>,
+    /// The truth itself is not finite (0/0, ∞·0, ∞−∞ in exact arithmetic, or a pole such as 1/√(NL·NV) at
+    /// NV = 0): left out of the averages, as Herbie samples only points with a finite truth.
+    pub undefined: usize,
+    /// Points where the formula is ill-conditioned by nature (module docs).
+    pub ill_conditioned: usize,
+    /// Largest bits of error at a well-conditioned point, and the point.
+    pub max_bits_well: f64,
+    pub worst_well: Option<Worst>,
+}
+
+impl ErrorStats {
+    /// Max ulps at well-conditioned points.
+    pub fn max_ulps_well(&self) -> f64 {
+        2f64.powf(self.max_bits_well) - 1.0
+    }
+}
+
+/// How many ulps the truth moves when one read input or live parameter moves by one ulp (the larger of the
+/// two directions); a finite-difference condition number in ulps.
+pub fn condition_ulps(truth_f: &Formula, pt: &Point, t: f64) -> f64 {
+    let used = truth_f.used_inputs();
+    let live = truth_f.ir.used_params(truth_f.root);
+    let mut worst: f64 = 0.0;
+    let mut probe = |x: [f64; N_INPUTS], p: &[f64]| {
+        let u = truth::eval(truth_f, &x, p);
+        if !u.is_nan() {
+            worst = worst.max(ulps(u, t));
+        }
+    };
+    for i in used.iter() {
+        let v = pt.x[i.index()];
+        if v == 0.0 {
+            continue;
+        }
+        for w in [v.next_up(), v.next_down()] {
+            let mut x = pt.x;
+            x[i.index()] = w;
+            probe(x, &pt.p);
+        }
+    }
+    for k in live {
+        let v = pt.p[k as usize];
+        if v == 0.0 {
+            continue;
+        }
+        for w in [v.next_up(), v.next_down()] {
+            let mut p = pt.p.clone();
+            p[k as usize] = w;
+            probe(pt.x, &p);
+        }
+    }
+    worst
+}
+
+#[derive(Default)]
+struct Acc {
+    stats: ErrorStats,
+    sum: f64,
+    defined: usize,
+}
+
+impl Acc {
+    fn add(mut self, truth_f: &Formula, pt: &Point, got: f64) -> Acc {
+        self.stats.points += 1;
+        let t = truth::eval(truth_f, &pt.x, &pt.p);
+        if !t.is_finite() {
+            self.stats.undefined += 1;
+            return self;
+        }
+        let b = bits(got, t);
+        let w = || Some(Worst { point: pt.clone(), got, truth: t, bits: b });
+        if !got.is_finite() && t.is_finite() {
+            self.stats.nonfinite += 1;
+            if self.stats.first_nonfinite.is_none() {
+                self.stats.first_nonfinite = w();
+            }
+        }
+        self.defined += 1;
+        self.sum += b;
+        if b > self.stats.max_bits || self.stats.worst.is_none() {
+            self.stats.max_bits = b;
+            self.stats.worst = w();
+        }
+        let ill = b > 4.0 && t.is_finite() && condition_ulps(truth_f, pt, t) > ILL_CONDITIONED_ULPS;
+        if ill {
+            self.stats.ill_conditioned += 1;
+        } else if b > self.stats.max_bits_well || self.stats.worst_well.is_none() {
+            self.stats.max_bits_well = b;
+            self.stats.worst_well = w();
+        }
+        self
+    }
+    fn merge(mut self, o: Acc) -> Acc {
+        let (a, b) = (&mut self.stats, o.stats);
+        a.points += b.points;
+        a.nonfinite += b.nonfinite;
+        a.undefined += b.undefined;
+        a.ill_conditioned += b.ill_conditioned;
+        if a.first_nonfinite.is_none() {
+            a.first_nonfinite = b.first_nonfinite;
+        }
+        if b.worst.is_some() && (a.worst.is_none() || b.max_bits > a.max_bits) {
+            a.max_bits = b.max_bits;
+            a.worst = b.worst;
+        }
+        if b.worst_well.is_some() && (a.worst_well.is_none() || b.max_bits_well > a.max_bits_well) {
+            a.max_bits_well = b.max_bits_well;
+            a.worst_well = b.worst_well;
+        }
+        self.sum += o.sum;
+        self.defined += o.defined;
+        self
+    }
+}
+
+/// Bits of error of `ev` against the truth of `truth_f` (the formula as written, baked values folded) at
+/// `points`; in parallel.
+pub fn measure(ev: &dyn Evaluator, truth_f: &Formula, points: &[Point]) -> ErrorStats {
+    let acc = points
+        .par_chunks(256)
+        .map(|ch| ch.iter().fold(Acc::default(), |a, pt| a.add(truth_f, pt, ev.eval(&pt.x, &pt.p))))
+        .reduce(Acc::default, Acc::merge);
+    let mut s = acc.stats;
+    s.avg_bits = if acc.defined > 0 { acc.sum / acc.defined as f64 } else { 0.0 };
+    s
+}
+
+/// What to optimise for (`--prefer`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Prefer {
+    /// Only rewrites that cost nothing.
+    Speed,
+    /// The most accurate form within `max_cost` × the fastest form's cost.
+    #[default]
+    Accuracy,
+}
+
+impl std::str::FromStr for Prefer {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Prefer, String> {
+        match s {
+            "speed" => Ok(Prefer::Speed),
+            "accuracy" => Ok(Prefer::Accuracy),
+            _ => Err(format!("unknown preference `{s}`; expected `speed` or `accuracy`")),
+        }
+    }
+}
+
+/// Settings of the accuracy pass.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PassOptions {
+    pub prefer: Prefer,
+    /// Budget for `Prefer::Accuracy`, as a multiple of the fastest form's static cost.
+    pub max_cost: f64,
+    /// Domain points the candidates are measured on.
+    pub points: usize,
+    pub seed: u64,
+}
+
+impl Default for PassOptions {
+    fn default() -> PassOptions {
+        PassOptions { prefer: Prefer::Accuracy, max_cost: 1.3, points: 4096, seed: 0x5eed_1ab5 }
+    }
+}
+
+/// Most truth work per measurement, in static cost units × points ([`cost`]); a formula above ~200 cost units
+/// (40 shared trigonometric `let`s, say) is measured on fewer points than asked, and the report says how many.
+/// Every catalogue formula (cost ≤ ~150) gets 10⁵ points.
+pub const MAX_WORK: f64 = 2e7;
+
+/// One candidate tried by the pass.
+#[derive(Clone, Debug)]
+pub struct Trial {
+    pub rule: &'static str,
+    pub describe: &'static str,
+    pub kept: bool,
+    /// Why it was kept or dropped.
+    pub reason: String,
+    pub stats: ErrorStats,
+    pub cost: f64,
+}
+
+/// The pass's result: the chosen formula, its error before and after, and every trial.
+#[derive(Clone, Debug)]
+pub struct Outcome {
+    pub formula: Formula,
+    pub before: ErrorStats,
+    pub after: ErrorStats,
+    pub cost_before: f64,
+    pub cost_after: f64,
+    pub trials: Vec<Trial>,
+    /// Domain points measured (fewer than asked for a costly formula; [`MAX_WORK`]).
+    pub points: usize,
+}
+
+/// `a` is more accurate than `b` (module docs: non-finite first, then well-conditioned max, then average).
+fn better(a: &ErrorStats, b: &ErrorStats) -> bool {
+    if a.nonfinite != b.nonfinite {
+        return a.nonfinite < b.nonfinite;
+    }
+    if a.max_bits_well < b.max_bits_well - 0.5 {
+        return true;
+    }
+    a.max_bits_well <= b.max_bits_well + 0.01 && a.avg_bits < b.avg_bits - 0.05
+}
+
+/// The accuracy pass on `orig` with `bake` folded in (module docs).
+pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcome {
+    let base = crate::simplify::simplify(orig, bake);
+    let truth_f = crate::simplify::bake_only(orig, bake);
+    let n = o.points.min((MAX_WORK / cost(&truth_f).max(1.0)) as usize).max(64);
+    let points = sample(orig, bake, n, o.seed);
+    let run = |f: &Formula| measure(&Interp::new(f), &truth_f, &points);
+    let before = run(&base);
+    let cost_before = cost(&base);
+    let base_budget = match o.prefer {
+        Prefer::Speed => cost_before,
+        Prefer::Accuracy => o.max_cost * cost_before,
+    };
+    let (mut cur, mut cur_stats, mut cur_cost) = (base.clone(), before.clone(), cost_before);
+    let mut trials = Vec::new();
+    let pow_call = crate::simplify::simplify_with(orig, bake, &pow_call_policy()).0;
+    let mut tries: Vec<(&'static str, &'static str, Option<usize>)> = vec![("pow-call", "integer powers above 8 as pow calls instead of multiplication chains", None)];
+    for r in Rule::ALL {
+        tries.push((r.name(), r.describe(), None));
+    }
+    let mut k = 0;
+    let mut i = 0;
+    while i < tries.len() {
+        let (name, describe, _) = tries[i];
+        let rule = Rule::ALL.iter().copied().find(|r| r.name() == name);
+        // quotient-chain goes site by site (Rule::apply_at); the others apply everywhere at once.
+        let site = (rule == Some(Rule::QuotientChain)).then_some(k);
+        let cand = match rule {
+            None => Some(pow_call.clone()).filter(|p| p.to_program_text() != cur.to_program_text()),
+            Some(r) => r.apply_at(&cur, site),
+        };
+        let Some(cand) = cand else {
+            i += 1;
+            k = 0;
+            continue;
+        };
+        if site.is_some() && cand.to_program_text() == cur.to_program_text() {
+            k += 1;
+            continue;
+        }
+        let stats = run(&cand);
+        let c = cost(&cand);
+        let fixes = stats.nonfinite < cur_stats.nonfinite;
+        let budget = if fixes && o.prefer == Prefer::Accuracy { base_budget.max(NONFINITE_BUDGET * cost_before) } else { base_budget };
+        let (kept, mut reason) = if !better(&stats, &cur_stats) {
+            (false, "no more accurate on the sample".to_string())
+        } else if c > budget {
+            (false, format!("more accurate but costs {:.2}× the fastest form (budget {:.2}×)", c / cost_before, budget / cost_before))
+        } else {
+            (true, format!("cost {:.2}× the fastest form", c / cost_before))
+        };
+        if let Some(s) = site {
+            reason = format!("site {}: {reason}", s + 1);
+        }
+        trials.push(Trial { rule: name, describe, kept, reason, stats: stats.clone(), cost: c });
+        if kept {
+            cur = cand;
+            cur_stats = stats;
+            cur_cost = c;
+        } else {
+            k += 1;
+        }
+        if site.is_none() {
+            i += 1;
+        }
+    }
+    Outcome { formula: cur, before, after: cur_stats, cost_before, cost_after: cur_cost, trials, points: n }
+}
+
+/// The accuracy pass as the compile step's chooser ([`crate::FormulaChooser`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Chooser(pub PassOptions);
+
+impl crate::FormulaChooser for Chooser {
+    fn choose(&self, original: &Formula, bake: &[(usize, f64)], simplified: Formula) -> Formula {
+        let out = improve(original, bake, &self.0);
+        if out.trials.iter().any(|t| t.kept) {
+            out.formula
+        } else {
+            simplified
+        }
+    }
+}
+
+/// Compile options with the accuracy pass on.
+pub fn with_pass(mut opts: crate::Options, pass: PassOptions) -> crate::Options {
+    opts.accuracy = Some(std::sync::Arc::new(Chooser(pass)));
+    opts
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ulps_and_bits() {
+        assert_eq!(ulps(1.0, 1.0), 0.0);
+        assert_eq!(ulps(1.0, 1.0f64.next_up()), 1.0);
+        assert_eq!(ulps(-0.0, 0.0), 0.0);
+        assert_eq!(ulps(5e-324, -5e-324), 2.0);
+        assert_eq!(bits(f64::NAN, 1.0), 64.0);
+        assert_eq!(bits(2.0, 2.0f64.next_up().next_up().next_up()), 2.0);
+    }
+}
