@@ -13,6 +13,7 @@
 //! numerics   energy and normalisation, accuracy against a reference, the domain sweep, fits, twins
 //! render     scenes, shapes, camera, rasteriser, shading, images, image comparison
 //! report     bench measurement and tables, plots
+//! serve      `lobe serve`: the interactive page's HTTP server (page assets embedded)
 //! cli        clap subcommands over the layers above (main.rs dispatches)
 //! ```
 //!
@@ -29,6 +30,7 @@ pub mod backend;
 pub mod numerics;
 pub mod render;
 pub mod report;
+pub mod serve;
 pub mod cli;
 
 pub use backend::{Backend, Columns, Evaluator, Kernel};

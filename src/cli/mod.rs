@@ -24,3 +24,4 @@ pub mod fit;
 pub mod sweep;
 pub mod watch;
 pub mod render;
+pub mod serve;

@@ -1,5 +1,6 @@
 //! lobe's integration tests: one binary, one module per area.
 mod benched;
+mod browser;
 mod catalogue;
 mod cli;
 mod differential;
@@ -13,3 +14,4 @@ mod simplify;
 mod accuracy;
 mod energy;
 mod render;
+mod serve;
