@@ -98,7 +98,7 @@ async function compile() {
     lobe.compiles++;
     showDiagnostics(r.warnings);
     $("simplified").textContent = r.simplified;
-    $("num-compile").textContent = `${r.compile_us.toFixed(0)} µs JIT + ${r.parse_us.toFixed(0)} µs parse/simplify`;
+    lobe.parse_us = r.parse_us;
     buildSliders(r.params);
     status("");
     changed();
@@ -201,7 +201,8 @@ function later(name, ms, f) {
 
 function changed() {
   requestFrame();
-  later("side", 250, () => { analyze(); comparePanel(); plotPanel(); });
+  // One side request at a time, after the sliders rest: the frames keep the server's job slots.
+  later("side", 250, async () => { await analyze(); await comparePanel(); await plotPanel(); });
 }
 
 function refText() {
@@ -227,6 +228,7 @@ async function analyze() {
     const reference = await refText();
     const r = await (await api("/api/analyze", { name: lobe.name, text: $("editor").value, params: lobe.params, reference })).json();
     if (seq !== analyzeSeq) return;
+    $("num-compile").textContent = `${fmt(r.compile_us, 0)} µs JIT (uncached) + ${fmt(lobe.parse_us, 0)} µs parse/simplify`;
     $("num-ns").textContent = `${fmt(r.jit_ns, 2)} / ${fmt(r.jit_batch_ns, 2)} / ${fmt(r.interp_ns, 2)}`;
     $("num-coef").textContent = r.coef !== undefined ? fmt(r.coef) : r.coef_error;
     $("num-albedo").textContent = r.albedo_max !== undefined ? `${fmt(r.albedo_max)} at θᵢ = ${r.theta_i_at_max_deg}°` : r.albedo_error;

@@ -130,7 +130,8 @@ pub fn limited<T: Send + 'static>(st: &Arc<State>, work: impl FnOnce(&State) -> 
     let (tx, rx) = std::sync::mpsc::channel();
     let st2 = st.clone();
     let spawned = std::thread::Builder::new().name("lobe-serve-job".into()).spawn(move || {
-        let r = work(&st2);
+        let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| work(&st2)))
+            .unwrap_or_else(|_| Err(ApiError::new(500, "internal error in the computation")));
         st2.jobs.fetch_sub(1, Ordering::SeqCst);
         let _ = tx.send(r);
     });
@@ -298,24 +299,26 @@ fn read_limited(p: &Path, max: u64) -> Result<Vec<u8>, ApiError> {
 }
 
 /// `POST /api/compile {name, text}`: parameters (with ranges), inputs, the simplified formula, warnings.
-pub fn compile(st: &State, req: &Value) -> Result<Reply, ApiError> {
-    let (name, text) = formula_field(req)?;
-    let c = st.compiled(&name, &text)?;
-    let f = &c.kernel.formula;
-    let params: Vec<Value> = f
-        .params
-        .iter()
-        .map(|p| json!({"name": p.name, "default": p.default, "lo": crate::base::json::value(p.lo), "hi": crate::base::json::value(p.hi)}))
-        .collect();
-    Ok(Reply::ok_json(json!({
-        "name": f.display_name(),
-        "params": params,
-        "used_inputs": f.used_inputs().iter().map(|i| i.name()).collect::<Vec<_>>(),
-        "simplified": f.to_text(),
-        "parse_us": c.parse_us,
-        "compile_us": c.kernel.compile_time.as_secs_f64() * 1e6,
-        "warnings": c.warnings.to_json(),
-    })))
+pub fn compile(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
+    limited(st, move |st| {
+        let (name, text) = formula_field(&req)?;
+        let c = st.compiled(&name, &text)?;
+        let f = &c.kernel.formula;
+        let params: Vec<Value> = f
+            .params
+            .iter()
+            .map(|p| json!({"name": p.name, "default": p.default, "lo": crate::base::json::value(p.lo), "hi": crate::base::json::value(p.hi)}))
+            .collect();
+        Ok(Reply::ok_json(json!({
+            "name": f.display_name(),
+            "params": params,
+            "used_inputs": f.used_inputs().iter().map(|i| i.name()).collect::<Vec<_>>(),
+            "simplified": f.to_text(),
+            "parse_us": c.parse_us,
+            "compile_us": c.kernel.compile_time.as_secs_f64() * 1e6,
+            "warnings": c.warnings.to_json(),
+        })))
+    })
 }
 
 /// `POST /api/render {name, text, params, size}`: the served scene with every material's formula replaced by

@@ -60,7 +60,7 @@ impl Default for Limits {
             formula_bytes: 64 << 10,
             max_size: 2048,
             deadline: Duration::from_secs(10),
-            max_jobs: 4,
+            max_jobs: 8,
             cost_budget: 4.0e9,
         }
     }
@@ -176,7 +176,7 @@ fn route(state: &Arc<api::State>, addr: Option<SocketAddr>, rq: &http::Request) 
             }
             let req = http::json_body(&rq.body)?;
             match p {
-                "/api/compile" => api::compile(state, &req),
+                "/api/compile" => api::compile(state, req),
                 "/api/render" => api::render(state, req),
                 "/api/compare" => api::compare(state, req),
                 "/api/plot" => api::plot(state, req),

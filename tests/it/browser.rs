@@ -47,7 +47,7 @@ impl Browser {
         let mut b = Browser { driver, addr, session: String::new() };
         let caps = json!({"capabilities": {"alwaysMatch": {"browserName": "chrome", "goog:chromeOptions": {
             "binary": chromium,
-            "args": ["--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1500,1000"]
+            "args": ["--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1500,1250"]
         }}}});
         let v = b.call("POST", "/session", Some(caps));
         b.session = v["sessionId"].as_str().unwrap_or_else(|| panic!("no session: {v}")).to_string();
@@ -163,7 +163,8 @@ fn browser_types_drags_and_matches_the_cli() {
     b.wait("document.getElementById('slider-k')", 10, "the slider of the declared parameter k");
     let before = b.image("#frame");
 
-    // Drag the n slider from near its left end to the right, as a hand would (40 pointer moves).
+    // Drag the n slider from near its left end to the right, as a fast hand would: 60 pointer moves 15 ms
+    // apart, faster than frames arrive, so the frames per second below are the page's, not the hand's.
     b.js("lobe.frames = []; lobe.server_ms = [];");
     let slider = b.element("#slider-n");
     let rect = b.cmd("GET", &format!("/element/{}/rect", slider[ELEMENT].as_str().unwrap()), None);
@@ -172,9 +173,9 @@ fn browser_types_drags_and_matches_the_cli() {
         json!({"type": "pointerMove", "duration": 0, "origin": slider, "x": (-w / 2.0 + 8.0) as i64, "y": 0}),
         json!({"type": "pointerDown", "button": 0}),
     ];
-    let steps = 40;
+    let steps = 60;
     for _ in 0..steps {
-        moves.push(json!({"type": "pointerMove", "duration": 30, "origin": "pointer", "x": (w * 0.5 / steps as f64).round() as i64, "y": 0}));
+        moves.push(json!({"type": "pointerMove", "duration": 15, "origin": "pointer", "x": (w * 0.5 / steps as f64).round() as i64, "y": 0}));
     }
     moves.push(json!({"type": "pointerUp", "button": 0}));
     let t = Instant::now();

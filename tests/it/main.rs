@@ -15,3 +15,11 @@ mod accuracy;
 mod energy;
 mod render;
 mod serve;
+
+/// A fresh, empty scratch directory `lobe-AREA-TAG-PID` under the system's temporary directory.
+pub fn scratch_dir(area: &str, tag: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("lobe-{area}-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}

@@ -136,10 +136,7 @@ fn dechunk(mut b: &[u8]) -> Vec<u8> {
 }
 
 pub(crate) fn scratch(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("lobe-serve-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    crate::scratch_dir("serve", tag)
 }
 
 pub(crate) fn cli_render(scene: &Path, set: &str, size: &str, out: &Path) -> Vec<u8> {
@@ -155,7 +152,6 @@ pub(crate) fn cli_render(scene: &Path, set: &str, size: &str, out: &Path) -> Vec
 fn render_png_is_the_cli_render_byte_for_byte() {
     let d = scratch("bytes");
     let s = Served::start(&["examples"]);
-    assert!(s.addr.ip().is_loopback(), "listens on {} without --bind", s.addr);
     for (scene, set, size) in [("examples/scenes/paper_sphere.toml", "n=50", "256"), ("examples/scenes/torus.toml", "n=200", "200x120")] {
         let r = s.get(&format!("/render.png?file={scene}&set={set}&size={size}"));
         assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
@@ -163,6 +159,11 @@ fn render_png_is_the_cli_render_byte_for_byte() {
         let cli = cli_render(Path::new(scene), set, size, &d.join("cli.png"));
         assert!(r.body == cli, "{scene}: /render.png ({} bytes) differs from lobe render ({} bytes)", r.body.len(), cli.len());
     }
+    assert_eq!(s.addr.ip().to_string(), "127.0.0.1", "the default address");
+    // --bind is honoured (another loopback address, so the test opens nothing to the network).
+    let other = Served::start(&["examples", "--bind", "127.0.0.2"]);
+    assert_eq!(other.addr.ip().to_string(), "127.0.0.2");
+    assert_eq!(other.get("/api/session").status, 200);
     // An absolute path inside a served directory is fine too.
     let abs = std::fs::canonicalize("examples/scenes/paper_sphere.toml").unwrap();
     assert_eq!(s.get(&format!("/render.png?file={}&size=64", abs.display())).status, 200);
@@ -212,10 +213,10 @@ fn traversal_and_foreign_requests_are_refused() {
 
 #[test]
 fn saving_is_atomic_and_refuses_files_changed_on_disk() {
-    let d = scratch("save");
-    let f = d.join("model.brdf");
-    std::fs::write(&f, "NH^n\n").unwrap();
+    let (d, name) = (scratch("save"), "model.brdf");
     std::fs::write(d.join("notes.txt"), "keep").unwrap();
+    let f = d.join(name);
+    std::fs::write(&f, "NH^n\n").unwrap();
     let s = Served::start(&[f.to_str().unwrap()]);
     let session = s.get("/api/session").json();
     assert_eq!(session["open"], json!(f.to_str().unwrap()));
