@@ -219,8 +219,12 @@ fn values(k: &Kernel, set: &[(String, f64)]) -> Result<Vec<f64>, ApiError> {
     Ok(p)
 }
 
+/// Every render gets its own pool of one thread per core (`threads` ≠ 0 makes [`crate::render::render`] build
+/// one): on rayon's shared pool a page frame would queue behind every tile of a slow 2048² comparison. A pool
+/// costs two thread spawns (tens of µs); the image does not depend on the thread count.
 fn ropts() -> RenderOptions {
-    RenderOptions::default()
+    let cores = std::thread::available_parallelism().map_or(2, |n| n.get()).min(crate::render::MAX_THREADS);
+    RenderOptions { threads: cores, ..RenderOptions::default() }
 }
 
 fn png(img: &crate::render::image::Image) -> Result<Vec<u8>, ApiError> {
@@ -491,4 +495,55 @@ pub fn render_png(st: &Arc<State>, query: &str) -> Result<Reply, ApiError> {
         let (frame, _) = crate::render::render(&sc, &ropts()).map_err(|e| ApiError::new(500, e))?;
         Ok(Reply::bytes("image/png", png(&frame.image)?))
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Duration;
+
+    fn state(deadline_ms: u64, max_jobs: usize) -> Arc<State> {
+        let limits = Limits { deadline: Duration::from_millis(deadline_ms), max_jobs, ..Limits::default() };
+        Arc::new(State::new(Roots::new(&[std::env::temp_dir()]).unwrap(), None, vec![], limits))
+    }
+
+    #[test]
+    fn late_jobs_are_abandoned_and_slots_are_bounded() {
+        let st = state(50, 1);
+        let (release, wait) = std::sync::mpsc::channel::<()>();
+        // A job that outlives its deadline: 503, and its slot stays taken until it ends.
+        let e = limited(&st, move |_| {
+            let _ = wait.recv_timeout(Duration::from_secs(30));
+            Ok(())
+        })
+        .unwrap_err();
+        assert_eq!(e.status, 503);
+        assert!(e.error.contains("longer than"), "{}", e.error);
+        let busy = limited(&st, |_| Ok(())).unwrap_err();
+        assert!(busy.status == 503 && busy.error.contains("busy"), "{}", busy.error);
+        release.send(()).unwrap();
+        let t = std::time::Instant::now();
+        while st.jobs.load(Ordering::SeqCst) > 0 && t.elapsed() < Duration::from_secs(30) {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        assert_eq!(limited(&state(10_000, 1), |_| Ok(7)).unwrap(), 7);
+        assert_eq!(limited(&st, |_| Ok(8)).unwrap(), 8, "the slot is free again");
+        // A panicking job (the panic message below in the test output is expected) is a 500 and frees its slot.
+        let st = state(30_000, 1);
+        assert_eq!(limited(&st, |_| -> Result<(), ApiError> { panic!("expected panic in a test job") }).unwrap_err().status, 500);
+        assert_eq!(limited(&st, |_| Ok(9)).unwrap(), 9);
+    }
+
+    #[test]
+    fn formulas_over_the_cost_budget_are_refused_before_running() {
+        let st = state(10_000, 2);
+        let heavy: String = (0..400).map(|i| format!("sin(NH*{i}.5) + ")).collect::<String>() + "0";
+        let k = st.compiled("h.brdf", &heavy).unwrap().kernel.clone();
+        assert!(check_cost(&st, &k, 64.0 * 64.0, "a small render").is_ok());
+        let e = check_cost(&st, &k, 2048.0 * 2048.0, "this render").unwrap_err();
+        assert_eq!(e.status, 422);
+        assert_eq!(st.compiled("big.brdf", &"1+".repeat(40 << 10)).err().map(|e| e.status), Some(413));
+        assert_eq!(content_hash(b"NH^n"), content_hash(b"NH^n"));
+        assert_ne!(content_hash(b"NH^n"), content_hash(b"NH^m"));
+    }
 }

@@ -298,3 +298,24 @@ fn live_render_compare_plot_and_analysis_answer() {
     assert!((a["coef"].as_f64().unwrap() - 12.0 / (2.0 * std::f64::consts::PI)).abs() < 1e-6, "{a}");
     assert!(a["jit_ns"].as_f64().unwrap() > 0.0 && a["mean_abs_grid"].as_f64().is_some(), "{a}");
 }
+
+#[test]
+fn a_slow_request_does_not_hold_up_the_page() {
+    let s = Served::start(&["examples/brdfs"]);
+    // ~800 IR nodes at 2048² (a comparison): just under the cost budget, about a second of work.
+    let heavy: String = (0..200).map(|i| format!("sin(NH*{i}.5) + ")).collect::<String>() + "0";
+    let addr = s.addr;
+    let body = json!({"a": {"text": heavy}, "b": {"text": "NH^n"}, "size": 2048}).to_string();
+    let slow = std::thread::spawn(move || http(addr, "POST", "/api/compare", &[("X-Lobe-Client", "t")], Some(body.as_bytes())).status);
+    std::thread::sleep(Duration::from_millis(300));
+    // Meanwhile the page's own requests are answered: a frame, a compile, the session.
+    for n in [10, 20, 30] {
+        assert_eq!(s.post("/api/render", &json!({"text": "VR^n", "params": {"n": n}, "size": 128})).status, 200);
+    }
+    assert_eq!(s.post("/api/compile", &json!({"text": "NH^n"})).status, 200);
+    assert_eq!(s.get("/api/session").status, 200);
+    let still_running = !slow.is_finished();
+    let status = slow.join().unwrap();
+    assert!(status == 200 || status == 503, "slow comparison: {status}");
+    assert!(still_running, "the slow comparison (~100× the work of the others) was expected to be still running");
+}
