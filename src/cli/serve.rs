@@ -28,7 +28,10 @@ pub fn run(a: &ServeArgs) -> Result<(), CliError> {
         port: a.port,
         limits: crate::serve::Limits::default(),
     };
-    let server = crate::serve::start(cfg).map_err(|e| CliError::hint(e, "check the paths and that the port is free (--port 0 picks one)"))?;
+    let server = crate::serve::start(cfg).map_err(|e| match e {
+        crate::serve::StartError::Scene(d) => CliError::Diagnostics(d),
+        crate::serve::StartError::Other(m) => CliError::hint(m, "check the paths and that the port is free (--port 0 picks one)"),
+    })?;
     println!("lobe serve: http://{}/", server.addr);
     if !a.bind.is_loopback() {
         eprintln!("warning: listening on {} — anyone who can reach this address can edit the served .brdf files", a.bind);

@@ -91,8 +91,21 @@ impl Server {
     }
 }
 
+/// Why [`start`] failed: the scene's own diagnostics, or a message (a path, the port).
+#[derive(Debug)]
+pub enum StartError {
+    Scene(crate::Diagnostics),
+    Other(String),
+}
+
+impl From<String> for StartError {
+    fn from(s: String) -> StartError {
+        StartError::Other(s)
+    }
+}
+
 /// Checks the configuration and starts listening (loopback unless `bind` says otherwise).
-pub fn start(cfg: Config) -> Result<Server, String> {
+pub fn start(cfg: Config) -> Result<Server, StartError> {
     let mut dirs = vec![];
     let mut files = vec![];
     for p in &cfg.paths {
@@ -112,7 +125,7 @@ pub fn start(cfg: Config) -> Result<Server, String> {
         Some(s) => {
             let c = std::fs::canonicalize(s).map_err(|e| format!("cannot read scene `{}`: {e}", s.display()))?;
             // Fail now, with the scene's own diagnostics, rather than on the page's first frame.
-            crate::render::scene::load_geometry(&c, None).map_err(|d| d.render(false))?;
+            crate::render::scene::load_geometry(&c, None).map_err(StartError::Scene)?;
             Some(c)
         }
         None => None,

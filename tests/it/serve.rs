@@ -319,3 +319,20 @@ fn a_slow_request_does_not_hold_up_the_page() {
     assert!(status == 200 || status == 503, "slow comparison: {status}");
     assert!(still_running, "the slow comparison (~100× the work of the others) was expected to be still running");
 }
+
+#[test]
+fn bad_command_lines_fail_cleanly() {
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = taken.local_addr().unwrap().port().to_string();
+    for (args, says) in [
+        (vec!["serve", "no/such/dir"], "cannot serve `no/such/dir`"),
+        (vec!["serve", "--scene", "examples/brdfs/phong.brdf", "examples"], "phong.brdf:3:7"),
+        (vec!["serve", "examples", "--port", &port], "cannot listen on 127.0.0.1"),
+        (vec!["serve", "--bind", "localhost.example"], "invalid value"),
+    ] {
+        let o = Command::new(env!("CARGO_BIN_EXE_lobe")).args(&args).stdin(Stdio::null()).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains(says), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+    }
+}
