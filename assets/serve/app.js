@@ -34,9 +34,10 @@ function status(msg, isError) {
   s.className = isError ? "error" : "";
 }
 
-// A refused request (not a formula error, which the diagnostics show): counted for the browser test.
+// A refused request (not a formula error, which the diagnostics show; not a busy server, 503, which passes):
+// counted for the browser test.
 function showError(e) {
-  lobe.errors++;
+  if (e.status !== 503) lobe.errors++;
   status(e.error + (e.hint ? ` (${e.hint})` : ""), true);
 }
 
@@ -157,7 +158,7 @@ function setParam(name, v) {
 
 // ---- frames: at most one render in flight; a change meanwhile is sent when it returns ----
 
-let inFlight = false, pending = false, frameUrl = null;
+let inFlight = false, pending = false, frameUrl = null, retryAfter = 0;
 function requestFrame() {
   if (!lobe.ok) return;
   if (inFlight) { pending = true; lobe.idle = false; return; }
@@ -183,10 +184,17 @@ function requestFrame() {
       $("frame-info").textContent = `${settings.size}² · frame ${ms.toFixed(1)} ms (server ${serverMs} ms)` +
         (nan !== "0" ? ` · ${nan} NaN/inf shaded as no light` : "");
     })
-    .catch((e) => showError(e.error ? e : { error: String(e) }))
+    .catch((e) => {
+      // A busy server (503: job slots full or the deadline passed) gets the frame again shortly; the
+      // status line says so without counting it as an error.
+      if (e.status === 503) { status(`${e.error}; retrying`); pending = true; retryAfter = 250; }
+      else showError(e.error ? e : { error: String(e) });
+    })
     .finally(() => {
       inFlight = false;
-      if (pending) requestFrame();
+      const wait = retryAfter;
+      retryAfter = 0;
+      if (pending) setTimeout(requestFrame, wait);
       else lobe.idle = true;
     });
 }
