@@ -14,6 +14,7 @@
 //!            higher-precision truth and the accuracy pass's measured choice (passed down as a FormulaChooser)
 //! render     scenes, shapes, camera, rasteriser, shading, images, image comparison
 //! report     bench measurement and tables, plots
+//! serve      `lobe serve`: the interactive page's HTTP server (page assets embedded)
 //! cli        clap subcommands over the layers above (main.rs dispatches)
 //! ```
 //!
@@ -30,6 +31,7 @@ pub mod backend;
 pub mod numerics;
 pub mod render;
 pub mod report;
+pub mod serve;
 pub mod cli;
 
 pub use builtins::Mode;

@@ -37,6 +37,8 @@ enum Cmd {
     Render(cli::render::RenderArgs),
     /// Render two formulas in the same scene and measure the difference (the papers' table 4.2).
     Compare(cli::compare::CompareArgs),
+    /// A local web page: edit a formula, move parameter sliders, compare two models live, save.
+    Serve(cli::serve::ServeArgs),
 }
 
 fn main() {
@@ -62,6 +64,7 @@ fn main() {
         Cmd::Sweep(a) => cli::sweep::run(a),
         Cmd::Render(a) => cli::render::run(a),
         Cmd::Compare(a) => cli::compare::run(a),
+        Cmd::Serve(a) => cli::serve::run(a),
     };
     if let Err(e) = result {
         let color = std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none();

@@ -140,6 +140,33 @@ impl Diagnostics {
         }
         String::from_utf8_lossy(buf.as_slice()).into_owned()
     }
+
+    /// The diagnostics as JSON for tools and the `lobe serve` page: one object per item with `severity`,
+    /// `message`, `file`, the primary span's 1-based `line`/`col` and `end_line`/`end_col` (absent when the
+    /// item has no place), its `label`, `hints`, and `rendered`, the caret text [`Diagnostics::render`] prints.
+    pub fn to_json(&self) -> serde_json::Value {
+        let items = self.items.iter().map(|d| {
+            let mut o = serde_json::json!({
+                "severity": match d.severity { Severity::Error => "error", Severity::Warning => "warning" },
+                "message": d.message,
+                "file": self.file,
+                "hints": d.hints,
+            });
+            if let Some((s, label)) = &d.primary {
+                let (line, col) = line_col(&self.source, s.start as usize);
+                let (end_line, end_col) = line_col(&self.source, s.end as usize);
+                o["line"] = line.into();
+                o["col"] = col.into();
+                o["end_line"] = end_line.into();
+                o["end_col"] = end_col.into();
+                o["label"] = label.as_str().into();
+            }
+            let one = Diagnostics { file: self.file.clone(), source: self.source.clone(), items: vec![d.clone()] };
+            o["rendered"] = one.render(false).into();
+            o
+        });
+        serde_json::Value::Array(items.collect())
+    }
 }
 
 impl fmt::Display for Diagnostics {

@@ -106,28 +106,7 @@ pub fn load_kernel(
     Ok(crate::compile_formula(f, &opts)?)
 }
 
-/// Parses `name=value,name=value` (also accepts repeated flags joined by the caller).
-pub fn parse_assignments(s: &str) -> Result<Vec<(String, f64)>, String> {
-    let mut out = Vec::new();
-    for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-        let (k, v) = part
-            .split_once('=')
-            .ok_or_else(|| format!("`{part}` is not of the form name=value (e.g. n=50)"))?;
-        let k = k.trim();
-        if k.is_empty() || !k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
-            return Err(format!("`{k}` is not a valid name in `{part}`"));
-        }
-        let v: f64 = v.trim().parse().map_err(|_| format!("`{}` is not a number in `{part}`", v.trim()))?;
-        if !v.is_finite() {
-            return Err(format!("`{part}`: the value must be finite"));
-        }
-        if out.iter().any(|(j, _)| j == k) {
-            return Err(format!("`{k}` is given twice in `{s}`; give each name once"));
-        }
-        out.push((k.to_string(), v));
-    }
-    Ok(out)
-}
+pub use crate::front::parse_assignments;
 
 /// Parameter values for a kernel: defaults, overridden by `set` (names already checked by compilation).
 pub fn param_values(f: &Formula, set: &[(String, f64)]) -> Vec<f64> {

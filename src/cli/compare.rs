@@ -12,8 +12,7 @@ use crate::render::RenderOptions;
 use serde::Serialize;
 use std::path::PathBuf;
 
-/// The papers' comparison scene, used when `--scene` is not given.
-pub const PAPER_SCENE: &str = include_str!("../../examples/scenes/paper_sphere.toml");
+pub use crate::render::scene::PAPER_SCENE;
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("set", args::help("Parameter values for both formulas, e.g. `n=50`")))]

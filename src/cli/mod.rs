@@ -25,3 +25,4 @@ pub mod fit;
 pub mod sweep;
 pub mod watch;
 pub mod render;
+pub mod serve;

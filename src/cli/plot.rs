@@ -2,9 +2,8 @@
 
 use super::args::{self, Output, Params};
 use super::common::{self, CliError};
-use crate::numerics::{choose_lobe_input, lobe_inputs};
 use crate::report::plot::{self, Format, LobeOptions, Series};
-use crate::{Backend, Evaluator, Kernel};
+use crate::Backend;
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("set", args::help("Parameter values, e.g. `n=50,a=16` (each formula takes the ones it declares)")))]
@@ -44,17 +43,6 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
     Ok((w, h))
 }
 
-/// Samples a kernel as a one-dimensional lobe: value against the angle (degrees) from the lobe axis.
-fn sample(k: &Kernel, params: &[f64]) -> Vec<(f64, f64)> {
-    let (lobe, _) = choose_lobe_input(k.used_inputs());
-    (0..=360)
-        .map(|i| {
-            let deg = i as f64 * 0.25;
-            (deg, k.eval(&lobe_inputs(deg.to_radians().cos(), lobe), params))
-        })
-        .collect()
-}
-
 pub fn run(a: &PlotArgs) -> Result<(), CliError> {
     let output = a.out.required();
     let format = Format::from_path(output).map_err(|e| CliError::hint(e, "use -o lobes.png or -o lobes.svg"))?;
@@ -70,7 +58,7 @@ pub fn run(a: &PlotArgs) -> Result<(), CliError> {
         let s = common::set_for(f, &set);
         let params = common::param_values(f, &s);
         let k = crate::compile_formula(f.clone(), &crate::Options { backend: Backend::Jit, bake: s, ..Default::default() })?;
-        series.push(Series { name: f.display_name(), points: sample(&k, &params) });
+        series.push(Series { name: f.display_name(), points: plot::lobe_points(&k, k.used_inputs(), &params) });
     }
     let n_label = set.iter().find(|(k, _)| k == "n").map(|(_, v)| format!("n = {v}")).unwrap_or_else(|| "default parameters".into());
     let mut title = format!("Lobes, {n_label}");

@@ -42,21 +42,7 @@ pub struct RenderArgs {
     pub quiet: bool,
 }
 
-/// `N` or `WxH`, each 1..=4096.
-pub fn parse_size(s: &str) -> Result<(usize, usize), String> {
-    let one = |t: &str| -> Result<usize, String> {
-        let v: usize = t.trim().parse().map_err(|_| format!("`{t}` is not a whole number"))?;
-        if (1..=r::MAX_SIZE).contains(&v) {
-            Ok(v)
-        } else {
-            Err(format!("{v} is outside 1..={}", r::MAX_SIZE))
-        }
-    };
-    match s.split_once(['x', 'X']) {
-        Some((w, h)) => Ok((one(w)?, one(h)?)),
-        None => one(s).map(|v| (v, v)),
-    }
-}
+pub use crate::render::parse_size;
 
 /// The default output path: `<scene stem>.png` in the current directory.
 pub fn default_output(scene: &Path) -> PathBuf {

@@ -118,6 +118,30 @@ fn levenshtein(a: &str, b: &str) -> usize {
     prev[b.len()]
 }
 
+/// Parses `name=value,name=value` (parameter values: `--set`, `lobe serve`'s `set=` query); names are
+/// identifiers, values finite numbers, each name once.
+pub fn parse_assignments(s: &str) -> Result<Vec<(String, f64)>, String> {
+    let mut out = Vec::new();
+    for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        let (k, v) = part
+            .split_once('=')
+            .ok_or_else(|| format!("`{part}` is not of the form name=value (e.g. n=50)"))?;
+        let k = k.trim();
+        if k.is_empty() || !k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+            return Err(format!("`{k}` is not a valid name in `{part}`"));
+        }
+        let v: f64 = v.trim().parse().map_err(|_| format!("`{}` is not a number in `{part}`", v.trim()))?;
+        if !v.is_finite() {
+            return Err(format!("`{part}`: the value must be finite"));
+        }
+        if out.iter().any(|(j, _)| j == k) {
+            return Err(format!("`{k}` is given twice in `{s}`; give each name once"));
+        }
+        out.push((k.to_string(), v));
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     #[test]

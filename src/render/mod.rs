@@ -50,6 +50,22 @@ use std::time::{Duration, Instant};
 /// Largest image side accepted.
 pub const MAX_SIZE: usize = 4096;
 
+/// An image size `N` (square) or `WxH`, each 1..=[`MAX_SIZE`] (`--size`, `lobe serve`'s `size=`).
+pub fn parse_size(s: &str) -> Result<(usize, usize), String> {
+    let one = |t: &str| -> Result<usize, String> {
+        let v: usize = t.trim().parse().map_err(|_| format!("`{t}` is not a whole number"))?;
+        if (1..=MAX_SIZE).contains(&v) {
+            Ok(v)
+        } else {
+            Err(format!("{v} is outside 1..={}", MAX_SIZE))
+        }
+    };
+    match s.split_once(['x', 'X']) {
+        Some((w, h)) => Ok((one(w)?, one(h)?)),
+        None => one(s).map(|v| (v, v)),
+    }
+}
+
 /// A light source. Lights do not fall off with distance (the papers' program did not attenuate).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum LightKind {

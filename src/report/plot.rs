@@ -33,6 +33,18 @@ impl Format {
     }
 }
 
+/// Samples a kernel as a one-dimensional lobe: value against the angle (degrees, 0..90 in steps of 0.25) from
+/// the lobe axis, under the lobe convention of [`crate::numerics::lobe_inputs`].
+pub fn lobe_points(ev: &dyn crate::Evaluator, used: crate::ir::InputSet, params: &[f64]) -> Vec<(f64, f64)> {
+    let (lobe, _) = crate::numerics::choose_lobe_input(used);
+    (0..=360)
+        .map(|i| {
+            let deg = i as f64 * 0.25;
+            (deg, ev.eval(&crate::numerics::lobe_inputs(deg.to_radians().cos(), lobe), params))
+        })
+        .collect()
+}
+
 /// How to draw lobes.
 #[derive(Clone, Debug)]
 pub struct LobeOptions {

@@ -63,10 +63,7 @@ fn refused(r: &Run, what: &str, needle: &str) {
 }
 
 fn scratch(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("lobe-hostile-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    crate::scratch_dir("hostile", tag)
 }
 
 fn s(p: &Path) -> String {

@@ -1,5 +1,6 @@
 //! lobe's integration tests: one binary, one module per area.
 mod benched;
+mod browser;
 mod catalogue;
 mod cli;
 mod differential;
@@ -15,3 +16,12 @@ mod accuracy;
 mod energy;
 mod render;
 mod robust;
+mod serve;
+
+/// A fresh, empty scratch directory `lobe-AREA-TAG-PID` under the system's temporary directory.
+pub fn scratch_dir(area: &str, tag: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("lobe-{area}-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}

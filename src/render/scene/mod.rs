@@ -75,6 +75,10 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use toml::Spanned;
 
+/// The papers' comparison scene (`examples/scenes/paper_sphere.toml`, compiled in): what `lobe compare` and
+/// `lobe serve` use when no scene is given.
+pub const PAPER_SCENE: &str = include_str!("../../../examples/scenes/paper_sphere.toml");
+
 /// What to override when loading.
 #[derive(Clone, Debug, Default)]
 pub struct LoadOptions {

@@ -1,0 +1,549 @@
+//! The server's endpoints: each takes the parsed request and returns a [`Reply`] or an [`ApiError`]. The work
+//! is the library's: formulas compile through [`crate::compile_formula`], scenes load and render through
+//! [`crate::render`], comparisons through [`crate::render::compare::compare_in`], plots through
+//! [`crate::report::plot`], numbers through [`crate::numerics`] and [`crate::report::measure`].
+//!
+//! Live parameters: the page's formula is compiled once per text with **no** parameter baked (every
+//! parameter is a runtime argument), kept in a small cache, and handed to the scene loader through
+//! [`Live`], a [`BrdfCompiler`] that returns the cached kernel; a slider move then only builds a new
+//! material list (parameter values, the normalisation coefficient if the scene asks for it) and renders.
+//! Scene geometry is parsed and tessellated once per (scene, size). `/render.png` instead runs exactly the
+//! CLI's `lobe render` path (parameters baked), so its bytes equal the CLI's.
+
+use super::http::{self, ApiError, Reply, Roots};
+use super::Limits;
+use crate::base::diag::Diagnostics;
+use crate::ir::ParamDecl;
+use crate::render::scene::{self, BrdfCompiler, CompiledBrdf, Geometry, LoadOptions, LobeCompiler};
+use crate::render::RenderOptions;
+use crate::{Backend, Evaluator, Kernel, Options};
+use serde_json::{json, Value};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+/// Entries kept in each cache before it is emptied (a typing user makes one entry per keystroke).
+const CACHE_ENTRIES: usize = 64;
+
+/// A formula compiled with every parameter live.
+struct Compiled {
+    kernel: Arc<Kernel>,
+    warnings: Diagnostics,
+    parse_us: f64,
+}
+
+/// Everything the endpoints share.
+pub struct State {
+    pub roots: Roots,
+    /// The scene page renders use: a served file, or `None` for the built-in paper sphere.
+    pub scene: Option<PathBuf>,
+    /// Formula files named on the command line (the page opens the first).
+    pub files: Vec<String>,
+    pub limits: Limits,
+    kernels: Mutex<HashMap<(String, String), Arc<Compiled>>>,
+    /// The scene's geometry per image side (the scene is fixed for the server's life).
+    geometry: Mutex<HashMap<usize, Arc<Geometry>>>,
+    /// Compute jobs running now, including ones whose request already timed out.
+    jobs: AtomicUsize,
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+impl State {
+    pub fn new(roots: Roots, scene: Option<PathBuf>, files: Vec<String>, limits: Limits) -> State {
+        State { roots, scene, files, limits, kernels: Mutex::default(), geometry: Mutex::default(), jobs: AtomicUsize::new(0) }
+    }
+
+    fn compiled(&self, name: &str, text: &str) -> Result<Arc<Compiled>, ApiError> {
+        if text.len() > self.limits.formula_bytes {
+            return Err(ApiError::new(413, format!("the formula is larger than {} KiB", self.limits.formula_bytes / 1024))
+                .hint("a formula is a few lines"));
+        }
+        let key = (name.to_string(), text.to_string());
+        if let Some(c) = lock(&self.kernels).get(&key) {
+            return Ok(c.clone());
+        }
+        let t = Instant::now();
+        let (f, warnings) = crate::front::parse_with_warnings(name, text)?;
+        let parse_us = t.elapsed().as_secs_f64() * 1e6;
+        let kernel = crate::compile_formula(f, &Options { backend: Backend::Jit, ..Options::default() })?;
+        let c = Arc::new(Compiled { kernel: Arc::new(kernel), warnings, parse_us });
+        let mut cache = lock(&self.kernels);
+        if cache.len() >= CACHE_ENTRIES {
+            cache.clear();
+        }
+        cache.insert(key, c.clone());
+        Ok(c)
+    }
+
+    fn geometry(&self, size: usize) -> Result<Arc<Geometry>, ApiError> {
+        if let Some(g) = lock(&self.geometry).get(&size) {
+            return Ok(g.clone());
+        }
+        let g = Arc::new(match &self.scene {
+            Some(p) => scene::load_geometry(p, Some((size, size)))?,
+            None => scene::parse_geometry("<builtin paper_sphere.toml>", scene::PAPER_SCENE, Path::new("."), Some((size, size)))?,
+        });
+        let mut cache = lock(&self.geometry);
+        if cache.len() >= CACHE_ENTRIES {
+            cache.clear();
+        }
+        cache.insert(size, g.clone());
+        Ok(g)
+    }
+}
+
+/// A [`BrdfCompiler`] over the live-parameter cache: parameter values are not baked but passed at render time.
+pub struct Live<'a>(&'a State);
+
+impl BrdfCompiler for Live<'_> {
+    fn declare(&self, file: &str, src: &str) -> Result<Vec<ParamDecl>, Diagnostics> {
+        self.0.compiled(file, src).map(|c| c.kernel.formula.params.clone()).map_err(|e| diagnostics_of(file, src, e))
+    }
+    fn build(&self, file: &str, src: &str, _values: &[(String, f64)]) -> Result<CompiledBrdf, Diagnostics> {
+        let c = self.0.compiled(file, src).map_err(|e| diagnostics_of(file, src, e))?;
+        Ok(CompiledBrdf { used: c.kernel.used_inputs(), evaluator: c.kernel.clone() as Arc<dyn Evaluator> })
+    }
+}
+
+/// The compile error back as diagnostics (the scene loader wants them); a size refusal becomes one item.
+fn diagnostics_of(file: &str, src: &str, e: ApiError) -> Diagnostics {
+    let mut ds = Diagnostics::new(file, src);
+    ds.push(crate::Diagnostic::error(e.error));
+    ds
+}
+
+/// Runs `work` on its own thread with the request deadline: the HTTP worker answers 503 when the deadline
+/// passes (the job finishes in the background and its result is dropped), and refuses new work with 503 while
+/// `max_jobs` jobs run. With the cost budget checked before each job, a hostile request costs at most one job
+/// slot for a bounded time, and the page's other requests keep being served.
+pub fn limited<T: Send + 'static>(st: &Arc<State>, work: impl FnOnce(&State) -> Result<T, ApiError> + Send + 'static) -> Result<T, ApiError> {
+    let max = st.limits.max_jobs;
+    if st.jobs.fetch_add(1, Ordering::SeqCst) >= max {
+        st.jobs.fetch_sub(1, Ordering::SeqCst);
+        return Err(ApiError::new(503, format!("the server is busy ({max} computations running)")).hint("try again in a moment"));
+    }
+    let (tx, rx) = std::sync::mpsc::channel();
+    let st2 = st.clone();
+    let spawned = std::thread::Builder::new().name("lobe-serve-job".into()).spawn(move || {
+        let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| work(&st2)))
+            .unwrap_or_else(|_| Err(ApiError::new(500, "internal error in the computation")));
+        st2.jobs.fetch_sub(1, Ordering::SeqCst);
+        let _ = tx.send(r);
+    });
+    if let Err(e) = spawned {
+        st.jobs.fetch_sub(1, Ordering::SeqCst);
+        return Err(ApiError::new(503, format!("cannot start a worker thread: {e}")));
+    }
+    let secs = st.limits.deadline.as_secs_f64();
+    match rx.recv_timeout(st.limits.deadline) {
+        Ok(r) => r,
+        Err(_) => Err(ApiError::new(503, format!("the computation took longer than {secs} s and was abandoned"))
+            .hint("use a smaller size or a simpler formula")),
+    }
+}
+
+/// Refuses work whose estimated cost (IR nodes × evaluations) is over the budget, before it starts.
+fn check_cost(st: &State, k: &Kernel, evals: f64, what: &str) -> Result<(), ApiError> {
+    let cost = k.formula.ir.len().max(1) as f64 * evals;
+    if cost > st.limits.cost_budget {
+        return Err(ApiError::new(422, format!(
+            "{what} would take about {:.0}× the server's budget ({} IR nodes × {:.0} evaluations)",
+            cost / st.limits.cost_budget,
+            k.formula.ir.len(),
+            evals
+        ))
+        .hint("use a smaller size or a simpler formula"));
+    }
+    Ok(())
+}
+
+/// FNV-1a of a file's bytes: the page sends it back on save to detect edits made on disk meanwhile.
+pub fn content_hash(bytes: &[u8]) -> String {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in bytes {
+        h = (h ^ b as u64).wrapping_mul(0x100_0000_01b3);
+    }
+    format!("{h:016x}")
+}
+
+// ---- request fields ----
+
+fn str_field<'a>(v: &'a Value, k: &str) -> Result<&'a str, ApiError> {
+    v.get(k).and_then(Value::as_str).ok_or_else(|| ApiError::bad(format!("missing string field `{k}`")))
+}
+
+/// A formula in a request: `{"name": "…", "text": "…"}` (name optional).
+fn formula_field(v: &Value) -> Result<(String, String), ApiError> {
+    let name = v.get("name").and_then(Value::as_str).unwrap_or("<page>").to_string();
+    Ok((name, str_field(v, "text")?.to_string()))
+}
+
+/// `{"params": {"n": 50, …}}` → a `--set` list.
+fn params_field(v: &Value) -> Result<Vec<(String, f64)>, ApiError> {
+    let Some(p) = v.get("params") else { return Ok(vec![]) };
+    let obj = p.as_object().ok_or_else(|| ApiError::bad("`params` must be an object of numbers"))?;
+    obj.iter()
+        .map(|(k, x)| {
+            let f = x.as_f64().filter(|f| f.is_finite()).ok_or_else(|| ApiError::bad(format!("params.{k} must be a finite number")))?;
+            Ok((k.clone(), f))
+        })
+        .collect()
+}
+
+/// The square image side of a page request (default 512), capped by the server.
+fn size_field(st: &State, v: &Value) -> Result<usize, ApiError> {
+    let s = match v.get("size") {
+        None => 512,
+        Some(x) => x.as_u64().ok_or_else(|| ApiError::bad("`size` must be a whole number"))? as usize,
+    };
+    if !(16..=st.limits.max_size).contains(&s) {
+        return Err(ApiError::bad(format!("size {s} is outside 16..={}", st.limits.max_size)).hint("the page offers 256, 512 and 1024"));
+    }
+    Ok(s)
+}
+
+/// Parameter values for a kernel: declared defaults, then `set` (range-checked like `--set`).
+fn values(k: &Kernel, set: &[(String, f64)]) -> Result<Vec<f64>, ApiError> {
+    crate::resolve_bake(&k.formula, set)?;
+    let mut p = k.default_params();
+    for (name, v) in set {
+        if let Some(i) = k.formula.param_index(name) {
+            p[i] = *v;
+        }
+    }
+    Ok(p)
+}
+
+/// Every render gets its own pool of one thread per core (`threads` ≠ 0 makes [`crate::render::render`] build
+/// one): on rayon's shared pool a page frame would queue behind every tile of a slow 2048² comparison. A pool
+/// costs two thread spawns (tens of µs); the image does not depend on the thread count.
+fn ropts() -> RenderOptions {
+    let cores = std::thread::available_parallelism().map_or(2, |n| n.get()).min(crate::render::MAX_THREADS);
+    RenderOptions { threads: cores, ..RenderOptions::default() }
+}
+
+fn png(img: &crate::render::image::Image) -> Result<Vec<u8>, ApiError> {
+    img.encode_png().map_err(|e| ApiError::new(500, e))
+}
+
+// ---- endpoints ----
+
+/// `GET /api/session`: what the page needs to start.
+pub fn session(st: &State) -> Reply {
+    let scene = st.scene.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "paper_sphere.toml (built in)".into());
+    Reply::ok_json(json!({
+        "files": list_files(&st.roots, "brdf"),
+        "scenes": list_files(&st.roots, "toml"),
+        "open": st.files.first(),
+        "scene": scene,
+        "roots": st.roots.dirs().iter().map(|d| d.display().to_string()).collect::<Vec<_>>(),
+        "limits": { "max_size": st.limits.max_size, "formula_bytes": st.limits.formula_bytes, "body_bytes": st.limits.body_bytes,
+                    "deadline_s": st.limits.deadline.as_secs_f64() },
+    }))
+}
+
+/// Served files with extension `ext` (sorted, at most 2000, four levels deep, hidden and `target` skipped),
+/// named relative to the current directory where possible.
+fn list_files(roots: &Roots, ext: &str) -> Vec<String> {
+    let cwd = std::env::current_dir().ok().and_then(|c| std::fs::canonicalize(c).ok());
+    let mut out = vec![];
+    fn walk(dir: &Path, depth: usize, ext: &str, out: &mut Vec<PathBuf>) {
+        let Ok(rd) = std::fs::read_dir(dir) else { return };
+        for e in rd.flatten() {
+            let name = e.file_name();
+            let name = name.to_string_lossy();
+            if name.starts_with('.') || name == "target" || out.len() >= 2000 {
+                continue;
+            }
+            let Ok(t) = e.file_type() else { continue };
+            let p = e.path();
+            if t.is_dir() && depth > 0 {
+                walk(&p, depth - 1, ext, out);
+            } else if t.is_file() && p.extension().is_some_and(|x| x == ext) {
+                out.push(p);
+            }
+        }
+    }
+    for d in roots.dirs() {
+        walk(d, 4, ext, &mut out);
+    }
+    let mut names: Vec<String> = out
+        .iter()
+        .map(|p| match &cwd {
+            Some(c) => p.strip_prefix(c).unwrap_or(p).display().to_string(),
+            None => p.display().to_string(),
+        })
+        .collect();
+    names.sort();
+    names.dedup();
+    names
+}
+
+/// `GET /api/file?path=…`: a served file's text and content hash.
+pub fn file(st: &State, path: &str) -> Result<Reply, ApiError> {
+    let p = st.roots.resolve(path)?;
+    let bytes = read_limited(&p, crate::base::source::MAX_SOURCE_BYTES as u64)?;
+    let hash = content_hash(&bytes);
+    let text = String::from_utf8(bytes).map_err(|_| ApiError::new(422, format!("`{path}` is not UTF-8 text")))?;
+    Ok(Reply::ok_json(json!({ "path": path, "text": text, "hash": hash })))
+}
+
+fn read_limited(p: &Path, max: u64) -> Result<Vec<u8>, ApiError> {
+    use crate::base::source::{read_regular_file, ReadError};
+    read_regular_file(p, max).map_err(|e| match e {
+        ReadError::Io(e) => ApiError::new(404, format!("cannot read `{}`: {e}", p.display())),
+        ReadError::NotRegular => ApiError::new(403, format!("`{}` is not a regular file", p.display())),
+        ReadError::TooLarge => ApiError::new(413, format!("`{}` is larger than {} KiB", p.display(), max / 1024)),
+    })
+}
+
+/// `POST /api/compile {name, text}`: parameters (with ranges), inputs, the simplified formula, warnings.
+pub fn compile(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
+    limited(st, move |st| {
+        let (name, text) = formula_field(&req)?;
+        let c = st.compiled(&name, &text)?;
+        let f = &c.kernel.formula;
+        let params: Vec<Value> = f
+            .params
+            .iter()
+            .map(|p| json!({"name": p.name, "default": p.default, "lo": crate::base::json::value(p.lo), "hi": crate::base::json::value(p.hi)}))
+            .collect();
+        Ok(Reply::ok_json(json!({
+            "name": f.display_name(),
+            "params": params,
+            "used_inputs": f.used_inputs().iter().map(|i| i.name()).collect::<Vec<_>>(),
+            "simplified": f.to_text(),
+            "parse_us": c.parse_us,
+            "compile_us": c.kernel.compile_time.as_secs_f64() * 1e6,
+            "warnings": c.warnings.to_json(),
+        })))
+    })
+}
+
+/// `POST /api/render {name, text, params, size}`: the served scene with every material's formula replaced by
+/// the page's, parameters live; PNG with the server-side time in `X-Lobe-Render-Ms`.
+pub fn render(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
+    limited(st, move |st| {
+        let t = Instant::now();
+        let (name, text) = formula_field(&req)?;
+        let set = params_field(&req)?;
+        let size = size_field(st, &req)?;
+        let c = st.compiled(&name, &text)?;
+        check_cost(st, &c.kernel, (size * size) as f64, "this render")?;
+        let g = st.geometry(size)?;
+        let sc = g.with_materials(&set, Some((&name, &text)), &Live(st))?;
+        let (frame, stats) = crate::render::render(&sc, &ropts()).map_err(|e| ApiError::new(500, e))?;
+        let bytes = png(&frame.image)?;
+        Ok(Reply::bytes("image/png", bytes)
+            .header("X-Lobe-Render-Ms", format!("{:.3}", t.elapsed().as_secs_f64() * 1e3))
+            .header("X-Lobe-Nan", stats.nan.to_string()))
+    })
+}
+
+/// `POST /api/compare {a: {name, text}, b: {name, text}, params, size}`: A | B | heat map as PNG, the metrics
+/// (`manhattan`, `manhattan_covered`, `max_gray_diff`, `rmse`, `psnr`) as JSON in `X-Lobe-Metrics`.
+pub fn compare(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
+    limited(st, move |st| {
+        let a = formula_field(req.get("a").ok_or_else(|| ApiError::bad("missing `a`"))?)?;
+        let b = formula_field(req.get("b").ok_or_else(|| ApiError::bad("missing `b`"))?)?;
+        let set = params_field(&req)?;
+        let size = size_field(st, &req)?;
+        for (n, t) in [&a, &b] {
+            check_cost(st, &st.compiled(n, t)?.kernel, (size * size) as f64, "this comparison")?;
+        }
+        let g = st.geometry(size)?;
+        let c = crate::render::compare::compare_in(&g, (&a.0, &a.1), (&b.0, &b.1), &set, &Live(st), &ropts())?;
+        let scale = c.metrics.max_gray_diff.max(1.0);
+        let bytes = png(&crate::render::compare::side_by_side(&c.a.image, &c.b.image, scale))?;
+        let metrics = serde_json::to_string(&c.metrics).map_err(|e| ApiError::new(500, e.to_string()))?;
+        Ok(Reply::bytes("image/png", bytes).header("X-Lobe-Metrics", metrics))
+    })
+}
+
+/// `POST /api/plot {formulas: [{name, text}…], params, polar}`: the lobes of up to four formulas.
+pub fn plot(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
+    limited(st, move |st| {
+        let set = params_field(&req)?;
+        let polar = req.get("polar").and_then(Value::as_bool).unwrap_or(false);
+        let list = req.get("formulas").and_then(Value::as_array).ok_or_else(|| ApiError::bad("missing `formulas` array"))?;
+        if list.is_empty() || list.len() > 4 {
+            return Err(ApiError::bad("plot 1 to 4 formulas"));
+        }
+        let mut series = vec![];
+        for f in list {
+            let (name, text) = formula_field(f)?;
+            let k = st.compiled(&name, &text)?.kernel.clone();
+            let own: Vec<(String, f64)> = set.iter().filter(|(n, _)| k.formula.param_index(n).is_some()).cloned().collect();
+            let params = values(&k, &own)?;
+            series.push(crate::report::plot::Series {
+                name: k.formula.display_name(),
+                points: crate::report::plot::lobe_points(k.as_ref(), k.used_inputs(), &params),
+            });
+        }
+        let n = set.iter().find(|(k, _)| k == "n").map(|(_, v)| format!("n = {v}")).unwrap_or_default();
+        let opts = crate::report::plot::LobeOptions { title: format!("Lobes {n}"), polar, log: false, size: (560, 400) };
+        let bytes = crate::report::plot::lobes(&series, &opts, crate::report::plot::Format::Png).map_err(|e| ApiError::new(500, e))?;
+        Ok(Reply::bytes("image/png", bytes))
+    })
+}
+
+/// `POST /api/analyze {name, text, params, reference: {name, text}}`: the energy coefficient, the maximum
+/// albedo (and its incidence angle), the papers' error metrics against the reference, ns/eval of the compiled
+/// kernel (scalar and batched JIT, interpreter) and its compile time.
+pub fn analyze(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
+    limited(st, move |st| {
+        let (name, text) = formula_field(&req)?;
+        let set = params_field(&req)?;
+        let k = st.compiled(&name, &text)?.kernel.clone();
+        // The accuracy grid (91 000 points plus fine grids per n) dominates.
+        check_cost(st, &k, 2.0e6, "this analysis")?;
+        let params = values(&k, &set)?;
+        let mut out = json!({});
+        let num = crate::base::json::value;
+        match crate::numerics::normalize::coefficient(k.as_ref(), k.used_inputs(), &params) {
+            Ok(c) => out["coef"] = num(c),
+            Err(e) => out["coef_error"] = e.msg.into(),
+        }
+        match crate::numerics::energy::full_energy(k.as_ref(), &params) {
+            Ok(e) => {
+                out["albedo_max"] = num(e.albedo_max);
+                out["theta_i_at_max_deg"] = num(e.theta_i_at_max_deg);
+            }
+            Err(e) => out["albedo_error"] = e.msg.into(),
+        }
+        if let Some(r) = req.get("reference") {
+            let (rn, rt) = formula_field(r)?;
+            let rk = st.compiled(&rn, &rt)?.kernel.clone();
+            let rp = rk.default_params();
+            let lobe = crate::numerics::choose_lobe_input(k.used_inputs()).0;
+            let rlobe = crate::numerics::choose_lobe_input(rk.used_inputs()).0;
+            let opts = crate::numerics::accuracy::AccuracyOptions::default();
+            let a = crate::numerics::accuracy::accuracy(k.as_ref(), &params, lobe, rk.as_ref(), &rp, rlobe, &opts)?;
+            out["reference"] = rk.formula.display_name().into();
+            out["mean_abs_grid"] = num(a.mean_abs_grid);
+            out["epicenter_max_rel_pct"] = num(a.epicenter.value * 100.0);
+            out["max_abs"] = num(a.max_abs.value);
+        }
+        let m = crate::report::measure::measure_kernel(&k, &params, crate::report::measure::MeasureOptions { points: 2048, samples: 9 })
+            .map_err(|e| ApiError::new(422, e.to_string()))?;
+        out["jit_ns"] = num(m.scalar_jit.median_ns);
+        out["jit_batch_ns"] = num(m.batched_jit.median_ns);
+        out["interp_ns"] = num(m.interp.median_ns);
+        out["compile_us"] = num(m.compile.as_secs_f64() * 1e6);
+        Ok(Reply::ok_json(out))
+    })
+}
+
+/// `POST /api/save {path, text, hash, force}`: writes a served `.brdf` file atomically. Refused with 409 when
+/// the file on disk no longer has the `hash` the page loaded (someone else changed it), unless `force`.
+pub fn save(st: &State, req: &Value) -> Result<Reply, ApiError> {
+    let path = str_field(req, "path")?;
+    let text = str_field(req, "text")?;
+    let force = req.get("force").and_then(Value::as_bool).unwrap_or(false);
+    let p = st.roots.resolve(path)?;
+    if p.extension().is_none_or(|e| e != "brdf") {
+        return Err(ApiError::new(403, format!("`{path}` is not a .brdf file")).hint("the page saves formula files only"));
+    }
+    if text.len() > st.limits.formula_bytes {
+        return Err(ApiError::new(413, format!("the formula is larger than {} KiB", st.limits.formula_bytes / 1024)));
+    }
+    let now = content_hash(&read_limited(&p, crate::base::source::MAX_SOURCE_BYTES as u64)?);
+    if !force && req.get("hash").and_then(Value::as_str) != Some(now.as_str()) {
+        return Err(ApiError::new(409, format!("`{path}` changed on disk since it was loaded"))
+            .hint("reload it to see the change, or save again to overwrite it"));
+    }
+    crate::base::output::write_atomic(&p, text.as_bytes()).map_err(|e| ApiError::new(500, e))?;
+    Ok(Reply::ok_json(json!({ "path": path, "hash": content_hash(text.as_bytes()) })))
+}
+
+/// `GET /render.png?file=SCENE&set=n=50&size=256`: exactly `lobe render SCENE --set n=50 --size 256` (JIT,
+/// linear transfer, default tiles and threads), so the bytes equal the CLI's output file.
+pub fn render_png(st: &Arc<State>, query: &str) -> Result<Reply, ApiError> {
+    let mut file = None;
+    let mut set = vec![];
+    let mut size = None;
+    for (k, v) in http::query_pairs(query)? {
+        match k.as_str() {
+            "file" => file = Some(v),
+            "set" => set.extend(crate::front::parse_assignments(&v).map_err(|e| ApiError::bad(format!("set: {e}")))?),
+            "size" => size = Some(crate::render::parse_size(&v).map_err(|e| ApiError::bad(format!("size: {e}")))?),
+            other => return Err(ApiError::bad(format!("unknown query parameter `{other}`")).hint("use file=SCENE.toml, set=n=50, size=256")),
+        }
+    }
+    let file = file.ok_or_else(|| ApiError::bad("missing `file`").hint("/render.png?file=examples/scenes/paper_sphere.toml&size=256"))?;
+    let path = st.roots.resolve(&file)?;
+    let max = st.limits.max_size;
+    if let Some((w, h)) = size {
+        if w > max || h > max {
+            return Err(ApiError::bad(format!("size {w}×{h} is over the server's {max}×{max}")).hint("lobe render has no such cap"));
+        }
+    }
+    limited(st, move |st| {
+        // The scene's own size when none is given: read it with the geometry, then check the cap.
+        let g = scene::load_geometry(&path, size)?;
+        let (w, h) = (g.scene.width, g.scene.height);
+        if w > st.limits.max_size || h > st.limits.max_size {
+            return Err(ApiError::bad(format!("the scene is {w}×{h}, over the server's {max}×{max}")).hint("pass a smaller size="));
+        }
+        let opts = LoadOptions { size, set, formula_override: None };
+        let sc = scene::load_scene(&path, &opts, &LobeCompiler { backend: Backend::Jit })?;
+        let (frame, _) = crate::render::render(&sc, &ropts()).map_err(|e| ApiError::new(500, e))?;
+        Ok(Reply::bytes("image/png", png(&frame.image)?))
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Duration;
+
+    fn state(deadline_ms: u64, max_jobs: usize) -> Arc<State> {
+        let limits = Limits { deadline: Duration::from_millis(deadline_ms), max_jobs, ..Limits::default() };
+        Arc::new(State::new(Roots::new(&[std::env::temp_dir()]).unwrap(), None, vec![], limits))
+    }
+
+    #[test]
+    fn late_jobs_are_abandoned_and_slots_are_bounded() {
+        let st = state(50, 1);
+        let (release, wait) = std::sync::mpsc::channel::<()>();
+        // A job that outlives its deadline: 503, and its slot stays taken until it ends.
+        let e = limited(&st, move |_| {
+            let _ = wait.recv_timeout(Duration::from_secs(30));
+            Ok(())
+        })
+        .unwrap_err();
+        assert_eq!(e.status, 503);
+        assert!(e.error.contains("longer than"), "{}", e.error);
+        let busy = limited(&st, |_| Ok(())).unwrap_err();
+        assert!(busy.status == 503 && busy.error.contains("busy"), "{}", busy.error);
+        release.send(()).unwrap();
+        let t = std::time::Instant::now();
+        while st.jobs.load(Ordering::SeqCst) > 0 && t.elapsed() < Duration::from_secs(30) {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        assert_eq!(limited(&state(10_000, 1), |_| Ok(7)).unwrap(), 7);
+        assert_eq!(limited(&st, |_| Ok(8)).unwrap(), 8, "the slot is free again");
+        // A panicking job (the panic message below in the test output is expected) is a 500 and frees its slot.
+        let st = state(30_000, 1);
+        assert_eq!(limited(&st, |_| -> Result<(), ApiError> { panic!("expected panic in a test job") }).unwrap_err().status, 500);
+        assert_eq!(limited(&st, |_| Ok(9)).unwrap(), 9);
+    }
+
+    #[test]
+    fn formulas_over_the_cost_budget_are_refused_before_running() {
+        let st = state(10_000, 2);
+        let heavy: String = (0..400).map(|i| format!("sin(NH*{i}.5) + ")).collect::<String>() + "0";
+        let k = st.compiled("h.brdf", &heavy).unwrap().kernel.clone();
+        assert!(check_cost(&st, &k, 64.0 * 64.0, "a small render").is_ok());
+        let e = check_cost(&st, &k, 2048.0 * 2048.0, "this render").unwrap_err();
+        assert_eq!(e.status, 422);
+        assert_eq!(st.compiled("big.brdf", &"1+".repeat(40 << 10)).err().map(|e| e.status), Some(413));
+        assert_eq!(content_hash(b"NH^n"), content_hash(b"NH^n"));
+        assert_ne!(content_hash(b"NH^n"), content_hash(b"NH^m"));
+    }
+}

@@ -1,0 +1,204 @@
+//! `lobe serve`: the papers' comparison program as a local web page — edit a formula with inline
+//! diagnostics, move a slider per parameter and see the render follow, put two models side by side with
+//! the difference heat map and the papers' numbers, and save the formula back to its file.
+//!
+//! Design:
+//! - **HTTP**: a small HTTP/1.1 server on std threads ([`http::listen`]; no dependency) rather than axum +
+//!   tokio (~40 crates) or tiny_http (whose unconfigurable Nagle delay cost 44 ms per response, see
+//!   [`http`]): the server handles one person's page on loopback, so blocking I/O with a thread per
+//!   connection is enough, and a slow request holds its own connection while the others keep being served.
+//! - **Page**: `assets/serve/{index.html,app.js,app.css}`, plain JS, compiled in ([`page`]); no CDN.
+//! - **Endpoints** ([`api`]): `/api/session`, `/api/file`, `/api/compile`, `/api/render`, `/api/compare`,
+//!   `/api/plot`, `/api/analyze`, `/api/save`, and the scriptable `GET /render.png?file=SCENE&set=n=50&size=256`,
+//!   byte-identical to `lobe render`. Every refusal is JSON `{"error", "hint", "diagnostics"}` (diagnostics
+//!   with file/line/col, as [`crate::Diagnostics::to_json`]), never a panic (a handler that panics anyway is
+//!   caught and answered with 500).
+//! - **Limits** ([`Limits`]): request bodies, formula size, image side, an estimated cost budget (IR nodes ×
+//!   evaluations) checked before work starts, a per-request deadline, and a cap on computations in flight.
+//! - **Files**: only under the directories the server was started with ([`http::Roots`]: no `..`, symbolic
+//!   links resolved before the check); saving is atomic ([`crate::base::output::write_atomic`]), `.brdf`
+//!   only, and refused with 409 when the file changed on disk since the page loaded it.
+//! - **Cross-site requests**: POSTs must carry the `X-Lobe-Client` header (a page from another origin cannot
+//!   send it without a CORS preflight, which the server never approves), and on loopback the `Host` header
+//!   must name a loopback host (no DNS rebinding).
+//!
+//! Cost model: a slider move is one render of the scene with the cached kernel (no compilation) plus PNG
+//! encoding; for the paper sphere at 512² that is a few milliseconds of shading and a few of encoding
+//! (BENCHMARKS.md has the measured frame time in a real browser). Compiling is ~0.1 ms per formula text.
+
+pub mod api;
+pub mod http;
+pub mod page;
+
+use http::{ApiError, Reply, Roots};
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+/// Resource limits for requests.
+#[derive(Clone, Debug)]
+pub struct Limits {
+    /// Largest request body.
+    pub body_bytes: usize,
+    /// Largest formula text.
+    pub formula_bytes: usize,
+    /// Largest image side.
+    pub max_size: usize,
+    /// Longest a request waits for its computation.
+    pub deadline: Duration,
+    /// Computations running at once (timed-out ones count until they finish).
+    pub max_jobs: usize,
+    /// Largest estimated cost, in IR nodes × kernel evaluations (~1 ns each on the JIT).
+    pub cost_budget: f64,
+}
+
+impl Default for Limits {
+    fn default() -> Limits {
+        Limits {
+            body_bytes: 256 << 10,
+            formula_bytes: 64 << 10,
+            max_size: 2048,
+            deadline: Duration::from_secs(10),
+            max_jobs: 8,
+            cost_budget: 4.0e9,
+        }
+    }
+}
+
+/// What to serve.
+#[derive(Clone, Debug, Default)]
+pub struct Config {
+    /// Formula files and directories; their directories are the served ones (the current directory if empty).
+    pub paths: Vec<PathBuf>,
+    /// The scene page renders use (default: the built-in paper sphere).
+    pub scene: Option<PathBuf>,
+    pub bind: Option<std::net::IpAddr>,
+    pub port: u16,
+    pub limits: Limits,
+}
+
+/// A running server.
+pub struct Server {
+    pub addr: SocketAddr,
+    accept: std::thread::JoinHandle<()>,
+}
+
+impl Server {
+    /// Blocks while the server runs (until the process is stopped with a signal).
+    pub fn wait(self) {
+        let _ = self.accept.join();
+    }
+}
+
+/// Why [`start`] failed: the scene's own diagnostics, or a message (a path, the port).
+#[derive(Debug)]
+pub enum StartError {
+    Scene(crate::Diagnostics),
+    Other(String),
+}
+
+impl From<String> for StartError {
+    fn from(s: String) -> StartError {
+        StartError::Other(s)
+    }
+}
+
+/// Checks the configuration and starts listening (loopback unless `bind` says otherwise).
+pub fn start(cfg: Config) -> Result<Server, StartError> {
+    let mut dirs = vec![];
+    let mut files = vec![];
+    for p in &cfg.paths {
+        let meta = std::fs::metadata(p).map_err(|e| format!("cannot serve `{}`: {e}", p.display()))?;
+        if meta.is_dir() {
+            dirs.push(p.clone());
+        } else {
+            files.push(p.display().to_string());
+            dirs.push(p.parent().filter(|d| !d.as_os_str().is_empty()).map(PathBuf::from).unwrap_or_else(|| ".".into()));
+        }
+    }
+    if dirs.is_empty() {
+        dirs.push(".".into());
+    }
+    let roots = Roots::new(&dirs)?;
+    let scene = match &cfg.scene {
+        Some(s) => {
+            let c = std::fs::canonicalize(s).map_err(|e| format!("cannot read scene `{}`: {e}", s.display()))?;
+            // Fail now, with the scene's own diagnostics, rather than on the page's first frame.
+            crate::render::scene::load_geometry(&c, None).map_err(StartError::Scene)?;
+            Some(c)
+        }
+        None => None,
+    };
+    let ip = cfg.bind.unwrap_or(std::net::IpAddr::V4(std::net::Ipv4Addr::LOCALHOST));
+    let state = Arc::new(api::State::new(roots, scene, files, cfg.limits.clone()));
+    let bound = Arc::new(std::sync::OnceLock::<SocketAddr>::new());
+    let b2 = bound.clone();
+    let handler = Arc::new(move |rq: &http::Request| handle(&state, b2.get().copied(), rq));
+    let (addr, accept) = http::listen(SocketAddr::new(ip, cfg.port), cfg.limits.body_bytes, handler)
+        .map_err(|e| format!("cannot listen on {ip}:{}: {e}", cfg.port))?;
+    let _ = bound.set(addr);
+    Ok(Server { addr, accept })
+}
+
+/// Answers one request; a panic inside a handler becomes a 500 JSON error.
+fn handle(state: &Arc<api::State>, addr: Option<SocketAddr>, rq: &http::Request) -> Reply {
+    let reply = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| route(state, addr, rq).unwrap_or_else(|e| e.reply())))
+        .unwrap_or_else(|_| ApiError::new(500, "internal error while answering the request").reply());
+    reply
+        .header("Cache-Control", "no-store".into())
+        .header("X-Content-Type-Options", "nosniff".into())
+        .header(
+            "Content-Security-Policy",
+            "default-src 'self'; img-src 'self' blob: data:; connect-src 'self' blob:; style-src 'self'; script-src 'self'".into(),
+        )
+}
+
+/// `Host` must name a loopback host when the server listens on loopback (DNS-rebinding defence).
+fn host_ok(rq: &http::Request, addr: Option<SocketAddr>) -> bool {
+    if addr.is_some_and(|a| !a.ip().is_loopback()) {
+        return true;
+    }
+    let Some(host) = rq.header("Host") else { return false };
+    let name = match host.rsplit_once(':') {
+        Some((h, port)) if port.chars().all(|c| c.is_ascii_digit()) => h,
+        _ => host,
+    };
+    matches!(name, "localhost" | "[::1]") || name.parse::<std::net::Ipv4Addr>().is_ok_and(|ip| ip.is_loopback())
+}
+
+fn route(state: &Arc<api::State>, addr: Option<SocketAddr>, rq: &http::Request) -> Result<Reply, ApiError> {
+    if !host_ok(rq, addr) {
+        return Err(ApiError::new(403, "the Host header does not name this loopback server").hint("open the address lobe serve printed"));
+    }
+    let (method, path, query) = (rq.method.as_str(), rq.path.as_str(), rq.query.as_str());
+    match (method, path) {
+        ("GET", "/") | ("GET", "/index.html") => Ok(page::asset("index.html")),
+        ("GET", "/app.js") => Ok(page::asset("app.js")),
+        ("GET", "/app.css") => Ok(page::asset("app.css")),
+        ("GET", "/api/session") => Ok(api::session(state)),
+        ("GET", "/api/file") => {
+            let q = http::query_pairs(query)?;
+            let p = q.iter().find(|(k, _)| k == "path").map(|(_, v)| v.as_str()).unwrap_or("");
+            api::file(state, p)
+        }
+        ("GET", "/render.png") => api::render_png(state, query),
+        ("POST", p) if p.starts_with("/api/") => {
+            if rq.header("X-Lobe-Client").is_none() {
+                return Err(ApiError::new(403, "POST requests need the X-Lobe-Client header").hint("the lobe page sends it; other sites cannot"));
+            }
+            let req = http::json_body(&rq.body)?;
+            match p {
+                "/api/compile" => api::compile(state, req),
+                "/api/render" => api::render(state, req),
+                "/api/compare" => api::compare(state, req),
+                "/api/plot" => api::plot(state, req),
+                "/api/analyze" => api::analyze(state, req),
+                "/api/save" => api::save(state, &req),
+                _ => Err(ApiError::new(404, format!("no endpoint {p}"))),
+            }
+        }
+        (m, p) => Err(ApiError::new(if matches!(m, "GET" | "POST") { 404 } else { 405 }, format!("no such page: {m} {p}"))
+            .hint("open / for the page; GET /render.png?file=SCENE renders a scene")),
+    }
+}

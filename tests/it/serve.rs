@@ -1,0 +1,338 @@
+//! `lobe serve` end to end: the real binary on a free loopback port, spoken to over plain HTTP.
+//!
+//! - `/render.png` is byte-identical to `lobe render` of the same scene and settings;
+//! - traversal (`..`, absolute paths outside, symbolic links out) gets 4xx, a POST without the page's header
+//!   and a foreign `Host` get 403, oversized bodies, formulas and images are refused, and bad formulas come
+//!   back as JSON diagnostics with line and column;
+//! - saving is atomic, `.brdf` only, and refused with 409 when the file changed on disk since it was loaded;
+//! - the page in a real headless Chromium: `browser.rs`.
+
+use serde_json::{json, Value};
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A `lobe serve` child process, killed on drop.
+pub(crate) struct Served {
+    child: Child,
+    pub(crate) addr: SocketAddr,
+}
+
+impl Served {
+    pub(crate) fn start(args: &[&str]) -> Served {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_lobe"))
+            .arg("serve")
+            .args(args)
+            .args(["--port", "0"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("start lobe serve");
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+        let addr = line
+            .trim()
+            .strip_prefix("lobe serve: http://")
+            .and_then(|s| s.strip_suffix('/'))
+            .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
+            .parse()
+            .unwrap();
+        Served { child, addr }
+    }
+    pub(crate) fn get(&self, path: &str) -> Resp {
+        http(self.addr, "GET", path, &[], None)
+    }
+    pub(crate) fn post(&self, path: &str, body: &Value) -> Resp {
+        http(self.addr, "POST", path, &[("X-Lobe-Client", "test"), ("Content-Type", "application/json")], Some(body.to_string().as_bytes()))
+    }
+}
+
+impl Drop for Served {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+pub(crate) struct Resp {
+    pub(crate) status: u16,
+    headers: Vec<(String, String)>,
+    pub(crate) body: Vec<u8>,
+}
+
+impl Resp {
+    pub(crate) fn json(&self) -> Value {
+        serde_json::from_slice(&self.body).unwrap_or_else(|e| panic!("not JSON ({e}): {}", String::from_utf8_lossy(&self.body)))
+    }
+    fn header(&self, k: &str) -> Option<&str> {
+        self.headers.iter().find(|(h, _)| h.eq_ignore_ascii_case(k)).map(|(_, v)| v.as_str())
+    }
+}
+
+/// A minimal HTTP/1.1 client (one request per connection), enough for lobe serve and chromedriver.
+pub(crate) fn http(addr: SocketAddr, method: &str, path: &str, headers: &[(&str, &str)], body: Option<&[u8]>) -> Resp {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(120))).unwrap();
+    let body = body.unwrap_or(b"");
+    let mut req = format!("{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Length: {}\r\n", body.len());
+    for (k, v) in headers {
+        req.push_str(&format!("{k}: {v}\r\n"));
+    }
+    req.push_str("\r\n");
+    s.write_all(req.as_bytes()).unwrap();
+    s.write_all(body).unwrap();
+    // Read the head, then exactly Content-Length bytes (chromedriver keeps connections open), else chunks or
+    // everything up to the close.
+    let mut raw = vec![];
+    let mut buf = [0u8; 65536];
+    let split = loop {
+        if let Some(p) = raw.windows(4).position(|w| w == b"\r\n\r\n") {
+            break p;
+        }
+        let n = s.read(&mut buf).unwrap();
+        assert!(n > 0, "connection closed before the response head");
+        raw.extend_from_slice(&buf[..n]);
+    };
+    let head = String::from_utf8_lossy(&raw[..split]).into_owned();
+    let mut lines = head.lines();
+    let status = lines.next().unwrap().split(' ').nth(1).unwrap().parse().unwrap();
+    let headers: Vec<(String, String)> =
+        lines.filter_map(|l| l.split_once(':')).map(|(k, v)| (k.trim().to_string(), v.trim().to_string())).collect();
+    let mut body = raw[split + 4..].to_vec();
+    let len = headers.iter().find(|(k, _)| k.eq_ignore_ascii_case("content-length")).and_then(|(_, v)| v.parse::<usize>().ok());
+    let chunked = headers.iter().any(|(k, v)| k.eq_ignore_ascii_case("transfer-encoding") && v.contains("chunked"));
+    match len {
+        Some(len) if !chunked => {
+            while body.len() < len {
+                let n = s.read(&mut buf).unwrap();
+                assert!(n > 0, "connection closed after {} of {len} body bytes", body.len());
+                body.extend_from_slice(&buf[..n]);
+            }
+            body.truncate(len);
+        }
+        _ => {
+            s.read_to_end(&mut body).unwrap();
+            if chunked {
+                body = dechunk(&body);
+            }
+        }
+    }
+    Resp { status, headers, body }
+}
+
+fn dechunk(mut b: &[u8]) -> Vec<u8> {
+    let mut out = vec![];
+    while let Some(eol) = b.windows(2).position(|w| w == b"\r\n") {
+        let n = usize::from_str_radix(String::from_utf8_lossy(&b[..eol]).split(';').next().unwrap().trim(), 16).unwrap_or(0);
+        if n == 0 {
+            break;
+        }
+        out.extend_from_slice(&b[eol + 2..eol + 2 + n]);
+        b = &b[eol + 2 + n + 2..];
+    }
+    out
+}
+
+pub(crate) fn scratch(tag: &str) -> PathBuf {
+    crate::scratch_dir("serve", tag)
+}
+
+pub(crate) fn cli_render(scene: &Path, set: &str, size: &str, out: &Path) -> Vec<u8> {
+    let o = Command::new(env!("CARGO_BIN_EXE_lobe"))
+        .args(["render", scene.to_str().unwrap(), "--set", set, "--size", size, "-q", "--force", "-o", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    std::fs::read(out).unwrap()
+}
+
+#[test]
+fn render_png_is_the_cli_render_byte_for_byte() {
+    let d = scratch("bytes");
+    let s = Served::start(&["examples"]);
+    for (scene, set, size) in [("examples/scenes/paper_sphere.toml", "n=50", "256"), ("examples/scenes/torus.toml", "n=200", "200x120")] {
+        let r = s.get(&format!("/render.png?file={scene}&set={set}&size={size}"));
+        assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+        assert_eq!(r.header("Content-Type"), Some("image/png"));
+        let cli = cli_render(Path::new(scene), set, size, &d.join("cli.png"));
+        assert!(r.body == cli, "{scene}: /render.png ({} bytes) differs from lobe render ({} bytes)", r.body.len(), cli.len());
+    }
+    assert_eq!(s.addr.ip().to_string(), "127.0.0.1", "the default address");
+    // --bind is honoured (another loopback address, so the test opens nothing to the network).
+    let other = Served::start(&["examples", "--bind", "127.0.0.2"]);
+    assert_eq!(other.addr.ip().to_string(), "127.0.0.2");
+    assert_eq!(other.get("/api/session").status, 200);
+    // An absolute path inside a served directory is fine too.
+    let abs = std::fs::canonicalize("examples/scenes/paper_sphere.toml").unwrap();
+    assert_eq!(s.get(&format!("/render.png?file={}&size=64", abs.display())).status, 200);
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn traversal_and_foreign_requests_are_refused() {
+    let d = scratch("traversal");
+    let served = d.join("served");
+    std::fs::create_dir_all(&served).unwrap();
+    std::fs::write(d.join("secret.brdf"), "NH^n # outside\n").unwrap();
+    std::fs::write(served.join("mine.brdf"), "VR^n\n").unwrap();
+    std::os::unix::fs::symlink(d.join("secret.brdf"), served.join("link.brdf")).unwrap();
+    std::os::unix::fs::symlink(&d, served.join("up")).unwrap();
+    let s = Served::start(&[served.to_str().unwrap()]);
+    let inside = served.join("mine.brdf");
+    assert_eq!(s.get(&format!("/api/file?path={}", inside.display())).status, 200);
+    for (path, want) in [
+        (format!("{}/../secret.brdf", served.display()), 400),
+        ("../../etc/passwd".to_string(), 400),
+        ("/etc/passwd".to_string(), 403),
+        (d.join("secret.brdf").display().to_string(), 403),
+        (served.join("link.brdf").display().to_string(), 403),
+        (served.join("up/secret.brdf").display().to_string(), 403),
+        (served.join("missing.brdf").display().to_string(), 404),
+    ] {
+        for url in [format!("/api/file?path={path}"), format!("/render.png?file={path}")] {
+            let r = s.get(&url);
+            assert_eq!(r.status, want, "{url}: {}", String::from_utf8_lossy(&r.body));
+            assert!(r.json()["error"].as_str().is_some_and(|e| !e.is_empty()));
+        }
+        let r = s.post("/api/save", &json!({"path": path, "text": "NH^n", "force": true}));
+        assert_eq!(r.status, want, "save {path}");
+    }
+    assert_eq!(std::fs::read_to_string(d.join("secret.brdf")).unwrap(), "NH^n # outside\n");
+    // Cross-site: a POST without the page's header, and a Host that is not loopback (DNS rebinding).
+    let r = http(s.addr, "POST", "/api/compile", &[], Some(br#"{"text":"NH^n"}"#));
+    assert_eq!(r.status, 403);
+    let mut raw = TcpStream::connect(s.addr).unwrap();
+    raw.write_all(b"GET /api/session HTTP/1.1\r\nHost: evil.example\r\nConnection: close\r\n\r\n").unwrap();
+    let mut got = String::new();
+    raw.read_to_string(&mut got).unwrap();
+    assert!(got.starts_with("HTTP/1.1 403"), "{got}");
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn saving_is_atomic_and_refuses_files_changed_on_disk() {
+    let (d, name) = (scratch("save"), "model.brdf");
+    std::fs::write(d.join("notes.txt"), "keep").unwrap();
+    let f = d.join(name);
+    std::fs::write(&f, "NH^n\n").unwrap();
+    let s = Served::start(&[f.to_str().unwrap()]);
+    let session = s.get("/api/session").json();
+    assert_eq!(session["open"], json!(f.to_str().unwrap()));
+    let loaded = s.get(&format!("/api/file?path={}", f.display())).json();
+    let hash = loaded["hash"].as_str().unwrap().to_string();
+    let r = s.post("/api/save", &json!({"path": f, "text": "VR^n\n", "hash": hash}));
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    assert_eq!(std::fs::read_to_string(&f).unwrap(), "VR^n\n");
+    let hash2 = r.json()["hash"].as_str().unwrap().to_string();
+    // Someone edits the file; the page's hash is now stale.
+    std::fs::write(&f, "NH^(2*n)\n").unwrap();
+    let r = s.post("/api/save", &json!({"path": f, "text": "NH^n\n", "hash": hash2}));
+    assert_eq!(r.status, 409);
+    assert!(r.json()["error"].as_str().unwrap().contains("changed on disk"));
+    assert_eq!(std::fs::read_to_string(&f).unwrap(), "NH^(2*n)\n");
+    let r = s.post("/api/save", &json!({"path": f, "text": "NH^n\n", "hash": hash2, "force": true}));
+    assert_eq!(r.status, 200);
+    assert_eq!(std::fs::read_to_string(&f).unwrap(), "NH^n\n");
+    // Only .brdf files; nothing else in the directory is touched, no temporaries are left.
+    let r = s.post("/api/save", &json!({"path": d.join("notes.txt"), "text": "x", "force": true}));
+    assert_eq!(r.status, 403);
+    assert_eq!(std::fs::read_to_string(d.join("notes.txt")).unwrap(), "keep");
+    let names: Vec<String> = std::fs::read_dir(&d).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    assert_eq!(names.len(), 2, "{names:?}");
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn bad_and_oversized_requests_get_json_errors() {
+    let s = Served::start(&["examples/brdfs"]);
+    // A formula error: 422 with the CLI's diagnostics (file, line, column, caret text).
+    let r = s.post("/api/compile", &json!({"name": "x.brdf", "text": "param a = 2 in 1..5\nNH^n * (a +\n"}));
+    assert_eq!(r.status, 422);
+    let d = &r.json()["diagnostics"][0];
+    assert_eq!((d["file"].as_str(), d["line"].as_u64()), (Some("x.brdf"), Some(2)), "{d}");
+    assert!(d["col"].as_u64().is_some() && d["rendered"].as_str().unwrap().contains("x.brdf:2:"), "{d}");
+    // Out-of-range parameter on a render: the scene loader's range message.
+    let r = s.post("/api/render", &json!({"text": "NH^n", "params": {"n": 5000}, "size": 64}));
+    assert_eq!(r.status, 422, "{}", String::from_utf8_lossy(&r.body));
+    assert_eq!(s.post("/api/render", &json!({"text": "NH^n", "size": 100000})).status, 400);
+    assert_eq!(s.get("/render.png?file=examples/brdfs/phong.brdf&size=100000").status, 400);
+    assert_eq!(s.post("/api/render", &json!({"text": "x".repeat(100 << 10)})).status, 413);
+    let big = format!("{{\"text\": \"{}\"}}", "x".repeat(1 << 20));
+    let r = http(s.addr, "POST", "/api/render", &[("X-Lobe-Client", "t")], Some(big.as_bytes()));
+    assert_eq!(r.status, 413);
+    assert_eq!(s.post("/api/render", &json!({"nope": 1})).status, 400);
+    let r = http(s.addr, "POST", "/api/render", &[("X-Lobe-Client", "t")], Some(b"{not json"));
+    assert_eq!(r.status, 400);
+    // A formula far over the cost budget at the largest size is refused before it runs.
+    let heavy: String = (0..3000).map(|i| format!("sin(NH*{i}.5) + ")).collect::<String>() + "0";
+    let t = Instant::now();
+    let r = s.post("/api/render", &json!({"text": heavy, "size": 2048}));
+    assert_eq!(r.status, 422, "{}", String::from_utf8_lossy(&r.body));
+    assert!(r.json()["error"].as_str().unwrap().contains("budget"));
+    eprintln!("heavy formula refused in {:?}", t.elapsed());
+    // The server is still there.
+    assert_eq!(s.get("/api/session").status, 200);
+}
+
+#[test]
+fn live_render_compare_plot_and_analysis_answer() {
+    let s = Served::start(&["examples/brdfs"]);
+    let r = s.post("/api/render", &json!({"text": "VR^n", "params": {"n": 50}, "size": 128}));
+    assert_eq!(r.status, 200);
+    let img = lobe::render::image::Image::decode_png(&r.body).unwrap();
+    assert_eq!((img.width, img.height), (128, 128));
+    let r2 = s.post("/api/render", &json!({"text": "VR^n", "params": {"n": 5}, "size": 128}));
+    assert_ne!(r.body, r2.body, "a new parameter value changes the image");
+    let r = s.post("/api/compare", &json!({"a": {"text": "VR^n"}, "b": {"text": "NH^n"}, "params": {"n": 20}, "size": 96}));
+    assert_eq!(r.status, 200);
+    let m: Value = serde_json::from_str(r.header("X-Lobe-Metrics").unwrap()).unwrap();
+    assert!(m["manhattan"].as_f64().unwrap() > 0.0, "{m}");
+    assert_eq!(lobe::render::image::Image::decode_png(&r.body).unwrap().width, 3 * 96);
+    let r = s.post("/api/plot", &json!({"formulas": [{"text": "VR^n"}, {"text": "NH^n"}], "params": {"n": 20}, "polar": true}));
+    assert_eq!(r.status, 200);
+    let r = s.post("/api/analyze", &json!({"text": "VR^n", "params": {"n": 10}, "reference": {"text": "NH^n"}}));
+    let a = r.json();
+    // Phong's coefficient is (n+2)/(2π) exactly.
+    assert!((a["coef"].as_f64().unwrap() - 12.0 / (2.0 * std::f64::consts::PI)).abs() < 1e-6, "{a}");
+    assert!(a["jit_ns"].as_f64().unwrap() > 0.0 && a["mean_abs_grid"].as_f64().is_some(), "{a}");
+}
+
+#[test]
+fn a_slow_request_does_not_hold_up_the_page() {
+    let s = Served::start(&["examples/brdfs"]);
+    // ~800 IR nodes at 2048² (a comparison): just under the cost budget, about a second of work.
+    let heavy: String = (0..200).map(|i| format!("sin(NH*{i}.5) + ")).collect::<String>() + "0";
+    let addr = s.addr;
+    let body = json!({"a": {"text": heavy}, "b": {"text": "NH^n"}, "size": 2048}).to_string();
+    let slow = std::thread::spawn(move || http(addr, "POST", "/api/compare", &[("X-Lobe-Client", "t")], Some(body.as_bytes())).status);
+    std::thread::sleep(Duration::from_millis(300));
+    // Meanwhile the page's own requests are answered: a frame, a compile, the session.
+    for n in [10, 20, 30] {
+        assert_eq!(s.post("/api/render", &json!({"text": "VR^n", "params": {"n": n}, "size": 128})).status, 200);
+    }
+    assert_eq!(s.post("/api/compile", &json!({"text": "NH^n"})).status, 200);
+    assert_eq!(s.get("/api/session").status, 200);
+    let still_running = !slow.is_finished();
+    let status = slow.join().unwrap();
+    assert!(status == 200 || status == 503, "slow comparison: {status}");
+    assert!(still_running, "the slow comparison (~100× the work of the others) was expected to be still running");
+}
+
+#[test]
+fn bad_command_lines_fail_cleanly() {
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = taken.local_addr().unwrap().port().to_string();
+    for (args, says) in [
+        (vec!["serve", "no/such/dir"], "cannot serve `no/such/dir`"),
+        (vec!["serve", "--scene", "examples/brdfs/phong.brdf", "examples"], "phong.brdf:3:7"),
+        (vec!["serve", "examples", "--port", &port], "cannot listen on 127.0.0.1"),
+        (vec!["serve", "--bind", "localhost.example"], "invalid value"),
+    ] {
+        let o = Command::new(env!("CARGO_BIN_EXE_lobe")).args(&args).stdin(Stdio::null()).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains(says), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+    }
+}
