@@ -88,7 +88,7 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
         transfer: if a.srgb { Transfer::Srgb } else { Transfer::Linear },
         ..RenderOptions::default()
     };
-    let lobe_compiler = LobeCompiler { backend: a.backend.kind };
+    let lobe_compiler = LobeCompiler { backend: a.backend.kind, math: a.backend.math.mode };
     let compiler: &dyn crate::render::scene::BrdfCompiler = &lobe_compiler;
     let base_set = a.set.list();
     let sets: Vec<Vec<(String, f64)>> = if a.sweep_n.is_empty() {

@@ -56,7 +56,7 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
     a.out.force.check(&out, image::is_lobe_png)?;
     Output::png_only(&out)?;
     let opts = LoadOptions { size: a.size, set: a.set.list(), formula_override: None };
-    let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: a.backend.kind })?;
+    let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: a.backend.kind, math: a.backend.math.mode })?;
     let ropts = RenderOptions {
         threads: a.threads,
         tile: a.tile as usize,
@@ -78,7 +78,7 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
         let cut = r::cutoff_effect(&sc, &ropts, &frame, &stats).map_err(CliError::msg)?;
         let t = Times { encode, wall };
         if a.json.on {
-            println!("{}", stats_json(&stats, &t, a.backend.kind.name(), cut.as_ref()));
+            println!("{}", stats_json(&stats, &t, a.backend.kind.name(), &math_of(&sc.materials), cut.as_ref()));
         } else {
             eprint!("{}", format_stats(&stats, encode));
             eprint!("{}", format_cutoff(cut.as_ref()));
@@ -90,9 +90,14 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
     Ok(())
 }
 
-/// The math mode of the kernels. Every kernel is compiled precise until the `--math` option exists; this is
-/// the one place the render report takes it from.
-pub const MATH: &str = "precise";
+/// The math modes of the scene's kernels for the report: `precise`, `fast`, or `fast+precise` when materials
+/// differ (scene key `math`).
+pub fn math_of(materials: &[r::Material]) -> String {
+    let mut modes: Vec<&str> = materials.iter().map(|m| m.math.name()).collect();
+    modes.sort_unstable();
+    modes.dedup();
+    modes.join("+")
+}
 
 /// Wall times the CLI measures around the render.
 pub struct Times {
@@ -102,7 +107,7 @@ pub struct Times {
 }
 
 /// The `--stats --json` object (keys listed in README.md). Times in ms except the per-pixel/per-element ns.
-pub fn stats_json(s: &RenderStats, t: &Times, backend: &str, cut: Option<&CutoffEffect>) -> serde_json::Value {
+pub fn stats_json(s: &RenderStats, t: &Times, backend: &str, math: &str, cut: Option<&CutoffEffect>) -> serde_json::Value {
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     let cutoff = cut.map(|c| {
         serde_json::json!({
@@ -118,7 +123,7 @@ pub fn stats_json(s: &RenderStats, t: &Times, backend: &str, cut: Option<&Cutoff
         "height": s.height,
         "threads": s.threads,
         "backend": backend,
-        "math": MATH,
+        "math": math,
         "triangles": s.triangles,
         "tiles_touched": s.tiles_touched,
         "visible_px": s.visible_pixels,

@@ -38,7 +38,7 @@ fn reload(a: &WatchArgs, src: String) -> Result<String, CliError> {
     let t0 = Instant::now();
     let name = a.file.display().to_string();
     let opts = LoadOptions { size: Some(a.size), set: a.set.list(), formula_override: Some((name, src)) };
-    let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: crate::Backend::Jit })?;
+    let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: crate::Backend::Jit, math: crate::Mode::Precise })?;
     let compile = t0.elapsed();
     let ropts = RenderOptions { progress: false, ..RenderOptions::default() };
     let (frame, stats) = r::render(&sc, &ropts).map_err(CliError::msg)?;

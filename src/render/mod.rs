@@ -100,6 +100,8 @@ pub struct Material {
     pub coef: f64,
     /// The papers' cut-off (scene key `cutoff = q`): F is not evaluated where the lobe is below 2^−q.
     pub cutoff: Option<plan::Cutoff>,
+    /// The math mode of the material's kernel (for reports).
+    pub math: crate::Mode,
 }
 
 impl std::fmt::Debug for Material {

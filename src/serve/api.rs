@@ -104,9 +104,10 @@ impl BrdfCompiler for Live<'_> {
     fn declare(&self, file: &str, src: &str) -> Result<Vec<ParamDecl>, Diagnostics> {
         self.0.compiled(file, src).map(|c| c.kernel.formula.params.clone()).map_err(|e| diagnostics_of(file, src, e))
     }
-    fn build(&self, file: &str, src: &str, _values: &[(String, f64)]) -> Result<CompiledBrdf, Diagnostics> {
+    /// The page compiles precise (the `math` key of a scene material is not applied to live kernels).
+    fn build(&self, file: &str, src: &str, _values: &[(String, f64)], _math: Option<crate::Mode>) -> Result<CompiledBrdf, Diagnostics> {
         let c = self.0.compiled(file, src).map_err(|e| diagnostics_of(file, src, e))?;
-        Ok(CompiledBrdf { used: c.kernel.used_inputs(), evaluator: c.kernel.clone() as Arc<dyn Evaluator> })
+        Ok(CompiledBrdf { used: c.kernel.used_inputs(), evaluator: c.kernel.clone() as Arc<dyn Evaluator>, math: c.kernel.math })
     }
 }
 
@@ -491,7 +492,7 @@ pub fn render_png(st: &Arc<State>, query: &str) -> Result<Reply, ApiError> {
             return Err(ApiError::bad(format!("the scene is {w}×{h}, over the server's {max}×{max}")).hint("pass a smaller size="));
         }
         let opts = LoadOptions { size, set, formula_override: None };
-        let sc = scene::load_scene(&path, &opts, &LobeCompiler { backend: Backend::Jit })?;
+        let sc = scene::load_scene(&path, &opts, &LobeCompiler { backend: Backend::Jit, math: crate::Mode::Precise })?;
         let (frame, _) = crate::render::render(&sc, &ropts()).map_err(|e| ApiError::new(500, e))?;
         Ok(Reply::bytes("image/png", png(&frame.image)?))
     })

@@ -10,6 +10,7 @@
 
 use super::schema::MaterialDef;
 use crate::backend::{Backend, Evaluator};
+use crate::builtins::Mode;
 use crate::base::diag::{Diagnostic, Diagnostics};
 use crate::base::span::Span;
 use crate::ir::{InputSet, ParamDecl};
@@ -23,7 +24,8 @@ use toml::Spanned;
 /// `build` bakes `values` (all parameters, by name) into the kernel.
 pub trait BrdfCompiler: Sync {
     fn declare(&self, file: &str, src: &str) -> Result<Vec<ParamDecl>, Diagnostics>;
-    fn build(&self, file: &str, src: &str, values: &[(String, f64)]) -> Result<CompiledBrdf, Diagnostics>;
+    /// `math`: the material's own `math = "…"` key, if it has one (else the compiler's default).
+    fn build(&self, file: &str, src: &str, values: &[(String, f64)], math: Option<Mode>) -> Result<CompiledBrdf, Diagnostics>;
 }
 
 /// A compiled material formula.
@@ -31,21 +33,25 @@ pub trait BrdfCompiler: Sync {
 pub struct CompiledBrdf {
     pub evaluator: Arc<dyn Evaluator>,
     pub used: InputSet,
+    /// The math mode the kernel runs.
+    pub math: Mode,
 }
 
-/// The real pipeline: `lobe::compile_source` with the chosen backend.
+/// The real pipeline: `lobe::compile_source` with the chosen backend, in `math` unless a material says otherwise.
 pub struct LobeCompiler {
     pub backend: Backend,
+    pub math: Mode,
 }
 
 impl BrdfCompiler for LobeCompiler {
     fn declare(&self, file: &str, src: &str) -> Result<Vec<ParamDecl>, Diagnostics> {
         Ok(crate::front::parse(file, src)?.params)
     }
-    fn build(&self, file: &str, src: &str, values: &[(String, f64)]) -> Result<CompiledBrdf, Diagnostics> {
-        let opts = crate::Options { backend: self.backend, bake: values.to_vec(), ..crate::Options::default() };
+    fn build(&self, file: &str, src: &str, values: &[(String, f64)], math: Option<Mode>) -> Result<CompiledBrdf, Diagnostics> {
+        let math = math.unwrap_or(self.math);
+        let opts = crate::Options { backend: self.backend, bake: values.to_vec(), math, ..crate::Options::default() };
         let k = crate::compile_source(file, src, &opts)?;
-        Ok(CompiledBrdf { used: k.used_inputs(), evaluator: Arc::new(k) })
+        Ok(CompiledBrdf { used: k.used_inputs(), evaluator: Arc::new(k), math })
     }
 }
 
@@ -179,7 +185,11 @@ fn build_material(
             Err(msg) => return Err(here(m.span(), format!("--set {k}={v} for material `{mname}`: {msg}"), "this material")),
         }
     }
-    let compiled = compiler.build(&file, &src, &values).map_err(with_note)?;
+    let math = match &d.math {
+        None => None,
+        Some(m) => Some(m.get_ref().parse::<Mode>().map_err(|msg| here(m.span(), format!("materials.{mname}.math: {msg}"), "unknown math mode"))?),
+    };
+    let compiled = compiler.build(&file, &src, &values, math).map_err(with_note)?;
     for (k, val) in [("ka", d.ka), ("kd", d.kd), ("ks", d.ks)] {
         if !(val.is_finite() && val >= 0.0) {
             return Err(here(m.span(), format!("materials.{mname}.{k} = {val} must be a finite number ≥ 0"), "this material"));
@@ -217,5 +227,6 @@ fn build_material(
         specular: d.specular.into(),
         coef,
         cutoff,
+        math: compiled.math,
     })
 }

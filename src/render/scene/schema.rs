@@ -94,6 +94,9 @@ pub(super) struct MaterialDef {
     /// The papers' cut-off exponent q: F is not evaluated where the lobe is below 2^−q.
     #[serde(default)]
     pub cutoff: Option<Spanned<f64>>,
+    /// `math = "fast"` or `"precise"`: this material's math mode (default: the command's `--math`).
+    #[serde(default)]
+    pub math: Option<Spanned<String>>,
 }
 
 fn default_ka() -> f64 {
