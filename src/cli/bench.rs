@@ -154,7 +154,7 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
     if let (Some(path), Some(format)) = (&a.plot, plot_format) {
         let pts: Vec<CostError> = rows
             .iter()
-            .map(|r| CostError { name: r.name.clone(), cost: r.jit_ns, error: r.mean_abs_grid, pareto: r.pareto })
+            .map(|r| CostError { name: r.name.clone(), cost: r.jit_ns, error: r.mean_abs_grid, pareto: r.pareto, series: String::new() })
             .collect();
         let bytes = plot::speed_error(&pts, "Speed against error", "scalar JIT ns/eval (log)", "mean |Δ| vs reference (log)", format)
             .map_err(CliError::msg)?;
