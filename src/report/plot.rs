@@ -220,6 +220,8 @@ const MARKER: f64 = 5.0;
 /// Height of the band that holds the error = 0 rows, and the gap between it and the log area.
 const BAND: f64 = 40.0;
 const BAND_GAP: f64 = 12.0;
+/// Footnotes never take more than this many lines from the plot (a long list is cut with "…").
+const MAX_NOTE_LINES: usize = 4;
 
 /// Cost (x, log) against error (y, log), with a "0" band below for exact rows, the Pareto front as a
 /// staircase, a legend per series and labels placed by [`place_labels`] so that none overlaps another, a point
@@ -577,7 +579,7 @@ impl<'a> Scatter<'a> {
                 .collect();
             unplaced_note = wrap("Not plotted (cost not positive and finite, or error not finite ≥ 0): ", &rows, note_w, |s| measure(s, NOTE_PX).0);
         }
-        let mut note_lines = unplaced_note.len();
+        let mut note_lines = unplaced_note.len().min(MAX_NOTE_LINES);
         let mut result = None;
         // Footnote room depends on which labels are dropped, which depends on the room left: settle in a few rounds.
         for _ in 0..4 {
@@ -608,7 +610,10 @@ impl<'a> Scatter<'a> {
             if fits {
                 break;
             }
-            note_lines = result.as_ref().map_or(0, |r| r.4.len());
+            if note_lines == MAX_NOTE_LINES {
+                break;
+            }
+            note_lines = result.as_ref().map_or(0, |r| r.4.len()).min(MAX_NOTE_LINES);
         }
         let Some((geo, anchors, placed, front, mut notes)) = result else { return Ok(()) };
         if notes.len() > note_lines {
@@ -936,6 +941,24 @@ mod tests {
         }
         assert!(texts.iter().any(|t| t.contains("Broken (cost NaN")), "the NaN row is named in a footnote");
         assert!(!texts.iter().any(|t| t.parse::<f64>().is_ok() && t.contains('e')), "no 1e0-style tick labels");
+    }
+
+    #[test]
+    fn a_crowd_of_points_keeps_its_plot_and_cuts_the_footnote() {
+        let v: Vec<CostError> = (0..200)
+            .map(|k| CostError {
+                name: format!("Formula number {k} (fast)"),
+                cost: 0.4 * 1.03f64.powi(k),
+                error: 1e-4 * 1.05f64.powi((k * 37) % 200),
+                pareto: k % 17 == 0,
+                series: if k % 2 == 0 { "precise".into() } else { "fast".into() },
+            })
+            .collect();
+        let texts = svg_texts(&String::from_utf8(speed_error(&v, "t", "ns", "err", Format::Svg).unwrap()).unwrap());
+        let notes: Vec<&String> = texts.iter().filter(|t| t.contains("(cost ")).collect();
+        assert!(!notes.is_empty() && notes.len() <= MAX_NOTE_LINES, "{} footnote lines", notes.len());
+        assert!(notes.last().unwrap().ends_with('…'));
+        assert!(texts.iter().any(|t| t == "0.001") && texts.iter().any(|t| t == "10"), "the axes are still there");
     }
 
     #[test]
