@@ -4,9 +4,15 @@
 //! Design: plotters draws into memory (an RGB buffer for PNG, a string for SVG), the bytes are encoded here
 //! and handed to the caller, which writes them atomically — a failed plot never leaves a broken file. The font
 //! (DejaVu Sans, assets/fonts, free licence) is compiled in, so plots look the same on a machine with no fonts.
+//!
+//! The speed-versus-error scatter is laid out by hand in pixels rather than through plotters' chart mesh: its
+//! 1-2-5 log ticks, the "0" band for exact rows and the label placement all need to know where every point and
+//! text box lands. Text is measured with the backend's own font metrics, placement ([`place_labels`]) is a pure
+//! function of those boxes (tested without rendering), and whatever cannot be shown is named in a footnote.
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 use std::sync::Once;
 
 /// One curve: a label and (x, y) points.
@@ -205,47 +211,606 @@ pub struct CostError {
     pub name: String,
     /// Cost, e.g. ns per evaluation.
     pub cost: f64,
-    /// Error against the reference, e.g. mean |Δ| on the papers' grid.
+    /// Error against the reference, e.g. mean |Δ| on the papers' grid; exactly 0 goes on the "0" band.
     pub error: f64,
+    /// On the Pareto front (computed by the caller over all points, every series together).
     pub pareto: bool,
-    /// Which series the point belongs to (e.g. the math mode).
+    /// Which run the point belongs to (e.g. "precise" or "fast" math): one marker shape and colour each.
     pub series: String,
 }
 
-/// Cost (x, log) against error (y, log), labelled, with the Pareto front joined by a line.
+/// Figure size of the scatter (pixels; the SVG uses the same user units).
+const SCATTER_SIZE: (u32, u32) = (1200, 820);
+const TITLE_PX: f64 = 22.0;
+const LEGEND_PX: f64 = 14.0;
+const TICK_PX: f64 = 14.0;
+const DESC_PX: f64 = 16.0;
+const LABEL_PX: f64 = 13.0;
+const NOTE_PX: f64 = 12.0;
+/// Half the side of a marker's box.
+const MARKER: f64 = 5.0;
+/// Height of the band that holds the error = 0 rows, and the gap between it and the log area.
+const BAND: f64 = 40.0;
+const BAND_GAP: f64 = 12.0;
+/// Footnotes never take more than this many lines from the plot (a long list is cut with "…").
+const MAX_NOTE_LINES: usize = 4;
+
+/// Cost (x, log) against error (y, log), with a "0" band below for exact rows, the Pareto front as a
+/// staircase, a legend per series and labels placed by [`place_labels`] so that none overlaps another, a point
+/// or the frame; labels that find no room, and rows that cannot be placed at all, are named in a footnote.
 pub fn speed_error(points: &[CostError], title: &str, x_desc: &str, y_desc: &str, format: Format) -> DrawResult<Vec<u8>> {
-    let finite: Vec<&CostError> = points.iter().filter(|p| p.cost > 0.0 && p.error > 0.0 && p.cost.is_finite() && p.error.is_finite()).collect();
-    if finite.is_empty() {
-        return Err("nothing to plot: every point has zero or non-finite cost or error".into());
+    let s = Scatter::new(points, title, x_desc, y_desc)?;
+    // ab_glyph in the bitmap backend puts the baseline ~0.17 em higher than an SVG viewer does for the same
+    // anchor; the shift re-centres bitmap text in the boxes the labels were placed with.
+    render_with(format, SCATTER_SIZE, |r| s.draw(r, 0.17), |r| s.draw(r, 0.0))
+}
+
+/// An axis-aligned box in pixels (y grows downwards).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Rect {
+    pub x0: f64,
+    pub y0: f64,
+    pub x1: f64,
+    pub y1: f64,
+}
+
+impl Rect {
+    /// Open intersection: boxes that only touch do not intersect.
+    pub fn intersects(&self, o: &Rect) -> bool {
+        self.x0 < o.x1 && o.x0 < self.x1 && self.y0 < o.y1 && o.y0 < self.y1
     }
-    let (xmin, xmax) = finite.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| (a.min(p.cost), b.max(p.cost)));
-    let (ymin, ymax) = finite.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| (a.min(p.error), b.max(p.error)));
-    let mut front: Vec<(f64, f64)> = finite.iter().filter(|p| p.pareto).map(|p| (p.cost, p.error)).collect();
-    front.sort_by(|a, b| a.0.total_cmp(&b.0));
-    macro_rules! body {
-        ($root:expr) => {{
-            let mut chart = ChartBuilder::on($root)
-                .caption(title, ("sans-serif", 22))
-                .margin(16)
-                .x_label_area_size(40)
-                .y_label_area_size(70)
-                .build_cartesian_2d((xmin / 1.5..xmax * 1.5).log_scale(), (ymin / 2.0..ymax * 2.0).log_scale())
-                .map_err(err)?;
-            chart.configure_mesh().x_desc(x_desc).y_desc(y_desc).draw().map_err(err)?;
-            chart.draw_series(LineSeries::new(front.clone(), RED.mix(0.5).stroke_width(2))).map_err(err)?;
-            for p in &finite {
-                let c = if p.pareto { RED } else { RGBColor(31, 119, 180) };
-                chart
-                    .draw_series(std::iter::once(Circle::new((p.cost, p.error), 5, c.filled())))
-                    .map_err(err)?;
-                chart
-                    .draw_series(std::iter::once(Text::new(p.name.clone(), (p.cost, p.error), ("sans-serif", 14))))
-                    .map_err(err)?;
+    pub fn contains(&self, o: &Rect) -> bool {
+        self.x0 <= o.x0 && o.x1 <= self.x1 && self.y0 <= o.y0 && o.y1 <= self.y1
+    }
+    fn grow(&self, d: f64) -> Rect {
+        Rect { x0: self.x0 - d, y0: self.y0 - d, x1: self.x1 + d, y1: self.y1 + d }
+    }
+    fn around(p: (f64, f64), r: f64) -> Rect {
+        Rect { x0: p.0 - r, y0: p.1 - r, x1: p.0 + r, y1: p.1 + r }
+    }
+    fn nearest(&self, p: (f64, f64)) -> (f64, f64) {
+        (p.0.clamp(self.x0, self.x1), p.1.clamp(self.y0, self.y1))
+    }
+    /// Whether the segment a–b passes through the box's interior (Liang–Barsky clipping).
+    fn hit_by(&self, a: (f64, f64), b: (f64, f64)) -> bool {
+        let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+        let (mut t0, mut t1) = (0.0f64, 1.0f64);
+        for (p, q) in [(-dx, a.0 - self.x0), (dx, self.x1 - a.0), (-dy, a.1 - self.y0), (dy, self.y1 - a.1)] {
+            if p == 0.0 {
+                if q <= 0.0 {
+                    return false;
+                }
+            } else {
+                let t = q / p;
+                if p < 0.0 {
+                    t0 = t0.max(t);
+                } else {
+                    t1 = t1.min(t);
+                }
             }
-            Ok(())
-        }};
+        }
+        t1 - t0 > 1e-9
     }
-    render_with(format, (1000, 700), |r| body!(r), |r| body!(r))
+}
+
+fn segments_cross(a: [(f64, f64); 2], b: [(f64, f64); 2]) -> bool {
+    let orient = |p: (f64, f64), q: (f64, f64), r: (f64, f64)| (q.0 - p.0) * (r.1 - p.1) - (q.1 - p.1) * (r.0 - p.0);
+    let (d1, d2) = (orient(b[0], b[1], a[0]), orient(b[0], b[1], a[1]));
+    let (d3, d4) = (orient(a[0], a[1], b[0]), orient(a[0], a[1], b[1]));
+    d1 * d2 < 0.0 && d3 * d4 < 0.0
+}
+
+/// Where a label went: its text box and, when it sits away from its point, a leader line (point → box).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlacedLabel {
+    pub rect: Rect,
+    pub leader: Option<[(f64, f64); 2]>,
+}
+
+/// What [`place_labels`] places: one label of `sizes[i]` (width, height) per point `anchors[i]`, whose
+/// marker covers a square of half-side `marker`; every box stays inside `bounds`, off `obstacles`, and off
+/// the `avoid` segments (e.g. the Pareto line) when some other position allows.
+pub struct LabelProblem<'a> {
+    pub anchors: &'a [(f64, f64)],
+    pub sizes: &'a [(f64, f64)],
+    pub marker: f64,
+    pub bounds: Rect,
+    pub obstacles: &'a [Rect],
+    pub avoid: &'a [[(f64, f64); 2]],
+}
+
+/// Clear space kept around each label box, and the farthest a label may sit from its point.
+const LABEL_PAD: f64 = 1.5;
+const MAX_LEADER: f64 = 400.0;
+
+/// Greedy, deterministic label placement. Points are taken most crowded first; each tries candidate boxes on
+/// square rings of growing distance around its point (the 8 touching positions first, then rings with a leader
+/// line), right/left before up/down, and takes the first box that leaves the bounds, the obstacles, every
+/// marker, every placed box and every placed leader alone (its own leader crossing none of them) — preferring,
+/// within two rings, one that also stays off the `avoid` segments and, if beside its point, is nearer to it
+/// than to any other point. `None` only when no ring up to `MAX_LEADER` has room.
+/// Cost: O(n² · candidates) box tests; 33 bench labels take milliseconds, far less than drawing them.
+pub fn place_labels(p: &LabelProblem) -> Vec<Option<PlacedLabel>> {
+    let n = p.anchors.len();
+    let markers: Vec<Rect> = p.anchors.iter().map(|&a| Rect::around(a, p.marker + 1.0)).collect();
+    let crowd = |i: usize| {
+        let r = 3.0 * p.sizes[i].1.max(p.marker * 2.0);
+        p.anchors.iter().filter(|a| (a.0 - p.anchors[i].0).hypot(a.1 - p.anchors[i].1) < r).count()
+    };
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by_key(|&i| (std::cmp::Reverse(crowd(i)), i));
+    let mut placed: Vec<Option<PlacedLabel>> = vec![None; n];
+    for &i in &order {
+        placed[i] = best_spot(p, i, &markers, &placed);
+    }
+    placed
+}
+
+/// Candidate directions of one ring, preferred first: near-horizontal (beside the point) before vertical.
+fn ring_dirs(ring: usize) -> Vec<(f64, f64)> {
+    if ring == 0 {
+        return vec![(1.0, 0.0), (-1.0, 0.0), (1.0, -1.0), (1.0, 1.0), (-1.0, -1.0), (-1.0, 1.0), (0.0, -1.0), (0.0, 1.0)];
+    }
+    let k = if ring < 4 { 16 } else { 32 };
+    let mut dirs: Vec<(usize, f64, f64)> = (0..k)
+        .map(|j| {
+            let a = j as f64 * std::f64::consts::TAU / k as f64;
+            // Rank by distance from the horizontal; j breaks ties so the order is fixed.
+            let rank = (a.sin().abs() * 1000.0) as usize * k + j;
+            (rank, a.cos(), -a.sin())
+        })
+        .collect();
+    dirs.sort_by_key(|d| d.0);
+    dirs.into_iter().map(|d| (d.1, d.2)).collect()
+}
+
+fn best_spot(p: &LabelProblem, i: usize, markers: &[Rect], placed: &[Option<PlacedLabel>]) -> Option<PlacedLabel> {
+    let (ax, ay) = p.anchors[i];
+    let (w, h) = p.sizes[i];
+    let gap = p.marker + 1.0 + LABEL_PAD + 1.0;
+    let step = (h * 0.75).max(4.0);
+    let others: Vec<&PlacedLabel> = placed.iter().flatten().collect();
+    let mut fallback: Option<(usize, PlacedLabel)> = None;
+    for ring in 0.. {
+        let d = gap + ring as f64 * step;
+        if d > MAX_LEADER {
+            break;
+        }
+        if let Some((r, f)) = fallback {
+            if ring > r + 2 {
+                return Some(f);
+            }
+        }
+        for (cx, cy) in ring_dirs(ring) {
+            // Attach point on the square of half-side d; the box hangs off it away from the point.
+            let s = d / cx.abs().max(cy.abs());
+            let (tx, ty) = (ax + cx * s, ay + cy * s);
+            let x0 = if cx > 0.38 { tx } else if cx < -0.38 { tx - w } else { tx - w / 2.0 };
+            let y0 = if cy > 0.38 { ty } else if cy < -0.38 { ty - h } else { ty - h / 2.0 };
+            let rect = Rect { x0, y0, x1: x0 + w, y1: y0 + h };
+            let padded = rect.grow(LABEL_PAD);
+            if !p.bounds.contains(&padded)
+                || p.obstacles.iter().any(|o| o.intersects(&padded))
+                || markers.iter().any(|m| m.intersects(&padded))
+                || others.iter().any(|o| o.rect.grow(LABEL_PAD).intersects(&padded) || o.leader.is_some_and(|l| padded.hit_by(l[0], l[1])))
+            {
+                continue;
+            }
+            let leader = (ring > 0).then(|| {
+                let q = rect.nearest((ax, ay));
+                let len = (q.0 - ax).hypot(q.1 - ay).max(1e-9);
+                let r = p.marker + 1.5;
+                [(ax + (q.0 - ax) * r / len, ay + (q.1 - ay) * r / len), q]
+            });
+            if let Some(l) = leader {
+                let blocked = others.iter().any(|o| o.rect.grow(LABEL_PAD).hit_by(l[0], l[1]) || o.leader.is_some_and(|m| segments_cross(l, m)))
+                    || markers.iter().enumerate().any(|(j, m)| {
+                        // A marker overlapping this one cannot be cleared; any other is passed with 2 px to spare.
+                        let m = m.grow(2.0);
+                        j != i && !m.contains(&Rect::around(l[0], 0.0)) && m.hit_by(l[0], l[1])
+                    });
+                if blocked {
+                    continue;
+                }
+            }
+            let spot = PlacedLabel { rect, leader };
+            // Soft: off the avoided segments, and closer to its own point than to any other (no misreading).
+            let dist = |a: (f64, f64)| {
+                let q = rect.nearest(a);
+                (q.0 - a.0).hypot(q.1 - a.1)
+            };
+            let own = if leader.is_some() { f64::INFINITY } else { dist((ax, ay)) };
+            let soft_clear = !p.avoid.iter().any(|s| padded.hit_by(s[0], s[1]) || leader.is_some_and(|l| segments_cross(l, *s)))
+                && !p.anchors.iter().enumerate().any(|(j, &a)| j != i && dist(a) < own + 2.0 && leader.is_none());
+            if soft_clear {
+                return Some(spot);
+            }
+            if fallback.is_none() {
+                fallback = Some((ring, spot));
+            }
+        }
+    }
+    fallback.map(|f| f.1)
+}
+
+/// A tick of a log axis: mantissa·10^exp, labelled or a minor (unlabelled) grid line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Tick {
+    mantissa: u32,
+    exp: i32,
+    labelled: bool,
+}
+
+impl Tick {
+    fn value(&self) -> f64 {
+        self.mantissa as f64 * 10f64.powi(self.exp)
+    }
+}
+
+/// Ticks at 1-2-5 steps inside [lo, hi] (10^lo..10^hi in log10 units), labelled while neighbouring labels are
+/// at least `min_px` apart on an axis of `len_px`; otherwise only powers of ten are labelled (2 and 5 stay as
+/// minor grid lines), and for very long ranges only every k-th power.
+fn log_ticks(lo: f64, hi: f64, len_px: f64, min_px: f64) -> Vec<Tick> {
+    let px_per_decade = len_px / (hi - lo).max(1e-9);
+    // The closest 1-2-5 neighbours are 5→10 (log10 2 = 0.301 decades).
+    let all125 = px_per_decade * 2f64.log10() >= min_px;
+    let every = if all125 { 1 } else { (min_px / px_per_decade).ceil().max(1.0) as i32 };
+    let mut out = Vec::new();
+    for exp in (lo.floor() as i32 - 1)..=(hi.ceil() as i32) {
+        for mantissa in [1u32, 2, 5] {
+            let v = (mantissa as f64).log10() + exp as f64;
+            if v < lo - 1e-9 || v > hi + 1e-9 {
+                continue;
+            }
+            let labelled = if all125 { true } else { mantissa == 1 && exp.rem_euclid(every) == 0 };
+            if labelled || every == 1 {
+                out.push(Tick { mantissa, exp, labelled });
+            }
+        }
+    }
+    out
+}
+
+/// Plain decimals for ordinary magnitudes (0.0001 … 50000), m×10ⁿ outside.
+fn tick_label(t: &Tick) -> String {
+    if (-4..=4).contains(&t.exp) {
+        if t.exp >= 0 {
+            (t.mantissa as u64 * 10u64.pow(t.exp as u32)).to_string()
+        } else {
+            format!("0.{}{}", "0".repeat((-t.exp - 1) as usize), t.mantissa)
+        }
+    } else {
+        const SUP: [char; 10] = ['⁰', '¹', '²', '³', '⁴', '⁵', '⁶', '⁷', '⁸', '⁹'];
+        let e: String = t.exp.to_string().chars().map(|c| c.to_digit(10).map_or('⁻', |d| SUP[d as usize])).collect();
+        if t.mantissa == 1 {
+            format!("10{e}")
+        } else {
+            format!("{}×10{e}", t.mantissa)
+        }
+    }
+}
+
+/// Three significant digits, for footnotes.
+fn short(v: f64) -> String {
+    if !v.is_finite() || v == 0.0 {
+        return format!("{v}");
+    }
+    if (1e-3..1e5).contains(&v.abs()) {
+        let decimals = (2 - v.abs().log10().floor() as i32).max(0) as usize;
+        format!("{v:.decimals$}")
+    } else {
+        format!("{v:.2e}")
+    }
+}
+
+/// The scatter's data, checked and grouped once, drawn by either backend.
+struct Scatter<'a> {
+    points: &'a [CostError],
+    title: &'a str,
+    x_desc: &'a str,
+    y_desc: &'a str,
+    /// Series names in order of first appearance; index = marker shape and colour.
+    series: Vec<&'a str>,
+    /// Indices of rows with a positive finite cost and a finite error ≥ 0.
+    shown: Vec<usize>,
+    /// Rows that cannot be placed on the axes.
+    unplaceable: Vec<usize>,
+    /// log10 ranges of the axes.
+    x: (f64, f64),
+    y: (f64, f64),
+    has_zero: bool,
+}
+
+/// Pads a log10 range by 6 % of its span each side and widens it to at least one decade. The ends are not
+/// snapped to 1-2-5 values: that costs up to 0.4 decade of room the labels need.
+fn padded(lo: f64, hi: f64) -> (f64, f64) {
+    let (lo, hi) = if hi - lo < 1.0 { ((lo + hi) / 2.0 - 0.5, (lo + hi) / 2.0 + 0.5) } else { (lo, hi) };
+    let pad = (hi - lo) * 0.06;
+    (lo - pad, hi + pad)
+}
+
+impl<'a> Scatter<'a> {
+    fn new(points: &'a [CostError], title: &'a str, x_desc: &'a str, y_desc: &'a str) -> DrawResult<Scatter<'a>> {
+        let ok = |p: &CostError| p.cost.is_finite() && p.cost > 0.0 && p.error.is_finite() && p.error >= 0.0;
+        let (shown, unplaceable): (Vec<usize>, Vec<usize>) = (0..points.len()).partition(|&i| ok(&points[i]));
+        if shown.is_empty() {
+            return Err("nothing to plot: no row has a positive finite cost and a finite error ≥ 0".into());
+        }
+        let mut series: Vec<&str> = Vec::new();
+        for p in points {
+            if !series.contains(&p.series.as_str()) {
+                series.push(&p.series);
+            }
+        }
+        let range = |v: &mut dyn Iterator<Item = f64>| v.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v.log10()), b.max(v.log10())));
+        let (x0, x1) = range(&mut shown.iter().map(|&i| points[i].cost));
+        let (y0, y1) = range(&mut shown.iter().map(|&i| points[i].error).filter(|&e| e > 0.0));
+        // Only exact rows: an empty log area of a few decades above the band.
+        let (y0, y1) = if y0.is_finite() { (y0, y1) } else { (-4.0, 0.0) };
+        let has_zero = shown.iter().any(|&i| points[i].error == 0.0);
+        Ok(Scatter { points, title, x_desc, y_desc, series, shown, unplaceable, x: padded(x0, x1), y: padded(y0, y1), has_zero })
+    }
+
+    fn color(&self, p: &CostError) -> RGBColor {
+        color(self.series.iter().position(|s| *s == p.series).unwrap_or(0))
+    }
+
+    fn shape(&self, p: &CostError) -> usize {
+        self.series.iter().position(|s| *s == p.series).unwrap_or(0)
+    }
+
+    /// Lays out and draws the figure. `ink_shift` (em) moves text down to centre it in its box (backend quirk).
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>, ink_shift: f64) -> DrawResult<()> {
+        let (w, h) = (SCATTER_SIZE.0 as f64, SCATTER_SIZE.1 as f64);
+        let measure = |s: &str, px: f64| -> (f64, f64) {
+            let (tw, _) = root.estimate_text_size(s, &("sans-serif", px).into_font().into_text_style(root)).unwrap_or((0, 0));
+            (tw as f64, px)
+        };
+        let text = |s: &str, px: f64, (x, y): (f64, f64), h: HPos, c: RGBColor| -> DrawResult<()> {
+            let style = ("sans-serif", px).into_font().color(&c).pos(Pos::new(h, VPos::Center));
+            root.draw_text(s, &style, (x.round() as i32, (y + ink_shift * px).round() as i32)).map_err(err)
+        };
+        let ink = RGBColor(30, 30, 30);
+        let margin = 16.0;
+
+        // Vertical layout, top down: title, legend, log area, band, x ticks, x description, footnotes.
+        let title_y = margin + TITLE_PX * 0.6;
+        let legend_y = title_y + TITLE_PX * 0.6 + 8.0 + LEGEND_PX * 0.6;
+        let top = legend_y + LEGEND_PX + 6.0;
+        let x_ticks = self.x_ticks_sample();
+        let y_label_w = self.y_tick_labels().iter().map(|s| measure(s, TICK_PX).0).fold(measure("0", TICK_PX).0, f64::max);
+        let left = margin + DESC_PX * 1.3 + y_label_w + 10.0;
+        let right = w - margin - measure(&x_ticks, TICK_PX).0 / 2.0;
+        let note_w = w - 2.0 * margin;
+        let mut unplaced_note = Vec::new();
+        if !self.unplaceable.is_empty() {
+            let rows: Vec<String> = self
+                .unplaceable
+                .iter()
+                .map(|&i| format!("{} (cost {}, error {})", self.points[i].name, short(self.points[i].cost), short(self.points[i].error)))
+                .collect();
+            unplaced_note = wrap("Not plotted (cost not positive and finite, or error not finite ≥ 0): ", &rows, note_w, |s| measure(s, NOTE_PX).0);
+        }
+        let mut note_lines = unplaced_note.len().min(MAX_NOTE_LINES);
+        let mut result = None;
+        // Footnote room depends on which labels are dropped, which depends on the room left: settle in a few rounds.
+        for _ in 0..4 {
+            let notes_h = if note_lines > 0 { 6.0 + note_lines as f64 * NOTE_PX * 1.35 } else { 0.0 };
+            let axis_bottom = h - margin - notes_h - DESC_PX * 1.4 - TICK_PX * 1.4 - 6.0;
+            let band = self.has_zero.then_some(Rect { x0: left, y0: axis_bottom - BAND, x1: right, y1: axis_bottom });
+            let main = Rect { x0: left, y0: top, x1: right, y1: band.map_or(axis_bottom, |b| b.y0 - BAND_GAP) };
+            let geo = Geometry { main, band, x: self.x, y: self.y };
+            let anchors: Vec<(f64, f64)> = self.shown.iter().map(|&i| geo.at(&self.points[i])).collect();
+            let sizes: Vec<(f64, f64)> = self.shown.iter().map(|&i| (measure(&self.points[i].name, LABEL_PX).0 + 2.0, LABEL_PX + 3.0)).collect();
+            let front = self.front(&geo);
+            let bounds = Rect { x0: main.x0 + 1.0, y0: main.y0 + 1.0, x1: main.x1 - 1.0, y1: band.map_or(main.y1, |b| b.y1) - 1.0 };
+            let gap = band.map(|b| vec![Rect { x0: main.x0, y0: main.y1, x1: main.x1, y1: b.y0 }]).unwrap_or_default();
+            let placed = place_labels(&LabelProblem { anchors: &anchors, sizes: &sizes, marker: MARKER, bounds, obstacles: &gap, avoid: &front });
+            let dropped: Vec<String> = self
+                .shown
+                .iter()
+                .zip(&placed)
+                .filter(|(_, p)| p.is_none())
+                .map(|(&i, _)| format!("{} (cost {}, error {})", self.points[i].name, short(self.points[i].cost), short(self.points[i].error)))
+                .collect();
+            let mut notes = unplaced_note.clone();
+            if !dropped.is_empty() {
+                notes.extend(wrap("Labels left out for lack of room: ", &dropped, note_w, |s| measure(s, NOTE_PX).0));
+            }
+            let fits = notes.len() <= note_lines;
+            result = Some((geo, anchors, placed, front, notes));
+            if fits {
+                break;
+            }
+            if note_lines == MAX_NOTE_LINES {
+                break;
+            }
+            note_lines = result.as_ref().map_or(0, |r| r.4.len()).min(MAX_NOTE_LINES);
+        }
+        let Some((geo, anchors, placed, front, mut notes)) = result else { return Ok(()) };
+        if notes.len() > note_lines {
+            notes.truncate(note_lines.max(1));
+            if let Some(last) = notes.last_mut() {
+                last.push_str(" …");
+            }
+        }
+
+        // Frames and grid.
+        let px = |x: f64| x.round() as i32;
+        let grid = RGBColor(225, 225, 225);
+        let frames: Vec<Rect> = std::iter::once(geo.main).chain(geo.band).collect();
+        let xt = log_ticks(self.x.0, self.x.1, geo.main.x1 - geo.main.x0, 0.0);
+        let yt = log_ticks(self.y.0, self.y.1, geo.main.y1 - geo.main.y0, TICK_PX * 1.6);
+        // x labels need their width: choose 1-2-5 or decades from the widest label.
+        let x_min_px = xt.iter().map(|t| measure(&tick_label(t), TICK_PX).0).fold(0.0, f64::max) + 12.0;
+        let xt = log_ticks(self.x.0, self.x.1, geo.main.x1 - geo.main.x0, x_min_px);
+        for f in &frames {
+            for t in &xt {
+                let x = geo.x_px(t.value());
+                root.draw(&PathElement::new(vec![(px(x), px(f.y0)), (px(x), px(f.y1))], grid.stroke_width(1))).map_err(err)?;
+            }
+        }
+        for t in &yt {
+            let y = geo.y_px(t.value());
+            root.draw(&PathElement::new(vec![(px(geo.main.x0), px(y)), (px(geo.main.x1), px(y))], grid.stroke_width(1))).map_err(err)?;
+        }
+        for f in &frames {
+            root.draw(&Rectangle::new([(px(f.x0), px(f.y0)), (px(f.x1), px(f.y1))], ink.stroke_width(1))).map_err(err)?;
+        }
+        let axis_bottom = frames.last().map_or(geo.main.y1, |f| f.y1);
+        for t in &xt {
+            let x = geo.x_px(t.value());
+            let len = if t.labelled { 6.0 } else { 3.0 };
+            root.draw(&PathElement::new(vec![(px(x), px(axis_bottom)), (px(x), px(axis_bottom + len))], ink.stroke_width(1))).map_err(err)?;
+            if t.labelled {
+                text(&tick_label(t), TICK_PX, (x, axis_bottom + 8.0 + TICK_PX * 0.6), HPos::Center, ink)?;
+            }
+        }
+        for t in &yt {
+            let y = geo.y_px(t.value());
+            let len = if t.labelled { 6.0 } else { 3.0 };
+            root.draw(&PathElement::new(vec![(px(geo.main.x0 - len), px(y)), (px(geo.main.x0), px(y))], ink.stroke_width(1))).map_err(err)?;
+            if t.labelled {
+                text(&tick_label(t), TICK_PX, (geo.main.x0 - 9.0, y), HPos::Right, ink)?;
+            }
+        }
+        if let Some(b) = geo.band {
+            let y = (b.y0 + b.y1) / 2.0;
+            root.draw(&PathElement::new(vec![(px(b.x0 - 6.0), px(y)), (px(b.x0), px(y))], ink.stroke_width(1))).map_err(err)?;
+            text("0", TICK_PX, (b.x0 - 9.0, y), HPos::Right, ink)?;
+        }
+        // Axis descriptions and title.
+        text(self.x_desc, DESC_PX, ((geo.main.x0 + geo.main.x1) / 2.0, axis_bottom + 10.0 + TICK_PX * 1.2 + DESC_PX * 0.7), HPos::Center, ink)?;
+        let y_mid = (geo.main.y0 + axis_bottom) / 2.0;
+        let rotated = ("sans-serif", DESC_PX).into_font().transform(FontTransform::Rotate270).color(&ink).pos(Pos::new(HPos::Center, VPos::Center));
+        root.draw_text(self.y_desc, &rotated, (px(margin + DESC_PX * 0.6 + ink_shift * DESC_PX), px(y_mid))).map_err(err)?;
+        text(self.title, TITLE_PX, (w / 2.0, title_y), HPos::Center, ink)?;
+
+        // Pareto front, leaders, markers, labels.
+        let front_color = RGBColor(90, 90, 90);
+        for s in &front {
+            root.draw(&PathElement::new(vec![(px(s[0].0), px(s[0].1)), (px(s[1].0), px(s[1].1))], front_color.stroke_width(2))).map_err(err)?;
+        }
+        for l in placed.iter().flatten().filter_map(|p| p.leader) {
+            root.draw(&PathElement::new(vec![(px(l[0].0), px(l[0].1)), (px(l[1].0), px(l[1].1))], RGBColor(150, 150, 150).stroke_width(1))).map_err(err)?;
+        }
+        for (k, &i) in self.shown.iter().enumerate() {
+            let p = &self.points[i];
+            marker(root, self.shape(p), anchors[k], self.color(p), p.pareto)?;
+        }
+        for (k, spot) in placed.iter().enumerate() {
+            if let Some(s) = spot {
+                let c = ((s.rect.x0 + s.rect.x1) / 2.0, (s.rect.y0 + s.rect.y1) / 2.0);
+                text(&self.points[self.shown[k]].name, LABEL_PX, c, HPos::Center, ink)?;
+            }
+        }
+
+        // Legend: one entry per named series, then the front.
+        let mut entries: Vec<(Option<usize>, String)> = self.series.iter().enumerate().filter(|(_, s)| !s.is_empty()).map(|(i, s)| (Some(i), s.to_string())).collect();
+        if !front.is_empty() {
+            entries.push((None, "Pareto front".into()));
+        }
+        let widths: Vec<f64> = entries.iter().map(|e| 26.0 + measure(&e.1, LEGEND_PX).0).collect();
+        let total = widths.iter().sum::<f64>() + 24.0 * entries.len().saturating_sub(1) as f64;
+        let mut x = (w - total) / 2.0;
+        for (e, ew) in entries.iter().zip(&widths) {
+            match e.0 {
+                Some(i) => marker(root, i, (x + 8.0, legend_y), color(i), false)?,
+                None => root.draw(&PathElement::new(vec![(px(x), px(legend_y)), (px(x + 18.0), px(legend_y))], front_color.stroke_width(2))).map_err(err)?,
+            }
+            text(&e.1, LEGEND_PX, (x + 24.0, legend_y), HPos::Left, ink)?;
+            x += ew + 24.0;
+        }
+        for (k, line) in notes.iter().enumerate() {
+            let y = h - margin - (notes.len() - 1 - k) as f64 * NOTE_PX * 1.35 - NOTE_PX * 0.5;
+            text(line, NOTE_PX, (margin, y), HPos::Left, RGBColor(70, 70, 70))?;
+        }
+        Ok(())
+    }
+
+    /// Labels of the y ticks for the widest-label estimate (the real ticks depend on the height left).
+    fn y_tick_labels(&self) -> Vec<String> {
+        log_ticks(self.y.0, self.y.1, 1e6, 0.0).iter().map(tick_label).collect()
+    }
+
+    /// The longest x tick label, to keep the last one inside the figure.
+    fn x_ticks_sample(&self) -> String {
+        log_ticks(self.x.0, self.x.1, 1e6, 0.0).iter().map(tick_label).max_by_key(|s| s.chars().count()).unwrap_or_default()
+    }
+
+    /// The Pareto front as a staircase through the flagged points sorted by cost (error steps down at each).
+    fn front(&self, geo: &Geometry) -> Vec<[(f64, f64); 2]> {
+        let mut f: Vec<&CostError> = self.shown.iter().map(|&i| &self.points[i]).filter(|p| p.pareto).collect();
+        f.sort_by(|a, b| a.cost.total_cmp(&b.cost).then(b.error.total_cmp(&a.error)));
+        let mut segs = Vec::new();
+        for pair in f.windows(2) {
+            let (a, b) = (geo.at(pair[0]), geo.at(pair[1]));
+            segs.push([a, (b.0, a.1)]);
+            segs.push([(b.0, a.1), b]);
+        }
+        segs.retain(|s| s[0] != s[1]);
+        segs
+    }
+}
+
+/// Data → pixels.
+struct Geometry {
+    main: Rect,
+    band: Option<Rect>,
+    x: (f64, f64),
+    y: (f64, f64),
+}
+
+impl Geometry {
+    fn x_px(&self, v: f64) -> f64 {
+        self.main.x0 + (v.log10() - self.x.0) / (self.x.1 - self.x.0) * (self.main.x1 - self.main.x0)
+    }
+    fn y_px(&self, v: f64) -> f64 {
+        self.main.y0 + (self.y.1 - v.log10()) / (self.y.1 - self.y.0) * (self.main.y1 - self.main.y0)
+    }
+    fn at(&self, p: &CostError) -> (f64, f64) {
+        let y = match self.band {
+            Some(b) if p.error == 0.0 => (b.y0 + b.y1) / 2.0,
+            _ => self.y_px(p.error),
+        };
+        (self.x_px(p.cost), y)
+    }
+}
+
+/// `prefix` then the items joined by "; ", broken into lines no wider than `width`.
+fn wrap(prefix: &str, items: &[String], width: f64, measure: impl Fn(&str) -> f64) -> Vec<String> {
+    let mut lines = vec![prefix.trim_end().to_string()];
+    for (k, item) in items.iter().enumerate() {
+        let piece = if k + 1 < items.len() { format!("{item};") } else { format!("{item}.") };
+        let last = lines.last_mut().expect("starts with one line");
+        let joined = format!("{last} {piece}");
+        if measure(&joined) <= width || last.is_empty() {
+            *last = joined;
+        } else {
+            lines.push(piece);
+        }
+    }
+    lines
+}
+
+/// Marker shapes by series: circle, square, triangle, diamond, down-triangle, then again.
+fn marker<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, shape: usize, (x, y): (f64, f64), c: RGBColor, outline: bool) -> DrawResult<()> {
+    let r = MARKER;
+    let pts: Vec<(f64, f64)> = match shape % 5 {
+        0 => (0..20).map(|k| k as f64 * std::f64::consts::TAU / 20.0).map(|a| (x + r * a.cos(), y + r * a.sin())).collect(),
+        1 => vec![(x - r * 0.9, y - r * 0.9), (x + r * 0.9, y - r * 0.9), (x + r * 0.9, y + r * 0.9), (x - r * 0.9, y + r * 0.9)],
+        2 => vec![(x, y - r * 1.15), (x + r * 1.1, y + r * 0.8), (x - r * 1.1, y + r * 0.8)],
+        3 => vec![(x, y - r * 1.2), (x + r * 1.2, y), (x, y + r * 1.2), (x - r * 1.2, y)],
+        _ => vec![(x, y + r * 1.15), (x + r * 1.1, y - r * 0.8), (x - r * 1.1, y - r * 0.8)],
+    };
+    let ipts: Vec<(i32, i32)> = pts.iter().map(|p| (p.0.round() as i32, p.1.round() as i32)).collect();
+    root.draw(&Polygon::new(ipts.clone(), c.filled())).map_err(err)?;
+    // Points on the front get a dark outline, so they read as "on the line" even where the line is short.
+    let edge = if outline { RGBColor(20, 20, 20).stroke_width(2) } else { c.stroke_width(1) };
+    let mut closed = ipts;
+    closed.push(closed[0]);
+    root.draw(&PathElement::new(closed, edge)).map_err(err)?;
+    Ok(())
 }
 
 /// `render` with two closures (plotters' backends are different types).
@@ -322,13 +887,165 @@ mod tests {
     }
 
     #[test]
-    fn scatter_needs_positive_points() {
-        let p = vec![
-            CostError { name: "a".into(), cost: 2.0, error: 0.01, pareto: true, series: String::new() },
-            CostError { name: "b".into(), cost: 5.0, error: 0.1, pareto: false, series: String::new() },
-        ];
+    fn scatter_needs_a_placeable_point() {
+        let pt = |name: &str, cost, error, pareto| CostError { name: name.into(), cost, error, pareto, series: "precise".into() };
+        let p = vec![pt("a", 2.0, 0.01, true), pt("b", 5.0, 0.1, false)];
         assert!(speed_error(&p, "t", "ns", "err", Format::Png).is_ok());
-        let z = vec![CostError { name: "z".into(), cost: 0.0, error: 0.0, pareto: false, series: String::new() }];
-        assert!(speed_error(&z, "t", "ns", "err", Format::Svg).is_err());
+        let z = vec![pt("z", 0.0, 0.0, false), pt("n", f64::NAN, 0.1, false), pt("i", 1.0, f64::INFINITY, false)];
+        assert!(speed_error(&z, "t", "ns", "err", Format::Svg).unwrap_err().contains("nothing to plot"));
+        // Only exact rows: still a plot (the band), not a refusal.
+        assert!(speed_error(&[pt("ref", 3.0, 0.0, true)], "t", "ns", "err", Format::Png).is_ok());
+    }
+
+    /// 16 formulas × 2 series as `lobe bench --plot` sees them: costs 0.4–80 ns, errors 1e-4–2, fast math
+    /// cheaper on transcendental formulas at almost the same error (so pairs sit side by side), a zero-error
+    /// reference and a NaN row.
+    fn bench_like() -> Vec<CostError> {
+        let rows = [
+            ("Modified cosine-quadratic F_SCOS2", 0.9, 2.1e-3, false), ("Schlick F_S", 0.45, 4.0e-2, false),
+            ("Modified Schlick F_MS", 1.3, 1.1e-3, false), ("Gaussian", 18.0, 3.0e-3, true), ("Beckmann", 12.0, 2.6e-3, true),
+            ("Ward", 12.5, 5.1e-3, true), ("Cook–Torrance", 14.0, 1.9e-3, true), ("F_ST", 15.0, 1.2e-3, true),
+            ("F_kutlog", 78.0, 1.0e-4, true), ("Blinn–Phong", 0.8, 2.2e-3, false), ("Phong", 2.9, 0.35, true),
+            ("Lafortune", 3.4, 0.21, true), ("Ashikhmin–Shirley", 21.0, 4.4e-3, true), ("GGX", 2.2, 1.3e-3, false),
+            ("Oren–Nayar", 30.0, 1.9, true), ("Minnaert", 9.5, 0.6, true),
+        ];
+        let mut v = Vec::new();
+        for (n, cost, error, transcendental) in rows {
+            v.push(CostError { name: format!("{n} (precise)"), cost, error, pareto: false, series: "precise".into() });
+            let fast = if transcendental { 0.55 } else { 0.93 };
+            v.push(CostError { name: format!("{n} (fast)"), cost: cost * fast, error: error * 1.002, pareto: false, series: "fast".into() });
+        }
+        v.push(CostError { name: "Blinn (reference)".into(), cost: 1.1, error: 0.0, pareto: false, series: "precise".into() });
+        v.push(CostError { name: "Broken".into(), cost: f64::NAN, error: 0.1, pareto: false, series: "fast".into() });
+        // The front as a caller computes it: no other point is both cheaper and at most as wrong.
+        let front: Vec<bool> = v
+            .iter()
+            .map(|p| p.cost.is_finite() && !v.iter().any(|q| q.cost.is_finite() && q.cost <= p.cost && q.error <= p.error && (q.cost < p.cost || q.error < p.error)))
+            .collect();
+        for (p, f) in v.iter_mut().zip(front) {
+            p.pareto = f;
+        }
+        v
+    }
+
+    /// The text of every `<text>` element of an SVG.
+    fn svg_texts(svg: &str) -> Vec<String> {
+        svg.split("<text").skip(1).filter_map(|t| Some(t.split_once('>')?.1.split("</text>").next()?.trim().to_string())).collect()
+    }
+
+    #[test]
+    fn scatter_renders_bench_like_data_in_both_formats() {
+        let v = bench_like();
+        let png = speed_error(&v, "Speed against error", "scalar JIT ns/eval (log)", "mean |Δ| vs reference (log)", Format::Png).unwrap();
+        let img = crate::render::image::Image::decode_png(&png).unwrap();
+        assert_eq!((img.width, img.height), (SCATTER_SIZE.0 as usize, SCATTER_SIZE.1 as usize));
+        if let Some(path) = std::env::var_os("LOBE_PLOT_EXAMPLE") {
+            std::fs::write(path, &png).unwrap();
+        }
+        let svg = String::from_utf8(speed_error(&v, "t", "ns", "err", Format::Svg).unwrap()).unwrap();
+        if let Some(path) = std::env::var_os("LOBE_PLOT_EXAMPLE_SVG") {
+            std::fs::write(path, &svg).unwrap();
+        }
+        let texts = svg_texts(&svg);
+        // The exact row is on the band, the NaN row in the footnote, the series and the front in the legend.
+        for needle in ["0", "precise", "fast", "Pareto front", "0.001", "0.5", "20", "Blinn (reference)"] {
+            assert!(texts.iter().any(|t| t == needle), "{needle} missing from the SVG's texts {texts:?}");
+        }
+        assert!(texts.iter().any(|t| t.contains("Broken (cost NaN")), "the NaN row is named in a footnote");
+        assert!(!texts.iter().any(|t| t.parse::<f64>().is_ok() && t.contains('e')), "no 1e0-style tick labels");
+    }
+
+    #[test]
+    fn a_crowd_of_points_keeps_its_plot_and_cuts_the_footnote() {
+        let v: Vec<CostError> = (0..200)
+            .map(|k| CostError {
+                name: format!("Formula number {k} (fast)"),
+                cost: 0.4 * 1.03f64.powi(k),
+                error: 1e-4 * 1.05f64.powi((k * 37) % 200),
+                pareto: k % 17 == 0,
+                series: if k % 2 == 0 { "precise".into() } else { "fast".into() },
+            })
+            .collect();
+        let texts = svg_texts(&String::from_utf8(speed_error(&v, "t", "ns", "err", Format::Svg).unwrap()).unwrap());
+        let notes: Vec<&String> = texts.iter().filter(|t| t.contains("(cost ")).collect();
+        assert!(!notes.is_empty() && notes.len() <= MAX_NOTE_LINES, "{} footnote lines", notes.len());
+        assert!(notes.last().unwrap().ends_with('…'));
+        assert!(texts.iter().any(|t| t == "0.001") && texts.iter().any(|t| t == "10"), "the axes are still there");
+    }
+
+    #[test]
+    fn log_ticks_step_1_2_5_and_read_as_plain_numbers() {
+        let labels = |lo: f64, hi: f64, len, min| -> Vec<String> {
+            log_ticks(lo, hi, len, min).iter().filter(|t| t.labelled).map(tick_label).collect()
+        };
+        assert_eq!(labels(-0.5, 1.8, 800.0, 20.0), ["0.5", "1", "2", "5", "10", "20", "50"]);
+        assert_eq!(labels(-4.0, 0.4, 600.0, 20.0)[..4], ["0.0001", "0.0002", "0.0005", "0.001"]);
+        // Crowded: decades only, 2 and 5 kept as unlabelled grid lines.
+        let t = log_ticks(-9.0, 3.0, 300.0, 20.0);
+        assert!(t.iter().filter(|t| t.labelled).all(|t| t.mantissa == 1));
+        assert!(t.iter().any(|t| !t.labelled));
+        assert_eq!(tick_label(&Tick { mantissa: 5, exp: -7, labelled: true }), "5×10⁻⁷");
+        assert_eq!(tick_label(&Tick { mantissa: 1, exp: 6, labelled: true }), "10⁶");
+    }
+
+    /// DejaVu Sans 13 px metrics, rounded up (5.7 px per character measured), so placement is tested without a renderer.
+    fn label_size(name: &str) -> (f64, f64) {
+        (name.chars().count() as f64 * 6.2 + 2.0, 16.0)
+    }
+
+    #[test]
+    fn close_labels_never_overlap_points_each_other_or_the_frame() {
+        let v = bench_like();
+        // The figure's log area (1200 × 820 minus title, legend, ticks and the "0" band) and its axis ranges.
+        let bounds = Rect { x0: 90.0, y0: 80.0, x1: 1175.0, y1: 680.0 };
+        let s = Scatter::new(&v, "t", "x", "y").unwrap();
+        let to_px = |p: &CostError| {
+            let x = bounds.x0 + (p.cost.log10() - s.x.0) / (s.x.1 - s.x.0) * (bounds.x1 - bounds.x0);
+            let y = bounds.y0 + (s.y.1 - p.error.max(1e-4).log10()) / (s.y.1 - s.y.0) * (bounds.y1 - bounds.y0);
+            (x, y)
+        };
+        let shown: Vec<&CostError> = v.iter().filter(|p| p.cost.is_finite()).collect();
+        let anchors: Vec<(f64, f64)> = shown.iter().map(|p| to_px(p)).collect();
+        let sizes: Vec<(f64, f64)> = shown.iter().map(|p| label_size(&p.name)).collect();
+        let avoid = [[(300.0, 600.0), (900.0, 600.0)]];
+        let problem = LabelProblem { anchors: &anchors, sizes: &sizes, marker: MARKER, bounds, obstacles: &[], avoid: &avoid };
+        let placed = place_labels(&problem);
+        assert_eq!(placed, place_labels(&problem), "placement is deterministic");
+        let boxes: Vec<(usize, Rect)> = placed.iter().enumerate().filter_map(|(i, p)| p.map(|p| (i, p.rect))).collect();
+        assert!(boxes.len() >= shown.len() - 2, "only {} of {} labels placed", boxes.len(), shown.len());
+        for (k, (i, r)) in boxes.iter().enumerate() {
+            assert!(bounds.contains(r), "label {i} leaves the area: {r:?}");
+            assert!((r.x1 - r.x0 - sizes[*i].0).abs() < 1e-9 && (r.y1 - r.y0 - sizes[*i].1).abs() < 1e-9, "label {i} has the size asked for");
+            for (j, s) in &boxes[k + 1..] {
+                assert!(!r.intersects(s), "labels {i} and {j} overlap: {r:?} {s:?}");
+            }
+            for a in &anchors {
+                assert!(!r.intersects(&Rect::around(*a, MARKER)), "label {i} covers a point at {a:?}");
+            }
+            assert!(!r.hit_by(avoid[0][0], avoid[0][1]), "label {i} sits on the line although there is room");
+        }
+        // Leaders run from their own point to their own box and cross no other box.
+        for (i, p) in placed.iter().enumerate() {
+            if let Some(PlacedLabel { rect, leader: Some([a, b]) }) = p {
+                assert!((a.0 - anchors[i].0).hypot(a.1 - anchors[i].1) <= MARKER + 2.0);
+                assert_eq!(rect.nearest(*b), *b);
+                for (j, r) in &boxes {
+                    assert!(*j == i || !r.hit_by(*a, *b), "leader of {i} crosses label {j}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn labels_without_room_are_dropped_not_forced() {
+        let anchors = [(50.0, 50.0), (52.0, 50.0)];
+        let sizes = [(300.0, 16.0), (300.0, 16.0)];
+        let bounds = Rect { x0: 0.0, y0: 0.0, x1: 100.0, y1: 100.0 };
+        let placed = place_labels(&LabelProblem { anchors: &anchors, sizes: &sizes, marker: MARKER, bounds, obstacles: &[], avoid: &[] });
+        assert_eq!(placed, [None, None]);
+        let small = [(20.0, 10.0), (20.0, 10.0)];
+        let placed = place_labels(&LabelProblem { anchors: &anchors, sizes: &small, marker: MARKER, bounds, obstacles: &[], avoid: &[] });
+        let (a, b) = (placed[0].unwrap().rect, placed[1].unwrap().rect);
+        assert!(!a.intersects(&b) && bounds.contains(&a) && bounds.contains(&b));
     }
 }
