@@ -1,7 +1,7 @@
 //! ns per evaluation for each benched catalogue formula (`common/formulas.rs`; the file
 //! `examples/brdfs/<stem>.brdf` compiled as shipped, at its default parameters): its hand-written Rust twin
-//! (direct and behind the `Evaluator` interface), scalar JIT, batched JIT and a Rust loop over the same
-//! columns (ns per element), the interpreter, and fasteval — how far a compiled kernel is from hand-written
+//! (direct and behind the `Evaluator` interface), scalar and batched JIT in both math modes (`_fast`:
+//! `--math fast`), a Rust loop over the same columns (ns per element), the interpreter, and fasteval — how far a compiled kernel is from hand-written
 //! code and from a generic expression evaluator. Every contestant evaluates the same 1024 pseudo-random
 //! points per iteration; criterion reports time per element (`Throughput::Elements`).
 //!
@@ -24,6 +24,7 @@ fn bench_eval(c: &mut Criterion) {
 
     for e in common::BENCHED {
         let jit = e.kernel(Backend::Jit);
+        let jit_fast = e.kernel_in(Backend::Jit, lobe::Mode::Fast);
         let interp = e.kernel(Backend::Interp);
         let twin_k = e.twin_kernel(&jit);
         let defaults = jit.default_params();
@@ -51,6 +52,7 @@ fn bench_eval(c: &mut Criterion) {
         };
         g.bench_function("rust_evaluator", |b| b.iter(|| scalar(&twin_k)));
         g.bench_function("jit_scalar", |b| b.iter(|| scalar(&jit)));
+        g.bench_function("jit_scalar_fast", |b| b.iter(|| scalar(&jit_fast)));
         g.bench_function("interp", |b| b.iter(|| scalar(&interp)));
         g.bench_function("rust_loop", |b| {
             b.iter(|| {
@@ -62,12 +64,14 @@ fn bench_eval(c: &mut Criterion) {
                 black_box(&out);
             })
         });
-        g.bench_function("jit_batched", |b| {
-            b.iter(|| {
-                jit.eval_batch(black_box(&columns), black_box(params), &mut out);
-                black_box(&out);
-            })
-        });
+        for (name, k) in [("jit_batched", &jit), ("jit_batched_fast", &jit_fast)] {
+            g.bench_function(name, |b| {
+                b.iter(|| {
+                    k.eval_batch(black_box(&columns), black_box(params), &mut out);
+                    black_box(&out);
+                })
+            });
+        }
 
         // fasteval: compiled expression, variables through a callback namespace.
         use fasteval::Evaler;

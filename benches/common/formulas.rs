@@ -46,7 +46,12 @@ impl Benched {
 
     /// The catalogue file compiled by `lobe::compile_source`, as shipped.
     pub fn kernel(&self, backend: Backend) -> Kernel {
-        let opts = Options { backend, ..Options::default() };
+        self.kernel_in(backend, lobe::Mode::Precise)
+    }
+
+    /// [`Self::kernel`] in math mode `math`.
+    pub fn kernel_in(&self, backend: Backend, math: lobe::Mode) -> Kernel {
+        let opts = Options { backend, math, ..Options::default() };
         lobe::compile_source(&self.path().display().to_string(), &self.source(), &opts)
             .unwrap_or_else(|d| panic!("{}", d.render(false)))
     }
