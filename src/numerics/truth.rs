@@ -411,10 +411,11 @@ impl Xf {
             // atan x = x − x³/3 (next term x⁵/5 is below 2^-200 relative).
             return self.sub(self.mul(self).mul(self).div(Xf::from_f64(3.0)));
         }
-        if self.e > 60 {
+        if self.e > 8 {
+            // atan x = ±π/2 − atan(1/x): near ±π/2 the Newton step below loses bits (cos y is tiny there).
             let half_pi = Xf::from_dd(dd_mul((PI3[0], PI3[1]), (0.5, 0.0)));
             let h = if self.sign_negative() { half_pi.neg() } else { half_pi };
-            return h.sub(Xf::ONE.div(self));
+            return h.sub(Xf::ONE.div(self).atan());
         }
         // Newton on tan y = x: y ← y + c·(x·c − s), s, c = sin y, cos y.
         let y0 = Xf::from_f64(self.to_f64().atan());
