@@ -392,20 +392,30 @@ fn scale2<E: Emit>(e: &mut E, y: E::V, k: E::V) -> E::V {
     e.mul(y1, s2)
 }
 
-/// e^(xh + xl) (xl a small correction to xh), to < 1 ulp.
-fn exp_dd<E: Emit>(e: &mut E, xh: E::V, xl: E::V) -> E::V {
-    // Clamp so k stays small (NaN passes through both compares and stays NaN).
-    let lo_lim = e.konst(-760.0);
-    let below = e.lt(xh, lo_lim);
-    let x = e.select(below, lo_lim, xh);
-    let hi_lim = e.konst(720.0);
-    let above = e.lt(hi_lim, x);
-    let x = e.select(above, hi_lim, x);
+/// `x` clamped to [lo, hi] by two compares; NaN passes through (both compares are false).
+fn clamp_to<E: Emit>(e: &mut E, x: E::V, lo: f64, hi: f64) -> E::V {
+    let l = e.konst(lo);
+    let below = e.lt(x, l);
+    let x = e.select(below, l, x);
+    let h = e.konst(hi);
+    let above = e.lt(h, x);
+    e.select(above, h, x)
+}
+
+/// Cody–Waite: `(k, x − k·ln2_hi, k·ln2_lo)` with k = round(x/ln 2); the subtraction is exact.
+fn reduce_exp<E: Emit>(e: &mut E, x: E::V) -> (E::V, E::V, E::V) {
     let kx = mulk(e, x, INV_LN2);
     let k = round_int(e, kx);
     let khi = mulk(e, k, LN2_HI);
     let hi = e.sub(x, khi);
-    let klo = mulk(e, k, LN2_LO);
+    (k, hi, mulk(e, k, LN2_LO))
+}
+
+/// e^(xh + xl) (xl a small correction to xh), to < 1 ulp.
+fn exp_dd<E: Emit>(e: &mut E, xh: E::V, xl: E::V) -> E::V {
+    // Clamp so k stays small.
+    let x = clamp_to(e, xh, -760.0, 720.0);
+    let (k, hi, klo) = reduce_exp(e, x);
     let lo = e.sub(klo, xl);
     let y = exp_reduced(e, hi, lo);
     scale2(e, y, k)
@@ -420,18 +430,11 @@ pub fn exp<E: Emit>(e: &mut E, x: E::V) -> E::V {
 /// scaling. Lanes below −708 are computed on 0 and flushed to 0 afterwards, so no operation ever sees a
 /// subnormal (an x86 microcode assist costs ~100 cycles per subnormal operand or result).
 pub fn exp_fast<E: Emit>(e: &mut E, x: E::V) -> E::V {
-    let lo_lim = e.konst(-708.0);
-    let below = e.lt(x, lo_lim);
+    let below = ltk(e, x, -708.0);
     let zero = e.konst(0.0);
     let xc = e.select(below, zero, x);
-    let hi_lim = e.konst(709.8);
-    let above = e.lt(hi_lim, xc);
-    let xc = e.select(above, hi_lim, xc);
-    let kx = mulk(e, xc, INV_LN2);
-    let k = round_int(e, kx);
-    let khi = mulk(e, k, LN2_HI);
-    let hi = e.sub(xc, khi);
-    let klo = mulk(e, k, LN2_LO);
+    let xc = clamp_to(e, xc, -708.0, 709.8);
+    let (k, hi, klo) = reduce_exp(e, xc);
     let r = e.sub(hi, klo);
     let p = horner(e, r, &[1.0, 1.0, 0.5, 1.0 / 6.0, 1.0 / 24.0, 1.0 / 120.0, 1.0 / 720.0, 1.0 / 5040.0]);
     // k is in [−1021, 1024]: 2p·2^(k−1), whose only rounding is the final product (normal, or the overflow).
@@ -820,18 +823,8 @@ fn asin_impl<E: Emit>(e: &mut E, x: E::V, precise: bool) -> E::V {
     e.select(small, res_small, big)
 }
 
-fn clamp_unit<E: Emit>(e: &mut E, x: E::V) -> E::V {
-    // min(max(x, −1), 1) with NaN passing through (compares are false on NaN).
-    let lo = e.konst(-1.0);
-    let below = e.lt(x, lo);
-    let x = e.select(below, lo, x);
-    let hi = e.konst(1.0);
-    let above = e.lt(hi, x);
-    e.select(above, hi, x)
-}
-
 pub fn acos<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
-    let x = clamp_unit(e, x);
+    let x = clamp_to(e, x, -1.0, 1.0);
     match mode {
         Mode::Precise => acos_impl(e, x, true),
         Mode::Fast => acos_fast(e, x),
@@ -864,7 +857,7 @@ fn acos_fast<E: Emit>(e: &mut E, x: E::V) -> E::V {
 }
 
 pub fn asin<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
-    let x = clamp_unit(e, x);
+    let x = clamp_to(e, x, -1.0, 1.0);
     asin_impl(e, x, mode == Mode::Precise)
 }
 

@@ -19,7 +19,7 @@ use proptest::test_runner::{Config, TestCaseError, TestRunner};
 const S: Span = Span { start: 0, end: 0 };
 
 /// Distance in units in the last place (0 for +0 vs −0).
-fn ulps(a: f64, b: f64) -> u64 {
+pub(crate) fn ulps(a: f64, b: f64) -> u64 {
     let key = |x: f64| {
         let b = x.to_bits() as i64;
         if b < 0 {

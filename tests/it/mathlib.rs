@@ -16,21 +16,10 @@ use lobe::base::span::Span;
 use lobe::builtins::{Builtin, Mode};
 use lobe::ir::{Formula, Input, Ir, Meta, ParamDecl};
 use lobe::{Backend, Columns, Evaluator};
+use crate::differential::ulps;
 use std::sync::Arc;
 
 const S: Span = Span { start: 0, end: 0 };
-
-fn ulps(a: f64, b: f64) -> u64 {
-    let key = |x: f64| {
-        let b = x.to_bits() as i64;
-        if b < 0 {
-            i64::MIN.wrapping_sub(b)
-        } else {
-            b
-        }
-    };
-    key(a).abs_diff(key(b))
-}
 
 /// A small deterministic generator (splitmix64).
 struct Rng(u64);

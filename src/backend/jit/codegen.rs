@@ -1,19 +1,20 @@
 //! IR → Cranelift IR: one translator, generic over the lane type, with one method per IR node kind; two
 //! function shapes.
 //!
-//! * scalar: `extern "C" fn(x: *const f64 /* NL NV NH VR VH */, params: *const f64) -> f64`, in `F64`;
-//! * batched: `extern "C" fn(cols: *const *const f64 /* 5 column pointers */, params: *const f64,
-//!   out: *mut f64, len: usize)`; the loop in `F64X2` lanes, the remaining element (odd `len`) in `F64`.
+//! * prepare: `extern "C" fn(params: *const f64, block: *mut f64)`: the carried parameter-only nodes ([`Plan`]);
+//! * scalar: `extern "C" fn(x: *const f64 /* NL NV NH VR VH */, params, block: *const f64) -> f64`, in `F64`;
+//! * batched: `extern "C" fn(cols: *const *const f64 /* 5 column pointers */, params, block, out: *mut f64,
+//!   len: usize)`; the loop in `F64X2` lanes, the remaining element (odd `len`) in `F64`.
 //!
-//! Both shapes translate with the same [`Translator`]; what differs between lane types (splatting a scalar,
-//! extracting a lane for a libm call, the select that becomes `maxpd`/`minpd`) is the [`Lanes`] trait.
+//! All translate with the same [`Translator`], which also implements the math library's [`Emit`] so the
+//! builtins' code is emitted in the translator's lanes; what differs between lane types (splatting, lanes,
+//! masks and bit casts, the select that becomes `maxpd`/`minpd`) is the [`Lanes`] trait.
 //!
 //! Neither checks anything at run time; the safe wrapper in `mod.rs` validates lengths before calling.
 //!
-//! Loop-invariant nodes (constants, parameters, and anything computed only from them, e.g. `pow(2, n)`) are
-//! computed once, in scalar, in the entry block of the batched function and splatted once for vector use, so
-//! the loop body holds only work that depends on the inputs (Cranelift may still rematerialise a cheap constant
-//! next to its use).
+//! Parameter-only nodes (e.g. `pow(Q, 1/k)`) are computed by the prepare function and loaded from the block;
+//! constants and parameters are splatted in the batched function's entry, so the loop body holds only work
+//! that depends on the inputs (Cranelift may still rematerialise a cheap constant next to its use).
 //!
 //! Codegen never sees text from the user: the only names are the builtins table's symbols, and every error
 //! is a [`JitError`] rather than a panic.
@@ -69,11 +70,12 @@ pub(super) fn used_symbols(ir: &Ir) -> Vec<(&'static str, *const u8)> {
 }
 
 /// A lane type the translator emits: how many elements one value holds and the few operations whose
-/// instructions differ by lane type. At the boundary (constants, parameters, libm calls) values are `F64`
-/// scalars; `splat` and `lane` convert. `F64` serves the scalar kernel and the batch tail, `F64X2` the batch
-/// loop. Another lane type (the planned `F32X4`) is one more impl, converting in `splat`/`lane`; it would
-/// also need its own column loads (`Translator::input` loads `TY` from `f64` columns) and a tail loop
-/// (the batch tail handles one element).
+/// instructions differ by lane type. At the boundary (constants, parameters, libm fallbacks, table loads)
+/// values are `F64` scalars; `splat` and `lane` convert. `F64` serves the scalar kernel and the batch tail,
+/// `F64X2` the batch loop. Another lane type (e.g. `F32X4` for a wider fast mode) is one more impl, converting
+/// in `splat`/`lane`; it would also need its own column loads (`Translator::input` loads `TY` from `f64`
+/// columns), f32 versions of the math library's bit operations, and a tail loop (the batch tail handles one
+/// element).
 trait Lanes {
     /// The Cranelift type of one value.
     const TY: Type;

@@ -4,27 +4,33 @@
 //! - a [`Jit`] owns the reusable Cranelift contexts; one per thread (compiles run in parallel);
 //! - `codegen` has one translator, generic over the lane type (`F64` for the scalar kernel and the batch tail,
 //!   `F64X2` for the batch loop), with one method per IR node kind; it never sees user text, never panics;
-//! - builtins come from the one table: `Lowering::Inline` becomes a native instruction, `Call1/Call2` a call
-//!   to the same `extern "C"` function the interpreter calls (so the two backends agree bit for bit there),
-//!   registered with `JITBuilder::symbol` before anything is finalized (an unresolved import would panic
-//!   inside Cranelift);
-//! - one `JITModule` per compiled formula: the scalar kernel is compiled at once, the batched kernel is added
-//!   to the same module on the first batch call; its memory is freed when the last kernel using it is dropped;
+//! - builtins come from the one table: `Lowering::Inline` becomes a native instruction, `Lowering::Math` the
+//!   math library's code (`builtins::math`) emitted inline in the kernel's lanes — the definition the
+//!   interpreter runs on `f64`, so the two backends agree bit for bit in each math mode; the only calls are the
+//!   trigonometric fallbacks to libm for huge arguments, registered with `JITBuilder::symbol` before anything
+//!   is finalized (an unresolved import would panic inside Cranelift);
+//! - parameter-only work is computed once per parameter set by a prepare function into a block the kernels
+//!   load (the prepared parameter block: cached per thread for scalar calls, once per batch);
+//! - one `JITModule` per compiled formula: the scalar kernel and the prepare function are compiled at once,
+//!   the batched kernel is added to the same module on the first batch call; its memory is freed when the
+//!   last kernel using it is dropped;
 //! - a bounded LRU [`cache`] keyed by the simplified IR's structure, so compiling a formula twice is free;
 //! - live parameters are loads from the `params` slice, so changing them needs no recompilation; baked ones
 //!   are already constants in the IR.
 //!
 //! The only `unsafe` in lobe is here: calling the generated code (the safe wrapper validates every length
-//! first, so no input from safe code can make it read or write out of bounds) and freeing its memory.
+//! first, so no input from safe code can make it read or write out of bounds; the math library's table
+//! lookups clamp their index inside the generated code) and freeing its memory.
 //!
 //! Cost model. Compiling is Cranelift's work: a fixed per-module cost plus roughly linear in the nodes; the
 //! batched kernel (a loop and two copies of the body) costs more than the scalar one, hence built lazily. A
 //! scalar call pays a fixed dispatch (`Kernel` → `dyn Evaluator` → length check → generated code) on top of
 //! the body, which dominates short arithmetic formulas; the batched kernel pays it once per batch, runs two
-//! lanes per instruction, hoists loop-invariant work, and does each clamp against a constant as one
-//! `maxpd`/`minpd`. Formulas with libm calls (`pow`, `exp`, `acos`) spend most of their time in those calls on
-//! every backend (the batched kernel calls once per lane). Measured compile times and ns/eval against the
-//! interpreter and hand-written Rust: BENCHMARKS.md.
+//! lanes per instruction, and does each clamp against a constant as one `maxpd`/`minpd`. A transcendental
+//! builtin is 20–200 vector instructions (pow the most: double-double in precise mode), straight-line except
+//! for rarely taken special-case blocks; scalar code runs the same instructions one lane at a time, where its
+//! selects become branches. Measured compile times and ns/eval against the interpreter and hand-written Rust:
+//! BENCHMARKS.md.
 
 // The one module allowed `unsafe`: calling and freeing generated code (each block has its `# Safety` note).
 #![allow(unsafe_code)]
