@@ -103,7 +103,7 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
     let unused: Vec<&str> = Input::ALL.iter().filter(|i| !used.contains(**i)).map(|i| i.name()).collect();
     let live = simplified.ir.used_params(simplified.root);
     let t_pass = std::time::Instant::now();
-    let pass = robust::improve(&f, &bake, &a.prefer.pass(a.points as usize));
+    let pass = robust::improve(&f, &bake, &robust::PassOptions { math: a.math.mode, ..a.prefer.pass(a.points as usize) });
     let pass_ms = t_pass.elapsed().as_secs_f64() * 1e3;
     let opts = |backend| Options { backend, bake: set.clone(), math: a.math.mode, ..Options::default() };
     let bounds = builtin_bounds(&simplified, a.math.mode);

@@ -328,11 +328,13 @@ pub struct PassOptions {
     /// Domain points the candidates are measured on.
     pub points: usize,
     pub seed: u64,
+    /// The math mode candidates are measured in: the one the chosen formula will be compiled in.
+    pub math: crate::Mode,
 }
 
 impl Default for PassOptions {
     fn default() -> PassOptions {
-        PassOptions { prefer: Prefer::Accuracy, max_cost: 1.3, points: 4096, seed: 0x5eed_1ab5 }
+        PassOptions { prefer: Prefer::Accuracy, max_cost: 1.3, points: 4096, seed: 0x5eed_1ab5, math: crate::Mode::Precise }
     }
 }
 
@@ -383,7 +385,7 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
     let truth_f = crate::simplify::bake_only(orig, bake);
     let n = o.points.min((MAX_WORK / cost(&truth_f).max(1.0)) as usize).max(64);
     let points = sample(orig, bake, n, o.seed);
-    let run = |f: &Formula| measure(&Interp::new(f), &truth_f, &points);
+    let run = |f: &Formula| measure(&Interp::with_mode(f, o.math), &truth_f, &points);
     let before = run(&base);
     let cost_before = cost(&base);
     let base_budget = match o.prefer {
@@ -463,6 +465,7 @@ impl crate::FormulaChooser for Chooser {
 
 /// Compile options with the accuracy pass on.
 pub fn with_pass(mut opts: crate::Options, pass: PassOptions) -> crate::Options {
+    let pass = PassOptions { math: opts.math, ..pass };
     opts.accuracy = Some(std::sync::Arc::new(Chooser(pass)));
     opts
 }
