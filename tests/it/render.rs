@@ -269,6 +269,9 @@ fn scene_errors_name_file_line_and_key() {
     // A formula with errors: its own diagnostics plus where the scene used it.
     let e = scene_err(&GOOD.replace("VR^n", "VR^^n"));
     assert!(e.contains("expected an operand after `^`") && e.contains("used by [materials.m] at bad.toml:7:"), "{e}");
+    // An unknown math mode, at its key.
+    let e = scene_err(&GOOD.replace("formula = \"VR^n\"", "formula = \"VR^n\"\nmath = \"turbo\""));
+    assert!(e.contains("bad.toml:8:") && e.contains("materials.m.math") && e.contains("`precise` or `fast`"), "{e}");
     // Shape-specific keys on the wrong shape.
     let e = scene_err(&GOOD.replace("shape = \"sphere\"", "shape = \"torus\"\nradius = 2"));
     assert!(e.contains("bad.toml:9:") && e.contains("`radius` applies only to shape = \"sphere\""), "{e}");
@@ -562,4 +565,28 @@ fn staged_loading_keeps_the_diagnostics() {
     };
     assert_eq!(cmp, alone);
     assert!(cmp.contains("[camera]") && cmp.contains("--set n=1000000000") && cmp.contains("unknown material `mm`"), "{cmp}");
+}
+
+/// `math = "fast"` on a material (and `--math` through `LobeCompiler`): the kernel runs fast math, and the
+/// image stays within one level of the precise one on formulas with exp, acos, sin and pow.
+#[test]
+fn fast_math_materials_render_within_one_level_of_precise() {
+    let opts = sized(128, 128);
+    for brdf in ["kutlog.brdf", "gaussian.brdf", "cook_torrance.brdf", "fst.brdf"] {
+        let src = std::fs::read_to_string(root().join("examples/brdfs").join(brdf)).unwrap();
+        let o = LoadOptions { formula_override: Some((brdf.into(), src)), ..opts.clone() };
+        let load = |math| {
+            let c = LobeCompiler { backend: lobe::Backend::Jit, math };
+            scene::load_scene(&scene_file("paper_sphere.toml"), &o, &c).map_err(|d| d.render(false)).unwrap()
+        };
+        let (p, f) = (load(lobe::Mode::Precise), load(lobe::Mode::Fast));
+        assert!(f.materials.iter().all(|m| m.math == lobe::Mode::Fast) && p.materials.iter().all(|m| m.math == lobe::Mode::Precise));
+        let (fp, ff) = (render(&p, 2).0, render(&f, 2).0);
+        let worst = fp.image.rgb.iter().zip(&ff.image.rgb).map(|(a, b)| a.abs_diff(*b)).max().unwrap_or(0);
+        assert!(worst <= 1, "{brdf}: fast math moved a channel by {worst} levels");
+    }
+    // The scene key overrides the compiler's default.
+    let src = GOOD.replace("formula = \"VR^n\"", "formula = \"exp(-n * acos(VR)^2)\"\nmath = \"fast\"");
+    let sc = scene::parse_scene("m.toml", &src, Path::new("."), &LoadOptions::default(), &JIT).map_err(|d| d.render(false)).unwrap();
+    assert_eq!(sc.materials[0].math, lobe::Mode::Fast);
 }
