@@ -109,6 +109,15 @@ pub trait Emit {
     fn rare(&mut self, m: Self::M, r: Self::V, slow: &mut dyn FnMut(&mut Self) -> Self::V) -> Self::V
     where
         Self: Sized;
+    /// `a·b` as `(p, err)`, exactly (for products that do not underflow). The default is Dekker's product (no
+    /// FMA); a target with a fused multiply-add computes `err = fma(a, b, −p)`, the same exact value in two
+    /// instructions, so the choice never changes a result.
+    fn two_prod(&mut self, a: Self::V, b: Self::V) -> (Self::V, Self::V)
+    where
+        Self: Sized,
+    {
+        dekker_two_prod(self, a, b)
+    }
     /// `m ? libm(x) : r` lane by lane, `libm` being the C library's version of `f` ([`Builtin::libm1`]).
     fn fallback(&mut self, m: Self::M, x: Self::V, r: Self::V, f: Builtin) -> Self::V;
 }
@@ -339,7 +348,7 @@ fn split<E: Emit>(e: &mut E, a: E::V) -> (E::V, E::V) {
 }
 
 /// `a·b` as `(p, err)` exactly (Dekker's product, no FMA), for operands whose product does not underflow.
-fn two_prod<E: Emit>(e: &mut E, a: E::V, b: E::V) -> (E::V, E::V) {
+pub fn dekker_two_prod<E: Emit>(e: &mut E, a: E::V, b: E::V) -> (E::V, E::V) {
     let p = e.mul(a, b);
     let (ah, al) = split(e, a);
     let (bh, bl) = split(e, b);
@@ -568,7 +577,7 @@ fn ln_dd<E: Emit>(e: &mut E, x: E::V) -> (E::V, E::V) {
     let num = e.sub(m, b); // exact (Sterbenz)
     let (den, den_lo) = two_sum(e, m, b);
     let s_hi = e.div(num, den);
-    let (p, pe) = two_prod(e, s_hi, den);
+    let (p, pe) = e.two_prod(s_hi, den);
     let r = e.sub(num, p);
     let r = e.sub(r, pe);
     let sd = e.mul(s_hi, den_lo);
@@ -672,7 +681,7 @@ fn pow_operands<E: Emit>(e: &mut E, x: E::V, y: E::V) -> (E::V, E::V) {
 pub fn pow<E: Emit>(e: &mut E, x: E::V, y: E::V) -> E::V {
     let (ax, ys) = pow_operands(e, x, y);
     let (lh, ll) = ln_dd(e, ax);
-    let (p, pe) = two_prod(e, ys, lh);
+    let (p, pe) = e.two_prod(ys, lh);
     let yl = e.mul(ys, ll);
     let pl = e.add(pe, yl);
     let (ph, pl) = fast_two_sum(e, p, pl);

@@ -206,6 +206,8 @@ struct Shared<'a> {
     invariants: Vec<Option<Value>>,
     /// Which library code the transcendental builtins emit.
     mode: Mode,
+    /// Whether the host has a fused multiply-add (exact two-products in two instructions).
+    fma: bool,
 }
 
 impl Shared<'_> {
@@ -479,6 +481,14 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
     /// Per lane: the index as an integer (the magic-number conversion), clamped with an unsigned `umin` to the
     /// table's last element — so whatever `x` holds, the load stays inside the table — then a load from the
     /// `'static` table, whose address is a constant in the code.
+    fn two_prod(&mut self, a: Value, b: Value) -> (Value, Value) {
+        if !self.cx.fma {
+            return math::dekker_two_prod(self, a, b);
+        }
+        let p = self.b.ins().fmul(a, b);
+        let np = self.b.ins().fneg(p);
+        (p, self.b.ins().fma(a, b, np))
+    }
     fn lookup(&mut self, table: &'static [f64], x: Value) -> Value {
         if table.is_empty() {
             self.error = Some(JitError::Internal("lookup in an empty table".into()));
@@ -648,6 +658,8 @@ pub(super) struct Build<'a> {
     pub plan: &'a Plan,
     pub imports: &'a Imports,
     pub mode: Mode,
+    /// The host has a native fused multiply-add.
+    pub fma: bool,
 }
 
 /// A function builder over `ctx` with an entry block holding the function's parameters.
@@ -678,7 +690,7 @@ pub(super) fn build_prepare(
 ) -> Result<(), JitError> {
     let (mut b, callees, args) = begin(module, ctx, fctx, prepare_signature(module), w.imports);
     let [params, block] = args[..] else { return Err(JitError::Internal("prepare signature".into())) };
-    let cx = Shared { ir: w.ir, params, callees, invariants: vec![], mode: w.mode };
+    let cx = Shared { ir: w.ir, params, callees, invariants: vec![], mode: w.mode, fma: w.fma };
     // Invariant nodes read no input: the source is never used.
     let mut t = cx.translator::<F64>(&mut b, vec![None; w.ir.len()], Source::Ptr(params));
     t.nodes(w.plan.root.index() + 1, |id| !w.plan.variant(id))?;
@@ -701,7 +713,7 @@ pub(super) fn build_scalar(
 ) -> Result<(), JitError> {
     let (mut b, callees, args) = begin(module, ctx, fctx, scalar_signature(module), w.imports);
     let [x, params, block] = args[..] else { return Err(JitError::Internal("scalar signature".into())) };
-    let cx = Shared { ir: w.ir, params, callees, invariants: vec![], mode: w.mode };
+    let cx = Shared { ir: w.ir, params, callees, invariants: vec![], mode: w.mode, fma: w.fma };
     let vals = w.plan.load_carried(&mut b, block, w.ir.len());
     let mut t = cx.translator::<F64>(&mut b, vals, Source::Ptr(x));
     let root = w.plan.root;
@@ -755,7 +767,7 @@ pub(super) fn build_batch(
         bases[i.index()] = Some(b.ins().load(ptr, mem(), cols, (i.index() * 8) as i32));
     }
     let zero = b.ins().iconst(ptr, 0);
-    let mut cx = Shared { ir, params, callees, invariants: vec![], mode: w.mode };
+    let mut cx = Shared { ir, params, callees, invariants: vec![], mode: w.mode, fma: w.fma };
     let vals = plan.load_carried(&mut b, block, ir.len());
     let mut t = cx.translator::<F64>(&mut b, vals, Source::Cols { bases, off: zero });
     t.nodes(n, |id| !plan.variant(id) && matches!(ir.node(id), Node::Const(_) | Node::Param(_)))?;

@@ -116,6 +116,11 @@ fn host_isa() -> Result<OwnedTargetIsa, JitError> {
     .map_err(JitError::Host)
 }
 
+/// Whether the host ISA has a native fused multiply-add (the math library's two-products use it then).
+fn host_fma() -> bool {
+    host_isa().is_ok_and(|isa| isa.has_native_fma())
+}
+
 type ScalarFn = unsafe extern "C" fn(*const f64, *const f64, *const f64) -> f64;
 type PrepareFn = unsafe extern "C" fn(*const f64, *mut f64);
 type BatchFn = unsafe extern "C" fn(*const *const f64, *const f64, *const f64, *mut f64, usize);
@@ -158,7 +163,7 @@ impl Compiled {
         let r = self.batch.get_or_init(|| {
             let mut guard = self.module.lock().map_err(|_| "JIT module lock poisoned".to_string())?;
             let module = guard.as_mut().ok_or("JIT module already freed")?;
-            let w = codegen::Build { ir: &self.ir, plan: &self.plan, imports: &self.imports, mode: self.mode };
+            let w = codegen::Build { ir: &self.ir, plan: &self.plan, imports: &self.imports, mode: self.mode, fma: host_fma() };
             let f = with_jit(|j| j.define_batch(module, &w)).map_err(|e| e.to_string())?;
             Ok(f)
         });
@@ -344,7 +349,7 @@ impl Jit {
         let mut module = JITModule::new(builder);
         let plan = codegen::Plan::new(ir, root);
         let defined = codegen::declare_imports(&mut module, ir).and_then(|imports| {
-            let w = codegen::Build { ir, plan: &plan, imports: &imports, mode };
+            let w = codegen::Build { ir, plan: &plan, imports: &imports, mode, fma: host_fma() };
             self.define_scalar(&mut module, &w).map(|fns| (fns, imports))
         });
         let ((scalar, prepare), imports) = match defined {
@@ -454,7 +459,7 @@ pub fn disassemble(f: &Formula, mode: Mode) -> Result<(String, String), JitError
     {
         let mut guard = c.module.lock().map_err(|_| JitError::Internal("module lock poisoned".into()))?;
         let module = guard.as_mut().ok_or(JitError::Internal("module freed".into()))?;
-        let w = codegen::Build { ir: &c.ir, plan: &c.plan, imports: &c.imports, mode: c.mode };
+        let w = codegen::Build { ir: &c.ir, plan: &c.plan, imports: &c.imports, mode: c.mode, fma: host_fma() };
         j.define_batch(module, &w)?;
     }
     let mut l = std::mem::take(&mut j.listing).into_iter();
