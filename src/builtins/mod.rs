@@ -131,6 +131,43 @@ extern "C" fn lobe_ln(x: f64) -> f64 {
     x.ln()
 }
 
+
+// The math library compiled by rustc as C functions, one per builtin and mode: what the JIT calls instead of
+// inlining the library when a formula has many call sites (its compile time grows with the inlined code).
+// Each runs `eval_in`, the same code, so calling instead of inlining changes no bit.
+macro_rules! lib1 {
+    ($name:ident, $b:ident, $m:ident) => {
+        extern "C" fn $name(x: f64) -> f64 {
+            Builtin::$b.eval_in(Mode::$m, &[x])
+        }
+    };
+}
+macro_rules! lib2 {
+    ($name:ident, $b:ident, $m:ident) => {
+        extern "C" fn $name(x: f64, y: f64) -> f64 {
+            Builtin::$b.eval_in(Mode::$m, &[x, y])
+        }
+    };
+}
+lib2!(lobe_pow_precise, Pow, Precise);
+lib2!(lobe_pow_fast, Pow, Fast);
+lib1!(lobe_cos_precise, Cos, Precise);
+lib1!(lobe_cos_fast, Cos, Fast);
+lib1!(lobe_sin_precise, Sin, Precise);
+lib1!(lobe_sin_fast, Sin, Fast);
+lib1!(lobe_tan_precise, Tan, Precise);
+lib1!(lobe_tan_fast, Tan, Fast);
+lib1!(lobe_acos_precise, Acos, Precise);
+lib1!(lobe_acos_fast, Acos, Fast);
+lib1!(lobe_asin_precise, Asin, Precise);
+lib1!(lobe_asin_fast, Asin, Fast);
+lib1!(lobe_atan_precise, Atan, Precise);
+lib1!(lobe_atan_fast, Atan, Fast);
+lib1!(lobe_exp_precise, Exp, Precise);
+lib1!(lobe_exp_fast, Exp, Fast);
+lib1!(lobe_ln_precise, Ln, Precise);
+lib1!(lobe_ln_fast, Ln, Fast);
+
 /// IEEE 754-2019 `minimum`: NaN if either is NaN, −0 < +0. This is Cranelift's `fmin`.
 pub fn fmin(a: f64, b: f64) -> f64 {
     if a.is_nan() || b.is_nan() {
@@ -412,6 +449,32 @@ impl Builtin {
             Libm::F2(f) => f(args[0], args[1]),
             Libm::Exact => self.eval(args),
         }
+    }
+
+    /// The math library's code for this builtin in `mode` as a C function (symbol and pointer), for call sites
+    /// the JIT does not inline; `None` for the inline builtins.
+    pub fn outlined(self, mode: Mode) -> Option<(&'static str, Libm)> {
+        Some(match (self, mode) {
+            (Builtin::Pow, Mode::Precise) => ("lobe_pow_precise", Libm::F2(lobe_pow_precise)),
+            (Builtin::Pow, Mode::Fast) => ("lobe_pow_fast", Libm::F2(lobe_pow_fast)),
+            (Builtin::Cos, Mode::Precise) => ("lobe_cos_precise", Libm::F1(lobe_cos_precise)),
+            (Builtin::Cos, Mode::Fast) => ("lobe_cos_fast", Libm::F1(lobe_cos_fast)),
+            (Builtin::Sin, Mode::Precise) => ("lobe_sin_precise", Libm::F1(lobe_sin_precise)),
+            (Builtin::Sin, Mode::Fast) => ("lobe_sin_fast", Libm::F1(lobe_sin_fast)),
+            (Builtin::Tan, Mode::Precise) => ("lobe_tan_precise", Libm::F1(lobe_tan_precise)),
+            (Builtin::Tan, Mode::Fast) => ("lobe_tan_fast", Libm::F1(lobe_tan_fast)),
+            (Builtin::Acos, Mode::Precise) => ("lobe_acos_precise", Libm::F1(lobe_acos_precise)),
+            (Builtin::Acos, Mode::Fast) => ("lobe_acos_fast", Libm::F1(lobe_acos_fast)),
+            (Builtin::Asin, Mode::Precise) => ("lobe_asin_precise", Libm::F1(lobe_asin_precise)),
+            (Builtin::Asin, Mode::Fast) => ("lobe_asin_fast", Libm::F1(lobe_asin_fast)),
+            (Builtin::Atan, Mode::Precise) => ("lobe_atan_precise", Libm::F1(lobe_atan_precise)),
+            (Builtin::Atan, Mode::Fast) => ("lobe_atan_fast", Libm::F1(lobe_atan_fast)),
+            (Builtin::Exp, Mode::Precise) => ("lobe_exp_precise", Libm::F1(lobe_exp_precise)),
+            (Builtin::Exp, Mode::Fast) => ("lobe_exp_fast", Libm::F1(lobe_exp_fast)),
+            (Builtin::Ln, Mode::Precise) => ("lobe_ln_precise", Libm::F1(lobe_ln_precise)),
+            (Builtin::Ln, Mode::Fast) => ("lobe_ln_fast", Libm::F1(lobe_ln_fast)),
+            (Builtin::Sqrt | Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Clamp, _) => return None,
+        })
     }
 
     /// The one-argument C library function, if that is what this builtin's libm is.

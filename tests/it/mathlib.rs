@@ -356,3 +356,46 @@ fn precise_builtins_are_within_their_stated_ulp_of_the_truth() {
         println!("{:>5}: max {} ulp from the truth (worst at {:?})", f.name(), worst.0, worst.1);
     }
 }
+
+/// A formula with more math call sites than the JIT inlines (`OUTLINE_AT`) calls the compiled library
+/// instead, and still returns the interpreter's bits, scalar and batched, in both modes.
+#[test]
+fn outlined_library_calls_return_the_interpreters_bits() {
+    let mut ir = Ir::new();
+    let x = ir.input(Input::NH, S);
+    let y = ir.input(Input::NV, S);
+    let mut sum = ir.konst(0.0, S);
+    let n = lobe::backend::jit::OUTLINE_AT + 8;
+    for i in 0..n {
+        let f = TRANSCENDENTAL[i % TRANSCENDENTAL.len()];
+        let k = ir.konst(1.0 + i as f64 / 8.0, S);
+        let xi = ir.bin(lobe::ir::BinOp::Mul, x, k, S);
+        let args = if f.arity() == 2 { vec![xi, y] } else { vec![xi] };
+        let c = ir.call(f, &args, S);
+        sum = ir.bin(lobe::ir::BinOp::Add, sum, c, S);
+    }
+    let formula = Arc::new(Formula {
+        meta: Meta::default(),
+        params: vec![ParamDecl { name: "n".into(), default: 1.0, lo: 1.0, hi: 1000.0, span: None }],
+        ir,
+        root: sum,
+        file: "many.brdf".into(),
+        source: String::new(),
+    });
+    let pts = args_of(Builtin::Pow, 2_001);
+    let xs: Vec<f64> = pts.iter().map(|a| a[0]).collect();
+    let ys: Vec<f64> = pts.iter().map(|a| a[1]).collect();
+    for mode in Mode::ALL {
+        let jit = lobe::build_kernel(formula.clone(), Backend::Jit, mode).expect("compiles");
+        let interp = lobe::build_kernel(formula.clone(), Backend::Interp, mode).expect("builds");
+        let mut batch = vec![0.0; xs.len()];
+        jit.eval_batch(&Columns::new([&[], &ys, &xs, &[], &[]]), &[1.0], &mut batch);
+        for i in 0..xs.len() {
+            let inputs = [0.0, ys[i], xs[i], 0.0, 0.0];
+            let want = interp.eval(&inputs, &[1.0]);
+            for got in [jit.eval(&inputs, &[1.0]), batch[i]] {
+                assert!(got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()), "{mode} at {:?}: {got:e} vs {want:e}", pts[i]);
+            }
+        }
+    }
+}

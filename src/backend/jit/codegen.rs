@@ -21,7 +21,7 @@
 
 use super::JitError;
 use crate::builtins::math::{self, Emit};
-use crate::builtins::{Builtin, Lowering, Mode};
+use crate::builtins::{Builtin, Libm, Lowering, Mode};
 use crate::ir::{BinOp, Input, Ir, Node, NodeId, N_INPUTS};
 use cranelift_codegen::ir::condcodes::{FloatCC, IntCC};
 use cranelift_codegen::ir::immediates::Ieee64;
@@ -34,39 +34,67 @@ use cranelift_jit::JITModule;
 use cranelift_module::{FuncId, Linkage, Module};
 use std::marker::PhantomData;
 
-/// Builtins with a C-library fallback (huge trigonometric arguments), with the module-level function id of
-/// each (indexed by `Builtin as usize`).
+/// The functions a module imports, by builtin (indexed by `Builtin as usize`): with the library inlined, the
+/// C-library fallback of each trigonometric builtin (huge arguments); with it outlined, each math builtin's
+/// compiled library function ([`Builtin::outlined`]), which includes its fallback.
 pub(super) type Imports = [Option<FuncId>; Builtin::ALL.len()];
 
-/// Builtins of `ir` that call a fallback symbol: the table's symbol and its C-library function.
-fn fallbacks(ir: &Ir) -> impl Iterator<Item = (Builtin, &'static str, extern "C" fn(f64) -> f64)> + '_ {
-    let mut seen = [false; Builtin::ALL.len()];
-    ir.nodes().iter().filter_map(move |n| match n {
-        Node::Call(b, _) if !std::mem::replace(&mut seen[*b as usize], true) => {
-            let info = b.info();
-            let f = b.libm1().filter(|_| info.lowering == Lowering::Math && !info.symbol.is_empty())?;
-            Some((*b, info.symbol, f))
-        }
-        _ => None,
-    })
+/// Above this many math-library call sites a formula calls the library instead of inlining it: inlined, each
+/// site is 20–200 instructions and Cranelift's time grows with them (~5 ms per `sin`), so a 3 000-term formula
+/// would take seconds to compile; called, each site is one call per lane, and the results are the same bits.
+pub const OUTLINE_AT: usize = 24;
+
+/// Whether `ir`'s math builtins are called rather than inlined ([`OUTLINE_AT`]).
+pub(super) fn outlines(ir: &Ir) -> bool {
+    ir.nodes().iter().filter(|n| matches!(n, Node::Call(b, _) if b.info().lowering == Lowering::Math)).count() > OUTLINE_AT
 }
 
-/// Declares (as imports) the fallback functions the formula may call. The caller registered each symbol with
-/// the `JITBuilder` ([`used_symbols`]), so `finalize_definitions` can resolve every import.
-pub(super) fn declare_imports(module: &mut JITModule, ir: &Ir) -> Result<Imports, JitError> {
+/// Each distinct builtin of `ir` that imports a function: its symbol, pointer and arity.
+fn symbols(ir: &Ir, mode: Mode, outline: bool) -> Vec<(Builtin, &'static str, *const u8, usize)> {
+    let mut seen = [false; Builtin::ALL.len()];
+    let mut out = vec![];
+    for n in ir.nodes() {
+        let Node::Call(b, _) = n else { continue };
+        if b.info().lowering != Lowering::Math || std::mem::replace(&mut seen[*b as usize], true) {
+            continue;
+        }
+        let (symbol, f) = if outline {
+            match b.outlined(mode) {
+                Some(s) => s,
+                None => continue,
+            }
+        } else {
+            match (b.info().symbol, b.info().libm) {
+                ("", _) => continue,
+                (s, f) => (s, f),
+            }
+        };
+        let (ptr, arity) = match f {
+            Libm::F1(f) => (f as *const u8, 1),
+            Libm::F2(f) => (f as *const u8, 2),
+            Libm::Exact => continue,
+        };
+        out.push((*b, symbol, ptr, arity));
+    }
+    out
+}
+
+/// Declares (as imports) the functions the formula may call. The caller registered each symbol with the
+/// `JITBuilder` ([`used_symbols`]), so `finalize_definitions` can resolve every import.
+pub(super) fn declare_imports(module: &mut JITModule, ir: &Ir, mode: Mode, outline: bool) -> Result<Imports, JitError> {
     let mut imports: Imports = [None; Builtin::ALL.len()];
-    for (b, symbol, _) in fallbacks(ir) {
+    for (b, symbol, _, arity) in symbols(ir, mode, outline) {
         let mut sig = module.make_signature();
-        sig.params.push(AbiParam::new(types::F64));
+        sig.params.extend(std::iter::repeat_n(AbiParam::new(types::F64), arity));
         sig.returns.push(AbiParam::new(types::F64));
         imports[b as usize] = Some(module.declare_function(symbol, Linkage::Import, &sig)?);
     }
     Ok(imports)
 }
 
-/// The fallback symbols `ir` needs, with the function pointer to register.
-pub(super) fn used_symbols(ir: &Ir) -> Vec<(&'static str, *const u8)> {
-    fallbacks(ir).map(|(_, symbol, f)| (symbol, f as *const u8)).collect()
+/// The symbols `ir` imports, with the function pointer to register.
+pub(super) fn used_symbols(ir: &Ir, mode: Mode, outline: bool) -> Vec<(&'static str, *const u8)> {
+    symbols(ir, mode, outline).into_iter().map(|(_, s, p, _)| (s, p)).collect()
 }
 
 /// A lane type the translator emits: how many elements one value holds and the few operations whose
@@ -208,6 +236,8 @@ struct Shared<'a> {
     mode: Mode,
     /// Whether the host has a fused multiply-add (exact two-products in two instructions).
     fma: bool,
+    /// Whether math builtins are calls to the compiled library ([`OUTLINE_AT`]) rather than inline code.
+    outline: bool,
 }
 
 impl Shared<'_> {
@@ -318,12 +348,29 @@ impl<L: Lanes> Translator<'_, '_, L> {
             return self.inline(f, args);
         }
         let vals = args[..f.arity()].iter().map(|a| self.arg(*a)).collect::<Result<Vec<_>, _>>()?;
+        if self.cx.outline {
+            return self.library_call(f, &vals);
+        }
         let mode = self.cx.mode;
         let v = f.emit(self, mode, &vals);
         if let Some(e) = self.error.take() {
             return Err(e);
         }
         v.ok_or_else(|| JitError::Internal(format!("builtin `{}` has no library code", f.name())))
+    }
+
+    /// The compiled library function of `f`, called once per lane.
+    fn library_call(&mut self, f: Builtin, args: &[Value]) -> Result<Value, JitError> {
+        let callee = self.cx.callees[f as usize]
+            .ok_or_else(|| JitError::Internal(format!("library function of `{}` was not imported", f.name())))?;
+        let mut lanes = Vec::with_capacity(usize::from(L::LANES));
+        for lane in 0..L::LANES {
+            let vals: Vec<Value> = args.iter().map(|a| L::lane(self.b, *a, lane)).collect();
+            let inst = self.b.ins().call(callee, &vals);
+            let r = self.b.inst_results(inst).first().copied();
+            lanes.push(r.ok_or(JitError::Internal("call without result".into()))?);
+        }
+        Ok(L::from_lanes(self.b, &lanes))
     }
 
     /// sqrt, abs, min, max, clamp: native instructions with exactly the table's semantics.
@@ -660,6 +707,8 @@ pub(super) struct Build<'a> {
     pub mode: Mode,
     /// The host has a native fused multiply-add.
     pub fma: bool,
+    /// Math builtins are called, not inlined ([`outlines`]).
+    pub outline: bool,
 }
 
 /// A function builder over `ctx` with an entry block holding the function's parameters.
@@ -690,7 +739,7 @@ pub(super) fn build_prepare(
 ) -> Result<(), JitError> {
     let (mut b, callees, args) = begin(module, ctx, fctx, prepare_signature(module), w.imports);
     let [params, block] = args[..] else { return Err(JitError::Internal("prepare signature".into())) };
-    let cx = Shared { ir: w.ir, params, callees, invariants: vec![], mode: w.mode, fma: w.fma };
+    let cx = Shared { ir: w.ir, params, callees, invariants: vec![], mode: w.mode, fma: w.fma, outline: w.outline };
     // Invariant nodes read no input: the source is never used.
     let mut t = cx.translator::<F64>(&mut b, vec![None; w.ir.len()], Source::Ptr(params));
     t.nodes(w.plan.root.index() + 1, |id| !w.plan.variant(id))?;
@@ -713,7 +762,7 @@ pub(super) fn build_scalar(
 ) -> Result<(), JitError> {
     let (mut b, callees, args) = begin(module, ctx, fctx, scalar_signature(module), w.imports);
     let [x, params, block] = args[..] else { return Err(JitError::Internal("scalar signature".into())) };
-    let cx = Shared { ir: w.ir, params, callees, invariants: vec![], mode: w.mode, fma: w.fma };
+    let cx = Shared { ir: w.ir, params, callees, invariants: vec![], mode: w.mode, fma: w.fma, outline: w.outline };
     let vals = w.plan.load_carried(&mut b, block, w.ir.len());
     let mut t = cx.translator::<F64>(&mut b, vals, Source::Ptr(x));
     let root = w.plan.root;
@@ -767,7 +816,7 @@ pub(super) fn build_batch(
         bases[i.index()] = Some(b.ins().load(ptr, mem(), cols, (i.index() * 8) as i32));
     }
     let zero = b.ins().iconst(ptr, 0);
-    let mut cx = Shared { ir, params, callees, invariants: vec![], mode: w.mode, fma: w.fma };
+    let mut cx = Shared { ir, params, callees, invariants: vec![], mode: w.mode, fma: w.fma, outline: w.outline };
     let vals = plan.load_carried(&mut b, block, ir.len());
     let mut t = cx.translator::<F64>(&mut b, vals, Source::Cols { bases, off: zero });
     t.nodes(n, |id| !plan.variant(id) && matches!(ir.node(id), Node::Const(_) | Node::Param(_)))?;

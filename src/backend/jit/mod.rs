@@ -36,6 +36,7 @@
 #![allow(unsafe_code)]
 
 pub mod cache;
+pub use codegen::OUTLINE_AT;
 mod codegen;
 
 use crate::base::diag::Diagnostic;
@@ -163,7 +164,7 @@ impl Compiled {
         let r = self.batch.get_or_init(|| {
             let mut guard = self.module.lock().map_err(|_| "JIT module lock poisoned".to_string())?;
             let module = guard.as_mut().ok_or("JIT module already freed")?;
-            let w = codegen::Build { ir: &self.ir, plan: &self.plan, imports: &self.imports, mode: self.mode, fma: host_fma() };
+            let w = codegen::Build { ir: &self.ir, plan: &self.plan, imports: &self.imports, mode: self.mode, fma: host_fma(), outline: codegen::outlines(&self.ir) };
             let f = with_jit(|j| j.define_batch(module, &w)).map_err(|e| e.to_string())?;
             Ok(f)
         });
@@ -342,14 +343,15 @@ impl Jit {
         if root.index() >= ir.len() {
             return Err(JitError::Internal("root outside the arena".into()));
         }
+        let outline = codegen::outlines(ir);
         let mut builder = JITBuilder::with_isa(host_isa()?, default_libcall_names());
-        for (sym, ptr) in codegen::used_symbols(ir) {
+        for (sym, ptr) in codegen::used_symbols(ir, mode, outline) {
             builder.symbol(sym, ptr);
         }
         let mut module = JITModule::new(builder);
         let plan = codegen::Plan::new(ir, root);
-        let defined = codegen::declare_imports(&mut module, ir).and_then(|imports| {
-            let w = codegen::Build { ir, plan: &plan, imports: &imports, mode, fma: host_fma() };
+        let defined = codegen::declare_imports(&mut module, ir, mode, outline).and_then(|imports| {
+            let w = codegen::Build { ir, plan: &plan, imports: &imports, mode, fma: host_fma(), outline };
             self.define_scalar(&mut module, &w).map(|fns| (fns, imports))
         });
         let ((scalar, prepare), imports) = match defined {
@@ -459,7 +461,7 @@ pub fn disassemble(f: &Formula, mode: Mode) -> Result<(String, String), JitError
     {
         let mut guard = c.module.lock().map_err(|_| JitError::Internal("module lock poisoned".into()))?;
         let module = guard.as_mut().ok_or(JitError::Internal("module freed".into()))?;
-        let w = codegen::Build { ir: &c.ir, plan: &c.plan, imports: &c.imports, mode: c.mode, fma: host_fma() };
+        let w = codegen::Build { ir: &c.ir, plan: &c.plan, imports: &c.imports, mode: c.mode, fma: host_fma(), outline: codegen::outlines(&c.ir) };
         j.define_batch(module, &w)?;
     }
     let mut l = std::mem::take(&mut j.listing).into_iter();
