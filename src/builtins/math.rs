@@ -661,6 +661,9 @@ fn pow_specials<E: Emit>(e: &mut E, x: E::V, y: E::V, mag: E::V) -> E::V {
     e.select(unit, one, mag)
 }
 
+/// |y| from which e^(y·ln|x|) saturates for every |x| ≠ 1 (2^64·2^-53 > 745).
+const Y_CAP: f64 = 18446744073709551616.0; // 2^64
+
 /// |x| and y made safe for the general case: |x| finite and > 0 (else 2), |y| ≤ 2^64 (any larger |y| already
 /// saturates e^(y·ln|x|) for every |x| ≠ 1).
 fn pow_operands<E: Emit>(e: &mut E, x: E::V, y: E::V) -> (E::V, E::V) {
@@ -671,10 +674,9 @@ fn pow_operands<E: Emit>(e: &mut E, x: E::V, y: E::V) -> (E::V, E::V) {
     let ok = e.and(pos, fin);
     let two = e.konst(2.0);
     let axs = e.select(ok, ax, two);
-    let lim = 18446744073709551616.0; // 2^64
     let ay = e.abs(y);
-    let small = ltk(e, ay, lim);
-    let l = e.konst(lim);
+    let small = ltk(e, ay, Y_CAP);
+    let l = e.konst(Y_CAP);
     let capped = copysign(e, l, y);
     let ys = e.select(small, y, capped);
     (axs, ys)
@@ -698,7 +700,7 @@ fn pow_finish<E: Emit>(e: &mut E, x: E::V, y: E::V, mag: E::V) -> E::V {
     let pos = e.lt(zero, x);
     let fin = ltk(e, x, f64::INFINITY);
     let ay = e.abs(y);
-    let small = ltk(e, ay, 18446744073709551616.0);
+    let small = ltk(e, ay, Y_CAP);
     let normal = e.and(pos, fin);
     let normal = e.and(normal, small);
     let special = e.not(normal);

@@ -98,11 +98,7 @@ fn error_vs_precise(kernel: &crate::Kernel, params: &[f64]) -> (f64, f64) {
         } else if !want.is_finite() || !g.is_finite() {
             (f64::INFINITY, f64::INFINITY)
         } else {
-            let key = |x: f64| {
-                let b = x.to_bits() as i64;
-                if b < 0 { i64::MIN.wrapping_sub(b) } else { b }
-            };
-            (key(*g).abs_diff(key(want)) as f64, (g - want).abs() / want.abs().max(f64::MIN_POSITIVE))
+            (crate::numerics::robust::ulps(*g, want), (g - want).abs() / want.abs().max(f64::MIN_POSITIVE))
         };
         worst = (worst.0.max(u), worst.1.max(r));
     }

@@ -363,6 +363,11 @@ impl<L: Lanes> Translator<'_, '_, L> {
     fn library_call(&mut self, f: Builtin, args: &[Value]) -> Result<Value, JitError> {
         let callee = self.cx.callees[f as usize]
             .ok_or_else(|| JitError::Internal(format!("library function of `{}` was not imported", f.name())))?;
+        self.call_lanes(callee, args)
+    }
+
+    /// `callee` called on each lane of `args` (`F64` scalars), the results gathered into one value.
+    fn call_lanes(&mut self, callee: FuncRef, args: &[Value]) -> Result<Value, JitError> {
         let mut lanes = Vec::with_capacity(usize::from(L::LANES));
         for lane in 0..L::LANES {
             let vals: Vec<Value> = args.iter().map(|a| L::lane(self.b, *a, lane)).collect();
@@ -574,38 +579,19 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
         self.b.seal_block(join);
         out
     }
-    /// `any(m) ? per-lane (m ? libm(x) : r) : r`: the call is in a block of its own, skipped unless a lane needs it.
+    /// `any(m) ? (m ? libm(x) : r) : r`: the per-lane calls are in a [`Emit::rare`] block.
     fn fallback(&mut self, m: Value, x: Value, r: Value, f: Builtin) -> Value {
         let Some(callee) = self.cx.callees[f as usize] else {
             self.error = Some(JitError::Internal(format!("fallback of `{}` was not imported", f.name())));
             return r;
         };
-        let slow = self.b.create_block();
-        let join = self.b.create_block();
-        let out = self.b.append_block_param(join, L::TY);
-        let any = L::any(self.b, m);
-        self.b.ins().brif(any, slow, &[], join, &[BlockArg::Value(r)]);
-        self.b.switch_to_block(slow);
-        self.b.seal_block(slow);
-        let mut lanes = Vec::with_capacity(usize::from(L::LANES));
-        for lane in 0..L::LANES {
-            let xi = L::lane(self.b, x, lane);
-            let ri = L::lane(self.b, r, lane);
-            let inst = self.b.ins().call(callee, &[xi]);
-            let yi = self.b.inst_results(inst)[0];
-            let v = if L::LANES == 1 {
-                self.b.ins().select(m, yi, ri)
-            } else {
-                let mi = self.b.ins().extractlane(m, lane);
-                self.b.ins().select(mi, yi, ri)
-            };
-            lanes.push(v);
-        }
-        let v = L::from_lanes(self.b, &lanes);
-        self.b.ins().jump(join, &[BlockArg::Value(v)]);
-        self.b.switch_to_block(join);
-        self.b.seal_block(join);
-        out
+        self.rare(m, r, &mut |t| match t.call_lanes(callee, &[x]) {
+            Ok(y) => t.select(m, y, r),
+            Err(e) => {
+                t.error = Some(e);
+                r
+            }
+        })
     }
 }
 
