@@ -58,7 +58,7 @@ fn bench_eval(c: &mut Criterion) {
             b.iter(|| {
                 let cs = black_box(&columns);
                 for (i, o) in out.iter_mut().enumerate() {
-                    let x = [cs.cols[0][i], cs.cols[1][i], cs.cols[2][i], cs.cols[3][i], cs.cols[4][i]];
+                    let x = lobe::from_cosines([cs.cols[0][i], cs.cols[1][i], cs.cols[2][i], cs.cols[3][i], cs.cols[4][i]]);
                     *o = twin(&x, params);
                 }
                 black_box(&out);

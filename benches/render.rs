@@ -38,7 +38,7 @@ fn batch_ns(ev: &dyn Evaluator, params: &[f64]) -> f64 {
             c.push(0.05 + 0.95 * (seed >> 11) as f64 / (1u64 << 53) as f64);
         }
     }
-    let columns = Columns::new([&cols[0], &cols[1], &cols[2], &cols[3], &cols[4]]);
+    let columns = Columns::new(std::array::from_fn(|k| cols[k].as_slice()));
     let mut out = vec![0.0; N];
     let mut best = f64::INFINITY;
     for _ in 0..30 {

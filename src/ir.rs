@@ -29,10 +29,14 @@ impl NodeId {
     }
 }
 
-/// The geometric inputs of a BRDF: cosines between unit vectors.
+/// The geometric inputs of a BRDF: cosines between unit vectors, and the light and view directions in the
+/// local shading frame.
 ///
 /// VH (view·half, equal to LH) is an input because Cook–Torrance's geometry term needs it and it cannot be
-/// recovered from the other four without the full vectors.
+/// recovered from the other four without the full vectors. The direction components are expressed in the local
+/// frame, where the normal is N = +z and the tangent and bitangent are X = +x and Y = +y: so N, X and Y are
+/// constants, `dot(N, L)` is `Lz`, and a formula that reads directions needs only these six numbers. A renderer
+/// computes only the inputs a formula reads ([`Ir::used_inputs`]); cosine formulas never pay for a tangent frame.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Input {
     NL,
@@ -40,16 +44,43 @@ pub enum Input {
     NH,
     VR,
     VH,
+    Lx,
+    Ly,
+    Lz,
+    Vx,
+    Vy,
+    Vz,
 }
 
 /// Number of geometric inputs; kernels take them as `[f64; N_INPUTS]` in [`Input::ALL`] order.
-pub const N_INPUTS: usize = 5;
+pub const N_INPUTS: usize = 11;
 
 impl Input {
-    pub const ALL: [Input; N_INPUTS] = [Input::NL, Input::NV, Input::NH, Input::VR, Input::VH];
+    pub const ALL: [Input; N_INPUTS] = [
+        Input::NL,
+        Input::NV,
+        Input::NH,
+        Input::VR,
+        Input::VH,
+        Input::Lx,
+        Input::Ly,
+        Input::Lz,
+        Input::Vx,
+        Input::Vy,
+        Input::Vz,
+    ];
+    /// The cosine inputs of the small DSL (clamped to [0, 1] by its lowering).
+    pub const COSINES: [Input; 5] = [Input::NL, Input::NV, Input::NH, Input::VR, Input::VH];
+    /// The direction components in the local frame (never clamped: they range over [−1, 1]).
+    pub const DIRECTIONS: [Input; 6] = [Input::Lx, Input::Ly, Input::Lz, Input::Vx, Input::Vy, Input::Vz];
 
     pub fn index(self) -> usize {
         self as usize
+    }
+
+    /// Whether this is a component of L or V rather than a cosine.
+    pub fn is_direction(self) -> bool {
+        self.index() >= Input::Lx.index()
     }
 
     pub fn name(self) -> &'static str {
@@ -59,6 +90,12 @@ impl Input {
             Input::NH => "NH",
             Input::VR => "VR",
             Input::VH => "VH",
+            Input::Lx => "Lx",
+            Input::Ly => "Ly",
+            Input::Lz => "Lz",
+            Input::Vx => "Vx",
+            Input::Vy => "Vy",
+            Input::Vz => "Vz",
         }
     }
 
@@ -74,13 +111,26 @@ impl Input {
             Input::NH => "cosine between the normal and the half vector H = norm(L + V)",
             Input::VR => "cosine between the view direction and the mirrored light R = 2(N·L)N − L",
             Input::VH => "cosine between the view direction and the half vector (equals L·H)",
+            Input::Lx => "light direction, component along the tangent X (local frame)",
+            Input::Ly => "light direction, component along the bitangent Y (local frame)",
+            Input::Lz => "light direction, component along the normal N (local frame; equals N·L unclamped)",
+            Input::Vx => "view direction, component along the tangent X (local frame)",
+            Input::Vy => "view direction, component along the bitangent Y (local frame)",
+            Input::Vz => "view direction, component along the normal N (local frame; equals N·V unclamped)",
         }
     }
 }
 
+/// Kernel inputs from the five cosines alone, directions zero: for formulas that read only cosines.
+pub fn from_cosines(c: [f64; 5]) -> [f64; N_INPUTS] {
+    let mut x = [0.0; N_INPUTS];
+    x[..5].copy_from_slice(&c);
+    x
+}
+
 /// A set of inputs, as a bit mask; what a formula reads, so callers skip computing the rest.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-pub struct InputSet(pub u8);
+pub struct InputSet(pub u16);
 
 impl InputSet {
     pub fn contains(self, i: Input) -> bool {
@@ -97,6 +147,10 @@ impl InputSet {
     }
     pub fn is_empty(self) -> bool {
         self.0 == 0
+    }
+    /// Whether any component of L or V is read (then a caller needs the tangent frame).
+    pub fn reads_directions(self) -> bool {
+        Input::DIRECTIONS.iter().any(|i| self.contains(*i))
     }
 }
 
@@ -347,9 +401,28 @@ pub struct ParamDecl {
     pub hi: f64,
     /// Where it was declared; `None` for the implicit `n`.
     pub span: Option<Span>,
+    pub kind: ParamKind,
+}
+
+/// What a parameter is to the person editing it. Every parameter is one f64 to the kernels; the kind decides
+/// how it is shown, edited and exported (a slider, a check box, a colour picker).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum ParamKind {
+    #[default]
+    Float,
+    /// 0 (false) or 1 (true); range 0..1.
+    Bool,
+    /// Channel 0, 1 or 2 (r, g, b) of a colour parameter; the three are consecutive parameters named
+    /// `NAME.r`, `NAME.g`, `NAME.b`, each in 0..1.
+    Color(u8),
 }
 
 impl ParamDecl {
+    /// A float parameter declared nowhere in the source (the implicit `n`, tests, generated formulas).
+    pub fn float(name: &str, default: f64, lo: f64, hi: f64) -> ParamDecl {
+        ParamDecl { name: name.into(), default, lo, hi, span: None, kind: ParamKind::Float }
+    }
+
     /// Whether `v` is an allowed value: finite and inside the declared range. The one range check every
     /// caller uses (`--set`, scene `params`, checks that vary parameters).
     pub fn admits(&self, v: f64) -> bool {
@@ -375,9 +448,25 @@ pub struct Formula {
     pub file: String,
     /// The source text, kept so later stages can quote it.
     pub source: String,
+    /// For a formula with a colour result: its red, green and blue channels, each a whole scalar formula. The
+    /// formula itself is then the red channel. Every stage below the front end works on scalar formulas; what
+    /// shows colour (eval, render, energy) asks for [`Formula::channels`] before it compiles.
+    pub rgb: Option<Box<[Formula; 3]>>,
 }
 
 impl Formula {
+    /// The scalar formulas to compile: the formula itself, or its three colour channels.
+    pub fn channels(&self) -> Vec<Formula> {
+        match &self.rgb {
+            None => vec![self.clone()],
+            Some(c) => c.to_vec(),
+        }
+    }
+
+    pub fn is_rgb(&self) -> bool {
+        self.rgb.is_some()
+    }
+
     /// Default parameter values, in declaration order.
     pub fn default_params(&self) -> Vec<f64> {
         self.params.iter().map(|p| p.default).collect()

@@ -37,7 +37,7 @@ pub mod cli;
 pub use builtins::Mode;
 pub use backend::{Backend, Columns, Evaluator, Kernel};
 pub use base::diag::{Diagnostic, Diagnostics};
-pub use ir::{Formula, Input, N_INPUTS};
+pub use ir::{from_cosines, Formula, Input, N_INPUTS};
 
 use std::sync::Arc;
 use std::time::Instant;

@@ -216,7 +216,11 @@ pub fn export(f: &Formula, d: Dialect) -> String {
             Node::Neg(a) => format!("(-{})", t(a)),
             Node::Binary(op, a, b) => format!("({} {} {})", t(a), op.symbol(), t(b)),
             Node::Call(b, a) => {
-                let mut s = b.info().glsl.to_string();
+                let mut s = match d {
+                    Dialect::Glsl => b.info().glsl,
+                    Dialect::Wgsl => b.wgsl(),
+                }
+                .to_string();
                 for (k, arg) in a[..b.arity()].iter().enumerate() {
                     s = s.replace(&format!("{{{k}}}"), &t(*arg));
                 }

@@ -127,7 +127,7 @@ impl Evaluator for Interp {
 mod tests {
     use super::*;
     use crate::base::span::Span;
-    use crate::ir::{Input, Ir, Meta, ParamDecl};
+    use crate::ir::{Input, Ir, Meta, ParamDecl, ParamKind};
 
     fn blinn() -> Formula {
         let mut ir = Ir::new();
@@ -137,24 +137,31 @@ mod tests {
         let root = ir.call(Builtin::Pow, &[nh, n], s);
         Formula {
             meta: Meta::default(),
-            params: vec![ParamDecl { name: "n".into(), default: 50.0, lo: 1.0, hi: 1000.0, span: None }],
+            params: vec![ParamDecl { name: "n".into(), default: 50.0, lo: 1.0, hi: 1000.0, span: None, kind: ParamKind::Float }],
             ir,
             root,
             file: "blinn".into(),
             source: String::new(),
+            rgb: None,
         }
+    }
+
+    fn nh(v: f64) -> [f64; crate::N_INPUTS] {
+        let mut x = [0.0; crate::N_INPUTS];
+        x[Input::NH.index()] = v;
+        x
     }
 
     #[test]
     fn evaluates_blinn() {
         let i = Interp::new(&blinn());
-        let v = i.eval(&[0.0, 0.0, 0.9, 0.0, 0.0], &[2.0]);
+        let v = i.eval(&nh(0.9), &[2.0]);
         assert!((v - 0.81).abs() < 1e-15);
     }
 
     #[test]
     fn missing_param_is_nan_not_a_panic() {
         let i = Interp::new(&blinn());
-        assert!(i.eval(&[0.0, 0.0, 0.9, 0.0, 0.0], &[]).is_nan());
+        assert!(i.eval(&nh(0.9), &[]).is_nan());
     }
 }

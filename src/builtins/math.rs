@@ -1119,3 +1119,47 @@ pub fn tan<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
     let far = trig_far(e, x);
     e.fallback(far, x, res, Builtin::Tan)
 }
+
+/// The exact builtins of [`Lowering::Logic`](super::Lowering::Logic): comparisons as 0/1 values, the select,
+/// floor. Written in the same primitives as the rest of the library, so every backend runs one definition.
+pub mod logic {
+    use super::*;
+
+    /// A comparison's flag as a number: 1 where `m` holds, else 0.
+    pub fn flag<E: Emit>(e: &mut E, m: impl FnOnce(&mut E) -> E::M) -> E::V {
+        let m = m(e);
+        let one = e.konst(1.0);
+        let zero = e.konst(0.0);
+        e.select(m, one, zero)
+    }
+
+    /// `c != 0 ? a : b` (a NaN condition counts as true, as in C). Both values are computed; only the chosen
+    /// one reaches the result, so an infinite or NaN untaken branch cannot poison it as a 0/1 blend would.
+    pub fn select<E: Emit>(e: &mut E, c: E::V, a: E::V, b: E::V) -> E::V {
+        let zero = e.konst(0.0);
+        let off = e.eq(c, zero);
+        e.select(off, b, a)
+    }
+
+    /// The largest integer ≤ x, exactly (−0 stays −0; NaN and ±inf pass through), without a rounding
+    /// instruction: below 2^52, adding and subtracting 2^52 to |x| rounds it to the nearest integer, which is
+    /// then stepped down (x ≥ 0) or up (x < 0, as a magnitude) when it overshot.
+    pub fn floor<E: Emit>(e: &mut E, x: E::V) -> E::V {
+        let a = e.abs(x);
+        let big = e.konst(TWO52);
+        let t0 = e.add(a, big);
+        let t = e.sub(t0, big);
+        let one = e.konst(1.0);
+        let down = e.sub(t, one);
+        let up = e.add(t, one);
+        let over = e.lt(a, t);
+        let under = e.lt(t, a);
+        let pos = e.select(over, down, t);
+        let mag = e.select(under, up, t);
+        let neg = e.neg(mag);
+        let negative = sign_bit(e, x);
+        let r = e.select(negative, neg, pos);
+        let small = e.lt(a, big);
+        e.select(small, r, x)
+    }
+}

@@ -35,6 +35,12 @@ pub enum Builtin {
     Min,
     Max,
     Clamp,
+    Floor,
+    Lt,
+    Le,
+    Eq,
+    Ne,
+    Select,
 }
 
 /// How the JIT lowers a builtin.
@@ -44,6 +50,9 @@ pub enum Lowering {
     Inline,
     /// The library's straight-line code ([`math`]), emitted into the kernel in the kernel's lane type.
     Math,
+    /// Exact comparisons, selects and floor, written in the library's primitives ([`math::logic`]) and always
+    /// emitted inline (a compare and a blend: never worth a call).
+    Logic,
 }
 
 /// The C library's version of a builtin (Rust's `f64` methods: the platform libm).
@@ -99,6 +108,8 @@ pub struct BuiltinInfo {
     pub bound: Bound,
     /// GLSL spelling; `{0}`, `{1}`, `{2}` are the arguments.
     pub glsl: &'static str,
+    /// WGSL spelling where it differs from GLSL's (empty: the same).
+    pub wgsl: &'static str,
     /// One line for `lobe help` and hints.
     pub doc: &'static str,
 }
@@ -208,7 +219,7 @@ pub fn clamp(x: f64, lo: f64, hi: f64) -> f64 {
     fmin(fmax(x, lo), hi)
 }
 
-const TABLE: [BuiltinInfo; 14] = [
+const TABLE: [BuiltinInfo; 20] = [
     BuiltinInfo {
         builtin: Builtin::Pow,
         name: "pow",
@@ -218,6 +229,7 @@ const TABLE: [BuiltinInfo; 14] = [
         symbol: "",
         bound: Bound::math(2.0),
         glsl: "pow({0}, {1})",
+        wgsl: "",
         doc: "pow(x, y) = x^y; integer constant exponents become multiplications",
     },
     BuiltinInfo {
@@ -229,6 +241,7 @@ const TABLE: [BuiltinInfo; 14] = [
         symbol: "lobe_cos",
         bound: Bound::math(2.0),
         glsl: "cos({0})",
+        wgsl: "",
         doc: "cosine of an angle in radians",
     },
     BuiltinInfo {
@@ -240,6 +253,7 @@ const TABLE: [BuiltinInfo; 14] = [
         symbol: "lobe_sin",
         bound: Bound::math(2.0),
         glsl: "sin({0})",
+        wgsl: "",
         doc: "sine of an angle in radians",
     },
     BuiltinInfo {
@@ -251,6 +265,7 @@ const TABLE: [BuiltinInfo; 14] = [
         symbol: "lobe_tan",
         bound: Bound::math(3.0),
         glsl: "tan({0})",
+        wgsl: "",
         doc: "tangent of an angle in radians",
     },
     BuiltinInfo {
@@ -262,6 +277,7 @@ const TABLE: [BuiltinInfo; 14] = [
         symbol: "",
         bound: Bound::math(2.0),
         glsl: "acos(clamp({0}, -1.0, 1.0))",
+        wgsl: "",
         doc: "arc cosine in radians; the argument is clamped to [-1, 1]",
     },
     BuiltinInfo {
@@ -273,6 +289,7 @@ const TABLE: [BuiltinInfo; 14] = [
         symbol: "",
         bound: Bound::math(2.0),
         glsl: "asin(clamp({0}, -1.0, 1.0))",
+        wgsl: "",
         doc: "arc sine in radians; the argument is clamped to [-1, 1]",
     },
     BuiltinInfo {
@@ -284,6 +301,7 @@ const TABLE: [BuiltinInfo; 14] = [
         symbol: "",
         bound: Bound::math(2.0),
         glsl: "atan({0})",
+        wgsl: "",
         doc: "arc tangent in radians",
     },
     BuiltinInfo {
@@ -295,6 +313,7 @@ const TABLE: [BuiltinInfo; 14] = [
         symbol: "",
         bound: Bound::math(2.0),
         glsl: "exp({0})",
+        wgsl: "",
         doc: "e^x",
     },
     BuiltinInfo {
@@ -306,6 +325,7 @@ const TABLE: [BuiltinInfo; 14] = [
         symbol: "",
         bound: Bound::math(2.0),
         glsl: "log({0})",
+        wgsl: "",
         doc: "natural logarithm",
     },
     BuiltinInfo {
@@ -317,6 +337,7 @@ const TABLE: [BuiltinInfo; 14] = [
         symbol: "",
         bound: Bound::ROUNDED,
         glsl: "sqrt({0})",
+        wgsl: "",
         doc: "square root (NaN below 0)",
     },
     BuiltinInfo {
@@ -328,6 +349,7 @@ const TABLE: [BuiltinInfo; 14] = [
         symbol: "",
         bound: Bound::EXACT,
         glsl: "abs({0})",
+        wgsl: "",
         doc: "absolute value",
     },
     BuiltinInfo {
@@ -339,6 +361,7 @@ const TABLE: [BuiltinInfo; 14] = [
         symbol: "",
         bound: Bound::EXACT,
         glsl: "min({0}, {1})",
+        wgsl: "",
         doc: "smaller of two values (NaN if either is NaN)",
     },
     BuiltinInfo {
@@ -350,6 +373,7 @@ const TABLE: [BuiltinInfo; 14] = [
         symbol: "",
         bound: Bound::EXACT,
         glsl: "max({0}, {1})",
+        wgsl: "",
         doc: "larger of two values (NaN if either is NaN)",
     },
     BuiltinInfo {
@@ -361,12 +385,85 @@ const TABLE: [BuiltinInfo; 14] = [
         symbol: "",
         bound: Bound::EXACT,
         glsl: "clamp({0}, {1}, {2})",
+        wgsl: "",
         doc: "clamp(x, lo, hi) = min(max(x, lo), hi)",
+    },
+    BuiltinInfo {
+        builtin: Builtin::Floor,
+        name: "floor",
+        arity: 1,
+        lowering: Lowering::Logic,
+        libm: Libm::Exact,
+        symbol: "",
+        bound: Bound::EXACT,
+        glsl: "floor({0})",
+        wgsl: "",
+        doc: "largest integer not above x",
+    },
+    BuiltinInfo {
+        builtin: Builtin::Lt,
+        name: "lt",
+        arity: 2,
+        lowering: Lowering::Logic,
+        libm: Libm::Exact,
+        symbol: "",
+        bound: Bound::EXACT,
+        glsl: "float({0} < {1})",
+        wgsl: "f32({0} < {1})",
+        doc: "1 if a < b, else 0 (0 when either is NaN); what `a < b` and `b > a` mean",
+    },
+    BuiltinInfo {
+        builtin: Builtin::Le,
+        name: "le",
+        arity: 2,
+        lowering: Lowering::Logic,
+        libm: Libm::Exact,
+        symbol: "",
+        bound: Bound::EXACT,
+        glsl: "float({0} <= {1})",
+        wgsl: "f32({0} <= {1})",
+        doc: "1 if a <= b, else 0 (0 when either is NaN); what `a <= b` and `b >= a` mean",
+    },
+    BuiltinInfo {
+        builtin: Builtin::Eq,
+        name: "eq",
+        arity: 2,
+        lowering: Lowering::Logic,
+        libm: Libm::Exact,
+        symbol: "",
+        bound: Bound::EXACT,
+        glsl: "float({0} == {1})",
+        wgsl: "f32({0} == {1})",
+        doc: "1 if a == b, else 0 (0 when either is NaN)",
+    },
+    BuiltinInfo {
+        builtin: Builtin::Ne,
+        name: "ne",
+        arity: 2,
+        lowering: Lowering::Logic,
+        libm: Libm::Exact,
+        symbol: "",
+        bound: Bound::EXACT,
+        glsl: "float({0} != {1})",
+        wgsl: "f32({0} != {1})",
+        doc: "1 if a != b, else 0 (1 when either is NaN)",
+    },
+    BuiltinInfo {
+        builtin: Builtin::Select,
+        name: "select",
+        arity: 3,
+        lowering: Lowering::Logic,
+        libm: Libm::Exact,
+        symbol: "",
+        bound: Bound::EXACT,
+        glsl: "({0} != 0.0 ? {1} : {2})",
+        wgsl: "select({2}, {1}, {0} != 0.0)",
+        doc: "select(c, a, b) = a if c is true (not 0), else b; the untaken value never reaches the result",
     },
 ];
 
 impl Builtin {
-    pub const ALL: [Builtin; 14] = [
+    pub const ALL: [Builtin; 20] = [
         Builtin::Pow,
         Builtin::Cos,
         Builtin::Sin,
@@ -381,6 +478,12 @@ impl Builtin {
         Builtin::Min,
         Builtin::Max,
         Builtin::Clamp,
+        Builtin::Floor,
+        Builtin::Lt,
+        Builtin::Le,
+        Builtin::Eq,
+        Builtin::Ne,
+        Builtin::Select,
     ];
 
     pub fn info(self) -> &'static BuiltinInfo {
@@ -391,6 +494,15 @@ impl Builtin {
     }
     pub fn arity(self) -> usize {
         self.info().arity
+    }
+    /// The WGSL spelling (see [`BuiltinInfo::wgsl`]).
+    pub fn wgsl(self) -> &'static str {
+        let i = self.info();
+        if i.wgsl.is_empty() {
+            i.glsl
+        } else {
+            i.wgsl
+        }
     }
 
     pub fn from_name(name: &str) -> Option<Builtin> {
@@ -419,8 +531,8 @@ impl Builtin {
         }
     }
 
-    /// The library code of a [`Lowering::Math`] builtin on `args` (exactly `arity()` values), emitted through
-    /// `e`; `None` for the inline builtins, whose lowering is the backend's.
+    /// The library code of a [`Lowering::Math`] or [`Lowering::Logic`] builtin on `args` (exactly `arity()`
+    /// values), emitted through `e`; `None` for the inline builtins, whose lowering is the backend's.
     pub fn emit<E: math::Emit>(self, e: &mut E, mode: Mode, args: &[E::V]) -> Option<E::V> {
         use math::*;
         let fast = mode == Mode::Fast;
@@ -438,6 +550,15 @@ impl Builtin {
             Builtin::Acos => acos(e, x, mode),
             Builtin::Asin => asin(e, x, mode),
             Builtin::Atan => atan(e, x),
+            Builtin::Floor => logic::floor(e, x),
+            Builtin::Lt => logic::flag(e, |e| e.lt(x, args[1])),
+            Builtin::Le => logic::flag(e, |e| e.le(x, args[1])),
+            Builtin::Eq => logic::flag(e, |e| e.eq(x, args[1])),
+            Builtin::Ne => logic::flag(e, |e| {
+                let eq = e.eq(x, args[1]);
+                e.not(eq)
+            }),
+            Builtin::Select => logic::select(e, x, args[1], args[2]),
             Builtin::Sqrt | Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Clamp => return None,
         })
     }
@@ -474,6 +595,7 @@ impl Builtin {
             (Builtin::Ln, Mode::Precise) => ("lobe_ln_precise", Libm::F1(lobe_ln_precise)),
             (Builtin::Ln, Mode::Fast) => ("lobe_ln_fast", Libm::F1(lobe_ln_fast)),
             (Builtin::Sqrt | Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Clamp, _) => return None,
+            (Builtin::Floor | Builtin::Lt | Builtin::Le | Builtin::Eq | Builtin::Ne | Builtin::Select, _) => return None,
         })
     }
 
@@ -507,11 +629,12 @@ mod tests {
             match r.libm {
                 Libm::F1(_) => assert_eq!(r.arity, 1, "{}", r.name),
                 Libm::F2(_) => assert_eq!(r.arity, 2, "{}", r.name),
-                Libm::Exact => assert!(inline, "{}", r.name),
+                Libm::Exact => assert!(r.lowering != Lowering::Math, "{}", r.name),
             }
-            // The library emits exactly the Math rows.
+            // The library emits exactly the Math and Logic rows; only Math rows have an outlined version.
             let args = vec![0.5; r.arity];
             assert_eq!(b.emit(&mut math::Direct, Mode::Precise, &args).is_some(), !inline, "{}", r.name);
+            assert_eq!(b.outlined(Mode::Precise).is_some(), r.lowering == Lowering::Math, "{}", r.name);
             // Only the trigonometric functions fall back to the C library (for huge arguments).
             let trig = matches!(b, Builtin::Sin | Builtin::Cos | Builtin::Tan);
             assert_eq!(!r.symbol.is_empty(), trig, "{}", r.name);
@@ -526,6 +649,28 @@ mod tests {
         assert!(fmax(-0.0, 0.0).is_sign_positive());
         assert_eq!(clamp(2.0, 0.0, 1.0), 1.0);
         assert_eq!(clamp(-2.0, 0.0, 1.0), 0.0);
+    }
+
+    #[test]
+    fn logic_builtins_are_exact() {
+        let f = |b: Builtin, a: &[f64]| b.eval(a);
+        for (x, want) in [(2.5f64, 2.0f64), (-2.5, -3.0), (-0.0, -0.0), (0.3, 0.0), (-0.3, -1.0), (3.0, 3.0), (-7.0, -7.0), (1e300, 1e300)] {
+            assert_eq!(f(Builtin::Floor, &[x]).to_bits(), want.to_bits(), "floor({x})");
+        }
+        let x = 4503599627370495.5; // 2^52 − 0.5: the largest non-integer
+        assert_eq!(f(Builtin::Floor, &[x]), x.floor());
+        assert_eq!(f(Builtin::Floor, &[-x]), (-x).floor());
+        assert!(f(Builtin::Floor, &[f64::NAN]).is_nan());
+        assert_eq!(f(Builtin::Floor, &[f64::NEG_INFINITY]), f64::NEG_INFINITY);
+        assert_eq!(f(Builtin::Lt, &[1.0, 2.0]), 1.0);
+        assert_eq!(f(Builtin::Lt, &[f64::NAN, 2.0]), 0.0);
+        assert_eq!(f(Builtin::Le, &[2.0, 2.0]), 1.0);
+        assert_eq!(f(Builtin::Eq, &[-0.0, 0.0]), 1.0);
+        assert_eq!(f(Builtin::Ne, &[f64::NAN, f64::NAN]), 1.0);
+        // The untaken value, even NaN or infinite, never reaches the result.
+        assert_eq!(f(Builtin::Select, &[1.0, 3.0, f64::NAN]), 3.0);
+        assert_eq!(f(Builtin::Select, &[0.0, f64::INFINITY, 4.0]), 4.0);
+        assert_eq!(f(Builtin::Select, &[-0.0, 1.0, 4.0]), 4.0);
     }
 
     #[test]

@@ -263,7 +263,7 @@ pub(crate) mod tests {
     use crate::builtins::Builtin;
     use crate::numerics::twins::{self, Twin};
     use crate::base::span::Span;
-    use crate::ir::{Formula, Ir, Meta, ParamDecl};
+    use crate::ir::{Formula, Ir, Meta, ParamDecl, ParamKind};
     use clap::Parser;
     use std::sync::Arc;
 
@@ -278,9 +278,9 @@ pub(crate) mod tests {
         let n = ir.param(0, s);
         let p = ir.call(Builtin::Pow, &[c, n], s);
         let root = ir.call(Builtin::Max, &[p, z], s);
-        let mut params = vec![ParamDecl { name: "n".into(), default: 50.0, lo: 1.0, hi: 1000.0, span: None }];
-        params.extend(extra.iter().map(|&(name, default, lo, hi)| ParamDecl { name: name.into(), default, lo, hi, span: None }));
-        Formula { meta: Meta { name: Some("test".into()), citation: None }, params, ir, root, file: "t.brdf".into(), source: String::new() }
+        let mut params = vec![ParamDecl { name: "n".into(), default: 50.0, lo: 1.0, hi: 1000.0, span: None, kind: ParamKind::Float }];
+        params.extend(extra.iter().map(|&(name, default, lo, hi)| ParamDecl { name: name.into(), default, lo, hi, span: None, kind: ParamKind::Float }));
+        Formula { meta: Meta { name: Some("test".into()), citation: None }, params, ir, root, file: "t.brdf".into(), source: String::new(), rgb: None }
     }
 
     /// A kernel whose evaluator is a twin, with a formula declaring the twin's parameters and reading `input`.
@@ -319,7 +319,7 @@ pub(crate) mod tests {
             Arc::new(power_formula(Input::NH, &[])),
             Backend::Interp,
             crate::Mode::Precise,
-            Arc::new(crate::backend::FnEvaluator(|_: &[f64; 5], p: &[f64]| (p[0] + 2.0) / (2.0 * std::f64::consts::PI))),
+            Arc::new(crate::backend::FnEvaluator(|_: &[f64; crate::N_INPUTS], p: &[f64]| (p[0] + 2.0) / (2.0 * std::f64::consts::PI))),
             std::time::Duration::ZERO,
         );
         let v = json(&report(&args(&["--range", "1..40", "--against-expr", "x", "--json"]), &k, Some(&exact)).unwrap());
@@ -341,7 +341,7 @@ pub(crate) mod tests {
 
     #[test]
     fn zero_lobe_is_a_clear_error() {
-        let zero = Twin { name: "zero", params: &["n"], defaults: vec![50.0], ev: Box::new(crate::backend::FnEvaluator(|_: &[f64; 5], _: &[f64]| 0.0)) };
+        let zero = Twin { name: "zero", params: &["n"], defaults: vec![50.0], ev: Box::new(crate::backend::FnEvaluator(|_: &[f64; crate::N_INPUTS], _: &[f64]| 0.0)) };
         let k = twin_kernel(zero, Input::NH, &[]);
         let e = report(&args(&[]), &k, None).unwrap_err();
         assert!(e.render(false).contains("integral is zero; cannot normalise"));

@@ -12,7 +12,7 @@ use super::ast::{Ast, BinOp as AstOp, ExprId, ExprKind, Ident, Lit, StmtKind};
 use crate::base::diag::Diagnostic;
 use crate::base::span::Span;
 use crate::builtins::Builtin;
-use crate::ir::{BinOp, Formula, Input, Ir, Meta, NodeId, ParamDecl};
+use crate::ir::{BinOp, Formula, Input, Ir, Meta, NodeId, ParamDecl, ParamKind};
 use std::collections::HashMap;
 
 /// Default and range of the implicit specular exponent `n`.
@@ -78,13 +78,7 @@ pub fn lower(
     let mut lw = Lowerer {
         ast,
         ir: Ir::new(),
-        params: vec![ParamDecl {
-            name: "n".into(),
-            default: N_DEFAULT.0,
-            lo: N_DEFAULT.1,
-            hi: N_DEFAULT.2,
-            span: None,
-        }],
+        params: vec![ParamDecl::float("n", N_DEFAULT.0, N_DEFAULT.1, N_DEFAULT.2)],
         param_names: HashMap::from([("n", 0u16)]),
         lets: vec![],
         scope: HashMap::new(),
@@ -114,6 +108,7 @@ pub fn lower(
                 root,
                 file: file.to_string(),
                 source: src.to_string(),
+                rgb: None,
             })
         }
         _ => None,
@@ -238,6 +233,7 @@ impl<'a, 's> Lowerer<'a, 's> {
                 lo: lo.value,
                 hi: hi.value,
                 span: Some(s.span),
+                kind: ParamKind::Float,
             };
             if name.name == "n" {
                 self.params[0] = decl;

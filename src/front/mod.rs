@@ -30,6 +30,7 @@ pub mod ast;
 pub mod lex;
 pub mod lower;
 pub mod parse;
+pub mod values;
 
 use crate::ir::Formula;
 use crate::base::diag::{Diagnostic, Diagnostics, Severity};

@@ -90,7 +90,7 @@ impl AngleGrid {
 
     /// `ev` at every angle into `out` (one batched call; `out` has one slot per angle).
     pub fn eval_into(&self, ev: &dyn Evaluator, params: &[f64], out: &mut [f64]) {
-        let c = Columns::new([&self.cols[0], &self.cols[1], &self.cols[2], &self.cols[3], &self.cols[4]]);
+        let c = Columns::new(std::array::from_fn(|k| self.cols[k].as_slice()));
         ev.eval_batch(&c, params, out);
     }
 

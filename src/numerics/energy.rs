@@ -443,19 +443,19 @@ mod tests {
 
     #[test]
     fn bad_lobes_get_clear_errors() {
-        let zero = FnEvaluator(|_: &[f64; 5], _: &[f64]| 0.0);
+        let zero = FnEvaluator(|_: &[f64; crate::N_INPUTS], _: &[f64]| 0.0);
         let e = normalization_coef(&zero, &[50.0], Input::NH).unwrap_err();
         assert!(e.msg.contains("integral is zero; cannot normalise"), "{e}");
-        let pole = FnEvaluator(|x: &[f64; 5], _: &[f64]| 1.0 / (1.0 - x[2]));
+        let pole = FnEvaluator(|x: &[f64; crate::N_INPUTS], _: &[f64]| 1.0 / (1.0 - x[2]));
         let e = normalization_coef(&pole, &[50.0], Input::NH).unwrap_err();
         assert!(e.msg.contains("infinite at the normal"), "{e}");
-        let nan = FnEvaluator(|x: &[f64; 5], _: &[f64]| (x[2] - 0.5).sqrt());
+        let nan = FnEvaluator(|x: &[f64; crate::N_INPUTS], _: &[f64]| (x[2] - 0.5).sqrt());
         let e = normalization_coef(&nan, &[50.0], Input::NH).unwrap_err();
         assert!(e.msg.contains("NaN"), "{e}");
         let e = normalization_coef(twins::blinn().ev.as_ref(), &[f64::NAN], Input::NH).unwrap_err();
         assert!(e.msg.contains("finite"), "{e}");
         // A pole inside the hemisphere (not at the normal): not integrable.
-        let inner = FnEvaluator(|x: &[f64; 5], _: &[f64]| 1.0 / (x[2] - 0.5).abs());
+        let inner = FnEvaluator(|x: &[f64; crate::N_INPUTS], _: &[f64]| 1.0 / (x[2] - 0.5).abs());
         let e = normalization_coef(&inner, &[50.0], Input::NH).unwrap_err();
         assert!(e.msg.contains("does not converge"), "{e}");
     }
@@ -464,7 +464,7 @@ mod tests {
     fn a_nan_piece_at_the_endpoint_is_skipped_and_said() {
         // Beckmann as f64 computes it: NaN for c ≤ ~1e-77 (c⁴ underflows: ∞·0), true value 0 there.
         let m2 = 0.09;
-        let beck = FnEvaluator(move |x: &[f64; 5], _: &[f64]| {
+        let beck = FnEvaluator(move |x: &[f64; crate::N_INPUTS], _: &[f64]| {
             let c = x[2];
             1.0 / (m2 * c * c * c * c) * ((c * c - 1.0) / (m2 * c * c)).exp()
         });
@@ -474,7 +474,7 @@ mod tests {
         // Beckmann's lobe coefficient is 1/π: ∫₀¹ D(c)·c dc = 1/2 for every m.
         assert!((r.coef() * PI - 1.0).abs() < 1e-9, "{}", r.coef());
         // A NaN piece whose edge value is not negligible is an error.
-        let bad = FnEvaluator(|x: &[f64; 5], _: &[f64]| if x[2] < 1e-3 { f64::NAN } else { 1.0 });
+        let bad = FnEvaluator(|x: &[f64; crate::N_INPUTS], _: &[f64]| if x[2] < 1e-3 { f64::NAN } else { 1.0 });
         assert!(lobe_integral(&bad, &[1.0], Input::NH).unwrap_err().msg.contains("not negligible"));
     }
 
@@ -488,7 +488,7 @@ mod tests {
 
     #[test]
     fn lambert_albedo_is_one_at_every_angle() {
-        let lambert = FnEvaluator(|_: &[f64; 5], _: &[f64]| 1.0 / PI);
+        let lambert = FnEvaluator(|_: &[f64; crate::N_INPUTS], _: &[f64]| 1.0 / PI);
         for d in [0.0, 30.0, 60.0, 85.0, 89.9] {
             let r = albedo(&lambert, &[], f64::to_radians(d)).unwrap();
             assert!((r - 1.0).abs() < 1e-7, "θ={d}: {r}");
@@ -514,7 +514,7 @@ mod tests {
         assert!(full.albedo.last().unwrap().1 < 0.6 * full.albedo_max);
         assert!(full.reciprocity.max_rel < 1e-12, "{:?}", full.reciprocity);
         // NL·VR^n is not reciprocal.
-        let nonrec = FnEvaluator(|x: &[f64; 5], p: &[f64]| x[0] * x[3].max(0.0).powf(p[0]));
+        let nonrec = FnEvaluator(|x: &[f64; crate::N_INPUTS], p: &[f64]| x[0] * x[3].max(0.0).powf(p[0]));
         assert!(reciprocity(&nonrec, &[20.0]).max_rel > 0.5);
     }
 }

@@ -360,7 +360,7 @@ mod tests {
     #[test]
     fn nelder_mead_recovers_two_parameters() {
         // F = p1·c^(p2·n) against Blinn: exact at p1 = 1, p2 = 1.
-        let f = FnEvaluator(|x: &[f64; 5], p: &[f64]| p[1] * x[2].max(0.0).powf(p[2] * p[0]));
+        let f = FnEvaluator(|x: &[f64; crate::N_INPUTS], p: &[f64]| p[1] * x[2].max(0.0).powf(p[2] * p[0]));
         let b = twins::blinn();
         let free = [
             FreeParam { index: 1, name: "s".into(), lo: 0.5, hi: 1.5, step: Some(0.25) },
@@ -371,9 +371,9 @@ mod tests {
         assert_eq!(r.best[0].score, 0.0);
         assert_eq!((r.best[0].params[1], r.best[0].params[2]), (1.0, 1.0));
         // Off-grid optimum: exponent 1.1 is not on the 0.25 grid; the refinement finds it.
-        let g = FnEvaluator(|x: &[f64; 5], p: &[f64]| x[2].max(0.0).powf(1.1 * p[0]));
+        let g = FnEvaluator(|x: &[f64; crate::N_INPUTS], p: &[f64]| x[2].max(0.0).powf(1.1 * p[0]));
         let free = [FreeParam { index: 1, name: "e".into(), lo: 0.5, hi: 1.5, step: Some(0.25) }];
-        let f2 = FnEvaluator(|x: &[f64; 5], p: &[f64]| x[2].max(0.0).powf(p[1] * p[0]));
+        let f2 = FnEvaluator(|x: &[f64; crate::N_INPUTS], p: &[f64]| x[2].max(0.0).powf(p[1] * p[0]));
         let r = fit(&f2, &[1.0, 1.0], Input::NH, &g, &[1.0], Input::NH, &free, &opts, &|| {}).unwrap();
         assert!(r.best[0].refined && (r.best[0].params[1] - 1.1).abs() < 1e-4, "{:?}", r.best[0]);
     }
@@ -395,7 +395,7 @@ mod tests {
     fn a_nan_anywhere_scores_infinity() {
         // NaN at one n in the middle of the sweep (not only at the last one) makes every metric +inf.
         let b = twins::blinn();
-        let f = FnEvaluator(|x: &[f64; 5], p: &[f64]| if p[0] == 5.0 { f64::NAN } else { x[2].max(0.0).powf(p[0]) });
+        let f = FnEvaluator(|x: &[f64; crate::N_INPUTS], p: &[f64]| if p[0] == 5.0 { f64::NAN } else { x[2].max(0.0).powf(p[0]) });
         for metric in [Metric::MeanAbs, Metric::MaxAbs, Metric::Epicenter] {
             let s = Scorer::new(&f, Input::NH, b.ev.as_ref(), &[1.0], Input::NH, metric, 20).score(&[1.0]);
             assert_eq!(s, f64::INFINITY, "{metric:?}");

@@ -99,8 +99,11 @@ impl std::error::Error for CheckError {}
 
 /// The inputs for lobe angle `c = cos θ` under the lobe convention (module docs); `lobe` is additionally set
 /// to `c` (a no-op for NH, VR and NV).
+///
+/// The directions are L = N and V at angle θ = acos c in the x–z plane, so NV = VR = c as the cosines say.
 pub fn lobe_inputs(c: f64, lobe: Input) -> [f64; N_INPUTS] {
-    let mut x = [1.0, c, c, c, (0.5 * (1.0 + c)).max(0.0).sqrt()];
+    let s = (1.0 - c * c).max(0.0).sqrt();
+    let mut x = [1.0, c, c, c, (0.5 * (1.0 + c)).max(0.0).sqrt(), 0.0, 0.0, 1.0, s, 0.0, c];
     x[lobe.index()] = c;
     x
 }
@@ -134,7 +137,7 @@ pub fn dir(theta: f64, phi: f64) -> V3 {
     [theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()]
 }
 
-/// The five inputs from real geometry: N = +z, unit L and V; H = norm(L + V), R = 2(N·L)N − L.
+/// Every input from real geometry in the local frame (N = +z, X = +x, Y = +y), unit L and V; H = norm(L + V), R = 2(N·L)N − L.
 /// When V = −L (H undefined) NH and VH are 0.
 pub fn inputs_from_dirs(l: V3, v: V3) -> [f64; N_INPUTS] {
     let nl = l[2];
@@ -143,7 +146,7 @@ pub fn inputs_from_dirs(l: V3, v: V3) -> [f64; N_INPUTS] {
     let hl = dot(h, h).sqrt();
     let (nh, vh) = if hl > 0.0 { (h[2] / hl, dot(v, h) / hl) } else { (0.0, 0.0) };
     let r = [-l[0], -l[1], 2.0 * nl - l[2]];
-    [nl, nv, nh, dot(v, r), vh]
+    [nl, nv, nh, dot(v, r), vh, l[0], l[1], l[2], v[0], v[1], v[2]]
 }
 
 /// Checks parameter values against declarations (range and finiteness), for checks that vary them.

@@ -50,7 +50,7 @@ mod tests {
 
     #[test]
     fn phong_coefficient_is_n_plus_2_over_2pi() {
-        let ev = FnEvaluator(|x: &[f64; 5], p: &[f64]| x[3].clamp(0.0, 1.0).powf(p[0]));
+        let ev = FnEvaluator(|x: &[f64; crate::N_INPUTS], p: &[f64]| x[3].clamp(0.0, 1.0).powf(p[0]));
         let mut vr = InputSet::default();
         vr.insert(Input::VR);
         for n in [1.0, 10.0, 100.0] {
@@ -58,8 +58,8 @@ mod tests {
             let exact = (n + 2.0) / (2.0 * std::f64::consts::PI);
             assert!((c - exact).abs() / exact < 1e-6, "{n}: {c} vs {exact}");
         }
-        assert!(coefficient(&FnEvaluator(|_: &[f64; 5], _: &[f64]| 0.0), vr, &[1.0]).is_err());
-        let tiny = FnEvaluator(|x: &[f64; 5], p: &[f64]| x[3].clamp(0.0, 1.0).powf(p[0]) * 1e-300 * 1e-10);
+        assert!(coefficient(&FnEvaluator(|_: &[f64; crate::N_INPUTS], _: &[f64]| 0.0), vr, &[1.0]).is_err());
+        let tiny = FnEvaluator(|x: &[f64; crate::N_INPUTS], p: &[f64]| x[3].clamp(0.0, 1.0).powf(p[0]) * 1e-300 * 1e-10);
         assert!(coefficient(&tiny, vr, &[50.0]).unwrap_err().msg.contains("overflows"));
     }
 }

@@ -239,7 +239,7 @@ pub fn sweep(ev: &dyn Evaluator, used: InputSet, decls: &[ParamDecl], opts: &Swe
                     cat.push(worst);
                 }
                 let mut out = vec![0.0; (end - j) as usize];
-                let c = Columns::new([&cols[0], &cols[1], &cols[2], &cols[3], &cols[4]]);
+                let c = Columns::new(std::array::from_fn(|k| cols[k].as_slice()));
                 ev.eval_batch(&c, &params, &mut out);
                 for (row, &y) in out.iter().enumerate() {
                     let s = &mut stats[cat[row]];
@@ -298,32 +298,32 @@ mod tests {
     use super::*;
     use crate::base::span::Span;
     use crate::backend::interp::Interp;
-    use crate::ir::{BinOp, Input, Ir, Meta};
+    use crate::ir::{BinOp, Input, Ir, Meta, ParamKind};
     use crate::backend::FnEvaluator;
 
     fn n_decl() -> ParamDecl {
-        ParamDecl { name: "n".into(), default: 50.0, lo: 1.0, hi: 1000.0, span: None }
+        ParamDecl { name: "n".into(), default: 50.0, lo: 1.0, hi: 1000.0, span: None, kind: ParamKind::Float }
     }
 
     #[test]
     fn extent_finds_the_underflow_region_of_beckmann() {
-        let beck = crate::backend::FnEvaluator(|x: &[f64; 5], _: &[f64]| {
+        let beck = crate::backend::FnEvaluator(|x: &[f64; crate::N_INPUTS], _: &[f64]| {
             let c = x[2];
             1.0 / (0.09 * c * c * c * c) * ((c * c - 1.0) / (0.09 * c * c)).exp()
         });
-        let x = [0.5, 0.5, 1e-300, 0.5, 0.5];
+        let x = crate::from_cosines([0.5, 0.5, 1e-300, 0.5, 0.5]);
         let (lo, hi) = extent(&beck, &x, &[], 2, f64::is_nan).unwrap();
         assert_eq!(lo, 0.0);
         // c⁴·0.09 underflows to 0 below ~1.2e-77 (then 1/0 · exp(−∞) = NaN).
         assert!(hi > 1e-78 && hi < 1e-76, "{hi:e}");
-        assert!(beck.eval(&[0.5, 0.5, hi, 0.5, 0.5], &[]).is_nan());
-        assert!(!beck.eval(&[0.5, 0.5, hi * 1.01, 0.5, 0.5], &[]).is_nan());
+        assert!(beck.eval(&crate::from_cosines([0.5, 0.5, hi, 0.5, 0.5]), &[]).is_nan());
+        assert!(!beck.eval(&crate::from_cosines([0.5, 0.5, hi * 1.01, 0.5, 0.5]), &[]).is_nan());
     }
 
     #[test]
     fn finds_nan_inf_and_negatives_in_the_right_regions() {
         // sqrt(NH − 0.5) is NaN for NH < 0.5; 1/NL is inf at NL = ±0; NH − 0.25 is negative below 0.25.
-        let f = FnEvaluator(|x: &[f64; 5], p: &[f64]| (x[2] - 0.5).sqrt() * p[0] / x[0]);
+        let f = FnEvaluator(|x: &[f64; crate::N_INPUTS], p: &[f64]| (x[2] - 0.5).sqrt() * p[0] / x[0]);
         let mut used = InputSet::default();
         used.insert(Input::NH);
         used.insert(Input::NL);
@@ -336,7 +336,7 @@ mod tests {
         let ex = zero.first_inf.as_ref().unwrap();
         assert_eq!(ex.inputs[0], 0.0);
         assert!(ex.inputs[2] > 0.5);
-        let neg = FnEvaluator(|x: &[f64; 5], _: &[f64]| x[2] - 0.25);
+        let neg = FnEvaluator(|x: &[f64; crate::N_INPUTS], _: &[f64]| x[2] - 0.25);
         let mut used = InputSet::default();
         used.insert(Input::NH);
         let r = sweep(&neg, used, &[n_decl()], &SweepOptions::default());
@@ -347,7 +347,7 @@ mod tests {
 
     #[test]
     fn large_domains_are_subsampled_within_budget() {
-        let f = FnEvaluator(|x: &[f64; 5], _: &[f64]| x.iter().sum::<f64>());
+        let f = FnEvaluator(|x: &[f64; crate::N_INPUTS], _: &[f64]| x.iter().sum::<f64>());
         let all = InputSet(0b11111);
         let opts = SweepOptions { max_evals: 100_000, ..Default::default() };
         let r = sweep(&f, all, &[n_decl()], &opts);
@@ -368,7 +368,7 @@ mod tests {
         let raw = ir.bin(BinOp::Sub, p, h, s);
         let z = ir.konst(0.0, s);
         let root = ir.call(Builtin::Max, &[raw, z], s);
-        let f = Formula { meta: Meta::default(), params: vec![n_decl()], ir, root, file: "t".into(), source: String::new() };
+        let f = Formula { meta: Meta::default(), params: vec![n_decl()], ir, root, file: "t".into(), source: String::new(), rgb: None };
         let used = f.used_inputs();
         let clamped = sweep(&Interp::new(&f), used, &f.params, &SweepOptions::default());
         assert_eq!(clamped.total.negative, 0);

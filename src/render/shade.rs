@@ -64,7 +64,7 @@ struct Group {
     q: [Vec<u8>; 3],
     /// The kernel batch: group positions of the evaluated pixels, their inputs, and F.
     idx: Vec<u32>,
-    cols: [Vec<f64>; 5],
+    cols: [Vec<f64>; crate::N_INPUTS],
     out: Vec<f64>,
 }
 
@@ -340,7 +340,7 @@ fn kernel(g: &mut Group, plan: &ShadingPlan, ev: &dyn Evaluator, params: &[f64],
         }
     }
     let out = fit(&mut g.out, count);
-    let cols = Columns::new([&g.cols[0], &g.cols[1], &g.cols[2], &g.cols[3], &g.cols[4]]);
+    let cols = Columns::new(std::array::from_fn(|k| g.cols[k].as_slice()));
     let t = Instant::now();
     ev.eval_batch(&cols, params, out);
     let ns = t.elapsed().as_nanos() as u64;

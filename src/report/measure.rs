@@ -73,7 +73,8 @@ impl Measurement {
     }
 }
 
-/// Deterministic cosines in [0, 1] (xorshift64*), so runs are comparable.
+/// Deterministic points (xorshift64*), so runs are comparable: the five cosines independent in [0, 1], and L, V
+/// unit directions of the upper hemisphere (uniform in cos θ and φ) for formulas that read directions.
 pub fn sample_points(n: usize, seed: u64) -> Vec<[f64; N_INPUTS]> {
     let mut s = seed.max(1);
     let mut next = move || {
@@ -82,7 +83,23 @@ pub fn sample_points(n: usize, seed: u64) -> Vec<[f64; N_INPUTS]> {
         s ^= s >> 27;
         (s.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
     };
-    (0..n).map(|_| std::array::from_fn(|_| next())).collect()
+    (0..n)
+        .map(|_| {
+            let mut x = [0.0; N_INPUTS];
+            for c in &mut x[..5] {
+                *c = next();
+            }
+            let mut dir = || {
+                let (z, phi) = (next(), std::f64::consts::TAU * next());
+                let r = (1.0 - z * z).max(0.0).sqrt();
+                [r * phi.cos(), r * phi.sin(), z]
+            };
+            let (l, v) = (dir(), dir());
+            x[5..8].copy_from_slice(&l);
+            x[8..].copy_from_slice(&v);
+            x
+        })
+        .collect()
 }
 
 fn time_per_eval(samples: usize, evals: usize, mut pass: impl FnMut()) -> Timing {
@@ -147,7 +164,12 @@ mod tests {
     #[test]
     fn sample_points_are_cosines() {
         let p = sample_points(1000, 7);
-        assert!(p.iter().flatten().all(|v| (0.0..1.0).contains(v)));
+        assert!(p.iter().all(|x| x[..5].iter().all(|v| (0.0..1.0).contains(v))));
+        for x in &p {
+            for d in [&x[5..8], &x[8..]] {
+                assert!((d.iter().map(|c| c * c).sum::<f64>() - 1.0).abs() < 1e-12 && d[2] >= 0.0);
+            }
+        }
         assert_ne!(p[0], p[1]);
     }
 }

@@ -105,6 +105,8 @@ pub fn cost(f: &Formula) -> f64 {
                 Builtin::Sqrt => 3.0,
                 Builtin::Abs | Builtin::Min | Builtin::Max => 1.0,
                 Builtin::Clamp => 2.0,
+                Builtin::Lt | Builtin::Le | Builtin::Eq | Builtin::Ne | Builtin::Select => 2.0,
+                Builtin::Floor => 6.0,
                 _ => 20.0,
             },
         }

@@ -219,7 +219,8 @@ pub fn bake_only(f: &Formula, bake: &[(usize, f64)]) -> Formula {
         map.push(ir.push(n, f.ir.span(id)));
     }
     let (ir, root) = ir.compact(map[f.root.index()]);
-    Formula { ir, root, ..f.clone() }
+    let rgb = f.rgb.as_ref().map(|c| Box::new(c.each_ref().map(|g| bake_only(g, bake))));
+    Formula { ir, root, rgb, ..f.clone() }
 }
 
 /// Simplifies with the default [`Policy`]; baked parameters (index, value) become constants first.
@@ -271,6 +272,8 @@ pub fn simplify_with(f: &Formula, bake: &[(usize, f64)], policy: &Policy) -> (Fo
         root,
         file: f.file.clone(),
         source: f.source.clone(),
+        // Each channel is simplified on its own; the report is the red channel's (the formula's own root).
+        rgb: f.rgb.as_ref().map(|c| Box::new(c.each_ref().map(|g| simplify_with(g, bake, policy).0))),
     };
     (out, report)
 }

@@ -226,6 +226,18 @@ impl Range {
             Builtin::Min => a.min(args[1]),
             Builtin::Max => a.max(args[1]),
             Builtin::Clamp => a.max(args[1]).min(args[2]),
+            Builtin::Floor => Range::new(a.lo.floor(), a.hi.floor(), a.nan, a.negz),
+            Builtin::Lt | Builtin::Le | Builtin::Eq | Builtin::Ne => Range::new(0.0, 1.0, false, false),
+            Builtin::Select => {
+                let (b, c) = (args[1], args[2]);
+                let union = Range::new(b.lo.min(c.lo), b.hi.max(c.hi), b.nan || c.nan, b.negz || c.negz);
+                match konst[0] {
+                    Some(k) if k != 0.0 => b,
+                    Some(_) => c,
+                    None if !a.contains_zero() => b,
+                    None => union,
+                }
+            }
             Builtin::Pow => Range::pow(a, args[1], konst.get(1).copied().flatten()),
         }
     }

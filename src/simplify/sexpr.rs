@@ -7,7 +7,7 @@
 
 use crate::builtins::Builtin;
 use crate::base::span::Span;
-use crate::ir::{BinOp, Formula, Input, Ir, Meta, Node, NodeId, ParamDecl};
+use crate::ir::{BinOp, Formula, Input, Ir, Meta, Node, NodeId, ParamDecl, ParamKind};
 
 /// Parameters beyond the implicit `n` (`n = 50 in 1..1000` unless listed): `(name, default, lo, hi)`.
 pub type ParamSpec<'a> = (&'a str, f64, f64, f64);
@@ -23,9 +23,9 @@ pub fn formula_literal(src: &str, params: &[ParamSpec]) -> Result<Formula, Strin
 }
 
 fn build(src: &str, params: &[ParamSpec], lowered: bool) -> Result<Formula, String> {
-    let mut decls = vec![ParamDecl { name: "n".into(), default: 50.0, lo: 1.0, hi: 1000.0, span: None }];
+    let mut decls = vec![ParamDecl { name: "n".into(), default: 50.0, lo: 1.0, hi: 1000.0, span: None, kind: ParamKind::Float }];
     for &(name, default, lo, hi) in params {
-        let d = ParamDecl { name: name.into(), default, lo, hi, span: None };
+        let d = ParamDecl { name: name.into(), default, lo, hi, span: None, kind: ParamKind::Float };
         match decls.iter_mut().find(|p| p.name == name) {
             Some(p) => *p = d,
             None => decls.push(d),
@@ -44,7 +44,7 @@ fn build(src: &str, params: &[ParamSpec], lowered: bool) -> Result<Formula, Stri
         raw
     };
     let ir = b.ir;
-    Ok(Formula { meta: Meta::default(), params: decls, ir, root, file: "sexpr".into(), source: src.into() })
+    Ok(Formula { meta: Meta::default(), params: decls, ir, root, file: "sexpr".into(), source: src.into(), rgb: None })
 }
 
 fn tokens(src: &str) -> Vec<(String, Span)> {

@@ -30,9 +30,9 @@ fn fasteval_spellings_evaluate_to_the_catalogue_formulas() {
     let grid: Vec<[f64; N_INPUTS]> = (0..=STEPS)
         .map(|i| {
             let t = i as f64 / STEPS as f64;
-            [t, 1.0 - t, t, (t * 3.0).fract(), (t * 7.0).fract()]
+            lobe::from_cosines([t, 1.0 - t, t, (t * 3.0).fract(), (t * 7.0).fract()])
         })
-        .chain((0..=STEPS).map(|i| [0.5, 0.5, 1.0 - (i as f64 / STEPS as f64).powi(4), 1.0 - i as f64 / STEPS as f64, 0.5]))
+        .chain((0..=STEPS).map(|i| lobe::from_cosines([0.5, 0.5, 1.0 - (i as f64 / STEPS as f64).powi(4), 1.0 - i as f64 / STEPS as f64, 0.5])))
         .collect();
     for e in BENCHED {
         let k = e.kernel(Backend::Interp);

@@ -11,7 +11,7 @@
 
 use lobe::builtins::Builtin;
 use lobe::base::span::Span;
-use lobe::ir::{BinOp, Formula, Input, Ir, Meta, NodeId, ParamDecl, N_INPUTS};
+use lobe::ir::{BinOp, Formula, Input, Ir, Meta, NodeId, ParamDecl, ParamKind, N_INPUTS};
 use lobe::{compile_formula, Backend, Columns, Evaluator, Kernel, Mode, Options};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestCaseError, TestRunner};
@@ -101,7 +101,7 @@ const N_PARAMS: u16 = 3;
 fn params() -> Vec<ParamDecl> {
     ["n", "a", "m"]
         .iter()
-        .map(|n| ParamDecl { name: (*n).into(), default: 2.0, lo: -f64::MAX, hi: f64::MAX, span: None })
+        .map(|n| ParamDecl { name: (*n).into(), default: 2.0, lo: -f64::MAX, hi: f64::MAX, span: None, kind: ParamKind::Float })
         .collect()
 }
 
@@ -113,7 +113,7 @@ fn formula(e: &E, policy: bool) -> Formula {
         let z = ir.konst(0.0, S);
         root = ir.call(Builtin::Max, &[root, z], S);
     }
-    Formula { meta: Meta::default(), params: params(), ir, root, file: "random.brdf".into(), source: String::new() }
+    Formula { meta: Meta::default(), params: params(), ir, root, file: "random.brdf".into(), source: String::new(), rgb: None }
 }
 
 const SPECIAL: [f64; 19] = [
@@ -168,17 +168,17 @@ fn points(random: &[[f64; N_INPUTS]]) -> Vec<[f64; N_INPUTS]> {
     let up = f64::from_bits(1f64.to_bits() + 1);
     let down = f64::from_bits(1f64.to_bits() - 1);
     let mut v = vec![
-        [0.0; 5],
-        [1.0; 5],
-        [up; 5],
-        [down; 5],
-        [1e-300; 5],
-        [5e-324; 5],
-        [-0.0; 5],
-        [1e-8, 0.5, 0.999_999_99, 1.0, 0.7],
-        [0.3, 1e-8, 1.0, down, 0.2],
-        [1.0, 1.0, up, -1e-17, 1e-8],
-        [-0.5, 1.5, 2.0, -2.0, 0.5],
+        [0.0; N_INPUTS],
+        [1.0; N_INPUTS],
+        [up; N_INPUTS],
+        [down; N_INPUTS],
+        [1e-300; N_INPUTS],
+        [5e-324; N_INPUTS],
+        [-0.0; N_INPUTS],
+        lobe::from_cosines([1e-8, 0.5, 0.999_999_99, 1.0, 0.7]),
+        lobe::from_cosines([0.3, 1e-8, 1.0, down, 0.2]),
+        lobe::from_cosines([1.0, 1.0, up, -1e-17, 1e-8]),
+        lobe::from_cosines([-0.5, 1.5, 2.0, -2.0, 0.5]),
     ];
     v.extend_from_slice(random);
     v
@@ -255,7 +255,7 @@ fn every_builtin_on_dense_inputs() {
     let pts: Vec<[f64; N_INPUTS]> = (0..1000)
         .map(|i| {
             let t = i as f64 / 999.0;
-            [t, 1.0 - t, t * t, 2.0 * t - 1.0, (t * 7.0).fract()]
+            lobe::from_cosines([t, 1.0 - t, t * t, 2.0 * t - 1.0, (t * 7.0).fract()])
         })
         .collect();
     for f in Builtin::ALL {

@@ -63,7 +63,7 @@ fn normalised_phong_never_exceeds_unit_albedo() {
     // pbrt-style furnace check: Phong scaled by (n+2)/2π has ρ(0) = 1 and loses energy towards grazing.
     for n in [1.0, 30.0, 300.0] {
         let t = twins::phong();
-        let scaled = lobe::backend::FnEvaluator(move |x: &[f64; 5], p: &[f64]| (p[0] + 2.0) / (2.0 * PI) * t.ev.eval(x, p));
+        let scaled = lobe::backend::FnEvaluator(move |x: &[f64; lobe::N_INPUTS], p: &[f64]| (p[0] + 2.0) / (2.0 * PI) * t.ev.eval(x, p));
         let full = full_energy(&scaled, &[n]).unwrap();
         assert!((full.albedo[0].1 - 1.0).abs() < 1e-6, "n={n}: {}", full.albedo[0].1);
         assert!(full.albedo.iter().all(|r| r.1 < 1.0 + 1e-6), "n={n}");

@@ -8,13 +8,13 @@ use lobe::backend::interp::Interp;
 use lobe::{Evaluator, Formula};
 
 /// Inputs in NL, NV, NH, VR, VH order.
-const X: [f64; 5] = [0.3, 0.6, 0.9, 0.7, 0.8];
+const X: [f64; lobe::N_INPUTS] = [0.3, 0.6, 0.9, 0.7, 0.8, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
 
 fn formula(src: &str) -> Formula {
     parse("t.brdf", src).unwrap_or_else(|d| panic!("{src:?} was rejected:\n{d}"))
 }
 
-fn eval_with(src: &str, x: [f64; 5], params: &[f64]) -> f64 {
+fn eval_with(src: &str, x: [f64; lobe::N_INPUTS], params: &[f64]) -> f64 {
     Interp::new(&formula(src)).eval(&x, params)
 }
 
@@ -52,9 +52,9 @@ fn precedence_and_associativity() {
 
 #[test]
 fn inputs_are_clamped_to_the_unit_interval_and_the_root_at_zero() {
-    assert_eq!(eval_with("NH", [0.0, 0.0, 1.5, 0.0, 0.0], &[50.0]), 1.0);
-    assert_eq!(eval_with("NH + 0.25", [0.0, 0.0, -0.5, 0.0, 0.0], &[50.0]), 0.25);
-    assert_eq!(eval_with("NH - 1", [0.0, 0.0, 0.5, 0.0, 0.0], &[50.0]), 0.0);
+    assert_eq!(eval_with("NH", lobe::from_cosines([0.0, 0.0, 1.5, 0.0, 0.0]), &[50.0]), 1.0);
+    assert_eq!(eval_with("NH + 0.25", lobe::from_cosines([0.0, 0.0, -0.5, 0.0, 0.0]), &[50.0]), 0.25);
+    assert_eq!(eval_with("NH - 1", lobe::from_cosines([0.0, 0.0, 0.5, 0.0, 0.0]), &[50.0]), 0.0);
     // Each input reads its own column.
     assert!(close(eval("NL + 10*NV + 100*NH + 1000*VR + 10000*VH"), 0.3 + 6.0 + 90.0 + 700.0 + 8000.0));
     assert!(close(eval("pi"), std::f64::consts::PI));
@@ -327,7 +327,7 @@ fn gen(r: &mut Rng, depth: u32) -> E {
 }
 
 /// Independent reference semantics, straight from `std` (inputs are already in [0, 1]).
-fn value(e: &E, x: &[f64; 5]) -> f64 {
+fn value(e: &E, x: &[f64; lobe::N_INPUTS]) -> f64 {
     let nanmin = |a: f64, b: f64| if a.is_nan() || b.is_nan() { f64::NAN } else if a == b { if a.is_sign_negative() { a } else { b } } else { a.min(b) };
     let nanmax = |a: f64, b: f64| if a.is_nan() || b.is_nan() { f64::NAN } else if a == b { if a.is_sign_positive() { a } else { b } } else { a.max(b) };
     match e {

@@ -143,7 +143,7 @@ fn mutate(r: &mut Rng, src: &str) -> String {
 fn hard_points() -> Vec<[f64; N_INPUTS]> {
     let up = f64::from_bits(1f64.to_bits() + 1);
     let down = f64::from_bits(1f64.to_bits() - 1);
-    vec![[0.0; 5], [1.0; 5], [up; 5], [down; 5], [5e-324; 5], [-0.0; 5], [0.5, 0.25, 0.75, 0.1, 0.9], [1e-8, 1.0, 0.3, down, 2.0], [-0.5, 1.5, 0.2, -2.0, 0.6]]
+    vec![[0.0; N_INPUTS], [1.0; N_INPUTS], [up; N_INPUTS], [down; N_INPUTS], [5e-324; N_INPUTS], [-0.0; N_INPUTS], lobe::from_cosines([0.5, 0.25, 0.75, 0.1, 0.9]), lobe::from_cosines([1e-8, 1.0, 0.3, down, 2.0]), lobe::from_cosines([-0.5, 1.5, 0.2, -2.0, 0.6])]
 }
 
 /// Parameter vectors across the declared ranges: defaults, every parameter at its low end, at its high end.

@@ -3,7 +3,7 @@
 use lobe::builtins::Builtin;
 use lobe::base::span::Span;
 use lobe::backend::interp::Interp;
-use lobe::ir::{BinOp, Formula, Input, Ir, Meta, NodeId, ParamDecl};
+use lobe::ir::{BinOp, Formula, Input, Ir, Meta, NodeId, ParamDecl, ParamKind};
 use lobe::backend::jit;
 use lobe::{Backend, Columns, Evaluator};
 use std::sync::Arc;
@@ -11,11 +11,11 @@ use std::sync::Arc;
 const S: Span = Span { start: 0, end: 0 };
 
 fn param(name: &str, default: f64) -> ParamDecl {
-    ParamDecl { name: name.into(), default, lo: 0.0, hi: 1e6, span: None }
+    ParamDecl { name: name.into(), default, lo: 0.0, hi: 1e6, span: None, kind: ParamKind::Float }
 }
 
 fn formula(ir: Ir, root: NodeId, params: Vec<ParamDecl>) -> Formula {
-    Formula { meta: Meta::default(), params, ir, root, file: "test.brdf".into(), source: String::new() }
+    Formula { meta: Meta::default(), params, ir, root, file: "test.brdf".into(), source: String::new(), rgb: None }
 }
 
 /// The lowering's domain policy: clamp(INPUT, 0, 1).
@@ -61,7 +61,7 @@ fn scalar_matches_interpreter_and_closed_form() {
     let k = jit::jit_kernel(&f, lobe::Mode::Precise).expect("compiles");
     let i = Interp::new(&f);
     for &(nh, n) in &[(0.9, 2.0), (0.5, 50.0), (1.0, 1000.0), (0.0, 1.0), (1.5, 3.0), (-0.2, 2.0)] {
-        let x = [0.0, 0.0, nh, 0.0, 0.0];
+        let x = lobe::from_cosines([0.0, 0.0, nh, 0.0, 0.0]);
         let want = f64::clamp(nh, 0.0, 1.0).powf(n);
         assert_eq!(k.eval(&x, &[n]).to_bits(), want.to_bits(), "NH={nh} n={n}");
         assert_eq!(k.eval(&x, &[n]).to_bits(), i.eval(&x, &[n]).to_bits());
@@ -72,7 +72,7 @@ fn scalar_matches_interpreter_and_closed_form() {
 fn live_parameter_change_needs_no_recompile() {
     let f = modified_schlick(1.25);
     let k = jit::jit_kernel_uncached(&f, lobe::Mode::Precise).expect("compiles");
-    let x = [0.0, 0.0, 0.8, 0.0, 0.0];
+    let x = lobe::from_cosines([0.0, 0.0, 0.8, 0.0, 0.0]);
     let closed = |n: f64| 2.0 * 0.8 / (1.25 * (n - n * 0.8 + 1.25 * 0.8) * (n - n * 0.8 + 1.25 * 0.8));
     let a = k.eval(&x, &[10.0]);
     let b = k.eval(&x, &[100.0]);
@@ -91,11 +91,11 @@ fn batched_matches_scalar_for_every_length() {
     let k = jit::jit_kernel(&f, lobe::Mode::Precise).expect("compiles");
     for len in [0usize, 1, 2, 3, 7, 8, 1000, 1001] {
         let nh: Vec<f64> = (0..len).map(|i| i as f64 / (len.max(2) - 1) as f64).collect();
-        let cols = Columns::new([&[], &[], &nh, &[], &[]]);
+        let cols = Columns::new(std::array::from_fn(|k| if k == 2 { nh.as_slice() } else { &[] }));
         let mut out = vec![f64::NAN; len];
         k.eval_batch(&cols, &[37.0], &mut out);
         for (j, o) in out.iter().enumerate() {
-            let s = k.eval(&[0.0, 0.0, nh[j], 0.0, 0.0], &[37.0]);
+            let s = k.eval(&lobe::from_cosines([0.0, 0.0, nh[j], 0.0, 0.0]), &[37.0]);
             assert_eq!(o.to_bits(), s.to_bits(), "len {len} element {j}");
         }
     }
@@ -107,10 +107,10 @@ fn short_params_and_ragged_columns_follow_interpreter_semantics() {
     let k = jit::jit_kernel(&f, lobe::Mode::Precise).expect("compiles");
     let i = Interp::new(&f);
     // Missing parameter: NaN, not an out-of-bounds read.
-    assert!(k.eval(&[0.0, 0.0, 0.5, 0.0, 0.0], &[]).is_nan());
+    assert!(k.eval(&lobe::from_cosines([0.0, 0.0, 0.5, 0.0, 0.0]), &[]).is_nan());
     // A column shorter than the output: missing elements read as 0, like the interpreter.
     let nh = [0.5, 0.25];
-    let cols = Columns::new([&[], &[], &nh, &[], &[]]);
+    let cols = Columns::new(std::array::from_fn(|k| if k == 2 { nh.as_slice() } else { &[] }));
     let (mut a, mut b) = (vec![0.0; 4], vec![0.0; 4]);
     k.eval_batch(&cols, &[2.0], &mut a);
     i.eval_batch(&cols, &[2.0], &mut b);
@@ -137,7 +137,7 @@ fn cache_returns_the_same_code_for_the_same_structure() {
 fn build_kernel_uses_the_jit() {
     let k = lobe::build_kernel(Arc::new(blinn()), Backend::Jit, lobe::Mode::Precise).expect("builds");
     assert_eq!(k.backend, Backend::Jit);
-    let x = [0.0, 0.0, 0.5, 0.0, 0.0];
+    let x = lobe::from_cosines([0.0, 0.0, 0.5, 0.0, 0.0]);
     assert_eq!(k.eval(&x, &[3.0]), 0.125);
 }
 
@@ -171,11 +171,11 @@ fn memory_child() {
     let run = |range: std::ops::Range<u32>| {
         for i in range {
             let k = jit::jit_kernel_uncached(&modified_schlick(1.0 + f64::from(i) * 1e-6), lobe::Mode::Precise).expect("compiles");
-            std::hint::black_box(k.eval(&[0.0, 0.0, 0.5, 0.0, 0.0], &[50.0]));
+            std::hint::black_box(k.eval(&lobe::from_cosines([0.0, 0.0, 0.5, 0.0, 0.0]), &[50.0]));
             // Also build the lazily compiled batched kernel, whose code lives in the same module.
             let nh = [0.1, 0.2, 0.3];
             let mut out = [0.0; 3];
-            k.eval_batch(&Columns::new([&[], &[], &nh, &[], &[]]), &[50.0], &mut out);
+            k.eval_batch(&Columns::new(std::array::from_fn(|k| if k == 2 { nh.as_slice() } else { &[] })), &[50.0], &mut out);
             std::hint::black_box(out);
         }
     };
@@ -202,7 +202,7 @@ fn corpus_inputs_never_panic() {
     files.sort();
     assert!(files.len() >= 20, "corpus has {} files", files.len());
     let worker = std::thread::Builder::new().stack_size(8 << 20).spawn(move || {
-        let pts = [[0.0; 5], [1.0; 5], [0.5, 1e-8, 1.0, 0.0, 0.3], [2.0, -1.0, f64::NAN, f64::INFINITY, 0.5]];
+        let pts = [[0.0; lobe::N_INPUTS], [1.0; lobe::N_INPUTS], lobe::from_cosines([0.5, 1e-8, 1.0, 0.0, 0.3]), lobe::from_cosines([2.0, -1.0, f64::NAN, f64::INFINITY, 0.5])];
         for path in files {
             let bytes = std::fs::read(&path).expect("readable");
             let src = String::from_utf8_lossy(&bytes);
@@ -218,7 +218,7 @@ fn corpus_inputs_never_panic() {
                         }
                         let col: Vec<f64> = pts.iter().map(|x| x[2]).collect();
                         let mut out = vec![0.0; col.len()];
-                        k.eval_batch(&Columns::new([&col, &col, &col, &col, &col]), &p, &mut out);
+                        k.eval_batch(&Columns::new([&col; lobe::N_INPUTS]), &p, &mut out);
                     }
                     Err(d) => {
                         // The diagnostics must render (codespan can panic on a bad span).
@@ -265,8 +265,8 @@ fn unusual_shapes_compile_and_agree() {
     }
     shapes.push(formula(ir, acc, vec![]));
 
-    let pts: Vec<[f64; 5]> = lobe::report::measure::sample_points(9, 3);
-    let cols: Vec<Vec<f64>> = (0..5).map(|i| pts.iter().map(|p| p[i]).collect()).collect();
+    let pts: Vec<[f64; lobe::N_INPUTS]> = lobe::report::measure::sample_points(9, 3);
+    let cols: Vec<Vec<f64>> = (0..lobe::N_INPUTS).map(|i| pts.iter().map(|p| p[i]).collect()).collect();
     let columns = Columns::new(std::array::from_fn(|i| cols[i].as_slice()));
     for f in shapes {
         let params = f.default_params();

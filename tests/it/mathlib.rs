@@ -14,7 +14,7 @@
 
 use lobe::base::span::Span;
 use lobe::builtins::{Builtin, Mode};
-use lobe::ir::{Formula, Input, Ir, Meta, ParamDecl};
+use lobe::ir::{Formula, Input, Ir, Meta, ParamDecl, ParamKind};
 use lobe::{Backend, Columns, Evaluator};
 use crate::differential::ulps;
 use std::sync::Arc;
@@ -272,11 +272,12 @@ fn raw_formula(f: Builtin) -> Formula {
     let root = ir.call(f, &args, S);
     Formula {
         meta: Meta::default(),
-        params: vec![ParamDecl { name: "n".into(), default: 1.0, lo: 1.0, hi: 1000.0, span: None }],
+        params: vec![ParamDecl { name: "n".into(), default: 1.0, lo: 1.0, hi: 1000.0, span: None, kind: ParamKind::Float }],
         ir,
         root,
         file: format!("{}.brdf", f.name()),
         source: String::new(),
+        rgb: None,
     }
 }
 
@@ -290,12 +291,12 @@ fn jit_returns_the_interpreters_bits_in_both_modes() {
         for mode in Mode::ALL {
             let jit = lobe::build_kernel(formula.clone(), Backend::Jit, mode).expect("compiles");
             let interp = lobe::build_kernel(formula.clone(), Backend::Interp, mode).expect("builds");
-            let cols = Columns::new([&[], &y, &x, &[], &[]]);
+            let cols = Columns::new(std::array::from_fn(|k| match k { 1 => y.as_slice(), 2 => x.as_slice(), _ => &[] }));
             let mut batch = vec![0.0; x.len()];
             jit.eval_batch(&cols, &[1.0], &mut batch);
             for (i, a) in pts.iter().enumerate() {
                 let want = f.eval_in(mode, a);
-                let inputs = [0.0, y[i], x[i], 0.0, 0.0];
+                let inputs = lobe::from_cosines([0.0, y[i], x[i], 0.0, 0.0]);
                 let si = interp.eval(&inputs, &[1.0]);
                 let sj = jit.eval(&inputs, &[1.0]);
                 let same = |v: f64| v.to_bits() == want.to_bits() || (v.is_nan() && want.is_nan());
@@ -376,11 +377,12 @@ fn outlined_library_calls_return_the_interpreters_bits() {
     }
     let formula = Arc::new(Formula {
         meta: Meta::default(),
-        params: vec![ParamDecl { name: "n".into(), default: 1.0, lo: 1.0, hi: 1000.0, span: None }],
+        params: vec![ParamDecl { name: "n".into(), default: 1.0, lo: 1.0, hi: 1000.0, span: None, kind: ParamKind::Float }],
         ir,
         root: sum,
         file: "many.brdf".into(),
         source: String::new(),
+        rgb: None,
     });
     let pts = args_of(Builtin::Pow, 2_001);
     let xs: Vec<f64> = pts.iter().map(|a| a[0]).collect();
@@ -389,9 +391,9 @@ fn outlined_library_calls_return_the_interpreters_bits() {
         let jit = lobe::build_kernel(formula.clone(), Backend::Jit, mode).expect("compiles");
         let interp = lobe::build_kernel(formula.clone(), Backend::Interp, mode).expect("builds");
         let mut batch = vec![0.0; xs.len()];
-        jit.eval_batch(&Columns::new([&[], &ys, &xs, &[], &[]]), &[1.0], &mut batch);
+        jit.eval_batch(&Columns::new(std::array::from_fn(|k| match k { 1 => ys.as_slice(), 2 => xs.as_slice(), _ => &[] })), &[1.0], &mut batch);
         for i in 0..xs.len() {
-            let inputs = [0.0, ys[i], xs[i], 0.0, 0.0];
+            let inputs = lobe::from_cosines([0.0, ys[i], xs[i], 0.0, 0.0]);
             let want = interp.eval(&inputs, &[1.0]);
             for got in [jit.eval(&inputs, &[1.0]), batch[i]] {
                 assert!(got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()), "{mode} at {:?}: {got:e} vs {want:e}", pts[i]);

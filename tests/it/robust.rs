@@ -27,8 +27,8 @@ fn plain_kernel(stem: &str, set: &[(&str, f64)]) -> Kernel {
 }
 
 /// Inputs NL, NV, NH, VR, VH.
-fn at(nl: f64, nv: f64, nh: f64, vh: f64) -> [f64; 5] {
-    [nl, nv, nh, nh, vh]
+fn at(nl: f64, nv: f64, nh: f64, vh: f64) -> [f64; lobe::N_INPUTS] {
+    lobe::from_cosines([nl, nv, nh, nh, vh])
 }
 
 #[test]

@@ -23,7 +23,7 @@ use proptest::prelude::*;
 
 const A: (&str, f64, f64, f64) = ("a", 0.5, 0.0, 1.0);
 
-fn eval(f: &Formula, x: &[f64; 5], p: &[f64]) -> f64 {
+fn eval(f: &Formula, x: &[f64; lobe::N_INPUTS], p: &[f64]) -> f64 {
     Interp::new(f).eval(x, p)
 }
 
@@ -36,12 +36,12 @@ fn count(f: &Formula, pred: impl Fn(&Node) -> bool) -> usize {
 }
 
 /// Samples of the five inputs in [0, 1], hard values included (0, 1, 1 − ulp, tiny).
-fn grid() -> Vec<[f64; 5]> {
+fn grid() -> Vec<[f64; lobe::N_INPUTS]> {
     let vals = [0.0, 1.0, 1.0 - f64::EPSILON / 2.0, 1e-300, 0.25, 0.5, 0.7, 0.93, 0.999];
     let mut v = vec![];
     for (i, a) in vals.iter().enumerate() {
         for b in vals.iter().skip(i % 3) {
-            v.push([*a, *b, (a + b) / 2.0, *b, 1.0 - a / 2.0]);
+            v.push(lobe::from_cosines([*a, *b, (a + b) / 2.0, *b, 1.0 - a / 2.0]));
         }
     }
     v
@@ -115,7 +115,7 @@ fn dead_inputs_disappear_only_under_the_contract() {
     let (g, _) = simplify_with(&f, &[], &Policy::exact());
     assert_eq!(inputs(&g), vec![Input::NL, Input::NV, Input::NH, Input::VR]);
     // And the exact result keeps NaN from a NaN input, which the unsimplified formula also gives.
-    let x = [f64::NAN, 0.5, 0.5, 0.5, 0.5];
+    let x = lobe::from_cosines([f64::NAN, 0.5, 0.5, 0.5, 0.5]);
     assert!(eval(&g, &x, &[50.0]).is_nan() && eval(&f, &x, &[50.0]).is_nan());
 }
 
@@ -206,6 +206,7 @@ proptest! {
         let r2 = simplify_with(&g, &[], &Policy::exact()).1;
         prop_assert_eq!(r2.total(), 0, "{} fired {:?} on {}", src, r2.fired, g.to_text());
         for x in &xs {
+            let x = &lobe::from_cosines(*x);
             let (u, v) = (eval(&f, x, &ps), eval(&g, x, &ps));
             prop_assert!(same(u, v), "{src}\n→ {}\nat {x:?} {ps:?}: {u} vs {v}", g.to_text());
         }
@@ -229,6 +230,7 @@ proptest! {
         let r2 = simplify_with(&g, &baked, &policy).1;
         prop_assert_eq!(r2.total(), 0, "{} fired {:?} on {}", src, r2.fired, g.to_text());
         for x in &xs {
+            let x = &lobe::from_cosines(*x);
             let (u, v) = (eval(&f, x, &[n, a]), eval(&g, x, &[n, a]));
             prop_assert!(same(u, v), "{src}\n→ {}\nat {x:?} n={n} a={a}: {u} vs {v}", g.to_text());
         }
@@ -275,7 +277,7 @@ impl P {
     }
 
     /// (value, drift bound relative to the value) at inputs `x` and parameter `n`.
-    fn eval(&self, x: &[f64; 5], n: f64) -> (f64, f64) {
+    fn eval(&self, x: &[f64; lobe::N_INPUTS], n: f64) -> (f64, f64) {
         match self {
             P::In(i) => (x[*i], 0.0),
             P::C(c) => (*c, 0.0),
@@ -361,6 +363,7 @@ proptest! {
         let r2 = simplify_report(&g, &baked).1;
         prop_assert_eq!(r2.total(), 0, "{} fired {:?} on {}", src, r2.fired, g.to_text());
         for x in &xs {
+            let x = &lobe::from_cosines(*x);
             let (u, v) = (eval(&f, x, &[n]), eval(&g, x, &[n]));
             let (_, d) = p.eval(x, n);
             let ok = u == v
@@ -424,6 +427,7 @@ fn default_policy_on_arbitrary_trees_mostly_agrees() {
         let f = formula(&src, &[A]).unwrap();
         let g = simplify(&f, &[]);
         for x in [[0.3, 0.7, 0.9, 0.2, 0.5], [1.0, 0.0, 1.0 - f64::EPSILON / 2.0, 1e-300, 0.5], [0.99, 0.98, 0.97, 0.96, 0.95]] {
+            let x = lobe::from_cosines(x);
             let (u, v) = (eval(&f, &x, &[50.0, 0.5]), eval(&g, &x, &[50.0, 0.5]));
             total += 1;
             bit += usize::from(same(u, v));
@@ -458,7 +462,7 @@ mod rewrites {
     const SAMPLES: [f64; 8] = [0.0, 1.0, 0.999_999_999_999_999_9, 1e-300, 5e-324, 0.5, 0.3, 0.87];
 
     fn eval(f: &Formula, x: f64, params: &[f64]) -> f64 {
-        Interp::new(f).eval(&[x, 1.0 - x, x, x * 0.5, 1.0 - x * 0.25], params)
+        Interp::new(f).eval(&lobe::from_cosines([x, 1.0 - x, x, x * 0.5, 1.0 - x * 0.25]), params)
     }
 
     /// Simplifies `src` (lowered shape) and checks the value at every sample is bit-identical (or both NaN) —
@@ -704,7 +708,7 @@ mod rewrites {
                 if r.0 < f64::MIN_POSITIVE {
                     continue;
                 }
-                let c = dd::ulps(it.eval(&[0.0, 0.0, x, 0.0, 0.0], &[]), r);
+                let c = dd::ulps(it.eval(&lobe::from_cosines([0.0, 0.0, x, 0.0, 0.0]), &[]), r);
                 let l = dd::ulps(Builtin::Pow.eval(&[x, k as f64]), r);
                 cmax = cmax.max(c);
                 lmax = lmax.max(l);
@@ -733,7 +737,7 @@ mod rewrites {
                 for x in uniform(5000, lo, hi) {
                     let d = 1.0 - x; // exact for x in [0.5, 1] (Sterbenz)
                     let refv = dd::two_prod(n, d);
-                    let xs = [0.0, 0.0, x, 0.0, 0.0];
+                    let xs = lobe::from_cosines([0.0, 0.0, x, 0.0, 0.0]);
                     let b = dd::ulps(before.eval(&xs, &[n]), refv);
                     let a = dd::ulps(after.eval(&xs, &[n]), refv);
                     bmax = bmax.max(b);

@@ -348,7 +348,7 @@ impl<L: Lanes> Translator<'_, '_, L> {
             return self.inline(f, args);
         }
         let vals = args[..f.arity()].iter().map(|a| self.arg(*a)).collect::<Result<Vec<_>, _>>()?;
-        if self.cx.outline {
+        if self.cx.outline && f.info().lowering == Lowering::Math {
             return self.library_call(f, &vals);
         }
         let mode = self.cx.mode;
