@@ -463,6 +463,17 @@ impl Formula {
         }
     }
 
+    /// A colour formula from one arena with three channel roots: each channel is compacted into a scalar
+    /// formula of its own; the result is the red one, carrying all three in [`Formula::rgb`].
+    pub fn from_channels(meta: Meta, params: Vec<ParamDecl>, ir: &Ir, roots: [NodeId; 3], file: String, source: String) -> Formula {
+        let channel = |r: NodeId| {
+            let (ir, root) = ir.compact(r);
+            Formula { meta: meta.clone(), params: params.clone(), ir, root, file: file.clone(), source: source.clone(), rgb: None }
+        };
+        let rgb = Box::new(roots.map(channel));
+        Formula { rgb: Some(rgb.clone()), ..rgb[0].clone() }
+    }
+
     pub fn is_rgb(&self) -> bool {
         self.rgb.is_some()
     }
