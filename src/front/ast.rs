@@ -24,7 +24,8 @@ pub struct Ident<'s> {
     pub span: Span,
 }
 
-/// A binary operator as written (`^` is lowered to the `pow` builtin).
+/// A binary operator as written (`^` is lowered to the `pow` builtin, comparisons to the exact comparison
+/// builtins, `&&`/`||` to selects).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum BinOp {
     Add,
@@ -32,6 +33,14 @@ pub enum BinOp {
     Mul,
     Div,
     Pow,
+    Lt,
+    Le,
+    Gt,
+    Ge,
+    Eq,
+    Ne,
+    And,
+    Or,
 }
 
 impl BinOp {
@@ -42,6 +51,14 @@ impl BinOp {
             BinOp::Mul => "*",
             BinOp::Div => "/",
             BinOp::Pow => "^",
+            BinOp::Lt => "<",
+            BinOp::Le => "<=",
+            BinOp::Gt => ">",
+            BinOp::Ge => ">=",
+            BinOp::Eq => "==",
+            BinOp::Ne => "!=",
+            BinOp::And => "&&",
+            BinOp::Or => "||",
         }
     }
 }
@@ -49,8 +66,16 @@ impl BinOp {
 #[derive(Clone, Debug, PartialEq)]
 pub enum ExprKind<'s> {
     Num(f64),
+    /// `true` / `false`.
+    Bool(bool),
     Name(Ident<'s>),
     Neg(ExprId),
+    /// `!a`.
+    Not(ExprId),
+    /// `c ? a : b` and `if c then a else b`.
+    Select(ExprId, ExprId, ExprId),
+    /// `v.x`: a component (`x y z` or `r g b`).
+    Field(ExprId, Ident<'s>),
     Binary(BinOp, ExprId, ExprId),
     Call(Ident<'s>, Vec<ExprId>),
     /// `( e )`: kept so the span covers the parentheses.
@@ -69,8 +94,13 @@ impl Expr<'_> {
     /// Calls `f` on every operand, in order.
     pub fn for_each_child(&self, mut f: impl FnMut(ExprId)) {
         match &self.kind {
-            ExprKind::Num(_) | ExprKind::Name(_) | ExprKind::Error => {}
-            ExprKind::Neg(a) | ExprKind::Paren(a) => f(*a),
+            ExprKind::Num(_) | ExprKind::Bool(_) | ExprKind::Name(_) | ExprKind::Error => {}
+            ExprKind::Neg(a) | ExprKind::Not(a) | ExprKind::Paren(a) | ExprKind::Field(a, _) => f(*a),
+            ExprKind::Select(c, a, b) => {
+                f(*c);
+                f(*a);
+                f(*b);
+            }
             ExprKind::Binary(_, a, b) => {
                 f(*a);
                 f(*b);
@@ -87,12 +117,35 @@ pub struct Lit {
     pub span: Span,
 }
 
+/// The default of a `param`, which also decides its kind.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ParamDefault<'s> {
+    /// `param k = 0.5`: a float.
+    Num(Lit),
+    /// `param aniso = true`: a bool (0 or 1).
+    Bool(bool, Span),
+    /// `param base = rgb(0.8, 0.6, 0.2)` (or `vec3(…)`): a colour, three parameters in 0..1. The name is the
+    /// constructor as written, checked by the lowering.
+    Color(Ident<'s>, [Lit; 3], Span),
+}
+
+impl ParamDefault<'_> {
+    pub fn span(&self) -> Span {
+        match self {
+            ParamDefault::Num(l) => l.span,
+            ParamDefault::Bool(_, s) | ParamDefault::Color(_, _, s) => *s,
+        }
+    }
+}
+
 #[derive(Clone, Debug, PartialEq)]
 pub enum StmtKind<'s> {
-    /// `@key "value"`.
-    Meta { key: Ident<'s>, value: &'s str, value_span: Span },
+    /// `@key "value"`, or `@key word` (`quoted` false; only `@domain raw` takes a bare word).
+    Meta { key: Ident<'s>, value: &'s str, value_span: Span, quoted: bool },
     /// `param name = default [in lo..hi]`.
-    Param { name: Ident<'s>, default: Lit, range: Option<(Lit, Lit)> },
+    Param { name: Ident<'s>, default: ParamDefault<'s>, range: Option<(Lit, Lit)> },
+    /// `fn name(a, b) = body`: a function inlined at each call.
+    Fn { name: Ident<'s>, args: Vec<Ident<'s>>, body: ExprId },
     /// `let name = value`.
     Let { name: Ident<'s>, value: ExprId },
     /// The formula (there must be exactly one, last).

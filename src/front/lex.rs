@@ -10,7 +10,9 @@
 //!
 //! Newlines: the adapter decides which newlines end a statement, so the grammar sees `Newline` only as a
 //! terminator (`;` is the same token). A newline is dropped at the file start, after another terminator,
-//! after a binary operator / `=` / `,` / `(` / `in` / `..`, and inside parentheses. Inside parentheses a
+//! after a binary operator (arithmetic, comparison, `&&`, `||`) / `!` / `=` / `,` / `(` / `in` / `..` / `.` /
+//! `?` / `:` / `if` / `then` / `else`, before a line starting with `then` / `else` / `?` / `:` (none of
+//! them can begin a statement), and inside parentheses. Inside parentheses a
 //! newline followed by a new statement (`let`, `param`, `@key`) — or by an operand after an operand, where the
 //! next line does not close the parenthesis — means the parenthesis was never closed: the adapter reports
 //! "unterminated parenthesis" there and inserts the missing `)`s, so the statements that follow still parse.
@@ -74,6 +76,42 @@ enum Raw {
     Eq,
     #[token("..")]
     DotDot,
+    #[token(".")]
+    Dot,
+    #[token("<")]
+    Lt,
+    #[token("<=")]
+    Le,
+    #[token(">")]
+    Gt,
+    #[token(">=")]
+    Ge,
+    #[token("==")]
+    EqEq,
+    #[token("!=")]
+    Ne,
+    #[token("&&")]
+    AndAnd,
+    #[token("||")]
+    OrOr,
+    #[token("!")]
+    Bang,
+    #[token("?")]
+    Question,
+    #[token(":")]
+    Colon,
+    #[token("fn")]
+    Fn,
+    #[token("if")]
+    If,
+    #[token("then")]
+    Then,
+    #[token("else")]
+    Else,
+    #[token("true")]
+    True,
+    #[token("false")]
+    False,
     #[regex("[A-Za-z_][A-Za-z0-9_]*")]
     Ident,
     /// Digits; the callback takes the fraction and exponent by hand, because `1..1000` must lex as
@@ -147,6 +185,25 @@ pub enum Tok<'s> {
     Comma,
     Eq,
     DotDot,
+    /// `.` before a component name (`v.x`).
+    Dot,
+    Lt,
+    Le,
+    Gt,
+    Ge,
+    EqEq,
+    Ne,
+    AndAnd,
+    OrOr,
+    Bang,
+    Question,
+    Colon,
+    Fn,
+    If,
+    Then,
+    Else,
+    True,
+    False,
     /// A statement terminator: a significant newline or `;`.
     Newline,
     Num(f64),
@@ -162,11 +219,11 @@ pub enum Tok<'s> {
 impl Tok<'_> {
     /// Ends an operand: a following operand means an operator is missing.
     pub fn ends_operand(self) -> bool {
-        matches!(self, Tok::Num(_) | Tok::Ident(_) | Tok::RParen)
+        matches!(self, Tok::Num(_) | Tok::Ident(_) | Tok::RParen | Tok::True | Tok::False)
     }
     /// Can start an operand (unary minus aside).
     pub fn starts_operand(self) -> bool {
-        matches!(self, Tok::Num(_) | Tok::Ident(_) | Tok::LParen)
+        matches!(self, Tok::Num(_) | Tok::Ident(_) | Tok::LParen | Tok::True | Tok::False)
     }
     /// A token after which the line obviously continues.
     fn continues_line(self) -> bool {
@@ -182,14 +239,28 @@ impl Tok<'_> {
                 | Tok::Eq
                 | Tok::In
                 | Tok::DotDot
-        )
+                | Tok::Dot
+                | Tok::Bang
+                | Tok::Question
+                | Tok::Colon
+                | Tok::If
+                | Tok::Then
+                | Tok::Else
+        ) || self.is_comparison_or_logic()
+    }
+    /// A token that cannot begin a statement and only continues the previous line (`else` on its own line).
+    fn continues_previous(self) -> bool {
+        matches!(self, Tok::Then | Tok::Else | Tok::Question | Tok::Colon)
+    }
+    fn is_comparison_or_logic(self) -> bool {
+        matches!(self, Tok::Lt | Tok::Le | Tok::Gt | Tok::Ge | Tok::EqEq | Tok::Ne | Tok::AndAnd | Tok::OrOr)
     }
     /// Starts a statement that can never continue an expression.
     fn starts_statement(self) -> bool {
-        matches!(self, Tok::Let | Tok::Param | Tok::Meta(_))
+        matches!(self, Tok::Let | Tok::Param | Tok::Fn | Tok::Meta(_))
     }
     pub fn is_binary_operator(self) -> bool {
-        matches!(self, Tok::Plus | Tok::Minus | Tok::Star | Tok::Slash | Tok::Caret)
+        matches!(self, Tok::Plus | Tok::Minus | Tok::Star | Tok::Slash | Tok::Caret) || self.is_comparison_or_logic()
     }
 }
 
@@ -256,6 +327,24 @@ fn raw_tokens<'s>(src: &'s str, diags: &mut Vec<Diagnostic>) -> Vec<(Tok<'s>, Sp
             Raw::Comma => Tok::Comma,
             Raw::Eq => Tok::Eq,
             Raw::DotDot => Tok::DotDot,
+            Raw::Dot => Tok::Dot,
+            Raw::Lt => Tok::Lt,
+            Raw::Le => Tok::Le,
+            Raw::Gt => Tok::Gt,
+            Raw::Ge => Tok::Ge,
+            Raw::EqEq => Tok::EqEq,
+            Raw::Ne => Tok::Ne,
+            Raw::AndAnd => Tok::AndAnd,
+            Raw::OrOr => Tok::OrOr,
+            Raw::Bang => Tok::Bang,
+            Raw::Question => Tok::Question,
+            Raw::Colon => Tok::Colon,
+            Raw::Fn => Tok::Fn,
+            Raw::If => Tok::If,
+            Raw::Then => Tok::Then,
+            Raw::Else => Tok::Else,
+            Raw::True => Tok::True,
+            Raw::False => Tok::False,
             Raw::Ident => Tok::Ident(text),
             Raw::Number(shape) => Tok::Num(number(text, shape, false, span, diags)),
             Raw::LeadingDot(shape) => Tok::Num(number(text, shape, true, span, diags)),
@@ -349,9 +438,9 @@ fn stray_diagnostic(text: &str, span: Span) -> Diagnostic {
         '{' | '}' | '[' | ']' => "group with parentheses `(` `)`",
         '.' => "a number needs digits on both sides of the point, like `0.5`",
         '@' => "metadata is written `@name \"…\"` or `@cite \"…\"`",
-        '%' | '!' | '&' | '|' | '<' | '>' | '?' | ':' | '~' => {
-            "the operators are `+ - * / ^`; functions are called like `max(a, b)`"
-        }
+        '&' => "logical and is written `&&`",
+        '|' => "logical or is written `||`",
+        '%' | '~' => "the operators are `+ - * / ^`, comparisons and `&& || !`; functions are called like `max(a, b)`",
         c if c.is_alphabetic() => "names use ASCII letters, digits and `_`; the inputs are NL, NV, NH, VR, VH",
         _ => "the formula language uses numbers, names, `+ - * / ^`, parentheses, `,` and `#` comments",
     };
@@ -361,12 +450,22 @@ fn stray_diagnostic(text: &str, span: Span) -> Diagnostic {
 /// Pass 2: decides which newlines terminate statements, tracks parentheses, and repairs unbalanced ones.
 fn layout<'s>(src: &str, toks: &[(Tok<'s>, Span)], out: &mut Lexed<'s>) {
     let mut opens: Vec<Span> = Vec::new();
+    // (index of the next non-newline token, whether it continues the previous line).
+    let mut next_after = (0usize, false);
     for (k, &(tok, span)) in toks.iter().enumerate() {
         match tok {
             Tok::Newline => {
                 let prev = out.toks.last().map(|t| t.1);
                 let Some(prev) = prev else { continue };
                 if prev == Tok::Newline || prev.continues_line() {
+                    continue;
+                }
+                // The verdict for a run of newlines is found once (a run of blank lines stays linear).
+                if next_after.0 <= k {
+                    let j = (k + 1..toks.len()).find(|&j| toks[j].0 != Tok::Newline).unwrap_or(toks.len());
+                    next_after = (j, toks.get(j).is_some_and(|t| t.0.continues_previous()));
+                }
+                if next_after.1 {
                     continue;
                 }
                 if !opens.is_empty() {

@@ -1,25 +1,53 @@
-//! Lowering: the AST → [`Formula`], resolving names and arity and writing the domain policy into the IR.
+//! Lowering: the AST → [`Formula`], resolving names, types and arity and writing the domain policy into the IR.
 //!
 //! Design: one pass over the statements in order. Metadata and `param`s are global (collected first, `n` is
-//! always parameter 0, implicitly `param n = 50 in 1..1000`); `let`s are visible only after their own
-//! statement. Expressions are lowered with an explicit stack (post-order), so a 500 000-deep spine costs a
-//! `Vec`, not native stack. Every name error is reported — a subexpression that failed becomes *poison*,
-//! which propagates silently upward, so one mistake yields one message. Each input reference lowers to
-//! `clamp(INPUT, 0, 1)` and the root to `max(raw, 0)` (the decided domain policy; see `ir.rs`).
-//! Warnings (unused `let`/`param`, no input read) are produced only for files without errors.
+//! always parameter 0, implicitly `param n = 50 in 1..1000`); `let`s and `fn`s are visible only after their own
+//! statement. Every value is typed (float, bool, vec3: [`Val`]) and every operation goes through
+//! [`Values`], which expands vectors and booleans into scalar IR; a bool is a 0/1 node, a select never blends
+//! its branches, so an infinite untaken branch cannot reach the result. Expressions are lowered with an
+//! explicit stack (post-order), so a 500 000-deep spine costs a `Vec`, not native stack. Every name or type
+//! error is reported at its span with a hint — a subexpression that failed becomes *poison*, which propagates
+//! silently upward, so one mistake yields one message.
+//!
+//! Functions (`fn f(x) = body`) are inlined at each call with the argument types of the call. A body is
+//! checked once at its definition (names, arity, recursion — with its arguments as poison, so only what does
+//! not depend on them can fail there); type errors that depend on the arguments are reported at the body, with
+//! the call as a second label, once per distinct message. A call with the same argument nodes reuses the
+//! earlier expansion (hash-consing makes it the same IR anyway); nesting is capped at [`MAX_INLINE_DEPTH`]
+//! (the only recursion on the native stack) and the total inlined body size at [`MAX_INLINED`], so a file of
+//! functions that each call the previous one twice is refused rather than expanded 2^n times.
+//!
+//! Domain policy (`@domain brdf`, the default): each cosine input lowers to `clamp(INPUT, 0, 1)` and each
+//! result channel to `max(raw, 0)`. `@domain raw` (GLSL semantics, what `lobe import` writes) adds neither.
+//! Direction components and vectors are never clamped. Warnings (unused `let`/`param`/`fn`, no input read) are
+//! produced only for files without errors. Cost: linear in the source plus the inlined bodies; the IR is
+//! compacted once at the end (dropping what unused `let`s and function checks built).
 
-use super::ast::{Ast, BinOp as AstOp, ExprId, ExprKind, Ident, Lit, StmtKind};
+use super::ast::{Ast, BinOp as AstOp, ExprId, ExprKind, Ident, Lit, ParamDefault, StmtKind};
+use super::values::{Cmp, Val, Values, DERIVED};
 use crate::base::diag::Diagnostic;
 use crate::base::span::Span;
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Input, Ir, Meta, NodeId, ParamDecl, ParamKind};
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 /// Default and range of the implicit specular exponent `n`.
 pub const N_DEFAULT: (f64, f64, f64) = (50.0, 1.0, 1000.0);
 
+/// Deepest chain of function calls inside function bodies that is inlined.
+pub const MAX_INLINE_DEPTH: usize = 64;
+
+/// Most expression nodes inlined from function bodies in one file (about 8× the nodes of a 1 MB file).
+pub const MAX_INLINED: usize = 4_000_000;
+
 /// Inputs in the order suggestions prefer them (most common first: Blinn, Phong, then the rest).
 const INPUT_PREFERENCE: [&str; 5] = ["NH", "VR", "NL", "NV", "VH"];
+
+/// The frame vectors (see [`Values::frame`]).
+const FRAME: [&str; 5] = ["L", "V", "N", "X", "Y"];
+
+/// Named shorthands computed from the directions (see [`Values::shorthand`]); never clamped.
+const SHORTHANDS: [&str; 7] = ["LV", "HX", "HY", "LX", "LY", "VX", "VY"];
 
 /// Common names from other languages and what to write instead.
 const FUNCTION_ALIASES: [(&str, &str); 11] = [
@@ -39,7 +67,7 @@ const FUNCTION_ALIASES: [(&str, &str); 11] = [
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Slot {
     Todo,
-    Done(NodeId),
+    Done(Val),
     /// Failed (already reported); users of it fail silently.
     Poison,
 }
@@ -50,20 +78,62 @@ struct Let<'s> {
     used: bool,
 }
 
+/// A user function: `fn name(args) = body`.
+struct FnDef<'s> {
+    name: Ident<'s>,
+    args: Vec<Ident<'s>>,
+    body: ExprId,
+    /// Smallest expression id in the body (the body is the contiguous id range `lo..=body`).
+    lo: usize,
+    /// Its definition checked without errors (calls of a broken function are poison, silently).
+    ok: bool,
+    used: bool,
+}
+
+/// What a parameter name reads as.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum ParamRef {
+    Float(u16),
+    Bool(u16),
+    /// The first of three consecutive parameters `NAME.r`, `.g`, `.b`.
+    Color(u16),
+}
+
+/// Where an expression is lowered: the top level, or a function body with its arguments bound.
+struct Ctx<'c, 's> {
+    /// Functions with an index below this are callable.
+    visible_fns: usize,
+    /// The function whose body this is, while checking its definition (a call to it is recursion).
+    defining: Option<&'s str>,
+    args: &'c [(&'s str, Slot)],
+    depth: usize,
+    /// The top-level call being inlined, for messages about errors inside bodies.
+    call: Option<Span>,
+}
+
 struct Lowerer<'a, 's> {
     ast: &'a Ast<'s>,
     ir: Ir,
+    /// `@domain raw`: no input clamps and no root clamp.
+    raw: bool,
     params: Vec<ParamDecl>,
-    param_names: HashMap<&'s str, u16>,
+    param_names: HashMap<&'s str, ParamRef>,
     lets: Vec<Let<'s>>,
     /// Lets visible so far, by name.
     scope: HashMap<&'s str, usize>,
     /// Every `let` in the file (name → its name span), for "used before its `let`".
     all_lets: HashMap<&'s str, Span>,
+    fns: Vec<FnDef<'s>>,
+    fn_names: HashMap<&'s str, usize>,
+    /// Every `fn` in the file (name → its name span), for "used before its definition".
+    all_fns: HashMap<&'s str, Span>,
+    /// Expansions already made: (function, argument values) → result.
+    inlined: HashMap<(usize, Vec<Val>), Slot>,
+    inlined_nodes: usize,
     memo: Vec<Slot>,
-    /// Operand buffer reused across nodes (one allocation per file, not per node).
-    args: Vec<NodeId>,
     diags: Vec<Diagnostic>,
+    /// Errors inside function bodies already reported (message, span start), so each shows once.
+    reported: HashSet<(String, u32)>,
 }
 
 /// Lowers a parsed file. `syntax_failed` suppresses the structural errors a syntax error may have caused
@@ -78,39 +148,38 @@ pub fn lower(
     let mut lw = Lowerer {
         ast,
         ir: Ir::new(),
+        raw: false,
         params: vec![ParamDecl::float("n", N_DEFAULT.0, N_DEFAULT.1, N_DEFAULT.2)],
-        param_names: HashMap::from([("n", 0u16)]),
+        param_names: HashMap::from([("n", ParamRef::Float(0))]),
         lets: vec![],
         scope: HashMap::new(),
         all_lets: HashMap::new(),
+        fns: vec![],
+        fn_names: HashMap::new(),
+        all_fns: HashMap::new(),
+        inlined: HashMap::new(),
+        inlined_nodes: 0,
         memo: vec![Slot::Todo; ast.exprs.len()],
-        args: vec![],
         diags: vec![],
+        reported: HashSet::new(),
     };
     let meta = lw.meta();
     lw.declare_params();
     for s in &ast.stmts {
-        if let StmtKind::Let { name, .. } = &s.kind {
-            lw.all_lets.entry(name.name).or_insert(name.span);
+        match &s.kind {
+            StmtKind::Let { name, .. } => {
+                lw.all_lets.entry(name.name).or_insert(name.span);
+            }
+            StmtKind::Fn { name, .. } => {
+                lw.all_fns.entry(name.name).or_insert(name.span);
+            }
+            _ => {}
         }
     }
     let root = lw.statements(syntax_failed);
     let failed = syntax_failed || !lw.diags.is_empty();
     let formula = match root {
-        Some((Slot::Done(raw), span)) if !failed => {
-            let zero = lw.ir.konst(0.0, span);
-            let root = lw.ir.call(Builtin::Max, &[raw, zero], span);
-            lw.warnings(root, span);
-            Some(Formula {
-                meta,
-                params: lw.params,
-                ir: lw.ir,
-                root,
-                file: file.to_string(),
-                source: src.to_string(),
-                rgb: None,
-            })
-        }
+        Some((Slot::Done(v), span)) if !failed => lw.finish(v, span, meta, file, src),
         _ => None,
     };
     diags.append(&mut lw.diags);
@@ -122,6 +191,7 @@ fn signature(b: Builtin) -> String {
     let args = match (b, b.arity()) {
         (Builtin::Clamp, _) => "x, lo, hi",
         (Builtin::Min | Builtin::Max, _) => "a, b",
+        (Builtin::Select, _) => "c, a, b",
         (_, 1) => "x",
         (_, 2) => "x, y",
         _ => "x, y, z",
@@ -137,17 +207,132 @@ fn plural(n: usize, one: &str) -> String {
     }
 }
 
+/// The derived function `name` (or `rgb`, an alias of `vec3`): its arity and doc.
+fn derived(name: &str) -> Option<(usize, &'static str)> {
+    let name = if name == "rgb" { "vec3" } else { name };
+    DERIVED.iter().find(|d| d.0 == name).map(|d| (d.1, d.2))
+}
+
+/// The component index of `.x .y .z` / `.r .g .b`.
+fn component(name: &str) -> Option<usize> {
+    match name {
+        "x" | "r" => Some(0),
+        "y" | "g" => Some(1),
+        "z" | "b" => Some(2),
+        _ => None,
+    }
+}
+
+/// A hint for a type error, by the construct that failed and the types it met.
+fn type_hint(what: &str, tys: &[Val]) -> String {
+    let has = |t: fn(&Val) -> bool| tys.iter().any(t);
+    let is_bool = |v: &Val| matches!(v, Val::B(_));
+    let is_vec = |v: &Val| matches!(v, Val::V(_));
+    match what {
+        "cond" => "a condition is a bool: compare a number, like `x > 0`, or use a bool parameter".into(),
+        "cmp" if has(is_vec) => "compare components (`L.z < 0.5`) or lengths (`length(v) < 1`)".into(),
+        "cmp" => "`<`, `<=`, `>`, `>=` compare numbers; `==` and `!=` compare two numbers or two bools".into(),
+        "branches" => "give both branches one type; `vec3(x)` makes a float a vector, `c ? 1 : 0` a bool a number".into(),
+        "field" => "components belong to vectors: `L.x`, `H.z`, `base.r`".into(),
+        _ if has(is_bool) => "a bool is not a number: write `c ? 1 : 0` for 0 or 1".into(),
+        _ => "check the argument types".into(),
+    }
+}
+
 impl<'a, 's> Lowerer<'a, 's> {
     fn error(&mut self, d: Diagnostic) {
         self.diags.push(d);
     }
 
-    /// `@name` and `@cite`.
+    /// A type error at `span`; inside an inlined body, labelled with the call and reported once.
+    fn type_error(&mut self, msg: String, span: Span, hint: String, ctx: &Ctx) {
+        let mut d = Diagnostic::error(msg).at(span, "here");
+        if let Some(call) = ctx.call {
+            if !self.reported.insert((d.message.clone(), span.start)) {
+                return;
+            }
+            d = d.also(call, "in the function called here");
+        }
+        self.error(d.hint(hint));
+    }
+
+    /// The result: a float is a scalar formula, a vec3 a colour formula, a bool an error.
+    fn finish(&mut self, v: Val, span: Span, meta: Meta, file: &str, src: &str) -> Option<Formula> {
+        let channels: Vec<NodeId> = match v {
+            Val::F(x) => vec![x],
+            Val::V(c) => c.to_vec(),
+            Val::B(_) => {
+                self.error(
+                    Diagnostic::error("the formula is a bool, not a number")
+                        .at(span, "this is true or false")
+                        .hint("a BRDF is a number or a colour: write `c ? value : 0`, or `c ? 1 : 0` for 0 or 1"),
+                );
+                return None;
+            }
+        };
+        let roots: Vec<NodeId> = channels
+            .iter()
+            .map(|&raw| {
+                if self.raw {
+                    raw
+                } else {
+                    let zero = self.ir.konst(0.0, span);
+                    self.ir.call(Builtin::Max, &[raw, zero], span)
+                }
+            })
+            .collect();
+        self.warnings(&roots, span);
+        let (file, source) = (file.to_string(), src.to_string());
+        let ir = std::mem::take(&mut self.ir);
+        let params = std::mem::take(&mut self.params);
+        Some(match roots[..] {
+            [r, g, b] => Formula::from_channels(meta, params, &ir, [r, g, b], file, source),
+            _ => {
+                let (ir, root) = ir.compact(roots[0]);
+                Formula { meta, params, ir, root, file, source, rgb: None }
+            }
+        })
+    }
+
+    /// `@name`, `@cite` and `@domain` (which sets [`Lowerer::raw`]).
     fn meta(&mut self) -> Meta {
         let mut meta = Meta::default();
         let mut seen: HashMap<&str, Span> = HashMap::new();
         for s in &self.ast.stmts {
-            let StmtKind::Meta { key, value, .. } = &s.kind else { continue };
+            let StmtKind::Meta { key, value, value_span, quoted } = &s.kind else { continue };
+            if !quoted && key.name != "domain" {
+                // Only `@domain raw` takes a bare word; the message is the parser's for a missing string.
+                self.error(
+                    Diagnostic::error(format!(
+                        "expected a string in double quotes after `@{}`, found name `{value}`",
+                        key.name
+                    ))
+                    .at(*value_span, "expected a string in double quotes")
+                    .hint(format!("metadata takes a string in double quotes: `@{} \"…\"`", key.name)),
+                );
+                continue;
+            }
+            if key.name == "domain" {
+                if let Some(first) = seen.insert("domain", key.span) {
+                    let d = Diagnostic::error("`@domain` is given twice")
+                        .at(key.span, "second one here")
+                        .also(first, "first one here")
+                        .hint("keep one of them");
+                    self.error(d);
+                    continue;
+                }
+                match *value {
+                    "raw" => self.raw = true,
+                    "brdf" => {}
+                    other => self.error(
+                        Diagnostic::error(format!("unknown domain `{other}`"))
+                            .at(*value_span, "not a domain")
+                            .hint("`@domain brdf` (the default: cosines clamped to 0..1, result at least 0) or `@domain raw` \
+                                   (GLSL semantics, nothing clamped)"),
+                    ),
+                }
+                continue;
+            }
             let slot = match key.name {
                 "name" => &mut meta.name,
                 "cite" => &mut meta.citation,
@@ -160,8 +345,8 @@ impl<'a, 's> Lowerer<'a, 's> {
                         _ => None,
                     };
                     d = match synonym.or_else(|| super::suggest(other, ["name", "cite"])) {
-                        Some(k) => d.hint(format!("did you mean `@{k}`? The keys are `@name` and `@cite`")),
-                        None => d.hint("the keys are `@name \"display name\"` and `@cite \"source, equation\"`"),
+                        Some(k) => d.hint(format!("did you mean `@{k}`? The keys are `@name`, `@cite` and `@domain`")),
+                        None => d.hint("the keys are `@name \"display name\"`, `@cite \"source, equation\"` and `@domain raw`"),
                     };
                     self.error(d);
                     continue;
@@ -181,13 +366,22 @@ impl<'a, 's> Lowerer<'a, 's> {
         meta
     }
 
-    /// What a name already means, if it is reserved (input, constant, builtin).
+    /// What a name already means, if it is reserved (input, frame vector, shorthand, constant, function).
     fn reserved(name: &str) -> Option<String> {
         if let Some(i) = Input::from_name(name) {
             return Some(format!("the input {} ({})", i.name(), i.describe()));
         }
         if name == "pi" {
             return Some("the constant pi".into());
+        }
+        if FRAME.contains(&name) {
+            return Some(format!("the frame vector {name}"));
+        }
+        if SHORTHANDS.contains(&name) {
+            return Some(format!("the shorthand {name}"));
+        }
+        if let Some((_, doc)) = derived(name) {
+            return Some(format!("the function {name} ({doc})"));
         }
         Builtin::from_name(name).map(|b| format!("the function {}", signature(b)))
     }
@@ -214,6 +408,13 @@ impl<'a, 's> Lowerer<'a, 's> {
                 continue;
             }
             declared.insert(name.name, name.span);
+            let default = match *default {
+                ParamDefault::Num(l) => l,
+                other => {
+                    self.declare_typed_param(*name, other, *range, s.span);
+                    continue;
+                }
+            };
             let (lo, hi) = match range {
                 Some((lo, hi)) => (*lo, *hi),
                 None if name.name == "n" => {
@@ -226,7 +427,7 @@ impl<'a, 's> Lowerer<'a, 's> {
                 }
             };
             // An invalid range is reported, but the parameter is still declared so its uses do not cascade.
-            self.check_range(name, *default, lo, hi, range.is_some());
+            self.check_range(name, default, lo, hi, range.is_some());
             let decl = ParamDecl {
                 name: name.name.to_string(),
                 default: default.value,
@@ -237,12 +438,67 @@ impl<'a, 's> Lowerer<'a, 's> {
             };
             if name.name == "n" {
                 self.params[0] = decl;
-            } else if self.params.len() >= u16::MAX as usize {
-                self.error(Diagnostic::error("too many parameters").at(name.span, "here").hint("use fewer than 65535"));
+            } else if self.params.len() + 3 >= u16::MAX as usize {
+                self.error(Diagnostic::error("too many parameters").at(name.span, "here").hint("use fewer than 65000"));
             } else {
-                self.param_names.insert(name.name, self.params.len() as u16);
+                self.param_names.insert(name.name, ParamRef::Float(self.params.len() as u16));
                 self.params.push(decl);
             }
+        }
+    }
+
+    /// A bool (`param b = true`) or colour (`param c = rgb(r, g, b)`) parameter: range 0..1, no `in`.
+    fn declare_typed_param(&mut self, name: Ident<'s>, default: ParamDefault<'s>, range: Option<(Lit, Lit)>, span: Span) {
+        let kind = if matches!(default, ParamDefault::Bool(..)) { "bool" } else { "colour" };
+        if name.name == "n" {
+            self.error(
+                Diagnostic::error(format!("`n` cannot be a {kind} parameter"))
+                    .at(default.span(), "not a number")
+                    .hint("`n` is the specular exponent: `param n = 100 in 1..1000`"),
+            );
+            return;
+        }
+        if let Some((lo, hi)) = range {
+            self.error(
+                Diagnostic::error(format!("a {kind} parameter has no range"))
+                    .at(lo.span.join(hi.span), "remove this range")
+                    .hint(format!("a {kind} parameter always ranges over 0..1")),
+            );
+        }
+        if self.params.len() + 3 >= u16::MAX as usize {
+            self.error(Diagnostic::error("too many parameters").at(name.span, "here").hint("use fewer than 65000"));
+            return;
+        }
+        let first = self.params.len() as u16;
+        let decl = |n: String, v: f64, kind: ParamKind| ParamDecl { name: n, default: v, lo: 0.0, hi: 1.0, span: Some(span), kind };
+        match default {
+            ParamDefault::Bool(b, _) => {
+                self.params.push(decl(name.name.to_string(), if b { 1.0 } else { 0.0 }, ParamKind::Bool));
+                self.param_names.insert(name.name, ParamRef::Bool(first));
+            }
+            ParamDefault::Color(ctor, lits, _) => {
+                if ctor.name != "rgb" && ctor.name != "vec3" {
+                    self.error(
+                        Diagnostic::error(format!("a parameter's default cannot be `{}(…)`", ctor.name))
+                            .at(ctor.span, "not a colour")
+                            .hint("a colour parameter is written `param base = rgb(0.8, 0.6, 0.2)`"),
+                    );
+                }
+                for l in lits {
+                    if !(0.0..=1.0).contains(&l.value) {
+                        self.error(
+                            Diagnostic::error(format!("colour channel {} of `{}` is outside 0..1", crate::ir::print::number(l.value), name.name))
+                                .at(l.span, "outside 0..1")
+                                .hint("colour channels range over 0..1"),
+                        );
+                    }
+                }
+                for (k, (l, ch)) in lits.iter().zip(["r", "g", "b"]).enumerate() {
+                    self.params.push(decl(format!("{}.{ch}", name.name), l.value, ParamKind::Color(k as u8)));
+                }
+                self.param_names.insert(name.name, ParamRef::Color(first));
+            }
+            ParamDefault::Num(_) => unreachable!("float parameters are declared by the caller"),
         }
     }
 
@@ -309,6 +565,7 @@ impl<'a, 's> Lowerer<'a, 's> {
                 let what = match &s.kind {
                     StmtKind::Let { .. } => "`let`",
                     StmtKind::Param { .. } => "`param`",
+                    StmtKind::Fn { .. } => "`fn`",
                     _ => "metadata",
                 };
                 self.error(
@@ -320,8 +577,9 @@ impl<'a, 's> Lowerer<'a, 's> {
             }
             match &s.kind {
                 StmtKind::Let { name, value } => self.let_(*name, *value),
+                StmtKind::Fn { name, args, body } => self.fn_def(*name, args, *body),
                 StmtKind::Expr(e) => {
-                    let v = self.expr(*e);
+                    let v = self.top_expr(*e);
                     match formula {
                         None => formula = Some((v, s.span)),
                         Some((_, first)) => {
@@ -376,7 +634,8 @@ impl<'a, 's> Lowerer<'a, 's> {
         } else if let Some(&p) = self.param_names.get(name.name) {
             let mut d = Diagnostic::error(format!("`{}` is already a parameter", name.name))
                 .at(name.span, "this `let` reuses its name");
-            if let Some(ps) = self.params[p as usize].span {
+            let (ParamRef::Float(i) | ParamRef::Bool(i) | ParamRef::Color(i)) = p;
+            if let Some(ps) = self.params[i as usize].span {
                 d = d.also(ps, "declared here");
             }
             self.error(d.hint("choose another name for the binding"));
@@ -397,20 +656,107 @@ impl<'a, 's> Lowerer<'a, 's> {
                     .hint("a `let` cannot be reassigned; give the second one another name"),
             );
             ok = false;
+        } else if let Some(&f) = self.fn_names.get(name.name) {
+            let first_span = self.fns[f].name.span;
+            self.error(
+                Diagnostic::error(format!("`{}` is already a function", name.name))
+                    .at(name.span, "this `let` reuses its name")
+                    .also(first_span, "defined here")
+                    .hint("choose another name for the binding"),
+            );
+            ok = false;
         }
-        let v = self.expr(value);
+        let v = self.top_expr(value);
         if ok {
             self.scope.insert(name.name, self.lets.len());
             self.lets.push(Let { name, value: v, used: false });
         }
     }
 
-    /// Lowers one expression with an explicit stack (children first).
-    fn expr(&mut self, root: ExprId) -> Slot {
+    /// `fn name(args) = body`: checks the name, the arguments and the body (with the arguments as poison),
+    /// then makes the function callable by the statements below it.
+    fn fn_def(&mut self, name: Ident<'s>, args: &[Ident<'s>], body: ExprId) {
+        let before = self.diags.len();
+        let taken = Self::reserved(name.name).or_else(|| {
+            if self.param_names.contains_key(name.name) {
+                Some(format!("the parameter `{}`", name.name))
+            } else if self.scope.contains_key(name.name) {
+                Some(format!("the `let {}`", name.name))
+            } else {
+                None
+            }
+        });
+        if let Some(what) = taken {
+            self.error(
+                Diagnostic::error(format!("`fn {}` would shadow {what}", name.name))
+                    .at(name.span, "this name is taken")
+                    .hint("choose another function name"),
+            );
+        } else if let Some(&first) = self.fn_names.get(name.name) {
+            let first_span = self.fns[first].name.span;
+            self.error(
+                Diagnostic::error(format!("function `{}` is defined twice", name.name))
+                    .at(name.span, "second definition")
+                    .also(first_span, "first defined here")
+                    .hint("give the second function another name"),
+            );
+        }
+        let mut bound: Vec<(&'s str, Slot)> = Vec::with_capacity(args.len());
+        for a in args {
+            if let Some(what) = Self::reserved(a.name) {
+                self.error(
+                    Diagnostic::error(format!("argument `{}` would shadow {what}", a.name))
+                        .at(a.span, "this name is taken")
+                        .hint("choose another argument name"),
+                );
+            } else if bound.iter().any(|b| b.0 == a.name) {
+                self.error(
+                    Diagnostic::error(format!("argument `{}` is named twice", a.name))
+                        .at(a.span, "second argument of this name")
+                        .hint("give each argument its own name"),
+                );
+            }
+            bound.push((a.name, Slot::Poison));
+        }
+        let ctx = Ctx { visible_fns: self.fns.len(), defining: Some(name.name), args: &bound, depth: 0, call: None };
+        let lo = self.lowest_id(body);
+        let mut memo = vec![Slot::Todo; body.index() + 1 - lo];
+        self.tree(body, &mut memo, lo, &ctx);
+        let ok = self.diags.len() == before;
+        if self.fn_names.contains_key(name.name) || Self::reserved(name.name).is_some() {
+            return;
+        }
+        self.fn_names.insert(name.name, self.fns.len());
+        self.fns.push(FnDef { name, args: args.to_vec(), body, lo, ok, used: false });
+    }
+
+    /// The smallest expression id under `root` (a statement's expressions are one contiguous id range).
+    fn lowest_id(&self, root: ExprId) -> usize {
+        let mut lo = root.index();
+        let mut stack = vec![root];
+        while let Some(id) = stack.pop() {
+            lo = lo.min(id.index());
+            self.ast.expr(id).for_each_child(|c| stack.push(c));
+        }
+        lo
+    }
+
+    /// Lowers a top-level expression (a `let` value or the formula).
+    fn top_expr(&mut self, root: ExprId) -> Slot {
+        let mut memo = std::mem::take(&mut self.memo);
+        let ctx = Ctx { visible_fns: self.fns.len(), defining: None, args: &[], depth: 0, call: None };
+        let v = self.tree(root, &mut memo, 0, &ctx);
+        self.memo = memo;
+        v
+    }
+
+    /// Lowers one expression with an explicit stack (children first); `memo[id - base]` holds each result.
+    fn tree(&mut self, root: ExprId, memo: &mut [Slot], base: usize, ctx: &Ctx<'_, 's>) -> Slot {
         let ast = self.ast;
         let mut stack = vec![(root, false)];
+        let mut args: Vec<Val> = Vec::new();
         while let Some((id, children_done)) = stack.pop() {
-            if self.memo[id.index()] != Slot::Todo {
+            if memo[id.index() - base] != Slot::Todo {
                 continue;
             }
             let e = ast.expr(id);
@@ -419,60 +765,135 @@ impl<'a, 's> Lowerer<'a, 's> {
                 e.for_each_child(|c| stack.push((c, false)));
                 continue;
             }
-            let mut args = std::mem::take(&mut self.args);
             args.clear();
             let mut poisoned = false;
-            e.for_each_child(|c| match self.memo[c.index()] {
-                Slot::Done(n) => args.push(n),
+            e.for_each_child(|c| match memo[c.index() - base] {
+                Slot::Done(v) => args.push(v),
                 _ => poisoned = true,
             });
             let span = e.span;
             let out = match &e.kind {
                 ExprKind::Error => Slot::Poison,
-                ExprKind::Name(n) => self.name(*n),
-                ExprKind::Call(n, a) => match self.check_call(*n, a.len(), span) {
-                    Some(b) if !poisoned => Slot::Done(self.ir.call(b, &args, span)),
-                    _ => Slot::Poison,
-                },
+                ExprKind::Name(n) => self.name(*n, ctx),
+                ExprKind::Call(n, a) => self.call(*n, &args, a.len(), poisoned, span, ctx),
                 _ if poisoned => Slot::Poison,
-                ExprKind::Num(v) => Slot::Done(self.ir.konst(*v, span)),
+                ExprKind::Num(v) => Slot::Done(Val::F(self.ir.konst(*v, span))),
+                ExprKind::Bool(b) => Slot::Done(Values::new(&mut self.ir, span).boolean(*b)),
                 ExprKind::Paren(_) => Slot::Done(args[0]),
-                ExprKind::Neg(_) => Slot::Done(self.ir.neg(args[0], span)),
+                ExprKind::Neg(_) => {
+                    let r = Values::new(&mut self.ir, span).neg(args[0]);
+                    self.typed(r, span, "arith", &args, ctx)
+                }
+                ExprKind::Not(_) => {
+                    let r = Values::new(&mut self.ir, span).not(args[0]);
+                    self.typed(r, span, "cond", &args, ctx)
+                }
+                ExprKind::Select(..) => {
+                    let (c, a, b) = (args[0], args[1], args[2]);
+                    let r = Values::new(&mut self.ir, span).select(c, a, b);
+                    let what = if matches!(c, Val::B(_)) { "branches" } else { "cond" };
+                    self.typed(r, span, what, &args, ctx)
+                }
+                ExprKind::Field(_, n) => match component(n.name) {
+                    Some(k) => {
+                        let r = Values::new(&mut self.ir, span).component(args[0], k);
+                        self.typed(r, span, "field", &args, ctx)
+                    }
+                    None => {
+                        self.type_error(
+                            format!("`.{}` is not a component", n.name),
+                            n.span,
+                            "a vec3 has the components `.x .y .z` (or `.r .g .b`)".into(),
+                            ctx,
+                        );
+                        Slot::Poison
+                    }
+                },
                 ExprKind::Binary(op, _, _) => {
                     let (a, b) = (args[0], args[1]);
-                    Slot::Done(match op {
-                        AstOp::Add => self.ir.bin(BinOp::Add, a, b, span),
-                        AstOp::Sub => self.ir.bin(BinOp::Sub, a, b, span),
-                        AstOp::Mul => self.ir.bin(BinOp::Mul, a, b, span),
-                        AstOp::Div => self.ir.bin(BinOp::Div, a, b, span),
-                        AstOp::Pow => self.ir.call(Builtin::Pow, &[a, b], span),
-                    })
+                    let mut vs = Values::new(&mut self.ir, span);
+                    let (r, what) = match op {
+                        AstOp::Add => (vs.arith(BinOp::Add, a, b), "arith"),
+                        AstOp::Sub => (vs.arith(BinOp::Sub, a, b), "arith"),
+                        AstOp::Mul => (vs.arith(BinOp::Mul, a, b), "arith"),
+                        AstOp::Div => (vs.arith(BinOp::Div, a, b), "arith"),
+                        AstOp::Pow => (vs.builtin(Builtin::Pow, &[a, b]), "arith"),
+                        AstOp::Lt => (vs.compare(Cmp::Lt, a, b), "cmp"),
+                        AstOp::Le => (vs.compare(Cmp::Le, a, b), "cmp"),
+                        AstOp::Gt => (vs.compare(Cmp::Gt, a, b), "cmp"),
+                        AstOp::Ge => (vs.compare(Cmp::Ge, a, b), "cmp"),
+                        AstOp::Eq => (vs.compare(Cmp::Eq, a, b), "cmp"),
+                        AstOp::Ne => (vs.compare(Cmp::Ne, a, b), "cmp"),
+                        AstOp::And => (vs.and(a, b), "cond"),
+                        AstOp::Or => (vs.or(a, b), "cond"),
+                    };
+                    let r = r.map_err(|m| if *op == AstOp::Pow { m.replace("`pow`", "`^`") } else { m });
+                    self.typed(r, span, what, &args, ctx)
                 }
             };
-            self.memo[id.index()] = out;
-            self.args = args;
+            memo[id.index() - base] = out;
         }
-        self.memo[root.index()]
+        memo[root.index() - base]
+    }
+
+    /// A [`Values`] result as a slot, reporting its error as a type error at `span`.
+    fn typed(&mut self, r: Result<Val, String>, span: Span, what: &str, args: &[Val], ctx: &Ctx) -> Slot {
+        match r {
+            Ok(v) => Slot::Done(v),
+            Err(m) => {
+                self.type_error(m, span, type_hint(what, args), ctx);
+                Slot::Poison
+            }
+        }
     }
 
     /// A name used as a value.
-    fn name(&mut self, n: Ident<'s>) -> Slot {
+    fn name(&mut self, n: Ident<'s>, ctx: &Ctx) -> Slot {
         let span = n.span;
-        if let Some(&i) = self.scope.get(n.name) {
-            self.lets[i].used = true;
-            return self.lets[i].value;
+        if let Some(&(_, v)) = ctx.args.iter().find(|a| a.0 == n.name) {
+            return v;
         }
+        if ctx.defining.is_none() && ctx.call.is_none() {
+            if let Some(&i) = self.scope.get(n.name) {
+                self.lets[i].used = true;
+                return self.lets[i].value;
+            }
+        } else if self.scope.contains_key(n.name) {
+            self.error(
+                Diagnostic::error(format!("a function cannot read the `let {}`", n.name))
+                    .at(span, "a `let` outside the function")
+                    .hint(format!(
+                        "a function body sees its arguments, the parameters and the inputs; pass `{}` as an argument",
+                        n.name
+                    )),
+            );
+            return Slot::Poison;
+        }
+        let mut vs = Values::new(&mut self.ir, span);
         if let Some(&p) = self.param_names.get(n.name) {
-            return Slot::Done(self.ir.param(p, span));
+            return Slot::Done(match p {
+                ParamRef::Float(i) => Val::F(vs.ir.param(i, span)),
+                ParamRef::Bool(i) => Val::B(vs.ir.param(i, span)),
+                ParamRef::Color(i) => Val::V([i, i + 1, i + 2].map(|k| vs.ir.param(k, span))),
+            });
+        }
+        if let Some(v) = vs.frame(n.name) {
+            return Slot::Done(v);
         }
         if let Some(input) = Input::from_name(n.name) {
-            let x = self.ir.input(input, span);
-            let zero = self.ir.konst(0.0, span);
-            let one = self.ir.konst(1.0, span);
-            return Slot::Done(self.ir.call(Builtin::Clamp, &[x, zero, one], span));
+            let x = vs.ir.input(input, span);
+            if self.raw || input.is_direction() {
+                return Slot::Done(Val::F(x));
+            }
+            let zero = vs.ir.konst(0.0, span);
+            let one = vs.ir.konst(1.0, span);
+            return Slot::Done(Val::F(vs.ir.call(Builtin::Clamp, &[x, zero, one], span)));
+        }
+        if let Some(v) = vs.shorthand(n.name) {
+            return Slot::Done(v);
         }
         if n.name == "pi" {
-            return Slot::Done(self.ir.konst(std::f64::consts::PI, span));
+            return Slot::Done(Val::F(vs.konst(std::f64::consts::PI)));
         }
         if let Some(b) = Builtin::from_name(n.name) {
             self.error(
@@ -482,12 +903,28 @@ impl<'a, 's> Lowerer<'a, 's> {
             );
             return Slot::Poison;
         }
-        let d = self.unknown_variable(n);
+        if let Some((_, doc)) = derived(n.name) {
+            self.error(
+                Diagnostic::error(format!("`{}` is a function, not a variable", n.name))
+                    .at(span, "used without arguments")
+                    .hint(format!("call it: {doc}")),
+            );
+            return Slot::Poison;
+        }
+        if self.all_fns.contains_key(n.name) {
+            self.error(
+                Diagnostic::error(format!("`{}` is a function, not a variable", n.name))
+                    .at(span, "used without arguments")
+                    .hint(format!("call it with its arguments: `{}(…)`", n.name)),
+            );
+            return Slot::Poison;
+        }
+        let d = self.unknown_variable(n, ctx);
         self.error(d);
         Slot::Poison
     }
 
-    fn unknown_variable(&self, n: Ident<'s>) -> Diagnostic {
+    fn unknown_variable(&self, n: Ident<'s>, ctx: &Ctx) -> Diagnostic {
         if let Some(&def) = self.all_lets.get(n.name) {
             if def.start > n.span.start {
                 return Diagnostic::error(format!("`{}` is used before its `let`", n.name))
@@ -506,8 +943,17 @@ impl<'a, 's> Lowerer<'a, 's> {
             return Diagnostic::error(format!("unknown variable `{}`", n.name)).at(n.span, "not defined");
         }
         let mut cands: Vec<&str> = INPUT_PREFERENCE.to_vec();
-        cands.extend(self.lets.iter().rev().map(|l| l.name.name));
-        cands.extend(self.params.iter().map(|p| p.name.as_str()));
+        cands.extend(ctx.args.iter().map(|a| a.0));
+        if ctx.args.is_empty() {
+            cands.extend(self.lets.iter().rev().map(|l| l.name.name));
+        }
+        cands.extend(SHORTHANDS);
+        cands.extend(Input::DIRECTIONS.iter().map(|i| i.name()));
+        cands.extend(self.params.iter().filter_map(|p| match p.kind {
+            ParamKind::Color(0) => p.name.strip_suffix(".r"),
+            ParamKind::Color(_) => None,
+            _ => Some(p.name.as_str()),
+        }));
         cands.push("pi");
         let exact_ci = cands.iter().copied().find(|c| c.eq_ignore_ascii_case(n.name));
         let sugg = exact_ci.or_else(|| super::suggest(n.name, cands.iter().copied()));
@@ -531,33 +977,96 @@ impl<'a, 's> Lowerer<'a, 's> {
                  `let c = NH`"
                     .to_string()
             }
-            _ => "the names available are the inputs NL, NV, NH, VR, VH, the constant pi, `n`, and names bound \
-                  with `let` or declared with `param`"
+            _ => "the names available are the inputs NL, NV, NH, VR, VH, the vectors L, V, N, X, Y, the constant pi, \
+                  `n`, and names bound with `let` or declared with `param`"
                 .to_string(),
         };
         d.hint(hint)
     }
 
-    /// Resolves a call's function and checks its arity; reports and returns `None` on error.
-    fn check_call(&mut self, n: Ident<'s>, nargs: usize, span: Span) -> Option<Builtin> {
-        if let Some(b) = Builtin::from_name(n.name) {
-            if b.arity() == nargs {
-                return Some(b);
+    /// A call: a user function (inlined), a builtin (per component on vectors) or a derived function. The
+    /// function and its arity are checked even when an argument failed, so those mistakes are reported too.
+    fn call(&mut self, n: Ident<'s>, args: &[Val], nargs: usize, poisoned: bool, span: Span, ctx: &Ctx<'_, 's>) -> Slot {
+        if let Some(&f) = self.fn_names.get(n.name).filter(|&&f| f < ctx.visible_fns) {
+            let want = self.fns[f].args.len();
+            self.fns[f].used = true;
+            if want != nargs {
+                let def = self.fns[f].name.span;
+                self.error(
+                    Diagnostic::error(format!("{} takes {}, found {nargs}", n.name, plural(want, "argument")))
+                        .at(span, format!("called with {}", plural(nargs, "argument")))
+                        .also(def, "defined here")
+                        .hint(format!("`{}`", self.fn_signature(f))),
+                );
+                return Slot::Poison;
             }
-            self.error(
-                Diagnostic::error(format!(
-                    "{} takes {}, found {nargs}",
-                    n.name,
-                    plural(b.arity(), "argument")
-                ))
-                .at(span, format!("called with {}", plural(nargs, "argument")))
-                .hint(format!("`{}`: {}", signature(b), b.info().doc)),
-            );
-            return None;
+            if poisoned {
+                return Slot::Poison;
+            }
+            return self.inline(f, args, span, ctx);
         }
-        let is_var = self.scope.contains_key(n.name)
+        if ctx.defining == Some(n.name) {
+            self.error(
+                Diagnostic::error(format!("`{}` calls itself", n.name))
+                    .at(span, "a recursive call")
+                    .hint("functions are inlined, so they cannot recurse; write the repetition out, or use a loop-free formula"),
+            );
+            return Slot::Poison;
+        }
+        if let Some(&def) = self.all_fns.get(n.name) {
+            self.error(
+                Diagnostic::error(format!("`{}` is called before its definition", n.name))
+                    .at(span, "called here")
+                    .also(def, "defined later, here")
+                    .hint(format!("move `fn {} … = …` above this line (a function may call only those defined above it)", n.name)),
+            );
+            return Slot::Poison;
+        }
+        if let Some(b) = Builtin::from_name(n.name) {
+            if b.arity() != nargs {
+                self.error(
+                    Diagnostic::error(format!("{} takes {}, found {nargs}", n.name, plural(b.arity(), "argument")))
+                        .at(span, format!("called with {}", plural(nargs, "argument")))
+                        .hint(format!("`{}`: {}", signature(b), b.info().doc)),
+                );
+                return Slot::Poison;
+            }
+            if poisoned {
+                return Slot::Poison;
+            }
+            let r = Values::new(&mut self.ir, span).builtin(b, args);
+            return self.typed(r, span, "arith", args, ctx);
+        }
+        if let Some((arity, doc)) = derived(n.name) {
+            let ok = if arity == 3 && derived(n.name) == derived("vec3") { nargs == 1 || nargs == 3 } else { nargs == arity };
+            if !ok {
+                self.error(
+                    Diagnostic::error(format!("{} takes {}, found {nargs}", n.name, plural(arity, "argument")))
+                        .at(span, format!("called with {}", plural(nargs, "argument")))
+                        .hint(doc),
+                );
+                return Slot::Poison;
+            }
+            if poisoned {
+                return Slot::Poison;
+            }
+            let name = if n.name == "rgb" { "vec3" } else { n.name };
+            let r = Values::new(&mut self.ir, span).function(name, args);
+            let r = r.unwrap_or_else(|| Err(format!("internal: `{name}` is not a function")));
+            return match r {
+                Ok(v) => Slot::Done(v),
+                Err(m) => {
+                    self.type_error(m, span, doc.to_string(), ctx);
+                    Slot::Poison
+                }
+            };
+        }
+        let is_var = ctx.args.iter().any(|a| a.0 == n.name)
+            || self.scope.contains_key(n.name)
             || self.param_names.contains_key(n.name)
             || Input::from_name(n.name).is_some()
+            || FRAME.contains(&n.name)
+            || SHORTHANDS.contains(&n.name)
             || n.name == "pi";
         if is_var {
             self.error(
@@ -565,25 +1074,97 @@ impl<'a, 's> Lowerer<'a, 's> {
                     .at(span, "called like a function")
                     .hint(format!("to multiply, write the `*`: `{} * (…)`", n.name)),
             );
-            return None;
+            return Slot::Poison;
         }
         let alias = FUNCTION_ALIASES.iter().find(|(a, _)| a.eq_ignore_ascii_case(n.name)).map(|(_, b)| *b);
-        let names = Builtin::table().iter().map(|r| r.name);
-        let sugg = alias.or_else(|| super::suggest(n.name, names.clone()));
+        let mut names: Vec<&str> = Builtin::table().iter().map(|r| r.name).collect();
+        names.extend(DERIVED.iter().map(|d| d.0));
+        names.push("rgb");
+        names.extend(self.fns[..ctx.visible_fns].iter().map(|f| f.name.name));
+        let sugg = alias.or_else(|| super::suggest(n.name, names.iter().copied()));
         let msg = match sugg {
             Some(s) => format!("unknown function `{}`; did you mean `{s}`?", n.name),
             None => format!("unknown function `{}`", n.name),
         };
-        let hint = match sugg.and_then(Builtin::from_name) {
-            Some(b) => format!("`{}`: {}", signature(b), b.info().doc),
-            None => format!("the functions are {}", names.collect::<Vec<_>>().join(", ")),
+        let hint = match sugg {
+            Some(s) => match (Builtin::from_name(s), derived(s), self.fn_names.get(s)) {
+                (Some(b), _, _) => format!("`{}`: {}", signature(b), b.info().doc),
+                (_, Some((_, doc)), _) => doc.to_string(),
+                (_, _, Some(&f)) => format!("`{}`", self.fn_signature(f)),
+                _ => String::new(),
+            },
+            None => format!(
+                "the functions are {}, and those defined with `fn name(x) = …` above this line",
+                names[..names.len() - self.fns[..ctx.visible_fns].len()].join(", ")
+            ),
         };
-        self.error(Diagnostic::error(msg).at(n.span, "not a builtin function").hint(hint));
-        None
+        let label = if self.fns.is_empty() { "not a builtin function" } else { "not a known function" };
+        self.error(Diagnostic::error(msg).at(n.span, label).hint(hint));
+        Slot::Poison
     }
 
-    /// Unused `let`s and `param`s, and a formula that reads no input.
-    fn warnings(&mut self, root: NodeId, span: Span) {
+    fn fn_signature(&self, f: usize) -> String {
+        let d = &self.fns[f];
+        let args: Vec<&str> = d.args.iter().map(|a| a.name).collect();
+        format!("fn {}({})", d.name.name, args.join(", "))
+    }
+
+    /// Expands the body of function `f` with its arguments bound to `args`.
+    fn inline(&mut self, f: usize, args: &[Val], span: Span, ctx: &Ctx<'_, 's>) -> Slot {
+        if !self.fns[f].ok {
+            return Slot::Poison;
+        }
+        let key = (f, args.to_vec());
+        if let Some(&v) = self.inlined.get(&key) {
+            return v;
+        }
+        let call = ctx.call.unwrap_or(span);
+        if ctx.depth >= MAX_INLINE_DEPTH {
+            if self.reported.insert(("depth".into(), call.start)) {
+                self.error(
+                    Diagnostic::error(format!("function calls nested more than {MAX_INLINE_DEPTH} deep"))
+                        .at(call, "this call expands too deeply")
+                        .hint("call fewer functions from inside functions"),
+                );
+            }
+            return Slot::Poison;
+        }
+        let (body, lo) = (self.fns[f].body, self.fns[f].lo);
+        self.inlined_nodes += body.index() + 1 - lo;
+        if self.inlined_nodes > MAX_INLINED {
+            if self.reported.insert(("size".into(), 0)) {
+                self.error(
+                    Diagnostic::error("the functions expand to too large a formula")
+                        .at(call, "expanding this call passes the limit")
+                        .hint(format!(
+                            "inlining stops after {MAX_INLINED} nodes; a function that calls another several times \
+                             multiplies its size — bind repeated calls with `let`"
+                        )),
+                );
+            }
+            return Slot::Poison;
+        }
+        let bound: Vec<(&'s str, Slot)> =
+            self.fns[f].args.iter().zip(args).map(|(a, v)| (a.name, Slot::Done(*v))).collect();
+        let inner = Ctx { visible_fns: f, defining: None, args: &bound, depth: ctx.depth + 1, call: Some(call) };
+        let mut memo = vec![Slot::Todo; body.index() + 1 - lo];
+        let v = self.tree(body, &mut memo, lo, &inner);
+        self.inlined.insert(key, v);
+        v
+    }
+
+    /// Unused `let`s, `fn`s and `param`s (a colour counts as used when any channel is), and a formula that
+    /// reads no input.
+    fn warnings(&mut self, roots: &[NodeId], span: Span) {
+        for f in &self.fns {
+            if !f.used && !f.name.name.starts_with('_') {
+                self.diags.push(
+                    Diagnostic::warning(format!("unused `fn {}`", f.name.name))
+                        .at(f.name.span, "never called")
+                        .hint(format!("remove it, or name it `_{}` to keep it quietly", f.name.name)),
+                );
+            }
+        }
         for l in &self.lets {
             if !l.used && !l.name.name.starts_with('_') {
                 self.diags.push(
@@ -593,17 +1174,32 @@ impl<'a, 's> Lowerer<'a, 's> {
                 );
             }
         }
-        let used = self.ir.used_params(root);
+        let mut used: Vec<u16> = roots.iter().flat_map(|r| self.ir.used_params(*r)).collect();
+        let mut inputs = crate::ir::InputSet::default();
+        roots.iter().for_each(|r| inputs.0 |= self.ir.used_inputs(*r).0);
+        // A colour parameter is used when any of its channels is.
         for (i, p) in self.params.iter().enumerate() {
+            if let ParamKind::Color(k) = p.kind {
+                let first = i - k as usize;
+                if (first..first + 3).any(|j| used.contains(&(j as u16))) {
+                    used.push(i as u16);
+                }
+            }
+        }
+        for (i, p) in self.params.iter().enumerate() {
+            if matches!(p.kind, ParamKind::Color(1 | 2)) {
+                continue;
+            }
             if let (Some(s), false) = (p.span, used.contains(&(i as u16))) {
+                let name = p.name.strip_suffix(".r").filter(|_| p.kind != ParamKind::Float).unwrap_or(&p.name);
                 self.diags.push(
-                    Diagnostic::warning(format!("parameter `{}` is never used", p.name))
+                    Diagnostic::warning(format!("parameter `{name}` is never used"))
                         .at(s, "declared here")
-                        .hint(format!("remove the declaration, or use `{}` in the formula", p.name)),
+                        .hint(format!("remove the declaration, or use `{name}` in the formula")),
                 );
             }
         }
-        if self.ir.used_inputs(root).is_empty() {
+        if inputs.is_empty() {
             self.diags.push(
                 Diagnostic::warning("the formula reads no input")
                     .at(span, "the same value in every direction")
@@ -612,6 +1208,7 @@ impl<'a, 's> Lowerer<'a, 's> {
         }
     }
 }
+
 
 #[cfg(test)]
 mod tests {

@@ -120,7 +120,8 @@ fn levenshtein(a: &str, b: &str) -> usize {
 }
 
 /// Parses `name=value,name=value` (parameter values: `--set`, `lobe serve`'s `set=` query); names are
-/// identifiers, values finite numbers, each name once.
+/// identifiers, or a colour channel `base.r`; values finite numbers, or `true`/`false` (1/0, for bool
+/// parameters); each name once.
 pub fn parse_assignments(s: &str) -> Result<Vec<(String, f64)>, String> {
     let mut out = Vec::new();
     for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
@@ -128,10 +129,19 @@ pub fn parse_assignments(s: &str) -> Result<Vec<(String, f64)>, String> {
             .split_once('=')
             .ok_or_else(|| format!("`{part}` is not of the form name=value (e.g. n=50)"))?;
         let k = k.trim();
-        if k.is_empty() || !k.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
-            return Err(format!("`{k}` is not a valid name in `{part}`"));
+        let ident = |s: &str| !s.is_empty() && s.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+        let valid = match k.split_once('.') {
+            Some((base, ch)) => ident(base) && matches!(ch, "r" | "g" | "b"),
+            None => ident(k),
+        };
+        if !valid {
+            return Err(format!("`{k}` is not a valid name in `{part}` (a name, or a colour channel like `base.r`)"));
         }
-        let v: f64 = v.trim().parse().map_err(|_| format!("`{}` is not a number in `{part}`", v.trim()))?;
+        let v: f64 = match v.trim() {
+            "true" => 1.0,
+            "false" => 0.0,
+            t => t.parse().map_err(|_| format!("`{t}` is not a number (or true/false) in `{part}`"))?,
+        };
         if !v.is_finite() {
             return Err(format!("`{part}`: the value must be finite"));
         }

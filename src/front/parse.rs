@@ -41,6 +41,20 @@ impl<'s> State<'s> {
         let span = Span::new(l, self.ast.span(a).end as usize);
         self.ast.push(ExprKind::Neg(a), span)
     }
+    pub fn not(&mut self, a: ExprId, l: usize) -> ExprId {
+        let span = Span::new(l, self.ast.span(a).end as usize);
+        self.ast.push(ExprKind::Not(a), span)
+    }
+    pub fn select(&mut self, c: ExprId, a: ExprId, b: ExprId) -> ExprId {
+        let span = self.ast.span(c).join(self.ast.span(b));
+        self.ast.push(ExprKind::Select(c, a, b), span)
+    }
+    /// Widens the span of `e` leftwards to `l` (to cover a leading keyword).
+    pub fn extend_left(&mut self, e: ExprId, l: usize) -> ExprId {
+        let s = &mut self.ast.exprs[e.index()].span;
+        *s = Span::new(l, s.end as usize);
+        e
+    }
 }
 
 /// Parses the tokens into an AST; syntax errors are appended to `diags`.
@@ -154,6 +168,17 @@ fn syntax_error(src: &str, toks: &[(usize, Tok, usize)], e: &ParseError<usize, T
         .unwrap_or(0);
     let stmt_kind = toks.get(stmt_start).map(|t| t.1).filter(|_| stmt_start < idx);
 
+    // `for i in 0..4`, `while …`: loops from other languages.
+    if let (Some(&(fl, Tok::Ident(kw @ ("for" | "while" | "loop" | "do")), fr)), true) =
+        (toks.get(stmt_start), idx == stmt_start + 1)
+    {
+        return Some(
+            Diagnostic::error(format!("`{kw}` loops are not part of the formula language"))
+                .at(Span::new(fl, fr), "a loop")
+                .hint("a formula is one expression: write the terms out, like `f(0) + f(1) + f(2)` with \
+                       `fn f(i) = …` for the repeated term"),
+        );
+    }
     if let (Some((pl, pt, pr)), Some((_, ct, _))) = (prev, cur) {
         if pt == Tok::Error {
             return None;
@@ -264,6 +289,10 @@ mod tests {
             }
             ExprKind::Paren(a) => show(ast, *a),
             ExprKind::Error => "<error>".into(),
+            ExprKind::Bool(b) => format!("{b}"),
+            ExprKind::Not(a) => format!("(!{})", show(ast, *a)),
+            ExprKind::Select(c, a, b) => format!("({} ? {} : {})", show(ast, *c), show(ast, *a), show(ast, *b)),
+            ExprKind::Field(a, n) => format!("{}.{}", show(ast, *a), n.name),
         }
     }
 
@@ -286,6 +315,31 @@ mod tests {
         assert_eq!(expr("--x"), "(-(-x))");
         assert_eq!(expr("-a*b"), "((-a) * b)");
         assert_eq!(expr("max(a, b,)"), "max(a, b)");
+    }
+
+    #[test]
+    fn precedence_of_the_vector_and_bool_language() {
+        assert_eq!(expr("a || b && c"), "(a || (b && c))");
+        assert_eq!(expr("a && b || c && d"), "((a && b) || (c && d))");
+        assert_eq!(expr("a + 1 < b * 2 && !c"), "(((a + 1) < (b * 2)) && (!c))");
+        assert_eq!(expr("c ? a : d ? e : f"), "(c ? a : (d ? e : f))");
+        assert_eq!(expr("c ? x ? 1 : 2 : 3"), "(c ? (x ? 1 : 2) : 3)");
+        assert_eq!(expr("if a < b then 1 else if c then 2 else 3"), "((a < b) ? 1 : (c ? 2 : 3))");
+        assert_eq!(expr("-L.x^2"), "(-(L.x ^ 2))");
+        assert_eq!(expr("normalize(L + V).z"), "normalize((L + V)).z");
+        assert_eq!(expr("!a == b"), "((!a) == b)");
+        assert_eq!(expr("true || false"), "(true || false)");
+        assert_eq!(expr("c ?\n1 :\n2"), "(c ? 1 : 2)");
+        assert_eq!(expr("if c\nthen 1\nelse 2"), "(c ? 1 : 2)");
+    }
+
+    #[test]
+    fn comparisons_do_not_chain() {
+        let src = "a < b < c";
+        let l = lex(src);
+        let mut d = vec![];
+        parse(src, &l, &mut d);
+        assert_eq!(d.len(), 1, "{d:?}");
     }
 
     #[test]

@@ -17,7 +17,7 @@ use crate::builtins::Builtin;
 use crate::ir::{BinOp, Input, Ir, Node, NodeId};
 
 /// A typed value: a float, a bool (a node that is 0 or 1), or a 3-vector.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Val {
     F(NodeId),
     B(NodeId),

@@ -104,8 +104,8 @@ fn hostile_parameter_names_export_valid_glsl() {
         return;
     };
     let src = "@name \"x\r#define pow(a,b) 0.0\"\nparam t0 = 1\nparam float = 2\nparam gl_Position = 3\nparam output = 4\n\
-               param fn = 5\nparam var = 6\nparam loop = 7\nparam f32 = 8\nparam main = 9\nparam __x = 1\n\
-               let a = pow(NH, n)\nlet b = a * a + t0\nb * b * float * gl_Position * output * fn * var * loop * f32 * main * __x\n";
+               param alias = 5\nparam var = 6\nparam loop = 7\nparam f32 = 8\nparam main = 9\nparam __x = 1\n\
+               let a = pow(NH, n)\nlet b = a * a + t0\nb * b * float * gl_Position * output * alias * var * loop * f32 * main * __x\n";
     let f = lobe::front::parse("hostile.brdf", src).unwrap_or_else(|d| panic!("{}", d.render(false)));
     let dir = std::env::temp_dir().join(format!("lobe-glsl-hostile-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();

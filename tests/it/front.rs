@@ -439,3 +439,326 @@ fn random_expressions_round_trip_through_the_parser() {
         );
     }
 }
+
+// ---- The vector and bool language (issue 13) ----
+
+/// Light/view direction pairs in the local frame (N = +z), upper hemisphere, away from special cases.
+fn directions() -> Vec<([f64; 3], [f64; 3])> {
+    let mut out = vec![];
+    for (tl, pl, tv, pv) in [(0.3, 0.4, 1.1, 2.0), (1.2, -2.5, 0.2, 0.9), (0.7, 3.0, 0.8, -1.0), (1.5, 1.0, 1.4, -2.8)] {
+        out.push((lobe::numerics::dir(tl, pl), lobe::numerics::dir(tv, pv)));
+    }
+    out
+}
+
+/// Every channel of `src` at (l, v) with the given parameters, from the interpreter and from the JIT, which
+/// must agree bit for bit.
+fn channels_at(src: &str, l: [f64; 3], v: [f64; 3], set: &[(&str, f64)]) -> Vec<f64> {
+    let f = formula(src);
+    let x = lobe::numerics::inputs_from_dirs(l, v);
+    let mut p = f.default_params();
+    for (k, val) in set {
+        p[f.param_index(k).unwrap_or_else(|| panic!("{src:?}: no parameter {k}"))] = *val;
+    }
+    f.channels()
+        .iter()
+        .map(|c| {
+            let i = Interp::new(c).eval(&x, &p);
+            let k = lobe::backend::jit::jit_kernel(c, lobe::Mode::Precise).expect("compiles").eval(&x, &p);
+            assert!(i.to_bits() == k.to_bits() || (i.is_nan() && k.is_nan()), "{src:?}: interp {i}, JIT {k}");
+            i
+        })
+        .collect()
+}
+
+#[track_caller]
+fn check_dirs(src: &str, want: impl Fn([f64; 3], [f64; 3]) -> f64) {
+    for (l, v) in directions() {
+        let got = channels_at(src, l, v, &[]);
+        let w = want(l, v);
+        assert_eq!(got.len(), 1, "{src:?} is scalar");
+        assert!(close(got[0], w), "{src:?} at L={l:?} V={v:?}: got {}, want {w}", got[0]);
+    }
+}
+
+fn dot3(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn half(l: [f64; 3], v: [f64; 3]) -> [f64; 3] {
+    let h = [l[0] + v[0], l[1] + v[1], l[2] + v[2]];
+    let n = dot3(h, h).sqrt();
+    h.map(|c| c / n)
+}
+
+#[test]
+fn vectors_frame_and_components_evaluate() {
+    let raw = |s: &str| format!("@domain raw\n{s}");
+    check_dirs(&raw("L.x + 10*V.y - 100*L.z"), |l, v| l[0] + 10.0 * v[1] - 100.0 * l[2]);
+    check_dirs(&raw("rgb(1, 2, 3).g + vec3(L.z).b"), |l, _| 2.0 + l[2]);
+    check_dirs(&raw("dot(L, V)"), dot3);
+    check_dirs(&raw("LV + 10*Lx + 100*Vz"), |l, v| dot3(l, v) + 10.0 * l[0] + 100.0 * v[2]);
+    check_dirs(&raw("HX + 10*HY"), |l, v| half(l, v)[0] + 10.0 * half(l, v)[1]);
+    check_dirs(&raw("dot(normalize(L + V), N)"), |l, v| half(l, v)[2]);
+    check_dirs(&raw("dot(X, L) + 10 * dot(Y, V)"), |l, v| l[0] + 10.0 * v[1]);
+    check_dirs(&raw("length(L + V) + distance(L, V)"), |l, v| {
+        let s = [l[0] + v[0], l[1] + v[1], l[2] + v[2]];
+        let d = [l[0] - v[0], l[1] - v[1], l[2] - v[2]];
+        dot3(s, s).sqrt() + dot3(d, d).sqrt()
+    });
+    check_dirs(&raw("cross(L, V).z + 10 * cross(X, Y).z"), |l, v| l[0] * v[1] - l[1] * v[0] + 10.0);
+    check_dirs(&raw("dot(reflect(-L, N), V)"), |l, v| 2.0 * l[2] * v[2] - dot3(l, v));
+    check_dirs(&raw("max(L, V).x + 10 * abs(-L).y + pow(vec3(2), vec3(1, 2, 3)).z"), |l, v| {
+        l[0].max(v[0]) + 10.0 * l[1].abs() + 8.0
+    });
+    check_dirs(&raw("mix(1, 3, L.z) + smoothstep(0, 1, V.z) + step(0.5, L.z)"), |l, v| {
+        let t = v[2].clamp(0.0, 1.0);
+        1.0 + 2.0 * l[2] + t * t * (3.0 - 2.0 * t) + if l[2] < 0.5 { 0.0 } else { 1.0 }
+    });
+    check_dirs(&raw("sign(L.x) + 10 * fract(3 * V.z) + 100 * floor(2.5 * L.z)"), |l, v| {
+        l[0].signum() + 10.0 * (3.0 * v[2] - (3.0 * v[2]).floor()) + 100.0 * (2.5 * l[2]).floor()
+    });
+    check_dirs(&raw("radians(180) + degrees(L.z)"), |l, _| std::f64::consts::PI + l[2].to_degrees());
+    // Named cosines are clamped in the brdf domain, raw in the raw domain; direction components never.
+    let (l, v) = ([0.6, 0.0, -0.8], [0.0, 0.0, 1.0]);
+    assert_eq!(channels_at("NL + 2", l, v, &[]), vec![2.0]);
+    assert!(close(channels_at(&raw("NL + 2"), l, v, &[])[0], 1.2));
+    assert!(close(channels_at("Lz + 2", l, v, &[])[0], 1.2));
+    // The brdf domain clamps the result at 0; raw does not.
+    assert_eq!(channels_at("L.z", l, v, &[]), vec![0.0]);
+    assert_eq!(channels_at(&raw("L.z"), l, v, &[]), vec![-0.8]);
+}
+
+#[test]
+fn booleans_comparisons_and_selects_evaluate() {
+    let raw = |s: &str| format!("@domain raw\n{s}");
+    check_dirs(&raw("L.z > 0.5 ? 1 : 2"), |l, _| if l[2] > 0.5 { 1.0 } else { 2.0 });
+    check_dirs(&raw("if L.z > 0.5 && V.z > 0.5 then 1 else 2"), |l, v| if l[2] > 0.5 && v[2] > 0.5 { 1.0 } else { 2.0 });
+    check_dirs(&raw("L.z < 0.5 || V.z <= 0.5 ? 3 : 4"), |l, v| if l[2] < 0.5 || v[2] <= 0.5 { 3.0 } else { 4.0 });
+    check_dirs(&raw("!(L.x >= 0) ? 5 : 6"), |l, _| if l[0] >= 0.0 { 6.0 } else { 5.0 });
+    check_dirs(&raw("let b = L.y > 0\nb == (V.y > 0) ? 7 : 8"), |l, v| if (l[1] > 0.0) == (v[1] > 0.0) { 7.0 } else { 8.0 });
+    check_dirs(&raw("L.x != V.x ? (true ? 9 : 10) : 11"), |l, v| if l[0] != v[0] { 9.0 } else { 11.0 });
+    check_dirs(&raw("false || L.z == L.z ? 12 : 13"), |_, _| 12.0);
+    check_dirs(&raw("L.z > 0.5 ? L.z : V.z"), |l, v| if l[2] > 0.5 { l[2] } else { v[2] });
+    // A nested select: right-associative, `if` chains the same way.
+    let three = |l: [f64; 3], _: [f64; 3]| if l[2] > 0.9 { 1.0 } else if l[2] > 0.5 { 2.0 } else { 3.0 };
+    check_dirs(&raw("L.z > 0.9 ? 1 : L.z > 0.5 ? 2 : 3"), three);
+    check_dirs(&raw("if L.z > 0.9 then 1\nelse if L.z > 0.5 then 2\nelse 3"), three);
+    // A vector select picks whole vectors.
+    check_dirs(&raw("(L.x > 0 ? L : V).y"), |l, v| if l[0] > 0.0 { l[1] } else { v[1] });
+}
+
+#[test]
+fn the_untaken_branch_never_reaches_the_result() {
+    // `inf` is 1/0 at run time (V.z - V.z), so no front-end folding hides it.
+    let inf = "let inf = 1 / (V.z - V.z)\n";
+    for (l, v) in directions() {
+        assert_eq!(channels_at(&format!("@domain raw\n{inf}L.z > 0 ? 2 : inf"), l, v, &[]), vec![2.0]);
+        assert_eq!(channels_at(&format!("@domain raw\n{inf}if L.z <= 0 then inf - inf else 3"), l, v, &[]), vec![3.0]);
+        assert_eq!(channels_at(&format!("@domain raw\n{inf}L.z > 0 && inf - inf > 0 ? 1 : 4"), l, v, &[]), vec![4.0]);
+        // The 0/1 blend the select replaces gives NaN (0 · inf).
+        let blend = format!("@domain raw\n{inf}let c = L.z > 0 ? 1 : 0\nc * 2 + (1 - c) * inf");
+        assert!(channels_at(&blend, l, v, &[])[0].is_nan());
+    }
+}
+
+#[test]
+fn bool_and_colour_parameters_and_set() {
+    let src = "param base = rgb(0.8, 0.6, 0.2)\nparam shiny = true\nparam k = 2 in 0..10\n\
+               shiny ? base * k * L.z : vec3(L.z)";
+    let f = formula(src);
+    let kinds: Vec<_> = f.params.iter().map(|p| (p.name.as_str(), p.kind, p.default, p.lo, p.hi)).collect();
+    use lobe::ir::ParamKind::*;
+    assert_eq!(
+        kinds,
+        vec![
+            ("n", Float, 50.0, 1.0, 1000.0),
+            ("base.r", Color(0), 0.8, 0.0, 1.0),
+            ("base.g", Color(1), 0.6, 0.0, 1.0),
+            ("base.b", Color(2), 0.2, 0.0, 1.0),
+            ("shiny", Bool, 1.0, 0.0, 1.0),
+            ("k", Float, 2.0, 0.0, 10.0),
+        ]
+    );
+    assert!(f.is_rgb());
+    let (l, v) = directions()[0];
+    let got = channels_at(src, l, v, &[]);
+    for (g, b) in got.iter().zip([0.8, 0.6, 0.2]) {
+        assert!(close(*g, b * 2.0 * l[2]), "{got:?}");
+    }
+    // `--set` values, through the same parser the CLI and the server use.
+    let set = lobe::front::parse_assignments("base.r=0.5, shiny=false").expect("valid");
+    assert_eq!(set, vec![("base.r".to_string(), 0.5), ("shiny".to_string(), 0.0)]);
+    let set: Vec<(&str, f64)> = set.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+    assert_eq!(channels_at(src, l, v, &set), vec![l[2]; 3]);
+    assert!(close(channels_at(src, l, v, &[("base.r", 0.5)])[0], 0.5 * 2.0 * l[2]));
+    assert!(lobe::front::parse_assignments("base.w=1").is_err());
+    assert!(lobe::front::parse_assignments("shiny=maybe").is_err());
+}
+
+#[test]
+fn user_functions_inline_with_the_types_of_each_call() {
+    let raw = |s: &str| format!("@domain raw\n{s}");
+    check_dirs(&raw("fn sqr(x) = x * x\nsqr(L.z) + sqr(vec3(1, 2, 3)).z"), |l, _| l[2] * l[2] + 9.0);
+    check_dirs(&raw("fn sqr(x) = x * x\nfn len2(v) = sqr(v.x) + sqr(v.y) + sqr(v.z)\nlen2(L - V)"), |l, v| {
+        let d = [l[0] - v[0], l[1] - v[1], l[2] - v[2]];
+        dot3(d, d)
+    });
+    check_dirs(&raw("param a = 2\nfn pick(c, x, y) = c ? x * a : y\npick(L.z > 0.5, L.z, V.z)"), |l, v| {
+        if l[2] > 0.5 { 2.0 * l[2] } else { v[2] }
+    });
+    // A function called twice with the same arguments is one expansion (hash-consed, memoised).
+    let f = formula("fn g(x) = acos(x) * 2\ng(NH) + g(NH)");
+    let acos = f.ir.nodes().iter().filter(|n| matches!(n, lobe::ir::Node::Call(Builtin::Acos, _))).count();
+    assert_eq!(acos, 1);
+}
+
+#[test]
+fn examples_in_the_vector_folder_parse_and_evaluate() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/vector");
+    let mut n = 0;
+    for e in std::fs::read_dir(&dir).expect("examples/vector") {
+        let p = e.expect("entry").path();
+        if p.extension().is_none_or(|x| x != "brdf") {
+            continue;
+        }
+        let src = std::fs::read_to_string(&p).expect("readable");
+        let (_, warnings) = parse_with_warnings(&p.display().to_string(), &src).unwrap_or_else(|d| panic!("{d}"));
+        assert!(warnings.items.is_empty(), "{}: {}", p.display(), warnings.render(false));
+        for (l, v) in directions() {
+            for c in channels_at(&src, l, v, &[]) {
+                assert!(c.is_finite() && c >= 0.0, "{}: {c}", p.display());
+            }
+        }
+        n += 1;
+    }
+    assert!(n >= 3);
+    // Anisotropic Ward by hand at one pair of directions.
+    let src = std::fs::read_to_string(dir.join("ward_anisotropic.brdf")).expect("ward");
+    let (l, v) = directions()[0];
+    let h = half(l, v);
+    let (ax, ay) = (0.1, 0.4);
+    let want = (-2.0 * ((h[0] / ax).powi(2) + (h[1] / ay).powi(2)) / (1.0 + h[2])).exp()
+        / (4.0 * std::f64::consts::PI * ax * ay * (l[2] * v[2]).sqrt());
+    let got = channels_at(&src, l, v, &[]);
+    assert!((got[0] - want).abs() <= 1e-12 * want, "{got:?} vs {want}");
+    // Stretched: rotating the directions by 90° about N changes the value (X and Y differ).
+    let rot = |d: [f64; 3]| [-d[1], d[0], d[2]];
+    assert!((channels_at(&src, rot(l), rot(v), &[])[0] - got[0]).abs() > 1e-6 * got[0]);
+}
+
+/// Random well-typed source text in the vector/bool language: `t` is 0 float, 1 bool, 2 vec3.
+fn gen_typed(r: &mut Rng, t: u32, depth: u32) -> String {
+    let leaf = depth == 0 || r.below(4) == 0;
+    let f = |r: &mut Rng| gen_typed(r, 0, depth.saturating_sub(1));
+    let b = |r: &mut Rng| gen_typed(r, 1, depth.saturating_sub(1));
+    let v = |r: &mut Rng| gen_typed(r, 2, depth.saturating_sub(1));
+    match (t, leaf) {
+        (0, true) => {
+            let names = ["L.x", "V.y", "Lz", "NH", "VR", "LV", "HX", "k", "base.g", "0.5", "2", "3"];
+            names[r.below(names.len() as u64) as usize].to_string()
+        }
+        (0, false) => match r.below(9) {
+            0..=2 => {
+                let op = ["+", "-", "*", "/"][r.below(4) as usize];
+                format!("({} {op} {})", f(r), f(r))
+            }
+            3 => {
+                let g = ["min", "max", "exp", "floor", "abs", "sqr", "fract", "sign"][r.below(8) as usize];
+                if g == "min" || g == "max" { format!("{g}({}, {})", f(r), f(r)) } else { format!("{g}({})", f(r)) }
+            }
+            4 => format!("({} ? {} : {})", b(r), f(r), f(r)),
+            5 => format!("(if {} then {} else {})", b(r), f(r), f(r)),
+            6 => format!("{}.{}", v(r), ["x", "y", "z", "r", "g", "b"][r.below(6) as usize]),
+            7 => format!("dot({}, {})", v(r), v(r)),
+            _ => format!("step({}, {})", f(r), f(r)),
+        },
+        (1, true) => ["true", "false", "shiny", "(L.z > 0.5)"][r.below(4) as usize].to_string(),
+        (1, false) => match r.below(5) {
+            0 => {
+                let op = ["<", "<=", ">", ">=", "==", "!="][r.below(6) as usize];
+                format!("({} {op} {})", f(r), f(r))
+            }
+            1 => format!("({} && {})", b(r), b(r)),
+            2 => format!("({} || {})", b(r), b(r)),
+            3 => format!("!{}", b(r)),
+            _ => format!("({} == {})", b(r), b(r)),
+        },
+        (_, true) => ["L", "V", "N", "X", "Y", "base", "vec3(0.25)"][r.below(7) as usize].to_string(),
+        (_, false) => match r.below(5) {
+            0 => format!("({} + {})", v(r), v(r)),
+            1 => format!("({} * {})", v(r), f(r)),
+            2 => format!("normalize({})", v(r)),
+            3 => format!("({} ? {} : {})", b(r), v(r), v(r)),
+            _ => format!("mix({}, {}, {})", v(r), v(r), f(r)),
+        },
+    }
+}
+
+/// The `param` lines that declare `f`'s parameters again (colour and bool kinds included).
+fn param_lines(f: &Formula) -> String {
+    use lobe::ir::ParamKind;
+    let mut out = String::new();
+    for (i, p) in f.params.iter().enumerate() {
+        match p.kind {
+            ParamKind::Float => out.push_str(&format!("param {} = {} in {}..{}\n", p.name, p.default, p.lo, p.hi)),
+            ParamKind::Bool => out.push_str(&format!("param {} = {}\n", p.name, p.default != 0.0)),
+            ParamKind::Color(0) => out.push_str(&format!(
+                "param {} = rgb({}, {}, {})\n",
+                p.name.trim_end_matches(".r"),
+                p.default,
+                f.params[i + 1].default,
+                f.params[i + 2].default
+            )),
+            ParamKind::Color(_) => {}
+        }
+    }
+    out
+}
+
+/// `lobe check`'s text of a formula parses back to the same values: comparisons and selects print in operator
+/// form, bools and numbers convert where the printed place needs the other type.
+#[test]
+fn printed_formulas_with_the_new_constructs_parse_back_to_the_same_values() {
+    let mut r = Rng(0x9E37_79B9_7F4A_7C15);
+    let header = "param k = 1.5 in 0..4\nparam shiny = true\nparam base = rgb(0.8, 0.5, 0.25)\nfn sqr(x) = x * x\n";
+    let (mut checked, mut skipped) = (0, 0);
+    for case in 0..300 {
+        let ty = if case % 3 == 2 { 2 } else { 0 };
+        let body = gen_typed(&mut r, ty, 5);
+        let src = format!("{header}{body}");
+        let f = match parse_with_warnings("rand.brdf", &src) {
+            Ok((f, _)) => f,
+            Err(d) => panic!("case {case}: {src}\n{}", d.render(false)),
+        };
+        for c in f.channels() {
+            for simplified in [false, true] {
+                let c = if simplified { lobe::simplify::simplify(&c, &[]) } else { c.clone() };
+                for text in [c.to_text(), c.to_program_text()] {
+                    // `print::number` writes non-finite constants as `inf`/`nan`, which are not literals.
+                    if text.split(|ch: char| !ch.is_alphanumeric()).any(|w| w == "inf" || w == "nan") {
+                        skipped += 1;
+                        continue;
+                    }
+                    let again = format!("@domain raw\n{}{text}", param_lines(&c));
+                    let g = parse("printed.brdf", &again)
+                        .unwrap_or_else(|d| panic!("case {case}: {src}\nprinted:\n{again}\n{}", d.render(false)));
+                    for (l, v) in directions() {
+                        let x = lobe::numerics::inputs_from_dirs(l, v);
+                        for shiny in [1.0, 0.0] {
+                            let mut p = c.default_params();
+                            p[c.param_index("shiny").expect("declared")] = shiny;
+                            let (a, b) = (Interp::new(&c).eval(&x, &p), Interp::new(&g).eval(&x, &p));
+                            assert!(
+                                a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
+                                "case {case}: {src}\nprinted:\n{again}\n{a} vs {b}"
+                            );
+                        }
+                    }
+                    checked += 1;
+                }
+            }
+        }
+    }
+    assert!(skipped * 20 < checked, "{skipped} printed texts skipped, {checked} checked");
+}

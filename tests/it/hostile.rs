@@ -159,14 +159,14 @@ fn log_plots_with_nothing_positive_end_with_an_error() {
 fn shader_export_mangles_hostile_names_and_metadata() {
     let d = scratch("export");
     let f = d.join("hostile.brdf");
-    std::fs::write(&f, "@name \"x\r#define pow(a,b) 0.0\"\nparam t0 = 1\nparam float = 2\nparam gl_Position = 3\nparam output = 4\nparam fn = 5\nparam var = 6\nparam loop = 7\nparam f32 = 8\npow(NH, n) * t0 * float * gl_Position * output * fn * var * loop * f32\n").unwrap();
+    std::fs::write(&f, "@name \"x\r#define pow(a,b) 0.0\"\nparam t0 = 1\nparam float = 2\nparam gl_Position = 3\nparam output = 4\nparam alias = 5\nparam var = 6\nparam loop = 7\nparam f32 = 8\npow(NH, n) * t0 * float * gl_Position * output * alias * var * loop * f32\n").unwrap();
     for dialect in ["--glsl", "--wgsl"] {
         let r = lobe(&["export", dialect, &s(&f)]);
         assert_eq!(r.code, Some(0), "{}", r.stderr);
         let text = String::from_utf8_lossy(&r.stdout);
         assert!(!text.contains('\r'), "{text}");
         assert!(text.lines().all(|l| l.trim_start().starts_with("//") || !l.contains("#define")), "{text}");
-        for name in ["t0", "float", "gl_Position", "output", "fn", "var", "loop", "f32"] {
+        for name in ["t0", "float", "gl_Position", "output", "alias", "var", "loop", "f32"] {
             assert!(text.contains(&format!("p_{name}")), "{name} not mangled:\n{text}");
         }
     }

@@ -97,7 +97,24 @@ fn each_mistake_gets_its_message_and_hint() {
         ("self_reference", &["`c` refers to itself"]),
         ("empty_parens", &["empty parentheses"]),
         ("duplicate_param", &["parameter `a` is declared twice", "parameter `n` is declared twice"]),
-        ("case_mismatch", &["did you mean `NH`?", "did you mean `n`?", "did you mean `pi`?"]),
+        ("type_errors", &[
+            "`+` needs numbers or vectors, not vec3 and bool",
+            "dot needs a vec3, not float",
+            "compares two floats, not vec3 and vec3",
+            "a condition needs a bool, not float",
+            "both branches must have one type, not vec3 and float",
+            "`.w` is not a component",
+        ]),
+        ("bool_result", &["the formula is a bool, not a number", "c ? 1 : 0"]),
+        ("recursion", &["`fact` calls itself", "`odd` is called before its definition"]),
+        ("unknown_functions", &[
+            "unknown function `shad`; did you mean `shade`?",
+            "shade takes 2 arguments, found 1",
+            "unknown function `normalise`; did you mean `normalize`?",
+            "unknown variable `HZ`; did you mean `HX`?",
+        ]),
+        ("loop_misuse", &["`for` loops are not part of the formula language", "`sum` is defined twice"]),
+        ("case_mismatch", &["did you mean `NH`?", "did you mean `cos`?", "did you mean `pi`?"]),
     ];
     for (name, needles) in want {
         let path = dir().join(format!("{name}.brdf"));
