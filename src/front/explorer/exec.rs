@@ -374,7 +374,7 @@ impl<'a> Exec<'a> {
     fn expr(&mut self, fr: &mut Frame, e: &Expr) -> R<Val> {
         self.tick(e.span)?;
         match &e.kind {
-            ExprKind::Num(v) => {
+            ExprKind::Num(v, _) => {
                 self.vb.span = e.span;
                 Ok(self.vb.num(*v))
             }
@@ -404,6 +404,10 @@ impl<'a> Exec<'a> {
                     Unary::Not => self.vb.not(x),
                 };
                 r.map_err(|m| err(e.span, m, "check the operand's type"))
+            }
+            ExprKind::Binary(..) if int_const(e, 0).is_some() => {
+                self.vb.span = e.span;
+                Ok(self.vb.num(int_const(e, 0).unwrap_or(0) as f64))
             }
             ExprKind::Binary(op, a, b) => {
                 let x = self.expr(fr, a)?;
@@ -553,6 +557,30 @@ impl<'a> Exec<'a> {
             Some(_) => Err(err(f.name_span, format!("not every path through `{}` returns a value", f.name), "end the function with a `return`")),
             None => Err(err(f.name_span, format!("`{}` never returns a value", f.name), "end the function with a `return`")),
         }
+    }
+}
+
+/// The value of an integer constant expression (GLSL's `1/2` is 0: integer literals divide as integers), or
+/// `None` when `e` is not one. Bounded by the parser's depth cap.
+fn int_const(e: &Expr, depth: u32) -> Option<i64> {
+    if depth > super::glsl::MAX_DEPTH {
+        return None;
+    }
+    match &e.kind {
+        ExprKind::Num(v, true) if *v < 9.0e15 => Some(*v as i64),
+        ExprKind::Unary(Unary::Neg, a) => int_const(a, depth + 1)?.checked_neg(),
+        ExprKind::Unary(Unary::Plus, a) => int_const(a, depth + 1),
+        ExprKind::Binary(op, a, b) => {
+            let (x, y) = (int_const(a, depth + 1)?, int_const(b, depth + 1)?);
+            match op {
+                Op::Add => x.checked_add(y),
+                Op::Sub => x.checked_sub(y),
+                Op::Mul => x.checked_mul(y),
+                Op::Div => x.checked_div(y),
+                _ => None,
+            }
+        }
+        _ => None,
     }
 }
 

@@ -15,7 +15,8 @@ pub const MAX_DEPTH: u32 = 200;
 
 #[derive(Clone, Debug, PartialEq)]
 pub enum Tok {
-    Num(f64),
+    /// A number and whether it is an integer literal (no `.`, no exponent): GLSL divides integers exactly.
+    Num(f64, bool),
     Ident(String),
     Punct(&'static str),
     Eof,
@@ -83,6 +84,7 @@ pub fn lex(src: &str, start: usize, end: usize) -> Result<Vec<Token>, Diagnostic
                 }
             }
             let text = &src[s..i];
+            let is_int = text.bytes().all(|c| c.is_ascii_digit());
             // GLSL's float suffixes: `1.0f`, `1.0lf`.
             for suffix in ["lf", "LF", "f", "F"] {
                 if src[i..end].starts_with(suffix) {
@@ -98,7 +100,7 @@ pub fn lex(src: &str, start: usize, end: usize) -> Result<Vec<Token>, Diagnostic
             let v: f64 = text.parse().map_err(|_| {
                 Diagnostic::error("malformed number").at(Span::new(s, i), "not a number").hint("write e.g. `0.5`")
             })?;
-            out.push(Token { tok: Tok::Num(v), span: Span::new(s, i) });
+            out.push(Token { tok: Tok::Num(v, is_int), span: Span::new(s, i) });
         } else if let Some(p) = PUNCT.iter().find(|p| b[i..end].starts_with(p.as_bytes())) {
             out.push(Token { tok: Tok::Punct(p), span: Span::new(i, i + p.len()) });
             i += p.len();
@@ -166,7 +168,8 @@ pub struct Expr {
 
 #[derive(Clone, Debug)]
 pub enum ExprKind {
-    Num(f64),
+    /// A literal and whether it is an integer.
+    Num(f64, bool),
     Bool(bool),
     Name(String),
     /// A call: the name, its span, the arguments.
@@ -318,7 +321,7 @@ impl<'t> Parser<'t> {
     }
     fn found(&self) -> String {
         match self.peek() {
-            Tok::Num(_) => "a number".into(),
+            Tok::Num(..) => "a number".into(),
             Tok::Ident(s) => format!("`{s}`"),
             Tok::Punct(p) => format!("`{p}`"),
             Tok::Eof => "the end of the shader".into(),
@@ -569,7 +572,7 @@ impl<'t> Parser<'t> {
             },
             ExprKind::Field(base, letters, lsp) => match base.kind {
                 ExprKind::Name(name) if letters.len() == 1 => {
-                    let k = Expr { kind: ExprKind::Num(component_of(&letters, lsp)? as f64), span: lsp, height: 1 };
+                    let k = Expr { kind: ExprKind::Num(component_of(&letters, lsp)? as f64, true), span: lsp, height: 1 };
                     Target { name, span: base.span, component: Some(Box::new(k)) }
                 }
                 _ => return Err(not_assignable(e.span)),
@@ -683,9 +686,9 @@ impl<'t> Parser<'t> {
     fn primary(&mut self) -> R<Expr> {
         let sp = self.span();
         match self.peek().clone() {
-            Tok::Num(v) => {
+            Tok::Num(v, int) => {
                 self.bump();
-                mk(sp, ExprKind::Num(v))
+                mk(sp, ExprKind::Num(v, int))
             }
             Tok::Ident(w) => {
                 if let Some(d) = refused(&w, sp) {
