@@ -261,7 +261,12 @@ impl<'a> Exec<'a> {
         }
     }
 
+    /// `select(c, a, b)` of returned flags; `select(c, 1, 0)` is `c` itself (a flag is 0 or 1).
     fn sel_node(&mut self, c: NodeId, a: NodeId, b: NodeId) -> NodeId {
+        let k = |s: &Self, x: NodeId| s.vb.ir.node(x).as_const();
+        if k(self, a) == Some(1.0) && k(self, b) == Some(0.0) {
+            return c;
+        }
         match self.vb.select(Val::B(c), Val::B(a), Val::B(b)) {
             Ok(Val::B(x)) => x,
             _ => unreachable!("a select of two bools is a bool"),
