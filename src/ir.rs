@@ -376,11 +376,19 @@ impl Ir {
 
     /// How many times each node is used as an operand within the graph rooted at `root` (the root counts 1).
     pub fn use_counts(&self, root: NodeId) -> Vec<u32> {
+        self.use_counts_of(&[root])
+    }
+
+    /// [`Ir::use_counts`] over the union of the graphs rooted at `roots` (each root counts 1 per listing).
+    pub fn use_counts_of(&self, roots: &[NodeId]) -> Vec<u32> {
         let mut counts = vec![0u32; self.nodes.len()];
         let mut seen = vec![false; self.nodes.len()];
-        counts[root.index()] = 1;
-        seen[root.index()] = true;
-        for i in (0..=root.index()).rev() {
+        for r in roots {
+            counts[r.index()] += 1;
+            seen[r.index()] = true;
+        }
+        let top = roots.iter().map(|r| r.index()).max().unwrap_or(0);
+        for i in (0..=top.min(self.nodes.len().saturating_sub(1))).rev() {
             if seen[i] {
                 self.nodes[i].for_each_arg(|a| {
                     counts[a.index()] += 1;
@@ -474,6 +482,25 @@ impl Formula {
         Formula { rgb: Some(rgb.clone()), ..rgb[0].clone() }
     }
 
+    /// The roots to print or emit together: the formula's own, or its three colour channels' roots copied into
+    /// one arena (hash-consing shares what the channels have in common).
+    pub fn merged_roots(&self) -> (Ir, Vec<NodeId>) {
+        let Some(ch) = &self.rgb else {
+            return (self.ir.clone(), vec![self.root]);
+        };
+        let mut ir = Ir::new();
+        let mut roots = Vec::new();
+        for c in ch.iter() {
+            let mut map: Vec<NodeId> = Vec::with_capacity(c.ir.len());
+            for (i, n) in c.ir.nodes().iter().enumerate() {
+                let id = ir.push(n.map_args(|a| map[a.index()]), c.ir.spans[i]);
+                map.push(id);
+            }
+            roots.push(map[c.root.index()]);
+        }
+        (ir, roots)
+    }
+
     pub fn is_rgb(&self) -> bool {
         self.rgb.is_some()
     }
@@ -561,14 +588,23 @@ pub mod print {
     /// `let nh = clamp(NH, 0, 1)` for a clamped input read several times, `let t1 = …` otherwise, then the
     /// final expression. A chain like x^4 prints as `let t1 = x * x` and `t1 * t1`, showing what is computed.
     pub fn with_lets(f: &Formula) -> String {
-        let counts = f.ir.use_counts(f.root);
+        let (mut out, roots) = with_lets_of(f, &[f.root]);
+        out.push_str(&roots[0]);
+        out
+    }
+
+    /// [`with_lets`] for several roots of `f.ir` (the channels of a colour formula, say): the `let` lines shared
+    /// by all of them, then each root's expression.
+    pub fn with_lets_of(f: &Formula, roots: &[NodeId]) -> (String, Vec<String>) {
+        let counts = f.ir.use_counts_of(roots);
         let mut names: HashMap<NodeId, String> = HashMap::new();
         let mut out = String::new();
         let taken = |s: &str| f.params.iter().any(|p| p.name == s) || s == "pi";
         let mut k = 0;
-        for id in f.ir.ids().take(f.root.index()) {
+        let top = roots.iter().map(|r| r.index()).max().unwrap_or(0);
+        for id in f.ir.ids().take(top) {
             let n = f.ir.node(id);
-            if counts[id.index()] < 2 || matches!(n, Node::Const(_) | Node::Input(_) | Node::Param(_)) {
+            if counts[id.index()] < 2 || roots.contains(&id) || matches!(n, Node::Const(_) | Node::Input(_) | Node::Param(_)) {
                 continue;
             }
             let mut name = match n {
@@ -589,7 +625,57 @@ pub mod print {
             out.push('\n');
             names.insert(id, name);
         }
-        write(f, f.root, &mut out, &names);
+        let exprs = roots
+            .iter()
+            .map(|r| {
+                let mut e = String::new();
+                write(f, *r, &mut e, &names);
+                e
+            })
+            .collect();
+        (out, exprs)
+    }
+
+    /// The formula as a source file of lobe's language, for people to read and edit (`lobe import`): `@name`,
+    /// the parameters (`param x = 0.5 in 0..1`, `param flag = true`, `param c = rgb(…)`), `@domain raw` (the
+    /// expression is taken as written: no input or result clamp added), the shared subexpressions as `let`s and
+    /// the final expression, or `rgb(r, g, b)` for a colour formula. The implicit `n` is not declared.
+    pub fn source(f: &Formula, header: &str) -> String {
+        let mut out = String::new();
+        for line in header.lines() {
+            out.push_str("# ");
+            out.push_str(line);
+            out.push('\n');
+        }
+        out.push_str(&format!("@name \"{}\"\n", f.display_name().replace('"', "'")));
+        for p in &f.params {
+            match p.kind {
+                _ if p.span.is_none() && p.name == "n" => {}
+                ParamKind::Float => out.push_str(&format!("param {} = {} in {}..{}\n", p.name, number(p.default), number(p.lo), number(p.hi))),
+                ParamKind::Bool => out.push_str(&format!("param {} = {}\n", p.name, p.default != 0.0)),
+                ParamKind::Color(0) => {
+                    let base = p.name.strip_suffix(".r").unwrap_or(&p.name);
+                    let ch: Vec<String> = ["r", "g", "b"]
+                        .iter()
+                        .map(|c| f.params.iter().find(|q| q.name == format!("{base}.{c}")).map_or(0.0, |q| q.default))
+                        .map(number)
+                        .collect();
+                    out.push_str(&format!("param {base} = rgb({})\n", ch.join(", ")));
+                }
+                ParamKind::Color(_) => {}
+            }
+        }
+        out.push_str("@domain raw\n");
+        let (ir, roots) = f.merged_roots();
+        let merged = Formula { ir, root: roots[roots.len() - 1], rgb: None, ..f.clone() };
+        let (lets, exprs) = with_lets_of(&merged, &roots);
+        out.push_str(&lets);
+        if exprs.len() == 3 {
+            out.push_str(&format!("rgb({})\n", exprs.join(", ")));
+        } else {
+            out.push_str(&exprs.concat());
+            out.push('\n');
+        }
         out
     }
 

@@ -25,6 +25,8 @@ enum Cmd {
     Check(cli::check::CheckArgs),
     /// Export a formula as a GLSL or WGSL function.
     Export(cli::export::ExportArgs),
+    /// Write a formula file (a BRDF Explorer .brdf) as lobe's own language.
+    Import(cli::import::ImportArgs),
     /// Energy: the exact normalisation coefficient (lobe mode) or the albedo over incidence angles (full mode).
     Energy(cli::energy::EnergyArgs),
     /// Accuracy against a reference lobe (mean |Δ|, epicentre, inflection, cut-off metrics).
@@ -57,6 +59,7 @@ fn main() {
         Cmd::Bench(a) => cli::bench::run(a),
         Cmd::Plot(a) => cli::plot::run(a),
         Cmd::Export(a) => cli::export::run(a),
+        Cmd::Import(a) => cli::import::run(a),
         Cmd::Check(a) => cli::check::run(a),
         Cmd::Energy(a) => cli::energy::run(a),
         Cmd::Accuracy(a) => cli::accuracy::run(a),

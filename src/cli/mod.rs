@@ -17,6 +17,7 @@ pub mod common;
 pub mod compare;
 pub mod eval;
 pub mod export;
+pub mod import;
 pub mod plot;
 pub mod points;
 pub mod accuracy;

@@ -27,6 +27,7 @@
 //! [`lex::MAX_DEPTH`] + 1 tokens. Measured times: BENCHMARKS.md.
 
 pub mod ast;
+pub mod explorer;
 pub mod lex;
 pub mod lower;
 pub mod parse;
@@ -46,6 +47,9 @@ pub fn parse(file: &str, src: &str) -> Result<Formula, Diagnostics> {
 /// Parses and lowers one .brdf source file; on success also returns the warnings (unused `let`/`param`, a
 /// formula that reads no input), possibly empty. On failure the diagnostics hold every error found.
 pub fn parse_with_warnings(file: &str, src: &str) -> Result<(Formula, Diagnostics), Diagnostics> {
+    if explorer::is_explorer(src) {
+        return explorer::parse(file, src);
+    }
     let mut items: Vec<Diagnostic> = Vec::new();
     let lexed = lex::lex(src);
     items.extend(lexed.diags.iter().cloned());

@@ -1,0 +1,38 @@
+//! `lobe import FILE [-o out.brdf]`: a formula file (a BRDF Explorer `.brdf`, typically) written back as lobe's
+//! own language, for people to read and edit. The text is [`crate::ir::print::source`] of the lowered,
+//! unsimplified formula, so reading it back gives the same IR and the same values.
+
+use super::args::{self, FormulaSource, Output};
+use super::common::CliError;
+
+#[derive(clap::Args, Debug)]
+#[command(mut_arg("output", args::help("Write the lobe source to this file instead of standard output")))]
+pub struct ImportArgs {
+    #[command(flatten)]
+    pub formula: FormulaSource,
+    #[command(flatten)]
+    pub out: Output,
+}
+
+/// The first line of every imported file: how `--force`-less overwriting recognises lobe's own output.
+const MARK: &str = "imported by `lobe import`";
+
+fn is_ours(bytes: &[u8]) -> bool {
+    String::from_utf8_lossy(&bytes[..bytes.len().min(400)]).contains(MARK)
+}
+
+pub fn run(a: &ImportArgs) -> Result<(), CliError> {
+    if let Some(p) = &a.out.path {
+        a.out.force.check(p, is_ours)?;
+    }
+    let f = a.formula.load()?;
+    let from = a.formula.file.as_deref().unwrap_or("<expr>");
+    let text = crate::ir::print::source(&f, &format!("{from}, {MARK}: the same function in lobe's language"));
+    match &a.out.path {
+        Some(p) => a.out.force.write(p, text.as_bytes(), is_ours),
+        None => {
+            print!("{text}");
+            Ok(())
+        }
+    }
+}
