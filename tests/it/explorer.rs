@@ -499,7 +499,6 @@ fn import_writes_lobe_source_and_keeps_foreign_files() {
 
 /// import → lobe source → lobe's parser → the same values, bit for bit, on every example.
 #[test]
-#[ignore = "needs the language of branch B; the merger enables it"]
 fn import_round_trips_through_the_lobe_language() {
     let dirs = directions();
     for p in examples() {
