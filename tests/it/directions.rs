@@ -150,3 +150,23 @@ fn colour_formulas_evaluate_per_channel_on_both_backends() {
     }
     assert_eq!(per_backend[0], per_backend[1], "interpreter and JIT differ on a colour formula");
 }
+
+/// The stability sweep of a colour direction formula, channel by channel on real geometry: the anisotropic lobe
+/// divides by sqrt(N·L · N·V), so it is infinite exactly in the horizon plane and finite on the interior of the
+/// hemisphere — which independent samples of Lx..Vz would not show.
+#[test]
+fn sweep_of_a_colour_direction_formula_runs_per_channel_on_geometry() {
+    use lobe::numerics::sweep::{sweep, SweepOptions};
+    let f = crate::export::aniso_colour();
+    let chans = lobe::cli::common::named_channels(&f);
+    assert_eq!(chans.iter().map(|c| c.display_name()).collect::<Vec<_>>(), ["aniso_colour (red)", "aniso_colour (green)", "aniso_colour (blue)"]);
+    for c in chans {
+        let k = lobe::compile_formula(c.unclamped(), &lobe::Options::default()).unwrap();
+        let r = sweep(&k, c.used_inputs(), &c.params, &SweepOptions { max_evals: 300_000, ..Default::default() });
+        let region = |name: &str| r.regions.iter().find(|s| s.region == name).unwrap_or_else(|| panic!("no {name} region"));
+        let zero = region("zero");
+        assert!(zero.inf > 0, "{}: {zero:?}", c.display_name());
+        let interior = region("interior");
+        assert_eq!((interior.nan, interior.inf), (0, 0), "{}: {interior:?}", c.display_name());
+    }
+}
