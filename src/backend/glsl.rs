@@ -1,15 +1,23 @@
-//! Shader export: a self-contained GLSL (or WGSL) function from the same IR and builtins table the JIT uses.
+//! Shader export: a self-contained GLSL or WGSL function, or a file Disney's BRDF Explorer loads, from the same
+//! IR and builtins table the JIT uses.
 //!
-//! Design: one statement per IR node that is used more than once or is a call (so shared subexpressions are
-//! computed once, as in the kernel), everything else inlined with full parentheses (no reliance on the target
-//! language's precedence). Builtins are spelled by the table's `glsl` column, which is also valid WGSL for every
-//! builtin lobe has. The function takes only the inputs the formula reads and its live parameters, so a shader
-//! that uses it computes nothing extra — the same "model only what the scene needs" rule as the renderer.
+//! Design: one expression emitter ([`emit`]) writes every body: one statement per IR node that is used more
+//! than once or is a call (so shared subexpressions are computed once, as in the kernel), everything else
+//! inlined with full parentheses (no reliance on the target language's precedence). Builtins are spelled by the
+//! table's `glsl` column, which is also valid WGSL for every builtin lobe has. A colour formula's three channels
+//! are merged into one arena first, so what they share is computed once and the function returns a `vec3`.
+//! The GLSL/WGSL function takes only the inputs the formula reads and its live parameters (a colour parameter as
+//! one `vec3`), so a shader that uses it computes nothing extra — the same "model only what the scene needs"
+//! rule as the renderer. The BRDF Explorer file wraps the same body in `vec3 BRDF(L, V, N, X, Y)`, which first
+//! computes the inputs read (`NL = dot(N, L)`, `Lx = dot(L, X)`, …) from the vectors BRDF Explorer passes, and
+//! declares the live parameters in its `::begin parameters` block (BRDF Explorer makes each a uniform).
+//! Cost: linear in the formula's nodes; no evaluation.
 //!
 //! Differences from lobe's own evaluation, stated in the emitted header: shaders run in f32, not f64; GPU
-//! `min`/`max` need not propagate NaN; `pow(x, y)` is undefined on GPUs for x < 0 and for x = 0, y ≤ 0.
+//! `min`/`max` need not propagate NaN; `pow(x, y)` is undefined on GPUs for x < 0 and for x = 0, y ≤ 0; in BRDF
+//! Explorer, `normalize(L + V)` is undefined when V = −L, where lobe's inputs give NH = VH = 0.
 
-use crate::ir::{Formula, Node, NodeId};
+use crate::ir::{Formula, Input, InputSet, Ir, Node, NodeId, ParamDecl, ParamKind};
 use std::fmt::Write;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -63,42 +71,12 @@ const RESERVED: &[&str] = &[
     "noexcept", "null", "of", "operator", "package", "private", "protected", "pub", "ref", "regardless",
     "self", "signed", "super", "throw", "trait", "try", "type", "typename", "typeof", "unless", "virtual",
     "where", "with", "yield",
-    // lobe's own names in the emitted function
-    "NL", "NV", "NH", "VR", "VH",
+    // lobe's own names in the emitted function, and BRDF Explorer's function arguments and locals
+    "NL", "NV", "NH", "VR", "VH", "Lx", "Ly", "Lz", "Vx", "Vy", "Vz", "L", "V", "N", "X", "Y", "H", "BRDF",
+    // globals of BRDF Explorer's shader templates, which its files are pasted into
+    "brightness", "exposure", "gamma", "incidentVector", "incidentTheta", "incidentPhi", "useNDotL", "fragColor",
+    "drawColor", "thickness", "colorMask", "showChroma", "useLogPlot", "thetaD", "thetaH", "phiD", "phiV",
 ];
-
-/// Shader identifiers for the formula's parameters (by index). A name that is reserved in GLSL or WGSL, looks
-/// like a temporary (`t0`) or the exported function (`lobe_…`), starts with `gl_` or `_`, or contains `__`
-/// (reserved in both languages) becomes
-/// `p_NAME` with underscores collapsed, made unique; every other name is kept, so an exported signature reads
-/// as the .brdf file does.
-pub fn param_names(f: &Formula) -> Vec<String> {
-    let needs_mangling = |n: &str| {
-        RESERVED.contains(&n)
-            || n.starts_with("gl_")
-            || n.starts_with('_')
-            || n.contains("__")
-            || n.starts_with("lobe_")
-            || (n.len() > 1 && n.starts_with('t') && n[1..].bytes().all(|b| b.is_ascii_digit()))
-    };
-    let mut out: Vec<String> = Vec::with_capacity(f.params.len());
-    for p in &f.params {
-        let mut name = if needs_mangling(&p.name) {
-            let collapsed: Vec<&str> = p.name.split('_').filter(|s| !s.is_empty()).collect();
-            format!("p_{}", collapsed.join("_"))
-        } else {
-            p.name.clone()
-        };
-        let base = name.clone();
-        let mut k = 1;
-        while out.contains(&name) || f.params.iter().any(|q| q.name == name && q.name != p.name) {
-            name = format!("{base}_{k}");
-            k += 1;
-        }
-        out.push(name);
-    }
-    out
-}
 
 /// Text safe inside a `//` comment: control characters and Unicode line separators (which would end the
 /// comment and inject code) become spaces.
@@ -106,7 +84,10 @@ fn comment_text(s: &str) -> String {
     s.chars().map(|c| if c.is_control() || matches!(c, '\u{2028}' | '\u{2029}') { ' ' } else { c }).collect()
 }
 
-fn literal(v: f64, d: Dialect) -> String {
+/// A literal for `v`: the shortest text that round-trips the f32 value the shader computes with, or with
+/// `exact` the f64 value (for text lobe reads back: a BRDF Explorer file imported again keeps lobe's constants;
+/// the GPU still rounds it to f32).
+fn literal(v: f64, d: Dialect, exact: bool) -> String {
     let bits = |b: u32| match d {
         Dialect::Glsl => format!("uintBitsToFloat({b:#010x}u)"),
         Dialect::Wgsl => format!("bitcast<f32>({b:#010x}u)"),
@@ -122,7 +103,7 @@ fn literal(v: f64, d: Dialect) -> String {
     if f.is_infinite() {
         return bits(if f > 0.0 { 0x7f80_0000 } else { 0xff80_0000 });
     }
-    let s = format!("{f:?}");
+    let s = if exact { format!("{v:?}") } else { format!("{f:?}") };
     let s = if s.contains('.') || s.contains('e') || s.contains("inf") { s } else { format!("{s}.0") };
     if v < 0.0 {
         format!("({s})")
@@ -131,88 +112,153 @@ fn literal(v: f64, d: Dialect) -> String {
     }
 }
 
-/// Exports the formula as one shader function.
-pub fn export(f: &Formula, d: Dialect) -> String {
-    let (ir, root) = f.ir.compact(f.root);
-    let uses = ir.use_counts(root);
-    let used_inputs = ir.used_inputs(root);
-    let live_params = ir.used_params(root);
-    let name = function_name(f);
+/// The group name of a parameter: a colour channel `NAME.r` belongs to `NAME`; every other parameter is its own.
+fn group(p: &ParamDecl) -> &str {
+    match p.kind {
+        ParamKind::Color(_) => p.name.rsplit_once('.').map_or(p.name.as_str(), |(g, _)| g),
+        _ => &p.name,
+    }
+}
+
+/// Shader identifiers for the formula's parameters (by index). A name that is reserved in GLSL or WGSL, looks
+/// like a temporary (`t0`) or the exported function (`lobe_…`), starts with `gl_` or `_`, or contains `__`
+/// (reserved in both languages) becomes
+/// `p_NAME` with underscores collapsed, made unique; every other name is kept, so an exported signature reads
+/// as the .brdf file does. The three channels of a colour parameter share one identifier (a `vec3`).
+pub fn param_names(f: &Formula) -> Vec<String> {
+    let needs_mangling = |n: &str| {
+        RESERVED.contains(&n)
+            || n.starts_with("gl_")
+            || n.starts_with('_')
+            || n.contains("__")
+            || n.starts_with("lobe_")
+            || (n.len() > 1 && n.starts_with('t') && n[1..].bytes().all(|b| b.is_ascii_digit()))
+    };
+    let mut out: Vec<String> = Vec::with_capacity(f.params.len());
+    for (i, p) in f.params.iter().enumerate() {
+        let g = group(p);
+        if i > 0 && matches!(p.kind, ParamKind::Color(k) if k > 0) && group(&f.params[i - 1]) == g {
+            out.push(out[i - 1].clone());
+            continue;
+        }
+        let mut name = if needs_mangling(g) {
+            let collapsed: Vec<&str> = g.split('_').filter(|s| !s.is_empty()).collect();
+            format!("p_{}", collapsed.join("_"))
+        } else {
+            g.to_string()
+        };
+        let base = name.clone();
+        let mut k = 1;
+        while out.contains(&name) || f.params.iter().any(|q| group(q) == name && group(q) != g) {
+            name = format!("{base}_{k}");
+            k += 1;
+        }
+        out.push(name);
+    }
+    out
+}
+
+/// How the body reads each parameter: its identifier, a colour channel as `NAME.r` (valid in both languages),
+/// a bool as `float(NAME)` when it is declared `bool` (BRDF Explorer's uniforms) rather than a float argument.
+fn param_reads(f: &Formula, names: &[String], bools_are_bool: bool) -> Vec<String> {
+    f.params
+        .iter()
+        .zip(names)
+        .map(|(p, n)| match p.kind {
+            ParamKind::Color(k) => format!("{n}.{}", ["r", "g", "b"][k.min(2) as usize]),
+            ParamKind::Bool if bools_are_bool => format!("float({n})"),
+            _ => n.clone(),
+        })
+        .collect()
+}
+
+/// A live parameter as a shader declares it: one float or bool, or one `vec3` for a colour's channels;
+/// `first` is the index of its (first) parameter.
+struct Decl {
+    name: String,
+    kind: ParamKind,
+    first: usize,
+}
+
+/// The declarations of the live parameters, in declaration order, one per colour group.
+fn live_decls(f: &Formula, names: &[String], live: &[u16]) -> Vec<Decl> {
+    let mut out: Vec<Decl> = vec![];
+    for &p in live {
+        let i = p as usize;
+        if out.iter().any(|d| d.name == names[i]) {
+            continue;
+        }
+        let kind = f.params[i].kind;
+        let first = match kind {
+            ParamKind::Color(k) => i - k as usize,
+            _ => i,
+        };
+        out.push(Decl { name: names[i].clone(), kind, first });
+    }
+    out.sort_by_key(|d| d.first);
+    out
+}
+
+/// The formula's channels in one arena (hash-consing shares what they have in common) and their roots: one
+/// root for a scalar formula, three (r, g, b) for a colour one.
+fn merged(f: &Formula) -> (Ir, Vec<NodeId>) {
+    let mut ir = Ir::new();
+    let mut roots = vec![];
+    for c in f.channels() {
+        let (cir, croot) = c.ir.compact(c.root);
+        let mut map: Vec<NodeId> = Vec::with_capacity(cir.len());
+        for id in cir.ids() {
+            let n = cir.node(id).map_args(|a| map[a.index()]);
+            map.push(ir.push(n, cir.span(id)));
+        }
+        roots.push(map[croot.index()]);
+    }
+    (ir, roots)
+}
+
+/// Inputs and live parameters of all `roots`.
+fn uses_of(ir: &Ir, roots: &[NodeId]) -> (InputSet, Vec<u16>) {
+    let mut inputs = InputSet::default();
+    let mut params = vec![];
+    for r in roots {
+        inputs.0 |= ir.used_inputs(*r).0;
+        params.extend(ir.used_params(*r));
+    }
+    params.sort_unstable();
+    params.dedup();
+    (inputs, params)
+}
+
+/// The one expression emitter behind every shader lobe writes (`--glsl`, `--wgsl`, `--brdf-explorer`): appends
+/// to `out` one indented statement per node that is shared (by any of `roots`) or is a call, binding it to a
+/// temporary `tK`; every other node is inlined with full parentheses. Returns each root's expression.
+/// Inputs are referred to by name (function arguments or locals) and parameters by `params` (see
+/// [`param_reads`]).
+fn emit(ir: &Ir, roots: &[NodeId], d: Dialect, exact: bool, params: &[String], out: &mut String) -> Vec<String> {
+    let mut uses = vec![0u32; ir.len()];
+    for r in roots {
+        for (u, c) in uses.iter_mut().zip(ir.use_counts(*r)) {
+            *u += c;
+        }
+    }
     let ty = match d {
         Dialect::Glsl => "float",
         Dialect::Wgsl => "f32",
     };
-
-    let mut out = String::new();
-    let lang = match d {
-        Dialect::Glsl => "GLSL",
-        Dialect::Wgsl => "WGSL",
-    };
-    let _ = writeln!(out, "// {} — exported by lobe {} as {lang}.", comment_text(&f.display_name()), env!("CARGO_PKG_VERSION"));
-    if let Some(c) = &f.meta.citation {
-        let _ = writeln!(out, "// Source: {}", comment_text(c));
-    }
-    // The let form, not the expanded tree: shared subexpressions would otherwise grow exponentially.
-    let program = f.to_program_text();
-    match program.lines().count() {
-        0 | 1 => {
-            let _ = writeln!(out, "// Formula (simplified): {}", comment_text(&program));
-        }
-        _ => {
-            let _ = writeln!(out, "// Formula (simplified):");
-            for line in program.lines() {
-                let _ = writeln!(out, "//   {}", comment_text(line));
-            }
-        }
-    }
-    let pnames = param_names(f);
-    let baked: Vec<String> = f
-        .params
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| !live_params.contains(&(*i as u16)))
-        .map(|(_, p)| p.name.clone())
-        .collect();
-    if !baked.is_empty() {
-        let _ = writeln!(out, "// Baked or unused parameters (folded into constants): {}", baked.join(", "));
-    }
-    let _ = writeln!(out, "// Inputs are cosines (clamped to [0, 1] here, as lobe does); the result is clamped at 0.");
-    let _ = writeln!(out, "// lobe evaluates in f64; this runs in f32. GPU min/max need not propagate NaN, and");
-    let _ = writeln!(out, "// pow(x, y) is undefined on GPUs for x < 0 or x = 0, y <= 0.");
-
-    let mut args: Vec<String> = used_inputs
-        .iter()
-        .map(|i| match d {
-            Dialect::Glsl => format!("float {}", i.name()),
-            Dialect::Wgsl => format!("{}: f32", i.name()),
-        })
-        .collect();
-    for p in &live_params {
-        let pname = &pnames[*p as usize];
-        args.push(match d {
-            Dialect::Glsl => format!("float {pname}"),
-            Dialect::Wgsl => format!("{pname}: f32"),
-        });
-    }
-    match d {
-        Dialect::Glsl => {
-            let _ = writeln!(out, "float {name}({}) {{", args.join(", "));
-        }
-        Dialect::Wgsl => {
-            let _ = writeln!(out, "fn {name}({}) -> f32 {{", args.join(", "));
-        }
-    }
-
-    // Expression text per node; nodes bound to temporaries are referred to by name.
+    let single = (roots.len() == 1).then(|| roots[0]);
     let mut text: Vec<String> = Vec::with_capacity(ir.len());
     let mut ntemps = 0;
     for id in ir.ids() {
+        if uses[id.index()] == 0 {
+            text.push(String::new());
+            continue;
+        }
         let node = ir.node(id);
         let t = |a: NodeId| text[a.index()].clone();
         let e = match *node {
-            Node::Const(b) => literal(f64::from_bits(b), d),
+            Node::Const(b) => literal(f64::from_bits(b), d, exact),
             Node::Input(i) => i.name().to_string(),
-            Node::Param(p) => pnames[p as usize].clone(),
+            Node::Param(p) => params[p as usize].clone(),
             Node::Neg(a) => format!("(-{})", t(a)),
             Node::Binary(op, a, b) => format!("({} {} {})", t(a), op.symbol(), t(b)),
             Node::Call(b, a) => {
@@ -228,7 +274,7 @@ pub fn export(f: &Formula, d: Dialect) -> String {
             }
         };
         let leaf = matches!(node, Node::Const(_) | Node::Input(_) | Node::Param(_));
-        let bind = id != root && !leaf && (uses[id.index()] > 1 || matches!(node, Node::Call(..)));
+        let bind = Some(id) != single && !leaf && (uses[id.index()] > 1 || matches!(node, Node::Call(..)));
         if bind {
             let tname = format!("t{ntemps}");
             ntemps += 1;
@@ -241,24 +287,198 @@ pub fn export(f: &Formula, d: Dialect) -> String {
             text.push(e);
         }
     }
-    let _ = writeln!(out, "    return {};", text[root.index()]);
+    roots.iter().map(|r| text[r.index()].clone()).collect()
+}
+
+/// The header every export starts with (each line to be prefixed by the target's comment marker): what the
+/// formula is, what was baked, and how the shader differs from lobe's own evaluation.
+fn header(f: &Formula, inputs: InputSet, live: &[u16], lang: &str) -> Vec<String> {
+    let mut out = vec![format!("{} — exported by lobe {} as {lang}.", comment_text(&f.display_name()), env!("CARGO_PKG_VERSION"))];
+    if let Some(c) = &f.meta.citation {
+        out.push(format!("Source: {}", comment_text(c)));
+    }
+    let channels = f.channels();
+    for (k, c) in channels.iter().enumerate() {
+        let which = if channels.len() == 1 { String::new() } else { format!(", {} channel", ["red", "green", "blue"][k.min(2)]) };
+        // The let form, not the expanded tree: shared subexpressions would otherwise grow exponentially.
+        let program = c.to_program_text();
+        if program.lines().count() <= 1 {
+            out.push(format!("Formula (simplified){which}: {}", comment_text(&program)));
+        } else {
+            out.push(format!("Formula (simplified){which}:"));
+            out.extend(program.lines().map(|l| format!("  {}", comment_text(l))));
+        }
+    }
+    let baked: Vec<&str> =
+        f.params.iter().enumerate().filter(|(i, _)| !live.contains(&(*i as u16))).map(|(_, p)| p.name.as_str()).collect();
+    if !baked.is_empty() {
+        out.push(format!("Baked or unused parameters (folded into constants): {}", baked.join(", ")));
+    }
+    if inputs.reads_directions() {
+        out.push("Lx..Vz are the components of the unit light and view directions in the local frame".into());
+        out.push("(N = +z, X = +x, Y = +y); cosine inputs are clamped where lobe clamps them.".into());
+    } else {
+        out.push("Inputs are cosines (clamped to [0, 1] here, as lobe does); the result is clamped at 0.".into());
+    }
+    out.push("lobe evaluates in f64; this runs in f32. GPU min/max need not propagate NaN, and".into());
+    out.push("pow(x, y) is undefined on GPUs for x < 0 or x = 0, y <= 0.".into());
+    out
+}
+
+/// Exports the formula as one shader function: the inputs it reads and its live parameters as arguments (a
+/// colour parameter as one `vec3`), returning `float` (`f32`) or, for a colour formula, `vec3` (`vec3<f32>`).
+pub fn export(f: &Formula, d: Dialect) -> String {
+    let (ir, roots) = merged(f);
+    let (inputs, live) = uses_of(&ir, &roots);
+    let names = param_names(f);
+    let lang = match d {
+        Dialect::Glsl => "GLSL",
+        Dialect::Wgsl => "WGSL",
+    };
+    let mut out = String::new();
+    for line in header(f, inputs, &live, lang) {
+        let _ = writeln!(out, "// {line}");
+    }
+    let arg = |name: &str, vec: bool| match (d, vec) {
+        (Dialect::Glsl, false) => format!("float {name}"),
+        (Dialect::Glsl, true) => format!("vec3 {name}"),
+        (Dialect::Wgsl, false) => format!("{name}: f32"),
+        (Dialect::Wgsl, true) => format!("{name}: vec3<f32>"),
+    };
+    let mut args: Vec<String> = inputs.iter().map(|i| arg(i.name(), false)).collect();
+    args.extend(live_decls(f, &names, &live).iter().map(|p| arg(&p.name, matches!(p.kind, ParamKind::Color(_)))));
+    let rgb = roots.len() == 3;
+    let name = function_name(f);
+    let _ = match (d, rgb) {
+        (Dialect::Glsl, _) => writeln!(out, "{} {name}({}) {{", if rgb { "vec3" } else { "float" }, args.join(", ")),
+        (Dialect::Wgsl, _) => writeln!(out, "fn {name}({}) -> {} {{", args.join(", "), if rgb { "vec3<f32>" } else { "f32" }),
+    };
+    let results = emit(&ir, &roots, d, false, &param_reads(f, &names, false), &mut out);
+    let _ = writeln!(out, "    return {};", result(&results, d));
     let _ = writeln!(out, "}}");
+    out
+}
+
+/// The returned expression: the scalar, or `vec3(r, g, b)`.
+fn result(results: &[String], d: Dialect) -> String {
+    match (results, d) {
+        ([one], _) => one.clone(),
+        (_, Dialect::Glsl) => format!("vec3({})", results.join(", ")),
+        (_, Dialect::Wgsl) => format!("vec3<f32>({})", results.join(", ")),
+    }
+}
+
+/// A number as BRDF Explorer's parameter reader (`stream >> float`) takes it; the f64 text, so an importer
+/// reading it back gets lobe's value.
+fn be_number(v: f64) -> String {
+    format!("{v}")
+}
+
+/// A finite slider range for a parameter (BRDF Explorer needs one): the declared bound where it is finite in
+/// f32, else ten times the default's magnitude (at least 10) away from the default. `true` when chosen here.
+fn slider_range(p: &ParamDecl) -> (f64, f64, bool) {
+    let finite = |v: f64| (v as f32).is_finite();
+    let reach = p.default.abs().max(1.0) * 10.0;
+    let lo = if finite(p.lo) { p.lo } else { p.default - reach };
+    let hi = if finite(p.hi) { p.hi } else { p.default + reach };
+    (lo, hi, !(finite(p.lo) && finite(p.hi)))
+}
+
+/// How BRDF Explorer's `vec3 BRDF(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)` computes each input lobe's kernels
+/// read, from the world-space vectors it is given (H = normalize(L + V), R = reflect(−L, N)).
+fn be_input(i: Input) -> &'static str {
+    match i {
+        Input::NL => "dot(N, L)",
+        Input::NV => "dot(N, V)",
+        Input::NH => "dot(N, H)",
+        Input::VR => "dot(V, reflect(-L, N))",
+        Input::VH => "dot(V, H)",
+        Input::Lx => "dot(L, X)",
+        Input::Ly => "dot(L, Y)",
+        Input::Lz => "dot(L, N)",
+        Input::Vx => "dot(V, X)",
+        Input::Vy => "dot(V, Y)",
+        Input::Vz => "dot(V, N)",
+    }
+}
+
+/// The formula as a file Disney's BRDF Explorer loads: `analytic`, a `::begin parameters` block declaring the
+/// live parameters (`float NAME MIN MAX DEFAULT`, `bool NAME DEFAULT`, `color NAME R G B`), and a
+/// `::begin shader` block defining `vec3 BRDF(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)` that computes only the
+/// inputs the formula reads and then the body [`export`] writes (the same emitter). BRDF Explorer declares
+/// each parameter as a uniform of its type (`uniform float`, `uniform bool`, `uniform vec3`), so a bool is
+/// read as `float(NAME)` and a colour channel as `NAME.r`; a scalar formula returns `vec3(F)`.
+pub fn brdf_explorer(f: &Formula) -> String {
+    let (ir, roots) = merged(f);
+    let (inputs, live) = uses_of(&ir, &roots);
+    let names = param_names(f);
+    let mut out = String::from("analytic\n\n");
+    for line in header(f, inputs, &live, "a BRDF Explorer file") {
+        let _ = writeln!(out, "# {line}");
+    }
+    let decls = live_decls(f, &names, &live);
+    for d in &decls {
+        let p = &f.params[d.first];
+        if let (ParamKind::Float, (lo, hi, true)) = (d.kind, slider_range(p)) {
+            let _ = writeln!(
+                out,
+                "# {}: declared range {}..{}; BRDF Explorer needs a finite one, so its slider spans {}..{}.",
+                d.name,
+                crate::ir::print::number(p.lo),
+                crate::ir::print::number(p.hi),
+                be_number(lo),
+                be_number(hi)
+            );
+        }
+    }
+    out.push_str("\n# [type] [name] [min val] [max val] [default val]\n::begin parameters\n");
+    for d in &decls {
+        let p = &f.params[d.first];
+        let _ = match d.kind {
+            ParamKind::Float => {
+                let (lo, hi, _) = slider_range(p);
+                writeln!(out, "float {} {} {} {}", d.name, be_number(lo), be_number(hi), be_number(p.default))
+            }
+            ParamKind::Bool => writeln!(out, "bool {} {}", d.name, u8::from(p.default != 0.0)),
+            ParamKind::Color(_) => {
+                let c: Vec<String> = (0..3).map(|k| be_number(f.params.get(d.first + k).map_or(0.0, |q| q.default))).collect();
+                writeln!(out, "color {} {}", d.name, c.join(" "))
+            }
+        };
+    }
+    out.push_str("::end parameters\n\n::begin shader\n");
+    let _ = writeln!(out, "vec3 BRDF(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)\n{{");
+    if inputs.contains(Input::NH) || inputs.contains(Input::VH) {
+        out.push_str("    vec3 H = normalize(L + V);\n");
+    }
+    for i in inputs.iter() {
+        let _ = writeln!(out, "    float {} = {};", i.name(), be_input(i));
+    }
+    let results = emit(&ir, &roots, Dialect::Glsl, true, &param_reads(f, &names, true), &mut out);
+    let ret = match results.as_slice() {
+        [one] => format!("vec3({one})"),
+        _ => result(&results, Dialect::Glsl),
+    };
+    let _ = writeln!(out, "    return {ret};\n}}\n::end shader");
     out
 }
 
 /// A complete fragment shader around the exported GLSL function (for validators and quick previews).
 pub fn glsl_test_shader(f: &Formula) -> String {
     let func = export(f, Dialect::Glsl);
-    let (ir, root) = f.ir.compact(f.root);
-    let mut call_args: Vec<String> = ir.used_inputs(root).iter().map(|_| "0.5".to_string()).collect();
-    for p in ir.used_params(root) {
-        call_args.push(literal(f.params[p as usize].default, Dialect::Glsl));
+    let (ir, roots) = merged(f);
+    let (inputs, live) = uses_of(&ir, &roots);
+    let mut call_args: Vec<String> = inputs.iter().map(|_| "0.5".to_string()).collect();
+    for d in live_decls(f, &param_names(f), &live) {
+        let lit = |k: usize| literal(f.params[d.first + k].default, Dialect::Glsl, false);
+        call_args.push(match d.kind {
+            ParamKind::Color(_) => format!("vec3({}, {}, {})", lit(0), lit(1), lit(2)),
+            _ => lit(0),
+        });
     }
-    format!(
-        "#version 450\n{func}\nlayout(location = 0) out vec4 color;\nvoid main() {{\n    color = vec4({}({}));\n}}\n",
-        function_name(f),
-        call_args.join(", ")
-    )
+    let call = format!("{}({})", function_name(f), call_args.join(", "));
+    let value = if roots.len() == 3 { format!("vec4({call}, 1.0)") } else { format!("vec4({call})") };
+    format!("#version 450\n{func}\nlayout(location = 0) out vec4 color;\nvoid main() {{\n    color = {value};\n}}\n")
 }
 
 #[cfg(test)]

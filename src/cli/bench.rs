@@ -194,7 +194,11 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
         "both" => vec![crate::Mode::Precise, crate::Mode::Fast],
         _ => vec![crate::Mode::Precise],
     };
-    for (f, path) in formulas.iter().zip(&files) {
+    // A colour formula is measured channel by channel: one row per channel, named `NAME (red)` etc.; its cost
+    // is the sum of its rows.
+    let channels: Vec<_> = formulas.iter().zip(&files).flat_map(|(f, p)| common::named_channels(f).into_iter().map(move |c| (c, p))).collect();
+    for (f, path) in &channels {
+        let (f, path) = (f, *path);
         for &math in &modes {
             if progress {
                 eprint!("\rmeasuring {:<40}", format!("{} ({math})", f.display_name()));

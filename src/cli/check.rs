@@ -5,7 +5,7 @@
 //! input, which rewrite bought what, and where the formula is ill-conditioned by nature.
 
 use super::args::{self, FormulaSource, Json, Params, PreferArg};
-use super::common::CliError;
+use super::common::{self, CliError};
 use crate::base::json;
 use crate::ir::{Formula, Input};
 use crate::numerics::robust::{self, ErrorStats, Worst};
@@ -95,7 +95,11 @@ fn stats_line(f: &Formula, s: &ErrorStats) -> String {
 
 pub fn run(a: &CheckArgs) -> Result<(), CliError> {
     let set = a.set.list();
-    let f = a.formula.load()?;
+    let whole = a.formula.load()?;
+    // A colour formula: the red channel is checked and shown, and the output says so (`lobe check --sweep`
+    // and `lobe bench` report every channel).
+    let colour = whole.is_rgb().then_some("red");
+    let f = common::named_channels(&whole).remove(0);
     let bake = crate::resolve_bake(&f, &set)?;
     let (simplified, report) = crate::simplify::simplify_report(&f, &bake);
     let (nodes_before, nodes_after) = (report.nodes_before, report.nodes_after);
@@ -126,6 +130,7 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
             "file": f.file,
             "name": f.display_name(),
             "citation": f.meta.citation,
+            "channel": colour,
             "params": params,
             // The let form: printing shared `let`s as a tree grows exponentially with their depth.
             "formula": f.to_program_text(),
@@ -167,6 +172,9 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
         return Ok(());
     }
     println!("{} — {}", f.file, f.display_name());
+    if colour.is_some() {
+        println!("  colour      an RGB formula: the red channel is shown (check --sweep and bench report all three)");
+    }
     if let Some(c) = &f.meta.citation {
         println!("  cite        {c}");
     }

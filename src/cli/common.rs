@@ -152,6 +152,18 @@ pub fn check_set_names(formulas: &[&Formula], set: &[(String, f64)]) -> Result<(
 
 pub use crate::front::did_you_mean;
 
+/// The scalar formulas of `f` for a command that reports per formula: `f` itself, or its red, green and blue
+/// channels named `NAME (red)`, `NAME (green)`, `NAME (blue)`.
+pub fn named_channels(f: &Formula) -> Vec<Formula> {
+    let mut chans = f.channels();
+    if chans.len() == 3 {
+        for (c, name) in chans.iter_mut().zip(["red", "green", "blue"]) {
+            c.meta.name = Some(format!("{} ({name})", f.display_name()));
+        }
+    }
+    chans
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

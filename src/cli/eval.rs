@@ -1,11 +1,16 @@
 //! `lobe eval FILE --set n=50 --at NH=0.95,NL=0.7 [--normalize] [--backend jit|interp] [--math precise|fast] [--json]`
+//! `lobe eval FILE --at L=0.3,0.1,0.9,V=0,0,1`: directions in the local frame (N = +z, X = +x, Y = +y); every
+//! input is then computed from them as the renderer does.
 //! `lobe eval FILE --points PATH|- [--json]`: every row of a CSV through the batched kernel ([`super::points`]).
+//!
+//! A colour formula is compiled channel by channel (three kernels sharing the parameters) and prints
+//! `[r, g, b]` per point.
 
 use super::args::{self, BackendArg, FormulaSource, Json, Params, PreferArg};
 use super::common::{self, CliError};
 use crate::base::json;
-use crate::ir::{Input, N_INPUTS};
-use crate::Evaluator;
+use crate::ir::{Input, InputSet, N_INPUTS};
+use crate::{Evaluator, Kernel};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("set", args::help("Parameter values baked into the kernel, e.g. `n=200,a=16`")))]
@@ -14,11 +19,13 @@ pub struct EvalArgs {
     pub formula: FormulaSource,
     #[command(flatten)]
     pub set: Params,
-    /// Input cosines, e.g. `NH=0.95,NL=0.7`; unset inputs are 0.
-    #[arg(long, value_parser = common::parse_assignments, action = clap::ArgAction::Append)]
-    pub at: Vec<Vec<(String, f64)>>,
-    /// Evaluate every row of a CSV file (`-`: standard input) whose header names inputs and, optionally,
-    /// parameters; prints one value per line (or `{"values": […]}` with --json).
+    /// Inputs: cosines, e.g. `NH=0.95,NL=0.7` (unset ones are 0), or the directions `L=x,y,z,V=x,y,z` (or
+    /// `Lx=…` singly) in the local frame, normalised, from which every cosine is computed.
+    #[arg(long, value_parser = parse_at, action = clap::ArgAction::Append)]
+    pub at: Vec<Vec<(String, Vec<f64>)>>,
+    /// Evaluate every row of a CSV file (`-`: standard input) whose header names inputs (cosines, or
+    /// Lx,Ly,Lz,Vx,Vy,Vz) and, optionally, parameters; prints one value per line, `[r, g, b]` for a colour
+    /// formula (or `{"values": […]}` with --json).
     #[arg(long, value_name = "PATH", conflicts_with = "at")]
     pub points: Option<String>,
     /// Multiply by the exact energy normalisation coefficient 1/(2π·Int), computed at compile time (bakes
@@ -33,73 +40,214 @@ pub struct EvalArgs {
     pub json: Json,
 }
 
+/// Parses `--at`: `name=value` items separated by commas, where `L=` and `V=` take three values
+/// (`L=0.3,0.1,0.9`). Each name once.
+pub fn parse_at(s: &str) -> Result<Vec<(String, Vec<f64>)>, String> {
+    let mut out: Vec<(String, Vec<f64>)> = Vec::new();
+    for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        let (name, v) = match part.split_once('=') {
+            Some((k, v)) => (Some(k.trim()), v.trim()),
+            None => (None, part),
+        };
+        let v: f64 = v.parse().map_err(|_| format!("`{v}` is not a number in `{part}`"))?;
+        if !v.is_finite() {
+            return Err(format!("`{part}`: the value must be finite"));
+        }
+        match name {
+            Some(k) => {
+                if out.iter().any(|(j, _)| j == k) {
+                    return Err(format!("`{k}` is given twice in `{s}`; give each name once"));
+                }
+                out.push((k.to_string(), vec![v]));
+            }
+            None => match out.last_mut() {
+                Some((k, vals)) if (k == "L" || k == "V") && vals.len() < 3 => vals.push(v),
+                _ => return Err(format!("`{part}` is not of the form name=value (e.g. NH=0.5, or L=x,y,z for a direction)")),
+            },
+        }
+    }
+    if let Some((k, _)) = out.iter().find(|(k, v)| (k == "L" || k == "V") && v.len() != 3) {
+        return Err(format!("`{k}=` takes three components, e.g. {k}=0.3,0.1,0.9"));
+    }
+    Ok(out)
+}
+
+/// The kernel inputs from `--at` for kernels reading `used`, and a note when a direction was normalised.
+fn at_inputs(at: &[(String, Vec<f64>)], used: InputSet) -> Result<([f64; N_INPUTS], Option<String>), CliError> {
+    let mut x = [0.0; N_INPUTS];
+    let mut dirs = [[0.0; 3]; 2];
+    let (mut cosines, mut directions) = (false, false);
+    for (name, v) in at {
+        let slot = match name.as_str() {
+            "L" | "V" => {
+                dirs[usize::from(name == "V")].copy_from_slice(v);
+                directions = true;
+                continue;
+            }
+            n => Input::from_name(n).ok_or_else(|| {
+                let mut known: Vec<&str> = Input::ALL.map(Input::name).to_vec();
+                known.extend(["L", "V"]);
+                CliError::hint(format!("--at: `{name}` is not an input"), common::did_you_mean(name, &known, "inputs are "))
+            })?,
+        };
+        if slot.is_direction() {
+            let i = slot.index() - Input::Lx.index();
+            dirs[i / 3][i % 3] = v[0];
+            directions = true;
+        } else {
+            x[slot.index()] = v[0];
+            cosines = true;
+        }
+    }
+    if directions && cosines {
+        return Err(CliError::hint("--at: both directions and cosines", "with L and V every cosine is computed from them; drop the cosines"));
+    }
+    if !directions {
+        if used.reads_directions() {
+            return Err(CliError::hint(
+                format!("the formula reads directions ({}); --at gives none", used.iter().filter(|i| i.is_direction()).map(Input::name).collect::<Vec<_>>().join(", ")),
+                "give --at L=x,y,z,V=x,y,z (local frame: N = +z, X = +x, Y = +y)",
+            ));
+        }
+        return Ok((x, None));
+    }
+    let mut notes = vec![];
+    for (k, d) in dirs.iter_mut().enumerate() {
+        let name = ["L", "V"][k];
+        let (u, scaled) = super::points::unit(*d).ok_or_else(|| {
+            CliError::hint(format!("--at: {name} = ({}, {}, {}) has no direction", d[0], d[1], d[2]), format!("give {name}=x,y,z, not all 0"))
+        })?;
+        if scaled {
+            notes.push(format!("{name} normalised to ({}, {}, {})", u[0], u[1], u[2]));
+        }
+        *d = u;
+    }
+    let note = (!notes.is_empty()).then(|| notes.join("; "));
+    Ok((crate::numerics::inputs_from_dirs(dirs[0], dirs[1]), note))
+}
+
+/// The inputs every kernel reads.
+fn used(ks: &[Kernel]) -> InputSet {
+    InputSet(ks.iter().map(|k| k.used_inputs().0).fold(0, |a, b| a | b))
+}
+
+/// One point's values as text: the number, or `[r, g, b]`.
+fn show(v: &[f64]) -> String {
+    match v {
+        [one] => format!("{one}"),
+        _ => format!("[{}]", v.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(", ")),
+    }
+}
+
+/// One point's values as JSON: the number, or `[r, g, b]`.
+fn json_of(v: &[f64]) -> serde_json::Value {
+    match v {
+        [one] => json::value(*one),
+        _ => serde_json::Value::Array(v.iter().map(|x| json::value(*x)).collect()),
+    }
+}
+
 pub fn run(a: &EvalArgs) -> Result<(), CliError> {
     let set = a.set.list();
     let f = a.formula.load()?;
     let pass = |opts| crate::numerics::robust::with_pass(opts, a.prefer.pass(crate::numerics::robust::PassOptions::default().points));
-    let k = if a.normalize {
+    let ks: Vec<Kernel> = if a.normalize {
+        if f.is_rgb() {
+            return Err(CliError::hint(
+                "--normalize: the formula has a colour result; one coefficient per channel would change its colour",
+                "evaluate without --normalize, or check the albedo per channel with `lobe energy --mode full`",
+            ));
+        }
         // The coefficient depends on every parameter: bake them all (--set values, declared defaults for the rest).
         let mut bake = set.clone();
         bake.extend(f.params.iter().filter(|p| !set.iter().any(|(k, _)| *k == p.name)).map(|p| (p.name.clone(), p.default)));
         let s = crate::simplified(&f, &pass(crate::Options { bake, ..Default::default() }))?;
-        crate::build_kernel(std::sync::Arc::new(crate::numerics::normalize::bake_coefficient(s)?), a.backend.kind, a.backend.math.mode)?
+        vec![crate::build_kernel(std::sync::Arc::new(crate::numerics::normalize::bake_coefficient(s)?), a.backend.kind, a.backend.math.mode)?]
     } else {
-        crate::compile_formula(f, &pass(a.backend.options(set.clone())))?
+        let mut ks = vec![];
+        for c in f.channels() {
+            ks.push(crate::compile_formula(c, &pass(a.backend.options(set.clone())))?);
+        }
+        ks
     };
-    let mut x = [0.0; N_INPUTS];
-    for (name, v) in a.at.concat() {
-        let i = Input::from_name(&name).ok_or_else(|| {
-            let hint = common::did_you_mean(&name, &Input::ALL.map(Input::name), "inputs are ");
-            CliError::hint(format!("--at: `{name}` is not an input"), hint)
-        })?;
-        x[i.index()] = v;
-    }
-    let params = common::param_values(&k.formula, &set);
+    let params = common::param_values(&ks[0].formula, &set);
     if let Some(path) = &a.points {
-        return run_points(a, &k, path, &params, &set);
+        return run_points(a, &ks, path, &params, &set);
     }
-    let v = k.eval(&x, &params);
+    let (x, note) = at_inputs(&a.at.concat(), used(&ks))?;
+    let v: Vec<f64> = ks.iter().map(|k| k.eval(&x, &params)).collect();
     if a.json.on {
-        let obj = serde_json::json!({
-            "value": json::value(v),
-            "backend": k.backend.name(),
-            "compile_us": json::value(k.compile_time.as_secs_f64() * 1e6),
+        let mut obj = serde_json::json!({
+            "value": json_of(&v),
+            "backend": ks[0].backend.name(),
+            "compile_us": json::value(ks.iter().map(|k| k.compile_time.as_secs_f64()).sum::<f64>() * 1e6),
         });
+        if let Some(n) = note {
+            obj["note"] = n.into();
+        }
         println!("{obj}");
     } else {
-        println!("{v}");
+        if let Some(n) = note {
+            eprintln!("note: {n}");
+        }
+        println!("{}", show(&v));
     }
     Ok(())
 }
 
-fn run_points(a: &EvalArgs, k: &crate::Kernel, path: &str, params: &[f64], set: &[(String, f64)]) -> Result<(), CliError> {
+fn run_points(a: &EvalArgs, ks: &[Kernel], path: &str, params: &[f64], set: &[(String, f64)]) -> Result<(), CliError> {
     let text = super::points::read(path)?;
     let name = if path == "-" { "<stdin>" } else { path };
+    let formula = &ks[0].formula;
     let mut baked: Vec<String> = set.iter().map(|(n, _)| n.clone()).collect();
     if a.normalize {
-        baked.extend(k.formula.params.iter().map(|p| p.name.clone()));
+        baked.extend(formula.params.iter().map(|p| p.name.clone()));
     }
-    let pts = super::points::parse(name, &text, &k.formula, &baked)?;
-    k.warm_up();
+    let pts = super::points::parse(name, &text, formula, used(ks), &baked)?;
+    ks.iter().for_each(Kernel::warm_up);
     let t = std::time::Instant::now();
-    let values = super::points::evaluate(k, &pts, params);
+    let channels: Vec<Vec<f64>> = ks.iter().map(|k| super::points::evaluate(k, &pts, params)).collect();
     let elapsed = t.elapsed();
+    let point = |i: usize| -> Vec<f64> { channels.iter().map(|c| c[i]).collect() };
+    let note = (pts.normalised > 0).then(|| format!("{} of {} rows had a non-unit L or V; they were normalised", pts.normalised, pts.len));
     if a.json.on {
-        let obj = serde_json::json!({
-            "values": values.iter().map(|v| json::value(*v)).collect::<Vec<_>>(),
-            "points": values.len(),
-            "backend": k.backend.name(),
-            "math": k.math.name(),
-            "compile_us": json::value(k.compile_time.as_secs_f64() * 1e6),
-            "eval_ns_per_point": json::value(elapsed.as_nanos() as f64 / values.len().max(1) as f64),
+        let mut obj = serde_json::json!({
+            "values": (0..pts.len).map(|i| json_of(&point(i))).collect::<Vec<_>>(),
+            "points": pts.len,
+            "backend": ks[0].backend.name(),
+            "math": ks[0].math.name(),
+            "compile_us": json::value(ks.iter().map(|k| k.compile_time.as_secs_f64()).sum::<f64>() * 1e6),
+            "eval_ns_per_point": json::value(elapsed.as_nanos() as f64 / pts.len.max(1) as f64),
         });
+        if let Some(n) = note {
+            obj["note"] = n.into();
+        }
         println!("{obj}");
     } else {
-        let mut out = String::with_capacity(values.len() * 20);
-        for v in &values {
-            out.push_str(&format!("{v}\n"));
+        if let Some(n) = note {
+            eprintln!("note: {n}");
+        }
+        let mut out = String::with_capacity(pts.len * 20 * ks.len());
+        for i in 0..pts.len {
+            out.push_str(&show(&point(i)));
+            out.push('\n');
         }
         print!("{out}");
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn at_takes_directions_and_colour_prints_triples() {
+        let a = parse_at("L=0.3,0.1,0.9,V=0,0,1,n=2").unwrap();
+        assert_eq!(a, vec![("L".into(), vec![0.3, 0.1, 0.9]), ("V".into(), vec![0.0, 0.0, 1.0]), ("n".into(), vec![2.0])]);
+        assert!(parse_at("L=1,2").is_err() && parse_at("NH=1,2").is_err() && parse_at("NH=1,NH=2").is_err());
+        assert_eq!(show(&[0.5]), "0.5");
+        assert_eq!(show(&[0.5, 1.0, f64::NAN]), "[0.5, 1, NaN]");
+        assert_eq!(json_of(&[0.5, 1.0, f64::NAN]).to_string(), r#"[0.5,1.0,"NaN"]"#);
+    }
 }

@@ -1,4 +1,4 @@
-//! `lobe export --glsl|--wgsl FILE [--set n=50] [-o out.glsl]`
+//! `lobe export --glsl|--wgsl|--brdf-explorer FILE [--set n=50] [-o out.glsl]`
 
 use super::args::{self, FormulaSource, Output, Params};
 use super::common::CliError;
@@ -11,11 +11,14 @@ pub struct ExportArgs {
     #[command(flatten)]
     pub formula: FormulaSource,
     /// Emit GLSL (the default).
-    #[arg(long, conflicts_with = "wgsl")]
+    #[arg(long, conflicts_with_all = ["wgsl", "brdf_explorer"])]
     pub glsl: bool,
     /// Emit WGSL.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "brdf_explorer")]
     pub wgsl: bool,
+    /// Emit a file Disney's BRDF Explorer loads (`analytic`, a parameters block, `vec3 BRDF(L, V, N, X, Y)`).
+    #[arg(long)]
+    pub brdf_explorer: bool,
     #[command(flatten)]
     pub set: Params,
     #[command(flatten)]
@@ -28,8 +31,11 @@ fn is_ours(bytes: &[u8]) -> bool {
 
 pub fn run(a: &ExportArgs) -> Result<(), CliError> {
     let k = a.formula.kernel(&a.set.list(), crate::Backend::Interp, crate::Mode::Precise)?;
-    let d = if a.wgsl { Dialect::Wgsl } else { Dialect::Glsl };
-    let text = glsl::export(&k.formula, d);
+    let text = if a.brdf_explorer {
+        glsl::brdf_explorer(&k.formula)
+    } else {
+        glsl::export(&k.formula, if a.wgsl { Dialect::Wgsl } else { Dialect::Glsl })
+    };
     match &a.out.path {
         Some(p) => a.out.force.write(p, text.as_bytes(), is_ours),
         None => {

@@ -1,15 +1,19 @@
 //! `lobe eval FILE --points PATH|-`: many points from CSV, evaluated by the batched kernel.
 //!
-//! The CSV has a header naming its columns: inputs (NL, NV, NH, VR, VH) and, optionally, parameters of the
-//! formula (which then stay live: no recompilation per row). Inputs not named are 0, parameters not named take
-//! their `--set` or declared values. Rows of equal parameter values that follow each other form one batch, so a
+//! The CSV has a header naming its columns: inputs and, optionally, parameters of the formula (which then stay
+//! live: no recompilation per row). The inputs are either the six direction components `Lx,Ly,Lz,Vx,Vy,Vz`
+//! (local frame: N = +z, X = +x, Y = +y), from which every input is computed as the renderer does
+//! ([`crate::numerics::inputs_from_dirs`]; non-unit directions are normalised and counted, a zero vector is an
+//! error), or cosine columns (NL, NV, NH, VR, VH; those not named are 0), which only a formula that reads no
+//! direction can take. Parameters not named take their `--set` or declared values. Rows of equal parameter values that follow each other form one batch, so a
 //! file with no parameter columns is a single call of the batched kernel. Errors point at the CSV's line and
 //! column with the usual caret diagnostics.
 
 use super::common::{self, CliError};
 use crate::base::diag::{Diagnostic, Diagnostics};
 use crate::base::span::Span;
-use crate::ir::{Formula, Input, N_INPUTS};
+use crate::ir::{Formula, Input, InputSet, N_INPUTS};
+use crate::numerics::{dot, inputs_from_dirs, V3};
 use crate::{Columns, Evaluator, Kernel};
 use std::io::Read;
 
@@ -25,6 +29,8 @@ enum Column {
 
 /// Parsed points: input columns (empty when not named) and per-row parameter values.
 pub struct Points {
+    /// Rows whose L or V was not of unit length (normalised before use).
+    pub normalised: usize,
     pub inputs: [Vec<f64>; N_INPUTS],
     /// Parameter indices named by the header.
     pub param_columns: Vec<usize>,
@@ -63,9 +69,22 @@ fn span(start: usize, len: usize) -> Span {
     Span { start: start as u32, end: (start + len.max(1)) as u32 }
 }
 
-/// Parses `text` (named `file` in diagnostics) for formula `f`; `baked` are parameters baked by `--set`, which
-/// cannot also be columns.
-pub fn parse(file: &str, text: &str, f: &Formula, baked: &[String]) -> Result<Points, CliError> {
+/// `v` scaled to unit length, and whether it had to be; `None` for a zero or non-finite vector.
+pub fn unit(v: V3) -> Option<(V3, bool)> {
+    let len = dot(v, v).sqrt();
+    if !(len > 0.0 && len.is_finite()) {
+        return None;
+    }
+    // Within a few ulp of 1 the vector is taken as given (text of a unit vector rarely has length exactly 1).
+    if (len - 1.0).abs() <= 4.0 * f64::EPSILON {
+        return Some((v, false));
+    }
+    Some((v.map(|c| c / len), true))
+}
+
+/// Parses `text` (named `file` in diagnostics) for formula `f`, whose compiled channels read `used`; `baked` are
+/// parameters baked by `--set`, which cannot also be columns.
+pub fn parse(file: &str, text: &str, f: &Formula, used: InputSet, baked: &[String]) -> Result<Points, CliError> {
     let fail = |d: Diagnostic| CliError::from(Diagnostics::single_in(file, text, d));
     let text_start = if text.starts_with('\u{feff}') { 3 } else { 0 };
     let mut lines = text[text_start..].split('\n').scan(text_start, |off, line| {
@@ -104,7 +123,28 @@ pub fn parse(file: &str, text: &str, f: &Formula, baked: &[String]) -> Result<Po
         columns.push(col);
     }
     let param_columns: Vec<usize> = columns.iter().filter_map(|c| if let Column::Param(p) = c { Some(*p) } else { None }).collect();
-    let mut pts = Points { inputs: Default::default(), param_columns, params: vec![], len: 0 };
+    let named = |i: Input| columns.contains(&Column::Input(i));
+    let header_span = span(hstart, header.len());
+    let directions = Input::DIRECTIONS.iter().any(|i| named(*i));
+    if directions {
+        let missing: Vec<&str> = Input::DIRECTIONS.iter().filter(|i| !named(**i)).map(|i| i.name()).collect();
+        if !missing.is_empty() {
+            return Err(fail(Diagnostic::error(format!("direction columns without {}", missing.join(", ")))
+                .at(header_span, "this header")
+                .hint("give all six components Lx,Ly,Lz,Vx,Vy,Vz (local frame: N = +z, X = +x, Y = +y)")));
+        }
+        if let Some(c) = Input::ALL.iter().find(|i| !i.is_direction() && named(**i)) {
+            return Err(fail(Diagnostic::error(format!("both directions and the cosine column {}", c.name()))
+                .at(header_span, "this header")
+                .hint("with Lx..Vz every cosine is computed from the directions; drop the cosine columns")));
+        }
+    } else if used.reads_directions() {
+        let reads: Vec<&str> = used.iter().filter(|i| i.is_direction()).map(Input::name).collect();
+        return Err(fail(Diagnostic::error(format!("the formula reads directions ({}), but the CSV has no direction columns", reads.join(", ")))
+            .at(header_span, "this header")
+            .hint("give the columns Lx,Ly,Lz,Vx,Vy,Vz (unit L and V in the local frame: N = +z, X = +x, Y = +y); cosines follow from them")));
+    }
+    let mut pts = Points { normalised: 0, inputs: Default::default(), param_columns, params: vec![], len: 0 };
     let mut row_inputs = [0.0; N_INPUTS];
     for (start, line) in lines {
         if line.trim().is_empty() {
@@ -113,6 +153,7 @@ pub fn parse(file: &str, text: &str, f: &Formula, baked: &[String]) -> Result<Po
         let mut row_params = Vec::with_capacity(pts.param_columns.len());
         let mut at = start;
         let mut n = 0;
+        let mut cells = [Span::default(); N_INPUTS];
         for cell in line.split(',') {
             let s = span(at + (cell.len() - cell.trim_start().len()), cell.trim().len());
             at += cell.len() + 1;
@@ -124,7 +165,10 @@ pub fn parse(file: &str, text: &str, f: &Formula, baked: &[String]) -> Result<Po
                 fail(Diagnostic::error(format!("`{}` is not a number", cell.trim())).at(s, "expected a number").hint("values are decimal numbers such as 0.95, 1e-3, nan or inf"))
             })?;
             match *col {
-                Column::Input(i) => row_inputs[i.index()] = v,
+                Column::Input(i) => {
+                    row_inputs[i.index()] = v;
+                    cells[i.index()] = s;
+                }
                 Column::Param(p) => {
                     let d = &f.params[p];
                     if !d.admits(v) {
@@ -143,9 +187,31 @@ pub fn parse(file: &str, text: &str, f: &Formula, baked: &[String]) -> Result<Po
         if n < columns.len() {
             return Err(fail(Diagnostic::error(format!("{n} values where the header has {}", columns.len())).at(span(start, line.len()), "short row")));
         }
-        for c in &columns {
-            if let Column::Input(i) = c {
-                pts.inputs[i.index()].push(row_inputs[i.index()]);
+        if directions {
+            let mut dirs = [[0.0; 3]; 2];
+            let mut scaled_any = false;
+            for (k, (d, first)) in dirs.iter_mut().zip([Input::Lx, Input::Vx]).enumerate() {
+                let raw: V3 = std::array::from_fn(|c| row_inputs[first.index() + c]);
+                let Some((u, scaled)) = unit(raw) else {
+                    let (a, b) = (cells[first.index()], cells[first.index() + 2]);
+                    let name = ["L", "V"][k];
+                    return Err(fail(Diagnostic::error(format!("{name} = ({}, {}, {}) has no direction", raw[0], raw[1], raw[2]))
+                        .at(Span { start: a.start, end: b.end }, "a zero or non-finite vector")
+                        .hint(format!("{name} is a direction: give three finite components, not all 0"))));
+                };
+                scaled_any |= scaled;
+                *d = u;
+            }
+            pts.normalised += usize::from(scaled_any);
+            let x = inputs_from_dirs(dirs[0], dirs[1]);
+            for (col, v) in pts.inputs.iter_mut().zip(x) {
+                col.push(v);
+            }
+        } else {
+            for c in &columns {
+                if let Column::Input(i) = c {
+                    pts.inputs[i.index()].push(row_inputs[i.index()]);
+                }
             }
         }
         pts.params.push(row_params);

@@ -90,8 +90,24 @@ pub fn run(a: &SweepArgs) -> Result<(), CliError> {
         return Err(CliError::hint("--bound must be a number", "e.g. --bound 1e6"));
     }
     let f = a.formula.load()?;
-    let (text, denied) = report(a, &f)?;
-    print!("{text}");
+    // A colour formula is swept channel by channel (each a scalar formula); --json then gives
+    // `{"channels": {"red": …, "green": …, "blue": …}}`.
+    let mut denied = vec![];
+    let mut objects = serde_json::Map::new();
+    for c in common::named_channels(&f) {
+        let (text, d) = report(a, &c)?;
+        denied.extend(d.into_iter().filter(|k| !denied.contains(k)).collect::<Vec<_>>());
+        match (f.is_rgb(), a.json.on) {
+            (true, true) => {
+                let channel = c.display_name().rsplit_once(" (").map_or(String::new(), |(_, ch)| ch.trim_end_matches(')').to_string());
+                objects.insert(channel, serde_json::from_str(&text).map_err(|e| CliError::msg(e.to_string()))?);
+            }
+            _ => print!("{text}"),
+        }
+    }
+    if f.is_rgb() && a.json.on {
+        println!("{}", serde_json::json!({ "channels": objects }));
+    }
     if !denied.is_empty() {
         eprintln!("error: denied kinds occurred: {}", denied.join(", "));
         return Err(CliError::Failed);
@@ -166,7 +182,8 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliEr
                         "negative" => y < 0.0,
                         _ => y > bound,
                     };
-                    for i in used.iter() {
+                    // Along one input at a time is not a path through real geometry: no extents for directions.
+                    for i in used.iter().filter(|_| !used.reads_directions()) {
                         if let Some((lo, hi)) = extent(&k, &e.inputs, &e.params, i.index(), bad) {
                             outln!(out, "    {kind} for {} in [{}, {}] (the rest as in the example)", i.name(), compact(lo), compact(hi));
                         }

@@ -20,7 +20,11 @@
 //! NL or NV gets geometrically possible combinations only: N·(L + V) = |L + V|·NH and |L + V| = 2·VH, so
 //! NL + NV = 2·NH·VH (VH = 0 means L = −V, where NL = NV = 0); the total is split at a random fraction drawn
 //! like an input (edge classes included). Other inputs are drawn independently, the conservative choice for a
-//! kernel that may be fed any cosines. Deterministic (fixed seed).
+//! kernel that may be fed any cosines. A formula that reads directions (Lx..Vz) is sampled on real geometry
+//! instead: unit L and V on the upper hemisphere, each with its normal component N·L drawn like an input (so
+//! the edge classes become grazing and horizon directions, and directions at the normal) and a uniform azimuth
+//! (a fifth on the frame axes, where components are exactly 0), every input computed from the pair by
+//! [`super::inputs_from_dirs`]. Deterministic (fixed seed).
 //!
 //! The pass ([`improve`]): start from the simplified formula (the fastest form lobe builds), try each candidate
 //! of `simplify::accuracy` in turn on the current best, keep it when it is more accurate — fewer non-finite
@@ -105,6 +109,21 @@ fn input_value(r: &mut Rng) -> f64 {
     }
 }
 
+/// A unit direction on the upper hemisphere: its normal component drawn like an input, a uniform azimuth (a
+/// fifth on the frame axes).
+fn direction(r: &mut Rng) -> super::V3 {
+    let z = input_value(r);
+    let s = (1.0 - z * z).max(0.0).sqrt();
+    // On the axes the other component is exactly 0 (cos(π/2) is 6e-17, not 0).
+    let (c, sn) = if r.unit() < 0.2 {
+        [(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)][r.below(4) as usize]
+    } else {
+        let phi = std::f64::consts::TAU * r.unit();
+        (phi.cos(), phi.sin())
+    };
+    [s * c, s * sn, z]
+}
+
 /// `n` points of `f`'s domain (module docs); parameters listed in `bake` keep their baked value.
 pub fn sample(f: &Formula, bake: &[(usize, f64)], n: usize, seed: u64) -> Vec<Point> {
     let mut r = Rng(seed.max(1));
@@ -112,13 +131,17 @@ pub fn sample(f: &Formula, bake: &[(usize, f64)], n: usize, seed: u64) -> Vec<Po
     (0..n)
         .map(|_| {
             let mut x = [0.5; N_INPUTS];
+            if used.reads_directions() {
+                let l = direction(&mut r);
+                x = super::inputs_from_dirs(l, direction(&mut r));
+            }
             for i in Input::ALL {
-                if used.contains(i) {
+                if used.contains(i) && !used.reads_directions() {
                     x[i.index()] = input_value(&mut r);
                 }
             }
             // Geometry: N·(L + V) = |L + V|·NH and |L + V| = 2·VH, so NL + NV = 2·NH·VH; split that total.
-            if used.contains(Input::VH) && (used.contains(Input::NL) || used.contains(Input::NV)) {
+            if !used.reads_directions() && used.contains(Input::VH) && (used.contains(Input::NL) || used.contains(Input::NV)) {
                 let total = 2.0 * x[Input::NH.index()] * x[Input::VH.index()];
                 let nl = (input_value(&mut r) * total).min(1.0);
                 let nv = (total - nl).min(1.0);
@@ -473,6 +496,28 @@ pub fn with_pass(mut opts: crate::Options, pass: PassOptions) -> crate::Options 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn direction_formulas_are_sampled_on_real_geometry() {
+        use crate::ir::{BinOp, Ir, Meta, ParamDecl};
+        let mut ir = Ir::new();
+        let s = crate::base::span::Span::default();
+        let (lx, vy) = (ir.input(Input::Lx, s), ir.input(Input::Vy, s));
+        let root = ir.bin(BinOp::Mul, lx, vy, s);
+        let f = Formula { meta: Meta::default(), params: vec![ParamDecl::float("n", 1.0, 1.0, 1.0)], ir, root, file: "t".into(), source: String::new(), rgb: None };
+        let pts = sample(&f, &[], 4000, 7);
+        let (mut horizon, mut normal, mut axis) = (0, 0, 0);
+        for p in &pts {
+            let (l, v) = ([p.x[5], p.x[6], p.x[7]], [p.x[8], p.x[9], p.x[10]]);
+            assert!((super::super::dot(l, l) - 1.0).abs() < 1e-15 && (super::super::dot(v, v) - 1.0).abs() < 1e-15, "{p:?}");
+            assert!(l[2] >= 0.0 && v[2] >= 0.0);
+            assert_eq!(p.x, super::super::inputs_from_dirs(l, v), "every input from the same pair");
+            horizon += usize::from(l[2] == 0.0);
+            normal += usize::from(l[2] == 1.0);
+            axis += usize::from(l[1] == 0.0 && l[2] < 1.0);
+        }
+        assert!(horizon > 10 && normal > 10 && axis > 10, "{horizon} {normal} {axis}");
+    }
 
     #[test]
     fn ulps_and_bits() {

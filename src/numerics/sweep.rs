@@ -10,6 +10,14 @@
 //! grid (deterministic), so every input value is still visited. A point's region is the most extreme category
 //! among its inputs (negative > above-one > denormal > zero > tiny > near-one > one > interior).
 //!
+//! A formula that reads directions (Lx..Vz) is swept on real geometry instead, so its inputs are consistent:
+//! L and V each over 11 polar angles (at the normal, 1e-8 from it, six interior, grazing at π/2 − 1e-8, exactly
+//! in the horizon plane, and just below it) × 6 azimuths, plus one direction well below the surface (67 each,
+//! 4 489 pairs per parameter combination), every input computed from the pair by
+//! [`super::inputs_from_dirs`]; a point's region is the more extreme of its two directions' categories (at the
+//! normal: one; 1e-8 from it: near-one; grazing: tiny; horizon: zero; below: negative). This includes V = −L in
+//! the horizon plane, where the half vector is undefined.
+//!
 //! Negative values are only visible on the *unclamped* formula: the lowering's root is `max(raw, 0)`, which
 //! [`Formula::unclamped`] peels. The input clamps `clamp(INPUT, 0, 1)` stay, so negative and above-one
 //! cosines exercise those clamps (a NaN there is a real bug in the domain policy).
@@ -193,11 +201,87 @@ pub fn extent(ev: &dyn Evaluator, x: &[f64; N_INPUTS], params: &[f64], input: us
     Some((lo, hi))
 }
 
+/// Unit directions over the upper hemisphere and just below it, with the category of their polar angle
+/// (module docs): the geometric grid of a formula that reads directions.
+fn direction_grid() -> Vec<(super::V3, usize)> {
+    use std::f64::consts::FRAC_PI_2;
+    let thetas: [(f64, usize); 11] = [
+        (0.0, 1),
+        (1e-8, 2),
+        (0.1, 0),
+        (0.4, 0),
+        (0.8, 0),
+        (1.1, 0),
+        (1.3, 0),
+        (1.5, 0),
+        (FRAC_PI_2 - 1e-8, 3),
+        (FRAC_PI_2, 4),
+        (FRAC_PI_2 + 1e-9, 7),
+    ];
+    let phis = [0.0, 0.7, FRAC_PI_2, 2.0, std::f64::consts::PI, -FRAC_PI_2];
+    let mut out = vec![];
+    for (t, c) in thetas {
+        for p in phis {
+            // Exactly in the horizon plane (z = 0), not cos(π/2) ≈ 6e-17.
+            let d = if c == 4 { [p.cos(), p.sin(), 0.0] } else { super::dir(t, p) };
+            out.push((d, c));
+        }
+    }
+    out.push(([0.0, -0.6, -0.8], 7));
+    out
+}
+
+/// The points a sweep walks, by index: a Cartesian product of cosines over the inputs a formula reads, or of
+/// (L, V) pairs for a formula that reads directions.
+enum Domain {
+    Cosines { g: Vec<(f64, usize)>, used: Vec<usize> },
+    Geometry(Vec<(super::V3, usize)>),
+}
+
+impl Domain {
+    fn new(used: InputSet) -> Domain {
+        if used.reads_directions() {
+            Domain::Geometry(direction_grid())
+        } else {
+            Domain::Cosines { g: grid(), used: used.iter().map(|i| i.index()).collect() }
+        }
+    }
+
+    fn size(&self) -> u64 {
+        match self {
+            Domain::Cosines { g, used } => g.len().pow(used.len() as u32) as u64,
+            Domain::Geometry(d) => (d.len() * d.len()) as u64,
+        }
+    }
+
+    /// Writes point `gi` into row `row` of `cols` (inputs not read keep their value); returns its category.
+    fn fill(&self, mut gi: u64, cols: &mut [Vec<f64>; N_INPUTS], row: usize) -> usize {
+        match self {
+            Domain::Cosines { g, used } => {
+                let mut worst = 0;
+                for &inp in used {
+                    let (v, c) = g[(gi % g.len() as u64) as usize];
+                    gi /= g.len() as u64;
+                    cols[inp][row] = v;
+                    worst = worst.max(c);
+                }
+                worst
+            }
+            Domain::Geometry(d) => {
+                let n = d.len() as u64;
+                let ((l, cl), (v, cv)) = (d[(gi % n) as usize], d[(gi / n) as usize]);
+                for (col, x) in cols.iter_mut().zip(super::inputs_from_dirs(l, v)) {
+                    col[row] = x;
+                }
+                cl.max(cv)
+            }
+        }
+    }
+}
+
 pub fn sweep(ev: &dyn Evaluator, used: InputSet, decls: &[ParamDecl], opts: &SweepOptions) -> SweepReport {
-    let g = grid();
-    let used: Vec<usize> = used.iter().map(|i| i.index()).collect();
-    let k = used.len();
-    let gsize = g.len().pow(k as u32) as u64;
+    let domain = Domain::new(used);
+    let gsize = domain.size();
     // Parameter combinations (mixed radix over each parameter's values).
     let pv: Vec<Vec<f64>> = decls.iter().map(param_values).collect();
     let combos: u64 = pv.iter().map(|v| v.len().max(1) as u64).product();
@@ -228,15 +312,8 @@ pub fn sweep(ev: &dyn Evaluator, used: InputSet, decls: &[ParamDecl], opts: &Swe
                 }
                 cat.clear();
                 for (row, jj) in (j..end).enumerate() {
-                    let mut gi = ((offset as u128 + jj as u128 * stride as u128) % gsize as u128) as u64;
-                    let mut worst = 0;
-                    for &inp in &used {
-                        let (v, c) = g[(gi % g.len() as u64) as usize];
-                        gi /= g.len() as u64;
-                        cols[inp][row] = v;
-                        worst = worst.max(c);
-                    }
-                    cat.push(worst);
+                    let gi = ((offset as u128 + jj as u128 * stride as u128) % gsize as u128) as u64;
+                    cat.push(domain.fill(gi, &mut cols, row));
                 }
                 let mut out = vec![0.0; (end - j) as usize];
                 let c = Columns::new(std::array::from_fn(|k| cols[k].as_slice()));
@@ -343,6 +420,30 @@ mod tests {
         assert_eq!(r.total.nan + r.total.inf, 0);
         // Negative at 4 negative, 2 zero, 2 denormal, 3 tiny, and 3 interior (1e-4, 0.01, 0.1) cosines.
         assert_eq!(r.total.negative, 14 * param_values(&n_decl()).len() as u64);
+    }
+
+    #[test]
+    fn direction_formulas_are_swept_on_real_geometry() {
+        // |L|² − 1 and the cosine NL − Lz vanish on real geometry; independent inputs would make both large.
+        let f = FnEvaluator(|x: &[f64; crate::N_INPUTS], _: &[f64]| {
+            let l2 = x[5] * x[5] + x[6] * x[6] + x[7] * x[7];
+            if (l2 - 1.0).abs() > 1e-15 || x[0] != x[7] {
+                f64::NAN
+            } else {
+                1.0 / x[7]
+            }
+        });
+        let mut used = InputSet::default();
+        used.insert(Input::Lx);
+        let r = sweep(&f, used, &[n_decl()], &SweepOptions::default());
+        assert!(r.exhaustive);
+        assert_eq!(r.total.evaluated, 67 * 67 * param_values(&n_decl()).len() as u64);
+        assert_eq!(r.total.nan, 0, "{:?}", r.total.first_nan);
+        // 1/Lz: infinite exactly in the horizon plane, negative below it.
+        let zero = r.regions.iter().find(|s| s.region == "zero").unwrap();
+        assert_eq!(zero.first_inf.as_ref().unwrap().inputs[7], 0.0);
+        let below = r.regions.iter().find(|s| s.region == "negative").unwrap();
+        assert!(below.negative > 0 && below.first_negative.as_ref().unwrap().inputs[7] < 0.0);
     }
 
     #[test]

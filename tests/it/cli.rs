@@ -4,7 +4,7 @@
 use std::io::Write;
 use std::process::{Command, Output, Stdio};
 
-fn lobe(args: &[&str], stdin: Option<&[u8]>) -> Output {
+pub(crate) fn lobe(args: &[&str], stdin: Option<&[u8]>) -> Output {
     let mut c = Command::new(env!("CARGO_BIN_EXE_lobe"));
     c.args(args).current_dir(env!("CARGO_MANIFEST_DIR")).env("NO_COLOR", "1");
     c.stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped());

@@ -4,6 +4,7 @@ mod browser;
 mod catalogue;
 mod cli;
 mod differential;
+mod directions;
 mod explorer;
 mod export;
 mod front;
