@@ -11,7 +11,8 @@
 //!    are filled with the background and cost nothing else;
 //! 3. PNG encoding and atomic output ([`image`]).
 //!
-//! Materials are `Arc<dyn Evaluator>` plus the set of inputs the formula reads, so the same renderer runs
+//! Materials are `Arc<dyn Evaluator>` (three for a colour formula, one per channel) plus the set of inputs the
+//! formula reads (a tangent frame per pixel only if it reads direction components), so the same renderer runs
 //! the JIT, the interpreter, or a plain Rust closure (tests and benches); everything but F is the same Rust
 //! code on every backend, so "JIT vs interpreter" compares the kernels in the same shading.
 //!

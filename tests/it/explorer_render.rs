@@ -40,6 +40,11 @@ fn ar(b: &mut Values, op: BinOp, x: Val, y: Val) -> Val {
     b.arith(op, x, y).unwrap()
 }
 
+/// `((x op₁ y₁) op₂ y₂) …`, left to right.
+fn fold(b: &mut Values, x: Val, steps: &[(BinOp, Val)]) -> Val {
+    steps.iter().fold(x, |acc, &(op, y)| ar(b, op, acc, y))
+}
+
 /// `cond ? x : 0` with cond = L·N > 0 && V·N > 0: the upper hemisphere only.
 fn upper(b: &mut Values, x: Val) -> Val {
     let (l, v) = (b.frame("L").unwrap(), b.frame("V").unwrap());
@@ -67,19 +72,15 @@ fn ward(ax: f64, ay: f64) -> Formula {
     let (pax, pay) = (Val::F(b.ir.param(0, s)), Val::F(b.ir.param(1, s)));
     let tx = ar(&mut b, BinOp::Div, hx, pax);
     let ty = ar(&mut b, BinOp::Div, hy, pay);
-    let (tx2, ty2) = (ar(&mut b, BinOp::Mul, tx, tx), ar(&mut b, BinOp::Mul, ty, ty));
-    let sum = ar(&mut b, BinOp::Add, tx2, ty2);
-    let hz2 = ar(&mut b, BinOp::Mul, hz, hz);
-    let q = ar(&mut b, BinOp::Div, sum, hz2);
+    let ty2 = ar(&mut b, BinOp::Mul, ty, ty);
+    let q = fold(&mut b, tx, &[(BinOp::Mul, tx), (BinOp::Add, ty2), (BinOp::Div, hz), (BinOp::Div, hz)]);
     let e = b.neg(q).unwrap();
     let num = call(&mut b, "exp", &[e]);
     let (lz, vz) = (b.component(l, 2).unwrap(), b.component(v, 2).unwrap());
     let lv = ar(&mut b, BinOp::Mul, lz, vz);
     let root = call(&mut b, "sqrt", &[lv]);
     let k = b.num(4.0 * std::f64::consts::PI);
-    let d1 = ar(&mut b, BinOp::Mul, k, pax);
-    let d2 = ar(&mut b, BinOp::Mul, d1, pay);
-    let den = ar(&mut b, BinOp::Mul, d2, root);
+    let den = fold(&mut b, k, &[(BinOp::Mul, pax), (BinOp::Mul, pay), (BinOp::Mul, root)]);
     let w = ar(&mut b, BinOp::Div, num, den);
     let r = f(upper(&mut b, w));
     let params = vec![ParamDecl::float("alpha_x", ax, 0.001, 1.0), ParamDecl::float("alpha_y", ay, 0.001, 1.0)];
@@ -105,19 +106,15 @@ fn principled() -> Formula {
     let a = call(&mut b, "max", &[r2, floor]);
     let a2 = ar(&mut b, BinOp::Mul, a, a);
     // D = a²/(π (NH²(a² − 1) + 1)²)
-    let nh2 = ar(&mut b, BinOp::Mul, nh, nh);
     let am1 = ar(&mut b, BinOp::Sub, a2, one);
-    let t = ar(&mut b, BinOp::Mul, nh2, am1);
-    let t1 = ar(&mut b, BinOp::Add, t, one);
-    let t2 = ar(&mut b, BinOp::Mul, t1, t1);
-    let pt = ar(&mut b, BinOp::Mul, pi, t2);
+    let t = fold(&mut b, nh, &[(BinOp::Mul, nh), (BinOp::Mul, am1), (BinOp::Add, one)]);
+    let pt = fold(&mut b, pi, &[(BinOp::Mul, t), (BinOp::Mul, t)]);
     let d = ar(&mut b, BinOp::Div, a2, pt);
     // G = 1/((NL + √(a² + NL² − a²NL²))(NV + √(…)))
     let g1 = |b: &mut Values, c: Val| {
         let c2 = ar(b, BinOp::Mul, c, c);
         let ac2 = ar(b, BinOp::Mul, a2, c2);
-        let x = ar(b, BinOp::Add, a2, c2);
-        let y = ar(b, BinOp::Sub, x, ac2);
+        let y = fold(b, a2, &[(BinOp::Add, c2), (BinOp::Sub, ac2)]);
         let sq = call(b, "sqrt", &[y]);
         ar(b, BinOp::Add, c, sq)
     };
@@ -130,15 +127,11 @@ fn principled() -> Formula {
     let omlh = ar(&mut b, BinOp::Sub, one, lh);
     let five = b.num(5.0);
     let fh = call(&mut b, "pow", &[omlh, five]);
-    let omf0 = ar(&mut b, BinOp::Sub, one, f0);
-    let fr = ar(&mut b, BinOp::Mul, omf0, fh);
+    let fr = fold(&mut b, one, &[(BinOp::Sub, f0), (BinOp::Mul, fh)]);
     let fresnel = ar(&mut b, BinOp::Add, f0, fr);
-    let dg = ar(&mut b, BinOp::Mul, d, g);
-    let spec = ar(&mut b, BinOp::Mul, fresnel, dg);
-    let om = ar(&mut b, BinOp::Sub, one, metal);
-    let kd = ar(&mut b, BinOp::Div, om, pi);
-    let diffuse = ar(&mut b, BinOp::Mul, base, kd);
-    let total = ar(&mut b, BinOp::Add, diffuse, spec);
+    let spec = fold(&mut b, d, &[(BinOp::Mul, g), (BinOp::Mul, fresnel)]);
+    let kd = fold(&mut b, one, &[(BinOp::Sub, metal), (BinOp::Div, pi)]);
+    let total = fold(&mut b, base, &[(BinOp::Mul, kd), (BinOp::Add, spec)]);
     let Val::V(roots) = upper(&mut b, total) else { panic!("colour") };
     let colour = |c: u8, name: &str, d: f64| ParamDecl { kind: ParamKind::Color(c), ..ParamDecl::float(name, d, 0.0, 1.0) };
     let params = vec![
@@ -360,6 +353,26 @@ fn full_energy_integrates_over_the_azimuth_for_direction_formulas() {
     assert!(e.albedo_phi.iter().any(|c| c.0 == e.theta_i_at_max_deg && c.1 == at && c.2 == best));
     // Ward is reciprocal, whatever the azimuth.
     assert!(e.reciprocity.max_rel < 1e-12, "{:?}", e.reciprocity);
+    // Against a brute-force midpoint rule over the hemisphere (θₒ, φₒ in 300 × 600 cells).
+    let brute = |t: f64, ph: f64| {
+        let l = lobe::numerics::dir(t, ph);
+        let (nt, np) = (300, 600);
+        let (dt, dp) = (std::f64::consts::FRAC_PI_2 / nt as f64, 2.0 * std::f64::consts::PI / np as f64);
+        let mut sum = 0.0;
+        for i in 0..nt {
+            let to = (i as f64 + 0.5) * dt;
+            for j in 0..np {
+                let v = lobe::numerics::dir(to, (j as f64 + 0.5) * dp);
+                sum += k.eval(&lobe::numerics::inputs_from_dirs(l, v), &p) * to.cos() * to.sin();
+            }
+        }
+        sum * dt * dp
+    };
+    for (td, pd) in [(0.0, 0.0), (30.0, 45.0), (60.0, 90.0), (75.0, 20.0)] {
+        let (t, ph) = (f64::to_radians(td), f64::to_radians(pd));
+        let (a, b) = (albedo_at(&k, &p, t, Some(ph)).unwrap(), brute(t, ph));
+        assert!((a - b).abs() < 5e-3 * b, "θᵢ = {td}°, φᵢ = {pd}°: {a} vs brute force {b}");
+    }
     // The same formula with equal roughnesses is isotropic although it reads directions: flat in φᵢ.
     for d in [0.0, 40.0, 80.0] {
         let a = albedo_at(&k, &[0.2, 0.2], f64::to_radians(d), Some(0.0)).unwrap();
@@ -436,5 +449,21 @@ fn explorer_render_report() {
         let (wx, wy) = highlight_extent(&fr.image);
         println!("highlight {label}: {wx} px along the tangent (x), {wy} px along the bitangent (y), ratio {:.2}", wx as f64 / wy as f64);
         std::fs::write(out.join(format!("highlight_{}.png", label.split(' ').next().unwrap())), fr.image.encode_png().unwrap()).unwrap();
+    }
+    // `lobe energy --mode full` on both models (the same code path: full_energy_for per channel kernel).
+    for (label, f) in [("ward αx = 0.4, αy = 0.05", ward(0.4, 0.05)), ("principled (defaults)", principled())] {
+        for (c, k) in channel_kernels(f).iter().enumerate() {
+            let t = std::time::Instant::now();
+            let e = full_energy_for(k, k.used_inputs(), &k.default_params()).unwrap();
+            let at0 = e.albedo_phi.iter().filter(|c| c.0 == 0.0).map(|c| c.2).fold(0.0, f64::max);
+            let spread = e.albedo.iter().map(|&(th, _)| {
+                let row: Vec<f64> = e.albedo_phi.iter().filter(|c| c.0 == th).map(|c| c.2).collect();
+                row.iter().fold(0.0f64, |m, v| m.max(*v)) / row.iter().fold(f64::INFINITY, |m, v| m.min(*v))
+            }).fold(1.0, f64::max);
+            println!(
+                "energy {label} channel {c}: ρ(0) = {at0:.4}, max ρ = {:.4} at θᵢ = {}°, φᵢ = {:?}°; max over θᵢ of maxφ/minφ = {spread:.3}; reciprocity {:.1e}; {} integrals in {:.1} s (debug build)",
+                e.albedo_max, e.theta_i_at_max_deg, e.phi_i_at_max_deg, e.reciprocity.max_rel, e.albedo_phi.len(), t.elapsed().as_secs_f64()
+            );
+        }
     }
 }
