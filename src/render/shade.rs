@@ -129,7 +129,13 @@ pub fn shade_tile(scene: &Scene, plans: &[ShadingPlan], s: &Setup, n: usize, sc:
         let end = start + sc.vis[start..].iter().take_while(|(mm, _)| *mm == m).count();
         let plan = &plans[m as usize];
         let mat = &scene.materials[m as usize];
-        let kernels: Vec<&dyn Evaluator> = mat.kernels().collect();
+        // The material's kernels (one, or red, green, blue), without allocating.
+        let mut kernels: [&dyn Evaluator; 3] = [mat.evaluator.as_ref(); 3];
+        let mut nk = 0;
+        for k in mat.kernels() {
+            kernels[nk] = k;
+            nk += 1;
+        }
         for span in sc.vis[start..end].chunks(SPAN) {
             let g = &mut sc.g;
             gather(g, span, &sc.gb);
@@ -154,7 +160,7 @@ pub fn shade_tile(scene: &Scene, plans: &[ShadingPlan], s: &Setup, n: usize, sc:
                     reflect(g);
                 }
                 if plan.specular {
-                    kernel_ns += kernel(g, plan, &kernels, &mat.params, &mut counts);
+                    kernel_ns += kernel(g, plan, &kernels[..nk], &mat.params, &mut counts);
                 }
                 colour(g, plan, light.color.to_array());
             }
@@ -443,9 +449,14 @@ fn kernel(g: &mut Group, plan: &ShadingPlan, kernels: &[&dyn Evaluator], params:
         counts.evals += count as u64;
         for (&i, &v) in idx.iter().zip(out.iter()) {
             if v.is_finite() {
-                f[i as usize] = if plan.times_nl { v * g.nl[i as usize] } else { v };
+                f[i as usize] = v;
             } else {
                 counts.nan += 1;
+            }
+        }
+        if plan.times_nl {
+            for &i in idx {
+                f[i as usize] *= g.nl[i as usize];
             }
         }
     }
@@ -460,15 +471,24 @@ fn colour(g: &mut Group, plan: &ShadingPlan, il: [f64; 3]) {
     let [r, gg, b] = &mut g.acc;
     let (r, gg, b) = (&mut r[..m], &mut gg[..m], &mut b[..m]);
     let (d, s) = (plan.diffuse, plan.spec);
-    if plan.specular {
-        // Filled by the kernel step for this light; a scalar formula's F serves all three channels.
+    if plan.specular && plan.channels == 3 {
+        // Filled by the kernel step for this light, one column per channel.
         let [f0, f1, f2] = &g.f;
-        let (fr, fg, fb) = if plan.channels == 3 { (&f0[..m], &f1[..m], &f2[..m]) } else { (&f0[..m], &f0[..m], &f0[..m]) };
+        let (fr, fg, fb) = (&f0[..m], &f1[..m], &f2[..m]);
         for i in 0..m {
             let n = if nl[i] > 0.0 { nl[i] } else { 0.0 };
             r[i] += il[0] * (d[0] * n + s[0] * fr[i]);
             gg[i] += il[1] * (d[1] * n + s[1] * fg[i]);
             b[i] += il[2] * (d[2] * n + s[2] * fb[i]);
+        }
+    } else if plan.specular {
+        // A scalar formula: one F for the three channels (one load per pixel).
+        let f = &g.f[0][..m];
+        for i in 0..m {
+            let n = if nl[i] > 0.0 { nl[i] } else { 0.0 };
+            r[i] += il[0] * (d[0] * n + s[0] * f[i]);
+            gg[i] += il[1] * (d[1] * n + s[1] * f[i]);
+            b[i] += il[2] * (d[2] * n + s[2] * f[i]);
         }
     } else {
         for i in 0..m {
