@@ -130,7 +130,7 @@ fn row(
         Err(_) => (f64::NAN, f64::NAN, f64::NAN),
     };
     let coef_n50 = energy::normalization_coef(&baked, &params, lobe).ok();
-    let albedo_max = if a.no_albedo { None } else { energy::full_energy(&baked, &params).ok().map(|e| e.albedo_max) };
+    let albedo_max = if a.no_albedo { None } else { energy::full_energy_for(&baked, baked.used_inputs(), &params).ok().map(|e| e.albedo_max) };
     let spread = (m.scalar_jit.p75_ns - m.scalar_jit.p25_ns) / 2.0 / m.scalar_jit.median_ns;
     let (max_ulp_vs_precise, max_rel_vs_precise) = error_vs_precise(&baked, &params);
     // Numerical error and cost of the accuracy pass's kernel (numerics::robust).

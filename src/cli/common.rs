@@ -100,7 +100,11 @@ pub fn load_kernel(
     backend: Backend,
     math: crate::Mode,
 ) -> Result<Kernel, CliError> {
-    let f = load_formula(path, expr)?;
+    compile_kernel(load_formula(path, expr)?, set, backend, math)
+}
+
+/// [`load_kernel`]'s compilation of an already loaded formula (e.g. one channel of a colour formula).
+pub fn compile_kernel(f: Formula, set: &[(String, f64)], backend: Backend, math: crate::Mode) -> Result<Kernel, CliError> {
     let opts = Options { backend, bake: set.to_vec(), math, ..Options::default() };
     let opts = crate::numerics::robust::with_pass(opts, Default::default());
     Ok(crate::compile_formula(f, &opts)?)

@@ -1,12 +1,17 @@
 //! `lobe energy FILE --set n=50 [--mode lobe|full] [--range 1..1000 [--against F.brdf | --against-expr E]] [--json]`
 //!
-//! JSON keys are documented in [`crate::numerics`].
+//! JSON keys are documented in [`crate::numerics`]. A colour formula is checked per channel: the text shows
+//! each channel under a `channel r/g/b` heading; `--json` prints the red channel's object with one more key,
+//! `"channels"`: the three channels' objects (red, green, blue), each with the keys of a scalar formula's.
+//! `--mode full` on a formula that reads direction components integrates over the azimuth of L too
+//! ([`crate::numerics::energy::full_energy_for`]): `albedo` then holds max over φᵢ of ρ(θᵢ, φᵢ), and the JSON
+//! adds `phi_i_at_max_deg` and `albedo_phi` (every θᵢ, φᵢ, ρ).
 
 use super::args::{self, BackendArg, Force, FormulaSource, Json, LobeVar, Params};
 use super::common::{self, CliError};
 use crate::base::json;
 use crate::ir::Input;
-use crate::numerics::energy::{coef_sweep, full_energy, lobe_integral, score_against};
+use crate::numerics::energy::{coef_sweep, full_energy_for, lobe_integral, score_against};
 use crate::numerics::parse_range;
 use crate::{Backend, Evaluator, Kernel};
 use serde_json::json;
@@ -61,7 +66,12 @@ pub fn run(a: &EnergyArgs) -> Result<(), CliError> {
         return Err(CliError::hint("--set n conflicts with --range", "--range sweeps n; drop n from --set"));
     }
     let backend: Backend = a.backend.kind;
-    let k = a.formula.kernel(&set, backend, a.backend.math.mode)?;
+    let f = a.formula.load()?;
+    let ks = f
+        .channels()
+        .into_iter()
+        .map(|c| common::compile_kernel(c, &set, backend, a.backend.math.mode))
+        .collect::<Result<Vec<Kernel>, CliError>>()?;
     let against = match (&a.against, &a.against_expr) {
         (None, None) => None,
         (file, expr) => {
@@ -70,11 +80,36 @@ pub fn run(a: &EnergyArgs) -> Result<(), CliError> {
             Some(crate::compile_formula(f, &a.backend.options(vec![]))?)
         }
     };
-    print!("{}", report(a, &k, against.as_ref())?);
+    print!("{}", report_channels(a, &ks, against.as_ref())?);
     Ok(())
 }
 
-/// The command's output for already compiled kernels (the formula, and the fitted coefficient if any).
+/// The output for a formula's channel kernels (one, or red, green, blue; see the module docs).
+pub fn report_channels(a: &EnergyArgs, ks: &[Kernel], against: Option<&Kernel>) -> Result<String, CliError> {
+    if ks.len() == 1 {
+        return report(a, &ks[0], against);
+    }
+    if a.range.is_some() {
+        return Err(CliError::hint("--range works on scalar formulas only", "this formula has a colour result; drop --range"));
+    }
+    let mut parts = Vec::with_capacity(ks.len());
+    for k in ks {
+        parts.push(report(a, k, against)?);
+    }
+    if !a.json.on {
+        return Ok(["r", "g", "b"].iter().zip(&parts).map(|(c, p)| format!("channel {c}:\n{p}")).collect());
+    }
+    let objs = parts
+        .iter()
+        .map(|p| serde_json::from_str::<serde_json::Value>(p))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| CliError::msg(format!("cannot write JSON: {e}")))?;
+    let mut red = objs[0].clone();
+    red["channels"] = serde_json::Value::Array(objs);
+    Ok(format!("{red}\n"))
+}
+
+/// The command's output for one already compiled kernel (the formula, and the fitted coefficient if any).
 pub fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<String, CliError> {
     let mut out = String::new();
     let params = common::param_values(&k.formula, &a.set.list());
@@ -88,27 +123,35 @@ pub fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<St
         if a.range.is_some() {
             return Err(CliError::hint("--range works in lobe mode only", "drop --mode full, or drop --range"));
         }
-        let r = full_energy(k, &params)?;
+        let r = full_energy_for(k, k.used_inputs(), &params)?;
         if a.json.on {
             let v = json::value;
             let rows: Vec<_> = r.albedo.iter().map(|(t, rho)| json!({"theta_i_deg": v(*t), "rho": v(*rho)})).collect();
             let rec = &r.reciprocity;
-            let obj = json!({
+            let mut obj = json!({
                 "mode": "full", "params": params_json, "coef": v(r.coef), "albedo_max": v(r.albedo_max),
                 "theta_i_at_max_deg": v(r.theta_i_at_max_deg), "albedo": rows,
                 "reciprocity_max_rel": v(rec.max_rel),
                 "reciprocity_worst": {"theta_l_deg": v(rec.theta_l_deg), "theta_v_deg": v(rec.theta_v_deg), "phi_v_deg": v(rec.phi_v_deg)},
             });
+            if let Some(p) = r.phi_i_at_max_deg {
+                obj["phi_i_at_max_deg"] = v(p);
+                obj["albedo_phi"] = r.albedo_phi.iter().map(|(t, p, rho)| json!({"theta_i_deg": v(*t), "phi_i_deg": v(*p), "rho": v(*rho)})).collect();
+            }
             outln!(out, "{obj}");
         } else {
             outln!(out, "{name}: hemispherical-directional albedo ρ(θᵢ) = ∫ f·cosθₒ dωₒ");
+            if r.phi_i_at_max_deg.is_some() {
+                outln!(out, "  (the formula reads directions: ρ(θᵢ) is the maximum over the azimuth φᵢ = 0°, 15°, …, 345° of L)");
+            }
             outln!(out, "  θᵢ (deg)   ρ(θᵢ)");
             for (t, v) in &r.albedo {
                 if t.fract() != 0.0 || (*t as i64) % 5 == 0 {
                     outln!(out, "  {t:>8.1}   {v:.8}");
                 }
             }
-            outln!(out, "max ρ = {:.8} at θᵢ = {}°; coefficient 1/max ρ = {:.8}", r.albedo_max, r.theta_i_at_max_deg, r.coef);
+            let phi = r.phi_i_at_max_deg.map(|p| format!(", φᵢ = {p}°")).unwrap_or_default();
+            outln!(out, "max ρ = {:.8} at θᵢ = {}°{phi}; coefficient 1/max ρ = {:.8}", r.albedo_max, r.theta_i_at_max_deg, r.coef);
             if r.albedo_max > 1.0 + 1e-9 {
                 outln!(out, "  the formula reflects more energy than it receives at θᵢ = {}° (ρ > 1)", r.theta_i_at_max_deg);
             }

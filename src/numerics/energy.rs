@@ -15,11 +15,19 @@
 //! mirror symmetry (y → −y) halves the azimuth range. Nested adaptive GK15 in α (with a ladder near α = 0)
 //! and φ. Reciprocity compares f(L, V) with f(V, L) on a direction grid.
 //!
+//! Anisotropy. The mirror symmetry holds for every cosine formula (cosines do not change when the frame turns
+//! about N), but not for a formula that reads direction components: its albedo depends on the azimuth φᵢ of L
+//! as well. [`full_energy_for`] therefore integrates such formulas over the whole azimuth circle about R (no
+//! halving), for L at every φᵢ of [`AZIMUTHS_DEG`] (the frame of the integration turned about N), and
+//! reports ρ(θᵢ) = max over φᵢ, the maximum over both angles and where it is; reciprocity is checked with L at
+//! those azimuths too. That costs ~48× the isotropic evaluations (24 azimuths, each integral over twice the
+//! azimuth range).
+//!
 //! Cost: see the module docs of [`numerics`](super) (evaluation counts); measured times in BENCHMARKS.md
 //! (`benches/energy.rs` reproduces them).
 
 use super::quad::integrate;
-use super::{dir, inputs_from_dirs, lobe_inputs, CheckError};
+use super::{dir, inputs_from_dirs, lobe_inputs, CheckError, V3};
 use crate::ir::Input;
 use crate::backend::Evaluator;
 use rayon::prelude::*;
@@ -238,13 +246,25 @@ pub fn score_against(exact: &[(f64, f64)], fit: impl Fn(f64) -> f64) -> AgainstS
     AgainstScore { max_abs, worst_n, mean_abs, rows }
 }
 
-/// The hemispherical-directional albedo `ρ(θᵢ)` (θᵢ in radians, < π/2).
+/// The hemispherical-directional albedo `ρ(θᵢ)` (θᵢ in radians, < π/2) of an isotropic formula (L in the
+/// xz-plane; the y → −y symmetry halves the azimuth range).
 pub fn albedo(ev: &dyn Evaluator, params: &[f64], theta_i: f64) -> Result<f64, CheckError> {
+    albedo_at(ev, params, theta_i, None)
+}
+
+/// `ρ(θᵢ, φᵢ)` for any formula: L at polar angle θᵢ and azimuth φᵢ (radians) about N, V over the whole
+/// hemisphere (no symmetry assumed). `None` for φᵢ: [`albedo`].
+pub fn albedo_at(ev: &dyn Evaluator, params: &[f64], theta_i: f64, phi_i: Option<f64>) -> Result<f64, CheckError> {
     let t = theta_i;
     let (st, ct) = t.sin_cos();
-    let l = [st, 0.0, ct];
-    let r = [-st, 0.0, ct];
-    let t1 = [ct, 0.0, st];
+    let (sp, cp) = phi_i.unwrap_or(0.0).sin_cos();
+    // The isotropic construction (L in the xz-plane) turned by φᵢ about N = +z.
+    let turn = |a: V3| [cp * a[0] - sp * a[1], sp * a[0] + cp * a[1], a[2]];
+    let l = turn([st, 0.0, ct]);
+    let r = turn([-st, 0.0, ct]);
+    let t1 = turn([ct, 0.0, st]);
+    let t2 = turn([0.0, 1.0, 0.0]);
+    let full_circle = phi_i.is_some();
     let mut nan = None;
     let mut nonconv = 0usize;
     let mut inner = |alpha: f64| -> f64 {
@@ -260,7 +280,7 @@ pub fn albedo(ev: &dyn Evaluator, params: &[f64], theta_i: f64) -> Result<f64, C
         }
         let g = |phi: f64| {
             let (sp, cp) = phi.sin_cos();
-            let v = [ca * r[0] + sa * cp * t1[0], sa * sp, ca * r[2] + sa * cp * t1[2]];
+            let v: V3 = std::array::from_fn(|k| ca * r[k] + sa * (cp * t1[k] + sp * t2[k]));
             if v[2] <= 0.0 {
                 return 0.0;
             }
@@ -271,11 +291,15 @@ pub fn albedo(ev: &dyn Evaluator, params: &[f64], theta_i: f64) -> Result<f64, C
             }
             crate::builtins::fmax(y, 0.0) * v[2]
         };
-        let q = integrate(g, &[0.0, 0.5 * phi_max, phi_max], 1e-9, 1e-15, 400);
+        let (q, twice) = if full_circle {
+            (integrate(g, &[-phi_max, -0.5 * phi_max, 0.0, 0.5 * phi_max, phi_max], 1e-9, 1e-15, 800), 1.0)
+        } else {
+            (integrate(g, &[0.0, 0.5 * phi_max, phi_max], 1e-9, 1e-15, 400), 2.0)
+        };
         if !q.converged {
             nonconv += 1;
         }
-        2.0 * q.value * sa
+        twice * q.value * sa
     };
     let top = FRAC_PI_2 + t;
     let mut breaks = vec![0.0, top];
@@ -287,7 +311,7 @@ pub fn albedo(ev: &dyn Evaluator, params: &[f64], theta_i: f64) -> Result<f64, C
     breaks.dedup();
     let q = integrate(&mut inner, &breaks, 1e-8, 1e-14, 2000);
     if let Some((a, p)) = nan {
-        let v = [a.cos() * r[0] + a.sin() * p.cos() * t1[0], a.sin() * p.sin(), a.cos() * r[2] + a.sin() * p.cos() * t1[2]];
+        let v: V3 = std::array::from_fn(|k| a.cos() * r[k] + a.sin() * (p.cos() * t1[k] + p.sin() * t2[k]));
         let x = inputs_from_dirs(l, v);
         return Err(CheckError::hint(
             format!(
@@ -324,14 +348,19 @@ pub struct Reciprocity {
 /// f(L,V) vs f(V,L): L at θ_L ∈ {0, 5, …, 85, 89}° (φ_L = 0, by symmetry), V at every θ_V of the same list and
 /// φ_V ∈ {0, 15, …, 345}°. NaN on either side counts as a violation of 1.
 pub fn reciprocity(ev: &dyn Evaluator, params: &[f64]) -> Reciprocity {
+    reciprocity_over(ev, params, &[0.0])
+}
+
+/// [`reciprocity`] with L at each azimuth of `phis_l_deg` (φ_V is then relative to φ_L).
+pub fn reciprocity_over(ev: &dyn Evaluator, params: &[f64], phis_l_deg: &[f64]) -> Reciprocity {
     let thetas: Vec<f64> = (0..18).map(|i| i as f64 * 5.0).chain([89.0]).collect();
     let mut best = Reciprocity { max_rel: 0.0, theta_l_deg: 0.0, theta_v_deg: 0.0, phi_v_deg: 0.0, pairs: 0 };
-    for &tl in &thetas {
-        let l = dir(tl.to_radians(), 0.0);
+    for (&tl, &pl) in thetas.iter().flat_map(|t| phis_l_deg.iter().map(move |p| (t, p))) {
+        let l = dir(tl.to_radians(), pl.to_radians());
         for &tv in &thetas {
             for k in 0..24 {
                 let pv = k as f64 * 15.0;
-                let v = dir(tv.to_radians(), pv.to_radians());
+                let v = dir(tv.to_radians(), (pl + pv).to_radians());
                 let a = ev.eval(&inputs_from_dirs(l, v), params);
                 let b = ev.eval(&inputs_from_dirs(v, l), params);
                 best.pairs += 1;
@@ -362,6 +391,44 @@ pub struct FullEnergy {
     /// `1 / albedo_max`: the largest scale that keeps every ρ(θᵢ) ≤ 1.
     pub coef: f64,
     pub reciprocity: Reciprocity,
+    /// For a formula that reads directions: every (θᵢ, φᵢ, ρ) in degrees, `albedo` holding the maximum over
+    /// φᵢ at each θᵢ, and the φᵢ of the overall maximum. Empty and `None` for a cosine formula.
+    pub albedo_phi: Vec<(f64, f64, f64)>,
+    pub phi_i_at_max_deg: Option<f64>,
+}
+
+/// The azimuths of L for formulas that read directions: 0°, 15°, …, 345°.
+pub const AZIMUTHS_DEG: [f64; 24] = {
+    let mut a = [0.0; 24];
+    let mut k = 0;
+    while k < 24 {
+        a[k] = k as f64 * 15.0;
+        k += 1;
+    }
+    a
+};
+
+/// The full mode for a kernel that reads `used`: [`full_energy`] for a cosine formula; over θᵢ and φᵢ (see
+/// the module docs) when a direction component is read.
+pub fn full_energy_for(ev: &dyn Evaluator, used: crate::ir::InputSet, params: &[f64]) -> Result<FullEnergy, CheckError> {
+    if !used.reads_directions() {
+        return full_energy(ev, params);
+    }
+    let grid: Vec<(f64, f64)> = full_mode_angles().into_iter().flat_map(|t| AZIMUTHS_DEG.map(|p| (t, p))).collect();
+    let cells: Result<Vec<(f64, f64, f64)>, CheckError> = grid
+        .par_iter()
+        .map(|&(t, p)| albedo_at(ev, params, t.to_radians(), Some(p.to_radians())).map(|r| (t, p, r)))
+        .collect();
+    let cells = cells?;
+    let rows: Vec<(f64, f64)> = cells
+        .chunks(AZIMUTHS_DEG.len())
+        .map(|c| (c[0].0, c.iter().map(|x| x.2).fold(f64::NEG_INFINITY, f64::max)))
+        .collect();
+    let mut r = summarise(rows, reciprocity_over(ev, params, &AZIMUTHS_DEG))?;
+    let best = cells.iter().filter(|c| c.0 == r.theta_i_at_max_deg).max_by(|a, b| a.2.total_cmp(&b.2));
+    r.phi_i_at_max_deg = best.map(|c| c.1);
+    r.albedo_phi = cells;
+    Ok(r)
 }
 
 /// The incidence angles of the full mode: 0°, 1°, …, 89°, 89.9°.
@@ -374,7 +441,11 @@ pub fn full_energy(ev: &dyn Evaluator, params: &[f64]) -> Result<FullEnergy, Che
     let angles = full_mode_angles();
     let rows: Result<Vec<(f64, f64)>, CheckError> =
         angles.par_iter().map(|&d| albedo(ev, params, d.to_radians()).map(|r| (d, r))).collect();
-    let rows = rows?;
+    summarise(rows?, reciprocity(ev, params))
+}
+
+/// The maximum of ρ(θᵢ) rows and the coefficient it gives.
+fn summarise(rows: Vec<(f64, f64)>, reciprocity: Reciprocity) -> Result<FullEnergy, CheckError> {
     let (mut albedo_max, mut at) = (f64::NEG_INFINITY, 0.0);
     for &(d, r) in &rows {
         if r > albedo_max {
@@ -388,7 +459,7 @@ pub fn full_energy(ev: &dyn Evaluator, params: &[f64]) -> Result<FullEnergy, Che
             "the formula is ≤ 0 (clamped to 0) everywhere for these parameters",
         ));
     }
-    Ok(FullEnergy { albedo: rows, albedo_max, theta_i_at_max_deg: at, coef: 1.0 / albedo_max, reciprocity: reciprocity(ev, params) })
+    Ok(FullEnergy { albedo: rows, albedo_max, theta_i_at_max_deg: at, coef: 1.0 / albedo_max, reciprocity, albedo_phi: vec![], phi_i_at_max_deg: None })
 }
 
 #[cfg(test)]

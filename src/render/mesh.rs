@@ -3,6 +3,14 @@
 //! A [`Mesh`] holds per-vertex positions and unit normals and counter-clockwise (seen from outside)
 //! triangles. The renderer interpolates the vertex normals per pixel (Phong shading), so the tessellation
 //! level shows only in the silhouette and in how the normal field bends, exactly as in the papers' program.
+//!
+//! Tangent frames: every mesh also carries a unit tangent per vertex, orthogonal to its normal, for formulas
+//! that read directions in the local frame (anisotropic models; the bitangent is always N × T). The sphere
+//! and the torus take ∂P/∂u of their parametrisation (the direction of growing longitude; the ring direction);
+//! OBJ meshes with texture coordinates take the per-triangle tangent of the UV map (∂P/∂u from the UV
+//! derivatives, summed over the triangles at a vertex); anything else gets [`onb_tangent`], a stable frame
+//! from the normal alone. Every tangent is Gram–Schmidt orthonormalised against its vertex normal; the
+//! shader interpolates and orthonormalises again per pixel. Cost: O(vertices + triangles) once per mesh.
 
 use glam::{DMat3, DMat4, DVec3};
 use std::f64::consts::PI;
@@ -12,6 +20,9 @@ use std::f64::consts::PI;
 pub struct Mesh {
     pub positions: Vec<DVec3>,
     pub normals: Vec<DVec3>,
+    /// Unit tangent per vertex, orthogonal to its normal (see the module docs). An empty list (hand-built
+    /// meshes) means [`onb_tangent`] of each normal.
+    pub tangents: Vec<DVec3>,
     /// Counter-clockwise seen from the side the normals point to.
     pub triangles: Vec<[u32; 3]>,
 }
@@ -31,6 +42,8 @@ impl Mesh {
                 let n = DVec3::new(theta.sin() * phi.sin(), theta.cos(), theta.sin() * phi.cos());
                 m.positions.push(n * radius);
                 m.normals.push(n);
+                // ∂P/∂φ / (r·sin θ): defined at the poles too, orthogonal to n by construction.
+                m.tangents.push(DVec3::new(phi.cos(), 0.0, -phi.sin()));
             }
         }
         let row = slices + 1;
@@ -65,6 +78,8 @@ impl Mesh {
                 let n = radial * v.cos() + DVec3::Y * v.sin();
                 m.positions.push(centre + n * minor);
                 m.normals.push(n);
+                // ∂P/∂u normalised: along the ring, orthogonal to both the radial and the y direction.
+                m.tangents.push(DVec3::new(-u.sin(), 0.0, -u.cos()));
             }
         }
         let row = sides + 1;
@@ -90,8 +105,37 @@ impl Mesh {
                 normals[i as usize] += n;
             }
         }
-        let normals = normals.into_iter().map(|n| n.try_normalize().unwrap_or(DVec3::Y)).collect();
-        Mesh { positions, normals, triangles }
+        let normals: Vec<DVec3> = normals.into_iter().map(|n| n.try_normalize().unwrap_or(DVec3::Y)).collect();
+        let tangents = normals.iter().map(|n| onb_tangent(*n)).collect();
+        Mesh { positions, normals, tangents, triangles }
+    }
+
+    /// Replaces the tangents by those of a UV map (`uv[i]` per vertex): per triangle T = (e1·Δv2 − e2·Δv1)/det
+    /// (the direction of growing u), summed at each vertex, then orthonormalised against its normal; a vertex
+    /// whose triangles all have degenerate UVs gets [`onb_tangent`].
+    pub fn set_uv_tangents(&mut self, uv: &[[f64; 2]]) {
+        let mut acc = vec![DVec3::ZERO; self.positions.len()];
+        for t in &self.triangles {
+            let [a, b, c] = t.map(|i| i as usize);
+            let (e1, e2) = (self.positions[b] - self.positions[a], self.positions[c] - self.positions[a]);
+            let (du1, dv1) = (uv[b][0] - uv[a][0], uv[b][1] - uv[a][1]);
+            let (du2, dv2) = (uv[c][0] - uv[a][0], uv[c][1] - uv[a][1]);
+            let det = du1 * dv2 - du2 * dv1;
+            if det.abs() < 1e-300 || !det.is_finite() {
+                continue;
+            }
+            // Dividing by |det| would weigh triangles by their UV density; the sign keeps u's direction.
+            let tang = (e1 * dv2 - e2 * dv1) * det.signum();
+            for i in [a, b, c] {
+                acc[i] += tang;
+            }
+        }
+        self.tangents = acc.iter().zip(&self.normals).map(|(t, n)| orthonormal_tangent(*t, *n)).collect();
+    }
+
+    /// The tangent of vertex `i` ([`onb_tangent`] of its normal when the mesh has none).
+    pub fn tangent(&self, i: usize) -> DVec3 {
+        self.tangents.get(i).copied().unwrap_or_else(|| onb_tangent(self.normals[i]))
     }
 
     /// Applies an affine transform: positions by `m`, normals by its inverse transpose (renormalised).
@@ -102,6 +146,12 @@ impl Mesh {
         }
         for n in &mut self.normals {
             *n = (nm * *n).try_normalize().unwrap_or(DVec3::Y);
+        }
+        // Tangents are surface directions: they transform by the linear part itself, then are made orthogonal
+        // to the transformed normal again (a non-uniform scale tilts them).
+        let lin = DMat3::from_mat4(*m);
+        for (t, n) in self.tangents.iter_mut().zip(&self.normals) {
+            *t = orthonormal_tangent(lin * *t, *n);
         }
         // A mirroring transform flips the winding; keep triangles counter-clockwise from outside.
         if m.determinant() < 0.0 {
@@ -116,6 +166,21 @@ impl Mesh {
         let first = *self.positions.first()?;
         Some(self.positions.iter().fold((first, first), |(lo, hi), p| (lo.min(*p), hi.max(*p))))
     }
+}
+
+/// A unit tangent orthogonal to the unit normal `n`, continuous in `n` except across n.z = 0: the first
+/// vector of Duff et al. 2017's branchless orthonormal basis ("Building an Orthonormal Basis, Revisited").
+pub fn onb_tangent(n: DVec3) -> DVec3 {
+    let sign = 1f64.copysign(n.z);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    DVec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x)
+}
+
+/// Gram–Schmidt: `t` minus its component along the unit normal `n`, normalised; [`onb_tangent`] when `t` is
+/// (nearly) parallel to `n`, zero or not finite.
+pub fn orthonormal_tangent(t: DVec3, n: DVec3) -> DVec3 {
+    (t - n * n.dot(t)).try_normalize().filter(|u| u.dot(n).abs() < 1e-6).unwrap_or_else(|| onb_tangent(n))
 }
 
 /// translate · rotate (Z·Y·X, degrees) · scale — the order a scene author expects: scale the object, turn
@@ -163,8 +228,10 @@ pub fn load_obj(path: &std::path::Path) -> Result<Mesh, ObjError> {
     };
     let mut positions = Vec::new();
     let mut normals = Vec::new();
+    let mut uvs: Vec<[f64; 2]> = Vec::new();
     let mut triangles = Vec::new();
     let mut all_have_normals = true;
+    let mut all_have_uvs = true;
     for m in &models {
         let mesh = &m.mesh;
         let base = positions.len() as u32;
@@ -174,6 +241,11 @@ pub fn load_obj(path: &std::path::Path) -> Result<Mesh, ObjError> {
             normals.extend(mesh.normals.chunks_exact(3).map(|n| DVec3::new(n[0] as f64, n[1] as f64, n[2] as f64)));
         } else {
             all_have_normals = false;
+        }
+        if mesh.texcoords.len() == nv * 2 && nv > 0 {
+            uvs.extend(mesh.texcoords.chunks_exact(2).map(|t| [t[0] as f64, t[1] as f64]));
+        } else {
+            all_have_uvs = false;
         }
         for t in mesh.indices.chunks_exact(3) {
             if t.iter().any(|&i| i as usize >= nv) {
@@ -185,12 +257,17 @@ pub fn load_obj(path: &std::path::Path) -> Result<Mesh, ObjError> {
     if triangles.is_empty() {
         return Err(ObjError { message: "the file has no faces".into(), line: None });
     }
-    Ok(if all_have_normals {
-        let normals = normals.into_iter().map(|n: DVec3| n.try_normalize().unwrap_or(DVec3::Y)).collect();
-        Mesh { positions, normals, triangles }
+    let mut mesh = if all_have_normals {
+        let normals: Vec<DVec3> = normals.into_iter().map(|n: DVec3| n.try_normalize().unwrap_or(DVec3::Y)).collect();
+        let tangents = normals.iter().map(|n| onb_tangent(*n)).collect();
+        Mesh { positions, normals, tangents, triangles }
     } else {
         Mesh::with_smooth_normals(positions, triangles)
-    })
+    };
+    if all_have_uvs {
+        mesh.set_uv_tangents(&uvs);
+    }
+    Ok(mesh)
 }
 
 /// The first line of `src` that the OBJ subset lobe reads (`v`, `vn`, `vt`, `f`) rejects, with the reason:
@@ -261,6 +338,7 @@ pub fn locate_obj_fault(src: &str) -> Option<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::path::Path;
 
     /// Sum over triangles of (a × b)·c / 6: the enclosed volume, positive when every face is counter-clockwise
     /// seen from outside.
@@ -302,6 +380,85 @@ mod tests {
         m.transform(&transform_matrix(DVec3::new(1.0, 2.0, 3.0), DVec3::new(10.0, 20.0, 30.0), DVec3::new(-1.0, 2.0, 1.0)));
         let v = signed_volume(&m);
         assert!(v > 0.0, "{v}");
+    }
+
+    /// Every vertex frame is orthonormal: unit tangent, orthogonal to the unit normal.
+    fn assert_orthonormal(m: &Mesh, what: &str) {
+        assert_eq!(m.tangents.len(), m.positions.len(), "{what}");
+        for (i, (t, n)) in m.tangents.iter().zip(&m.normals).enumerate() {
+            assert!((t.length() - 1.0).abs() < 1e-12 && t.dot(*n).abs() < 1e-12, "{what} vertex {i}: t = {t}, n = {n}");
+        }
+    }
+
+    #[test]
+    fn frames_are_orthonormal_on_every_shape() {
+        let sphere = Mesh::sphere(2.0, 20, 40);
+        assert_orthonormal(&sphere, "sphere");
+        // The sphere's tangent is the direction of growing longitude: horizontal, turning with φ.
+        for (t, p) in sphere.tangents.iter().zip(&sphere.positions) {
+            assert!(t.y.abs() < 1e-15);
+            if p.x.hypot(p.z) > 1e-9 {
+                assert!((t.cross(DVec3::new(p.x, 0.0, p.z).normalize()) - DVec3::NEG_Y).length() < 1e-12, "{t} at {p}");
+            }
+        }
+        let torus = Mesh::torus(2.0, 0.5, 24, 12);
+        assert_orthonormal(&torus, "torus");
+        for (t, p) in torus.tangents.iter().zip(&torus.positions) {
+            // Along the ring: orthogonal to the radial direction and to the axis.
+            assert!(t.y.abs() < 1e-15 && t.dot(DVec3::new(p.x, 0.0, p.z).normalize()).abs() < 1e-12);
+        }
+        // A non-uniform, mirroring transform tilts tangents off the new normals; they are re-orthonormalised.
+        let mut m = Mesh::torus(2.0, 0.5, 24, 12);
+        m.transform(&transform_matrix(DVec3::new(1.0, 2.0, 3.0), DVec3::new(10.0, 20.0, 30.0), DVec3::new(-1.0, 3.0, 0.5)));
+        assert_orthonormal(&m, "transformed torus");
+        let bumpy = load_obj(&Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/meshes/bumpy.obj")).unwrap();
+        assert_orthonormal(&bumpy, "OBJ without UVs");
+        // Duff et al.'s frame, including the normal that breaks the classic formula (n = −z).
+        for n in [DVec3::Z, DVec3::NEG_Z, DVec3::X, DVec3::new(1e-300, -1e-300, -1.0), DVec3::new(0.3, -0.4, -0.5).normalize()] {
+            let t = onb_tangent(n);
+            assert!((t.length() - 1.0).abs() < 1e-12 && t.dot(n).abs() < 1e-12, "{n}: {t}");
+        }
+        // A tangent parallel to the normal, zero or NaN falls back to that frame.
+        for bad in [DVec3::Z * 3.0, DVec3::ZERO, DVec3::NAN] {
+            assert_eq!(orthonormal_tangent(bad, DVec3::Z), onb_tangent(DVec3::Z));
+        }
+    }
+
+    #[test]
+    fn obj_uv_tangents_follow_the_uv_map() {
+        // examples/meshes/uv_roof.obj: a roof with its ridge along x; u runs from y = −1 over the ridge (y = 0,
+        // z = 1) to y = 1. So ∂P/∂u is (0, 1, 1)/√2 on one slope, (0, 1, −1)/√2 on the other, and +y on the
+        // ridge, where the two slopes' tangents are summed and made orthogonal to the ridge's normal +z (the
+        // file gives the normals: +z on the ridge, the slopes' own on the eaves).
+        let m = load_obj(&Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/meshes/uv_roof.obj")).unwrap();
+        assert_orthonormal(&m, "uv_roof");
+        let r = std::f64::consts::FRAC_1_SQRT_2;
+        for (p, t) in m.positions.iter().zip(&m.tangents) {
+            let want = match p.y {
+                y if y < -0.5 => DVec3::new(0.0, r, r),
+                y if y > 0.5 => DVec3::new(0.0, r, -r),
+                _ => DVec3::Y,
+            };
+            assert!((*t - want).length() < 1e-6, "at {p}: {t} vs {want}");
+        }
+        // The same file without its `vt` lines gets the normal-only frame instead.
+        let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/meshes/uv_roof.obj")).unwrap();
+        let plain: String = text.lines().filter(|l| !l.starts_with("vt")).map(|l| {
+            let l = if l.starts_with("f ") {
+                l.split_whitespace().map(|c| c.split('/').enumerate().map(|(k, x)| if k == 1 { "" } else { x }).collect::<Vec<_>>().join("/")).collect::<Vec<_>>().join(" ")
+            } else {
+                l.to_string()
+            };
+            l + "\n"
+        }).collect();
+        let dir = std::env::temp_dir().join(format!("lobe-mesh-uv-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("plain.obj");
+        std::fs::write(&path, plain).unwrap();
+        let p = load_obj(&path).unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
+        assert_orthonormal(&p, "uv_roof without UVs");
+        assert!(p.tangents.iter().zip(&p.normals).all(|(t, n)| *t == onb_tangent(*n)));
     }
 
     #[test]

@@ -11,7 +11,8 @@
 //!    are filled with the background and cost nothing else;
 //! 3. PNG encoding and atomic output ([`image`]).
 //!
-//! Materials are `Arc<dyn Evaluator>` plus the set of inputs the formula reads, so the same renderer runs
+//! Materials are `Arc<dyn Evaluator>` (three for a colour formula, one per channel) plus the set of inputs the
+//! formula reads (a tangent frame per pixel only if it reads direction components), so the same renderer runs
 //! the JIT, the interpreter, or a plain Rust closure (tests and benches); everything but F is the same Rust
 //! code on every backend, so "JIT vs interpreter" compares the kernels in the same shading.
 //!
@@ -80,12 +81,16 @@ pub struct Light {
     pub color: DVec3,
 }
 
-/// A surface's reflectance: the BRDF kernel and the classic ka/kd/ks weights.
+/// A surface's reflectance: the BRDF kernel(s) and the classic ka/kd/ks weights.
 #[derive(Clone)]
 pub struct Material {
     pub name: String,
+    /// The scalar formula's kernel, or the red channel's of a colour formula.
     pub evaluator: Arc<dyn Evaluator>,
-    /// Inputs the formula reads; the shader computes only these (NL is always computed: it decides "lit").
+    /// A colour formula's green and blue kernels (`None`: scalar, F is the same for the three channels).
+    pub green_blue: Option<[Arc<dyn Evaluator>; 2]>,
+    /// Inputs the formula reads (all channels); the shader computes only these (NL is always computed: it
+    /// decides "lit"), and the tangent frame only if a direction component is among them.
     pub used: InputSet,
     /// Parameter values in declaration order (`n` first).
     pub params: Vec<f64>,
@@ -96,12 +101,27 @@ pub struct Material {
     pub color: DVec3,
     /// Multiplies the specular term.
     pub specular: DVec3,
-    /// Energy normalisation factor applied to F (1 when `normalize` is off).
-    pub coef: f64,
+    /// Energy normalisation factor applied to F, per channel (1 when `normalize` is off; the same three for
+    /// a scalar formula).
+    pub coef: DVec3,
+    /// Turns the tangent (and bitangent) about the normal by this angle, degrees (scene key
+    /// `tangent_angle_deg`): the direction an anisotropic highlight stretches along. 0 keeps the shape's frame.
+    pub tangent_angle_deg: f64,
+    /// Multiply F by NL (scene key `times_nl`): the rendering equation's cosine, for formulas that are a BRDF
+    /// proper (BRDF Explorer's `BRDF(L, V, N, X, Y)` returns f without it); the papers' models include
+    /// whatever cosine they want in F, so the default is off.
+    pub times_nl: bool,
     /// The papers' cut-off (scene key `cutoff = q`): F is not evaluated where the lobe is below 2^−q.
     pub cutoff: Option<plan::Cutoff>,
     /// The math mode of the material's kernel (for reports).
     pub math: crate::Mode,
+}
+
+impl Material {
+    /// The kernels to call per pixel and light: one, or red, green, blue.
+    pub fn kernels(&self) -> impl Iterator<Item = &dyn Evaluator> {
+        std::iter::once(self.evaluator.as_ref()).chain(self.green_blue.iter().flat_map(|gb| gb.iter().map(|e| e.as_ref())))
+    }
 }
 
 impl std::fmt::Debug for Material {
@@ -114,6 +134,8 @@ impl std::fmt::Debug for Material {
             .field("kd", &self.kd)
             .field("ks", &self.ks)
             .field("coef", &self.coef)
+            .field("colour", &self.green_blue.is_some())
+            .field("tangent_angle_deg", &self.tangent_angle_deg)
             .field("cutoff", &self.cutoff)
             .finish()
     }

@@ -14,22 +14,28 @@
 //! | view·light | VL = v·l/(\|v\|\|l\|) | NH, VH or VR read |
 //! | half | NH = (NL + NV)/√(2 + 2VL), VH = (1 + VL)/√(2 + 2VL) (0 where L = −V) | NH or VH read |
 //! | reflect | VR = 2·NL·NV − VL (V̂·R̂ with R = 2(N̂·L̂)N̂ − L̂) | VR read |
-//! | kernel | F on the lit pixels (NL > 0, and the lobe cosine above the cut-off), one batch | ks ≠ 0 |
-//! | colour | I += Il·(kd·C·max(NL, 0) + ks·coef·Cs·F), F non-finite → 0 and counted | always |
+//! | frame | tangent t interpolated with n; T̂ = norm(t − N̂(N̂·t)), B̂ = N̂ × T̂, turned by the material's tangent angle; Vx = V̂·T̂, Vy = V̂·B̂ (Vz = NV) | a direction component read |
+//! | light frame (per light) | Lx = L̂·T̂, Ly = L̂·B̂ (Lz = NL), inside the light loop | a direction component read |
+//! | kernel | F on the lit pixels (NL > 0, and the lobe cosine above the cut-off), one batch per channel | ks ≠ 0 |
+//! | colour | I_c += Il_c·(kd·C_c·max(NL, 0) + ks·coef_c·Cs_c·F_c), F non-finite → 0 and counted; F·NL with `times_nl` | always |
 //!
 //! The cosines reach the kernel unclamped: clamping them to [0, 1] is the formula's domain policy, which
 //! the front end writes into its IR, so every backend applies it identically.
 //!
+//! A formula that reads directions in the local frame (L, V, N, X, Y, as BRDF Explorer's `BRDF(L, V, N, X, Y)`)
+//! gets the two frame steps; a cosine formula never runs them, so it pays nothing for tangent frames. A
+//! colour formula (`Formula.rgb`) has one kernel per channel, all three called on the same compacted columns;
+//! a scalar formula's F serves all three channels. Energy normalisation (`coef`) is per channel too.
+//!
 //! Design for what comes next: `shade.rs` runs each step as one loop over structure-of-arrays columns (LLVM
 //! vectorises them); a JIT-compiled shading program would compile the same step list into lane code with the
-//! uniforms as constants, and the interpreter would run that program — the plan does not change. A formula
-//! that reads directions in the local frame (L, V, N, X, Y, as BRDF Explorer's `BRDF(L, V, N, X, Y)`) adds a
-//! step after "light": a tangent column interpolated with n, then the components of l and v in (X, Y, N),
-//! one column each; the kernel interface grows by those columns, and nothing above changes.
+//! uniforms as constants, and the interpreter would run that program — the plan does not change.
 //!
 //! Cost model: per visible pixel ~25 flops (surface) + ~20 and two square roots (view); per lit pixel and
 //! light ~15 flops and one square root (light), 5 (view·light), 6 and one root (half), 3 (reflect), the
-//! kernel, 9 (colour); plus one gather per kernel column. Measured split: BENCHMARKS.md.
+//! kernel, 9 (colour); plus one gather per kernel column. Directions add ~9 flops per pixel (tangent
+//! interpolation), ~40 and one root (frame) and ~12 per light; colour adds two kernel calls and scatters.
+//! Measured split: BENCHMARKS.md.
 
 use super::Material;
 use crate::backend::Evaluator;
@@ -109,6 +115,14 @@ pub struct ShadingPlan {
     pub half: bool,
     /// The reflect step (VR read).
     pub reflect: bool,
+    /// The frame steps (a direction component read).
+    pub directions: bool,
+    /// (cos, sin) of the material's tangent angle: T and B are turned by it about N.
+    pub tangent_rotation: [f64; 2],
+    /// Kernels per pixel and light: 1 (scalar formula) or 3 (colour formula, one per channel).
+    pub channels: usize,
+    /// F is multiplied by NL (the material's `times_nl`), applied when F is scattered back.
+    pub times_nl: bool,
     /// The kernel runs at all (ks ≠ 0).
     pub specular: bool,
     /// The cut-off, if the material has one and the render applies it.
@@ -117,7 +131,7 @@ pub struct ShadingPlan {
     pub ambient: [f64; 3],
     /// kd·C, multiplied by NL.
     pub diffuse: [f64; 3],
-    /// ks·coef·Cs, multiplied by F.
+    /// ks·coef·Cs, multiplied by F (per channel).
     pub spec: [f64; 3],
 }
 
@@ -127,12 +141,17 @@ impl ShadingPlan {
         let r = m.used;
         let half = r.contains(Input::NH) || r.contains(Input::VH);
         let reflect = r.contains(Input::VR);
-        let spec = m.specular * (m.ks * m.coef);
+        let spec = m.specular * m.coef * m.ks;
+        let (s, c) = m.tangent_angle_deg.to_radians().sin_cos();
         ShadingPlan {
             reads: r,
             view_light: half || reflect,
             half,
             reflect,
+            directions: r.reads_directions(),
+            tangent_rotation: [c, s],
+            channels: if m.green_blue.is_some() { 3 } else { 1 },
+            times_nl: m.times_nl,
             specular: m.ks != 0.0,
             cutoff: if cutoff { m.cutoff } else { None },
             ambient: (ambient * m.color * m.ka).to_array(),

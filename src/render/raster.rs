@@ -35,6 +35,8 @@ pub struct ScreenTri {
     pub inv_w: [f64; 3],
     pub pos: [DVec3; 3],
     pub normal: [DVec3; 3],
+    /// Vertex tangents (interpolated like the normal, read only by formulas that read directions).
+    pub tangent: [DVec3; 3],
     pub material: u32,
     /// The object is drawn from both sides: shading turns the normal towards the viewer.
     pub two_sided: bool,
@@ -68,11 +70,12 @@ struct ClipVert {
     c: DVec4,
     pos: DVec3,
     normal: DVec3,
+    tangent: DVec3,
 }
 
 impl ClipVert {
     fn lerp(&self, o: &ClipVert, t: f64) -> ClipVert {
-        ClipVert { c: self.c.lerp(o.c, t), pos: self.pos.lerp(o.pos, t), normal: self.normal.lerp(o.normal, t) }
+        ClipVert { c: self.c.lerp(o.c, t), pos: self.pos.lerp(o.pos, t), normal: self.normal.lerp(o.normal, t), tangent: self.tangent.lerp(o.tangent, t) }
     }
 }
 
@@ -102,6 +105,7 @@ pub fn setup(items: &[DrawItem], xf: &ClipTransform, width: usize, height: usize
                 c: clip[i as usize],
                 pos: item.mesh.positions[i as usize],
                 normal: item.mesh.normals[i as usize],
+                tangent: item.mesh.tangent(i as usize),
             });
             if v.iter().all(|cv| inside(cv.c)) {
                 emit(&mut s, &v, item);
@@ -173,6 +177,7 @@ fn emit(s: &mut Setup, v: &[ClipVert; 3], item: &DrawItem) {
         inv_w: order.map(|i| inv_w[i]),
         pos: order.map(|i| v[i].pos),
         normal: order.map(|i| v[i].normal),
+        tangent: order.map(|i| v[i].tangent),
         material: item.material,
         two_sided: !item.cull_backfaces,
         area,
@@ -290,6 +295,7 @@ mod tests {
                 DVec3::new(-2.0, 2.0, 0.0),
             ],
             normals: vec![DVec3::Z; 4],
+            tangents: vec![],
             triangles: vec![[0, 1, 2], [0, 2, 3]],
         };
         let cam = Camera { position: DVec3::new(0.0, 0.0, 2.0), look_at: DVec3::ZERO, up: DVec3::Y, fov_deg: 90.0 };
@@ -324,6 +330,7 @@ mod tests {
         let mesh = Mesh {
             positions: vec![DVec3::new(-1.0, -1.0, 0.0), DVec3::new(1.0, -1.0, 0.0), DVec3::new(0.0, 1.0, 0.0)],
             normals: vec![DVec3::Z; 3],
+            tangents: vec![],
             triangles: vec![[0, 2, 1]], // clockwise from +z: a back face
         };
         let cam = Camera { position: DVec3::new(0.0, 0.0, 2.0), look_at: DVec3::ZERO, up: DVec3::Y, fov_deg: 60.0 };
@@ -334,6 +341,7 @@ mod tests {
         let big = Mesh {
             positions: vec![DVec3::new(-100.0, -1.0, 10.0), DVec3::new(100.0, -1.0, 10.0), DVec3::new(0.0, -1.0, -100.0)],
             normals: vec![DVec3::Y; 3],
+            tangents: vec![],
             triangles: vec![[0, 1, 2]],
         };
         let s = setup(&[DrawItem { mesh: &big, material: 0, cull_backfaces: false }], &xf, 16, 16, 8);

@@ -52,13 +52,22 @@ struct Group {
     inv_n: Vec<f64>,
     inv_v: Vec<f64>,
     nv: Vec<f64>,
+    /// The tangent frame (formulas that read directions only): the interpolated tangent, then the unit
+    /// tangent and bitangent of the local frame; the view and light directions' components in it.
+    t: [Vec<f64>; 3],
+    bt: [Vec<f64>; 3],
+    vx: Vec<f64>,
+    vy: Vec<f64>,
+    lx: Vec<f64>,
+    ly: Vec<f64>,
     nl: Vec<f64>,
     vl: Vec<f64>,
     nh: Vec<f64>,
     vh: Vec<f64>,
     vr: Vec<f64>,
-    /// F per pixel for the current light (0 where not evaluated).
-    f: Vec<f64>,
+    /// F per pixel and channel for the current light (0 where not evaluated); a scalar formula fills only
+    /// channel 0, which the colour step then reads for all three.
+    f: [Vec<f64>; 3],
     acc: [Vec<f64>; 3],
     /// 8-bit colours.
     q: [Vec<u8>; 3],
@@ -120,17 +129,30 @@ pub fn shade_tile(scene: &Scene, plans: &[ShadingPlan], s: &Setup, n: usize, sc:
         let end = start + sc.vis[start..].iter().take_while(|(mm, _)| *mm == m).count();
         let plan = &plans[m as usize];
         let mat = &scene.materials[m as usize];
+        // The material's kernels (one, or red, green, blue), without allocating.
+        let mut kernels: [&dyn Evaluator; 3] = [mat.evaluator.as_ref(); 3];
+        let mut nk = 0;
+        for k in mat.kernels() {
+            kernels[nk] = k;
+            nk += 1;
+        }
         for span in sc.vis[start..end].chunks(SPAN) {
             let g = &mut sc.g;
             gather(g, span, &sc.gb);
-            surface(g, s, eye);
-            view(g, eye);
+            if plan.directions {
+                surface::<true>(g, s, eye);
+                view(g, eye);
+                frame(g, plan.tangent_rotation);
+            } else {
+                surface::<false>(g, s, eye);
+                view(g, eye);
+            }
             for (c, a) in g.acc.iter_mut().enumerate() {
                 a.clear();
                 a.resize(span.len(), plan.ambient[c]);
             }
             for light in &scene.lights {
-                light_step(g, light.kind, plan.view_light);
+                light_step(g, light.kind, plan.view_light, plan.directions);
                 if plan.half {
                     half(g);
                 }
@@ -138,7 +160,7 @@ pub fn shade_tile(scene: &Scene, plans: &[ShadingPlan], s: &Setup, n: usize, sc:
                     reflect(g);
                 }
                 if plan.specular {
-                    kernel_ns += kernel(g, plan, mat.evaluator.as_ref(), &mat.params, &mut counts);
+                    kernel_ns += kernel(g, plan, &kernels[..nk], &mat.params, &mut counts);
                 }
                 colour(g, plan, light.color.to_array());
             }
@@ -176,13 +198,17 @@ fn rsqrt(x: f64) -> f64 {
     y * (1.5 - 0.5 * x * y * y)
 }
 
-/// The surface step: p and n interpolated, one loop per run of pixels of one triangle (its vertices are
-/// constants there): a = v2 + b0·(v0 − v2) + b1·(v1 − v2). Two-sided triangles turn n towards the viewer.
-fn surface(g: &mut Group, s: &Setup, eye: [f64; 3]) {
+/// The surface step: p and n (and with `TAN` the tangent) interpolated, one loop per run of pixels of one
+/// triangle (its vertices are constants there): a = v2 + b0·(v0 − v2) + b1·(v1 − v2). Two-sided triangles
+/// turn n towards the viewer.
+fn surface<const TAN: bool>(g: &mut Group, s: &Setup, eye: [f64; 3]) {
     let m = g.pix.len();
     for c in 0..3 {
         fit(&mut g.p[c], m);
         fit(&mut g.n[c], m);
+        if TAN {
+            fit(&mut g.t[c], m);
+        }
     }
     let mut k = 0;
     while k < m {
@@ -203,6 +229,17 @@ fn surface(g: &mut Group, s: &Setup, eye: [f64; 3]) {
             nx[i] = na.x + u * n0.x + w * n1.x;
             ny[i] = na.y + u * n0.y + w * n1.y;
             nz[i] = na.z + u * n0.z + w * n1.z;
+        }
+        if TAN {
+            let (ta, t0, t1) = (tri.tangent[2], tri.tangent[0] - tri.tangent[2], tri.tangent[1] - tri.tangent[2]);
+            let [tx, ty, tz] = &mut g.t;
+            let (tx, ty, tz) = (&mut tx[k..e], &mut ty[k..e], &mut tz[k..e]);
+            for i in 0..e - k {
+                let (u, w) = (b0[i], b1[i]);
+                tx[i] = ta.x + u * t0.x + w * t1.x;
+                ty[i] = ta.y + u * t0.y + w * t1.y;
+                tz[i] = ta.z + u * t0.z + w * t1.z;
+            }
         }
         if tri.two_sided {
             let [nx, ny, nz] = &mut g.n;
@@ -241,21 +278,76 @@ fn view(g: &mut Group, eye: [f64; 3]) {
     }
 }
 
-/// The light step (NL, and VL if the plan needs it) for one light.
-fn light_step(g: &mut Group, kind: LightKind, view_light: bool) {
-    match (kind, view_light) {
-        (LightKind::Point(lp), true) => light_loop::<true, true>(g, lp.to_array()),
-        (LightKind::Point(lp), false) => light_loop::<true, false>(g, lp.to_array()),
-        (LightKind::Directional(d), true) => light_loop::<false, true>(g, (-d).to_array()),
-        (LightKind::Directional(d), false) => light_loop::<false, false>(g, (-d).to_array()),
+/// The frame step (formulas that read directions): the interpolated tangent made orthogonal to the normal
+/// and unit (Gram–Schmidt; where it is parallel to the normal, Duff et al.'s frame of the normal instead),
+/// the bitangent N̂ × T̂, both turned about N̂ by the material's tangent angle (`rot` = (cos, sin)), and the
+/// view direction's components Vx = V̂·T̂, Vy = V̂·B̂ (Vz is NV).
+fn frame(g: &mut Group, rot: [f64; 2]) {
+    let m = g.pix.len();
+    let (vxo, vyo) = (fit(&mut g.vx, m), fit(&mut g.vy, m));
+    let [bx, by, bz] = &mut g.bt;
+    let (bx, by, bz) = (fit(bx, m), fit(by, m), fit(bz, m));
+    let [tx, ty, tz] = &mut g.t;
+    let (tx, ty, tz) = (&mut tx[..m], &mut ty[..m], &mut tz[..m]);
+    let [nx, ny, nz] = &g.n;
+    let [vx, vy, vz] = &g.v;
+    let (nx, ny, nz, vx, vy, vz) = (&nx[..m], &ny[..m], &nz[..m], &vx[..m], &vy[..m], &vz[..m]);
+    let (inv_n, inv_v) = (&g.inv_n[..m], &g.inv_v[..m]);
+    let [c, s] = rot;
+    for i in 0..m {
+        let (a, b, d) = (nx[i] * inv_n[i], ny[i] * inv_n[i], nz[i] * inv_n[i]);
+        let k = a * tx[i] + b * ty[i] + d * tz[i];
+        let (ux, uy, uz) = (tx[i] - a * k, ty[i] - b * k, tz[i] - d * k);
+        let l2 = ux * ux + uy * uy + uz * uz;
+        let ok = l2 > 1e-20;
+        // Duff et al. 2017's tangent of (a, b, d) for the degenerate case (see mesh::onb_tangent).
+        let sign = if d < 0.0 { -1.0 } else { 1.0 };
+        let q = -1.0 / (sign + d);
+        let (ox, oy, oz) = (1.0 + sign * a * a * q, sign * a * b * q, -sign * a);
+        let il = if ok { rsqrt(l2) } else { 1.0 };
+        let (ux, uy, uz) = if ok { (ux * il, uy * il, uz * il) } else { (ox, oy, oz) };
+        // B̂ = N̂ × T̂, then the rotation by the tangent angle in the tangent plane.
+        let (wx, wy, wz) = (b * uz - d * uy, d * ux - a * uz, a * uy - b * ux);
+        let (t0, t1, t2) = (c * ux + s * wx, c * uy + s * wy, c * uz + s * wz);
+        let (b0, b1, b2) = (c * wx - s * ux, c * wy - s * uy, c * wz - s * uz);
+        tx[i] = t0;
+        ty[i] = t1;
+        tz[i] = t2;
+        bx[i] = b0;
+        by[i] = b1;
+        bz[i] = b2;
+        vxo[i] = (vx[i] * t0 + vy[i] * t1 + vz[i] * t2) * inv_v[i];
+        vyo[i] = (vx[i] * b0 + vy[i] * b1 + vz[i] * b2) * inv_v[i];
+    }
+}
+
+/// The light step (NL; VL if the plan needs it; Lx, Ly if the formula reads directions) for one light.
+fn light_step(g: &mut Group, kind: LightKind, view_light: bool, dirs: bool) {
+    let (p, d) = match kind {
+        LightKind::Point(lp) => (true, lp.to_array()),
+        LightKind::Directional(dir) => (false, (-dir).to_array()),
+    };
+    match (p, view_light, dirs) {
+        (true, true, true) => light_loop::<true, true, true>(g, d),
+        (true, true, false) => light_loop::<true, true, false>(g, d),
+        (true, false, true) => light_loop::<true, false, true>(g, d),
+        (true, false, false) => light_loop::<true, false, false>(g, d),
+        (false, true, true) => light_loop::<false, true, true>(g, d),
+        (false, true, false) => light_loop::<false, true, false>(g, d),
+        (false, false, true) => light_loop::<false, false, true>(g, d),
+        (false, false, false) => light_loop::<false, false, false>(g, d),
     }
 }
 
 /// `POINT`: `l` is the light's position (l = pos − p, normalised here); else `l` is the unit direction
-/// towards the light. `VL`: also compute V̂·L̂.
-fn light_loop<const POINT: bool, const VL: bool>(g: &mut Group, l: [f64; 3]) {
+/// towards the light. `VL`: also compute V̂·L̂. `DIR`: also L̂·T̂ and L̂·B̂ (the frame step ran).
+fn light_loop<const POINT: bool, const VL: bool, const DIR: bool>(g: &mut Group, l: [f64; 3]) {
     let m = g.pix.len();
     let (nl, vl) = (fit(&mut g.nl, m), fit(&mut g.vl, m));
+    let (lx, ly) = if DIR { (fit(&mut g.lx, m), fit(&mut g.ly, m)) } else { (&mut g.lx[..0], &mut g.ly[..0]) };
+    let ([tx, ty, tz], [bx, by, bz]) = (&g.t, &g.bt);
+    let k = if DIR { m } else { 0 };
+    let (tx, ty, tz, bx, by, bz) = (&tx[..k], &ty[..k], &tz[..k], &bx[..k], &by[..k], &bz[..k]);
     let [px, py, pz] = &g.p;
     let [nx, ny, nz] = &g.n;
     let [vx, vy, vz] = &g.v;
@@ -271,6 +363,10 @@ fn light_loop<const POINT: bool, const VL: bool>(g: &mut Group, l: [f64; 3]) {
         nl[i] = (nx[i] * x + ny[i] * y + nz[i] * z) * inv_n[i] * il;
         if VL {
             vl[i] = (vx[i] * x + vy[i] * y + vz[i] * z) * inv_v[i] * il;
+        }
+        if DIR {
+            lx[i] = (tx[i] * x + ty[i] * y + tz[i] * z) * il;
+            ly[i] = (bx[i] * x + by[i] * y + bz[i] * z) * il;
         }
     }
 }
@@ -299,10 +395,11 @@ fn reflect(g: &mut Group) {
     }
 }
 
-/// The kernel step: compacts the pixels to evaluate, calls the kernel once, scatters F back into `g.f` (0
-/// where not evaluated, and where F is NaN or ±inf — counted: an infinite lobe is a defect, not a highlight).
-/// Returns the nanoseconds spent in the kernel.
-fn kernel(g: &mut Group, plan: &ShadingPlan, ev: &dyn Evaluator, params: &[f64], counts: &mut ShadeCounts) -> u64 {
+/// The kernel step: compacts the pixels to evaluate, calls each channel's kernel once (one for a scalar
+/// formula, three for a colour one, on the same columns), scatters F back into `g.f` (0 where not evaluated,
+/// and where F is NaN or ±inf — counted per channel: an infinite lobe is a defect, not a highlight).
+/// Returns the nanoseconds spent in the kernels.
+fn kernel(g: &mut Group, plan: &ShadingPlan, kernels: &[&dyn Evaluator], params: &[f64], counts: &mut ShadeCounts) -> u64 {
     let m = g.pix.len();
     let nl = &g.nl[..m];
     let idx = fit(&mut g.idx, m);
@@ -326,13 +423,15 @@ fn kernel(g: &mut Group, plan: &ShadingPlan, ev: &dyn Evaluator, params: &[f64],
         }
     }
     counts.cut += (lit - count) as u64;
-    let f = fit(&mut g.f, m);
-    f.fill(0.0);
+    for f in &mut g.f[..kernels.len()] {
+        fit(f, m).fill(0.0);
+    }
     if count == 0 {
         return 0;
     }
     let idx = &g.idx[..count];
-    let sources: [&[f64]; 5] = [&g.nl, &g.nv, &g.nh, &g.vr, &g.vh];
+    // In Input::ALL order; Lz is NL and Vz is NV (both unclamped).
+    let sources: [&[f64]; crate::N_INPUTS] = [&g.nl, &g.nv, &g.nh, &g.vr, &g.vh, &g.lx, &g.ly, &g.nl, &g.vx, &g.vy, &g.nv];
     for (k, (col, src)) in g.cols.iter_mut().zip(sources).enumerate() {
         col.clear();
         if k == Input::NL.index() || plan.reads.contains(Input::ALL[k]) {
@@ -341,16 +440,24 @@ fn kernel(g: &mut Group, plan: &ShadingPlan, ev: &dyn Evaluator, params: &[f64],
     }
     let out = fit(&mut g.out, count);
     let cols = Columns::new(std::array::from_fn(|k| g.cols[k].as_slice()));
-    let t = Instant::now();
-    ev.eval_batch(&cols, params, out);
-    let ns = t.elapsed().as_nanos() as u64;
-    counts.kernel_calls += 1;
-    counts.evals += count as u64;
-    for (&i, &v) in idx.iter().zip(out.iter()) {
-        if v.is_finite() {
-            f[i as usize] = v;
-        } else {
-            counts.nan += 1;
+    let mut ns = 0;
+    for (ev, f) in kernels.iter().zip(&mut g.f) {
+        let t = Instant::now();
+        ev.eval_batch(&cols, params, out);
+        ns += t.elapsed().as_nanos() as u64;
+        counts.kernel_calls += 1;
+        counts.evals += count as u64;
+        for (&i, &v) in idx.iter().zip(out.iter()) {
+            if v.is_finite() {
+                f[i as usize] = v;
+            } else {
+                counts.nan += 1;
+            }
+        }
+        if plan.times_nl {
+            for &i in idx {
+                f[i as usize] *= g.nl[i as usize];
+            }
         }
     }
     ns
@@ -364,9 +471,19 @@ fn colour(g: &mut Group, plan: &ShadingPlan, il: [f64; 3]) {
     let [r, gg, b] = &mut g.acc;
     let (r, gg, b) = (&mut r[..m], &mut gg[..m], &mut b[..m]);
     let (d, s) = (plan.diffuse, plan.spec);
-    if plan.specular {
-        // Filled by the kernel step for this light.
-        let f = &g.f[..m];
+    if plan.specular && plan.channels == 3 {
+        // Filled by the kernel step for this light, one column per channel.
+        let [f0, f1, f2] = &g.f;
+        let (fr, fg, fb) = (&f0[..m], &f1[..m], &f2[..m]);
+        for i in 0..m {
+            let n = if nl[i] > 0.0 { nl[i] } else { 0.0 };
+            r[i] += il[0] * (d[0] * n + s[0] * fr[i]);
+            gg[i] += il[1] * (d[1] * n + s[1] * fg[i]);
+            b[i] += il[2] * (d[2] * n + s[2] * fb[i]);
+        }
+    } else if plan.specular {
+        // A scalar formula: one F for the three channels (one load per pixel).
+        let f = &g.f[0][..m];
         for i in 0..m {
             let n = if nl[i] > 0.0 { nl[i] } else { 0.0 };
             r[i] += il[0] * (d[0] * n + s[0] * f[i]);

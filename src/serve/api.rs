@@ -107,7 +107,7 @@ impl BrdfCompiler for Live<'_> {
     /// The page compiles precise (the `math` key of a scene material is not applied to live kernels).
     fn build(&self, file: &str, src: &str, _values: &[(String, f64)], _math: Option<crate::Mode>) -> Result<CompiledBrdf, Diagnostics> {
         let c = self.0.compiled(file, src).map_err(|e| diagnostics_of(file, src, e))?;
-        Ok(CompiledBrdf { used: c.kernel.used_inputs(), evaluator: c.kernel.clone() as Arc<dyn Evaluator>, math: c.kernel.math })
+        Ok(CompiledBrdf { used: c.kernel.used_inputs(), evaluator: c.kernel.clone() as Arc<dyn Evaluator>, green_blue: None, math: c.kernel.math })
     }
 }
 
@@ -410,7 +410,7 @@ pub fn analyze(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
             Ok(c) => out["coef"] = num(c),
             Err(e) => out["coef_error"] = e.msg.into(),
         }
-        match crate::numerics::energy::full_energy(k.as_ref(), &params) {
+        match crate::numerics::energy::full_energy_for(k.as_ref(), k.used_inputs(), &params) {
             Ok(e) => {
                 out["albedo_max"] = num(e.albedo_max);
                 out["theta_i_at_max_deg"] = num(e.theta_i_at_max_deg);

@@ -16,6 +16,7 @@ mod parse_errors;
 mod simplify;
 mod accuracy;
 mod energy;
+mod explorer_render;
 mod render;
 mod robust;
 mod serve;

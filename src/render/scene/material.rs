@@ -7,6 +7,10 @@
 //! the real front end and backends, and the trait lets embedders and tests supply kernels of their own. This is
 //! the only step that depends on parameter values, so it is the one step [`super::Geometry::with_materials`]
 //! repeats.
+//!
+//! A colour formula (`Formula.rgb`) compiles to one kernel per channel, each through the same pipeline as a
+//! scalar formula; normalisation is per channel, and a cut-off is found per channel and the widest kept (no
+//! channel is cut above its own 2^−q level).
 
 use super::schema::MaterialDef;
 use crate::backend::{Backend, Evaluator};
@@ -31,7 +35,11 @@ pub trait BrdfCompiler: Sync {
 /// A compiled material formula.
 #[derive(Clone)]
 pub struct CompiledBrdf {
+    /// The scalar formula's kernel, or a colour formula's red channel.
     pub evaluator: Arc<dyn Evaluator>,
+    /// A colour formula's green and blue kernels.
+    pub green_blue: Option<[Arc<dyn Evaluator>; 2]>,
+    /// Inputs read by any channel.
     pub used: InputSet,
     /// The math mode the kernel runs.
     pub math: Mode,
@@ -50,11 +58,24 @@ impl BrdfCompiler for LobeCompiler {
     fn build(&self, file: &str, src: &str, values: &[(String, f64)], math: Option<Mode>) -> Result<CompiledBrdf, Diagnostics> {
         let math = math.unwrap_or(self.math);
         let opts = crate::Options { backend: self.backend, bake: values.to_vec(), math, ..crate::Options::default() };
-        let k = crate::compile_source(file, src, &opts)?;
-        // The batched kernel is built on first use; build it now, at load time, not inside the timed render.
-        k.warm_up();
-        Ok(CompiledBrdf { used: k.used_inputs(), evaluator: Arc::new(k), math })
+        compile_channels(crate::front::parse(file, src)?, &opts)
     }
+}
+
+/// Compiles a formula's channels ([`crate::ir::Formula::channels`]: itself, or red, green, blue) into a
+/// [`CompiledBrdf`], each kernel warmed up (the batched kernel is built on first use; build it now, at load
+/// time, not inside the timed render).
+pub fn compile_channels(f: crate::ir::Formula, opts: &crate::Options) -> Result<CompiledBrdf, Diagnostics> {
+    let mut ks = Vec::with_capacity(3);
+    let mut used = InputSet::default();
+    for c in f.channels() {
+        let k = crate::compile_formula(c, opts)?;
+        k.warm_up();
+        used.0 |= k.used_inputs().0;
+        ks.push(Arc::new(k) as Arc<dyn Evaluator>);
+    }
+    let green_blue = (ks.len() == 3).then(|| [ks[1].clone(), ks[2].clone()]);
+    Ok(CompiledBrdf { evaluator: ks.swap_remove(0), green_blue, used, math: opts.math })
 }
 
 /// The scene file the tables came from: its name and text (for spans and notes) and the directory relative
@@ -202,24 +223,43 @@ fn build_material(
             return Err(here(m.span(), format!("materials.{mname}.{k} = {rgb:?} must be three finite numbers ≥ 0"), "this material"));
         }
     }
+    let angle = d.tangent_angle_deg.as_ref().map_or(0.0, |a| *a.get_ref());
+    if let Some(a) = d.tangent_angle_deg.as_ref().filter(|a| !a.get_ref().is_finite()) {
+        return Err(here(a.span(), format!("materials.{mname}.tangent_angle_deg must be a finite angle in degrees"), "tangent angle"));
+    }
     let params: Vec<f64> = values.iter().map(|(_, v)| *v).collect();
-    let coef = if d.normalize {
-        crate::numerics::normalize::coefficient(compiled.evaluator.as_ref(), compiled.used, &params)
-            .map_err(|e| e.to_string())
-            .map_err(|msg| here(m.span(), format!("materials.{mname}.normalize: {msg}"), "this material"))?
-    } else {
-        1.0
-    };
+    let channels: Vec<&dyn Evaluator> =
+        std::iter::once(compiled.evaluator.as_ref()).chain(compiled.green_blue.iter().flat_map(|gb| gb.iter().map(|e| e.as_ref()))).collect();
+    let mut coef = [1.0; 3];
+    if d.normalize {
+        for (c, ev) in channels.iter().enumerate() {
+            coef[c] = crate::numerics::normalize::coefficient(*ev, compiled.used, &params)
+                .map_err(|e| e.to_string())
+                .map_err(|msg| here(m.span(), format!("materials.{mname}.normalize: {msg}"), "this material"))?;
+        }
+        if channels.len() == 1 {
+            coef = [coef[0]; 3];
+        }
+    }
     let cutoff = match &d.cutoff {
-        Some(q) => Some(
-            crate::render::plan::Cutoff::find(compiled.evaluator.as_ref(), compiled.used, &params, *q.get_ref())
-                .map_err(|msg| here(q.span(), format!("materials.{mname}.cutoff: {msg}"), "cut-off exponent"))?,
-        ),
+        Some(q) => {
+            let mut widest: Option<crate::render::plan::Cutoff> = None;
+            for ev in &channels {
+                let c = crate::render::plan::Cutoff::find(*ev, compiled.used, &params, *q.get_ref())
+                    .map_err(|msg| here(q.span(), format!("materials.{mname}.cutoff: {msg}"), "cut-off exponent"))?;
+                widest = Some(match widest {
+                    Some(w) if w.cos <= c.cos => w,
+                    _ => c,
+                });
+            }
+            widest
+        }
         None => None,
     };
     Ok(Material {
         name: mname.to_string(),
         evaluator: compiled.evaluator,
+        green_blue: compiled.green_blue,
         used: compiled.used,
         params,
         ka: d.ka,
@@ -227,7 +267,9 @@ fn build_material(
         ks: d.ks,
         color: d.color.into(),
         specular: d.specular.into(),
-        coef,
+        coef: coef.into(),
+        tangent_angle_deg: angle,
+        times_nl: d.times_nl,
         cutoff,
         math: compiled.math,
     })

@@ -27,6 +27,10 @@
 //! specular = [1, 1, 1]           # multiplies the specular term
 //! normalize = false              # multiply F by the energy coefficient 1/(2π·Int(n))
 //! cutoff = 8                     # optional: skip F where the lobe is below 2^-q (formulas of NH or VR only)
+//! tangent_angle_deg = 0          # turns the tangent X (and bitangent Y) about the normal, for formulas that
+//!                                #  read directions; the shapes' tangents: sphere ∂P/∂longitude (around +y),
+//!                                #  torus along the ring, OBJ from its UVs (else a frame from the normal)
+//! times_nl = false               # multiply F by NL: for BRDFs proper (BRDF Explorer's), whose f has no cosine
 //!
 //! [[object]]
 //! shape = "sphere"               # "sphere" (radius, tessellation, slices), "torus" (major_radius,
@@ -62,7 +66,7 @@ mod material;
 mod schema;
 mod shapes;
 
-pub use material::{BrdfCompiler, CompiledBrdf, LobeCompiler};
+pub use material::{compile_channels, BrdfCompiler, CompiledBrdf, LobeCompiler};
 
 use super::camera::Camera;
 use super::{Light, LightKind, Object, Scene, MAX_SIZE};

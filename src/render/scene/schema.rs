@@ -97,6 +97,12 @@ pub(super) struct MaterialDef {
     /// `math = "fast"` or `"precise"`: this material's math mode (default: the command's `--math`).
     #[serde(default)]
     pub math: Option<Spanned<String>>,
+    /// Turns the shape's tangent about the normal, degrees (anisotropic formulas; default 0).
+    #[serde(default)]
+    pub tangent_angle_deg: Option<Spanned<f64>>,
+    /// Multiply F by NL (formulas that are a BRDF without the cosine, as BRDF Explorer's).
+    #[serde(default)]
+    pub times_nl: bool,
 }
 
 fn default_ka() -> f64 {
