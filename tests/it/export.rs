@@ -308,7 +308,6 @@ fn direction_bool_and_colour_formulas_export_everywhere() {
 /// Import → export → import: a catalogue file exported for BRDF Explorer and read back evaluates as the
 /// original (to f64 rounding of the exported literals), and exporting the import again changes nothing.
 #[test]
-#[ignore = "needs branch A; the merger enables it"]
 fn brdf_explorer_export_round_trips_through_the_importer() {
     let dir = crate::scratch_dir("export", "round-trip");
     let lobe = env!("CARGO_BIN_EXE_lobe");
