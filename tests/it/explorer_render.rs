@@ -461,7 +461,7 @@ fn explorer_render_report() {
                 row.iter().fold(0.0f64, |m, v| m.max(*v)) / row.iter().fold(f64::INFINITY, |m, v| m.min(*v))
             }).fold(1.0, f64::max);
             println!(
-                "energy {label} channel {c}: ρ(0) = {at0:.4}, max ρ = {:.4} at θᵢ = {}°, φᵢ = {:?}°; max over θᵢ of maxφ/minφ = {spread:.3}; reciprocity {:.1e}; {} integrals in {:.1} s (debug build)",
+                "energy {label} channel {c}: ρ(0) = {at0:.4}, max ρ = {:.4} at θᵢ = {}°, φᵢ = {:?}°; max over θᵢ of maxφ/minφ = {spread:.3}; reciprocity {:.1e}; {} integrals in {:.1} s wall",
                 e.albedo_max, e.theta_i_at_max_deg, e.phi_i_at_max_deg, e.reciprocity.max_rel, e.albedo_phi.len(), t.elapsed().as_secs_f64()
             );
         }
