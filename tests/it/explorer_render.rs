@@ -461,9 +461,38 @@ fn explorer_render_report() {
                 row.iter().fold(0.0f64, |m, v| m.max(*v)) / row.iter().fold(f64::INFINITY, |m, v| m.min(*v))
             }).fold(1.0, f64::max);
             println!(
-                "energy {label} channel {c}: ρ(0) = {at0:.4}, max ρ = {:.4} at θᵢ = {}°, φᵢ = {:?}°; max over θᵢ of maxφ/minφ = {spread:.3}; reciprocity {:.1e}; {} integrals in {:.1} s (debug build)",
+                "energy {label} channel {c}: ρ(0) = {at0:.4}, max ρ = {:.4} at θᵢ = {}°, φᵢ = {:?}°; max over θᵢ of maxφ/minφ = {spread:.3}; reciprocity {:.1e}; {} integrals in {:.1} s wall",
                 e.albedo_max, e.theta_i_at_max_deg, e.phi_i_at_max_deg, e.reciprocity.max_rel, e.albedo_phi.len(), t.elapsed().as_secs_f64()
             );
         }
     }
+}
+
+/// NH^50, NH^10, NH^200 as red, green, blue.
+fn three_powers() -> Formula {
+    let mut ir = Ir::new();
+    let s = Span::default();
+    let nh = ir.input(Input::NH, s);
+    let (z, o) = (ir.konst(0.0, s), ir.konst(1.0, s));
+    let c = ir.call(Builtin::Clamp, &[nh, z, o], s);
+    let roots = [50.0, 10.0, 200.0].map(|n| {
+        let k = ir.konst(n, s);
+        ir.call(Builtin::Pow, &[c, k], s)
+    });
+    Formula::from_channels(Meta::default(), vec![ParamDecl::float("n", 1.0, 1.0, 1.0)], &ir, roots, "powers.brdf".into(), String::new())
+}
+
+#[test]
+fn a_colour_cutoff_keeps_the_widest_channel() {
+    let src = highlight_scene("", "cutoff = 8");
+    let s = scene_with(&src, three_powers);
+    let c = s.materials[0].cutoff.expect("a cut-off");
+    // NH^10 < 2^-8 beyond acos(2^(-8/10)): the green channel's angle, the widest of the three.
+    let green = (-8.0f64 / 10.0).exp2().acos().to_degrees();
+    assert!(c.angle_deg() > green && c.angle_deg() < green + 0.05, "{} vs {green}", c.angle_deg());
+    let (cut, st) = render(&s, 2);
+    assert!(st.cut > 0 && st.nan == 0);
+    // No channel changes by more than one level against the render without the cut-off.
+    let full = r::render(&s, &RenderOptions { threads: 2, tile: 32, cutoff: false, ..RenderOptions::default() }).unwrap().0;
+    assert!(cut.image.rgb.iter().zip(&full.image.rgb).all(|(a, b)| a.abs_diff(*b) <= 1));
 }
