@@ -21,7 +21,7 @@ use super::Declared;
 use crate::base::diag::Diagnostic;
 use crate::base::span::Span;
 use crate::builtins::Builtin;
-use crate::front::values::{Cmp, Ty, Val, Values};
+use crate::front::values::{Ty, Val, Values};
 use crate::ir::{BinOp, Formula, Ir, Meta, NodeId, ParamDecl};
 
 /// Most expression evaluations (counting every inlined copy) one file may take.
@@ -348,32 +348,13 @@ impl<'a> Exec<'a> {
 
     fn binary(&mut self, op: Op, a: Val, b: Val, span: Span) -> R<Val> {
         self.vb.span = span;
-        let arith = |o| Some(o);
-        let r = match op {
-            Op::Add => arith(BinOp::Add),
-            Op::Sub => arith(BinOp::Sub),
-            Op::Mul => arith(BinOp::Mul),
-            Op::Div => arith(BinOp::Div),
-            _ => None,
+        let res = match op {
+            Op::Arith(o) => self.vb.arith(o, a, b),
+            Op::Cmp(c) => self.vb.compare(c, a, b),
+            Op::And => self.vb.and(a, b),
+            Op::Or => self.vb.or(a, b),
         };
-        let hint = "GLSL types: float, bool, vec3; convert explicitly";
-        let res = match (r, op) {
-            (Some(o), _) => self.vb.arith(o, a, b),
-            (None, Op::And) => self.vb.and(a, b),
-            (None, Op::Or) => self.vb.or(a, b),
-            (None, cmp) => {
-                let c = match cmp {
-                    Op::Lt => Cmp::Lt,
-                    Op::Le => Cmp::Le,
-                    Op::Gt => Cmp::Gt,
-                    Op::Ge => Cmp::Ge,
-                    Op::Eq => Cmp::Eq,
-                    _ => Cmp::Ne,
-                };
-                self.vb.compare(c, a, b)
-            }
-        };
-        res.map_err(|m| err(span, m, hint))
+        res.map_err(|m| err(span, m, "GLSL types: float, bool, vec3; convert explicitly"))
     }
 
     fn expr(&mut self, fr: &mut Frame, e: &Expr) -> R<Val> {
@@ -578,10 +559,10 @@ fn int_const(e: &Expr, depth: u32) -> Option<i64> {
         ExprKind::Binary(op, a, b) => {
             let (x, y) = (int_const(a, depth + 1)?, int_const(b, depth + 1)?);
             match op {
-                Op::Add => x.checked_add(y),
-                Op::Sub => x.checked_sub(y),
-                Op::Mul => x.checked_mul(y),
-                Op::Div => x.checked_div(y),
+                Op::Arith(BinOp::Add) => x.checked_add(y),
+                Op::Arith(BinOp::Sub) => x.checked_sub(y),
+                Op::Arith(BinOp::Mul) => x.checked_mul(y),
+                Op::Arith(BinOp::Div) => x.checked_div(y),
                 _ => None,
             }
         }
