@@ -114,9 +114,12 @@ fn has_gxx() -> bool {
     Command::new("g++").arg("--version").output().is_ok_and(|o| o.status.success())
 }
 
-/// The parameters as C++ globals at their defaults, read from the file independently of lobe's parser.
-fn cpp_params(src: &str) -> String {
-    let mut out = String::new();
+/// The file's parameter values, read independently of lobe's parser: `variant` 0 is the defaults; any other
+/// draws each float uniformly from its range, each bool and colour channel at random. Names as lobe's
+/// parameters are named (`NAME`, or `NAME.r`/`.g`/`.b`), with the C++ declaration of each file parameter.
+fn param_values(src: &str, variant: u64) -> (Vec<(String, f64)>, String) {
+    let mut rng = Rng(0x2545_f491_4f6c_dd1d ^ variant.wrapping_mul(0x9e37_79b9));
+    let (mut vals, mut cpp) = (Vec::new(), String::new());
     let mut inside = false;
     for line in src.lines() {
         let t = line.split('#').next().unwrap_or("").trim();
@@ -125,17 +128,33 @@ fn cpp_params(src: &str) -> String {
             "::end parameters" => inside = false,
             _ if inside && !t.is_empty() => {
                 let w: Vec<&str> = t.split_whitespace().collect();
+                let num = |k: usize| -> f64 { w[k].parse().unwrap() };
+                let name = w[1].to_string();
                 match w[0] {
-                    "float" => out.push_str(&format!("double {} = {};\n", w[1], w[4])),
-                    "bool" => out.push_str(&format!("bool {} = {};\n", w[1], w[2])),
-                    "color" => out.push_str(&format!("vec3 {}({}, {}, {});\n", w[1], w[2], w[3], w[4])),
+                    "float" => {
+                        let v = if variant == 0 { num(4) } else { num(2) + (num(3) - num(2)) * rng.unit() };
+                        cpp.push_str(&format!("double {name} = {v:e};\n"));
+                        vals.push((name, v));
+                    }
+                    "bool" => {
+                        let v = if variant == 0 { num(2) } else { rng.below(2) as f64 };
+                        cpp.push_str(&format!("bool {name} = {};\n", v != 0.0));
+                        vals.push((name, v));
+                    }
+                    "color" => {
+                        let c: Vec<f64> = (2..5).map(|k| if variant == 0 { num(k) } else { rng.unit() }).collect();
+                        cpp.push_str(&format!("vec3 {name}({:e}, {:e}, {:e});\n", c[0], c[1], c[2]));
+                        for (k, ch) in ["r", "g", "b"].iter().enumerate() {
+                            vals.push((format!("{name}.{ch}"), c[k]));
+                        }
+                    }
                     other => panic!("unknown parameter type {other}"),
                 }
             }
             _ => {}
         }
     }
-    out
+    (vals, cpp)
 }
 
 /// The shader block with every helper function renamed `u_NAME` (definitions and calls; `BRDF` stays).
@@ -225,11 +244,11 @@ fn directions() -> Vec<([f64; 3], [f64; 3])> {
 }
 
 /// Runs the C++ reference of `src` on `dirs`; one `[r, g, b]` a direction pair.
-fn reference(name: &str, src: &str, dirs: &[([f64; 3], [f64; 3])], work: &Path) -> Vec<[f64; 3]> {
+fn reference(name: &str, src: &str, params: &str, dirs: &[([f64; 3], [f64; 3])], work: &Path) -> Vec<[f64; 3]> {
     let stem = name.trim_end_matches(".brdf");
     let cpp = work.join(format!("{stem}.cpp"));
     let exe = work.join(stem);
-    let text = format!("{HEADER}\nnamespace shader {{\n{}\n{}\n}}\n{MAIN}", cpp_params(src), cpp_shader(src));
+    let text = format!("{HEADER}\nnamespace shader {{\n{}\n{}\n}}\n{MAIN}", params, cpp_shader(src));
     fs::write(&cpp, text).unwrap();
     let out = Command::new("g++")
         .args(["-O0", "-ffp-contract=off", "-std=c++17", "-w", "-o"])
@@ -269,12 +288,16 @@ fn error(got: f64, want: f64) -> f64 {
 
 /// Checks one file: lobe (interpreter, JIT scalar, JIT batched) against the reference; returns the max error
 /// ([`error`]) and the max purely relative error over nonzero finite reference values (for the report).
-fn check_file(name: &str, src: &str, work: &Path) -> Result<(f64, f64), String> {
+fn check_file(name: &str, src: &str, variant: u64, work: &Path) -> Result<(f64, f64), String> {
     let dirs = directions();
-    let want = reference(name, src, &dirs, work);
+    let (values, cpp) = param_values(src, variant);
+    let want = reference(name, src, &cpp, &dirs, work);
     assert_eq!(want.len(), dirs.len(), "{name}: the reference printed too few rows");
     let f = lobe::front::parse(name, src).map_err(|d| format!("{name} does not load:\n{}", d.render(false)))?;
-    let params = f.default_params();
+    // lobe's parameters by name; the implicit `n` (not in the file) at its default.
+    let params: Vec<f64> =
+        f.params.iter().map(|p| values.iter().find(|(k, _)| *k == p.name).map_or(p.default, |(_, v)| *v)).collect();
+    let name = &format!("{name} (parameters {})", if variant == 0 { "at their defaults".to_string() } else { format!("drawn, variant {variant}") });
     let inputs: Vec<[f64; N_INPUTS]> = dirs.iter().map(|(l, v)| lobe::numerics::inputs_from_dirs(*l, *v)).collect();
     let channels = f.channels();
     let (mut worst, mut worst_rel): (f64, f64) = (0.0, 0.0);
@@ -325,10 +348,15 @@ fn run_reference(files: &[PathBuf], tag: &str) {
     for p in files {
         let name = p.file_name().and_then(|s| s.to_str()).unwrap_or("?").to_string();
         let src = fs::read_to_string(p).expect("readable");
-        match check_file(&name, &src, &work) {
-            Ok((e, rel)) => eprintln!("{name:32} max error {e:.2e} (relative {rel:.2e})"),
-            Err(m) => failures.push(m),
+        // The defaults, then two random draws of every parameter within its range.
+        let mut worst = (0.0f64, 0.0f64);
+        for variant in 0..3 {
+            match check_file(&name, &src, variant, &work) {
+                Ok((e, rel)) => worst = (worst.0.max(e), worst.1.max(rel)),
+                Err(m) => failures.push(m),
+            }
         }
+        eprintln!("{name:32} max error {:.2e} (relative {:.2e})", worst.0, worst.1);
     }
     let _ = fs::remove_dir_all(&work);
     assert!(failures.is_empty(), "{} of {} files differ from their GLSL:\n{}", failures.len(), files.len(), failures.join("\n"));
@@ -443,6 +471,11 @@ fn hostile_shaders_are_refused_quickly() {
         doubling.push_str(&format!("float f{k}(float x) {{ return f{}(x) + f{}(x + 1.0); }}\n", k - 1, k - 1));
     }
     doubling.push_str("vec3 BRDF(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y) { return vec3(f59(L.z)); }");
+    let mut stacked = String::from("float g0(float x) { return x; }\n");
+    for k in 1..60 {
+        stacked.push_str(&format!("float g{k}(float x) {{ return {}g{}(x); }}\n", "- ".repeat(150), k - 1));
+    }
+    stacked.push_str("vec3 BRDF(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y) { return vec3(g59(L.z)); }");
     let mut chain = String::from("vec3 BRDF(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y) { float a = 0.0;\n");
     chain.push_str(&"if (L.z > 0.5) a = 1.0; else ".repeat(20_000));
     chain.push_str("a = 2.0; return vec3(a); }");
@@ -457,6 +490,7 @@ fn hostile_shaders_are_refused_quickly() {
         ("sum", brdf(&vec!["L.z"; 100_000].join(" + ")), "nests deeper than"),
         ("chain", wrap(&chain), "nests deeper than"),
         ("doubling", wrap(&doubling), "operations once its helper functions are inlined"),
+        ("stacked", wrap(&stacked), "go deeper than"),
         // Big but fair (under the 1 MiB file limit): accepted.
         ("huge", wrap(&huge), ""),
         ("bytes", wrap("vec3 BRDF(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y) { return vec3(\u{7f}é); }"), "unexpected character"),

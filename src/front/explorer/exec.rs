@@ -21,13 +21,16 @@ use super::Declared;
 use crate::base::diag::Diagnostic;
 use crate::base::span::Span;
 use crate::builtins::Builtin;
-use crate::front::values::{Cmp, Ty, Val, Values};
+use crate::front::values::{Ty, Val, Values};
 use crate::ir::{BinOp, Formula, Ir, Meta, NodeId, ParamDecl};
 
 /// Most expression evaluations (counting every inlined copy) one file may take.
 pub const MAX_WORK: u64 = 2_000_000;
 /// Deepest chain of helper calls (GLSL has no recursion; this bounds the Rust stack).
 const MAX_CALLS: usize = 64;
+/// Deepest recursion of the lowering (nested expressions and blocks, summed over inlined calls): the parser
+/// caps each function's nesting, this caps their sum, so the Rust stack stays within about a megabyte.
+const MAX_NEST: u32 = 1500;
 
 type R<T> = Result<T, Diagnostic>;
 
@@ -72,6 +75,7 @@ struct Exec<'a> {
     globals: Vec<Var>,
     work: u64,
     calls: usize,
+    nest: u32,
 }
 
 fn err(span: Span, msg: impl Into<String>, hint: &str) -> Diagnostic {
@@ -81,7 +85,7 @@ fn err(span: Span, msg: impl Into<String>, hint: &str) -> Diagnostic {
 /// Lowers `BRDF` of the parsed shader into a formula with `params` (n first).
 pub fn lower(file: &str, src: &str, params: Vec<ParamDecl>, declared: &[Declared], items: &[Item], shader: Span) -> R<Formula> {
     let mut ir = Ir::new();
-    let mut ex = Exec { vb: Values::new(&mut ir, shader), funcs: vec![], globals: vec![], work: 0, calls: 0 };
+    let mut ex = Exec { vb: Values::new(&mut ir, shader), funcs: vec![], globals: vec![], work: 0, calls: 0, nest: 0 };
     for d in declared {
         ex.vb.span = d.span;
         let p = |ex: &mut Exec, k: u16| ex.vb.ir.param(d.index + k, d.span);
@@ -182,7 +186,23 @@ impl<'a> Exec<'a> {
         Ok(())
     }
 
+    /// Runs `f` one level deeper, refusing past [`MAX_NEST`].
+    fn nested<T>(&mut self, span: Span, f: impl FnOnce(&mut Self) -> R<T>) -> R<T> {
+        if self.nest >= MAX_NEST {
+            return Err(err(span, format!("helper calls and nesting together go deeper than {MAX_NEST} levels"), "flatten the helpers or split expressions with local variables"));
+        }
+        self.nest += 1;
+        let r = f(self);
+        self.nest -= 1;
+        r
+    }
+
     fn block(&mut self, fr: &mut Frame, body: &[Stmt]) -> R<()> {
+        let span = self.vb.span;
+        self.nested(span, |s| s.block_inner(fr, body))
+    }
+
+    fn block_inner(&mut self, fr: &mut Frame, body: &[Stmt]) -> R<()> {
         fr.scopes.push(vec![]);
         for s in body {
             if fr.dead(self.vb.ir) {
@@ -348,35 +368,20 @@ impl<'a> Exec<'a> {
 
     fn binary(&mut self, op: Op, a: Val, b: Val, span: Span) -> R<Val> {
         self.vb.span = span;
-        let arith = |o| Some(o);
-        let r = match op {
-            Op::Add => arith(BinOp::Add),
-            Op::Sub => arith(BinOp::Sub),
-            Op::Mul => arith(BinOp::Mul),
-            Op::Div => arith(BinOp::Div),
-            _ => None,
+        let res = match op {
+            Op::Arith(o) => self.vb.arith(o, a, b),
+            Op::Cmp(c) => self.vb.compare(c, a, b),
+            Op::And => self.vb.and(a, b),
+            Op::Or => self.vb.or(a, b),
         };
-        let hint = "GLSL types: float, bool, vec3; convert explicitly";
-        let res = match (r, op) {
-            (Some(o), _) => self.vb.arith(o, a, b),
-            (None, Op::And) => self.vb.and(a, b),
-            (None, Op::Or) => self.vb.or(a, b),
-            (None, cmp) => {
-                let c = match cmp {
-                    Op::Lt => Cmp::Lt,
-                    Op::Le => Cmp::Le,
-                    Op::Gt => Cmp::Gt,
-                    Op::Ge => Cmp::Ge,
-                    Op::Eq => Cmp::Eq,
-                    _ => Cmp::Ne,
-                };
-                self.vb.compare(c, a, b)
-            }
-        };
-        res.map_err(|m| err(span, m, hint))
+        res.map_err(|m| err(span, m, "GLSL types: float, bool, vec3; convert explicitly"))
     }
 
     fn expr(&mut self, fr: &mut Frame, e: &Expr) -> R<Val> {
+        self.nested(e.span, |s| s.expr_inner(fr, e))
+    }
+
+    fn expr_inner(&mut self, fr: &mut Frame, e: &Expr) -> R<Val> {
         self.tick(e.span)?;
         match &e.kind {
             ExprKind::Num(v, _) => {
@@ -578,10 +583,10 @@ fn int_const(e: &Expr, depth: u32) -> Option<i64> {
         ExprKind::Binary(op, a, b) => {
             let (x, y) = (int_const(a, depth + 1)?, int_const(b, depth + 1)?);
             match op {
-                Op::Add => x.checked_add(y),
-                Op::Sub => x.checked_sub(y),
-                Op::Mul => x.checked_mul(y),
-                Op::Div => x.checked_div(y),
+                Op::Arith(BinOp::Add) => x.checked_add(y),
+                Op::Arith(BinOp::Sub) => x.checked_sub(y),
+                Op::Arith(BinOp::Mul) => x.checked_mul(y),
+                Op::Arith(BinOp::Div) => x.checked_div(y),
                 _ => None,
             }
         }

@@ -9,6 +9,8 @@
 
 use crate::base::diag::Diagnostic;
 use crate::base::span::Span;
+use crate::front::values::Cmp;
+use crate::ir::BinOp;
 
 /// Deepest nesting of expressions, statements and blocks accepted (the corpus needs under 20).
 pub const MAX_DEPTH: u32 = 200;
@@ -135,21 +137,30 @@ impl Type {
     }
 }
 
+/// A binary operator: arithmetic and comparisons as [`Values`](crate::front::values::Values) names them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Op {
-    Add,
-    Sub,
-    Mul,
-    Div,
-    Lt,
-    Le,
-    Gt,
-    Ge,
-    Eq,
-    Ne,
+    Arith(BinOp),
+    Cmp(Cmp),
     And,
     Or,
 }
+
+/// The binary operators with their precedence (higher binds tighter); all are left-associative.
+const BINARY: [(&str, Op, u8); 12] = [
+    ("||", Op::Or, 1),
+    ("&&", Op::And, 2),
+    ("==", Op::Cmp(Cmp::Eq), 3),
+    ("!=", Op::Cmp(Cmp::Ne), 3),
+    ("<", Op::Cmp(Cmp::Lt), 4),
+    ("<=", Op::Cmp(Cmp::Le), 4),
+    (">", Op::Cmp(Cmp::Gt), 4),
+    (">=", Op::Cmp(Cmp::Ge), 4),
+    ("+", Op::Arith(BinOp::Add), 5),
+    ("-", Op::Arith(BinOp::Sub), 5),
+    ("*", Op::Arith(BinOp::Mul), 6),
+    ("/", Op::Arith(BinOp::Div), 6),
+];
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Unary {
@@ -550,10 +561,10 @@ impl<'t> Parser<'t> {
         let e = self.expr()?;
         let op = match self.peek() {
             Tok::Punct("=") => Some(None),
-            Tok::Punct("+=") => Some(Some(Op::Add)),
-            Tok::Punct("-=") => Some(Some(Op::Sub)),
-            Tok::Punct("*=") => Some(Some(Op::Mul)),
-            Tok::Punct("/=") => Some(Some(Op::Div)),
+            Tok::Punct("+=") => Some(Some(Op::Arith(BinOp::Add))),
+            Tok::Punct("-=") => Some(Some(Op::Arith(BinOp::Sub))),
+            Tok::Punct("*=") => Some(Some(Op::Arith(BinOp::Mul))),
+            Tok::Punct("/=") => Some(Some(Op::Arith(BinOp::Div))),
             Tok::Punct("++" | "--") => {
                 return Err(unsupported(self.span(), "`++` and `--`", "write `x += 1.0;`"));
             }
@@ -616,24 +627,16 @@ impl<'t> Parser<'t> {
         let mut lhs = self.unary()?;
         loop {
             let (op, prec) = match self.peek() {
-                Tok::Punct("||") => (Op::Or, 1),
-                Tok::Punct("&&") => (Op::And, 2),
-                Tok::Punct("==") => (Op::Eq, 3),
-                Tok::Punct("!=") => (Op::Ne, 3),
-                Tok::Punct("<") => (Op::Lt, 4),
-                Tok::Punct("<=") => (Op::Le, 4),
-                Tok::Punct(">") => (Op::Gt, 4),
-                Tok::Punct(">=") => (Op::Ge, 4),
-                Tok::Punct("+") => (Op::Add, 5),
-                Tok::Punct("-") => (Op::Sub, 5),
-                Tok::Punct("*") => (Op::Mul, 6),
-                Tok::Punct("/") => (Op::Div, 6),
                 Tok::Punct(p @ ("%" | "&" | "|" | "^")) => {
                     let hint = if *p == "%" { "use mod(x, y)" } else { "bitwise operators need integers; use && or ||" };
                     return Err(Diagnostic::error(format!("operator `{p}` is not supported"))
                         .at(self.span(), "not supported")
                         .hint(hint));
                 }
+                Tok::Punct(p) => match BINARY.iter().find(|b| b.0 == *p) {
+                    Some(&(_, op, prec)) => (op, prec),
+                    None => return Ok(lhs),
+                },
                 _ => return Ok(lhs),
             };
             if prec <= min {
