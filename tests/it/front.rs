@@ -762,3 +762,91 @@ fn printed_formulas_with_the_new_constructs_parse_back_to_the_same_values() {
     }
     assert!(skipped * 20 < checked, "{skipped} printed texts skipped, {checked} checked");
 }
+
+/// About `bytes` of source in the new constructs: colour and bool parameters, a function, vectors, `if`,
+/// `?:`, comparisons and `&&`, one `let` per line, each reading the previous one.
+fn big_vector_source(bytes: usize) -> String {
+    let mut src = String::from(
+        "param base = rgb(0.8, 0.6, 0.2)\nparam shiny = true\nfn sqr(x) = x * x\nlet H = normalize(L + V)\nlet a0 = H.z\n",
+    );
+    let mut i = 1;
+    while src.len() < bytes {
+        src.push_str(&format!(
+            "let a{i} = if dot(H, N) > 0.5 && shiny then sqr(a{}) * base.r else mix(a{}, L.z, 0.5)\n",
+            i - 1,
+            i - 1
+        ));
+        i += 1;
+    }
+    src.push_str(&format!("vec3(a{}) * base", i - 1));
+    src
+}
+
+#[test]
+fn one_mebibyte_of_the_new_constructs_parses_and_lowers_in_linear_time() {
+    // Parse + lower time is printed (dev profile; BENCHMARKS.md has release numbers), never asserted.
+    let mut times = vec![];
+    for bytes in [1 << 19, 1 << 20] {
+        let src = big_vector_source(bytes);
+        let t = std::time::Instant::now();
+        let f = formula(&src);
+        times.push(t.elapsed().as_secs_f64());
+        assert!(f.is_rgb());
+        let (l, v) = directions()[0];
+        assert!(channels_at("param base = rgb(0.8, 0.6, 0.2)\nL.z * base", l, v, &[])[0] > 0.0);
+    }
+    eprintln!("parse+lower: 0.5 MiB {:.3} s, 1 MiB {:.3} s, ratio {:.2}", times[0], times[1], times[1] / times[0]);
+}
+
+#[test]
+fn deep_selects_and_bool_chains_do_not_overflow() {
+    // A right spine of `?:` 200 000 deep, an `if` chain, a left spine of `&&`, a `!` chain.
+    let k = 200_000;
+    let mut src = String::from("@domain raw\n");
+    for i in 0..k {
+        src.push_str(&format!("L.z > {} ? {i} : ", i as f64 / k as f64));
+    }
+    src.push_str("-1");
+    let (l, v) = ([0.6, 0.0, 0.8], [0.0, 0.0, 1.0]);
+    // The interpreter only: these formulas have ~10^5 nodes (the JIT is tested on real-sized ones).
+    let channels_at = |src: &str, l: [f64; 3], v: [f64; 3], _: &[(&str, f64)]| {
+        let f = formula(src);
+        let x = lobe::numerics::inputs_from_dirs(l, v);
+        f.channels().iter().map(|c| Interp::new(c).eval(&x, &c.default_params())).collect::<Vec<f64>>()
+    };
+    assert_eq!(channels_at(&src, l, v, &[]), vec![0.0]);
+    let mut src = String::from("@domain raw\n");
+    for i in 0..k {
+        src.push_str(&format!("if L.z > {} then {i} else\n", 1.0 - i as f64 / k as f64));
+    }
+    src.push_str("-1");
+    let want = (1..k).find(|&i| 0.8 > 1.0 - i as f64 / k as f64).expect("some level") as f64;
+    assert_eq!(channels_at(&src, l, v, &[]), vec![want]);
+    let src = format!("({}) ? 1 : 2", vec!["L.z > 0.5"; k].join(" && "));
+    assert_eq!(channels_at(&src, l, v, &[]), vec![1.0]);
+    let src = format!("{}true ? 3 : 4", "!".repeat(1 << 20));
+    assert_eq!(eval(&src), 3.0);
+    // Nested user functions: a chain deeper than the inlining limit, and an exponential expansion, are
+    // refused with a message (not a stack overflow, not a hang).
+    let mut src = String::from("fn f0(x) = x * 2\n");
+    for i in 1..100 {
+        src.push_str(&format!("fn f{i}(x) = f{}(x) + 1\n", i - 1));
+    }
+    src.push_str("f99(NH)");
+    let Err(d) = parse("chain.brdf", &src) else { panic!("a 100-deep chain of calls was accepted") };
+    assert!(d.render(false).contains("nested more than 64 deep"), "{d}");
+    let mut src = String::from("fn f0(x) = x * 2\n");
+    for i in 1..60 {
+        src.push_str(&format!("fn f{i}(x) = f{}(x * 2) + f{}(x * 3)\n", i - 1, i - 1));
+    }
+    src.push_str("f59(NH)");
+    let Err(d) = parse("blowup.brdf", &src) else { panic!("2^59 distinct expansions were accepted") };
+    assert!(d.render(false).contains("too large a formula"), "{d}");
+    // Calls with equal arguments expand once (memoised): sixty levels of doubling are accepted.
+    let mut src = String::from("fn f0(x) = x * 2\n");
+    for i in 1..60 {
+        src.push_str(&format!("fn f{i}(x) = f{}(x) + f{}(x)\n", i - 1, i - 1));
+    }
+    src.push_str("f59(NH) / 2^60");
+    check(&src, 0.9);
+}
