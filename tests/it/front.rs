@@ -162,18 +162,25 @@ fn ir_spans_point_into_the_source() {
 /// Every .brdf in the catalogue must parse without errors.
 #[test]
 fn catalogue_parses() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/brdfs");
-    let mut n = 0;
-    for e in std::fs::read_dir(&dir).expect("examples/brdfs exists") {
-        let p = e.expect("dir entry").path();
-        if p.extension().is_none_or(|x| x != "brdf") {
-            continue;
-        }
-        let src = std::fs::read_to_string(&p).expect("readable");
-        parse(&p.display().to_string(), &src).unwrap_or_else(|d| panic!("{}:\n{d}", p.display()));
-        n += 1;
+    let files = brdf_files("examples/brdfs");
+    for (p, src) in &files {
+        parse(&p.display().to_string(), src).unwrap_or_else(|d| panic!("{}:\n{d}", p.display()));
     }
-    assert!(n >= 2, "found only {n} catalogue files");
+    assert!(files.len() >= 2, "found only {} catalogue files", files.len());
+}
+
+/// The `.brdf` files of a folder of the repository, with their text.
+fn brdf_files(folder: &str) -> Vec<(std::path::PathBuf, String)> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(folder);
+    let mut out = vec![];
+    for e in std::fs::read_dir(&dir).unwrap_or_else(|e| panic!("{folder}: {e}")) {
+        let p = e.expect("dir entry").path();
+        if p.extension().is_some_and(|x| x == "brdf") {
+            let src = std::fs::read_to_string(&p).expect("readable");
+            out.push((p, src));
+        }
+    }
+    out
 }
 
 // ---- robustness: bad input of any kind gives diagnostics, never a panic or a stack overflow ----
@@ -615,36 +622,29 @@ fn user_functions_inline_with_the_types_of_each_call() {
 
 #[test]
 fn examples_in_the_vector_folder_parse_and_evaluate() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/vector");
-    let mut n = 0;
-    for e in std::fs::read_dir(&dir).expect("examples/vector") {
-        let p = e.expect("entry").path();
-        if p.extension().is_none_or(|x| x != "brdf") {
-            continue;
-        }
-        let src = std::fs::read_to_string(&p).expect("readable");
-        let (_, warnings) = parse_with_warnings(&p.display().to_string(), &src).unwrap_or_else(|d| panic!("{d}"));
+    let files = brdf_files("examples/vector");
+    for (p, src) in &files {
+        let (_, warnings) = parse_with_warnings(&p.display().to_string(), src).unwrap_or_else(|d| panic!("{d}"));
         assert!(warnings.items.is_empty(), "{}: {}", p.display(), warnings.render(false));
         for (l, v) in directions() {
-            for c in channels_at(&src, l, v, &[]) {
+            for c in channels_at(src, l, v, &[]) {
                 assert!(c.is_finite() && c >= 0.0, "{}: {c}", p.display());
             }
         }
-        n += 1;
     }
-    assert!(n >= 3);
+    assert!(files.len() >= 3);
     // Anisotropic Ward by hand at one pair of directions.
-    let src = std::fs::read_to_string(dir.join("ward_anisotropic.brdf")).expect("ward");
+    let src = &files.iter().find(|f| f.0.ends_with("ward_anisotropic.brdf")).expect("ward").1;
     let (l, v) = directions()[0];
     let h = half(l, v);
     let (ax, ay) = (0.1, 0.4);
     let want = (-2.0 * ((h[0] / ax).powi(2) + (h[1] / ay).powi(2)) / (1.0 + h[2])).exp()
         / (4.0 * std::f64::consts::PI * ax * ay * (l[2] * v[2]).sqrt());
-    let got = channels_at(&src, l, v, &[]);
+    let got = channels_at(src, l, v, &[]);
     assert!((got[0] - want).abs() <= 1e-12 * want, "{got:?} vs {want}");
     // Stretched: rotating the directions by 90° about N changes the value (X and Y differ).
     let rot = |d: [f64; 3]| [-d[1], d[0], d[2]];
-    assert!((channels_at(&src, rot(l), rot(v), &[])[0] - got[0]).abs() > 1e-6 * got[0]);
+    assert!((channels_at(src, rot(l), rot(v), &[])[0] - got[0]).abs() > 1e-6 * got[0]);
 }
 
 /// Random well-typed source text in the vector/bool language: `t` is 0 float, 1 bool, 2 vec3.
@@ -828,25 +828,20 @@ fn deep_selects_and_bool_chains_do_not_overflow() {
     assert_eq!(eval(&src), 3.0);
     // Nested user functions: a chain deeper than the inlining limit, and an exponential expansion, are
     // refused with a message (not a stack overflow, not a hang).
-    let mut src = String::from("fn f0(x) = x * 2\n");
-    for i in 1..100 {
-        src.push_str(&format!("fn f{i}(x) = f{}(x) + 1\n", i - 1));
-    }
-    src.push_str("f99(NH)");
+    // `fn f0(x) = x * 2`, then `fn fI(x) = body(fI-1)` for I < n, then `tail`.
+    let chain = |n: usize, body: &dyn Fn(&str) -> String, tail: &str| {
+        let mut src = String::from("fn f0(x) = x * 2\n");
+        for i in 1..n {
+            src.push_str(&format!("fn f{i}(x) = {}\n", body(&format!("f{}", i - 1))));
+        }
+        src + tail
+    };
+    let src = chain(100, &|g| format!("{g}(x) + 1"), "f99(NH)");
     let Err(d) = parse("chain.brdf", &src) else { panic!("a 100-deep chain of calls was accepted") };
     assert!(d.render(false).contains("nested more than 64 deep"), "{d}");
-    let mut src = String::from("fn f0(x) = x * 2\n");
-    for i in 1..60 {
-        src.push_str(&format!("fn f{i}(x) = f{}(x * 2) + f{}(x * 3)\n", i - 1, i - 1));
-    }
-    src.push_str("f59(NH)");
+    let src = chain(60, &|g| format!("{g}(x * 2) + {g}(x * 3)"), "f59(NH)");
     let Err(d) = parse("blowup.brdf", &src) else { panic!("2^59 distinct expansions were accepted") };
     assert!(d.render(false).contains("too large a formula"), "{d}");
     // Calls with equal arguments expand once (memoised): sixty levels of doubling are accepted.
-    let mut src = String::from("fn f0(x) = x * 2\n");
-    for i in 1..60 {
-        src.push_str(&format!("fn f{i}(x) = f{}(x) + f{}(x)\n", i - 1, i - 1));
-    }
-    src.push_str("f59(NH) / 2^60");
-    check(&src, 0.9);
+    check(&chain(60, &|g| format!("{g}(x) + {g}(x)"), "f59(NH) / 2^60"), 0.9);
 }
