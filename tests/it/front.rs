@@ -761,6 +761,7 @@ fn printed_formulas_with_the_new_constructs_parse_back_to_the_same_values() {
         }
     }
     assert!(skipped * 20 < checked, "{skipped} printed texts skipped, {checked} checked");
+    eprintln!("print → parse round trip: {checked} printed texts parse back to the same values ({skipped} skipped)");
 }
 
 /// About `bytes` of source in the new constructs: colour and bool parameters, a function, vectors, `if`,
@@ -796,6 +797,21 @@ fn one_mebibyte_of_the_new_constructs_parses_and_lowers_in_linear_time() {
         assert!(channels_at("param base = rgb(0.8, 0.6, 0.2)\nL.z * base", l, v, &[])[0] > 0.0);
     }
     eprintln!("parse+lower: 0.5 MiB {:.3} s, 1 MiB {:.3} s, ratio {:.2}", times[0], times[1], times[1] / times[0]);
+    // The print → parse round trip at this size: `lobe check`'s text of the red channel, parsed again.
+    let f = formula(&big_vector_source(1 << 20));
+    let red = &f.channels()[0];
+    let t = std::time::Instant::now();
+    let text = format!("@domain raw\n{}{}", param_lines(red), red.to_program_text());
+    let printed = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let again = formula(&text);
+    let reparsed = t.elapsed().as_secs_f64();
+    for (l, v) in directions() {
+        let x = lobe::numerics::inputs_from_dirs(l, v);
+        let p = red.default_params();
+        assert_eq!(Interp::new(red).eval(&x, &p).to_bits(), Interp::new(&again).eval(&x, &p).to_bits());
+    }
+    eprintln!("round trip of {} nodes: print {printed:.3} s ({} bytes), parse+lower {reparsed:.3} s", red.ir.len(), text.len());
 }
 
 #[test]
