@@ -5,6 +5,7 @@
 //! lowered with an explicit stack. The parser builds bottom-up, so every operand has a smaller id than its
 //! user. Every node carries the byte span of its source text. Names borrow from the source.
 
+use super::values::Cmp;
 use crate::base::span::Span;
 
 /// Index of an expression in [`Ast::exprs`].
@@ -33,12 +34,7 @@ pub enum BinOp {
     Mul,
     Div,
     Pow,
-    Lt,
-    Le,
-    Gt,
-    Ge,
-    Eq,
-    Ne,
+    Cmp(Cmp),
     And,
     Or,
 }
@@ -51,12 +47,7 @@ impl BinOp {
             BinOp::Mul => "*",
             BinOp::Div => "/",
             BinOp::Pow => "^",
-            BinOp::Lt => "<",
-            BinOp::Le => "<=",
-            BinOp::Gt => ">",
-            BinOp::Ge => ">=",
-            BinOp::Eq => "==",
-            BinOp::Ne => "!=",
+            BinOp::Cmp(c) => c.symbol(),
             BinOp::And => "&&",
             BinOp::Or => "||",
         }

@@ -24,7 +24,7 @@
 //! compacted once at the end (dropping what unused `let`s and function checks built).
 
 use super::ast::{Ast, BinOp as AstOp, ExprId, ExprKind, Ident, Lit, ParamDefault, StmtKind};
-use super::values::{Cmp, Val, Values, DERIVED};
+use super::values::{Val, Values, DERIVED};
 use crate::base::diag::Diagnostic;
 use crate::base::span::Span;
 use crate::builtins::Builtin;
@@ -622,6 +622,19 @@ impl<'a, 's> Lowerer<'a, 's> {
         formula
     }
 
+    fn defined_twice(&mut self, msg: String, second: (Span, &str), first: Span, hint: &str) {
+        self.error(Diagnostic::error(msg).at(second.0, second.1).also(first, "first defined here").hint(hint));
+    }
+
+    /// A parameter or function of this name (what it is, where it was declared).
+    fn global_name(&self, name: &str) -> Option<(&'static str, Option<Span>)> {
+        if let Some(&p) = self.param_names.get(name) {
+            let (ParamRef::Float(i) | ParamRef::Bool(i) | ParamRef::Color(i)) = p;
+            return Some(("a parameter", self.params[i as usize].span));
+        }
+        self.fn_names.get(name).map(|&f| ("a function", Some(self.fns[f].name.span)))
+    }
+
     fn let_(&mut self, name: Ident<'s>, value: ExprId) {
         let mut ok = true;
         if let Some(what) = Self::reserved(name.name) {
@@ -631,12 +644,11 @@ impl<'a, 's> Lowerer<'a, 's> {
                     .hint("choose another name for the binding"),
             );
             ok = false;
-        } else if let Some(&p) = self.param_names.get(name.name) {
-            let mut d = Diagnostic::error(format!("`{}` is already a parameter", name.name))
+        } else if let Some((what, at)) = self.global_name(name.name) {
+            let mut d = Diagnostic::error(format!("`{}` is already {what}", name.name))
                 .at(name.span, "this `let` reuses its name");
-            let (ParamRef::Float(i) | ParamRef::Bool(i) | ParamRef::Color(i)) = p;
-            if let Some(ps) = self.params[i as usize].span {
-                d = d.also(ps, "declared here");
+            if let Some(at) = at {
+                d = d.also(at, "declared here");
             }
             self.error(d.hint("choose another name for the binding"));
             ok = false;
@@ -648,22 +660,9 @@ impl<'a, 's> Lowerer<'a, 's> {
             );
             ok = false;
         } else if let Some(&first) = self.scope.get(name.name) {
-            let first_span = self.lets[first].name.span;
-            self.error(
-                Diagnostic::error(format!("`{}` is defined twice", name.name))
-                    .at(name.span, "second `let`")
-                    .also(first_span, "first defined here")
-                    .hint("a `let` cannot be reassigned; give the second one another name"),
-            );
-            ok = false;
-        } else if let Some(&f) = self.fn_names.get(name.name) {
-            let first_span = self.fns[f].name.span;
-            self.error(
-                Diagnostic::error(format!("`{}` is already a function", name.name))
-                    .at(name.span, "this `let` reuses its name")
-                    .also(first_span, "defined here")
-                    .hint("choose another name for the binding"),
-            );
+            let first = self.lets[first].name.span;
+            let msg = format!("`{}` is defined twice", name.name);
+            self.defined_twice(msg, (name.span, "second `let`"), first, "a `let` cannot be reassigned; give the second one another name");
             ok = false;
         }
         let v = self.top_expr(value);
@@ -693,13 +692,9 @@ impl<'a, 's> Lowerer<'a, 's> {
                     .hint("choose another function name"),
             );
         } else if let Some(&first) = self.fn_names.get(name.name) {
-            let first_span = self.fns[first].name.span;
-            self.error(
-                Diagnostic::error(format!("function `{}` is defined twice", name.name))
-                    .at(name.span, "second definition")
-                    .also(first_span, "first defined here")
-                    .hint("give the second function another name"),
-            );
+            let first = self.fns[first].name.span;
+            let msg = format!("function `{}` is defined twice", name.name);
+            self.defined_twice(msg, (name.span, "second definition"), first, "give the second function another name");
         }
         let mut bound: Vec<(&'s str, Slot)> = Vec::with_capacity(args.len());
         for a in args {
@@ -818,12 +813,7 @@ impl<'a, 's> Lowerer<'a, 's> {
                         AstOp::Mul => (vs.arith(BinOp::Mul, a, b), "arith"),
                         AstOp::Div => (vs.arith(BinOp::Div, a, b), "arith"),
                         AstOp::Pow => (vs.builtin(Builtin::Pow, &[a, b]), "arith"),
-                        AstOp::Lt => (vs.compare(Cmp::Lt, a, b), "cmp"),
-                        AstOp::Le => (vs.compare(Cmp::Le, a, b), "cmp"),
-                        AstOp::Gt => (vs.compare(Cmp::Gt, a, b), "cmp"),
-                        AstOp::Ge => (vs.compare(Cmp::Ge, a, b), "cmp"),
-                        AstOp::Eq => (vs.compare(Cmp::Eq, a, b), "cmp"),
-                        AstOp::Ne => (vs.compare(Cmp::Ne, a, b), "cmp"),
+                        AstOp::Cmp(c) => (vs.compare(*c, a, b), "cmp"),
                         AstOp::And => (vs.and(a, b), "cond"),
                         AstOp::Or => (vs.or(a, b), "cond"),
                     };
@@ -1156,23 +1146,14 @@ impl<'a, 's> Lowerer<'a, 's> {
     /// Unused `let`s, `fn`s and `param`s (a colour counts as used when any channel is), and a formula that
     /// reads no input.
     fn warnings(&mut self, roots: &[NodeId], span: Span) {
-        for f in &self.fns {
-            if !f.used && !f.name.name.starts_with('_') {
-                self.diags.push(
-                    Diagnostic::warning(format!("unused `fn {}`", f.name.name))
-                        .at(f.name.span, "never called")
-                        .hint(format!("remove it, or name it `_{}` to keep it quietly", f.name.name)),
-                );
-            }
-        }
-        for l in &self.lets {
-            if !l.used && !l.name.name.starts_with('_') {
-                self.diags.push(
-                    Diagnostic::warning(format!("unused `let {}`", l.name.name))
-                        .at(l.name.span, "never used")
-                        .hint(format!("remove it, or name it `_{}` to keep it quietly", l.name.name)),
-                );
-            }
+        let unused = self.fns.iter().filter(|f| !f.used).map(|f| ("fn", f.name, "never called"));
+        let unused = unused.chain(self.lets.iter().filter(|l| !l.used).map(|l| ("let", l.name, "never used")));
+        for (kw, name, label) in unused.filter(|u| !u.1.name.starts_with('_')) {
+            self.diags.push(
+                Diagnostic::warning(format!("unused `{kw} {}`", name.name))
+                    .at(name.span, label)
+                    .hint(format!("remove it, or name it `_{}` to keep it quietly", name.name)),
+            );
         }
         let mut used: Vec<u16> = roots.iter().flat_map(|r| self.ir.used_params(*r)).collect();
         let mut inputs = crate::ir::InputSet::default();

@@ -2,27 +2,34 @@
 //!
 //! Pipeline: [`lex`] (logos DFA + an adapter that decides statement-ending newlines and repairs bad
 //! spellings) → [`parse`] (lalrpop LR(1), table-driven, builds the arena [`ast`] with a span on every node,
-//! recovers at each statement) → [`lower`] (names, arity, `n` as parameter 0, domain policy → `ir::Formula`).
+//! recovers at each statement) → [`lower`] (names, types, arity, function inlining, `n` as parameter 0, domain
+//! policy → `ir::Formula`).
 //! Every stage reports into one list, so a file with several mistakes gets all of them, sorted by position.
 //!
-//! The language, in brief (grammar/formula.lalrpop is the definition):
+//! The language, in brief (grammar/formula.lalrpop is the definition; README.md has the reference):
 //!
 //! ```text
 //! # comment                                  statements end at a newline or `;`
-//! @name "Modified Schlick"                   metadata: @name, @cite (each at most once, before the formula)
-//! param a = 16 in 1..1000                    a parameter: default, optional range (none = unbounded);
+//! @name "Modified Schlick"                   metadata: @name, @cite (strings), @domain raw|brdf
+//! param a = 16 in 1..1000                    a float parameter: default, optional range (none = unbounded);
 //!                                            `n` is always parameter 0 (implicitly 50 in 1..1000)
+//! param aniso = true                         a bool parameter; `param base = rgb(0.8, 0.6, 0.2)` a colour
+//! fn sqr(x) = x * x                          a function, inlined at each call
 //! let c = NH                                 bindings, visible after their own line; no shadowing
-//! 2*c / (1.25*(n - n*c + 1.25*c)^2)          exactly one final expression, last
+//! 2*c / (1.25*(n - n*c + 1.25*c)^2)          exactly one final expression, last: a float or a vec3 (RGB)
 //! ```
 //!
-//! Precedence, tightest first: calls and parentheses; `^` (right-associative; `2^-x` allowed); unary `-`
-//! (so `-x^2 = -(x^2)`); `*` `/`; `+` `-` (left-associative). A newline continues the statement inside
-//! parentheses and after a binary operator, `=`, `,` or `(`. Numbers: `2`, `0.5`, `1e-3`, `1.5E+2`.
+//! Values are floats, bools and vec3s (the frame `L V N X Y`, `vec3(…)`/`rgb(…)`, `.x`/`.r` components),
+//! lowered through [`values::Values`] into scalar IR. Precedence, loosest first: `?:` and `if c then a else
+//! b` (right-associative); `||`; `&&`; comparisons (non-associative); `+ -`; `* /`; unary `-` `!`; `^`
+//! (right-associative; `2^-x` allowed; `-x^2 = -(x^2)`); postfix `.x`, calls and parentheses. A newline
+//! continues the statement inside parentheses, after a binary operator, `!`, `=`, `,`, `(`, `?`, `:`, `if`,
+//! `then`, `else`, and before a line that starts with `then`, `else`, `?` or `:`. Numbers: `2`, `0.5`, `1e-3`.
 //!
 //! Robustness: nothing here recurses on the input's depth (the parser's stack and the AST are `Vec`s;
 //! lowering uses an explicit stack), parentheses deeper than [`lex::MAX_DEPTH`] are refused at once, and at
-//! most [`MAX_ERRORS`] errors are shown. Cost is linear in the input; lowering dominates (most of it
+//! most [`MAX_ERRORS`] errors are shown; function inlining is bounded in depth and size ([`lower`]). Cost is
+//! linear in the input (plus the inlined bodies); lowering dominates (most of it
 //! `Ir::push` hash-consing), then parsing, then lexing, and over-deep nesting is rejected after
 //! [`lex::MAX_DEPTH`] + 1 tokens. Measured times: BENCHMARKS.md.
 

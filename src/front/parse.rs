@@ -306,31 +306,31 @@ mod tests {
 
     #[test]
     fn precedence_and_associativity() {
-        assert_eq!(expr("-x^2"), "(-(x ^ 2))");
-        assert_eq!(expr("2^3^2"), "(2 ^ (3 ^ 2))");
-        assert_eq!(expr("a-b-c"), "((a - b) - c)");
-        assert_eq!(expr("a/b/c"), "((a / b) / c)");
-        assert_eq!(expr("a+b*c^d"), "(a + (b * (c ^ d)))");
-        assert_eq!(expr("2^-x"), "(2 ^ (-x))");
-        assert_eq!(expr("--x"), "(-(-x))");
-        assert_eq!(expr("-a*b"), "((-a) * b)");
-        assert_eq!(expr("max(a, b,)"), "max(a, b)");
-    }
-
-    #[test]
-    fn precedence_of_the_vector_and_bool_language() {
-        assert_eq!(expr("a || b && c"), "(a || (b && c))");
-        assert_eq!(expr("a && b || c && d"), "((a && b) || (c && d))");
-        assert_eq!(expr("a + 1 < b * 2 && !c"), "(((a + 1) < (b * 2)) && (!c))");
-        assert_eq!(expr("c ? a : d ? e : f"), "(c ? a : (d ? e : f))");
-        assert_eq!(expr("c ? x ? 1 : 2 : 3"), "(c ? (x ? 1 : 2) : 3)");
-        assert_eq!(expr("if a < b then 1 else if c then 2 else 3"), "((a < b) ? 1 : (c ? 2 : 3))");
-        assert_eq!(expr("-L.x^2"), "(-(L.x ^ 2))");
-        assert_eq!(expr("normalize(L + V).z"), "normalize((L + V)).z");
-        assert_eq!(expr("!a == b"), "((!a) == b)");
-        assert_eq!(expr("true || false"), "(true || false)");
-        assert_eq!(expr("c ?\n1 :\n2"), "(c ? 1 : 2)");
-        assert_eq!(expr("if c\nthen 1\nelse 2"), "(c ? 1 : 2)");
+        for (src, want) in [
+            ("-x^2", "(-(x ^ 2))"),
+            ("2^3^2", "(2 ^ (3 ^ 2))"),
+            ("a-b-c", "((a - b) - c)"),
+            ("a/b/c", "((a / b) / c)"),
+            ("a+b*c^d", "(a + (b * (c ^ d)))"),
+            ("2^-x", "(2 ^ (-x))"),
+            ("--x", "(-(-x))"),
+            ("-a*b", "((-a) * b)"),
+            ("max(a, b,)", "max(a, b)"),
+            ("a || b && c", "(a || (b && c))"),
+            ("a && b || c && d", "((a && b) || (c && d))"),
+            ("a + 1 < b * 2 && !c", "(((a + 1) < (b * 2)) && (!c))"),
+            ("c ? a : d ? e : f", "(c ? a : (d ? e : f))"),
+            ("c ? x ? 1 : 2 : 3", "(c ? (x ? 1 : 2) : 3)"),
+            ("if a < b then 1 else if c then 2 else 3", "((a < b) ? 1 : (c ? 2 : 3))"),
+            ("-L.x^2", "(-(L.x ^ 2))"),
+            ("normalize(L + V).z", "normalize((L + V)).z"),
+            ("!a == b", "((!a) == b)"),
+            ("true || false", "(true || false)"),
+            ("c ?\n1 :\n2", "(c ? 1 : 2)"),
+            ("if c\nthen 1\nelse 2", "(c ? 1 : 2)"),
+        ] {
+            assert_eq!(expr(src), want, "{src:?}");
+        }
     }
 
     #[test]

@@ -63,6 +63,19 @@ pub enum Cmp {
     Ne,
 }
 
+impl Cmp {
+    pub fn symbol(self) -> &'static str {
+        match self {
+            Cmp::Lt => "<",
+            Cmp::Le => "<=",
+            Cmp::Gt => ">",
+            Cmp::Ge => ">=",
+            Cmp::Eq => "==",
+            Cmp::Ne => "!=",
+        }
+    }
+}
+
 /// Functions beyond the builtins table that both languages accept, expanded here. Each is `(name, arity, doc)`.
 pub const DERIVED: [(&str, usize, &str); 14] = [
     ("dot", 2, "dot(a, b): dot product of two vec3"),
@@ -280,14 +293,7 @@ impl<'a> Values<'a> {
 
     /// A comparison of two floats, as a bool.
     pub fn compare(&mut self, op: Cmp, a: Val, b: Val) -> R {
-        let sym = match op {
-            Cmp::Lt => "<",
-            Cmp::Le => "<=",
-            Cmp::Gt => ">",
-            Cmp::Ge => ">=",
-            Cmp::Eq => "==",
-            Cmp::Ne => "!=",
-        };
+        let sym = op.symbol();
         let (x, y) = match (a, b) {
             (Val::F(x), Val::F(y)) | (Val::B(x), Val::B(y)) if matches!(op, Cmp::Eq | Cmp::Ne) => (x, y),
             (Val::F(x), Val::F(y)) => (x, y),

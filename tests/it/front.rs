@@ -162,18 +162,25 @@ fn ir_spans_point_into_the_source() {
 /// Every .brdf in the catalogue must parse without errors.
 #[test]
 fn catalogue_parses() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/brdfs");
-    let mut n = 0;
-    for e in std::fs::read_dir(&dir).expect("examples/brdfs exists") {
-        let p = e.expect("dir entry").path();
-        if p.extension().is_none_or(|x| x != "brdf") {
-            continue;
-        }
-        let src = std::fs::read_to_string(&p).expect("readable");
-        parse(&p.display().to_string(), &src).unwrap_or_else(|d| panic!("{}:\n{d}", p.display()));
-        n += 1;
+    let files = brdf_files("examples/brdfs");
+    for (p, src) in &files {
+        parse(&p.display().to_string(), src).unwrap_or_else(|d| panic!("{}:\n{d}", p.display()));
     }
-    assert!(n >= 2, "found only {n} catalogue files");
+    assert!(files.len() >= 2, "found only {} catalogue files", files.len());
+}
+
+/// The `.brdf` files of a folder of the repository, with their text.
+fn brdf_files(folder: &str) -> Vec<(std::path::PathBuf, String)> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(folder);
+    let mut out = vec![];
+    for e in std::fs::read_dir(&dir).unwrap_or_else(|e| panic!("{folder}: {e}")) {
+        let p = e.expect("dir entry").path();
+        if p.extension().is_some_and(|x| x == "brdf") {
+            let src = std::fs::read_to_string(&p).expect("readable");
+            out.push((p, src));
+        }
+    }
+    out
 }
 
 // ---- robustness: bad input of any kind gives diagnostics, never a panic or a stack overflow ----
@@ -615,36 +622,29 @@ fn user_functions_inline_with_the_types_of_each_call() {
 
 #[test]
 fn examples_in_the_vector_folder_parse_and_evaluate() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/vector");
-    let mut n = 0;
-    for e in std::fs::read_dir(&dir).expect("examples/vector") {
-        let p = e.expect("entry").path();
-        if p.extension().is_none_or(|x| x != "brdf") {
-            continue;
-        }
-        let src = std::fs::read_to_string(&p).expect("readable");
-        let (_, warnings) = parse_with_warnings(&p.display().to_string(), &src).unwrap_or_else(|d| panic!("{d}"));
+    let files = brdf_files("examples/vector");
+    for (p, src) in &files {
+        let (_, warnings) = parse_with_warnings(&p.display().to_string(), src).unwrap_or_else(|d| panic!("{d}"));
         assert!(warnings.items.is_empty(), "{}: {}", p.display(), warnings.render(false));
         for (l, v) in directions() {
-            for c in channels_at(&src, l, v, &[]) {
+            for c in channels_at(src, l, v, &[]) {
                 assert!(c.is_finite() && c >= 0.0, "{}: {c}", p.display());
             }
         }
-        n += 1;
     }
-    assert!(n >= 3);
+    assert!(files.len() >= 3);
     // Anisotropic Ward by hand at one pair of directions.
-    let src = std::fs::read_to_string(dir.join("ward_anisotropic.brdf")).expect("ward");
+    let src = &files.iter().find(|f| f.0.ends_with("ward_anisotropic.brdf")).expect("ward").1;
     let (l, v) = directions()[0];
     let h = half(l, v);
     let (ax, ay) = (0.1, 0.4);
     let want = (-2.0 * ((h[0] / ax).powi(2) + (h[1] / ay).powi(2)) / (1.0 + h[2])).exp()
         / (4.0 * std::f64::consts::PI * ax * ay * (l[2] * v[2]).sqrt());
-    let got = channels_at(&src, l, v, &[]);
+    let got = channels_at(src, l, v, &[]);
     assert!((got[0] - want).abs() <= 1e-12 * want, "{got:?} vs {want}");
     // Stretched: rotating the directions by 90° about N changes the value (X and Y differ).
     let rot = |d: [f64; 3]| [-d[1], d[0], d[2]];
-    assert!((channels_at(&src, rot(l), rot(v), &[])[0] - got[0]).abs() > 1e-6 * got[0]);
+    assert!((channels_at(src, rot(l), rot(v), &[])[0] - got[0]).abs() > 1e-6 * got[0]);
 }
 
 /// Random well-typed source text in the vector/bool language: `t` is 0 float, 1 bool, 2 vec3.
@@ -761,4 +761,103 @@ fn printed_formulas_with_the_new_constructs_parse_back_to_the_same_values() {
         }
     }
     assert!(skipped * 20 < checked, "{skipped} printed texts skipped, {checked} checked");
+    eprintln!("print → parse round trip: {checked} printed texts parse back to the same values ({skipped} skipped)");
+}
+
+/// About `bytes` of source in the new constructs: colour and bool parameters, a function, vectors, `if`,
+/// `?:`, comparisons and `&&`, one `let` per line, each reading the previous one.
+fn big_vector_source(bytes: usize) -> String {
+    let mut src = String::from(
+        "param base = rgb(0.8, 0.6, 0.2)\nparam shiny = true\nfn sqr(x) = x * x\nlet H = normalize(L + V)\nlet a0 = H.z\n",
+    );
+    let mut i = 1;
+    while src.len() < bytes {
+        src.push_str(&format!(
+            "let a{i} = if dot(H, N) > 0.5 && shiny then sqr(a{}) * base.r else mix(a{}, L.z, 0.5)\n",
+            i - 1,
+            i - 1
+        ));
+        i += 1;
+    }
+    src.push_str(&format!("vec3(a{}) * base", i - 1));
+    src
+}
+
+#[test]
+fn one_mebibyte_of_the_new_constructs_parses_and_lowers_in_linear_time() {
+    // Parse + lower time is printed (dev profile; BENCHMARKS.md has release numbers), never asserted.
+    let mut times = vec![];
+    for bytes in [1 << 19, 1 << 20] {
+        let src = big_vector_source(bytes);
+        let t = std::time::Instant::now();
+        let f = formula(&src);
+        times.push(t.elapsed().as_secs_f64());
+        assert!(f.is_rgb());
+        let (l, v) = directions()[0];
+        assert!(channels_at("param base = rgb(0.8, 0.6, 0.2)\nL.z * base", l, v, &[])[0] > 0.0);
+    }
+    eprintln!("parse+lower: 0.5 MiB {:.3} s, 1 MiB {:.3} s, ratio {:.2}", times[0], times[1], times[1] / times[0]);
+    // The print → parse round trip at this size: `lobe check`'s text of the red channel, parsed again.
+    let f = formula(&big_vector_source(1 << 20));
+    let red = &f.channels()[0];
+    let t = std::time::Instant::now();
+    let text = format!("@domain raw\n{}{}", param_lines(red), red.to_program_text());
+    let printed = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let again = formula(&text);
+    let reparsed = t.elapsed().as_secs_f64();
+    for (l, v) in directions() {
+        let x = lobe::numerics::inputs_from_dirs(l, v);
+        let p = red.default_params();
+        assert_eq!(Interp::new(red).eval(&x, &p).to_bits(), Interp::new(&again).eval(&x, &p).to_bits());
+    }
+    eprintln!("round trip of {} nodes: print {printed:.3} s ({} bytes), parse+lower {reparsed:.3} s", red.ir.len(), text.len());
+}
+
+#[test]
+fn deep_selects_and_bool_chains_do_not_overflow() {
+    // A right spine of `?:` 200 000 deep, an `if` chain, a left spine of `&&`, a `!` chain.
+    let k = 200_000;
+    let mut src = String::from("@domain raw\n");
+    for i in 0..k {
+        src.push_str(&format!("L.z > {} ? {i} : ", i as f64 / k as f64));
+    }
+    src.push_str("-1");
+    let (l, v) = ([0.6, 0.0, 0.8], [0.0, 0.0, 1.0]);
+    // The interpreter only: these formulas have ~10^5 nodes (the JIT is tested on real-sized ones).
+    let channels_at = |src: &str, l: [f64; 3], v: [f64; 3], _: &[(&str, f64)]| {
+        let f = formula(src);
+        let x = lobe::numerics::inputs_from_dirs(l, v);
+        f.channels().iter().map(|c| Interp::new(c).eval(&x, &c.default_params())).collect::<Vec<f64>>()
+    };
+    assert_eq!(channels_at(&src, l, v, &[]), vec![0.0]);
+    let mut src = String::from("@domain raw\n");
+    for i in 0..k {
+        src.push_str(&format!("if L.z > {} then {i} else\n", 1.0 - i as f64 / k as f64));
+    }
+    src.push_str("-1");
+    let want = (1..k).find(|&i| 0.8 > 1.0 - i as f64 / k as f64).expect("some level") as f64;
+    assert_eq!(channels_at(&src, l, v, &[]), vec![want]);
+    let src = format!("({}) ? 1 : 2", vec!["L.z > 0.5"; k].join(" && "));
+    assert_eq!(channels_at(&src, l, v, &[]), vec![1.0]);
+    let src = format!("{}true ? 3 : 4", "!".repeat(1 << 20));
+    assert_eq!(eval(&src), 3.0);
+    // Nested user functions: a chain deeper than the inlining limit, and an exponential expansion, are
+    // refused with a message (not a stack overflow, not a hang).
+    // `fn f0(x) = x * 2`, then `fn fI(x) = body(fI-1)` for I < n, then `tail`.
+    let chain = |n: usize, body: &dyn Fn(&str) -> String, tail: &str| {
+        let mut src = String::from("fn f0(x) = x * 2\n");
+        for i in 1..n {
+            src.push_str(&format!("fn f{i}(x) = {}\n", body(&format!("f{}", i - 1))));
+        }
+        src + tail
+    };
+    let src = chain(100, &|g| format!("{g}(x) + 1"), "f99(NH)");
+    let Err(d) = parse("chain.brdf", &src) else { panic!("a 100-deep chain of calls was accepted") };
+    assert!(d.render(false).contains("nested more than 64 deep"), "{d}");
+    let src = chain(60, &|g| format!("{g}(x * 2) + {g}(x * 3)"), "f59(NH)");
+    let Err(d) = parse("blowup.brdf", &src) else { panic!("2^59 distinct expansions were accepted") };
+    assert!(d.render(false).contains("too large a formula"), "{d}");
+    // Calls with equal arguments expand once (memoised): sixty levels of doubling are accepted.
+    check(&chain(60, &|g| format!("{g}(x) + {g}(x)"), "f59(NH) / 2^60"), 0.9);
 }
