@@ -249,10 +249,21 @@ impl<'a> Values<'a> {
         Ok(Val::F(self.dot3(x, y)))
     }
 
+    /// A dot product; a component that is the constant 0 in either vector contributes nothing, so a dot with a
+    /// frame axis (N, X, Y) reads one component: `dot(N, H)` is `H.z` even where H's other components are not
+    /// finite (L = −V), which IEEE's `0·inf` would turn into NaN. Only then do the two differ.
     fn dot3(&mut self, x: [NodeId; 3], y: [NodeId; 3]) -> NodeId {
-        let p: Vec<NodeId> = (0..3).map(|k| self.bin(BinOp::Mul, x[k], y[k])).collect();
-        let s = self.bin(BinOp::Add, p[0], p[1]);
-        self.bin(BinOp::Add, s, p[2])
+        let zero = |s: &Self, a: NodeId| s.const_of(a) == Some(0.0);
+        let terms: Vec<usize> = (0..3).filter(|&k| !zero(self, x[k]) && !zero(self, y[k])).collect();
+        let mut acc: Option<NodeId> = None;
+        for k in terms {
+            let p = self.bin(BinOp::Mul, x[k], y[k]);
+            acc = Some(match acc {
+                None => p,
+                Some(a) => self.bin(BinOp::Add, a, p),
+            });
+        }
+        acc.unwrap_or_else(|| self.konst(0.0))
     }
 
     pub fn cross(&mut self, a: Val, b: Val) -> R {

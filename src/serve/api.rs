@@ -29,7 +29,10 @@ const CACHE_ENTRIES: usize = 64;
 
 /// A formula compiled with every parameter live.
 struct Compiled {
+    /// The formula's kernel; for a colour formula its red channel (the plots and analyses show red).
     kernel: Arc<Kernel>,
+    /// A colour formula's green and blue kernels, which renders use.
+    green_blue: Option<[Arc<Kernel>; 2]>,
     warnings: Diagnostics,
     parse_us: f64,
 }
@@ -70,8 +73,10 @@ impl State {
         let t = Instant::now();
         let (f, warnings) = crate::front::parse_with_warnings(name, text)?;
         let parse_us = t.elapsed().as_secs_f64() * 1e6;
-        let kernel = crate::compile_formula(f, &Options { backend: Backend::Jit, ..Options::default() })?;
-        let c = Arc::new(Compiled { kernel: Arc::new(kernel), warnings, parse_us });
+        let opts = Options { backend: Backend::Jit, ..Options::default() };
+        let mut kernels = f.channels().into_iter().map(|c| crate::compile_formula(c, &opts).map(Arc::new)).collect::<Result<Vec<_>, _>>()?;
+        let green_blue = (kernels.len() == 3).then(|| [kernels[1].clone(), kernels[2].clone()]);
+        let c = Arc::new(Compiled { kernel: kernels.swap_remove(0), green_blue, warnings, parse_us });
         let mut cache = lock(&self.kernels);
         if cache.len() >= CACHE_ENTRIES {
             cache.clear();
@@ -107,7 +112,12 @@ impl BrdfCompiler for Live<'_> {
     /// The page compiles precise (the `math` key of a scene material is not applied to live kernels).
     fn build(&self, file: &str, src: &str, _values: &[(String, f64)], _math: Option<crate::Mode>) -> Result<CompiledBrdf, Diagnostics> {
         let c = self.0.compiled(file, src).map_err(|e| diagnostics_of(file, src, e))?;
-        Ok(CompiledBrdf { used: c.kernel.used_inputs(), evaluator: c.kernel.clone() as Arc<dyn Evaluator>, green_blue: None, math: c.kernel.math })
+        let mut used = c.kernel.used_inputs();
+        let green_blue = c.green_blue.as_ref().map(|gb| {
+            gb.iter().for_each(|k| used.0 |= k.used_inputs().0);
+            gb.clone().map(|k| k as Arc<dyn Evaluator>)
+        });
+        Ok(CompiledBrdf { used, evaluator: c.kernel.clone() as Arc<dyn Evaluator>, green_blue, math: c.kernel.math })
     }
 }
 

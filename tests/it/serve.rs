@@ -152,7 +152,9 @@ pub(crate) fn cli_render(scene: &Path, set: &str, size: &str, out: &Path) -> Vec
 fn render_png_is_the_cli_render_byte_for_byte() {
     let d = scratch("bytes");
     let s = Served::start(&["examples"]);
-    for (scene, set, size) in [("examples/scenes/paper_sphere.toml", "n=50", "256"), ("examples/scenes/torus.toml", "n=200", "200x120")] {
+    for (scene, set, size) in [("examples/scenes/paper_sphere.toml", "n=50", "256"), ("examples/scenes/torus.toml", "n=200", "200x120"),
+        // A colour (RGB) formula: one kernel per channel on the page as in the CLI.
+        ("examples/scenes/principled.toml", "n=50", "96")] {
         let r = s.get(&format!("/render.png?file={scene}&set={set}&size={size}"));
         assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
         assert_eq!(r.header("Content-Type"), Some("image/png"));
