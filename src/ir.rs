@@ -560,6 +560,18 @@ pub mod print {
         }
     }
 
+    /// A constant as the language reads it back: `number`, except that the non-finite values, which have no
+    /// literal, print as the divisions that make them.
+    fn literal(v: f64) -> String {
+        match v {
+            _ if v.is_nan() => "(0/0)".into(),
+            f64::INFINITY => "(1/0)".into(),
+            f64::NEG_INFINITY => "(-1/0)".into(),
+            _ => number(v),
+        }
+    }
+
+    /// A number for people: `pi`, `inf`, `nan`, or the shortest decimal that reads back exactly.
     pub fn number(v: f64) -> String {
         if v.is_nan() {
             return "nan".into();
@@ -598,6 +610,8 @@ pub mod print {
     pub fn with_lets_of(f: &Formula, roots: &[NodeId]) -> (String, Vec<String>) {
         let counts = f.ir.use_counts_of(roots);
         let mut names: HashMap<NodeId, String> = HashMap::new();
+        // The names given so far, for the uniqueness check (a scan of `names` made printing quadratic).
+        let mut given: std::collections::HashSet<String> = std::collections::HashSet::new();
         let mut out = String::new();
         let taken = |s: &str| f.params.iter().any(|p| p.name == s) || s == "pi";
         let mut k = 0;
@@ -614,7 +628,7 @@ pub mod print {
                 },
                 _ => String::new(),
             };
-            while name.is_empty() || taken(&name) || names.values().any(|v| *v == name) {
+            while name.is_empty() || taken(&name) || given.contains(&name) {
                 k += 1;
                 name = format!("t{k}");
             }
@@ -623,6 +637,7 @@ pub mod print {
             out.push_str(" = ");
             write(f, id, &mut out, &names);
             out.push('\n');
+            given.insert(name.clone());
             names.insert(id, name);
         }
         let exprs = roots
@@ -796,7 +811,7 @@ pub mod print {
             }
             open(out, &mut stack, p);
             match n {
-                Node::Const(b) => out.push_str(&number(f64::from_bits(*b))),
+                Node::Const(b) => out.push_str(&literal(f64::from_bits(*b))),
                 Node::Input(i) => out.push_str(i.name()),
                 Node::Param(p) => out.push_str(&f.params[*p as usize].name),
                 Node::Neg(a) => {

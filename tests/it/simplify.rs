@@ -495,7 +495,7 @@ mod rewrites {
     #[test]
     fn constant_folding_uses_the_builtin_table() {
         let (t, r) = text("(* NH (+ (pow 2 3) (acos 2) (max 1 nan)))");
-        assert!(t.contains("nan"), "{t}");
+        assert!(t.contains("(0/0)"), "{t}"); // NaN prints as the division that makes it
         assert!(r.count("const-fold") >= 3);
         let (t, _) = text("(* NH (+ (pow 2 3) (acos 2)))");
         assert_eq!(t, "clamp(NH, 0, 1) * 8");
