@@ -154,6 +154,13 @@ impl InputSet {
     }
 }
 
+/// The union of the sets: what several kernels or roots read together.
+impl std::iter::FromIterator<InputSet> for InputSet {
+    fn from_iter<I: IntoIterator<Item = InputSet>>(it: I) -> InputSet {
+        InputSet(it.into_iter().fold(0, |a, s| a | s.0))
+    }
+}
+
 impl fmt::Display for InputSet {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let names: Vec<_> = self.iter().map(|i| i.name()).collect();
@@ -482,21 +489,18 @@ impl Formula {
         Formula { rgb: Some(rgb.clone()), ..rgb[0].clone() }
     }
 
-    /// The roots to print or emit together: the formula's own, or its three colour channels' roots copied into
-    /// one arena (hash-consing shares what the channels have in common).
+    /// The roots to print or emit together, in one arena of live nodes only: the formula's own, or its three
+    /// colour channels' (hash-consing shares what the channels have in common).
     pub fn merged_roots(&self) -> (Ir, Vec<NodeId>) {
-        let Some(ch) = &self.rgb else {
-            return (self.ir.clone(), vec![self.root]);
-        };
         let mut ir = Ir::new();
         let mut roots = Vec::new();
-        for c in ch.iter() {
-            let mut map: Vec<NodeId> = Vec::with_capacity(c.ir.len());
-            for (i, n) in c.ir.nodes().iter().enumerate() {
-                let id = ir.push(n.map_args(|a| map[a.index()]), c.ir.spans[i]);
-                map.push(id);
+        for c in self.channels() {
+            let (cir, croot) = c.ir.compact(c.root);
+            let mut map: Vec<NodeId> = Vec::with_capacity(cir.len());
+            for id in cir.ids() {
+                map.push(ir.push(cir.node(id).map_args(|a| map[a.index()]), cir.span(id)));
             }
-            roots.push(map[c.root.index()]);
+            roots.push(map[croot.index()]);
         }
         (ir, roots)
     }

@@ -199,31 +199,10 @@ fn live_decls(f: &Formula, names: &[String], live: &[u16]) -> Vec<Decl> {
     out
 }
 
-/// The formula's channels in one arena (hash-consing shares what they have in common) and their roots: one
-/// root for a scalar formula, three (r, g, b) for a colour one.
-fn merged(f: &Formula) -> (Ir, Vec<NodeId>) {
-    let mut ir = Ir::new();
-    let mut roots = vec![];
-    for c in f.channels() {
-        let (cir, croot) = c.ir.compact(c.root);
-        let mut map: Vec<NodeId> = Vec::with_capacity(cir.len());
-        for id in cir.ids() {
-            let n = cir.node(id).map_args(|a| map[a.index()]);
-            map.push(ir.push(n, cir.span(id)));
-        }
-        roots.push(map[croot.index()]);
-    }
-    (ir, roots)
-}
-
 /// Inputs and live parameters of all `roots`.
 fn uses_of(ir: &Ir, roots: &[NodeId]) -> (InputSet, Vec<u16>) {
-    let mut inputs = InputSet::default();
-    let mut params = vec![];
-    for r in roots {
-        inputs.0 |= ir.used_inputs(*r).0;
-        params.extend(ir.used_params(*r));
-    }
+    let inputs: InputSet = roots.iter().map(|r| ir.used_inputs(*r)).collect();
+    let mut params: Vec<u16> = roots.iter().flat_map(|r| ir.used_params(*r)).collect();
     params.sort_unstable();
     params.dedup();
     (inputs, params)
@@ -328,7 +307,7 @@ fn header(f: &Formula, inputs: InputSet, live: &[u16], lang: &str) -> Vec<String
 /// Exports the formula as one shader function: the inputs it reads and its live parameters as arguments (a
 /// colour parameter as one `vec3`), returning `float` (`f32`) or, for a colour formula, `vec3` (`vec3<f32>`).
 pub fn export(f: &Formula, d: Dialect) -> String {
-    let (ir, roots) = merged(f);
+    let (ir, roots) = f.merged_roots();
     let (inputs, live) = uses_of(&ir, &roots);
     let names = param_names(f);
     let lang = match d {
@@ -409,7 +388,7 @@ fn be_input(i: Input) -> &'static str {
 /// each parameter as a uniform of its type (`uniform float`, `uniform bool`, `uniform vec3`), so a bool is
 /// read as `float(NAME)` and a colour channel as `NAME.r`; a scalar formula returns `vec3(F)`.
 pub fn brdf_explorer(f: &Formula) -> String {
-    let (ir, roots) = merged(f);
+    let (ir, roots) = f.merged_roots();
     let (inputs, live) = uses_of(&ir, &roots);
     let names = param_names(f);
     let mut out = String::from("analytic\n\n");
@@ -466,7 +445,7 @@ pub fn brdf_explorer(f: &Formula) -> String {
 /// A complete fragment shader around the exported GLSL function (for validators and quick previews).
 pub fn glsl_test_shader(f: &Formula) -> String {
     let func = export(f, Dialect::Glsl);
-    let (ir, roots) = merged(f);
+    let (ir, roots) = f.merged_roots();
     let (inputs, live) = uses_of(&ir, &roots);
     let mut call_args: Vec<String> = inputs.iter().map(|_| "0.5".to_string()).collect();
     for d in live_decls(f, &param_names(f), &live) {

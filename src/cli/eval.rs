@@ -128,7 +128,7 @@ fn at_inputs(at: &[(String, Vec<f64>)], used: InputSet) -> Result<([f64; N_INPUT
 
 /// The inputs every kernel reads.
 fn used(ks: &[Kernel]) -> InputSet {
-    InputSet(ks.iter().map(|k| k.used_inputs().0).fold(0, |a, b| a | b))
+    ks.iter().map(Kernel::used_inputs).collect()
 }
 
 /// One point's values as text: the number, or `[r, g, b]`.
@@ -176,12 +176,20 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
     }
     let (x, note) = at_inputs(&a.at.concat(), used(&ks))?;
     let v: Vec<f64> = ks.iter().map(|k| k.eval(&x, &params)).collect();
-    if a.json.on {
-        let mut obj = serde_json::json!({
-            "value": json_of(&v),
-            "backend": ks[0].backend.name(),
-            "compile_us": json::value(ks.iter().map(|k| k.compile_time.as_secs_f64()).sum::<f64>() * 1e6),
-        });
+    let obj = || serde_json::json!({ "value": json_of(&v), "backend": ks[0].backend.name(), "compile_us": compile_us(&ks) });
+    emit(a.json.on, obj, note, || format!("{}\n", show(&v)));
+    Ok(())
+}
+
+/// The kernels' compile time, summed over channels, in µs.
+fn compile_us(ks: &[Kernel]) -> serde_json::Value {
+    json::value(ks.iter().map(|k| k.compile_time.as_secs_f64()).sum::<f64>() * 1e6)
+}
+
+/// Prints the JSON object (with the note, if any) under `--json`; else the note on stderr and `text` on stdout.
+fn emit(json: bool, obj: impl FnOnce() -> serde_json::Value, note: Option<String>, text: impl FnOnce() -> String) {
+    if json {
+        let mut obj = obj();
         if let Some(n) = note {
             obj["note"] = n.into();
         }
@@ -190,9 +198,8 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
         if let Some(n) = note {
             eprintln!("note: {n}");
         }
-        println!("{}", show(&v));
+        print!("{}", text());
     }
-    Ok(())
 }
 
 fn run_points(a: &EvalArgs, ks: &[Kernel], path: &str, params: &[f64], set: &[(String, f64)]) -> Result<(), CliError> {
@@ -210,30 +217,25 @@ fn run_points(a: &EvalArgs, ks: &[Kernel], path: &str, params: &[f64], set: &[(S
     let elapsed = t.elapsed();
     let point = |i: usize| -> Vec<f64> { channels.iter().map(|c| c[i]).collect() };
     let note = (pts.normalised > 0).then(|| format!("{} of {} rows had a non-unit L or V; they were normalised", pts.normalised, pts.len));
-    if a.json.on {
-        let mut obj = serde_json::json!({
+    let obj = || {
+        serde_json::json!({
             "values": (0..pts.len).map(|i| json_of(&point(i))).collect::<Vec<_>>(),
             "points": pts.len,
             "backend": ks[0].backend.name(),
             "math": ks[0].math.name(),
-            "compile_us": json::value(ks.iter().map(|k| k.compile_time.as_secs_f64()).sum::<f64>() * 1e6),
+            "compile_us": compile_us(ks),
             "eval_ns_per_point": json::value(elapsed.as_nanos() as f64 / pts.len.max(1) as f64),
-        });
-        if let Some(n) = note {
-            obj["note"] = n.into();
-        }
-        println!("{obj}");
-    } else {
-        if let Some(n) = note {
-            eprintln!("note: {n}");
-        }
+        })
+    };
+    let text = || {
         let mut out = String::with_capacity(pts.len * 20 * ks.len());
         for i in 0..pts.len {
             out.push_str(&show(&point(i)));
             out.push('\n');
         }
-        print!("{out}");
-    }
+        out
+    };
+    emit(a.json.on, obj, note, text);
     Ok(())
 }
 

@@ -1156,8 +1156,7 @@ impl<'a, 's> Lowerer<'a, 's> {
             );
         }
         let mut used: Vec<u16> = roots.iter().flat_map(|r| self.ir.used_params(*r)).collect();
-        let mut inputs = crate::ir::InputSet::default();
-        roots.iter().for_each(|r| inputs.0 |= self.ir.used_inputs(*r).0);
+        let inputs: crate::ir::InputSet = roots.iter().map(|r| self.ir.used_inputs(*r)).collect();
         // A colour parameter is used when any of its channels is.
         for (i, p) in self.params.iter().enumerate() {
             if let ParamKind::Color(k) = p.kind {

@@ -358,29 +358,14 @@ impl<'a> Values<'a> {
     /// A scalar builtin applied to floats, or component by component when any argument is a vector (a float
     /// argument is then used for every component, as GLSL's `min(vec3, float)`).
     pub fn builtin(&mut self, f: Builtin, args: &[Val]) -> R {
-        if args.iter().any(|a| matches!(a, Val::B(_))) {
-            return Err(format!("`{}` needs numbers or vectors, not bool", f.name()));
-        }
-        if !args.iter().any(|a| matches!(a, Val::V(_))) {
-            let xs: Vec<NodeId> = args.iter().map(|a| if let Val::F(x) = a { *x } else { unreachable!() }).collect();
-            return Ok(Val::F(self.call(f, &xs)));
-        }
-        let comp = |a: &Val, k: usize| match a {
-            Val::V(v) => v[k],
-            Val::F(x) | Val::B(x) => *x,
-        };
-        let mut out = [NodeId(0); 3];
-        for (k, o) in out.iter_mut().enumerate() {
-            let xs: Vec<NodeId> = args.iter().map(|a| comp(a, k)).collect();
-            *o = self.call(f, &xs);
-        }
-        Ok(Val::V(out))
+        self.each(f.name(), args, &mut |s, xs| s.call(f, xs))
     }
 
-    /// Applies a scalar function component by component (for the derived functions on vectors).
-    fn each(&mut self, args: &[Val], f: &mut dyn FnMut(&mut Self, &[NodeId]) -> NodeId) -> R {
+    /// Applies the scalar function `f` (named `name` in messages) to floats, or component by component when any
+    /// argument is a vector.
+    fn each(&mut self, name: &str, args: &[Val], f: &mut dyn FnMut(&mut Self, &[NodeId]) -> NodeId) -> R {
         if args.iter().any(|a| matches!(a, Val::B(_))) {
-            return Err("needs numbers or vectors, not bool".into());
+            return Err(format!("`{name}` needs numbers or vectors, not bool"));
         }
         let comp = |a: &Val, k: usize| match a {
             Val::V(v) => v[k],
@@ -428,14 +413,14 @@ impl<'a> Values<'a> {
             "reflect" => self.reflect(a, b),
             "distance" => self.arith(BinOp::Sub, a, b).and_then(|d| self.length(d)),
             // GLSL's definition: x·(1 − a) + y·a.
-            "mix" => self.each(args, &mut |s, x| {
+            "mix" => self.each(name, args, &mut |s, x| {
                 let one = s.konst(1.0);
                 let w = s.bin(BinOp::Sub, one, x[2]);
                 let p = s.bin(BinOp::Mul, x[0], w);
                 let q = s.bin(BinOp::Mul, x[1], x[2]);
                 s.bin(BinOp::Add, p, q)
             }),
-            "smoothstep" => self.each(args, &mut |s, x| {
+            "smoothstep" => self.each(name, args, &mut |s, x| {
                 let num = s.bin(BinOp::Sub, x[2], x[0]);
                 let den = s.bin(BinOp::Sub, x[1], x[0]);
                 let q = s.bin(BinOp::Div, num, den);
@@ -448,26 +433,26 @@ impl<'a> Values<'a> {
                 let w = s.bin(BinOp::Sub, three, t2);
                 s.bin(BinOp::Mul, tt, w)
             }),
-            "step" => self.each(args, &mut |s, x| {
+            "step" => self.each(name, args, &mut |s, x| {
                 let below = s.call(Builtin::Lt, &[x[1], x[0]]);
                 let (zero, one) = (s.konst(0.0), s.konst(1.0));
                 s.call(Builtin::Select, &[below, zero, one])
             }),
-            "sign" => self.each(args, &mut |s, x| {
+            "sign" => self.each(name, args, &mut |s, x| {
                 let zero = s.konst(0.0);
                 let pos = s.call(Builtin::Lt, &[zero, x[0]]);
                 let neg = s.call(Builtin::Lt, &[x[0], zero]);
                 s.bin(BinOp::Sub, pos, neg)
             }),
-            "fract" => self.each(args, &mut |s, x| {
+            "fract" => self.each(name, args, &mut |s, x| {
                 let f = s.call(Builtin::Floor, &[x[0]]);
                 s.bin(BinOp::Sub, x[0], f)
             }),
-            "radians" => self.each(args, &mut |s, x| {
+            "radians" => self.each(name, args, &mut |s, x| {
                 let k = s.konst(std::f64::consts::PI / 180.0);
                 s.bin(BinOp::Mul, x[0], k)
             }),
-            "degrees" => self.each(args, &mut |s, x| {
+            "degrees" => self.each(name, args, &mut |s, x| {
                 let k = s.konst(180.0 / std::f64::consts::PI);
                 s.bin(BinOp::Mul, x[0], k)
             }),

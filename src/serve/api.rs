@@ -16,7 +16,7 @@ use crate::base::diag::Diagnostics;
 use crate::ir::ParamDecl;
 use crate::render::scene::{self, BrdfCompiler, CompiledBrdf, Geometry, LoadOptions, LobeCompiler};
 use crate::render::RenderOptions;
-use crate::{Backend, Evaluator, Kernel, Options};
+use crate::{Backend, Kernel, Options};
 use serde_json::{json, Value};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -29,12 +29,18 @@ const CACHE_ENTRIES: usize = 64;
 
 /// A formula compiled with every parameter live.
 struct Compiled {
-    /// The formula's kernel; for a colour formula its red channel (the plots and analyses show red).
-    kernel: Arc<Kernel>,
-    /// A colour formula's green and blue kernels, which renders use.
-    green_blue: Option<[Arc<Kernel>; 2]>,
+    /// The formula's kernel, or a colour formula's red, green and blue ones (renders use all; the plots and
+    /// analyses show the first).
+    kernels: Vec<Arc<Kernel>>,
     warnings: Diagnostics,
     parse_us: f64,
+}
+
+impl Compiled {
+    /// The formula's kernel, or a colour formula's red one.
+    fn kernel(&self) -> &Arc<Kernel> {
+        &self.kernels[0]
+    }
 }
 
 /// Everything the endpoints share.
@@ -74,9 +80,8 @@ impl State {
         let (f, warnings) = crate::front::parse_with_warnings(name, text)?;
         let parse_us = t.elapsed().as_secs_f64() * 1e6;
         let opts = Options { backend: Backend::Jit, ..Options::default() };
-        let mut kernels = f.channels().into_iter().map(|c| crate::compile_formula(c, &opts).map(Arc::new)).collect::<Result<Vec<_>, _>>()?;
-        let green_blue = (kernels.len() == 3).then(|| [kernels[1].clone(), kernels[2].clone()]);
-        let c = Arc::new(Compiled { kernel: kernels.swap_remove(0), green_blue, warnings, parse_us });
+        let kernels = f.channels().into_iter().map(|c| crate::compile_formula(c, &opts).map(Arc::new)).collect::<Result<Vec<_>, _>>()?;
+        let c = Arc::new(Compiled { kernels, warnings, parse_us });
         let mut cache = lock(&self.kernels);
         if cache.len() >= CACHE_ENTRIES {
             cache.clear();
@@ -107,17 +112,12 @@ pub struct Live<'a>(&'a State);
 
 impl BrdfCompiler for Live<'_> {
     fn declare(&self, file: &str, src: &str) -> Result<Vec<ParamDecl>, Diagnostics> {
-        self.0.compiled(file, src).map(|c| c.kernel.formula.params.clone()).map_err(|e| diagnostics_of(file, src, e))
+        self.0.compiled(file, src).map(|c| c.kernel().formula.params.clone()).map_err(|e| diagnostics_of(file, src, e))
     }
     /// The page compiles precise (the `math` key of a scene material is not applied to live kernels).
     fn build(&self, file: &str, src: &str, _values: &[(String, f64)], _math: Option<crate::Mode>) -> Result<CompiledBrdf, Diagnostics> {
         let c = self.0.compiled(file, src).map_err(|e| diagnostics_of(file, src, e))?;
-        let mut used = c.kernel.used_inputs();
-        let green_blue = c.green_blue.as_ref().map(|gb| {
-            gb.iter().for_each(|k| used.0 |= k.used_inputs().0);
-            gb.clone().map(|k| k as Arc<dyn Evaluator>)
-        });
-        Ok(CompiledBrdf { used, evaluator: c.kernel.clone() as Arc<dyn Evaluator>, green_blue, math: c.kernel.math })
+        Ok(CompiledBrdf::from_kernels(&c.kernels))
     }
 }
 
@@ -318,7 +318,7 @@ pub fn compile(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
     limited(st, move |st| {
         let (name, text) = formula_field(&req)?;
         let c = st.compiled(&name, &text)?;
-        let f = &c.kernel.formula;
+        let f = &c.kernel().formula;
         let params: Vec<Value> = f
             .params
             .iter()
@@ -330,7 +330,7 @@ pub fn compile(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
             "used_inputs": f.used_inputs().iter().map(|i| i.name()).collect::<Vec<_>>(),
             "simplified": f.to_text(),
             "parse_us": c.parse_us,
-            "compile_us": c.kernel.compile_time.as_secs_f64() * 1e6,
+            "compile_us": c.kernel().compile_time.as_secs_f64() * 1e6,
             "warnings": c.warnings.to_json(),
         })))
     })
@@ -345,7 +345,7 @@ pub fn render(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
         let set = params_field(&req)?;
         let size = size_field(st, &req)?;
         let c = st.compiled(&name, &text)?;
-        check_cost(st, &c.kernel, (size * size) as f64, "this render")?;
+        check_cost(st, c.kernel(), (size * size) as f64, "this render")?;
         let g = st.geometry(size)?;
         let sc = g.with_materials(&set, Some((&name, &text)), &Live(st))?;
         let (frame, stats) = crate::render::render(&sc, &ropts()).map_err(|e| ApiError::new(500, e))?;
@@ -365,7 +365,7 @@ pub fn compare(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
         let set = params_field(&req)?;
         let size = size_field(st, &req)?;
         for (n, t) in [&a, &b] {
-            check_cost(st, &st.compiled(n, t)?.kernel, (size * size) as f64, "this comparison")?;
+            check_cost(st, st.compiled(n, t)?.kernel(), (size * size) as f64, "this comparison")?;
         }
         let g = st.geometry(size)?;
         let c = crate::render::compare::compare_in(&g, (&a.0, &a.1), (&b.0, &b.1), &set, &Live(st), &ropts())?;
@@ -388,7 +388,7 @@ pub fn plot(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
         let mut series = vec![];
         for f in list {
             let (name, text) = formula_field(f)?;
-            let k = st.compiled(&name, &text)?.kernel.clone();
+            let k = st.compiled(&name, &text)?.kernel().clone();
             let own: Vec<(String, f64)> = set.iter().filter(|(n, _)| k.formula.param_index(n).is_some()).cloned().collect();
             let params = values(&k, &own)?;
             series.push(crate::report::plot::Series {
@@ -410,7 +410,7 @@ pub fn analyze(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
     limited(st, move |st| {
         let (name, text) = formula_field(&req)?;
         let set = params_field(&req)?;
-        let k = st.compiled(&name, &text)?.kernel.clone();
+        let k = st.compiled(&name, &text)?.kernel().clone();
         // The accuracy grid (91 000 points plus fine grids per n) dominates.
         check_cost(st, &k, 2.0e6, "this analysis")?;
         let params = values(&k, &set)?;
@@ -429,7 +429,7 @@ pub fn analyze(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
         }
         if let Some(r) = req.get("reference") {
             let (rn, rt) = formula_field(r)?;
-            let rk = st.compiled(&rn, &rt)?.kernel.clone();
+            let rk = st.compiled(&rn, &rt)?.kernel().clone();
             let rp = rk.default_params();
             let lobe = crate::numerics::choose_lobe_input(k.used_inputs()).0;
             let rlobe = crate::numerics::choose_lobe_input(rk.used_inputs()).0;
@@ -549,7 +549,7 @@ mod tests {
     fn formulas_over_the_cost_budget_are_refused_before_running() {
         let st = state(10_000, 2);
         let heavy: String = (0..400).map(|i| format!("sin(NH*{i}.5) + ")).collect::<String>() + "0";
-        let k = st.compiled("h.brdf", &heavy).unwrap().kernel.clone();
+        let k = st.compiled("h.brdf", &heavy).unwrap().kernel().clone();
         assert!(check_cost(&st, &k, 64.0 * 64.0, "a small render").is_ok());
         let e = check_cost(&st, &k, 2048.0 * 2048.0, "this render").unwrap_err();
         assert_eq!(e.status, 422);

@@ -66,16 +66,23 @@ impl BrdfCompiler for LobeCompiler {
 /// [`CompiledBrdf`], each kernel warmed up (the batched kernel is built on first use; build it now, at load
 /// time, not inside the timed render).
 pub fn compile_channels(f: crate::ir::Formula, opts: &crate::Options) -> Result<CompiledBrdf, Diagnostics> {
-    let mut ks = Vec::with_capacity(3);
-    let mut used = InputSet::default();
-    for c in f.channels() {
-        let k = crate::compile_formula(c, opts)?;
-        k.warm_up();
-        used.0 |= k.used_inputs().0;
-        ks.push(Arc::new(k) as Arc<dyn Evaluator>);
+    let ks = f.channels().into_iter().map(|c| crate::compile_formula(c, opts).map(Arc::new)).collect::<Result<Vec<_>, _>>()?;
+    ks.iter().for_each(|k| k.warm_up());
+    Ok(CompiledBrdf::from_kernels(&ks))
+}
+
+impl CompiledBrdf {
+    /// A material's kernels from a formula's channel kernels ([`crate::ir::Formula::channels`] order: one, or
+    /// red, green, blue).
+    pub fn from_kernels(ks: &[Arc<crate::Kernel>]) -> CompiledBrdf {
+        let dynamic = |k: &Arc<crate::Kernel>| k.clone() as Arc<dyn Evaluator>;
+        CompiledBrdf {
+            evaluator: dynamic(&ks[0]),
+            green_blue: (ks.len() == 3).then(|| [dynamic(&ks[1]), dynamic(&ks[2])]),
+            used: ks.iter().map(|k| k.used_inputs()).collect(),
+            math: ks[0].math,
+        }
     }
-    let green_blue = (ks.len() == 3).then(|| [ks[1].clone(), ks[2].clone()]);
-    Ok(CompiledBrdf { evaluator: ks.swap_remove(0), green_blue, used, math: opts.math })
 }
 
 /// The scene file the tables came from: its name and text (for spans and notes) and the directory relative
