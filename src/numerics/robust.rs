@@ -157,10 +157,12 @@ pub fn sample(f: &Formula, bake: &[(usize, f64)], n: usize, seed: u64) -> Vec<Po
                 .iter()
                 .enumerate()
                 .map(|(k, d)| {
+                    // Drawn even when baked, so baking a parameter leaves every other value of the sample as it
+                    // was (and the pass measures a baked and a live compile on the same points).
+                    let (u, v) = (r.unit(), r.unit());
                     if let Some((_, v)) = bake.iter().find(|(j, _)| *j == k) {
                         return *v;
                     }
-                    let (u, v) = (r.unit(), r.unit());
                     let val = if u < 0.2 {
                         d.lo
                     } else if u < 0.4 {
