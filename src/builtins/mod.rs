@@ -41,6 +41,7 @@ pub enum Builtin {
     Eq,
     Ne,
     Select,
+    Fma,
 }
 
 /// How the JIT lowers a builtin.
@@ -219,7 +220,7 @@ pub fn clamp(x: f64, lo: f64, hi: f64) -> f64 {
     fmin(fmax(x, lo), hi)
 }
 
-const TABLE: [BuiltinInfo; 20] = [
+const TABLE: [BuiltinInfo; 21] = [
     BuiltinInfo {
         builtin: Builtin::Pow,
         name: "pow",
@@ -460,10 +461,22 @@ const TABLE: [BuiltinInfo; 20] = [
         wgsl: "select({2}, {1}, {0} != 0.0)",
         doc: "select(c, a, b) = a if c is true (not 0), else b; the untaken value never reaches the result",
     },
+    BuiltinInfo {
+        builtin: Builtin::Fma,
+        name: "fma",
+        arity: 3,
+        lowering: Lowering::Inline,
+        libm: Libm::Exact,
+        symbol: "",
+        bound: Bound::ROUNDED,
+        glsl: "fma({0}, {1}, {2})",
+        wgsl: "",
+        doc: "fma(a, b, c) = a*b + c rounded once (the accuracy pass's compensated power chains use it)",
+    },
 ];
 
 impl Builtin {
-    pub const ALL: [Builtin; 20] = [
+    pub const ALL: [Builtin; 21] = [
         Builtin::Pow,
         Builtin::Cos,
         Builtin::Sin,
@@ -484,6 +497,7 @@ impl Builtin {
         Builtin::Eq,
         Builtin::Ne,
         Builtin::Select,
+        Builtin::Fma,
     ];
 
     pub fn info(self) -> &'static BuiltinInfo {
@@ -527,6 +541,7 @@ impl Builtin {
             Builtin::Min => fmin(args[0], args[1]),
             Builtin::Max => fmax(args[0], args[1]),
             Builtin::Clamp => clamp(args[0], args[1], args[2]),
+            Builtin::Fma => args[0].mul_add(args[1], args[2]),
             _ => self.emit(&mut math::Direct, mode, args).unwrap_or(f64::NAN),
         }
     }
@@ -559,7 +574,7 @@ impl Builtin {
                 e.not(eq)
             }),
             Builtin::Select => logic::select(e, x, args[1], args[2]),
-            Builtin::Sqrt | Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Clamp => return None,
+            Builtin::Sqrt | Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Clamp | Builtin::Fma => return None,
         })
     }
 
@@ -594,7 +609,7 @@ impl Builtin {
             (Builtin::Exp, Mode::Fast) => ("lobe_exp_fast", Libm::F1(lobe_exp_fast)),
             (Builtin::Ln, Mode::Precise) => ("lobe_ln_precise", Libm::F1(lobe_ln_precise)),
             (Builtin::Ln, Mode::Fast) => ("lobe_ln_fast", Libm::F1(lobe_ln_fast)),
-            (Builtin::Sqrt | Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Clamp, _) => return None,
+            (Builtin::Sqrt | Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Clamp | Builtin::Fma, _) => return None,
             (Builtin::Floor | Builtin::Lt | Builtin::Le | Builtin::Eq | Builtin::Ne | Builtin::Select, _) => return None,
         })
     }
@@ -624,7 +639,7 @@ mod tests {
             let r = &TABLE[i];
             assert_eq!(r.builtin, *b);
             assert_eq!(Builtin::from_name(r.name), Some(*b));
-            let inline = matches!(b, Builtin::Sqrt | Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Clamp);
+            let inline = matches!(b, Builtin::Sqrt | Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Clamp | Builtin::Fma);
             assert_eq!(r.lowering == Lowering::Inline, inline, "{}", r.name);
             match r.libm {
                 Libm::F1(_) => assert_eq!(r.arity, 1, "{}", r.name),

@@ -72,6 +72,7 @@ fn stats_json(f: &Formula, s: &ErrorStats) -> serde_json::Value {
         "bits_error_avg": json::value(s.avg_bits), "bits_error_max": json::value(s.max_bits),
         "bits_error_worst": worst_json(f, &s.worst),
         "bits_error_max_well_conditioned": json::value(s.max_bits_well),
+        "bits_error_worst_well_conditioned": worst_json(f, &s.worst_well),
         "nonfinite_where_finite": s.nonfinite, "ill_conditioned": s.ill_conditioned, "undefined": s.undefined,
     })
 }
@@ -109,6 +110,9 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
     let t_pass = std::time::Instant::now();
     let pass = robust::improve(&f, &bake, &robust::PassOptions { math: a.math.mode, ..a.prefer.pass(a.points as usize) });
     let pass_ms = t_pass.elapsed().as_secs_f64() * 1e3;
+    // How far the worst well-conditioned point is from the ill-conditioned threshold.
+    let truth_f = crate::simplify::bake_only(&f, &bake);
+    let cond_well = pass.after.worst_well.as_ref().map(|w| robust::condition_ulps(&truth_f, &w.point, w.truth));
     let opts = |backend| Options { backend, bake: set.clone(), math: a.math.mode, ..Options::default() };
     let bounds = builtin_bounds(&simplified, a.math.mode);
     let jit = crate::compile_formula(f.clone(), &opts(Backend::Jit))?;
@@ -152,6 +156,8 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
             "bits_error_max": json::value(pass.after.max_bits),
             "bits_error_worst": worst_json(&f, &pass.after.worst),
             "bits_error_max_well_conditioned": json::value(pass.after.max_bits_well),
+            "bits_error_worst_well_conditioned": worst_json(&f, &pass.after.worst_well),
+            "condition_ulps_at_worst_well_conditioned": cond_well.map(json::value),
             "nonfinite_where_finite": pass.after.nonfinite,
             "ill_conditioned": pass.after.ill_conditioned,
             "undefined": pass.after.undefined,
@@ -206,7 +212,7 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
         let b: Vec<String> = bounds.iter().map(|(n, b)| format!("{n} {b}")).collect();
         println!("  builtins    {} ({} math)", b.join(", "), a.math.mode);
     }
-    print_accuracy(&f, &pass, a.points as usize, pass_ms);
+    print_accuracy(&f, &pass, a.points as usize, pass_ms, cond_well);
     println!(
         "  compile     jit {:.0} µs, interpreter {:.0} µs",
         jit.compile_time.as_secs_f64() * 1e6,
@@ -216,7 +222,7 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
 }
 
 /// The accuracy section of the text report.
-fn print_accuracy(f: &Formula, pass: &robust::Outcome, asked: usize, ms: f64) {
+fn print_accuracy(f: &Formula, pass: &robust::Outcome, asked: usize, ms: f64, cond_well: Option<f64>) {
     let reduced = if pass.points < asked { format!(", fewer than the {asked} asked: the formula is costly") } else { String::new() };
     println!(
         "  accuracy    bits of error vs the truth (~104-bit, unbounded exponent) at {} domain points{reduced} ({ms:.0} ms)",
@@ -247,6 +253,13 @@ fn print_accuracy(f: &Formula, pass: &robust::Outcome, asked: usize, ms: f64) {
         println!("    cost      {:.2}× the fastest form (static cost model)", pass.cost_after / pass.cost_before);
     }
     let a = &pass.after;
+    if let (Some(w), Some(c)) = (&a.worst_well, cond_well) {
+        println!(
+            "    worst well-conditioned point {} bits at {}; there a 1-ulp change of an input moves the true value by {c:.1} ulps",
+            format_args!("{:.2}", w.bits),
+            point_text(f, w)
+        );
+    }
     if a.ill_conditioned > 0 {
         let pct = 100.0 * a.ill_conditioned as f64 / a.points.max(1) as f64;
         println!(

@@ -32,8 +32,10 @@
 //! and its static cost ([`crate::simplify::accuracy::cost`]) stays within the budget: `--prefer speed` keeps
 //! only rewrites that cost nothing, `--prefer accuracy` (default) those within `max_cost` (1.3) × the fastest
 //! form's cost — up to [`NONFINITE_BUDGET`] (2×) for a rewrite that removes NaN/∞ results where the true
-//! value is finite, since those are wrong answers, not imprecise ones. Each trial is reported with what it
-//! bought.
+//! value is finite, since those are wrong answers, not imprecise ones — and up to the cost of the `pow`-call
+//! form for `compensated-power` (large baked integer powers as compensated chains): a baked exponent then never
+//! costs more than the live formula, which calls pow, and agrees with it within a few ulp instead of the plain
+//! chain's hundreds. Each trial is reported with what it bought.
 //!
 //! Cost: one truth evaluation per point (1–5 µs for a catalogue formula in release) plus one interpreter
 //! evaluation per point and candidate, plus the condition estimate (two truth evaluations per read input) at the
@@ -44,7 +46,9 @@ use crate::base::rng::Rng;
 use crate::backend::interp::Interp;
 use crate::backend::Evaluator;
 use crate::ir::{Formula, Input, N_INPUTS};
-use crate::simplify::accuracy::{cost, pow_call_policy, Rule};
+use crate::simplify::accuracy::{compensated_powers, cost, pow_call_policy, Rule};
+
+const COMPENSATED: &str = "compensated-power";
 use rayon::prelude::*;
 
 /// Budget multiple for a candidate that removes NaN/∞ results where the truth is finite (wrong answers rather
@@ -153,10 +157,12 @@ pub fn sample(f: &Formula, bake: &[(usize, f64)], n: usize, seed: u64) -> Vec<Po
                 .iter()
                 .enumerate()
                 .map(|(k, d)| {
+                    // Drawn even when baked, so baking a parameter leaves every other value of the sample as it
+                    // was (and the pass measures a baked and a live compile on the same points).
+                    let (u, v) = (r.unit(), r.unit());
                     if let Some((_, v)) = bake.iter().find(|(j, _)| *j == k) {
                         return *v;
                     }
-                    let (u, v) = (r.unit(), r.unit());
                     let val = if u < 0.2 {
                         d.lo
                     } else if u < 0.4 {
@@ -406,7 +412,8 @@ fn better(a: &ErrorStats, b: &ErrorStats) -> bool {
 pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcome {
     let base = crate::simplify::simplify(orig, bake);
     let truth_f = crate::simplify::bake_only(orig, bake);
-    let n = o.points.min((MAX_WORK / cost(&truth_f).max(1.0)) as usize).max(64);
+    // The simplified form's cost stands for the truth's work (the truth's own `x^2` is a pow call).
+    let n = o.points.min((MAX_WORK / cost(&base).max(1.0)) as usize).max(64);
     let points = sample(orig, bake, n, o.seed);
     let run = |f: &Formula| measure(&Interp::with_mode(f, o.math), &truth_f, &points);
     let before = run(&base);
@@ -418,7 +425,12 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
     let (mut cur, mut cur_stats, mut cur_cost) = (base.clone(), before.clone(), cost_before);
     let mut trials = Vec::new();
     let pow_call = crate::simplify::simplify_with(orig, bake, &pow_call_policy()).0;
-    let mut tries: Vec<(&'static str, &'static str, Option<usize>)> = vec![("pow-call", "integer powers above 8 as pow calls instead of multiplication chains", None)];
+    let compensated = compensated_powers(&pow_call);
+    let pow_cost = cost(&pow_call);
+    let mut tries: Vec<(&'static str, &'static str, Option<usize>)> = vec![
+        ("pow-call", "integer powers above 8 as pow calls instead of multiplication chains", None),
+        (COMPENSATED, "integer powers above 8 as compensated multiplication chains (fma error terms)", None),
+    ];
     for r in Rule::ALL {
         tries.push((r.name(), r.describe(), None));
     }
@@ -430,6 +442,7 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
         // quotient-chain goes site by site (Rule::apply_at); the others apply everywhere at once.
         let site = (rule == Some(Rule::QuotientChain)).then_some(k);
         let cand = match rule {
+            None if name == COMPENSATED => compensated.clone(),
             None => Some(pow_call.clone()).filter(|p| p.to_program_text() != cur.to_program_text()),
             Some(r) => r.apply_at(&cur, site),
         };
@@ -445,7 +458,12 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
         let stats = run(&cand);
         let c = cost(&cand);
         let fixes = stats.nonfinite < cur_stats.nonfinite;
-        let budget = if fixes && o.prefer == Prefer::Accuracy { base_budget.max(NONFINITE_BUDGET * cost_before) } else { base_budget };
+        let budget = match o.prefer {
+            Prefer::Accuracy if fixes => base_budget.max(NONFINITE_BUDGET * cost_before),
+            // A baked power may cost what the live formula's pow call costs (module docs).
+            Prefer::Accuracy if name == COMPENSATED => base_budget.max(pow_cost),
+            _ => base_budget,
+        };
         let (kept, mut reason) = if !better(&stats, &cur_stats) {
             (false, "no more accurate on the sample".to_string())
         } else if c > budget {

@@ -7,7 +7,8 @@
 //! against a higher-precision truth over the formula's domain, within a cost budget. A rule that does not
 //! apply returns `None`. Every rule is exact in real arithmetic; what changes is where f64 rounds:
 //!
-//! - `split-sqrt`: `sqrt(a·b) → sqrt(a)·sqrt(b)` for a, b ≥ 0 (range analysis). a·b underflows to 0 when both
+//! - `split-sqrt`: `sqrt(a·b) → sqrt(a)·sqrt(b)` for a, b ≥ 0 (range analysis, or a guard: the sqrt is used
+//!   only in the else branch of `a <= 0 || b <= 0 ? … : …`, as in an explorer BRDF's early return). a·b underflows to 0 when both
 //!   are below ~10⁻¹⁶², but sqrt(a)·sqrt(b) ≥ sqrt(4.9·10⁻³²⁴) never does (Ward's 1/sqrt(NL·NV)). One more
 //!   sqrt (cost +3), one more rounding (≤ 1.5 ulp instead of ≤ 1).
 //! - `quotient-chain`: a maximal tree of `*` and `/` is flattened into numerator and denominator factors and
@@ -21,13 +22,20 @@
 //!   c ∈ [0.5, 2] (Sterbenz), so near c = 1 the result rounds ~twice instead of cancelling two terms of size A.
 //!   The same cost (three multiplications and two additions either way).
 //!
+//! - `compensated-base`: `pow(a + b, y)` (y live) → `p + p·y·(e/s)` with s = a + b, p = pow(s, y) and e the
+//!   exact rounding error of the sum (2Sum, five additions): pow amplifies its base's relative error y times,
+//!   so F_ST's `(n/a·(c − 1) + 1)^a` at a = 1000 lost 500 ulp where its condition is 1. Cost ~12.
+//!
 //! A fourth candidate, large integer powers kept as `pow` calls instead of multiplication chains, is the
-//! simplifier's own [`super::Policy::max_chain`]; the chooser builds it with [`pow_call_policy`].
+//! simplifier's own [`super::Policy::max_chain`]; the chooser builds it with [`pow_call_policy`]. A fifth,
+//! [`compensated_powers`], rebuilds those calls as multiplication chains that carry their rounding errors
+//! (fma), within a few ulp of pow at ~3.5× the plain chain's operations and below pow's cost.
 //!
 //! # Cost model
 //! [`cost`] counts live nodes with weights fitted to JIT timings on x86-64 (BENCHMARKS.md, 2026-11-30: five
 //! extra divisions add ~3.4 ns to Beckmann's 8.5 ns, a libm exp ~5 ns): `+ − ×`, abs, min, max 1; clamp 2;
-//! `/` and sqrt 3; libm calls (pow, exp, ln, trig) 20; leaves and negation 0.
+//! `/` and sqrt 3; fma 1; math-library calls (exp, ln, trig) 20, pow 60 (pow(NH, e) with e live took 5.0× the
+//! ns of the 14-multiplication chain for NH¹⁰⁰⁰); leaves and negation 0.
 //! It ranks candidates; the kernel's run time, measured in `lobe bench`, is what the README reports.
 
 use super::range::Range;
@@ -41,16 +49,18 @@ pub enum Rule {
     SplitSqrt,
     QuotientChain,
     FactorQuadratic,
+    CompensatedBase,
 }
 
 impl Rule {
-    pub const ALL: [Rule; 3] = [Rule::SplitSqrt, Rule::QuotientChain, Rule::FactorQuadratic];
+    pub const ALL: [Rule; 4] = [Rule::SplitSqrt, Rule::QuotientChain, Rule::FactorQuadratic, Rule::CompensatedBase];
 
     pub fn name(self) -> &'static str {
         match self {
             Rule::SplitSqrt => "split-sqrt",
             Rule::QuotientChain => "quotient-chain",
             Rule::FactorQuadratic => "factor-quadratic",
+            Rule::CompensatedBase => "compensated-base",
         }
     }
 
@@ -60,6 +70,7 @@ impl Rule {
             Rule::SplitSqrt => "sqrt(a*b) as sqrt(a)*sqrt(b): no underflow of a*b",
             Rule::QuotientChain => "products/quotients reassociated: divide by each tiny-or-huge factor separately",
             Rule::FactorQuadratic => "A*c^2 + (1 - A)*c as c*(1 + A*(c - 1)): no cancellation near c = 1",
+            Rule::CompensatedBase => "pow(a + b, y) corrected by the rounding error of a + b: no amplification by y",
         }
     }
 
@@ -78,6 +89,7 @@ impl Rule {
             Rule::SplitSqrt => split_sqrt(f, &ranges),
             Rule::QuotientChain => quotient_chain(f, &ranges, site),
             Rule::FactorQuadratic => factor_quadratic(f),
+            Rule::CompensatedBase => compensated_base(f),
         };
         if !fired {
             return None;
@@ -93,6 +105,62 @@ pub fn pow_call_policy() -> Policy {
     Policy { max_chain: 8, ..Policy::default() }
 }
 
+/// The `compensated-power` candidate: `f` simplified with [`pow_call_policy`] (so integer powers above 8 are
+/// still `pow` calls), each `pow(x, k)` with a constant integer 9 ≤ k ≤ [`super::MAX_POW_CHAIN`] and x in
+/// [−1, 1] rebuilt as a compensated multiplication chain, then simplified again. `None` when no power qualifies.
+///
+/// Each step of the chain ([`super::powi::steps`]) carries x^j as an unevaluated sum `h + l`: `h = hₐ·h_b` and
+/// its exact rounding error `fma(hₐ, h_b, −h)` plus the first-order terms `hₐ·l_b + lₐ·h_b` (two more fmas)
+/// make the new `l`; the result is `h + l`. The error is then a few ulp whatever k (the plain chain's grows
+/// like k·u: ~490 ulp at k = 1000). The `l` chain runs beside the `h` chain, so a scalar kernel's latency
+/// grows little; the operation count ~3.5×. |x| ≤ 1 keeps every `h` finite (∞ − ∞ would be NaN); below
+/// 2⁻¹⁰²² the error terms underflow and the chain degrades to the plain one's absolute error.
+pub fn compensated_powers(f: &Formula) -> Option<Formula> {
+    let ranges = node_ranges(f, &Policy::default());
+    let (ir, root, fired) = rebuild(f, |ir, map, id, n| {
+        let Node::Call(Builtin::Pow, [x, k, _]) = n else { return None };
+        let k = f.ir.node(k).as_const()?;
+        let r = ranges[x.index()];
+        if !(k.fract() == 0.0 && (9.0..=f64::from(super::MAX_POW_CHAIN)).contains(&k) && !r.nan && r.lo >= -1.0 && r.hi <= 1.0) {
+            return None;
+        }
+        let s = f.ir.span(id);
+        // Exponent j → (h, l) with x^j = h + l to first order; l = None where h is exact (j = 1).
+        let mut have: Vec<(u32, NodeId, Option<NodeId>)> = vec![(1, map[x.index()], None)];
+        for (a, b) in super::powi::steps(k as u32) {
+            let get = |j: u32| have.iter().find(|e| e.0 == j).map(|e| (e.1, e.2));
+            let ((ha, la), (hb, lb)) = (get(a)?, get(b)?);
+            let h = ir.bin(BinOp::Mul, ha, hb, s);
+            let nh = ir.neg(h, s);
+            let mut l = ir.call(Builtin::Fma, &[ha, hb, nh], s);
+            if a == b {
+                if let Some(la) = la {
+                    let two = ir.bin(BinOp::Add, ha, ha, s);
+                    l = ir.call(Builtin::Fma, &[two, la, l], s);
+                }
+            } else {
+                if let Some(lb) = lb {
+                    l = ir.call(Builtin::Fma, &[ha, lb, l], s);
+                }
+                if let Some(la) = la {
+                    l = ir.call(Builtin::Fma, &[la, hb, l], s);
+                }
+            }
+            have.push((a + b, h, Some(l)));
+        }
+        let (_, h, l) = *have.last()?;
+        Some(match l {
+            Some(l) => ir.bin(BinOp::Add, h, l, s),
+            None => h,
+        })
+    });
+    if !fired {
+        return None;
+    }
+    let g = Formula { ir, root, ..f.clone() };
+    Some(super::simplify_with(&g, &[], &Policy::default()).0)
+}
+
 /// Static cost of a formula's live nodes (module docs).
 pub fn cost(f: &Formula) -> f64 {
     let mut c = 0.0;
@@ -103,10 +171,11 @@ pub fn cost(f: &Formula) -> f64 {
             Node::Binary(..) => 1.0,
             Node::Call(b, _) => match b {
                 Builtin::Sqrt => 3.0,
-                Builtin::Abs | Builtin::Min | Builtin::Max => 1.0,
+                Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Fma => 1.0,
                 Builtin::Clamp => 2.0,
                 Builtin::Lt | Builtin::Le | Builtin::Eq | Builtin::Ne | Builtin::Select => 2.0,
                 Builtin::Floor => 6.0,
+                Builtin::Pow => 60.0,
                 _ => 20.0,
             },
         }
@@ -135,12 +204,60 @@ fn rebuild(f: &Formula, mut rw: impl FnMut(&mut Ir, &[NodeId], NodeId, Node) -> 
     (ir, root, fired)
 }
 
-// sqrt(a*b) → sqrt(a)*sqrt(b)   when a ≥ +0 and b ≥ +0
+/// Per node, the nodes known to be > 0 (or NaN) wherever its value is used: it is reached only through the
+/// else branch of selects `x <= 0 ? … : …` (and `x <= 0 || y <= 0`, which the front end writes as
+/// `select(x <= 0, 1, y <= 0)`). An explorer BRDF's `if (NdotL <= 0.0 || NdotV <= 0.0) return 0` guards its
+/// body this way, while the inputs' own ranges include negative cosines. `None`: not reachable from the root.
+fn positive_guards(f: &Formula) -> Vec<Option<Vec<NodeId>>> {
+    let ir = &f.ir;
+    // Nodes `x` with `x > 0` (or NaN) wherever `cond` is false.
+    fn falses(ir: &Ir, cond: NodeId, out: &mut Vec<NodeId>) {
+        match *ir.node(cond) {
+            Node::Call(Builtin::Le, [x, z, _]) if ir.node(z).as_const() == Some(0.0) => out.push(x),
+            Node::Call(Builtin::Select, [p, one, q]) if ir.node(one).as_const().is_some_and(|v| v != 0.0 && !v.is_nan()) => {
+                falses(ir, p, out);
+                falses(ir, q, out);
+            }
+            _ => {}
+        }
+    }
+    let mut g: Vec<Option<Vec<NodeId>>> = vec![None; ir.len()];
+    g[f.root.index()] = Some(vec![]);
+    // Parents have larger ids than their operands: a reverse sweep sees every parent before its children.
+    for i in (0..=f.root.index()).rev() {
+        let Some(mine) = g[i].clone() else { continue };
+        let id = NodeId(i as u32);
+        let node = *ir.node(id);
+        let mut give = |child: NodeId, extra: &[NodeId]| {
+            let mut set = mine.clone();
+            set.extend_from_slice(extra);
+            let slot = &mut g[child.index()];
+            *slot = Some(match slot.take() {
+                None => set,
+                Some(old) => old.into_iter().filter(|x| set.contains(x)).collect(),
+            });
+        };
+        if let Node::Call(Builtin::Select, [c, t, e]) = node {
+            let mut pos = vec![];
+            falses(ir, c, &mut pos);
+            give(c, &[]);
+            give(t, &[]);
+            give(e, &pos);
+        } else {
+            node.for_each_arg(|a| give(a, &[]));
+        }
+    }
+    g
+}
+
+// sqrt(a*b) → sqrt(a)*sqrt(b)   when a ≥ +0 and b ≥ +0 (by range, or by a guard around the sqrt)
 fn split_sqrt(f: &Formula, ranges: &[Range]) -> (Ir, NodeId, bool) {
+    let guards = positive_guards(f);
     rebuild(f, |ir, map, id, n| {
         let Node::Call(Builtin::Sqrt, [x, ..]) = n else { return None };
         let Node::Binary(BinOp::Mul, a, b) = *f.ir.node(x) else { return None };
-        if !(ranges[a.index()].nonneg() && ranges[b.index()].nonneg()) {
+        let pos = |y: NodeId| ranges[y.index()].nonneg() || guards[id.index()].as_ref().is_some_and(|g| g.contains(&y));
+        if !(pos(a) && pos(b)) {
             return None;
         }
         let s = f.ir.span(id);
@@ -218,6 +335,39 @@ fn quotient_chain(f: &Formula, ranges: &[Range], only: Option<usize>) -> (Ir, No
     })
 }
 
+// pow(s, y) with s = a + b (or max(a + b, 0)) → p + p·y·(e/s), p = pow(s, y), e = a + b − s exactly (2Sum)
+fn compensated_base(f: &Formula) -> (Ir, NodeId, bool) {
+    rebuild(f, |ir, map, id, n| {
+        let Node::Call(Builtin::Pow, [base, y, _]) = n else { return None };
+        // Constant exponents become chains (or compensated chains); this is for pow calls.
+        if f.ir.node(y).as_const().is_some() {
+            return None;
+        }
+        let sum = match *f.ir.node(base) {
+            Node::Call(Builtin::Max, [s, z, _]) if f.ir.node(z).as_const() == Some(0.0) => s,
+            _ => base,
+        };
+        let Node::Binary(BinOp::Add, a, b) = *f.ir.node(sum) else { return None };
+        let sp = f.ir.span(id);
+        let (a, b, s, y) = (map[a.index()], map[b.index()], map[sum.index()], map[y.index()]);
+        let sub = |ir: &mut Ir, x, z| ir.bin(BinOp::Sub, x, z, sp);
+        // 2Sum (Knuth): e = (a − (s − b')) + (b − b'), b' = s − a; exact whatever the magnitudes.
+        let bb = sub(ir, s, a);
+        let ab = sub(ir, s, bb);
+        let ea = sub(ir, a, ab);
+        let eb = sub(ir, b, bb);
+        let e = ir.bin(BinOp::Add, ea, eb, sp);
+        // pow(s + e, y) = pow(s, y)·(1 + y·e/s + O(e²)); s ≤ 0 (clamped to a zero base) divides by the smallest
+        // normal instead, where p = 0 (or NaN for a negative base, as before) and the correction is finite.
+        let tiny = ir.konst(f64::MIN_POSITIVE, sp);
+        let den = ir.call(Builtin::Max, &[s, tiny], sp);
+        let r = ir.bin(BinOp::Div, e, den, sp);
+        let yr = ir.bin(BinOp::Mul, y, r, sp);
+        let p = ir.call(Builtin::Pow, &[map[base.index()], y], sp);
+        Some(ir.call(Builtin::Fma, &[p, yr, p], sp))
+    })
+}
+
 // A*c^2 + (1 - A)*c → c*(1 + A*(c - 1))
 fn factor_quadratic(f: &Formula) -> (Ir, NodeId, bool) {
     let ir0 = &f.ir;
@@ -286,6 +436,11 @@ mod tests {
         assert_eq!(g.to_text().matches("sqrt").count(), 2, "{}", g.to_text());
         // x − 1 may be negative: sqrt((x−1)·y) is NaN for x < 1 either way, but the split is not exact.
         assert!(Rule::SplitSqrt.apply(&parse("sqrt((NL - 2)*(NV - 2))")).is_none());
+        // A guard makes the factors positive where the sqrt's value is used; without it, no split.
+        let guarded = "let a = NL - 0.5\nlet b = NV - 0.5\na <= 0 || b <= 0 ? 0 : 1/sqrt(a*b)";
+        assert!(Rule::SplitSqrt.apply(&parse(guarded)).is_some());
+        assert!(Rule::SplitSqrt.apply(&parse("let a = NL - 0.5\nlet b = NV - 0.5\na <= 0 ? 0 : 1/sqrt(a*b)")).is_none());
+        assert!(Rule::SplitSqrt.apply(&parse("let a = NL - 0.5\nlet b = NV - 0.5\n(a <= 0 || b <= 0 ? 0 : 1) + sqrt(a*b)")).is_none());
     }
 
     #[test]
@@ -301,6 +456,26 @@ mod tests {
         assert_eq!(sites.len(), 3, "{:?}", sites.iter().map(|g| g.to_text()).collect::<Vec<_>>());
         // A single divisor is left alone.
         assert!(Rule::QuotientChain.apply(&parse("NH / NL")).is_none());
+    }
+
+    #[test]
+    fn compensated_power_replaces_large_integer_powers_only() {
+        let f = crate::front::parse("b.brdf", "NH^n").unwrap();
+        let calls = |b: u32| crate::simplify::simplify_with(&f, &[(0, f64::from(b))], &pow_call_policy()).0;
+        let g = compensated_powers(&calls(1000)).unwrap();
+        let t = g.to_program_text();
+        assert!(t.contains("fma(") && !t.contains("pow("), "{t}");
+        let mut xs = [0.5; crate::ir::N_INPUTS];
+        xs[crate::ir::Input::NH.index()] = 0.999_999_7;
+        let ev = crate::backend::interp::Interp::new(&g);
+        // glibc's pow is within 1 ulp; the plain chain is off by ~100 ulp here.
+        let (got, want) = (crate::backend::Evaluator::eval(&ev, &xs, &[1000.0]), 0.999_999_7f64.powf(1000.0));
+        assert!((got - want).abs() <= 2.0 * f64::EPSILON * want, "{got} {want}");
+        // Small powers stay chains, live exponents and bases outside [−1, 1] stay as they are.
+        assert!(compensated_powers(&calls(8)).is_none());
+        assert!(compensated_powers(&crate::simplify::simplify_with(&f, &[], &pow_call_policy()).0).is_none());
+        let big = crate::front::parse("b.brdf", "(2*NH)^n").unwrap();
+        assert!(compensated_powers(&crate::simplify::simplify_with(&big, &[(0, 1000.0)], &pow_call_policy()).0).is_none());
     }
 
     #[test]

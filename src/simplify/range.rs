@@ -226,6 +226,13 @@ impl Range {
             Builtin::Min => a.min(args[1]),
             Builtin::Max => a.max(args[1]),
             Builtin::Clamp => a.max(args[1]).min(args[2]),
+            // The exact product lies within the rounded products' range widened by an ulp; a negative product
+            // below the denormals plus a zero c rounds once, to −0 (a rounded product and + 0 would give +0).
+            Builtin::Fma => {
+                let m = a.mul_(args[1]);
+                let r = Range::widened(m.lo, m.hi, m.nan, m.negz).add_(args[2]);
+                Range { negz: r.negz || m.negz || (m.lo < 0.0 && args[2].contains_zero()), ..r }
+            }
             Builtin::Floor => Range::new(a.lo.floor(), a.hi.floor(), a.nan, a.negz),
             Builtin::Lt | Builtin::Le | Builtin::Eq | Builtin::Ne => Range::new(0.0, 1.0, false, false),
             Builtin::Select => {

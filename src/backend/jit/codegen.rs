@@ -378,7 +378,7 @@ impl<L: Lanes> Translator<'_, '_, L> {
         Ok(L::from_lanes(self.b, &lanes))
     }
 
-    /// sqrt, abs, min, max, clamp: native instructions with exactly the table's semantics.
+    /// sqrt, abs, min, max, clamp, fma: native instructions with exactly the table's semantics.
     fn inline(&mut self, f: Builtin, args: [NodeId; 3]) -> Result<Value, JitError> {
         let x = self.arg(args[0])?;
         Ok(match f {
@@ -390,6 +390,11 @@ impl<L: Lanes> Translator<'_, '_, L> {
             Builtin::Clamp => {
                 let m = self.max(args[0], args[1])?;
                 self.min_value(m, args[2])?
+            }
+            // One rounding, as Rust's `mul_add` (the interpreter's); a libm call on a target without FMA.
+            Builtin::Fma => {
+                let (y, z) = (self.arg(args[1])?, self.arg(args[2])?);
+                self.b.ins().fma(x, y, z)
             }
             other => return Err(JitError::Internal(format!("builtin `{}` is not an inline lowering", other.name()))),
         })

@@ -35,10 +35,10 @@ const MAX_NEST: u32 = 1500;
 type R<T> = Result<T, Diagnostic>;
 
 /// The GLSL functions lobe evaluates, besides user functions: (GLSL name, what it lowers to).
-const GLSL_FUNCTIONS: [&str; 33] = [
+const GLSL_FUNCTIONS: [&str; 34] = [
     "pow", "cos", "sin", "tan", "acos", "asin", "atan", "exp", "log", "sqrt", "abs", "min", "max", "clamp",
     "floor", "dot", "cross", "length", "normalize", "reflect", "distance", "mix", "smoothstep", "step", "sign",
-    "fract", "radians", "degrees", "inversesqrt", "ceil", "mod", "exp2", "log2",
+    "fract", "radians", "degrees", "inversesqrt", "ceil", "mod", "exp2", "log2", "fma",
 ];
 
 fn ty_of(v: Val) -> Type {
