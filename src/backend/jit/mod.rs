@@ -122,6 +122,10 @@ fn host_fma() -> bool {
     host_isa().is_ok_and(|isa| isa.has_native_fma())
 }
 
+extern "C" fn fma_libcall(a: f64, b: f64, c: f64) -> f64 {
+    a.mul_add(b, c)
+}
+
 type ScalarFn = unsafe extern "C" fn(*const f64, *const f64, *const f64) -> f64;
 type PrepareFn = unsafe extern "C" fn(*const f64, *mut f64);
 type BatchFn = unsafe extern "C" fn(*const *const f64, *const f64, *const f64, *mut f64, usize);
@@ -348,6 +352,8 @@ impl Jit {
         for (sym, ptr) in codegen::used_symbols(ir, mode, outline) {
             builder.symbol(sym, ptr);
         }
+        // Cranelift's libcall for `fma` on a host without the instruction: Rust's correctly rounded one.
+        builder.symbol("fma", fma_libcall as *const u8);
         let mut module = JITModule::new(builder);
         let plan = codegen::Plan::new(ir, root);
         let defined = codegen::declare_imports(&mut module, ir, mode, outline).and_then(|imports| {
