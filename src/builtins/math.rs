@@ -694,8 +694,8 @@ fn pow_specials<E: Emit>(e: &mut E, x: E::V, y: E::V, mag: E::V) -> E::V {
 /// |y| from which e^(y·ln|x|) saturates for every |x| ≠ 1 (2^64·2^-53 > 745).
 const Y_CAP: f64 = 18446744073709551616.0; // 2^64
 
-/// |x| and y made safe for the general case: |x| finite and > 0 (else 2), |y| ≤ 2^64 (any larger |y| already
-/// saturates e^(y·ln|x|) for every |x| ≠ 1).
+/// |x| and y made safe for the general case: |x| finite and > 0 (else 2), y clamped to ±2^64 (any larger |y|
+/// already saturates e^(y·ln|x|) for every |x| ≠ 1).
 fn pow_operands<E: Emit>(e: &mut E, x: E::V, y: E::V) -> (E::V, E::V) {
     let ax = e.abs(x);
     let zero = e.konst(0.0);
@@ -704,11 +704,8 @@ fn pow_operands<E: Emit>(e: &mut E, x: E::V, y: E::V) -> (E::V, E::V) {
     let ok = e.and(pos, fin);
     let two = e.konst(2.0);
     let axs = e.select(ok, ax, two);
-    let ay = e.abs(y);
-    let small = ltk(e, ay, Y_CAP);
-    let l = e.konst(Y_CAP);
-    let capped = copysign(e, l, y);
-    let ys = e.select(small, y, capped);
+    // A clamp (two instructions in vector lanes: min/max); a NaN y stays NaN, for the special-case block.
+    let ys = clamp_to(e, y, -Y_CAP, Y_CAP);
     (axs, ys)
 }
 
