@@ -245,23 +245,12 @@ const EXP_ONE: u64 = 0x3ff0_0000_0000_0000;
 
 // Small helpers over Emit, so the algorithms read like the formulas they are.
 
-/// `c0 + x·(c1 + x·(c2 + …))` with fused steps.
-fn horner_fma<E: Emit>(e: &mut E, x: E::V, cs: &[f64]) -> E::V {
+/// `c0 + x·(c1 + x·(c2 + …))` (Horner, each step one fused multiply-add).
+fn horner<E: Emit>(e: &mut E, x: E::V, cs: &[f64]) -> E::V {
     let mut acc = e.konst(cs[cs.len() - 1]);
     for &c in cs[..cs.len() - 1].iter().rev() {
         let k = e.konst(c);
         acc = e.fma(acc, x, k);
-    }
-    acc
-}
-
-/// `c0 + x·(c1 + x·(c2 + …))` (Horner, unfused).
-fn horner<E: Emit>(e: &mut E, x: E::V, cs: &[f64]) -> E::V {
-    let mut acc = e.konst(cs[cs.len() - 1]);
-    for &c in cs[..cs.len() - 1].iter().rev() {
-        let m = e.mul(acc, x);
-        let k = e.konst(c);
-        acc = e.add(m, k);
     }
     acc
 }
@@ -454,7 +443,7 @@ fn exp_dd<E: Emit>(e: &mut E, xh: E::V, xl: E::V) -> E::V {
     let j = e.sub(k, q128);
     let t_hi = e.lookup(&EXP_T_HI, j);
     let t_tail = e.lookup(&EXP_T_TAIL, j);
-    let p = horner_fma(e, r, &[1.0 / 2.0, 1.0 / 6.0, 1.0 / 24.0, 1.0 / 120.0]);
+    let p = horner(e, r, &[1.0 / 2.0, 1.0 / 6.0, 1.0 / 24.0, 1.0 / 120.0]);
     let r2 = e.mul(r, r);
     let em1 = e.fma(r2, p, r);
     let tmp = e.add(t_tail, em1);
