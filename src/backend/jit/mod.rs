@@ -126,6 +126,12 @@ extern "C" fn fma_libcall(a: f64, b: f64, c: f64) -> f64 {
     a.mul_add(b, c)
 }
 
+/// Symbols Cranelift's own lowering may call: `fma` (per lane, on a host without the instruction) as Rust's
+/// correctly rounded `mul_add`, so the math library's `fma` has the same bits everywhere.
+fn runtime_symbols(builder: &mut JITBuilder) {
+    builder.symbol("fma", fma_libcall as *const u8);
+}
+
 type ScalarFn = unsafe extern "C" fn(*const f64, *const f64, *const f64) -> f64;
 type PrepareFn = unsafe extern "C" fn(*const f64, *mut f64);
 type BatchFn = unsafe extern "C" fn(*const *const f64, *const f64, *const f64, *mut f64, usize);
@@ -352,8 +358,7 @@ impl Jit {
         for (sym, ptr) in codegen::used_symbols(ir, mode, outline) {
             builder.symbol(sym, ptr);
         }
-        // Cranelift's libcall for `fma` on a host without the instruction: Rust's correctly rounded one.
-        builder.symbol("fma", fma_libcall as *const u8);
+        runtime_symbols(&mut builder);
         let mut module = JITModule::new(builder);
         let plan = codegen::Plan::new(ir, root);
         let defined = codegen::declare_imports(&mut module, ir, mode, outline).and_then(|imports| {
@@ -589,6 +594,66 @@ mod tests {
         let d = JitError::Module("out of memory".into()).to_diagnostic();
         assert!(d.message.contains("out of memory"));
         assert!(d.hints.iter().any(|h| h.contains("--backend interp")));
+    }
+
+    /// On a host without FMA (simulated: the host ISA with `has_fma` off), Cranelift lowers `fma` to a call
+    /// of the `fma` symbol, per lane for F64X2; [`runtime_symbols`] resolves it to a correctly rounded fma.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn fma_without_the_instruction_is_still_correctly_rounded() {
+        use cranelift_codegen::ir::{types, AbiParam, InstBuilder};
+        use cranelift_frontend::FunctionBuilder;
+        let mut fb = settings::builder();
+        for (k, v) in [("opt_level", "speed"), ("use_colocated_libcalls", "false"), ("is_pic", "false")] {
+            fb.set(k, v).expect("flag");
+        }
+        let mut ib = cranelift_native::builder().expect("host supported");
+        ib.set("has_fma", "false").expect("x86-64 has the setting");
+        let isa = ib.finish(settings::Flags::new(fb)).expect("isa");
+        assert!(!isa.has_native_fma());
+        let mut builder = JITBuilder::with_isa(isa, default_libcall_names());
+        runtime_symbols(&mut builder);
+        let mut module = JITModule::new(builder);
+        let mut ctx = module.make_context();
+        let mut fctx = FunctionBuilderContext::new();
+        let mut ids = vec![];
+        for (i, vector) in [false, true].into_iter().enumerate() {
+            module.clear_context(&mut ctx);
+            for _ in 0..3 {
+                ctx.func.signature.params.push(AbiParam::new(types::F64));
+            }
+            ctx.func.signature.returns.push(AbiParam::new(types::F64));
+            let mut b = FunctionBuilder::new(&mut ctx.func, &mut fctx);
+            let block = b.create_block();
+            b.append_block_params_for_function_params(block);
+            b.switch_to_block(block);
+            b.seal_block(block);
+            let p = b.block_params(block).to_vec();
+            let r = if vector {
+                let v: Vec<_> = p.iter().map(|&x| b.ins().splat(types::F64X2, x)).collect();
+                let f = b.ins().fma(v[0], v[1], v[2]);
+                b.ins().extractlane(f, 1)
+            } else {
+                b.ins().fma(p[0], p[1], p[2])
+            };
+            b.ins().return_(&[r]);
+            b.finalize(module.target_config());
+            let id = module.declare_function(&format!("f{i}"), cranelift_module::Linkage::Local, &ctx.func.signature).expect("declare");
+            module.define_function(id, &mut ctx).expect("define");
+            ids.push(id);
+        }
+        module.finalize_definitions().expect("every symbol resolves");
+        let (a, b, c) = (1.0 + 2f64.powi(-30), 1.0 - 2f64.powi(-30), -1.0);
+        assert_eq!(a * b + c, 0.0, "the unfused result differs");
+        for id in ids {
+            let f = module.get_finalized_function(id);
+            // Safety: `f` was just compiled with signature (f64, f64, f64) -> f64 and `module` outlives the call.
+            let call = unsafe { std::mem::transmute::<*const u8, extern "C" fn(f64, f64, f64) -> f64>(f) };
+            assert_eq!(call(a, b, c), -(2f64.powi(-60)));
+            assert_eq!(call(0.1, 10.0, -1.0).to_bits(), 0.1f64.mul_add(10.0, -1.0).to_bits());
+        }
+        // Safety: no pointer into the module is used after this point.
+        unsafe { module.free_memory() };
     }
 
     #[test]
