@@ -7,8 +7,9 @@
 //! - builtins come from the one table: `Lowering::Inline` becomes a native instruction, `Lowering::Math` the
 //!   math library's code (`builtins::math`) emitted inline in the kernel's lanes — the definition the
 //!   interpreter runs on `f64`, so the two backends agree bit for bit in each math mode; the only calls are the
-//!   trigonometric fallbacks to libm for huge arguments, registered with `JITBuilder::symbol` before anything
-//!   is finalized (an unresolved import would panic inside Cranelift);
+//!   trigonometric fallbacks to libm for huge arguments and, on a host without FMA, Cranelift's `fma` libcall
+//!   (a correctly rounded fma: same bits), registered with `JITBuilder::symbol` before anything is finalized
+//!   (an unresolved import would panic inside Cranelift);
 //! - parameter-only work is computed once per parameter set by a prepare function into a block the kernels
 //!   load (the prepared parameter block: cached per thread for scalar calls, once per batch);
 //! - one `JITModule` per compiled formula: the scalar kernel and the prepare function are compiled at once,
