@@ -11,7 +11,8 @@
 //!   (a correctly rounded fma: same bits), registered with `JITBuilder::symbol` before anything is finalized
 //!   (an unresolved import would panic inside Cranelift);
 //! - parameter-only work is computed once per parameter set by a prepare function into a block the kernels
-//!   load (the prepared parameter block: cached per thread for scalar calls, once per batch);
+//!   load (the prepared parameter block: held by a [`PreparedJit`] from `Evaluator::prepare`, cached per thread
+//!   for plain scalar calls, computed once per batch);
 //! - one `JITModule` per compiled formula: the scalar kernel and the prepare function are compiled at once,
 //!   the batched kernel is added to the same module on the first batch call; its memory is freed when the
 //!   last kernel using it is dropped;
@@ -25,8 +26,9 @@
 //!
 //! Cost model. Compiling is Cranelift's work: a fixed per-module cost plus roughly linear in the nodes; the
 //! batched kernel (a loop and two copies of the body) costs more than the scalar one, hence built lazily. A
-//! scalar call pays a fixed dispatch (`Kernel` → `dyn Evaluator` → length check → generated code) on top of
-//! the body, which dominates short arithmetic formulas; the batched kernel pays it once per batch, runs two
+//! plain scalar call pays a fixed dispatch (`Kernel` → `dyn Evaluator` → length check → per-thread block
+//! lookup → generated code) on top of the body, which dominates short arithmetic formulas; a prepared call
+//! ([`PreparedJit`]) pays only a `match` and the indirect call; the batched kernel pays it once per batch, runs two
 //! lanes per instruction, and does each clamp against a constant as one `maxpd`/`minpd`. A transcendental
 //! builtin is 20–200 vector instructions (pow the most: double-double in precise mode), straight-line except
 //! for rarely taken special-case blocks; scalar code runs the same instructions one lane at a time, where its
@@ -42,7 +44,7 @@ mod codegen;
 
 use crate::base::diag::Diagnostic;
 use crate::ir::{Formula, InputSet, Ir, NodeId, N_INPUTS};
-use crate::backend::{Columns, Evaluator};
+use crate::backend::{Columns, Evaluator, Prepared};
 use crate::builtins::Mode;
 use cranelift_codegen::ir::UserFuncName;
 use cranelift_codegen::isa::OwnedTargetIsa;
@@ -184,7 +186,7 @@ impl Compiled {
 }
 
 /// A prepared parameter block: what the prepare function computed for one kernel and one parameter vector.
-struct Prepared {
+struct CachedBlock {
     id: u64,
     /// The parameters' bit patterns (so −0/+0 and NaN payloads count as different, as they may to the code).
     params: Vec<u64>,
@@ -196,7 +198,7 @@ struct Prepared {
 const PREPARED_KEEP: usize = 8;
 
 thread_local! {
-    static PREPARED: RefCell<Vec<Prepared>> = const { RefCell::new(Vec::new()) };
+    static PREPARED: RefCell<Vec<CachedBlock>> = const { RefCell::new(Vec::new()) };
 }
 
 impl Compiled {
@@ -215,7 +217,7 @@ impl Compiled {
         if self.block_len == 0 {
             return f(&[]);
         }
-        let same = |e: &Prepared| {
+        let same = |e: &CachedBlock| {
             e.id == self.id && e.params.len() == params.len() && e.params.iter().zip(params).all(|(a, b)| *a == b.to_bits())
         };
         PREPARED.with(|cache| match cache.try_borrow_mut() {
@@ -229,7 +231,7 @@ impl Compiled {
                     None => {
                         let mut block = vec![0.0; self.block_len];
                         self.prepare_into(params, &mut block);
-                        c.insert(0, Prepared { id: self.id, params: params.iter().map(|p| p.to_bits()).collect(), block });
+                        c.insert(0, CachedBlock { id: self.id, params: params.iter().map(|p| p.to_bits()).collect(), block });
                         c.truncate(PREPARED_KEEP);
                     }
                 }
@@ -539,7 +541,41 @@ impl JitKernel {
     }
 }
 
+/// A JIT kernel bound to one parameter vector: the parameters padded and the prepared block computed once, so a
+/// call is the generated code and nothing else. Borrows the kernel, which keeps the code alive.
+pub struct PreparedJit<'a> {
+    /// Copy of `kernel.code.scalar`.
+    scalar: ScalarFn,
+    /// At least `kernel.n_params` slots (missing ones NaN, as in `eval`).
+    params: Vec<f64>,
+    /// `kernel.code.block_len` slots, computed from `params`.
+    block: Vec<f64>,
+    kernel: &'a JitKernel,
+}
+
+impl PreparedJit<'_> {
+    #[inline]
+    pub fn eval(&self, x: &[f64; N_INPUTS]) -> f64 {
+        // Safety: `x` has the inputs the code may read; `params` has every slot it reads (padded to `n_params`
+        // in `prepare`); `block` was computed from these `params` by this code's prepare function and has its
+        // `block_len` slots; `scalar` is `kernel.code.scalar`, alive while `kernel` (borrowed by `self`) lives.
+        unsafe { (self.scalar)(x.as_ptr(), self.params.as_ptr(), self.block.as_ptr()) }
+    }
+
+    /// The kernel this was prepared from.
+    pub fn kernel(&self) -> &JitKernel {
+        self.kernel
+    }
+}
+
 impl Evaluator for JitKernel {
+    fn prepare(&self, params: &[f64]) -> Prepared<'_> {
+        let params = if params.len() >= self.n_params { params.to_vec() } else { self.padded(params) };
+        let mut block = vec![0.0; self.code.block_len];
+        self.code.prepare_into(&params, &mut block);
+        Prepared::Jit(PreparedJit { scalar: self.scalar, params, block, kernel: self })
+    }
+
     fn eval(&self, x: &[f64; N_INPUTS], params: &[f64]) -> f64 {
         if params.len() >= self.n_params {
             self.code.with_block(params, |block| {
