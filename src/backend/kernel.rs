@@ -83,7 +83,9 @@ pub enum Prepared<'a> {
 }
 
 impl Prepared<'_> {
-    #[inline]
+    /// Always inlined: the `match` belongs in the caller's loop (left to the optimiser, whether it was inlined
+    /// varied between builds of the same source and moved the cheapest formulas' call by ~0.5 ns).
+    #[inline(always)]
     pub fn eval(&self, x: &[f64; N_INPUTS]) -> f64 {
         match self {
             Prepared::Jit(j) => j.eval(x),

@@ -554,7 +554,7 @@ pub struct PreparedJit<'a> {
 }
 
 impl PreparedJit<'_> {
-    #[inline]
+    #[inline(always)]
     pub fn eval(&self, x: &[f64; N_INPUTS]) -> f64 {
         // Safety: `x` has the inputs the code may read; `params` has every slot it reads (padded to `n_params`
         // in `prepare`); `block` was computed from these `params` by this code's prepare function and has its
