@@ -12,7 +12,7 @@
 
 use crate::builtins::{Builtin, Mode};
 use crate::ir::{BinOp, Formula, Node, N_INPUTS};
-use super::{Columns, Evaluator};
+use super::{Columns, Evaluator, Prepared};
 use std::cell::RefCell;
 
 #[derive(Clone, Copy, Debug)]
@@ -102,7 +102,30 @@ impl Interp {
     }
 }
 
+/// The interpreter bound to one parameter vector, with its own scratch (no thread-local lookup per call).
+pub struct PreparedInterp<'a> {
+    interp: &'a Interp,
+    params: Vec<f64>,
+    scratch: RefCell<Vec<f64>>,
+}
+
+impl PreparedInterp<'_> {
+    #[inline]
+    pub fn eval(&self, x: &[f64; N_INPUTS]) -> f64 {
+        match self.scratch.try_borrow_mut() {
+            Ok(mut s) => self.interp.run(x, &self.params, &mut s),
+            // Re-entrant use (the formula's evaluation calling back into this prepared form): a fresh buffer.
+            Err(_) => self.interp.run(x, &self.params, &mut Vec::with_capacity(self.interp.code.len())),
+        }
+    }
+}
+
 impl Evaluator for Interp {
+    fn prepare(&self, params: &[f64]) -> Prepared<'_> {
+        let scratch = RefCell::new(Vec::with_capacity(self.code.len()));
+        Prepared::Interp(PreparedInterp { interp: self, params: params.to_vec(), scratch })
+    }
+
     fn eval(&self, x: &[f64; N_INPUTS], params: &[f64]) -> f64 {
         SCRATCH.with(|s| match s.try_borrow_mut() {
             Ok(mut s) => self.run(x, params, &mut s),

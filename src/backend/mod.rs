@@ -9,4 +9,4 @@ pub mod glsl;
 pub mod interp;
 pub mod jit;
 
-pub use kernel::{Backend, Columns, Evaluator, FnEvaluator, Kernel};
+pub use kernel::{AsEvaluator, Backend, Columns, Evaluator, FnEvaluator, Kernel, Prepared};

@@ -1,31 +1,35 @@
 //! lobe's math library: every transcendental builtin defined once, as straight-line code over [`Emit`].
 //!
 //! Design. Each function (exp, ln, pow, sin, cos, tan, acos, asin, atan) is written once, generic over an
-//! [`Emit`] implementation that supplies IEEE primitives (add, mul, div, sqrt, compare, select) and three
-//! bit-level ones (2^k from an integer-valued k, the exponent field, masking bits). [`Direct`] runs the code on
-//! `f64` (the interpreter and constant folding); the JIT implements `Emit` over Cranelift values, in scalar
-//! and vector lanes. Every primitive is one correctly rounded IEEE operation or an exact bit operation, and no
-//! multiply-add is fused, so the interpreter and the JIT compute the same bits for every input in every lane
-//! shape. Branches are selects (both sides computed, one kept), which is what vector lanes need; the one
-//! exception is the trigonometric functions' huge arguments (|x| > 2^19·π/2, ±inf, NaN): those lanes call the C
-//! library through [`Emit::fallback`], a branch taken only when some lane needs it.
+//! [`Emit`] implementation that supplies IEEE primitives (add, mul, div, sqrt, fused multiply-add, compare,
+//! select) and three bit-level ones (2^k from an integer-valued k, the exponent field, masking bits). [`Direct`]
+//! runs the code on `f64` (the interpreter and constant folding); the JIT implements `Emit` over Cranelift
+//! values, in scalar and vector lanes. Every primitive is one correctly rounded IEEE operation (`fma` included:
+//! one rounding, whether the host has the instruction or the JIT calls a correctly rounded library `fma`) or an
+//! exact bit operation, and nothing else is fused, so the interpreter and the JIT compute the same bits for
+//! every input in every lane shape. Branches are selects (both sides computed, one kept), which is what vector
+//! lanes need; the one exception is the trigonometric functions' huge arguments (|x| > 2^19·π/2, ±inf, NaN):
+//! those lanes call the C library through [`Emit::fallback`], a branch taken only when some lane needs it.
 //!
 //! Precise mode: the algorithms and minimax coefficients of fdlibm (Sun Microsystems, freely redistributable),
-//! rewritten with selects; `tan` is the quotient of the sine and cosine kernels, and `pow` computes ln|x| and
-//! y·ln|x| in double-double (a 47-entry table of ln(j/64), error-free products by Veltkamp splitting since
-//! there is no FMA), so exp's argument is exact far below an ulp even when |y·ln x| is near 745. Measured over
-//! 10^5 points per function (edge classes included) every function is within 1 ulp of the C library (tan 2);
-//! the table states 2 ulp (tan 3) against the correctly rounded result, and the tests hold it to that.
+//! rewritten with selects, except exp; `tan` is the quotient of the sine and cosine kernels. exp is
+//! table-driven (2^(j/128) in head and tail, `math_tables.rs`; a degree-5 polynomial; one FMA rounding; no
+//! division). `pow` computes ln|x| and y·ln|x| in double-double (a 47-entry table of ln(j/64), exact products
+//! by FMA), then that exp on the double-double argument, so exp's argument is exact far below an ulp even when
+//! |y·ln x| is near 745. Measured over 10^5 points per function (edge classes included) every function is
+//! within 1 ulp of the C library (tan 2); the table states 2 ulp (tan 3) against the correctly rounded result,
+//! and the tests hold it to that.
 //!
 //! Fast mode: the same reductions with shorter polynomials (Taylor series of degree 7–9 where the argument is
 //! small), a single scaling step in exp, pow in plain double (error ≈ |y·ln x|·2^−53 ≤ 1e−13 relative), and no
 //! hi/lo corrections; every function stays within 1e−6 relative (1e−6 absolute near zero).
 //!
-//! Cost model: straight-line code of 20–200 primitive operations per function (exp ≈ 25, acos ≈ 35, pow ≈ 190
-//! precise / 70 fast; fewer with an FMA for pow's exact products), two table loads in precise pow, and special
-//! cases in rarely taken blocks, so it vectorises as is. Inlined at every call site it costs compile time
-//! (~5 ms per `sin` in Cranelift), which is why the JIT calls this same code, compiled by rustc, for formulas
-//! with many call sites.
+//! Cost model: straight-line code of 20–200 primitive operations per function (exp ≈ 45, acos ≈ 35, pow ≈ 150
+//! precise / 70 fast), table loads in exp and precise pow, and special cases in rarely taken blocks, so it
+//! vectorises as is. In F64X2 lanes the batched cost follows the instruction count (the loop runs at a high
+//! IPC), not the divisions: a table-driven ln (three lookups, no division) measured slower than the
+//! two-division one kept here. Inlined at every call site it costs compile time (~5 ms per `sin` in
+//! Cranelift), which is why the JIT calls this same code, compiled by rustc, for formulas with many call sites.
 
 // The constants are written as fdlibm publishes them (more digits than a double holds; each rounds to the
 // intended bits), and some are split values of π/2 or 1/ln 2 on purpose, not approximations of std's.
@@ -84,6 +88,9 @@ pub trait Emit {
     fn neg(&mut self, a: Self::V) -> Self::V;
     fn abs(&mut self, a: Self::V) -> Self::V;
     fn sqrt(&mut self, a: Self::V) -> Self::V;
+    /// `a·b + c` rounded once (IEEE fusedMultiplyAdd): the same bits on every target, with or without a
+    /// hardware FMA (the JIT falls back to a correctly rounded library call).
+    fn fma(&mut self, a: Self::V, b: Self::V, c: Self::V) -> Self::V;
     /// `a < b` (false when either is NaN).
     fn lt(&mut self, a: Self::V, b: Self::V) -> Self::M;
     /// `a <= b` (false when either is NaN).
@@ -111,14 +118,15 @@ pub trait Emit {
     fn rare(&mut self, m: Self::M, r: Self::V, slow: &mut dyn FnMut(&mut Self) -> Self::V) -> Self::V
     where
         Self: Sized;
-    /// `a·b` as `(p, err)`, exactly (for products that do not underflow). The default is Dekker's product (no
-    /// FMA); a target with a fused multiply-add computes `err = fma(a, b, −p)`, the same exact value in two
-    /// instructions, so the choice never changes a result.
+    /// `a·b` as `(p, err)`, exactly (for products that do not underflow): `err = fma(a, b, −p)`. A target
+    /// without a hardware FMA may use Dekker's product instead, the same exact value without a library call.
     fn two_prod(&mut self, a: Self::V, b: Self::V) -> (Self::V, Self::V)
     where
         Self: Sized,
     {
-        dekker_two_prod(self, a, b)
+        let p = self.mul(a, b);
+        let np = self.neg(p);
+        (p, self.fma(a, b, np))
     }
     /// `m ? libm(x) : r` lane by lane, `libm` being the C library's version of `f` ([`Builtin::libm1`]).
     fn fallback(&mut self, m: Self::M, x: Self::V, r: Self::V, f: Builtin) -> Self::V;
@@ -175,6 +183,9 @@ impl Emit for Direct {
     }
     fn sqrt(&mut self, a: f64) -> f64 {
         a.sqrt()
+    }
+    fn fma(&mut self, a: f64, b: f64, c: f64) -> f64 {
+        a.mul_add(b, c)
     }
     fn lt(&mut self, a: f64, b: f64) -> bool {
         a < b
@@ -234,13 +245,12 @@ const EXP_ONE: u64 = 0x3ff0_0000_0000_0000;
 
 // Small helpers over Emit, so the algorithms read like the formulas they are.
 
-/// `c0 + x·(c1 + x·(c2 + …))` (Horner, unfused).
+/// `c0 + x·(c1 + x·(c2 + …))` (Horner, each step one fused multiply-add).
 fn horner<E: Emit>(e: &mut E, x: E::V, cs: &[f64]) -> E::V {
     let mut acc = e.konst(cs[cs.len() - 1]);
     for &c in cs[..cs.len() - 1].iter().rev() {
-        let m = e.mul(acc, x);
         let k = e.konst(c);
-        acc = e.add(m, k);
+        acc = e.fma(acc, x, k);
     }
     acc
 }
@@ -369,29 +379,6 @@ pub fn dekker_two_prod<E: Emit>(e: &mut E, a: E::V, b: E::V) -> (E::V, E::V) {
 const LN2_HI: f64 = 6.93147180369123816490e-01; // 0x3fe62e42_fee00000: k·LN2_HI is exact for |k| < 2^21
 const LN2_LO: f64 = 1.90821492927058770002e-10;
 const INV_LN2: f64 = 1.44269504088896338700e+00;
-const EXP_P: [f64; 5] = [
-    1.66666666666666019037e-01,
-    -2.77777777770155933842e-03,
-    6.61375632143793436117e-05,
-    -1.65339022054652515390e-06,
-    4.13813679705723846039e-08,
-];
-
-/// e^(hi − lo) for an argument reduced to |hi − lo| ≤ ln2/2, as fdlibm: `1 − ((lo − r·c/(2 − c)) − hi)`.
-fn exp_reduced<E: Emit>(e: &mut E, hi: E::V, lo: E::V) -> E::V {
-    let r = e.sub(hi, lo);
-    let t = e.mul(r, r);
-    let p = horner(e, t, &EXP_P);
-    let tp = e.mul(t, p);
-    let c = e.sub(r, tp);
-    let rc = e.mul(r, c);
-    let two_c = ksub(e, 2.0, c);
-    let q = e.div(rc, two_c);
-    let a = e.sub(lo, q);
-    let b = e.sub(a, hi);
-    ksub(e, 1.0, b)
-}
-
 /// `y·2^k` for an integer-valued k in [−1100, 1100], rounding once (two exact scalings, the second rounding).
 fn scale2<E: Emit>(e: &mut E, y: E::V, k: E::V) -> E::V {
     let half = mulk(e, k, 0.5);
@@ -422,14 +409,46 @@ fn reduce_exp<E: Emit>(e: &mut E, x: E::V) -> (E::V, E::V, E::V) {
     (k, hi, mulk(e, k, LN2_LO))
 }
 
-/// e^(xh + xl) (xl a small correction to xh), to < 1 ulp.
+/// ln2/128 split so that k·`L2N_HI` is exact for |k| < 2^18 (35 significant bits), and the remainder.
+const L2N_HI: f64 = 0.0054152123482253955;
+const L2N_LO: f64 = -1.0082281460997769e-13;
+const INV_L2N: f64 = 184.6649652337873; // 128/ln 2
+
+/// e^(xh + xl) (xl a small correction to xh), < 0.51 ulp before subnormal rounding.
+///
+/// k = round(x·128/ln 2), j = k mod 128, x = k·ln2/128 + r with |r| ≤ ln2/256 (+ xl): e^x = 2^(k div 128)
+/// ·2^(j/128)·e^r. 2^(j/128) is the table's `T_HI·(1 + T_TAIL)`, e^r − 1 a degree-5 Taylor polynomial
+/// (truncation < 2^-60), and the result `T_HI + T_HI·(T_TAIL + (e^r − 1))` rounds once in an FMA, then
+/// [`scale2`] (exact unless the result is subnormal or overflows). No division. Scaling by two products in
+/// every lane measured faster than one product plus a rare block: Beckmann's exp underflows in many lanes.
 fn exp_dd<E: Emit>(e: &mut E, xh: E::V, xl: E::V) -> E::V {
-    // Clamp so k stays small.
+    use super::math_tables::{EXP_T_HI, EXP_T_TAIL};
+    // Clamp so k stays small; a clamped (or NaN) lane drops xl, which is only meaningful beside its xh.
     let x = clamp_to(e, xh, -760.0, 720.0);
-    let (k, hi, klo) = reduce_exp(e, x);
-    let lo = e.sub(klo, xl);
-    let y = exp_reduced(e, hi, lo);
-    scale2(e, y, k)
+    let same = e.eq(x, xh);
+    let zero = e.konst(0.0);
+    let xl = e.select(same, xl, zero);
+    let kx = mulk(e, x, INV_L2N);
+    let k = round_int(e, kx);
+    let kh = mulk(e, k, L2N_HI); // exact
+    let rh = e.sub(x, kh); // exact: x and k·ln2/128 are within a factor 2 (or k = 0)
+    let nl = e.konst(-L2N_LO);
+    let rl = e.fma(k, nl, xl);
+    let r = e.add(rh, rl);
+    // k = 128·q + j with q = floor(k/128): k/128 − 127/256 lies within 0.5 of q.
+    let k128 = mulk(e, k, 1.0 / 128.0);
+    let qh = addk(e, k128, -127.0 / 256.0);
+    let q = round_int(e, qh);
+    let q128 = mulk(e, q, 128.0);
+    let j = e.sub(k, q128);
+    let t_hi = e.lookup(&EXP_T_HI, j);
+    let t_tail = e.lookup(&EXP_T_TAIL, j);
+    let p = horner(e, r, &[1.0 / 2.0, 1.0 / 6.0, 1.0 / 24.0, 1.0 / 120.0]);
+    let r2 = e.mul(r, r);
+    let em1 = e.fma(r2, p, r);
+    let tmp = e.add(t_tail, em1);
+    let y = e.fma(t_hi, tmp, t_hi);
+    scale2(e, y, q)
 }
 
 pub fn exp<E: Emit>(e: &mut E, x: E::V) -> E::V {
@@ -664,8 +683,8 @@ fn pow_specials<E: Emit>(e: &mut E, x: E::V, y: E::V, mag: E::V) -> E::V {
 /// |y| from which e^(y·ln|x|) saturates for every |x| ≠ 1 (2^64·2^-53 > 745).
 const Y_CAP: f64 = 18446744073709551616.0; // 2^64
 
-/// |x| and y made safe for the general case: |x| finite and > 0 (else 2), |y| ≤ 2^64 (any larger |y| already
-/// saturates e^(y·ln|x|) for every |x| ≠ 1).
+/// |x| and y made safe for the general case: |x| finite and > 0 (else 2), y clamped to ±2^64 (any larger |y|
+/// already saturates e^(y·ln|x|) for every |x| ≠ 1).
 fn pow_operands<E: Emit>(e: &mut E, x: E::V, y: E::V) -> (E::V, E::V) {
     let ax = e.abs(x);
     let zero = e.konst(0.0);
@@ -674,11 +693,8 @@ fn pow_operands<E: Emit>(e: &mut E, x: E::V, y: E::V) -> (E::V, E::V) {
     let ok = e.and(pos, fin);
     let two = e.konst(2.0);
     let axs = e.select(ok, ax, two);
-    let ay = e.abs(y);
-    let small = ltk(e, ay, Y_CAP);
-    let l = e.konst(Y_CAP);
-    let capped = copysign(e, l, y);
-    let ys = e.select(small, y, capped);
+    // A clamp (two instructions in vector lanes: min/max); a NaN y stays NaN, for the special-case block.
+    let ys = clamp_to(e, y, -Y_CAP, Y_CAP);
     (axs, ys)
 }
 
@@ -695,6 +711,7 @@ pub fn pow<E: Emit>(e: &mut E, x: E::V, y: E::V) -> E::V {
 
 /// pow's special cases, computed only when some lane has one: x not in (0, inf) or |y| not below 2^64 (NaN
 /// included). Elsewhere [`pow_specials`] returns `mag` unchanged (x = 1 and y = 0 already give exactly 1).
+/// pow(+0, y > 0) = +0 is selected inline: formulas like `max(t, 0)^a` have it in most lanes.
 fn pow_finish<E: Emit>(e: &mut E, x: E::V, y: E::V, mag: E::V) -> E::V {
     let zero = e.konst(0.0);
     let pos = e.lt(zero, x);
@@ -703,7 +720,15 @@ fn pow_finish<E: Emit>(e: &mut E, x: E::V, y: E::V, mag: E::V) -> E::V {
     let small = ltk(e, ay, Y_CAP);
     let normal = e.and(pos, fin);
     let normal = e.and(normal, small);
-    let special = e.not(normal);
+    let x_zero = e.eq(x, zero);
+    let x_neg = sign_bit(e, x);
+    let x_plus = e.not(x_neg);
+    let y_pos = e.lt(zero, y);
+    let zero_pos = e.and(x_zero, x_plus);
+    let zero_pos = e.and(zero_pos, y_pos);
+    let mag = e.select(zero_pos, zero, mag);
+    let ok = e.or(normal, zero_pos);
+    let special = e.not(ok);
     e.rare(special, mag, &mut |e| pow_specials(e, x, y, mag))
 }
 

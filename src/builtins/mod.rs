@@ -14,6 +14,7 @@
 //! NaN in → NaN out).
 
 pub mod math;
+pub mod math_tables;
 
 pub use math::Mode;
 use std::fmt;

@@ -62,15 +62,16 @@ fn catalogue() -> Result<Vec<String>, CliError> {
 }
 
 /// Median ns/eval of a hand-written Rust twin over the same points the JIT is timed on, called through the
-/// same `Evaluator` interface as the JIT kernel (so the comparison is of the code, not of the call path).
+/// same prepared `Evaluator` path as the JIT kernel (so the comparison is of the code, not of the call path).
 fn time_twin(ev: &dyn crate::Evaluator, params: &[f64], samples: usize) -> f64 {
     let pts = sample_points(4096, 0x5EED);
+    let ev = ev.prepare(params);
     let mut ns: Vec<f64> = (0..samples.max(1) + 1)
         .map(|_| {
             let t = Instant::now();
             let mut acc = 0.0;
             for p in &pts {
-                acc += ev.eval(black_box(p), black_box(params));
+                acc += ev.eval(black_box(p));
             }
             black_box(acc);
             t.elapsed().as_nanos() as f64 / pts.len() as f64

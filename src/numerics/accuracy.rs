@@ -313,8 +313,10 @@ pub fn accuracy(
                     cutoff_rel.take(Worst { value: rel(f[i], r[i]), n, angle_deg: gf.deg()[i] });
                 }
             }
-            let fe = |x: f64| ev.eval(&lobe_inputs(x.cos(), lobe), &p);
-            let fr = |x: f64| reference.eval(&lobe_inputs(x.cos(), ref_lobe), &pr);
+            // The cut-off searches call each side many times with one parameter set: bind it once.
+            let (pe, pre) = (ev.prepare(&p), reference.prepare(&pr));
+            let fe = |x: f64| pe.eval(&lobe_inputs(x.cos(), lobe));
+            let fr = |x: f64| pre.eval(&lobe_inputs(x.cos(), ref_lobe));
             let cf = cutoff_deg(&fe, gf.deg(), &f, level);
             let cr = cutoff_deg(&fr, gfr.deg(), &r, level);
             let ratio = Worst { value: cf / cr, n, angle_deg: cf };

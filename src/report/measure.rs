@@ -1,5 +1,6 @@
 //! Timing a kernel's three evaluation paths in one run (for `lobe bench`): scalar JIT, batched JIT, and the
-//! interpreter, each as ns per evaluation, median and spread over repeated samples.
+//! interpreter, each as ns per evaluation, median and spread over repeated samples. The scalar paths are timed
+//! through [`Evaluator::prepare`] (parameters bound once), the way the checks and fits loop over points.
 //!
 //! Method: a fixed pseudo-random set of `n` input points in [0, 1] (SoA columns and AoS rows from the same
 //! numbers); each sample times one pass over all points; the first sample of each path is a discarded warm-up.
@@ -9,7 +10,7 @@
 use crate::backend::jit::JitError;
 use crate::backend::interp::Interp;
 use crate::ir::N_INPUTS;
-use crate::backend::{Columns, Evaluator, Kernel};
+use crate::backend::{Columns, Evaluator, Kernel, Prepared};
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
@@ -133,15 +134,17 @@ pub fn measure_kernel(k: &Kernel, params: &[f64], opts: MeasureOptions) -> Resul
     let columns = Columns::new(std::array::from_fn(|i| cols[i].as_slice()));
     let mut out = vec![0.0; n];
 
-    let scalar = |ev: &dyn Evaluator| {
+    // Both backends through the same prepared path (parameters bound once, as the checks and fits call them).
+    let scalar = |ev: &Prepared| {
         let mut acc = 0.0;
         for r in &rows {
-            acc += ev.eval(black_box(r), black_box(params));
+            acc += ev.eval(black_box(r));
         }
         black_box(acc);
     };
-    let scalar_jit = time_per_eval(opts.samples, n, || scalar(&jit));
-    let interp_t = time_per_eval(opts.samples, n, || scalar(&interp));
+    let (jit_p, interp_p) = (jit.prepare(params), interp.prepare(params));
+    let scalar_jit = time_per_eval(opts.samples, n, || scalar(&jit_p));
+    let interp_t = time_per_eval(opts.samples, n, || scalar(&interp_p));
     let batched_jit = time_per_eval(opts.samples, n, || {
         jit.eval_batch(black_box(&columns), black_box(params), &mut out);
         black_box(&out);

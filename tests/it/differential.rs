@@ -347,3 +347,57 @@ fn catalogue_files_agree_with_rust_twins() {
         }
     }
 }
+
+/// `Evaluator::prepare` (parameters bound once, no per-call lookup) gives the bits of `eval` on every catalogue
+/// file, both backends, both math modes: random parameters inside each declared range, the defaults, a short
+/// vector (missing parameters are NaN) and the random formulas' sets, on hard and random points.
+#[test]
+fn prepared_eval_matches_eval_on_the_catalogue() {
+    let pts = points(&lobe::report::measure::sample_points(64, 11));
+    let mut s = 0x9E37_79B9_7F4A_7C15u64;
+    let mut unit = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for math in Mode::ALL {
+        for (stem, jit, interp) in catalogue(math) {
+            let mut sets = param_sets();
+            sets.push(jit.default_params());
+            sets.push(jit.default_params()[..jit.formula.params.len() / 2].to_vec());
+            for _ in 0..4 {
+                sets.push(jit.formula.params.iter().map(|d| d.lo + (d.hi - d.lo) * unit()).collect());
+            }
+            for k in [&jit, &interp] {
+                for ps in &sets {
+                    let prepared = k.prepare(ps);
+                    let kind_ok = matches!(
+                        (&prepared, k.backend),
+                        (lobe::backend::Prepared::Jit(_), Backend::Jit) | (lobe::backend::Prepared::Interp(_), Backend::Interp)
+                    );
+                    assert!(kind_ok, "{stem}: {} kernel prepared as another backend", k.backend.name());
+                    for x in &pts {
+                        let (want, got) = (k.eval(x, ps), prepared.eval(x));
+                        assert!(
+                            identical(want, got),
+                            "{stem} ({math} math, {}) at x = {x:?}, params = {ps:?}: eval {want:e}, prepared {got:e}",
+                            k.backend.name()
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Evaluators without a prepared form (closures, wrappers) keep their parameters and call `eval`.
+#[test]
+fn prepared_falls_back_to_eval_for_other_evaluators() {
+    let twin = lobe::backend::FnEvaluator(|x: &[f64; N_INPUTS], p: &[f64]| x[2].powf(p[0]) + p.len() as f64);
+    let x = lobe::from_cosines([0.1, 0.2, 0.9, 0.4, 0.5]);
+    let prepared = twin.prepare(&[3.0, 7.0]);
+    assert!(matches!(prepared, lobe::backend::Prepared::Other(..)));
+    assert_eq!(prepared.eval(&x).to_bits(), twin.eval(&x, &[3.0, 7.0]).to_bits());
+    assert_eq!(prepared.eval(&x), 0.9f64.powf(3.0) + 2.0);
+}

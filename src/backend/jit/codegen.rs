@@ -210,6 +210,12 @@ impl Lanes for F64X2 {
     fn any(b: &mut FunctionBuilder, m: Value) -> Value {
         b.ins().vany_true(m)
     }
+    /// Lane 0 by `scalar_to_vector` (a load there folds into `movsd`), lane 1 by `movlhps`: two instructions
+    /// where a splat and an insert take three.
+    fn from_lanes(b: &mut FunctionBuilder, lanes: &[Value]) -> Value {
+        let v = b.ins().scalar_to_vector(Self::TY, lanes[0]);
+        b.ins().insertlane(v, lanes[1], 1)
+    }
 }
 
 /// Where input values come from.
@@ -482,6 +488,11 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
     }
     fn sqrt(&mut self, a: Value) -> Value {
         self.b.ins().sqrt(a)
+    }
+    /// One instruction with a hardware FMA; otherwise Cranelift calls the `fma` symbol per lane (registered
+    /// with the JIT builder), which is correctly rounded too, so the bits are the same.
+    fn fma(&mut self, a: Value, b: Value, c: Value) -> Value {
+        self.b.ins().fma(a, b, c)
     }
     fn lt(&mut self, a: Value, b: Value) -> Value {
         self.b.ins().fcmp(FloatCC::LessThan, a, b)

@@ -7,10 +7,12 @@
 //! - builtins come from the one table: `Lowering::Inline` becomes a native instruction, `Lowering::Math` the
 //!   math library's code (`builtins::math`) emitted inline in the kernel's lanes — the definition the
 //!   interpreter runs on `f64`, so the two backends agree bit for bit in each math mode; the only calls are the
-//!   trigonometric fallbacks to libm for huge arguments, registered with `JITBuilder::symbol` before anything
-//!   is finalized (an unresolved import would panic inside Cranelift);
+//!   trigonometric fallbacks to libm for huge arguments and, on a host without FMA, Cranelift's `fma` libcall
+//!   (a correctly rounded fma: same bits), registered with `JITBuilder::symbol` before anything is finalized
+//!   (an unresolved import would panic inside Cranelift);
 //! - parameter-only work is computed once per parameter set by a prepare function into a block the kernels
-//!   load (the prepared parameter block: cached per thread for scalar calls, once per batch);
+//!   load (the prepared parameter block: held by a [`PreparedJit`] from `Evaluator::prepare`, cached per thread
+//!   for plain scalar calls, computed once per batch);
 //! - one `JITModule` per compiled formula: the scalar kernel and the prepare function are compiled at once,
 //!   the batched kernel is added to the same module on the first batch call; its memory is freed when the
 //!   last kernel using it is dropped;
@@ -24,8 +26,9 @@
 //!
 //! Cost model. Compiling is Cranelift's work: a fixed per-module cost plus roughly linear in the nodes; the
 //! batched kernel (a loop and two copies of the body) costs more than the scalar one, hence built lazily. A
-//! scalar call pays a fixed dispatch (`Kernel` → `dyn Evaluator` → length check → generated code) on top of
-//! the body, which dominates short arithmetic formulas; the batched kernel pays it once per batch, runs two
+//! plain scalar call pays a fixed dispatch (`Kernel` → `dyn Evaluator` → length check → per-thread block
+//! lookup → generated code) on top of the body, which dominates short arithmetic formulas; a prepared call
+//! ([`PreparedJit`]) pays only a `match` and the indirect call; the batched kernel pays it once per batch, runs two
 //! lanes per instruction, and does each clamp against a constant as one `maxpd`/`minpd`. A transcendental
 //! builtin is 20–200 vector instructions (pow the most: double-double in precise mode), straight-line except
 //! for rarely taken special-case blocks; scalar code runs the same instructions one lane at a time, where its
@@ -41,7 +44,7 @@ mod codegen;
 
 use crate::base::diag::Diagnostic;
 use crate::ir::{Formula, InputSet, Ir, NodeId, N_INPUTS};
-use crate::backend::{Columns, Evaluator};
+use crate::backend::{Columns, Evaluator, Prepared};
 use crate::builtins::Mode;
 use cranelift_codegen::ir::UserFuncName;
 use cranelift_codegen::isa::OwnedTargetIsa;
@@ -122,6 +125,16 @@ fn host_fma() -> bool {
     host_isa().is_ok_and(|isa| isa.has_native_fma())
 }
 
+extern "C" fn fma_libcall(a: f64, b: f64, c: f64) -> f64 {
+    a.mul_add(b, c)
+}
+
+/// Symbols Cranelift's own lowering may call: `fma` (per lane, on a host without the instruction) as Rust's
+/// correctly rounded `mul_add`, so the math library's `fma` has the same bits everywhere.
+fn runtime_symbols(builder: &mut JITBuilder) {
+    builder.symbol("fma", fma_libcall as *const u8);
+}
+
 type ScalarFn = unsafe extern "C" fn(*const f64, *const f64, *const f64) -> f64;
 type PrepareFn = unsafe extern "C" fn(*const f64, *mut f64);
 type BatchFn = unsafe extern "C" fn(*const *const f64, *const f64, *const f64, *mut f64, usize);
@@ -173,7 +186,7 @@ impl Compiled {
 }
 
 /// A prepared parameter block: what the prepare function computed for one kernel and one parameter vector.
-struct Prepared {
+struct CachedBlock {
     id: u64,
     /// The parameters' bit patterns (so −0/+0 and NaN payloads count as different, as they may to the code).
     params: Vec<u64>,
@@ -185,7 +198,7 @@ struct Prepared {
 const PREPARED_KEEP: usize = 8;
 
 thread_local! {
-    static PREPARED: RefCell<Vec<Prepared>> = const { RefCell::new(Vec::new()) };
+    static PREPARED: RefCell<Vec<CachedBlock>> = const { RefCell::new(Vec::new()) };
 }
 
 impl Compiled {
@@ -204,7 +217,7 @@ impl Compiled {
         if self.block_len == 0 {
             return f(&[]);
         }
-        let same = |e: &Prepared| {
+        let same = |e: &CachedBlock| {
             e.id == self.id && e.params.len() == params.len() && e.params.iter().zip(params).all(|(a, b)| *a == b.to_bits())
         };
         PREPARED.with(|cache| match cache.try_borrow_mut() {
@@ -218,7 +231,7 @@ impl Compiled {
                     None => {
                         let mut block = vec![0.0; self.block_len];
                         self.prepare_into(params, &mut block);
-                        c.insert(0, Prepared { id: self.id, params: params.iter().map(|p| p.to_bits()).collect(), block });
+                        c.insert(0, CachedBlock { id: self.id, params: params.iter().map(|p| p.to_bits()).collect(), block });
                         c.truncate(PREPARED_KEEP);
                     }
                 }
@@ -348,6 +361,7 @@ impl Jit {
         for (sym, ptr) in codegen::used_symbols(ir, mode, outline) {
             builder.symbol(sym, ptr);
         }
+        runtime_symbols(&mut builder);
         let mut module = JITModule::new(builder);
         let plan = codegen::Plan::new(ir, root);
         let defined = codegen::declare_imports(&mut module, ir, mode, outline).and_then(|imports| {
@@ -527,7 +541,41 @@ impl JitKernel {
     }
 }
 
+/// A JIT kernel bound to one parameter vector: the parameters padded and the prepared block computed once, so a
+/// call is the generated code and nothing else. Borrows the kernel, which keeps the code alive.
+pub struct PreparedJit<'a> {
+    /// Copy of `kernel.code.scalar`.
+    scalar: ScalarFn,
+    /// At least `kernel.n_params` slots (missing ones NaN, as in `eval`).
+    params: Vec<f64>,
+    /// `kernel.code.block_len` slots, computed from `params`.
+    block: Vec<f64>,
+    kernel: &'a JitKernel,
+}
+
+impl PreparedJit<'_> {
+    #[inline(always)]
+    pub fn eval(&self, x: &[f64; N_INPUTS]) -> f64 {
+        // Safety: `x` has the inputs the code may read; `params` has every slot it reads (padded to `n_params`
+        // in `prepare`); `block` was computed from these `params` by this code's prepare function and has its
+        // `block_len` slots; `scalar` is `kernel.code.scalar`, alive while `kernel` (borrowed by `self`) lives.
+        unsafe { (self.scalar)(x.as_ptr(), self.params.as_ptr(), self.block.as_ptr()) }
+    }
+
+    /// The kernel this was prepared from.
+    pub fn kernel(&self) -> &JitKernel {
+        self.kernel
+    }
+}
+
 impl Evaluator for JitKernel {
+    fn prepare(&self, params: &[f64]) -> Prepared<'_> {
+        let params = if params.len() >= self.n_params { params.to_vec() } else { self.padded(params) };
+        let mut block = vec![0.0; self.code.block_len];
+        self.code.prepare_into(&params, &mut block);
+        Prepared::Jit(PreparedJit { scalar: self.scalar, params, block, kernel: self })
+    }
+
     fn eval(&self, x: &[f64; N_INPUTS], params: &[f64]) -> f64 {
         if params.len() >= self.n_params {
             self.code.with_block(params, |block| {
@@ -583,6 +631,66 @@ mod tests {
         let d = JitError::Module("out of memory".into()).to_diagnostic();
         assert!(d.message.contains("out of memory"));
         assert!(d.hints.iter().any(|h| h.contains("--backend interp")));
+    }
+
+    /// On a host without FMA (simulated: the host ISA with `has_fma` off), Cranelift lowers `fma` to a call
+    /// of the `fma` symbol, per lane for F64X2; [`runtime_symbols`] resolves it to a correctly rounded fma.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn fma_without_the_instruction_is_still_correctly_rounded() {
+        use cranelift_codegen::ir::{types, AbiParam, InstBuilder};
+        use cranelift_frontend::FunctionBuilder;
+        let mut fb = settings::builder();
+        for (k, v) in [("opt_level", "speed"), ("use_colocated_libcalls", "false"), ("is_pic", "false")] {
+            fb.set(k, v).expect("flag");
+        }
+        let mut ib = cranelift_native::builder().expect("host supported");
+        ib.set("has_fma", "false").expect("x86-64 has the setting");
+        let isa = ib.finish(settings::Flags::new(fb)).expect("isa");
+        assert!(!isa.has_native_fma());
+        let mut builder = JITBuilder::with_isa(isa, default_libcall_names());
+        runtime_symbols(&mut builder);
+        let mut module = JITModule::new(builder);
+        let mut ctx = module.make_context();
+        let mut fctx = FunctionBuilderContext::new();
+        let mut ids = vec![];
+        for (i, vector) in [false, true].into_iter().enumerate() {
+            module.clear_context(&mut ctx);
+            for _ in 0..3 {
+                ctx.func.signature.params.push(AbiParam::new(types::F64));
+            }
+            ctx.func.signature.returns.push(AbiParam::new(types::F64));
+            let mut b = FunctionBuilder::new(&mut ctx.func, &mut fctx);
+            let block = b.create_block();
+            b.append_block_params_for_function_params(block);
+            b.switch_to_block(block);
+            b.seal_block(block);
+            let p = b.block_params(block).to_vec();
+            let r = if vector {
+                let v: Vec<_> = p.iter().map(|&x| b.ins().splat(types::F64X2, x)).collect();
+                let f = b.ins().fma(v[0], v[1], v[2]);
+                b.ins().extractlane(f, 1)
+            } else {
+                b.ins().fma(p[0], p[1], p[2])
+            };
+            b.ins().return_(&[r]);
+            b.finalize(module.target_config());
+            let id = module.declare_function(&format!("f{i}"), cranelift_module::Linkage::Local, &ctx.func.signature).expect("declare");
+            module.define_function(id, &mut ctx).expect("define");
+            ids.push(id);
+        }
+        module.finalize_definitions().expect("every symbol resolves");
+        let (a, b, c) = (1.0 + 2f64.powi(-30), 1.0 - 2f64.powi(-30), -1.0);
+        assert_eq!(a * b + c, 0.0, "the unfused result differs");
+        for id in ids {
+            let f = module.get_finalized_function(id);
+            // Safety: `f` was just compiled with signature (f64, f64, f64) -> f64 and `module` outlives the call.
+            let call = unsafe { std::mem::transmute::<*const u8, extern "C" fn(f64, f64, f64) -> f64>(f) };
+            assert_eq!(call(a, b, c), -(2f64.powi(-60)));
+            assert_eq!(call(0.1, 10.0, -1.0).to_bits(), 0.1f64.mul_add(10.0, -1.0).to_bits());
+        }
+        // Safety: no pointer into the module is used after this point.
+        unsafe { module.free_memory() };
     }
 
     #[test]
