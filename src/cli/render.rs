@@ -63,6 +63,7 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
         transfer: if a.srgb { Transfer::Srgb } else { Transfer::Linear },
         progress: !a.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr()),
         cutoff: true,
+        program: true,
     };
     let t0 = Instant::now();
     let (frame, stats) = r::render(&sc, &ropts).map_err(CliError::msg)?;

@@ -115,6 +115,18 @@ pub struct Material {
     pub cutoff: Option<plan::Cutoff>,
     /// The math mode of the material's kernel (for reports).
     pub math: crate::Mode,
+    /// What the shading program is built from (`None` for kernels that are not lobe formulas, e.g. Rust
+    /// closures: those are shaded by the Rust span loops and one batched kernel call per span and light).
+    pub program: Option<ProgramSource>,
+}
+
+/// The compiled formula's channels and backend, from which each render builds the material's shading program.
+#[derive(Clone)]
+pub struct ProgramSource {
+    /// The simplified formula of each channel (one, or red, green, blue), parameters baked as compiled.
+    pub channels: Vec<Arc<crate::ir::Formula>>,
+    pub backend: crate::backend::Backend,
+    pub math: crate::Mode,
 }
 
 impl Material {
@@ -176,11 +188,14 @@ pub struct RenderOptions {
     pub progress: bool,
     /// Apply the materials' cut-offs (off: evaluate F everywhere, to measure what the cut-off changes).
     pub cutoff: bool,
+    /// Shade with each material's compiled shading program (off: the Rust span loops with one batched kernel
+    /// call per span and light, the previous path, kept for comparison and for non-lobe kernels).
+    pub program: bool,
 }
 
 impl Default for RenderOptions {
     fn default() -> RenderOptions {
-        RenderOptions { threads: 0, tile: 64, transfer: Transfer::Linear, progress: false, cutoff: true }
+        RenderOptions { threads: 0, tile: 64, transfer: Transfer::Linear, progress: false, cutoff: true, program: true }
     }
 }
 
@@ -205,8 +220,11 @@ pub struct RenderStats {
     pub raster_cpu: Duration,
     /// Shading, including the kernel time and the conversion to 8 bits.
     pub shade_cpu: Duration,
-    /// The part of `shade_cpu` spent inside the kernel's batched calls.
+    /// The part of `shade_cpu` spent inside compiled code: the shading programs' calls (which include F and
+    /// all the geometry after interpolation), or the kernel's batched calls on the span-loop path.
     pub kernel_cpu: Duration,
+    /// Building and compiling the shading programs (wall, before the tiles; ~0 on a code-cache hit).
+    pub program_compile: Duration,
     /// Wall time of setup + tiles (excludes encoding).
     pub render_wall: Duration,
 }
@@ -270,6 +288,15 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
 
     let bg = scene.background.to_array().map(|c| opts.transfer.encode(c));
     let plans: Vec<plan::ShadingPlan> = scene.materials.iter().map(|m| plan::ShadingPlan::new(m, scene.ambient, opts.cutoff)).collect();
+    let tc = Instant::now();
+    let programs: Vec<Option<shade::ProgramRun>> = scene
+        .materials
+        .iter()
+        .zip(&plans)
+        .map(|(m, p)| if opts.program { shade::ProgramRun::new(scene, m, p) } else { None })
+        .collect();
+    let program_compile = tc.elapsed();
+    let plans: Vec<(plan::ShadingPlan, Option<shade::ProgramRun>)> = plans.into_iter().zip(programs).collect();
     let timers = Timers::default();
     let progress = Progress::new(opts.progress, setup.bins.len() as u64);
     let mut rgb = vec![0u8; w * h * 3];
@@ -330,6 +357,7 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
         raster_cpu: Duration::from_nanos(timers.raster.load(Ordering::Relaxed)),
         shade_cpu: Duration::from_nanos(timers.shade.load(Ordering::Relaxed)),
         kernel_cpu: Duration::from_nanos(timers.kernel.load(Ordering::Relaxed)),
+        program_compile,
         render_wall: t0.elapsed(),
     };
     (Frame { image: Image { width: w, height: h, rgb }, covered }, stats)
@@ -360,7 +388,7 @@ struct Timers {
 #[allow(clippy::too_many_arguments)]
 fn tile_pixels(
     scene: &Scene,
-    plans: &[plan::ShadingPlan],
+    plans: &[(plan::ShadingPlan, Option<shade::ProgramRun>)],
     setup: &raster::Setup,
     t: usize,
     sc: &mut shade::Scratch,

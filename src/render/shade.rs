@@ -19,9 +19,58 @@ use super::image::Transfer;
 use super::plan::ShadingPlan;
 use super::raster::{GBuffer, Setup, EMPTY};
 use super::{LightKind, Scene};
+use super::Material;
+use crate::backend::shading::{self, N_OUTPUTS};
 use crate::backend::{Columns, Evaluator};
 use crate::ir::Input;
 use std::time::Instant;
+
+/// A material's compiled shading program for one render, with its prepared parameter block.
+pub struct ProgramRun {
+    code: shading::Compiled,
+    block: Vec<f64>,
+    params: Vec<f64>,
+    /// The program reads the tangent (columns 6..9).
+    tangent: bool,
+}
+
+impl ProgramRun {
+    /// The program `plan` describes for `m` under `scene`'s eye and lights, compiled with the material's
+    /// backend and math mode; `None` when the material's kernels are not lobe formulas or compilation failed
+    /// (then the span loops shade it, with the same result within rounding).
+    pub fn new(scene: &Scene, m: &Material, plan: &ShadingPlan) -> Option<ProgramRun> {
+        let src = m.program.as_ref()?;
+        let spec = spec(scene, plan);
+        let channels: Vec<&crate::ir::Formula> = src.channels.iter().map(|f| f.as_ref()).collect();
+        let program = shading::Program::new(&spec, &channels).ok()?;
+        let code = shading::Compiled::new(&program, src.backend, src.math).ok()?;
+        let block = code.prepare(&m.params);
+        Some(ProgramRun { code, block, params: m.params.clone(), tangent: program.columns > 6 })
+    }
+}
+
+/// The shading program's description from the plan (see [`shading::Spec`]).
+pub fn spec(scene: &Scene, plan: &ShadingPlan) -> shading::Spec {
+    let lights = scene
+        .lights
+        .iter()
+        .map(|l| match l.kind {
+            LightKind::Point(p) => shading::Light { point: true, at: p.to_array(), color: l.color.to_array() },
+            LightKind::Directional(d) => shading::Light { point: false, at: (-d).to_array(), color: l.color.to_array() },
+        })
+        .collect();
+    shading::Spec {
+        eye: scene.camera.position.to_array(),
+        lights,
+        ambient: plan.ambient,
+        diffuse: plan.diffuse,
+        spec: plan.spec,
+        specular: plan.specular,
+        times_nl: plan.times_nl,
+        tangent_rotation: plan.directions.then_some(plan.tangent_rotation),
+        cutoff: plan.cutoff.map(|c| (c.input, c.cos)),
+    }
+}
 
 /// Pixels shaded together: every column of a span (~25 of them, 2 KiB each) stays in the L1 cache between
 /// the steps, and the kernel call per span and light (~50 ns of dispatch) is well amortised.
@@ -69,6 +118,8 @@ struct Group {
     /// channel 0, which the colour step then reads for all three.
     f: [Vec<f64>; 3],
     acc: [Vec<f64>; 3],
+    /// The shading program's counters per pixel (non-finite F, evaluations, cut-off skips).
+    cnt: [Vec<f64>; 3],
     /// 8-bit colours.
     q: [Vec<u8>; 3],
     /// The kernel batch: group positions of the evaluated pixels, their inputs, and F.
@@ -101,7 +152,7 @@ impl std::ops::AddAssign for ShadeCounts {
 /// Shades the tile whose G-buffer is in `sc.gb` (`tw × th` pixels) with the per-material `plans`; the 8-bit
 /// result (background where nothing is visible) is left in `sc.rgb`. Returns the counters and the time
 /// spent inside the kernel, in nanoseconds.
-pub fn shade_tile(scene: &Scene, plans: &[ShadingPlan], s: &Setup, n: usize, sc: &mut Scratch, transfer: Transfer, bg: [u8; 3]) -> (ShadeCounts, u64) {
+pub fn shade_tile(scene: &Scene, plans: &[(ShadingPlan, Option<ProgramRun>)], s: &Setup, n: usize, sc: &mut Scratch, transfer: Transfer, bg: [u8; 3]) -> (ShadeCounts, u64) {
     let mut counts = ShadeCounts::default();
     let mut kernel_ns = 0;
     sc.vis.clear();
@@ -127,7 +178,22 @@ pub fn shade_tile(scene: &Scene, plans: &[ShadingPlan], s: &Setup, n: usize, sc:
     while start < sc.vis.len() {
         let m = sc.vis[start].0;
         let end = start + sc.vis[start..].iter().take_while(|(mm, _)| *mm == m).count();
-        let plan = &plans[m as usize];
+        let (plan, program) = &plans[m as usize];
+        if let Some(pr) = program {
+            for span in sc.vis[start..end].chunks(SPAN) {
+                let g = &mut sc.g;
+                gather(g, span, &sc.gb);
+                if pr.tangent {
+                    surface::<true>(g, s, eye);
+                } else {
+                    surface::<false>(g, s, eye);
+                }
+                kernel_ns += run_program(g, pr, &mut counts);
+                encode(g, &mut sc.rgb, transfer);
+            }
+            start = end;
+            continue;
+        }
         let mat = &scene.materials[m as usize];
         // The material's kernels (one, or red, green, blue), without allocating.
         let mut kernels: [&dyn Evaluator; 3] = [mat.evaluator.as_ref(); 3];
@@ -169,6 +235,28 @@ pub fn shade_tile(scene: &Scene, plans: &[ShadingPlan], s: &Setup, n: usize, sc:
         start = end;
     }
     (counts, kernel_ns)
+}
+
+/// Runs the span's shading program: columns p, n (and t) in, colours into `acc`, counters summed. Returns
+/// the nanoseconds spent in the program.
+fn run_program(g: &mut Group, pr: &ProgramRun, counts: &mut ShadeCounts) -> u64 {
+    let m = g.pix.len();
+    let ([px, py, pz], [nx, ny, nz], [tx, ty, tz]) = (&g.p, &g.n, &g.t);
+    let tk = if pr.tangent { m } else { 0 };
+    let cols: [&[f64]; shading::MAX_COLUMNS] = [&px[..m], &py[..m], &pz[..m], &nx[..m], &ny[..m], &nz[..m], &tx[..tk], &ty[..tk], &tz[..tk]];
+    let [r, gg, b] = &mut g.acc;
+    let [c0, c1, c2] = &mut g.cnt;
+    let mut outs: [&mut [f64]; N_OUTPUTS] = [fit(r, m), fit(gg, m), fit(b, m), fit(c0, m), fit(c1, m), fit(c2, m)];
+    let t = Instant::now();
+    pr.code.run(&cols, &pr.params, &pr.block, &mut outs, m);
+    let ns = t.elapsed().as_nanos() as u64;
+    counts.kernel_calls += 1;
+    // Small non-negative integers in f64: exact as u64 (a NaN, from a failed call, counts 0).
+    let sum = |c: &[f64]| c.iter().map(|&x| x as u64).sum::<u64>();
+    counts.nan += sum(&g.cnt[0][..m]);
+    counts.evals += sum(&g.cnt[1][..m]);
+    counts.cut += sum(&g.cnt[2][..m]);
+    ns
 }
 
 fn fit<T: Copy + Default>(v: &mut Vec<T>, m: usize) -> &mut [T] {

@@ -34,6 +34,10 @@ use cranelift_jit::JITModule;
 use cranelift_module::{FuncId, Linkage, Module};
 use std::marker::PhantomData;
 
+// The shading program's batched function: a child module, so it reuses the translator and lanes as they are.
+#[path = "shade.rs"]
+pub(super) mod shade;
+
 /// The functions a module imports, by builtin (indexed by `Builtin as usize`): with the library inlined, the
 /// C-library fallback of each trigonometric builtin (huge arguments); with it outlined, each math builtin's
 /// compiled library function ([`Builtin::outlined`]), which includes its fallback.
@@ -219,6 +223,8 @@ enum Source {
     Ptr(Value),
     /// `col_i[off]` (one value of the lane type) from the batched kernel's hoisted column bases.
     Cols { bases: [Option<Value>; N_INPUTS], off: Value },
+    /// A shading program's data columns (`Node::Column(k)` reads `data_k[off]`); it has no `Input` nodes.
+    Data { bases: [Option<Value>; shade::MAX_COLUMNS], off: Value },
 }
 
 type Callees = [Option<FuncRef>; Builtin::ALL.len()];
@@ -285,6 +291,7 @@ impl<L: Lanes> Translator<'_, '_, L> {
             Node::Const(bits) => self.konst(bits),
             Node::Input(i) => self.input(i)?,
             Node::Param(p) => self.param(p),
+            Node::Column(k) => self.column(k)?,
             Node::Neg(a) => self.neg(a)?,
             Node::Binary(op, a, b) => self.binary(op, a, b)?,
             Node::Call(f, args) => self.call(f, args)?,
@@ -319,7 +326,18 @@ impl<L: Lanes> Translator<'_, '_, L> {
                 let addr = self.b.ins().iadd(base, off);
                 self.b.ins().load(L::TY, mem(), addr, 0)
             }
+            Source::Data { .. } => return Err(JitError::Internal(format!("input {} in a shading program", i.name()))),
         })
+    }
+
+    /// `data_k[off]`: a shading program's column ([`shade`]).
+    fn column(&mut self, k: u16) -> Result<Value, JitError> {
+        let Source::Data { bases, off } = self.source else {
+            return Err(JitError::Internal(format!("data column {k} outside a shading program")));
+        };
+        let base = bases.get(usize::from(k)).copied().flatten().ok_or_else(|| JitError::Internal(format!("data column {k} has no base")))?;
+        let addr = self.b.ins().iadd(base, off);
+        Ok(self.b.ins().load(L::TY, mem(), addr, 0))
     }
 
     fn param(&mut self, p: u16) -> Value {
@@ -615,7 +633,7 @@ impl Plan {
         let mut inv = vec![false; ir.len()];
         for id in ir.ids() {
             let node = ir.node(id);
-            let mut all = !matches!(node, Node::Input(_));
+            let mut all = !matches!(node, Node::Input(_) | Node::Column(_));
             node.for_each_arg(|a| all &= inv.get(a.index()).copied().unwrap_or(false));
             inv[id.index()] = all;
         }
