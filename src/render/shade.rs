@@ -251,8 +251,19 @@ fn run_program(g: &mut Group, pr: &ProgramRun, counts: &mut ShadeCounts) -> u64 
     pr.code.run(&cols, &pr.params, &pr.block, &mut outs, m);
     let ns = t.elapsed().as_nanos() as u64;
     counts.kernel_calls += 1;
-    // Small non-negative integers in f64: exact as u64 (a NaN, from a failed call, counts 0).
-    let sum = |c: &[f64]| c.iter().map(|&x| x as u64).sum::<u64>();
+    // Small non-negative integers in f64, so the f64 sums are exact (four partial sums: LLVM vectorises
+    // them); a NaN, from a failed call, counts 0.
+    let sum = |c: &[f64]| {
+        let mut acc = [0.0f64; 4];
+        let chunks = c.chunks_exact(4);
+        let rest: f64 = chunks.remainder().iter().sum();
+        for q in chunks {
+            for (a, x) in acc.iter_mut().zip(q) {
+                *a += x;
+            }
+        }
+        (acc[0] + acc[1] + acc[2] + acc[3] + rest) as u64
+    };
     counts.nan += sum(&g.cnt[0][..m]);
     counts.evals += sum(&g.cnt[1][..m]);
     counts.cut += sum(&g.cnt[2][..m]);

@@ -601,7 +601,7 @@ impl Jit {
     /// Compiles a shading program into a fresh module: its loop and (when something is carried) its
     /// prepare function.
     fn translate_program(&mut self, p: &crate::backend::shading::Program, mode: Mode) -> Result<ShadeCode, JitError> {
-        let outline = codegen::outlines(&p.ir);
+        let outline = codegen::shade::outlines(p);
         let mut builder = JITBuilder::with_isa(host_isa()?, default_libcall_names());
         for (sym, ptr) in codegen::used_symbols(&p.ir, mode, outline) {
             builder.symbol(sym, ptr);

@@ -30,6 +30,13 @@ pub(in crate::backend::jit) fn plan(p: &Program) -> Result<Plan, JitError> {
     Ok(plan)
 }
 
+/// Whether the program calls the math library instead of inlining it: [`OUTLINE_AT`] applies per copy of
+/// the formula (one per light region), so a scene with more lights does not switch its formula to calls.
+pub(in crate::backend::jit) fn outlines(p: &Program) -> bool {
+    let calls = p.ir.nodes().iter().filter(|n| matches!(n, Node::Call(b, _) if b.info().lowering == Lowering::Math)).count();
+    calls / p.regions.len().max(1) > OUTLINE_AT
+}
+
 /// `fn(cols: *const *const f64, params: *const f64, block: *const f64, outs: *const *mut f64, len: usize)`.
 pub(in crate::backend::jit) fn signature(module: &JITModule) -> Signature {
     super::signature(module, 5, false)
