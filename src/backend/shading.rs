@@ -270,7 +270,8 @@ impl Program {
             (tt, bb, vx, vy)
         });
         let mut acc = b.splat(spec.ambient);
-        let mut counters = [zero; 3];
+        let mut counters: [Option<NodeId>; 3] = [None; 3];
+        let count = |b: &mut Builder, c: &mut Option<NodeId>, x: NodeId| *c = Some(c.map_or(x, |c| b.add(c, x)));
         let mut regions: Vec<(NodeId, Vec<NodeId>)> = vec![];
         for light in &spec.lights {
             let (l, il) = if light.point {
@@ -352,13 +353,15 @@ impl Program {
                     f = [f[0]; 3];
                 }
                 for fl in &flags {
-                    counters[0] = b.add(counters[0], *fl);
+                    count(&mut b, &mut counters[0], *fl);
                 }
                 let nk = b.k(raw.len() as f64);
                 let ev = b.mul(lit, nk);
-                counters[1] = b.add(counters[1], ev);
-                let cut = b.sub(lit_nl, lit);
-                counters[2] = b.add(counters[2], cut);
+                count(&mut b, &mut counters[1], ev);
+                if spec.cutoff.is_some() {
+                    let cut = b.sub(lit_nl, lit);
+                    count(&mut b, &mut counters[2], cut);
+                }
                 regions.push((lit, outs.into_iter().chain(flags).collect()));
             }
             for c in 0..3 {
@@ -376,7 +379,8 @@ impl Program {
                 acc[c] = b.add(acc[c], t);
             }
         }
-        let outs = [acc[0], acc[1], acc[2], counters[0], counters[1], counters[2]];
+        let [c0, c1, c2] = counters.map(|c| c.unwrap_or(zero));
+        let outs = [acc[0], acc[1], acc[2], c0, c1, c2];
         // Compact everything live, keeping the regions' lit values and outputs.
         let mut roots: Vec<NodeId> = outs.to_vec();
         for (lit, o) in &regions {
@@ -414,11 +418,11 @@ impl Program {
         guarded.dedup();
         let classify = |guarded: &[(NodeId, Vec<NodeId>)]| {
             let mut boundary = vec![false; len];
+            let mut outer = vec![false; len];
             for (_, o) in guarded {
                 o.iter().for_each(|x| boundary[x.index()] = true);
             }
             // Outer: reachable from the outputs (and the lit values) without entering a region's outputs.
-            let mut outer = vec![false; len];
             for r in outputs.iter().chain(guarded.iter().map(|(l, _)| l)) {
                 if !boundary[r.index()] {
                     outer[r.index()] = true;
@@ -434,8 +438,14 @@ impl Program {
                 }
             }
             let mut regions = vec![];
-            for (lit, o) in guarded {
-                let mut mine = vec![false; len];
+            // Nodes several regions need (the view step, the frame: light-independent work) are computed once
+            // per pixel, outside the regions; their operands are then needed by the same regions, so the
+            // outer set stays closed under operands.
+            let mut needed_by = vec![0u32; len];
+            for pass in 0..2 {
+                regions.clear();
+                for (lit, o) in guarded {
+                    let mut mine = vec![false; len];
                 o.iter().for_each(|x| mine[x.index()] = true);
                 let top = o.iter().map(|x| x.index()).max().unwrap_or(0);
                 for i in (0..=top).rev() {
@@ -448,7 +458,14 @@ impl Program {
                     }
                 }
                 let nodes: Vec<NodeId> = (0..=top).filter(|i| mine[*i]).map(|i| NodeId(i as u32)).collect();
-                regions.push(Region { lit: *lit, outputs: o.clone(), nodes, at: NodeId(top as u32) });
+                    nodes.iter().for_each(|n| needed_by[n.index()] += 1);
+                    regions.push(Region { lit: *lit, outputs: o.clone(), nodes, at: NodeId(top as u32) });
+                }
+                if pass == 0 {
+                    for (o, n) in outer.iter_mut().zip(&needed_by) {
+                        *o |= *n > 1;
+                    }
+                }
             }
             (outer, regions)
         };

@@ -6,27 +6,31 @@
 //! 2. per tile, tiles in parallel with rayon: rasterise the tile's bin into a tile-sized G-buffer (integer
 //!    edge functions, top-left rule, 1/w depth test), then shade the visible pixels in structure-of-arrays
 //!    spans of up to [`shade::SPAN`] pixels, following each material's [`plan::ShadingPlan`] (computed once
-//!    per frame: which cosines the formula reads, the uniforms, the cut-off), with one batched kernel call per
-//!    span and light ([`shade::shade_tile`]), and convert to 8 bits into the frame; tiles no triangle touches
-//!    are filled with the background and cost nothing else;
+//!    per frame: which cosines the formula reads, the uniforms, the cut-off) compiled into a shading program
+//!    (one call per span: [`shade::shade_tile`], [`crate::backend::shading`]), and convert to 8 bits into the
+//!    frame; tiles no triangle touches are filled with the background and cost nothing else;
 //! 3. PNG encoding and atomic output ([`image`]).
 //!
 //! Materials are `Arc<dyn Evaluator>` (three for a colour formula, one per channel) plus the set of inputs the
-//! formula reads (a tangent frame per pixel only if it reads direction components), so the same renderer runs
-//! the JIT, the interpreter, or a plain Rust closure (tests and benches); everything but F is the same Rust
-//! code on every backend, so "JIT vs interpreter" compares the kernels in the same shading.
+//! formula reads (a tangent frame per pixel only if it reads direction components) and, for lobe formulas,
+//! the simplified formulas themselves ([`ProgramSource`]): each render builds the material's shading program
+//! from them and compiles it with the material's backend, so "JIT vs interpreter" compares the same program
+//! (geometry, F and colour sum) compiled or interpreted. A plain Rust closure (tests and benches) is shaded by
+//! the Rust span loops with one batched kernel call per span and light.
 //!
 //! Determinism: every tile is computed from its own bin in scene order and written to its own pixels, and
 //! all counters are integers, so 1 thread and N threads give byte-identical images and equal counts.
 //!
-//! Cost model: shading dominates — per visible pixel the SoA geometry (interpolation, three inverse lengths,
-//! the cosines the formula reads, compaction of the lit pixels, the colour sum, the 8-bit conversion:
-//! ~15–20 ns on this project's machine, SSE2 f64 lanes), plus per lit pixel and light the kernel (JIT ~1 ns
-//! for arithmetic formulas, the interpreter ~35 ns) — then rasterisation (a few edge-function steps per
+//! Cost model: shading dominates — per visible pixel the interpolation, grouping and 8-bit conversion in Rust
+//! (~10 ns), then the shading program (the inverse lengths, the cosines the formula reads, F where lit, the
+//! colour sum: JIT ~7 ns for one light and a cheap formula, plus F's own cost per lit pixel and light; the
+//! interpreter 15–30× that) — then rasterisation (a few edge-function steps per
 //! covered pixel, ~5 ns); setup and binning are per triangle and small; tiles the scene does not touch cost
 //! only the background fill. PNG encoding is a separate, serial stage. Stage times are thread CPU time
-//! (`cpu-time`), so a loaded machine does not inflate them; the kernel's share is its wall time scaled by the
-//! tile's CPU/wall ratio. Measured numbers: BENCHMARKS.md.
+//! (`cpu-time`), so a loaded machine does not inflate them; the compiled code's share (`kernel_cpu`: the
+//! program's calls, F included, or the kernel's on the span-loop path) is its wall time scaled by the tile's
+//! CPU/wall ratio — inside a fused program F's own time is not separable, so benches report the batched
+//! kernel's ns/element measured beside it. Measured numbers: BENCHMARKS.md.
 
 pub mod camera;
 pub mod compare;
@@ -237,11 +241,13 @@ impl RenderStats {
     pub fn shade_ns_per_px(&self) -> f64 {
         self.shade_cpu.as_nanos() as f64 / self.visible_pixels.max(1) as f64
     }
-    /// Shading CPU time outside the kernel per visible pixel, ns: the geometry and colour cost.
+    /// Shading CPU time outside compiled code per visible pixel, ns: interpolation, grouping and the 8-bit
+    /// conversion (with the span loops off the program path: also the geometry and colour sum).
     pub fn geometry_ns_per_px(&self) -> f64 {
         (self.shade_cpu.saturating_sub(self.kernel_cpu)).as_nanos() as f64 / self.visible_pixels.max(1) as f64
     }
-    /// Kernel CPU time per evaluation, ns (0 when nothing was evaluated).
+    /// Compiled-code CPU time per evaluation of F, ns (0 when nothing was evaluated): with shading programs
+    /// this includes the geometry and colour sum around F.
     pub fn kernel_ns_per_eval(&self) -> f64 {
         if self.evals == 0 { 0.0 } else { self.kernel_cpu.as_nanos() as f64 / self.evals as f64 }
     }

@@ -1,19 +1,21 @@
 //! Per-tile shading in structure-of-arrays columns: I = ka·Ia·C + Σ_lights Il·(kd·NL·C + ks·coef·F·Cs).
 //!
 //! Design: the visible pixels of a tile are grouped by material and cut into spans of up to [`SPAN`] pixels.
-//! In a span every quantity is a column of f64 with one entry per pixel, and every step of the material's
-//! [`ShadingPlan`] is one branch-free loop over those columns, which LLVM vectorises (SSE2 f64x2 on the
-//! baseline x86-64 target; the inverse lengths take an f32 estimate and one f64 Newton step instead of an f64
-//! square root and division). Position and normal are interpolated per run of pixels covered by one triangle
-//! (its attributes are loop constants there). Per light, the lit pixels (NL > 0, lobe cosine above the
-//! cut-off if the material has one) are compacted into the kernel's columns (branch-free: the write index
-//! advances by the mask) and the kernel is called once for the span with [`Evaluator::eval_batch`] — the
-//! JIT's F64X2 batch loop or the interpreter. F is scattered back (a NaN or ±inf is counted and becomes 0:
-//! no light) and the colour sum runs over the whole span, unlit pixels adding exactly +0. Nothing here
+//! In a span every quantity is a column of f64 with one entry per pixel. Position and normal (and the
+//! tangent, for formulas that read directions) are interpolated per run of pixels covered by one triangle
+//! (its attributes are loop constants there); two-sided triangles turn the normal to the viewer.
+//!
+//! Then, for a material whose kernels are lobe formulas, one call of its shading program ([`ProgramRun`]:
+//! [`crate::backend::shading`], compiled once per render) takes those columns to the colour and the counters
+//! — the JIT's batched function or the interpreter running the same program. Otherwise (kernels that are Rust
+//! closures, or `RenderOptions::program` off) every step of the material's [`ShadingPlan`] is one branch-free
+//! loop over the columns, which LLVM vectorises (SSE2 f64x2; the inverse lengths take an f32 estimate and one
+//! f64 Newton step); per light the lit pixels (NL > 0, lobe cosine above the cut-off) are compacted into the
+//! kernel's columns and the kernel is called once for the span with [`Evaluator::eval_batch`], F scattered
+//! back (a NaN or ±inf counted and 0: no light). Both end in the vectorised 8-bit conversion. Nothing here
 //! allocates in the steady state ([`Scratch`] is per thread).
 //!
-//! The plan documents which steps run for which inputs, so a JIT-compiled shading program can replace these
-//! loops one for one. Cost model: see [`super::plan`]; measured numbers: BENCHMARKS.md.
+//! Cost model: see [`super::plan`] and [`crate::backend::shading`]; measured numbers: BENCHMARKS.md.
 
 use super::image::Transfer;
 use super::plan::ShadingPlan;

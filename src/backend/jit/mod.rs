@@ -233,13 +233,17 @@ impl Compiled {
     }
 }
 
+/// The module out of its lock (poisoned or not), for freeing it on drop.
+fn take_module(m: &mut Mutex<Option<JITModule>>) -> Option<JITModule> {
+    match m.get_mut() {
+        Ok(m) => m.take(),
+        Err(poisoned) => poisoned.into_inner().take(),
+    }
+}
+
 impl Drop for Compiled {
     fn drop(&mut self) {
-        let module = match self.module.get_mut() {
-            Ok(m) => m.take(),
-            Err(poisoned) => poisoned.into_inner().take(),
-        };
-        if let Some(m) = module {
+        if let Some(m) = take_module(&mut self.module) {
             // Safety: `scalar` and `batch` point into this module's memory and are only reachable through
             // `self`, which is being dropped; every `JitKernel` holds an `Arc<Compiled>`, so no kernel can call
             // the code after this point, and no call is running (a running call borrows a kernel).
@@ -695,11 +699,7 @@ impl ShadeCode {
 
 impl Drop for ShadeCode {
     fn drop(&mut self) {
-        let module = match self.module.get_mut() {
-            Ok(m) => m.take(),
-            Err(poisoned) => poisoned.into_inner().take(),
-        };
-        if let Some(m) = module {
+        if let Some(m) = take_module(&mut self.module) {
             // Safety: `run` and `prepare` point into this module and are only reachable through `self`, which
             // is being dropped; every user holds an `Arc<ShadeCode>`, so no call is running.
             unsafe { m.free_memory() };

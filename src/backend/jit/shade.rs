@@ -42,7 +42,7 @@ pub(in crate::backend::jit) fn signature(module: &JITModule) -> Signature {
     super::signature(module, 5, false)
 }
 
-/// Builds the program's function (see the module doc; the loop is [`build_batch`]'s).
+/// Builds the program's function (see the module doc; the loop is [`batch_loop`]).
 pub(in crate::backend::jit) fn build(
     module: &mut JITModule,
     ctx: &mut Context,
@@ -50,17 +50,11 @@ pub(in crate::backend::jit) fn build(
     w: &Build,
     p: &Program,
 ) -> Result<(), JitError> {
-    const { assert!(V::LANES == 1 || V::LANES == 2, "the tail handles one element") };
     let ptr = module.target_config().pointer_type();
     let (ir, plan) = (w.ir, w.plan);
     let n = ir.len();
     let (mut b, callees, args) = begin(module, ctx, fctx, signature(module), w.imports);
     let [cols, params, block, outs, len] = args[..] else { return Err(JitError::Internal("program signature".into())) };
-    let header = b.create_block();
-    let body = b.create_block();
-    let tail_check = b.create_block();
-    let tail = b.create_block();
-    let exit = b.create_block();
 
     let mut bases = [None; MAX_COLUMNS];
     for (k, base) in bases.iter_mut().enumerate().take(p.columns.min(MAX_COLUMNS)) {
@@ -79,35 +73,8 @@ pub(in crate::backend::jit) fn build(
             splats[id.index()] = Some(V::splat(&mut b, s));
         }
     }
-    let vector_end = b.ins().band_imm_s(len, -i64::from(V::LANES));
-    b.ins().jump(header, &[BlockArg::Value(zero)]);
-
-    b.switch_to_block(header);
-    let i = b.append_block_param(header, ptr);
-    let more = b.ins().icmp(IntCC::UnsignedLessThan, i, vector_end);
-    b.ins().brif(more, body, &[], tail_check, &[]);
-
     let step = Step { cx: &cx, p, bases, outs: &out_bases };
-    b.switch_to_block(body);
-    b.seal_block(body);
-    step.emit::<V>(&mut b, splats, i)?;
-    let next = b.ins().iadd_imm_u(i, i64::from(V::LANES));
-    b.ins().jump(header, &[BlockArg::Value(next)]);
-    b.seal_block(header);
-
-    b.switch_to_block(tail_check);
-    b.seal_block(tail_check);
-    let rest = b.ins().band_imm_s(len, i64::from(V::LANES - 1));
-    b.ins().brif(rest, tail, &[], exit, &[]);
-
-    b.switch_to_block(tail);
-    b.seal_block(tail);
-    step.emit::<F64>(&mut b, cx.invariants.clone(), vector_end)?;
-    b.ins().jump(exit, &[]);
-
-    b.switch_to_block(exit);
-    b.seal_block(exit);
-    b.ins().return_(&[]);
+    batch_loop(&mut b, ptr, len, zero, splats, cx.invariants.clone(), &step)?;
     b.finalize(module.target_config());
     Ok(())
 }
@@ -120,7 +87,7 @@ struct Step<'a> {
     outs: &'a [Value],
 }
 
-impl Step<'_> {
+impl LoopBody for Step<'_> {
     /// The outer nodes in order, each region where the walk reaches its last output, then the stores.
     fn emit<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Option<Value>>, i: Value) -> Result<(), JitError> {
         let off = b.ins().ishl_imm_u(i, 3);
