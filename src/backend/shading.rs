@@ -1,6 +1,9 @@
 //! Shading programs: a material's whole shading, from per-pixel data columns to the pixel colour, as one lobe
 //! IR with several outputs, run by the interpreter here and compiled by the JIT (`jit::shade`).
 //!
+//! The JIT's side is `jit::shade` (src/backend/jit/shade.rs); the renderer picks one of the two per material
+//! (`render::shade::ProgramCode`).
+//!
 //! Design. The renderer fills a [`Spec`] per material (eye, lights, the colour uniforms, which geometric
 //! quantities the formula reads, the cut-off) and [`Program::new`] writes, as IR over `Node::Column` leaves
 //! (interpolated position, normal and, for formulas that read directions, tangent):
@@ -24,11 +27,9 @@
 //! light ~15 flops, one root and one division (point lights), ~10 more and one root for the half vector; the
 //! frame adds ~45 flops and a root per light region. Inverse lengths are exact `1/sqrt` in f64.
 
-use super::jit::{self, JitError, ShadeCode};
 use crate::base::span::Span;
 use crate::builtins::{Builtin, Mode};
 use crate::ir::{BinOp, Formula, Input, Ir, Node, NodeId, N_INPUTS};
-use std::sync::Arc;
 
 /// Most data columns a program reads: position, normal, tangent (3 each).
 pub const MAX_COLUMNS: usize = 9;
@@ -507,23 +508,10 @@ impl Program {
     }
 }
 
-/// One step of the flattened program.
-#[derive(Clone, Copy, Debug)]
-enum Op {
-    Const(f64),
-    Param(u16),
-    Column(u16),
-    Neg(u32),
-    Bin(BinOp, u32, u32),
-    Call1(Builtin, u32),
-    Call2(Builtin, u32, u32),
-    Call3(Builtin, u32, u32, u32),
-}
-
 #[derive(Clone, Copy, Debug)]
 enum Step {
-    /// Node `dst` = op.
-    Op(u32, Op),
+    /// Node `dst` = its IR node, evaluated in place (the node's operands are slots of earlier nodes).
+    Op(u32, Node),
     /// If slot `lit` is zero: the slots `outs` (a range of `Interp::outs`) become +0 and the next `skip`
     /// steps are skipped.
     Guard { lit: u32, skip: u32, outs: (u32, u32) },
@@ -532,30 +520,13 @@ enum Step {
 /// The reference interpreter of a [`Program`]: one loop over its steps per pixel, invariants once per call.
 #[derive(Clone, Debug)]
 pub struct Interp {
-    invariant: Vec<(u32, Op)>,
+    invariant: Vec<(u32, Node)>,
     steps: Vec<Step>,
     outs: Vec<u32>,
     outputs: [u32; N_OUTPUTS],
     len: usize,
     columns: usize,
     mode: Mode,
-}
-
-fn op_of(n: &Node) -> Op {
-    match *n {
-        Node::Const(b) => Op::Const(f64::from_bits(b)),
-        // Programs have no `Input` leaves; their values would be NaN, as a missing input.
-        Node::Input(_) => Op::Const(f64::NAN),
-        Node::Param(p) => Op::Param(p),
-        Node::Column(k) => Op::Column(k),
-        Node::Neg(a) => Op::Neg(a.0),
-        Node::Binary(op, a, b) => Op::Bin(op, a.0, b.0),
-        Node::Call(b, a) => match b.arity() {
-            1 => Op::Call1(b, a[0].0),
-            2 => Op::Call2(b, a[0].0, a[1].0),
-            _ => Op::Call3(b, a[0].0, a[1].0, a[2].0),
-        },
-    }
 }
 
 impl Interp {
@@ -566,36 +537,44 @@ impl Interp {
         let mut next = 0;
         for id in p.ir.ids() {
             match p.class[id.index()] {
-                Class::Invariant => invariant.push((id.0, op_of(p.ir.node(id)))),
-                Class::Outer => steps.push(Step::Op(id.0, op_of(p.ir.node(id)))),
+                Class::Invariant => invariant.push((id.0, *p.ir.node(id))),
+                Class::Outer => steps.push(Step::Op(id.0, *p.ir.node(id))),
                 Class::Guarded => {}
             }
             while let Some(r) = p.regions.get(next).filter(|r| r.at == id) {
                 let o0 = outs.len() as u32;
                 outs.extend(r.outputs.iter().map(|o| o.0));
                 steps.push(Step::Guard { lit: r.lit.0, skip: r.nodes.len() as u32, outs: (o0, outs.len() as u32) });
-                steps.extend(r.nodes.iter().map(|n| Step::Op(n.0, op_of(p.ir.node(*n)))));
+                steps.extend(r.nodes.iter().map(|n| Step::Op(n.0, *p.ir.node(*n))));
                 next += 1;
             }
         }
         Interp { invariant, steps, outs, outputs: p.outputs.map(|o| o.0), len: p.ir.len(), columns: p.columns, mode }
     }
 
-    fn op(&self, op: Op, s: &[f64], cols: &[&[f64]], i: usize, params: &[f64]) -> f64 {
-        match op {
-            Op::Const(c) => c,
-            Op::Param(p) => params.get(p as usize).copied().unwrap_or(f64::NAN),
-            Op::Column(k) => cols.get(k as usize).and_then(|c| c.get(i)).copied().unwrap_or(f64::NAN),
-            Op::Neg(a) => -s[a as usize],
-            Op::Bin(op, a, b) => op.apply(s[a as usize], s[b as usize]),
-            Op::Call1(f, a) => f.eval_in(self.mode, &[s[a as usize]]),
-            Op::Call2(f, a, b) => f.eval_in(self.mode, &[s[a as usize], s[b as usize]]),
-            Op::Call3(f, a, b, c) => f.eval_in(self.mode, &[s[a as usize], s[b as usize], s[c as usize]]),
+    /// The value of `node` for pixel `i`, its operands' values in `s` (the IR's semantics, as
+    /// [`super::interp`]; programs have no `Input` leaves, which read as NaN like a missing input).
+    fn op(&self, node: Node, s: &[f64], cols: &[&[f64]], i: usize, params: &[f64]) -> f64 {
+        let v = |a: NodeId| s[a.index()];
+        match node {
+            Node::Const(b) => f64::from_bits(b),
+            Node::Input(_) => f64::NAN,
+            Node::Param(p) => params.get(p as usize).copied().unwrap_or(f64::NAN),
+            Node::Column(k) => cols.get(k as usize).and_then(|c| c.get(i)).copied().unwrap_or(f64::NAN),
+            Node::Neg(a) => -v(a),
+            Node::Binary(op, a, b) => op.apply(v(a), v(b)),
+            // Unused argument slots repeat the first argument, so all three reads are in bounds.
+            Node::Call(f, [a, b, c]) => f.eval_in(self.mode, &[v(a), v(b), v(c)][..f.arity()]),
         }
     }
 
-    /// Runs the program on `len` pixels: `cols` are the data columns, `outs` the [`N_OUTPUTS`] output columns.
+    /// Runs the program on `len` pixels: `cols` are the data columns, `outs` the [`N_OUTPUTS`] output columns
+    /// (with fewer columns or shorter ones than the program reads, the outputs are NaN).
     pub fn run(&self, cols: &[&[f64]], params: &[f64], outs: &mut [&mut [f64]; N_OUTPUTS], len: usize) {
+        if cols.len() < self.columns || cols[..self.columns].iter().any(|c| c.len() < len) {
+            outs.iter_mut().for_each(|o| o.iter_mut().for_each(|x| *x = f64::NAN));
+            return;
+        }
         let mut s = vec![0.0; self.len];
         for &(d, op) in &self.invariant {
             s[d as usize] = self.op(op, &s, cols, 0, params);
@@ -619,51 +598,6 @@ impl Interp {
             for (o, &slot) in outs.iter_mut().zip(&self.outputs) {
                 if let Some(x) = o.get_mut(i) {
                     *x = s[slot as usize];
-                }
-            }
-        }
-    }
-}
-
-/// A program ready to run: interpreted or compiled.
-#[derive(Clone)]
-pub enum Compiled {
-    Interp(Arc<Interp>),
-    Jit(Arc<ShadeCode>),
-}
-
-impl Compiled {
-    /// Compiles `p` for `backend` in math mode `mode` (the JIT through its code cache).
-    pub fn new(p: &Program, backend: super::Backend, mode: Mode) -> Result<Compiled, JitError> {
-        Ok(match backend {
-            super::Backend::Interp => Compiled::Interp(Arc::new(Interp::new(p, mode))),
-            super::Backend::Jit => Compiled::Jit(jit::shade_code(p, mode)?),
-        })
-    }
-
-    /// The parameter-only work for `params`, computed once per render (the JIT's prepared block; empty for
-    /// the interpreter, which does it per call).
-    pub fn prepare(&self, params: &[f64]) -> Vec<f64> {
-        match self {
-            Compiled::Interp(_) => vec![],
-            Compiled::Jit(c) => c.prepare(params),
-        }
-    }
-
-    /// Runs the program on `len` pixels (every column and output at least `len` long; otherwise nothing
-    /// runs and the outputs are NaN). `block` is [`Compiled::prepare`]'s result for `params`.
-    pub fn run(&self, cols: &[&[f64]], params: &[f64], block: &[f64], outs: &mut [&mut [f64]; N_OUTPUTS], len: usize) {
-        match self {
-            Compiled::Interp(i) => {
-                if cols.len() >= i.columns && cols[..i.columns].iter().all(|c| c.len() >= len) {
-                    i.run(cols, params, outs, len)
-                } else {
-                    outs.iter_mut().for_each(|o| o.iter_mut().for_each(|x| *x = f64::NAN));
-                }
-            }
-            Compiled::Jit(c) => {
-                if c.run(cols, params, block, outs, len).is_err() {
-                    outs.iter_mut().for_each(|o| o.iter_mut().for_each(|x| *x = f64::NAN));
                 }
             }
         }

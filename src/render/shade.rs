@@ -25,11 +25,53 @@ use super::Material;
 use crate::backend::shading::{self, N_OUTPUTS};
 use crate::backend::{Columns, Evaluator};
 use crate::ir::Input;
+use std::sync::Arc;
 use std::time::Instant;
+
+/// A shading program ready to run: interpreted, or compiled by the JIT.
+#[derive(Clone)]
+pub enum ProgramCode {
+    Interp(Arc<shading::Interp>),
+    Jit(Arc<crate::backend::jit::ShadeCode>),
+}
+
+impl ProgramCode {
+    /// Compiles `p` for `backend` in math mode `mode` (the JIT through its code cache).
+    pub fn new(p: &shading::Program, backend: crate::backend::Backend, mode: crate::Mode) -> Result<ProgramCode, crate::backend::jit::JitError> {
+        Ok(match backend {
+            crate::backend::Backend::Interp => ProgramCode::Interp(Arc::new(shading::Interp::new(p, mode))),
+            crate::backend::Backend::Jit => ProgramCode::Jit(crate::backend::jit::shade_code(p, mode)?),
+        })
+    }
+
+    /// The parameter-only work for `params`, computed once per render (the JIT's prepared block; empty for
+    /// the interpreter, which does it per call).
+    pub fn prepare(&self, params: &[f64]) -> Vec<f64> {
+        match self {
+            ProgramCode::Interp(_) => vec![],
+            ProgramCode::Jit(c) => c.prepare(params),
+        }
+    }
+
+    /// Runs the program on `len` pixels (every column and output at least `len` long; otherwise nothing
+    /// runs and the outputs are NaN). `block` is [`ProgramCode::prepare`]'s result for `params`.
+    pub fn run(&self, cols: &[&[f64]], params: &[f64], block: &[f64], outs: &mut [&mut [f64]; N_OUTPUTS], len: usize) {
+        match self {
+            ProgramCode::Interp(i) => {
+                i.run(cols, params, outs, len)
+            }
+            ProgramCode::Jit(c) => {
+                if c.run(cols, params, block, outs, len).is_err() {
+                    outs.iter_mut().for_each(|o| o.iter_mut().for_each(|x| *x = f64::NAN));
+                }
+            }
+        }
+    }
+}
 
 /// A material's compiled shading program for one render, with its prepared parameter block.
 pub struct ProgramRun {
-    code: shading::Compiled,
+    code: ProgramCode,
     block: Vec<f64>,
     params: Vec<f64>,
     /// The program reads the tangent (columns 6..9).
@@ -45,7 +87,7 @@ impl ProgramRun {
         let spec = spec(scene, plan);
         let channels: Vec<&crate::ir::Formula> = src.channels.iter().map(|f| f.as_ref()).collect();
         let program = shading::Program::new(&spec, &channels).ok()?;
-        let code = shading::Compiled::new(&program, src.backend, src.math).ok()?;
+        let code = ProgramCode::new(&program, src.backend, src.math).ok()?;
         let block = code.prepare(&m.params);
         Some(ProgramRun { code, block, params: m.params.clone(), tangent: program.columns > 6 })
     }

@@ -2,7 +2,8 @@
 //! on every example scene in both math modes; renders through the program stay within one level of the Rust
 //! span loops (the previous path) on every example scene; the `Column` leaf runs through every backend.
 
-use lobe::backend::shading::{self, Compiled, Program, N_OUTPUTS};
+use lobe::backend::shading::{self, Program, N_OUTPUTS};
+use lobe::render::shade::ProgramCode as Compiled;
 use lobe::render::scene::{self, LoadOptions, LobeCompiler};
 use lobe::render::{self as r, RenderOptions};
 use lobe::{Backend, Evaluator, Mode};
