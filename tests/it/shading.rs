@@ -113,6 +113,7 @@ fn program_and_span_loop_renders_are_within_one_level() {
             moved += usize::from(d > 0);
         }
         assert!(moved * 100 <= sa.visible_pixels as usize, "{}: {moved} pixels moved", path.display());
+        println!("{}: {moved} of {} visible pixels differ by one level", path.file_name().unwrap_or_default().display(), sa.visible_pixels);
         assert_eq!(sa.visible_pixels, sb.visible_pixels);
         // Evaluations: the same lit pixels up to rounding at the terminator (NL ≈ 0).
         let (ea, eb) = (sa.evals as f64, sb.evals as f64);
