@@ -50,7 +50,7 @@ fn batch_ns(ev: &dyn Evaluator, params: &[f64]) -> f64 {
     best
 }
 
-#[derive(Default, Clone, Copy)]
+#[derive(Default, Clone, Copy, Debug)]
 struct Best {
     shade: f64,
     geometry: f64,
@@ -70,11 +70,15 @@ fn best_of(acc: &mut Option<Best>, st: &RenderStats, encode: Duration) {
 
 fn split() {
     let rounds: usize = std::env::var("LOBE_SPLIT_ROUNDS").ok().and_then(|s| s.parse().ok()).unwrap_or(5);
-    let opts = RenderOptions { threads: 1, ..RenderOptions::default() };
-    println!("render split, 1 thread, best of {rounds} alternating JIT/interpreter renders (ns per visible pixel; kernel ns per evaluation)");
+    let only = std::env::var("LOBE_SPLIT_ONLY").unwrap_or_default();
+    let program = RenderOptions { threads: 1, ..RenderOptions::default() };
+    let spans = RenderOptions { program: false, ..program };
+    println!("render split, 1 thread, best of {rounds} alternating renders (ns per visible pixel; kernel ns per evaluation)");
+    println!("  program: the compiled shading program (JIT) and the same program interpreted; spans: the Rust span loops");
+    println!("  with one batched kernel call per span and light (the previous path). prog = the program's own share.");
     println!(
-        "{:<22} {:>5} {:>9} {:>9} {:>9} {:>7} {:>9} {:>9} {:>9} {:>8} {:>8} {:>8}",
-        "scene", "size", "visible", "jit shd", "int shd", "int/jit", "jit geom", "jit kern", "batch", "jit/bat", "raster", "encode"
+        "{:<20} {:>5} {:>8} {:>8} {:>8} {:>7} {:>8} {:>8} {:>7} {:>8} {:>8} {:>7} {:>7} {:>7}",
+        "scene", "size", "visible", "jit prg", "int prg", "int/jit", "jit spn", "int spn", "int/jit", "prog", "batch", "jit/bat", "raster", "encode"
     );
     for (file, size) in [
         ("paper_sphere.toml", 4096),
@@ -83,35 +87,42 @@ fn split() {
         ("fill_kutlog.toml", 2048),
         ("fill_mesh.toml", 2048),
     ] {
+        if !file.contains(only.as_str()) {
+            continue;
+        }
         let scenes = [load(file, size, Backend::Jit), load(file, size, Backend::Interp)];
-        let mut best: [Option<Best>; 2] = [None, None];
+        // JIT program, interpreted program, JIT span loops, interpreted span loops.
+        let runs = [(0, &program), (1, &program), (0, &spans), (1, &spans)];
+        let mut best: [Option<Best>; 4] = [None; 4];
         let mut visible = 0;
         for _ in 0..rounds {
-            for (s, b) in scenes.iter().zip(&mut best) {
-                let (frame, st) = render::render(s, &opts).expect("render");
+            for ((k, o), b) in runs.iter().zip(&mut best) {
+                let (frame, st) = render::render(&scenes[*k], o).expect("render");
                 let t = Instant::now();
                 black_box(frame.image.encode_png().expect("png"));
                 best_of(b, &st, t.elapsed());
                 visible = st.visible_pixels;
             }
         }
-        let (j, i) = (best[0].unwrap_or_default(), best[1].unwrap_or_default());
+        let [jp, ip, js, is] = best.map(|b| b.unwrap_or_default());
         let m = &scenes[0].materials[0];
         let batch = batch_ns(m.evaluator.as_ref(), &m.params);
         println!(
-            "{:<22} {:>5} {:>9} {:>9.1} {:>9.1} {:>6.1}× {:>9.1} {:>9.2} {:>9.2} {:>7.1}× {:>6.1}ms {:>6.1}ms",
+            "{:<20} {:>5} {:>8} {:>8.1} {:>8.1} {:>6.1}× {:>8.1} {:>8.1} {:>6.1}× {:>8.1} {:>8.2} {:>6.1}× {:>5.1}ms {:>5.1}ms",
             file.trim_end_matches(".toml"),
             size,
             visible,
-            j.shade,
-            i.shade,
-            i.shade / j.shade,
-            j.geometry,
-            j.kernel,
+            jp.shade,
+            ip.shade,
+            ip.shade / jp.shade,
+            js.shade,
+            is.shade,
+            is.shade / js.shade,
+            jp.shade - jp.geometry,
             batch,
-            j.shade / batch,
-            j.raster_ms,
-            j.encode_ms
+            jp.shade / batch,
+            jp.raster_ms,
+            jp.encode_ms
         );
     }
 }

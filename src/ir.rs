@@ -207,6 +207,9 @@ pub enum Node {
     Binary(BinOp, NodeId, NodeId),
     /// A builtin from the one table; unused argument slots hold the first argument and are ignored.
     Call(Builtin, [NodeId; 3]),
+    /// Per-element data column k of a shading program ([`crate::backend::shading`]): a varying leaf like an
+    /// `Input`, but not a BRDF input. Front ends never produce it, so formulas never contain it.
+    Column(u16),
 }
 
 impl Node {
@@ -224,7 +227,7 @@ impl Node {
     /// Calls `f` on every operand, in order.
     pub fn for_each_arg(&self, mut f: impl FnMut(NodeId)) {
         match self {
-            Node::Const(_) | Node::Input(_) | Node::Param(_) => {}
+            Node::Const(_) | Node::Input(_) | Node::Param(_) | Node::Column(_) => {}
             Node::Neg(a) => f(*a),
             Node::Binary(_, a, b) => {
                 f(*a);
@@ -237,7 +240,7 @@ impl Node {
     /// The same node with every operand mapped through `m`.
     pub fn map_args(&self, mut m: impl FnMut(NodeId) -> NodeId) -> Node {
         match *self {
-            Node::Const(_) | Node::Input(_) | Node::Param(_) => *self,
+            Node::Const(_) | Node::Input(_) | Node::Param(_) | Node::Column(_) => *self,
             Node::Neg(a) => Node::Neg(m(a)),
             Node::Binary(op, a, b) => Node::Binary(op, m(a), m(b)),
             Node::Call(f, args) => {
@@ -290,6 +293,9 @@ impl Ir {
     pub fn param(&mut self, p: u16, span: Span) -> NodeId {
         self.push(Node::Param(p), span)
     }
+    pub fn column(&mut self, k: u16, span: Span) -> NodeId {
+        self.push(Node::Column(k), span)
+    }
     pub fn neg(&mut self, a: NodeId, span: Span) -> NodeId {
         self.push(Node::Neg(a), span)
     }
@@ -325,22 +331,31 @@ impl Ir {
     /// Copies the nodes reachable from `root` into a fresh arena (dropping dead nodes, renumbering in
     /// topological order); returns the arena and the new root.
     pub fn compact(&self, root: NodeId) -> (Ir, NodeId) {
-        let mut live = vec![false; self.nodes.len()];
-        live[root.index()] = true;
-        for i in (0..=root.index()).rev() {
+        let (out, roots) = self.compact_many(&[root]);
+        (out, roots[0])
+    }
+
+    /// [`Ir::compact`] for several roots (a program with several outputs); returns the new roots in order.
+    pub fn compact_many(&self, roots: &[NodeId]) -> (Ir, Vec<NodeId>) {
+        let top = roots.iter().map(|r| r.index() + 1).max().unwrap_or(0);
+        let mut live = vec![false; top];
+        for r in roots {
+            live[r.index()] = true;
+        }
+        for i in (0..top).rev() {
             if live[i] {
                 self.nodes[i].for_each_arg(|a| live[a.index()] = true);
             }
         }
         let mut out = Ir::new();
-        let mut map = vec![NodeId(u32::MAX); self.nodes.len()];
-        for i in 0..=root.index() {
+        let mut map = vec![NodeId(u32::MAX); top];
+        for i in 0..top {
             if live[i] {
                 let n = self.nodes[i].map_args(|a| map[a.index()]);
                 map[i] = out.push(n, self.spans[i]);
             }
         }
-        let r = map[root.index()];
+        let r = roots.iter().map(|r| map[r.index()]).collect();
         (out, r)
     }
 
@@ -622,7 +637,7 @@ pub mod print {
         let top = roots.iter().map(|r| r.index()).max().unwrap_or(0);
         for id in f.ir.ids().take(top) {
             let n = f.ir.node(id);
-            if counts[id.index()] < 2 || roots.contains(&id) || matches!(n, Node::Const(_) | Node::Input(_) | Node::Param(_)) {
+            if counts[id.index()] < 2 || roots.contains(&id) || matches!(n, Node::Const(_) | Node::Input(_) | Node::Param(_) | Node::Column(_)) {
                 continue;
             }
             let mut name = match n {
@@ -818,6 +833,8 @@ pub mod print {
                 Node::Const(b) => out.push_str(&literal(f64::from_bits(*b))),
                 Node::Input(i) => out.push_str(i.name()),
                 Node::Param(p) => out.push_str(&f.params[*p as usize].name),
+                // Not in the language: printed as the shading program's column, for dumps only.
+                Node::Column(k) => out.push_str(&format!("column{k}")),
                 Node::Neg(a) => {
                     out.push('-');
                     stack.push(Item::Node(*a, Some(7), false));

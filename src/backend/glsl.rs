@@ -238,6 +238,8 @@ fn emit(ir: &Ir, roots: &[NodeId], d: Dialect, exact: bool, params: &[String], o
             Node::Const(b) => literal(f64::from_bits(b), d, exact),
             Node::Input(i) => i.name().to_string(),
             Node::Param(p) => params[p as usize].clone(),
+            // Formulas have no data columns (only shading programs, which are not exported); named for dumps.
+            Node::Column(k) => format!("column{k}"),
             Node::Neg(a) => format!("(-{})", t(a)),
             Node::Binary(op, a, b) => format!("({} {} {})", t(a), op.symbol(), t(b)),
             Node::Call(b, a) => {
@@ -252,7 +254,7 @@ fn emit(ir: &Ir, roots: &[NodeId], d: Dialect, exact: bool, params: &[String], o
                 s
             }
         };
-        let leaf = matches!(node, Node::Const(_) | Node::Input(_) | Node::Param(_));
+        let leaf = matches!(node, Node::Const(_) | Node::Input(_) | Node::Param(_) | Node::Column(_));
         let bind = Some(id) != single && !leaf && (uses[id.index()] > 1 || matches!(node, Node::Call(..)));
         if bind {
             let tname = format!("t{ntemps}");

@@ -56,6 +56,8 @@ impl Interp {
                 Node::Const(b) => Instr::Const(f64::from_bits(b)),
                 Node::Input(i) => Instr::Input(i.index() as u8),
                 Node::Param(p) => Instr::Param(p),
+                // Formulas have no data columns; shading programs run in `backend::shading`'s interpreter.
+                Node::Column(_) => Instr::Const(f64::NAN),
                 Node::Neg(a) => Instr::Neg(a.0),
                 Node::Binary(op, a, b) => Instr::Bin(op, a.0, b.0),
                 Node::Call(b, a) => match b.arity() {

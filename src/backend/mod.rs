@@ -8,5 +8,6 @@ mod kernel;
 pub mod glsl;
 pub mod interp;
 pub mod jit;
+pub mod shading;
 
 pub use kernel::{AsEvaluator, Backend, Columns, Evaluator, FnEvaluator, Kernel, Prepared};

@@ -63,6 +63,7 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
         transfer: if a.srgb { Transfer::Srgb } else { Transfer::Linear },
         progress: !a.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr()),
         cutoff: true,
+        program: true,
     };
     let t0 = Instant::now();
     let (frame, stats) = r::render(&sc, &ropts).map_err(CliError::msg)?;
@@ -137,6 +138,7 @@ pub fn stats_json(s: &RenderStats, t: &Times, backend: &str, math: &str, cut: Op
         "raster_ms": ms(s.raster_cpu),
         "shade_ms": ms(s.shade_cpu),
         "kernel_ms": ms(s.kernel_cpu),
+        "program_compile_ms": ms(s.program_compile),
         "render_ms": ms(s.render_wall),
         "encode_ms": ms(t.encode),
         "wall_ms": ms(t.wall),
@@ -161,8 +163,8 @@ pub fn format_stats(s: &RenderStats, encode: std::time::Duration) -> String {
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     format!(
         "render: {}×{} px, {} thread(s), {} triangles, {}/{} tiles touched\n\
-         \x20 time: {:.2} ms wall ({:.2} Mpixel/s); setup+binning {:.2} ms; raster {:.2} ms cpu; shading {:.2} ms cpu (kernel {:.2}); encode {:.2} ms\n\
-         \x20 shading: {} visible px, {:.1} ns cpu per visible px ({:.1} outside the kernel), {} kernel evaluations ({:.2} ns each) in {} batched calls, {} NaN\n",
+         \x20 time: {:.2} ms wall ({:.2} Mpixel/s); setup+binning {:.2} ms; raster {:.2} ms cpu; shading {:.2} ms cpu (compiled code {:.2}); encode {:.2} ms; shading programs built in {:.2} ms\n\
+         \x20 shading: {} visible px, {:.1} ns cpu per visible px ({:.1} outside compiled code), {} evaluations of F ({:.2} ns of compiled code each) in {} calls, {} NaN\n",
         s.width,
         s.height,
         s.threads,
@@ -176,6 +178,7 @@ pub fn format_stats(s: &RenderStats, encode: std::time::Duration) -> String {
         ms(s.shade_cpu),
         ms(s.kernel_cpu),
         ms(encode),
+        ms(s.program_compile),
         s.visible_pixels,
         s.shade_ns_per_px(),
         s.geometry_ns_per_px(),

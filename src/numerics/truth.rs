@@ -535,6 +535,8 @@ pub fn eval_x(f: &Formula, x: &[f64; N_INPUTS], params: &[f64]) -> Xf {
         let r = match *f.ir.node(id) {
             Node::Const(b) => Xf::from_f64(f64::from_bits(b)),
             Node::Input(i) => Xf::from_f64(x[i.index()]),
+            // Formulas have no data columns (front ends never produce them).
+            Node::Column(_) => Xf::from_f64(f64::NAN),
             Node::Param(p) => Xf::from_f64(params.get(p as usize).copied().unwrap_or(f64::NAN)),
             Node::Neg(a) => v[a.index()].neg(),
             Node::Binary(op, a, b) => {

@@ -6,27 +6,31 @@
 //! 2. per tile, tiles in parallel with rayon: rasterise the tile's bin into a tile-sized G-buffer (integer
 //!    edge functions, top-left rule, 1/w depth test), then shade the visible pixels in structure-of-arrays
 //!    spans of up to [`shade::SPAN`] pixels, following each material's [`plan::ShadingPlan`] (computed once
-//!    per frame: which cosines the formula reads, the uniforms, the cut-off), with one batched kernel call per
-//!    span and light ([`shade::shade_tile`]), and convert to 8 bits into the frame; tiles no triangle touches
-//!    are filled with the background and cost nothing else;
+//!    per frame: which cosines the formula reads, the uniforms, the cut-off) compiled into a shading program
+//!    (one call per span: [`shade::shade_tile`], [`crate::backend::shading`]), and convert to 8 bits into the
+//!    frame; tiles no triangle touches are filled with the background and cost nothing else;
 //! 3. PNG encoding and atomic output ([`image`]).
 //!
 //! Materials are `Arc<dyn Evaluator>` (three for a colour formula, one per channel) plus the set of inputs the
-//! formula reads (a tangent frame per pixel only if it reads direction components), so the same renderer runs
-//! the JIT, the interpreter, or a plain Rust closure (tests and benches); everything but F is the same Rust
-//! code on every backend, so "JIT vs interpreter" compares the kernels in the same shading.
+//! formula reads (a tangent frame per pixel only if it reads direction components) and, for lobe formulas,
+//! the simplified formulas themselves ([`ProgramSource`]): each render builds the material's shading program
+//! from them and compiles it with the material's backend, so "JIT vs interpreter" compares the same program
+//! (geometry, F and colour sum) compiled or interpreted. A plain Rust closure (tests and benches) is shaded by
+//! the Rust span loops with one batched kernel call per span and light.
 //!
 //! Determinism: every tile is computed from its own bin in scene order and written to its own pixels, and
 //! all counters are integers, so 1 thread and N threads give byte-identical images and equal counts.
 //!
-//! Cost model: shading dominates — per visible pixel the SoA geometry (interpolation, three inverse lengths,
-//! the cosines the formula reads, compaction of the lit pixels, the colour sum, the 8-bit conversion:
-//! ~15–20 ns on this project's machine, SSE2 f64 lanes), plus per lit pixel and light the kernel (JIT ~1 ns
-//! for arithmetic formulas, the interpreter ~35 ns) — then rasterisation (a few edge-function steps per
+//! Cost model: shading dominates — per visible pixel the interpolation, grouping and 8-bit conversion in Rust
+//! (~10 ns), then the shading program (the inverse lengths, the cosines the formula reads, F where lit, the
+//! colour sum: JIT ~7 ns for one light and a cheap formula, plus F's own cost per lit pixel and light; the
+//! interpreter 15–30× that) — then rasterisation (a few edge-function steps per
 //! covered pixel, ~5 ns); setup and binning are per triangle and small; tiles the scene does not touch cost
 //! only the background fill. PNG encoding is a separate, serial stage. Stage times are thread CPU time
-//! (`cpu-time`), so a loaded machine does not inflate them; the kernel's share is its wall time scaled by the
-//! tile's CPU/wall ratio. Measured numbers: BENCHMARKS.md.
+//! (`cpu-time`), so a loaded machine does not inflate them; the compiled code's share (`kernel_cpu`: the
+//! program's calls, F included, or the kernel's on the span-loop path) is its wall time scaled by the tile's
+//! CPU/wall ratio — inside a fused program F's own time is not separable, so benches report the batched
+//! kernel's ns/element measured beside it. Measured numbers: BENCHMARKS.md.
 
 pub mod camera;
 pub mod compare;
@@ -115,6 +119,18 @@ pub struct Material {
     pub cutoff: Option<plan::Cutoff>,
     /// The math mode of the material's kernel (for reports).
     pub math: crate::Mode,
+    /// What the shading program is built from (`None` for kernels that are not lobe formulas, e.g. Rust
+    /// closures: those are shaded by the Rust span loops and one batched kernel call per span and light).
+    pub program: Option<ProgramSource>,
+}
+
+/// The compiled formula's channels and backend, from which each render builds the material's shading program.
+#[derive(Clone)]
+pub struct ProgramSource {
+    /// The simplified formula of each channel (one, or red, green, blue), parameters baked as compiled.
+    pub channels: Vec<Arc<crate::ir::Formula>>,
+    pub backend: crate::backend::Backend,
+    pub math: crate::Mode,
 }
 
 impl Material {
@@ -176,11 +192,14 @@ pub struct RenderOptions {
     pub progress: bool,
     /// Apply the materials' cut-offs (off: evaluate F everywhere, to measure what the cut-off changes).
     pub cutoff: bool,
+    /// Shade with each material's compiled shading program (off: the Rust span loops with one batched kernel
+    /// call per span and light, the previous path, kept for comparison and for non-lobe kernels).
+    pub program: bool,
 }
 
 impl Default for RenderOptions {
     fn default() -> RenderOptions {
-        RenderOptions { threads: 0, tile: 64, transfer: Transfer::Linear, progress: false, cutoff: true }
+        RenderOptions { threads: 0, tile: 64, transfer: Transfer::Linear, progress: false, cutoff: true, program: true }
     }
 }
 
@@ -205,8 +224,11 @@ pub struct RenderStats {
     pub raster_cpu: Duration,
     /// Shading, including the kernel time and the conversion to 8 bits.
     pub shade_cpu: Duration,
-    /// The part of `shade_cpu` spent inside the kernel's batched calls.
+    /// The part of `shade_cpu` spent inside compiled code: the shading programs' calls (which include F and
+    /// all the geometry after interpolation), or the kernel's batched calls on the span-loop path.
     pub kernel_cpu: Duration,
+    /// Building and compiling the shading programs (wall, before the tiles; ~0 on a code-cache hit).
+    pub program_compile: Duration,
     /// Wall time of setup + tiles (excludes encoding).
     pub render_wall: Duration,
 }
@@ -219,11 +241,13 @@ impl RenderStats {
     pub fn shade_ns_per_px(&self) -> f64 {
         self.shade_cpu.as_nanos() as f64 / self.visible_pixels.max(1) as f64
     }
-    /// Shading CPU time outside the kernel per visible pixel, ns: the geometry and colour cost.
+    /// Shading CPU time outside compiled code per visible pixel, ns: interpolation, grouping and the 8-bit
+    /// conversion (with the span loops off the program path: also the geometry and colour sum).
     pub fn geometry_ns_per_px(&self) -> f64 {
         (self.shade_cpu.saturating_sub(self.kernel_cpu)).as_nanos() as f64 / self.visible_pixels.max(1) as f64
     }
-    /// Kernel CPU time per evaluation, ns (0 when nothing was evaluated).
+    /// Compiled-code CPU time per evaluation of F, ns (0 when nothing was evaluated): with shading programs
+    /// this includes the geometry and colour sum around F.
     pub fn kernel_ns_per_eval(&self) -> f64 {
         if self.evals == 0 { 0.0 } else { self.kernel_cpu.as_nanos() as f64 / self.evals as f64 }
     }
@@ -270,6 +294,15 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
 
     let bg = scene.background.to_array().map(|c| opts.transfer.encode(c));
     let plans: Vec<plan::ShadingPlan> = scene.materials.iter().map(|m| plan::ShadingPlan::new(m, scene.ambient, opts.cutoff)).collect();
+    let tc = Instant::now();
+    let programs: Vec<Option<shade::ProgramRun>> = scene
+        .materials
+        .iter()
+        .zip(&plans)
+        .map(|(m, p)| if opts.program { shade::ProgramRun::new(scene, m, p) } else { None })
+        .collect();
+    let program_compile = tc.elapsed();
+    let plans: Vec<(plan::ShadingPlan, Option<shade::ProgramRun>)> = plans.into_iter().zip(programs).collect();
     let timers = Timers::default();
     let progress = Progress::new(opts.progress, setup.bins.len() as u64);
     let mut rgb = vec![0u8; w * h * 3];
@@ -330,6 +363,7 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
         raster_cpu: Duration::from_nanos(timers.raster.load(Ordering::Relaxed)),
         shade_cpu: Duration::from_nanos(timers.shade.load(Ordering::Relaxed)),
         kernel_cpu: Duration::from_nanos(timers.kernel.load(Ordering::Relaxed)),
+        program_compile,
         render_wall: t0.elapsed(),
     };
     (Frame { image: Image { width: w, height: h, rgb }, covered }, stats)
@@ -360,7 +394,7 @@ struct Timers {
 #[allow(clippy::too_many_arguments)]
 fn tile_pixels(
     scene: &Scene,
-    plans: &[plan::ShadingPlan],
+    plans: &[(plan::ShadingPlan, Option<shade::ProgramRun>)],
     setup: &raster::Setup,
     t: usize,
     sc: &mut shade::Scratch,

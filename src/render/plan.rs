@@ -27,9 +27,15 @@
 //! colour formula (`Formula.rgb`) has one kernel per channel, all three called on the same compacted columns;
 //! a scalar formula's F serves all three channels. Energy normalisation (`coef`) is per channel too.
 //!
-//! Design for what comes next: `shade.rs` runs each step as one loop over structure-of-arrays columns (LLVM
-//! vectorises them); a JIT-compiled shading program would compile the same step list into lane code with the
-//! uniforms as constants, and the interpreter would run that program — the plan does not change.
+//! The steps are written twice, on purpose: as the shading program ([`crate::backend::shading`], built from
+//! this plan by [`super::shade::spec`]; one lobe IR with the formula inlined, the steps after interpolation
+//! as IR nodes, run by the interpreter or compiled by the JIT — the path every lobe formula takes), and as
+//! the Rust span loops of `shade.rs` (kernels that are not lobe formulas, e.g. Rust closures, and the
+//! comparison `RenderOptions::program = false`). The program computes inverse lengths as exact `1/sqrt`, the
+//! span loops from an f32 estimate and one Newton step, so the two paths agree within one 8-bit level
+//! (tested on every example scene). In the program the kernel row is a guarded region per light (F only
+//! where some lane is lit; no compaction), F non-finite → 0 and counted, and a colour formula's three
+//! channels share their common nodes.
 //!
 //! Cost model: per visible pixel ~25 flops (surface) + ~20 and two square roots (view); per lit pixel and
 //! light ~15 flops and one square root (light), 5 (view·light), 6 and one root (half), 3 (reflect), the

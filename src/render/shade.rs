@@ -1,27 +1,120 @@
 //! Per-tile shading in structure-of-arrays columns: I = ka·Ia·C + Σ_lights Il·(kd·NL·C + ks·coef·F·Cs).
 //!
 //! Design: the visible pixels of a tile are grouped by material and cut into spans of up to [`SPAN`] pixels.
-//! In a span every quantity is a column of f64 with one entry per pixel, and every step of the material's
-//! [`ShadingPlan`] is one branch-free loop over those columns, which LLVM vectorises (SSE2 f64x2 on the
-//! baseline x86-64 target; the inverse lengths take an f32 estimate and one f64 Newton step instead of an f64
-//! square root and division). Position and normal are interpolated per run of pixels covered by one triangle
-//! (its attributes are loop constants there). Per light, the lit pixels (NL > 0, lobe cosine above the
-//! cut-off if the material has one) are compacted into the kernel's columns (branch-free: the write index
-//! advances by the mask) and the kernel is called once for the span with [`Evaluator::eval_batch`] — the
-//! JIT's F64X2 batch loop or the interpreter. F is scattered back (a NaN or ±inf is counted and becomes 0:
-//! no light) and the colour sum runs over the whole span, unlit pixels adding exactly +0. Nothing here
+//! In a span every quantity is a column of f64 with one entry per pixel. Position and normal (and the
+//! tangent, for formulas that read directions) are interpolated per run of pixels covered by one triangle
+//! (its attributes are loop constants there); two-sided triangles turn the normal to the viewer.
+//!
+//! Then, for a material whose kernels are lobe formulas, one call of its shading program ([`ProgramRun`]:
+//! [`crate::backend::shading`], compiled once per render) takes those columns to the colour and the counters
+//! — the JIT's batched function or the interpreter running the same program. Otherwise (kernels that are Rust
+//! closures, or `RenderOptions::program` off) every step of the material's [`ShadingPlan`] is one branch-free
+//! loop over the columns, which LLVM vectorises (SSE2 f64x2; the inverse lengths take an f32 estimate and one
+//! f64 Newton step); per light the lit pixels (NL > 0, lobe cosine above the cut-off) are compacted into the
+//! kernel's columns and the kernel is called once for the span with [`Evaluator::eval_batch`], F scattered
+//! back (a NaN or ±inf counted and 0: no light). Both end in the vectorised 8-bit conversion. Nothing here
 //! allocates in the steady state ([`Scratch`] is per thread).
 //!
-//! The plan documents which steps run for which inputs, so a JIT-compiled shading program can replace these
-//! loops one for one. Cost model: see [`super::plan`]; measured numbers: BENCHMARKS.md.
+//! Cost model: see [`super::plan`] and [`crate::backend::shading`]; measured numbers: BENCHMARKS.md.
 
 use super::image::Transfer;
 use super::plan::ShadingPlan;
 use super::raster::{GBuffer, Setup, EMPTY};
 use super::{LightKind, Scene};
+use super::Material;
+use crate::backend::shading::{self, N_OUTPUTS};
 use crate::backend::{Columns, Evaluator};
 use crate::ir::Input;
+use std::sync::Arc;
 use std::time::Instant;
+
+/// A shading program ready to run: interpreted, or compiled by the JIT.
+#[derive(Clone)]
+pub enum ProgramCode {
+    Interp(Arc<shading::Interp>),
+    Jit(Arc<crate::backend::jit::ShadeCode>),
+}
+
+impl ProgramCode {
+    /// Compiles `p` for `backend` in math mode `mode` (the JIT through its code cache).
+    pub fn new(p: &shading::Program, backend: crate::backend::Backend, mode: crate::Mode) -> Result<ProgramCode, crate::backend::jit::JitError> {
+        Ok(match backend {
+            crate::backend::Backend::Interp => ProgramCode::Interp(Arc::new(shading::Interp::new(p, mode))),
+            crate::backend::Backend::Jit => ProgramCode::Jit(crate::backend::jit::shade_code(p, mode)?),
+        })
+    }
+
+    /// The parameter-only work for `params`, computed once per render (the JIT's prepared block; empty for
+    /// the interpreter, which does it per call).
+    pub fn prepare(&self, params: &[f64]) -> Vec<f64> {
+        match self {
+            ProgramCode::Interp(_) => vec![],
+            ProgramCode::Jit(c) => c.prepare(params),
+        }
+    }
+
+    /// Runs the program on `len` pixels (every column and output at least `len` long; otherwise nothing
+    /// runs and the outputs are NaN). `block` is [`ProgramCode::prepare`]'s result for `params`.
+    pub fn run(&self, cols: &[&[f64]], params: &[f64], block: &[f64], outs: &mut [&mut [f64]; N_OUTPUTS], len: usize) {
+        match self {
+            ProgramCode::Interp(i) => {
+                i.run(cols, params, outs, len)
+            }
+            ProgramCode::Jit(c) => {
+                if c.run(cols, params, block, outs, len).is_err() {
+                    outs.iter_mut().for_each(|o| o.iter_mut().for_each(|x| *x = f64::NAN));
+                }
+            }
+        }
+    }
+}
+
+/// A material's compiled shading program for one render, with its prepared parameter block.
+pub struct ProgramRun {
+    code: ProgramCode,
+    block: Vec<f64>,
+    params: Vec<f64>,
+    /// The program reads the tangent (columns 6..9).
+    tangent: bool,
+}
+
+impl ProgramRun {
+    /// The program `plan` describes for `m` under `scene`'s eye and lights, compiled with the material's
+    /// backend and math mode; `None` when the material's kernels are not lobe formulas or compilation failed
+    /// (then the span loops shade it, with the same result within rounding).
+    pub fn new(scene: &Scene, m: &Material, plan: &ShadingPlan) -> Option<ProgramRun> {
+        let src = m.program.as_ref()?;
+        let spec = spec(scene, plan);
+        let channels: Vec<&crate::ir::Formula> = src.channels.iter().map(|f| f.as_ref()).collect();
+        let program = shading::Program::new(&spec, &channels).ok()?;
+        let code = ProgramCode::new(&program, src.backend, src.math).ok()?;
+        let block = code.prepare(&m.params);
+        Some(ProgramRun { code, block, params: m.params.clone(), tangent: program.columns > 6 })
+    }
+}
+
+/// The shading program's description from the plan (see [`shading::Spec`]).
+pub fn spec(scene: &Scene, plan: &ShadingPlan) -> shading::Spec {
+    let lights = scene
+        .lights
+        .iter()
+        .map(|l| match l.kind {
+            LightKind::Point(p) => shading::Light { point: true, at: p.to_array(), color: l.color.to_array() },
+            LightKind::Directional(d) => shading::Light { point: false, at: (-d).to_array(), color: l.color.to_array() },
+        })
+        .collect();
+    shading::Spec {
+        eye: scene.camera.position.to_array(),
+        lights,
+        ambient: plan.ambient,
+        diffuse: plan.diffuse,
+        spec: plan.spec,
+        specular: plan.specular,
+        times_nl: plan.times_nl,
+        tangent_rotation: plan.directions.then_some(plan.tangent_rotation),
+        cutoff: plan.cutoff.map(|c| (c.input, c.cos)),
+    }
+}
 
 /// Pixels shaded together: every column of a span (~25 of them, 2 KiB each) stays in the L1 cache between
 /// the steps, and the kernel call per span and light (~50 ns of dispatch) is well amortised.
@@ -69,6 +162,8 @@ struct Group {
     /// channel 0, which the colour step then reads for all three.
     f: [Vec<f64>; 3],
     acc: [Vec<f64>; 3],
+    /// The shading program's counters per pixel (non-finite F, evaluations, cut-off skips).
+    cnt: [Vec<f64>; 3],
     /// 8-bit colours.
     q: [Vec<u8>; 3],
     /// The kernel batch: group positions of the evaluated pixels, their inputs, and F.
@@ -101,7 +196,7 @@ impl std::ops::AddAssign for ShadeCounts {
 /// Shades the tile whose G-buffer is in `sc.gb` (`tw × th` pixels) with the per-material `plans`; the 8-bit
 /// result (background where nothing is visible) is left in `sc.rgb`. Returns the counters and the time
 /// spent inside the kernel, in nanoseconds.
-pub fn shade_tile(scene: &Scene, plans: &[ShadingPlan], s: &Setup, n: usize, sc: &mut Scratch, transfer: Transfer, bg: [u8; 3]) -> (ShadeCounts, u64) {
+pub fn shade_tile(scene: &Scene, plans: &[(ShadingPlan, Option<ProgramRun>)], s: &Setup, n: usize, sc: &mut Scratch, transfer: Transfer, bg: [u8; 3]) -> (ShadeCounts, u64) {
     let mut counts = ShadeCounts::default();
     let mut kernel_ns = 0;
     sc.vis.clear();
@@ -127,7 +222,22 @@ pub fn shade_tile(scene: &Scene, plans: &[ShadingPlan], s: &Setup, n: usize, sc:
     while start < sc.vis.len() {
         let m = sc.vis[start].0;
         let end = start + sc.vis[start..].iter().take_while(|(mm, _)| *mm == m).count();
-        let plan = &plans[m as usize];
+        let (plan, program) = &plans[m as usize];
+        if let Some(pr) = program {
+            for span in sc.vis[start..end].chunks(SPAN) {
+                let g = &mut sc.g;
+                gather(g, span, &sc.gb);
+                if pr.tangent {
+                    surface::<true>(g, s, eye);
+                } else {
+                    surface::<false>(g, s, eye);
+                }
+                kernel_ns += run_program(g, pr, &mut counts);
+                encode(g, &mut sc.rgb, transfer);
+            }
+            start = end;
+            continue;
+        }
         let mat = &scene.materials[m as usize];
         // The material's kernels (one, or red, green, blue), without allocating.
         let mut kernels: [&dyn Evaluator; 3] = [mat.evaluator.as_ref(); 3];
@@ -169,6 +279,39 @@ pub fn shade_tile(scene: &Scene, plans: &[ShadingPlan], s: &Setup, n: usize, sc:
         start = end;
     }
     (counts, kernel_ns)
+}
+
+/// Runs the span's shading program: columns p, n (and t) in, colours into `acc`, counters summed. Returns
+/// the nanoseconds spent in the program.
+fn run_program(g: &mut Group, pr: &ProgramRun, counts: &mut ShadeCounts) -> u64 {
+    let m = g.pix.len();
+    let ([px, py, pz], [nx, ny, nz], [tx, ty, tz]) = (&g.p, &g.n, &g.t);
+    let tk = if pr.tangent { m } else { 0 };
+    let cols: [&[f64]; shading::MAX_COLUMNS] = [&px[..m], &py[..m], &pz[..m], &nx[..m], &ny[..m], &nz[..m], &tx[..tk], &ty[..tk], &tz[..tk]];
+    let [r, gg, b] = &mut g.acc;
+    let [c0, c1, c2] = &mut g.cnt;
+    let mut outs: [&mut [f64]; N_OUTPUTS] = [fit(r, m), fit(gg, m), fit(b, m), fit(c0, m), fit(c1, m), fit(c2, m)];
+    let t = Instant::now();
+    pr.code.run(&cols, &pr.params, &pr.block, &mut outs, m);
+    let ns = t.elapsed().as_nanos() as u64;
+    counts.kernel_calls += 1;
+    // Small non-negative integers in f64, so the f64 sums are exact (four partial sums: LLVM vectorises
+    // them); a NaN, from a failed call, counts 0.
+    let sum = |c: &[f64]| {
+        let mut acc = [0.0f64; 4];
+        let chunks = c.chunks_exact(4);
+        let rest: f64 = chunks.remainder().iter().sum();
+        for q in chunks {
+            for (a, x) in acc.iter_mut().zip(q) {
+                *a += x;
+            }
+        }
+        (acc[0] + acc[1] + acc[2] + acc[3] + rest) as u64
+    };
+    counts.nan += sum(&g.cnt[0][..m]);
+    counts.evals += sum(&g.cnt[1][..m]);
+    counts.cut += sum(&g.cnt[2][..m]);
+    ns
 }
 
 fn fit<T: Copy + Default>(v: &mut Vec<T>, m: usize) -> &mut [T] {

@@ -166,7 +166,7 @@ pub fn cost(f: &Formula) -> f64 {
     let mut c = 0.0;
     f.ir.walk(f.root, |n| {
         c += match n {
-            Node::Const(_) | Node::Input(_) | Node::Param(_) | Node::Neg(_) => 0.0,
+            Node::Const(_) | Node::Input(_) | Node::Param(_) | Node::Column(_) | Node::Neg(_) => 0.0,
             Node::Binary(BinOp::Div, ..) => 3.0,
             Node::Binary(..) => 1.0,
             Node::Call(b, _) => match b {

@@ -338,6 +338,7 @@ impl<'a> Rewriter<'a> {
         match *n {
             Node::Const(b) => Range::constant(f64::from_bits(b)),
             Node::Input(_) => Range { nan: !self.policy.inputs_not_nan, ..Range::TOP },
+            Node::Column(_) => Range::TOP,
             Node::Param(p) => match self.params.get(p as usize) {
                 Some(d) if self.policy.params_in_range => Range::new(d.lo, d.hi, false, d.lo <= 0.0),
                 _ => Range::TOP,
@@ -416,7 +417,7 @@ impl<'a> Rewriter<'a> {
                 self.fire("bake");
                 Some(self.konst_node(v, span))
             }
-            Node::Const(_) | Node::Input(_) => None,
+            Node::Const(_) | Node::Input(_) | Node::Column(_) => None,
             Node::Neg(a) => {
                 // -c → constant
                 if let Some(c) = self.konst(a) {

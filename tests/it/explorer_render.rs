@@ -255,6 +255,8 @@ fn the_local_frame_gives_unit_directions_on_every_shape() {
     for m in &mut s.materials {
         m.evaluator = Arc::new(FrameSpy);
         m.used = used;
+        // A Rust kernel: no shading program, the span loops call it with the local frame.
+        m.program = None;
         m.tangent_angle_deg = 33.0;
     }
     let (_, st) = render(&s, 2);

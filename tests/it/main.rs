@@ -20,6 +20,7 @@ mod explorer_render;
 mod render;
 mod robust;
 mod serve;
+mod shading;
 
 /// A fresh, empty scratch directory `lobe-AREA-TAG-PID` under the system's temporary directory.
 pub fn scratch_dir(area: &str, tag: &str) -> std::path::PathBuf {

@@ -19,12 +19,20 @@ pub struct Key {
     nodes: Vec<Node>,
     root: u32,
     mode: Mode,
+    /// A shading program's further roots (its outputs after the first), empty for a formula.
+    more: Vec<u32>,
 }
 
 impl Key {
     /// `ir` must be compacted (nodes reachable from `root` only).
     pub fn new(ir: &Ir, root: crate::ir::NodeId, mode: Mode) -> Key {
-        Key { nodes: ir.nodes().to_vec(), root: root.0, mode }
+        Key { nodes: ir.nodes().to_vec(), root: root.0, mode, more: vec![] }
+    }
+
+    /// The key of a compacted program with several roots (`roots` non-empty).
+    pub fn of_roots(ir: &Ir, roots: &[crate::ir::NodeId], mode: Mode) -> Key {
+        let more = roots.iter().skip(1).map(|r| r.0).collect();
+        Key { nodes: ir.nodes().to_vec(), root: roots.first().map_or(u32::MAX, |r| r.0), mode, more }
     }
 }
 

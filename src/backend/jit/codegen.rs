@@ -34,6 +34,10 @@ use cranelift_jit::JITModule;
 use cranelift_module::{FuncId, Linkage, Module};
 use std::marker::PhantomData;
 
+// The shading program's batched function: a child module, so it reuses the translator and lanes as they are.
+#[path = "shade.rs"]
+pub(super) mod shade;
+
 /// The functions a module imports, by builtin (indexed by `Builtin as usize`): with the library inlined, the
 /// C-library fallback of each trigonometric builtin (huge arguments); with it outlined, each math builtin's
 /// compiled library function ([`Builtin::outlined`]), which includes its fallback.
@@ -225,6 +229,8 @@ enum Source {
     Ptr(Value),
     /// `col_i[off]` (one value of the lane type) from the batched kernel's hoisted column bases.
     Cols { bases: [Option<Value>; N_INPUTS], off: Value },
+    /// A shading program's data columns (`Node::Column(k)` reads `data_k[off]`); it has no `Input` nodes.
+    Data { bases: [Option<Value>; shade::MAX_COLUMNS], off: Value },
 }
 
 type Callees = [Option<FuncRef>; Builtin::ALL.len()];
@@ -291,6 +297,7 @@ impl<L: Lanes> Translator<'_, '_, L> {
             Node::Const(bits) => self.konst(bits),
             Node::Input(i) => self.input(i)?,
             Node::Param(p) => self.param(p),
+            Node::Column(k) => self.column(k)?,
             Node::Neg(a) => self.neg(a)?,
             Node::Binary(op, a, b) => self.binary(op, a, b)?,
             Node::Call(f, args) => self.call(f, args)?,
@@ -325,7 +332,18 @@ impl<L: Lanes> Translator<'_, '_, L> {
                 let addr = self.b.ins().iadd(base, off);
                 self.b.ins().load(L::TY, mem(), addr, 0)
             }
+            Source::Data { .. } => return Err(JitError::Internal(format!("input {} in a shading program", i.name()))),
         })
+    }
+
+    /// `data_k[off]`: a shading program's column ([`shade`]).
+    fn column(&mut self, k: u16) -> Result<Value, JitError> {
+        let Source::Data { bases, off } = self.source else {
+            return Err(JitError::Internal(format!("data column {k} outside a shading program")));
+        };
+        let base = bases.get(usize::from(k)).copied().flatten().ok_or_else(|| JitError::Internal(format!("data column {k} has no base")))?;
+        let addr = self.b.ins().iadd(base, off);
+        Ok(self.b.ins().load(L::TY, mem(), addr, 0))
     }
 
     fn param(&mut self, p: u16) -> Value {
@@ -631,7 +649,7 @@ impl Plan {
         let mut inv = vec![false; ir.len()];
         for id in ir.ids() {
             let node = ir.node(id);
-            let mut all = !matches!(node, Node::Input(_));
+            let mut all = !matches!(node, Node::Input(_) | Node::Column(_));
             node.for_each_arg(|a| all &= inv.get(a.index()).copied().unwrap_or(false));
             inv[id.index()] = all;
         }
@@ -783,10 +801,7 @@ type V = F64X2;
 /// ```text
 /// entry:       column bases; carried nodes loaded from the block, constants and parameters, in F64;
 ///              splatted to V where the loop reads them
-/// header(i):   i < len & !(V::LANES − 1) ? body : tail_check
-/// body:        the V::LANES elements at i; header(i + V::LANES)
-/// tail_check:  len & (V::LANES − 1) ≠ 0 ? tail : exit
-/// tail:        the last element, in F64 (one element: V has at most two lanes)
+/// then         the loop of [`batch_loop`], storing the root to out[i]
 /// ```
 ///
 /// The carried nodes are computed by the prepare function, not here: Cranelift's optimizer would move their
@@ -798,19 +813,12 @@ pub(super) fn build_batch(
     fctx: &mut FunctionBuilderContext,
     w: &Build,
 ) -> Result<(), JitError> {
-    // A wider lane type leaves up to LANES − 1 elements and needs a tail loop instead of one tail element.
-    const { assert!(V::LANES == 1 || V::LANES == 2, "the batch tail handles one element") };
     let ptr = module.target_config().pointer_type();
     let (ir, plan, root) = (w.ir, w.plan, w.plan.root);
     let used = ir.used_inputs(root);
     let n = root.index() + 1;
     let (mut b, callees, args) = begin(module, ctx, fctx, batch_signature(module), w.imports);
     let [cols, params, block, out, len] = args[..] else { return Err(JitError::Internal("batch signature".into())) };
-    let header = b.create_block();
-    let body = b.create_block();
-    let tail_check = b.create_block();
-    let tail = b.create_block();
-    let exit = b.create_block();
 
     // Entry: column bases, the invariants the loop reads (F64), their splats, the length of the vector part.
     let mut bases = [None; N_INPUTS];
@@ -829,27 +837,60 @@ pub(super) fn build_batch(
             splats[id.index()] = Some(V::splat(&mut b, s));
         }
     }
+    // The loop-variant nodes of one step, translated in each lane type over the shared invariants.
+    let step = LoopStep { cx: &cx, plan, bases, out };
+    batch_loop(&mut b, ptr, len, zero, splats, cx.invariants.clone(), &step)?;
+    b.finalize(module.target_config());
+    Ok(())
+}
+
+/// One step of a batched function's loop, emitted in each lane type over the invariants `vals` (as `L`
+/// values) for the `L::LANES` elements at index `i`.
+trait LoopBody {
+    fn emit<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Option<Value>>, i: Value) -> Result<(), JitError>;
+}
+
+/// The loop of a batched function, continuing from the entry block (which has computed `splats`, the
+/// invariants in lane type [`V`], and `invariants`, the same in `F64`):
+///
+/// ```text
+/// header(i):   i < len & !(V::LANES − 1) ? body : tail_check
+/// body:        the V::LANES elements at i; header(i + V::LANES)
+/// tail_check:  len & (V::LANES − 1) ≠ 0 ? tail : exit
+/// tail:        the last element, in F64 (one element: V has at most two lanes)
+/// exit:        return
+/// ```
+fn batch_loop<S: LoopBody>(
+    b: &mut FunctionBuilder,
+    ptr: Type,
+    len: Value,
+    zero: Value,
+    splats: Vec<Option<Value>>,
+    invariants: Vec<Option<Value>>,
+    step: &S,
+) -> Result<(), JitError> {
+    // A wider lane type leaves up to LANES − 1 elements and needs a tail loop instead of one tail element.
+    const { assert!(V::LANES == 1 || V::LANES == 2, "the batch tail handles one element") };
+    let header = b.create_block();
+    let body = b.create_block();
+    let tail_check = b.create_block();
+    let tail = b.create_block();
+    let exit = b.create_block();
     let vector_end = b.ins().band_imm_s(len, -i64::from(V::LANES));
     b.ins().jump(header, &[BlockArg::Value(zero)]);
 
-    // header(i): i < vector_end ? body : tail_check
     b.switch_to_block(header);
     let i = b.append_block_param(header, ptr);
     let more = b.ins().icmp(IntCC::UnsignedLessThan, i, vector_end);
     b.ins().brif(more, body, &[], tail_check, &[]);
 
-    // The loop-variant nodes of one step, translated in each lane type over the shared invariants.
-    let step = LoopStep { cx: &cx, plan, bases, out };
-
-    // body: V::LANES elements per iteration.
     b.switch_to_block(body);
     b.seal_block(body);
-    step.emit::<V>(&mut b, splats, i)?;
+    step.emit::<V>(b, splats, i)?;
     let next = b.ins().iadd_imm_u(i, i64::from(V::LANES));
     b.ins().jump(header, &[BlockArg::Value(next)]);
     b.seal_block(header);
 
-    // tail_check: one element left when len is not a multiple of V::LANES.
     b.switch_to_block(tail_check);
     b.seal_block(tail_check);
     let rest = b.ins().band_imm_s(len, i64::from(V::LANES - 1));
@@ -857,13 +898,12 @@ pub(super) fn build_batch(
 
     b.switch_to_block(tail);
     b.seal_block(tail);
-    step.emit::<F64>(&mut b, cx.invariants.clone(), vector_end)?;
+    step.emit::<F64>(b, invariants, vector_end)?;
     b.ins().jump(exit, &[]);
 
     b.switch_to_block(exit);
     b.seal_block(exit);
     b.ins().return_(&[]);
-    b.finalize(module.target_config());
     Ok(())
 }
 
@@ -876,7 +916,7 @@ struct LoopStep<'a> {
     out: Value,
 }
 
-impl LoopStep<'_> {
+impl LoopBody for LoopStep<'_> {
     /// Translates the loop-variant nodes for the `L::LANES` elements at index `i` (`vals` holds the invariants
     /// as `L` values) and stores the root to `out[i..]`.
     fn emit<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Option<Value>>, i: Value) -> Result<(), JitError> {

@@ -246,13 +246,17 @@ impl Compiled {
     }
 }
 
+/// The module out of its lock (poisoned or not), for freeing it on drop.
+fn take_module(m: &mut Mutex<Option<JITModule>>) -> Option<JITModule> {
+    match m.get_mut() {
+        Ok(m) => m.take(),
+        Err(poisoned) => poisoned.into_inner().take(),
+    }
+}
+
 impl Drop for Compiled {
     fn drop(&mut self) {
-        let module = match self.module.get_mut() {
-            Ok(m) => m.take(),
-            Err(poisoned) => poisoned.into_inner().take(),
-        };
-        if let Some(m) = module {
+        if let Some(m) = take_module(&mut self.module) {
             // Safety: `scalar` and `batch` point into this module's memory and are only reachable through
             // `self`, which is being dropped; every `JitKernel` holds an `Arc<Compiled>`, so no kernel can call
             // the code after this point, and no call is running (a running call borrows a kernel).
@@ -603,6 +607,150 @@ impl Evaluator for JitKernel {
         } else {
             let p = self.padded(params);
             self.batch_checked(cols, &p, out);
+        }
+    }
+}
+
+type ProgramFn = unsafe extern "C" fn(*const *const f64, *const f64, *const f64, *const *mut f64, usize);
+
+/// A compiled shading program ([`crate::backend::shading`]): its module, the loop function and the prepare
+/// function of its parameter-only work.
+pub struct ShadeCode {
+    module: Mutex<Option<JITModule>>,
+    run: ProgramFn,
+    prepare: Option<PrepareFn>,
+    block_len: usize,
+    columns: usize,
+    /// Parameter slots the code reads (`max index + 1`).
+    params_read: usize,
+    /// Cranelift's time for the program (when it was compiled; a cache hit costs nothing).
+    pub compile_time: std::time::Duration,
+}
+
+fn shade_cache() -> &'static Mutex<cache::Lru<ShadeCode>> {
+    static CACHE: OnceLock<Mutex<cache::Lru<ShadeCode>>> = OnceLock::new();
+    CACHE.get_or_init(|| Mutex::new(cache::Lru::new(DEFAULT_CACHE_CAPACITY)))
+}
+
+/// Compiles a shading program (through a cache keyed like the kernels': the IR's structure, its roots and
+/// the math mode), so a frame whose parameters changed reuses the code.
+pub fn shade_code(p: &crate::backend::shading::Program, mode: Mode) -> Result<Arc<ShadeCode>, JitError> {
+    let key = cache::Key::of_roots(&p.ir, &p.roots(), mode);
+    let lock = || shade_cache().lock().unwrap_or_else(|e| e.into_inner());
+    let hit = lock().get(&key);
+    if let Some(c) = hit {
+        return Ok(c);
+    }
+    let t = std::time::Instant::now();
+    let mut c = with_jit(|j| j.translate_program(p, mode))?;
+    c.compile_time = t.elapsed();
+    let c = Arc::new(c);
+    lock().insert(key, c.clone());
+    Ok(c)
+}
+
+impl Jit {
+    /// Compiles a shading program into a fresh module: its loop and (when something is carried) its
+    /// prepare function.
+    fn translate_program(&mut self, p: &crate::backend::shading::Program, mode: Mode) -> Result<ShadeCode, JitError> {
+        let outline = codegen::shade::outlines(p);
+        let mut builder = JITBuilder::with_isa(host_isa()?, default_libcall_names());
+        for (sym, ptr) in codegen::used_symbols(&p.ir, mode, outline) {
+            builder.symbol(sym, ptr);
+        }
+        let mut module = JITModule::new(builder);
+        let defined = codegen::shade::plan(p).and_then(|plan| {
+            let imports = codegen::declare_imports(&mut module, &p.ir, mode, outline)?;
+            let w = codegen::Build { ir: &p.ir, plan: &plan, imports: &imports, mode, fma: host_fma(), outline };
+            let sig = codegen::shade::signature(&module);
+            let run = self.define(&mut module, &sig, |m, c, f| codegen::shade::build(m, c, f, &w, p))?;
+            let prepare = if plan.carried.is_empty() {
+                None
+            } else {
+                let sig = codegen::prepare_signature(&module);
+                Some(self.define(&mut module, &sig, |m, c, f| codegen::build_prepare(m, c, f, &w))?)
+            };
+            module.finalize_definitions()?;
+            let run = Self::address(&module, run)?;
+            let prepare = prepare.map(|id| Self::address(&module, id)).transpose()?;
+            Ok((run, prepare, plan.carried.len()))
+        });
+        let (run, prepare, block_len) = match defined {
+            Ok(x) => x,
+            Err(e) => {
+                // Safety: no pointer into the module escaped, so nothing can call into the memory being freed.
+                unsafe { module.free_memory() };
+                return Err(e);
+            }
+        };
+        let params_read = p.ir.nodes().iter().filter_map(|n| if let crate::ir::Node::Param(k) = n { Some(*k as usize + 1) } else { None }).max().unwrap_or(0);
+        // Safety: each address is the entry of a function just compiled with exactly the signature of the type
+        // it becomes (the host's C calling convention); it stays valid while `module` lives, which the returned
+        // `ShadeCode` owns.
+        let (run, prepare) = unsafe {
+            (std::mem::transmute::<*const u8, ProgramFn>(run), prepare.map(|q| std::mem::transmute::<*const u8, PrepareFn>(q)))
+        };
+        Ok(ShadeCode {
+            module: Mutex::new(Some(module)),
+            run,
+            prepare,
+            block_len,
+            columns: p.columns,
+            params_read: params_read.max(p.n_params),
+            compile_time: std::time::Duration::ZERO,
+        })
+    }
+}
+
+impl ShadeCode {
+    /// The prepared parameter block for `params` (computed once per render and material; a missing parameter
+    /// is NaN, as in the interpreter).
+    pub fn prepare(&self, params: &[f64]) -> Vec<f64> {
+        let mut p = params.to_vec();
+        p.resize(p.len().max(self.params_read), f64::NAN);
+        let mut block = vec![0.0; self.block_len];
+        if let Some(prepare) = self.prepare {
+            // Safety: `p` has every slot the code reads (padded just above); `block` has exactly the
+            // `block_len` slots the prepare function writes.
+            unsafe { prepare(p.as_ptr(), block.as_mut_ptr()) }
+        }
+        block
+    }
+
+    /// Runs the program on `len` elements. Checked: at least the program's columns, each `len` long or more,
+    /// every output `len` long or more, `params` with every slot read, `block` from [`ShadeCode::prepare`].
+    pub fn run(&self, cols: &[&[f64]], params: &[f64], block: &[f64], outs: &mut [&mut [f64]; crate::backend::shading::N_OUTPUTS], len: usize) -> Result<(), String> {
+        if cols.len() < self.columns || cols[..self.columns].iter().any(|c| c.len() < len) {
+            return Err(format!("a shading program needs {} data columns of {len} elements", self.columns));
+        }
+        if outs.iter().any(|o| o.len() < len) || block.len() != self.block_len {
+            return Err("shading program outputs or block too short".into());
+        }
+        if params.len() < self.params_read {
+            // A missing parameter is NaN, as in the interpreter.
+            let mut p = params.to_vec();
+            p.resize(self.params_read, f64::NAN);
+            return self.run(cols, &p, block, outs, len);
+        }
+        let mut ptrs = [std::ptr::null::<f64>(); codegen::shade::MAX_COLUMNS];
+        for (p, c) in ptrs.iter_mut().zip(cols) {
+            *p = c.as_ptr();
+        }
+        let out_ptrs: [*mut f64; crate::backend::shading::N_OUTPUTS] = std::array::from_fn(|k| outs[k].as_mut_ptr());
+        // Safety: checked just above: the `columns` column pointers the code reads each have `len` elements,
+        // every output has `len` elements and is exclusively borrowed (distinct `&mut` slices), `params` has
+        // every slot the code reads and `block` the `block_len` slots; the code lives as long as `self`.
+        unsafe { (self.run)(ptrs.as_ptr(), params.as_ptr(), block.as_ptr(), out_ptrs.as_ptr(), len) };
+        Ok(())
+    }
+}
+
+impl Drop for ShadeCode {
+    fn drop(&mut self) {
+        if let Some(m) = take_module(&mut self.module) {
+            // Safety: `run` and `prepare` point into this module and are only reachable through `self`, which
+            // is being dropped; every user holds an `Arc<ShadeCode>`, so no call is running.
+            unsafe { m.free_memory() };
         }
     }
 }
