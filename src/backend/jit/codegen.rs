@@ -418,7 +418,7 @@ impl<L: Lanes> Translator<'_, '_, L> {
             // One rounding, as Rust's `mul_add` (the interpreter's); a libm call on a target without FMA.
             Builtin::Fma => {
                 let (y, z) = (self.arg(args[1])?, self.arg(args[2])?);
-                self.b.ins().fma(x, y, z)
+                Emit::fma(self, x, y, z)
             }
             other => return Err(JitError::Internal(format!("builtin `{}` is not an inline lowering", other.name()))),
         })
