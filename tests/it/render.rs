@@ -458,6 +458,16 @@ fn cli_render_and_compare_end_to_end() {
     assert!(v["visible_px"].as_u64().unwrap() > 0 && v["evals"].as_u64().unwrap() > 0);
     assert_eq!((v["threads"].as_u64(), v["backend"].as_str(), v["math"].as_str()), (Some(1), Some("interp"), Some("precise")));
     assert!(v["cutoff"].is_null());
+    assert_eq!(v["shading"].as_str(), Some("program"));
+    // --shading spans (the Rust span loops around the batched kernel) draws the same image as the program.
+    let spans = dir.join("spans.png");
+    let o = lobe(&["render", scene.to_str().unwrap(), "-o", spans.to_str().unwrap(), "--size", "64", "--stats", "--json", "--threads", "1", "--backend", "interp", "--shading", "spans"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["shading"].as_str(), Some("spans"));
+    assert_eq!(std::fs::read(&spans).unwrap(), std::fs::read(&out).unwrap());
+    let o = lobe(&["render", scene.to_str().unwrap(), "-o", spans.to_str().unwrap(), "--shading", "fused"]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("program"), "{}", String::from_utf8_lossy(&o.stderr));
     // Re-rendering over our own PNG is allowed.
     assert!(lobe(&["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "--size", "16", "-q"]).status.success());
 
