@@ -233,21 +233,14 @@ impl Program {
             let sign = b.select(neg, m1, one);
             let sd = b.add(sign, nh[2]);
             let q = b.bin(BinOp::Div, m1, sd);
-            let saq = {
-                let sa = b.mul(sign, nh[0]);
-                let saa = b.mul(sa, nh[0]);
-                b.mul(saa, q)
-            };
+            // Duff's tangent (1 + s·a²·q, s·a·b·q, −s·a), s·a built once.
+            let sa = b.mul(sign, nh[0]);
+            let saa = b.mul(sa, nh[0]);
+            let saq = b.mul(saa, q);
             let ox = b.add(one, saq);
-            let oy = {
-                let sa = b.mul(sign, nh[0]);
-                let sab = b.mul(sa, nh[1]);
-                b.mul(sab, q)
-            };
-            let oz = {
-                let sa = b.mul(sign, nh[0]);
-                b.ir.neg(sa, Span::default())
-            };
+            let sab = b.mul(sa, nh[1]);
+            let oy = b.mul(sab, q);
+            let oz = b.ir.neg(sa, Span::default());
             let il = b.inv_len(l2);
             let il = b.select(ok, il, one);
             let un = [b.mul(u[0], il), b.mul(u[1], il), b.mul(u[2], il)];

@@ -57,9 +57,7 @@ impl ProgramCode {
     /// runs and the outputs are NaN). `block` is [`ProgramCode::prepare`]'s result for `params`.
     pub fn run(&self, cols: &[&[f64]], params: &[f64], block: &[f64], outs: &mut [&mut [f64]; N_OUTPUTS], len: usize) {
         match self {
-            ProgramCode::Interp(i) => {
-                i.run(cols, params, outs, len)
-            }
+            ProgramCode::Interp(i) => i.run(cols, params, outs, len),
             ProgramCode::Jit(c) => {
                 if c.run(cols, params, block, outs, len).is_err() {
                     outs.iter_mut().for_each(|o| o.iter_mut().for_each(|x| *x = f64::NAN));
