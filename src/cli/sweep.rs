@@ -1,13 +1,17 @@
-//! `lobe sweep FILE [--set …] [--bound 1e6] [--deny nan,inf] [--json]` (also reachable as `lobe check --sweep`).
+//! `lobe sweep FILE [--set …] [--bound 1e6] [--deny nan,inf] [--as-written] [--json]` (also reachable as
+//! `lobe check --sweep`).
 //!
-//! Evaluates the *unclamped* formula (root `max(raw, 0)` peeled) over the domain; see [`crate::numerics::sweep`].
-//! Exits with status 1 when a kind listed in `--deny` occurs (after printing the report).
+//! Evaluates the *unclamped* formula (root `max(raw, 0)` peeled) over the domain (see
+//! [`crate::numerics::sweep`]) twice: as written (the plain simplification) and as compiled (the accuracy
+//! pass's choice, which `eval`, `energy`, `fit`, … run), so a bad region shows beside whether lobe's code still
+//! has it. Exits with status 1 when a kind listed in `--deny` occurs in the compiled formula (in the formula as
+//! written with `--as-written`), after printing the report.
 
-use super::args::{self, BackendArg, FormulaSource, Json, Params};
+use super::args::{self, BackendArg, FormulaSource, Json, Params, PreferArg};
 use super::common::{self, CliError};
 use crate::base::json;
 use crate::ir::Formula;
-use crate::numerics::sweep::{extent, sweep, Example, RegionStats, SweepOptions};
+use crate::numerics::sweep::{extent, extent_polar, sweep, Example, RegionStats, SweepOptions, SweepReport};
 
 use serde::Serialize;
 
@@ -24,9 +28,14 @@ pub struct SweepArgs {
     /// Evaluation budget (the full grid is subsampled above it).
     #[arg(long, default_value_t = 2_000_000, value_parser = clap::value_parser!(u64).range(1..))]
     pub max_evals: u64,
-    /// Fail (exit 1) if any of these occur: nan, inf, negative, bound.
+    /// Fail (exit 1) if any of these occur in the compiled formula: nan, inf, negative, bound.
     #[arg(long, value_delimiter = ',')]
     pub deny: Vec<String>,
+    /// Sweep only the formula as written (no accuracy pass); `--deny` then judges it.
+    #[arg(long)]
+    pub as_written: bool,
+    #[command(flatten)]
+    pub prefer: PreferArg,
     #[command(flatten)]
     pub backend: BackendArg,
     #[command(flatten)]
@@ -41,7 +50,12 @@ struct SweepJson<'a> {
     #[serde(serialize_with = "json::num")]
     bound: f64,
     exhaustive: bool,
+    /// How points were chosen (`DomainKind::describe`).
+    domain: &'static str,
     regions: Vec<RegionJson<'a>>,
+    /// The same sweep of the compiled formula (absent with `--as-written`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    compiled: Option<CompiledJson<'a>>,
 }
 
 #[derive(Serialize)]
@@ -50,6 +64,15 @@ struct RegionJson<'a> {
     #[serde(flatten)]
     counts: &'a RegionStats,
     first: serde_json::Value,
+    extents: Vec<serde_json::Value>,
+}
+
+#[derive(Serialize)]
+struct CompiledJson<'a> {
+    formula: String,
+    #[serde(flatten)]
+    total: &'a RegionStats,
+    regions: Vec<RegionJson<'a>>,
 }
 
 const KINDS: [&str; 4] = ["nan", "inf", "negative", "bound"];
@@ -115,13 +138,86 @@ pub fn run(a: &SweepArgs) -> Result<(), CliError> {
     Ok(())
 }
 
+/// One example's bad-region extents: along each input read (independent cosines) or along L's and V's polar
+/// angles (geometry), as (label, lo, hi).
+fn extents(k: &crate::Kernel, rep: &SweepReport, used: crate::ir::InputSet, e: &Example, bad: &dyn Fn(f64) -> bool) -> Vec<(String, f64, f64)> {
+    if rep.domain.is_geometric() {
+        [(true, "NL = Lz", "along L's polar angle"), (false, "NV = Vz", "along V's polar angle")]
+            .into_iter()
+            .filter_map(|(light, name, how)| extent_polar(k, &e.inputs, &e.params, light, bad).map(|(lo, hi)| (format!("{name} {how}"), lo, hi)))
+            .collect()
+    } else {
+        used.iter().filter_map(|i| extent(k, &e.inputs, &e.params, i.index(), bad).map(|(lo, hi)| (i.name().to_string(), lo, hi))).collect()
+    }
+}
+
+/// One kind a sweep counts: label, JSON key, the region's first example, and the predicate on a value.
+type Kind<'a> = (&'static str, &'static str, &'a Option<Example>, Box<dyn Fn(f64) -> bool>);
+
+/// The four kinds a sweep counts, for one region.
+fn kinds(r: &RegionStats, bound: f64) -> [Kind<'_>; 4] {
+    [
+        ("NaN", "nan", &r.first_nan, Box::new(f64::is_nan)),
+        ("inf", "inf", &r.first_inf, Box::new(f64::is_infinite)),
+        ("negative", "negative", &r.first_negative, Box::new(|y: f64| y < 0.0)),
+        ("over bound", "over_bound", &r.first_over_bound, Box::new(move |y: f64| y > bound)),
+    ]
+}
+
+fn regions_json<'a>(k: &crate::Kernel, rep: &'a SweepReport, used: crate::ir::InputSet, names: &[String]) -> Vec<RegionJson<'a>> {
+    rep.regions
+        .iter()
+        .map(|r| {
+            let mut first = serde_json::Map::new();
+            let mut ext = vec![];
+            for (_, key, e, bad) in kinds(r, rep.bound) {
+                first.insert(key.into(), example_json(e, names));
+                if let Some(e) = e {
+                    for (along, lo, hi) in extents(k, rep, used, e, &*bad) {
+                        ext.push(serde_json::json!({"kind": key, "along": along, "lo": json::value(lo), "hi": json::value(hi)}));
+                    }
+                }
+            }
+            RegionJson { region: r.region, counts: r, first: serde_json::Value::Object(first), extents: ext }
+        })
+        .collect()
+}
+
+/// The first examples of each region and kind with their extents, as text lines.
+fn examples_text(out: &mut String, k: &crate::Kernel, rep: &SweepReport, used: crate::ir::InputSet, names: &[String], label: &str) {
+    for r in &rep.regions {
+        for (kind, _, e, bad) in kinds(r, rep.bound) {
+            if let Some(e) = e {
+                outln!(out, "  {label}first {kind} in {}: {}", r.region, example_text(e, used, names));
+                for (along, lo, hi) in extents(k, rep, used, e, &*bad) {
+                    outln!(out, "    {kind} for {along} in [{}, {}] (the rest as in the example)", compact(lo), compact(hi));
+                }
+            }
+        }
+    }
+}
+
+/// A table cell: the count as written, and `→ compiled` when the compiled formula differs.
+fn cell(a: u64, b: Option<u64>) -> String {
+    match b {
+        Some(b) if b != a => format!("{a} → {b}"),
+        _ => a.to_string(),
+    }
+}
+
 /// The command's output for a lowered formula, and the `--deny` kinds that occurred.
 pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliError> {
     let mut out = String::new();
     let set = a.set.list();
     let mut decls = f.params.clone();
     let u = f.unclamped();
-    let k = crate::compile_formula(u, &a.backend.options(set.clone()))?;
+    let k = crate::compile_formula(u.clone(), &a.backend.options(set.clone()))?;
+    let compiled = if a.as_written {
+        None
+    } else {
+        let opts = crate::numerics::robust::with_pass(a.backend.options(set.clone()), a.prefer.pass(crate::numerics::robust::PassOptions::default().points));
+        Some(crate::compile_formula(u, &opts)?)
+    };
     // Baked parameters are fixed: sweep them at their value only.
     for (name, v) in &set {
         if let Some(i) = f.param_index(name) {
@@ -131,7 +227,9 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliEr
         }
     }
     let used = f.used_inputs();
-    let rep = sweep(&k, used, &decls, &SweepOptions { bound: a.bound, max_evals: a.max_evals });
+    let opts = SweepOptions { bound: a.bound, max_evals: a.max_evals };
+    let rep = sweep(&k, used, &decls, &opts);
+    let crep = compiled.as_ref().map(|c| sweep(c, used, &decls, &opts));
     let names: Vec<String> = decls.iter().map(|d| d.name.clone()).collect();
     let t = &rep.total;
     let count = |kind: &str, s: &RegionStats| match kind {
@@ -140,59 +238,53 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliEr
         "negative" => s.negative,
         _ => s.over_bound,
     };
+    let text = |k: &crate::Kernel| k.formula.to_program_text().replace('\n', "; ");
     if a.json.on {
-        let regions = rep
-            .regions
-            .iter()
-            .map(|r| RegionJson {
-                region: r.region,
-                counts: r,
-                first: serde_json::json!({
-                    "nan": example_json(&r.first_nan, &names),
-                    "inf": example_json(&r.first_inf, &names),
-                    "negative": example_json(&r.first_negative, &names),
-                    "over_bound": example_json(&r.first_over_bound, &names),
-                }),
-            })
-            .collect();
-        let obj = SweepJson { total: t, bound: rep.bound, exhaustive: rep.exhaustive, regions };
+        let obj = SweepJson {
+            total: t,
+            bound: rep.bound,
+            exhaustive: rep.exhaustive,
+            domain: rep.domain.describe(),
+            regions: regions_json(&k, &rep, used, &names),
+            compiled: compiled.as_ref().zip(crep.as_ref()).map(|(c, cr)| CompiledJson { formula: text(c), total: &cr.total, regions: regions_json(c, cr, used, &names) }),
+        };
         outln!(out, "{}", common::to_json(&obj)?);
     } else {
-        outln!(out, 
-            "{}: unclamped formula {} over {} points ({}; inputs read: {})",
+        outln!(
+            out,
+            "{}: unclamped formula over {} points ({} of {}; inputs read: {})",
             f.display_name(),
-            k.formula.to_program_text().replace('\n', "; "),
             t.evaluated,
             if rep.exhaustive { "exhaustive grid" } else { "subsampled grid" },
+            rep.domain.describe(),
             if used.is_empty() { "none".to_string() } else { used.to_string() }
         );
-        outln!(out, "  {:<10} {:>10} {:>8} {:>8} {:>9} {:>9}", "region", "evaluated", "NaN", "±inf", "negative", format!(">{:e}", rep.bound));
-        for r in rep.regions.iter().chain(std::iter::once(t)) {
-            outln!(out, "  {:<10} {:>10} {:>8} {:>8} {:>9} {:>9}", r.region, r.evaluated, r.nan, r.inf, r.negative, r.over_bound);
+        outln!(out, "  as written  {}", text(&k));
+        if let Some(c) = &compiled {
+            let same = text(c) == text(&k);
+            outln!(out, "  compiled    {}", if same { "the same (the accuracy pass kept no rewrite)".to_string() } else { text(c) });
+            if !same {
+                outln!(out, "  counts read \"as written → compiled\" where they differ");
+            }
         }
-        let bound = rep.bound;
-        for r in &rep.regions {
-            for (kind, e) in [("NaN", &r.first_nan), ("inf", &r.first_inf), ("negative", &r.first_negative), ("over bound", &r.first_over_bound)] {
-                if let Some(e) = e {
-                    outln!(out, "  first {kind} in {}: {}", r.region, example_text(e, used, &names));
-                    // How far the region reaches along each input, the rest as in the example.
-                    let bad = |y: f64| match kind {
-                        "NaN" => y.is_nan(),
-                        "inf" => y.is_infinite(),
-                        "negative" => y < 0.0,
-                        _ => y > bound,
-                    };
-                    // Along one input at a time is not a path through real geometry: no extents for directions.
-                    for i in used.iter().filter(|_| !used.reads_directions()) {
-                        if let Some((lo, hi)) = extent(&k, &e.inputs, &e.params, i.index(), bad) {
-                            outln!(out, "    {kind} for {} in [{}, {}] (the rest as in the example)", i.name(), compact(lo), compact(hi));
-                        }
-                    }
-                }
+        outln!(out, "  {:<10} {:>10} {:>12} {:>12} {:>12} {:>12}", "region", "evaluated", "NaN", "±inf", "negative", format!(">{:e}", rep.bound));
+        let rows: Vec<(&RegionStats, Option<&RegionStats>)> = match &crep {
+            Some(cr) => rep.regions.iter().zip(cr.regions.iter().map(Some)).chain(std::iter::once((t, Some(&cr.total)))).collect(),
+            None => rep.regions.iter().chain(std::iter::once(t)).map(|r| (r, None)).collect(),
+        };
+        for (r, c) in rows {
+            let cells: Vec<String> = ["nan", "inf", "negative", "bound"].iter().map(|kind| cell(count(kind, r), c.map(|c| count(kind, c)))).collect();
+            outln!(out, "  {:<10} {:>10} {:>12} {:>12} {:>12} {:>12}", r.region, r.evaluated, cells[0], cells[1], cells[2], cells[3]);
+        }
+        examples_text(&mut out, &k, &rep, used, &names, "");
+        if let (Some(c), Some(cr)) = (&compiled, &crep) {
+            if text(c) != text(&k) {
+                examples_text(&mut out, c, cr, used, &names, "compiled: ");
             }
         }
     }
-    let denied: Vec<String> = a.deny.iter().filter(|d| count(d, t) > 0).cloned().collect();
+    let judged = crep.as_ref().map_or(t, |cr| &cr.total);
+    let denied: Vec<String> = a.deny.iter().filter(|d| count(d, judged) > 0).cloned().collect();
     Ok((out, denied))
 }
 

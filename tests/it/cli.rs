@@ -127,6 +127,43 @@ fn check_sweep_is_an_alias_of_sweep() {
     assert!(v["nan"].as_u64().unwrap() > 0, "Beckmann is NaN at NH = 0: {v}");
 }
 
+/// The sweep reports the formula as written and as compiled: Beckmann as published is NaN wherever NH⁴·m²
+/// underflows (NH ≤ 8.6e-77 at m = 0.01, the extent found by bisection), the accuracy pass's form only where
+/// NH is exactly 0; `--deny` judges the compiled form unless `--as-written`.
+#[test]
+fn sweep_reports_extents_as_written_and_as_compiled() {
+    let o = lobe(&["sweep", "examples/brdfs/beckmann.brdf", "--json"], None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["domain"], "independent cosines");
+    let tiny = v["regions"].as_array().unwrap().iter().find(|r| r["region"] == "tiny").unwrap();
+    let ext = tiny["extents"].as_array().unwrap().iter().find(|e| e["kind"] == "nan" && e["along"] == "NH").unwrap();
+    let hi = ext["hi"].as_f64().unwrap();
+    assert!(ext["lo"].as_f64() == Some(0.0) && hi > 1e-77 && hi < 1e-76, "{ext}");
+    let c = &v["compiled"];
+    assert!(c["nan"].as_u64().unwrap() < v["nan"].as_u64().unwrap(), "{c}");
+    let ctiny = c["regions"].as_array().unwrap().iter().find(|r| r["region"] == "tiny").unwrap();
+    assert_eq!(ctiny["nan"], 0, "{ctiny}");
+    // A formula clean in both forms passes `--deny`; Beckmann as written fails it.
+    let o = lobe(&["sweep", "--expr", "NH^n", "--deny", "nan,inf"], None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = lobe(&["sweep", "examples/brdfs/beckmann.brdf", "--as-written", "--deny", "nan"], None);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("denied kinds occurred: nan"), "{}", stderr(&o));
+}
+
+/// Cosines that geometry links are swept on real (L, V) pairs, and extents follow a polar angle: Ward's
+/// 1/sqrt(NL·NV) as written is NaN where NL·NV underflows with both directions grazing.
+#[test]
+fn sweep_of_linked_cosines_runs_on_geometry() {
+    let o = lobe(&["sweep", "examples/brdfs/ward.brdf", "--as-written"], None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("cosines of real (L, V) pairs; inputs read: NL, NV, NH"), "{out}");
+    assert!(out.contains("NaN for NL = Lz along L's polar angle in [0, "), "{out}");
+    assert!(!out.contains("compiled"), "{out}");
+}
+
 #[test]
 fn watch_renders_on_start_and_keeps_the_last_good_image_on_errors() {
     let dir = std::env::temp_dir().join(format!("lobe-watch-cli-{}", std::process::id()));
