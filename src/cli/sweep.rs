@@ -229,7 +229,11 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliEr
     let used = f.used_inputs();
     let opts = SweepOptions { bound: a.bound, max_evals: a.max_evals };
     let rep = sweep(&k, used, &decls, &opts);
-    let crep = compiled.as_ref().map(|c| sweep(c, used, &decls, &opts));
+    let text = |k: &crate::Kernel| k.formula.to_program_text().replace('\n', "; ");
+    // The compiled form's sweep, run only when the accuracy pass kept a rewrite (otherwise it is `rep`).
+    let changed = compiled.as_ref().filter(|c| text(c) != text(&k));
+    let crep_changed = changed.map(|c| sweep(c, used, &decls, &opts));
+    let crep = crep_changed.as_ref().or(compiled.as_ref().map(|_| &rep));
     let names: Vec<String> = decls.iter().map(|d| d.name.clone()).collect();
     let t = &rep.total;
     let count = |kind: &str, s: &RegionStats| match kind {
@@ -238,7 +242,6 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliEr
         "negative" => s.negative,
         _ => s.over_bound,
     };
-    let text = |k: &crate::Kernel| k.formula.to_program_text().replace('\n', "; ");
     if a.json.on {
         let obj = SweepJson {
             total: t,
@@ -246,7 +249,7 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliEr
             exhaustive: rep.exhaustive,
             domain: rep.domain.describe(),
             regions: regions_json(&k, &rep, used, &names),
-            compiled: compiled.as_ref().zip(crep.as_ref()).map(|(c, cr)| CompiledJson { formula: text(c), total: &cr.total, regions: regions_json(c, cr, used, &names) }),
+            compiled: compiled.as_ref().zip(crep).map(|(c, cr)| CompiledJson { formula: text(c), total: &cr.total, regions: regions_json(c, cr, used, &names) }),
         };
         outln!(out, "{}", common::to_json(&obj)?);
     } else {
@@ -260,15 +263,16 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliEr
             if used.is_empty() { "none".to_string() } else { used.to_string() }
         );
         outln!(out, "  as written  {}", text(&k));
-        if let Some(c) = &compiled {
-            let same = text(c) == text(&k);
-            outln!(out, "  compiled    {}", if same { "the same (the accuracy pass kept no rewrite)".to_string() } else { text(c) });
-            if !same {
+        match (&compiled, changed) {
+            (_, Some(c)) => {
+                outln!(out, "  compiled    {}", text(c));
                 outln!(out, "  counts read \"as written → compiled\" where they differ");
             }
+            (Some(_), None) => outln!(out, "  compiled    the same (the accuracy pass kept no rewrite)"),
+            (None, None) => {}
         }
         outln!(out, "  {:<10} {:>10} {:>12} {:>12} {:>12} {:>12}", "region", "evaluated", "NaN", "±inf", "negative", format!(">{:e}", rep.bound));
-        let rows: Vec<(&RegionStats, Option<&RegionStats>)> = match &crep {
+        let rows: Vec<(&RegionStats, Option<&RegionStats>)> = match crep {
             Some(cr) => rep.regions.iter().zip(cr.regions.iter().map(Some)).chain(std::iter::once((t, Some(&cr.total)))).collect(),
             None => rep.regions.iter().chain(std::iter::once(t)).map(|r| (r, None)).collect(),
         };
@@ -277,13 +281,11 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliEr
             outln!(out, "  {:<10} {:>10} {:>12} {:>12} {:>12} {:>12}", r.region, r.evaluated, cells[0], cells[1], cells[2], cells[3]);
         }
         examples_text(&mut out, &k, &rep, used, &names, "");
-        if let (Some(c), Some(cr)) = (&compiled, &crep) {
-            if text(c) != text(&k) {
-                examples_text(&mut out, c, cr, used, &names, "compiled: ");
-            }
+        if let (Some(c), Some(cr)) = (changed, &crep_changed) {
+            examples_text(&mut out, c, cr, used, &names, "compiled: ");
         }
     }
-    let judged = crep.as_ref().map_or(t, |cr| &cr.total);
+    let judged = crep.map_or(t, |cr| &cr.total);
     let denied: Vec<String> = a.deny.iter().filter(|d| count(d, judged) > 0).cloned().collect();
     Ok((out, denied))
 }

@@ -137,6 +137,13 @@ pub fn dir(theta: f64, phi: f64) -> V3 {
     [theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()]
 }
 
+/// A unit direction whose cosine with the normal is exactly `c` (so denormal and 1 − ulp cosines are reachable,
+/// which polar angles are not) at azimuth `phi`.
+pub fn dir_from_cos(c: f64, phi: f64) -> V3 {
+    let s = (1.0 - c * c).max(0.0).sqrt();
+    [s * phi.cos(), s * phi.sin(), c]
+}
+
 /// Every input from real geometry in the local frame (N = +z, X = +x, Y = +y), unit L and V; H = norm(L + V), R = 2(N·L)N − L.
 /// When V = −L (H undefined) NH and VH are 0.
 pub fn inputs_from_dirs(l: V3, v: V3) -> [f64; N_INPUTS] {

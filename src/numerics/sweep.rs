@@ -206,20 +206,13 @@ fn category(v: f64) -> usize {
     }
 }
 
-/// A unit direction whose cosine with the normal is exactly `c` (so denormal and 1 − ulp cosines are reachable,
-/// which polar angles are not) at azimuth `phi`.
-fn dir_from_cos(c: f64, phi: f64) -> super::V3 {
-    let s = (1.0 - c * c).max(0.0).sqrt();
-    [s * phi.cos(), s * phi.sin(), c]
-}
-
 /// Unit directions over the hemisphere, in and just below the horizon plane: every cosine of [`grid`] in
 /// [−1, 1] at each azimuth of `phis`.
 fn directions(phis: &[f64]) -> Vec<super::V3> {
     let mut out = vec![];
     for (c, _) in grid().into_iter().filter(|(c, _)| (-1.0..=1.0).contains(c)) {
         for &p in phis {
-            out.push(dir_from_cos(c, p));
+            out.push(super::dir_from_cos(c, p));
         }
     }
     out
@@ -246,13 +239,9 @@ pub enum DomainKind {
 impl DomainKind {
     pub fn of(used: InputSet) -> DomainKind {
         use crate::ir::Input;
-        let bit = |i: Input| 1u32 << i.index();
-        let directions: u32 = Input::DIRECTIONS.iter().map(|&i| bit(i)).sum();
-        let pair = bit(Input::NL) | bit(Input::NV);
-        let cosines = u32::from(used.0) & !directions;
         if used.reads_directions() {
             DomainKind::Directions
-        } else if cosines.count_ones() > 1 && cosines & !pair != 0 {
+        } else if used.len() > 1 && used.iter().any(|i| !matches!(i, Input::NL | Input::NV)) {
             DomainKind::LinkedCosines
         } else {
             DomainKind::Independent
@@ -282,8 +271,8 @@ enum Domain {
 }
 
 impl Domain {
-    fn new(used: InputSet) -> Domain {
-        match DomainKind::of(used) {
+    fn new(kind: DomainKind, used: InputSet) -> Domain {
+        match kind {
             DomainKind::Independent => Domain::Cosines { g: grid(), used: used.iter().map(|i| i.index()).collect() },
             DomainKind::LinkedCosines => Domain::Geometry { ls: directions(&[0.0]), vs: directions(&PHIS), used, directions: false },
             DomainKind::Directions => Domain::Geometry { ls: directions(&PHIS), vs: directions(&PHIS), used, directions: true },
@@ -337,7 +326,7 @@ pub fn extent_polar(ev: &dyn Evaluator, x: &[f64; N_INPUTS], params: &[f64], lig
     let d = if light { l } else { v };
     let phi = if d[0] == 0.0 && d[1] == 0.0 { 0.0 } else { d[1].atan2(d[0]) };
     bad_interval(d[2], |c| {
-        let moved = dir_from_cos(c, phi);
+        let moved = super::dir_from_cos(c, phi);
         let y = if light { super::inputs_from_dirs(moved, v) } else { super::inputs_from_dirs(l, moved) };
         bad(ev.eval(&y, params))
     })
@@ -373,7 +362,7 @@ fn bad_interval(v: f64, at: impl Fn(f64) -> bool) -> Option<(f64, f64)> {
 /// Sweeps `ev` (normally the [`Formula::unclamped`] kernel) over the domain described in the module docs.
 pub fn sweep(ev: &dyn Evaluator, used: InputSet, decls: &[ParamDecl], opts: &SweepOptions) -> SweepReport {
     let kind = DomainKind::of(used);
-    let domain = Domain::new(used);
+    let domain = Domain::new(kind, used);
     let gsize = domain.size();
     // Parameter combinations (mixed radix over each parameter's values).
     let pv: Vec<Vec<f64>> = decls.iter().map(param_values).collect();
@@ -470,6 +459,7 @@ mod tests {
     use crate::backend::interp::Interp;
     use crate::ir::{BinOp, Input, Ir, Meta, ParamKind};
     use crate::backend::FnEvaluator;
+    use crate::numerics::dir_from_cos;
 
     fn n_decl() -> ParamDecl {
         ParamDecl { name: "n".into(), default: 50.0, lo: 1.0, hi: 1000.0, span: None, kind: ParamKind::Float }
