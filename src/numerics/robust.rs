@@ -439,8 +439,9 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
     while i < tries.len() {
         let (name, describe, _) = tries[i];
         let rule = Rule::ALL.iter().copied().find(|r| r.name() == name);
-        // quotient-chain goes site by site (Rule::apply_at); the others apply everywhere at once.
-        let site = (rule == Some(Rule::QuotientChain)).then_some(k);
+        // quotient-chain goes site by site, scaled-exp variant by variant (Rule::apply_at); the others apply
+        // everywhere at once.
+        let site = matches!(rule, Some(Rule::QuotientChain | Rule::ScaledExp)).then_some(k);
         let cand = match rule {
             None if name == COMPENSATED => compensated.clone(),
             None => Some(pow_call.clone()).filter(|p| p.to_program_text() != cur.to_program_text()),

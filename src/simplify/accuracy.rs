@@ -26,15 +26,23 @@
 //!   exact rounding error of the sum (2Sum, five additions): pow amplifies its base's relative error y times,
 //!   so F_ST's `(n/a·(c − 1) + 1)^a` at a = 1000 lost 500 ulp where its condition is 1. Cost ~12.
 //!
-//! A fourth candidate, large integer powers kept as `pow` calls instead of multiplication chains, is the
-//! simplifier's own [`super::Policy::max_chain`]; the chooser builds it with [`pow_call_policy`]. A fifth,
+//! - `scaled-exp`: a product/quotient tree with an `exp(E)` factor, `exp(E)·n/(d₁·…·d_k)`, →
+//!   `expmuldiv(E, n/(d₁·…·d_{k−1}), d_k)` (the builtin applies every power of two last, so e^E may be far
+//!   below the denormals while the result is not: Beckmann's and Ward's values near 1e-311). Three variants,
+//!   tried in turn: the other divisors as one product (cost ≈ the exp it replaces + 6), divided one by one,
+//!   and the exponent halved over two nested builtins so two tiny divisors (Cook–Torrance's NL, NV ~1e-224)
+//!   each meet one half (twice the cost).
+//!
+//! Another candidate, large integer powers kept as `pow` calls instead of multiplication chains, is the
+//! simplifier's own [`super::Policy::max_chain`]; the chooser builds it with [`pow_call_policy`]. Another,
 //! [`compensated_powers`], rebuilds those calls as multiplication chains that carry their rounding errors
 //! (fma), within a few ulp of pow at ~3.5× the plain chain's operations and below pow's cost.
 //!
 //! # Cost model
 //! [`cost`] counts live nodes with weights fitted to JIT timings on x86-64 (BENCHMARKS.md, 2026-11-30: five
 //! extra divisions add ~3.4 ns to Beckmann's 8.5 ns, a libm exp ~5 ns): `+ − ×`, abs, min, max 1; clamp 2;
-//! `/` and sqrt 3; fma 1; math-library calls (exp, ln, trig) 20, pow 60 (pow(NH, e) with e live took 5.0× the
+//! `/` and sqrt 3; fma 1; math-library calls (exp, ln, trig) 20, expmuldiv 26 (exp, a product, a quotient and
+//! range checks in the common case), pow 60 (pow(NH, e) with e live took 5.0× the
 //! ns of the 14-multiplication chain for NH¹⁰⁰⁰); leaves and negation 0.
 //! It ranks candidates; the kernel's run time, measured in `lobe bench`, is what the README reports.
 
@@ -50,10 +58,11 @@ pub enum Rule {
     QuotientChain,
     FactorQuadratic,
     CompensatedBase,
+    ScaledExp,
 }
 
 impl Rule {
-    pub const ALL: [Rule; 4] = [Rule::SplitSqrt, Rule::QuotientChain, Rule::FactorQuadratic, Rule::CompensatedBase];
+    pub const ALL: [Rule; 5] = [Rule::SplitSqrt, Rule::QuotientChain, Rule::ScaledExp, Rule::FactorQuadratic, Rule::CompensatedBase];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -61,6 +70,7 @@ impl Rule {
             Rule::QuotientChain => "quotient-chain",
             Rule::FactorQuadratic => "factor-quadratic",
             Rule::CompensatedBase => "compensated-base",
+            Rule::ScaledExp => "scaled-exp",
         }
     }
 
@@ -71,6 +81,7 @@ impl Rule {
             Rule::QuotientChain => "products/quotients reassociated: divide by each tiny-or-huge factor separately",
             Rule::FactorQuadratic => "A*c^2 + (1 - A)*c as c*(1 + A*(c - 1)): no cancellation near c = 1",
             Rule::CompensatedBase => "pow(a + b, y) corrected by the rounding error of a + b: no amplification by y",
+            Rule::ScaledExp => "exp(a)*b/c as expmuldiv(a, b, c): no underflow of exp(a) before b/c rescales it",
         }
     }
 
@@ -90,6 +101,7 @@ impl Rule {
             Rule::QuotientChain => quotient_chain(f, &ranges, site),
             Rule::FactorQuadratic => factor_quadratic(f),
             Rule::CompensatedBase => compensated_base(f),
+            Rule::ScaledExp => scaled_exp(f, &ranges, site.unwrap_or(0)),
         };
         if !fired {
             return None;
@@ -176,6 +188,7 @@ pub fn cost(f: &Formula) -> f64 {
                 Builtin::Lt | Builtin::Le | Builtin::Eq | Builtin::Ne | Builtin::Select => 2.0,
                 Builtin::Floor => 6.0,
                 Builtin::Pow => 60.0,
+                Builtin::ExpMulDiv => 26.0,
                 _ => 20.0,
             },
         }
@@ -275,12 +288,13 @@ fn safe(r: Range) -> bool {
     !r.nan && ((r.lo >= lo && r.hi <= hi) || (r.hi <= -lo && r.lo >= -hi))
 }
 
-// x / (a*b*…) → x / (safe factors) / a / b / …   dividing by each factor that may be tiny or huge on its own
-fn quotient_chain(f: &Formula, ranges: &[Range], only: Option<usize>) -> (Ir, NodeId, bool) {
-    // Per old node: (numerator, denominator) factor lists of old atomic nodes, if it is a short product tree.
-    let mut lists: Vec<Option<(Vec<NodeId>, Vec<NodeId>)>> = Vec::with_capacity(f.ir.len());
+/// Per node, its (numerator, denominator) factor lists of atomic nodes when it is a short tree of `*` and `/`.
+type Lists = Vec<Option<(Vec<NodeId>, Vec<NodeId>)>>;
+
+fn product_lists(f: &Formula) -> Lists {
+    let mut lists: Lists = Vec::with_capacity(f.ir.len());
     for id in f.ir.ids() {
-        let of = |x: NodeId, lists: &[Option<(Vec<NodeId>, Vec<NodeId>)>]| match &lists[x.index()] {
+        let of = |x: NodeId, lists: &Lists| match &lists[x.index()] {
             Some(l) => l.clone(),
             None if f.ir.node(x).as_const() == Some(1.0) => (vec![], vec![]),
             None => (vec![x], vec![]),
@@ -300,6 +314,19 @@ fn quotient_chain(f: &Formula, ranges: &[Range], only: Option<usize>) -> (Ir, No
         };
         lists.push(l.filter(|(n, d)| n.len() + d.len() <= MAX_FACTORS));
     }
+    lists
+}
+
+/// The product of `xs` (mapped to the new arena), `None` when empty.
+fn product(ir: &mut Ir, map: &[NodeId], xs: &[NodeId], s: crate::base::span::Span) -> Option<NodeId> {
+    let mut it = xs.iter().map(|x| map[x.index()]);
+    let first = it.next()?;
+    Some(it.fold(first, |acc, x| ir.bin(BinOp::Mul, acc, x, s)))
+}
+
+// x / (a*b*…) → x / (safe factors) / a / b / …   dividing by each factor that may be tiny or huge on its own
+fn quotient_chain(f: &Formula, ranges: &[Range], only: Option<usize>) -> (Ir, NodeId, bool) {
+    let lists = product_lists(f);
     let mut site = 0;
     rebuild(f, |ir, map, id, _| {
         let (num, den) = lists[id.index()].as_ref()?;
@@ -314,24 +341,63 @@ fn quotient_chain(f: &Formula, ranges: &[Range], only: Option<usize>) -> (Ir, No
             return None;
         }
         let s = f.ir.span(id);
-        let prod = |ir: &mut Ir, xs: &[NodeId]| -> Option<NodeId> {
-            let mut it = xs.iter().map(|x| map[x.index()]);
-            let first = it.next()?;
-            Some(it.fold(first, |acc, x| ir.bin(BinOp::Mul, acc, x, s)))
-        };
         // The whole numerator first (in a BRDF the factor that vanishes, exp(−1/x²), is there, and it must meet
         // the divisions as 0, not as ∞·0), then the safe divisors at once, then each unsafe divisor.
-        let mut v = match prod(ir, num) {
+        let mut v = match product(ir, map, num, s) {
             Some(v) => v,
             None => ir.konst(1.0, s),
         };
-        if let Some(d) = prod(ir, &safe_den) {
+        if let Some(d) = product(ir, map, &safe_den, s) {
             v = ir.bin(BinOp::Div, v, d, s);
         }
         for d in unsafe_den {
             v = ir.bin(BinOp::Div, v, map[d.index()], s);
         }
         Some(v)
+    })
+}
+
+// exp(E)·n₁·…/(d₁·…·d_k) → expmuldiv(E, n₁·…/(d₁·…·d_{k−1}), d_k)   (variant 0; 1: dividing by each d_i in
+// turn; 2: expmuldiv(E/2, expmuldiv(E/2, n₁·…/d₁/…/d_{k−2}, d_{k−1}), d_k))
+fn scaled_exp(f: &Formula, ranges: &[Range], variant: usize) -> (Ir, NodeId, bool) {
+    let lists = product_lists(f);
+    rebuild(f, |ir, map, id, _| {
+        let (num, den) = lists[id.index()].as_ref()?;
+        let at = num.iter().position(|x| matches!(f.ir.node(*x), Node::Call(Builtin::Exp, _)))?;
+        let Node::Call(Builtin::Exp, [arg, ..]) = *f.ir.node(num[at]) else { return None };
+        if num.len() + den.len() < 2 || variant > 2 || (variant == 2 && den.len() < 2) {
+            return None;
+        }
+        let s = f.ir.span(id);
+        let rest: Vec<NodeId> = num.iter().enumerate().filter(|(i, _)| *i != at).map(|(_, x)| *x).collect();
+        // Safe divisors first, so the last ones (the divisors kept apart) are those that may be tiny or huge.
+        let (mut dens, unsafe_den): (Vec<NodeId>, Vec<NodeId>) = den.iter().partition(|d| safe(ranges[d.index()]));
+        dens.extend(unsafe_den);
+        let last = dens.pop();
+        let second = if variant == 2 { dens.pop() } else { None };
+        let mut b = product(ir, map, &rest, s).unwrap_or_else(|| ir.konst(1.0, s));
+        if variant == 0 {
+            if let Some(d) = product(ir, map, &dens, s) {
+                b = ir.bin(BinOp::Div, b, d, s);
+            }
+        } else {
+            for d in dens {
+                b = ir.bin(BinOp::Div, b, map[d.index()], s);
+            }
+        }
+        let c = match last {
+            Some(d) => map[d.index()],
+            None => ir.konst(1.0, s),
+        };
+        let mut a = map[arg.index()];
+        if let Some(d) = second {
+            // e^(E/2)·(e^(E/2)·b/d)/c: each half of the exponent meets one divisor, so neither b/d nor the
+            // inner result leaves the normal range when both divisors are tiny (Cook–Torrance's NL and NV).
+            let half = ir.konst(0.5, s);
+            a = ir.bin(BinOp::Mul, a, half, s);
+            b = ir.call(Builtin::ExpMulDiv, &[a, b, map[d.index()]], s);
+        }
+        Some(ir.call(Builtin::ExpMulDiv, &[a, b, c], s))
     })
 }
 
@@ -476,6 +542,18 @@ mod tests {
         assert!(compensated_powers(&crate::simplify::simplify_with(&f, &[], &pow_call_policy()).0).is_none());
         let big = crate::front::parse("b.brdf", "(2*NH)^n").unwrap();
         assert!(compensated_powers(&crate::simplify::simplify_with(&big, &[(0, 1000.0)], &pow_call_policy()).0).is_none());
+    }
+
+    #[test]
+    fn scaled_exp_needs_an_exp_factor_and_another_factor() {
+        let f = parse("param m = 0.3 in 0.01..1\nexp((NH^2 - 1) / (m^2 * NH^2)) / (m*m) / NH / NL");
+        let t = |k| Rule::ScaledExp.apply_at(&f, Some(k)).map(|g| g.to_program_text());
+        let (v0, v1, v2) = (t(0).unwrap(), t(1).unwrap(), t(2).unwrap());
+        assert!(v0.contains("expmuldiv(") && !v0.contains("exp("), "{v0}");
+        assert!(v1 != v0 && v2.matches("expmuldiv(").count() == 2, "{v1}\n{v2}");
+        assert!(t(3).is_none());
+        assert!(Rule::ScaledExp.apply(&parse("exp(-NH)")).is_none());
+        assert!(Rule::ScaledExp.apply(&parse("NL / exp(NH)")).is_none());
     }
 
     #[test]
