@@ -33,6 +33,14 @@
 //!   and the exponent halved over two nested builtins so two tiny divisors (Cook–Torrance's NL, NV ~1e-224)
 //!   each meet one half (twice the cost).
 //!
+//! - `smith-g1`: Smith's G1 for GGX written with tan², `K/(1 + sqrt(1 + A·(1 − c²)/c²))`, → `K·c/(c + sqrt(c² +
+//!   A·(1 − c²)))` for c > 0 (range or guard), then c cancelled against a divisor c of the products around it
+//!   (BRDF Explorer's GGX: `G·…/(4·NL·NV)`). At grazing c, c² underflows: tan² = 1/0 and G1 = 0, and the
+//!   product meets 0/0. Cheaper than the written form (no division by c², no 4·NL·NV).
+//! - `scaled-norm`: `x/sqrt(a² + b² + …)`, x one of a, b, …, (a normalize) with the vector scaled by 2^600
+//!   when its largest component is below 2^-500 (exact), so L + V at L ≈ −V (grazing light and view facing each
+//!   other) has a length, not 0. Cost: abs and max per component, a compare, a select, a product each (~+12).
+//!
 //! Another candidate, large integer powers kept as `pow` calls instead of multiplication chains, is the
 //! simplifier's own [`super::Policy::max_chain`]; the chooser builds it with [`pow_call_policy`]. Another,
 //! [`compensated_powers`], rebuilds those calls as multiplication chains that carry their rounding errors
@@ -59,10 +67,20 @@ pub enum Rule {
     FactorQuadratic,
     CompensatedBase,
     ScaledExp,
+    SmithG1,
+    ScaledNorm,
 }
 
 impl Rule {
-    pub const ALL: [Rule; 5] = [Rule::SplitSqrt, Rule::QuotientChain, Rule::ScaledExp, Rule::FactorQuadratic, Rule::CompensatedBase];
+    pub const ALL: [Rule; 7] = [
+        Rule::SplitSqrt,
+        Rule::SmithG1,
+        Rule::QuotientChain,
+        Rule::ScaledExp,
+        Rule::FactorQuadratic,
+        Rule::CompensatedBase,
+        Rule::ScaledNorm,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -71,6 +89,8 @@ impl Rule {
             Rule::FactorQuadratic => "factor-quadratic",
             Rule::CompensatedBase => "compensated-base",
             Rule::ScaledExp => "scaled-exp",
+            Rule::SmithG1 => "smith-g1",
+            Rule::ScaledNorm => "scaled-norm",
         }
     }
 
@@ -82,6 +102,8 @@ impl Rule {
             Rule::FactorQuadratic => "A*c^2 + (1 - A)*c as c*(1 + A*(c - 1)): no cancellation near c = 1",
             Rule::CompensatedBase => "pow(a + b, y) corrected by the rounding error of a + b: no amplification by y",
             Rule::ScaledExp => "exp(a)*b/c as expmuldiv(a, b, c): no underflow of exp(a) before b/c rescales it",
+            Rule::SmithG1 => "Smith G1 2/(1 + sqrt(1 + A*tan^2)) as 2c/(c + sqrt(c^2 + A*(1 - c^2))), c/c cancelled: no inf/inf at grazing c",
+            Rule::ScaledNorm => "x/sqrt(a^2 + b^2 + ...) with a tiny vector scaled by 2^600 first: no zero length",
         }
     }
 
@@ -102,6 +124,8 @@ impl Rule {
             Rule::FactorQuadratic => factor_quadratic(f),
             Rule::CompensatedBase => compensated_base(f),
             Rule::ScaledExp => scaled_exp(f, &ranges, site.unwrap_or(0)),
+            Rule::SmithG1 => smith_g1(f, &ranges),
+            Rule::ScaledNorm => scaled_norm(f),
         };
         if !fired {
             return None;
@@ -291,7 +315,7 @@ fn safe(r: Range) -> bool {
 /// Per node, its (numerator, denominator) factor lists of atomic nodes when it is a short tree of `*` and `/`.
 type Lists = Vec<Option<(Vec<NodeId>, Vec<NodeId>)>>;
 
-fn product_lists(f: &Formula) -> Lists {
+fn product_lists(f: &Formula, max: usize) -> Lists {
     let mut lists: Lists = Vec::with_capacity(f.ir.len());
     for id in f.ir.ids() {
         let of = |x: NodeId, lists: &Lists| match &lists[x.index()] {
@@ -312,7 +336,7 @@ fn product_lists(f: &Formula) -> Lists {
             }
             _ => None,
         };
-        lists.push(l.filter(|(n, d)| n.len() + d.len() <= MAX_FACTORS));
+        lists.push(l.filter(|(n, d)| n.len() + d.len() <= max));
     }
     lists
 }
@@ -326,7 +350,7 @@ fn product(ir: &mut Ir, map: &[NodeId], xs: &[NodeId], s: crate::base::span::Spa
 
 // x / (a*b*…) → x / (safe factors) / a / b / …   dividing by each factor that may be tiny or huge on its own
 fn quotient_chain(f: &Formula, ranges: &[Range], only: Option<usize>) -> (Ir, NodeId, bool) {
-    let lists = product_lists(f);
+    let lists = product_lists(f, MAX_FACTORS);
     let mut site = 0;
     rebuild(f, |ir, map, id, _| {
         let (num, den) = lists[id.index()].as_ref()?;
@@ -360,7 +384,7 @@ fn quotient_chain(f: &Formula, ranges: &[Range], only: Option<usize>) -> (Ir, No
 // exp(E)·n₁·…/(d₁·…·d_k) → expmuldiv(E, n₁·…/(d₁·…·d_{k−1}), d_k)   (variant 0; 1: dividing by each d_i in
 // turn; 2: expmuldiv(E/2, expmuldiv(E/2, n₁·…/d₁/…/d_{k−2}, d_{k−1}), d_k))
 fn scaled_exp(f: &Formula, ranges: &[Range], variant: usize) -> (Ir, NodeId, bool) {
-    let lists = product_lists(f);
+    let lists = product_lists(f, MAX_FACTORS);
     rebuild(f, |ir, map, id, _| {
         let (num, den) = lists[id.index()].as_ref()?;
         let at = num.iter().position(|x| matches!(f.ir.node(*x), Node::Call(Builtin::Exp, _)))?;
@@ -398,6 +422,135 @@ fn scaled_exp(f: &Formula, ranges: &[Range], variant: usize) -> (Ir, NodeId, boo
             b = ir.call(Builtin::ExpMulDiv, &[a, b, map[d.index()]], s);
         }
         Some(ir.call(Builtin::ExpMulDiv, &[a, b, c], s))
+    })
+}
+
+// K/(1 + sqrt(1 + A·((1 − c·c)/(c·c)))) → K·c/(c + sqrt(c·c + A·(1 − c·c)))   for c > 0, then c/c cancelled
+// in the products around it
+fn smith_g1(f: &Formula, ranges: &[Range]) -> (Ir, NodeId, bool) {
+    let guards = positive_guards(f);
+    let ir0 = &f.ir;
+    let is_one = |x: NodeId| ir0.node(x).as_const() == Some(1.0);
+    // (A, c, c·c) when `x` is 1 + A·((1 − c·c)/(c·c)) (either operand order of + and ·).
+    let inner = |x: NodeId| -> Option<(NodeId, NodeId, NodeId)> {
+        let Node::Binary(BinOp::Add, p, q) = *ir0.node(x) else { return None };
+        let m = if is_one(p) { q } else if is_one(q) { p } else { return None };
+        let Node::Binary(BinOp::Mul, u, v) = *ir0.node(m) else { return None };
+        for (a, d) in [(u, v), (v, u)] {
+            let Node::Binary(BinOp::Div, t, sq) = *ir0.node(d) else { continue };
+            let Node::Binary(BinOp::Sub, one, sq2) = *ir0.node(t) else { continue };
+            let Node::Binary(BinOp::Mul, c, c2) = *ir0.node(sq) else { continue };
+            if is_one(one) && sq2 == sq && c == c2 {
+                return Some((a, c, sq));
+            }
+        }
+        None
+    };
+    let (ir, root, fired) = rebuild(f, |ir, map, id, n| {
+        let Node::Binary(BinOp::Div, k, den) = n else { return None };
+        let Node::Binary(BinOp::Add, p, q) = *ir0.node(den) else { return None };
+        let r = if is_one(p) { q } else if is_one(q) { p } else { return None };
+        let Node::Call(Builtin::Sqrt, [x, ..]) = *ir0.node(r) else { return None };
+        let (a, c, sq) = inner(x)?;
+        let positive = ranges[c.index()].lo > 0.0 || guards[id.index()].as_ref().is_some_and(|g| g.contains(&c));
+        if !positive {
+            return None;
+        }
+        let s = f.ir.span(id);
+        let (a, c, sq) = (map[a.index()], map[c.index()], map[sq.index()]);
+        let one = ir.konst(1.0, s);
+        let om = ir.bin(BinOp::Sub, one, sq, s);
+        let am = ir.bin(BinOp::Mul, a, om, s);
+        let rad = ir.bin(BinOp::Add, sq, am, s);
+        let root = ir.call(Builtin::Sqrt, &[rad], s);
+        let d = ir.bin(BinOp::Add, c, root, s);
+        let kc = ir.bin(BinOp::Mul, map[k.index()], c, s);
+        Some(ir.bin(BinOp::Div, kc, d, s))
+    });
+    if !fired {
+        return (ir, root, false);
+    }
+    let g = Formula { ir, root, ..f.clone() };
+    let (ir, root, _) = cancel_positive(&g);
+    (ir, root, true)
+}
+
+// x·…/(x·…) → …/…   for x > 0 by range or guard (exact in real arithmetic); the divisors that remain are
+// divided one by one (safe ones first, as a product), as in `quotient-chain`
+fn cancel_positive(f: &Formula) -> (Ir, NodeId, bool) {
+    // Longer lists than elsewhere: a microfacet BRDF's D·G·F/(4·NL·NV) has 14 factors once G is rationalised.
+    let lists = product_lists(f, 2 * MAX_FACTORS);
+    let guards = positive_guards(f);
+    let ranges = node_ranges(f, &Policy::default());
+    rebuild(f, |ir, map, id, _| {
+        let (num, den) = lists[id.index()].as_ref()?;
+        let pos = |x: NodeId| {
+            let r = ranges[x.index()];
+            (r.lo > 0.0 && r.hi.is_finite()) || guards[id.index()].as_ref().is_some_and(|g| g.contains(&x))
+        };
+        let (mut num, mut den) = (num.clone(), den.clone());
+        let mut cancelled = false;
+        let mut i = 0;
+        while i < num.len() {
+            match den.iter().position(|d| *d == num[i]) {
+                Some(j) if pos(num[i]) => {
+                    num.remove(i);
+                    den.remove(j);
+                    cancelled = true;
+                }
+                _ => i += 1,
+            }
+        }
+        if !cancelled {
+            return None;
+        }
+        let s = f.ir.span(id);
+        let (safe_den, unsafe_den): (Vec<NodeId>, Vec<NodeId>) = den.iter().partition(|d| safe(ranges[d.index()]));
+        let mut v = product(ir, map, &num, s).unwrap_or_else(|| ir.konst(1.0, s));
+        if let Some(d) = product(ir, map, &safe_den, s) {
+            v = ir.bin(BinOp::Div, v, d, s);
+        }
+        for d in unsafe_den {
+            v = ir.bin(BinOp::Div, v, map[d.index()], s);
+        }
+        Some(v)
+    })
+}
+
+// x / sqrt(a·a + b·b + …) → (x·s) / sqrt((a·s)·(a·s) + …),  s = 2^600 if max(|a|, |b|, …) < 2^-500 else 1,
+// x one of a, b, …: the squares of a tiny vector (L + V at L ≈ −V) no longer underflow to a zero length
+fn scaled_norm(f: &Formula) -> (Ir, NodeId, bool) {
+    let ir0 = &f.ir;
+    fn squares(ir: &Ir, x: NodeId, out: &mut Vec<NodeId>) -> bool {
+        match *ir.node(x) {
+            Node::Binary(BinOp::Add, p, q) => squares(ir, p, out) && squares(ir, q, out),
+            Node::Binary(BinOp::Mul, a, b) if a == b => {
+                out.push(a);
+                true
+            }
+            _ => false,
+        }
+    }
+    rebuild(f, |ir, map, id, n| {
+        let Node::Binary(BinOp::Div, x, d) = n else { return None };
+        let Node::Call(Builtin::Sqrt, [sum, ..]) = *ir0.node(d) else { return None };
+        let mut bases = vec![];
+        if !squares(ir0, sum, &mut bases) || bases.len() < 2 || !bases.contains(&x) {
+            return None;
+        }
+        let sp = f.ir.span(id);
+        let mags: Vec<NodeId> = bases.iter().map(|b| ir.call(Builtin::Abs, &[map[b.index()]], sp)).collect();
+        let m = mags[1..].iter().fold(mags[0], |acc, v| ir.call(Builtin::Max, &[acc, *v], sp));
+        let tiny = ir.konst(2f64.powi(-500), sp);
+        let small = ir.call(Builtin::Lt, &[m, tiny], sp);
+        let (up, one) = (ir.konst(2f64.powi(600), sp), ir.konst(1.0, sp));
+        let sc = ir.call(Builtin::Select, &[small, up, one], sp);
+        let scaled: Vec<NodeId> = bases.iter().map(|b| ir.bin(BinOp::Mul, map[b.index()], sc, sp)).collect();
+        let sq: Vec<NodeId> = scaled.iter().map(|v| ir.bin(BinOp::Mul, *v, *v, sp)).collect();
+        let total = sq[1..].iter().fold(sq[0], |acc, v| ir.bin(BinOp::Add, acc, *v, sp));
+        let root = ir.call(Builtin::Sqrt, &[total], sp);
+        let xs = ir.bin(BinOp::Mul, map[x.index()], sc, sp);
+        Some(ir.bin(BinOp::Div, xs, root, sp))
     })
 }
 
@@ -554,6 +707,26 @@ mod tests {
         assert!(t(3).is_none());
         assert!(Rule::ScaledExp.apply(&parse("exp(-NH)")).is_none());
         assert!(Rule::ScaledExp.apply(&parse("NL / exp(NH)")).is_none());
+    }
+
+    #[test]
+    fn smith_g1_needs_a_positive_cosine_and_cancels_it() {
+        let g1 = "let g = 2/(1 + sqrt(1 + a*a*((1 - NL*NL)/(NL*NL))))";
+        let src = format!("param a = 0.2 in 0.01..1\n{g1}\nlet c = NL - 0.5\nNL <= 0 ? 0 : g * NH / (4*NL)");
+        let t = Rule::SmithG1.apply(&parse(&src)).unwrap().to_program_text();
+        // G1·…/(4·NL) with G1 = 2·NL/(NL + …): NL cancelled, so nothing is ∞/∞ or 0/0 at tiny NL.
+        assert!(!t.contains("/ nl") && !t.contains("* nl /") && t.contains("sqrt("), "{t}");
+        // Without the guard NL may be 0 or negative: not rewritten.
+        assert!(Rule::SmithG1.apply(&parse(&format!("param a = 0.2 in 0.01..1\n{g1}\ng * NH / (4*NL)"))).is_none());
+    }
+
+    #[test]
+    fn scaled_norm_scales_the_vector_not_a_lone_sqrt() {
+        let f = parse("let x = Lx + Vx\nlet z = Lz + Vz\nz / sqrt(x*x + z*z)");
+        let t = Rule::ScaledNorm.apply(&f).unwrap().to_program_text();
+        assert!(t.contains("? 4.149515568880993e180 : 1") && t.contains("t5 / sqrt(t4 * t4 + t5 * t5)"), "{t}");
+        assert!(Rule::ScaledNorm.apply(&parse("let x = Lx + Vx\nlet z = Lz + Vz\nNH / sqrt(x*x + z*z)")).is_none());
+        assert!(Rule::ScaledNorm.apply(&parse("let x = Lx + Vx\nx / sqrt(x*x)")).is_none());
     }
 
     #[test]

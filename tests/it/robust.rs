@@ -268,3 +268,32 @@ fn scaled_exp_keeps_denormal_results() {
         assert!(ulps(plain_kernel(stem, &[]).eval(&x, &p), t) > 1000.0, "{stem}: the unrewritten form is no longer off here");
     }
 }
+
+/// GGX as BRDF Explorer users write it: Smith's G1 through tan² is ∞/∞ at grazing NL or NV (`smith-g1`), and
+/// normalize(L + V) has a zero length when L ≈ −V at the horizon (`scaled-norm`). The unrewritten form is NaN at
+/// both points (7,788 of 10⁵ domain points before); the pass's kernel is within 16 ulp of the truth.
+#[test]
+fn explorer_ggx_is_finite_at_grazing_angles() {
+    let path = format!("{}/examples/explorer/ggx.brdf", env!("CARGO_MANIFEST_DIR"));
+    let f = lobe::front::parse(&path, &std::fs::read_to_string(&path).unwrap()).unwrap();
+    let plain = lobe::compile_formula(f.clone(), &jit_options(&[])).unwrap();
+    let k = lobe::compile_formula(f.clone(), &robust::with_pass(jit_options(&[]), PassOptions::default())).unwrap();
+    let unit = |x: f64, y: f64, z: f64| {
+        let s = ((1.0 - z * z) / (x * x + y * y)).sqrt();
+        [x * s, y * s, z]
+    };
+    for (l, v, alpha, f0) in [
+        (unit(-1.0, 0.0, 2.2250738585072014e-308), unit(0.14857266125057206, 0.9889014937439031, 6.789709752559824e-253), 0.001, 0.28),
+        (unit(0.0, -1.0, 4.21490016269414e-309), unit(0.0, 1.0, 2.2250738585072014e-308), 0.8456125034439829, 0.83),
+    ] {
+        let x = lobe::numerics::inputs_from_dirs(l, v);
+        let mut p = k.default_params();
+        p[f.param_index("alpha").unwrap()] = alpha;
+        p[f.param_index("f0").unwrap()] = f0;
+        let t = truth::eval(&f, &x, &p);
+        assert!(t.is_finite() && t > 0.0, "truth {t} at L = {l:?}, V = {v:?}");
+        assert!(plain.eval(&x, &p).is_nan(), "the unrewritten form is no longer NaN at L = {l:?}, V = {v:?}");
+        let got = k.eval(&x, &p);
+        assert!(ulps(got, t) <= 16.0, "at L = {l:?}, V = {v:?}: {got} vs {t}");
+    }
+}
