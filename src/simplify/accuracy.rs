@@ -29,7 +29,7 @@
 //! - `scaled-exp`: a product/quotient tree with an `exp(E)` factor, `exp(E)·n/(d₁·…·d_k)`, →
 //!   `expmuldiv(E, n/(d₁·…·d_{k−1}), d_k)` (the builtin applies every power of two last, so e^E may be far
 //!   below the denormals while the result is not: Beckmann's and Ward's values near 1e-311). Three variants,
-//!   tried in turn: the other divisors as one product (cost ≈ the exp it replaces + 6), divided one by one,
+//!   tried in turn: the other divisors as one product, divided one by one,
 //!   and the exponent halved over two nested builtins so two tiny divisors (Cook–Torrance's NL, NV ~1e-224)
 //!   each meet one half (twice the cost).
 //!
@@ -49,8 +49,8 @@
 //! # Cost model
 //! [`cost`] counts live nodes with weights fitted to JIT timings on x86-64 (BENCHMARKS.md, 2026-11-30: five
 //! extra divisions add ~3.4 ns to Beckmann's 8.5 ns, a libm exp ~5 ns): `+ − ×`, abs, min, max 1; clamp 2;
-//! `/` and sqrt 3; fma 1; math-library calls (exp, ln, trig) 20, expmuldiv 26 (exp, a product, a quotient and
-//! range checks in the common case), pow 60 (pow(NH, e) with e live took 5.0× the
+//! `/` and sqrt 3; fma 1; math-library calls (exp, ln, trig) 20, expmuldiv 48 (measured: Beckmann's kernel
+//! 8.4 → 16.3 ns with it, its rare scaled branch included), pow 60 (pow(NH, e) with e live took 5.0× the
 //! ns of the 14-multiplication chain for NH¹⁰⁰⁰); leaves and negation 0.
 //! It ranks candidates; the kernel's run time, measured in `lobe bench`, is what the README reports.
 
@@ -212,7 +212,7 @@ pub fn cost(f: &Formula) -> f64 {
                 Builtin::Lt | Builtin::Le | Builtin::Eq | Builtin::Ne | Builtin::Select => 2.0,
                 Builtin::Floor => 6.0,
                 Builtin::Pow => 60.0,
-                Builtin::ExpMulDiv => 26.0,
+                Builtin::ExpMulDiv => 48.0,
                 _ => 20.0,
             },
         }

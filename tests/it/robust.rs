@@ -250,14 +250,17 @@ fn expmuldiv_keeps_the_bits_exp_loses_to_underflow() {
 }
 
 /// The denormal-result class: exp underflows before the divisions rescale it (the points were the pass's worst
-/// well-conditioned ones before `scaled-exp`: Beckmann 18.9 bits, Ward 42.4 bits (→ 0)). Within 16 ulp now.
+/// well-conditioned ones before `scaled-exp`: Beckmann 18.9 bits, Ward 42.4 bits (→ 0)). Within 16 ulp with
+/// `--max-cost 2`.
 #[test]
 fn scaled_exp_keeps_denormal_results() {
     for (stem, nl, nv, nh, m) in [
         ("beckmann", 0.5, 0.5, 3.773371444627538e-2, 0.9772191696069679),
         ("ward", 1.2276886869217682e-284, 5.740923431144541e-1, 4.420180284241315e-2, 0.7007159467187803),
     ] {
-        let k = robust_kernel(stem, &[]);
+        // expmuldiv costs ~2× these kernels (BENCHMARKS.md): the default 1.3× budget declines it.
+        let pass = PassOptions { max_cost: 2.0, ..PassOptions::default() };
+        let k = lobe::compile_formula(load(stem), &robust::with_pass(jit_options(&[]), pass)).unwrap();
         let f = load(stem);
         let mut p = k.default_params();
         p[f.param_index("m").unwrap()] = m;
