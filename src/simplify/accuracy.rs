@@ -75,11 +75,12 @@ impl Rule {
     pub const ALL: [Rule; 7] = [
         Rule::SplitSqrt,
         Rule::SmithG1,
+        // Before quotient-chain, which flattens (x/√s)·(x/√s) into x·x/√s/√s, where scaled-norm cannot see it.
+        Rule::ScaledNorm,
         Rule::QuotientChain,
         Rule::ScaledExp,
         Rule::FactorQuadratic,
         Rule::CompensatedBase,
-        Rule::ScaledNorm,
     ];
 
     pub fn name(self) -> &'static str {
