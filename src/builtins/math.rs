@@ -1188,3 +1188,110 @@ pub mod logic {
         e.select(small, r, x)
     }
 }
+
+// ---- expmuldiv (the accuracy pass's scaled exponential; added after the library above, which it reuses) ----
+
+/// `exp(a)·b/c` rounded as if the product had an unbounded exponent, then once to f64 (≤ 2 ulp; both modes).
+///
+/// Why: in `exp(a)·b/c` written out, e^a underflows (a < −708) or overflows before b/c rescales it, so a
+/// Beckmann or Ward value near 1e-311 comes out as a denormal with few bits, or 0. The common case is that
+/// product as written (exp, a multiplication, a division: ≤ 1.6 ulp when e^a, e^a·b and the result are all
+/// normal). Lanes where one of them is not take [`Emit::rare`]'s branch to [`exp_mul_div_scaled`], where no
+/// intermediate leaves the normal range. Cost: exp + ~12 operations, plus the rare branch where taken.
+///
+/// Special values follow `exp(a)*b/c`, except that a zero exponential (a < −745.2) times an infinite b/c is 0:
+/// an infinite b/c stands for an overflowed finite factor, and the accuracy pass forms this builtin only from
+/// products whose exp factor is what vanishes there.
+pub fn exp_mul_div<E: Emit>(e: &mut E, a: E::V, b: E::V, c: E::V) -> E::V {
+    let x = exp(e, a);
+    let t = e.mul(x, b);
+    let r = e.div(t, c);
+    let normal = |e: &mut E, v: E::V| {
+        let av = e.abs(v);
+        let lo = e.konst(f64::MIN_POSITIVE);
+        let hi = e.konst(f64::MAX);
+        let above = e.le(lo, av);
+        let below = e.le(av, hi);
+        e.and(above, below)
+    };
+    let nx = normal(e, x);
+    let nt = normal(e, t);
+    let nr = normal(e, r);
+    let ok = e.and(nx, nt);
+    let ok = e.and(ok, nr);
+    let bad = e.not(ok);
+    e.rare(bad, r, &mut |e| {
+        let s = exp_mul_div_scaled(e, a, b, c);
+        e.select(bad, s, r)
+    })
+}
+
+/// [`exp_mul_div`] with every power of two applied last: a = m·512·ln 2 + r (|m| ≤ 8, r exact as a
+/// double-double), e^r by [`exp_dd`] (normal, < 0.51 ulp); b and c split into mantissa and exponent (denormals
+/// scaled by 2^64 first); the mantissas and e^r multiply and divide (two roundings), and [`scale2`] applies
+/// the summed exponent at the end — the only rounding a denormal or overflowing result sees.
+fn exp_mul_div_scaled<E: Emit>(e: &mut E, a: E::V, b: E::V, c: E::V) -> E::V {
+    // a = m·C + r, C = 512·ln 2 = C_HI + C_LO; m·C_HI exact (C_HI has 32 bits), a − m·C_HI exact (Sterbenz).
+    const C_HI: f64 = 512.0 * LN2_HI;
+    const C_LO: f64 = 512.0 * LN2_LO;
+    let ac = clamp_to(e, a, -2900.0, 2900.0);
+    let ma = mulk(e, ac, 1.0 / (512.0 * std::f64::consts::LN_2));
+    let m = round_int(e, ma);
+    let mc = mulk(e, m, C_HI);
+    let rh = e.sub(ac, mc);
+    let rl = mulk(e, m, -C_LO);
+    let er = exp_dd(e, rh, rl);
+    // Mantissa in ±[1, 2) and unbiased exponent of a finite nonzero x (denormals scaled by 2^64 first).
+    let split = |e: &mut E, x: E::V| {
+        let ax = e.abs(x);
+        let tiny = e.konst(f64::MIN_POSITIVE);
+        let sub = e.lt(ax, tiny);
+        let up = mulk(e, x, 18446744073709551616.0);
+        let xs = e.select(sub, up, x);
+        let f = e.exponent_field(xs);
+        let bias = e.konst(1023.0);
+        let bias64 = e.konst(1023.0 + 64.0);
+        let bias = e.select(sub, bias64, bias);
+        let k = e.sub(f, bias);
+        (e.mask_bits(xs, SIGN | MANTISSA, EXP_ONE), k)
+    };
+    let (mb, kb) = split(e, b);
+    let (mcm, kc) = split(e, c);
+    let q = e.div(mb, mcm);
+    let p = e.mul(er, q);
+    let (mp, kp) = split(e, p);
+    let m512 = mulk(e, m, 512.0);
+    let k = e.sub(kb, kc);
+    let k = e.add(k, kp);
+    let k = e.add(k, m512);
+    let k = clamp_to(e, k, -1100.0, 1100.0);
+    let r = scale2(e, mp, k);
+    // b or c zero, infinite or NaN: exp(a)·(b/c), with 0·∞ = 0 where e^a is 0 (see above).
+    let ab = e.abs(b);
+    let acv = e.abs(c);
+    let max = e.konst(f64::MAX);
+    let fb = e.le(ab, max);
+    let fc = e.le(acv, max);
+    let zero = e.konst(0.0);
+    let zb = e.eq(b, zero);
+    let zc = e.eq(c, zero);
+    let fin = e.and(fb, fc);
+    let nz = e.or(zb, zc);
+    let nz = e.not(nz);
+    let normal = e.and(fin, nz);
+    let nan = is_nan(e, a);
+    let num = e.not(nan);
+    let normal = e.and(normal, num);
+    let bc = e.div(b, c);
+    let big = ltk(e, ac, 709.8);
+    let big = e.not(big);
+    let f = select_k(e, big, f64::INFINITY, er);
+    let low = ltk(e, a, -745.2);
+    let f = select_k(e, low, 0.0, f);
+    let f = e.select(nan, a, f);
+    let s = e.mul(bc, f);
+    let bc_ok = e.eq(bc, bc);
+    let z = e.and(low, bc_ok);
+    let s = select_k(e, z, 0.0, s);
+    e.select(normal, r, s)
+}

@@ -43,6 +43,7 @@ pub enum Builtin {
     Ne,
     Select,
     Fma,
+    ExpMulDiv,
 }
 
 /// How the JIT lowers a builtin.
@@ -62,6 +63,7 @@ pub enum Lowering {
 pub enum Libm {
     F1(extern "C" fn(f64) -> f64),
     F2(extern "C" fn(f64, f64) -> f64),
+    F3(extern "C" fn(f64, f64, f64) -> f64),
     /// Inline builtins: exact, nothing to compare with but themselves.
     Exact,
 }
@@ -114,6 +116,16 @@ pub struct BuiltinInfo {
     pub wgsl: &'static str,
     /// One line for `lobe help` and hints.
     pub doc: &'static str,
+}
+
+/// expmuldiv's C-library spelling, `exp(a)*b/c` as written (it underflows where the builtin does not).
+extern "C" fn lobe_expmuldiv_libm(a: f64, b: f64, c: f64) -> f64 {
+    a.exp() * b / c
+}
+
+/// expmuldiv's library code compiled by rustc (both modes run the same code), for outlined call sites.
+extern "C" fn lobe_expmuldiv(a: f64, b: f64, c: f64) -> f64 {
+    math::exp_mul_div(&mut math::Direct, a, b, c)
 }
 
 extern "C" fn lobe_pow(x: f64, y: f64) -> f64 {
@@ -221,7 +233,7 @@ pub fn clamp(x: f64, lo: f64, hi: f64) -> f64 {
     fmin(fmax(x, lo), hi)
 }
 
-const TABLE: [BuiltinInfo; 21] = [
+const TABLE: [BuiltinInfo; 22] = [
     BuiltinInfo {
         builtin: Builtin::Pow,
         name: "pow",
@@ -474,10 +486,22 @@ const TABLE: [BuiltinInfo; 21] = [
         wgsl: "",
         doc: "fma(a, b, c) = a*b + c rounded once (the accuracy pass's compensated power chains use it)",
     },
+    BuiltinInfo {
+        builtin: Builtin::ExpMulDiv,
+        name: "expmuldiv",
+        arity: 3,
+        lowering: Lowering::Math,
+        libm: Libm::F3(lobe_expmuldiv_libm),
+        symbol: "",
+        bound: Bound::math(2.0),
+        glsl: "(exp({0}) * {1} / {2})",
+        wgsl: "",
+        doc: "expmuldiv(a, b, c) = exp(a)*b/c with no intermediate underflow or overflow (the accuracy pass forms it)",
+    },
 ];
 
 impl Builtin {
-    pub const ALL: [Builtin; 21] = [
+    pub const ALL: [Builtin; 22] = [
         Builtin::Pow,
         Builtin::Cos,
         Builtin::Sin,
@@ -499,6 +523,7 @@ impl Builtin {
         Builtin::Ne,
         Builtin::Select,
         Builtin::Fma,
+        Builtin::ExpMulDiv,
     ];
 
     pub fn info(self) -> &'static BuiltinInfo {
@@ -575,6 +600,7 @@ impl Builtin {
                 e.not(eq)
             }),
             Builtin::Select => logic::select(e, x, args[1], args[2]),
+            Builtin::ExpMulDiv => exp_mul_div(e, x, args[1], args[2]),
             Builtin::Sqrt | Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Clamp | Builtin::Fma => return None,
         })
     }
@@ -584,6 +610,7 @@ impl Builtin {
         match self.info().libm {
             Libm::F1(f) => f(args[0]),
             Libm::F2(f) => f(args[0], args[1]),
+            Libm::F3(f) => f(args[0], args[1], args[2]),
             Libm::Exact => self.eval(args),
         }
     }
@@ -610,6 +637,7 @@ impl Builtin {
             (Builtin::Exp, Mode::Fast) => ("lobe_exp_fast", Libm::F1(lobe_exp_fast)),
             (Builtin::Ln, Mode::Precise) => ("lobe_ln_precise", Libm::F1(lobe_ln_precise)),
             (Builtin::Ln, Mode::Fast) => ("lobe_ln_fast", Libm::F1(lobe_ln_fast)),
+            (Builtin::ExpMulDiv, _) => ("lobe_expmuldiv", Libm::F3(lobe_expmuldiv)),
             (Builtin::Sqrt | Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Clamp | Builtin::Fma, _) => return None,
             (Builtin::Floor | Builtin::Lt | Builtin::Le | Builtin::Eq | Builtin::Ne | Builtin::Select, _) => return None,
         })
@@ -645,6 +673,7 @@ mod tests {
             match r.libm {
                 Libm::F1(_) => assert_eq!(r.arity, 1, "{}", r.name),
                 Libm::F2(_) => assert_eq!(r.arity, 2, "{}", r.name),
+                Libm::F3(_) => assert_eq!(r.arity, 3, "{}", r.name),
                 Libm::Exact => assert!(r.lowering != Lowering::Math, "{}", r.name),
             }
             // The library emits exactly the Math and Logic rows; only Math rows have an outlined version.

@@ -23,7 +23,8 @@
 //! kernel that may be fed any cosines. A formula that reads directions (Lx..Vz) is sampled on real geometry
 //! instead: unit L and V on the upper hemisphere, each with its normal component N·L drawn like an input (so
 //! the edge classes become grazing and horizon directions, and directions at the normal) and a uniform azimuth
-//! (a fifth on the frame axes, where components are exactly 0), every input computed from the pair by
+//! (a fifth on the frame axes, where components are exactly 0; a twentieth of the pairs face each other across
+//! the normal, so L + V ∥ N, tiny at grazing angles), every input computed from the pair by
 //! [`super::inputs_from_dirs`]. Deterministic (fixed seed).
 //!
 //! The pass ([`improve`]): start from the simplified formula (the fastest form lobe builds), try each candidate
@@ -137,7 +138,15 @@ pub fn sample(f: &Formula, bake: &[(usize, f64)], n: usize, seed: u64) -> Vec<Po
             let mut x = [0.5; N_INPUTS];
             if used.reads_directions() {
                 let l = direction(&mut r);
-                x = super::inputs_from_dirs(l, direction(&mut r));
+                let mut v = direction(&mut r);
+                // A twentieth of the pairs face each other across the normal (L + V ∥ N, of length 2·(Lz + Vz)
+                // for grazing pairs): normalize(L + V)'s degenerate case.
+                let lt = (l[0] * l[0] + l[1] * l[1]).sqrt();
+                if r.unit() < 0.05 && lt > 0.0 {
+                    let t = (1.0 - v[2] * v[2]).max(0.0).sqrt() / lt;
+                    v = [-l[0] * t, -l[1] * t, v[2]];
+                }
+                x = super::inputs_from_dirs(l, v);
             }
             for i in Input::ALL {
                 if used.contains(i) && !used.reads_directions() {
@@ -439,8 +448,9 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
     while i < tries.len() {
         let (name, describe, _) = tries[i];
         let rule = Rule::ALL.iter().copied().find(|r| r.name() == name);
-        // quotient-chain goes site by site (Rule::apply_at); the others apply everywhere at once.
-        let site = (rule == Some(Rule::QuotientChain)).then_some(k);
+        // quotient-chain goes site by site, scaled-exp variant by variant (Rule::apply_at); the others apply
+        // everywhere at once.
+        let site = matches!(rule, Some(Rule::QuotientChain | Rule::ScaledExp)).then_some(k);
         let cand = match rule {
             None if name == COMPENSATED => compensated.clone(),
             None => Some(pow_call.clone()).filter(|p| p.to_program_text() != cur.to_program_text()),

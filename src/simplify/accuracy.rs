@@ -26,15 +26,31 @@
 //!   exact rounding error of the sum (2Sum, five additions): pow amplifies its base's relative error y times,
 //!   so F_ST's `(n/a·(c − 1) + 1)^a` at a = 1000 lost 500 ulp where its condition is 1. Cost ~12.
 //!
-//! A fourth candidate, large integer powers kept as `pow` calls instead of multiplication chains, is the
-//! simplifier's own [`super::Policy::max_chain`]; the chooser builds it with [`pow_call_policy`]. A fifth,
+//! - `scaled-exp`: a product/quotient tree with an `exp(E)` factor, `exp(E)·n/(d₁·…·d_k)`, →
+//!   `expmuldiv(E, n/(d₁·…·d_{k−1}), d_k)` (the builtin applies every power of two last, so e^E may be far
+//!   below the denormals while the result is not: Beckmann's and Ward's values near 1e-311). Three variants,
+//!   tried in turn: the other divisors as one product, divided one by one,
+//!   and the exponent halved over two nested builtins so two tiny divisors (Cook–Torrance's NL, NV ~1e-224)
+//!   each meet one half (twice the cost).
+//!
+//! - `smith-g1`: Smith's G1 for GGX written with tan², `K/(1 + sqrt(1 + A·(1 − c²)/c²))`, → `K·c/(c + sqrt(c² +
+//!   A·(1 − c²)))` for c > 0 (range or guard), then c cancelled against a divisor c of the products around it
+//!   (BRDF Explorer's GGX: `G·…/(4·NL·NV)`). At grazing c, c² underflows: tan² = 1/0 and G1 = 0, and the
+//!   product meets 0/0. Cheaper than the written form (no division by c², no 4·NL·NV).
+//! - `scaled-norm`: `x/sqrt(a² + b² + …)`, x one of a, b, …, (a normalize) with the vector scaled by 2^600
+//!   when its largest component is below 2^-500 (exact), so L + V at L ≈ −V (grazing light and view facing each
+//!   other) has a length, not 0. Cost: abs and max per component, a compare, a select, a product each (~+12).
+//!
+//! Another candidate, large integer powers kept as `pow` calls instead of multiplication chains, is the
+//! simplifier's own [`super::Policy::max_chain`]; the chooser builds it with [`pow_call_policy`]. Another,
 //! [`compensated_powers`], rebuilds those calls as multiplication chains that carry their rounding errors
 //! (fma), within a few ulp of pow at ~3.5× the plain chain's operations and below pow's cost.
 //!
 //! # Cost model
 //! [`cost`] counts live nodes with weights fitted to JIT timings on x86-64 (BENCHMARKS.md, 2026-11-30: five
 //! extra divisions add ~3.4 ns to Beckmann's 8.5 ns, a libm exp ~5 ns): `+ − ×`, abs, min, max 1; clamp 2;
-//! `/` and sqrt 3; fma 1; math-library calls (exp, ln, trig) 20, pow 60 (pow(NH, e) with e live took 5.0× the
+//! `/` and sqrt 3; fma 1; math-library calls (exp, ln, trig) 20, expmuldiv 48 (measured: Beckmann's kernel
+//! 8.4 → 16.3 ns with it, its rare scaled branch included), pow 60 (pow(NH, e) with e live took 5.0× the
 //! ns of the 14-multiplication chain for NH¹⁰⁰⁰); leaves and negation 0.
 //! It ranks candidates; the kernel's run time, measured in `lobe bench`, is what the README reports.
 
@@ -50,10 +66,22 @@ pub enum Rule {
     QuotientChain,
     FactorQuadratic,
     CompensatedBase,
+    ScaledExp,
+    SmithG1,
+    ScaledNorm,
 }
 
 impl Rule {
-    pub const ALL: [Rule; 4] = [Rule::SplitSqrt, Rule::QuotientChain, Rule::FactorQuadratic, Rule::CompensatedBase];
+    pub const ALL: [Rule; 7] = [
+        Rule::SplitSqrt,
+        Rule::SmithG1,
+        // Before quotient-chain, which flattens (x/√s)·(x/√s) into x·x/√s/√s, where scaled-norm cannot see it.
+        Rule::ScaledNorm,
+        Rule::QuotientChain,
+        Rule::ScaledExp,
+        Rule::FactorQuadratic,
+        Rule::CompensatedBase,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -61,6 +89,9 @@ impl Rule {
             Rule::QuotientChain => "quotient-chain",
             Rule::FactorQuadratic => "factor-quadratic",
             Rule::CompensatedBase => "compensated-base",
+            Rule::ScaledExp => "scaled-exp",
+            Rule::SmithG1 => "smith-g1",
+            Rule::ScaledNorm => "scaled-norm",
         }
     }
 
@@ -71,6 +102,9 @@ impl Rule {
             Rule::QuotientChain => "products/quotients reassociated: divide by each tiny-or-huge factor separately",
             Rule::FactorQuadratic => "A*c^2 + (1 - A)*c as c*(1 + A*(c - 1)): no cancellation near c = 1",
             Rule::CompensatedBase => "pow(a + b, y) corrected by the rounding error of a + b: no amplification by y",
+            Rule::ScaledExp => "exp(a)*b/c as expmuldiv(a, b, c): no underflow of exp(a) before b/c rescales it",
+            Rule::SmithG1 => "Smith G1 2/(1 + sqrt(1 + A*tan^2)) as 2c/(c + sqrt(c^2 + A*(1 - c^2))), c/c cancelled: no inf/inf at grazing c",
+            Rule::ScaledNorm => "x/sqrt(a^2 + b^2 + ...) with a tiny vector scaled by 2^600 first: no zero length",
         }
     }
 
@@ -90,6 +124,9 @@ impl Rule {
             Rule::QuotientChain => quotient_chain(f, &ranges, site),
             Rule::FactorQuadratic => factor_quadratic(f),
             Rule::CompensatedBase => compensated_base(f),
+            Rule::ScaledExp => scaled_exp(f, &ranges, site.unwrap_or(0)),
+            Rule::SmithG1 => smith_g1(f, &ranges),
+            Rule::ScaledNorm => scaled_norm(f),
         };
         if !fired {
             return None;
@@ -176,6 +213,7 @@ pub fn cost(f: &Formula) -> f64 {
                 Builtin::Lt | Builtin::Le | Builtin::Eq | Builtin::Ne | Builtin::Select => 2.0,
                 Builtin::Floor => 6.0,
                 Builtin::Pow => 60.0,
+                Builtin::ExpMulDiv => 48.0,
                 _ => 20.0,
             },
         }
@@ -275,12 +313,13 @@ fn safe(r: Range) -> bool {
     !r.nan && ((r.lo >= lo && r.hi <= hi) || (r.hi <= -lo && r.lo >= -hi))
 }
 
-// x / (a*b*…) → x / (safe factors) / a / b / …   dividing by each factor that may be tiny or huge on its own
-fn quotient_chain(f: &Formula, ranges: &[Range], only: Option<usize>) -> (Ir, NodeId, bool) {
-    // Per old node: (numerator, denominator) factor lists of old atomic nodes, if it is a short product tree.
-    let mut lists: Vec<Option<(Vec<NodeId>, Vec<NodeId>)>> = Vec::with_capacity(f.ir.len());
+/// Per node, its (numerator, denominator) factor lists of atomic nodes when it is a short tree of `*` and `/`.
+type Lists = Vec<Option<(Vec<NodeId>, Vec<NodeId>)>>;
+
+fn product_lists(f: &Formula, max: usize) -> Lists {
+    let mut lists: Lists = Vec::with_capacity(f.ir.len());
     for id in f.ir.ids() {
-        let of = |x: NodeId, lists: &[Option<(Vec<NodeId>, Vec<NodeId>)>]| match &lists[x.index()] {
+        let of = |x: NodeId, lists: &Lists| match &lists[x.index()] {
             Some(l) => l.clone(),
             None if f.ir.node(x).as_const() == Some(1.0) => (vec![], vec![]),
             None => (vec![x], vec![]),
@@ -298,8 +337,21 @@ fn quotient_chain(f: &Formula, ranges: &[Range], only: Option<usize>) -> (Ir, No
             }
             _ => None,
         };
-        lists.push(l.filter(|(n, d)| n.len() + d.len() <= MAX_FACTORS));
+        lists.push(l.filter(|(n, d)| n.len() + d.len() <= max));
     }
+    lists
+}
+
+/// The product of `xs` (mapped to the new arena), `None` when empty.
+fn product(ir: &mut Ir, map: &[NodeId], xs: &[NodeId], s: crate::base::span::Span) -> Option<NodeId> {
+    let mut it = xs.iter().map(|x| map[x.index()]);
+    let first = it.next()?;
+    Some(it.fold(first, |acc, x| ir.bin(BinOp::Mul, acc, x, s)))
+}
+
+// x / (a*b*…) → x / (safe factors) / a / b / …   dividing by each factor that may be tiny or huge on its own
+fn quotient_chain(f: &Formula, ranges: &[Range], only: Option<usize>) -> (Ir, NodeId, bool) {
+    let lists = product_lists(f, MAX_FACTORS);
     let mut site = 0;
     rebuild(f, |ir, map, id, _| {
         let (num, den) = lists[id.index()].as_ref()?;
@@ -314,24 +366,192 @@ fn quotient_chain(f: &Formula, ranges: &[Range], only: Option<usize>) -> (Ir, No
             return None;
         }
         let s = f.ir.span(id);
-        let prod = |ir: &mut Ir, xs: &[NodeId]| -> Option<NodeId> {
-            let mut it = xs.iter().map(|x| map[x.index()]);
-            let first = it.next()?;
-            Some(it.fold(first, |acc, x| ir.bin(BinOp::Mul, acc, x, s)))
-        };
         // The whole numerator first (in a BRDF the factor that vanishes, exp(−1/x²), is there, and it must meet
         // the divisions as 0, not as ∞·0), then the safe divisors at once, then each unsafe divisor.
-        let mut v = match prod(ir, num) {
+        let mut v = match product(ir, map, num, s) {
             Some(v) => v,
             None => ir.konst(1.0, s),
         };
-        if let Some(d) = prod(ir, &safe_den) {
+        if let Some(d) = product(ir, map, &safe_den, s) {
             v = ir.bin(BinOp::Div, v, d, s);
         }
         for d in unsafe_den {
             v = ir.bin(BinOp::Div, v, map[d.index()], s);
         }
         Some(v)
+    })
+}
+
+// exp(E)·n₁·…/(d₁·…·d_k) → expmuldiv(E, n₁·…/(d₁·…·d_{k−1}), d_k)   (variant 0; 1: dividing by each d_i in
+// turn; 2: expmuldiv(E/2, expmuldiv(E/2, n₁·…/d₁/…/d_{k−2}, d_{k−1}), d_k))
+fn scaled_exp(f: &Formula, ranges: &[Range], variant: usize) -> (Ir, NodeId, bool) {
+    let lists = product_lists(f, MAX_FACTORS);
+    rebuild(f, |ir, map, id, _| {
+        let (num, den) = lists[id.index()].as_ref()?;
+        let at = num.iter().position(|x| matches!(f.ir.node(*x), Node::Call(Builtin::Exp, _)))?;
+        let Node::Call(Builtin::Exp, [arg, ..]) = *f.ir.node(num[at]) else { return None };
+        if num.len() + den.len() < 2 || variant > 2 || (variant == 2 && den.len() < 2) {
+            return None;
+        }
+        let s = f.ir.span(id);
+        let rest: Vec<NodeId> = num.iter().enumerate().filter(|(i, _)| *i != at).map(|(_, x)| *x).collect();
+        // Safe divisors first, so the last ones (the divisors kept apart) are those that may be tiny or huge.
+        let (mut dens, unsafe_den): (Vec<NodeId>, Vec<NodeId>) = den.iter().partition(|d| safe(ranges[d.index()]));
+        dens.extend(unsafe_den);
+        let last = dens.pop();
+        let second = if variant == 2 { dens.pop() } else { None };
+        let mut b = product(ir, map, &rest, s).unwrap_or_else(|| ir.konst(1.0, s));
+        if variant == 0 {
+            if let Some(d) = product(ir, map, &dens, s) {
+                b = ir.bin(BinOp::Div, b, d, s);
+            }
+        } else {
+            for d in dens {
+                b = ir.bin(BinOp::Div, b, map[d.index()], s);
+            }
+        }
+        let c = match last {
+            Some(d) => map[d.index()],
+            None => ir.konst(1.0, s),
+        };
+        let mut a = map[arg.index()];
+        if let Some(d) = second {
+            // e^(E/2)·(e^(E/2)·b/d)/c: each half of the exponent meets one divisor, so neither b/d nor the
+            // inner result leaves the normal range when both divisors are tiny (Cook–Torrance's NL and NV).
+            let half = ir.konst(0.5, s);
+            a = ir.bin(BinOp::Mul, a, half, s);
+            b = ir.call(Builtin::ExpMulDiv, &[a, b, map[d.index()]], s);
+        }
+        Some(ir.call(Builtin::ExpMulDiv, &[a, b, c], s))
+    })
+}
+
+// K/(1 + sqrt(1 + A·((1 − c·c)/(c·c)))) → K·c/(c + sqrt(c·c + A·(1 − c·c)))   for c > 0, then c/c cancelled
+// in the products around it
+fn smith_g1(f: &Formula, ranges: &[Range]) -> (Ir, NodeId, bool) {
+    let guards = positive_guards(f);
+    let ir0 = &f.ir;
+    let is_one = |x: NodeId| ir0.node(x).as_const() == Some(1.0);
+    // (A, c, c·c) when `x` is 1 + A·((1 − c·c)/(c·c)) (either operand order of + and ·).
+    let inner = |x: NodeId| -> Option<(NodeId, NodeId, NodeId)> {
+        let Node::Binary(BinOp::Add, p, q) = *ir0.node(x) else { return None };
+        let m = if is_one(p) { q } else if is_one(q) { p } else { return None };
+        let Node::Binary(BinOp::Mul, u, v) = *ir0.node(m) else { return None };
+        for (a, d) in [(u, v), (v, u)] {
+            let Node::Binary(BinOp::Div, t, sq) = *ir0.node(d) else { continue };
+            let Node::Binary(BinOp::Sub, one, sq2) = *ir0.node(t) else { continue };
+            let Node::Binary(BinOp::Mul, c, c2) = *ir0.node(sq) else { continue };
+            if is_one(one) && sq2 == sq && c == c2 {
+                return Some((a, c, sq));
+            }
+        }
+        None
+    };
+    let (ir, root, fired) = rebuild(f, |ir, map, id, n| {
+        let Node::Binary(BinOp::Div, k, den) = n else { return None };
+        let Node::Binary(BinOp::Add, p, q) = *ir0.node(den) else { return None };
+        let r = if is_one(p) { q } else if is_one(q) { p } else { return None };
+        let Node::Call(Builtin::Sqrt, [x, ..]) = *ir0.node(r) else { return None };
+        let (a, c, sq) = inner(x)?;
+        let positive = ranges[c.index()].lo > 0.0 || guards[id.index()].as_ref().is_some_and(|g| g.contains(&c));
+        if !positive {
+            return None;
+        }
+        let s = f.ir.span(id);
+        let (a, c, sq) = (map[a.index()], map[c.index()], map[sq.index()]);
+        let one = ir.konst(1.0, s);
+        let om = ir.bin(BinOp::Sub, one, sq, s);
+        let am = ir.bin(BinOp::Mul, a, om, s);
+        let rad = ir.bin(BinOp::Add, sq, am, s);
+        let root = ir.call(Builtin::Sqrt, &[rad], s);
+        let d = ir.bin(BinOp::Add, c, root, s);
+        let kc = ir.bin(BinOp::Mul, map[k.index()], c, s);
+        Some(ir.bin(BinOp::Div, kc, d, s))
+    });
+    if !fired {
+        return (ir, root, false);
+    }
+    let g = Formula { ir, root, ..f.clone() };
+    let (ir, root, _) = cancel_positive(&g);
+    (ir, root, true)
+}
+
+// x·…/(x·…) → …/…   for x > 0 by range or guard (exact in real arithmetic); the divisors that remain are
+// divided one by one (safe ones first, as a product), as in `quotient-chain`
+fn cancel_positive(f: &Formula) -> (Ir, NodeId, bool) {
+    // Longer lists than elsewhere: a microfacet BRDF's D·G·F/(4·NL·NV) has 14 factors once G is rationalised.
+    let lists = product_lists(f, 2 * MAX_FACTORS);
+    let guards = positive_guards(f);
+    let ranges = node_ranges(f, &Policy::default());
+    rebuild(f, |ir, map, id, _| {
+        let (num, den) = lists[id.index()].as_ref()?;
+        let pos = |x: NodeId| {
+            let r = ranges[x.index()];
+            (r.lo > 0.0 && r.hi.is_finite()) || guards[id.index()].as_ref().is_some_and(|g| g.contains(&x))
+        };
+        let (mut num, mut den) = (num.clone(), den.clone());
+        let mut cancelled = false;
+        let mut i = 0;
+        while i < num.len() {
+            match den.iter().position(|d| *d == num[i]) {
+                Some(j) if pos(num[i]) => {
+                    num.remove(i);
+                    den.remove(j);
+                    cancelled = true;
+                }
+                _ => i += 1,
+            }
+        }
+        if !cancelled {
+            return None;
+        }
+        let s = f.ir.span(id);
+        let (safe_den, unsafe_den): (Vec<NodeId>, Vec<NodeId>) = den.iter().partition(|d| safe(ranges[d.index()]));
+        let mut v = product(ir, map, &num, s).unwrap_or_else(|| ir.konst(1.0, s));
+        if let Some(d) = product(ir, map, &safe_den, s) {
+            v = ir.bin(BinOp::Div, v, d, s);
+        }
+        for d in unsafe_den {
+            v = ir.bin(BinOp::Div, v, map[d.index()], s);
+        }
+        Some(v)
+    })
+}
+
+// x / sqrt(a·a + b·b + …) → (x·s) / sqrt((a·s)·(a·s) + …),  s = 2^600 if max(|a|, |b|, …) < 2^-500 else 1,
+// x one of a, b, …: the squares of a tiny vector (L + V at L ≈ −V) no longer underflow to a zero length
+fn scaled_norm(f: &Formula) -> (Ir, NodeId, bool) {
+    let ir0 = &f.ir;
+    fn squares(ir: &Ir, x: NodeId, out: &mut Vec<NodeId>) -> bool {
+        match *ir.node(x) {
+            Node::Binary(BinOp::Add, p, q) => squares(ir, p, out) && squares(ir, q, out),
+            Node::Binary(BinOp::Mul, a, b) if a == b => {
+                out.push(a);
+                true
+            }
+            _ => false,
+        }
+    }
+    rebuild(f, |ir, map, id, n| {
+        let Node::Binary(BinOp::Div, x, d) = n else { return None };
+        let Node::Call(Builtin::Sqrt, [sum, ..]) = *ir0.node(d) else { return None };
+        let mut bases = vec![];
+        if !squares(ir0, sum, &mut bases) || bases.len() < 2 || !bases.contains(&x) {
+            return None;
+        }
+        let sp = f.ir.span(id);
+        let mags: Vec<NodeId> = bases.iter().map(|b| ir.call(Builtin::Abs, &[map[b.index()]], sp)).collect();
+        let m = mags[1..].iter().fold(mags[0], |acc, v| ir.call(Builtin::Max, &[acc, *v], sp));
+        let tiny = ir.konst(2f64.powi(-500), sp);
+        let small = ir.call(Builtin::Lt, &[m, tiny], sp);
+        let (up, one) = (ir.konst(2f64.powi(600), sp), ir.konst(1.0, sp));
+        let sc = ir.call(Builtin::Select, &[small, up, one], sp);
+        let scaled: Vec<NodeId> = bases.iter().map(|b| ir.bin(BinOp::Mul, map[b.index()], sc, sp)).collect();
+        let sq: Vec<NodeId> = scaled.iter().map(|v| ir.bin(BinOp::Mul, *v, *v, sp)).collect();
+        let total = sq[1..].iter().fold(sq[0], |acc, v| ir.bin(BinOp::Add, acc, *v, sp));
+        let root = ir.call(Builtin::Sqrt, &[total], sp);
+        let xs = ir.bin(BinOp::Mul, map[x.index()], sc, sp);
+        Some(ir.bin(BinOp::Div, xs, root, sp))
     })
 }
 
@@ -476,6 +696,38 @@ mod tests {
         assert!(compensated_powers(&crate::simplify::simplify_with(&f, &[], &pow_call_policy()).0).is_none());
         let big = crate::front::parse("b.brdf", "(2*NH)^n").unwrap();
         assert!(compensated_powers(&crate::simplify::simplify_with(&big, &[(0, 1000.0)], &pow_call_policy()).0).is_none());
+    }
+
+    #[test]
+    fn scaled_exp_needs_an_exp_factor_and_another_factor() {
+        let f = parse("param m = 0.3 in 0.01..1\nexp((NH^2 - 1) / (m^2 * NH^2)) / (m*m) / NH / NL");
+        let t = |k| Rule::ScaledExp.apply_at(&f, Some(k)).map(|g| g.to_program_text());
+        let (v0, v1, v2) = (t(0).unwrap(), t(1).unwrap(), t(2).unwrap());
+        assert!(v0.contains("expmuldiv(") && !v0.contains("exp("), "{v0}");
+        assert!(v1 != v0 && v2.matches("expmuldiv(").count() == 2, "{v1}\n{v2}");
+        assert!(t(3).is_none());
+        assert!(Rule::ScaledExp.apply(&parse("exp(-NH)")).is_none());
+        assert!(Rule::ScaledExp.apply(&parse("NL / exp(NH)")).is_none());
+    }
+
+    #[test]
+    fn smith_g1_needs_a_positive_cosine_and_cancels_it() {
+        let g1 = "let g = 2/(1 + sqrt(1 + a*a*((1 - NL*NL)/(NL*NL))))";
+        let src = format!("param a = 0.2 in 0.01..1\n{g1}\nlet c = NL - 0.5\nNL <= 0 ? 0 : g * NH / (4*NL)");
+        let t = Rule::SmithG1.apply(&parse(&src)).unwrap().to_program_text();
+        // G1·…/(4·NL) with G1 = 2·NL/(NL + …): NL cancelled, so nothing is ∞/∞ or 0/0 at tiny NL.
+        assert!(!t.contains("/ nl") && !t.contains("* nl /") && t.contains("sqrt("), "{t}");
+        // Without the guard NL may be 0 or negative: not rewritten.
+        assert!(Rule::SmithG1.apply(&parse(&format!("param a = 0.2 in 0.01..1\n{g1}\ng * NH / (4*NL)"))).is_none());
+    }
+
+    #[test]
+    fn scaled_norm_scales_the_vector_not_a_lone_sqrt() {
+        let f = parse("let x = Lx + Vx\nlet z = Lz + Vz\nz / sqrt(x*x + z*z)");
+        let t = Rule::ScaledNorm.apply(&f).unwrap().to_program_text();
+        assert!(t.contains("? 4.149515568880993e180 : 1") && t.contains("t5 / sqrt(t4 * t4 + t5 * t5)"), "{t}");
+        assert!(Rule::ScaledNorm.apply(&parse("let x = Lx + Vx\nlet z = Lz + Vz\nNH / sqrt(x*x + z*z)")).is_none());
+        assert!(Rule::ScaledNorm.apply(&parse("let x = Lx + Vx\nx / sqrt(x*x)")).is_none());
     }
 
     #[test]

@@ -233,6 +233,19 @@ impl Range {
                 let r = Range::widened(m.lo, m.hi, m.nan, m.negz).add_(args[2]);
                 Range { negz: r.negz || m.negz || (m.lo < 0.0 && args[2].contains_zero()), ..r }
             }
+            // e^a·b/c for b ≥ 0, c > 0, from the exponent sum a + ln b − ln c (libm's ln and exp are far within
+            // the 1e-9 relative slack); anything else is unknown.
+            Builtin::ExpMulDiv => {
+                let (b, c) = (args[1], args[2]);
+                if !(b.lo >= 0.0 && c.lo > 0.0) {
+                    return Range::TOP;
+                }
+                let (l, h) = (a.lo + b.lo.ln() - c.hi.ln(), a.hi + b.hi.ln() - c.lo.ln());
+                let lo = if l > -700.0 { l.exp() * (1.0 - 1e-9) } else { 0.0 };
+                let hi = if h < 700.0 { h.exp() * (1.0 + 1e-9) } else { f64::INFINITY };
+                let nan = a.nan || b.nan || c.nan || a.hi == f64::INFINITY || b.hi == f64::INFINITY || c.hi == f64::INFINITY;
+                Range::new(lo, hi, nan, b.negz)
+            }
             Builtin::Floor => Range::new(a.lo.floor(), a.hi.floor(), a.nan, a.negz),
             Builtin::Lt | Builtin::Le | Builtin::Eq | Builtin::Ne => Range::new(0.0, 1.0, false, false),
             Builtin::Select => {

@@ -76,6 +76,7 @@ fn symbols(ir: &Ir, mode: Mode, outline: bool) -> Vec<(Builtin, &'static str, *c
         let (ptr, arity) = match f {
             Libm::F1(f) => (f as *const u8, 1),
             Libm::F2(f) => (f as *const u8, 2),
+            Libm::F3(f) => (f as *const u8, 3),
             Libm::Exact => continue,
         };
         out.push((*b, symbol, ptr, arity));
