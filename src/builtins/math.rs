@@ -21,8 +21,9 @@
 //! and the tests hold it to that.
 //!
 //! Fast mode: the same reductions with shorter polynomials (Taylor series of degree 7–9 where the argument is
-//! small), a single scaling step in exp, pow in plain double (error ≈ |y·ln x|·2^−53 ≤ 1e−13 relative), and no
-//! hi/lo corrections; every function stays within 1e−6 relative (1e−6 absolute near zero).
+//! small; exp a degree-6 Chebyshev fit with FMA reduction, one scaling and no special-case selects beyond the
+//! clamp and the underflow flush), pow in plain double (error ≈ |y·ln x|·2^−53 ≤ 1e−13 relative), and no hi/lo
+//! corrections; every function stays within 1e−6 relative (1e−6 absolute near zero).
 //!
 //! Cost model: straight-line code of 20–200 primitive operations per function (exp ≈ 45, acos ≈ 35, pow ≈ 150
 //! precise / 70 fast), table loads in exp and precise pow, and special cases in rarely taken blocks, so it
@@ -102,6 +103,12 @@ pub trait Emit {
     fn not(&mut self, a: Self::M) -> Self::M;
     /// `m ? a : b`, lane by lane.
     fn select(&mut self, m: Self::M, a: Self::V, b: Self::V) -> Self::V;
+    /// `m ? +0 : y`, lane by lane: [`Emit::select`] with +0, which vector lanes do as one and-not of the mask
+    /// (a blend is three micro-ops on x86).
+    fn zero_where(&mut self, m: Self::M, y: Self::V) -> Self::V {
+        let zero = self.konst(0.0);
+        self.select(m, zero, y)
+    }
     /// `from_bits((bits(x) & and) | or)`.
     fn mask_bits(&mut self, x: Self::V, and: u64, or: u64) -> Self::V;
     /// `from_bits((bits(k + MAGIC) + 1023 − bits(MAGIC)) << 52)` with wrapping integer arithmetic: 2^k for an
@@ -109,10 +116,11 @@ pub trait Emit {
     fn pow2i(&mut self, k: Self::V) -> Self::V;
     /// `from_bits(((bits(x) >> 52) & 0x7ff) | bits(2^52)) − 2^52`: the biased exponent field as a number.
     fn exponent_field(&mut self, x: Self::V) -> Self::V;
-    /// `table[min(i, len − 1)]` lane by lane, `i` being the integer `bits(x + MAGIC) − bits(MAGIC)` taken as
-    /// unsigned (see [`table_index`]): callers pass integer-valued `x` in `0..len`; any other `x` (negative,
-    /// NaN) still reads inside the table.
-    fn lookup(&mut self, table: &'static [f64], x: Self::V) -> Self::V;
+    /// `table[min(i, len − 1)]` lane by lane, as the two values of that row, `i` being the integer
+    /// `bits(x + MAGIC) − bits(MAGIC)` taken as unsigned (see [`table_index`]): callers pass integer-valued `x`
+    /// in `0..len`; any other `x` (negative, NaN) still reads inside the table. A row is 16 bytes, so vector
+    /// lanes load it in one instruction (the tables pair a head with its tail).
+    fn lookup_pair(&mut self, table: &'static [[f64; 2]], x: Self::V) -> (Self::V, Self::V);
     /// `any(m) ? slow() : r`: code for rare lanes (special cases), run only when some lane needs it. `slow` must
     /// return `r`'s value in every lane where `m` is false, so the result does not depend on the lane shape.
     fn rare(&mut self, m: Self::M, r: Self::V, slow: &mut dyn FnMut(&mut Self) -> Self::V) -> Self::V
@@ -228,8 +236,9 @@ impl Emit for Direct {
             r
         }
     }
-    fn lookup(&mut self, table: &'static [f64], x: f64) -> f64 {
-        table[table_index(x, table.len())]
+    fn lookup_pair(&mut self, table: &'static [[f64; 2]], x: f64) -> (f64, f64) {
+        let [a, b] = table[table_index(x, table.len())];
+        (a, b)
     }
     fn fallback(&mut self, m: bool, x: f64, r: f64, f: Builtin) -> f64 {
         match (m, f.libm1()) {
@@ -400,15 +409,6 @@ fn clamp_to<E: Emit>(e: &mut E, x: E::V, lo: f64, hi: f64) -> E::V {
     e.select(above, h, x)
 }
 
-/// Cody–Waite: `(k, x − k·ln2_hi, k·ln2_lo)` with k = round(x/ln 2); the subtraction is exact.
-fn reduce_exp<E: Emit>(e: &mut E, x: E::V) -> (E::V, E::V, E::V) {
-    let kx = mulk(e, x, INV_LN2);
-    let k = round_int(e, kx);
-    let khi = mulk(e, k, LN2_HI);
-    let hi = e.sub(x, khi);
-    (k, hi, mulk(e, k, LN2_LO))
-}
-
 /// ln2/128 split so that k·`L2N_HI` is exact for |k| < 2^18 (35 significant bits), and the remainder.
 const L2N_HI: f64 = 0.0054152123482253955;
 const L2N_LO: f64 = -1.0082281460997769e-13;
@@ -422,7 +422,7 @@ const INV_L2N: f64 = 184.6649652337873; // 128/ln 2
 /// [`scale2`] (exact unless the result is subnormal or overflows). No division. Scaling by two products in
 /// every lane measured faster than one product plus a rare block: Beckmann's exp underflows in many lanes.
 fn exp_dd<E: Emit>(e: &mut E, xh: E::V, xl: E::V) -> E::V {
-    use super::math_tables::{EXP_T_HI, EXP_T_TAIL};
+    use super::math_tables::EXP_T;
     // Clamp so k stays small; a clamped (or NaN) lane drops xl, which is only meaningful beside its xh.
     let x = clamp_to(e, xh, -760.0, 720.0);
     let same = e.eq(x, xh);
@@ -441,8 +441,7 @@ fn exp_dd<E: Emit>(e: &mut E, xh: E::V, xl: E::V) -> E::V {
     let q = round_int(e, qh);
     let q128 = mulk(e, q, 128.0);
     let j = e.sub(k, q128);
-    let t_hi = e.lookup(&EXP_T_HI, j);
-    let t_tail = e.lookup(&EXP_T_TAIL, j);
+    let (t_hi, t_tail) = e.lookup_pair(&EXP_T, j);
     let p = horner(e, r, &[1.0 / 2.0, 1.0 / 6.0, 1.0 / 24.0, 1.0 / 120.0]);
     let r2 = e.mul(r, r);
     let em1 = e.fma(r2, p, r);
@@ -456,30 +455,40 @@ pub fn exp<E: Emit>(e: &mut E, x: E::V) -> E::V {
     exp_dd(e, x, zero)
 }
 
-/// Fast e^x: the same reduction, a degree-7 Taylor polynomial on |r| ≤ ln2/2 (truncation < 1.2e-8), one
-/// scaling. Lanes below −708 are computed on 0 and flushed to 0 afterwards, so no operation ever sees a
-/// subnormal (an x86 microcode assist costs ~100 cycles per subnormal operand or result).
+/// Fast e^x's polynomial times 2: 2·P(r) ≈ 2e^r with P(r) = 1 + r·G(r), G the degree-5 Chebyshev fit of
+/// (e^r − 1)/r on |r| ≤ ln2/2 (relative error of P 5.1e-9; degree 4 gives 2.0e-7, within the bound too, but
+/// a formula like F_kutlog's `acos(Q^(1/n))` amplifies it 40× past 1e-6). P(0) = 1 exactly, so e^0 = 1 and
+/// pow(1, y) = 1 without a special case. The factor 2 (exact) lets the scaling be 2^(k−1), normal for every k
+/// the clamp allows.
+const EXP_FAST_2P: [f64; 7] = [
+    2.0,
+    2.0 * 1.0000000107727665,
+    2.0 * 0.5000000013459222,
+    2.0 * 0.16666505248452865,
+    2.0 * 0.041666464991106766,
+    2.0 * 0.008369149818125777,
+    2.0 * 0.0013933642689829186,
+];
+
+/// Fast e^x: Cody–Waite reduction by two FMAs (r = x − k·ln2, |r| ≤ ln2/2), [`EXP_FAST_2P`], one scaling.
+/// The clamp to [−708, 709.9] keeps k in [−1021, 1024], so 2^(k−1) is normal and no operation sees a subnormal
+/// (an x86 microcode assist costs ~100 cycles per subnormal operand or result); above e^709.78 the final
+/// product overflows to +inf by itself, NaN passes through the clamp, and below −708 the result is flushed to
+/// 0 (an absolute error < 3.3e-308).
 pub fn exp_fast<E: Emit>(e: &mut E, x: E::V) -> E::V {
     let below = ltk(e, x, -708.0);
-    let zero = e.konst(0.0);
-    let xc = e.select(below, zero, x);
-    let xc = clamp_to(e, xc, -708.0, 709.8);
-    let (k, hi, klo) = reduce_exp(e, xc);
-    let r = e.sub(hi, klo);
-    let p = horner(e, r, &[1.0, 1.0, 0.5, 1.0 / 6.0, 1.0 / 24.0, 1.0 / 120.0, 1.0 / 720.0, 1.0 / 5040.0]);
-    // k is in [−1021, 1024]: 2p·2^(k−1), whose only rounding is the final product (normal, or the overflow).
+    let xc = clamp_to(e, x, -708.0, 709.9);
+    let kx = mulk(e, xc, INV_LN2);
+    let k = round_int(e, kx);
+    let nhi = e.konst(-LN2_HI);
+    let hi = e.fma(k, nhi, xc); // exact: k·LN2_HI is, and xc is within a factor 2 of it (or k = 0)
+    let nlo = e.konst(-LN2_LO);
+    let r = e.fma(k, nlo, hi);
+    let p2 = horner(e, r, &EXP_FAST_2P);
     let k1 = addk(e, k, -1.0);
     let s = e.pow2i(k1);
-    let p2 = mulk(e, p, 2.0);
     let y = e.mul(p2, s);
-    // Past the clamps: overflow to +inf, and below e^-708 (< 3.3e-308) flush to 0 (an absolute error < 1e-307).
-    let over = ltk(e, x, 709.78);
-    let over = e.not(over);
-    let nan = is_nan(e, x);
-    let not_nan = e.not(nan);
-    let over = e.and(over, not_nan);
-    let y = select_k(e, over, f64::INFINITY, y);
-    select_k(e, below, 0.0, y)
+    e.zero_where(below, y)
 }
 
 // ---- ln ----
@@ -583,6 +592,8 @@ fn ln_fast_reduced<E: Emit>(e: &mut E, k: E::V, f: E::V) -> E::V {
 /// ln(j/64) for j = 45..=91 (the breakpoints covering [√2/2, √2]), rounded (`HI`) and the remainder (`LO`).
 const LN_J64_HI: [f64; 47] = [-0.3522205935893521, -0.33024168687057687, -0.3087354816496133, -0.2876820724517809, -0.26706278524904525, -0.24686007793152578, -0.22705745063534608, -0.2076393647782445, -0.18859116980755003, -0.16989903679539747, -0.15154989812720093, -0.13353139262452263, -0.1158318155251217, -0.09844007281325252, -0.0813456394539524, -0.06453852113757118, -0.048009219186360606, -0.0317486983145803, -0.015748356968139168, 0.0, 0.015504186535965254, 0.030771658666753687, 0.0458095360312942, 0.06062462181643484, 0.07522342123758753, 0.08961215868968714, 0.10379679368164356, 0.11778303565638346, 0.13157635778871926, 0.1451820098444979, 0.15860503017663857, 0.17185025692665923, 0.184922338494012, 0.19782574332991987, 0.21056476910734964, 0.22314355131420976, 0.2355660713127669, 0.24783616390458127, 0.25995752443692605, 0.27193371548364176, 0.2837681731306446, 0.2954642128938359, 0.3070250352949119, 0.3184537311185346, 0.329753286372468, 0.3409265869705932, 0.3519764231571782];
 const LN_J64_LO: [f64; 47] = [-5.7233316949182485e-18, 1.0828321637483858e-17, 1.6199186085148102e-17, -2.607160616442564e-17, 7.32891532732017e-18, -1.361743371748368e-17, -9.551415762738488e-18, -1.2053243216686129e-17, 7.432164219196925e-18, 4.868008764439071e-19, -5.1669593684615594e-18, 3.664457663660085e-18, -4.338484369808096e-18, 4.439009633675136e-18, -5.07707635593117e-18, 6.470486661692933e-18, -1.4390903347292205e-18, -3.0382263084680858e-18, -1.0021578630528974e-18, 0.0, -3.278321022892429e-19, 1.0431732029005968e-18, 1.902959866474257e-18, 2.6424025938726934e-18, -5.930604196293241e-18, -5.4268129336647135e-18, 5.47772415726659e-18, -1.1971685747593677e-18, 1.1123000879729588e-17, 8.242418783022475e-18, 1.1257003872182592e-17, -6.0224538210113705e-18, 3.0236614153574064e-18, 1.2821194372980142e-17, -4.249405314729895e-18, -9.091270597324799e-18, -2.3943371495187355e-18, -1.2432209578702523e-17, 2.069806938978935e-17, 7.83319637697442e-19, -2.032665581126656e-17, -2.16461086040599e-17, -1.2319916200101964e-17, 2.7114779367326236e-17, 2.122020616196946e-18, 1.7467136443544747e-17, -1.2953893030191963e-17];
+/// `LN_J64_HI` and `LN_J64_LO` as rows, for [`Emit::lookup_pair`].
+static LN_J64: [[f64; 2]; 47] = super::math_tables::pairs(&LN_J64_HI, &LN_J64_LO);
 
 /// ln x as a double-double `(hi, lo)`, relative error < 2^-68, for finite x > 0.
 ///
@@ -609,8 +620,7 @@ fn ln_dd<E: Emit>(e: &mut E, x: E::V) -> (E::V, E::V) {
     let zq = e.mul(z, q);
     let t = e.mul(s_hi, zq);
     let idx = addk(e, j, -45.0);
-    let lb_hi = e.lookup(&LN_J64_HI, idx);
-    let lb_lo = e.lookup(&LN_J64_LO, idx);
+    let (lb_hi, lb_lo) = e.lookup_pair(&LN_J64, idx);
     let khi = mulk(e, k, LN2_HI); // exact
     let (a, a_err) = two_sum(e, khi, lb_hi);
     let two_s = e.add(s_hi, s_hi);
@@ -726,7 +736,7 @@ fn pow_finish<E: Emit>(e: &mut E, x: E::V, y: E::V, mag: E::V) -> E::V {
     let y_pos = e.lt(zero, y);
     let zero_pos = e.and(x_zero, x_plus);
     let zero_pos = e.and(zero_pos, y_pos);
-    let mag = e.select(zero_pos, zero, mag);
+    let mag = e.zero_where(zero_pos, mag);
     let ok = e.or(normal, zero_pos);
     let special = e.not(ok);
     e.rare(special, mag, &mut |e| pow_specials(e, x, y, mag))
@@ -823,7 +833,7 @@ fn acos_impl<E: Emit>(e: &mut E, x: E::V, precise: bool) -> E::V {
     let res = e.select(small, res_small, big);
     // acos(1) = +0 (the general formula divides 0 by 0 there).
     let one = eqk(e, x, 1.0);
-    select_k(e, one, 0.0, res)
+    e.zero_where(one, res)
 }
 
 /// asin of the argument already clamped to [−1, 1] (NaN passes through).

@@ -534,6 +534,15 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
     fn select(&mut self, m: Value, a: Value, b: Value) -> Value {
         L::select(self.b, m, a, b)
     }
+    /// Vector masks are all ones or all zeros per lane: `y & !m` (`andnpd`).
+    fn zero_where(&mut self, m: Value, y: Value) -> Value {
+        if L::LANES == 1 {
+            let zero = L::konst(self.b, 0);
+            return L::select(self.b, m, zero, y);
+        }
+        let mask = L::bitcast(self.b, L::TY, m);
+        self.b.ins().band_not(y, mask)
+    }
     fn mask_bits(&mut self, x: Value, and: u64, or: u64) -> Value {
         let i = L::bitcast(self.b, L::ITY, x);
         let m = L::iconst(self.b, and);
@@ -576,10 +585,12 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
         let np = self.b.ins().fneg(p);
         (p, self.b.ins().fma(a, b, np))
     }
-    fn lookup(&mut self, table: &'static [f64], x: Value) -> Value {
+    /// Per lane: the index clamped to the table, one 16-byte row load (`F64X2`), then the heads and the tails
+    /// of the lanes' rows gathered by two shuffles (`punpcklqdq`/`punpckhqdq`); in `F64`, two scalar loads.
+    fn lookup_pair(&mut self, table: &'static [[f64; 2]], x: Value) -> (Value, Value) {
         if table.is_empty() {
             self.error = Some(JitError::Internal("lookup in an empty table".into()));
-            return x;
+            return (x, x);
         }
         let magic = L::konst(self.b, math::MAGIC.to_bits());
         let t = self.b.ins().fadd(x, magic);
@@ -588,16 +599,36 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
         let i = self.b.ins().isub(i, m);
         let base = self.b.ins().iconst(types::I64, table.as_ptr() as i64);
         let last = self.b.ins().iconst(types::I64, table.len() as i64 - 1);
-        let mut lanes = Vec::with_capacity(usize::from(L::LANES));
+        let flags = MemFlagsData::new().with_notrap().with_readonly();
+        let mut rows = Vec::with_capacity(usize::from(L::LANES));
         for lane in 0..L::LANES {
             let il = if L::LANES == 1 { i } else { self.b.ins().extractlane(i, lane) };
             let il = self.b.ins().umin(il, last);
-            let off = self.b.ins().ishl_imm_u(il, 3);
-            let addr = self.b.ins().iadd(base, off);
-            let flags = MemFlagsData::new().with_notrap().with_readonly().with_aligned();
-            lanes.push(self.b.ins().load(types::F64, flags, addr, 0));
+            let off = self.b.ins().ishl_imm_u(il, 4);
+            rows.push(self.b.ins().iadd(base, off));
         }
-        L::from_lanes(self.b, &lanes)
+        if L::LANES == 1 {
+            let head = self.b.ins().load(types::F64, flags, rows[0], 0);
+            return (head, self.b.ins().load(types::F64, flags, rows[0], 8));
+        }
+        if L::LANES != 2 {
+            self.error = Some(JitError::Internal("lookup_pair handles one or two lanes".into()));
+            return (x, x);
+        }
+        let le = MemFlagsData::new().with_endianness(Endianness::Little);
+        let [r0, r1] = [rows[0], rows[1]].map(|a| {
+            let row = self.b.ins().load(types::F64X2, flags, a, 0);
+            self.b.ins().bitcast(types::I8X16, le, row)
+        });
+        // Byte shuffles that Cranelift's x64 backend emits as `punpcklqdq` / `punpckhqdq`.
+        let low: [u8; 16] = std::array::from_fn(|k| if k < 8 { k as u8 } else { 8 + k as u8 });
+        let high: [u8; 16] = std::array::from_fn(|k| low[k] + 8);
+        let [heads, tails] = [low, high].map(|mask| {
+            let imm = self.b.func.dfg.immediates.push(mask.to_vec().into());
+            let v = self.b.ins().shuffle(r0, r1, imm);
+            self.b.ins().bitcast(L::TY, le, v)
+        });
+        (heads, tails)
     }
     /// `any(m) ? slow() : r`, the slow code in a block of its own.
     fn rare(&mut self, m: Value, r: Value, slow: &mut dyn FnMut(&mut Self) -> Value) -> Value {

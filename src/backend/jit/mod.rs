@@ -482,8 +482,9 @@ pub fn disassemble(f: &Formula, mode: Mode) -> Result<(String, String), JitError
         let w = codegen::Build { ir: &c.ir, plan: &c.plan, imports: &c.imports, mode: c.mode, fma: host_fma(), outline: codegen::outlines(&c.ir) };
         j.define_batch(module, &w)?;
     }
-    let mut l = std::mem::take(&mut j.listing).into_iter();
-    Ok((l.next().unwrap_or_default(), l.next().unwrap_or_default()))
+    // The listings are in definition order: scalar, prepare (when the formula has a prepared block), batch.
+    let l = std::mem::take(&mut j.listing);
+    Ok((l.first().cloned().unwrap_or_default(), l.last().cloned().unwrap_or_default()))
 }
 
 /// Compiles without consulting or filling the cache (for compile-time measurements and tests).
