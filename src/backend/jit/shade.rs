@@ -3,11 +3,18 @@
 //!
 //! `extern "C" fn(cols: *const *const f64, params, block, outs: *const *mut f64, len: usize)`
 //!
-//! the same loop shape as the batched kernel (F64X2 body, one F64 tail element), the same translator (so the
-//! lanes, the hoisted invariants and the prepared parameter block, and the inline math library are the
-//! kernel's), reading `Node::Column(k)` from `cols[k]` and storing each output to `outs[o]`. A guarded region
-//! is a branch on `any(lit)` over the vector's lanes: its nodes are translated in a block of their own, and
-//! its outputs reach the rest through the join block's parameters (+0 when the branch is not taken).
+//! the batched kernel's loop (F64X2 body, one F64 tail element), preceded, when F calls the math library or
+//! there are several lights, by a loop handling two vectors per step, their nodes interleaved ([`pairs`]);
+//! the same translator (so the lanes, the hoisted invariants and the prepared parameter block, and the inline
+//! math library are the kernel's), reading `Node::Column(k)` from `cols[k]` and storing each output to
+//! `outs[o]`. A guarded region is a branch on `any(lit)` over the step's lanes: its nodes are translated in a
+//! block of their own, and its outputs reach the rest through the join block's parameters (+0 when the branch
+//! is not taken); the outer values it reads are pinned before the first region that reads them
+//! ([`anchors`]), so they are computed once per pixel.
+//!
+//! Cost: per pixel the program's own operations (see [`crate::backend::shading`]) plus one 16-byte store per
+//! anchored value; the pair loop costs spills (16 vector registers for two vectors' live values) and wins
+//! where latency dominates (measured: BENCHMARKS.md).
 //!
 //! A child of `codegen`, so it uses the translator's private parts as they are; codegen only gained the
 //! `Source::Data` variant and the `Node::Column` arm.
@@ -43,7 +50,7 @@ pub(in crate::backend::jit) fn signature(module: &JITModule) -> Signature {
     super::signature(module, 5, false)
 }
 
-/// Builds the program's function (see the module doc; the loop is [`batch_loop`]).
+/// Builds the program's function (see the module doc; the loops: two vectors per step when [`pairs`] holds, then [`batch_loop`]).
 pub(in crate::backend::jit) fn build(
     module: &mut JITModule,
     ctx: &mut Context,
@@ -110,13 +117,13 @@ pub(in crate::backend::jit) fn build(
 /// Vectors the main loop interleaves ([`pairs`]).
 const PAIR: usize = 2;
 
-/// Whether the loop interleaves [`PAIR`] vectors: when F calls the math library. Cranelift schedules no
-/// instructions, so one vector's long chains (roots, divisions, then the library's polynomials: hundreds of
-/// cycles from the loads to the colour) leave the core idle unless an independent vector's instructions sit
-/// beside them in program order; the pair costs registers (more spills), which a cheap program does not win
-/// back (measured: BENCHMARKS.md, 2026-11-30 issue 11 third pass).
+/// Whether the loop interleaves [`PAIR`] vectors: when F calls the math library or the scene has several
+/// lights. Cranelift schedules no instructions, so one vector's long chains (roots, divisions, the library's
+/// polynomials: hundreds of cycles from the loads to the colour) leave the core idle unless an independent
+/// vector's instructions sit beside them in program order; the pair costs registers (more spills), which one
+/// light and a cheap formula do not win back (measured: BENCHMARKS.md, 2026-11-30 issue 11 third pass).
 fn pairs(p: &Program) -> bool {
-    p.ir.nodes().iter().any(|n| matches!(n, Node::Call(b, _) if b.info().lowering == Lowering::Math))
+    p.regions.len() > 1 || p.ir.nodes().iter().any(|n| matches!(n, Node::Call(b, _) if b.info().lowering == Lowering::Math))
 }
 
 /// One step of the program's loop, whatever its lane type.
