@@ -4,7 +4,7 @@
 //! `extern "C" fn(cols: *const *const f64, params, block, outs: *const *mut f64, len: usize)`
 //!
 //! the batched kernel's loop (F64X2 body, one F64 tail element), preceded, when F calls the math library or
-//! there are several lights, by a loop handling two vectors per step, their nodes interleaved ([`pairs`]);
+//! there are several lights, by a loop handling four vectors per step, their nodes interleaved ([`interleaves`]);
 //! the same translator (so the lanes, the hoisted invariants and the prepared parameter block, and the inline
 //! math library are the kernel's), reading `Node::Column(k)` from `cols[k]` and storing each output to
 //! `outs[o]`. A guarded region is a branch on `any(lit)` over the step's lanes: its nodes are translated in a
@@ -13,7 +13,7 @@
 //! ([`anchors`]), so they are computed once per pixel.
 //!
 //! Cost: per pixel the program's own operations (see [`crate::backend::shading`]) plus one 16-byte store per
-//! anchored value; the pair loop costs spills (16 vector registers for two vectors' live values) and wins
+//! anchored value; the interleaved loop costs spills (16 vector registers for four vectors' live values) and wins
 //! where latency dominates (measured: BENCHMARKS.md).
 //!
 //! A child of `codegen`, so it uses the translator's private parts as they are; codegen only gained the
@@ -50,7 +50,8 @@ pub(in crate::backend::jit) fn signature(module: &JITModule) -> Signature {
     super::signature(module, 5, false)
 }
 
-/// Builds the program's function (see the module doc; the loops: two vectors per step when [`pairs`] holds, then [`batch_loop`]).
+/// Builds the program's function (see the module doc; the loops: [`STEP`] vectors per step when [`interleaves`]
+/// holds, then [`batch_loop`]).
 pub(in crate::backend::jit) fn build(
     module: &mut JITModule,
     ctx: &mut Context,
@@ -82,24 +83,24 @@ pub(in crate::backend::jit) fn build(
         }
     }
     let (first, count) = anchors(p);
-    let slot = b.create_sized_stack_slot(StackSlotData::new(StackSlotKind::ExplicitSlot, (16 * PAIR * count.max(1)) as u32, 4));
+    let slot = b.create_sized_stack_slot(StackSlotData::new(StackSlotKind::ExplicitSlot, (16 * STEP * count.max(1)) as u32, 4));
     let anchor = b.ins().stack_addr(ptr, slot, 0);
     let step = Step { cx: &cx, p, bases, outs: &out_bases, anchor, first: &first, stride: 16 * count as i32 };
-    // With transcendental F: two vectors per step while four elements remain, then batch_loop's one vector
-    // and one element.
-    let start = if pairs(p) {
+    // With transcendental F or several lights: STEP vectors per step while that many remain, then
+    // batch_loop's one vector and one element.
+    let start = if interleaves(p) {
         let (header, body, rest) = (b.create_block(), b.create_block(), b.create_block());
-        let pair_end = b.ins().band_imm_s(len, -(PAIR as i64 * i64::from(V::LANES)));
+        let step_end = b.ins().band_imm_s(len, -(STEP as i64 * i64::from(V::LANES)));
         b.ins().jump(header, &[BlockArg::Value(zero)]);
         b.switch_to_block(header);
         let i = b.append_block_param(header, ptr);
-        let more = b.ins().icmp(IntCC::UnsignedLessThan, i, pair_end);
+        let more = b.ins().icmp(IntCC::UnsignedLessThan, i, step_end);
         b.ins().brif(more, body, &[], rest, &[BlockArg::Value(i)]);
         b.switch_to_block(body);
         b.seal_block(body);
-        let second = b.ins().iadd_imm_u(i, i64::from(V::LANES));
-        step.emit_copies::<V>(&mut b, vec![splats.clone(); PAIR], &[i, second])?;
-        let next = b.ins().iadd_imm_u(i, PAIR as i64 * i64::from(V::LANES));
+        let at: Vec<Value> = (0..STEP).map(|k| if k == 0 { i } else { b.ins().iadd_imm_u(i, (k as i64) * i64::from(V::LANES)) }).collect();
+        step.emit_copies::<V>(&mut b, vec![splats.clone(); STEP], &at)?;
+        let next = b.ins().iadd_imm_u(i, STEP as i64 * i64::from(V::LANES));
         b.ins().jump(header, &[BlockArg::Value(next)]);
         b.seal_block(header);
         b.switch_to_block(rest);
@@ -114,15 +115,16 @@ pub(in crate::backend::jit) fn build(
     Ok(())
 }
 
-/// Vectors the main loop interleaves ([`pairs`]).
-const PAIR: usize = 2;
+/// Vectors the main loop interleaves ([`interleaves`]; a power of two; four measured faster than two on
+/// Cook–Torrance and no slower elsewhere: BENCHMARKS.md).
+const STEP: usize = 4;
 
-/// Whether the loop interleaves [`PAIR`] vectors: when F calls the math library or the scene has several
+/// Whether the main loop interleaves [`STEP`] vectors: when F calls the math library or the scene has several
 /// lights. Cranelift schedules no instructions, so one vector's long chains (roots, divisions, the library's
 /// polynomials: hundreds of cycles from the loads to the colour) leave the core idle unless an independent
-/// vector's instructions sit beside them in program order; the pair costs registers (more spills), which one
+/// vector's instructions sit beside them in program order; interleaving costs registers (more spills), which one
 /// light and a cheap formula do not win back (measured: BENCHMARKS.md, 2026-11-30 issue 11 third pass).
-fn pairs(p: &Program) -> bool {
+fn interleaves(p: &Program) -> bool {
     p.regions.len() > 1 || p.ir.nodes().iter().any(|n| matches!(n, Node::Call(b, _) if b.info().lowering == Lowering::Math))
 }
 
