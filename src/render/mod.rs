@@ -21,8 +21,8 @@
 //! Determinism: every tile is computed from its own bin in scene order and written to its own pixels, and
 //! all counters are integers, so 1 thread and N threads give byte-identical images and equal counts.
 //!
-//! Cost model: shading dominates — per visible pixel the interpolation, grouping and 8-bit conversion in Rust
-//! (~10 ns), then the shading program (the inverse lengths, the cosines the formula reads, F where lit, the
+//! Cost model: shading dominates — per visible pixel the tile scan, interpolation, grouping and 8-bit conversion
+//! in Rust (~8 ns), then the shading program (the inverse lengths, the cosines the formula reads, F where lit, the
 //! colour sum: JIT ~7 ns for one light and a cheap formula, plus F's own cost per lit pixel and light; the
 //! interpreter 15–30× that) — then rasterisation (a few edge-function steps per
 //! covered pixel, ~5 ns); setup and binning are per triangle and small; tiles the scene does not touch cost

@@ -12,7 +12,7 @@
 //! loop over the columns, which LLVM vectorises (SSE2 f64x2; the inverse lengths take an f32 estimate and one
 //! f64 Newton step); per light the lit pixels (NL > 0, lobe cosine above the cut-off) are compacted into the
 //! kernel's columns and the kernel is called once for the span with [`Evaluator::eval_batch`], F scattered
-//! back (a NaN or ±inf counted and 0: no light). Both end in the vectorised 8-bit conversion. Nothing here
+//! back (a NaN or ±inf counted and 0: no light). Both end in the 8-bit conversion. Nothing here
 //! allocates in the steady state ([`Scratch`] is per thread).
 //!
 //! Cost model: see [`super::plan`] and [`crate::backend::shading`]; measured numbers: BENCHMARKS.md.
@@ -162,8 +162,6 @@ struct Group {
     acc: [Vec<f64>; 3],
     /// The shading program's counters per pixel (non-finite F, evaluations, cut-off skips).
     cnt: [Vec<f64>; 3],
-    /// 8-bit colours.
-    q: [Vec<u8>; 3],
     /// The kernel batch: group positions of the evaluated pixels, their inputs, and F.
     idx: Vec<u32>,
     cols: [Vec<f64>; crate::N_INPUTS],
@@ -641,40 +639,43 @@ fn colour(g: &mut Group, plan: &ShadingPlan, il: [f64; 3]) {
     }
 }
 
-/// Converts the span's colours to 8 bits into the tile: a vectorised pass per channel (the linear transfer
-/// inline; sRGB through [`Transfer::encode`]), then one scatter.
+/// Converts the span's colours to 8 bits into the tile: one pass over the pixels, each pixel's three
+/// channels converted and stored together (the linear transfer inline; sRGB through [`Transfer::encode`]).
 fn encode(g: &mut Group, rgb: &mut [u8], transfer: Transfer) {
     let m = g.pix.len();
-    for (c, acc) in g.acc.iter().enumerate() {
-        let q = fit(&mut g.q[c], m);
-        match transfer {
-            // Transfer::encode's linear branch, bit for bit, in a form LLVM vectorises: the comparisons turn
-            // NaN into 0, and floor(y) comes from adding 1.5·2^52 (which rounds y to an integer in the low
-            // mantissa bits) and stepping down where that rounded up — no float-to-int conversion.
-            Transfer::Linear => {
-                const M: f64 = 6_755_399_441_055_744.0;
-                for (q, &x) in q.iter_mut().zip(&acc[..m]) {
-                    let c = if x > 0.0 { x } else { 0.0 };
-                    let c = if c < 1.0 { c } else { 1.0 };
-                    let y = c * 255.0 + 0.5;
-                    let t = y + M;
-                    *q = (t.to_bits() as u32).wrapping_sub(u32::from(t - M > y)) as u8;
+    let [r, gg, b] = &g.acc;
+    let (r, gg, b) = (&r[..m], &gg[..m], &b[..m]);
+    match transfer {
+        Transfer::Linear => {
+            for (k, &o) in g.pix.iter().enumerate() {
+                let o = o as usize * 3;
+                if let Some(px) = rgb.get_mut(o..o + 3) {
+                    px.copy_from_slice(&[linear8(r[k]), linear8(gg[k]), linear8(b[k])]);
                 }
             }
-            Transfer::Srgb => {
-                for (q, &x) in q.iter_mut().zip(&acc[..m]) {
-                    *q = transfer.encode(x);
+        }
+        Transfer::Srgb => {
+            for (k, &o) in g.pix.iter().enumerate() {
+                let o = o as usize * 3;
+                if let Some(px) = rgb.get_mut(o..o + 3) {
+                    px.copy_from_slice(&[transfer.encode(r[k]), transfer.encode(gg[k]), transfer.encode(b[k])]);
                 }
             }
         }
     }
-    let [r, gg, b] = &g.q;
-    for (k, &o) in g.pix.iter().enumerate() {
-        let o = o as usize * 3;
-        rgb[o] = r[k];
-        rgb[o + 1] = gg[k];
-        rgb[o + 2] = b[k];
-    }
+}
+
+/// [`Transfer::encode`]'s linear branch, bit for bit, without branches or a float-to-int conversion: the
+/// comparisons turn NaN into 0, and floor(y) comes from adding 1.5·2^52 (which rounds y to an integer in the
+/// low mantissa bits) and stepping down where that rounded up.
+#[inline(always)]
+fn linear8(x: f64) -> u8 {
+    const M: f64 = 6_755_399_441_055_744.0;
+    let c = if x > 0.0 { x } else { 0.0 };
+    let c = if c < 1.0 { c } else { 1.0 };
+    let y = c * 255.0 + 0.5;
+    let t = y + M;
+    (t.to_bits() as u32).wrapping_sub(u32::from(t - M > y)) as u8
 }
 
 #[cfg(test)]

@@ -163,3 +163,30 @@ fn the_column_leaf_runs_through_every_backend() {
         }
     }
 }
+
+/// Values several light regions read (NV, 1/|v|) are computed once per pixel, before the first region, not
+/// again inside each: each vector the program's code handles (four per step of the main loop, one in the loop
+/// after it, as F calls the math library) has one `sqrtpd` per varying square root of the program, plus the
+/// math library's own in each region's copy of the formula (as many as the formula's batched kernel has).
+#[test]
+fn values_regions_share_are_computed_once_per_pixel() {
+    use lobe::builtins::Builtin;
+    use lobe::ir::Node;
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("examples/scenes/fill_kutlog.toml");
+    let s = load(&path, 32, Backend::Jit, Mode::Precise);
+    let m = &s.materials[0];
+    let plan = r::plan::ShadingPlan::new(m, s.ambient, false);
+    let f = m.program.as_ref().unwrap().channels[0].clone();
+    let p = Program::new(&r::shade::spec(&s, &plan), &[&f]).unwrap();
+    assert_eq!(p.regions.len(), 3, "three lights, three guarded regions");
+    let sqrt = |n: &Node| matches!(n, Node::Call(Builtin::Sqrt, _));
+    let varying_roots = p.ir.nodes().iter().zip(&p.class).filter(|(n, c)| sqrt(n) && **c != shading::Class::Invariant).count();
+    let (fir, _) = f.ir.compact(f.root);
+    assert_eq!(fir.nodes().iter().filter(|n| sqrt(n)).count(), 0, "F_kutlog's square roots are all the library's");
+    let (_, batch) = lobe::backend::jit::disassemble(&f, Mode::Precise).unwrap();
+    let listing = lobe::backend::jit::disassemble_program(&p, Mode::Precise).unwrap();
+    let count = |s: &str| s.matches("sqrtpd").count();
+    assert!(count(&batch) >= 1);
+    let vectors = 5;
+    assert_eq!(count(&listing), vectors * (varying_roots + p.regions.len() * count(&batch)), "{listing}");
+}

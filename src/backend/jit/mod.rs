@@ -487,6 +487,14 @@ pub fn disassemble(f: &Formula, mode: Mode) -> Result<(String, String), JitError
     Ok((l.first().cloned().unwrap_or_default(), l.last().cloned().unwrap_or_default()))
 }
 
+/// The machine code (Cranelift's listing) of a shading program's loop, for checking what it compiles to.
+pub fn disassemble_program(p: &crate::backend::shading::Program, mode: Mode) -> Result<String, JitError> {
+    let mut j = Jit::new();
+    j.disasm = true;
+    j.translate_program(p, mode)?;
+    Ok(j.listing.into_iter().next().unwrap_or_default())
+}
+
 /// Compiles without consulting or filling the cache (for compile-time measurements and tests).
 pub fn jit_kernel_uncached(f: &Formula, mode: Mode) -> Result<JitKernel, JitError> {
     let (ir, root) = f.ir.compact(f.root);

@@ -3,17 +3,25 @@
 //!
 //! `extern "C" fn(cols: *const *const f64, params, block, outs: *const *mut f64, len: usize)`
 //!
-//! the same loop shape as the batched kernel (F64X2 body, one F64 tail element), the same translator (so the
-//! lanes, the hoisted invariants and the prepared parameter block, and the inline math library are the
-//! kernel's), reading `Node::Column(k)` from `cols[k]` and storing each output to `outs[o]`. A guarded region
-//! is a branch on `any(lit)` over the vector's lanes: its nodes are translated in a block of their own, and
-//! its outputs reach the rest through the join block's parameters (+0 when the branch is not taken).
+//! the batched kernel's loop (F64X2 body, one F64 tail element), preceded, when F calls the math library or
+//! there are several lights, by a loop handling four vectors per step, their nodes interleaved ([`interleaves`]);
+//! the same translator (so the lanes, the hoisted invariants and the prepared parameter block, and the inline
+//! math library are the kernel's), reading `Node::Column(k)` from `cols[k]` and storing each output to
+//! `outs[o]`. A guarded region is a branch on `any(lit)` over the step's lanes: its nodes are translated in a
+//! block of their own, and its outputs reach the rest through the join block's parameters (+0 when the branch
+//! is not taken); the outer values it reads are pinned before the first region that reads them
+//! ([`anchors`]), so they are computed once per pixel.
+//!
+//! Cost: per pixel the program's own operations (see [`crate::backend::shading`]) plus one 16-byte store per
+//! anchored value; the interleaved loop costs spills (16 vector registers for four vectors' live values) and wins
+//! where latency dominates (measured: BENCHMARKS.md).
 //!
 //! A child of `codegen`, so it uses the translator's private parts as they are; codegen only gained the
 //! `Source::Data` variant and the `Node::Column` arm.
 
 use super::*;
 use crate::backend::shading::{Class, Program, Region, N_OUTPUTS};
+use cranelift_codegen::ir::{StackSlotData, StackSlotKind};
 pub use crate::backend::shading::MAX_COLUMNS;
 
 /// The carried-node plan of a program: the kernel's plan over the whole arena, plus every output that reads
@@ -42,7 +50,8 @@ pub(in crate::backend::jit) fn signature(module: &JITModule) -> Signature {
     super::signature(module, 5, false)
 }
 
-/// Builds the program's function (see the module doc; the loop is [`batch_loop`]).
+/// Builds the program's function (see the module doc; the loops: [`STEP`] vectors per step when [`interleaves`]
+/// holds, then [`batch_loop`]).
 pub(in crate::backend::jit) fn build(
     module: &mut JITModule,
     ctx: &mut Context,
@@ -73,10 +82,50 @@ pub(in crate::backend::jit) fn build(
             splats[id.index()] = Some(V::splat(&mut b, s));
         }
     }
-    let step = Step { cx: &cx, p, bases, outs: &out_bases };
-    batch_loop(&mut b, ptr, len, zero, splats, cx.invariants.clone(), &step)?;
+    let (first, count) = anchors(p);
+    let slot = b.create_sized_stack_slot(StackSlotData::new(StackSlotKind::ExplicitSlot, (16 * STEP * count.max(1)) as u32, 4));
+    let anchor = b.ins().stack_addr(ptr, slot, 0);
+    let step = Step { cx: &cx, p, bases, outs: &out_bases, anchor, first: &first, stride: 16 * count as i32 };
+    // With transcendental F or several lights: STEP vectors per step while that many remain, then
+    // batch_loop's one vector and one element.
+    let start = if interleaves(p) {
+        let (header, body, rest) = (b.create_block(), b.create_block(), b.create_block());
+        let step_end = b.ins().band_imm_s(len, -(STEP as i64 * i64::from(V::LANES)));
+        b.ins().jump(header, &[BlockArg::Value(zero)]);
+        b.switch_to_block(header);
+        let i = b.append_block_param(header, ptr);
+        let more = b.ins().icmp(IntCC::UnsignedLessThan, i, step_end);
+        b.ins().brif(more, body, &[], rest, &[BlockArg::Value(i)]);
+        b.switch_to_block(body);
+        b.seal_block(body);
+        let at: Vec<Value> = (0..STEP).map(|k| if k == 0 { i } else { b.ins().iadd_imm_u(i, (k as i64) * i64::from(V::LANES)) }).collect();
+        step.emit_copies::<V>(&mut b, vec![splats.clone(); STEP], &at)?;
+        let next = b.ins().iadd_imm_u(i, STEP as i64 * i64::from(V::LANES));
+        b.ins().jump(header, &[BlockArg::Value(next)]);
+        b.seal_block(header);
+        b.switch_to_block(rest);
+        let start = b.append_block_param(rest, ptr);
+        b.seal_block(rest);
+        start
+    } else {
+        zero
+    };
+    batch_loop(&mut b, ptr, len, start, splats, cx.invariants.clone(), &step)?;
     b.finalize(module.target_config());
     Ok(())
+}
+
+/// Vectors the main loop interleaves ([`interleaves`]; a power of two; four measured faster than two on
+/// Cook–Torrance and no slower elsewhere: BENCHMARKS.md).
+const STEP: usize = 4;
+
+/// Whether the main loop interleaves [`STEP`] vectors: when F calls the math library or the scene has several
+/// lights. Cranelift schedules no instructions, so one vector's long chains (roots, divisions, the library's
+/// polynomials: hundreds of cycles from the loads to the colour) leave the core idle unless an independent
+/// vector's instructions sit beside them in program order; interleaving costs registers (more spills), which one
+/// light and a cheap formula do not win back (measured: BENCHMARKS.md, 2026-11-30 issue 11 third pass).
+fn interleaves(p: &Program) -> bool {
+    p.regions.len() > 1 || p.ir.nodes().iter().any(|n| matches!(n, Node::Call(b, _) if b.info().lowering == Lowering::Math))
 }
 
 /// One step of the program's loop, whatever its lane type.
@@ -85,57 +134,142 @@ struct Step<'a> {
     p: &'a Program,
     bases: [Option<Value>; MAX_COLUMNS],
     outs: &'a [Value],
+    /// The address of a scratch slot the outer values regions read are stored to ([`anchors`]).
+    anchor: Value,
+    first: &'a [Vec<(NodeId, i32)>],
+    /// Bytes of the anchor slot one copy uses.
+    stride: i32,
 }
 
 impl LoopBody for Step<'_> {
-    /// The outer nodes in order, each region where the walk reaches its last output, then the stores.
     fn emit<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Option<Value>>, i: Value) -> Result<(), JitError> {
-        let off = b.ins().ishl_imm_u(i, 3);
-        let mut t = self.cx.translator::<L>(b, vals, Source::Data { bases: self.bases, off });
+        self.emit_copies::<L>(b, vec![vals], &[i])
+    }
+}
+
+impl Step<'_> {
+    /// Node `id` translated in copy `c` (the copies' tables are swapped in and out of one translator).
+    fn on<L: Lanes>(&self, b: &mut FunctionBuilder, k: &mut Copies, c: usize, id: NodeId) -> Result<Value, JitError> {
+        let mut t = self.cx.translator::<L>(b, std::mem::take(&mut k.vals[c]), k.src[c]);
+        let v = t.node(id);
+        k.vals[c] = std::mem::take(&mut t.vals);
+        v
+    }
+
+    /// The step for the vectors at indices `at` (one copy each, their instructions interleaved node by
+    /// node): the outer nodes in order, each region where the walk reaches its last output, then the stores.
+    fn emit_copies<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Vec<Option<Value>>>, at: &[Value]) -> Result<(), JitError> {
+        let offs: Vec<Value> = at.iter().map(|i| b.ins().ishl_imm_u(*i, 3)).collect();
+        let mut k = Copies { vals, src: offs.iter().map(|&off| Source::Data { bases: self.bases, off }).collect() };
         let mut next = 0;
         for id in self.p.ir.ids() {
             if self.p.class[id.index()] == Class::Outer {
-                t.node(id)?;
+                for c in 0..at.len() {
+                    self.on::<L>(b, &mut k, c, id)?;
+                }
             }
             while let Some(r) = self.p.regions.get(next).filter(|r| r.at == id) {
-                region(&mut t, r)?;
+                self.region::<L>(b, &mut k, r, &self.first[next])?;
                 next += 1;
             }
         }
-        for (o, base) in self.p.outputs.iter().zip(self.outs) {
-            let v = t.arg(*o)?;
-            let dst = t.b.ins().iadd(*base, off);
-            t.b.ins().store(mem(), v, dst, 0);
+        for (c, off) in offs.iter().enumerate() {
+            for (o, base) in self.p.outputs.iter().zip(self.outs) {
+                let v = arg(&k.vals[c], *o)?;
+                let dst = b.ins().iadd(*base, *off);
+                b.ins().store(mem(), v, dst, 0);
+            }
+        }
+        Ok(())
+    }
+
+    /// `any(lit ≠ 0 in some copy) ? region's outputs : +0`, the region's nodes (every copy's, interleaved) in a
+    /// block of their own; first the outer values it is the first to read are stored to the anchor slot
+    /// ([`anchors`]). A copy with no lit lane may run the region too: its outputs are then the selects' +0.
+    fn region<L: Lanes>(&self, b: &mut FunctionBuilder, k: &mut Copies, r: &Region, first: &[(NodeId, i32)]) -> Result<(), JitError> {
+        let copies = k.vals.len();
+        for (c, vals) in k.vals.iter().enumerate() {
+            for &(a, off) in first {
+                b.ins().store(mem(), arg(vals, a)?, self.anchor, off + c as i32 * self.stride);
+            }
+        }
+        let z = L::konst(b, 0);
+        let mut any_mask = None;
+        for vals in &k.vals {
+            let m = b.ins().fcmp(FloatCC::NotEqual, arg(vals, r.lit)?, z);
+            any_mask = Some(any_mask.map_or(m, |a| b.ins().bor(a, m)));
+        }
+        let any = L::any(b, any_mask.ok_or(JitError::Internal("a step of no vectors".into()))?);
+        let inside = b.create_block();
+        let join = b.create_block();
+        let params: Vec<Value> = (0..copies * r.outputs.len()).map(|_| b.append_block_param(join, L::TY)).collect();
+        let zeros: Vec<BlockArg> = params.iter().map(|_| BlockArg::Value(z)).collect();
+        b.ins().brif(any, inside, &[], join, &zeros);
+        b.switch_to_block(inside);
+        b.seal_block(inside);
+        // The region's values live only in its block.
+        let saved = k.vals.clone();
+        for id in &r.nodes {
+            for c in 0..copies {
+                self.on::<L>(b, k, c, *id)?;
+            }
+        }
+        let mut outs = vec![];
+        for vals in &k.vals {
+            for o in &r.outputs {
+                outs.push(BlockArg::Value(arg(vals, *o)?));
+            }
+        }
+        b.ins().jump(join, &outs);
+        k.vals = saved;
+        b.switch_to_block(join);
+        b.seal_block(join);
+        for (c, vals) in k.vals.iter_mut().enumerate() {
+            for (j, o) in r.outputs.iter().enumerate() {
+                vals[o.index()] = Some(params[c * r.outputs.len() + j]);
+            }
         }
         Ok(())
     }
 }
 
-/// `any(lit ≠ 0) ? region's outputs : +0`, the region's nodes in a block of their own.
-fn region<L: Lanes>(t: &mut Translator<'_, '_, L>, r: &Region) -> Result<(), JitError> {
-    let lit = t.arg(r.lit)?;
-    let z = L::konst(t.b, 0);
-    let m = t.b.ins().fcmp(FloatCC::NotEqual, lit, z);
-    let any = L::any(t.b, m);
-    let inside = t.b.create_block();
-    let join = t.b.create_block();
-    let params: Vec<Value> = r.outputs.iter().map(|_| t.b.append_block_param(join, L::TY)).collect();
-    let zeros: Vec<BlockArg> = r.outputs.iter().map(|_| BlockArg::Value(z)).collect();
-    t.b.ins().brif(any, inside, &[], join, &zeros);
-    t.b.switch_to_block(inside);
-    t.b.seal_block(inside);
-    // The region's values live only in its block: later regions recompute what they share with it.
-    let saved = t.vals.clone();
-    for id in &r.nodes {
-        t.node(*id)?;
-    }
-    let outs = r.outputs.iter().map(|o| t.arg(*o).map(BlockArg::Value)).collect::<Result<Vec<_>, _>>()?;
-    t.b.ins().jump(join, &outs);
-    t.vals = saved;
-    t.b.switch_to_block(join);
-    t.b.seal_block(join);
-    for (o, v) in r.outputs.iter().zip(params) {
-        t.vals[o.index()] = Some(v);
-    }
-    Ok(())
+/// The per-copy translation tables and column sources of one step.
+struct Copies {
+    vals: Vec<Vec<Option<Value>>>,
+    src: Vec<Source>,
+}
+
+/// The value of an already translated node in one copy's table.
+fn arg(vals: &[Option<Value>], id: NodeId) -> Result<Value, JitError> {
+    vals.get(id.index()).copied().flatten().ok_or_else(|| JitError::Internal(format!("operand t{} used before it was translated", id.0)))
+}
+
+/// The outer values guarded regions read, each with its own offset in the anchor slot, listed under the
+/// first region that reads it; and how many there are.
+///
+/// Cranelift places a pure value where its first use is reached in dominator order, so a value several
+/// regions share (NV, 1/|v|, …) and nothing outside them uses would be computed inside the first region's
+/// block and again inside each later one, which that block does not dominate. Storing it (a fixed use,
+/// never read; distinct offsets, so no store is dead) before the first region's branch keeps it there,
+/// computed once per pixel.
+fn anchors(p: &Program) -> (Vec<Vec<(NodeId, i32)>>, usize) {
+    let mut seen = vec![false; p.ir.len()];
+    let mut count = 0;
+    let first = p
+        .regions
+        .iter()
+        .map(|r| {
+            let mut mine = vec![];
+            for id in &r.nodes {
+                p.ir.node(*id).for_each_arg(|a| {
+                    if p.class[a.index()] == Class::Outer && !std::mem::replace(&mut seen[a.index()], true) {
+                        mine.push((a, 16 * count as i32));
+                        count += 1;
+                    }
+                });
+            }
+            mine
+        })
+        .collect();
+    (first, count)
 }
