@@ -156,7 +156,7 @@ pub fn exponent_field(x: f64) -> f64 {
     f64::from_bits(((x.to_bits() >> 52) & 0x7ff) | TWO52.to_bits()) - TWO52
 }
 
-/// The scalar definition of the index [`Emit::lookup`] reads (clamped to the table).
+/// The scalar definition of the index [`Emit::lookup_pair`] reads (clamped to the table).
 pub fn table_index(x: f64, len: usize) -> usize {
     let i = (x + MAGIC).to_bits().wrapping_sub(MAGIC.to_bits());
     i.min(len as u64 - 1) as usize

@@ -243,7 +243,9 @@ impl Range {
                 let (l, h) = (a.lo + b.lo.ln() - c.hi.ln(), a.hi + b.hi.ln() - c.lo.ln());
                 let lo = if l > -700.0 { l.exp() * (1.0 - 1e-9) } else { 0.0 };
                 let hi = if h < 700.0 { h.exp() * (1.0 + 1e-9) } else { f64::INFINITY };
-                let nan = a.nan || b.nan || c.nan || a.hi == f64::INFINITY || b.hi == f64::INFINITY || c.hi == f64::INFINITY;
+                // e^a overflows to ∞ past a ≈ 709.78, and ∞·0 is NaN, as in exp(a)*b/c written out.
+                let overflow_times_zero = a.hi > 709.0 && b.contains_zero();
+                let nan = a.nan || b.nan || c.nan || overflow_times_zero || b.hi == f64::INFINITY || c.hi == f64::INFINITY;
                 Range::new(lo, hi, nan, b.negz)
             }
             Builtin::Floor => Range::new(a.lo.floor(), a.hi.floor(), a.nan, a.negz),
