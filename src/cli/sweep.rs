@@ -236,12 +236,6 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliEr
     let crep = crep_changed.as_ref().or(compiled.as_ref().map(|_| &rep));
     let names: Vec<String> = decls.iter().map(|d| d.name.clone()).collect();
     let t = &rep.total;
-    let count = |kind: &str, s: &RegionStats| match kind {
-        "nan" => s.nan,
-        "inf" => s.inf,
-        "negative" => s.negative,
-        _ => s.over_bound,
-    };
     if a.json.on {
         let obj = SweepJson {
             total: t,
@@ -277,7 +271,7 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliEr
             None => rep.regions.iter().chain(std::iter::once(t)).map(|r| (r, None)).collect(),
         };
         for (r, c) in rows {
-            let cells: Vec<String> = ["nan", "inf", "negative", "bound"].iter().map(|kind| cell(count(kind, r), c.map(|c| count(kind, c)))).collect();
+            let cells: Vec<String> = ["nan", "inf", "negative", "bound"].iter().map(|kind| cell(r.count(kind), c.map(|c| c.count(kind)))).collect();
             outln!(out, "  {:<10} {:>10} {:>12} {:>12} {:>12} {:>12}", r.region, r.evaluated, cells[0], cells[1], cells[2], cells[3]);
         }
         examples_text(&mut out, &k, &rep, used, &names, "");
@@ -286,7 +280,7 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliEr
         }
     }
     let judged = crep.map_or(t, |cr| &cr.total);
-    let denied: Vec<String> = a.deny.iter().filter(|d| count(d, judged) > 0).cloned().collect();
+    let denied: Vec<String> = a.deny.iter().filter(|d| judged.count(d) > 0).cloned().collect();
     Ok((out, denied))
 }
 

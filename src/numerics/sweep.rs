@@ -130,6 +130,16 @@ pub struct RegionStats {
 }
 
 impl RegionStats {
+    /// The count of one kind by its `--deny` name: nan, inf, negative, bound.
+    pub fn count(&self, kind: &str) -> u64 {
+        match kind {
+            "nan" => self.nan,
+            "inf" => self.inf,
+            "negative" => self.negative,
+            _ => self.over_bound,
+        }
+    }
+
     fn merge(&mut self, o: RegionStats) {
         self.evaluated += o.evaluated;
         self.nan += o.nan;
