@@ -116,10 +116,11 @@ pub trait Emit {
     fn pow2i(&mut self, k: Self::V) -> Self::V;
     /// `from_bits(((bits(x) >> 52) & 0x7ff) | bits(2^52)) − 2^52`: the biased exponent field as a number.
     fn exponent_field(&mut self, x: Self::V) -> Self::V;
-    /// `table[min(i, len − 1)]` lane by lane, as the two values of that row, `i` being the integer
-    /// `bits(x + MAGIC) − bits(MAGIC)` taken as unsigned (see [`table_index`]): callers pass integer-valued `x`
-    /// in `0..len`; any other `x` (negative, NaN) still reads inside the table. A row is 16 bytes, so vector
-    /// lanes load it in one instruction (the tables pair a head with its tail).
+    /// `table[i & (len − 1)]` lane by lane, as the two values of that row, `i` being `bits(x + MAGIC)` (see
+    /// [`table_index`]; `len` is a power of two): for |x| < 2^51 the addition rounds x to the nearest integer
+    /// (ties to even) and `i`'s low bits are that integer modulo `len`; any other `x` (NaN) still reads inside
+    /// the table. A row is 16 bytes, so vector lanes load it in one instruction (the tables pair a head with
+    /// its tail).
     fn lookup_pair(&mut self, table: &'static [[f64; 2]], x: Self::V) -> (Self::V, Self::V);
     /// `any(m) ? slow() : r`: code for rare lanes (special cases), run only when some lane needs it. `slow` must
     /// return `r`'s value in every lane where `m` is false, so the result does not depend on the lane shape.
@@ -156,10 +157,12 @@ pub fn exponent_field(x: f64) -> f64 {
     f64::from_bits(((x.to_bits() >> 52) & 0x7ff) | TWO52.to_bits()) - TWO52
 }
 
-/// The scalar definition of the index [`Emit::lookup_pair`] reads (clamped to the table).
+/// The scalar definition of the index [`Emit::lookup_pair`] reads: the low bits of `x + MAGIC`, which hold
+/// the nearest integer to `x` in two's complement (MAGIC's low 51 bits are zero), masked to the table's
+/// power-of-two `len`: that integer modulo `len`.
 pub fn table_index(x: f64, len: usize) -> usize {
-    let i = (x + MAGIC).to_bits().wrapping_sub(MAGIC.to_bits());
-    i.min(len as u64 - 1) as usize
+    debug_assert!(len.is_power_of_two());
+    ((x + MAGIC).to_bits() & (len as u64 - 1)) as usize
 }
 
 /// Runs the library on plain `f64`: the reference semantics, used by the interpreter and constant folding.
@@ -439,9 +442,9 @@ fn exp_dd<E: Emit>(e: &mut E, xh: E::V, xl: E::V) -> E::V {
     let k128 = mulk(e, k, 1.0 / 128.0);
     let qh = addk(e, k128, -127.0 / 256.0);
     let q = round_int(e, qh);
-    let q128 = mulk(e, q, 128.0);
-    let j = e.sub(k, q128);
-    let (t_hi, t_tail) = e.lookup_pair(&EXP_T, j);
+    // The row j = k − 128q = k mod 128: the lookup rounds kx itself (the addition `round_int` made) and keeps
+    // the low 7 bits, so j costs no instruction.
+    let (t_hi, t_tail) = e.lookup_pair(&EXP_T, kx);
     let p = horner(e, r, &[1.0 / 2.0, 1.0 / 6.0, 1.0 / 24.0, 1.0 / 120.0]);
     let r2 = e.mul(r, r);
     let em1 = e.fma(r2, p, r);
@@ -592,8 +595,8 @@ fn ln_fast_reduced<E: Emit>(e: &mut E, k: E::V, f: E::V) -> E::V {
 /// ln(j/64) for j = 45..=91 (the breakpoints covering [√2/2, √2]), rounded (`HI`) and the remainder (`LO`).
 const LN_J64_HI: [f64; 47] = [-0.3522205935893521, -0.33024168687057687, -0.3087354816496133, -0.2876820724517809, -0.26706278524904525, -0.24686007793152578, -0.22705745063534608, -0.2076393647782445, -0.18859116980755003, -0.16989903679539747, -0.15154989812720093, -0.13353139262452263, -0.1158318155251217, -0.09844007281325252, -0.0813456394539524, -0.06453852113757118, -0.048009219186360606, -0.0317486983145803, -0.015748356968139168, 0.0, 0.015504186535965254, 0.030771658666753687, 0.0458095360312942, 0.06062462181643484, 0.07522342123758753, 0.08961215868968714, 0.10379679368164356, 0.11778303565638346, 0.13157635778871926, 0.1451820098444979, 0.15860503017663857, 0.17185025692665923, 0.184922338494012, 0.19782574332991987, 0.21056476910734964, 0.22314355131420976, 0.2355660713127669, 0.24783616390458127, 0.25995752443692605, 0.27193371548364176, 0.2837681731306446, 0.2954642128938359, 0.3070250352949119, 0.3184537311185346, 0.329753286372468, 0.3409265869705932, 0.3519764231571782];
 const LN_J64_LO: [f64; 47] = [-5.7233316949182485e-18, 1.0828321637483858e-17, 1.6199186085148102e-17, -2.607160616442564e-17, 7.32891532732017e-18, -1.361743371748368e-17, -9.551415762738488e-18, -1.2053243216686129e-17, 7.432164219196925e-18, 4.868008764439071e-19, -5.1669593684615594e-18, 3.664457663660085e-18, -4.338484369808096e-18, 4.439009633675136e-18, -5.07707635593117e-18, 6.470486661692933e-18, -1.4390903347292205e-18, -3.0382263084680858e-18, -1.0021578630528974e-18, 0.0, -3.278321022892429e-19, 1.0431732029005968e-18, 1.902959866474257e-18, 2.6424025938726934e-18, -5.930604196293241e-18, -5.4268129336647135e-18, 5.47772415726659e-18, -1.1971685747593677e-18, 1.1123000879729588e-17, 8.242418783022475e-18, 1.1257003872182592e-17, -6.0224538210113705e-18, 3.0236614153574064e-18, 1.2821194372980142e-17, -4.249405314729895e-18, -9.091270597324799e-18, -2.3943371495187355e-18, -1.2432209578702523e-17, 2.069806938978935e-17, 7.83319637697442e-19, -2.032665581126656e-17, -2.16461086040599e-17, -1.2319916200101964e-17, 2.7114779367326236e-17, 2.122020616196946e-18, 1.7467136443544747e-17, -1.2953893030191963e-17];
-/// `LN_J64_HI` and `LN_J64_LO` as rows, for [`Emit::lookup_pair`].
-static LN_J64: [[f64; 2]; 47] = super::math_tables::pairs(&LN_J64_HI, &LN_J64_LO);
+/// `LN_J64_HI` and `LN_J64_LO` as rows, for [`Emit::lookup_pair`] (padded to 64 rows).
+static LN_J64: [[f64; 2]; 64] = super::math_tables::pairs(&LN_J64_HI, &LN_J64_LO);
 
 /// ln x as a double-double `(hi, lo)`, relative error < 2^-68, for finite x > 0.
 ///
@@ -1086,6 +1089,14 @@ fn kernel_cos<E: Emit>(e: &mut E, x: E::V, y: E::V, precise: bool) -> E::V {
     e.add(w, a)
 }
 
+/// Whether the small integer `j` (0..=4, the quadrant) is odd: j/2 is then not an integer (NaN: odd).
+fn is_odd_small<E: Emit>(e: &mut E, j: E::V) -> E::M {
+    let h = mulk(e, j, 0.5);
+    let r = round_int(e, h);
+    let same = e.eq(r, h);
+    e.not(same)
+}
+
 /// Lanes whose |x| is beyond the reduction (or inf, NaN): computed by the C library instead.
 fn trig_far<E: Emit>(e: &mut E, x: E::V) -> E::M {
     let ax = e.abs(x);
@@ -1102,11 +1113,7 @@ fn sin_cos<E: Emit>(e: &mut E, x: E::V, phase: f64, mode: Mode, f: Builtin) -> E
     let c = kernel_cos(e, y0, y1, precise);
     let j = addk(e, j, phase);
     // j in 0..=4: 0 sin, 1 cos, 2 −sin, 3 −cos, 4 sin.
-    let odd = {
-        let h = mulk(e, j, 0.5);
-        let hi = is_int(e, h);
-        e.not(hi)
-    };
+    let odd = is_odd_small(e, j);
     let v = e.select(odd, c, s);
     let nv = e.neg(v);
     let two = e.konst(2.0);
@@ -1141,8 +1148,8 @@ pub fn tan<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
     let (j, y0, y1) = trig_reduce(e, x, true);
     let s = kernel_sin(e, y0, y1, precise);
     let c = kernel_cos(e, y0, y1, precise);
-    let h = mulk(e, j, 0.5);
-    let even = is_int(e, h);
+    let odd = is_odd_small(e, j);
+    let even = e.not(odd);
     let t_even = e.div(s, c);
     let nc = e.neg(c);
     let t_odd = e.div(nc, s);

@@ -718,6 +718,21 @@ mod tests {
         assert_eq!(f(Builtin::Select, &[-0.0, 1.0, 4.0]), 4.0);
     }
 
+    /// Precise exp passes x·128/ln 2 (any sign, not an integer) to the lookup: the row must be the nearest
+    /// integer (ties to even) modulo the table's length, and no input may index outside the table.
+    #[test]
+    fn table_index_is_the_rounded_value_modulo_the_length() {
+        for (x, want) in [(0.0, 0), (5.0, 5), (5.5, 6), (6.5, 6), (127.4, 127), (128.0, 0), (-1.0, 127), (-128.0, 0), (-129.6, 126), (-0.5, 0), (-1.5, 126)] {
+            assert_eq!(math::table_index(x, 128), want, "index of {x}");
+        }
+        for k in -300i32..300 {
+            assert_eq!(math::table_index(f64::from(k), 64), k.rem_euclid(64) as usize, "index of {k}");
+        }
+        for x in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e300, -1e300] {
+            assert!(math::table_index(x, 64) < 64, "index of {x}");
+        }
+    }
+
     #[test]
     fn acos_clamps_its_domain() {
         let one_plus = f64::from_bits(1f64.to_bits() + 1);

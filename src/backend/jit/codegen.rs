@@ -585,27 +585,26 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
         let np = self.b.ins().fneg(p);
         (p, self.b.ins().fma(a, b, np))
     }
-    /// Per lane: the index clamped to the table, one 16-byte row load (`F64X2`), then the heads and the tails
-    /// of the lanes' rows gathered by two shuffles (`punpcklqdq`/`punpckhqdq`); in `F64`, two scalar loads.
+    /// The row offsets masked to the table and scaled to bytes in all lanes at once (`pand`, `psllq`: whatever
+    /// `x` holds, the load stays inside the table), then per lane one 16-byte row load (`F64X2`) and the heads
+    /// and tails gathered by two shuffles (`punpcklqdq`/`punpckhqdq`); in `F64`, two scalar loads.
     fn lookup_pair(&mut self, table: &'static [[f64; 2]], x: Value) -> (Value, Value) {
-        if table.is_empty() {
-            self.error = Some(JitError::Internal("lookup in an empty table".into()));
+        if !table.len().is_power_of_two() {
+            self.error = Some(JitError::Internal("lookup in a table whose length is not a power of two".into()));
             return (x, x);
         }
         let magic = L::konst(self.b, math::MAGIC.to_bits());
         let t = self.b.ins().fadd(x, magic);
         let i = L::bitcast(self.b, L::ITY, t);
-        let m = L::iconst(self.b, math::MAGIC.to_bits());
-        let i = self.b.ins().isub(i, m);
+        let m = L::iconst(self.b, table.len() as u64 - 1);
+        let i = self.b.ins().band(i, m);
+        let off = self.b.ins().ishl_imm_u(i, 4);
         let base = self.b.ins().iconst(types::I64, table.as_ptr() as i64);
-        let last = self.b.ins().iconst(types::I64, table.len() as i64 - 1);
         let flags = MemFlagsData::new().with_notrap().with_readonly();
         let mut rows = Vec::with_capacity(usize::from(L::LANES));
         for lane in 0..L::LANES {
-            let il = if L::LANES == 1 { i } else { self.b.ins().extractlane(i, lane) };
-            let il = self.b.ins().umin(il, last);
-            let off = self.b.ins().ishl_imm_u(il, 4);
-            rows.push(self.b.ins().iadd(base, off));
+            let ol = if L::LANES == 1 { off } else { self.b.ins().extractlane(off, lane) };
+            rows.push(self.b.ins().iadd(base, ol));
         }
         if L::LANES == 1 {
             let head = self.b.ins().load(types::F64, flags, rows[0], 0);
