@@ -5,18 +5,14 @@
 //! (`render::shade::ProgramCode`).
 //!
 //! Design. The renderer fills a [`Spec`] per material (eye, lights, the colour uniforms, which geometric
-//! quantities the formula reads, the cut-off) and [`Program::new`] writes, as IR over two `Node::Column`
-//! leaves (the perspective-correct barycentric weights b0, b1 of a pixel) and the triangle's per-call values
-//! ([`TRI_SLOTS`] `Param` slots after the formula's, laid out by [`triangle_params`]): position and normal
-//! (and, for formulas that read directions, tangent) interpolated as v2 + b0·(v0 − v2) + b1·(v1 − v2), a
-//! two-sided triangle's normal turned to the viewer, the view vector and its inverse length, 1/|n|, per light
-//! NL (lit = NL > 0, and the lobe cosine above the cut-off), VL/NH/VH/VR and the local-frame components only
-//! when the formula reads what needs them, the formula itself inlined with those nodes in place of its
-//! `Input`s (each channel of a colour formula, sharing their common nodes through hash-consing), F
-//! non-finite → 0 and counted, and the colour sum I = ka·Ia·C + Σ Il·(kd·NL⁺·C + ks·coef·F·Cs). Lights,
-//! colours and coefficients are constants; the formula's parameters stay `Param` nodes, so changing them needs
-//! no recompilation. One call shades pixels of one triangle; no node reads only triangle slots (checked), so
-//! the JIT's prepared parameter block, computed once per parameter set, never holds a per-triangle value.
+//! quantities the formula reads, the cut-off) and [`Program::new`] writes, as IR over `Node::Column` leaves
+//! (interpolated position, normal and, for formulas that read directions, tangent):
+//! the view vector and its inverse length, 1/|n|, per light NL (lit = NL > 0, and the lobe cosine above the
+//! cut-off), VL/NH/VH/VR and the local-frame components only when the formula reads what needs them, the
+//! formula itself inlined with those nodes in place of its `Input`s (each channel of a colour formula, sharing
+//! their common nodes through hash-consing), F non-finite → 0 and counted, and the colour sum
+//! I = ka·Ia·C + Σ Il·(kd·NL⁺·C + ks·coef·F·Cs). Lights, colours and coefficients are constants; the formula's
+//! parameters stay `Param` nodes, so changing them needs no recompilation.
 //!
 //! Outputs ([`Out`]): r, g, b, and three per-pixel counters (non-finite F, evaluations, cut-off skips), small
 //! integers in f64 that the renderer sums exactly.
@@ -27,37 +23,18 @@
 //! of lanes: a branch on `any(lit)`), and otherwise takes +0 for its outputs — exactly what the selects give
 //! where nothing is lit, so skipping is invisible in the results and both backends agree bit for bit.
 //!
-//! Cost model (per pixel, before F): ~20 flops of interpolation (~30 with the tangent), ~30 flops, two square
-//! roots and two divisions for the view step; per light ~15 flops, one root and one division (point lights),
-//! ~10 more and one root for the half vector; the frame adds ~45 flops and a root per pixel (work that several
-//! light regions need is computed once, outside them). Per call: the triangle's slots are loaded and splatted
-//! once. Inverse lengths are exact `1/sqrt` in f64. Measured: BENCHMARKS.md.
+//! Cost model (per pixel, before F): ~30 flops, two square roots and two divisions for the view step; per
+//! light ~15 flops, one root and one division (point lights), ~10 more and one root for the half vector; the
+//! frame adds ~45 flops and a root per pixel (work that several light regions need is computed once, outside
+//! them). Measured (BENCHMARKS.md): the JIT program ~7 ns per pixel for one light and a cheap formula, of
+//! which the exact inverse lengths are ~25 %. Inverse lengths are exact `1/sqrt` in f64.
 
 use crate::base::span::Span;
 use crate::builtins::{Builtin, Mode};
 use crate::ir::{BinOp, Formula, Input, Ir, Node, NodeId, N_INPUTS};
 
-/// Data columns a program reads: the barycentric weights b0 and b1 of each pixel.
-pub const MAX_COLUMNS: usize = 2;
-
-/// Per-call values of the triangle a call shades, after the formula's parameters ([`Program::tri_base`]):
-/// position, normal and tangent, each as (v2, v0 − v2, v1 − v2) (9 slots), then 1 for a two-sided triangle.
-pub const TRI_SLOTS: usize = 28;
-
-/// The [`TRI_SLOTS`] values of a triangle with vertex positions `pos`, normals `normal` and tangents `tangent`
-/// (the differences are taken here, once per triangle, so every backend interpolates the same numbers).
-pub fn triangle_params(pos: [[f64; 3]; 3], normal: [[f64; 3]; 3], tangent: [[f64; 3]; 3], two_sided: bool) -> [f64; TRI_SLOTS] {
-    let mut out = [0.0; TRI_SLOTS];
-    for (k, v) in [pos, normal, tangent].iter().enumerate() {
-        for c in 0..3 {
-            out[9 * k + c] = v[2][c];
-            out[9 * k + 3 + c] = v[0][c] - v[2][c];
-            out[9 * k + 6 + c] = v[1][c] - v[2][c];
-        }
-    }
-    out[27] = f64::from(u8::from(two_sided));
-    out
-}
+/// Most data columns a program reads: position, normal, tangent (3 each).
+pub const MAX_COLUMNS: usize = 9;
 
 /// The program's outputs, per pixel.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -101,9 +78,6 @@ pub struct Spec {
     pub tangent_rotation: Option<[f64; 2]>,
     /// F is not evaluated where this lobe cosine is below the value.
     pub cutoff: Option<(Input, f64)>,
-    /// Some triangles are drawn from both sides (their slot 27 is 1): the program turns their normal to the
-    /// viewer (~13 operations per pixel, left out when no triangle needs them).
-    pub two_sided: bool,
 }
 
 /// A region of nodes evaluated only when `lit` is non-zero (module doc).
@@ -136,12 +110,10 @@ pub struct Program {
     pub outputs: [NodeId; N_OUTPUTS],
     pub regions: Vec<Region>,
     pub class: Vec<Class>,
-    /// Data columns read: [`MAX_COLUMNS`], or fewer if the program ignores some.
+    /// Data columns read: 6 (position, normal), or 9 with the tangent; fewer if the program ignores some.
     pub columns: usize,
     /// Parameter slots the formula declares.
     pub n_params: usize,
-    /// The first of the triangle's [`TRI_SLOTS`] parameter slots (= `n_params`).
-    pub tri_base: usize,
 }
 
 /// IR construction with the few folds that keep trivial nodes out (×1, +0 with a constant).
@@ -227,41 +199,15 @@ impl Program {
         if !(channels.len() == 1 || channels.len() == 3) {
             return Err(format!("a shading program takes 1 or 3 channels, not {}", channels.len()));
         }
-        let n_params = channels.iter().map(|c| c.params.len()).max().unwrap_or(0);
-        let tri_base = u16::try_from(n_params + TRI_SLOTS).map_err(|_| "too many parameters for a shading program".to_string())? - TRI_SLOTS as u16;
         let mut b = Builder { ir: Ir::new(), s: Span::default() };
-        let (b0, b1) = (b.ir.column(0, Span::default()), b.ir.column(1, Span::default()));
-        let slot = |b: &mut Builder, k: usize| b.ir.param(tri_base + k as u16, Span::default());
-        // a + b0·d0 + b1·d1 per component, from the triangle's slots at `at` (module doc).
-        let lerp = |b: &mut Builder, at: usize| -> [NodeId; 3] {
-            std::array::from_fn(|c| {
-                let (a, d0, d1) = (slot(b, at + c), slot(b, at + 3 + c), slot(b, at + 6 + c));
-                let x = b.mul(b0, d0);
-                let y = b.mul(b1, d1);
-                let ax = b.add(a, x);
-                b.add(ax, y)
-            })
-        };
-        let p = lerp(&mut b, 0);
-        let n = lerp(&mut b, 9);
+        let cols: Vec<NodeId> = (0..MAX_COLUMNS as u16).map(|k| b.ir.column(k, Span::default())).collect();
+        let (p, n) = ([cols[0], cols[1], cols[2]], [cols[3], cols[4], cols[5]]);
         let zero = b.k(0.0);
         let one = b.k(1.0);
         let two = b.k(2.0);
         let eye = b.splat(spec.eye);
-        // The view step: v = eye − p; a two-sided triangle's normal turned to the viewer; 1/|n|, 1/|v|, NV.
+        // The view step: v = eye − p, 1/|n|, 1/|v|, NV.
         let v = b.sub3(eye, p);
-        let n = if spec.two_sided {
-            let facing = b.dot(n, v);
-            let away = b.lt(facing, zero);
-            let two_sided = slot(&mut b, 27);
-            let flip = b.mul(away, two_sided);
-            std::array::from_fn(|c| {
-                let m = b.ir.neg(n[c], Span::default());
-                b.select(flip, m, n[c])
-            })
-        } else {
-            n
-        };
         let nn = b.dot(n, n);
         let inv_n = b.inv_len(nn);
         let vv = b.dot(v, v);
@@ -274,7 +220,7 @@ impl Program {
         let view_light = needs(Input::NH) || needs(Input::VH) || needs(Input::VR);
         // The frame step: T̂ = norm(t − N̂(N̂·t)) (Duff et al.'s tangent of N̂ where t ∥ n), B̂ = N̂ × T̂, turned.
         let frame = spec.tangent_rotation.map(|[c, s]| {
-            let t = lerp(&mut b, 18);
+            let t = [cols[6], cols[7], cols[8]];
             let nh = [b.mul(n[0], inv_n), b.mul(n[1], inv_n), b.mul(n[2], inv_n)];
             let kk = b.dot(nh, t);
             let proj = [b.mul(nh[0], kk), b.mul(nh[1], kk), b.mul(nh[2], kk)];
@@ -445,27 +391,10 @@ impl Program {
             guarded.push((map[at], map[at + 1..at + 1 + o.len()].to_vec()));
             at += 1 + o.len();
         }
-        // The columns the compacted program still reads.
+        // The columns the compacted program still reads (the tangent only when the formula reads directions).
         let columns = ir.nodes().iter().filter_map(|n| if let Node::Column(k) = n { Some(usize::from(*k) + 1) } else { None }).max().unwrap_or(0);
-        let p = Program::with_regions(ir, outputs, guarded, columns, n_params);
-        p.check_triangle_slots()?;
-        Ok(p)
-    }
-
-    /// Refuses a program in which a computed node depends on triangle slots but on no column: the JIT would
-    /// compute it once per parameter set (its prepared block), not once per call.
-    fn check_triangle_slots(&self) -> Result<(), String> {
-        let mut tri = vec![false; self.ir.len()];
-        for id in self.ir.ids() {
-            let node = self.ir.node(id);
-            let mut t = matches!(node, Node::Param(k) if usize::from(*k) >= self.tri_base);
-            node.for_each_arg(|a| t |= tri[a.index()]);
-            tri[id.index()] = t;
-            if t && self.class[id.index()] == Class::Invariant && !matches!(node, Node::Param(_)) {
-                return Err(format!("shading program node t{} depends on the triangle but on no pixel", id.0));
-            }
-        }
-        Ok(())
+        let n_params = channels.iter().map(|c| c.params.len()).max().unwrap_or(0);
+        Ok(Program::with_regions(ir, outputs, guarded, columns, n_params))
     }
 
     /// Classifies the nodes and builds the regions (dropping them all if their order does not allow guarding,
@@ -554,7 +483,7 @@ impl Program {
         let class = (0..len)
             .map(|i| if inv[i] { Class::Invariant } else if outer[i] { Class::Outer } else { Class::Guarded })
             .collect();
-        Program { ir, outputs, regions, class, columns, n_params, tri_base: n_params }
+        Program { ir, outputs, regions, class, columns, n_params }
     }
 
     /// Every root a compiled program depends on (for the code cache key): outputs, then per region its lit

@@ -7,7 +7,7 @@
 //!    edge functions, top-left rule, 1/w depth test), then shade the visible pixels in structure-of-arrays
 //!    spans of up to [`shade::SPAN`] pixels, following each material's [`plan::ShadingPlan`] (computed once
 //!    per frame: which cosines the formula reads, the uniforms, the cut-off) compiled into a shading program
-//!    (one call per triangle and span: [`shade::shade_tile`], [`crate::backend::shading`]), and convert to 8 bits into the
+//!    (one call per span: [`shade::shade_tile`], [`crate::backend::shading`]), and convert to 8 bits into the
 //!    frame; tiles no triangle touches are filled with the background and cost nothing else;
 //! 3. PNG encoding and atomic output ([`image`]).
 //!
@@ -21,8 +21,8 @@
 //! Determinism: every tile is computed from its own bin in scene order and written to its own pixels, and
 //! all counters are integers, so 1 thread and N threads give byte-identical images and equal counts.
 //!
-//! Cost model: shading dominates — per visible pixel the tile scan and grouping and the 8-bit conversion in
-//! Rust (~6.5 ns), then the shading program (interpolation, the inverse lengths, the cosines the formula reads, F where lit, the
+//! Cost model: shading dominates — per visible pixel the tile scan, interpolation, grouping and 8-bit conversion
+//! in Rust (~8 ns), then the shading program (the inverse lengths, the cosines the formula reads, F where lit, the
 //! colour sum: JIT ~7 ns for one light and a cheap formula, plus F's own cost per lit pixel and light; the
 //! interpreter 15–30× that) — then rasterisation (a few edge-function steps per
 //! covered pixel, ~5 ns); setup and binning are per triangle and small; tiles the scene does not touch cost
@@ -295,9 +295,10 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
     let bg = scene.background.to_array().map(|c| opts.transfer.encode(c));
     let plans: Vec<plan::ShadingPlan> = scene.materials.iter().map(|m| plan::ShadingPlan::new(m, scene.ambient, opts.cutoff)).collect();
     let tc = Instant::now();
-    let programs: Vec<Option<shade::ProgramRun>> = plans
+    let programs: Vec<Option<shade::ProgramRun>> = scene
+        .materials
         .iter()
-        .enumerate()
+        .zip(&plans)
         .map(|(m, p)| if opts.program { shade::ProgramRun::new(scene, m, p) } else { None })
         .collect();
     let program_compile = tc.elapsed();
@@ -410,7 +411,7 @@ fn tile_pixels(
     raster::raster_tile(setup, t, &mut sc.gb);
     let c1 = thread_cpu();
     let t1 = Instant::now();
-    let (counts, kernel_wall) = shade::shade_tile(scene, plans, setup, &setup.bins[t], n, sc, transfer, bg);
+    let (counts, kernel_wall) = shade::shade_tile(scene, plans, setup, n, sc, transfer, bg);
     let px = sc.rgb.clone();
     let cov = sc.gb.tri.iter().map(|&t| t != raster::EMPTY).collect();
     let (c2, wall) = (thread_cpu(), t1.elapsed().as_nanos().max(1) as u64);

@@ -28,7 +28,7 @@
 //! a scalar formula's F serves all three channels. Energy normalisation (`coef`) is per channel too.
 //!
 //! The steps are written twice, on purpose: as the shading program ([`crate::backend::shading`], built from
-//! this plan by [`super::shade::spec`]; one lobe IR with the formula inlined, every step (interpolation too)
+//! this plan by [`super::shade::spec`]; one lobe IR with the formula inlined, the steps after interpolation
 //! as IR nodes, run by the interpreter or compiled by the JIT — the path every lobe formula takes), and as
 //! the Rust span loops of `shade.rs` (kernels that are not lobe formulas, e.g. Rust closures, and the
 //! comparison `RenderOptions::program = false`). The program computes inverse lengths as exact `1/sqrt`, the

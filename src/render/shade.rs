@@ -1,22 +1,19 @@
 //! Per-tile shading in structure-of-arrays columns: I = ka·Ia·C + Σ_lights Il·(kd·NL·C + ks·coef·F·Cs).
 //!
-//! Design: the visible pixels of a tile are grouped by triangle ([`group`], a counting sort over the tile's
-//! bin: one pass counts and fills uncovered pixels with the background, one writes each pixel's index and
-//! barycentric weights to its triangle's place), so the columns are written once.
+//! Design: the visible pixels of a tile are grouped by material and cut into spans of up to [`SPAN`] pixels.
+//! In a span every quantity is a column of f64 with one entry per pixel. Position and normal (and the
+//! tangent, for formulas that read directions) are interpolated per run of pixels covered by one triangle
+//! (its attributes are loop constants there); two-sided triangles turn the normal to the viewer.
 //!
-//! For a material whose kernels are lobe formulas, its shading program ([`ProgramRun`]:
-//! [`crate::backend::shading`], compiled once per render) is called per triangle, up to [`SPAN`] pixels a
-//! call, on the barycentric columns with the triangle's vertex data as per-call values; it interpolates
-//! position and normal (and tangent), turns a two-sided triangle's normal to the viewer, and computes the
-//! colour and the counters — the JIT's batched function or the interpreter running the same program.
-//! Otherwise (kernels that are Rust closures, or `RenderOptions::program` off) the span loops run: spans of up
-//! to [`SPAN`] pixels of one material (crossing triangles), position and normal interpolated per run of one
-//! triangle, then every step of the material's [`ShadingPlan`] as one branch-free loop over the columns, which
-//! LLVM vectorises (SSE2 f64x2; the inverse lengths take an f32 estimate and one f64 Newton step); per light
-//! the lit pixels (NL > 0, lobe cosine above the cut-off) are compacted into the kernel's columns and the
-//! kernel is called once for the span with [`Evaluator::eval_batch`], F scattered back (a NaN or ±inf counted
-//! and 0: no light). Both end in the 8-bit conversion. Nothing here allocates in the steady state
-//! ([`Scratch`] is per thread).
+//! Then, for a material whose kernels are lobe formulas, one call of its shading program ([`ProgramRun`]:
+//! [`crate::backend::shading`], compiled once per render) takes those columns to the colour and the counters
+//! — the JIT's batched function or the interpreter running the same program. Otherwise (kernels that are Rust
+//! closures, or `RenderOptions::program` off) every step of the material's [`ShadingPlan`] is one branch-free
+//! loop over the columns, which LLVM vectorises (SSE2 f64x2; the inverse lengths take an f32 estimate and one
+//! f64 Newton step); per light the lit pixels (NL > 0, lobe cosine above the cut-off) are compacted into the
+//! kernel's columns and the kernel is called once for the span with [`Evaluator::eval_batch`], F scattered
+//! back (a NaN or ±inf counted and 0: no light). Both end in the 8-bit conversion. Nothing here
+//! allocates in the steady state ([`Scratch`] is per thread).
 //!
 //! Cost model: see [`super::plan`] and [`crate::backend::shading`]; measured numbers: BENCHMARKS.md.
 
@@ -24,6 +21,7 @@ use super::image::Transfer;
 use super::plan::ShadingPlan;
 use super::raster::{GBuffer, Setup, EMPTY};
 use super::{LightKind, Scene};
+use super::Material;
 use crate::backend::shading::{self, N_OUTPUTS};
 use crate::backend::{Columns, Evaluator};
 use crate::ir::Input;
@@ -73,30 +71,28 @@ impl ProgramCode {
 pub struct ProgramRun {
     code: ProgramCode,
     block: Vec<f64>,
-    /// The material's parameters, padded to the program's first triangle slot.
     params: Vec<f64>,
+    /// The program reads the tangent (columns 6..9).
+    tangent: bool,
 }
 
 impl ProgramRun {
     /// The program `plan` describes for `m` under `scene`'s eye and lights, compiled with the material's
     /// backend and math mode; `None` when the material's kernels are not lobe formulas or compilation failed
     /// (then the span loops shade it, with the same result within rounding).
-    pub fn new(scene: &Scene, material: usize, plan: &ShadingPlan) -> Option<ProgramRun> {
-        let m = scene.materials.get(material)?;
+    pub fn new(scene: &Scene, m: &Material, plan: &ShadingPlan) -> Option<ProgramRun> {
         let src = m.program.as_ref()?;
-        let spec = spec(scene, material, plan);
+        let spec = spec(scene, plan);
         let channels: Vec<&crate::ir::Formula> = src.channels.iter().map(|f| f.as_ref()).collect();
         let program = shading::Program::new(&spec, &channels).ok()?;
         let code = ProgramCode::new(&program, src.backend, src.math).ok()?;
-        let mut params = m.params.clone();
-        params.resize(program.tri_base, f64::NAN);
-        let block = code.prepare(&params);
-        Some(ProgramRun { code, block, params })
+        let block = code.prepare(&m.params);
+        Some(ProgramRun { code, block, params: m.params.clone(), tangent: program.columns > 6 })
     }
 }
 
-/// The shading program's description for material number `material` from its plan (see [`shading::Spec`]).
-pub fn spec(scene: &Scene, material: usize, plan: &ShadingPlan) -> shading::Spec {
+/// The shading program's description from the plan (see [`shading::Spec`]).
+pub fn spec(scene: &Scene, plan: &ShadingPlan) -> shading::Spec {
     let lights = scene
         .lights
         .iter()
@@ -115,7 +111,6 @@ pub fn spec(scene: &Scene, material: usize, plan: &ShadingPlan) -> shading::Spec
         times_nl: plan.times_nl,
         tangent_rotation: plan.directions.then_some(plan.tangent_rotation),
         cutoff: plan.cutoff.map(|c| (c.input, c.cos)),
-        two_sided: scene.objects.iter().any(|o| o.material == material && !o.cull_backfaces),
     }
 }
 
@@ -127,16 +122,8 @@ pub const SPAN: usize = 256;
 #[derive(Default)]
 pub struct Scratch {
     pub gb: GBuffer,
-    /// The visible pixels grouped by triangle ([`group`]): tile-local index and barycentric weights.
-    pix: Vec<u32>,
-    b0: Vec<f64>,
-    b1: Vec<f64>,
-    /// Per triangle of the scene: its position in the tile's bin (entries of the bin's triangles only).
-    local: Vec<u32>,
-    /// Per triangle of the tile's bin: where its pixels start in `pix` (then one past the end).
-    starts: Vec<u32>,
-    /// A program call's parameters: the material's, then the triangle's slots.
-    params: Vec<f64>,
+    /// (material, tile-local pixel index) of the visible pixels, sorted.
+    vis: Vec<(u32, u32)>,
     g: Group,
     /// The tile's 8-bit pixels (row-major, `tw × th × 3`).
     pub rgb: Vec<u8>,
@@ -145,7 +132,8 @@ pub struct Scratch {
 /// The columns of one span of one material's pixels; each is resized to the span's size.
 #[derive(Default)]
 struct Group {
-    /// The triangle of each pixel (its length is the span's).
+    /// Tile-local pixel index and triangle of each pixel.
+    pix: Vec<u32>,
     tri: Vec<u32>,
     b0: Vec<f64>,
     b1: Vec<f64>,
@@ -201,43 +189,52 @@ impl std::ops::AddAssign for ShadeCounts {
     }
 }
 
-/// Shades the tile whose G-buffer is in `sc.gb` (`tw × th` pixels, rasterised from the triangles `bin`) with
-/// the per-material `plans`; the 8-bit result (background where nothing is visible) is left in `sc.rgb`.
-/// Returns the counters and the time spent inside the program or kernel, in nanoseconds.
-#[allow(clippy::too_many_arguments)]
-pub fn shade_tile(scene: &Scene, plans: &[(ShadingPlan, Option<ProgramRun>)], s: &Setup, bin: &[u32], n: usize, sc: &mut Scratch, transfer: Transfer, bg: [u8; 3]) -> (ShadeCounts, u64) {
+/// Shades the tile whose G-buffer is in `sc.gb` (`tw × th` pixels) with the per-material `plans`; the 8-bit
+/// result (background where nothing is visible) is left in `sc.rgb`. Returns the counters and the time
+/// spent inside the kernel, in nanoseconds.
+pub fn shade_tile(scene: &Scene, plans: &[(ShadingPlan, Option<ProgramRun>)], s: &Setup, n: usize, sc: &mut Scratch, transfer: Transfer, bg: [u8; 3]) -> (ShadeCounts, u64) {
     let mut counts = ShadeCounts::default();
     let mut kernel_ns = 0;
-    counts.visible = group(sc, s, bin, n, bg) as u64;
+    sc.vis.clear();
+    let mut mixed = false;
+    for (o, &t) in sc.gb.tri.iter().enumerate() {
+        if t != EMPTY {
+            let m = s.tris[t as usize].material;
+            mixed |= sc.vis.first().is_some_and(|f| f.0 != m);
+            sc.vis.push((m, o as u32));
+        }
+    }
+    // Pixels are pushed in index order, so one material needs no sort.
+    if mixed {
+        sc.vis.sort_unstable();
+    }
+    counts.visible = sc.vis.len() as u64;
+    sc.rgb.resize(n * 3, 0);
+    for p in sc.rgb[..n * 3].chunks_exact_mut(3) {
+        p.copy_from_slice(&bg);
+    }
     let eye = scene.camera.position.to_array();
-    let mut k = 0;
-    while k < bin.len() {
-        let (t, a) = (bin[k], sc.starts[k] as usize);
-        let tri = &s.tris[t as usize];
-        let m = tri.material as usize;
-        let (plan, program) = &plans[m];
-        k += 1;
+    let mut start = 0;
+    while start < sc.vis.len() {
+        let m = sc.vis[start].0;
+        let end = start + sc.vis[start..].iter().take_while(|(mm, _)| *mm == m).count();
+        let (plan, program) = &plans[m as usize];
         if let Some(pr) = program {
-            let e = sc.starts[k] as usize;
-            let arr = |v: &[glam::DVec3; 3]| v.map(|x| x.to_array());
-            let slots = shading::triangle_params(arr(&tri.pos), arr(&tri.normal), arr(&tri.tangent), tri.two_sided);
-            sc.params.clear();
-            sc.params.extend_from_slice(&pr.params);
-            sc.params.extend_from_slice(&slots);
-            for c in (a..e).step_by(SPAN) {
-                let r = c..e.min(c + SPAN);
-                kernel_ns += run_program(&mut sc.g, pr, &sc.params, &sc.b0[r.clone()], &sc.b1[r.clone()], &mut counts);
-                encode(&sc.pix[r], &sc.g.acc, &mut sc.rgb, transfer);
+            for span in sc.vis[start..end].chunks(SPAN) {
+                let g = &mut sc.g;
+                gather(g, span, &sc.gb);
+                if pr.tangent {
+                    surface::<true>(g, s, eye);
+                } else {
+                    surface::<false>(g, s, eye);
+                }
+                kernel_ns += run_program(g, pr, &mut counts);
+                encode(g, &mut sc.rgb, transfer);
             }
+            start = end;
             continue;
         }
-        // The span loops take the following triangles of the same material too (their spans may cross
-        // triangles), so that each span fills the kernel's batch.
-        while k < bin.len() && s.tris[bin[k] as usize].material as usize == m {
-            k += 1;
-        }
-        let e = sc.starts[k] as usize;
-        let mat = &scene.materials[m];
+        let mat = &scene.materials[m as usize];
         // The material's kernels (one, or red, green, blue), without allocating.
         let mut kernels: [&dyn Evaluator; 3] = [mat.evaluator.as_ref(); 3];
         let mut nk = 0;
@@ -245,10 +242,9 @@ pub fn shade_tile(scene: &Scene, plans: &[(ShadingPlan, Option<ProgramRun>)], s:
             kernels[nk] = k;
             nk += 1;
         }
-        for c in (a..e).step_by(SPAN) {
-            let r = c..e.min(c + SPAN);
+        for span in sc.vis[start..end].chunks(SPAN) {
             let g = &mut sc.g;
-            gather(g, r.clone(), &sc.starts, &bin[..k], &sc.b0, &sc.b1);
+            gather(g, span, &sc.gb);
             if plan.directions {
                 surface::<true>(g, s, eye);
                 view(g, eye);
@@ -259,7 +255,7 @@ pub fn shade_tile(scene: &Scene, plans: &[(ShadingPlan, Option<ProgramRun>)], s:
             }
             for (c, a) in g.acc.iter_mut().enumerate() {
                 a.clear();
-                a.resize(r.len(), plan.ambient[c]);
+                a.resize(span.len(), plan.ambient[c]);
             }
             for light in &scene.lights {
                 light_step(g, light.kind, plan.view_light, plan.directions);
@@ -274,62 +270,25 @@ pub fn shade_tile(scene: &Scene, plans: &[(ShadingPlan, Option<ProgramRun>)], s:
                 }
                 colour(g, plan, light.color.to_array());
             }
-            encode(&sc.pix[r], &g.acc, &mut sc.rgb, transfer);
+            encode(g, &mut sc.rgb, transfer);
         }
+        start = end;
     }
     (counts, kernel_ns)
 }
 
-/// Groups the tile's visible pixels by triangle, in bin order (a counting sort: one pass counts, one writes
-/// each pixel's index and barycentric weights to its triangle's place in `sc.pix`, `sc.b0`, `sc.b1`), and
-/// fills the tile's pixels that no triangle covers with the background. Returns the visible pixel count.
-fn group(sc: &mut Scratch, s: &Setup, bin: &[u32], n: usize, bg: [u8; 3]) -> usize {
-    sc.local.resize(s.tris.len(), 0);
-    for (k, &t) in bin.iter().enumerate() {
-        sc.local[t as usize] = k as u32;
-    }
-    sc.starts.clear();
-    sc.starts.resize(bin.len() + 1, 0);
-    sc.rgb.resize(n * 3, 0);
-    let (tri, local) = (&sc.gb.tri[..n], &sc.local);
-    for (&t, px) in tri.iter().zip(sc.rgb.chunks_exact_mut(3)) {
-        if t == EMPTY {
-            px.copy_from_slice(&bg);
-        } else {
-            sc.starts[local[t as usize] as usize + 1] += 1;
-        }
-    }
-    for k in 1..sc.starts.len() {
-        sc.starts[k] += sc.starts[k - 1];
-    }
-    let visible = sc.starts[bin.len()] as usize;
-    let (pix, b0, b1) = (fit(&mut sc.pix, visible), fit(&mut sc.b0, visible), fit(&mut sc.b1, visible));
-    // `starts[k]` serves as triangle k's write cursor and ends at its end, so shift back afterwards.
-    for (o, (&t, w)) in tri.iter().zip(&sc.gb.bary).enumerate() {
-        if t != EMPTY {
-            let k = local[t as usize] as usize;
-            let at = sc.starts[k] as usize;
-            sc.starts[k] += 1;
-            pix[at] = o as u32;
-            b0[at] = w[0];
-            b1[at] = w[1];
-        }
-    }
-    sc.starts.copy_within(0..bin.len(), 1);
-    sc.starts[0] = 0;
-    visible
-}
-
-/// Runs the shading program on the pixels with barycentric weights `b0`, `b1` of one triangle (its slots at
-/// the end of `params`): colours into `g.acc`, counters summed. Returns the nanoseconds spent in the program.
-fn run_program(g: &mut Group, pr: &ProgramRun, params: &[f64], b0: &[f64], b1: &[f64], counts: &mut ShadeCounts) -> u64 {
-    let m = b0.len();
-    let cols: [&[f64]; shading::MAX_COLUMNS] = [b0, b1];
+/// Runs the span's shading program: columns p, n (and t) in, colours into `acc`, counters summed. Returns
+/// the nanoseconds spent in the program.
+fn run_program(g: &mut Group, pr: &ProgramRun, counts: &mut ShadeCounts) -> u64 {
+    let m = g.pix.len();
+    let ([px, py, pz], [nx, ny, nz], [tx, ty, tz]) = (&g.p, &g.n, &g.t);
+    let tk = if pr.tangent { m } else { 0 };
+    let cols: [&[f64]; shading::MAX_COLUMNS] = [&px[..m], &py[..m], &pz[..m], &nx[..m], &ny[..m], &nz[..m], &tx[..tk], &ty[..tk], &tz[..tk]];
     let [r, gg, b] = &mut g.acc;
     let [c0, c1, c2] = &mut g.cnt;
     let mut outs: [&mut [f64]; N_OUTPUTS] = [fit(r, m), fit(gg, m), fit(b, m), fit(c0, m), fit(c1, m), fit(c2, m)];
     let t = Instant::now();
-    pr.code.run(&cols, params, &pr.block, &mut outs, m);
+    pr.code.run(&cols, &pr.params, &pr.block, &mut outs, m);
     let ns = t.elapsed().as_nanos() as u64;
     counts.kernel_calls += 1;
     // Small non-negative integers in f64, so the f64 sums are exact (four partial sums: LLVM vectorises
@@ -356,19 +315,17 @@ fn fit<T: Copy + Default>(v: &mut Vec<T>, m: usize) -> &mut [T] {
     &mut v[..m]
 }
 
-/// The grouped pixels at positions `r` as the span loops' columns: triangle and barycentric weights
-/// (triangle k of `bin` owns positions `starts[k]..starts[k + 1]`).
-fn gather(g: &mut Group, r: std::ops::Range<usize>, starts: &[u32], bin: &[u32], b0: &[f64], b1: &[f64]) {
-    let m = r.len();
-    let tri = fit(&mut g.tri, m);
-    for (k, &t) in bin.iter().enumerate() {
-        let (a, e) = ((starts[k] as usize).max(r.start), (starts[k + 1] as usize).min(r.end));
-        if a < e {
-            tri[a - r.start..e - r.start].fill(t);
-        }
+/// The span's pixel indices, triangles and barycentrics, as columns.
+fn gather(g: &mut Group, span: &[(u32, u32)], gb: &GBuffer) {
+    let m = span.len();
+    let (pix, tri, b0, b1) = (fit(&mut g.pix, m), fit(&mut g.tri, m), fit(&mut g.b0, m), fit(&mut g.b1, m));
+    for (i, &(_, o)) in span.iter().enumerate() {
+        let [u, w] = gb.bary[o as usize];
+        pix[i] = o;
+        tri[i] = gb.tri[o as usize];
+        b0[i] = u;
+        b1[i] = w;
     }
-    fit(&mut g.b0, m).copy_from_slice(&b0[r.clone()]);
-    fit(&mut g.b1, m).copy_from_slice(&b1[r]);
 }
 
 /// 1/√x to ~1e-14 relative without an f64 square root or division, which the f64 loops would otherwise
@@ -384,7 +341,7 @@ fn rsqrt(x: f64) -> f64 {
 /// triangle (its vertices are constants there): a = v2 + b0·(v0 − v2) + b1·(v1 − v2). Two-sided triangles
 /// turn n towards the viewer.
 fn surface<const TAN: bool>(g: &mut Group, s: &Setup, eye: [f64; 3]) {
-    let m = g.tri.len();
+    let m = g.pix.len();
     for c in 0..3 {
         fit(&mut g.p[c], m);
         fit(&mut g.n[c], m);
@@ -440,7 +397,7 @@ fn surface<const TAN: bool>(g: &mut Group, s: &Setup, eye: [f64; 3]) {
 
 /// The view step: v = eye − p, 1/|n|, 1/|v|, NV.
 fn view(g: &mut Group, eye: [f64; 3]) {
-    let m = g.tri.len();
+    let m = g.pix.len();
     let (inv_n, inv_v, nv) = (fit(&mut g.inv_n, m), fit(&mut g.inv_v, m), fit(&mut g.nv, m));
     let [vx, vy, vz] = &mut g.v;
     let (vx, vy, vz) = (fit(vx, m), fit(vy, m), fit(vz, m));
@@ -465,7 +422,7 @@ fn view(g: &mut Group, eye: [f64; 3]) {
 /// the bitangent N̂ × T̂, both turned about N̂ by the material's tangent angle (`rot` = (cos, sin)), and the
 /// view direction's components Vx = V̂·T̂, Vy = V̂·B̂ (Vz is NV).
 fn frame(g: &mut Group, rot: [f64; 2]) {
-    let m = g.tri.len();
+    let m = g.pix.len();
     let (vxo, vyo) = (fit(&mut g.vx, m), fit(&mut g.vy, m));
     let [bx, by, bz] = &mut g.bt;
     let (bx, by, bz) = (fit(bx, m), fit(by, m), fit(bz, m));
@@ -524,7 +481,7 @@ fn light_step(g: &mut Group, kind: LightKind, view_light: bool, dirs: bool) {
 /// `POINT`: `l` is the light's position (l = pos − p, normalised here); else `l` is the unit direction
 /// towards the light. `VL`: also compute V̂·L̂. `DIR`: also L̂·T̂ and L̂·B̂ (the frame step ran).
 fn light_loop<const POINT: bool, const VL: bool, const DIR: bool>(g: &mut Group, l: [f64; 3]) {
-    let m = g.tri.len();
+    let m = g.pix.len();
     let (nl, vl) = (fit(&mut g.nl, m), fit(&mut g.vl, m));
     let (lx, ly) = if DIR { (fit(&mut g.lx, m), fit(&mut g.ly, m)) } else { (&mut g.lx[..0], &mut g.ly[..0]) };
     let ([tx, ty, tz], [bx, by, bz]) = (&g.t, &g.bt);
@@ -556,7 +513,7 @@ fn light_loop<const POINT: bool, const VL: bool, const DIR: bool>(g: &mut Group,
 /// The half step: |L̂ + V̂|² = 2 + 2VL, so NH = (NL + NV)/|L̂ + V̂| and VH = (1 + VL)/|L̂ + V̂| (both 0 where
 /// L = −V and H is undefined, as a zero half vector gives).
 fn half(g: &mut Group) {
-    let m = g.tri.len();
+    let m = g.pix.len();
     let (nh, vh) = (fit(&mut g.nh, m), fit(&mut g.vh, m));
     let (nl, nv, vl) = (&g.nl[..m], &g.nv[..m], &g.vl[..m]);
     for i in 0..m {
@@ -569,7 +526,7 @@ fn half(g: &mut Group) {
 
 /// The reflect step: V̂·R̂ = 2·NL·NV − VL.
 fn reflect(g: &mut Group) {
-    let m = g.tri.len();
+    let m = g.pix.len();
     let vr = fit(&mut g.vr, m);
     let (nl, nv, vl) = (&g.nl[..m], &g.nv[..m], &g.vl[..m]);
     for i in 0..m {
@@ -582,7 +539,7 @@ fn reflect(g: &mut Group) {
 /// and where F is NaN or ±inf — counted per channel: an infinite lobe is a defect, not a highlight).
 /// Returns the nanoseconds spent in the kernels.
 fn kernel(g: &mut Group, plan: &ShadingPlan, kernels: &[&dyn Evaluator], params: &[f64], counts: &mut ShadeCounts) -> u64 {
-    let m = g.tri.len();
+    let m = g.pix.len();
     let nl = &g.nl[..m];
     let idx = fit(&mut g.idx, m);
     let mut lit = 0;
@@ -648,7 +605,7 @@ fn kernel(g: &mut Group, plan: &ShadingPlan, kernels: &[&dyn Evaluator], params:
 /// The colour step for one light: acc += Il·(kd·C·max(NL, 0) + ks·coef·Cs·F). Unlit pixels add exactly +0
 /// (F is 0 there and NL is clamped), so the sum equals skipping them.
 fn colour(g: &mut Group, plan: &ShadingPlan, il: [f64; 3]) {
-    let m = g.tri.len();
+    let m = g.pix.len();
     let nl = &g.nl[..m];
     let [r, gg, b] = &mut g.acc;
     let (r, gg, b) = (&mut r[..m], &mut gg[..m], &mut b[..m]);
@@ -682,16 +639,15 @@ fn colour(g: &mut Group, plan: &ShadingPlan, il: [f64; 3]) {
     }
 }
 
-/// Converts a span's colours `acc` to 8 bits into the tile at the pixels `pix`: one pass over the pixels, each
-/// pixel's three channels converted and stored together (the linear transfer inline; sRGB through
-/// [`Transfer::encode`]).
-fn encode(pix: &[u32], acc: &[Vec<f64>; 3], rgb: &mut [u8], transfer: Transfer) {
-    let m = pix.len();
-    let [r, gg, b] = acc;
+/// Converts the span's colours to 8 bits into the tile: one pass over the pixels, each pixel's three
+/// channels converted and stored together (the linear transfer inline; sRGB through [`Transfer::encode`]).
+fn encode(g: &mut Group, rgb: &mut [u8], transfer: Transfer) {
+    let m = g.pix.len();
+    let [r, gg, b] = &g.acc;
     let (r, gg, b) = (&r[..m], &gg[..m], &b[..m]);
     match transfer {
         Transfer::Linear => {
-            for (k, &o) in pix.iter().enumerate() {
+            for (k, &o) in g.pix.iter().enumerate() {
                 let o = o as usize * 3;
                 if let Some(px) = rgb.get_mut(o..o + 3) {
                     px.copy_from_slice(&[linear8(r[k]), linear8(gg[k]), linear8(b[k])]);
@@ -699,7 +655,7 @@ fn encode(pix: &[u32], acc: &[Vec<f64>; 3], rgb: &mut [u8], transfer: Transfer) 
             }
         }
         Transfer::Srgb => {
-            for (k, &o) in pix.iter().enumerate() {
+            for (k, &o) in g.pix.iter().enumerate() {
                 let o = o as usize * 3;
                 if let Some(px) = rgb.get_mut(o..o + 3) {
                     px.copy_from_slice(&[transfer.encode(r[k]), transfer.encode(gg[k]), transfer.encode(b[k])]);
@@ -735,9 +691,9 @@ mod tests {
             vals.extend([h, h.next_up(), h.next_down()]);
         }
         vals.extend([-1.0, -0.0, 1.0 + 1e-12, 7.0, f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e-300]);
-        let pix: Vec<u32> = (0..vals.len() as u32).collect();
+        let mut g = Group { pix: (0..vals.len() as u32).collect(), acc: [vals.clone(), vals.clone(), vals.clone()], ..Group::default() };
         let mut rgb = vec![0u8; vals.len() * 3];
-        encode(&pix, &[vals.clone(), vals.clone(), vals.clone()], &mut rgb, Transfer::Linear);
+        encode(&mut g, &mut rgb, Transfer::Linear);
         for (i, v) in vals.iter().enumerate() {
             assert_eq!(rgb[i * 3], Transfer::Linear.encode(*v), "{v}");
         }

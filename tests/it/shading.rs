@@ -22,45 +22,28 @@ fn load(path: &Path, size: usize, backend: Backend, math: Mode) -> r::Scene {
     scene::load_scene(path, &opts, &LobeCompiler { backend, math }).unwrap_or_else(|d| panic!("{}", d.render(false)))
 }
 
-fn rng(mut seed: u64) -> impl FnMut() -> f64 {
-    move || {
+/// Pseudo-random data columns: positions near the origin, normals and tangents of any direction (some
+/// degenerate: zero normals, tangents parallel to the normal), so the special cases run too.
+fn columns(n: usize) -> Vec<Vec<f64>> {
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let mut next = move || {
         seed ^= seed << 13;
         seed ^= seed >> 7;
         seed ^= seed << 17;
         (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    let mut cols: Vec<Vec<f64>> = (0..shading::MAX_COLUMNS).map(|_| (0..n).map(|_| next()).collect()).collect();
+    for i in (0..n).step_by(37) {
+        for c in &mut cols[3..6] {
+            c[i] = 0.0;
+        }
     }
-}
-
-/// Pseudo-random barycentric columns (b0, b1), some outside the triangle.
-fn columns(n: usize) -> Vec<Vec<f64>> {
-    let mut next = rng(0x2545_f491_4f6c_dd1d);
-    (0..shading::MAX_COLUMNS).map(|_| (0..n).map(|_| 0.5 + 0.6 * next()).collect()).collect()
-}
-
-/// Triangles near the origin with normals and tangents of any direction, and the special cases: zero
-/// normals, tangents parallel to the normal, a two-sided triangle facing away from the viewer.
-fn triangles() -> Vec<[f64; shading::TRI_SLOTS]> {
-    let mut next = rng(0x9e37_79b9_7f4a_7c15);
-    let mut v3 = |s: f64| -> [[f64; 3]; 3] { std::array::from_fn(|_| std::array::from_fn(|_| s * next())) };
-    let mut out = vec![];
-    for k in 0..4 {
-        let (p, n, t) = (v3(1.0), v3(1.0), v3(1.0));
-        out.push(shading::triangle_params(p, n, t, k % 2 == 1));
+    for i in (5..n).step_by(41) {
+        for c in 0..3 {
+            cols[6 + c][i] = cols[3 + c][i];
+        }
     }
-    let p = v3(1.0);
-    out.push(shading::triangle_params(p, [[0.0; 3]; 3], v3(1.0), false));
-    let n = v3(1.0);
-    out.push(shading::triangle_params(p, n, n, false));
-    out.push(shading::triangle_params(p, [[0.0, 0.0, -1.0]; 3], v3(1.0), true));
-    out
-}
-
-/// The program's parameters for one call: the material's, padded to the triangle slots, then `tri`.
-fn call_params(p: &Program, params: &[f64], tri: &[f64]) -> Vec<f64> {
-    let mut v = params.to_vec();
-    v.resize(p.tri_base, f64::NAN);
-    v.extend_from_slice(tri);
-    v
+    cols
 }
 
 fn run(c: &Compiled, cols: &[Vec<f64>], params: &[f64]) -> Vec<Vec<f64>> {
@@ -82,30 +65,23 @@ fn interpreted_and_compiled_programs_agree_bit_for_bit_on_every_scene() {
     for path in scenes() {
         for math in [Mode::Precise, Mode::Fast] {
             let s = load(&path, 32, Backend::Jit, math);
-            for (mi, m) in s.materials.iter().enumerate() {
+            for m in &s.materials {
                 for cutoff in [false, true] {
                     let plan = r::plan::ShadingPlan::new(m, s.ambient, cutoff);
-                    let mut spec = r::shade::spec(&s, mi, &plan);
-                    // The special case runs on every scene.
-                    spec.two_sided = true;
+                    let spec = r::shade::spec(&s, &plan);
                     let src = m.program.as_ref().expect("lobe formulas have a program source");
                     let ch: Vec<&lobe::ir::Formula> = src.channels.iter().map(|f| f.as_ref()).collect();
                     let p = Program::new(&spec, &ch).unwrap();
                     let i = Compiled::new(&p, Backend::Interp, math).unwrap();
                     let j = Compiled::new(&p, Backend::Jit, math).unwrap();
-                    let mut evals = 0.0;
-                    for tri in triangles() {
-                        let params = call_params(&p, &m.params, &tri);
-                        let (a, b) = (run(&i, &cols, &params), run(&j, &cols, &params));
-                        for (k, (x, y)) in a.iter().zip(&b).enumerate() {
-                            for (e, (u, v)) in x.iter().zip(y).enumerate() {
-                                assert!(u.to_bits() == v.to_bits(), "{}: {math:?} output {k} element {e}: interp {u} vs jit {v}", path.display());
-                            }
+                    let (a, b) = (run(&i, &cols, &m.params), run(&j, &cols, &m.params));
+                    for (k, (x, y)) in a.iter().zip(&b).enumerate() {
+                        for (e, (u, v)) in x.iter().zip(y).enumerate() {
+                            assert!(u.to_bits() == v.to_bits(), "{}: {math:?} output {k} element {e}: interp {u} vs jit {v}", path.display());
                         }
-                        evals += a[4].iter().sum::<f64>();
                     }
                     // Something was shaded (the colour columns are not all ambient).
-                    assert!(evals > 0.0 || !plan.specular, "{}: no evaluation", path.display());
+                    assert!(a[4].iter().sum::<f64>() > 0.0 || !plan.specular, "{}: no evaluation", path.display());
                 }
             }
         }
@@ -172,18 +148,15 @@ fn the_column_leaf_runs_through_every_backend() {
         times_nl: false,
         tangent_rotation: None,
         cutoff: None,
-        two_sided: false,
     };
     let one = lobe::front::parse("one", "1").unwrap();
     let p = Program::new(&spec, &[&one]).unwrap();
     let cols = columns(9);
-    let tri = triangles()[0];
-    let params = call_params(&p, &[], &tri);
     for backend in [Backend::Interp, Backend::Jit] {
-        let out = run(&Compiled::new(&p, backend, Mode::Precise).unwrap(), &cols, &params);
+        let out = run(&Compiled::new(&p, backend, Mode::Precise).unwrap(), &cols, &[]);
         for e in 0..9 {
-            // Directional light along +z: the colour is max(n̂·z, 0), n interpolated from the triangle's slots.
-            let n: [f64; 3] = std::array::from_fn(|c| tri[9 + c] + cols[0][e] * tri[12 + c] + cols[1][e] * tri[15 + c]);
+            // Directional light along +z: the colour is max(n̂·z, 0).
+            let n = [cols[3][e], cols[4][e], cols[5][e]];
             let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
             let want = if n[2] / len > 0.0 { n[2] / len } else { 0.0 };
             assert!((out[0][e] - want).abs() < 1e-12 || (want == 0.0 && out[0][e] == 0.0), "{backend:?} {e}: {} vs {want}", out[0][e]);
@@ -204,7 +177,7 @@ fn values_regions_share_are_computed_once_per_pixel() {
     let m = &s.materials[0];
     let plan = r::plan::ShadingPlan::new(m, s.ambient, false);
     let f = m.program.as_ref().unwrap().channels[0].clone();
-    let p = Program::new(&r::shade::spec(&s, 0, &plan), &[&f]).unwrap();
+    let p = Program::new(&r::shade::spec(&s, &plan), &[&f]).unwrap();
     assert_eq!(p.regions.len(), 3, "three lights, three guarded regions");
     let sqrt = |n: &Node| matches!(n, Node::Call(Builtin::Sqrt, _));
     let varying_roots = p.ir.nodes().iter().zip(&p.class).filter(|(n, c)| sqrt(n) && **c != shading::Class::Invariant).count();
@@ -217,4 +190,3 @@ fn values_regions_share_are_computed_once_per_pixel() {
     let vectors = 5;
     assert_eq!(count(&listing), vectors * (varying_roots + p.regions.len() * count(&batch)), "{listing}");
 }
-

@@ -6,8 +6,7 @@
 //! the batched kernel's loop (F64X2 body, one F64 tail element), preceded, when F calls the math library or
 //! there are several lights, by a loop handling four vectors per step, their nodes interleaved ([`interleaves`]);
 //! the same translator (so the lanes, the hoisted invariants and the prepared parameter block, and the inline
-//! math library are the kernel's), reading `Node::Column(k)` from `cols[k]` (the triangle's per-call slots,
-//! `Param` nodes after the formula's, splatted once per call and loaded at each use) and storing each output to
+//! math library are the kernel's), reading `Node::Column(k)` from `cols[k]` and storing each output to
 //! `outs[o]`. A guarded region is a branch on `any(lit)` over the step's lanes: its nodes are translated in a
 //! block of their own, and its outputs reach the rest through the join block's parameters (+0 when the branch
 //! is not taken); the outer values it reads are pinned before the first region that reads them
@@ -86,20 +85,7 @@ pub(in crate::backend::jit) fn build(
     let (first, count) = anchors(p);
     let slot = b.create_sized_stack_slot(StackSlotData::new(StackSlotKind::ExplicitSlot, (16 * STEP * count.max(1)) as u32, 4));
     let anchor = b.ins().stack_addr(ptr, slot, 0);
-    // The triangle's slots, splatted once per call into a stack slot the steps load them from.
-    let tri: Vec<(NodeId, i32)> = ir
-        .ids()
-        .filter(|id| matches!(ir.node(*id), Node::Param(k) if usize::from(*k) >= p.tri_base))
-        .enumerate()
-        .map(|(j, id)| (id, 16 * j as i32))
-        .collect();
-    let tslot = b.create_sized_stack_slot(StackSlotData::new(StackSlotKind::ExplicitSlot, (16 * tri.len().max(1)) as u32, 4));
-    let tri_at = b.ins().stack_addr(ptr, tslot, 0);
-    for &(id, off) in &tri {
-        let v = splats[id.index()].ok_or_else(|| JitError::Internal(format!("triangle slot t{} not splatted", id.0)))?;
-        b.ins().store(mem(), v, tri_at, off);
-    }
-    let step = Step { cx: &cx, p, bases, outs: &out_bases, anchor, first: &first, stride: 16 * count as i32, tri: &tri, tri_at };
+    let step = Step { cx: &cx, p, bases, outs: &out_bases, anchor, first: &first, stride: 16 * count as i32 };
     // With transcendental F or several lights: STEP vectors per step while that many remain, then
     // batch_loop's one vector and one element.
     let start = if interleaves(p) {
@@ -153,10 +139,6 @@ struct Step<'a> {
     first: &'a [Vec<(NodeId, i32)>],
     /// Bytes of the anchor slot one copy uses.
     stride: i32,
-    /// The triangle's slots and their offsets in the slot at `tri_at`, splatted: loaded at each use, so the
-    /// load folds into the operation instead of a splat kept in (or spilled from) a register.
-    tri: &'a [(NodeId, i32)],
-    tri_at: Value,
 }
 
 impl LoopBody for Step<'_> {
@@ -168,14 +150,6 @@ impl LoopBody for Step<'_> {
 impl Step<'_> {
     /// Node `id` translated in copy `c` (the copies' tables are swapped in and out of one translator).
     fn on<L: Lanes>(&self, b: &mut FunctionBuilder, k: &mut Copies, c: usize, id: NodeId) -> Result<Value, JitError> {
-        // Each triangle slot an operand reads is loaded just before its use (the load folds into it).
-        let mut args = vec![];
-        self.p.ir.node(id).for_each_arg(|a| args.push(a));
-        for a in args {
-            if let Some(&(_, off)) = self.tri.iter().find(|(t, _)| *t == a) {
-                k.vals[c][a.index()] = Some(b.ins().load(L::TY, mem(), self.tri_at, off));
-            }
-        }
         let mut t = self.cx.translator::<L>(b, std::mem::take(&mut k.vals[c]), k.src[c]);
         let v = t.node(id);
         k.vals[c] = std::mem::take(&mut t.vals);
