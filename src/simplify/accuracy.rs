@@ -49,8 +49,9 @@
 //! # Cost model
 //! [`cost`] counts live nodes with weights fitted to JIT timings on x86-64 (BENCHMARKS.md, 2026-11-30: five
 //! extra divisions add ~3.4 ns to Beckmann's 8.5 ns, a libm exp ~5 ns): `+ − ×`, abs, min, max 1; clamp 2;
-//! `/` and sqrt 3; fma 1; math-library calls (exp, ln, trig) 20, expmuldiv 48 (measured: Beckmann's kernel
-//! 8.4 → 16.3 ns with it, its rare scaled branch included), pow 60 (pow(NH, e) with e live took 5.0× the
+//! `/` and sqrt 3; fma 1; math-library calls (exp, ln, trig) 20, expmuldiv 40 (measured: Beckmann's and
+//! Ward's kernels take 1.5–1.6× the unrewritten ones with it, its four compares being most of the difference),
+//! pow 60 (pow(NH, e) with e live took 5.0× the
 //! ns of the 14-multiplication chain for NH¹⁰⁰⁰); leaves and negation 0.
 //! It ranks candidates; the kernel's run time, measured in `lobe bench`, is what the README reports.
 
@@ -213,7 +214,7 @@ pub fn cost(f: &Formula) -> f64 {
                 Builtin::Lt | Builtin::Le | Builtin::Eq | Builtin::Ne | Builtin::Select => 2.0,
                 Builtin::Floor => 6.0,
                 Builtin::Pow => 60.0,
-                Builtin::ExpMulDiv => 48.0,
+                Builtin::ExpMulDiv => 40.0,
                 _ => 20.0,
             },
         }

@@ -258,7 +258,7 @@ fn scaled_exp_keeps_denormal_results() {
         ("beckmann", 0.5, 0.5, 3.773371444627538e-2, 0.9772191696069679),
         ("ward", 1.2276886869217682e-284, 5.740923431144541e-1, 4.420180284241315e-2, 0.7007159467187803),
     ] {
-        // expmuldiv costs ~2× these kernels (BENCHMARKS.md): the default 1.3× budget declines it.
+        // expmuldiv costs 1.5–1.6× these kernels (BENCHMARKS.md, 2026-12-01): the default 1.3× budget declines it.
         let pass = PassOptions { max_cost: 2.0, ..PassOptions::default() };
         let k = lobe::compile_formula(load(stem), &robust::with_pass(jit_options(&[]), pass)).unwrap();
         let f = load(stem);
