@@ -1213,8 +1213,11 @@ pub mod logic {
 /// Why: in `exp(a)·b/c` written out, e^a underflows (a < −708) or overflows before b/c rescales it, so a
 /// Beckmann or Ward value near 1e-311 comes out as a denormal with few bits, or 0. The common case is that
 /// product as written (exp, a multiplication, a division: ≤ 1.6 ulp when e^a, e^a·b and the result are all
-/// normal). Lanes where one of them is not take [`Emit::rare`]'s branch to [`exp_mul_div_scaled`], where no
-/// intermediate leaves the normal range. Cost: exp + ~12 operations, plus the rare branch where taken.
+/// normal), checked by four compares. Lanes where a check fails take [`Emit::rare`]'s branch; there a zero
+/// result whose true value is certainly below the denormals (Beckmann at small NH: most such lanes) is kept,
+/// and only the rest take a second branch to [`exp_mul_div_scaled`], where no intermediate leaves the normal
+/// range. Cost: exp + ~10 operations; in scalar kernels the compares are what costs (BENCHMARKS.md,
+/// 2026-12-01), the branches only where lanes take them.
 ///
 /// Special values follow `exp(a)*b/c`, except that a zero exponential (a < −745.2) times an infinite b/c is 0:
 /// an infinite b/c stands for an overflowed finite factor, and the accuracy pass forms this builtin only from
@@ -1223,23 +1226,40 @@ pub fn exp_mul_div<E: Emit>(e: &mut E, a: E::V, b: E::V, c: E::V) -> E::V {
     let x = exp(e, a);
     let t = e.mul(x, b);
     let r = e.div(t, c);
-    let normal = |e: &mut E, v: E::V| {
-        let av = e.abs(v);
-        let lo = e.konst(f64::MIN_POSITIVE);
-        let hi = e.konst(f64::MAX);
-        let above = e.le(lo, av);
-        let below = e.le(av, hi);
-        e.and(above, below)
-    };
-    let nx = normal(e, x);
-    let nt = normal(e, t);
-    let nr = normal(e, r);
-    let ok = e.and(nx, nt);
-    let ok = e.and(ok, nr);
+    // Four compares: e^a is normal above a = ln 2^-1022 (an overflowed e^a or t makes r ±∞ or NaN, so neither
+    // needs an upper bound), t at least the smallest normal, r normal.
+    let lo = e.konst(-708.39);
+    let ok = e.le(lo, a);
+    let min = e.konst(f64::MIN_POSITIVE);
+    let at = e.abs(t);
+    let t_lo = e.le(min, at);
+    let ok = e.and(ok, t_lo);
+    let ar = e.abs(r);
+    let r_lo = e.le(min, ar);
+    let max = e.konst(f64::MAX);
+    let r_hi = e.le(ar, max);
+    let ok = e.and(ok, r_lo);
+    let ok = e.and(ok, r_hi);
     let bad = e.not(ok);
     e.rare(bad, r, &mut |e| {
-        let s = exp_mul_div_scaled(e, a, b, c);
-        e.select(bad, s, r)
+        // A zero r is right where the true value is below half the smallest denormal: log2|e^a·b/c| < a·log2 e +
+        // E(b) + 1 − E(c) with E the exponent field (a denormal c reads as 2^-1023 but may be 2^51 smaller,
+        // hence the margin). Most lanes that get here are such (Beckmann at small NH), and skip the scaling.
+        let fb = e.exponent_field(b);
+        let fc = e.exponent_field(c);
+        let d = e.sub(fb, fc);
+        let al = mulk(e, a, std::f64::consts::LOG2_E);
+        let s = e.add(al, d);
+        let tiny = ltk(e, s, -1130.0);
+        let zero = e.konst(0.0);
+        let rz = e.eq(r, zero);
+        let vanishes = e.and(tiny, rz);
+        let keep = e.or(ok, vanishes);
+        let need = e.not(keep);
+        e.rare(need, r, &mut |e| {
+            let s = exp_mul_div_scaled(e, a, b, c);
+            e.select(need, s, r)
+        })
     })
 }
 

@@ -23,8 +23,12 @@
 //!   The same cost (three multiplications and two additions either way).
 //!
 //! - `compensated-base`: `pow(a + b, y)` (y live) → `p + p·y·(e/s)` with s = a + b, p = pow(s, y) and e the
-//!   exact rounding error of the sum (2Sum, five additions): pow amplifies its base's relative error y times,
-//!   so F_ST's `(n/a·(c − 1) + 1)^a` at a = 1000 lost 500 ulp where its condition is 1. Cost ~12.
+//!   rounding error of the sum and of the `+ − × /` below it ([`rounding_error`]): pow amplifies its base's
+//!   relative error y times, so F_ST's `(n/a·(c − 1) + 1)^a` at a = 1000 lost 500 ulp where its condition is
+//!   1, and at a = 640 still 16 ulp with the sum's error alone (n/a and c − 1 round too). Cost ~12–20.
+//! - `compensated-sum`: `a + b` where a and b may have opposite signs (by range) → `(a + b) + e`, e as above,
+//!   one site at a time: the error terms are first order, so they are exact to ~2⁻¹⁰⁶ relative to the terms,
+//!   and the cancellation no longer amplifies the terms' roundings. Cost ~3 per `+ − × /` below the sum.
 //!
 //! - `scaled-exp`: a product/quotient tree with an `exp(E)` factor, `exp(E)·n/(d₁·…·d_k)`, →
 //!   `expmuldiv(E, n/(d₁·…·d_{k−1}), d_k)` (the builtin applies every power of two last, so e^E may be far
@@ -49,13 +53,17 @@
 //! # Cost model
 //! [`cost`] counts live nodes with weights fitted to JIT timings on x86-64 (BENCHMARKS.md, 2026-11-30: five
 //! extra divisions add ~3.4 ns to Beckmann's 8.5 ns, a libm exp ~5 ns): `+ − ×`, abs, min, max 1; clamp 2;
-//! `/` and sqrt 3; fma 1; math-library calls (exp, ln, trig) 20, expmuldiv 48 (measured: Beckmann's kernel
-//! 8.4 → 16.3 ns with it, its rare scaled branch included), pow 60 (pow(NH, e) with e live took 5.0× the
+//! `/` and sqrt 3; fma 1; math-library calls (exp, ln, trig) 20, expmuldiv 40 (measured: Beckmann's and
+//! Ward's kernels take 1.5–1.6× the unrewritten ones with it, its four compares being most of the difference),
+//! pow 60 (pow(NH, e) with e live took 5.0× the
 //! ns of the 14-multiplication chain for NH¹⁰⁰⁰); leaves and negation 0.
+//! Nodes that read no input (parameters only) cost nothing: the kernels compute them once per parameter set
+//! (the prepared block, hoisted out of batch loops).
 //! It ranks candidates; the kernel's run time, measured in `lobe bench`, is what the README reports.
 
 use super::range::Range;
 use super::{node_ranges, Policy};
+use crate::base::span::Span;
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Ir, Node, NodeId};
 
@@ -66,13 +74,14 @@ pub enum Rule {
     QuotientChain,
     FactorQuadratic,
     CompensatedBase,
+    CompensatedSum,
     ScaledExp,
     SmithG1,
     ScaledNorm,
 }
 
 impl Rule {
-    pub const ALL: [Rule; 7] = [
+    pub const ALL: [Rule; 8] = [
         Rule::SplitSqrt,
         Rule::SmithG1,
         // Before quotient-chain, which flattens (x/√s)·(x/√s) into x·x/√s/√s, where scaled-norm cannot see it.
@@ -81,6 +90,7 @@ impl Rule {
         Rule::ScaledExp,
         Rule::FactorQuadratic,
         Rule::CompensatedBase,
+        Rule::CompensatedSum,
     ];
 
     pub fn name(self) -> &'static str {
@@ -89,6 +99,7 @@ impl Rule {
             Rule::QuotientChain => "quotient-chain",
             Rule::FactorQuadratic => "factor-quadratic",
             Rule::CompensatedBase => "compensated-base",
+            Rule::CompensatedSum => "compensated-sum",
             Rule::ScaledExp => "scaled-exp",
             Rule::SmithG1 => "smith-g1",
             Rule::ScaledNorm => "scaled-norm",
@@ -101,7 +112,8 @@ impl Rule {
             Rule::SplitSqrt => "sqrt(a*b) as sqrt(a)*sqrt(b): no underflow of a*b",
             Rule::QuotientChain => "products/quotients reassociated: divide by each tiny-or-huge factor separately",
             Rule::FactorQuadratic => "A*c^2 + (1 - A)*c as c*(1 + A*(c - 1)): no cancellation near c = 1",
-            Rule::CompensatedBase => "pow(a + b, y) corrected by the rounding error of a + b: no amplification by y",
+            Rule::CompensatedBase => "pow(a + b, y) corrected by the rounding errors of a + b and its terms: no amplification by y",
+            Rule::CompensatedSum => "a + b that may cancel, plus the rounding errors of the sum and the terms below it (fma, 2Sum)",
             Rule::ScaledExp => "exp(a)*b/c as expmuldiv(a, b, c): no underflow of exp(a) before b/c rescales it",
             Rule::SmithG1 => "Smith G1 2/(1 + sqrt(1 + A*tan^2)) as 2c/(c + sqrt(c^2 + A*(1 - c^2))), c/c cancelled: no inf/inf at grazing c",
             Rule::ScaledNorm => "x/sqrt(a^2 + b^2 + ...) with a tiny vector scaled by 2^600 first: no zero length",
@@ -116,14 +128,15 @@ impl Rule {
 
     /// [`Rule::apply`] at one site only (the `k`-th place the rule matches, in arena order), so the chooser
     /// can keep it where it helps and leave it where it only costs (Beckmann: the product whose exp factor
-    /// vanishes, not the exponent's own quotient). Only `quotient-chain` has sites; the others apply everywhere.
+    /// vanishes, not the exponent's own quotient). `quotient-chain` and `compensated-sum` have sites, `scaled-exp` variants; the others apply everywhere.
     pub fn apply_at(self, f: &Formula, site: Option<usize>) -> Option<Formula> {
         let ranges = node_ranges(f, &Policy::default());
         let (ir, root, fired) = match self {
             Rule::SplitSqrt => split_sqrt(f, &ranges),
             Rule::QuotientChain => quotient_chain(f, &ranges, site),
             Rule::FactorQuadratic => factor_quadratic(f),
-            Rule::CompensatedBase => compensated_base(f),
+            Rule::CompensatedBase => compensated_base(f, &ranges),
+            Rule::CompensatedSum => compensated_sum(f, &ranges, site.unwrap_or(0)),
             Rule::ScaledExp => scaled_exp(f, &ranges, site.unwrap_or(0)),
             Rule::SmithG1 => smith_g1(f, &ranges),
             Rule::ScaledNorm => scaled_norm(f),
@@ -200,8 +213,21 @@ pub fn compensated_powers(f: &Formula) -> Option<Formula> {
 
 /// Static cost of a formula's live nodes (module docs).
 pub fn cost(f: &Formula) -> f64 {
+    // Nodes that read no input are the prepared block's, computed once per parameter set, not per point.
+    let mut live = vec![false; f.ir.len()];
+    for id in f.ir.ids() {
+        let n = f.ir.node(id);
+        let mut l = matches!(n, Node::Input(_) | Node::Column(_));
+        n.for_each_arg(|a| l |= live[a.index()]);
+        live[id.index()] = l;
+    }
     let mut c = 0.0;
     f.ir.walk(f.root, |n| {
+        let mut l = matches!(n, Node::Input(_) | Node::Column(_));
+        n.for_each_arg(|a| l |= live[a.index()]);
+        if !l {
+            return;
+        }
         c += match n {
             Node::Const(_) | Node::Input(_) | Node::Param(_) | Node::Column(_) | Node::Neg(_) => 0.0,
             Node::Binary(BinOp::Div, ..) => 3.0,
@@ -213,7 +239,7 @@ pub fn cost(f: &Formula) -> f64 {
                 Builtin::Lt | Builtin::Le | Builtin::Eq | Builtin::Ne | Builtin::Select => 2.0,
                 Builtin::Floor => 6.0,
                 Builtin::Pow => 60.0,
-                Builtin::ExpMulDiv => 48.0,
+                Builtin::ExpMulDiv => 40.0,
                 _ => 20.0,
             },
         }
@@ -555,8 +581,133 @@ fn scaled_norm(f: &Formula) -> (Ir, NodeId, bool) {
     })
 }
 
+fn magnitude(r: Range) -> (f64, f64) {
+    let lo = if r.lo > 0.0 { r.lo } else if r.hi < 0.0 { -r.hi } else { 0.0 };
+    (lo, r.lo.abs().max(r.hi.abs()))
+}
+
+/// The exact error `a + b − s` of the rounded sum `s = a + b` (new-arena nodes): Fast2Sum (two operations)
+/// when the ranges show |a| ≥ |b| (or the reverse), else Knuth's 2Sum (five), exact whatever the magnitudes.
+fn sum_error(ir: &mut Ir, (a, ra): (NodeId, Range), (b, rb): (NodeId, Range), s: NodeId, sp: Span) -> NodeId {
+    let (big, small) = if magnitude(ra).0 >= magnitude(rb).1 {
+        (Some(a), b)
+    } else if magnitude(rb).0 >= magnitude(ra).1 {
+        (Some(b), a)
+    } else {
+        (None, a)
+    };
+    if let Some(big) = big {
+        let z = ir.bin(BinOp::Sub, s, big, sp);
+        return ir.bin(BinOp::Sub, small, z, sp);
+    }
+    let bb = ir.bin(BinOp::Sub, s, a, sp);
+    let ab = ir.bin(BinOp::Sub, s, bb, sp);
+    let ea = ir.bin(BinOp::Sub, a, ab, sp);
+    let eb = ir.bin(BinOp::Sub, b, bb, sp);
+    ir.bin(BinOp::Add, ea, eb, sp)
+}
+
+fn add_opt(ir: &mut Ir, a: Option<NodeId>, b: Option<NodeId>, sp: Span) -> Option<NodeId> {
+    match (a, b) {
+        (Some(a), Some(b)) => Some(ir.bin(BinOp::Add, a, b, sp)),
+        (a, b) => a.or(b),
+    }
+}
+
+/// The rounding error of old node `x` (exact value of its expression tree minus its f64 value), to first order,
+/// as new-arena nodes (`s` is `x`'s node there): each `+ −` contributes its 2Sum error, each `×` its fma
+/// remainder, each `/` its exact remainder over the divisor, plus the operands' errors propagated through, down
+/// to leaves and calls (which count as exact). Once per node (`memo`), so a shared term carries the same error
+/// wherever it is used: an error compensated on one side of a cancellation only would break it. `None`: exact.
+/// Valid while no product underflows.
+fn rounding_error(f: &Formula, ranges: &[Range], ir: &mut Ir, map: &[NodeId], (x, s): (NodeId, NodeId), memo: &mut [Option<Option<NodeId>>], sp: Span) -> Option<NodeId> {
+    if let Some(e) = memo[x.index()] {
+        return e;
+    }
+    let mut err = |ir: &mut Ir, y: NodeId| rounding_error(f, ranges, ir, map, (y, map[y.index()]), memo, sp);
+    let e = match *f.ir.node(x) {
+        Node::Neg(a) => err(ir, a).map(|e| ir.neg(e, sp)),
+        Node::Binary(op @ (BinOp::Add | BinOp::Sub), a, b) => {
+            let (ea, eb) = (err(ir, a), err(ir, b));
+            let (ra, mut rb) = (ranges[a.index()], ranges[b.index()]);
+            let mut bv = map[b.index()];
+            let eb = if op == BinOp::Sub {
+                bv = ir.neg(bv, sp);
+                rb = Range::new(-rb.hi, -rb.lo, rb.nan, false);
+                eb.map(|e| ir.neg(e, sp))
+            } else {
+                eb
+            };
+            let e = sum_error(ir, (map[a.index()], ra), (bv, rb), s, sp);
+            let e2 = add_opt(ir, ea, eb, sp);
+            add_opt(ir, Some(e), e2, sp)
+        }
+        Node::Binary(op @ (BinOp::Mul | BinOp::Div), a, b) => {
+            let (av, bv) = (map[a.index()], map[b.index()]);
+            let (ea, eb) = (err(ir, a), err(ir, b));
+            let ns = ir.neg(s, sp);
+            if op == BinOp::Mul {
+                // (a + ea)(b + eb) − ab ≈ ea·b + a·eb, ab − s exact in one fma.
+                let mut e = ir.call(Builtin::Fma, &[av, bv, ns], sp);
+                if let Some(ea) = ea {
+                    e = ir.call(Builtin::Fma, &[ea, bv, e], sp);
+                }
+                if let Some(eb) = eb {
+                    e = ir.call(Builtin::Fma, &[av, eb, e], sp);
+                }
+                return memoize(memo, x, Some(e));
+            }
+            // (a + ea)/(b + eb) − q ≈ (a − q·b + ea − q·eb)/b, a − q·b exact in one fma.
+            let mut r = ir.call(Builtin::Fma, &[ns, bv, av], sp);
+            if let Some(ea) = ea {
+                r = ir.bin(BinOp::Add, r, ea, sp);
+            }
+            if let Some(eb) = eb {
+                r = ir.call(Builtin::Fma, &[ns, eb, r], sp);
+            }
+            Some(ir.bin(BinOp::Div, r, bv, sp))
+        }
+        _ => None,
+    };
+    memoize(memo, x, e)
+}
+
+fn memoize(memo: &mut [Option<Option<NodeId>>], x: NodeId, e: Option<NodeId>) -> Option<NodeId> {
+    memo[x.index()] = Some(e);
+    e
+}
+
+// a + b → (a + b) + e, e the first-order rounding error of the sum and the `+ − × /` below it, where a and b
+// may have opposite signs (the sum may cancel: F_dsh, F_SCOS2); one site at a time
+fn compensated_sum(f: &Formula, ranges: &[Range], only: usize) -> (Ir, NodeId, bool) {
+    let mut site = 0;
+    rebuild(f, |ir, map, id, n| {
+        let Node::Binary(op @ (BinOp::Add | BinOp::Sub), a, b) = n else { return None };
+        let (ra, rb) = (ranges[a.index()], ranges[b.index()]);
+        let (pa, na) = (ra.hi > 0.0, ra.lo < 0.0);
+        let (pb, nb) = (rb.hi > 0.0, rb.lo < 0.0);
+        let cancels = match op {
+            BinOp::Add => (pa && nb) || (na && pb),
+            _ => (pa && pb) || (na && nb),
+        };
+        // A constant operand alone rounds once: nothing below it to carry.
+        let deep = |x: NodeId| matches!(f.ir.node(x), Node::Binary(..));
+        if !cancels || !(deep(a) || deep(b)) {
+            return None;
+        }
+        site += 1;
+        if site != only + 1 {
+            return None;
+        }
+        let sp = f.ir.span(id);
+        let sum = ir.bin(op, map[a.index()], map[b.index()], sp);
+        let e = rounding_error(f, ranges, ir, map, (id, sum), &mut vec![None; f.ir.len()], sp)?;
+        Some(ir.bin(BinOp::Add, sum, e, sp))
+    })
+}
+
 // pow(s, y) with s = a + b (or max(a + b, 0)) → p + p·y·(e/s), p = pow(s, y), e = a + b − s exactly (2Sum)
-fn compensated_base(f: &Formula) -> (Ir, NodeId, bool) {
+fn compensated_base(f: &Formula, ranges: &[Range]) -> (Ir, NodeId, bool) {
     rebuild(f, |ir, map, id, n| {
         let Node::Call(Builtin::Pow, [base, y, _]) = n else { return None };
         // Constant exponents become chains (or compensated chains); this is for pow calls.
@@ -567,16 +718,13 @@ fn compensated_base(f: &Formula) -> (Ir, NodeId, bool) {
             Node::Call(Builtin::Max, [s, z, _]) if f.ir.node(z).as_const() == Some(0.0) => s,
             _ => base,
         };
-        let Node::Binary(BinOp::Add, a, b) = *f.ir.node(sum) else { return None };
+        if !matches!(f.ir.node(sum), Node::Binary(BinOp::Add, ..)) {
+            return None;
+        }
         let sp = f.ir.span(id);
-        let (a, b, s, y) = (map[a.index()], map[b.index()], map[sum.index()], map[y.index()]);
-        let sub = |ir: &mut Ir, x, z| ir.bin(BinOp::Sub, x, z, sp);
-        // 2Sum (Knuth): e = (a − (s − b')) + (b − b'), b' = s − a; exact whatever the magnitudes.
-        let bb = sub(ir, s, a);
-        let ab = sub(ir, s, bb);
-        let ea = sub(ir, a, ab);
-        let eb = sub(ir, b, bb);
-        let e = ir.bin(BinOp::Add, ea, eb, sp);
+        // The sum's own rounding error and, to first order, its addends' (F_ST's n/a·(c − 1)).
+        let e = rounding_error(f, ranges, ir, map, (sum, map[sum.index()]), &mut vec![None; f.ir.len()], sp)?;
+        let (s, y) = (map[sum.index()], map[y.index()]);
         // pow(s + e, y) = pow(s, y)·(1 + y·e/s + O(e²)); s ≤ 0 (clamped to a zero base) divides by the smallest
         // normal instead, where p = 0 (or NaN for a negative base, as before) and the correction is finite.
         let tiny = ir.konst(f64::MIN_POSITIVE, sp);
@@ -728,6 +876,26 @@ mod tests {
         assert!(t.contains("? 4.149515568880993e180 : 1") && t.contains("t5 / sqrt(t4 * t4 + t5 * t5)"), "{t}");
         assert!(Rule::ScaledNorm.apply(&parse("let x = Lx + Vx\nlet z = Lz + Vz\nNH / sqrt(x*x + z*z)")).is_none());
         assert!(Rule::ScaledNorm.apply(&parse("let x = Lx + Vx\nx / sqrt(x*x)")).is_none());
+    }
+
+    #[test]
+    fn compensated_sum_carries_the_errors_below_a_cancelling_sum() {
+        let f = parse("let q = -1.1/(n*NH - n - 2*NH)\nq*n*(NH - 1) + 1");
+        // The sites in arena order: n·c − n, then − 2c, then the final + 1.
+        let t = Rule::CompensatedSum.apply_at(&f, Some(2)).unwrap().to_program_text();
+        assert!(Rule::CompensatedSum.apply_at(&f, Some(3)).is_none());
+        // The sum's 2Sum error, the products' and the quotient's fma remainders, c − 1's Fast2Sum error.
+        assert!(t.matches("fma(").count() >= 4, "{t}");
+        // Same-signed terms do not cancel: no site. (Accuracy: tests/it/robust.rs.)
+        assert!(Rule::CompensatedSum.apply(&parse("NH*NL + NV")).is_none());
+    }
+
+    #[test]
+    fn cost_leaves_out_the_prepared_block() {
+        // n/a reads no input: computed once per parameter set, so it costs nothing per point.
+        let (a, b) = (parse("param a = 16 in 1..1000\nn/a*NH"), parse("param a = 16 in 1..1000\nn*NH"));
+        assert_eq!(cost(&a), cost(&b));
+        assert_eq!(cost(&parse("NH/NL")), cost(&parse("NH*NL")) + 2.0);
     }
 
     #[test]
