@@ -1,4 +1,4 @@
-//! `lobe render SCENE [-o out.png|out.ppm] [--size 1024] [--set n=200] [--backend jit|interp] [--threads N] [--stats [--json]]`
+//! `lobe render SCENE [-o out.png] [--size 1024] [--set n=200] [--backend jit|interp] [--threads N] [--stats [--json]]`
 
 use super::args::{self, BackendArg, Json, Output, Params};
 use super::common::CliError;
@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 #[derive(clap::Args, Debug)]
-#[command(mut_arg("output", args::help("Output image, .png or .ppm (default: the scene's name with .png, in the current directory)")))]
+#[command(mut_arg("output", args::help("Output PNG (default: the scene's name with .png, in the current directory)")))]
 #[command(mut_arg("set", args::help("Parameter values for every material that declares them, e.g. `n=200`")))]
 pub struct RenderArgs {
     /// Scene file (.toml); see examples/scenes/.
@@ -66,10 +66,8 @@ pub fn default_output(scene: &Path) -> PathBuf {
 pub fn run(a: &RenderArgs) -> Result<(), CliError> {
     let out = a.out.path.clone().unwrap_or_else(|| default_output(&a.scene));
     // Refuse a bad output path before doing any work, and write nothing unless everything succeeds.
-    let format = image::Format::of(&out).map_err(|e| {
-        CliError::hint(format!("`{}`: render writes PNG or PPM images, not .{e}", out.display()), "name the output .png, or .ppm (uncompressed: no encode time)")
-    })?;
-    a.out.force.check(&out, image::is_lobe_image)?;
+    a.out.force.check(&out, image::is_lobe_png)?;
+    Output::png_only(&out)?;
     let opts = LoadOptions { size: a.size, set: a.set.list(), formula_override: None };
     let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: a.backend.kind, math: a.backend.math.mode })?;
     let ropts = RenderOptions {
@@ -83,9 +81,9 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
     let t0 = Instant::now();
     let (frame, stats) = r::render(&sc, &ropts).map_err(CliError::msg)?;
     let t = Instant::now();
-    let bytes = frame.image.encode(format).map_err(CliError::msg)?;
+    let png = frame.image.encode_png().map_err(CliError::msg)?;
     let encode = t.elapsed();
-    a.out.force.write(&out, &bytes, image::is_lobe_image)?;
+    a.out.force.write(&out, &png, image::is_lobe_png)?;
     let wall = t0.elapsed();
     if stats.nan > 0 {
         eprintln!("warning: {} kernel evaluations returned NaN or ±inf and were shaded as no light", stats.nan);

@@ -6,8 +6,7 @@
 //! physically based pipeline would display. NaN channels become 0.
 //!
 //! PNG encoding is one serial pass (the "up" filter, then fdeflate's fastest mode); measured against the
-//! render in BENCHMARKS.md. Where even that outweighs a large render, binary PPM (P6) is the same pixels with a
-//! text header and no compression: a copy of the bytes.
+//! render in BENCHMARKS.md.
 //!
 //! Output is written by [`crate::base::output`]: atomically, regular files only, and an existing file that is
 //! not a PNG lobe wrote is refused unless forced.
@@ -48,29 +47,6 @@ pub struct Image {
 /// The tEXt key/value lobe writes into every PNG, so it can recognise its own files before overwriting.
 pub const PNG_SOFTWARE: (&str, &str) = ("Software", "lobe");
 
-/// The start of every PPM lobe writes: the P6 magic and a comment line that marks the file as lobe's.
-const PPM_MAGIC: &[u8] = b"P6\n# Software: lobe\n";
-
-/// The image file formats lobe writes, chosen by the output's extension.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Format {
-    Png,
-    /// Binary PPM (P6): no compression, so no encode time; several times PNG's size.
-    Ppm,
-}
-
-impl Format {
-    /// The format an output path names (`.png`, `.ppm`, any case; no extension is PNG), or the extension.
-    pub fn of(path: &std::path::Path) -> Result<Format, String> {
-        match path.extension().and_then(|e| e.to_str()) {
-            None => Ok(Format::Png),
-            Some(e) if e.eq_ignore_ascii_case("png") => Ok(Format::Png),
-            Some(e) if e.eq_ignore_ascii_case("ppm") => Ok(Format::Ppm),
-            Some(e) => Err(e.to_string()),
-        }
-    }
-}
-
 impl Image {
     pub fn new(width: usize, height: usize) -> Image {
         Image { width, height, rgb: vec![0; width * height * 3] }
@@ -84,24 +60,6 @@ impl Image {
     pub fn set(&mut self, x: usize, y: usize, c: [u8; 3]) {
         let o = (y * self.width + x) * 3;
         self.rgb[o..o + 3].copy_from_slice(&c);
-    }
-
-    /// The file's bytes in `format`.
-    pub fn encode(&self, format: Format) -> Result<Vec<u8>, String> {
-        match format {
-            Format::Png => self.encode_png(),
-            Format::Ppm => Ok(self.encode_ppm()),
-        }
-    }
-
-    /// Binary PPM bytes (P6, maxval 255) with lobe's comment line.
-    pub fn encode_ppm(&self) -> Vec<u8> {
-        let header = format!("{} {}\n255\n", self.width, self.height);
-        let mut out = Vec::with_capacity(PPM_MAGIC.len() + header.len() + self.rgb.len());
-        out.extend_from_slice(PPM_MAGIC);
-        out.extend_from_slice(header.as_bytes());
-        out.extend_from_slice(&self.rgb);
-        out
     }
 
     /// PNG bytes (8-bit RGB) with lobe's tEXt marker.
@@ -143,11 +101,6 @@ impl Image {
 }
 
 /// Is `bytes` a PNG carrying lobe's tEXt marker?
-/// Whether `bytes` are a PNG or PPM lobe wrote (see [`is_lobe_png`]; a PPM by its comment line).
-pub fn is_lobe_image(bytes: &[u8]) -> bool {
-    bytes.starts_with(PPM_MAGIC) || is_lobe_png(bytes)
-}
-
 pub fn is_lobe_png(bytes: &[u8]) -> bool {
     let dec = png::Decoder::new(std::io::Cursor::new(bytes));
     match dec.read_info() {
@@ -189,25 +142,6 @@ mod tests {
         assert!(is_lobe_png(&bytes));
         assert_eq!(Image::decode_png(&bytes).unwrap(), im);
         assert!(!is_lobe_png(b"hello"));
-    }
-
-    #[test]
-    fn ppm_is_the_pixels_behind_a_marked_header() {
-        let mut im = Image::new(3, 2);
-        im.set(2, 1, [1, 2, 3]);
-        let bytes = im.encode(Format::Ppm).unwrap();
-        let head = b"P6\n# Software: lobe\n3 2\n255\n";
-        assert_eq!(&bytes[..head.len()], head);
-        assert_eq!(&bytes[head.len()..], &im.rgb[..]);
-        assert!(is_lobe_image(&bytes) && !is_lobe_png(&bytes));
-        assert!(is_lobe_image(&im.encode_png().unwrap()));
-        // Another program's PPM (no lobe comment) is not lobe's to overwrite.
-        assert!(!is_lobe_image(b"P6\n3 2\n255\n\0\0\0"));
-        use std::path::Path;
-        assert_eq!(Format::of(Path::new("a.PPM")), Ok(Format::Ppm));
-        assert_eq!(Format::of(Path::new("a.png")), Ok(Format::Png));
-        assert_eq!(Format::of(Path::new("a")), Ok(Format::Png));
-        assert_eq!(Format::of(Path::new("a.jpg")), Err("jpg".to_string()));
     }
 
     #[test]

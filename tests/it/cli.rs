@@ -106,33 +106,6 @@ fn export_refuses_to_clobber_a_file_it_did_not_write() {
 }
 
 #[test]
-fn render_writes_ppm_with_the_png_pixels_and_guards_foreign_ppm() {
-    let dir = crate::scratch_dir("cli", "ppm");
-    let (png, ppm) = (dir.join("a.png"), dir.join("a.ppm"));
-    for out in [&png, &ppm] {
-        let o = lobe(&["render", "examples/scenes/paper_sphere.toml", "--size", "48", "-q", "-o", &out.display().to_string()], None);
-        assert!(o.status.success(), "{}", stderr(&o));
-    }
-    let im = lobe::render::image::Image::decode_png(&std::fs::read(&png).unwrap()).unwrap();
-    let bytes = std::fs::read(&ppm).unwrap();
-    let head = b"P6\n# Software: lobe\n48 48\n255\n";
-    assert_eq!(&bytes[..head.len()], head);
-    assert_eq!(&bytes[head.len()..], &im.rgb[..], "the PPM holds the PNG's pixels");
-    assert!(im.rgb.iter().any(|&c| c > 0), "the sphere is lit");
-    // lobe replaces its own PPM without --force, but not another program's.
-    let again = lobe(&["render", "examples/scenes/paper_sphere.toml", "--size", "48", "-q", "-o", &ppm.display().to_string()], None);
-    assert!(again.status.success(), "{}", stderr(&again));
-    let theirs = dir.join("theirs.ppm");
-    std::fs::write(&theirs, b"P6\n1 1\n255\n\x01\x02\x03").unwrap();
-    let o = lobe(&["render", "examples/scenes/paper_sphere.toml", "--size", "48", "-o", &theirs.display().to_string()], None);
-    assert_clean_error(&o, "foreign ppm", "not overwriting");
-    assert_eq!(std::fs::read(&theirs).unwrap(), b"P6\n1 1\n255\n\x01\x02\x03");
-    let o = lobe(&["render", "examples/scenes/paper_sphere.toml", "--size", "48", "-o", &dir.join("a.tiff").display().to_string()], None);
-    assert_clean_error(&o, "tiff", ".ppm");
-    let _ = std::fs::remove_dir_all(&dir);
-}
-
-#[test]
 fn normalize_bakes_the_exact_coefficient() {
     // Phong at n = 10: coef = (n + 2) / 2π, so the normalised value at VR = 1 is exactly that.
     let o = lobe(&["eval", "examples/brdfs/phong.brdf", "--set", "n=10", "--at", "VR=1", "--normalize", "--json"], None);
