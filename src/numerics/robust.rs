@@ -36,7 +36,9 @@
 //! value is finite, since those are wrong answers, not imprecise ones — and up to the cost of the `pow`-call
 //! form for `compensated-power` (large baked integer powers as compensated chains): a baked exponent then never
 //! costs more than the live formula, which calls pow, and agrees with it within a few ulp instead of the plain
-//! chain's hundreds. Each trial is reported with what it bought.
+//! chain's hundreds. Each trial is reported with what it bought. A rule applied everywhere that was dropped as
+//! no more accurate is tried once more after a later rule was kept: two defects at the same points (a zero
+//! normalize length and an underflowing 1/(NL·NV)) each hide the other's fix.
 //!
 //! Cost: one truth evaluation per point (1–5 µs for a catalogue formula in release) plus one interpreter
 //! evaluation per point and candidate, plus the condition estimate (two truth evaluations per read input) at the
@@ -451,7 +453,20 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
     }
     let mut k = 0;
     let mut i = 0;
-    while i < tries.len() {
+    let mut second_round = false;
+    loop {
+        if i == tries.len() {
+            // A rule applied everywhere may have been dropped only because another defect hid its gain (the
+            // explorer Cook–Torrance's facing pairs need both scaled-norm and a quotient chain): once, after a
+            // later rule was kept, those rules are tried again on the result.
+            let retry = retries(&trials);
+            if second_round || retry.is_empty() {
+                break;
+            }
+            second_round = true;
+            tries.extend(retry.into_iter().filter_map(|n| Rule::ALL.iter().find(|r| r.name() == n).map(|r| (r.name(), r.describe(), None))));
+            continue;
+        }
         let (name, describe, _) = tries[i];
         let rule = Rule::ALL.iter().copied().find(|r| r.name() == name);
         // quotient-chain and compensated-sum go site by site, scaled-exp variant by variant (Rule::apply_at); the others apply
@@ -505,6 +520,19 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
         }
     }
     Outcome { formula: cur, before, after: cur_stats, cost_before, cost_after: cur_cost, trials, points: n }
+}
+
+/// The everywhere-applied rules (not site by site) dropped as no more accurate before some later trial was kept.
+fn retries(trials: &[Trial]) -> Vec<&'static str> {
+    let Some(last_kept) = trials.iter().rposition(|t| t.kept) else { return vec![] };
+    let mut names: Vec<&'static str> = trials[..last_kept]
+        .iter()
+        .filter(|t| !t.kept && !t.reason.starts_with("site ") && t.reason == "no more accurate on the sample")
+        .filter(|t| Rule::ALL.iter().any(|r| r.name() == t.rule))
+        .map(|t| t.rule)
+        .collect();
+    names.dedup();
+    names
 }
 
 /// The accuracy pass as the compile step's chooser ([`crate::FormulaChooser`]).
