@@ -359,6 +359,18 @@ impl Ir {
         (out, r)
     }
 
+    /// Per node, whether it reads no input and no column, directly or through its operands: constants,
+    /// parameters and work on them only, which the kernels compute once per parameter set.
+    pub fn invariant(&self) -> Vec<bool> {
+        let mut inv = vec![false; self.nodes.len()];
+        for (i, n) in self.nodes.iter().enumerate() {
+            let mut all = !matches!(n, Node::Input(_) | Node::Column(_));
+            n.for_each_arg(|a| all &= inv[a.index()]);
+            inv[i] = all;
+        }
+        inv
+    }
+
     /// Inputs read by the expression rooted at `root`.
     pub fn used_inputs(&self, root: NodeId) -> InputSet {
         let mut set = InputSet::default();

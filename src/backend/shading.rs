@@ -401,13 +401,7 @@ impl Program {
     /// which the construction above never produces).
     fn with_regions(ir: Ir, outputs: [NodeId; N_OUTPUTS], guarded: Vec<(NodeId, Vec<NodeId>)>, columns: usize, n_params: usize) -> Program {
         let len = ir.len();
-        let mut inv = vec![false; len];
-        for id in ir.ids() {
-            let node = ir.node(id);
-            let mut all = !matches!(node, Node::Column(_) | Node::Input(_));
-            node.for_each_arg(|a| all &= inv[a.index()]);
-            inv[id.index()] = all;
-        }
+        let inv = ir.invariant();
         // Deduplicated regions whose outputs all vary (a region of invariant values guards nothing).
         let mut guarded: Vec<(NodeId, Vec<NodeId>)> = guarded.into_iter().filter(|(_, o)| o.iter().all(|x| !inv[x.index()])).collect();
         guarded.sort_by_key(|(_, o)| o.iter().max().copied());

@@ -1324,11 +1324,11 @@ fn exp_mul_div_scaled<E: Emit>(e: &mut E, a: E::V, b: E::V, c: E::V) -> E::V {
     let big = e.not(big);
     let f = select_k(e, big, f64::INFINITY, er);
     let low = ltk(e, a, -745.2);
-    let f = select_k(e, low, 0.0, f);
+    let f = e.zero_where(low, f);
     let f = e.select(nan, a, f);
     let s = e.mul(bc, f);
     let bc_ok = e.eq(bc, bc);
     let z = e.and(low, bc_ok);
-    let s = select_k(e, z, 0.0, s);
+    let s = e.zero_where(z, s);
     e.select(normal, r, s)
 }

@@ -464,7 +464,7 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
                 break;
             }
             second_round = true;
-            tries.extend(retry.into_iter().filter_map(|n| Rule::ALL.iter().find(|r| r.name() == n).map(|r| (r.name(), r.describe(), None))));
+            tries.extend(retry.into_iter().map(|r| (r.name(), r.describe(), None)));
             continue;
         }
         let (name, describe, _) = tries[i];
@@ -496,7 +496,7 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
             _ => base_budget,
         };
         let (kept, mut reason) = if !better(&stats, &cur_stats) {
-            (false, "no more accurate on the sample".to_string())
+            (false, NOT_BETTER.to_string())
         } else if c > budget {
             (false, format!("more accurate but costs {:.2}× the fastest form (budget {:.2}×)", c / cost_before, budget / cost_before))
         } else {
@@ -522,17 +522,14 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
     Outcome { formula: cur, before, after: cur_stats, cost_before, cost_after: cur_cost, trials, points: n }
 }
 
-/// The everywhere-applied rules (not site by site) dropped as no more accurate before some later trial was kept.
-fn retries(trials: &[Trial]) -> Vec<&'static str> {
+/// A trial's reason when it measured no more accurate than the current best.
+const NOT_BETTER: &str = "no more accurate on the sample";
+
+/// The rules applied everywhere (a site-by-site trial's reason starts "site k:") dropped as no more accurate
+/// before the last trial that was kept, in the order they were tried.
+fn retries(trials: &[Trial]) -> Vec<Rule> {
     let Some(last_kept) = trials.iter().rposition(|t| t.kept) else { return vec![] };
-    let mut names: Vec<&'static str> = trials[..last_kept]
-        .iter()
-        .filter(|t| !t.kept && !t.reason.starts_with("site ") && t.reason == "no more accurate on the sample")
-        .filter(|t| Rule::ALL.iter().any(|r| r.name() == t.rule))
-        .map(|t| t.rule)
-        .collect();
-    names.dedup();
-    names
+    trials[..last_kept].iter().filter(|t| t.reason == NOT_BETTER).filter_map(|t| Rule::ALL.iter().copied().find(|r| r.name() == t.rule)).collect()
 }
 
 /// The accuracy pass as the compile step's chooser ([`crate::FormulaChooser`]).

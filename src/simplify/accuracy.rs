@@ -214,37 +214,24 @@ pub fn compensated_powers(f: &Formula) -> Option<Formula> {
 /// Static cost of a formula's live nodes (module docs).
 pub fn cost(f: &Formula) -> f64 {
     // Nodes that read no input are the prepared block's, computed once per parameter set, not per point.
-    let mut live = vec![false; f.ir.len()];
-    for id in f.ir.ids() {
-        let n = f.ir.node(id);
-        let mut l = matches!(n, Node::Input(_) | Node::Column(_));
-        n.for_each_arg(|a| l |= live[a.index()]);
-        live[id.index()] = l;
-    }
-    let mut c = 0.0;
-    f.ir.walk(f.root, |n| {
-        let mut l = matches!(n, Node::Input(_) | Node::Column(_));
-        n.for_each_arg(|a| l |= live[a.index()]);
-        if !l {
-            return;
-        }
-        c += match n {
-            Node::Const(_) | Node::Input(_) | Node::Param(_) | Node::Column(_) | Node::Neg(_) => 0.0,
-            Node::Binary(BinOp::Div, ..) => 3.0,
-            Node::Binary(..) => 1.0,
-            Node::Call(b, _) => match b {
-                Builtin::Sqrt => 3.0,
-                Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Fma => 1.0,
-                Builtin::Clamp => 2.0,
-                Builtin::Lt | Builtin::Le | Builtin::Eq | Builtin::Ne | Builtin::Select => 2.0,
-                Builtin::Floor => 6.0,
-                Builtin::Pow => 60.0,
-                Builtin::ExpMulDiv => 40.0,
-                _ => 20.0,
-            },
-        }
-    });
-    c
+    let inv = f.ir.invariant();
+    let uses = f.ir.use_counts(f.root);
+    let weight = |n: &Node| match n {
+        Node::Const(_) | Node::Input(_) | Node::Param(_) | Node::Column(_) | Node::Neg(_) => 0.0,
+        Node::Binary(BinOp::Div, ..) => 3.0,
+        Node::Binary(..) => 1.0,
+        Node::Call(b, _) => match b {
+            Builtin::Sqrt => 3.0,
+            Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Fma => 1.0,
+            Builtin::Clamp => 2.0,
+            Builtin::Lt | Builtin::Le | Builtin::Eq | Builtin::Ne | Builtin::Select => 2.0,
+            Builtin::Floor => 6.0,
+            Builtin::Pow => 60.0,
+            Builtin::ExpMulDiv => 40.0,
+            _ => 20.0,
+        },
+    };
+    f.ir.ids().filter(|id| uses[id.index()] > 0 && !inv[id.index()]).map(|id| weight(f.ir.node(id))).sum()
 }
 
 /// Rebuilds `f` node by node through `rw`, which returns the new node for an old one given the map so far.
@@ -369,7 +356,7 @@ fn product_lists(f: &Formula, max: usize) -> Lists {
 }
 
 /// The product of `xs` (mapped to the new arena), `None` when empty.
-fn product(ir: &mut Ir, map: &[NodeId], xs: &[NodeId], s: crate::base::span::Span) -> Option<NodeId> {
+fn product(ir: &mut Ir, map: &[NodeId], xs: &[NodeId], s: Span) -> Option<NodeId> {
     let mut it = xs.iter().map(|x| map[x.index()]);
     let first = it.next()?;
     Some(it.fold(first, |acc, x| ir.bin(BinOp::Mul, acc, x, s)))
@@ -391,21 +378,22 @@ fn quotient_chain(f: &Formula, ranges: &[Range], only: Option<usize>) -> (Ir, No
         if only.is_some_and(|k| k + 1 != site) {
             return None;
         }
-        let s = f.ir.span(id);
-        // The whole numerator first (in a BRDF the factor that vanishes, exp(−1/x²), is there, and it must meet
-        // the divisions as 0, not as ∞·0), then the safe divisors at once, then each unsafe divisor.
-        let mut v = match product(ir, map, num, s) {
-            Some(v) => v,
-            None => ir.konst(1.0, s),
-        };
-        if let Some(d) = product(ir, map, &safe_den, s) {
-            v = ir.bin(BinOp::Div, v, d, s);
-        }
-        for d in unsafe_den {
-            v = ir.bin(BinOp::Div, v, map[d.index()], s);
-        }
-        Some(v)
+        Some(divide_apart(ir, map, num, &safe_den, &unsafe_den, f.ir.span(id)))
     })
+}
+
+/// `num / safe_den / unsafe_den₁ / …` (new-arena nodes): the whole numerator first (in a BRDF the factor that
+/// vanishes, exp(−1/x²), is there, and it must meet the divisions as 0, not as ∞·0), then the safe divisors at
+/// once, then each divisor that may be tiny or huge on its own.
+fn divide_apart(ir: &mut Ir, map: &[NodeId], num: &[NodeId], safe_den: &[NodeId], unsafe_den: &[NodeId], s: Span) -> NodeId {
+    let mut v = product(ir, map, num, s).unwrap_or_else(|| ir.konst(1.0, s));
+    if let Some(d) = product(ir, map, safe_den, s) {
+        v = ir.bin(BinOp::Div, v, d, s);
+    }
+    for d in unsafe_den {
+        v = ir.bin(BinOp::Div, v, map[d.index()], s);
+    }
+    v
 }
 
 // exp(E)·n₁·…/(d₁·…·d_k) → expmuldiv(E, n₁·…/(d₁·…·d_{k−1}), d_k)   (variant 0; 1: dividing by each d_i in
@@ -531,16 +519,8 @@ fn cancel_positive(f: &Formula) -> (Ir, NodeId, bool) {
         if !cancelled {
             return None;
         }
-        let s = f.ir.span(id);
         let (safe_den, unsafe_den): (Vec<NodeId>, Vec<NodeId>) = den.iter().partition(|d| safe(ranges[d.index()]));
-        let mut v = product(ir, map, &num, s).unwrap_or_else(|| ir.konst(1.0, s));
-        if let Some(d) = product(ir, map, &safe_den, s) {
-            v = ir.bin(BinOp::Div, v, d, s);
-        }
-        for d in unsafe_den {
-            v = ir.bin(BinOp::Div, v, map[d.index()], s);
-        }
-        Some(v)
+        Some(divide_apart(ir, map, &num, &safe_den, &unsafe_den, f.ir.span(id)))
     })
 }
 

@@ -677,13 +677,7 @@ pub(super) struct Plan {
 impl Plan {
     pub(super) fn new(ir: &Ir, root: NodeId) -> Plan {
         let n = root.index() + 1;
-        let mut inv = vec![false; ir.len()];
-        for id in ir.ids() {
-            let node = ir.node(id);
-            let mut all = !matches!(node, Node::Input(_) | Node::Column(_));
-            node.for_each_arg(|a| all &= inv.get(a.index()).copied().unwrap_or(false));
-            inv[id.index()] = all;
-        }
+        let inv = ir.invariant();
         let mut needed = vec![false; ir.len()];
         for id in ir.ids().take(n) {
             if !inv[id.index()] {
