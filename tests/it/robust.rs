@@ -22,6 +22,15 @@ fn robust_kernel(stem: &str, set: &[(&str, f64)]) -> Kernel {
     lobe::compile_formula(load(stem), &robust::with_pass(jit_options(set), PassOptions::default())).unwrap()
 }
 
+/// A BRDF Explorer example file, compiled on the JIT as is and through the accuracy pass with `pass`.
+fn explorer(stem: &str, pass: PassOptions) -> (Formula, Kernel, Kernel) {
+    let path = format!("{}/examples/explorer/{stem}.brdf", env!("CARGO_MANIFEST_DIR"));
+    let f = lobe::front::parse(&path, &std::fs::read_to_string(&path).unwrap()).unwrap();
+    let plain = lobe::compile_formula(f.clone(), &jit_options(&[])).unwrap();
+    let k = lobe::compile_formula(f.clone(), &robust::with_pass(jit_options(&[]), pass)).unwrap();
+    (f, plain, k)
+}
+
 fn plain_kernel(stem: &str, set: &[(&str, f64)]) -> Kernel {
     lobe::compile_formula(load(stem), &jit_options(set)).unwrap()
 }
@@ -190,10 +199,7 @@ fn energy_has_a_coefficient_for_every_catalogue_file() {
 /// (At Lz = Vz = 5e-324 the constant factors still underflow the product √Lz·√Vz: NaN; not yet fixed.)
 #[test]
 fn explorer_ward_is_finite_at_grazing_light_and_view() {
-    let path = format!("{}/examples/explorer/ward_anisotropic.brdf", env!("CARGO_MANIFEST_DIR"));
-    let f = lobe::front::parse(&path, &std::fs::read_to_string(&path).unwrap()).unwrap();
-    let plain = lobe::compile_formula(f.clone(), &jit_options(&[])).unwrap();
-    let k = lobe::compile_formula(f.clone(), &robust::with_pass(jit_options(&[]), PassOptions::default())).unwrap();
+    let (f, plain, k) = explorer("ward_anisotropic", PassOptions::default());
     let p = k.default_params();
     for z in [1e-170f64, 1e-200, 1e-300] {
         let s = (1.0 - z * z).sqrt();
@@ -277,10 +283,7 @@ fn scaled_exp_keeps_denormal_results() {
 /// both points (7,788 of 10⁵ domain points before); the pass's kernel is within 16 ulp of the truth.
 #[test]
 fn explorer_ggx_is_finite_at_grazing_angles() {
-    let path = format!("{}/examples/explorer/ggx.brdf", env!("CARGO_MANIFEST_DIR"));
-    let f = lobe::front::parse(&path, &std::fs::read_to_string(&path).unwrap()).unwrap();
-    let plain = lobe::compile_formula(f.clone(), &jit_options(&[])).unwrap();
-    let k = lobe::compile_formula(f.clone(), &robust::with_pass(jit_options(&[]), PassOptions::default())).unwrap();
+    let (f, plain, k) = explorer("ggx", PassOptions::default());
     let unit = |x: f64, y: f64, z: f64| {
         let s = ((1.0 - z * z) / (x * x + y * y)).sqrt();
         [x * s, y * s, z]
@@ -308,12 +311,8 @@ fn explorer_ggx_is_finite_at_grazing_angles() {
 /// scaled-norm on its second round (28 NaN-where-finite points of 10⁵ before that round, 0 after).
 #[test]
 fn explorer_cook_torrance_is_finite_at_facing_pairs() {
-    let path = format!("{}/examples/explorer/cook_torrance.brdf", env!("CARGO_MANIFEST_DIR"));
-    let f = lobe::front::parse(&path, &std::fs::read_to_string(&path).unwrap()).unwrap();
-    let plain = lobe::compile_formula(f.clone(), &jit_options(&[])).unwrap();
     // `lobe check`'s 10⁵ points: the compile step's default 4096 draw too few facing pairs to see the NaN.
-    let pass = PassOptions { points: 100_000, ..Default::default() };
-    let k = lobe::compile_formula(f.clone(), &robust::with_pass(jit_options(&[]), pass)).unwrap();
+    let (f, plain, k) = explorer("cook_torrance", PassOptions { points: 100_000, ..Default::default() });
     let (l, v) = ([9.09496204422576e-1, -4.157122251521212e-1, 1.2746267800070171e-222], [-9.09496204422576e-1, 4.157122251521212e-1, 1.3569653304466212e-259]);
     let x = lobe::numerics::inputs_from_dirs(l, v);
     for (m, ior, fresnel, masking) in [(0.4627329777033496, 1.0, 1.0, 0.0), (0.4627329777033496, 1.0, 1.0, 1.0), (0.05, 1.0, 1.0, 0.0)] {
