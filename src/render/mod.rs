@@ -3,9 +3,10 @@
 //! Pipeline (one frame):
 //! 1. setup (serial): project and clip every triangle, snap to 1/256 pixel, bin into 64×64 tiles
 //!    ([`raster::setup`]);
-//! 2. per tile, tiles in parallel with rayon: rasterise the tile's bin into a tile-sized G-buffer (integer
-//!    edge functions, top-left rule, 1/w depth test), then shade the visible pixels in structure-of-arrays
-//!    spans of up to [`shade::SPAN`] pixels, following each material's [`plan::ShadingPlan`] (computed once
+//! 2. per band of tiles (bands in parallel with rayon, the band's tiles in order on one thread, each written
+//!    straight from the thread's scratch into the frame): rasterise the tile's bin into a tile-sized G-buffer
+//!    (integer edge functions, top-left rule, 1/w depth test), then shade the visible pixels in
+//!    structure-of-arrays spans of up to [`shade::SPAN`] pixels, following each material's [`plan::ShadingPlan`] (computed once
 //!    per frame: which cosines the formula reads, the uniforms, the cut-off) compiled into a shading program
 //!    (one call per span: [`shade::shade_tile`], [`crate::backend::shading`]), and convert to 8 bits into the
 //!    frame; tiles no triangle touches are filled with the background and cost nothing else;
@@ -21,8 +22,8 @@
 //! Determinism: every tile is computed from its own bin in scene order and written to its own pixels, and
 //! all counters are integers, so 1 thread and N threads give byte-identical images and equal counts.
 //!
-//! Cost model: shading dominates — per visible pixel the tile scan, interpolation, grouping and 8-bit conversion
-//! in Rust (~8 ns), then the shading program (the inverse lengths, the cosines the formula reads, F where lit, the
+//! Cost model: shading dominates — per visible pixel the tile scan into triangle runs, interpolation and 8-bit
+//! conversion in Rust (~5 ns), then the shading program (the inverse lengths, the cosines the formula reads, F where lit, the
 //! colour sum: JIT ~7 ns for one light and a cheap formula, plus F's own cost per lit pixel and light; the
 //! interpreter 15–30× that) — then rasterisation (a few edge-function steps per
 //! covered pixel, ~5 ns); setup and binning are per triangle and small; tiles the scene does not touch cost
@@ -307,20 +308,13 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
     let progress = Progress::new(opts.progress, setup.bins.len() as u64);
     let mut rgb = vec![0u8; w * h * 3];
     let mut covered = vec![false; w * h];
+    // One task per band of tiles: its tiles are shaded in order into the thread's scratch and copied straight
+    // into the frame (no per-tile buffers).
     let band_counts: Vec<shade::ShadeCounts> = rgb
         .par_chunks_mut(w * 3 * tile)
         .zip(covered.par_chunks_mut(w * tile))
         .enumerate()
-        .map(|(ty, (band, band_cov))| {
-            let tiles: Vec<Option<TileOut>> = (0..setup.tiles_x)
-                .into_par_iter()
-                .map_init(shade::Scratch::default, |sc, tx| {
-                    let t = ty * setup.tiles_x + tx;
-                    let out = tile_pixels(scene, &plans, &setup, t, sc, opts.transfer, bg, &timers);
-                    progress.tick();
-                    out
-                })
-                .collect();
+        .map_init(shade::Scratch::default, |sc, (ty, (band, band_cov))| {
             // Background everywhere first (one row built, then copied); empty tiles need nothing more.
             let (first, rest) = band.split_at_mut((w * 3).min(band.len()));
             for p in first.chunks_exact_mut(3) {
@@ -330,13 +324,19 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
                 row.copy_from_slice(first);
             }
             let mut counts = shade::ShadeCounts::default();
-            for (tx, tile) in tiles.into_iter().enumerate() {
-                let Some((px, cov, c)) = tile else { continue };
+            for tx in 0..setup.tiles_x {
+                let t = ty * setup.tiles_x + tx;
+                let shaded = tile_pixels(scene, &plans, &setup, t, sc, opts.transfer, bg, &timers);
+                progress.tick();
+                let Some(c) = shaded else { continue };
                 counts += c;
-                let (x0, _, tw, th) = raster::tile_rect(&setup, ty * setup.tiles_x + tx);
+                let (x0, _, tw, th) = raster::tile_rect(&setup, t);
                 for y in 0..th {
-                    band[(y * w + x0) * 3..(y * w + x0 + tw) * 3].copy_from_slice(&px[y * tw * 3..(y + 1) * tw * 3]);
-                    band_cov[y * w + x0..y * w + x0 + tw].copy_from_slice(&cov[y * tw..(y + 1) * tw]);
+                    band[(y * w + x0) * 3..(y * w + x0 + tw) * 3].copy_from_slice(&sc.rgb[y * tw * 3..(y + 1) * tw * 3]);
+                    let cov = &mut band_cov[y * w + x0..y * w + x0 + tw];
+                    for (c, &t) in cov.iter_mut().zip(&sc.gb.tri[y * tw..(y + 1) * tw]) {
+                        *c = t != raster::EMPTY;
+                    }
                 }
             }
             counts
@@ -369,9 +369,6 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
     (Frame { image: Image { width: w, height: h, rgb }, covered }, stats)
 }
 
-/// A shaded tile: 8-bit pixels and coverage (row-major, tile-sized) and its counters.
-type TileOut = (Vec<u8>, Vec<bool>, shade::ShadeCounts);
-
 /// This thread's CPU time in ns (the wall clock where the platform has no thread clock): stage times are CPU
 /// time, so a shared machine does not inflate them.
 fn thread_cpu() -> u64 {
@@ -390,7 +387,8 @@ struct Timers {
     kernel: AtomicU64,
 }
 
-/// One tile's output; `None` for a tile no triangle touches.
+/// Rasterises and shades tile `t` into `sc` (its 8-bit pixels in `sc.rgb`, its coverage in `sc.gb.tri`, both
+/// row-major and tile-sized); returns its counters, or `None` for a tile no triangle touches.
 #[allow(clippy::too_many_arguments)]
 fn tile_pixels(
     scene: &Scene,
@@ -401,7 +399,7 @@ fn tile_pixels(
     transfer: Transfer,
     bg: [u8; 3],
     timers: &Timers,
-) -> Option<TileOut> {
+) -> Option<shade::ShadeCounts> {
     let (_, _, tw, th) = raster::tile_rect(setup, t);
     let n = tw * th;
     if setup.bins[t].is_empty() {
@@ -412,8 +410,6 @@ fn tile_pixels(
     let c1 = thread_cpu();
     let t1 = Instant::now();
     let (counts, kernel_wall) = shade::shade_tile(scene, plans, setup, n, sc, transfer, bg);
-    let px = sc.rgb.clone();
-    let cov = sc.gb.tri.iter().map(|&t| t != raster::EMPTY).collect();
     let (c2, wall) = (thread_cpu(), t1.elapsed().as_nanos().max(1) as u64);
     let shade_cpu = c2.saturating_sub(c1);
     // The kernel is timed by the wall clock (a thread-CPU clock read costs ~0.3 µs, too much per call);
@@ -422,7 +418,7 @@ fn tile_pixels(
     timers.raster.fetch_add(c1.saturating_sub(c0), Ordering::Relaxed);
     timers.shade.fetch_add(shade_cpu, Ordering::Relaxed);
     timers.kernel.fetch_add(kernel_cpu.min(shade_cpu), Ordering::Relaxed);
-    Some((px, cov, counts))
+    Some(counts)
 }
 
 /// What the materials' cut-offs change in a frame: the frame rendered again without them, compared.
