@@ -127,6 +127,16 @@ pub trait Emit {
     fn rare(&mut self, m: Self::M, r: Self::V, slow: &mut dyn FnMut(&mut Self) -> Self::V) -> Self::V
     where
         Self: Sized;
+    /// [`Emit::rare`] where `slow` is the rest of builtin `f`'s own code on `args`: the JIT may instead call
+    /// `f`'s compiled library function ([`Builtin::outlined`]) per lane, the same bits, so the rare code's
+    /// constants do not stay live (spilled) across the common path's loop.
+    fn rare_call(&mut self, m: Self::M, r: Self::V, f: Builtin, args: &[Self::V], slow: &mut dyn FnMut(&mut Self) -> Self::V) -> Self::V
+    where
+        Self: Sized,
+    {
+        let _ = (f, args);
+        self.rare(m, r, slow)
+    }
     /// `a·b` as `(p, err)`, exactly (for products that do not underflow): `err = fma(a, b, −p)`. A target
     /// without a hardware FMA may use Dekker's product instead, the same exact value without a library call.
     fn two_prod(&mut self, a: Self::V, b: Self::V) -> (Self::V, Self::V)
@@ -425,9 +435,16 @@ const INV_L2N: f64 = 184.6649652337873; // 128/ln 2
 /// [`scale2`] (exact unless the result is subnormal or overflows). No division. Scaling by two products in
 /// every lane measured faster than one product plus a rare block: Beckmann's exp underflows in many lanes.
 fn exp_dd<E: Emit>(e: &mut E, xh: E::V, xl: E::V) -> E::V {
+    let (y, q) = exp_parts(e, xh, xl, 760.0);
+    scale2(e, y, q)
+}
+
+/// [`exp_dd`] before its scaling: `(y, q)` with e^(xh + xl) = y·2^q, y in [0.99, 2.01) rounded once, xh
+/// clamped to [−lim, min(lim, 720)] (lim ≤ 1416, so k·`L2N_HI` stays exact and q within [`scale2`]'s range).
+fn exp_parts<E: Emit>(e: &mut E, xh: E::V, xl: E::V, lim: f64) -> (E::V, E::V) {
     use super::math_tables::EXP_T;
     // Clamp so k stays small; a clamped (or NaN) lane drops xl, which is only meaningful beside its xh.
-    let x = clamp_to(e, xh, -760.0, 720.0);
+    let x = clamp_to(e, xh, -lim, if lim <= 760.0 { 720.0 } else { lim });
     let same = e.eq(x, xh);
     let zero = e.konst(0.0);
     let xl = e.select(same, xl, zero);
@@ -450,7 +467,7 @@ fn exp_dd<E: Emit>(e: &mut E, xh: E::V, xl: E::V) -> E::V {
     let em1 = e.fma(r2, p, r);
     let tmp = e.add(t_tail, em1);
     let y = e.fma(t_hi, tmp, t_hi);
-    scale2(e, y, q)
+    (y, q)
 }
 
 pub fn exp<E: Emit>(e: &mut E, x: E::V) -> E::V {
@@ -1211,55 +1228,39 @@ pub mod logic {
 /// `exp(a)·b/c` rounded as if the product had an unbounded exponent, then once to f64 (≤ 2 ulp; both modes).
 ///
 /// Why: in `exp(a)·b/c` written out, e^a underflows (a < −708) or overflows before b/c rescales it, so a
-/// Beckmann or Ward value near 1e-311 comes out as a denormal with few bits, or 0. The common case is that
-/// product as written (exp, a multiplication, a division: ≤ 1.6 ulp when e^a, e^a·b and the result are all
-/// normal), checked by four compares. Lanes where a check fails take [`Emit::rare`]'s branch; there a zero
-/// result whose true value is certainly below the denormals (Beckmann at small NH: most such lanes) is kept,
-/// and only the rest take a second branch to [`exp_mul_div_scaled`], where no intermediate leaves the normal
-/// range. Cost: exp + ~10 operations; in scalar kernels the compares are what costs (BENCHMARKS.md,
-/// 2026-12-01), the branches only where lanes take them.
+/// Beckmann or Ward value near 1e-311 comes out as a denormal with few bits, or 0. The common case costs what
+/// the product as written does plus a range test on b/c: e^a = y·2^q ([`exp_parts`] with a clamped to ±1416,
+/// y in [0.99, 2.01)), s = y·(b/c) (two roundings), and [`scale2`] applies 2^q last (|q| ≤ 2043; exact unless
+/// the result is subnormal, whose only rounding it then is). Where |b/c| lies in [2^-1000, 2^967] that is the
+/// answer for every a, the clamped ones included: a < −1416 gives 0, as the truth rounds, and a > 1416 ∞
+/// (Beckmann's small-NH lanes, where e^a alone is 0, stay on this path). Other lanes (b or c tiny, huge, 0, ∞ or
+/// NaN) take [`Emit::rare_call`]'s branch to [`exp_mul_div_scaled`], which the JIT calls out of line, so its
+/// constants stay out of the common path. Cost: exp + a division, a multiplication and ~6 operations
+/// (BENCHMARKS.md, 2026-12-01, robust4).
 ///
 /// Special values follow `exp(a)*b/c`, except that a zero exponential (a < −745.2) times an infinite b/c is 0:
 /// an infinite b/c stands for an overflowed finite factor, and the accuracy pass forms this builtin only from
 /// products whose exp factor is what vanishes there.
 pub fn exp_mul_div<E: Emit>(e: &mut E, a: E::V, b: E::V, c: E::V) -> E::V {
-    let x = exp(e, a);
-    let t = e.mul(x, b);
-    let r = e.div(t, c);
-    // Four compares: e^a is normal above a = ln 2^-1022 (an overflowed e^a or t makes r ±∞ or NaN, so neither
-    // needs an upper bound), t at least the smallest normal, r normal.
-    let lo = e.konst(-708.39);
-    let ok = e.le(lo, a);
-    let min = e.konst(f64::MIN_POSITIVE);
-    let at = e.abs(t);
-    let t_lo = e.le(min, at);
-    let ok = e.and(ok, t_lo);
-    let ar = e.abs(r);
-    let r_lo = e.le(min, ar);
-    let max = e.konst(f64::MAX);
-    let r_hi = e.le(ar, max);
-    let ok = e.and(ok, r_lo);
-    let ok = e.and(ok, r_hi);
+    let zero = e.konst(0.0);
+    let (y, q) = exp_parts(e, a, zero, 1416.0);
+    let bc = e.div(b, c);
+    let s = e.mul(y, bc);
+    let r = scale2(e, s, q);
+    // One compare: |b/c|·2^1000 ≥ 1 and |b/c|·2^-967 ≤ 1, as min(…, 2 − …) ≥ 1; the select is a min
+    // instruction that returns its second operand on NaN, so a NaN b/c reaches the compare.
+    let abc = e.abs(bc);
+    let lo = mulk(e, abc, 2f64.powi(1000));
+    let hi = mulk(e, abc, 2f64.powi(-967));
+    let u = ksub(e, 2.0, hi);
+    let lt = e.lt(lo, u);
+    let z = e.select(lt, lo, u);
+    let one = e.konst(1.0);
+    let ok = e.le(one, z);
     let bad = e.not(ok);
-    e.rare(bad, r, &mut |e| {
-        // A zero r is right where the true value is below half the smallest denormal: log2|e^a·b/c| < a·log2 e +
-        // E(b) + 1 − E(c) with E the exponent field (a denormal c reads as 2^-1023 but may be 2^51 smaller,
-        // hence the margin). Most lanes that get here are such (Beckmann at small NH), and skip the scaling.
-        let fb = e.exponent_field(b);
-        let fc = e.exponent_field(c);
-        let d = e.sub(fb, fc);
-        let al = mulk(e, a, std::f64::consts::LOG2_E);
-        let s = e.add(al, d);
-        let tiny = ltk(e, s, -1130.0);
-        let zero = e.konst(0.0);
-        let rz = e.eq(r, zero);
-        let vanishes = e.and(tiny, rz);
-        let keep = e.or(ok, vanishes);
-        let need = e.not(keep);
-        e.rare(need, r, &mut |e| {
-            let s = exp_mul_div_scaled(e, a, b, c);
-            e.select(need, s, r)
-        })
+    e.rare_call(bad, r, Builtin::ExpMulDiv, &[a, b, c], &mut |e| {
+        let t = exp_mul_div_scaled(e, a, b, c);
+        e.select(bad, t, r)
     })
 }
 

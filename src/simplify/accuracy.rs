@@ -53,9 +53,9 @@
 //! # Cost model
 //! [`cost`] counts live nodes with weights fitted to JIT timings on x86-64 (BENCHMARKS.md, 2026-11-30: five
 //! extra divisions add ~3.4 ns to Beckmann's 8.5 ns, a libm exp ~5 ns): `+ − ×`, abs, min, max 1; clamp 2;
-//! `/` and sqrt 3; fma 1; math-library calls (exp, ln, trig) 20, expmuldiv 40 (measured: Beckmann's and
-//! Ward's kernels take 1.5–1.6× the unrewritten ones with it, its four compares being most of the difference),
-//! pow 60 (pow(NH, e) with e live took 5.0× the
+//! `/` and sqrt 3; fma 1; math-library calls (exp, ln, trig) 20, expmuldiv 28 (it replaces an exp, a `×` and
+//! a `/` (24) and adds a range test: Beckmann's kernel takes ~1.15× the unrewritten one with it, on `lobe
+//! bench`'s inputs and on inputs where no lane takes its rare branch alike), pow 60 (pow(NH, e) with e live took 5.0× the
 //! ns of the 14-multiplication chain for NH¹⁰⁰⁰); leaves and negation 0.
 //! Nodes that read no input (parameters only) cost nothing: the kernels compute them once per parameter set
 //! (the prepared block, hoisted out of batch loops).
@@ -227,7 +227,7 @@ pub fn cost(f: &Formula) -> f64 {
             Builtin::Lt | Builtin::Le | Builtin::Eq | Builtin::Ne | Builtin::Select => 2.0,
             Builtin::Floor => 6.0,
             Builtin::Pow => 60.0,
-            Builtin::ExpMulDiv => 40.0,
+            Builtin::ExpMulDiv => 28.0,
             _ => 20.0,
         },
     };

@@ -62,7 +62,8 @@ fn symbols(ir: &Ir, mode: Mode, outline: bool) -> Vec<(Builtin, &'static str, *c
         if b.info().lowering != Lowering::Math || std::mem::replace(&mut seen[*b as usize], true) {
             continue;
         }
-        let (symbol, f) = if outline {
+        // With the library inlined, expmuldiv's rare lanes call its compiled function (`Emit::rare_call`).
+        let (symbol, f) = if outline || *b == Builtin::ExpMulDiv {
             match b.outlined(mode) {
                 Some(s) => s,
                 None => continue,
@@ -643,6 +644,18 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
         self.b.switch_to_block(join);
         self.b.seal_block(join);
         out
+    }
+    /// `any(m) ? (m ? f(args) : r) : r` with `f`'s compiled library function, when the module imports it.
+    fn rare_call(&mut self, m: Value, r: Value, f: Builtin, args: &[Value], slow: &mut dyn FnMut(&mut Self) -> Value) -> Value {
+        let Some(callee) = self.cx.callees[f as usize] else { return self.rare(m, r, slow) };
+        let args = args.to_vec();
+        self.rare(m, r, &mut |t| match t.call_lanes(callee, &args) {
+            Ok(y) => t.select(m, y, r),
+            Err(e) => {
+                t.error = Some(e);
+                r
+            }
+        })
     }
     /// `any(m) ? (m ? libm(x) : r) : r`: the per-lane calls are in a [`Emit::rare`] block.
     fn fallback(&mut self, m: Value, x: Value, r: Value, f: Builtin) -> Value {
