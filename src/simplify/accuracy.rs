@@ -44,6 +44,8 @@
 //! - `scaled-norm`: `x/sqrt(a² + b² + …)`, x one of a, b, …, (a normalize) with the vector scaled by 2^600
 //!   when its largest component is below 2^-500 (exact), so L + V at L ≈ −V (grazing light and view facing each
 //!   other) has a length, not 0. Cost: abs and max per component, a compare, a select, a product each (~+12).
+//! - `rational-form` (in `cancel.rs`): a cancelling sum rational in one input, as one linear-fractional form
+//!   with double-double parameter-only coefficients.
 //!
 //! Another candidate, large integer powers kept as `pow` calls instead of multiplication chains, is the
 //! simplifier's own [`super::Policy::max_chain`]; the chooser builds it with [`pow_call_policy`]. Another,
