@@ -44,6 +44,8 @@
 //! - `scaled-norm`: `x/sqrt(a² + b² + …)`, x one of a, b, …, (a normalize) with the vector scaled by 2^600
 //!   when its largest component is below 2^-500 (exact), so L + V at L ≈ −V (grazing light and view facing each
 //!   other) has a length, not 0. Cost: abs and max per component, a compare, a select, a product each (~+12).
+//! - `rational-form` (in `cancel.rs`): a cancelling sum rational in one input, as one linear-fractional form
+//!   with double-double parameter-only coefficients.
 //!
 //! Another candidate, large integer powers kept as `pow` calls instead of multiplication chains, is the
 //! simplifier's own [`super::Policy::max_chain`]; the chooser builds it with [`pow_call_policy`]. Another,
@@ -78,10 +80,11 @@ pub enum Rule {
     ScaledExp,
     SmithG1,
     ScaledNorm,
+    RationalForm,
 }
 
 impl Rule {
-    pub const ALL: [Rule; 8] = [
+    pub const ALL: [Rule; 9] = [
         Rule::SplitSqrt,
         Rule::SmithG1,
         // Before quotient-chain, which flattens (x/√s)·(x/√s) into x·x/√s/√s, where scaled-norm cannot see it.
@@ -91,6 +94,7 @@ impl Rule {
         Rule::FactorQuadratic,
         Rule::CompensatedBase,
         Rule::CompensatedSum,
+        Rule::RationalForm,
     ];
 
     pub fn name(self) -> &'static str {
@@ -103,6 +107,7 @@ impl Rule {
             Rule::ScaledExp => "scaled-exp",
             Rule::SmithG1 => "smith-g1",
             Rule::ScaledNorm => "scaled-norm",
+            Rule::RationalForm => "rational-form",
         }
     }
 
@@ -117,6 +122,7 @@ impl Rule {
             Rule::ScaledExp => "exp(a)*b/c as expmuldiv(a, b, c): no underflow of exp(a) before b/c rescales it",
             Rule::SmithG1 => "Smith G1 2/(1 + sqrt(1 + A*tan^2)) as 2c/(c + sqrt(c^2 + A*(1 - c^2))), c/c cancelled: no inf/inf at grazing c",
             Rule::ScaledNorm => "x/sqrt(a^2 + b^2 + ...) with a tiny vector scaled by 2^600 first: no zero length",
+            Rule::RationalForm => "a sum rational in one input as (a1*x + a0)/(b1*x + b0), coefficients in double-double: the cancellation moves to the parameters",
         }
     }
 
@@ -140,6 +146,7 @@ impl Rule {
             Rule::ScaledExp => scaled_exp(f, &ranges, site.unwrap_or(0)),
             Rule::SmithG1 => smith_g1(f, &ranges),
             Rule::ScaledNorm => scaled_norm(f),
+            Rule::RationalForm => super::cancel::rational_form(f),
         };
         if !fired {
             return None;
@@ -235,7 +242,7 @@ pub fn cost(f: &Formula) -> f64 {
 }
 
 /// Rebuilds `f` node by node through `rw`, which returns the new node for an old one given the map so far.
-fn rebuild(f: &Formula, mut rw: impl FnMut(&mut Ir, &[NodeId], NodeId, Node) -> Option<NodeId>) -> (Ir, NodeId, bool) {
+pub(super) fn rebuild(f: &Formula, mut rw: impl FnMut(&mut Ir, &[NodeId], NodeId, Node) -> Option<NodeId>) -> (Ir, NodeId, bool) {
     let mut ir = Ir::new();
     let mut map: Vec<NodeId> = Vec::with_capacity(f.ir.len());
     let mut fired = false;

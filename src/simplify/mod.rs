@@ -80,6 +80,7 @@
 //!   (a = 1 is exact either way.) The one value it changes beyond rounding is the sign of a zero when a = −0.
 
 pub mod accuracy;
+mod cancel;
 mod powi;
 pub mod range;
 pub mod sexpr;

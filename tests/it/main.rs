@@ -1,6 +1,7 @@
 //! lobe's integration tests: one binary, one module per area.
 mod benched;
 mod browser;
+mod cancel;
 mod catalogue;
 mod cli;
 mod differential;

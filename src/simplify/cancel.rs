@@ -1,0 +1,377 @@
+//! The accuracy pass's cancellation rules: rewrites that move a cancellation into work on the parameters only,
+//! which is free per point, or into one fused operation.
+//!
+//! # Design
+//! `rational-form`: a sum whose terms are rational in one live *atom* x (an input, or any live node that is
+//! not `+ − × /`), with coefficients that read no input, is the quotient of two polynomials in x. With both of
+//! degree ≤ 1, the denominator not constant, the sum is rewritten `(a₁·x + a₀)/(b₁·x + b₀)`, each polynomial evaluated as
+//! `fma(a₁ʰ, x, a₀ʰ) + fma(a₁ˡ, x, a₀ˡ)`, where every coefficient is a double-double `aʰ + aˡ` computed exactly
+//! (2Sum, fma two-product) from the values of the subexpressions that read no
+//! input (as the kernel computes them, which is what a baked parameter folds to: baked and live agree).
+//! A sum with a term of higher degree stays as written (regrouping part of it changes where it rounds at the
+//! points where the whole cancels, ill-conditioned ones included, so a baked and a live kernel would disagree
+//! wherever the pass chose differently for them). The written form's cancellation — Modified cosine-quadratic's
+//! `1 − 1.1·u/(u + 2c)`, u = n(1 − c) — then happens inside the coefficient arithmetic, in double-double; what is
+//! left per point is one rounding of a₁ʰx + a₀ʰ (the fma), one of the addition of the low parts (below an ulp
+//! of it), and the same for the denominator and the quotient: ≤ ~2.5 ulp, except near the numerator's own
+//! zero, where the value is ill-conditioned by nature (its zero moves with the parameters).
+//!
+//! A term's form is found bottom-up ([`shapes`]): degrees add under `×`, `/` and `+` (a common denominator, no
+//! gcd); a sum whose numerator or denominator would exceed degree 1 is left alone.
+//!
+//! # Cost model
+//! Coefficients read no input: free ([`super::accuracy::cost`]). Per point: two fmas and an addition per
+//! polynomial (fewer where a coefficient is exact or zero), one division when the denominator is not constant
+//! — usually cheaper than the written chain of products, quotients and sums it replaces.
+
+use super::accuracy::rebuild;
+use crate::base::span::Span;
+use crate::builtins::Builtin;
+use crate::ir::{BinOp, Formula, Ir, Node, NodeId};
+use std::collections::HashMap;
+
+/// Largest degree in x of a rewritten numerator or denominator: linear-fractional forms, whose evaluation by
+/// one fma per part keeps the bound above (a Horner chain would round at each step).
+const MAX_DEG: u8 = 1;
+
+/// The degrees of an old node as a rational function of its atom (`None`: reads no input).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Shape {
+    atom: Option<NodeId>,
+    num: u8,
+    den: u8,
+}
+
+const COEF: Shape = Shape { atom: None, num: 0, den: 0 };
+
+fn combine(op: BinOp, x: Shape, y: Shape) -> Option<Shape> {
+    let atom = match (x.atom, y.atom) {
+        (Some(a), Some(b)) if a != b => return None,
+        (a, b) => a.or(b),
+    };
+    let (num, den) = match op {
+        BinOp::Add | BinOp::Sub => ((x.num + y.den).max(y.num + x.den), x.den + y.den),
+        BinOp::Mul => (x.num + y.num, x.den + y.den),
+        BinOp::Div => (x.num + y.den, x.den + y.num),
+    };
+    Some(Shape { atom, num, den }).filter(|s| s.num <= MAX_DEG && s.den <= MAX_DEG)
+}
+
+/// Per old node, its shape when it is rational of degree ≤ [`MAX_DEG`] in one atom.
+fn shapes(f: &Formula, inv: &[bool]) -> Vec<Option<Shape>> {
+    let mut out: Vec<Option<Shape>> = Vec::with_capacity(f.ir.len());
+    for id in f.ir.ids() {
+        let s = if inv[id.index()] {
+            Some(COEF)
+        } else {
+            match *f.ir.node(id) {
+                Node::Neg(a) => out[a.index()],
+                Node::Binary(op, a, b) => out[a.index()].zip(out[b.index()]).and_then(|(x, y)| combine(op, x, y)),
+                _ => Some(Shape { atom: Some(id), num: 1, den: 0 }),
+            }
+        };
+        out.push(s);
+    }
+    out
+}
+
+/// A double-double `hi + lo` of new-arena nodes (`lo: None` when hi is exact).
+#[derive(Clone, Copy, Debug)]
+struct Dd {
+    hi: NodeId,
+    lo: Option<NodeId>,
+}
+
+/// A polynomial in the atom, lowest degree first; `None` is an exact zero coefficient.
+type Poly = Vec<Option<Dd>>;
+
+struct Builder<'a> {
+    f: &'a Formula,
+    inv: Vec<bool>,
+    sp: Span,
+    rats: HashMap<NodeId, (Poly, Poly)>,
+}
+
+impl Builder<'_> {
+    fn is(&self, ir: &Ir, x: NodeId, v: f64) -> bool {
+        ir.node(x).as_const() == Some(v)
+    }
+
+    fn add_opt(&self, ir: &mut Ir, a: Option<NodeId>, b: Option<NodeId>) -> Option<NodeId> {
+        match (a, b) {
+            (Some(a), Some(b)) => Some(ir.bin(BinOp::Add, a, b, self.sp)),
+            (a, b) => a.or(b),
+        }
+    }
+
+    /// hi + lo renormalised (Fast2Sum: |hi| ≥ |lo| up to the coefficient arithmetic's own cancellations, where
+    /// the sum is exact anyway).
+    fn norm(&self, ir: &mut Ir, hi: NodeId, lo: Option<NodeId>) -> Dd {
+        let Some(lo) = lo else { return Dd { hi, lo: None } };
+        let s = ir.bin(BinOp::Add, hi, lo, self.sp);
+        let d = ir.bin(BinOp::Sub, s, hi, self.sp);
+        Dd { hi: s, lo: Some(ir.bin(BinOp::Sub, lo, d, self.sp)) }
+    }
+
+    fn neg(&self, ir: &mut Ir, a: Dd) -> Dd {
+        Dd { hi: ir.neg(a.hi, self.sp), lo: a.lo.map(|l| ir.neg(l, self.sp)) }
+    }
+
+    fn add(&self, ir: &mut Ir, a: Dd, b: Dd) -> Dd {
+        let sp = self.sp;
+        // Knuth's 2Sum: s + e = a.hi + b.hi exactly.
+        let s = ir.bin(BinOp::Add, a.hi, b.hi, sp);
+        let bb = ir.bin(BinOp::Sub, s, a.hi, sp);
+        let ab = ir.bin(BinOp::Sub, s, bb, sp);
+        let ea = ir.bin(BinOp::Sub, a.hi, ab, sp);
+        let eb = ir.bin(BinOp::Sub, b.hi, bb, sp);
+        let e = ir.bin(BinOp::Add, ea, eb, sp);
+        let lo = self.add_opt(ir, a.lo, b.lo);
+        let lo = self.add_opt(ir, Some(e), lo);
+        self.norm(ir, s, lo)
+    }
+
+    fn mul(&self, ir: &mut Ir, a: Dd, b: Dd) -> Dd {
+        let sp = self.sp;
+        if self.is(ir, a.hi, 1.0) && a.lo.is_none() {
+            return b;
+        }
+        if self.is(ir, b.hi, 1.0) && b.lo.is_none() {
+            return a;
+        }
+        let p = ir.bin(BinOp::Mul, a.hi, b.hi, sp);
+        let np = ir.neg(p, sp);
+        let mut e = ir.call(Builtin::Fma, &[a.hi, b.hi, np], sp);
+        if let Some(bl) = b.lo {
+            e = ir.call(Builtin::Fma, &[a.hi, bl, e], sp);
+        }
+        if let Some(al) = a.lo {
+            e = ir.call(Builtin::Fma, &[al, b.hi, e], sp);
+        }
+        self.norm(ir, p, Some(e))
+    }
+
+    fn padd(&self, ir: &mut Ir, p: &Poly, q: &Poly) -> Poly {
+        (0..p.len().max(q.len()))
+            .map(|i| match (p.get(i).copied().flatten(), q.get(i).copied().flatten()) {
+                (Some(a), Some(b)) => Some(self.add(ir, a, b)),
+                (a, b) => a.or(b),
+            })
+            .collect()
+    }
+
+    fn pmul(&self, ir: &mut Ir, p: &Poly, q: &Poly) -> Poly {
+        let mut out: Poly = vec![None; p.len() + q.len() - 1];
+        for (i, a) in p.iter().enumerate() {
+            for (j, b) in q.iter().enumerate() {
+                let (Some(a), Some(b)) = (a, b) else { continue };
+                let t = self.mul(ir, *a, *b);
+                out[i + j] = Some(match out[i + j] {
+                    Some(s) => self.add(ir, s, t),
+                    None => t,
+                });
+            }
+        }
+        out
+    }
+
+    fn pneg(&self, ir: &mut Ir, p: &Poly) -> Poly {
+        p.iter().map(|c| c.map(|c| self.neg(ir, c))).collect()
+    }
+
+    fn one(&self, ir: &mut Ir) -> Poly {
+        vec![Some(Dd { hi: ir.konst(1.0, self.sp), lo: None })]
+    }
+
+    /// `x` (an old node of some shape) as numerator and denominator polynomials.
+    fn rat(&mut self, ir: &mut Ir, map: &[NodeId], x: NodeId, shapes: &[Option<Shape>]) -> (Poly, Poly) {
+        if let Some(r) = self.rats.get(&x) {
+            return r.clone();
+        }
+        let one = self.one(ir);
+        let r = if self.inv[x.index()] {
+            // Taken as computed (rounded), as a baked parameter's folding computes it: the baked and the live
+            // kernel then start from the same coefficients and agree (tests/it/robust.rs).
+            (vec![Some(Dd { hi: map[x.index()], lo: None })], one)
+        } else {
+            match *self.f.ir.node(x) {
+                Node::Neg(a) => {
+                    let (n, d) = self.rat(ir, map, a, shapes);
+                    (self.pneg(ir, &n), d)
+                }
+                Node::Binary(op, a, b) if shapes[x.index()].is_some() => {
+                    let (na, da) = self.rat(ir, map, a, shapes);
+                    let (nb, db) = self.rat(ir, map, b, shapes);
+                    let nb = if op == BinOp::Sub { self.pneg(ir, &nb) } else { nb };
+                    match op {
+                        BinOp::Add | BinOp::Sub => {
+                            let l = self.pmul(ir, &na, &db);
+                            let r = self.pmul(ir, &nb, &da);
+                            (self.padd(ir, &l, &r), self.pmul(ir, &da, &db))
+                        }
+                        BinOp::Mul => (self.pmul(ir, &na, &nb), self.pmul(ir, &da, &db)),
+                        BinOp::Div => (self.pmul(ir, &na, &db), self.pmul(ir, &da, &nb)),
+                    }
+                }
+                // The atom: 0 + 1·x.
+                _ => (vec![None, one[0]], one),
+            }
+        };
+        self.rats.insert(x, r.clone());
+        r
+    }
+
+    /// A polynomial of degree ≤ 1 at the atom `x`: `fma(c₁ʰ, x, c₀ʰ) + fma(c₁ˡ, x, c₀ˡ)`, terms that are zero or
+    /// one left out.
+    fn eval(&self, ir: &mut Ir, p: &Poly, x: NodeId) -> NodeId {
+        let sp = self.sp;
+        let (c0, c1) = (p.first().copied().flatten(), p.get(1).copied().flatten());
+        let part = |ir: &mut Ir, a: Option<NodeId>, b: Option<NodeId>| match (a, b) {
+            (None, b) => b,
+            (Some(a), b) if self.is(ir, a, 1.0) => Some(match b {
+                Some(b) => ir.bin(BinOp::Add, x, b, sp),
+                None => x,
+            }),
+            (Some(a), Some(b)) => Some(ir.call(Builtin::Fma, &[a, x, b], sp)),
+            (Some(a), None) => Some(ir.bin(BinOp::Mul, a, x, sp)),
+        };
+        let hi = part(ir, c1.map(|c| c.hi), c0.map(|c| c.hi));
+        let lo = part(ir, c1.and_then(|c| c.lo), c0.and_then(|c| c.lo));
+        self.add_opt(ir, hi, lo).unwrap_or_else(|| ir.konst(0.0, sp))
+    }
+}
+
+/// Signed terms of the sum tree under `x` (through `+`, `−` and negation of live nodes).
+fn terms(f: &Formula, inv: &[bool], x: NodeId, neg: bool, out: &mut Vec<(NodeId, bool)>) {
+    match *f.ir.node(x) {
+        _ if inv[x.index()] => out.push((x, neg)),
+        Node::Neg(a) => terms(f, inv, a, !neg, out),
+        Node::Binary(op @ (BinOp::Add | BinOp::Sub), a, b) => {
+            terms(f, inv, a, neg, out);
+            terms(f, inv, b, neg ^ (op == BinOp::Sub), out);
+        }
+        _ => out.push((x, neg)),
+    }
+}
+
+// Σ ±tᵢ (tᵢ rational in one atom, of degree ≤ 1 together) → (a₁x + a₀)/(b₁x + b₀)
+pub(super) fn rational_form(f: &Formula) -> (Ir, NodeId, bool) {
+    let inv = f.ir.invariant();
+    let shapes = shapes(f, &inv);
+    // A sum's root: a live `+`/`−` none of whose users is one (the whole tree is rewritten at its root).
+    let mut in_sum = vec![false; f.ir.len()];
+    for i in (0..f.ir.len()).rev() {
+        let n = *f.ir.node(NodeId(i as u32));
+        if matches!(n, Node::Binary(BinOp::Add | BinOp::Sub, ..)) || matches!(n, Node::Neg(_)) && in_sum[i] {
+            n.for_each_arg(|a| in_sum[a.index()] = true);
+        }
+    }
+    let uses = f.ir.use_counts(f.root);
+    let ranges = super::node_ranges(f, &super::Policy::default());
+    let mut b = Builder { f, inv: inv.clone(), sp: Span::default(), rats: HashMap::new() };
+    rebuild(f, |ir, map, id, n| {
+        if inv[id.index()] || in_sum[id.index()] && uses[id.index()] <= 1 || !matches!(n, Node::Binary(BinOp::Add | BinOp::Sub, ..)) {
+            return None;
+        }
+        let mut ts = vec![];
+        terms(f, &inv, id, false, &mut ts);
+        // Every term must join: regrouping only part of a sum (F_dsh's c/(n − n·c + c) − 0.25 beside its c⁸
+        // term) changes where it rounds at the points where the whole sum cancels, and the measured gain was
+        // too small for the pass to take it at every baked n, so baked and live kernels would differ there.
+        let mut acc: Option<Shape> = None;
+        for (t, _) in &ts {
+            let s = shapes[t.index()]?;
+            acc = Some(match acc {
+                None => s,
+                Some(a) => combine(BinOp::Add, a, s)?,
+            });
+        }
+        // Only a sum that may cancel (terms of both signs, by range) has rounding errors to move; a sum of
+        // same-signed terms is accurate as written.
+        let signs = |(t, neg): &(NodeId, bool)| {
+            let r = ranges[t.index()];
+            let (lo, hi) = if *neg { (-r.hi, -r.lo) } else { (r.lo, r.hi) };
+            (hi > 0.0, lo < 0.0)
+        };
+        if !(ts.iter().any(|t| signs(t).0) && ts.iter().any(|t| signs(t).1)) {
+            return None;
+        }
+        let group = ts;
+        let atom = acc.and_then(|s| s.atom)?;
+        // Nothing to gain where the live terms are the atom itself: the sum is already x + a₀.
+        if group.len() < 2 || group.iter().all(|(t, _)| inv[t.index()] || *t == atom) {
+            return None;
+        }
+        b.sp = f.ir.span(id);
+        let one = b.one(ir);
+        let (mut num, mut den): (Poly, Poly) = (vec![None], one);
+        for (t, neg) in group {
+            let (n, d) = b.rat(ir, map, t, &shapes);
+            let n = if neg { b.pneg(ir, &n) } else { n };
+            let l = b.pmul(ir, &num, &d);
+            let r = b.pmul(ir, &n, &den);
+            num = b.padd(ir, &l, &r);
+            den = b.pmul(ir, &den, &d);
+        }
+        // A polynomial (constant denominator) is left as written: degree 1 written as a sum rounds at most
+        // twice where it is well conditioned (Modified cosine's n/2·(c − 1) + 1, c − 1 exact by Sterbenz); the
+        // fma form gains only where the value's own zero makes it ill-conditioned, and there the pass's choice
+        // differs between baked and live kernels, which must agree (tests/it/robust.rs).
+        if den.len() < 2 {
+            return None;
+        }
+        let x = map[atom.index()];
+        let (nv, dv) = (b.eval(ir, &num, x), b.eval(ir, &den, x));
+        let v = ir.bin(BinOp::Div, nv, dv, b.sp);
+        Some(v)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(src: &str) -> Formula {
+        let f = crate::front::parse("t.brdf", src).unwrap();
+        super::super::simplify(&f, &[])
+    }
+
+    fn apply(src: &str) -> Option<String> {
+        let f = parse(src);
+        let (ir, root, fired) = rational_form(&f);
+        fired.then(|| super::super::simplify_with(&Formula { ir, root, ..f }, &[], &super::super::Policy::default()).0.to_program_text())
+    }
+
+    #[test]
+    fn linear_fractional_sums_become_one_quotient() {
+        // 1 − 1.1·u/(u + 2c): one division of two fma-evaluated linear polynomials.
+        let t = apply("let c = NH\nmax((-1.1/(-n + n*c - 2*c)) * n * (c - 1) + 1, 0)^2").unwrap();
+        assert_eq!(t.matches(" / ").count(), 1, "{t}");
+        assert!(t.contains("fma("), "{t}");
+        let t = apply("let c = NH\nc/(n - n*c + c) - 0.25").unwrap();
+        assert!(t.contains("fma(") && t.matches(" / ").count() == 1, "{t}");
+        // A polynomial is left as written.
+        assert!(apply("n*0.5*(NH - 1) + 1").is_none());
+        // A term of higher degree keeps the whole sum as written.
+        assert!(apply("let c = NH\nc/(n - n*c + c) + (c^8 - 0.25)").is_none());
+        // Degree 2 over one atom, two atoms, a sum already x + a₀, same-signed terms are left alone.
+        assert!(apply("NH*NH - n*NH").is_none());
+        assert!(apply("NH/(n + NL) - 1").is_none());
+        assert!(apply("NH - n").is_none());
+        assert!(apply("n*(1 - NH) + NH").is_none());
+        assert!(apply("1/(n*(1 - NH) - NH) - 1").is_some());
+    }
+
+    #[test]
+    fn shapes_add_degrees() {
+        // The shape of the last `/` or `*` node (the root itself may be the lowering's max(…, 0)).
+        let last = |src: &str| {
+            let f = parse(src);
+            let s = shapes(&f, &f.ir.invariant());
+            let id = f.ir.ids().filter(|id| matches!(f.ir.node(*id), Node::Binary(BinOp::Div | BinOp::Mul, ..))).last().unwrap();
+            s[id.index()].map(|s| (s.num, s.den))
+        };
+        assert_eq!(last("let c = NH\n(n*c + 1)/(c + 2)"), Some((1, 1)));
+        assert_eq!(last("let c = NH\n(n*c + 1)/(c + 2)*c"), None);
+    }
+}

@@ -1,0 +1,77 @@
+//! The cancellation class of issue 12 (`simplify::cancel`): a rewrite must reach the target where the written
+//! form cannot, at the default budget, and keep baked and live kernels in agreement.
+
+use lobe::ir::Formula;
+use lobe::numerics::robust::{self, improve, ulps, PassOptions};
+use lobe::numerics::truth;
+use lobe::{Backend, Evaluator, Kernel, Options};
+
+fn load(stem: &str) -> Formula {
+    let path = format!("{}/examples/brdfs/{stem}.brdf", env!("CARGO_MANIFEST_DIR"));
+    lobe::front::parse(&path, &std::fs::read_to_string(&path).unwrap()).unwrap()
+}
+
+fn kernel(stem: &str, set: &[(&str, f64)], pass: bool) -> Kernel {
+    let opts = Options { backend: Backend::Jit, bake: set.iter().map(|(k, v)| (k.to_string(), *v)).collect(), ..Default::default() };
+    let opts = if pass { robust::with_pass(opts, PassOptions::default()) } else { opts };
+    lobe::compile_formula(load(stem), &opts).unwrap()
+}
+
+fn at_nh(nh: f64) -> [f64; lobe::N_INPUTS] {
+    lobe::from_cosines([0.5, 0.5, nh, nh, 0.7])
+}
+
+/// Modified cosine-quadratic, 1 − 1.1·u/(u + 2c) with u = n(1 − c): at c = 0.2203, n = 4.706 the written form
+/// cancels (~142 ulp off, 7.2 bits, where a 1-ulp input change moves the truth 13 ulp); `rational-form` makes it
+/// ((2 + 0.1n)c − 0.1n)/((2 − n)c + n) with double-double coefficients, within a few ulp, and cheaper.
+#[test]
+fn scos2_rational_form_removes_the_cancellation() {
+    let f = load("scos2");
+    let x = at_nh(2.202963953926277e-1);
+    let p = vec![4.70617413255282];
+    let t = truth::eval(&f, &x, &p);
+    let plain = kernel("scos2", &[], false).eval(&x, &p);
+    assert!(ulps(plain, t) > 100.0, "the written form is no longer off here: {} ulp", ulps(plain, t));
+    let k = kernel("scos2", &[], true);
+    assert!(ulps(k.eval(&x, &p), t) <= 4.0, "{} vs the truth {t}", k.eval(&x, &p));
+    let o = improve(&f, &[], &PassOptions { points: 20_000, ..Default::default() });
+    let kept = o.trials.iter().find(|t| t.kept && t.rule == "rational-form").unwrap_or_else(|| panic!("{:?}", o.trials));
+    assert!(kept.cost <= o.cost_before, "rational-form costs {} against {}", kept.cost, o.cost_before);
+    assert!(o.after.max_bits_well <= robust::TARGET_BITS && o.before.max_bits_well > 6.0, "{:?} → {:?}", o.before, o.after);
+    // Even where the value's own zero makes it ill-conditioned, the quotient of two fmas stays within a few ulp.
+    assert!(o.after.max_bits <= robust::TARGET_BITS, "{:?}", o.after.worst);
+}
+
+/// Coefficients start from the values the kernel computes for the parameter-only parts, which is what baking
+/// folds them to: the baked and the live kernel agree bit for bit, ill-conditioned points included.
+#[test]
+fn scos2_rational_form_baked_equals_live() {
+    let f = load("scos2");
+    let live = kernel("scos2", &[], true);
+    for n in [1.0, 4.70617413255282, 50.0, 1000.0] {
+        let baked = kernel("scos2", &[("n", n)], true);
+        for pt in robust::sample(&f, &[(0, n)], 2000, 3) {
+            let (a, b) = (live.eval(&pt.x, &[n]), baked.eval(&pt.x, &[n]));
+            assert!(a.to_bits() == b.to_bits(), "n = {n}, {:?}: live {a}, baked {b}", pt.x);
+        }
+    }
+}
+
+/// The rule itself, live and baked: a parameter-only subtree (0.786·n) enters as the value the kernel computes,
+/// which is what baking folds it to, so the two rewritten formulas agree bit for bit whatever the pass decides.
+#[test]
+fn rational_form_starts_from_the_values_baking_folds() {
+    use lobe::backend::interp::Interp;
+    use lobe::simplify::accuracy::Rule;
+    let f = lobe::front::parse("t.brdf", "let c = NH\n-1.1/(0.786*n*(1 - c) + 2*c)*n*(1 - c) + 1").unwrap();
+    let n = f.param_index("n").unwrap();
+    let live = Rule::RationalForm.apply(&lobe::simplify::simplify(&f, &[])).unwrap();
+    for v in [3.0, 50.0, 1000.0] {
+        let baked = Rule::RationalForm.apply(&lobe::simplify::simplify(&f, &[(n, v)])).unwrap();
+        let (a, b) = (Interp::new(&live), Interp::new(&baked));
+        for pt in robust::sample(&f, &[(n, v)], 2000, 5) {
+            let (x, y) = (a.eval(&pt.x, &pt.p), b.eval(&pt.x, &pt.p));
+            assert!(x.to_bits() == y.to_bits(), "n = {v}, {:?}: live {x}, baked {y}", pt.x);
+        }
+    }
+}
