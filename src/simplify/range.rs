@@ -241,7 +241,10 @@ impl Range {
                     return Range::TOP;
                 }
                 let (l, h) = (a.lo + b.lo.ln() - c.hi.ln(), a.hi + b.hi.ln() - c.lo.ln());
-                let lo = if l > -700.0 { l.exp() * (1.0 - 1e-9) } else { 0.0 };
+                // e^a is 0 below a ≈ −745.2 and the builtin takes 0·∞ there as 0 (an infinite b stands for an
+                // overflowed finite factor), which the exponent sum with ln ∞ does not see.
+                let vanishing = a.lo < -745.2 && b.hi == f64::INFINITY;
+                let lo = if l > -700.0 && !vanishing { l.exp() * (1.0 - 1e-9) } else { 0.0 };
                 let hi = if h < 700.0 { h.exp() * (1.0 + 1e-9) } else { f64::INFINITY };
                 // e^a overflows to ∞ past a ≈ 709.78, and ∞·0 is NaN, as in exp(a)*b/c written out.
                 let overflow_times_zero = a.hi > 709.0 && b.contains_zero();
