@@ -435,16 +435,16 @@ const INV_L2N: f64 = 184.6649652337873; // 128/ln 2
 /// [`scale2`] (exact unless the result is subnormal or overflows). No division. Scaling by two products in
 /// every lane measured faster than one product plus a rare block: Beckmann's exp underflows in many lanes.
 fn exp_dd<E: Emit>(e: &mut E, xh: E::V, xl: E::V) -> E::V {
-    let (y, q) = exp_parts(e, xh, xl, 760.0);
+    let (y, q) = exp_parts(e, xh, xl, -760.0, 720.0);
     scale2(e, y, q)
 }
 
 /// [`exp_dd`] before its scaling: `(y, q)` with e^(xh + xl) = y·2^q, y in [0.99, 2.01) rounded once, xh
-/// clamped to [−lim, min(lim, 720)] (lim ≤ 1416, so k·`L2N_HI` stays exact and q within [`scale2`]'s range).
-fn exp_parts<E: Emit>(e: &mut E, xh: E::V, xl: E::V, lim: f64) -> (E::V, E::V) {
+/// clamped to [lo, hi] (|lo|, |hi| ≤ 1416, so k·`L2N_HI` stays exact and q within [`scale2`]'s range).
+fn exp_parts<E: Emit>(e: &mut E, xh: E::V, xl: E::V, lo: f64, hi: f64) -> (E::V, E::V) {
     use super::math_tables::EXP_T;
     // Clamp so k stays small; a clamped (or NaN) lane drops xl, which is only meaningful beside its xh.
-    let x = clamp_to(e, xh, -lim, if lim <= 760.0 { 720.0 } else { lim });
+    let x = clamp_to(e, xh, lo, hi);
     let same = e.eq(x, xh);
     let zero = e.konst(0.0);
     let xl = e.select(same, xl, zero);
@@ -1243,7 +1243,7 @@ pub mod logic {
 /// products whose exp factor is what vanishes there.
 pub fn exp_mul_div<E: Emit>(e: &mut E, a: E::V, b: E::V, c: E::V) -> E::V {
     let zero = e.konst(0.0);
-    let (y, q) = exp_parts(e, a, zero, 1416.0);
+    let (y, q) = exp_parts(e, a, zero, -1416.0, 1416.0);
     let bc = e.div(b, c);
     let s = e.mul(y, bc);
     let r = scale2(e, s, q);

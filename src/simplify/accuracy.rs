@@ -587,6 +587,11 @@ fn sum_error(ir: &mut Ir, (a, ra): (NodeId, Range), (b, rb): (NodeId, Range), s:
         let z = ir.bin(BinOp::Sub, s, big, sp);
         return ir.bin(BinOp::Sub, small, z, sp);
     }
+    two_sum_error(ir, a, b, s, sp)
+}
+
+/// Knuth's 2Sum: the exact error `a + b − s` of `s = a + b` whatever the magnitudes (five operations).
+pub(super) fn two_sum_error(ir: &mut Ir, a: NodeId, b: NodeId, s: NodeId, sp: Span) -> NodeId {
     let bb = ir.bin(BinOp::Sub, s, a, sp);
     let ab = ir.bin(BinOp::Sub, s, bb, sp);
     let ea = ir.bin(BinOp::Sub, a, ab, sp);
@@ -594,7 +599,7 @@ fn sum_error(ir: &mut Ir, (a, ra): (NodeId, Range), (b, rb): (NodeId, Range), s:
     ir.bin(BinOp::Add, ea, eb, sp)
 }
 
-fn add_opt(ir: &mut Ir, a: Option<NodeId>, b: Option<NodeId>, sp: Span) -> Option<NodeId> {
+pub(super) fn add_opt(ir: &mut Ir, a: Option<NodeId>, b: Option<NodeId>, sp: Span) -> Option<NodeId> {
     match (a, b) {
         (Some(a), Some(b)) => Some(ir.bin(BinOp::Add, a, b, sp)),
         (a, b) => a.or(b),

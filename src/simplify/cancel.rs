@@ -24,7 +24,7 @@
 //! polynomial (fewer where a coefficient is exact or zero), one division when the denominator is not constant
 //! — usually cheaper than the written chain of products, quotients and sums it replaces.
 
-use super::accuracy::rebuild;
+use super::accuracy::{add_opt, rebuild, two_sum_error};
 use crate::base::span::Span;
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Ir, Node, NodeId};
@@ -87,7 +87,7 @@ type Poly = Vec<Option<Dd>>;
 
 struct Builder<'a> {
     f: &'a Formula,
-    inv: Vec<bool>,
+    inv: &'a [bool],
     sp: Span,
     rats: HashMap<NodeId, (Poly, Poly)>,
 }
@@ -95,13 +95,6 @@ struct Builder<'a> {
 impl Builder<'_> {
     fn is(&self, ir: &Ir, x: NodeId, v: f64) -> bool {
         ir.node(x).as_const() == Some(v)
-    }
-
-    fn add_opt(&self, ir: &mut Ir, a: Option<NodeId>, b: Option<NodeId>) -> Option<NodeId> {
-        match (a, b) {
-            (Some(a), Some(b)) => Some(ir.bin(BinOp::Add, a, b, self.sp)),
-            (a, b) => a.or(b),
-        }
     }
 
     /// hi + lo renormalised (Fast2Sum: |hi| ≥ |lo| up to the coefficient arithmetic's own cancellations, where
@@ -119,15 +112,11 @@ impl Builder<'_> {
 
     fn add(&self, ir: &mut Ir, a: Dd, b: Dd) -> Dd {
         let sp = self.sp;
-        // Knuth's 2Sum: s + e = a.hi + b.hi exactly.
+        // s + e = a.hi + b.hi exactly.
         let s = ir.bin(BinOp::Add, a.hi, b.hi, sp);
-        let bb = ir.bin(BinOp::Sub, s, a.hi, sp);
-        let ab = ir.bin(BinOp::Sub, s, bb, sp);
-        let ea = ir.bin(BinOp::Sub, a.hi, ab, sp);
-        let eb = ir.bin(BinOp::Sub, b.hi, bb, sp);
-        let e = ir.bin(BinOp::Add, ea, eb, sp);
-        let lo = self.add_opt(ir, a.lo, b.lo);
-        let lo = self.add_opt(ir, Some(e), lo);
+        let e = two_sum_error(ir, a.hi, b.hi, s, sp);
+        let lo = add_opt(ir, a.lo, b.lo, sp);
+        let lo = add_opt(ir, Some(e), lo, sp);
         self.norm(ir, s, lo)
     }
 
@@ -237,7 +226,7 @@ impl Builder<'_> {
         };
         let hi = part(ir, c1.map(|c| c.hi), c0.map(|c| c.hi));
         let lo = part(ir, c1.and_then(|c| c.lo), c0.and_then(|c| c.lo));
-        self.add_opt(ir, hi, lo).unwrap_or_else(|| ir.konst(0.0, sp))
+        add_opt(ir, hi, lo, sp).unwrap_or_else(|| ir.konst(0.0, sp))
     }
 }
 
@@ -268,7 +257,7 @@ pub(super) fn rational_form(f: &Formula) -> (Ir, NodeId, bool) {
     }
     let uses = f.ir.use_counts(f.root);
     let ranges = super::node_ranges(f, &super::Policy::default());
-    let mut b = Builder { f, inv: inv.clone(), sp: Span::default(), rats: HashMap::new() };
+    let mut b = Builder { f, inv: &inv, sp: Span::default(), rats: HashMap::new() };
     rebuild(f, |ir, map, id, n| {
         if inv[id.index()] || in_sum[id.index()] && uses[id.index()] <= 1 || !matches!(n, Node::Binary(BinOp::Add | BinOp::Sub, ..)) {
             return None;
@@ -296,16 +285,15 @@ pub(super) fn rational_form(f: &Formula) -> (Ir, NodeId, bool) {
         if !(ts.iter().any(|t| signs(t).0) && ts.iter().any(|t| signs(t).1)) {
             return None;
         }
-        let group = ts;
         let atom = acc.and_then(|s| s.atom)?;
         // Nothing to gain where the live terms are the atom itself: the sum is already x + a₀.
-        if group.len() < 2 || group.iter().all(|(t, _)| inv[t.index()] || *t == atom) {
+        if ts.len() < 2 || ts.iter().all(|(t, _)| inv[t.index()] || *t == atom) {
             return None;
         }
         b.sp = f.ir.span(id);
         let one = b.one(ir);
         let (mut num, mut den): (Poly, Poly) = (vec![None], one);
-        for (t, neg) in group {
+        for (t, neg) in ts {
             let (n, d) = b.rat(ir, map, t, &shapes);
             let n = if neg { b.pneg(ir, &n) } else { n };
             let l = b.pmul(ir, &num, &d);

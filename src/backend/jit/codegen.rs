@@ -404,6 +404,18 @@ impl<L: Lanes> Translator<'_, '_, L> {
         Ok(L::from_lanes(self.b, &lanes))
     }
 
+    /// `any(m) ? (m ? callee(args) : r) : r`, one call per lane inside an [`Emit::rare`] block.
+    fn rare_lanes(&mut self, m: Value, r: Value, callee: FuncRef, args: &[Value]) -> Value {
+        let args = args.to_vec();
+        self.rare(m, r, &mut |t| match t.call_lanes(callee, &args) {
+            Ok(y) => t.select(m, y, r),
+            Err(e) => {
+                t.error = Some(e);
+                r
+            }
+        })
+    }
+
     /// sqrt, abs, min, max, clamp, fma: native instructions with exactly the table's semantics.
     fn inline(&mut self, f: Builtin, args: [NodeId; 3]) -> Result<Value, JitError> {
         let x = self.arg(args[0])?;
@@ -647,15 +659,10 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
     }
     /// `any(m) ? (m ? f(args) : r) : r` with `f`'s compiled library function, when the module imports it.
     fn rare_call(&mut self, m: Value, r: Value, f: Builtin, args: &[Value], slow: &mut dyn FnMut(&mut Self) -> Value) -> Value {
-        let Some(callee) = self.cx.callees[f as usize] else { return self.rare(m, r, slow) };
-        let args = args.to_vec();
-        self.rare(m, r, &mut |t| match t.call_lanes(callee, &args) {
-            Ok(y) => t.select(m, y, r),
-            Err(e) => {
-                t.error = Some(e);
-                r
-            }
-        })
+        match self.cx.callees[f as usize] {
+            Some(callee) => self.rare_lanes(m, r, callee, args),
+            None => self.rare(m, r, slow),
+        }
     }
     /// `any(m) ? (m ? libm(x) : r) : r`: the per-lane calls are in a [`Emit::rare`] block.
     fn fallback(&mut self, m: Value, x: Value, r: Value, f: Builtin) -> Value {
@@ -663,13 +670,7 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
             self.error = Some(JitError::Internal(format!("fallback of `{}` was not imported", f.name())));
             return r;
         };
-        self.rare(m, r, &mut |t| match t.call_lanes(callee, &[x]) {
-            Ok(y) => t.select(m, y, r),
-            Err(e) => {
-                t.error = Some(e);
-                r
-            }
-        })
+        self.rare_lanes(m, r, callee, &[x])
     }
 }
 
