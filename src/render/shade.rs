@@ -674,7 +674,7 @@ fn encode(g: &mut Group, rgb: &mut [u8], transfer: Transfer) {
     match transfer {
         Transfer::Linear => {
             for i in 0..m {
-                lv[i] = pack(linear8(r[i]), linear8(gg[i]), linear8(b[i]));
+                lv[i] = linear_pixel(r[i], gg[i], b[i]);
             }
         }
         Transfer::Srgb => {
@@ -691,17 +691,25 @@ fn encode(g: &mut Group, rgb: &mut [u8], transfer: Transfer) {
     }
 }
 
-/// [`Transfer::encode`]'s linear branch, bit for bit, without branches or a float-to-int conversion: the
-/// comparisons turn NaN into 0, and floor(y) comes from adding 1.5·2^52 (which rounds y to an integer in the
-/// low mantissa bits) and stepping down where that rounded up.
+/// A pixel's three linear levels packed: each level sits in the low byte of its [`linear_bits`], so shifted
+/// and added in 64-bit lanes the low 32 bits are the packed pixel (no shuffle per channel).
 #[inline(always)]
-fn linear8(x: f64) -> u8 {
+fn linear_pixel(r: f64, g: f64, b: f64) -> u32 {
+    linear_bits(r).wrapping_add(linear_bits(g) << 8).wrapping_add(linear_bits(b) << 16) as u32
+}
+
+/// [`Transfer::encode`]'s linear branch, bit for bit, without branches or a float-to-int conversion, as the
+/// low byte of the result (the bits above it are junk to discard): the comparisons turn NaN into 0, and
+/// floor(y) comes from adding 1.5·2^52 (which rounds y to an integer in the low mantissa bits) and stepping
+/// down where that rounded up.
+#[inline(always)]
+fn linear_bits(x: f64) -> u64 {
     const M: f64 = 6_755_399_441_055_744.0;
     let c = if x > 0.0 { x } else { 0.0 };
     let c = if c < 1.0 { c } else { 1.0 };
     let y = c * 255.0 + 0.5;
     let t = y + M;
-    (t.to_bits() as u32).wrapping_sub(u32::from(t - M > y)) as u8
+    t.to_bits().wrapping_sub(u64::from(t - M > y))
 }
 
 #[cfg(test)]
