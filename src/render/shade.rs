@@ -279,7 +279,12 @@ fn runs(tri: &[u32], s: &Setup, runs: &mut Vec<Run>, rgb: &mut [u8], bg: [u8; 3]
     let mut o = 0;
     while o < tri.len() {
         let t = tri[o];
-        let e = o + 1 + tri[o + 1..].iter().take_while(|&&x| x == t).count();
+        // Eight pixels per test (one vector compare) while the run lasts, then one by one.
+        let mut e = o + 1;
+        while tri.get(e..e + 8).is_some_and(|c| c.iter().all(|&x| x == t)) {
+            e += 8;
+        }
+        e += tri[e..].iter().take_while(|&&x| x == t).count();
         if t == EMPTY {
             for p in rgb[o * 3..e * 3].chunks_exact_mut(3) {
                 p.copy_from_slice(&bg);
