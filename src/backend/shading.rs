@@ -26,8 +26,10 @@
 //! Cost model (per pixel, before F): ~30 flops, two square roots and two divisions for the view step; per
 //! light ~15 flops, one root and one division (point lights), ~10 more and one root for the half vector; the
 //! frame adds ~45 flops and a root per pixel (work that several light regions need is computed once, outside
-//! them). Measured (BENCHMARKS.md): the JIT program ~7 ns per pixel for one light and a cheap formula, of
-//! which the exact inverse lengths are ~25 %. Inverse lengths are exact `1/sqrt` in f64.
+//! them). Measured (BENCHMARKS.md): the JIT program ~6 ns per pixel for one light and a cheap formula. The
+//! loop is bound by its instruction count, not by the divider: without the inverse lengths' roots and divisions
+//! it would be only ~16 % faster, and f32 ones (converted at the boundary) made it slower, so inverse lengths
+//! are exact `1/sqrt` in f64 (an f32 geometry does not pay on 128-bit lanes: BENCHMARKS.md, shade5).
 
 use crate::base::span::Span;
 use crate::builtins::{Builtin, Mode};
