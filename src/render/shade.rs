@@ -730,11 +730,16 @@ mod tests {
             vals.extend([h, h.next_up(), h.next_down()]);
         }
         vals.extend([-1.0, -0.0, 1.0 + 1e-12, 7.0, f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e-300]);
-        let mut g = Group { len: vals.len(), segs: vec![(0, 0, vals.len() as u32)], acc: [vals.clone(), vals.clone(), vals.clone()], ..Group::default() };
-        let mut rgb = vec![0u8; vals.len() * 3];
+        // Each channel its own order of the values, so a level packed into the wrong byte shows.
+        let n = vals.len();
+        let chans: [Vec<f64>; 3] = [vals.clone(), vals.iter().rev().copied().collect(), (0..n).map(|i| vals[(i * 7 + 3) % n]).collect()];
+        let mut g = Group { len: n, segs: vec![(0, 0, n as u32)], acc: chans.clone(), ..Group::default() };
+        let mut rgb = vec![0u8; n * 3];
         encode(&mut g, &mut rgb, Transfer::Linear);
-        for (i, v) in vals.iter().enumerate() {
-            assert_eq!(rgb[i * 3], Transfer::Linear.encode(*v), "{v}");
+        for i in 0..n {
+            for (c, ch) in chans.iter().enumerate() {
+                assert_eq!(rgb[i * 3 + c], Transfer::Linear.encode(ch[i]), "channel {c}: {}", ch[i]);
+            }
         }
     }
 }
