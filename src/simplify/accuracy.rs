@@ -81,10 +81,11 @@ pub enum Rule {
     SmithG1,
     ScaledNorm,
     RationalForm,
+    CompensatedExp,
 }
 
 impl Rule {
-    pub const ALL: [Rule; 9] = [
+    pub const ALL: [Rule; 10] = [
         Rule::SplitSqrt,
         Rule::SmithG1,
         // Before quotient-chain, which flattens (x/√s)·(x/√s) into x·x/√s/√s, where scaled-norm cannot see it.
@@ -95,6 +96,7 @@ impl Rule {
         Rule::CompensatedBase,
         Rule::CompensatedSum,
         Rule::RationalForm,
+        Rule::CompensatedExp,
     ];
 
     pub fn name(self) -> &'static str {
@@ -108,6 +110,7 @@ impl Rule {
             Rule::SmithG1 => "smith-g1",
             Rule::ScaledNorm => "scaled-norm",
             Rule::RationalForm => "rational-form",
+            Rule::CompensatedExp => "compensated-exp",
         }
     }
 
@@ -123,6 +126,7 @@ impl Rule {
             Rule::SmithG1 => "Smith G1 2/(1 + sqrt(1 + A*tan^2)) as 2c/(c + sqrt(c^2 + A*(1 - c^2))), c/c cancelled: no inf/inf at grazing c",
             Rule::ScaledNorm => "x/sqrt(a^2 + b^2 + ...) with a tiny vector scaled by 2^600 first: no zero length",
             Rule::RationalForm => "a sum rational in one input as (a1*x + a0)/(b1*x + b0), coefficients in double-double: the cancellation moves to the parameters",
+            Rule::CompensatedExp => "exp(K*q) as exp(hi)*(1 + t), K's parameter-only factors in double-double and t the product's rounding error: exp no longer amplifies it",
         }
     }
 
@@ -147,6 +151,7 @@ impl Rule {
             Rule::SmithG1 => smith_g1(f, &ranges),
             Rule::ScaledNorm => scaled_norm(f),
             Rule::RationalForm => super::cancel::rational_form(f),
+            Rule::CompensatedExp => super::cancel::compensated_exp(f),
         };
         if !fired {
             return None;
@@ -363,7 +368,7 @@ fn product_lists(f: &Formula, max: usize) -> Lists {
 }
 
 /// The product of `xs` (mapped to the new arena), `None` when empty.
-fn product(ir: &mut Ir, map: &[NodeId], xs: &[NodeId], s: Span) -> Option<NodeId> {
+pub(super) fn product(ir: &mut Ir, map: &[NodeId], xs: &[NodeId], s: Span) -> Option<NodeId> {
     let mut it = xs.iter().map(|x| map[x.index()]);
     let first = it.next()?;
     Some(it.fold(first, |acc, x| ir.bin(BinOp::Mul, acc, x, s)))

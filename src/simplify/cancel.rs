@@ -24,7 +24,7 @@
 //! polynomial (fewer where a coefficient is exact or zero), one division when the denominator is not constant
 //! — usually cheaper than the written chain of products, quotients and sums it replaces.
 
-use super::accuracy::{add_opt, rebuild, two_sum_error};
+use super::accuracy::{add_opt, product, rebuild, two_sum_error};
 use crate::base::span::Span;
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Ir, Node, NodeId};
@@ -138,6 +138,25 @@ impl Builder<'_> {
             e = ir.call(Builtin::Fma, &[al, b.hi, e], sp);
         }
         self.norm(ir, p, Some(e))
+    }
+
+    /// a/b: the quotient's exact remainder (fma) and the operands' low parts, over b.
+    fn div(&self, ir: &mut Ir, a: Dd, b: Dd) -> Dd {
+        let sp = self.sp;
+        if self.is(ir, b.hi, 1.0) && b.lo.is_none() {
+            return a;
+        }
+        let q = ir.bin(BinOp::Div, a.hi, b.hi, sp);
+        let nq = ir.neg(q, sp);
+        let mut r = ir.call(Builtin::Fma, &[nq, b.hi, a.hi], sp);
+        if let Some(al) = a.lo {
+            r = ir.bin(BinOp::Add, r, al, sp);
+        }
+        if let Some(bl) = b.lo {
+            r = ir.call(Builtin::Fma, &[nq, bl, r], sp);
+        }
+        let lo = ir.bin(BinOp::Div, r, b.hi, sp);
+        self.norm(ir, q, Some(lo))
     }
 
     fn padd(&self, ir: &mut Ir, p: &Poly, q: &Poly) -> Poly {
@@ -315,6 +334,158 @@ pub(super) fn rational_form(f: &Formula) -> (Ir, NodeId, bool) {
     })
 }
 
+/// Factors of a `×`/`÷`/negation tree under `x`: (negated, numerators, denominators); `None` beyond
+/// [`MAX_FACTORS`] factors. A parameter-only subtree is one factor, taken as the kernel computes it, which is
+/// what baking folds it to: baked and live kernels then start from the same values.
+fn factors(f: &Formula, inv: &[bool], x: NodeId) -> Option<(bool, Vec<NodeId>, Vec<NodeId>)> {
+    type Out = (bool, Vec<NodeId>, Vec<NodeId>);
+    fn go(f: &Formula, inv: &[bool], x: NodeId, den: bool, out: &mut Out) {
+        match *f.ir.node(x) {
+            _ if inv[x.index()] && f.ir.node(x).as_const() != Some(1.0) => {
+                if den {
+                    out.2.push(x);
+                } else {
+                    out.1.push(x);
+                }
+            }
+            Node::Neg(a) => {
+                out.0 = !out.0;
+                go(f, inv, a, den, out);
+            }
+            Node::Binary(op @ (BinOp::Mul | BinOp::Div), a, b) => {
+                go(f, inv, a, den, out);
+                go(f, inv, b, den ^ (op == BinOp::Div), out);
+            }
+            _ if f.ir.node(x).as_const() == Some(1.0) => {}
+            _ if den => out.2.push(x),
+            _ => out.1.push(x),
+        }
+    }
+    let mut out = (false, vec![], vec![]);
+    go(f, inv, x, false, &mut out);
+    (out.1.len() + out.2.len() <= MAX_FACTORS).then_some(out)
+}
+
+/// Largest product/quotient tree [`compensated_exp`] takes apart.
+const MAX_FACTORS: usize = 8;
+
+/// Divisors of the live core are kept ≥ this, so the exponent stays finite where one vanishes (it is then
+/// below −1416 and the exponential 0 either way) and its tail is a number, not ∞ − ∞.
+const MIN_DIVISOR: f64 = 9.332636185032189e-302; // 2^-1000
+
+// exp(K·q) → e + e·t, e = exp(Kʰ·q);  expmuldiv(K·q, K_b·u, c) → expmuldiv(Kʰ·q, (K_b + K_b·t)·u, c)
+// t = (K·q − Kʰ·q) to first order: K = Kʰ + Kˡ the parameter-only factors in double-double, q the live ones
+pub(super) fn compensated_exp(f: &Formula) -> (Ir, NodeId, bool) {
+    let inv = f.ir.invariant();
+    let ranges = super::node_ranges(f, &super::Policy::default());
+    let mut b = Builder { f, inv: &inv, sp: Span::default(), rats: HashMap::new() };
+    rebuild(f, |ir, map, id, n| {
+        let Node::Call(call @ (Builtin::Exp | Builtin::ExpMulDiv), [arg, bv, cv]) = n else { return None };
+        if inv[arg.index()] {
+            return None;
+        }
+        let (negated, num, den) = factors(f, &inv, arg)?;
+        // An exponent ≤ 0 (by its factors' signs): where a divisor of it vanishes, the exponential does.
+        let mut neg = negated;
+        for x in num.iter().chain(&den) {
+            let r = ranges[x.index()];
+            match (r.lo >= 0.0, r.hi <= 0.0) {
+                (true, _) => {}
+                (false, true) => neg = !neg,
+                (false, false) => return None,
+            }
+        }
+        if !neg {
+            return None;
+        }
+        let (kn, qn): (Vec<NodeId>, Vec<NodeId>) = num.iter().partition(|x| inv[x.index()]);
+        let (kd, qd): (Vec<NodeId>, Vec<NodeId>) = den.iter().partition(|x| inv[x.index()]);
+        // Nothing to carry: no parameter-only factor, or no live one.
+        if kn.len() + kd.len() == 0 || qn.len() + qd.len() == 0 {
+            return None;
+        }
+        // Divisors must be ≥ 0 for the floor above to keep their sign.
+        if qd.iter().any(|d| ranges[d.index()].lo < 0.0 || ranges[d.index()].nan) {
+            return None;
+        }
+        let sp = f.ir.span(id);
+        b.sp = sp;
+        // K in double-double, from the parameter-only factors as the kernel computes them (what baking folds
+        // them to, so baked and live kernels start from the same K).
+        let dd = |b: &Builder, ir: &mut Ir, xs: &[NodeId]| {
+            let mut acc = Dd { hi: ir.konst(1.0, sp), lo: None };
+            for x in xs {
+                acc = b.mul(ir, acc, Dd { hi: map[x.index()], lo: None });
+            }
+            acc
+        };
+        let (kn, kd) = (dd(&b, ir, &kn), dd(&b, ir, &kd));
+        let mut k = b.div(ir, kn, kd);
+        if negated {
+            k = b.neg(ir, k);
+        }
+        let q = {
+            let qn = product(ir, map, &qn, sp);
+            let qd = product(ir, map, &qd, sp).map(|d| {
+                let floor = ir.konst(MIN_DIVISOR, sp);
+                ir.call(Builtin::Max, &[d, floor], sp)
+            });
+            match (qn, qd) {
+                (Some(n), Some(d)) => ir.bin(BinOp::Div, n, d, sp),
+                (Some(n), None) => n,
+                (None, Some(d)) => {
+                    let one = ir.konst(1.0, sp);
+                    ir.bin(BinOp::Div, one, d, sp)
+                }
+                (None, None) => unreachable!("a live factor exists"),
+            }
+        };
+        let a = ir.bin(BinOp::Mul, k.hi, q, sp);
+        let na = ir.neg(a, sp);
+        let mut t = ir.call(Builtin::Fma, &[k.hi, q, na], sp);
+        if let Some(kl) = k.lo {
+            t = ir.call(Builtin::Fma, &[kl, q, t], sp);
+        }
+        Some(if call == Builtin::Exp {
+            let e = ir.call(Builtin::Exp, &[a], sp);
+            ir.call(Builtin::Fma, &[e, t, e], sp)
+        } else {
+            // b's own parameter-only factors carry the tail where it has some: one fma on a value computed once
+            // per parameter set.
+            let (negb, bn, bd) = factors(f, &inv, bv)?;
+            let (kbn, un): (Vec<NodeId>, Vec<NodeId>) = bn.iter().partition(|x| inv[x.index()]);
+            let (kbd, ud): (Vec<NodeId>, Vec<NodeId>) = bd.iter().partition(|x| inv[x.index()]);
+            let quot = |ir: &mut Ir, n: &[NodeId], d: &[NodeId]| match (product(ir, map, n, sp), product(ir, map, d, sp)) {
+                (None, None) => None,
+                (n, Some(d)) => {
+                    let n = n.unwrap_or_else(|| ir.konst(1.0, sp));
+                    Some(ir.bin(BinOp::Div, n, d, sp))
+                }
+                (n, None) => n,
+            };
+            let kb = quot(ir, &kbn, &kbd).map(|k| if negb { ir.neg(k, sp) } else { k });
+            let bb = match kb {
+                Some(kb) => {
+                    let mut x = ir.call(Builtin::Fma, &[kb, t, kb], sp);
+                    if let Some(n) = product(ir, map, &un, sp) {
+                        x = ir.bin(BinOp::Mul, x, n, sp);
+                    }
+                    if let Some(d) = product(ir, map, &ud, sp) {
+                        x = ir.bin(BinOp::Div, x, d, sp);
+                    }
+                    x
+                }
+                None => {
+                    let u = quot(ir, &un, &ud).unwrap_or_else(|| ir.konst(1.0, sp));
+                    let u = if negb { ir.neg(u, sp) } else { u };
+                    ir.call(Builtin::Fma, &[u, t, u], sp)
+                }
+            };
+            ir.call(Builtin::ExpMulDiv, &[a, bb, map[cv.index()]], sp)
+        })
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -361,5 +532,25 @@ mod tests {
         };
         assert_eq!(last("let c = NH\n(n*c + 1)/(c + 2)"), Some((1, 1)));
         assert_eq!(last("let c = NH\n(n*c + 1)/(c + 2)*c"), None);
+    }
+
+    #[test]
+    fn compensated_exp_carries_the_exponent_tail() {
+        let apply = |src: &str| {
+            let f = parse(src);
+            let (ir, root, fired) = compensated_exp(&f);
+            fired.then(|| super::super::simplify_with(&Formula { ir, root, ..f }, &[], &super::super::Policy::default()).0.to_program_text())
+        };
+        // Beckmann after scaled-exp: K = 1/m² in double-double, the tail on b's parameter-only factor, the
+        // vanishing divisor floored so the tail stays a number.
+        let t = apply("param m = 0.3 in 0.01..1\nlet nh = clamp(NH, 0, 1)\nexpmuldiv((nh*nh - 1) / (m*m * (nh*nh)), 1 / (m*m * nh * nh * nh), nh)").unwrap();
+        assert!(t.contains("max(") && t.matches("fma(").count() >= 3 && t.contains("expmuldiv("), "{t}");
+        // A plain exp: e + e·t.
+        let t = apply("exp(-n * NH * NH)").unwrap();
+        assert!(t.contains("fma(") && t.contains("exp("), "{t}");
+        // An exponent that may be positive, one without a parameter, and a parameter-only one are left alone.
+        assert!(apply("exp(n * NH)").is_none());
+        assert!(apply("exp(-NH * NH)").is_none());
+        assert!(apply("exp(-n * 2) * NH").is_none());
     }
 }
