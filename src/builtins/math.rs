@@ -1333,3 +1333,66 @@ fn exp_mul_div_scaled<E: Emit>(e: &mut E, a: E::V, b: E::V, c: E::V) -> E::V {
     let s = e.zero_where(z, s);
     e.select(normal, r, s)
 }
+
+// ---- acoslo (the accuracy pass's tail of acos; added after the library above, which it reuses) ----
+
+/// `acos(x) − acos_f64(x)`: the rounding error of the precise [`acos`] at x (the same clamp, reduction and
+/// branches), so `acos(x) + acoslo(x)` is acos to within ~1/16 ulp instead of ≤ 1 (tests/it/cancel.rs). Fast
+/// mode: 0 (its acos is 2e-8 off; the pass carries no tail there). In exact arithmetic (the truth) it is 0.
+///
+/// Why: exp(−n·acos(x)²/2) multiplies acos's relative error by 2·|exponent| (~40 for the Gaussian at n = 30);
+/// the accuracy pass carries this tail into the exponent (`compensated-exp`).
+///
+/// Each branch recovers the error of its last, largest roundings from exact differences (Sterbenz) of the
+/// rounded result and the pieces acos adds: |x| < ½: (π/2ʰ − r) − x is x·R − π/2ˡ up to those roundings, so
+/// subtracting the rounded x·R and adding π/2ˡ leaves them; x > ½ (for |x|): r/2 = df + (s·R + c), so
+/// ((df − r/2) + s·R) + c; x < −½: π − r and the |x| > ½ result share their pieces, so the tail is their exact
+/// difference plus π's low part minus that result's tail. Left out, each ≤ ~1/50 ulp of the result: the
+/// roundings of x·R and s·R (small next to the result) and √z's own (times R). The intermediates are acos's
+/// own, computed the same way, so inside one kernel the JIT computes them once. Cost: ~12 additions, 2 selects
+/// and a compare beside acos.
+pub fn acos_lo<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
+    if mode == Mode::Fast {
+        return e.konst(0.0);
+    }
+    let x = clamp_to(e, x, -1.0, 1.0);
+    let ax = e.abs(x);
+    let small = ltk(e, ax, 0.5);
+    let (z, s, r) = asin_reduce(e, ax, small, x);
+    // |x| < ½: res = π/2ʰ − (x − (π/2ˡ − x·r)).
+    let xr = e.mul(x, r);
+    let a = ksub(e, PIO2_LO, xr);
+    let a = e.sub(x, a);
+    let res_small = ksub(e, PIO2_HI, a);
+    let d = ksub(e, PIO2_HI, res_small);
+    let g = e.sub(d, x);
+    let g = e.sub(g, xr);
+    let lo_small = addk(e, g, PIO2_LO);
+    // |x| > ½ (for |x|): res = 2t, t = df + (s·r + c).
+    let rs = e.mul(r, s);
+    let (df, c) = sqrt_split(e, z, s);
+    let w = e.add(rs, c);
+    let t = e.add(df, w);
+    let res_pos = e.add(t, t);
+    let g = e.sub(df, t);
+    let g = e.add(g, rs);
+    let g = e.add(g, c);
+    let lo_pos = e.add(g, g);
+    // |x| = 1: z = 0 and the split divides 0 by 0; acos(1) = +0 exactly.
+    let at1 = eqk(e, ax, 1.0);
+    let res_pos = e.zero_where(at1, res_pos);
+    let lo_pos = e.zero_where(at1, lo_pos);
+    // x < −½: res = π − 2(s + (r·s − π/2ˡ)) = π − res_pos up to rounding; π = PI + 2·π/2ˡ.
+    let sw = addk(e, rs, -PIO2_LO);
+    let sw = e.add(s, sw);
+    let sw2 = e.add(sw, sw);
+    let res_neg = ksub(e, PI, sw2);
+    let d = ksub(e, PI, res_neg);
+    let g = e.sub(d, res_pos);
+    let g = addk(e, g, 2.0 * PIO2_LO);
+    let lo_neg = e.sub(g, lo_pos);
+    let zero = e.konst(0.0);
+    let neg = e.lt(x, zero);
+    let big = e.select(neg, lo_neg, lo_pos);
+    e.select(small, lo_small, big)
+}

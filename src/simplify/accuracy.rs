@@ -57,7 +57,8 @@
 //! extra divisions add ~3.4 ns to Beckmann's 8.5 ns, a libm exp ~5 ns): `+ − ×`, abs, min, max 1; clamp 2;
 //! `/` and sqrt 3; fma 1; math-library calls (exp, ln, trig) 20, expmuldiv 28 (it replaces an exp, a `×` and
 //! a `/` (24) and adds a range test: Beckmann's kernel takes ~1.15× the unrewritten one with it, on `lobe
-//! bench`'s inputs and on inputs where no lane takes its rare branch alike), pow 60 (pow(NH, e) with e live took 5.0× the
+//! bench`'s inputs and on inputs where no lane takes its rare branch alike), acoslo 8 (beside the acos it
+//! corrects, whose reduction the JIT shares: the Gaussian's kernel measured +1.5 ns batched on 8.5), pow 60 (pow(NH, e) with e live took 5.0× the
 //! ns of the 14-multiplication chain for NH¹⁰⁰⁰); leaves and negation 0.
 //! Nodes that read no input (parameters only) cost nothing: the kernels compute them once per parameter set
 //! (the prepared block, hoisted out of batch loops).
@@ -240,6 +241,8 @@ pub fn cost(f: &Formula) -> f64 {
             Builtin::Floor => 6.0,
             Builtin::Pow => 60.0,
             Builtin::ExpMulDiv => 28.0,
+            // Beside acos of the same argument (its only use), whose work the JIT shares: measured (robust7).
+            Builtin::AcosLo => 8.0,
             _ => 20.0,
         },
     };

@@ -128,6 +128,13 @@ impl Builder<'_> {
         if self.is(ir, b.hi, 1.0) && b.lo.is_none() {
             return a;
         }
+        // By a power of two: exact (no underflow in a parameter's coefficient), the low part scaled alike.
+        let pow2 = |ir: &Ir, x: Dd| x.lo.is_none() && ir.node(x.hi).as_const().is_some_and(|c| c != 0.0 && c.abs().log2().fract() == 0.0);
+        if pow2(ir, a) || pow2(ir, b) {
+            let (a, b) = if pow2(ir, b) { (a, b) } else { (b, a) };
+            let hi = ir.bin(BinOp::Mul, a.hi, b.hi, sp);
+            return Dd { hi, lo: a.lo.map(|l| ir.bin(BinOp::Mul, l, b.hi, sp)) };
+        }
         let p = ir.bin(BinOp::Mul, a.hi, b.hi, sp);
         let np = ir.neg(p, sp);
         let mut e = ir.call(Builtin::Fma, &[a.hi, b.hi, np], sp);
@@ -373,6 +380,41 @@ const MAX_FACTORS: usize = 8;
 /// below −1416 and the exponential 0 either way) and its tail is a number, not ∞ − ∞.
 const MIN_DIVISOR: f64 = 9.332636185032189e-302; // 2^-1000
 
+/// The rounding error of a live core q that is one factor or the product of two (`None` otherwise, or when q is
+/// exact): the product's fma remainder, and each acos factor's tail (`acoslo`), which exp would otherwise
+/// amplify (the Gaussian's exp(−n·acos(c)²/2): 2·|exponent| times acos's half ulp). A quotient's remainder
+/// costs a division and is left out.
+fn core_error(f: &Formula, ir: &mut Ir, map: &[NodeId], num: &[NodeId], den: &[NodeId], q: NodeId, sp: Span) -> Option<NodeId> {
+    let tail = |ir: &mut Ir, x: NodeId| match *f.ir.node(x) {
+        Node::Call(Builtin::Acos, [z, ..]) => Some(ir.call(Builtin::AcosLo, &[map[z.index()]], sp)),
+        _ => None,
+    };
+    match (num, den) {
+        ([x], []) => tail(ir, *x),
+        ([x, y], []) => {
+            let (xv, yv) = (map[x.index()], map[y.index()]);
+            let nq = ir.neg(q, sp);
+            let mut e = ir.call(Builtin::Fma, &[xv, yv, nq], sp);
+            // (x + xˡ)(y + yˡ) − x·y ≈ xˡ·y + x·yˡ; a square's two terms are one, 2x·xˡ.
+            if x == y {
+                if let Some(l) = tail(ir, *x) {
+                    let two = ir.bin(BinOp::Add, xv, xv, sp);
+                    e = ir.call(Builtin::Fma, &[two, l, e], sp);
+                }
+            } else {
+                if let Some(l) = tail(ir, *x) {
+                    e = ir.call(Builtin::Fma, &[l, yv, e], sp);
+                }
+                if let Some(l) = tail(ir, *y) {
+                    e = ir.call(Builtin::Fma, &[xv, l, e], sp);
+                }
+            }
+            Some(e)
+        }
+        _ => None,
+    }
+}
+
 // exp(K·q) → e + e·t, e = exp(Kʰ·q);  expmuldiv(K·q, K_b·u, c) → expmuldiv(Kʰ·q, (K_b + K_b·t)·u, c)
 // t = (K·q − Kʰ·q) to first order: K = Kʰ + Kˡ the parameter-only factors in double-double, q the live ones
 pub(super) fn compensated_exp(f: &Formula) -> (Ir, NodeId, bool) {
@@ -445,6 +487,9 @@ pub(super) fn compensated_exp(f: &Formula) -> (Ir, NodeId, bool) {
         let mut t = ir.call(Builtin::Fma, &[k.hi, q, na], sp);
         if let Some(kl) = k.lo {
             t = ir.call(Builtin::Fma, &[kl, q, t], sp);
+        }
+        if let Some(e) = core_error(f, ir, map, &qn, &qd, q, sp) {
+            t = ir.call(Builtin::Fma, &[k.hi, e, t], sp);
         }
         Some(if call == Builtin::Exp {
             let e = ir.call(Builtin::Exp, &[a], sp);
