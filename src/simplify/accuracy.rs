@@ -46,6 +46,9 @@
 //!   other) has a length, not 0. Cost: abs and max per component, a compare, a select, a product each (~+12).
 //! - `rational-form` (in `cancel.rs`): a cancelling sum rational in one input, as one linear-fractional form
 //!   with double-double parameter-only coefficients.
+//! - `compensated-exp` (in `cancel.rs`): exp's (or expmuldiv's) argument K·q, K its parameter-only factors in
+//!   double-double, computed as Kʰ·q with the product's rounding error (and q's own, acos's through `acoslo`)
+//!   carried as a relative tail t: e + e·t, or into expmuldiv's b.
 //!
 //! Another candidate, large integer powers kept as `pow` calls instead of multiplication chains, is the
 //! simplifier's own [`super::Policy::max_chain`]; the chooser builds it with [`pow_call_policy`]. Another,

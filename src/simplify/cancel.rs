@@ -1,5 +1,5 @@
-//! The accuracy pass's cancellation rules: rewrites that move a cancellation into work on the parameters only,
-//! which is free per point, or into one fused operation.
+//! The accuracy pass's rules for the last ulps: rewrites that move a cancellation into work on the parameters
+//! only, which is free per point, or into one fused operation, and that carry the roundings exp would amplify.
 //!
 //! # Design
 //! `rational-form`: a sum whose terms are rational in one live *atom* x (an input, or any live node that is
@@ -19,10 +19,24 @@
 //! A term's form is found bottom-up ([`shapes`]): degrees add under `×`, `/` and `+` (a common denominator, no
 //! gcd); a sum whose numerator or denominator would exceed degree 1 is left alone.
 //!
+//! `compensated-exp`: exp multiplies its argument's absolute error into its result's relative error, so an
+//! argument of −8.6 (Beckmann) or −20 (the Gaussian) carrying a few roundings of ½ ulp each costs 10–40 ulp where
+//! the formula's condition is 14. The argument, a product/quotient tree `K·q` with K the factors that read no
+//! input and q the live ones, is computed as a = Kʰ·q with K = Kʰ + Kˡ in double-double (free: parameter-only),
+//! and t = fma(Kʰ, q, −a) + Kˡ·q + Kʰ·e_q, e_q the rounding error of q where it is one factor or a product of two
+//! (an fma; an acos factor's own error through the builtin `acoslo`); a quotient's is left out (a division). Then
+//! exp(K·q) = e^a·(1 + t): `fma(e, t, e)`, or for `expmuldiv(K·q, b, c)` the tail multiplies b's parameter-only
+//! factor (b's other factors divided in after), so no new rounding meets it. The exponent must be ≤ 0 by its
+//! factors' signs, and q's divisors (≥ 0) are floored at 2⁻¹⁰⁰⁰, so where one vanishes the exponent is a huge
+//! negative number and not −∞ (e^a is 0 either way; t stays a number instead of ∞ − ∞).
+//!
 //! # Cost model
 //! Coefficients read no input: free ([`super::accuracy::cost`]). Per point: two fmas and an addition per
 //! polynomial (fewer where a coefficient is exact or zero), one division when the denominator is not constant
-//! — usually cheaper than the written chain of products, quotients and sums it replaces.
+//! — usually cheaper than the written chain of products, quotients and sums it replaces. `compensated-exp`: 2–4
+//! fmas, one max per floored divisor, one fma applying the tail, acoslo (8) per acos factor; b's parameter-only
+//! factor no longer multiplies per point. Both catalogue uses sit just within the 1.3× budget, statically and as
+//! measured (BENCHMARKS.md, robust7).
 
 use super::accuracy::{add_opt, product, rebuild, two_sum_error};
 use crate::base::span::Span;
@@ -495,8 +509,11 @@ pub(super) fn compensated_exp(f: &Formula) -> (Ir, NodeId, bool) {
             let e = ir.call(Builtin::Exp, &[a], sp);
             ir.call(Builtin::Fma, &[e, t, e], sp)
         } else {
-            // b's own parameter-only factors carry the tail where it has some: one fma on a value computed once
-            // per parameter set.
+            // A finite c carries the tail as c·(1 − t) (the same to O(t²)), off the path that forms b, so b's
+            // division and the tail's chain run side by side; otherwise b's parameter-only factor carries it (a
+            // value computed once per parameter set, finite where b overflows).
+            let rc = ranges[cv.index()];
+            let c_carries = rc.lo.is_finite() && rc.hi.is_finite() && !rc.nan;
             let (negb, bn, bd) = factors(f, &inv, bv)?;
             let (kbn, un): (Vec<NodeId>, Vec<NodeId>) = bn.iter().partition(|x| inv[x.index()]);
             let (kbd, ud): (Vec<NodeId>, Vec<NodeId>) = bd.iter().partition(|x| inv[x.index()]);
@@ -509,24 +526,30 @@ pub(super) fn compensated_exp(f: &Formula) -> (Ir, NodeId, bool) {
                 (n, None) => n,
             };
             let kb = quot(ir, &kbn, &kbd).map(|k| if negb { ir.neg(k, sp) } else { k });
-            let bb = match kb {
+            let (bb, cc) = match kb {
                 Some(kb) => {
-                    let mut x = ir.call(Builtin::Fma, &[kb, t, kb], sp);
+                    let mut x = if c_carries { kb } else { ir.call(Builtin::Fma, &[kb, t, kb], sp) };
                     if let Some(n) = product(ir, map, &un, sp) {
                         x = ir.bin(BinOp::Mul, x, n, sp);
                     }
                     if let Some(d) = product(ir, map, &ud, sp) {
                         x = ir.bin(BinOp::Div, x, d, sp);
                     }
-                    x
+                    (x, map[cv.index()])
                 }
+                None if c_carries => (map[bv.index()], map[cv.index()]),
                 None => {
-                    let u = quot(ir, &un, &ud).unwrap_or_else(|| ir.konst(1.0, sp));
-                    let u = if negb { ir.neg(u, sp) } else { u };
-                    ir.call(Builtin::Fma, &[u, t, u], sp)
+                    let u = map[bv.index()];
+                    (ir.call(Builtin::Fma, &[u, t, u], sp), map[cv.index()])
                 }
             };
-            ir.call(Builtin::ExpMulDiv, &[a, bb, map[cv.index()]], sp)
+            let cc = if c_carries {
+                let nt = ir.neg(t, sp);
+                ir.call(Builtin::Fma, &[nt, cc, cc], sp)
+            } else {
+                cc
+            };
+            ir.call(Builtin::ExpMulDiv, &[a, bb, cc], sp)
         })
     })
 }
