@@ -821,36 +821,51 @@ fn sqrt_split<E: Emit>(e: &mut E, z: E::V, s: E::V) -> (E::V, E::V) {
     (df, e.div(n, d))
 }
 
-/// acos of the argument already clamped to [−1, 1] (NaN passes through).
-fn acos_impl<E: Emit>(e: &mut E, x: E::V, precise: bool) -> E::V {
+/// The branch results of the precise acos of an argument clamped to [−1, 1], and the pieces they add (shared with
+/// [`acos_lo`], which recovers their roundings; inside one kernel the JIT computes them once).
+struct AcosParts<V, M> {
+    small: M,
+    neg: M,
+    /// |x| < 1/2: π/2 − (x − (pio2_lo − x·r)), with x·r.
+    res_small: V,
+    xr: V,
+    /// x < −1/2: π − 2(s + (r·s − pio2_lo)).
+    res_neg: V,
+    /// |x| > 1/2: 2t, t = df + (r·s + c), df + c = s = √z to ~2^-80.
+    res_pos: V,
+    t: V,
+    rs: V,
+    df: V,
+    c: V,
+}
+
+fn acos_parts<E: Emit>(e: &mut E, x: E::V) -> AcosParts<E::V, E::M> {
     let ax = e.abs(x);
     let small = ltk(e, ax, 0.5);
     let (z, s, r) = asin_reduce(e, ax, small, x);
-    // |x| < 1/2: π/2 − (x − (pio2_lo − x·r))
     let xr = e.mul(x, r);
     let a = ksub(e, PIO2_LO, xr);
     let a = e.sub(x, a);
     let res_small = ksub(e, PIO2_HI, a);
-    // x < −1/2: π − 2(s + (r·s − pio2_lo))
     let rs = e.mul(r, s);
     let w = addk(e, rs, -PIO2_LO);
     let sw = e.add(s, w);
     let sw2 = e.add(sw, sw);
     let res_neg = ksub(e, PI, sw2);
-    // x > 1/2: 2(df + (r·s + c)) (precise), 2(s + r·s) (fast)
-    let res_pos = if precise {
-        let (df, c) = sqrt_split(e, z, s);
-        let w = e.add(rs, c);
-        let t = e.add(df, w);
-        e.add(t, t)
-    } else {
-        let t = e.add(s, rs);
-        e.add(t, t)
-    };
+    let (df, c) = sqrt_split(e, z, s);
+    let w = e.add(rs, c);
+    let t = e.add(df, w);
+    let res_pos = e.add(t, t);
     let zero = e.konst(0.0);
     let neg = e.lt(x, zero);
-    let big = e.select(neg, res_neg, res_pos);
-    let res = e.select(small, res_small, big);
+    AcosParts { small, neg, res_small, xr, res_neg, res_pos, t, rs, df, c }
+}
+
+/// acos of the argument already clamped to [−1, 1] (NaN passes through).
+fn acos_impl<E: Emit>(e: &mut E, x: E::V) -> E::V {
+    let p = acos_parts(e, x);
+    let big = e.select(p.neg, p.res_neg, p.res_pos);
+    let res = e.select(p.small, p.res_small, big);
     // acos(1) = +0 (the general formula divides 0 by 0 there).
     let one = eqk(e, x, 1.0);
     e.zero_where(one, res)
@@ -894,7 +909,7 @@ fn asin_impl<E: Emit>(e: &mut E, x: E::V, precise: bool) -> E::V {
 pub fn acos<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
     let x = clamp_to(e, x, -1.0, 1.0);
     match mode {
-        Mode::Precise => acos_impl(e, x, true),
+        Mode::Precise => acos_impl(e, x),
         Mode::Fast => acos_fast(e, x),
     }
 }
@@ -1332,4 +1347,51 @@ fn exp_mul_div_scaled<E: Emit>(e: &mut E, a: E::V, b: E::V, c: E::V) -> E::V {
     let z = e.and(low, bc_ok);
     let s = e.zero_where(z, s);
     e.select(normal, r, s)
+}
+
+// ---- acoslo (the accuracy pass's tail of acos; added after the library above, which it reuses) ----
+
+/// `acos(x) − acos_f64(x)`: the rounding error of the precise [`acos`] at x (the same clamp, reduction and
+/// branches), so `acos(x) + acoslo(x)` is acos to within ~1/16 ulp instead of ≤ 1 (tests/it/cancel.rs). Fast
+/// mode: 0 (its acos is 2e-8 off; the pass carries no tail there). In exact arithmetic (the truth) it is 0.
+///
+/// Why: exp(−n·acos(x)²/2) multiplies acos's relative error by 2·|exponent| (~40 for the Gaussian at n = 30);
+/// the accuracy pass carries this tail into the exponent (`compensated-exp`).
+///
+/// Each branch recovers the error of its last, largest roundings from exact differences (Sterbenz) of the
+/// rounded result and the pieces acos adds: |x| < ½: (π/2ʰ − r) − x is x·R − π/2ˡ up to those roundings, so
+/// subtracting the rounded x·R and adding π/2ˡ leaves them; x > ½ (for |x|): r/2 = df + (s·R + c), so
+/// ((df − r/2) + s·R) + c; x < −½: π − r and the |x| > ½ result share their pieces, so the tail is their exact
+/// difference plus π's low part minus that result's tail. Left out, each ≤ ~1/50 ulp of the result: the
+/// roundings of x·R and s·R (small next to the result) and √z's own (times R). The intermediates are acos's
+/// own ([`acos_parts`]), so inside one kernel the JIT computes them once. Cost: ~12 additions, 2 selects
+/// and a compare beside acos.
+pub fn acos_lo<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
+    if mode == Mode::Fast {
+        return e.konst(0.0);
+    }
+    let x = clamp_to(e, x, -1.0, 1.0);
+    let p = acos_parts(e, x);
+    // |x| < ½: π/2ʰ − res_small = x − (π/2ˡ − x·r) up to the roundings (exact: Sterbenz).
+    let d = ksub(e, PIO2_HI, p.res_small);
+    let g = e.sub(d, x);
+    let g = e.sub(g, p.xr);
+    let lo_small = addk(e, g, PIO2_LO);
+    // |x| > ½ (for |x|): df − t = −(r·s + c) up to t's rounding.
+    let g = e.sub(p.df, p.t);
+    let g = e.add(g, p.rs);
+    let g = e.add(g, p.c);
+    let lo_pos = e.add(g, g);
+    // |x| = 1: z = 0 and the split divides 0 by 0; acos(1) = +0 exactly.
+    let ax = e.abs(x);
+    let at1 = eqk(e, ax, 1.0);
+    let res_pos = e.zero_where(at1, p.res_pos);
+    let lo_pos = e.zero_where(at1, lo_pos);
+    // x < −½: π − res_neg = res_pos up to rounding; π = PI + 2·π/2ˡ.
+    let d = ksub(e, PI, p.res_neg);
+    let g = e.sub(d, res_pos);
+    let g = addk(e, g, 2.0 * PIO2_LO);
+    let lo_neg = e.sub(g, lo_pos);
+    let big = e.select(p.neg, lo_neg, lo_pos);
+    e.select(p.small, lo_small, big)
 }

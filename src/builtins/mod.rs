@@ -44,6 +44,7 @@ pub enum Builtin {
     Select,
     Fma,
     ExpMulDiv,
+    AcosLo,
 }
 
 /// How the JIT lowers a builtin.
@@ -126,6 +127,20 @@ extern "C" fn lobe_expmuldiv_libm(a: f64, b: f64, c: f64) -> f64 {
 /// expmuldiv's library code compiled by rustc (both modes run the same code), for outlined call sites.
 extern "C" fn lobe_expmuldiv(a: f64, b: f64, c: f64) -> f64 {
     math::exp_mul_div(&mut math::Direct, a, b, c)
+}
+
+/// acoslo's C-library spelling: the C library's acos minus lobe's (both within an ulp, so a rough reference).
+extern "C" fn lobe_acoslo_libm(x: f64) -> f64 {
+    x.acos() - math::acos(&mut math::Direct, x, Mode::Precise)
+}
+
+/// acoslo's library code compiled by rustc, for outlined call sites.
+extern "C" fn lobe_acoslo_precise(x: f64) -> f64 {
+    math::acos_lo(&mut math::Direct, x, Mode::Precise)
+}
+
+extern "C" fn lobe_acoslo_fast(x: f64) -> f64 {
+    math::acos_lo(&mut math::Direct, x, Mode::Fast)
 }
 
 extern "C" fn lobe_pow(x: f64, y: f64) -> f64 {
@@ -233,7 +248,7 @@ pub fn clamp(x: f64, lo: f64, hi: f64) -> f64 {
     fmin(fmax(x, lo), hi)
 }
 
-const TABLE: [BuiltinInfo; 22] = [
+const TABLE: [BuiltinInfo; 23] = [
     BuiltinInfo {
         builtin: Builtin::Pow,
         name: "pow",
@@ -498,10 +513,22 @@ const TABLE: [BuiltinInfo; 22] = [
         wgsl: "",
         doc: "expmuldiv(a, b, c) = exp(a)*b/c with no intermediate underflow or overflow (the accuracy pass forms it)",
     },
+    BuiltinInfo {
+        builtin: Builtin::AcosLo,
+        name: "acoslo",
+        arity: 1,
+        lowering: Lowering::Math,
+        libm: Libm::F1(lobe_acoslo_libm),
+        symbol: "",
+        bound: Bound::math(1.0),
+        glsl: "0.0",
+        wgsl: "",
+        doc: "acoslo(x) = acos(x) minus lobe's acos(x): its rounding error, 0 in fast math (the accuracy pass forms it)",
+    },
 ];
 
 impl Builtin {
-    pub const ALL: [Builtin; 22] = [
+    pub const ALL: [Builtin; 23] = [
         Builtin::Pow,
         Builtin::Cos,
         Builtin::Sin,
@@ -524,6 +551,7 @@ impl Builtin {
         Builtin::Select,
         Builtin::Fma,
         Builtin::ExpMulDiv,
+        Builtin::AcosLo,
     ];
 
     pub fn info(self) -> &'static BuiltinInfo {
@@ -601,6 +629,7 @@ impl Builtin {
             }),
             Builtin::Select => logic::select(e, x, args[1], args[2]),
             Builtin::ExpMulDiv => exp_mul_div(e, x, args[1], args[2]),
+            Builtin::AcosLo => acos_lo(e, x, mode),
             Builtin::Sqrt | Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Clamp | Builtin::Fma => return None,
         })
     }
@@ -638,6 +667,8 @@ impl Builtin {
             (Builtin::Ln, Mode::Precise) => ("lobe_ln_precise", Libm::F1(lobe_ln_precise)),
             (Builtin::Ln, Mode::Fast) => ("lobe_ln_fast", Libm::F1(lobe_ln_fast)),
             (Builtin::ExpMulDiv, _) => ("lobe_expmuldiv", Libm::F3(lobe_expmuldiv)),
+            (Builtin::AcosLo, Mode::Precise) => ("lobe_acoslo_precise", Libm::F1(lobe_acoslo_precise)),
+            (Builtin::AcosLo, Mode::Fast) => ("lobe_acoslo_fast", Libm::F1(lobe_acoslo_fast)),
             (Builtin::Sqrt | Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Clamp | Builtin::Fma, _) => return None,
             (Builtin::Floor | Builtin::Lt | Builtin::Le | Builtin::Eq | Builtin::Ne | Builtin::Select, _) => return None,
         })

@@ -46,6 +46,9 @@
 //!   other) has a length, not 0. Cost: abs and max per component, a compare, a select, a product each (~+12).
 //! - `rational-form` (in `cancel.rs`): a cancelling sum rational in one input, as one linear-fractional form
 //!   with double-double parameter-only coefficients.
+//! - `compensated-exp` (in `cancel.rs`): exp's (or expmuldiv's) argument K·q, K its parameter-only factors in
+//!   double-double, computed as Kʰ·q with the product's rounding error (and q's own, acos's through `acoslo`)
+//!   carried as a relative tail t: e + e·t, or into expmuldiv's b.
 //!
 //! Another candidate, large integer powers kept as `pow` calls instead of multiplication chains, is the
 //! simplifier's own [`super::Policy::max_chain`]; the chooser builds it with [`pow_call_policy`]. Another,
@@ -57,7 +60,8 @@
 //! extra divisions add ~3.4 ns to Beckmann's 8.5 ns, a libm exp ~5 ns): `+ − ×`, abs, min, max 1; clamp 2;
 //! `/` and sqrt 3; fma 1; math-library calls (exp, ln, trig) 20, expmuldiv 28 (it replaces an exp, a `×` and
 //! a `/` (24) and adds a range test: Beckmann's kernel takes ~1.15× the unrewritten one with it, on `lobe
-//! bench`'s inputs and on inputs where no lane takes its rare branch alike), pow 60 (pow(NH, e) with e live took 5.0× the
+//! bench`'s inputs and on inputs where no lane takes its rare branch alike), acoslo 8 (beside the acos it
+//! corrects, whose reduction the JIT shares: the Gaussian's kernel measured +1.5 ns batched on 8.5), pow 60 (pow(NH, e) with e live took 5.0× the
 //! ns of the 14-multiplication chain for NH¹⁰⁰⁰); leaves and negation 0.
 //! Nodes that read no input (parameters only) cost nothing: the kernels compute them once per parameter set
 //! (the prepared block, hoisted out of batch loops).
@@ -81,10 +85,11 @@ pub enum Rule {
     SmithG1,
     ScaledNorm,
     RationalForm,
+    CompensatedExp,
 }
 
 impl Rule {
-    pub const ALL: [Rule; 9] = [
+    pub const ALL: [Rule; 10] = [
         Rule::SplitSqrt,
         Rule::SmithG1,
         // Before quotient-chain, which flattens (x/√s)·(x/√s) into x·x/√s/√s, where scaled-norm cannot see it.
@@ -95,6 +100,7 @@ impl Rule {
         Rule::CompensatedBase,
         Rule::CompensatedSum,
         Rule::RationalForm,
+        Rule::CompensatedExp,
     ];
 
     pub fn name(self) -> &'static str {
@@ -108,6 +114,7 @@ impl Rule {
             Rule::SmithG1 => "smith-g1",
             Rule::ScaledNorm => "scaled-norm",
             Rule::RationalForm => "rational-form",
+            Rule::CompensatedExp => "compensated-exp",
         }
     }
 
@@ -123,6 +130,7 @@ impl Rule {
             Rule::SmithG1 => "Smith G1 2/(1 + sqrt(1 + A*tan^2)) as 2c/(c + sqrt(c^2 + A*(1 - c^2))), c/c cancelled: no inf/inf at grazing c",
             Rule::ScaledNorm => "x/sqrt(a^2 + b^2 + ...) with a tiny vector scaled by 2^600 first: no zero length",
             Rule::RationalForm => "a sum rational in one input as (a1*x + a0)/(b1*x + b0), coefficients in double-double: the cancellation moves to the parameters",
+            Rule::CompensatedExp => "exp(K*q) as exp(hi)*(1 + t), K's parameter-only factors in double-double and t the product's rounding error: exp no longer amplifies it",
         }
     }
 
@@ -147,6 +155,7 @@ impl Rule {
             Rule::SmithG1 => smith_g1(f, &ranges),
             Rule::ScaledNorm => scaled_norm(f),
             Rule::RationalForm => super::cancel::rational_form(f),
+            Rule::CompensatedExp => super::cancel::compensated_exp(f),
         };
         if !fired {
             return None;
@@ -235,6 +244,8 @@ pub fn cost(f: &Formula) -> f64 {
             Builtin::Floor => 6.0,
             Builtin::Pow => 60.0,
             Builtin::ExpMulDiv => 28.0,
+            // Beside acos of the same argument (its only use), whose work the JIT shares: measured (robust7).
+            Builtin::AcosLo => 8.0,
             _ => 20.0,
         },
     };
@@ -363,7 +374,7 @@ fn product_lists(f: &Formula, max: usize) -> Lists {
 }
 
 /// The product of `xs` (mapped to the new arena), `None` when empty.
-fn product(ir: &mut Ir, map: &[NodeId], xs: &[NodeId], s: Span) -> Option<NodeId> {
+pub(super) fn product(ir: &mut Ir, map: &[NodeId], xs: &[NodeId], s: Span) -> Option<NodeId> {
     let mut it = xs.iter().map(|x| map[x.index()]);
     let first = it.next()?;
     Some(it.fold(first, |acc, x| ir.bin(BinOp::Mul, acc, x, s)))

@@ -1,5 +1,5 @@
-//! The accuracy pass's cancellation rules: rewrites that move a cancellation into work on the parameters only,
-//! which is free per point, or into one fused operation.
+//! The accuracy pass's rules for the last ulps: rewrites that move a cancellation into work on the parameters
+//! only, which is free per point, or into one fused operation, and that carry the roundings exp would amplify.
 //!
 //! # Design
 //! `rational-form`: a sum whose terms are rational in one live *atom* x (an input, or any live node that is
@@ -19,12 +19,26 @@
 //! A term's form is found bottom-up ([`shapes`]): degrees add under `×`, `/` and `+` (a common denominator, no
 //! gcd); a sum whose numerator or denominator would exceed degree 1 is left alone.
 //!
+//! `compensated-exp`: exp multiplies its argument's absolute error into its result's relative error, so an
+//! argument of −8.6 (Beckmann) or −20 (the Gaussian) carrying a few roundings of ½ ulp each costs 10–40 ulp where
+//! the formula's condition is 14. The argument, a product/quotient tree `K·q` with K the factors that read no
+//! input and q the live ones, is computed as a = Kʰ·q with K = Kʰ + Kˡ in double-double (free: parameter-only),
+//! and t = fma(Kʰ, q, −a) + Kˡ·q + Kʰ·e_q, e_q the rounding error of q where it is one factor or a product of two
+//! (an fma; an acos factor's own error through the builtin `acoslo`); a quotient's is left out (a division). Then
+//! exp(K·q) = e^a·(1 + t): `fma(e, t, e)`, or for `expmuldiv(K·q, b, c)` the tail multiplies b's parameter-only
+//! factor (b's other factors divided in after), so no new rounding meets it. The exponent must be ≤ 0 by its
+//! factors' signs, and q's divisors (≥ 0) are floored at 2⁻¹⁰⁰⁰, so where one vanishes the exponent is a huge
+//! negative number and not −∞ (e^a is 0 either way; t stays a number instead of ∞ − ∞).
+//!
 //! # Cost model
 //! Coefficients read no input: free ([`super::accuracy::cost`]). Per point: two fmas and an addition per
 //! polynomial (fewer where a coefficient is exact or zero), one division when the denominator is not constant
-//! — usually cheaper than the written chain of products, quotients and sums it replaces.
+//! — usually cheaper than the written chain of products, quotients and sums it replaces. `compensated-exp`: 2–4
+//! fmas, one max per floored divisor, one fma applying the tail, acoslo (8) per acos factor; b's parameter-only
+//! factor no longer multiplies per point. Both catalogue uses sit just within the 1.3× budget, statically and as
+//! measured (BENCHMARKS.md, robust7).
 
-use super::accuracy::{add_opt, rebuild, two_sum_error};
+use super::accuracy::{add_opt, product, rebuild, two_sum_error};
 use crate::base::span::Span;
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Ir, Node, NodeId};
@@ -128,6 +142,13 @@ impl Builder<'_> {
         if self.is(ir, b.hi, 1.0) && b.lo.is_none() {
             return a;
         }
+        // By a power of two: exact (no underflow in a parameter's coefficient), the low part scaled alike.
+        let pow2 = |ir: &Ir, x: Dd| x.lo.is_none() && ir.node(x.hi).as_const().is_some_and(|c| c != 0.0 && c.abs().log2().fract() == 0.0);
+        if pow2(ir, a) || pow2(ir, b) {
+            let (a, b) = if pow2(ir, b) { (a, b) } else { (b, a) };
+            let hi = ir.bin(BinOp::Mul, a.hi, b.hi, sp);
+            return Dd { hi, lo: a.lo.map(|l| ir.bin(BinOp::Mul, l, b.hi, sp)) };
+        }
         let p = ir.bin(BinOp::Mul, a.hi, b.hi, sp);
         let np = ir.neg(p, sp);
         let mut e = ir.call(Builtin::Fma, &[a.hi, b.hi, np], sp);
@@ -138,6 +159,25 @@ impl Builder<'_> {
             e = ir.call(Builtin::Fma, &[al, b.hi, e], sp);
         }
         self.norm(ir, p, Some(e))
+    }
+
+    /// a/b: the quotient's exact remainder (fma) and the operands' low parts, over b.
+    fn div(&self, ir: &mut Ir, a: Dd, b: Dd) -> Dd {
+        let sp = self.sp;
+        if self.is(ir, b.hi, 1.0) && b.lo.is_none() {
+            return a;
+        }
+        let q = ir.bin(BinOp::Div, a.hi, b.hi, sp);
+        let nq = ir.neg(q, sp);
+        let mut r = ir.call(Builtin::Fma, &[nq, b.hi, a.hi], sp);
+        if let Some(al) = a.lo {
+            r = ir.bin(BinOp::Add, r, al, sp);
+        }
+        if let Some(bl) = b.lo {
+            r = ir.call(Builtin::Fma, &[nq, bl, r], sp);
+        }
+        let lo = ir.bin(BinOp::Div, r, b.hi, sp);
+        self.norm(ir, q, Some(lo))
     }
 
     fn padd(&self, ir: &mut Ir, p: &Poly, q: &Poly) -> Poly {
@@ -315,6 +355,205 @@ pub(super) fn rational_form(f: &Formula) -> (Ir, NodeId, bool) {
     })
 }
 
+/// Factors of a `×`/`÷`/negation tree under `x`: (negated, numerators, denominators); `None` beyond
+/// [`MAX_FACTORS`] factors. A parameter-only subtree is one factor, taken as the kernel computes it, which is
+/// what baking folds it to: baked and live kernels then start from the same values.
+fn factors(f: &Formula, inv: &[bool], x: NodeId) -> Option<(bool, Vec<NodeId>, Vec<NodeId>)> {
+    type Out = (bool, Vec<NodeId>, Vec<NodeId>);
+    fn go(f: &Formula, inv: &[bool], x: NodeId, den: bool, out: &mut Out) {
+        match *f.ir.node(x) {
+            _ if inv[x.index()] && f.ir.node(x).as_const() != Some(1.0) => {
+                if den {
+                    out.2.push(x);
+                } else {
+                    out.1.push(x);
+                }
+            }
+            Node::Neg(a) => {
+                out.0 = !out.0;
+                go(f, inv, a, den, out);
+            }
+            Node::Binary(op @ (BinOp::Mul | BinOp::Div), a, b) => {
+                go(f, inv, a, den, out);
+                go(f, inv, b, den ^ (op == BinOp::Div), out);
+            }
+            _ if f.ir.node(x).as_const() == Some(1.0) => {}
+            _ if den => out.2.push(x),
+            _ => out.1.push(x),
+        }
+    }
+    let mut out = (false, vec![], vec![]);
+    go(f, inv, x, false, &mut out);
+    (out.1.len() + out.2.len() <= MAX_FACTORS).then_some(out)
+}
+
+/// Largest product/quotient tree [`compensated_exp`] takes apart.
+const MAX_FACTORS: usize = 8;
+
+/// Divisors of the live core are kept ≥ this, so the exponent stays finite where one vanishes (it is then
+/// below −1416 and the exponential 0 either way) and its tail is a number, not ∞ − ∞.
+const MIN_DIVISOR: f64 = 9.332636185032189e-302; // 2^-1000
+
+/// The rounding error of a live core q that is one factor or the product of two (`None` otherwise, or when q is
+/// exact): the product's fma remainder, and each acos factor's tail (`acoslo`), which exp would otherwise
+/// amplify (the Gaussian's exp(−n·acos(c)²/2): 2·|exponent| times acos's half ulp). A quotient's remainder
+/// costs a division and is left out.
+fn core_error(f: &Formula, ir: &mut Ir, map: &[NodeId], num: &[NodeId], den: &[NodeId], q: NodeId, sp: Span) -> Option<NodeId> {
+    let tail = |ir: &mut Ir, x: NodeId| match *f.ir.node(x) {
+        Node::Call(Builtin::Acos, [z, ..]) => Some(ir.call(Builtin::AcosLo, &[map[z.index()]], sp)),
+        _ => None,
+    };
+    match (num, den) {
+        ([x], []) => tail(ir, *x),
+        ([x, y], []) => {
+            let (xv, yv) = (map[x.index()], map[y.index()]);
+            let nq = ir.neg(q, sp);
+            let mut e = ir.call(Builtin::Fma, &[xv, yv, nq], sp);
+            // (x + xˡ)(y + yˡ) − x·y ≈ xˡ·y + x·yˡ; a square's two terms are one, 2x·xˡ.
+            if x == y {
+                if let Some(l) = tail(ir, *x) {
+                    let two = ir.bin(BinOp::Add, xv, xv, sp);
+                    e = ir.call(Builtin::Fma, &[two, l, e], sp);
+                }
+            } else {
+                if let Some(l) = tail(ir, *x) {
+                    e = ir.call(Builtin::Fma, &[l, yv, e], sp);
+                }
+                if let Some(l) = tail(ir, *y) {
+                    e = ir.call(Builtin::Fma, &[xv, l, e], sp);
+                }
+            }
+            Some(e)
+        }
+        _ => None,
+    }
+}
+
+// exp(K·q) → e + e·t, e = exp(Kʰ·q);  expmuldiv(K·q, K_b·u, c) → expmuldiv(Kʰ·q, (K_b + K_b·t)·u, c)
+// t = (K·q − Kʰ·q) to first order: K = Kʰ + Kˡ the parameter-only factors in double-double, q the live ones
+pub(super) fn compensated_exp(f: &Formula) -> (Ir, NodeId, bool) {
+    let inv = f.ir.invariant();
+    let ranges = super::node_ranges(f, &super::Policy::default());
+    let mut b = Builder { f, inv: &inv, sp: Span::default(), rats: HashMap::new() };
+    rebuild(f, |ir, map, id, n| {
+        let Node::Call(call @ (Builtin::Exp | Builtin::ExpMulDiv), [arg, bv, cv]) = n else { return None };
+        if inv[arg.index()] {
+            return None;
+        }
+        let (negated, num, den) = factors(f, &inv, arg)?;
+        // An exponent ≤ 0 (by its factors' signs): where a divisor of it vanishes, the exponential does.
+        let mut neg = negated;
+        for x in num.iter().chain(&den) {
+            let r = ranges[x.index()];
+            match (r.lo >= 0.0, r.hi <= 0.0) {
+                (true, _) => {}
+                (false, true) => neg = !neg,
+                (false, false) => return None,
+            }
+        }
+        if !neg {
+            return None;
+        }
+        let (kn, qn): (Vec<NodeId>, Vec<NodeId>) = num.iter().partition(|x| inv[x.index()]);
+        let (kd, qd): (Vec<NodeId>, Vec<NodeId>) = den.iter().partition(|x| inv[x.index()]);
+        // Nothing to carry: no parameter-only factor, or no live one.
+        if kn.len() + kd.len() == 0 || qn.len() + qd.len() == 0 {
+            return None;
+        }
+        // Divisors must be ≥ 0 for the floor above to keep their sign.
+        if qd.iter().any(|d| ranges[d.index()].lo < 0.0 || ranges[d.index()].nan) {
+            return None;
+        }
+        let sp = f.ir.span(id);
+        b.sp = sp;
+        // K in double-double, from the parameter-only factors as the kernel computes them (what baking folds
+        // them to, so baked and live kernels start from the same K).
+        let dd = |b: &Builder, ir: &mut Ir, xs: &[NodeId]| {
+            let mut acc = Dd { hi: ir.konst(1.0, sp), lo: None };
+            for x in xs {
+                acc = b.mul(ir, acc, Dd { hi: map[x.index()], lo: None });
+            }
+            acc
+        };
+        let (kn, kd) = (dd(&b, ir, &kn), dd(&b, ir, &kd));
+        let mut k = b.div(ir, kn, kd);
+        if negated {
+            k = b.neg(ir, k);
+        }
+        let q = {
+            let qn = product(ir, map, &qn, sp);
+            let qd = product(ir, map, &qd, sp).map(|d| {
+                let floor = ir.konst(MIN_DIVISOR, sp);
+                ir.call(Builtin::Max, &[d, floor], sp)
+            });
+            match (qn, qd) {
+                (Some(n), Some(d)) => ir.bin(BinOp::Div, n, d, sp),
+                (Some(n), None) => n,
+                (None, Some(d)) => {
+                    let one = ir.konst(1.0, sp);
+                    ir.bin(BinOp::Div, one, d, sp)
+                }
+                (None, None) => unreachable!("a live factor exists"),
+            }
+        };
+        let a = ir.bin(BinOp::Mul, k.hi, q, sp);
+        let na = ir.neg(a, sp);
+        let mut t = ir.call(Builtin::Fma, &[k.hi, q, na], sp);
+        if let Some(kl) = k.lo {
+            t = ir.call(Builtin::Fma, &[kl, q, t], sp);
+        }
+        if let Some(e) = core_error(f, ir, map, &qn, &qd, q, sp) {
+            t = ir.call(Builtin::Fma, &[k.hi, e, t], sp);
+        }
+        Some(if call == Builtin::Exp {
+            let e = ir.call(Builtin::Exp, &[a], sp);
+            ir.call(Builtin::Fma, &[e, t, e], sp)
+        } else {
+            // A finite c carries the tail as c·(1 − t) (the same to O(t²)), off the path that forms b, so b's
+            // division and the tail's chain run side by side; otherwise b's parameter-only factor carries it (a
+            // value computed once per parameter set, finite where b overflows).
+            let rc = ranges[cv.index()];
+            let c_carries = rc.lo.is_finite() && rc.hi.is_finite() && !rc.nan;
+            let (negb, bn, bd) = factors(f, &inv, bv)?;
+            let (kbn, un): (Vec<NodeId>, Vec<NodeId>) = bn.iter().partition(|x| inv[x.index()]);
+            let (kbd, ud): (Vec<NodeId>, Vec<NodeId>) = bd.iter().partition(|x| inv[x.index()]);
+            let quot = |ir: &mut Ir, n: &[NodeId], d: &[NodeId]| match (product(ir, map, n, sp), product(ir, map, d, sp)) {
+                (None, None) => None,
+                (n, Some(d)) => {
+                    let n = n.unwrap_or_else(|| ir.konst(1.0, sp));
+                    Some(ir.bin(BinOp::Div, n, d, sp))
+                }
+                (n, None) => n,
+            };
+            let kb = quot(ir, &kbn, &kbd).map(|k| if negb { ir.neg(k, sp) } else { k });
+            let (bb, cc) = match kb {
+                Some(kb) => {
+                    let mut x = if c_carries { kb } else { ir.call(Builtin::Fma, &[kb, t, kb], sp) };
+                    if let Some(n) = product(ir, map, &un, sp) {
+                        x = ir.bin(BinOp::Mul, x, n, sp);
+                    }
+                    if let Some(d) = product(ir, map, &ud, sp) {
+                        x = ir.bin(BinOp::Div, x, d, sp);
+                    }
+                    (x, map[cv.index()])
+                }
+                None if c_carries => (map[bv.index()], map[cv.index()]),
+                None => {
+                    let u = map[bv.index()];
+                    (ir.call(Builtin::Fma, &[u, t, u], sp), map[cv.index()])
+                }
+            };
+            let cc = if c_carries {
+                let nt = ir.neg(t, sp);
+                ir.call(Builtin::Fma, &[nt, cc, cc], sp)
+            } else {
+                cc
+            };
+            ir.call(Builtin::ExpMulDiv, &[a, bb, cc], sp)
+        })
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -361,5 +600,25 @@ mod tests {
         };
         assert_eq!(last("let c = NH\n(n*c + 1)/(c + 2)"), Some((1, 1)));
         assert_eq!(last("let c = NH\n(n*c + 1)/(c + 2)*c"), None);
+    }
+
+    #[test]
+    fn compensated_exp_carries_the_exponent_tail() {
+        let apply = |src: &str| {
+            let f = parse(src);
+            let (ir, root, fired) = compensated_exp(&f);
+            fired.then(|| super::super::simplify_with(&Formula { ir, root, ..f }, &[], &super::super::Policy::default()).0.to_program_text())
+        };
+        // Beckmann after scaled-exp: K = 1/m² in double-double, the tail on b's parameter-only factor, the
+        // vanishing divisor floored so the tail stays a number.
+        let t = apply("param m = 0.3 in 0.01..1\nlet nh = clamp(NH, 0, 1)\nexpmuldiv((nh*nh - 1) / (m*m * (nh*nh)), 1 / (m*m * nh * nh * nh), nh)").unwrap();
+        assert!(t.contains("max(") && t.matches("fma(").count() >= 3 && t.contains("expmuldiv("), "{t}");
+        // A plain exp: e + e·t.
+        let t = apply("exp(-n * NH * NH)").unwrap();
+        assert!(t.contains("fma(") && t.contains("exp("), "{t}");
+        // An exponent that may be positive, one without a parameter, and a parameter-only one are left alone.
+        assert!(apply("exp(n * NH)").is_none());
+        assert!(apply("exp(-NH * NH)").is_none());
+        assert!(apply("exp(-n * 2) * NH").is_none());
     }
 }

@@ -235,6 +235,8 @@ impl Range {
             }
             // e^a·b/c for b ≥ 0, c > 0, from the exponent sum a + ln b − ln c (libm's ln and exp are far within
             // the 1e-9 relative slack); anything else is unknown.
+            // Within acos's own error of ≤ 2 ulp of a value ≤ π: |tail| < 2⁻⁵⁰.
+            Builtin::AcosLo => Range::new(-8.9e-16, 8.9e-16, a.nan, true),
             Builtin::ExpMulDiv => {
                 let (b, c) = (args[1], args[2]);
                 if !(b.lo >= 0.0 && c.lo > 0.0) {

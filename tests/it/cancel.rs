@@ -75,3 +75,78 @@ fn rational_form_starts_from_the_values_baking_folds() {
         }
     }
 }
+
+/// Beckmann at NH = 0.4173, m = 0.741 (a 1-ulp input change moves the truth 14 ulp): exp amplified its
+/// argument's rounding (−8.6·a few u) to 17 ulp. `compensated-exp` carries K = 1/m² in double-double and the
+/// product's rounding error into b, so the kernel lands within 15 ulp, within the default budget.
+#[test]
+fn beckmann_compensated_exp_carries_the_argument_rounding() {
+    let f = load("beckmann");
+    let x = at_nh(4.1727069681260887e-1);
+    let p = vec![50.0, 0.7409606420843246];
+    let t = truth::eval(&f, &x, &p);
+    let o = improve(&f, &[], &PassOptions { points: 20_000, ..Default::default() });
+    let kept = o.trials.iter().find(|t| t.kept && t.rule == "compensated-exp").unwrap_or_else(|| panic!("{:?}", o.trials));
+    assert!(kept.cost <= 1.3 * o.cost_before, "compensated-exp costs {} against {}", kept.cost, o.cost_before);
+    let k = kernel("beckmann", &[], true);
+    assert!(ulps(k.eval(&x, &p), t) < 16.0, "{} vs the truth {t}: {} ulp", k.eval(&x, &p), ulps(k.eval(&x, &p), t));
+    assert!(o.after.max_bits_well <= robust::TARGET_BITS, "{:?}", o.after);
+    // The form before it (scaled-exp alone, as the pass built it) is 17 ulp off here.
+    let src = "param n = 50 in 1..1000\nparam m = 0.3 in 0.01..1\nlet nh = clamp(NH, 0, 1)\nlet t1 = nh*nh\nlet t2 = m*m\nexpmuldiv((t1 - 1)/(t2*t1), 1/(t2*nh*nh*nh), nh)";
+    let g = lobe::simplify::simplify(&lobe::front::parse("t.brdf", src).unwrap(), &[]);
+    let plain = lobe::backend::interp::Interp::new(&g).eval(&x, &p);
+    assert!(ulps(plain, t) > 16.0, "the scaled-exp form is no longer off here: {} ulp", ulps(plain, t));
+}
+
+/// acoslo is acos's rounding error: acos(x) + acoslo(x) lies within 1/8 ulp of the true acos on 2·10⁵ points
+/// of [−1, 1] (edges, each branch, near ±1 and ±½), where acos alone is up to an ulp off.
+#[test]
+fn acoslo_carries_acos_to_an_eighth_of_an_ulp() {
+    use lobe::builtins::Builtin;
+    use lobe::numerics::truth::Xf;
+    let mut r = lobe::base::rng::Rng(7);
+    let mut pts = vec![-1.0, -0.5, -0.0, 0.0, 0.5, 1.0, 5e-324, 1e-300, 1e-17, 0.4999999999999999, 0.5000000000000001, 1.0 - 1.1102230246251565e-16];
+    for _ in 0..200_000 {
+        let u = r.unit();
+        let v = r.unit();
+        let x = if u < 0.3 { 2.0 * v - 1.0 } else if u < 0.6 { 1.0 - 10f64.powf(-16.0 * v) } else if u < 0.8 { 0.5 + (v - 0.5) * 1e-3 } else { 10f64.powf(-300.0 * v) };
+        pts.push(if r.unit() < 0.5 { -x } else { x });
+    }
+    let (mut worst_hi, mut worst) = (0.0f64, (0.0f64, 0.0f64));
+    for x in pts {
+        let hi = Builtin::Acos.eval(&[x]);
+        let lo = Builtin::AcosLo.eval(&[x]);
+        let t = Xf::from_f64(x).acos();
+        let ulp = (hi.abs() * f64::EPSILON).max(f64::MIN_POSITIVE);
+        let err = ((t - Xf::from_f64(hi)) - Xf::from_f64(lo)).to_f64().abs() / ulp;
+        worst_hi = worst_hi.max((t - Xf::from_f64(hi)).to_f64().abs() / ulp);
+        if err > worst.0 {
+            worst = (err, x);
+        }
+    }
+    assert!(worst.0 <= 0.125, "acos + acoslo is {} ulp off at x = {:e}", worst.0, worst.1);
+    assert!(worst_hi > 0.4, "acos alone is within {worst_hi} ulp: nothing to carry");
+    println!("acos alone ≤ {worst_hi:.3} ulp, with acoslo ≤ {:.4} ulp (at {:e})", worst.0, worst.1);
+}
+
+/// The Gaussian exp(−n·acos(c)²/2) at c = 0.4022, n = 30.6 (condition 14): exp multiplied acos's rounding, the
+/// square's and the product's by 2·|exponent| ≈ 41, 40 ulp in all. `compensated-exp` carries all three (acos's
+/// through `acoslo`) into e + e·t, within the default budget.
+#[test]
+fn gaussian_compensated_exp_carries_acos_rounding() {
+    let f = load("gaussian");
+    let x = at_nh(4.022059445786712e-1);
+    let p = vec![30.63641672077346];
+    let t = truth::eval(&f, &x, &p);
+    let plain = kernel("gaussian", &[], false).eval(&x, &p);
+    assert!(ulps(plain, t) > 30.0, "the written form is no longer off here: {} ulp", ulps(plain, t));
+    let o = improve(&f, &[], &PassOptions { points: 20_000, ..Default::default() });
+    let kept = o.trials.iter().find(|t| t.kept && t.rule == "compensated-exp").unwrap_or_else(|| panic!("{:?}", o.trials));
+    assert!(kept.cost <= 1.3 * o.cost_before, "compensated-exp costs {} against {}", kept.cost, o.cost_before);
+    assert!(o.after.max_bits_well <= robust::TARGET_BITS && o.before.max_bits_well > robust::TARGET_BITS, "{:?} → {:?}", o.before, o.after);
+    for backend in [Backend::Jit, Backend::Interp] {
+        let opts = robust::with_pass(Options { backend, ..Default::default() }, PassOptions::default());
+        let v = lobe::compile_formula(load("gaussian"), &opts).unwrap().eval(&x, &p);
+        assert!(ulps(v, t) <= 4.0, "{backend:?}: {v} vs the truth {t}: {} ulp", ulps(v, t));
+    }
+}
