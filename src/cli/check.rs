@@ -74,6 +74,7 @@ fn stats_json(f: &Formula, s: &ErrorStats) -> serde_json::Value {
         "bits_error_max_well_conditioned": json::value(s.max_bits_well),
         "bits_error_worst_well_conditioned": worst_json(f, &s.worst_well),
         "nonfinite_where_finite": s.nonfinite, "ill_conditioned": s.ill_conditioned, "undefined": s.undefined,
+        "limit_points": s.limits,
     })
 }
 
@@ -161,6 +162,7 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
             "nonfinite_where_finite": pass.after.nonfinite,
             "ill_conditioned": pass.after.ill_conditioned,
             "undefined": pass.after.undefined,
+            "limit_points": pass.after.limits,
             "before": stats_json(&f, &pass.before),
             "accuracy_rewrites": pass.trials.iter().map(|t| json!({
                 "rule": t.rule, "kept": t.kept, "reason": t.reason, "cost_ratio": json::value(t.cost / pass.cost_before),
@@ -268,9 +270,15 @@ fn print_accuracy(f: &Formula, pass: &robust::Outcome, asked: usize, ms: f64, co
             robust::ILL_CONDITIONED_ULPS
         );
     }
+    if a.limits > 0 {
+        println!(
+            "    at {} points the exact value is 0/0 or ∞·0 because an input is exactly 0 or 1; there the limit along that input is the truth (counted above)",
+            a.limits
+        );
+    }
     if a.undefined > 0 {
         println!(
-            "    not finite in exact arithmetic (0/0, ∞·0, or a pole such as an input exactly 0) at {} points; not counted",
+            "    not finite in exact arithmetic (0/0, ∞·0, or a pole such as an input exactly 0), and no limit along an input, at {} points; not counted",
             a.undefined
         );
     }

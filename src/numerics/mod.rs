@@ -32,7 +32,7 @@
 //!   `evaluated`, `seconds`.
 //! - `check` (accuracy report, [`robust`]): `bits_error_avg`, `bits_error_max`, `bits_error_worst` ({`inputs`,
 //!   `params`, `value`, `truth`, `bits`}), `bits_error_max_well_conditioned`, `nonfinite_where_finite`,
-//!   `ill_conditioned`, `undefined`, `before` (the same keys for the plain simplification), `accuracy_rewrites`
+//!   `ill_conditioned`, `undefined`, `limit_points` (points whose truth is a limit along an edge input), `before` (the same keys for the plain simplification), `accuracy_rewrites`
 //!   (list of {`rule`, `kept`, `reason`, `cost_ratio`, `bits_error_avg`, `bits_error_max`,
 //!   `nonfinite_where_finite`}), `compiled`, `cost_ratio`, `points`. `energy` lobe mode also gives
 //!   `skipped_nan_up_to` and `skipped_bound` (null when nothing was skipped).

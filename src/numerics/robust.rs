@@ -8,7 +8,8 @@
 //! correctly rounded, 64 bits is NaN or ∞ where the truth is finite. [`measure`] reports the average and the
 //! maximum over a sample of the domain with the worst input, counts the points where the result is NaN/∞ but the
 //! truth is finite, the points where the formula is undefined even in exact arithmetic (0/0, ∞·0 at e.g. NH = 0
-//! exactly; left out of the averages), and the points where the formula is *ill-conditioned by nature*: a 1-ulp
+//! exactly, with no limit along an input on its edge, [`truth::limit`]; left out of the averages; where the
+//! limit exists it is the truth, and the report counts those points), and the points where the formula is *ill-conditioned by nature*: a 1-ulp
 //! change of one input or live parameter moves the true value by more than [`ILL_CONDITIONED_ULPS`] ulps, so no
 //! f64 evaluation can be accurate there (the Gaussian at large n: exp amplifies its argument). The maximum over
 //! well-conditioned points is reported separately.
@@ -40,7 +41,8 @@
 //! no more accurate is tried once more after a later rule was kept: two defects at the same points (a zero
 //! normalize length and an underflowing 1/(NL·NV)) each hide the other's fix.
 //!
-//! Cost: one truth evaluation per point (1–5 µs for a catalogue formula in release) plus one interpreter
+//! Cost: one truth evaluation per point (1–5 µs for a catalogue formula in release; a limit, up to three per
+//! input on an edge, only where it is not finite), computed once per pass ([`truths`]), plus one interpreter
 //! evaluation per point and candidate, plus the condition estimate (two truth evaluations per read input) at the
 //! points with more than 4 bits of error; parallel over points (rayon). 10⁵ points: 0.3–2 s per formula.
 
@@ -214,8 +216,12 @@ pub struct ErrorStats {
     pub nonfinite: usize,
     pub first_nonfinite: Option<Worst>,
     /// The truth itself is not finite (0/0, ∞·0, ∞−∞ in exact arithmetic, or a pole such as 1/√(NL·NV) at
-    /// NV = 0): left out of the averages, as Herbie samples only points with a finite truth.
+    /// NV = 0) and has no limit along an edge input ([`truth::limit`]): left out of the averages, as Herbie
+    /// samples only points with a finite truth.
     pub undefined: usize,
+    /// The exact value is not finite but its limit along an input exactly on an edge is ([`truth::limit`]):
+    /// counted like any point, with the limit as the truth (Cook–Torrance's G/(NL·NV) at NL = 0).
+    pub limits: usize,
     /// Points where the formula is ill-conditioned by nature (module docs).
     pub ill_conditioned: usize,
     /// Largest bits of error at a well-conditioned point, and the point.
@@ -237,7 +243,11 @@ pub fn condition_ulps(truth_f: &Formula, pt: &Point, t: f64) -> f64 {
     let live = truth_f.ir.used_params(truth_f.root);
     let mut worst: f64 = 0.0;
     let mut probe = |x: [f64; N_INPUTS], p: &[f64]| {
-        let u = truth::eval(truth_f, &x, p);
+        let mut u = truth::eval(truth_f, &x, p);
+        // At a limit point its neighbours along the other inputs are limits too.
+        if u.is_nan() {
+            u = truth::limit(truth_f, &x, p).unwrap_or(u);
+        }
         if !u.is_nan() {
             worst = worst.max(ulps(u, t));
         }
@@ -267,6 +277,32 @@ pub fn condition_ulps(truth_f: &Formula, pt: &Point, t: f64) -> f64 {
     worst
 }
 
+/// The truth at one point rounded to f64 ([`truth::eval`]), or where that is not finite the limit along an edge
+/// input when there is one ([`truth::limit`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TruthAt {
+    pub value: f64,
+    pub limit: bool,
+}
+
+impl TruthAt {
+    pub fn new(truth_f: &Formula, pt: &Point) -> TruthAt {
+        let value = truth::eval(truth_f, &pt.x, &pt.p);
+        if value.is_finite() {
+            return TruthAt { value, limit: false };
+        }
+        match truth::limit(truth_f, &pt.x, &pt.p) {
+            Some(l) => TruthAt { value: l, limit: true },
+            None => TruthAt { value, limit: false },
+        }
+    }
+}
+
+/// The truth at every point, in parallel: computed once and shared by every candidate the pass measures.
+pub fn truths(truth_f: &Formula, points: &[Point]) -> Vec<TruthAt> {
+    points.par_iter().map(|pt| TruthAt::new(truth_f, pt)).collect()
+}
+
 #[derive(Default)]
 struct Acc {
     stats: ErrorStats,
@@ -275,13 +311,14 @@ struct Acc {
 }
 
 impl Acc {
-    fn add(mut self, truth_f: &Formula, pt: &Point, got: f64) -> Acc {
+    fn add(mut self, truth_f: &Formula, pt: &Point, got: f64, ta: TruthAt) -> Acc {
         self.stats.points += 1;
-        let t = truth::eval(truth_f, &pt.x, &pt.p);
+        let t = ta.value;
         if !t.is_finite() {
             self.stats.undefined += 1;
             return self;
         }
+        self.stats.limits += usize::from(ta.limit);
         let b = bits(got, t);
         let w = || Some(Worst { point: pt.clone(), got, truth: t, bits: b });
         if !got.is_finite() && t.is_finite() {
@@ -310,6 +347,7 @@ impl Acc {
         a.points += b.points;
         a.nonfinite += b.nonfinite;
         a.undefined += b.undefined;
+        a.limits += b.limits;
         a.ill_conditioned += b.ill_conditioned;
         if a.first_nonfinite.is_none() {
             a.first_nonfinite = b.first_nonfinite;
@@ -331,9 +369,15 @@ impl Acc {
 /// Bits of error of `ev` against the truth of `truth_f` (the formula as written, baked values folded) at
 /// `points`; in parallel.
 pub fn measure(ev: &dyn Evaluator, truth_f: &Formula, points: &[Point]) -> ErrorStats {
+    measure_against(ev, truth_f, points, &truths(truth_f, points))
+}
+
+/// [`measure`] with the truth at each point given ([`truths`]).
+pub fn measure_against(ev: &dyn Evaluator, truth_f: &Formula, points: &[Point], truths: &[TruthAt]) -> ErrorStats {
     let acc = points
         .par_chunks(256)
-        .map(|ch| ch.iter().fold(Acc::default(), |a, pt| a.add(truth_f, pt, ev.eval(&pt.x, &pt.p))))
+        .zip(truths.par_chunks(256))
+        .map(|(ch, ts)| ch.iter().zip(ts).fold(Acc::default(), |a, (pt, t)| a.add(truth_f, pt, ev.eval(&pt.x, &pt.p), *t)))
         .reduce(Acc::default, Acc::merge);
     let mut s = acc.stats;
     s.avg_bits = if acc.defined > 0 { acc.sum / acc.defined as f64 } else { 0.0 };
@@ -432,7 +476,8 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
     // The simplified form's cost stands for the truth's work (the truth's own `x^2` is a pow call).
     let n = o.points.min((MAX_WORK / cost(&base).max(1.0)) as usize).max(64);
     let points = sample(orig, bake, n, o.seed);
-    let run = |f: &Formula| measure(&Interp::with_mode(f, o.math), &truth_f, &points);
+    let truth = truths(&truth_f, &points);
+    let run = |f: &Formula| measure_against(&Interp::with_mode(f, o.math), &truth_f, &points, &truth);
     let before = run(&base);
     let cost_before = cost(&base);
     let base_budget = match o.prefer {

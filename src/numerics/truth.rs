@@ -533,11 +533,16 @@ fn call(f: Builtin, a: &[Xf]) -> Xf {
 /// The formula's exact value at inputs `x` and parameters `params` (a missing parameter is NaN, as in the
 /// interpreter), before rounding.
 pub fn eval_x(f: &Formula, x: &[f64; N_INPUTS], params: &[f64]) -> Xf {
+    eval_xs(f, &x.map(Xf::from_f64), params)
+}
+
+/// [`eval_x`] at inputs that need not be f64 (an input 2⁻⁸¹⁹² away from an edge, [`limit`]).
+fn eval_xs(f: &Formula, x: &[Xf; N_INPUTS], params: &[f64]) -> Xf {
     let mut v: Vec<Xf> = Vec::with_capacity(f.root.index() + 1);
     for id in f.ir.ids().take(f.root.index() + 1) {
         let r = match *f.ir.node(id) {
             Node::Const(b) => Xf::from_f64(f64::from_bits(b)),
-            Node::Input(i) => Xf::from_f64(x[i.index()]),
+            Node::Input(i) => x[i.index()],
             // Formulas have no data columns (front ends never produce them).
             Node::Column(_) => Xf::from_f64(f64::NAN),
             Node::Param(p) => Xf::from_f64(params.get(p as usize).copied().unwrap_or(f64::NAN)),
@@ -564,6 +569,66 @@ pub fn eval_x(f: &Formula, x: &[f64; N_INPUTS], params: &[f64]) -> Xf {
 /// The true value rounded to f64 once: what a perfect kernel returns.
 pub fn eval(f: &Formula, x: &[f64; N_INPUTS], params: &[f64]) -> f64 {
     eval_x(f, x, params).to_f64()
+}
+
+/// Distances 2⁻ᵏ from an edge at 0 (any k: the exponent is unbounded) and from ±1 (k ≤ 100: 1 − 2⁻ᵏ must fit the
+/// double-double mantissa); an approach converges when the values at all of them round to the same f64.
+const FROM_ZERO: [i64; 3] = [2048, 4096, 8192];
+const FROM_ONE: [i64; 3] = [72, 88, 100];
+
+/// The formula's one-sided limit at a point where an input sits exactly on an edge (0, or ±1 for a cosine or
+/// a direction component), for points where the exact value is not finite (0/0 or ∞·0: Cook–Torrance's
+/// `G/(NL·NV)` at NL = 0, Beckmann's `exp(−1/NH²)/NH⁴` at NH = 0).
+///
+/// Each read input on an edge is moved into the domain by 2⁻ᵏ for growing k (k up to 8192 at 0, 100 at ±1; a
+/// direction component at 0 from both sides), the others kept, and the exact values rounded to f64. An approach
+/// *converges* when they are all the same f64 ([`FROM_ZERO`], [`FROM_ONE`]). The limit is accepted when some approach
+/// converges to a finite value and every approach that converges (to anything, ∞ included) agrees with it;
+/// approaches that stay NaN or keep changing (a logarithm's slow growth) neither count nor veto.
+///
+/// What this proves and what it samples: the values are exact (no rounding before the last), so a converged
+/// sequence is the formula's value rounded to f64 at those points; that it stays so for all smaller distances
+/// is *sampled* (a formula whose value moves again below 2⁻⁸¹⁹², or whose limit along another path differs, is
+/// accepted wrongly), which for BRDF terms (powers, exponentials of powers, quotients of them) does not happen.
+/// Cost: up to 3 evaluations per edge input and side, only where [`eval`] is not finite.
+pub fn limit(f: &Formula, x: &[f64; N_INPUTS], params: &[f64]) -> Option<f64> {
+    let used = f.used_inputs();
+    let base = x.map(Xf::from_f64);
+    let mut found: Option<f64> = None;
+    let mut vetoed = false;
+    let mut approach = |i: usize, at: Xf, side: f64, steps: &[i64]| {
+        let at_k = |k: i64| {
+            let mut xs = base;
+            xs[i] = at + Xf { hi: side, lo: 0.0, e: -k };
+            eval_xs(f, &xs, params).to_f64()
+        };
+        // Nearest first: a NaN there ends the approach after one evaluation. -0 and +0 are the same limit.
+        let last = at_k(steps[steps.len() - 1]);
+        if last.is_nan() || steps[..steps.len() - 1].iter().any(|&k| at_k(k) != last) {
+            return;
+        }
+        match found {
+            _ if !last.is_finite() => vetoed = true,
+            Some(l) if l != last => vetoed = true,
+            _ => found = Some(last),
+        }
+    };
+    for inp in used.iter() {
+        let i = inp.index();
+        let signed = crate::ir::Input::DIRECTIONS.contains(&inp);
+        match x[i] {
+            0.0 => {
+                approach(i, Xf::ZERO, 1.0, &FROM_ZERO);
+                if signed {
+                    approach(i, Xf::ZERO, -1.0, &FROM_ZERO);
+                }
+            }
+            1.0 => approach(i, Xf::ONE, -1.0, &FROM_ONE),
+            -1.0 if signed => approach(i, Xf::ONE.neg(), 1.0, &FROM_ONE),
+            _ => {}
+        }
+    }
+    found.filter(|_| !vetoed)
 }
 
 #[cfg(test)]
@@ -663,5 +728,37 @@ mod tests {
         let b = Xf::from_f64(1000.0).mul(x.ln()).exp();
         assert!(close(a, dd(b), 1e-28));
         assert!(((a.to_f64() - 0.3765) / 0.3765).abs() < 1e-3, "{}", a.to_f64());
+    }
+
+    /// Limits at an input exactly on its edge: found where the written form is 0/0 or ∞·0 (Cook–Torrance's
+    /// G/(NL·NV) at NL = 0; Beckmann at NH = 0, limit 0; x·ln x at 0), and refused where the value grows without
+    /// bound (a pole, ln) or where the approaches along two inputs disagree.
+    #[test]
+    fn limits_at_edge_inputs() {
+        let parse = |body: &str| crate::front::parse("t.brdf", &format!("param m = 0.3 in 0.01..1\n@domain raw\n{body}")).unwrap();
+        let x = |nl: f64, nv: f64, nh: f64, vh: f64| crate::from_cosines([nl, nv, nh, nh, vh]);
+        let p = [50.0, 0.3];
+        let ct = parse("min(1, min(2*NH*NV/VH, 2*NH*NL/VH)) / (NL*NV)");
+        let at = x(0.0, 0.25, 0.9, 0.5);
+        assert!(eval(&ct, &at, &p).is_nan());
+        // The limit: 2·NH/(VH·NV) = 14.4, as the value at NL = 10⁻³⁰⁰ rounds.
+        assert_eq!(limit(&ct, &at, &p), Some(eval(&ct, &x(1e-300, 0.25, 0.9, 0.5), &p)));
+        assert_eq!(limit(&ct, &at, &p), Some(14.4));
+        // Along NL and along NV both 0: still 0/0 on each approach, so no limit.
+        assert_eq!(limit(&ct, &x(0.0, 0.0, 0.9, 0.5), &p), None);
+        let beckmann = parse("exp((NH^2 - 1)/(m^2*NH^2)) / (m^2*NH^4)");
+        assert!(eval(&beckmann, &x(0.5, 0.5, 0.0, 0.5), &p).is_nan());
+        assert_eq!(limit(&beckmann, &x(0.5, 0.5, 0.0, 0.5), &p), Some(0.0));
+        let xlnx = parse("NL*ln(NL)");
+        assert_eq!(limit(&xlnx, &x(0.0, 0.5, 0.5, 0.5), &p), Some(0.0));
+        // A pole and a logarithm: no finite limit.
+        assert_eq!(limit(&parse("NL/NL/NL"), &x(0.0, 0.5, 0.5, 0.5), &p), None);
+        assert_eq!(limit(&parse("ln(NL)*NL/NL"), &x(0.0, 0.5, 0.5, 0.5), &p), None);
+        // From 1: (1 − NH²)/(1 − NH) → 2.
+        assert_eq!(limit(&parse("(1 - NH*NH)/(1 - NH)"), &x(0.5, 0.5, 1.0, 0.5), &p), Some(2.0));
+        // Two inputs on an edge: along NL, NV/NV stays 0/0 (no veto); along NV the value is 1: accepted.
+        assert_eq!(limit(&parse("(NL + 1)*NV/NV"), &x(0.0, 0.0, 0.5, 0.5), &p), Some(1.0));
+        // A finite limit along one input and an infinite one along another: refused.
+        assert_eq!(limit(&parse("NV/NV + 1/NL*(NV/NV)"), &x(0.0, 0.0, 0.5, 0.5), &p), None);
     }
 }

@@ -41,6 +41,12 @@
 //!   A·(1 − c²)))` for c > 0 (range or guard), then c cancelled against a divisor c of the products around it
 //!   (BRDF Explorer's GGX: `G·…/(4·NL·NV)`). At grazing c, c² underflows: tan² = 1/0 and G1 = 0, and the
 //!   product meets 0/0. Cheaper than the written form (no division by c², no 4·NL·NV).
+//! - `cancel-min`: a product/quotient tree `z·min(K, c·x, c·y)/(v·x·y)` with K > 0 and x, y, c ≥ 0 (Cook–Torrance's
+//!   `G/(π·NL·NV)`, G = min(1, 2·NH·NV/VH, 2·NH·NL/VH)) → `z·min(K·d/u, n)/(v·d)/w`, c = n/d, u = min(x, y),
+//!   w = max(x, y): with c ≥ 0, min(K, c·x, c·y) = min(K, c·u) and x·y = u·w, so the two are equal wherever
+//!   u, d > 0; at u = 0 (NL or NV exactly 0), where the written form is 0/0, min(K·d/0, n) = n gives the limit
+//!   z·c/(v·w). The min stays ≤ n (2·NH), and d (VH) and w divide one by one after the small factors, so
+//!   nothing overflows where the value does not. Cheaper than written (one `×` and one `/` fewer).
 //! - `scaled-norm`: `x/sqrt(a² + b² + …)`, x one of a, b, …, (a normalize) with the vector scaled by 2^600
 //!   when its largest component is below 2^-500 (exact), so L + V at L ≈ −V (grazing light and view facing each
 //!   other) has a length, not 0. Cost: abs and max per component, a compare, a select, a product each (~+12).
@@ -83,15 +89,17 @@ pub enum Rule {
     CompensatedSum,
     ScaledExp,
     SmithG1,
+    CancelMin,
     ScaledNorm,
     RationalForm,
     CompensatedExp,
 }
 
 impl Rule {
-    pub const ALL: [Rule; 10] = [
+    pub const ALL: [Rule; 11] = [
         Rule::SplitSqrt,
         Rule::SmithG1,
+        Rule::CancelMin,
         // Before quotient-chain, which flattens (x/√s)·(x/√s) into x·x/√s/√s, where scaled-norm cannot see it.
         Rule::ScaledNorm,
         Rule::QuotientChain,
@@ -112,6 +120,7 @@ impl Rule {
             Rule::CompensatedSum => "compensated-sum",
             Rule::ScaledExp => "scaled-exp",
             Rule::SmithG1 => "smith-g1",
+            Rule::CancelMin => "cancel-min",
             Rule::ScaledNorm => "scaled-norm",
             Rule::RationalForm => "rational-form",
             Rule::CompensatedExp => "compensated-exp",
@@ -128,6 +137,7 @@ impl Rule {
             Rule::CompensatedSum => "a + b that may cancel, plus the rounding errors of the sum and the terms below it (fma, 2Sum)",
             Rule::ScaledExp => "exp(a)*b/c as expmuldiv(a, b, c): no underflow of exp(a) before b/c rescales it",
             Rule::SmithG1 => "Smith G1 2/(1 + sqrt(1 + A*tan^2)) as 2c/(c + sqrt(c^2 + A*(1 - c^2))), c/c cancelled: no inf/inf at grazing c",
+            Rule::CancelMin => "min(K, c*x, c*y)/(x*y) as min(K/min(x, y), c)/max(x, y): the limit, not 0/0, at x or y = 0",
             Rule::ScaledNorm => "x/sqrt(a^2 + b^2 + ...) with a tiny vector scaled by 2^600 first: no zero length",
             Rule::RationalForm => "a sum rational in one input as (a1*x + a0)/(b1*x + b0), coefficients in double-double: the cancellation moves to the parameters",
             Rule::CompensatedExp => "exp(K*q) as exp(hi)*(1 + t), K's parameter-only factors in double-double and t the product's rounding error: exp no longer amplifies it",
@@ -153,6 +163,7 @@ impl Rule {
             Rule::CompensatedSum => compensated_sum(f, &ranges, site.unwrap_or(0)),
             Rule::ScaledExp => scaled_exp(f, &ranges, site.unwrap_or(0)),
             Rule::SmithG1 => smith_g1(f, &ranges),
+            Rule::CancelMin => cancel_min(f, &ranges),
             Rule::ScaledNorm => scaled_norm(f),
             Rule::RationalForm => super::cancel::rational_form(f),
             Rule::CompensatedExp => super::cancel::compensated_exp(f),
@@ -418,12 +429,21 @@ fn divide_apart(ir: &mut Ir, map: &[NodeId], num: &[NodeId], safe_den: &[NodeId]
 // turn; 2: expmuldiv(E/2, expmuldiv(E/2, n₁·…/d₁/…/d_{k−2}, d_{k−1}), d_k))
 fn scaled_exp(f: &Formula, ranges: &[Range], variant: usize) -> (Ir, NodeId, bool) {
     let lists = product_lists(f, MAX_FACTORS);
-    rebuild(f, |ir, map, id, _| {
+    rebuild(f, |ir, map, id, old| {
         let (num, den) = lists[id.index()].as_ref()?;
         let at = num.iter().position(|x| matches!(f.ir.node(*x), Node::Call(Builtin::Exp, _)))?;
         let Node::Call(Builtin::Exp, [arg, ..]) = *f.ir.node(num[at]) else { return None };
         if num.len() + den.len() < 2 || variant > 2 || (variant == 2 && den.len() < 2) {
             return None;
+        }
+        // A divisor left in b that may be tiny and that neither the exponent's own divisors cover (Beckmann's
+        // NH: e^E vanishes faster) nor a square root bounds (1/√x ≤ 4.5·10¹⁶¹: Ward's √NL) overflows b before
+        // e^E scales it (Cook–Torrance's VH ~ 10⁻³¹⁰ beside a tiny max(NL, NV): ∞ where the value is 10³⁰⁰).
+        // Such a variant is skipped (the node unchanged), so the next is tried.
+        let covered = lists[arg.index()].as_ref().map_or(vec![], |l| l.1.clone());
+        let risky = |d: &NodeId| !safe(ranges[d.index()]) && !covered.contains(d) && !matches!(f.ir.node(*d), Node::Call(Builtin::Sqrt, _));
+        if den.iter().filter(|d| risky(d)).count() > if variant == 2 { 2 } else { 1 } {
+            return Some(ir.push(old.map_args(|a| map[a.index()]), f.ir.span(id)));
         }
         let s = f.ir.span(id);
         let rest: Vec<NodeId> = num.iter().enumerate().filter(|(i, _)| *i != at).map(|(_, x)| *x).collect();
@@ -539,6 +559,96 @@ fn cancel_positive(f: &Formula) -> (Ir, NodeId, bool) {
         }
         let (safe_den, unsafe_den): (Vec<NodeId>, Vec<NodeId>) = den.iter().partition(|d| safe(ranges[d.index()]));
         Some(divide_apart(ir, map, &num, &safe_den, &unsafe_den, f.ir.span(id)))
+    })
+}
+
+// z·min(K, c·x, c·y)/(v·x·y) → z·min(K·d/min(x, y), n)/(v·d)/max(x, y)   for K > 0 and x, y, n, d ≥ 0 by range,
+// c = n/d the product/quotient of the factors both arguments share (the min's arguments in any order and nesting)
+fn cancel_min(f: &Formula, ranges: &[Range]) -> (Ir, NodeId, bool) {
+    let lists = product_lists(f, MAX_FACTORS);
+    let ir0 = &f.ir;
+    fn leaves(ir: &Ir, x: NodeId, out: &mut Vec<NodeId>) {
+        match *ir.node(x) {
+            Node::Call(Builtin::Min, [a, b, _]) => {
+                leaves(ir, a, out);
+                leaves(ir, b, out);
+            }
+            _ => out.push(x),
+        }
+    }
+    let factors = |x: NodeId| match &lists[x.index()] {
+        Some(l) => l.clone(),
+        None => (vec![x], vec![]),
+    };
+    let nonneg = |xs: &[NodeId]| xs.iter().all(|x| ranges[x.index()].nonneg());
+    // (c's numerator and denominator, x, y) when `args` are K, c·x, c·y with x, y divisors of the tree.
+    let split = |args: &[NodeId], den: &[NodeId]| -> Option<(Vec<NodeId>, Vec<NodeId>, NodeId, NodeId)> {
+        let k = args.iter().position(|a| ranges[a.index()].lo > 0.0)?;
+        let rest: Vec<NodeId> = args.iter().enumerate().filter(|(i, _)| *i != k).map(|(_, a)| *a).collect();
+        let [p, q] = rest[..] else { return None };
+        let ((pn, pd), (qn, qd)) = (factors(p), factors(q));
+        for (i, x) in pn.iter().enumerate() {
+            for (j, y) in qn.iter().enumerate() {
+                if x == y || !den.contains(x) || !den.contains(y) {
+                    continue;
+                }
+                let mut cn = pn.clone();
+                cn.remove(i);
+                let mut qn2 = qn.clone();
+                qn2.remove(j);
+                let (mut a, mut b, mut c, mut d) = (cn.clone(), qn2, pd.clone(), qd.clone());
+                for v in [&mut a, &mut b, &mut c, &mut d] {
+                    v.sort();
+                }
+                if a == b && c == d && nonneg(&cn) && nonneg(&pd) && nonneg(&[*x, *y]) {
+                    return Some((cn, pd, *x, *y));
+                }
+            }
+        }
+        None
+    };
+    // Only whole trees: an operand of a flattened product would not have x and y among its divisors.
+    let mut inner = vec![false; ir0.len()];
+    for id in ir0.ids() {
+        if let (Some(_), Node::Binary(BinOp::Mul | BinOp::Div, a, b)) = (&lists[id.index()], ir0.node(id)) {
+            inner[a.index()] = true;
+            inner[b.index()] = true;
+        }
+    }
+    rebuild(f, |ir, map, id, _| {
+        let (num, den) = lists[id.index()].as_ref().filter(|_| !inner[id.index()])?;
+        let at = num.iter().position(|x| matches!(ir0.node(*x), Node::Call(Builtin::Min, _)))?;
+        let mut args = vec![];
+        leaves(ir0, num[at], &mut args);
+        if args.len() != 3 {
+            return None;
+        }
+        let (cn, cd, x, y) = split(&args, den)?;
+        let k = *args.iter().find(|a| ranges[a.index()].lo > 0.0)?;
+        let s = ir0.span(id);
+        let (mx, my) = (map[x.index()], map[y.index()]);
+        let u = ir.call(Builtin::Min, &[mx, my], s);
+        let w = ir.call(Builtin::Max, &[mx, my], s);
+        // c = cn/cd: its divisors join the tree's, so the min is bounded by cn (VH ~ 10⁻³¹⁰ would overflow c).
+        let kd = product(ir, map, &[&[k][..], &cd].concat(), s)?;
+        let ku = ir.bin(BinOp::Div, kd, u, s);
+        let c = product(ir, map, &cn, s).unwrap_or_else(|| ir.konst(1.0, s));
+        let g = ir.call(Builtin::Min, &[ku, c], s);
+        let others: Vec<NodeId> = num.iter().enumerate().filter(|(i, _)| *i != at).map(|(_, v)| *v).collect();
+        let mut rest = den.clone();
+        rest.extend(&cd);
+        for v in [x, y] {
+            rest.remove(rest.iter().position(|d| *d == v)?);
+        }
+        let (safe_den, unsafe_den): (Vec<NodeId>, Vec<NodeId>) = rest.iter().partition(|d| safe(ranges[d.index()]));
+        let mut v = product(ir, map, &others, s).map_or(g, |p| ir.bin(BinOp::Mul, p, g, s));
+        if let Some(d) = product(ir, map, &safe_den, s) {
+            v = ir.bin(BinOp::Div, v, d, s);
+        }
+        for d in &unsafe_den {
+            v = ir.bin(BinOp::Div, v, map[d.index()], s);
+        }
+        Some(ir.bin(BinOp::Div, v, w, s))
     })
 }
 
@@ -870,6 +980,18 @@ mod tests {
         assert!(!t.contains("/ nl") && !t.contains("* nl /") && t.contains("sqrt("), "{t}");
         // Without the guard NL may be 0 or negative: not rewritten.
         assert!(Rule::SmithG1.apply(&parse(&format!("param a = 0.2 in 0.01..1\n{g1}\ng * NH / (4*NL)"))).is_none());
+    }
+
+    #[test]
+    fn cancel_min_needs_a_positive_bound_and_a_nonnegative_shared_factor() {
+        let f = parse("param m = 0.3 in 0.01..1\nlet G = min(1, min(2*NH*NV/VH, 2*NH*NL/VH))\nexp(-NH/m)*G/(3*NL*NV)");
+        let t = Rule::CancelMin.apply(&f).unwrap().to_program_text();
+        // min(VH/min(NL, NV), 2·NH)/VH/max(NL, NV): no NL·NV, and no NL or NV alone under a division inside G.
+        assert!(t.contains("min(vh / min(") && t.contains("/ vh / max(") && !t.contains("nl * nv"), "{t}");
+        // A shared factor that may be negative (NH − 0.5) or a bound that may be 0: not rewritten.
+        assert!(Rule::CancelMin.apply(&parse("min(1, min((NH - 0.5)*NV, (NH - 0.5)*NL))/(NL*NV)")).is_none());
+        assert!(Rule::CancelMin.apply(&parse("min(NH, min(2*NV, 2*NL))/(NL*NV)")).is_none());
+        assert!(Rule::CancelMin.apply(&parse("min(1, min(2*NV, 2*NL))/(NL*NV)")).is_some());
     }
 
     #[test]

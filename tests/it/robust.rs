@@ -152,6 +152,7 @@ fn catalogue_must_show_on_100k_points() {
     stems.sort();
     assert!(stems.len() >= 16, "{stems:?}");
     let mut power_formulas = 0;
+    let mut limit_points = 0;
     for stem in &stems {
         let f = load(stem);
         let n = f.param_index("n").unwrap();
@@ -163,7 +164,12 @@ fn catalogue_must_show_on_100k_points() {
             let pts = sample(&f, &bake, 100_000, 7);
             let s = measure(&k, &lobe::simplify::bake_only(&f, &bake), &pts);
             assert_eq!(s.points, 100_000);
+            // Points whose exact value is 0/0 at an input exactly 0 or 1 count, with their limit as the truth.
             assert_eq!(s.nonfinite, 0, "{stem} {bake:?}: {:?}", s.first_nonfinite);
+            limit_points += s.limits;
+            if stem == "cook_torrance" {
+                assert!(s.limits > 20_000, "Cook–Torrance at NL or NV = 0: {} limit points", s.limits);
+            }
             if !bake.is_empty() {
                 let worst = pts
                     .iter()
@@ -177,6 +183,30 @@ fn catalogue_must_show_on_100k_points() {
         power_formulas += usize::from(reads_n);
     }
     assert!(power_formulas >= 10, "{power_formulas}");
+    // Cook–Torrance, Beckmann (NH = 0) and Ward (NL·NV at 0 beside a vanishing exp).
+    assert!(limit_points > 3 * (20_000 + 1_000), "{limit_points}");
+}
+
+/// Cook–Torrance at NL = 0 or NV = 0 exactly: G/(NL·NV) is 0/0 as written, but G = 2·NH·NL/VH there, so the
+/// value has a limit (the truth's, along NL), which `cancel-min` computes: G/(NL·NV) as
+/// min(VH/min(NL, NV), 2·NH)/VH/max(NL, NV). The written form, and the branch start's pass, gave NaN.
+#[test]
+fn cook_torrance_is_its_limit_at_nl_or_nv_zero() {
+    let f = load("cook_torrance");
+    let plain = plain_kernel("cook_torrance", &[]);
+    let k = robust_kernel("cook_torrance", &[]);
+    let p = k.default_params();
+    for (nl, nv, nh, vh) in [(0.0, 0.25, 0.9, 0.5), (0.4, 0.0, 0.7, 0.6), (0.0, 1e-300, 0.95, 0.8), (0.0, 0.9, 0.99, 0.999)] {
+        let x = at(nl, nv, nh, vh);
+        assert!(truth::eval(&f, &x, &p).is_nan() && plain.eval(&x, &p).is_nan(), "not 0/0 at {x:?}");
+        let t = truth::limit(&f, &x, &p).unwrap_or_else(|| panic!("no limit at {x:?}"));
+        let v = k.eval(&x, &p);
+        assert!(t.is_finite() && ulps(v, t) <= 16.0, "at {x:?}: {v:e} vs the limit {t:e}");
+    }
+    let o = improve(&f, &[], &PassOptions::default());
+    assert!(o.trials.iter().any(|t| t.kept && t.rule == "cancel-min"), "{:?}", o.trials);
+    assert_eq!(o.after.nonfinite, 0, "{:?}", o.after.first_nonfinite);
+    assert!(o.before.limits > 0 && o.before.nonfinite >= o.before.limits, "{:?}", o.before);
 }
 
 #[test]
