@@ -98,9 +98,11 @@ fn literal(v: f64, d: Dialect, exact: bool) -> String {
     if v.is_infinite() {
         return bits(if v > 0.0 { 0x7f80_0000 } else { 0xff80_0000 });
     }
-    // f32 is what the shader computes in; print the shortest text that round-trips the f32 value.
+    // f32 is what the shader computes in; print the shortest text that round-trips the f32 value. A value
+    // beyond f32's range (the accuracy pass's 2^600-style scales) is still exact text when lobe reads it back:
+    // the GPU compiler rounds it to f32 ∞ as the bit pattern would, and lobe keeps the finite f64 constant.
     let f = v as f32;
-    if f.is_infinite() {
+    if f.is_infinite() && !exact {
         return bits(if f > 0.0 { 0x7f80_0000 } else { 0xff80_0000 });
     }
     let s = if exact { format!("{v:?}") } else { format!("{f:?}") };
