@@ -2,7 +2,7 @@
 //! form cannot, at the default budget, and keep baked and live kernels in agreement.
 
 use lobe::ir::Formula;
-use lobe::numerics::robust::{self, improve, ulps, PassOptions};
+use lobe::numerics::robust::{self, improve, ulps, Outcome, PassOptions, Trial};
 use lobe::numerics::truth;
 use lobe::{Backend, Evaluator, Kernel, Options};
 
@@ -19,6 +19,13 @@ fn kernel(stem: &str, set: &[(&str, f64)], pass: bool) -> Kernel {
 
 fn at_nh(nh: f64) -> [f64; lobe::N_INPUTS] {
     lobe::from_cosines([0.5, 0.5, nh, nh, 0.7])
+}
+
+/// The accuracy pass on `f` (20 000 points) and its trial of `rule`, which must have been kept.
+fn pass_keeping(f: &Formula, rule: &str) -> (Outcome, Trial) {
+    let o = improve(f, &[], &PassOptions { points: 20_000, ..Default::default() });
+    let kept = o.trials.iter().find(|t| t.kept && t.rule == rule).unwrap_or_else(|| panic!("{:?}", o.trials)).clone();
+    (o, kept)
 }
 
 /// The truth of catalogue formula `name` at `x`, `p`, checked to be more than `off` ulp from the form as
@@ -41,8 +48,7 @@ fn scos2_rational_form_removes_the_cancellation() {
     let t = truth_where_written_form_is_off("scos2", &x, &p, 100.0);
     let k = kernel("scos2", &[], true);
     assert!(ulps(k.eval(&x, &p), t) <= 4.0, "{} vs the truth {t}", k.eval(&x, &p));
-    let o = improve(&f, &[], &PassOptions { points: 20_000, ..Default::default() });
-    let kept = o.trials.iter().find(|t| t.kept && t.rule == "rational-form").unwrap_or_else(|| panic!("{:?}", o.trials));
+    let (o, kept) = pass_keeping(&f, "rational-form");
     assert!(kept.cost <= o.cost_before, "rational-form costs {} against {}", kept.cost, o.cost_before);
     assert!(o.after.max_bits_well <= robust::TARGET_BITS && o.before.max_bits_well > 6.0, "{:?} → {:?}", o.before, o.after);
     // Even where the value's own zero makes it ill-conditioned, the quotient of two fmas stays within a few ulp.
@@ -92,8 +98,7 @@ fn beckmann_compensated_exp_carries_the_argument_rounding() {
     let x = at_nh(4.1727069681260887e-1);
     let p = vec![50.0, 0.7409606420843246];
     let t = truth::eval(&f, &x, &p);
-    let o = improve(&f, &[], &PassOptions { points: 20_000, ..Default::default() });
-    let kept = o.trials.iter().find(|t| t.kept && t.rule == "compensated-exp").unwrap_or_else(|| panic!("{:?}", o.trials));
+    let (o, kept) = pass_keeping(&f, "compensated-exp");
     assert!(kept.cost <= 1.3 * o.cost_before, "compensated-exp costs {} against {}", kept.cost, o.cost_before);
     let k = kernel("beckmann", &[], true);
     assert!(ulps(k.eval(&x, &p), t) < 16.0, "{} vs the truth {t}: {} ulp", k.eval(&x, &p), ulps(k.eval(&x, &p), t));
@@ -145,8 +150,7 @@ fn gaussian_compensated_exp_carries_acos_rounding() {
     let x = at_nh(4.022059445786712e-1);
     let p = vec![30.63641672077346];
     let t = truth_where_written_form_is_off("gaussian", &x, &p, 30.0);
-    let o = improve(&f, &[], &PassOptions { points: 20_000, ..Default::default() });
-    let kept = o.trials.iter().find(|t| t.kept && t.rule == "compensated-exp").unwrap_or_else(|| panic!("{:?}", o.trials));
+    let (o, kept) = pass_keeping(&f, "compensated-exp");
     assert!(kept.cost <= 1.3 * o.cost_before, "compensated-exp costs {} against {}", kept.cost, o.cost_before);
     assert!(o.after.max_bits_well <= robust::TARGET_BITS && o.before.max_bits_well > robust::TARGET_BITS, "{:?} → {:?}", o.before, o.after);
     for backend in [Backend::Jit, Backend::Interp] {
