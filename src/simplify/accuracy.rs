@@ -33,7 +33,8 @@
 //! - `scaled-exp`: a product/quotient tree with an `exp(E)` factor, `exp(E)·n/(d₁·…·d_k)`, →
 //!   `expmuldiv(E, n/(d₁·…·d_{k−1}), d_k)` (the builtin applies every power of two last, so e^E may be far
 //!   below the denormals while the result is not: Beckmann's and Ward's values near 1e-311). Three variants,
-//!   tried in turn: the other divisors as one product, divided one by one,
+//!   tried in turn: the other divisors as one product; the safe ones as one product and each that may be tiny
+//!   or huge on its own;
 //!   and the exponent halved over two nested builtins so two tiny divisors (Cook–Torrance's NL, NV ~1e-224)
 //!   each meet one half (twice the cost).
 //!
@@ -425,8 +426,9 @@ fn divide_apart(ir: &mut Ir, map: &[NodeId], num: &[NodeId], safe_den: &[NodeId]
     v
 }
 
-// exp(E)·n₁·…/(d₁·…·d_k) → expmuldiv(E, n₁·…/(d₁·…·d_{k−1}), d_k)   (variant 0; 1: dividing by each d_i in
-// turn; 2: expmuldiv(E/2, expmuldiv(E/2, n₁·…/d₁/…/d_{k−2}, d_{k−1}), d_k))
+// exp(E)·n₁·…/(d₁·…·d_k) → expmuldiv(E, n₁·…/(d₁·…·d_{k−1}), d_k)   (variant 0; 1: dividing by the safe d_i at
+// once, then by each that may be tiny or huge in turn; 2: expmuldiv(E/2, expmuldiv(E/2, n₁·…/d₁/…/d_{k−2}, d_{k−1}),
+// d_k))
 fn scaled_exp(f: &Formula, ranges: &[Range], variant: usize) -> (Ir, NodeId, bool) {
     let lists = product_lists(f, MAX_FACTORS);
     rebuild(f, |ir, map, id, old| {
