@@ -415,8 +415,13 @@ fn quotient_chain(f: &Formula, ranges: &[Range], only: Option<usize>) -> (Ir, No
 /// `num / safe_den / unsafe_den₁ / …` (new-arena nodes): the whole numerator first (in a BRDF the factor that
 /// vanishes, exp(−1/x²), is there, and it must meet the divisions as 0, not as ∞·0), then the safe divisors at
 /// once, then each divisor that may be tiny or huge on its own.
-fn divide_apart(ir: &mut Ir, map: &[NodeId], num: &[NodeId], safe_den: &[NodeId], unsafe_den: &[NodeId], s: Span) -> NodeId {
-    let mut v = product(ir, map, num, s).unwrap_or_else(|| ir.konst(1.0, s));
+pub(super) fn divide_apart(ir: &mut Ir, map: &[NodeId], num: &[NodeId], safe_den: &[NodeId], unsafe_den: &[NodeId], s: Span) -> NodeId {
+    let v = product(ir, map, num, s).unwrap_or_else(|| ir.konst(1.0, s));
+    divide_by(ir, map, v, safe_den, unsafe_den, s)
+}
+
+/// [`divide_apart`] for a numerator already built (`v`, a new-arena node).
+fn divide_by(ir: &mut Ir, map: &[NodeId], mut v: NodeId, safe_den: &[NodeId], unsafe_den: &[NodeId], s: Span) -> NodeId {
     if let Some(d) = product(ir, map, safe_den, s) {
         v = ir.bin(BinOp::Div, v, d, s);
     }
@@ -644,13 +649,8 @@ fn cancel_min(f: &Formula, ranges: &[Range]) -> (Ir, NodeId, bool) {
             rest.remove(rest.iter().position(|d| *d == v)?);
         }
         let (safe_den, unsafe_den): (Vec<NodeId>, Vec<NodeId>) = rest.iter().partition(|d| safe(ranges[d.index()]));
-        let mut v = product(ir, map, &others, s).map_or(g, |p| ir.bin(BinOp::Mul, p, g, s));
-        if let Some(d) = product(ir, map, &safe_den, s) {
-            v = ir.bin(BinOp::Div, v, d, s);
-        }
-        for d in &unsafe_den {
-            v = ir.bin(BinOp::Div, v, map[d.index()], s);
-        }
+        let v = product(ir, map, &others, s).map_or(g, |p| ir.bin(BinOp::Mul, p, g, s));
+        let v = divide_by(ir, map, v, &safe_den, &unsafe_den, s);
         Some(ir.bin(BinOp::Div, v, w, s))
     })
 }

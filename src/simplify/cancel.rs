@@ -38,7 +38,7 @@
 //! factor no longer multiplies per point. Both catalogue uses sit just within the 1.3× budget, statically and as
 //! measured (BENCHMARKS.md, robust7).
 
-use super::accuracy::{add_opt, product, rebuild, two_sum_error};
+use super::accuracy::{add_opt, divide_apart, product, rebuild, two_sum_error};
 use crate::base::span::Span;
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Ir, Node, NodeId};
@@ -481,20 +481,13 @@ pub(super) fn compensated_exp(f: &Formula) -> (Ir, NodeId, bool) {
             k = b.neg(ir, k);
         }
         let q = {
-            let qn = product(ir, map, &qn, sp);
-            let qd = product(ir, map, &qd, sp).map(|d| {
+            let n = product(ir, map, &qn, sp);
+            let d = product(ir, map, &qd, sp).map(|d| {
                 let floor = ir.konst(MIN_DIVISOR, sp);
                 ir.call(Builtin::Max, &[d, floor], sp)
             });
-            match (qn, qd) {
-                (Some(n), Some(d)) => ir.bin(BinOp::Div, n, d, sp),
-                (Some(n), None) => n,
-                (None, Some(d)) => {
-                    let one = ir.konst(1.0, sp);
-                    ir.bin(BinOp::Div, one, d, sp)
-                }
-                (None, None) => unreachable!("a live factor exists"),
-            }
+            let n = n.unwrap_or_else(|| ir.konst(1.0, sp));
+            d.map_or(n, |d| ir.bin(BinOp::Div, n, d, sp))
         };
         let a = ir.bin(BinOp::Mul, k.hi, q, sp);
         let na = ir.neg(a, sp);
@@ -517,15 +510,8 @@ pub(super) fn compensated_exp(f: &Formula) -> (Ir, NodeId, bool) {
             let (negb, bn, bd) = factors(f, &inv, bv)?;
             let (kbn, un): (Vec<NodeId>, Vec<NodeId>) = bn.iter().partition(|x| inv[x.index()]);
             let (kbd, ud): (Vec<NodeId>, Vec<NodeId>) = bd.iter().partition(|x| inv[x.index()]);
-            let quot = |ir: &mut Ir, n: &[NodeId], d: &[NodeId]| match (product(ir, map, n, sp), product(ir, map, d, sp)) {
-                (None, None) => None,
-                (n, Some(d)) => {
-                    let n = n.unwrap_or_else(|| ir.konst(1.0, sp));
-                    Some(ir.bin(BinOp::Div, n, d, sp))
-                }
-                (n, None) => n,
-            };
-            let kb = quot(ir, &kbn, &kbd).map(|k| if negb { ir.neg(k, sp) } else { k });
+            let kb = (kbn.len() + kbd.len() > 0).then(|| divide_apart(ir, map, &kbn, &kbd, &[], sp));
+            let kb = kb.map(|k| if negb { ir.neg(k, sp) } else { k });
             let (bb, cc) = match kb {
                 Some(kb) => {
                     let mut x = if c_carries { kb } else { ir.call(Builtin::Fma, &[kb, t, kb], sp) };

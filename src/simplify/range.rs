@@ -233,10 +233,10 @@ impl Range {
                 let r = Range::widened(m.lo, m.hi, m.nan, m.negz).add_(args[2]);
                 Range { negz: r.negz || m.negz || (m.lo < 0.0 && args[2].contains_zero()), ..r }
             }
-            // e^a·b/c for b ≥ 0, c > 0, from the exponent sum a + ln b − ln c (libm's ln and exp are far within
-            // the 1e-9 relative slack); anything else is unknown.
             // Within acos's own error of ≤ 2 ulp of a value ≤ π: |tail| < 2⁻⁵⁰.
             Builtin::AcosLo => Range::new(-8.9e-16, 8.9e-16, a.nan, true),
+            // e^a·b/c for b ≥ 0, c > 0, from the exponent sum a + ln b − ln c (libm's ln and exp are far within
+            // the 1e-9 relative slack); anything else is unknown.
             Builtin::ExpMulDiv => {
                 let (b, c) = (args[1], args[2]);
                 if !(b.lo >= 0.0 && c.lo > 0.0) {
