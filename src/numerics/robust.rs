@@ -41,6 +41,22 @@
 //! no more accurate is tried once more after a later rule was kept: two defects at the same points (a zero
 //! normalize length and an underflowing 1/(NL·NV)) each hide the other's fix.
 //!
+//! Bake-consistent choices: a baked kernel must agree with the live one at the baked values (within 4 ulp,
+//! tests/it/robust.rs), but a pass measured on the baked domain alone decides by what that domain needs, so it
+//! dropped rewrites the live pass kept (Beckmann's `compensated-exp` at m = 0.3, F_dsh's `rational-form` at
+//! n = 50), and the two kernels then differ by the correction. So with baked values the pass first decides
+//! with every parameter live, then bakes that choice: the live choice simplified with the values folded in
+//! (`live-choice`, its first trial), parameter-only subexpressions folding to exactly what the live kernel
+//! computes once per parameter set (the folder and the backends share `BinOp::apply` and `Builtin::eval`).
+//! Replaying the live rules on the baked form instead would need their sites to match across two arenas
+//! whose folding differs; baking the choice keeps it by construction. It is kept unless it measures less
+//! accurate than the plain baked form (ties kept) or costs more than both the budget and the live kernel
+//! (folding only removes work, so in practice never). The search then goes on from it with the rules the
+//! live choice did not keep, the power candidates built from it: a baked exponent still gets its
+//! compensated chain (the live kernel calls pow). A baked value the formula does not read is dropped first
+//! (the live decision is then the whole decision). Cost: a baked formula's pass measures twice (live, then
+//! baked), ~2× the time; with nothing kept live, it is the baked pass alone plus the live one's measuring.
+//!
 //! Cost: one truth evaluation per point (1–5 µs for a catalogue formula in release; a limit, up to three per
 //! input on an edge, only where it is not finite), computed once per pass ([`truths`]), plus one interpreter
 //! evaluation per point and candidate, plus the condition estimate (two truth evaluations per read input) at the
@@ -471,6 +487,13 @@ fn better(a: &ErrorStats, b: &ErrorStats) -> bool {
 
 /// The accuracy pass on `orig` with `bake` folded in (module docs).
 pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcome {
+    // A baked value the formula never reads changes nothing: the live decision is the whole decision.
+    let read = crate::simplify::simplify(orig, &[]);
+    let read = read.ir.used_params(read.root);
+    let bake: Vec<(usize, f64)> = bake.iter().copied().filter(|(k, _)| read.contains(&(*k as u16))).collect();
+    let bake = bake.as_slice();
+    // Decided with every parameter live first (module docs: bake-consistent choices).
+    let live = (!bake.is_empty()).then(|| improve(orig, &[], o)).filter(|l| l.trials.iter().any(|t| t.kept));
     let base = crate::simplify::simplify(orig, bake);
     let truth_f = crate::simplify::bake_only(orig, bake);
     // The simplified form's cost stands for the truth's work (the truth's own `x^2` is a pow call).
@@ -486,14 +509,40 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
     };
     let (mut cur, mut cur_stats, mut cur_cost) = (base.clone(), before.clone(), cost_before);
     let mut trials = Vec::new();
-    let pow_call = crate::simplify::simplify_with(orig, bake, &pow_call_policy()).0;
+    // The formula the power candidates start from: the live choice once it is kept.
+    let mut src = orig;
+    // Rules the live choice kept are not tried again: where they apply was decided live.
+    let mut decided: Vec<&'static str> = vec![];
+    if let Some(l) = &live {
+        let cand = crate::simplify::simplify(&l.formula, bake);
+        let stats = run(&cand);
+        let c = cost(&cand);
+        let rules: Vec<&'static str> = l.trials.iter().filter(|t| t.kept).map(|t| t.rule).collect();
+        // Not less accurate than the plain baked form (ties kept), and no costlier than the budget or the live
+        // kernel the pass already chose.
+        let budget = base_budget.max(l.cost_after);
+        let (kept, reason) = if better(&before, &stats) {
+            (false, format!("{}: less accurate than the plain form with these values baked", rules.join(", ")))
+        } else if c > budget {
+            (false, format!("{}: costs {:.2}× the fastest form (budget {:.2}×)", rules.join(", "), c / cost_before, budget / cost_before))
+        } else {
+            (true, format!("{}: cost {:.2}× the fastest form", rules.join(", "), c / cost_before))
+        };
+        trials.push(Trial { rule: LIVE_CHOICE, describe: LIVE_CHOICE_DESCRIBE, kept, reason, stats: stats.clone(), cost: c });
+        if kept {
+            (cur, cur_stats, cur_cost) = (cand, stats, c);
+            src = &l.formula;
+            decided = rules;
+        }
+    }
+    let pow_call = crate::simplify::simplify_with(src, bake, &pow_call_policy()).0;
     let compensated = compensated_powers(&pow_call);
     let pow_cost = cost(&pow_call);
     let mut tries: Vec<(&'static str, &'static str, Option<usize>)> = vec![
         ("pow-call", "integer powers above 8 as pow calls instead of multiplication chains", None),
         (COMPENSATED, "integer powers above 8 as compensated multiplication chains (fma error terms)", None),
     ];
-    for r in Rule::ALL {
+    for r in Rule::ALL.iter().filter(|r| !decided.contains(&r.name())) {
         tries.push((r.name(), r.describe(), None));
     }
     let mut k = 0;
@@ -566,6 +615,10 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
     }
     Outcome { formula: cur, before, after: cur_stats, cost_before, cost_after: cur_cost, trials, points: n }
 }
+
+/// The first trial of a pass with baked values: the live decision, baked (module docs).
+pub const LIVE_CHOICE: &str = "live-choice";
+const LIVE_CHOICE_DESCRIBE: &str = "the rewrites chosen with every parameter live, the baked values folded into them: baked and live kernels agree";
 
 /// A trial's reason when it measured no more accurate than the current best.
 const NOT_BETTER: &str = "no more accurate on the sample";

@@ -8,9 +8,11 @@
 //! `fma(a₁ʰ, x, a₀ʰ) + fma(a₁ˡ, x, a₀ˡ)`, where every coefficient is a double-double `aʰ + aˡ` computed exactly
 //! (2Sum, fma two-product) from the values of the subexpressions that read no
 //! input (as the kernel computes them, which is what a baked parameter folds to: baked and live agree).
-//! A sum with a term of higher degree stays as written (regrouping part of it changes where it rounds at the
-//! points where the whole cancels, ill-conditioned ones included, so a baked and a live kernel would disagree
-//! wherever the pass chose differently for them). The written form's cancellation — Modified cosine-quadratic's
+//! In a sum with other terms (of higher degree, or in another atom), the terms that qualify are regrouped and
+//! the others added to the quotient as written: F_dsh's c/(n(1 − c) + c) − 0.25 beside its c⁸ term, where
+//! the first two cancel (0.266 − 0.25). That changes where the whole sum rounds, so a baked and a live kernel
+//! agree only if the pass makes the same choice for both: it decides with every parameter live and bakes that
+//! choice (`numerics::robust`). The written form's cancellation — Modified cosine-quadratic's
 //! `1 − 1.1·u/(u + 2c)`, u = n(1 − c) — then happens inside the coefficient arithmetic, in double-double; what is
 //! left per point is one rounding of a₁ʰx + a₀ʰ (the fma), one of the addition of the low parts (below an ulp
 //! of it), and the same for the denominator and the quotient: ≤ ~2.5 ulp, except near the numerator's own
@@ -302,18 +304,24 @@ pub(super) fn rational_form(f: &Formula) -> (Ir, NodeId, bool) {
         if inv[id.index()] || in_sum[id.index()] && uses[id.index()] <= 1 || !matches!(n, Node::Binary(BinOp::Add | BinOp::Sub, ..)) {
             return None;
         }
-        let mut ts = vec![];
-        terms(f, &inv, id, false, &mut ts);
-        // Every term must join: regrouping only part of a sum (F_dsh's c/(n − n·c + c) − 0.25 beside its c⁸
-        // term) changes where it rounds at the points where the whole sum cancels, and the measured gain was
-        // too small for the pass to take it at every baked n, so baked and live kernels would differ there.
+        let mut all = vec![];
+        terms(f, &inv, id, false, &mut all);
+        // The terms that are rational in one atom and of degree ≤ 1 together join, in order (F_dsh's
+        // c/(n − n·c + c) and −0.25); the others (its c⁸ term) are added to the joined quotient as written.
         let mut acc: Option<Shape> = None;
-        for (t, _) in &ts {
-            let s = shapes[t.index()]?;
-            acc = Some(match acc {
-                None => s,
-                Some(a) => combine(BinOp::Add, a, s)?,
+        let (mut ts, mut rest) = (vec![], vec![]);
+        for t in all {
+            let joined = shapes[t.0.index()].and_then(|s| match acc {
+                None => Some(s),
+                Some(a) => combine(BinOp::Add, a, s),
             });
+            match joined {
+                Some(s) => {
+                    acc = Some(s);
+                    ts.push(t);
+                }
+                None => rest.push(t),
+            }
         }
         // Only a sum that may cancel (terms of both signs, by range) has rounding errors to move; a sum of
         // same-signed terms is accurate as written.
@@ -350,7 +358,10 @@ pub(super) fn rational_form(f: &Formula) -> (Ir, NodeId, bool) {
         }
         let x = map[atom.index()];
         let (nv, dv) = (b.eval(ir, &num, x), b.eval(ir, &den, x));
-        let v = ir.bin(BinOp::Div, nv, dv, b.sp);
+        let mut v = ir.bin(BinOp::Div, nv, dv, b.sp);
+        for (t, neg) in rest {
+            v = ir.bin(if neg { BinOp::Sub } else { BinOp::Add }, v, map[t.index()], b.sp);
+        }
         Some(v)
     })
 }
@@ -565,8 +576,11 @@ mod tests {
         assert!(t.contains("fma(") && t.matches(" / ").count() == 1, "{t}");
         // A polynomial is left as written.
         assert!(apply("n*0.5*(NH - 1) + 1").is_none());
-        // A term of higher degree keeps the whole sum as written.
-        assert!(apply("let c = NH\nc/(n - n*c + c) + (c^8 - 0.25)").is_none());
+        // A term of higher degree is added to the regrouped part as written.
+        let t = apply("let c = NH\nc/(n - n*c + c) + (c^8 - 0.25)").unwrap();
+        assert!(t.contains("fma(") && t.matches(" / ").count() == 1 && t.contains("t2 * t2"), "{t}");
+        // Same-signed qualifying terms beside it are not regrouped.
+        assert!(apply("let c = NH\nc/(n - n*c + c) + (c^8 + 0.25)").is_none());
         // Degree 2 over one atom, two atoms, a sum already x + a₀, same-signed terms are left alone.
         assert!(apply("NH*NH - n*NH").is_none());
         assert!(apply("NH/(n + NL) - 1").is_none());

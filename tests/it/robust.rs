@@ -187,6 +187,64 @@ fn catalogue_must_show_on_100k_points() {
     assert!(limit_points > 3 * (20_000 + 1_000), "{limit_points}");
 }
 
+/// Bake-consistency (`numerics::robust`, module docs): with every parameter baked at its default, and with n = 50
+/// alone, the pass's kernel agrees with the live one within 4 ulp at each of 10⁵ domain points where both are
+/// finite. A pass deciding on the baked domain alone dropped rewrites the live one kept (Beckmann's
+/// `compensated-exp` at m = 0.3, Ward's second quotient chain), so the kernels differed by the correction.
+#[test]
+fn catalogue_baked_at_defaults_agrees_with_live() {
+    let dir = format!("{}/examples/brdfs", env!("CARGO_MANIFEST_DIR"));
+    let mut stems: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .filter_map(|e| {
+            let p = e.ok()?.path();
+            (p.extension()? == "brdf").then(|| p.file_stem().unwrap().to_string_lossy().into_owned())
+        })
+        .collect();
+    stems.sort();
+    assert!(stems.len() >= 16, "{stems:?}");
+    for stem in &stems {
+        let f = load(stem);
+        let live = robust_kernel(stem, &[]);
+        let all: Vec<(usize, f64)> = f.params.iter().enumerate().map(|(i, p)| (i, p.default)).collect();
+        for bake in [all, vec![(f.param_index("n").unwrap(), 50.0)]] {
+            let set: Vec<(&str, f64)> = bake.iter().map(|&(i, v)| (f.params[i].name.as_str(), v)).collect();
+            let k = robust_kernel(stem, &set);
+            let worst = sample(&f, &bake, 100_000, 7)
+                .iter()
+                .map(|pt| (live.eval(&pt.x, &pt.p), k.eval(&pt.x, &pt.p), pt))
+                .filter(|(a, b, _)| a.is_finite() && b.is_finite())
+                .map(|(a, b, pt)| (ulps(a, b), pt.x))
+                .fold((0.0, [0.0; lobe::N_INPUTS]), |w, d| if d.0 > w.0 { d } else { w });
+            assert!(worst.0 <= 4.0, "{stem} {set:?}: baked and live differ by {} ulp at {:?}", worst.0, worst.1);
+        }
+    }
+    // The live choice is the baked one's first trial: Beckmann keeps compensated-exp with m baked.
+    let f = load("beckmann");
+    let o = improve(&f, &[(f.param_index("m").unwrap(), 0.3)], &PassOptions::default());
+    assert!(o.trials[0].kept && o.trials[0].rule == robust::LIVE_CHOICE && o.trials[0].reason.contains("compensated-exp"), "{:?}", o.trials);
+}
+
+/// F_dsh's worst well-conditioned point (NH = 0.3127, n = 1.24, condition 15) was c/(n(1 − c) + c) − 0.25
+/// cancelling (0.266 − 0.25) beside the c⁸ term: 4.25 bits. `rational-form` regroups that sub-sum as one
+/// linear-fractional form, within the 4 bits live and with n baked, at the default budget.
+#[test]
+fn dsh_within_16_ulp_live_and_baked() {
+    let f = load("dsh");
+    let n = f.param_index("n").unwrap();
+    let seed = PassOptions::default().seed;
+    let pts = sample(&f, &[], 100_000, seed);
+    let plain = measure(&plain_kernel("dsh", &[]), &f, &pts);
+    assert!(plain.max_bits_well > robust::TARGET_BITS, "the written form is within the target now: {:?}", plain.worst_well);
+    for bake in [vec![], vec![(n, 50.0)], vec![(n, 1000.0)]] {
+        let set: Vec<(&str, f64)> = bake.iter().map(|(_, v)| ("n", *v)).collect();
+        let pts = sample(&f, &bake, 100_000, seed);
+        let s = measure(&robust_kernel("dsh", &set), &lobe::simplify::bake_only(&f, &bake), &pts);
+        assert!(s.max_bits_well <= robust::TARGET_BITS, "{bake:?}: {:?}", s.worst_well);
+        assert_eq!(s.nonfinite, 0, "{bake:?}");
+    }
+}
+
 /// Cook–Torrance at NL = 0 or NV = 0 exactly: G/(NL·NV) is 0/0 as written, but G = 2·NH·NL/VH there, so the
 /// value has a limit (the truth's, along NL), which `cancel-min` computes: G/(NL·NV) as
 /// min(VH/min(NL, NV), 2·NH)/VH/max(NL, NV). The written form, and the branch start's pass, gave NaN.
