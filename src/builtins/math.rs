@@ -442,6 +442,13 @@ fn exp_dd<E: Emit>(e: &mut E, xh: E::V, xl: E::V) -> E::V {
 /// [`exp_dd`] before its scaling: `(y, q)` with e^(xh + xl) = y·2^q, y in [0.99, 2.01) rounded once, xh
 /// clamped to [lo, hi] (|lo|, |hi| ≤ 1416, so k·`L2N_HI` stays exact and q within [`scale2`]'s range).
 fn exp_parts<E: Emit>(e: &mut E, xh: E::V, xl: E::V, lo: f64, hi: f64) -> (E::V, E::V) {
+    let (y, q, _) = exp_parts_tail(e, xh, xl, lo, hi);
+    (y, q)
+}
+
+/// [`exp_parts`] and the final FMA's operands `(T_HI, tmp)`, y = fma(T_HI, tmp, T_HI) rounded: [`pow_lo`]
+/// recovers that rounding from them.
+fn exp_parts_tail<E: Emit>(e: &mut E, xh: E::V, xl: E::V, lo: f64, hi: f64) -> (E::V, E::V, (E::V, E::V)) {
     use super::math_tables::EXP_T;
     // Clamp so k stays small; a clamped (or NaN) lane drops xl, which is only meaningful beside its xh.
     let x = clamp_to(e, xh, lo, hi);
@@ -467,7 +474,7 @@ fn exp_parts<E: Emit>(e: &mut E, xh: E::V, xl: E::V, lo: f64, hi: f64) -> (E::V,
     let em1 = e.fma(r2, p, r);
     let tmp = e.add(t_tail, em1);
     let y = e.fma(t_hi, tmp, t_hi);
-    (y, q)
+    (y, q, (t_hi, tmp))
 }
 
 pub fn exp<E: Emit>(e: &mut E, x: E::V) -> E::V {
@@ -1394,4 +1401,53 @@ pub fn acos_lo<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
     let lo_neg = e.sub(g, lo_pos);
     let big = e.select(p.neg, lo_neg, lo_pos);
     e.select(p.small, lo_small, big)
+}
+
+// ---- powlo (the accuracy pass's tail of pow; added after the library above, which it reuses) ----
+
+/// Smallest |pow| whose tail [`pow_lo`] returns: ~2^53 above the smallest normal, so the tail is normal too.
+const POW_LO_MIN: f64 = 2.0041683600089728e-292; // 2^-969
+
+/// `pow(x, y) − pow_f64(x, y)`: the rounding error of the precise [`pow`] at (x, y), so `pow + powlo` is pow to
+/// within ~1/100 ulp instead of ≤ 0.55 (tests/it/cancel.rs). pow computes y·ln x in double-double (2⁻⁶⁸) and
+/// rounds once, in exp's final FMA; [`exp_parts_tail`] recovers that rounding. 0 where pow is a special case
+/// (x ≤ 0, ∞ or NaN, |y| ≥ 2⁶⁴, pow(1, y), pow(x, 0)) or its value is not normal enough for a normal tail, and
+/// in fast mode (its pow is 1e-8 off; the pass carries no tail there). In exact arithmetic (the truth) it is 0.
+///
+/// Why: acos(Q^(1/k)) with Q^(1/k) near 1 (F_kutlog) multiplies pow's relative error by up to ~20; a parameter-
+/// only subtree computed in double-double (`compensated-params`) needs pow's tail to be worth doing. The same
+/// instructions as pow up to exp's scaling, plus two; no special-case block.
+pub fn pow_lo<E: Emit>(e: &mut E, x: E::V, y: E::V, mode: Mode) -> E::V {
+    if mode == Mode::Fast {
+        return e.konst(0.0);
+    }
+    let (ax, ys) = pow_operands(e, x, y);
+    let (lh, ll) = ln_dd(e, ax);
+    let (p, pe) = e.two_prod(ys, lh);
+    let yl = e.mul(ys, ll);
+    let pl = e.add(pe, yl);
+    let (ph, pl) = fast_two_sum(e, p, pl);
+    let (m, q, (t_hi, tmp)) = exp_parts_tail(e, ph, pl, -760.0, 720.0);
+    // m = T_HI + T_HI·tmp rounded once; T_HI − m is exact (Sterbenz: m in [0.99, 2.01), T_HI in [1, 2)), so
+    // this is the rounding up to tmp's own (~1/100 ulp of m).
+    let d = e.sub(t_hi, m);
+    let m_lo = e.fma(t_hi, tmp, d);
+    let mag = scale2(e, m, q);
+    let lo = scale2(e, m_lo, q);
+    // Only for positive finite x, |y| < 2^64 and a value in [2^-969, ∞): elsewhere pow's value is exact, a
+    // special case, or rounded again in the subnormals.
+    let zero = e.konst(0.0);
+    let pos = e.lt(zero, x);
+    let fin = ltk(e, x, f64::INFINITY);
+    let ay = e.abs(y);
+    let small = ltk(e, ay, Y_CAP);
+    let big = ltk(e, mag, POW_LO_MIN);
+    let not_big = e.not(big);
+    let ok = e.and(pos, fin);
+    let ok = e.and(ok, small);
+    let ok = e.and(ok, not_big);
+    let ok_fin = ltk(e, mag, f64::INFINITY);
+    let ok = e.and(ok, ok_fin);
+    let bad = e.not(ok);
+    e.zero_where(bad, lo)
 }

@@ -45,6 +45,7 @@ pub enum Builtin {
     Fma,
     ExpMulDiv,
     AcosLo,
+    PowLo,
 }
 
 /// How the JIT lowers a builtin.
@@ -143,6 +144,11 @@ extern "C" fn lobe_acoslo_fast(x: f64) -> f64 {
     math::acos_lo(&mut math::Direct, x, Mode::Fast)
 }
 
+/// powlo's C-library spelling: the C library's pow minus lobe's (both within an ulp, so a rough reference).
+extern "C" fn lobe_powlo_libm(x: f64, y: f64) -> f64 {
+    x.powf(y) - math::pow(&mut math::Direct, x, y)
+}
+
 extern "C" fn lobe_pow(x: f64, y: f64) -> f64 {
     x.powf(y)
 }
@@ -191,6 +197,8 @@ macro_rules! lib2 {
 }
 lib2!(lobe_pow_precise, Pow, Precise);
 lib2!(lobe_pow_fast, Pow, Fast);
+lib2!(lobe_powlo_precise, PowLo, Precise);
+lib2!(lobe_powlo_fast, PowLo, Fast);
 lib1!(lobe_cos_precise, Cos, Precise);
 lib1!(lobe_cos_fast, Cos, Fast);
 lib1!(lobe_sin_precise, Sin, Precise);
@@ -248,7 +256,7 @@ pub fn clamp(x: f64, lo: f64, hi: f64) -> f64 {
     fmin(fmax(x, lo), hi)
 }
 
-const TABLE: [BuiltinInfo; 23] = [
+const TABLE: [BuiltinInfo; 24] = [
     BuiltinInfo {
         builtin: Builtin::Pow,
         name: "pow",
@@ -525,10 +533,22 @@ const TABLE: [BuiltinInfo; 23] = [
         wgsl: "",
         doc: "acoslo(x) = acos(x) minus lobe's acos(x): its rounding error, 0 in fast math (the accuracy pass forms it)",
     },
+    BuiltinInfo {
+        builtin: Builtin::PowLo,
+        name: "powlo",
+        arity: 2,
+        lowering: Lowering::Math,
+        libm: Libm::F2(lobe_powlo_libm),
+        symbol: "",
+        bound: Bound::math(1.0),
+        glsl: "0.0",
+        wgsl: "",
+        doc: "powlo(x, y) = pow(x, y) minus lobe's pow(x, y): its rounding error, 0 in fast math (the accuracy pass forms it)",
+    },
 ];
 
 impl Builtin {
-    pub const ALL: [Builtin; 23] = [
+    pub const ALL: [Builtin; 24] = [
         Builtin::Pow,
         Builtin::Cos,
         Builtin::Sin,
@@ -552,6 +572,7 @@ impl Builtin {
         Builtin::Fma,
         Builtin::ExpMulDiv,
         Builtin::AcosLo,
+        Builtin::PowLo,
     ];
 
     pub fn info(self) -> &'static BuiltinInfo {
@@ -630,6 +651,7 @@ impl Builtin {
             Builtin::Select => logic::select(e, x, args[1], args[2]),
             Builtin::ExpMulDiv => exp_mul_div(e, x, args[1], args[2]),
             Builtin::AcosLo => acos_lo(e, x, mode),
+            Builtin::PowLo => pow_lo(e, x, args[1], mode),
             Builtin::Sqrt | Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Clamp | Builtin::Fma => return None,
         })
     }
@@ -669,6 +691,8 @@ impl Builtin {
             (Builtin::ExpMulDiv, _) => ("lobe_expmuldiv", Libm::F3(lobe_expmuldiv)),
             (Builtin::AcosLo, Mode::Precise) => ("lobe_acoslo_precise", Libm::F1(lobe_acoslo_precise)),
             (Builtin::AcosLo, Mode::Fast) => ("lobe_acoslo_fast", Libm::F1(lobe_acoslo_fast)),
+            (Builtin::PowLo, Mode::Precise) => ("lobe_powlo_precise", Libm::F2(lobe_powlo_precise)),
+            (Builtin::PowLo, Mode::Fast) => ("lobe_powlo_fast", Libm::F2(lobe_powlo_fast)),
             (Builtin::Sqrt | Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Clamp | Builtin::Fma, _) => return None,
             (Builtin::Floor | Builtin::Lt | Builtin::Le | Builtin::Eq | Builtin::Ne | Builtin::Select, _) => return None,
         })

@@ -28,8 +28,9 @@
 //! the normal, so L + V ∥ N, tiny at grazing angles), every input computed from the pair by
 //! [`super::inputs_from_dirs`]. Deterministic (fixed seed).
 //!
-//! The pass ([`improve`]): start from the simplified formula (the fastest form lobe builds), try each candidate
-//! of `simplify::accuracy` in turn on the current best, keep it when it is more accurate — fewer non-finite
+//! The pass ([`improve`]): start from the simplified formula (the fastest form lobe builds), try
+//! `compensated-params` first (it rewrites the formula before baking, so a baked parameter folds what the live
+//! kernel computes), then each candidate of `simplify::accuracy` in turn on the current best, keep it when it is more accurate — fewer non-finite
 //! results where the truth is finite, then a lower maximum over well-conditioned points (by half a bit, or from
 //! above [`TARGET_BITS`] to within it), then a lower average — and its static cost ([`crate::simplify::accuracy::cost`]) stays within the budget: `--prefer speed` keeps
 //! only rewrites that cost nothing, `--prefer accuracy` (default) those within `max_cost` (1.3) × the fastest
@@ -67,9 +68,10 @@ use crate::base::rng::Rng;
 use crate::backend::interp::Interp;
 use crate::backend::Evaluator;
 use crate::ir::{Formula, Input, N_INPUTS};
-use crate::simplify::accuracy::{compensated_powers, cost, pow_call_policy, Rule};
+use crate::simplify::accuracy::{compensated_params, compensated_powers, cost, pow_call_policy, Rule};
 
 const COMPENSATED: &str = "compensated-power";
+const PARAMS: &str = "compensated-params";
 use rayon::prelude::*;
 
 /// Budget multiple for a candidate that removes NaN/∞ results where the truth is finite (wrong answers rather
@@ -535,10 +537,15 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
             decided = rules;
         }
     }
-    let pow_call = crate::simplify::simplify_with(src, bake, &pow_call_policy()).0;
-    let compensated = compensated_powers(&pow_call);
-    let pow_cost = cost(&pow_call);
+    // compensated-params rewrites the formula before baking (so baked and live fold the same expression): when
+    // kept, the candidates built from the source below are rebuilt from it.
+    let params = if decided.contains(&PARAMS) { None } else { compensated_params(src) };
+    let params_cand = params.as_ref().map(|g| crate::simplify::simplify(g, bake));
+    let mut pow_call = crate::simplify::simplify_with(src, bake, &pow_call_policy()).0;
+    let mut compensated = compensated_powers(&pow_call);
+    let mut pow_cost = cost(&pow_call);
     let mut tries: Vec<(&'static str, &'static str, Option<usize>)> = vec![
+        (PARAMS, "parameter-only subexpressions in double-double, rounded once where the kernel reads them", None),
         ("pow-call", "integer powers above 8 as pow calls instead of multiplication chains", None),
         (COMPENSATED, "integer powers above 8 as compensated multiplication chains (fma error terms)", None),
     ];
@@ -568,6 +575,7 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
         let site = matches!(rule, Some(Rule::QuotientChain | Rule::ScaledExp | Rule::CompensatedSum)).then_some(k);
         let cand = match rule {
             None if name == COMPENSATED => compensated.clone(),
+            None if name == PARAMS => params_cand.clone(),
             None => Some(pow_call.clone()).filter(|p| p.to_program_text() != cur.to_program_text()),
             Some(r) => r.apply_at(&cur, site),
         };
@@ -601,6 +609,12 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
         }
         trials.push(Trial { rule: name, describe, kept, reason, stats: stats.clone(), cost: c });
         if kept {
+            if name == PARAMS {
+                let g = params.as_ref().expect("the candidate came from it");
+                pow_call = crate::simplify::simplify_with(g, bake, &pow_call_policy()).0;
+                compensated = compensated_powers(&pow_call);
+                pow_cost = cost(&pow_call);
+            }
             cur = cand;
             cur_stats = stats;
             cur_cost = c;

@@ -28,7 +28,10 @@
 //!   1, and at a = 640 still 16 ulp with the sum's error alone (n/a and c − 1 round too). Cost ~12–20.
 //! - `compensated-sum`: `a + b` where a and b may have opposite signs (by range) → `(a + b) + e`, e as above,
 //!   one site at a time: the error terms are first order, so they are exact to ~2⁻¹⁰⁶ relative to the terms,
-//!   and the cancellation no longer amplifies the terms' roundings. Cost ~3 per `+ − × /` below the sum.
+//!   and the cancellation no longer amplifies the terms' roundings. An acos below it carries its own rounding
+//!   (`acoslo`), and a parameter-only sum is taken as `compensated-params`' rounded double-double, whose error is
+//!   its 2Sum residual (F_kutlog's π/2 − C·acos(NH) near C·acos(NH) = π/2). Sums that read no input are not
+//!   sites. Cost ~3 per `+ − × /` below the sum, 8 per acos.
 //!
 //! - `scaled-exp`: a product/quotient tree with an `exp(E)` factor, `exp(E)·n/(d₁·…·d_k)`, →
 //!   `expmuldiv(E, n/(d₁·…·d_{k−1}), d_k)` (the builtin applies every power of two last, so e^E may be far
@@ -56,6 +59,11 @@
 //! - `compensated-exp` (in `cancel.rs`): exp's (or expmuldiv's) argument K·q, K its parameter-only factors in
 //!   double-double, computed as Kʰ·q with the product's rounding error (and q's own, acos's through `acoslo`)
 //!   carried as a relative tail t: e + e·t, or into expmuldiv's b.
+//! - `compensated-params` (in `cancel.rs`, through [`compensated_params`]): each parameter-only subtree the
+//!   kernel reads, when it rounds more than once or calls pow or acos, in double-double (pow's and acos's own
+//!   roundings through the builtins `powlo` and `acoslo`) and rounded once. Applied before baking, so baked and
+//!   live kernels compute the same value; free per point (F_kutlog's acos(Q^(1/k))/acos(Q^(1/n)), where acos
+//!   near 1 multiplied pow's half ulp ~20 times).
 //!
 //! Another candidate, large integer powers kept as `pow` calls instead of multiplication chains, is the
 //! simplifier's own [`super::Policy::max_chain`]; the chooser builds it with [`pow_call_policy`]. Another,
@@ -177,6 +185,16 @@ impl Rule {
     }
 }
 
+/// The `compensated-params` candidate's source: `f` (unsimplified, before baking) with each parameter-only
+/// subtree the kernel reads computed in double-double and rounded once ([`super::cancel`]); `None` when no
+/// subtree qualifies. The chooser simplifies it with the bake set, so a baked parameter folds the same
+/// expression the live kernel's prepared block computes. Free per point: the block is computed once per
+/// parameter set.
+pub fn compensated_params(f: &Formula) -> Option<Formula> {
+    let (ir, root, fired) = super::cancel::compensated_params(f);
+    fired.then(|| Formula { ir, root, ..f.clone() })
+}
+
 /// The simplifier policy of the `pow-call` candidate: integer powers above 8 stay `pow` calls (libm's < 1 ulp)
 /// instead of multiplication chains (error up to (k − 1)·u; 449 ulp measured at k = 1000).
 pub fn pow_call_policy() -> Policy {
@@ -254,7 +272,8 @@ pub fn cost(f: &Formula) -> f64 {
             Builtin::Clamp => 2.0,
             Builtin::Lt | Builtin::Le | Builtin::Eq | Builtin::Ne | Builtin::Select => 2.0,
             Builtin::Floor => 6.0,
-            Builtin::Pow => 60.0,
+            // powlo redoes pow's work; the pass forms it only on parameter-only values, where it is free.
+            Builtin::Pow | Builtin::PowLo => 60.0,
             Builtin::ExpMulDiv => 28.0,
             // Beside acos of the same argument (its only use), whose work the JIT shares: measured (robust7).
             Builtin::AcosLo => 8.0,
@@ -743,6 +762,13 @@ fn rounding_error(f: &Formula, ranges: &[Range], ir: &mut Ir, map: &[NodeId], (x
     let mut err = |ir: &mut Ir, y: NodeId| rounding_error(f, ranges, ir, map, (y, map[y.index()]), memo, sp);
     let e = match *f.ir.node(x) {
         Node::Neg(a) => err(ir, a).map(|e| ir.neg(e, sp)),
+        // A sum that reads no input is taken as the rounded hi + lo of a double-double (`compensated-params`'s
+        // value): its 2Sum error alone, since the error terms below it are the low part's own (an fma counts as
+        // exact, so recursing would count them twice). Elsewhere it is the sum's own rounding, its operands' left
+        // out. Free: computed once per parameter set.
+        Node::Binary(BinOp::Add, a, b) if f.ir.used_inputs(x).is_empty() => {
+            Some(sum_error(ir, (map[a.index()], ranges[a.index()]), (map[b.index()], ranges[b.index()]), s, sp))
+        }
         Node::Binary(op @ (BinOp::Add | BinOp::Sub), a, b) => {
             let (ea, eb) = (err(ir, a), err(ir, b));
             let (ra, mut rb) = (ranges[a.index()], ranges[b.index()]);
@@ -783,6 +809,8 @@ fn rounding_error(f: &Formula, ranges: &[Range], ir: &mut Ir, map: &[NodeId], (x
             }
             Some(ir.bin(BinOp::Div, r, bv, sp))
         }
+        // acos's own rounding, ≤ 1 ulp (its tail, `acoslo`, costs ~8 beside it).
+        Node::Call(Builtin::Acos, [z, ..]) => Some(ir.call(Builtin::AcosLo, &[map[z.index()]], sp)),
         _ => None,
     };
     memoize(memo, x, e)
@@ -797,8 +825,13 @@ fn memoize(memo: &mut [Option<Option<NodeId>>], x: NodeId, e: Option<NodeId>) ->
 // may have opposite signs (the sum may cancel: F_dsh, F_SCOS2); one site at a time
 fn compensated_sum(f: &Formula, ranges: &[Range], only: usize) -> (Ir, NodeId, bool) {
     let mut site = 0;
+    let inv = f.ir.invariant();
     rebuild(f, |ir, map, id, n| {
         let Node::Binary(op @ (BinOp::Add | BinOp::Sub), a, b) = n else { return None };
+        // A sum that reads no input is `compensated-params`'s to carry, once per parameter set.
+        if inv[id.index()] {
+            return None;
+        }
         let (ra, rb) = (ranges[a.index()], ranges[b.index()]);
         let (pa, na) = (ra.hi > 0.0, ra.lo < 0.0);
         let (pb, nb) = (rb.hi > 0.0, rb.lo < 0.0);

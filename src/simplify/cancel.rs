@@ -32,13 +32,23 @@
 //! factors' signs, and q's divisors (≥ 0) are floored at 2⁻¹⁰⁰⁰, so where one vanishes the exponent is a huge
 //! negative number and not −∞ (e^a is 0 either way; t stays a number instead of ∞ − ∞).
 //!
+//! `compensated-params`: a parameter-only value is computed once per parameter set, so it can afford
+//! double-double. Each maximal parameter-only subtree a live node reads, if its plain evaluation rounds more than
+//! once (pow and acos count twice: they are not correctly rounded), is rebuilt with `+ − × /` as above, pow as
+//! `pow + powlo` plus its operands' low parts to first order, acos as `acos + acoslo − xˡ/√((1 − x)(1 + x))` (the
+//! first-order term dropped where it is not small next to acos: near ±1 acos grows like √(1 − x)), sqrt with its
+//! fma remainder, exp and ln with their operands' low parts, and rounded once where the kernel reads it. The rule
+//! runs on the formula before baking (`numerics::robust`): baking then folds the same double-double expression
+//! through the same builtins the live kernel's prepared block runs, so the two agree bit for bit.
+//!
 //! # Cost model
 //! Coefficients read no input: free ([`super::accuracy::cost`]). Per point: two fmas and an addition per
 //! polynomial (fewer where a coefficient is exact or zero), one division when the denominator is not constant
 //! — usually cheaper than the written chain of products, quotients and sums it replaces. `compensated-exp`: 2–4
 //! fmas, one max per floored divisor, one fma applying the tail, acoslo (8) per acos factor; b's parameter-only
 //! factor no longer multiplies per point. Both catalogue uses sit just within the 1.3× budget, statically and as
-//! measured (BENCHMARKS.md, robust7).
+//! measured (BENCHMARKS.md, robust7). `compensated-params`: nothing per point (the prepared block grows; compile
+//! time with it, e.g. F_kutlog's JIT from ~6 to ~30 ms).
 
 use super::accuracy::{add_opt, divide_apart, product, rebuild, two_sum_error};
 use crate::base::span::Span;
@@ -548,6 +558,173 @@ pub(super) fn compensated_exp(f: &Formula) -> (Ir, NodeId, bool) {
             };
             ir.call(Builtin::ExpMulDiv, &[a, bb, cc], sp)
         })
+    })
+}
+
+/// Rounding operations a parameter-only subtree's plain evaluation makes, counting pow and acos twice (their
+/// results are not correctly rounded, and their tails exist); capped at 2, the threshold that matters.
+fn roundings(f: &Formula, x: NodeId, memo: &mut HashMap<NodeId, u8>) -> u8 {
+    if let Some(&c) = memo.get(&x) {
+        return c;
+    }
+    let n = *f.ir.node(x);
+    let mut c: u8 = match n {
+        Node::Const(_) | Node::Param(_) | Node::Input(_) | Node::Column(_) | Node::Neg(_) => 0,
+        Node::Call(Builtin::Pow | Builtin::Acos, _) => 2,
+        _ => 1,
+    };
+    n.for_each_arg(|a| c = c.saturating_add(roundings(f, a, memo)));
+    let c = c.min(2);
+    memo.insert(x, c);
+    c
+}
+
+/// A parameter-only subtree in double-double (old node → new `Dd`), memoised.
+struct ParamDd<'a> {
+    b: Builder<'a>,
+    ranges: &'a [super::range::Range],
+    memo: HashMap<NodeId, Dd>,
+}
+
+impl ParamDd<'_> {
+    fn dd(&mut self, ir: &mut Ir, map: &[NodeId], x: NodeId) -> Dd {
+        if let Some(&d) = self.memo.get(&x) {
+            return d;
+        }
+        let f = self.b.f;
+        let sp = self.b.sp;
+        let n = *f.ir.node(x);
+        let pos = |r: super::range::Range| r.lo > 0.0 && !r.nan;
+        let d = match n {
+            Node::Const(_) | Node::Param(_) | Node::Input(_) | Node::Column(_) => Dd { hi: map[x.index()], lo: None },
+            Node::Neg(a) => {
+                let a = self.dd(ir, map, a);
+                self.b.neg(ir, a)
+            }
+            Node::Binary(op, a, c) => {
+                let (a, c) = (self.dd(ir, map, a), self.dd(ir, map, c));
+                match op {
+                    BinOp::Add => self.b.add(ir, a, c),
+                    BinOp::Sub => {
+                        let c = self.b.neg(ir, c);
+                        self.b.add(ir, a, c)
+                    }
+                    BinOp::Mul => self.b.mul(ir, a, c),
+                    BinOp::Div => self.b.div(ir, a, c),
+                }
+            }
+            // x^y + powlo(x, y), and to first order x^y·(y·xˡ/x + ln(x)·yˡ) for the operands' low parts.
+            Node::Call(Builtin::Pow, [a, c, _]) if pos(self.ranges[a.index()]) && self.ranges[x.index()].hi.is_finite() => {
+                let (a, c) = (self.dd(ir, map, a), self.dd(ir, map, c));
+                let p = ir.call(Builtin::Pow, &[a.hi, c.hi], sp);
+                let mut lo = ir.call(Builtin::PowLo, &[a.hi, c.hi], sp);
+                let mut rel = a.lo.map(|al| {
+                    let q = ir.bin(BinOp::Div, al, a.hi, sp);
+                    ir.bin(BinOp::Mul, c.hi, q, sp)
+                });
+                if let Some(cl) = c.lo {
+                    let l = ir.call(Builtin::Ln, &[a.hi], sp);
+                    rel = Some(match rel {
+                        Some(r) => ir.call(Builtin::Fma, &[l, cl, r], sp),
+                        None => ir.bin(BinOp::Mul, l, cl, sp),
+                    });
+                }
+                if let Some(r) = rel {
+                    lo = ir.call(Builtin::Fma, &[p, r, lo], sp);
+                }
+                self.b.norm(ir, p, Some(lo))
+            }
+            // acos + acoslo, and to first order −xˡ/√(1 − x²), kept only while it is small next to acos (near
+            // ±1 the first order fails: acos grows like √(1 − x)); √((1 − x)(1 + x)) avoids 1 − x²'s cancellation.
+            Node::Call(Builtin::Acos, [a, ..]) => {
+                let a = self.dd(ir, map, a);
+                let h = ir.call(Builtin::Acos, &[a.hi], sp);
+                let mut lo = ir.call(Builtin::AcosLo, &[a.hi], sp);
+                if let Some(al) = a.lo {
+                    let one = ir.konst(1.0, sp);
+                    let (m, p) = (ir.bin(BinOp::Sub, one, a.hi, sp), ir.bin(BinOp::Add, one, a.hi, sp));
+                    let s = ir.bin(BinOp::Mul, m, p, sp);
+                    let s = ir.call(Builtin::Sqrt, &[s], sp);
+                    let t = ir.bin(BinOp::Div, al, s, sp);
+                    let at = ir.call(Builtin::Abs, &[t], sp);
+                    let small = ir.konst(2f64.powi(-20), sp);
+                    let bound = ir.bin(BinOp::Mul, h, small, sp);
+                    let ok = ir.call(Builtin::Lt, &[at, bound], sp);
+                    let zero = ir.konst(0.0, sp);
+                    let t = ir.call(Builtin::Select, &[ok, t, zero], sp);
+                    lo = ir.bin(BinOp::Sub, lo, t, sp);
+                }
+                self.b.norm(ir, h, Some(lo))
+            }
+            // √x + (x − s² + xˡ)/(2s), the remainder exact by fma.
+            Node::Call(Builtin::Sqrt, [a, ..]) if pos(self.ranges[a.index()]) => {
+                let a = self.dd(ir, map, a);
+                let s = ir.call(Builtin::Sqrt, &[a.hi], sp);
+                let ns = ir.neg(s, sp);
+                let mut r = ir.call(Builtin::Fma, &[ns, s, a.hi], sp);
+                if let Some(al) = a.lo {
+                    r = ir.bin(BinOp::Add, r, al, sp);
+                }
+                let two_s = ir.bin(BinOp::Add, s, s, sp);
+                let lo = ir.bin(BinOp::Div, r, two_s, sp);
+                self.b.norm(ir, s, Some(lo))
+            }
+            // Other calls: their operands' low parts to first order where the derivative is at hand, else
+            // computed from the rounded operands as the kernel would.
+            _ => {
+                let mut args = [NodeId(0); 3];
+                let mut lows = [None; 3];
+                let mut k = 0;
+                n.for_each_arg(|a| {
+                    args[k] = a;
+                    k += 1;
+                });
+                for i in 0..k {
+                    let d = self.dd(ir, map, args[i]);
+                    args[i] = d.hi;
+                    lows[i] = d.lo;
+                }
+                let v = match n {
+                    Node::Call(b, _) => ir.call(b, &args[..b.arity()], sp),
+                    _ => map[x.index()],
+                };
+                let lo = match (n, lows[0]) {
+                    (Node::Call(Builtin::Exp, _), Some(al)) if self.ranges[x.index()].hi.is_finite() => Some(ir.bin(BinOp::Mul, v, al, sp)),
+                    (Node::Call(Builtin::Ln, [a, ..]), Some(al)) if pos(self.ranges[a.index()]) => Some(ir.bin(BinOp::Div, al, args[0], sp)),
+                    _ => None,
+                };
+                self.b.norm(ir, v, lo)
+            }
+        };
+        self.memo.insert(x, d);
+        d
+    }
+}
+
+// p(params) feeding a live node → hi + lo of p in double-double, rounded once
+/// `compensated-params`: each maximal parameter-only subtree that a live node reads, and whose plain evaluation
+/// rounds at least twice (or calls pow or acos), computed in double-double and rounded once where the kernel
+/// reads it. Runs on the formula *before* baking (`numerics::robust`), so a baked parameter folds the same
+/// double-double expression the live kernel's prepared block computes: baked and live agree bit for bit.
+pub(super) fn compensated_params(f: &Formula) -> (Ir, NodeId, bool) {
+    let inv = f.ir.invariant();
+    let ranges = super::node_ranges(f, &super::Policy::default());
+    let mut boundary = vec![false; f.ir.len()];
+    for id in f.ir.ids() {
+        if !inv[id.index()] {
+            f.ir.node(id).for_each_arg(|a| boundary[a.index()] |= inv[a.index()]);
+        }
+    }
+    let mut count = HashMap::new();
+    let mut pd = ParamDd { b: Builder { f, inv: &inv, sp: Span::default(), rats: HashMap::new() }, ranges: &ranges, memo: HashMap::new() };
+    rebuild(f, |ir, map, id, _| {
+        if !boundary[id.index()] || roundings(f, id, &mut count) < 2 {
+            return None;
+        }
+        pd.b.sp = f.ir.span(id);
+        let d = pd.dd(ir, map, id);
+        // Only where some operation left a low part: otherwise the subtree is what the kernel computes anyway.
+        d.lo.is_some().then_some(d.hi)
     })
 }
 

@@ -235,6 +235,12 @@ impl Range {
             }
             // Within acos's own error of ≤ 2 ulp of a value ≤ π: |tail| < 2⁻⁵⁰.
             Builtin::AcosLo => Range::new(-8.9e-16, 8.9e-16, a.nan, true),
+            // Within pow's own error (≤ 0.55 ulp, < 2⁻⁵²·|pow|); 0 wherever pow is a special case or NaN.
+            Builtin::PowLo => {
+                let p = Range::pow(a, args[1], konst.get(1).copied().flatten());
+                let m = p.lo.abs().max(p.hi.abs()) * 2.3e-16;
+                if m.is_finite() { Range::new(-m, m, false, true) } else { Range { nan: false, ..Range::TOP } }
+            }
             // e^a·b/c for b ≥ 0, c > 0, from the exponent sum a + ln b − ln c (libm's ln and exp are far within
             // the 1e-9 relative slack); anything else is unknown.
             Builtin::ExpMulDiv => {

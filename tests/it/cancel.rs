@@ -141,6 +141,76 @@ fn acoslo_carries_acos_to_an_eighth_of_an_ulp() {
     println!("acos alone ≤ {worst_hi:.3} ulp, with acoslo ≤ {:.4} ulp (at {:e})", worst.0, worst.1);
 }
 
+/// powlo is pow's rounding error: pow(x, y) + powlo(x, y) lies within 1/16 ulp of the true x^y on 2·10⁵ points
+/// (x over (0, 4], y over ±[10⁻³, 10³] and the small exponents 1/k of F_kutlog's Q^(1/k)), where pow alone is up
+/// to half an ulp off; and it is 0 where pow is exact or a special case.
+#[test]
+fn powlo_carries_pow_to_a_sixteenth_of_an_ulp() {
+    use lobe::builtins::Builtin;
+    use lobe::numerics::truth::Xf;
+    let mut r = lobe::base::rng::Rng(11);
+    let (mut worst_hi, mut worst, mut n) = (0.0f64, (0.0f64, 0.0f64, 0.0f64), 0);
+    for i in 0..200_000 {
+        let (u, v) = (r.unit(), r.unit());
+        let x = if i % 2 == 0 { 0.1 + 0.8 * u } else { 4.0 * u };
+        let y = match i % 3 {
+            0 => 1.0 / (1.0 + 999.0 * v),
+            1 => -(10f64.powf(6.0 * v - 3.0)),
+            _ => 10f64.powf(6.0 * v - 3.0),
+        };
+        let hi = Builtin::Pow.eval(&[x, y]);
+        let lo = Builtin::PowLo.eval(&[x, y]);
+        if !(hi.is_normal() && hi.abs() > 1e-290 && hi.is_finite()) || x == 0.0 {
+            continue;
+        }
+        n += 1;
+        let t = Xf::from_f64(x).pow(Xf::from_f64(y));
+        let ulp = hi.abs() * f64::EPSILON;
+        let err = ((t - Xf::from_f64(hi)) - Xf::from_f64(lo)).to_f64().abs() / ulp;
+        worst_hi = worst_hi.max((t - Xf::from_f64(hi)).to_f64().abs() / ulp);
+        if err > worst.0 {
+            worst = (err, x, y);
+        }
+    }
+    assert!(n > 150_000, "{n}");
+    assert!(worst.0 <= 0.0625, "pow + powlo is {} ulp off at ({:e}, {:e})", worst.0, worst.1, worst.2);
+    assert!(worst_hi > 0.4, "pow alone is within {worst_hi} ulp: nothing to carry");
+    for (x, y) in [(1.0, 0.3), (0.5, 0.0), (0.0, 2.0), (-2.0, 3.0), (f64::NAN, 1.0), (2.0, f64::INFINITY), (1e-300, 2.0)] {
+        assert_eq!(Builtin::PowLo.eval(&[x, y]), 0.0, "powlo({x}, {y})");
+    }
+    println!("pow alone ≤ {worst_hi:.3} ulp, with powlo ≤ {:.4} ulp (at {:e}, {:e})", worst.0, worst.1, worst.2);
+}
+
+/// F_kutlog's C = acos(Q^(1/k))/acos(Q^(1/n)) reads parameters only: near 1, acos multiplies pow's half ulp
+/// ~20 times, and π/2 − C·acos(NH) cancels where C·acos(NH) nears π/2, 350 ulp (8.5 bits) where the
+/// formula's condition is 16. `compensated-params` computes C in double-double (pow's tail through powlo,
+/// acos's through acoslo) for free, and `compensated-sum` then carries the cancellation with C's residual and
+/// acos(NH)'s tail: within 16 ulp. Baked, the same expression folds to the same C: baked and live bit for bit.
+#[test]
+fn kutlog_parameter_block_in_double_double() {
+    let f = load("kutlog");
+    let x = at_nh(2.2250738585072014e-308);
+    let p = vec![3.2273406107961624, 4.086010967150041, 0.9];
+    let t = truth_where_written_form_is_off("kutlog", &x, &p, 100.0);
+    let (o, kept) = pass_keeping(&f, "compensated-params");
+    assert_eq!(kept.cost, o.cost_before, "parameter-only work is free per point");
+    assert!(o.trials.iter().any(|t| t.kept && t.rule == "compensated-sum"), "{:?}", o.trials);
+    assert!(o.after.max_bits_well <= robust::TARGET_BITS && o.before.max_bits_well > 6.0, "{:?} → {:?}", o.before, o.after);
+    for backend in [Backend::Jit, Backend::Interp] {
+        let opts = robust::with_pass(Options { backend, ..Default::default() }, PassOptions::default());
+        let v = lobe::compile_formula(load("kutlog"), &opts).unwrap().eval(&x, &p);
+        assert!(ulps(v, t) <= 16.0, "{backend:?}: {v} vs the truth {t}: {} ulp", ulps(v, t));
+    }
+    let live = kernel("kutlog", &[], true);
+    let baked = kernel("kutlog", &[("n", p[0]), ("k", p[1]), ("Q", p[2])], true);
+    assert!(baked.formula.ir.used_params(baked.formula.root).is_empty(), "{}", baked.formula.to_program_text());
+    let pts = robust::sample(&f, &[], 10_000, 3);
+    for pt in &pts {
+        let (a, b) = (live.eval(&pt.x, &p), baked.eval(&pt.x, &p));
+        assert!(a.to_bits() == b.to_bits(), "{:?}: live {a}, baked {b}", pt.x);
+    }
+}
+
 /// The Gaussian exp(−n·acos(c)²/2) at c = 0.4022, n = 30.6 (condition 14): exp multiplied acos's rounding, the
 /// square's and the product's by 2·|exponent| ≈ 41, 40 ulp in all. `compensated-exp` carries all three (acos's
 /// through `acoslo`) into e + e·t, within the default budget.
