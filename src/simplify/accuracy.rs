@@ -299,8 +299,8 @@ pub fn compensated_powers(f: &Formula) -> Option<Formula> {
 
 /// The base of a compensated power x^k for x ≥ +0 (docs of [`compensated_powers`]): x₀ = 2^(−1076/k)·(1 − 2⁻⁴⁰)
 /// is where x^k drops below a quarter of the smallest subnormal, so that below it the result rounds to +0.
-/// - x₀ ≥ 2⁻⁸ (k ≥ 135): the base becomes 0 below x₀, `max(min(x, fma(x, 2¹⁰⁰⁰, −x₀·2¹⁰⁰⁰)), 0)` (the fma is
-///   > 2⁹⁴⁶ above x₀, ≤ 0 at and below it), so the chain multiplies zeros there instead of underflowing: an
+/// - x₀ ≥ 2⁻⁸ (k ≥ 135): the base becomes 0 below x₀, `max(min(x, fma(x, 2¹⁰⁰⁰, −x₀·2¹⁰⁰⁰)), 0)` (the fma
+///   exceeds 2⁹⁴⁶ above x₀ and is ≤ 0 at and below it), so the chain multiplies zeros there instead of underflowing: an
 ///   underflowing product costs a microcode assist (measured: `clamp(NH, x₀, 1)^1000`, whose last product
 ///   underflows to 0 on the 47 % of `lobe bench`'s uniform inputs below x₀, takes 33 ns against NH^1000's
 ///   6.2 ns). Two instructions when x is the lowering's `clamp(v, 0, hi)` read only here (the min and the
