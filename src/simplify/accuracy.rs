@@ -60,7 +60,8 @@
 //! Another candidate, large integer powers kept as `pow` calls instead of multiplication chains, is the
 //! simplifier's own [`super::Policy::max_chain`]; the chooser builds it with [`pow_call_policy`]. Another,
 //! [`compensated_powers`], rebuilds those calls as multiplication chains that carry their rounding errors
-//! (fma), within a few ulp of pow at ~3.5× the plain chain's operations and below pow's cost.
+//! (fma) where a step's rounding would weigh more than 3u, within 3 ulp of pow at ~2.5–3× the plain chain's
+//! operations and below pow's cost.
 //!
 //! # Cost model
 //! [`cost`] counts live nodes with weights fitted to JIT timings on x86-64 (BENCHMARKS.md, 2026-11-30: five
@@ -195,10 +196,10 @@ pub fn pow_call_policy() -> Policy {
 /// once each instead: a step whose operands carry an `l` folds it into its product with one fma
 /// (`fma(hₐ, h_b, hₐ·l_b + lₐ·h_b)`), the others are plain products. The result is within 3u relative (< 3 ulp)
 /// of x^k to first order whatever k, where the plain chain's grows like k·u (~490 ulp at k = 1000) and the
-/// fully compensated chain's is 0.5u: measured against the truth on 10⁵ points, ≤ 1.9 ulp at k ∈ {9 … 1024}
+/// fully compensated chain's is 0.5u: measured against the truth on 10⁵ points, ≤ 2 ulp at k ∈ {9 … 1024}
 /// (live `pow` ≤ 0.51), so baked and live agree within 4 ulp. It saves the last steps' tails, the error fma
-/// of the fold and the final `h + l` (16 → 13 operations over the plain chain's 7 at k = 50, 34 → 31 over 14
-/// at k = 1000).
+/// of the fold and the final `h + l`: 13 operations over the plain chain's 7 at k = 50 where carrying every
+/// step took 17, 31 over 14 at k = 1000 (BENCHMARKS.md, 2026-12-01, powchain).
 ///
 /// Why a special budget ([`crate::numerics::robust`]) remains: the tails cannot be much cheaper. Within
 /// 3u, every step but the last two needs its rounding error, one fma each, and carrying it one step further
@@ -300,8 +301,8 @@ pub fn compensated_powers(f: &Formula) -> Option<Formula> {
 /// The base of a compensated power x^k for x ≥ +0 (docs of [`compensated_powers`]): x₀ = 2^(−1076/k)·(1 − 2⁻⁴⁰)
 /// is where x^k drops below a quarter of the smallest subnormal, so that below it the result rounds to +0.
 /// - x₀ ≥ 2⁻⁸ (k ≥ 135): the base becomes 0 below x₀, `max(min(x, fma(x, 2¹⁰⁰⁰, −x₀·2¹⁰⁰⁰)), 0)` (the fma
-///   exceeds 2⁹⁴⁶ above x₀ and is ≤ 0 at and below it), so the chain multiplies zeros there instead of underflowing: an
-///   underflowing product costs a microcode assist (measured: `clamp(NH, x₀, 1)^1000`, whose last product
+///   exceeds 2⁹⁴⁶ above x₀ and is ≤ 0 at and below it), so the chain multiplies zeros there instead of
+///   underflowing: an underflowing product costs a microcode assist (measured: `clamp(NH, x₀, 1)^1000`, whose last product
 ///   underflows to 0 on the 47 % of `lobe bench`'s uniform inputs below x₀, takes 33 ns against NH^1000's
 ///   6.2 ns). Two instructions when x is the lowering's `clamp(v, 0, hi)` read only here (the min and the
 ///   fma go inside it), four otherwise. On uniform inputs that pays from ~0.5 % of them below x₀.
