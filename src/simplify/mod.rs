@@ -348,6 +348,7 @@ impl<'a> Rewriter<'a> {
             Node::Binary(op, a, b) => match op {
                 BinOp::Add => r(a) + r(b),
                 BinOp::Sub => r(a) - r(b),
+                BinOp::Mul if a == b => r(a).square(),
                 BinOp::Mul => r(a) * r(b),
                 BinOp::Div => r(a) / r(b),
             },

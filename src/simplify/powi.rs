@@ -73,6 +73,27 @@ pub fn cost(k: u32) -> usize {
     steps(k).len()
 }
 
+/// How many times each step's power enters x^k (indexed like [`steps`]): to first order the chain's relative
+/// error is Σ mⱼ·δⱼ over the steps' rounding errors δⱼ (|δⱼ| ≤ u), and Σ mⱼ = k − 1 for every chain. The early
+/// steps weigh most (binary x^1000: x² and x³ enter 256 times each, the last step once).
+pub fn multiplicities(k: u32) -> Vec<u32> {
+    let st = steps(k);
+    let mut m = vec![0u32; st.len()];
+    if let Some(last) = m.last_mut() {
+        *last = 1;
+    }
+    for j in (0..st.len()).rev() {
+        let (a, b) = st[j];
+        // x^a·x^a counts x^a twice; exponent 1 is the base, which no step computes.
+        for e in [a, b] {
+            if let Some(i) = st[..j].iter().position(|&(p, q)| p + q == e) {
+                m[i] += m[j];
+            }
+        }
+    }
+    m
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -88,6 +109,15 @@ mod tests {
             }
             assert_eq!(*have.last().unwrap_or(&0), k, "k={k}");
         }
+    }
+
+    #[test]
+    fn multiplicities_sum_to_the_multiplications_of_the_expanded_product() {
+        for k in 1..=MAX_EXPONENT {
+            assert_eq!(multiplicities(k).iter().sum::<u32>(), k - 1, "k={k}");
+        }
+        // 50 = 1, 2, 3, 6, 12, 24, 25, 50.
+        assert_eq!(multiplicities(50), [16, 16, 8, 4, 2, 2, 1]);
     }
 
     #[test]

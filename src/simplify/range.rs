@@ -84,6 +84,14 @@ impl Range {
         self.lo >= lo && self.hi <= hi
     }
 
+    /// `x·x` of one value: never below +0 ((−0)² = +0), NaN only from NaN (inf² = inf). The corners of `x·y`
+    /// would allow lo·hi < 0 for a range containing zero.
+    pub fn square(self) -> Range {
+        let (a, b) = (self.lo * self.lo, self.hi * self.hi);
+        let lo = if self.contains_zero() { 0.0 } else { a.min(b) };
+        Range::new(lo, a.max(b), self.nan, false)
+    }
+
     fn widened(lo: f64, hi: f64, nan: bool, negz: bool) -> Range {
         Range::new(down(lo, LIBM_SLACK), up(hi, LIBM_SLACK), nan, negz)
     }
@@ -384,6 +392,7 @@ mod tests {
                 check_sound(a, b, |x, y| x + y, a + b);
                 check_sound(a, b, |x, y| x - y, a - b);
                 check_sound(a, b, |x, y| x * y, a * b);
+                check_sound(a, a, |x, _| x * x, a.square());
                 check_sound(a, b, |x, y| x / y, a / b);
                 check_sound(a, b, crate::builtins::fmax, a.max(b));
                 check_sound(a, b, crate::builtins::fmin, a.min(b));
@@ -397,6 +406,15 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_square_is_never_negative() {
+        // The product's corners allow −2·3 = −6; x·x of one value does not.
+        let r = Range::new(-2.0, 3.0, false, true).square();
+        assert_eq!((r.lo, r.hi, r.negz), (0.0, 9.0, false));
+        assert!(r.nonneg());
+        assert_eq!(Range::new(-5.0, -0.5, false, false).square(), Range::new(0.25, 25.0, false, false));
     }
 
     #[test]
