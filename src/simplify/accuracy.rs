@@ -1085,7 +1085,7 @@ mod tests {
         };
         // VH·max(NL, NV) ~ 1e-520 where the value is subnormal: b/VH joins expmuldiv (VH ≥ 2⁻¹⁰⁰⁰); at VH ~ 1e-310
         // the exponent carries the 2¹⁵³⁶ that scales c. Reference by logarithms (relative error ~700·2⁻⁵³).
-        for (nl, nv, nh, vh) in [(1e-260, 2e-260, 0.0285, 2e-260), (1e-310, 3e-310, 0.0269, 2e-310)] {
+        for (nl, nv, nh, vh) in [(1e-260f64, 2e-260f64, 0.0285f64, 2e-260f64), (1e-310, 3e-310, 0.0269, 2e-310)] {
             let m = 0.8f64;
             let ln = (nh * nh - 1.0) / (m * m * nh * nh) - 2.0 * m.ln() - 4.0 * nh.ln() - vh.ln() - nl.max(nv).ln();
             let (got, want) = (at(nl, nv, nh, vh), ln.exp());
