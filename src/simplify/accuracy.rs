@@ -530,8 +530,8 @@ const JOIN_B: f64 = 9.332636185032189e-302;
 
 /// 1536·ln 2 as fdlibm's ln 2 split (`ln2_hi` has 32 bits, so `K_HI` has 34 and a + K_HI is exact for
 /// a ≤ −512), and e^(−1536·ln2_lo), the factor that split leaves (1 − 2.9·10⁻⁷, rounded once).
-const K_HI: f64 = 1536.0 * 6.93147180369123816490e-01;
-const K_LO: f64 = 1536.0 * 1.90821492927058770002e-10;
+const K_HI: f64 = 1536.0 * 0.6931471803691238;
+const K_LO: f64 = 1536.0 * 1.9082149292705877e-10;
 
 // exp(E)·n/(safe·covered·x·y) → expmuldiv(E′, n/max(safe·covered, 2⁻¹⁰²²)/x′, y·s)   with x, y the two divisors
 // that may be tiny and that the exponent does not cover: (E′, x′, s) = (E, x, 1) where x ≥ 2⁻¹⁰⁰⁰, else
