@@ -36,10 +36,14 @@
 //! - `scaled-exp`: a product/quotient tree with an `exp(E)` factor, `exp(E)·n/(d₁·…·d_k)`, →
 //!   `expmuldiv(E, n/(d₁·…·d_{k−1}), d_k)` (the builtin applies every power of two last, so e^E may be far
 //!   below the denormals while the result is not: Beckmann's and Ward's values near 1e-311). Three variants,
-//!   tried in turn: the other divisors as one product; the safe ones as one product and each that may be tiny
-//!   or huge on its own;
+//!   tried in turn: the other divisors as one product; the safe ones and the exponent's own (NH, whose tininess
+//!   makes e^E vanish first) as one product, each other that may be tiny or huge on its own, and two such
+//!   (Cook–Torrance's VH and max(NL, NV)) taken apart at run time inside the one builtin: b/VH where VH ≥ 2⁻¹⁰⁰⁰,
+//!   else c scaled by 2¹⁵³⁶ and E by 1536·ln 2 (exact there; [`two_divisors`]; a compare, three selects and four
+//!   operations, ~+14, where nesting costs a second exp);
 //!   and the exponent halved over two nested builtins so two tiny divisors (Cook–Torrance's NL, NV ~1e-224)
-//!   each meet one half (twice the cost).
+//!   each meet one half (twice the cost). One division by a product rather than a chain: dependent divisions
+//!   add latency the static cost does not see (Cook–Torrance's `/nh/nh/nh/nh`: 1.36× measured at 1.23× static).
 //!
 //! - `smith-g1`: Smith's G1 for GGX written with tan², `K/(1 + sqrt(1 + A·(1 − c²)/c²))`, → `K·c/(c + sqrt(c² +
 //!   A·(1 − c²)))` for c > 0 (range or guard), then c cancelled against a divisor c of the products around it
@@ -520,6 +524,18 @@ pub(super) fn product(ir: &mut Ir, map: &[NodeId], xs: &[NodeId], s: Span) -> Op
     Some(it.fold(first, |acc, x| ir.bin(BinOp::Mul, acc, x, s)))
 }
 
+/// The product of `xs` (non-empty, mapped to the new arena) as a balanced tree, `x·x` first, so its latency is
+/// log₂ of the count and the simplifier shares each square (NH⁴ as t1·t1, t1 = NH·NH, the exponent's own).
+fn balanced_product(ir: &mut Ir, map: &[NodeId], xs: &[NodeId], s: Span) -> NodeId {
+    let mut sorted = xs.to_vec();
+    sorted.sort();
+    let mut level: Vec<NodeId> = sorted.iter().map(|x| map[x.index()]).collect();
+    while level.len() > 1 {
+        level = level.chunks(2).map(|c| if c.len() == 2 { ir.bin(BinOp::Mul, c[0], c[1], s) } else { c[0] }).collect();
+    }
+    level[0]
+}
+
 // x / (a*b*…) → x / (safe factors) / a / b / …   dividing by each factor that may be tiny or huge on its own
 fn quotient_chain(f: &Formula, ranges: &[Range], only: Option<usize>) -> (Ir, NodeId, bool) {
     let lists = product_lists(f, MAX_FACTORS);
@@ -559,8 +575,8 @@ fn divide_by(ir: &mut Ir, map: &[NodeId], mut v: NodeId, safe_den: &[NodeId], un
     v
 }
 
-// exp(E)·n₁·…/(d₁·…·d_k) → expmuldiv(E, n₁·…/(d₁·…·d_{k−1}), d_k)   (variant 0; 1: dividing by the safe d_i at
-// once, then by each that may be tiny or huge in turn; 2: expmuldiv(E/2, expmuldiv(E/2, n₁·…/d₁/…/d_{k−2}, d_{k−1}),
+// exp(E)·n₁·…/(d₁·…·d_k) → expmuldiv(E, n₁·…/(d₁·…·d_{k−1}), d_k)   (variant 0; 1: dividing by the safe d_i and
+// the exponent's own at once, then by each other that may be tiny or huge in turn, two of them by `two_divisors`; 2: expmuldiv(E/2, expmuldiv(E/2, n₁·…/d₁/…/d_{k−2}, d_{k−1}),
 // d_k))
 fn scaled_exp(f: &Formula, ranges: &[Range], variant: usize) -> (Ir, NodeId, bool) {
     let lists = product_lists(f, MAX_FACTORS);
@@ -577,11 +593,17 @@ fn scaled_exp(f: &Formula, ranges: &[Range], variant: usize) -> (Ir, NodeId, boo
         // Such a variant is skipped (the node unchanged), so the next is tried.
         let covered = lists[arg.index()].as_ref().map_or(vec![], |l| l.1.clone());
         let risky = |d: &NodeId| !safe(ranges[d.index()]) && !covered.contains(d) && !matches!(f.ir.node(*d), Node::Call(Builtin::Sqrt, _));
-        if den.iter().filter(|d| risky(d)).count() > if variant == 2 { 2 } else { 1 } {
+        let n_risky = den.iter().filter(|d| risky(d)).count();
+        // Variant 1 takes two such divisors apart at run time ([`two_divisors`]).
+        let two = variant == 1 && n_risky == 2 && den.iter().all(|d| risky(d) || safe(ranges[d.index()]) || covered.contains(d));
+        if n_risky > if variant == 2 { 2 } else { 1 } && !two {
             return Some(ir.push(old.map_args(|a| map[a.index()]), f.ir.span(id)));
         }
         let s = f.ir.span(id);
         let rest: Vec<NodeId> = num.iter().enumerate().filter(|(i, _)| *i != at).map(|(_, x)| *x).collect();
+        if two {
+            return Some(two_divisors(ir, map, (map[arg.index()], &rest), den, ranges, |d| risky(d), s));
+        }
         // Safe divisors first, so the last ones (the divisors kept apart) are those that may be tiny or huge.
         let (mut dens, unsafe_den): (Vec<NodeId>, Vec<NodeId>) = den.iter().partition(|d| safe(ranges[d.index()]));
         dens.extend(unsafe_den);
@@ -596,7 +618,24 @@ fn scaled_exp(f: &Formula, ranges: &[Range], variant: usize) -> (Ir, NodeId, boo
             // The safe divisors at once (one division, their product often parameter-only and so computed once
             // per parameter set), then each that may be tiny or huge on its own.
             let n_safe = dens.iter().take_while(|d| safe(ranges[d.index()])).count();
-            b = divide_apart(ir, map, &rest, &dens[..n_safe], &dens[n_safe..], s);
+            let (cov, apart): (Vec<NodeId>, Vec<NodeId>) = dens[n_safe..].iter().partition(|d| covered.contains(d));
+            b = if cov.is_empty() {
+                divide_apart(ir, map, &rest, &dens[..n_safe], &apart, s)
+            } else {
+                // The exponent's own divisors join that product (one division, not a chain: Cook–Torrance's
+                // /nh/nh/nh/nh was four dependent divisions, latency the cost model did not see). Where their
+                // product underflows e^E vanishes with it, so max(…, 2⁻¹⁰²²) (an overflowing b, which expmuldiv
+                // takes as 0 beside a vanished e^E) only keeps a zero numerator from 0/0.
+                let n = product(ir, map, &rest, s).unwrap_or_else(|| ir.konst(1.0, s));
+                let mut p = balanced_product(ir, map, &cov, s);
+                if let Some(q) = product(ir, map, &dens[..n_safe], s) {
+                    p = ir.bin(BinOp::Mul, q, p, s);
+                }
+                let tiny = ir.konst(f64::MIN_POSITIVE, s);
+                let p = ir.call(Builtin::Max, &[p, tiny], s);
+                let v = ir.bin(BinOp::Div, n, p, s);
+                divide_by(ir, map, v, &[], &apart, s)
+            };
         }
         let c = match last {
             Some(d) => map[d.index()],
@@ -612,6 +651,57 @@ fn scaled_exp(f: &Formula, ranges: &[Range], variant: usize) -> (Ir, NodeId, boo
         }
         Some(ir.call(Builtin::ExpMulDiv, &[a, b, c], s))
     })
+}
+
+/// Below this a divisor is too small to join expmuldiv's b ([`two_divisors`]): 2⁻¹⁰⁰⁰.
+const JOIN_B: f64 = 9.332636185032189e-302;
+
+/// 1536·ln 2 as fdlibm's ln 2 split (`ln2_hi` has 32 bits, so `K_HI` has 34 and a + K_HI is exact for
+/// a ≤ −512), and e^(−1536·ln2_lo), the factor that split leaves (1 − 2.9·10⁻⁷, rounded once).
+const K_HI: f64 = 1536.0 * 0.6931471803691238;
+const K_LO: f64 = 1536.0 * 1.9082149292705877e-10;
+
+// exp(E)·n/(safe·covered·x·y) → expmuldiv(E′, n/max(safe·covered, 2⁻¹⁰²²)/x′, y·s)   with x, y the two divisors
+// that may be tiny and that the exponent does not cover: (E′, x′, s) = (E, x, 1) where x ≥ 2⁻¹⁰⁰⁰, else
+// (E + K_HI, e^(−K_LO), x·2¹⁵³⁶), exact in real arithmetic since e^(K_HI + K_LO) = 2¹⁵³⁶
+fn two_divisors(ir: &mut Ir, map: &[NodeId], (arg, rest): (NodeId, &[NodeId]), den: &[NodeId], ranges: &[Range], risky: impl Fn(&NodeId) -> bool, s: Span) -> NodeId {
+    // Both in c as written would need their product, which underflows (Cook–Torrance's VH·max(NL, NV) ~ 10⁻⁵²⁰
+    // where the value is 10⁻³¹⁰); one dividing the result after expmuldiv meets it rounded into the subnormals
+    // (there: 0, 44 bits). So x joins b where b/x cannot overflow unless e^E vanishes (x ≥ 2⁻¹⁰⁰⁰: b would have
+    // to exceed 2²⁴), and expmuldiv carries the exponent of b/x over c = y. A tinier x scales c by 2¹⁵³⁶ instead
+    // (x·2⁷⁶⁸·2⁷⁶⁸·y lies in [2⁻⁶¹², 2⁻⁴⁶⁴]: normal, both factors exact) and the exponent pays for it: there a
+    // finite value needs e^E·b < 2⁻⁹⁷⁶, so E ≤ −512 wherever b ≥ 2⁻²³⁷ and E + K_HI rounds nothing.
+    let (xs, others): (Vec<NodeId>, Vec<NodeId>) = den.iter().partition(|d| risky(d));
+    let (x, y) = (map[xs[0].index()], map[xs[1].index()]);
+    let (safe_den, cov): (Vec<NodeId>, Vec<NodeId>) = others.iter().partition(|d| safe(ranges[d.index()]));
+    let mut b = product(ir, map, rest, s).unwrap_or_else(|| ir.konst(1.0, s));
+    let p = match (product(ir, map, &safe_den, s), cov.is_empty()) {
+        (q, false) => {
+            let p = balanced_product(ir, map, &cov, s);
+            let p = q.map_or(p, |q| ir.bin(BinOp::Mul, q, p, s));
+            let tiny = ir.konst(f64::MIN_POSITIVE, s);
+            Some(ir.call(Builtin::Max, &[p, tiny], s))
+        }
+        (q, true) => q,
+    };
+    if let Some(p) = p {
+        b = ir.bin(BinOp::Div, b, p, s);
+    }
+    let k = |ir: &mut Ir, v: f64| ir.konst(v, s);
+    let t = k(ir, JOIN_B);
+    let tiny = ir.call(Builtin::Lt, &[x, t], s);
+    let (hi, zero, lo) = (k(ir, K_HI), k(ir, 0.0), k(ir, 1.0 + (-K_LO).exp_m1()));
+    let shift = ir.call(Builtin::Select, &[tiny, hi, zero], s);
+    let a = ir.bin(BinOp::Add, arg, shift, s);
+    let x1 = ir.call(Builtin::Select, &[tiny, lo, x], s);
+    let half = k(ir, 2f64.powi(768));
+    let xs1 = ir.bin(BinOp::Mul, x, half, s);
+    let xs2 = ir.bin(BinOp::Mul, xs1, half, s);
+    let one = k(ir, 1.0);
+    let sc = ir.call(Builtin::Select, &[tiny, xs2, one], s);
+    let c = ir.bin(BinOp::Mul, y, sc, s);
+    let b = ir.bin(BinOp::Div, b, x1, s);
+    ir.call(Builtin::ExpMulDiv, &[a, b, c], s)
 }
 
 // K/(1 + sqrt(1 + A·((1 − c·c)/(c·c)))) → K·c/(c + sqrt(c·c + A·(1 − c·c)))   for c > 0, then c/c cancelled
@@ -1117,6 +1207,32 @@ mod tests {
         assert!(t(3).is_none());
         assert!(Rule::ScaledExp.apply(&parse("exp(-NH)")).is_none());
         assert!(Rule::ScaledExp.apply(&parse("NL / exp(NH)")).is_none());
+    }
+
+    #[test]
+    fn scaled_exp_takes_two_tiny_divisors_apart_in_one_call() {
+        let f = parse("param m = 0.3 in 0.01..1\nexp((NH^2 - 1) / (m^2 * NH^2)) / (m*m) / NH^4 / VH / max(NL, NV)");
+        let g = Rule::ScaledExp.apply_at(&f, Some(1)).unwrap();
+        let t = g.to_program_text();
+        // One expmuldiv (one exp), VH and max(NL, NV) chosen apart at run time, NH⁴ one division, not four.
+        assert_eq!(t.matches("expmuldiv(").count(), 1, "{t}");
+        assert!(t.contains("< 9.332636185032189e-302") && !t.contains("/ nh /"), "{t}");
+        let ev = crate::backend::interp::Interp::new(&g);
+        let at = |nl: f64, nv: f64, nh: f64, vh: f64| {
+            let mut x = [0.5; crate::ir::N_INPUTS];
+            for (i, v) in [(0, nl), (1, nv), (2, nh), (4, vh)] {
+                x[i] = v;
+            }
+            crate::backend::Evaluator::eval(&ev, &x, &[0.5, 0.8])
+        };
+        // VH·max(NL, NV) ~ 1e-520 where the value is subnormal: b/VH joins expmuldiv (VH ≥ 2⁻¹⁰⁰⁰); at VH ~ 1e-310
+        // the exponent carries the 2¹⁵³⁶ that scales c. Reference by logarithms (relative error ~700·2⁻⁵³).
+        for (nl, nv, nh, vh) in [(1e-260f64, 2e-260f64, 0.0285f64, 2e-260f64), (1e-310, 3e-310, 0.0269, 2e-310)] {
+            let m = 0.8f64;
+            let ln = (nh * nh - 1.0) / (m * m * nh * nh) - 2.0 * m.ln() - 4.0 * nh.ln() - vh.ln() - nl.max(nv).ln();
+            let (got, want) = (at(nl, nv, nh, vh), ln.exp());
+            assert!(want > 0.0 && want < 2.2e-308 && ((got - want) / want).abs() < 1e-11, "{got:e} {want:e}");
+        }
     }
 
     #[test]
