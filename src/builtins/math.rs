@@ -442,13 +442,20 @@ fn exp_dd<E: Emit>(e: &mut E, xh: E::V, xl: E::V) -> E::V {
 /// [`exp_dd`] before its scaling: `(y, q)` with e^(xh + xl) = y·2^q, y in [0.99, 2.01) rounded once, xh
 /// clamped to [lo, hi] (|lo|, |hi| ≤ 1416, so k·`L2N_HI` stays exact and q within [`scale2`]'s range).
 fn exp_parts<E: Emit>(e: &mut E, xh: E::V, xl: E::V, lo: f64, hi: f64) -> (E::V, E::V) {
-    let (y, q, _) = exp_parts_tail(e, xh, xl, lo, hi);
-    (y, q)
+    let p = exp_parts_tail(e, xh, xl, lo, hi);
+    (p.y, p.q)
 }
 
-/// [`exp_parts`] and the final FMA's operands `(T_HI, tmp)`, y = fma(T_HI, tmp, T_HI) rounded: [`pow_lo`]
-/// recovers that rounding from them.
-fn exp_parts_tail<E: Emit>(e: &mut E, xh: E::V, xl: E::V, lo: f64, hi: f64) -> (E::V, E::V, (E::V, E::V)) {
+/// [`exp_parts_tail`]'s result: e^(xh + xl) = y·2^q, y = fma(t_hi, tmp, t_hi) rounded once.
+struct ExpParts<V> {
+    y: V,
+    q: V,
+    t_hi: V,
+    tmp: V,
+}
+
+/// [`exp_parts`] and the final FMA's operands, from which [`pow_lo`] recovers that rounding.
+fn exp_parts_tail<E: Emit>(e: &mut E, xh: E::V, xl: E::V, lo: f64, hi: f64) -> ExpParts<E::V> {
     use super::math_tables::EXP_T;
     // Clamp so k stays small; a clamped (or NaN) lane drops xl, which is only meaningful beside its xh.
     let x = clamp_to(e, xh, lo, hi);
@@ -474,7 +481,7 @@ fn exp_parts_tail<E: Emit>(e: &mut E, xh: E::V, xl: E::V, lo: f64, hi: f64) -> (
     let em1 = e.fma(r2, p, r);
     let tmp = e.add(t_tail, em1);
     let y = e.fma(t_hi, tmp, t_hi);
-    (y, q, (t_hi, tmp))
+    ExpParts { y, q, t_hi, tmp }
 }
 
 pub fn exp<E: Emit>(e: &mut E, x: E::V) -> E::V {
@@ -1427,7 +1434,7 @@ pub fn pow_lo<E: Emit>(e: &mut E, x: E::V, y: E::V, mode: Mode) -> E::V {
     let yl = e.mul(ys, ll);
     let pl = e.add(pe, yl);
     let (ph, pl) = fast_two_sum(e, p, pl);
-    let (m, q, (t_hi, tmp)) = exp_parts_tail(e, ph, pl, -760.0, 720.0);
+    let ExpParts { y: m, q, t_hi, tmp } = exp_parts_tail(e, ph, pl, -760.0, 720.0);
     // m = T_HI + T_HI·tmp rounded once; T_HI − m is exact (Sterbenz: m in [0.99, 2.01), T_HI in [1, 2)), so
     // this is the rounding up to tmp's own (~1/100 ulp of m).
     let d = e.sub(t_hi, m);

@@ -177,7 +177,7 @@ fn quadratic_near_one_is_correctly_rounded_after_factoring() {
 
 /// The "must show" on every catalogue formula, 10⁵ domain points each (a quarter from the edge classes:
 /// 0, 1 − 2⁻⁵³, denormals, 10⁻³⁰⁰ …), at defaults (n live) and with n = 50 and n = 1000 baked: no NaN/∞ where
-/// the truth is finite; and the baked kernel within 4 ulp of the live one at every point where both are finite
+/// the truth is finite; at most 4 bits (15 ulp) of error where the formula is well conditioned; and the baked kernel within 4 ulp of the live one at every point where both are finite
 /// (where the formula reads n: a compensated power chain against pow; elsewhere the pass must choose the same).
 #[test]
 fn catalogue_must_show_on_100k_points() {
@@ -205,6 +205,8 @@ fn catalogue_must_show_on_100k_points() {
             assert_eq!(s.points, 100_000);
             // Points whose exact value is 0/0 at an input exactly 0 or 1 count, with their limit as the truth.
             assert_eq!(s.nonfinite, 0, "{stem} {bake:?}: {:?}", s.first_nonfinite);
+            // ≤ 15 ulp wherever a 1-ulp input change moves the truth by at most 16 ulp.
+            assert!(s.max_bits_well <= lobe::numerics::robust::TARGET_BITS, "{stem} {bake:?}: {} bits at {:?}", s.max_bits_well, s.worst_well);
             limit_points += s.limits;
             if stem == "cook_torrance" {
                 assert!(s.limits > 20_000, "Cook–Torrance at NL or NV = 0: {} limit points", s.limits);
