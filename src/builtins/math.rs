@@ -742,13 +742,18 @@ fn pow_operands<E: Emit>(e: &mut E, x: E::V, y: E::V) -> (E::V, E::V) {
     (axs, ys)
 }
 
-pub fn pow<E: Emit>(e: &mut E, x: E::V, y: E::V) -> E::V {
+/// y·ln|x| in double-double (`(hi, lo)`), x and y made safe by [`pow_operands`]: what pow exponentiates.
+fn pow_exponent<E: Emit>(e: &mut E, x: E::V, y: E::V) -> (E::V, E::V) {
     let (ax, ys) = pow_operands(e, x, y);
     let (lh, ll) = ln_dd(e, ax);
     let (p, pe) = e.two_prod(ys, lh);
     let yl = e.mul(ys, ll);
     let pl = e.add(pe, yl);
-    let (ph, pl) = fast_two_sum(e, p, pl);
+    fast_two_sum(e, p, pl)
+}
+
+pub fn pow<E: Emit>(e: &mut E, x: E::V, y: E::V) -> E::V {
+    let (ph, pl) = pow_exponent(e, x, y);
     let mag = exp_dd(e, ph, pl);
     pow_finish(e, x, y, mag)
 }
@@ -1428,12 +1433,7 @@ pub fn pow_lo<E: Emit>(e: &mut E, x: E::V, y: E::V, mode: Mode) -> E::V {
     if mode == Mode::Fast {
         return e.konst(0.0);
     }
-    let (ax, ys) = pow_operands(e, x, y);
-    let (lh, ll) = ln_dd(e, ax);
-    let (p, pe) = e.two_prod(ys, lh);
-    let yl = e.mul(ys, ll);
-    let pl = e.add(pe, yl);
-    let (ph, pl) = fast_two_sum(e, p, pl);
+    let (ph, pl) = pow_exponent(e, x, y);
     let ExpParts { y: m, q, t_hi, tmp } = exp_parts_tail(e, ph, pl, -760.0, 720.0);
     // m = T_HI + T_HI·tmp rounded once; T_HI − m is exact (Sterbenz: m in [0.99, 2.01), T_HI in [1, 2)), so
     // this is the rounding up to tmp's own (~1/100 ulp of m).

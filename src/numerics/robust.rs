@@ -609,8 +609,7 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
         }
         trials.push(Trial { rule: name, describe, kept, reason, stats: stats.clone(), cost: c });
         if kept {
-            if name == PARAMS {
-                let g = params.as_ref().expect("the candidate came from it");
+            if let Some(g) = params.as_ref().filter(|_| name == PARAMS) {
                 pow_call = crate::simplify::simplify_with(g, bake, &pow_call_policy()).0;
                 compensated = compensated_powers(&pow_call);
                 pow_cost = cost(&pow_call);
