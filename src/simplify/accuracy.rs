@@ -623,17 +623,12 @@ fn scaled_exp(f: &Formula, ranges: &[Range], variant: usize) -> (Ir, NodeId, boo
                 divide_apart(ir, map, &rest, &dens[..n_safe], &apart, s)
             } else {
                 // The exponent's own divisors join that product (one division, not a chain: Cook–Torrance's
-                // /nh/nh/nh/nh was four dependent divisions, latency the cost model did not see). Where their
-                // product underflows e^E vanishes with it, so max(…, 2⁻¹⁰²²) (an overflowing b, which expmuldiv
-                // takes as 0 beside a vanished e^E) only keeps a zero numerator from 0/0.
+                // /nh/nh/nh/nh was four dependent divisions, latency the cost model did not see).
                 let n = product(ir, map, &rest, s).unwrap_or_else(|| ir.konst(1.0, s));
-                let mut p = balanced_product(ir, map, &cov, s);
-                if let Some(q) = product(ir, map, &dens[..n_safe], s) {
-                    p = ir.bin(BinOp::Mul, q, p, s);
-                }
-                let tiny = ir.konst(f64::MIN_POSITIVE, s);
-                let p = ir.call(Builtin::Max, &[p, tiny], s);
-                let v = ir.bin(BinOp::Div, n, p, s);
+                let v = match joint_divisor(ir, map, &dens[..n_safe], &cov, s) {
+                    Some(p) => ir.bin(BinOp::Div, n, p, s),
+                    None => n,
+                };
                 divide_by(ir, map, v, &[], &apart, s)
             };
         }
@@ -651,6 +646,21 @@ fn scaled_exp(f: &Formula, ranges: &[Range], variant: usize) -> (Ir, NodeId, boo
         }
         Some(ir.call(Builtin::ExpMulDiv, &[a, b, c], s))
     })
+}
+
+/// The safe divisors and the exponent's own (`cov`) as one divisor, `None` when there are neither: with the
+/// exponent's own, the balanced product of those times the safe ones' product, floored at 2⁻¹⁰²² (where it
+/// underflows e^E vanishes with it, so the floor only keeps a zero numerator from 0/0; an overflowing b is
+/// taken by expmuldiv as 0 beside a vanished e^E).
+fn joint_divisor(ir: &mut Ir, map: &[NodeId], safe: &[NodeId], cov: &[NodeId], s: Span) -> Option<NodeId> {
+    let q = product(ir, map, safe, s);
+    if cov.is_empty() {
+        return q;
+    }
+    let p = balanced_product(ir, map, cov, s);
+    let p = q.map_or(p, |q| ir.bin(BinOp::Mul, q, p, s));
+    let tiny = ir.konst(f64::MIN_POSITIVE, s);
+    Some(ir.call(Builtin::Max, &[p, tiny], s))
 }
 
 /// Below this a divisor is too small to join expmuldiv's b ([`two_divisors`]): 2⁻¹⁰⁰⁰.
@@ -675,16 +685,7 @@ fn two_divisors(ir: &mut Ir, map: &[NodeId], (arg, rest): (NodeId, &[NodeId]), d
     let (x, y) = (map[xs[0].index()], map[xs[1].index()]);
     let (safe_den, cov): (Vec<NodeId>, Vec<NodeId>) = others.iter().partition(|d| safe(ranges[d.index()]));
     let mut b = product(ir, map, rest, s).unwrap_or_else(|| ir.konst(1.0, s));
-    let p = match (product(ir, map, &safe_den, s), cov.is_empty()) {
-        (q, false) => {
-            let p = balanced_product(ir, map, &cov, s);
-            let p = q.map_or(p, |q| ir.bin(BinOp::Mul, q, p, s));
-            let tiny = ir.konst(f64::MIN_POSITIVE, s);
-            Some(ir.call(Builtin::Max, &[p, tiny], s))
-        }
-        (q, true) => q,
-    };
-    if let Some(p) = p {
+    if let Some(p) = joint_divisor(ir, map, &safe_den, &cov, s) {
         b = ir.bin(BinOp::Div, b, p, s);
     }
     let k = |ir: &mut Ir, v: f64| ir.konst(v, s);
