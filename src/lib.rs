@@ -36,7 +36,7 @@ pub mod cli;
 
 pub use builtins::Mode;
 pub use backend::{Backend, Columns, Evaluator, Kernel};
-pub use base::diag::{Diagnostic, Diagnostics};
+pub use base::diag::{Diagnostic, Diagnostics, Hint};
 pub use ir::{from_cosines, Formula, Input, N_INPUTS};
 
 use std::sync::Arc;
@@ -129,9 +129,9 @@ pub fn resolve_bake(f: &Formula, set: &[(String, f64)]) -> Result<Vec<(usize, f6
             None => {
                 let names: Vec<&str> = f.params.iter().map(|p| p.name.as_str()).collect();
                 let hint = if Input::from_name(name).is_some() {
-                    format!("`{name}` is an input (a cosine), not a parameter; `lobe eval` takes inputs with --at {name}=…")
+                    base::diag::Hint::InputNotParam { name: name.clone() }
                 } else {
-                    front::did_you_mean(name, &names, "its parameters are: ")
+                    front::did_you_mean(name, &names, "its parameters are: ").into()
                 };
                 ds.push(Diagnostic::error(format!("the formula has no parameter `{name}`")).hint(hint));
             }

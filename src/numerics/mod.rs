@@ -66,36 +66,8 @@ pub mod sweep;
 pub mod truth;
 pub mod twins;
 
+use crate::base::diag::Diagnostic;
 use crate::ir::{Input, InputSet, N_INPUTS};
-use std::fmt;
-
-/// A check that cannot produce a number, with a message and a hint for the user.
-#[derive(Clone, Debug, PartialEq)]
-pub struct CheckError {
-    pub msg: String,
-    pub hint: Option<String>,
-}
-
-impl CheckError {
-    pub fn new(msg: impl Into<String>) -> CheckError {
-        CheckError { msg: msg.into(), hint: None }
-    }
-    pub fn hint(msg: impl Into<String>, hint: impl Into<String>) -> CheckError {
-        CheckError { msg: msg.into(), hint: Some(hint.into()) }
-    }
-}
-
-impl fmt::Display for CheckError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.msg)?;
-        if let Some(h) = &self.hint {
-            write!(f, " (help: {h})")?;
-        }
-        Ok(())
-    }
-}
-
-impl std::error::Error for CheckError {}
 
 /// The inputs for lobe angle `c = cos θ` under the lobe convention (module docs); `lobe` is additionally set
 /// to `c` (a no-op for NH, VR and NV).
@@ -157,27 +129,15 @@ pub fn inputs_from_dirs(l: V3, v: V3) -> [f64; N_INPUTS] {
 }
 
 /// Checks parameter values against declarations (range and finiteness), for checks that vary them.
-pub fn check_param_values(decls: &[crate::ir::ParamDecl], params: &[f64]) -> Result<(), CheckError> {
+pub fn check_param_values(decls: &[crate::ir::ParamDecl], params: &[f64]) -> Result<(), Diagnostic> {
     for (d, v) in decls.iter().zip(params) {
         if !d.admits(*v) {
-            return Err(CheckError::hint(
-                format!("parameter `{}` = {v} is outside its declared range {}..{}", d.name, d.lo, d.hi),
-                format!("choose {} in {}..{}", d.name, d.lo, d.hi),
-            ));
+            return Err(Diagnostic::error(
+                format!("parameter `{}` = {v} is outside its declared range {}..{}", d.name, d.lo, d.hi)).hint(
+                format!("choose {} in {}..{}", d.name, d.lo, d.hi)));
         }
     }
     Ok(())
-}
-
-/// Parses `lo..hi` (both numbers) as used by `--range` and `--param`.
-pub fn parse_range(s: &str) -> Result<(f64, f64), String> {
-    let (a, b) = s.split_once("..").ok_or_else(|| format!("`{s}` is not a range; write lo..hi, e.g. 1..1000"))?;
-    let p = |t: &str| t.trim().parse::<f64>().map_err(|_| format!("`{}` is not a number in the range `{s}`", t.trim()));
-    let (lo, hi) = (p(a)?, p(b)?);
-    if !(lo.is_finite() && hi.is_finite()) || lo > hi {
-        return Err(format!("`{s}`: need finite lo ≤ hi"));
-    }
-    Ok((lo, hi))
 }
 
 #[cfg(test)]

@@ -187,7 +187,8 @@ pub fn compare_in(
         if let Some((k, _)) = set.iter().find(|(k, _)| !da.iter().chain(db).any(|p| p.name == *k)) {
             return Err(crate::Diagnostics::single(
                 geometry.name(),
-                crate::Diagnostic::error(format!("--set {k}: neither formula declares a parameter `{k}`"))
+                crate::Diagnostic::error(format!("neither formula declares a parameter `{k}`"))
+                    .about(crate::base::diag::Setting::Param { name: k.clone(), value: None })
                     .hint("every formula has `n`; see each file's `param` lines"),
             ));
         }

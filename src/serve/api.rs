@@ -124,7 +124,7 @@ impl BrdfCompiler for Live<'_> {
 /// The compile error back as diagnostics (the scene loader wants them); a size refusal becomes one item.
 fn diagnostics_of(file: &str, src: &str, e: ApiError) -> Diagnostics {
     let mut ds = Diagnostics::new(file, src);
-    ds.push(crate::Diagnostic::error(e.error));
+    ds.push(crate::Diagnostic::error(e.error.message));
     ds
 }
 
@@ -418,14 +418,14 @@ pub fn analyze(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
         let num = crate::base::json::value;
         match crate::numerics::normalize::coefficient(k.as_ref(), k.used_inputs(), &params) {
             Ok(c) => out["coef"] = num(c),
-            Err(e) => out["coef_error"] = e.msg.into(),
+            Err(e) => out["coef_error"] = e.message.into(),
         }
         match crate::numerics::energy::full_energy_for(k.as_ref(), k.used_inputs(), &params) {
             Ok(e) => {
                 out["albedo_max"] = num(e.albedo_max);
                 out["theta_i_at_max_deg"] = num(e.theta_i_at_max_deg);
             }
-            Err(e) => out["albedo_error"] = e.msg.into(),
+            Err(e) => out["albedo_error"] = e.message.into(),
         }
         if let Some(r) = req.get("reference") {
             let (rn, rt) = formula_field(r)?;
@@ -529,9 +529,9 @@ mod tests {
         })
         .unwrap_err();
         assert_eq!(e.status, 503);
-        assert!(e.error.contains("longer than"), "{}", e.error);
+        assert!(e.error.message.contains("longer than"), "{}", e.error);
         let busy = limited(&st, |_| Ok(())).unwrap_err();
-        assert!(busy.status == 503 && busy.error.contains("busy"), "{}", busy.error);
+        assert!(busy.status == 503 && busy.error.message.contains("busy"), "{}", busy.error);
         release.send(()).unwrap();
         let t = std::time::Instant::now();
         while st.jobs.load(Ordering::SeqCst) > 0 && t.elapsed() < Duration::from_secs(30) {
