@@ -54,7 +54,7 @@ pub trait FormulaChooser: Send + Sync + std::fmt::Debug {
 #[derive(Clone, Debug, Default)]
 pub struct Options {
     pub backend: Backend,
-    /// Parameters baked into the code as constants (`--set n=50` for a fixed material). Parameters not listed
+    /// Parameters baked into the code as constants (n = 50 for a fixed material). Parameters not listed
     /// stay live: read from the params slice at run time, so changing them needs no recompilation.
     pub bake: Vec<(String, f64)>,
     /// Skip the simplifier (for testing the simplifier itself against the unsimplified formula).
@@ -76,7 +76,7 @@ pub fn compile_formula(f: Formula, opts: &Options) -> Result<Kernel, Diagnostics
     build_kernel(Arc::new(simplified(&f, opts)?), opts.backend, opts.math)
 }
 
-/// The simplified formula with `opts.bake` folded in (`--set` names and ranges checked first).
+/// The simplified formula with `opts.bake` folded in (names and ranges checked first).
 pub fn simplified(f: &Formula, opts: &Options) -> Result<Formula, Diagnostics> {
     let bake = resolve_bake(f, &opts.bake)?;
     if opts.no_simplify {
@@ -99,7 +99,7 @@ pub fn build_kernel(f: Arc<Formula>, backend: Backend, math: Mode) -> Result<Ker
     Ok(Kernel::new(f, backend, math, ev, t.elapsed()))
 }
 
-/// Checks `--set` names and ranges against the formula's declared parameters.
+/// Checks the names and ranges of parameter values to bake against the formula's declared parameters.
 pub fn resolve_bake(f: &Formula, set: &[(String, f64)]) -> Result<Vec<(usize, f64)>, Diagnostics> {
     let mut out = vec![];
     let mut ds = Diagnostics::new(f.file.clone(), f.source.clone());

@@ -6,7 +6,7 @@
 //! parameter declarations or used-input set) — never source text — so the same code runs on the JIT, the
 //! interpreter, or a hand-written Rust closure ([`twins`], used by the tests to pin the published numbers).
 //!
-//! # The lobe convention (shared by `energy --mode lobe`, `accuracy` and `fit`)
+//! # The lobe convention (shared by the lobe-mode energy check, accuracy and fit)
 //! The papers treat a lobe as a function of one angle θ, `c = cos θ`, with the light at the normal. lobe maps
 //! `c` to the five inputs as [`lobe_inputs`] does: **NL = 1** (light at the normal), **NV = c** (the
 //! outgoing direction whose cosine weights the integral), **NH = VR = c** (whichever lobe variable the formula
@@ -14,14 +14,14 @@
 //! **VH = cos(θ/2) = √((1+c)/2)** (L = N, V at θ). Because NH and VR are both set to `c`, the result does
 //! not depend on which of the two a formula reads; [`choose_lobe_input`] still names it for reports.
 //! The physically consistent alternative (NH = cos(θ/2) for a light at the normal) is what
-//! `energy --mode full` measures at θᵢ = 0.
+//! the full-mode energy check measures at θᵢ = 0.
 //!
-//! # JSON keys (`--json`, one object per command; stable)
+//! # JSON keys (one object per check; stable)
 //! Numbers follow [`crate::base::json`]: finite values are numbers, NaN and ±inf the strings `"NaN"`, `"inf"`,
 //! `"-inf"`.
 //! - `energy`: `mode` (`lobe` or `full`), `params`; lobe mode: `coef` (1/(2π·Int)), `integral`, `evals`,
-//!   `lobe_input`; with `--range`: `range` = list of {`n`, `coef`} instead of `coef`/`integral`/`evals`; with
-//!   `--against`: `against_max_abs` (max |coef_fit·2π·Int − 1|), `against_worst_n`, `against_mean_abs`; full
+//!   `lobe_input`; over a range of n: `range` = list of {`n`, `coef`} instead of `coef`/`integral`/`evals`; against
+//!   a fitted coefficient: `against_max_abs` (max |coef_fit·2π·Int − 1|), `against_worst_n`, `against_mean_abs`; full
 //!   mode: `coef` (= 1/`albedo_max`), `albedo_max`, `theta_i_at_max_deg`, `albedo` (list of {`theta_i_deg`,
 //!   `rho`}), `reciprocity_max_rel`, `reciprocity_worst` ({`theta_l_deg`, `theta_v_deg`, `phi_v_deg`}).
 //! - `accuracy`: `mean_abs_grid`, `epicenter_max_rel_pct` (+ `epicenter_worst_n`), `inflection_max_rel_pct`

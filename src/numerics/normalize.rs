@@ -1,6 +1,6 @@
 //! Energy normalisation: F → coef·F with the papers' exact coefficient `1/(2π·Int)` (lobe convention, the
 //! lobe variable chosen from the inputs the formula reads). [`coefficient`] is the one place it is computed:
-//! scene materials keep it beside their kernel and multiply at shading time; `eval --normalize` bakes it into
+//! scene materials keep it beside their kernel and multiply at shading time; evaluating a normalised formula bakes it into
 //! the IR with [`bake_coefficient`]. Cost: one adaptive quadrature, a few hundred evaluations.
 
 use super::{choose_lobe_input, energy, Diagnostic};

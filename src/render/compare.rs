@@ -157,7 +157,7 @@ pub fn compare_formulas(
     compare_in(&geometry, job.a, job.b, set, compiler, ropts)
 }
 
-/// [`compare_formulas`] at each of `sets` (one comparison per set, in order; `lobe compare --sweep-n`). The
+/// [`compare_formulas`] at each of `sets` (one comparison per set, in order). The
 /// scene is parsed and its meshes built once; each comparison only compiles the two formulas with its values.
 /// Errors are those of the first set's comparison, as if each had been run alone.
 pub fn compare_sweep(

@@ -56,7 +56,7 @@ use std::time::{Duration, Instant};
 /// Largest image side accepted.
 pub const MAX_SIZE: usize = 4096;
 
-/// An image size `N` (square) or `WxH`, each 1..=[`MAX_SIZE`] (`--size`, `lobe serve`'s `size=`).
+/// An image size `N` (square) or `WxH`, each 1..=[`MAX_SIZE`] (the image size a front end asks for).
 pub fn parse_size(s: &str) -> Result<(usize, usize), String> {
     let one = |t: &str| -> Result<usize, String> {
         let v: usize = t.trim().parse().map_err(|_| format!("`{t}` is not a whole number"))?;
@@ -161,7 +161,7 @@ impl std::fmt::Debug for Material {
 /// A mesh in world space with its material.
 #[derive(Clone, Debug)]
 pub struct Object {
-    /// Shared: scenes made from one [`scene::Geometry`] (e.g. each row of `lobe compare --sweep-n`) use the
+    /// Shared: scenes made from one [`scene::Geometry`] (e.g. each row of a comparison over several n) use the
     /// same mesh.
     pub mesh: Arc<Mesh>,
     pub material: usize,

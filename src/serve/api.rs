@@ -194,7 +194,7 @@ fn formula_field(v: &Value) -> Result<(String, String), ApiError> {
     Ok((name, str_field(v, "text")?.to_string()))
 }
 
-/// `{"params": {"n": 50, …}}` → a `--set` list.
+/// `{"params": {"n": 50, …}}` → a list of parameter values.
 fn params_field(v: &Value) -> Result<Vec<(String, f64)>, ApiError> {
     let Some(p) = v.get("params") else { return Ok(vec![]) };
     let obj = p.as_object().ok_or_else(|| ApiError::bad("`params` must be an object of numbers"))?;
@@ -218,7 +218,7 @@ fn size_field(st: &State, v: &Value) -> Result<usize, ApiError> {
     Ok(s)
 }
 
-/// Parameter values for a kernel: declared defaults, then `set` (range-checked like `--set`).
+/// Parameter values for a kernel: declared defaults, then `set` (range-checked like every parameter value given for a run).
 fn values(k: &Kernel, set: &[(String, f64)]) -> Result<Vec<f64>, ApiError> {
     crate::resolve_bake(&k.formula, set)?;
     let mut p = k.default_params();
@@ -472,7 +472,7 @@ pub fn save(st: &State, req: &Value) -> Result<Reply, ApiError> {
     Ok(Reply::ok_json(json!({ "path": path, "hash": content_hash(text.as_bytes()) })))
 }
 
-/// `GET /render.png?file=SCENE&set=n=50&size=256`: exactly `lobe render SCENE --set n=50 --size 256` (JIT,
+/// `GET /render.png?file=SCENE&set=n=50&size=256`: exactly what rendering SCENE with n = 50 at size 256 gives (JIT,
 /// linear transfer, default tiles and threads), so the bytes equal the CLI's output file.
 pub fn render_png(st: &Arc<State>, query: &str) -> Result<Reply, ApiError> {
     let mut file = None;

@@ -1,5 +1,5 @@
 //! `[materials.*]` tables → [`Material`]s: where the formula comes from (a `brdf` file, an inline `formula`, or
-//! the caller's override), parameter values (the formula's defaults, then the table's `params`, then `--set`,
+//! the caller's override), parameter values (the formula's defaults, then the table's `params`, then the run's,
 //! each checked against the declared range), compilation, and the optional energy normalisation
 //! ([`crate::numerics::normalize::coefficient`]) and cut-off ([`crate::render::plan::Cutoff`]).
 //!
