@@ -200,7 +200,7 @@ mod tests {
     }
     /// What a command does: check, then write.
     fn write(path: &Path, bytes: &[u8], force: bool, is_ours: fn(&[u8]) -> bool) -> Result<(), String> {
-        check(path, force, is_ours)?;
+        check(path, force, is_ours).map_err(|d| d.message)?;
         write_atomic(path, bytes)
     }
 
@@ -213,12 +213,12 @@ mod tests {
         assert_eq!(std::fs::read(&p).unwrap(), b"precious");
         assert!(write(&p, b"LOBE x", true, ours).is_ok());
         assert!(write(&p, b"LOBE y", false, ours).is_ok());
-        assert!(check(&d, true, ours).unwrap_err().contains("directory"));
+        assert!(check(&d, true, ours).unwrap_err().message.contains("directory"));
         assert!(check(&d.join("missing/x"), false, ours).is_err());
         #[cfg(unix)]
         {
             let e = check(Path::new("/dev/null"), true, ours).unwrap_err();
-            assert!(e.contains("character device"), "{e}");
+            assert!(e.message.contains("character device"), "{e}");
             assert!(write_atomic(Path::new("/dev/null"), b"LOBE").is_err());
         }
         std::fs::remove_dir_all(&d).unwrap();

@@ -32,9 +32,10 @@ impl CliError {
             CliError::Diagnostics(d) => d.render_with(color, &Flags),
             CliError::Error(d) => {
                 let hints = d.hint_texts(&Flags);
-                match hints.is_empty() {
-                    false => format!("error: {}\n  = help: {}\n", d.text(&Flags), hints.join("; ")),
-                    true => format!("error: {}\n", d.text(&Flags)),
+                if hints.is_empty() {
+                    format!("error: {}\n", d.text(&Flags))
+                } else {
+                    format!("error: {}\n  = help: {}\n", d.text(&Flags), hints.join("; "))
                 }
             }
             CliError::Failed => String::new(),

@@ -507,19 +507,19 @@ mod tests {
     fn bad_lobes_get_clear_errors() {
         let zero = FnEvaluator(|_: &[f64; crate::N_INPUTS], _: &[f64]| 0.0);
         let e = normalization_coef(&zero, &[50.0], Input::NH).unwrap_err();
-        assert!(e.msg.contains("integral is zero; cannot normalise"), "{e}");
+        assert!(e.message.contains("integral is zero; cannot normalise"), "{e}");
         let pole = FnEvaluator(|x: &[f64; crate::N_INPUTS], _: &[f64]| 1.0 / (1.0 - x[2]));
         let e = normalization_coef(&pole, &[50.0], Input::NH).unwrap_err();
-        assert!(e.msg.contains("infinite at the normal"), "{e}");
+        assert!(e.message.contains("infinite at the normal"), "{e}");
         let nan = FnEvaluator(|x: &[f64; crate::N_INPUTS], _: &[f64]| (x[2] - 0.5).sqrt());
         let e = normalization_coef(&nan, &[50.0], Input::NH).unwrap_err();
-        assert!(e.msg.contains("NaN"), "{e}");
+        assert!(e.message.contains("NaN"), "{e}");
         let e = normalization_coef(twins::blinn().ev.as_ref(), &[f64::NAN], Input::NH).unwrap_err();
-        assert!(e.msg.contains("finite"), "{e}");
+        assert!(e.message.contains("finite"), "{e}");
         // A pole inside the hemisphere (not at the normal): not integrable.
         let inner = FnEvaluator(|x: &[f64; crate::N_INPUTS], _: &[f64]| 1.0 / (x[2] - 0.5).abs());
         let e = normalization_coef(&inner, &[50.0], Input::NH).unwrap_err();
-        assert!(e.msg.contains("does not converge"), "{e}");
+        assert!(e.message.contains("does not converge"), "{e}");
     }
 
     #[test]
@@ -537,7 +537,7 @@ mod tests {
         assert!((r.coef() * PI - 1.0).abs() < 1e-9, "{}", r.coef());
         // A NaN piece whose edge value is not negligible is an error.
         let bad = FnEvaluator(|x: &[f64; crate::N_INPUTS], _: &[f64]| if x[2] < 1e-3 { f64::NAN } else { 1.0 });
-        assert!(lobe_integral(&bad, &[1.0], Input::NH).unwrap_err().msg.contains("not negligible"));
+        assert!(lobe_integral(&bad, &[1.0], Input::NH).unwrap_err().message.contains("not negligible"));
     }
 
     #[test]

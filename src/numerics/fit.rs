@@ -407,7 +407,7 @@ mod tests {
     fn bad_requests_are_errors() {
         let b = twins::blinn();
         let e = fit(b.ev.as_ref(), &[1.0], Input::NH, b.ev.as_ref(), &[1.0], Input::NH, &[], &FitOptions::default(), &|| {});
-        assert!(e.unwrap_err().msg.contains("nothing to fit"));
+        assert!(e.unwrap_err().message.contains("nothing to fit"));
         let free = [FreeParam { index: 0, name: "n".into(), lo: 1.0, hi: 5.0, step: None }];
         let e = fit(b.ev.as_ref(), &[1.0], Input::NH, b.ev.as_ref(), &[1.0], Input::NH, &free, &FitOptions::default(), &|| {});
         assert!(e.is_err());

@@ -58,6 +58,6 @@ mod tests {
         }
         assert!(coefficient(&FnEvaluator(|_: &[f64; crate::N_INPUTS], _: &[f64]| 0.0), vr, &[1.0]).is_err());
         let tiny = FnEvaluator(|x: &[f64; crate::N_INPUTS], p: &[f64]| x[3].clamp(0.0, 1.0).powf(p[0]) * 1e-300 * 1e-10);
-        assert!(coefficient(&tiny, vr, &[50.0]).unwrap_err().msg.contains("overflows"));
+        assert!(coefficient(&tiny, vr, &[50.0]).unwrap_err().message.contains("overflows"));
     }
 }
