@@ -466,7 +466,7 @@ impl ParamDecl {
     }
 
     /// Whether `v` is an allowed value: finite and inside the declared range. The one range check every
-    /// caller uses (`--set`, scene `params`, checks that vary parameters).
+    /// caller uses (a run's parameter values, scene `params`, checks that vary parameters).
     pub fn admits(&self, v: f64) -> bool {
         v.is_finite() && v >= self.lo && v <= self.hi
     }

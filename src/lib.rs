@@ -36,7 +36,7 @@ pub mod cli;
 
 pub use builtins::Mode;
 pub use backend::{Backend, Columns, Evaluator, Kernel};
-pub use base::diag::{Diagnostic, Diagnostics};
+pub use base::diag::{Diagnostic, Diagnostics, Hint};
 pub use ir::{from_cosines, Formula, Input, N_INPUTS};
 
 use std::sync::Arc;
@@ -54,7 +54,7 @@ pub trait FormulaChooser: Send + Sync + std::fmt::Debug {
 #[derive(Clone, Debug, Default)]
 pub struct Options {
     pub backend: Backend,
-    /// Parameters baked into the code as constants (`--set n=50` for a fixed material). Parameters not listed
+    /// Parameters baked into the code as constants (n = 50 for a fixed material). Parameters not listed
     /// stay live: read from the params slice at run time, so changing them needs no recompilation.
     pub bake: Vec<(String, f64)>,
     /// Skip the simplifier (for testing the simplifier itself against the unsimplified formula).
@@ -76,7 +76,7 @@ pub fn compile_formula(f: Formula, opts: &Options) -> Result<Kernel, Diagnostics
     build_kernel(Arc::new(simplified(&f, opts)?), opts.backend, opts.math)
 }
 
-/// The simplified formula with `opts.bake` folded in (`--set` names and ranges checked first).
+/// The simplified formula with `opts.bake` folded in (names and ranges checked first).
 pub fn simplified(f: &Formula, opts: &Options) -> Result<Formula, Diagnostics> {
     let bake = resolve_bake(f, &opts.bake)?;
     if opts.no_simplify {
@@ -99,7 +99,7 @@ pub fn build_kernel(f: Arc<Formula>, backend: Backend, math: Mode) -> Result<Ker
     Ok(Kernel::new(f, backend, math, ev, t.elapsed()))
 }
 
-/// Checks `--set` names and ranges against the formula's declared parameters.
+/// Checks the names and ranges of parameter values to bake against the formula's declared parameters.
 pub fn resolve_bake(f: &Formula, set: &[(String, f64)]) -> Result<Vec<(usize, f64)>, Diagnostics> {
     let mut out = vec![];
     let mut ds = Diagnostics::new(f.file.clone(), f.source.clone());
@@ -129,9 +129,9 @@ pub fn resolve_bake(f: &Formula, set: &[(String, f64)]) -> Result<Vec<(usize, f6
             None => {
                 let names: Vec<&str> = f.params.iter().map(|p| p.name.as_str()).collect();
                 let hint = if Input::from_name(name).is_some() {
-                    format!("`{name}` is an input (a cosine), not a parameter; `lobe eval` takes inputs with --at {name}=…")
+                    base::diag::Hint::InputNotParam { name: name.clone() }
                 } else {
-                    front::did_you_mean(name, &names, "its parameters are: ")
+                    front::did_you_mean(name, &names, "its parameters are: ").into()
                 };
                 ds.push(Diagnostic::error(format!("the formula has no parameter `{name}`")).hint(hint));
             }

@@ -210,7 +210,7 @@ fn uses_of(ir: &Ir, roots: &[NodeId]) -> (InputSet, Vec<u16>) {
     (inputs, params)
 }
 
-/// The one expression emitter behind every shader lobe writes (`--glsl`, `--wgsl`, `--brdf-explorer`): appends
+/// The one expression emitter behind every shader lobe writes (GLSL, WGSL, BRDF Explorer): appends
 /// to `out` one indented statement per node that is shared (by any of `roots`) or is a call, binding it to a
 /// temporary `tK`; every other node is inlined with full parentheses. Returns each root's expression.
 /// Inputs are referred to by name (function arguments or locals) and parameters by `params` (see

@@ -1,8 +1,13 @@
-//! Diagnostics: span-carrying errors rendered once, with carets, at the user's own source.
+//! Diagnostics: lobe's one error type, a message with hints, located or not, rendered once with carets at
+//! the user's own source.
 //!
-//! Every stage that can reject user input (the front end, `--set` overrides, scene files) produces
-//! [`Diagnostic`]s; [`Diagnostics::render`] turns them into `file:line:col` text with the offending source
-//! underlined (codespan-reporting), which the CLI prints and the snapshot tests compare whole.
+//! Every stage that can reject user input (the front end, parameter overrides, scene files, numerical checks,
+//! the JIT) produces [`Diagnostic`]s; [`Diagnostics::render`] turns them into `file:line:col` text with the
+//! offending source underlined (codespan-reporting), which the CLI prints and the snapshot tests compare whole.
+//!
+//! Nothing below the CLI knows how the user spelled a setting, so what a message is about ([`Setting`]) and
+//! what to change ([`Hint`]) are structured; the front end that shows the error words them through a
+//! [`Wording`] (the CLI names its flags, the web page its controls). [`Plain`] words them without either.
 
 use super::span::{line_col, Span};
 use codespan_reporting::diagnostic::{Diagnostic as CsDiag, Label};
@@ -19,22 +24,96 @@ pub enum Severity {
     Warning,
 }
 
-/// One message about the source, with a primary span, optional secondary spans, and hints.
+/// What to change to get past an error. Advice that every front end words alike is [`Hint::Text`]; the rest
+/// name a setting, which each front end spells its own way ([`Wording::hint`]).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Hint {
+    Text(String),
+    /// The JIT failed; the interpreter computes the same values.
+    UseInterpreter,
+    /// An existing file lobe did not write is kept unless the user explicitly allows replacing it.
+    AllowOverwrite,
+    /// `name` is an input (a cosine), given where a parameter value was expected.
+    InputNotParam { name: String },
+    /// Normalising needs every parameter given a fixed value.
+    BakeEveryParam,
+    /// A fit needs at least one parameter to vary, with its range.
+    FitSomeParam,
+}
+
+impl From<String> for Hint {
+    fn from(s: String) -> Hint {
+        Hint::Text(s)
+    }
+}
+
+impl From<&str> for Hint {
+    fn from(s: &str) -> Hint {
+        Hint::Text(s.to_string())
+    }
+}
+
+/// A setting of this run that a message is about (its prefix), spelled by the front end that took it.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Setting {
+    /// A parameter value given for this run: the name, and the value when the message is about it.
+    Param { name: String, value: Option<f64> },
+}
+
+/// How a front end words structured hints and settings.
+pub trait Wording {
+    fn hint(&self, h: &Hint) -> String;
+    fn setting(&self, s: &Setting) -> String;
+}
+
+/// Words hints and settings by what they are, naming no front end's controls (library callers, tests, the
+/// web page).
+pub struct Plain;
+
+impl Wording for Plain {
+    fn hint(&self, h: &Hint) -> String {
+        match h {
+            Hint::Text(t) => t.clone(),
+            Hint::UseInterpreter => "the interpreter computes the same values: use the interpreter backend".into(),
+            Hint::AllowOverwrite => "choose another output path, or allow replacing the file".into(),
+            Hint::InputNotParam { name } => format!("`{name}` is an input (a cosine), not a parameter; give it as an input value"),
+            Hint::BakeEveryParam => "give every parameter a value before normalising".into(),
+            Hint::FitSomeParam => "name at least one parameter to fit, with its range (e.g. a in 1..1000)".into(),
+        }
+    }
+    fn setting(&self, s: &Setting) -> String {
+        match s {
+            Setting::Param { name, value: None } => format!("set {name}"),
+            Setting::Param { name, value: Some(v) } => format!("set {name}={v}"),
+        }
+    }
+}
+
+/// One message, with hints, a primary span, and optional secondary spans: lobe's error type.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Diagnostic {
     pub severity: Severity,
+    /// The setting the message is about, shown before it (`SETTING: message`).
+    pub subject: Option<Setting>,
     pub message: String,
     /// The main location and its label (what is wrong *here*).
     pub primary: Option<(Span, String)>,
     /// Related locations ("parenthesis opened here").
     pub secondary: Vec<(Span, String)>,
     /// "help: …" lines.
-    pub hints: Vec<String>,
+    pub hints: Vec<Hint>,
 }
 
 impl Diagnostic {
     pub fn error(message: impl Into<String>) -> Diagnostic {
-        Diagnostic { severity: Severity::Error, message: message.into(), primary: None, secondary: vec![], hints: vec![] }
+        Diagnostic {
+            severity: Severity::Error,
+            subject: None,
+            message: message.into(),
+            primary: None,
+            secondary: vec![],
+            hints: vec![],
+        }
     }
     pub fn warning(message: impl Into<String>) -> Diagnostic {
         Diagnostic { severity: Severity::Warning, ..Diagnostic::error(message) }
@@ -47,9 +126,45 @@ impl Diagnostic {
         self.secondary.push((span, label.into()));
         self
     }
-    pub fn hint(mut self, h: impl Into<String>) -> Diagnostic {
+    pub fn hint(mut self, h: impl Into<Hint>) -> Diagnostic {
         self.hints.push(h.into());
         self
+    }
+    /// The message is about `s`, a setting of this run.
+    pub fn about(mut self, s: Setting) -> Diagnostic {
+        self.subject = Some(s);
+        self
+    }
+    /// The message as the user reads it: the subject, if any, then the message.
+    pub fn text(&self, w: &dyn Wording) -> String {
+        match &self.subject {
+            Some(s) => format!("{}: {}", w.setting(s), self.message),
+            None => self.message.clone(),
+        }
+    }
+    /// The hints as the user reads them.
+    pub fn hint_texts(&self, w: &dyn Wording) -> Vec<String> {
+        self.hints.iter().map(|h| w.hint(h)).collect()
+    }
+}
+
+/// The message, then each hint as ` (help: …)`, in [`Plain`] words.
+impl fmt::Display for Diagnostic {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.text(&Plain))?;
+        for h in self.hint_texts(&Plain) {
+            write!(f, " (help: {h})")?;
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for Diagnostic {}
+
+/// A plain message without hints.
+impl From<String> for Diagnostic {
+    fn from(m: String) -> Diagnostic {
+        Diagnostic::error(m)
     }
 }
 
@@ -87,8 +202,14 @@ impl Diagnostics {
         self.items.iter().filter(|d| d.severity == Severity::Error)
     }
 
-    /// Renders every diagnostic as `error: …` followed by `┌─ file:line:col` and the underlined source.
+    /// Renders every diagnostic as `error: …` followed by `┌─ file:line:col` and the underlined source, in
+    /// [`Plain`] words.
     pub fn render(&self, color: bool) -> String {
+        self.render_with(color, &Plain)
+    }
+
+    /// [`Diagnostics::render`] with hints and settings in a front end's words.
+    pub fn render_with(&self, color: bool, w: &dyn Wording) -> String {
         let file = SimpleFile::new(self.file.as_str(), self.source.as_str());
         let mut buf = if color { Buffer::ansi() } else { Buffer::no_color() };
         let config = term::Config::default();
@@ -98,7 +219,7 @@ impl Diagnostics {
                 Severity::Error => CsDiag::error(),
                 Severity::Warning => CsDiag::warning(),
             }
-            .with_message(&d.message);
+            .with_message(d.text(w));
             let clip = |s: Span| {
                 let a = (s.start as usize).min(len);
                 let b = (s.end as usize).clamp(a, len);
@@ -127,7 +248,7 @@ impl Diagnostics {
             }
             cs = cs.with_labels(labels);
             let mut notes: Vec<String> = placed;
-            notes.extend(d.hints.iter().map(|h| format!("help: {h}")));
+            notes.extend(d.hint_texts(w).iter().map(|h| format!("help: {h}")));
             if d.primary.is_none() && !self.file.is_empty() {
                 notes.insert(0, format!("in {}", self.file));
             }
@@ -135,7 +256,7 @@ impl Diagnostics {
             // Writing to an in-memory buffer cannot fail except on a span bug; fall back to plain text.
             if term::emit(&mut buf, &config, &file, &cs).is_err() {
                 use std::io::Write;
-                let _ = writeln!(buf, "error: {}", d.message);
+                let _ = writeln!(buf, "error: {}", d.text(w));
             }
         }
         String::from_utf8_lossy(buf.as_slice()).into_owned()
@@ -143,14 +264,15 @@ impl Diagnostics {
 
     /// The diagnostics as JSON for tools and the `lobe serve` page: one object per item with `severity`,
     /// `message`, `file`, the primary span's 1-based `line`/`col` and `end_line`/`end_col` (absent when the
-    /// item has no place), its `label`, `hints`, and `rendered`, the caret text [`Diagnostics::render`] prints.
+    /// item has no place), its `label`, `hints`, and `rendered`, the caret text [`Diagnostics::render`] prints;
+    /// all in [`Plain`] words.
     pub fn to_json(&self) -> serde_json::Value {
         let items = self.items.iter().map(|d| {
             let mut o = serde_json::json!({
                 "severity": match d.severity { Severity::Error => "error", Severity::Warning => "warning" },
-                "message": d.message,
+                "message": d.text(&Plain),
                 "file": self.file,
-                "hints": d.hints,
+                "hints": d.hint_texts(&Plain),
             });
             if let Some((s, label)) = &d.primary {
                 let (line, col) = line_col(&self.source, s.start as usize);

@@ -1,4 +1,4 @@
-//! The one rule for numbers in `--json` output. JSON has no NaN or infinity, and `null` would hide which of
+//! The one rule for numbers in JSON output. JSON has no NaN or infinity, and `null` would hide which of
 //! them a check produced, so a finite value is written as a number and a non-finite one as the string `"NaN"`,
 //! `"inf"` or `"-inf"`. Result types apply it per field with
 //! `#[serde(serialize_with = "crate::base::json::num")]`; objects built with `serde_json::json!` wrap their

@@ -2,9 +2,10 @@
 //!
 //! Policy, the same for every command and every output (images, plots, shaders, tables):
 //! - only **regular files** are written or replaced: a directory, device node, FIFO or socket at the output
-//!   path is refused, even with `--force` (`-o /dev/null --force` must not replace `/dev/null`);
+//!   path is refused, even when the user allows replacing files (`/dev/null` must never be replaced);
 //! - an existing file is replaced only if lobe wrote it (recognised from a bounded **prefix** — a PNG's
-//!   `Software: lobe` chunk or a text header — so a 2 GB foreign file costs one 64 KiB read) or with `--force`;
+//!   `Software: lobe` chunk or a text header — so a 2 GB foreign file costs one 64 KiB read) or when the user
+//!   allows replacing it (`force`);
 //! - the write is **atomic**: a temporary file `.NAME.lobe-tmp-PID` in the target's directory, synced, then
 //!   renamed over the target, so a failure or a kill never leaves a truncated file at the user's path;
 //! - a **symlink** is followed: the file it points to is replaced and the link stays a link (a dangling link
@@ -17,6 +18,7 @@
 //! [`write_atomic`], so a file another program put there in between (e.g. during `lobe watch`) is not
 //! clobbered.
 
+use super::diag::{Diagnostic, Hint};
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -29,17 +31,17 @@ static IN_FLIGHT: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
 /// Checks that `path` may be (over)written: its directory exists; if something is there it is a regular file
 /// (after following symlinks), and, unless `force`, one that `is_ours` recognises from its first
-/// [`PREFIX_BYTES`].
-pub fn check(path: &Path, force: bool, is_ours: fn(&[u8]) -> bool) -> Result<(), String> {
+/// [`PREFIX_BYTES`]. A foreign file is refused with [`Hint::AllowOverwrite`].
+pub fn check(path: &Path, force: bool, is_ours: fn(&[u8]) -> bool) -> Result<(), Diagnostic> {
     let target = resolve(path)?;
     let dir = parent_dir(&target);
     if !dir.is_dir() {
-        return Err(format!("the directory `{}` does not exist", dir.display()));
+        return Err(format!("the directory `{}` does not exist", dir.display()).into());
     }
     let meta = match std::fs::metadata(&target) {
         Ok(m) => m,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
-        Err(e) => return Err(format!("cannot inspect `{}`: {e}", path.display())),
+        Err(e) => return Err(format!("cannot inspect `{}`: {e}", path.display()).into()),
     };
     regular(path, &meta)?;
     if !force {
@@ -48,10 +50,8 @@ pub fn check(path: &Path, force: bool, is_ours: fn(&[u8]) -> bool) -> Result<(),
             .and_then(|f| f.take(PREFIX_BYTES).read_to_end(&mut prefix))
             .map_err(|e| format!("cannot read existing `{}`: {e}", path.display()))?;
         if !is_ours(&prefix) {
-            return Err(format!(
-                "`{}` exists and was not written by lobe; not overwriting it (refusing to overwrite without --force)",
-                path.display()
-            ));
+            return Err(Diagnostic::error(format!("`{}` exists and was not written by lobe; not overwriting it (refusing to overwrite unless allowed)", path.display()))
+                .hint(Hint::AllowOverwrite));
         }
     }
     Ok(())
@@ -200,7 +200,7 @@ mod tests {
     }
     /// What a command does: check, then write.
     fn write(path: &Path, bytes: &[u8], force: bool, is_ours: fn(&[u8]) -> bool) -> Result<(), String> {
-        check(path, force, is_ours)?;
+        check(path, force, is_ours).map_err(|d| d.message)?;
         write_atomic(path, bytes)
     }
 
@@ -213,12 +213,12 @@ mod tests {
         assert_eq!(std::fs::read(&p).unwrap(), b"precious");
         assert!(write(&p, b"LOBE x", true, ours).is_ok());
         assert!(write(&p, b"LOBE y", false, ours).is_ok());
-        assert!(check(&d, true, ours).unwrap_err().contains("directory"));
+        assert!(check(&d, true, ours).unwrap_err().message.contains("directory"));
         assert!(check(&d.join("missing/x"), false, ours).is_err());
         #[cfg(unix)]
         {
             let e = check(Path::new("/dev/null"), true, ours).unwrap_err();
-            assert!(e.contains("character device"), "{e}");
+            assert!(e.message.contains("character device"), "{e}");
             assert!(write_atomic(Path::new("/dev/null"), b"LOBE").is_err());
         }
         std::fs::remove_dir_all(&d).unwrap();

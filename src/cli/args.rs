@@ -9,6 +9,17 @@ use crate::base::output;
 use crate::{Backend, Kernel};
 use std::path::{Path, PathBuf};
 
+/// Parses `lo..hi` (both numbers) as `--range` and `--param` take it.
+pub fn parse_range(s: &str) -> Result<(f64, f64), String> {
+    let (a, b) = s.split_once("..").ok_or_else(|| format!("`{s}` is not a range; write lo..hi, e.g. 1..1000"))?;
+    let p = |t: &str| t.trim().parse::<f64>().map_err(|_| format!("`{}` is not a number in the range `{s}`", t.trim()));
+    let (lo, hi) = (p(a)?, p(b)?);
+    if !(lo.is_finite() && hi.is_finite()) || lo > hi {
+        return Err(format!("`{s}`: need finite lo ≤ hi"));
+    }
+    Ok((lo, hi))
+}
+
 /// A help text for `mut_arg`, written without a final full stop (clap drops it from doc comments).
 pub fn help(text: &'static str) -> impl FnOnce(clap::Arg) -> clap::Arg {
     move |a| a.help(text)
@@ -196,8 +207,9 @@ impl Force {
     /// recognised by `is_ours` nor `--force`d ([`output::check`]). Commands call this before doing the work, so
     /// a bad path costs nothing.
     pub fn check(&self, path: &Path, is_ours: fn(&[u8]) -> bool) -> Result<(), CliError> {
+        use crate::base::diag::Hint;
         output::check(path, self.on, is_ours)
-            .map_err(|m| CliError::hint(m, "choose another output path, or pass --force to replace it"))
+            .map_err(|d| if d.hints.is_empty() { d.hint(Hint::AllowOverwrite) } else { d }.into())
     }
 
     /// Checks `path` as [`Force::check`] does, then writes `bytes` to a temporary file in the same directory

@@ -1,27 +1,27 @@
 //! Helpers the subcommands share: loading a formula (file, `-` for stdin, or `--expr`), parsing and
 //! applying `name=value,…` lists, hints for misspelt names, `--json` documents, recognising lobe's own
-//! output files, and one error type that knows how to print itself and which exit code to use.
+//! output files, and the CLI's error, which words the library's structured hints with this CLI's flags.
 
-use crate::base::diag::Diagnostics;
+use crate::base::diag::{Diagnostic, Diagnostics, Hint, Setting, Wording};
 use crate::ir::Formula;
 use crate::{Backend, Kernel, Options};
 use std::fmt;
 
-/// An error a subcommand reports: rendered diagnostics, or a plain message with an optional hint.
+/// An error a subcommand reports: rendered diagnostics, or one message with its hints.
 #[derive(Debug)]
 pub enum CliError {
     Diagnostics(Diagnostics),
-    Msg { msg: String, hint: Option<String> },
+    Error(Diagnostic),
     /// The command ran, and its verdict is "fail" (e.g. `check --sweep --deny nan` found NaN); already printed.
     Failed,
 }
 
 impl CliError {
     pub fn msg(msg: impl Into<String>) -> CliError {
-        CliError::Msg { msg: msg.into(), hint: None }
+        CliError::Error(Diagnostic::error(msg))
     }
     pub fn hint(msg: impl Into<String>, hint: impl Into<String>) -> CliError {
-        CliError::Msg { msg: msg.into(), hint: Some(hint.into()) }
+        CliError::Error(Diagnostic::error(msg).hint(hint.into()))
     }
     /// Process exit code: 1 for bad input and failed verdicts.
     pub fn exit_code(&self) -> i32 {
@@ -29,11 +29,15 @@ impl CliError {
     }
     pub fn render(&self, color: bool) -> String {
         match self {
-            CliError::Diagnostics(d) => d.render(color),
-            CliError::Msg { msg, hint } => match hint {
-                Some(h) => format!("error: {msg}\n  = help: {h}\n"),
-                None => format!("error: {msg}\n"),
-            },
+            CliError::Diagnostics(d) => d.render_with(color, &Flags),
+            CliError::Error(d) => {
+                let hints = d.hint_texts(&Flags);
+                if hints.is_empty() {
+                    format!("error: {}\n", d.text(&Flags))
+                } else {
+                    format!("error: {}\n  = help: {}\n", d.text(&Flags), hints.join("; "))
+                }
+            }
             CliError::Failed => String::new(),
         }
     }
@@ -45,17 +49,35 @@ impl fmt::Display for CliError {
     }
 }
 
-/// A single located-nowhere diagnostic (an unreadable file, say) prints as a plain message with its hints.
-impl From<crate::base::diag::Diagnostic> for CliError {
-    fn from(d: crate::base::diag::Diagnostic) -> CliError {
-        CliError::Msg { msg: d.message, hint: (!d.hints.is_empty()).then(|| d.hints.join("; ")) }
+/// The library's hints and settings in this CLI's words: each names the flag that changes it.
+pub struct Flags;
+
+impl Wording for Flags {
+    fn hint(&self, h: &Hint) -> String {
+        match h {
+            Hint::Text(t) => t.clone(),
+            Hint::UseInterpreter => "the interpreter computes the same values: rerun with `--backend interp`".into(),
+            Hint::AllowOverwrite => "choose another output path, or pass --force to replace it".into(),
+            Hint::InputNotParam { name } => {
+                format!("`{name}` is an input (a cosine), not a parameter; `lobe eval` takes inputs with --at {name}=…")
+            }
+            Hint::BakeEveryParam => "give every parameter a value (--set) before normalising".into(),
+            Hint::FitSomeParam => "name at least one parameter: --param a=1..1000".into(),
+        }
+    }
+    fn setting(&self, s: &Setting) -> String {
+        match s {
+            Setting::Param { name, value: None } => format!("--set {name}"),
+            Setting::Param { name, value: Some(v) } => format!("--set {name}={v}"),
+        }
     }
 }
 
-/// A failed numerical check prints as its message and hint.
-impl From<crate::numerics::CheckError> for CliError {
-    fn from(e: crate::numerics::CheckError) -> Self {
-        CliError::Msg { msg: e.msg, hint: e.hint }
+/// A single located-nowhere diagnostic (an unreadable file, a failed numerical check) prints as a plain
+/// message with its hints.
+impl From<Diagnostic> for CliError {
+    fn from(d: Diagnostic) -> CliError {
+        CliError::Error(d)
     }
 }
 
@@ -86,7 +108,7 @@ pub fn load_formula_with(path: Option<&str>, expr: Option<&str>, show_warnings: 
     if show_warnings && !warnings.items.is_empty() {
         use std::io::IsTerminal;
         let color = std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none();
-        eprint!("{}", warnings.render(color));
+        eprint!("{}", warnings.render_with(color, &Flags));
     }
     Ok(f)
 }
@@ -111,6 +133,15 @@ pub fn compile_kernel(f: Formula, set: &[(String, f64)], backend: Backend, math:
 }
 
 pub use crate::front::parse_assignments;
+
+/// Refuses a `--threads` count the renderer would refuse, in the flag's words.
+pub fn check_threads(threads: usize) -> Result<(), CliError> {
+    use crate::render::MAX_THREADS;
+    if threads > MAX_THREADS {
+        return Err(CliError::msg(format!("--threads {threads} is more than {MAX_THREADS}; 0 uses one per core")));
+    }
+    Ok(())
+}
 
 /// Parameter values for a kernel: defaults, overridden by `set` (names already checked by compilation).
 pub fn param_values(f: &Formula, set: &[(String, f64)]) -> Vec<f64> {

@@ -83,6 +83,7 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
         None => ("<builtin paper_sphere.toml>".to_string(), PAPER_SCENE.to_string(), PathBuf::from(".")),
     };
     let job = CompareJob { scene_name: &scene_name, scene_src: &scene_src, base: &base, a: (&fa, &sa), b: (&fb, &sb), size: a.size };
+    common::check_threads(a.threads)?;
     let ropts = RenderOptions {
         threads: a.threads,
         transfer: if a.srgb { Transfer::Srgb } else { Transfer::Linear },

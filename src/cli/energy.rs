@@ -12,7 +12,7 @@ use super::common::{self, CliError};
 use crate::base::json;
 use crate::ir::Input;
 use crate::numerics::energy::{coef_sweep, full_energy_for, lobe_integral, score_against};
-use crate::numerics::parse_range;
+use super::args::parse_range;
 use crate::{Backend, Evaluator, Kernel};
 use serde_json::json;
 
@@ -217,7 +217,10 @@ pub fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<St
     // (n, Int(n)) to score a fitted coefficient against, and (n, coef(n)) to print.
     let (mut exact, mut coefs) = (Vec::with_capacity(ns.len()), Vec::with_capacity(ns.len()));
     for (n, r) in ns.iter().zip(results) {
-        let r = r.map_err(|e| CliError::Msg { msg: format!("at n = {n}: {}", e.msg), hint: e.hint })?;
+        let r = r.map_err(|mut e| {
+            e.message = format!("at n = {n}: {}", e.message);
+            CliError::Error(e)
+        })?;
         exact.push((*n, r.integral));
         coefs.push((*n, r.coef()));
     }

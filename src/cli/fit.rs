@@ -6,7 +6,7 @@ use super::args::{self, AgainstReference, BackendArg, Json, Params};
 use super::common::{self, CliError};
 use crate::base::json;
 use crate::numerics::fit::{fit, FitOptions, FreeParam, Metric};
-use crate::numerics::parse_range;
+use super::args::parse_range;
 use crate::Kernel;
 use std::io::IsTerminal;
 

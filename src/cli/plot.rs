@@ -72,6 +72,9 @@ pub fn run(a: &PlotArgs) -> Result<(), CliError> {
         }
         title = format!("Error against {}, {n_label}", reference.name);
     }
+    if a.polar && a.log {
+        return Err(CliError::msg("--log applies to cartesian plots only (a log radius has no zero)"));
+    }
     let opts = LobeOptions { title, polar: a.polar, log: a.log, size: a.size };
     let bytes = plot::lobes(&series, &opts, format).map_err(CliError::msg)?;
     a.out.force.write(output, &bytes, common::is_lobe_output)?;

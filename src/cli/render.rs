@@ -1,7 +1,7 @@
 //! `lobe render SCENE [-o out.png] [--size 1024] [--set n=200] [--backend jit|interp] [--threads N] [--stats [--json]]`
 
 use super::args::{self, BackendArg, Json, Output, Params};
-use super::common::CliError;
+use super::common::{self, CliError};
 use crate::render::image::{self, Transfer};
 use crate::render::scene::{self, LobeCompiler, LoadOptions};
 use crate::render::{self as r, CutoffEffect, RenderOptions, RenderStats};
@@ -74,12 +74,15 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
         threads: a.threads,
         tile: a.tile as usize,
         transfer: if a.srgb { Transfer::Srgb } else { Transfer::Linear },
-        progress: !a.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr()),
         cutoff: true,
         program: a.shading == Shading::Program,
     };
     let t0 = Instant::now();
-    let (frame, stats) = r::render(&sc, &ropts).map_err(CliError::msg)?;
+    common::check_threads(a.threads)?;
+    let bar = TileBar::new(!a.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr()));
+    let rendered = r::render_observed(&sc, &ropts, &|_, total| bar.tick(total));
+    bar.finish();
+    let (frame, stats) = rendered.map_err(CliError::msg)?;
     let t = Instant::now();
     let png = frame.image.encode_png().map_err(CliError::msg)?;
     let encode = t.elapsed();
@@ -215,5 +218,43 @@ mod tests {
         assert!(parse_size("5000").is_err());
         assert!(parse_size("0").is_err());
         assert!(parse_size("axb").is_err());
+    }
+}
+
+/// The render's progress on stderr: an indicatif bar that appears only once the render has run for half a
+/// second (a quick render prints nothing).
+struct TileBar {
+    bar: Option<indicatif::ProgressBar>,
+    start: Instant,
+    shown: std::sync::atomic::AtomicBool,
+}
+
+impl TileBar {
+    fn new(enabled: bool) -> TileBar {
+        let bar = enabled.then(|| {
+            let b = indicatif::ProgressBar::with_draw_target(None, indicatif::ProgressDrawTarget::hidden());
+            if let Ok(style) = indicatif::ProgressStyle::with_template("rendering {bar:40} {pos}/{len} tiles {elapsed}") {
+                b.set_style(style);
+            }
+            b
+        });
+        TileBar { bar, start: Instant::now(), shown: std::sync::atomic::AtomicBool::new(false) }
+    }
+    fn tick(&self, total: u64) {
+        use std::sync::atomic::Ordering;
+        let Some(b) = &self.bar else { return };
+        if !self.shown.load(Ordering::Relaxed)
+            && self.start.elapsed() > std::time::Duration::from_millis(500)
+            && !self.shown.swap(true, Ordering::Relaxed)
+        {
+            b.set_length(total);
+            b.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+        }
+        b.inc(1);
+    }
+    fn finish(&self) {
+        if let Some(b) = &self.bar {
+            b.finish_and_clear();
+        }
     }
 }

@@ -40,7 +40,7 @@ fn reload(a: &WatchArgs, src: String) -> Result<String, CliError> {
     let opts = LoadOptions { size: Some(a.size), set: a.set.list(), formula_override: Some((name, src)) };
     let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: crate::Backend::Jit, math: crate::Mode::Precise })?;
     let compile = t0.elapsed();
-    let ropts = RenderOptions { progress: false, ..RenderOptions::default() };
+    let ropts = RenderOptions::default();
     let (frame, stats) = r::render(&sc, &ropts).map_err(CliError::msg)?;
     let png = frame.image.encode_png().map_err(CliError::msg)?;
     a.out.force.write(a.out.required(), &png, image::is_lobe_png)?;

@@ -130,7 +130,7 @@ fn levenshtein(a: &str, b: &str) -> usize {
     prev[b.len()]
 }
 
-/// Parses `name=value,name=value` (parameter values: `--set`, `lobe serve`'s `set=` query); names are
+/// Parses `name=value,name=value` (parameter values given for a run, as the CLI and the page take them); names are
 /// identifiers, or a colour channel `base.r`; values finite numbers, or `true`/`false` (1/0, for bool
 /// parameters); each name once.
 pub fn parse_assignments(s: &str) -> Result<Vec<(String, f64)>, String> {

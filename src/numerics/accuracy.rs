@@ -21,7 +21,7 @@
 //! Cost: 2 × 1000 × (91 + 1801) batched evaluations plus ~100 scalar ones per n for the cut-offs —
 //! about 4 M evaluations for the whole report.
 
-use super::{lobe_inputs, CheckError};
+use super::{lobe_inputs, Diagnostic};
 use crate::backend::{Columns, Evaluator};
 use crate::ir::Input;
 use crate::N_INPUTS;
@@ -179,9 +179,9 @@ pub fn papers_mean(row_sums: impl IntoIterator<Item = f64>, nan: usize, n_max: u
 }
 
 /// The smallest usable `n_max` for the papers' metrics is 3 (the inflection metric starts there).
-pub fn check_n_max(n_max: u32) -> Result<(), CheckError> {
+pub fn check_n_max(n_max: u32) -> Result<(), Diagnostic> {
     if n_max < 3 {
-        return Err(CheckError::new("n_max must be at least 3"));
+        return Err(Diagnostic::error("n_max must be at least 3"));
     }
     Ok(())
 }
@@ -275,9 +275,9 @@ pub fn accuracy(
     ref_params: &[f64],
     ref_lobe: Input,
     opts: &AccuracyOptions,
-) -> Result<AccuracyReport, CheckError> {
+) -> Result<AccuracyReport, Diagnostic> {
     if !(opts.q > 0.0 && opts.q.is_finite() && opts.q <= 1000.0) {
-        return Err(CheckError::hint(format!("q = {} is not a usable cut-off exponent", opts.q), "use q in (0, 1000], e.g. 8"));
+        return Err(Diagnostic::error(format!("q = {} is not a usable cut-off exponent", opts.q)).hint("use q in (0, 1000], e.g. 8"));
     }
     check_n_max(opts.n_max)?;
     let reference_grid = PapersReference::new(reference, ref_params, ref_lobe, opts.n_max);

@@ -27,7 +27,7 @@
 //! (`benches/energy.rs` reproduces them).
 
 use super::quad::integrate;
-use super::{dir, inputs_from_dirs, lobe_inputs, CheckError, V3};
+use super::{dir, inputs_from_dirs, lobe_inputs, Diagnostic, V3};
 use crate::ir::Input;
 use crate::backend::Evaluator;
 use rayon::prelude::*;
@@ -67,17 +67,16 @@ fn describe(lobe: Input, c: f64) -> String {
 
 /// `∫₀¹ max(f(c), 0)·c dc` under the lobe convention, with clear errors for NaN, an infinity at the normal, a
 /// non-convergent (non-integrable) lobe, and a lobe that is zero everywhere.
-pub fn lobe_integral(ev: &dyn Evaluator, params: &[f64], lobe: Input) -> Result<LobeIntegral, CheckError> {
+pub fn lobe_integral(ev: &dyn Evaluator, params: &[f64], lobe: Input) -> Result<LobeIntegral, Diagnostic> {
     if let Some((i, v)) = params.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-        return Err(CheckError::new(format!("parameter #{i} is {v}; parameters must be finite")));
+        return Err(Diagnostic::error(format!("parameter #{i} is {v}; parameters must be finite")));
     }
     let f = |c: f64| ev.eval(&lobe_inputs(c, lobe), params);
     let at_normal = f(1.0);
     if at_normal.is_infinite() {
-        return Err(CheckError::hint(
-            format!("the formula is infinite at the normal ({}): the lobe cannot be normalised", describe(lobe, 1.0)),
-            "a BRDF lobe must be finite at its peak; check for a division by (1 − c) or similar",
-        ));
+        return Err(Diagnostic::error(
+            format!("the formula is infinite at the normal ({}): the lobe cannot be normalised", describe(lobe, 1.0))).hint(
+            "a BRDF lobe must be finite at its peak; check for a division by (1 − c) or similar"));
     }
     // Scan for NaN and for the switches between zero and positive.
     let mut xs: Vec<f64> = (0..=64).map(|i| i as f64 / 64.0).collect();
@@ -111,10 +110,9 @@ pub fn lobe_integral(ev: &dyn Evaluator, params: &[f64], lobe: Input) -> Result<
         start = b;
     }
     if let Some(i) = ys.iter().enumerate().position(|(i, y)| y.is_nan() && (i >= lead || lead == xs.len())) {
-        return Err(CheckError::hint(
-            format!("the formula is NaN at {}", describe(lobe, xs[i])),
-            "run `lobe sweep` on the file to see where it is undefined",
-        ));
+        return Err(Diagnostic::error(
+            format!("the formula is NaN at {}", describe(lobe, xs[i]))).hint(
+            "run `lobe sweep` on the file to see where it is undefined"));
     }
     // Breakpoints at every switch; only switches next to a non-negligible value are reported as cut-offs
     // (c^1000 underflowing to 0 near 62° is not a clamp).
@@ -165,32 +163,28 @@ pub fn lobe_integral(ev: &dyn Evaluator, params: &[f64], lobe: Input) -> Result<
     );
     evals += r.evals;
     if let Some(c) = nan_at {
-        return Err(CheckError::hint(
-            format!("the formula is NaN at {}", describe(lobe, c)),
-            "run `lobe sweep` on the file to see where it is undefined",
-        ));
+        return Err(Diagnostic::error(
+            format!("the formula is NaN at {}", describe(lobe, c))).hint(
+            "run `lobe sweep` on the file to see where it is undefined"));
     }
     if !r.value.is_finite() || !r.converged && r.error > 1e-7 * r.value.abs() {
-        return Err(CheckError::hint(
+        return Err(Diagnostic::error(
             format!(
                 "the lobe integral does not converge (estimate {:e} ± {:e} after {} evaluations): the lobe is not integrable",
                 r.value, r.error, r.evals
-            ),
-            "the formula probably has a pole inside [0°, 90°]; check its denominators",
-        ));
+            )).hint(
+            "the formula probably has a pole inside [0°, 90°]; check its denominators"));
     }
     if r.value <= 0.0 {
-        return Err(CheckError::hint(
-            "the integral is zero; cannot normalise",
-            "the formula is ≤ 0 (clamped to 0) at every angle for these parameters",
-        ));
+        return Err(Diagnostic::error(
+            "the integral is zero; cannot normalise").hint(
+            "the formula is ≤ 0 (clamped to 0) at every angle for these parameters"));
     }
     if let Some((c, bound)) = skipped {
         if c > SKIP_MAX || bound.is_nan() || bound > REL_TOL * r.value {
-            return Err(CheckError::hint(
-                format!("the formula is NaN for {} ≤ {c:e} and that piece is not negligible", lobe.name()),
-                "run `lobe check` on the file: the accuracy pass may remove the NaN",
-            ));
+            return Err(Diagnostic::error(
+                format!("the formula is NaN for {} ≤ {c:e} and that piece is not negligible", lobe.name())).hint(
+                "run `lobe check` on the file: the accuracy pass may remove the NaN"));
         }
     }
     Ok(LobeIntegral { integral: r.value, error: r.error, evals, kinks, skipped })
@@ -198,12 +192,12 @@ pub fn lobe_integral(ev: &dyn Evaluator, params: &[f64], lobe: Input) -> Result<
 
 /// The exact normalisation coefficient `1 / (2π·Int)` of the papers (lobe convention; module docs).
 /// Relative accuracy ~1e-11; a few hundred to ~2000 evaluations.
-pub fn normalization_coef(ev: &dyn Evaluator, params: &[f64], lobe_input: Input) -> Result<f64, CheckError> {
+pub fn normalization_coef(ev: &dyn Evaluator, params: &[f64], lobe_input: Input) -> Result<f64, Diagnostic> {
     lobe_integral(ev, params, lobe_input).map(|r| r.coef())
 }
 
 /// `coef(n)` for every `n` in `ns` (parameter 0 replaced), in parallel.
-pub fn coef_sweep(ev: &dyn Evaluator, params: &[f64], lobe: Input, ns: &[f64]) -> Vec<Result<LobeIntegral, CheckError>> {
+pub fn coef_sweep(ev: &dyn Evaluator, params: &[f64], lobe: Input, ns: &[f64]) -> Vec<Result<LobeIntegral, Diagnostic>> {
     ns.par_iter()
         .map(|&n| {
             let mut p = params.to_vec();
@@ -248,13 +242,13 @@ pub fn score_against(exact: &[(f64, f64)], fit: impl Fn(f64) -> f64) -> AgainstS
 
 /// The hemispherical-directional albedo `ρ(θᵢ)` (θᵢ in radians, < π/2) of an isotropic formula (L in the
 /// xz-plane; the y → −y symmetry halves the azimuth range).
-pub fn albedo(ev: &dyn Evaluator, params: &[f64], theta_i: f64) -> Result<f64, CheckError> {
+pub fn albedo(ev: &dyn Evaluator, params: &[f64], theta_i: f64) -> Result<f64, Diagnostic> {
     albedo_at(ev, params, theta_i, None)
 }
 
 /// `ρ(θᵢ, φᵢ)` for any formula: L at polar angle θᵢ and azimuth φᵢ (radians) about N, V over the whole
 /// hemisphere (no symmetry assumed). `None` for φᵢ: [`albedo`].
-pub fn albedo_at(ev: &dyn Evaluator, params: &[f64], theta_i: f64, phi_i: Option<f64>) -> Result<f64, CheckError> {
+pub fn albedo_at(ev: &dyn Evaluator, params: &[f64], theta_i: f64, phi_i: Option<f64>) -> Result<f64, Diagnostic> {
     let t = theta_i;
     let (st, ct) = t.sin_cos();
     let (sp, cp) = phi_i.unwrap_or(0.0).sin_cos();
@@ -313,7 +307,7 @@ pub fn albedo_at(ev: &dyn Evaluator, params: &[f64], theta_i: f64, phi_i: Option
     if let Some((a, p)) = nan {
         let v: V3 = std::array::from_fn(|k| a.cos() * r[k] + a.sin() * (p.cos() * t1[k] + p.sin() * t2[k]));
         let x = inputs_from_dirs(l, v);
-        return Err(CheckError::hint(
+        return Err(Diagnostic::error(
             format!(
                 "the formula is NaN at θᵢ = {:.3}° with NL={:.6} NV={:.6} NH={:.6} VR={:.6} VH={:.6}",
                 t.to_degrees(),
@@ -322,15 +316,13 @@ pub fn albedo_at(ev: &dyn Evaluator, params: &[f64], theta_i: f64, phi_i: Option
                 x[2],
                 x[3],
                 x[4]
-            ),
-            "run `lobe sweep` on the file to see where it is undefined",
-        ));
+            )).hint(
+            "run `lobe sweep` on the file to see where it is undefined"));
     }
     if !q.value.is_finite() || (!q.converged && q.error > 1e-5 * q.value.abs()) {
-        return Err(CheckError::hint(
-            format!("the albedo integral at θᵢ = {:.3}° does not converge (estimate {:e})", t.to_degrees(), q.value),
-            "the formula probably has a pole on the hemisphere",
-        ));
+        return Err(Diagnostic::error(
+            format!("the albedo integral at θᵢ = {:.3}° does not converge (estimate {:e})", t.to_degrees(), q.value)).hint(
+            "the formula probably has a pole on the hemisphere"));
     }
     Ok(q.value)
 }
@@ -410,12 +402,12 @@ pub const AZIMUTHS_DEG: [f64; 24] = {
 
 /// The full mode for a kernel that reads `used`: [`full_energy`] for a cosine formula; over θᵢ and φᵢ (see
 /// the module docs) when a direction component is read.
-pub fn full_energy_for(ev: &dyn Evaluator, used: crate::ir::InputSet, params: &[f64]) -> Result<FullEnergy, CheckError> {
+pub fn full_energy_for(ev: &dyn Evaluator, used: crate::ir::InputSet, params: &[f64]) -> Result<FullEnergy, Diagnostic> {
     if !used.reads_directions() {
         return full_energy(ev, params);
     }
     let grid: Vec<(f64, f64)> = full_mode_angles().into_iter().flat_map(|t| AZIMUTHS_DEG.map(|p| (t, p))).collect();
-    let cells: Result<Vec<(f64, f64, f64)>, CheckError> = grid
+    let cells: Result<Vec<(f64, f64, f64)>, Diagnostic> = grid
         .par_iter()
         .map(|&(t, p)| albedo_at(ev, params, t.to_radians(), Some(p.to_radians())).map(|r| (t, p, r)))
         .collect();
@@ -437,15 +429,15 @@ pub fn full_mode_angles() -> Vec<f64> {
 }
 
 /// ρ(θᵢ) over [`full_mode_angles`] (in parallel), its maximum, and reciprocity.
-pub fn full_energy(ev: &dyn Evaluator, params: &[f64]) -> Result<FullEnergy, CheckError> {
+pub fn full_energy(ev: &dyn Evaluator, params: &[f64]) -> Result<FullEnergy, Diagnostic> {
     let angles = full_mode_angles();
-    let rows: Result<Vec<(f64, f64)>, CheckError> =
+    let rows: Result<Vec<(f64, f64)>, Diagnostic> =
         angles.par_iter().map(|&d| albedo(ev, params, d.to_radians()).map(|r| (d, r))).collect();
     summarise(rows?, reciprocity(ev, params))
 }
 
 /// The maximum of ρ(θᵢ) rows and the coefficient it gives.
-fn summarise(rows: Vec<(f64, f64)>, reciprocity: Reciprocity) -> Result<FullEnergy, CheckError> {
+fn summarise(rows: Vec<(f64, f64)>, reciprocity: Reciprocity) -> Result<FullEnergy, Diagnostic> {
     let (mut albedo_max, mut at) = (f64::NEG_INFINITY, 0.0);
     for &(d, r) in &rows {
         if r > albedo_max {
@@ -454,10 +446,9 @@ fn summarise(rows: Vec<(f64, f64)>, reciprocity: Reciprocity) -> Result<FullEner
         }
     }
     if albedo_max <= 0.0 {
-        return Err(CheckError::hint(
-            "the albedo is zero at every incidence angle; cannot normalise",
-            "the formula is ≤ 0 (clamped to 0) everywhere for these parameters",
-        ));
+        return Err(Diagnostic::error(
+            "the albedo is zero at every incidence angle; cannot normalise").hint(
+            "the formula is ≤ 0 (clamped to 0) everywhere for these parameters"));
     }
     Ok(FullEnergy { albedo: rows, albedo_max, theta_i_at_max_deg: at, coef: 1.0 / albedo_max, reciprocity, albedo_phi: vec![], phi_i_at_max_deg: None })
 }
@@ -516,19 +507,19 @@ mod tests {
     fn bad_lobes_get_clear_errors() {
         let zero = FnEvaluator(|_: &[f64; crate::N_INPUTS], _: &[f64]| 0.0);
         let e = normalization_coef(&zero, &[50.0], Input::NH).unwrap_err();
-        assert!(e.msg.contains("integral is zero; cannot normalise"), "{e}");
+        assert!(e.message.contains("integral is zero; cannot normalise"), "{e}");
         let pole = FnEvaluator(|x: &[f64; crate::N_INPUTS], _: &[f64]| 1.0 / (1.0 - x[2]));
         let e = normalization_coef(&pole, &[50.0], Input::NH).unwrap_err();
-        assert!(e.msg.contains("infinite at the normal"), "{e}");
+        assert!(e.message.contains("infinite at the normal"), "{e}");
         let nan = FnEvaluator(|x: &[f64; crate::N_INPUTS], _: &[f64]| (x[2] - 0.5).sqrt());
         let e = normalization_coef(&nan, &[50.0], Input::NH).unwrap_err();
-        assert!(e.msg.contains("NaN"), "{e}");
+        assert!(e.message.contains("NaN"), "{e}");
         let e = normalization_coef(twins::blinn().ev.as_ref(), &[f64::NAN], Input::NH).unwrap_err();
-        assert!(e.msg.contains("finite"), "{e}");
+        assert!(e.message.contains("finite"), "{e}");
         // A pole inside the hemisphere (not at the normal): not integrable.
         let inner = FnEvaluator(|x: &[f64; crate::N_INPUTS], _: &[f64]| 1.0 / (x[2] - 0.5).abs());
         let e = normalization_coef(&inner, &[50.0], Input::NH).unwrap_err();
-        assert!(e.msg.contains("does not converge"), "{e}");
+        assert!(e.message.contains("does not converge"), "{e}");
     }
 
     #[test]
@@ -546,7 +537,7 @@ mod tests {
         assert!((r.coef() * PI - 1.0).abs() < 1e-9, "{}", r.coef());
         // A NaN piece whose edge value is not negligible is an error.
         let bad = FnEvaluator(|x: &[f64; crate::N_INPUTS], _: &[f64]| if x[2] < 1e-3 { f64::NAN } else { 1.0 });
-        assert!(lobe_integral(&bad, &[1.0], Input::NH).unwrap_err().msg.contains("not negligible"));
+        assert!(lobe_integral(&bad, &[1.0], Input::NH).unwrap_err().message.contains("not negligible"));
     }
 
     #[test]

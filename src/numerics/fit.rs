@@ -17,7 +17,7 @@ use super::accuracy::{
     check_n_max, epicenter_cos, papers_mean, rel, with_n, AngleGrid, PapersReference, RowError, EPICENTER_FROM,
     PAPERS_ANGLES,
 };
-use super::{lobe_inputs, CheckError};
+use super::{lobe_inputs, Diagnostic};
 use crate::backend::Evaluator;
 use crate::ir::Input;
 use rayon::prelude::*;
@@ -69,19 +69,19 @@ pub struct FreeParam {
 
 impl FreeParam {
     /// The grid values of stage 1.
-    pub fn grid(&self) -> Result<Vec<f64>, CheckError> {
+    pub fn grid(&self) -> Result<Vec<f64>, Diagnostic> {
         if !(self.lo.is_finite() && self.hi.is_finite() && self.lo <= self.hi) {
-            return Err(CheckError::hint(format!("bad range {}..{} for `{}`", self.lo, self.hi, self.name), "write e.g. a=1..1000"));
+            return Err(Diagnostic::error(format!("bad range {}..{} for `{}`", self.lo, self.hi, self.name)).hint("write e.g. a=1..1000"));
         }
         let step = match self.step {
             Some(s) if s > 0.0 && s.is_finite() => s,
-            Some(s) => return Err(CheckError::new(format!("step {s} for `{}` must be positive", self.name))),
+            Some(s) => return Err(Diagnostic::error(format!("step {s} for `{}` must be positive", self.name))),
             None if self.lo.fract() == 0.0 && self.hi.fract() == 0.0 => 1.0,
             None => (self.hi - self.lo) / 40.0,
         };
         let count = ((self.hi - self.lo) / step + 1e-9).floor() + 1.0;
         if count > 1e6 || step == 0.0 && self.hi > self.lo {
-            return Err(CheckError::hint(format!("`{}` would take {count} grid values", self.name), "give a coarser step: a=lo..hi:step"));
+            return Err(Diagnostic::error(format!("`{}` would take {count} grid values", self.name)).hint("give a coarser step: a=lo..hi:step"));
         }
         Ok((0..count.max(1.0) as usize).map(|i| (self.lo + i as f64 * step).min(self.hi)).collect())
     }
@@ -197,21 +197,20 @@ pub fn fit(
     free: &[FreeParam],
     opts: &FitOptions,
     progress: &(dyn Fn() + Sync),
-) -> Result<FitReport, CheckError> {
+) -> Result<FitReport, Diagnostic> {
     if free.is_empty() {
-        return Err(CheckError::hint("nothing to fit", "name at least one parameter: --param a=1..1000"));
+        return Err(Diagnostic::error("nothing to fit").hint(crate::base::diag::Hint::FitSomeParam));
     }
     if let Some(f) = free.iter().find(|f| f.index == 0 || f.index >= base_params.len()) {
-        return Err(CheckError::hint(
-            format!("cannot fit `{}`", f.name),
-            if f.index == 0 { "n is swept by the metric itself; fit the other parameters" } else { "not a parameter of the formula" },
-        ));
+        return Err(Diagnostic::error(
+            format!("cannot fit `{}`", f.name)).hint(
+            if f.index == 0 { "n is swept by the metric itself; fit the other parameters" } else { "not a parameter of the formula" }));
     }
     check_n_max(opts.n_max)?;
     let grids: Vec<Vec<f64>> = free.iter().map(FreeParam::grid).collect::<Result<_, _>>()?;
     let total: usize = grids.iter().map(Vec::len).product();
     if total > 2_000_000 {
-        return Err(CheckError::hint(format!("the grid has {total} points"), "use coarser steps (a=lo..hi:step) or fewer parameters"));
+        return Err(Diagnostic::error(format!("the grid has {total} points")).hint("use coarser steps (a=lo..hi:step) or fewer parameters"));
     }
     let scorer = Scorer::new(ev, lobe, reference, ref_params, ref_lobe, opts.metric, opts.n_max);
     let point = |mut i: usize| {
@@ -408,7 +407,7 @@ mod tests {
     fn bad_requests_are_errors() {
         let b = twins::blinn();
         let e = fit(b.ev.as_ref(), &[1.0], Input::NH, b.ev.as_ref(), &[1.0], Input::NH, &[], &FitOptions::default(), &|| {});
-        assert!(e.unwrap_err().msg.contains("nothing to fit"));
+        assert!(e.unwrap_err().message.contains("nothing to fit"));
         let free = [FreeParam { index: 0, name: "n".into(), lo: 1.0, hi: 5.0, step: None }];
         let e = fit(b.ev.as_ref(), &[1.0], Input::NH, b.ev.as_ref(), &[1.0], Input::NH, &free, &FitOptions::default(), &|| {});
         assert!(e.is_err());

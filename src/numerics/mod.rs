@@ -6,7 +6,7 @@
 //! parameter declarations or used-input set) — never source text — so the same code runs on the JIT, the
 //! interpreter, or a hand-written Rust closure ([`twins`], used by the tests to pin the published numbers).
 //!
-//! # The lobe convention (shared by `energy --mode lobe`, `accuracy` and `fit`)
+//! # The lobe convention (shared by the lobe-mode energy check, accuracy and fit)
 //! The papers treat a lobe as a function of one angle θ, `c = cos θ`, with the light at the normal. lobe maps
 //! `c` to the five inputs as [`lobe_inputs`] does: **NL = 1** (light at the normal), **NV = c** (the
 //! outgoing direction whose cosine weights the integral), **NH = VR = c** (whichever lobe variable the formula
@@ -14,14 +14,14 @@
 //! **VH = cos(θ/2) = √((1+c)/2)** (L = N, V at θ). Because NH and VR are both set to `c`, the result does
 //! not depend on which of the two a formula reads; [`choose_lobe_input`] still names it for reports.
 //! The physically consistent alternative (NH = cos(θ/2) for a light at the normal) is what
-//! `energy --mode full` measures at θᵢ = 0.
+//! the full-mode energy check measures at θᵢ = 0.
 //!
-//! # JSON keys (`--json`, one object per command; stable)
+//! # JSON keys (one object per check; stable)
 //! Numbers follow [`crate::base::json`]: finite values are numbers, NaN and ±inf the strings `"NaN"`, `"inf"`,
 //! `"-inf"`.
 //! - `energy`: `mode` (`lobe` or `full`), `params`; lobe mode: `coef` (1/(2π·Int)), `integral`, `evals`,
-//!   `lobe_input`; with `--range`: `range` = list of {`n`, `coef`} instead of `coef`/`integral`/`evals`; with
-//!   `--against`: `against_max_abs` (max |coef_fit·2π·Int − 1|), `against_worst_n`, `against_mean_abs`; full
+//!   `lobe_input`; over a range of n: `range` = list of {`n`, `coef`} instead of `coef`/`integral`/`evals`; against
+//!   a fitted coefficient: `against_max_abs` (max |coef_fit·2π·Int − 1|), `against_worst_n`, `against_mean_abs`; full
 //!   mode: `coef` (= 1/`albedo_max`), `albedo_max`, `theta_i_at_max_deg`, `albedo` (list of {`theta_i_deg`,
 //!   `rho`}), `reciprocity_max_rel`, `reciprocity_worst` ({`theta_l_deg`, `theta_v_deg`, `phi_v_deg`}).
 //! - `accuracy`: `mean_abs_grid`, `epicenter_max_rel_pct` (+ `epicenter_worst_n`), `inflection_max_rel_pct`
@@ -66,36 +66,8 @@ pub mod sweep;
 pub mod truth;
 pub mod twins;
 
+use crate::base::diag::Diagnostic;
 use crate::ir::{Input, InputSet, N_INPUTS};
-use std::fmt;
-
-/// A check that cannot produce a number, with a message and a hint for the user.
-#[derive(Clone, Debug, PartialEq)]
-pub struct CheckError {
-    pub msg: String,
-    pub hint: Option<String>,
-}
-
-impl CheckError {
-    pub fn new(msg: impl Into<String>) -> CheckError {
-        CheckError { msg: msg.into(), hint: None }
-    }
-    pub fn hint(msg: impl Into<String>, hint: impl Into<String>) -> CheckError {
-        CheckError { msg: msg.into(), hint: Some(hint.into()) }
-    }
-}
-
-impl fmt::Display for CheckError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.msg)?;
-        if let Some(h) = &self.hint {
-            write!(f, " (help: {h})")?;
-        }
-        Ok(())
-    }
-}
-
-impl std::error::Error for CheckError {}
 
 /// The inputs for lobe angle `c = cos θ` under the lobe convention (module docs); `lobe` is additionally set
 /// to `c` (a no-op for NH, VR and NV).
@@ -157,27 +129,15 @@ pub fn inputs_from_dirs(l: V3, v: V3) -> [f64; N_INPUTS] {
 }
 
 /// Checks parameter values against declarations (range and finiteness), for checks that vary them.
-pub fn check_param_values(decls: &[crate::ir::ParamDecl], params: &[f64]) -> Result<(), CheckError> {
+pub fn check_param_values(decls: &[crate::ir::ParamDecl], params: &[f64]) -> Result<(), Diagnostic> {
     for (d, v) in decls.iter().zip(params) {
         if !d.admits(*v) {
-            return Err(CheckError::hint(
-                format!("parameter `{}` = {v} is outside its declared range {}..{}", d.name, d.lo, d.hi),
-                format!("choose {} in {}..{}", d.name, d.lo, d.hi),
-            ));
+            return Err(Diagnostic::error(
+                format!("parameter `{}` = {v} is outside its declared range {}..{}", d.name, d.lo, d.hi)).hint(
+                format!("choose {} in {}..{}", d.name, d.lo, d.hi)));
         }
     }
     Ok(())
-}
-
-/// Parses `lo..hi` (both numbers) as used by `--range` and `--param`.
-pub fn parse_range(s: &str) -> Result<(f64, f64), String> {
-    let (a, b) = s.split_once("..").ok_or_else(|| format!("`{s}` is not a range; write lo..hi, e.g. 1..1000"))?;
-    let p = |t: &str| t.trim().parse::<f64>().map_err(|_| format!("`{}` is not a number in the range `{s}`", t.trim()));
-    let (lo, hi) = (p(a)?, p(b)?);
-    if !(lo.is_finite() && hi.is_finite()) || lo > hi {
-        return Err(format!("`{s}`: need finite lo ≤ hi"));
-    }
-    Ok((lo, hi))
 }
 
 #[cfg(test)]

@@ -39,7 +39,7 @@
 use super::accuracy::{accuracy, AccuracyOptions};
 use super::energy::{coef_sweep, normalization_coef, score_against};
 use super::twins::{self, Twin};
-use super::CheckError;
+use super::Diagnostic;
 use crate::ir::Input;
 
 /// How a published number is stated.
@@ -155,7 +155,7 @@ pub fn verdict(published: f64, kind: Kind, computed: f64) -> Verdict {
 }
 
 /// Recomputes a row's quantity.
-pub fn compute(q: &Quantity) -> Result<f64, CheckError> {
+pub fn compute(q: &Quantity) -> Result<f64, Diagnostic> {
     let blinn = twins::blinn();
     let acc = |t: fn() -> Twin, p: &[f64], from: u32| {
         let t = t();

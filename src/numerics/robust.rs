@@ -32,8 +32,8 @@
 //! `compensated-params` first (it rewrites the formula before baking, so a baked parameter folds what the live
 //! kernel computes), then each candidate of `simplify::accuracy` in turn on the current best, keep it when it is more accurate — fewer non-finite
 //! results where the truth is finite, then a lower maximum over well-conditioned points (by half a bit, or from
-//! above [`TARGET_BITS`] to within it), then a lower average — and its static cost ([`crate::simplify::accuracy::cost`]) stays within the budget: `--prefer speed` keeps
-//! only rewrites that cost nothing, `--prefer accuracy` (default) those within `max_cost` (1.3) × the fastest
+//! above [`TARGET_BITS`] to within it), then a lower average — and its static cost ([`crate::simplify::accuracy::cost`]) stays within the budget: [`Prefer::Speed`] keeps
+//! only rewrites that cost nothing, [`Prefer::Accuracy`] (default) those within `max_cost` (1.3) × the fastest
 //! form's cost — up to [`NONFINITE_BUDGET`] (2×) for a rewrite that removes NaN/∞ results where the true
 //! value is finite, since those are wrong answers, not imprecise ones — and up to the cost of the `pow`-call
 //! form for `compensated-power` (large baked integer powers as compensated chains): a baked exponent then never
@@ -402,7 +402,7 @@ pub fn measure_against(ev: &dyn Evaluator, truth_f: &Formula, points: &[Point], 
     s
 }
 
-/// What to optimise for (`--prefer`).
+/// What to optimise for: speed or accuracy.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Prefer {
     /// Only rewrites that cost nothing.

@@ -130,7 +130,7 @@ pub struct RegionStats {
 }
 
 impl RegionStats {
-    /// The count of one kind by its `--deny` name: nan, inf, negative, bound.
+    /// The count of one kind by name: nan, inf, negative, bound.
     pub fn count(&self, kind: &str) -> u64 {
         match kind {
             "nan" => self.nan,

@@ -157,7 +157,7 @@ pub fn compare_formulas(
     compare_in(&geometry, job.a, job.b, set, compiler, ropts)
 }
 
-/// [`compare_formulas`] at each of `sets` (one comparison per set, in order; `lobe compare --sweep-n`). The
+/// [`compare_formulas`] at each of `sets` (one comparison per set, in order). The
 /// scene is parsed and its meshes built once; each comparison only compiles the two formulas with its values.
 /// Errors are those of the first set's comparison, as if each had been run alone.
 pub fn compare_sweep(
@@ -187,7 +187,8 @@ pub fn compare_in(
         if let Some((k, _)) = set.iter().find(|(k, _)| !da.iter().chain(db).any(|p| p.name == *k)) {
             return Err(crate::Diagnostics::single(
                 geometry.name(),
-                crate::Diagnostic::error(format!("--set {k}: neither formula declares a parameter `{k}`"))
+                crate::Diagnostic::error(format!("neither formula declares a parameter `{k}`"))
+                    .about(crate::base::diag::Setting::Param { name: k.clone(), value: None })
                     .hint("every formula has `n`; see each file's `param` lines"),
             ));
         }

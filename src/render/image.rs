@@ -2,7 +2,7 @@
 //!
 //! Colour: the renderer accumulates linear RGB in f64. The papers' program clamps each channel to 0..1 and
 //! scales to 0..255 with no gamma curve, so that is the default ([`Transfer::Linear`]) and what the
-//! comparison metrics are computed on; `--srgb` applies the sRGB transfer curve instead, which is what a
+//! comparison metrics are computed on; [`Transfer::Srgb`] applies the sRGB transfer curve instead, which is what a
 //! physically based pipeline would display. NaN channels become 0.
 //!
 //! PNG encoding is one serial pass (the "up" filter, then fdeflate's fastest mode); measured against the

@@ -49,14 +49,14 @@ use glam::DVec3;
 use image::{Image, Transfer};
 use mesh::Mesh;
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// Largest image side accepted.
 pub const MAX_SIZE: usize = 4096;
 
-/// An image size `N` (square) or `WxH`, each 1..=[`MAX_SIZE`] (`--size`, `lobe serve`'s `size=`).
+/// An image size `N` (square) or `WxH`, each 1..=[`MAX_SIZE`] (the image size a front end asks for).
 pub fn parse_size(s: &str) -> Result<(usize, usize), String> {
     let one = |t: &str| -> Result<usize, String> {
         let v: usize = t.trim().parse().map_err(|_| format!("`{t}` is not a whole number"))?;
@@ -161,7 +161,7 @@ impl std::fmt::Debug for Material {
 /// A mesh in world space with its material.
 #[derive(Clone, Debug)]
 pub struct Object {
-    /// Shared: scenes made from one [`scene::Geometry`] (e.g. each row of `lobe compare --sweep-n`) use the
+    /// Shared: scenes made from one [`scene::Geometry`] (e.g. each row of a comparison over several n) use the
     /// same mesh.
     pub mesh: Arc<Mesh>,
     pub material: usize,
@@ -189,8 +189,6 @@ pub struct RenderOptions {
     /// Tile side in pixels (32 or 64 are sensible).
     pub tile: usize,
     pub transfer: Transfer,
-    /// Show a progress bar on stderr if the render takes longer than half a second.
-    pub progress: bool,
     /// Apply the materials' cut-offs (off: evaluate F everywhere, to measure what the cut-off changes).
     pub cutoff: bool,
     /// Shade with each material's compiled shading program (off: the Rust span loops with one batched kernel
@@ -200,7 +198,7 @@ pub struct RenderOptions {
 
 impl Default for RenderOptions {
     fn default() -> RenderOptions {
-        RenderOptions { threads: 0, tile: 64, transfer: Transfer::Linear, progress: false, cutoff: true, program: true }
+        RenderOptions { threads: 0, tile: 64, transfer: Transfer::Linear, cutoff: true, program: true }
     }
 }
 
@@ -266,21 +264,27 @@ pub const MAX_THREADS: usize = 256;
 
 /// Renders `scene`. Fails only if the thread count is over [`MAX_THREADS`] or the pool cannot be built.
 pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<(Frame, RenderStats), String> {
+    render_observed(scene, opts, &|_, _| {})
+}
+
+/// [`render`], calling `progress(done, total)` (tiles) from the worker threads after each tile, so a front end
+/// can draw progress; the renderer draws nothing itself.
+pub fn render_observed(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64, u64) + Sync)) -> Result<(Frame, RenderStats), String> {
     if opts.threads > MAX_THREADS {
-        return Err(format!("--threads {} is more than {MAX_THREADS}; 0 uses one per core", opts.threads));
+        return Err(format!("{} worker threads is more than {MAX_THREADS}; 0 uses one per core", opts.threads));
     }
     if opts.threads == 0 {
-        Ok(render_in_pool(scene, opts))
+        Ok(render_in_pool(scene, opts, progress))
     } else {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(opts.threads)
             .build()
             .map_err(|e| format!("cannot start {} threads: {e}", opts.threads))?;
-        Ok(pool.install(|| render_in_pool(scene, opts)))
+        Ok(pool.install(|| render_in_pool(scene, opts, progress)))
     }
 }
 
-fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
+fn render_in_pool(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64, u64) + Sync)) -> (Frame, RenderStats) {
     let t0 = Instant::now();
     let (w, h) = (scene.width, scene.height);
     let tile = opts.tile.clamp(8, 256);
@@ -305,7 +309,7 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
     let program_compile = tc.elapsed();
     let plans: Vec<(plan::ShadingPlan, Option<shade::ProgramRun>)> = plans.into_iter().zip(programs).collect();
     let timers = Timers::default();
-    let progress = Progress::new(opts.progress, setup.bins.len() as u64);
+    let (tiles_done, tiles) = (AtomicU64::new(0), setup.bins.len() as u64);
     let mut rgb = vec![0u8; w * h * 3];
     let mut covered = vec![false; w * h];
     // One task per band of tiles: its tiles are shaded in order into the thread's scratch and copied straight
@@ -327,7 +331,7 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
             for tx in 0..setup.tiles_x {
                 let t = ty * setup.tiles_x + tx;
                 let shaded = tile_pixels(scene, &plans, &setup, t, sc, opts.transfer, bg, &timers);
-                progress.tick();
+                progress(tiles_done.fetch_add(1, Ordering::Relaxed) + 1, tiles);
                 let Some(c) = shaded else { continue };
                 counts += c;
                 let (x0, _, tw, th) = raster::tile_rect(&setup, t);
@@ -342,7 +346,6 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions) -> (Frame, RenderStats) {
             counts
         })
         .collect();
-    progress.finish();
     let mut counts = shade::ShadeCounts::default();
     for c in band_counts {
         counts += c;
@@ -440,7 +443,7 @@ pub fn cutoff_effect(scene: &Scene, opts: &RenderOptions, frame: &Frame, stats: 
     if !opts.cutoff || scene.materials.iter().all(|m| m.cutoff.is_none()) {
         return Ok(None);
     }
-    let (full, _) = render(scene, &RenderOptions { cutoff: false, progress: false, ..*opts })?;
+    let (full, _) = render(scene, &RenderOptions { cutoff: false, ..*opts })?;
     let (a, b) = (&frame.image.rgb, &full.image.rgb);
     let mut max = 0u8;
     let mut differing = 0u64;
@@ -453,38 +456,3 @@ pub fn cutoff_effect(scene: &Scene, opts: &RenderOptions, frame: &Frame, stats: 
     Ok(Some(CutoffEffect { skipped: stats.cut, max_channel_diff: max, pixels_differing: differing, metrics }))
 }
 
-/// An indicatif bar that appears only once a render has run for half a second.
-struct Progress {
-    bar: Option<indicatif::ProgressBar>,
-    start: Instant,
-    shown: AtomicBool,
-}
-
-impl Progress {
-    fn new(enabled: bool, total: u64) -> Progress {
-        let bar = enabled.then(|| {
-            let b = indicatif::ProgressBar::with_draw_target(Some(total), indicatif::ProgressDrawTarget::hidden());
-            if let Ok(style) = indicatif::ProgressStyle::with_template("rendering {bar:40} {pos}/{len} tiles {elapsed}") {
-                b.set_style(style);
-            }
-            b
-        });
-        Progress { bar, start: Instant::now(), shown: AtomicBool::new(false) }
-    }
-    fn tick(&self) {
-        if let Some(b) = &self.bar {
-            if !self.shown.load(Ordering::Relaxed)
-                && self.start.elapsed() > Duration::from_millis(500)
-                && !self.shown.swap(true, Ordering::Relaxed)
-            {
-                b.set_draw_target(indicatif::ProgressDrawTarget::stderr());
-            }
-            b.inc(1);
-        }
-    }
-    fn finish(&self) {
-        if let Some(b) = &self.bar {
-            b.finish_and_clear();
-        }
-    }
-}

@@ -113,7 +113,7 @@ fn err<E: std::fmt::Display>(e: E) -> String {
 /// Lobes (value against angle in degrees, 0..90). Polar: radius = value, drawn on both sides of the axis.
 pub fn lobes(series: &[Series], o: &LobeOptions, format: Format) -> DrawResult<Vec<u8>> {
     if o.polar && o.log {
-        return Err("--log applies to cartesian plots only (a log radius has no zero)".into());
+        return Err("a log scale applies to cartesian plots only (a log radius has no zero)".into());
     }
     let values = || series.iter().flat_map(|s| s.points.iter().map(|p| p.1)).filter(|v| v.is_finite());
     if values().next().is_none() {
@@ -122,7 +122,7 @@ pub fn lobes(series: &[Series], o: &LobeOptions, format: Format) -> DrawResult<V
     let ymax = values().fold(0.0f64, f64::max).max(1e-12);
     let ymin_pos = values().filter(|v| *v > 0.0).fold(f64::INFINITY, f64::min);
     if o.log && !ymin_pos.is_finite() {
-        return Err("nothing to plot on a log scale: no curve has a positive finite value (drop --log)".into());
+        return Err("nothing to plot on a log scale: no curve has a positive finite value (use a linear scale)".into());
     }
     let ymin_pos = ymin_pos.max(ymax * 1e-12);
     macro_rules! body {
@@ -178,7 +178,7 @@ pub fn lobes(series: &[Series], o: &LobeOptions, format: Format) -> DrawResult<V
     render_with(format, o.size, |r| body!(r), |r| body!(r))
 }
 
-/// Curves over any x range (e.g. coef(n) against n for `lobe energy --range … --plot`).
+/// Curves over any x range (e.g. the normalisation coefficient against n over a range of n).
 pub fn curves(series: &[Series], title: &str, x_desc: &str, y_desc: &str, format: Format) -> DrawResult<Vec<u8>> {
     let pts = || series.iter().flat_map(|s| s.points.iter()).filter(|p| p.0.is_finite() && p.1.is_finite());
     let (xmin, xmax) = pts().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.0), b.max(p.0)));
@@ -897,7 +897,7 @@ mod tests {
         assert!(speed_error(&[pt("ref", 3.0, 0.0, true)], "t", "ns", "err", Format::Png).is_ok());
     }
 
-    /// 16 formulas × 2 series as `lobe bench --plot` sees them: costs 0.4–80 ns, errors 1e-4–2, fast math
+    /// 16 formulas × 2 series as the benchmark's plot sees them: costs 0.4–80 ns, errors 1e-4–2, fast math
     /// cheaper on transcendental formulas at almost the same error (so pairs sit side by side), a zero-error
     /// reference and a NaN row.
     fn bench_like() -> Vec<CostError> {

@@ -124,7 +124,7 @@ impl BrdfCompiler for Live<'_> {
 /// The compile error back as diagnostics (the scene loader wants them); a size refusal becomes one item.
 fn diagnostics_of(file: &str, src: &str, e: ApiError) -> Diagnostics {
     let mut ds = Diagnostics::new(file, src);
-    ds.push(crate::Diagnostic::error(e.error));
+    ds.push(crate::Diagnostic::error(e.error.message));
     ds
 }
 
@@ -194,7 +194,7 @@ fn formula_field(v: &Value) -> Result<(String, String), ApiError> {
     Ok((name, str_field(v, "text")?.to_string()))
 }
 
-/// `{"params": {"n": 50, …}}` → a `--set` list.
+/// `{"params": {"n": 50, …}}` → a list of parameter values.
 fn params_field(v: &Value) -> Result<Vec<(String, f64)>, ApiError> {
     let Some(p) = v.get("params") else { return Ok(vec![]) };
     let obj = p.as_object().ok_or_else(|| ApiError::bad("`params` must be an object of numbers"))?;
@@ -218,7 +218,7 @@ fn size_field(st: &State, v: &Value) -> Result<usize, ApiError> {
     Ok(s)
 }
 
-/// Parameter values for a kernel: declared defaults, then `set` (range-checked like `--set`).
+/// Parameter values for a kernel: declared defaults, then `set` (range-checked like every parameter value given for a run).
 fn values(k: &Kernel, set: &[(String, f64)]) -> Result<Vec<f64>, ApiError> {
     crate::resolve_bake(&k.formula, set)?;
     let mut p = k.default_params();
@@ -418,14 +418,14 @@ pub fn analyze(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
         let num = crate::base::json::value;
         match crate::numerics::normalize::coefficient(k.as_ref(), k.used_inputs(), &params) {
             Ok(c) => out["coef"] = num(c),
-            Err(e) => out["coef_error"] = e.msg.into(),
+            Err(e) => out["coef_error"] = e.message.into(),
         }
         match crate::numerics::energy::full_energy_for(k.as_ref(), k.used_inputs(), &params) {
             Ok(e) => {
                 out["albedo_max"] = num(e.albedo_max);
                 out["theta_i_at_max_deg"] = num(e.theta_i_at_max_deg);
             }
-            Err(e) => out["albedo_error"] = e.msg.into(),
+            Err(e) => out["albedo_error"] = e.message.into(),
         }
         if let Some(r) = req.get("reference") {
             let (rn, rt) = formula_field(r)?;
@@ -472,7 +472,7 @@ pub fn save(st: &State, req: &Value) -> Result<Reply, ApiError> {
     Ok(Reply::ok_json(json!({ "path": path, "hash": content_hash(text.as_bytes()) })))
 }
 
-/// `GET /render.png?file=SCENE&set=n=50&size=256`: exactly `lobe render SCENE --set n=50 --size 256` (JIT,
+/// `GET /render.png?file=SCENE&set=n=50&size=256`: exactly what rendering SCENE with n = 50 at size 256 gives (JIT,
 /// linear transfer, default tiles and threads), so the bytes equal the CLI's output file.
 pub fn render_png(st: &Arc<State>, query: &str) -> Result<Reply, ApiError> {
     let mut file = None;
@@ -529,9 +529,9 @@ mod tests {
         })
         .unwrap_err();
         assert_eq!(e.status, 503);
-        assert!(e.error.contains("longer than"), "{}", e.error);
+        assert!(e.error.message.contains("longer than"), "{}", e.error);
         let busy = limited(&st, |_| Ok(())).unwrap_err();
-        assert!(busy.status == 503 && busy.error.contains("busy"), "{}", busy.error);
+        assert!(busy.status == 503 && busy.error.message.contains("busy"), "{}", busy.error);
         release.send(()).unwrap();
         let t = std::time::Instant::now();
         while st.jobs.load(Ordering::SeqCst) > 0 && t.elapsed() < Duration::from_secs(30) {

@@ -12,6 +12,7 @@
 //! honoured, HTTP/1.0 closes). One thread per connection, at most [`MAX_CONNECTIONS`] at once (the rest get
 //! 503); idle or slow connections are closed after [`IDLE`].
 
+use crate::base::diag::{Diagnostic, Plain};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::path::{Component, Path, PathBuf};
@@ -238,30 +239,31 @@ impl Reply {
 }
 
 /// A refused request: an HTTP status and a JSON body `{"error", "hint", "diagnostics"}` the page shows.
+/// `error` and `hint` are the [`Diagnostic`]'s message and hints in [`Plain`] words (the page has no flags);
 /// `diagnostics` are [`crate::Diagnostics::to_json`] items (file, line, col, caret text), as the CLI prints.
 #[derive(Debug)]
 pub struct ApiError {
     pub status: u16,
-    pub error: String,
-    pub hint: Option<String>,
+    pub error: Diagnostic,
     pub diagnostics: Option<serde_json::Value>,
 }
 
 impl ApiError {
     pub fn new(status: u16, error: impl Into<String>) -> ApiError {
-        ApiError { status, error: error.into(), hint: None, diagnostics: None }
+        ApiError { status, error: Diagnostic::error(error), diagnostics: None }
     }
     pub fn hint(mut self, h: impl Into<String>) -> ApiError {
-        self.hint = Some(h.into());
+        self.error = self.error.hint(h.into());
         self
     }
     pub fn bad(error: impl Into<String>) -> ApiError {
         ApiError::new(400, error)
     }
     pub fn reply(&self) -> Reply {
-        let mut v = serde_json::json!({ "error": self.error });
-        if let Some(h) = &self.hint {
-            v["hint"] = h.as_str().into();
+        let mut v = serde_json::json!({ "error": self.error.text(&Plain) });
+        let hints = self.error.hint_texts(&Plain);
+        if !hints.is_empty() {
+            v["hint"] = hints.join("; ").into();
         }
         if let Some(d) = &self.diagnostics {
             v["diagnostics"] = d.clone();
@@ -273,14 +275,15 @@ impl ApiError {
 /// Bad input in a formula or scene: 422 with the diagnostics.
 impl From<crate::Diagnostics> for ApiError {
     fn from(ds: crate::Diagnostics) -> ApiError {
-        let first = ds.errors().next().map(|d| d.message.clone()).unwrap_or_else(|| "invalid input".into());
-        ApiError { status: 422, error: first, hint: None, diagnostics: Some(ds.to_json()) }
+        let first = ds.errors().next().map(|d| d.text(&Plain)).unwrap_or_else(|| "invalid input".into());
+        ApiError { status: 422, error: Diagnostic::error(first), diagnostics: Some(ds.to_json()) }
     }
 }
 
-impl From<crate::numerics::CheckError> for ApiError {
-    fn from(e: crate::numerics::CheckError) -> ApiError {
-        ApiError { status: 422, error: e.msg, hint: e.hint, diagnostics: None }
+/// A failed check (one unlocated message with its hints): 422.
+impl From<Diagnostic> for ApiError {
+    fn from(e: Diagnostic) -> ApiError {
+        ApiError { status: 422, error: e, diagnostics: None }
     }
 }
 

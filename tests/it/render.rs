@@ -576,7 +576,7 @@ fn staged_loading_keeps_the_diagnostics() {
         Err(d) => d.render(false),
     };
     assert_eq!(cmp, alone);
-    assert!(cmp.contains("[camera]") && cmp.contains("--set n=1000000000") && cmp.contains("unknown material `mm`"), "{cmp}");
+    assert!(cmp.contains("[camera]") && cmp.contains("set n=1000000000") && cmp.contains("unknown material `mm`"), "{cmp}");
 }
 
 /// `math = "fast"` on a material (and `--math` through `LobeCompiler`): the kernel runs fast math, and the

@@ -91,8 +91,7 @@ impl From<ModuleError> for JitError {
 impl JitError {
     /// The error as a diagnostic, with a hint to fall back to the interpreter.
     pub fn to_diagnostic(&self) -> Diagnostic {
-        Diagnostic::error(self.to_string())
-            .hint("the interpreter computes the same values: rerun with `--backend interp`")
+        Diagnostic::error(self.to_string()).hint(crate::base::diag::Hint::UseInterpreter)
     }
 }
 
@@ -787,7 +786,7 @@ mod tests {
     fn errors_become_diagnostics_with_a_fallback_hint() {
         let d = JitError::Module("out of memory".into()).to_diagnostic();
         assert!(d.message.contains("out of memory"));
-        assert!(d.hints.iter().any(|h| h.contains("--backend interp")));
+        assert!(d.hints.contains(&crate::base::diag::Hint::UseInterpreter));
     }
 
     /// On a host without FMA (simulated: the host ISA with `has_fma` off), Cranelift lowers `fma` to a call

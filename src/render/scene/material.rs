@@ -1,5 +1,5 @@
 //! `[materials.*]` tables → [`Material`]s: where the formula comes from (a `brdf` file, an inline `formula`, or
-//! the caller's override), parameter values (the formula's defaults, then the table's `params`, then `--set`,
+//! the caller's override), parameter values (the formula's defaults, then the table's `params`, then the run's,
 //! each checked against the declared range), compilation, and the optional energy normalisation
 //! ([`crate::numerics::normalize::coefficient`]) and cut-off ([`crate::render::plan::Cutoff`]).
 //!
@@ -15,7 +15,7 @@
 use super::schema::MaterialDef;
 use crate::backend::{Backend, Evaluator};
 use crate::builtins::Mode;
-use crate::base::diag::{Diagnostic, Diagnostics};
+use crate::base::diag::{Diagnostic, Diagnostics, Setting};
 use crate::base::span::Span;
 use crate::ir::{InputSet, ParamDecl};
 use crate::render::Material;
@@ -129,7 +129,11 @@ pub(super) fn build_all(
     }
     for (i, (k, _)) in choice.set.iter().enumerate() {
         if !set_used[i] && !tables.is_empty() {
-            ds.push(Diagnostic::error(format!("--set {k}: no material's formula declares a parameter `{k}`")).hint("every formula has `n`; see each .brdf file's `param` lines"));
+            ds.push(
+                Diagnostic::error(format!("no material's formula declares a parameter `{k}`"))
+                    .about(Setting::Param { name: k.clone(), value: None })
+                    .hint("every formula has `n`; see each .brdf file's `param` lines"),
+            );
         }
     }
     Ok(materials)
@@ -179,7 +183,7 @@ fn build_material(
     let (line, col) = crate::base::span::line_col(at.src, key_span.start);
     let with_note = |mut fd: Diagnostics| {
         for it in &mut fd.items {
-            it.hints.push(format!("used by [materials.{mname}] at {}:{line}:{col}", at.name));
+            it.hints.push(format!("used by [materials.{mname}] at {}:{line}:{col}", at.name).into());
         }
         MatError::Formula(fd)
     };
@@ -219,7 +223,10 @@ fn build_material(
         match assign(k, *v) {
             Ok(true) => set_used[i] = true,
             Ok(false) => {}
-            Err(msg) => return Err(here(m.span(), format!("--set {k}={v} for material `{mname}`: {msg}"), "this material")),
+            Err(msg) => {
+                let d = Diagnostic::error(format!("material `{mname}`: {msg}")).about(Setting::Param { name: k.clone(), value: Some(*v) });
+                return Err(MatError::Scene(d.at(span_of(m.span()), "this material")));
+            }
         }
     }
     let math = match &d.math {

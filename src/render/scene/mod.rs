@@ -19,7 +19,7 @@
 //!
 //! [materials.shiny]
 //! brdf = "../brdfs/phong.brdf"   # relative to this file; or `formula = "VR^n"` inline
-//! params = { n = 50 }            # baked into the kernel; `--set` overrides
+//! params = { n = 50 }            # baked into the kernel; a run's values override
 //! ka = 0.4                       # defaults: the papers' ka 0.4, kd 0.5, ks 0.5
 //! kd = 0.5
 //! ks = 0.5
@@ -50,12 +50,12 @@
 //!    camera and lights, resolve each object's material name and build its mesh (`shapes.rs`). The result, a
 //!    [`Geometry`], keeps the material tables uncompiled.
 //! 2. **Materials** ([`Geometry::with_materials`]): compile each table's formula with the parameter values of
-//!    this call (`--set`, or a formula that replaces every material's) and assemble a [`Scene`] (`material.rs`).
+//!    this call (the run's values, or a formula that replaces every material's) and assemble a [`Scene`] (`material.rs`).
 //!    Formulas are compiled through a [`BrdfCompiler`] — [`LobeCompiler`], the real front end and backends;
 //!    the trait lets embedders supply kernels of their own.
 //!
 //! [`load_scene`] / [`parse_scene`] run both. The split exists because only stage 2 depends on parameter
-//! values: `lobe compare --sweep-n` parses the file and tessellates once, then runs stage 2 twice per n (the
+//! values: comparing over several n parses the file and tessellates once, then runs stage 2 twice per n (the
 //! scenes share the meshes through `Arc`, so a new [`Scene`] copies no vertex data). Diagnostics are the same
 //! either way: one load reports geometry errors (size, camera, lights first; objects last) together with the
 //! material errors, in that order, exactly as the single pass this replaced did. For that, stage 1 keeps its
@@ -88,7 +88,7 @@ pub const PAPER_SCENE: &str = include_str!("../../../examples/scenes/paper_spher
 pub struct LoadOptions {
     /// Image size instead of the file's.
     pub size: Option<(usize, usize)>,
-    /// `--set` values: applied to every material whose formula declares the name; an error if none does.
+    /// Parameter values for this run: applied to every material whose formula declares the name; an error if none does.
     pub set: Vec<(String, f64)>,
     /// Replace every material's formula by this (file name, source); ka/kd/ks, colours and `normalize` stay.
     /// Scene `params` the replacement does not declare are ignored. Used by `lobe compare`.

@@ -94,7 +94,7 @@ pub(super) struct MaterialDef {
     /// The papers' cut-off exponent q: F is not evaluated where the lobe is below 2^−q.
     #[serde(default)]
     pub cutoff: Option<Spanned<f64>>,
-    /// `math = "fast"` or `"precise"`: this material's math mode (default: the command's `--math`).
+    /// `math = "fast"` or `"precise"`: this material's math mode (default: the math mode the caller chose).
     #[serde(default)]
     pub math: Option<Spanned<String>>,
     /// Turns the shape's tangent about the normal, degrees (anisotropic formulas; default 0).
