@@ -1,12 +1,12 @@
 //! `lobe accuracy FILE --reference examples/brdfs/blinn.brdf [--set a=268] [--q 8] [--json]`
 //!
-//! JSON keys are documented in [`crate::numerics`].
+//! JSON keys are documented in [`lobe::numerics`].
 
 use super::args::{self, AgainstReference, BackendArg, Json, Params};
 use super::common::{self, CliError};
-use crate::base::json;
-use crate::numerics::accuracy::{accuracy, AccuracyOptions};
-use crate::Kernel;
+use lobe::base::json;
+use lobe::numerics::accuracy::{accuracy, AccuracyOptions};
+use lobe::Kernel;
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("set", args::help("Values of the formula's other parameters, e.g. `a=268` (n is swept over 1..1000)")))]
@@ -110,9 +110,9 @@ pub fn report(a: &AccuracyArgs, k: &Kernel, r: &Kernel) -> Result<String, CliErr
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::numerics::twins;
+    use lobe::numerics::twins;
     use crate::cli::energy::tests::twin_kernel;
-    use crate::ir::Input;
+    use lobe::ir::Input;
     use clap::Parser;
 
     #[derive(Parser)]

@@ -8,9 +8,9 @@
 
 use super::args::{self, BackendArg, FormulaSource, Json, Params, PreferArg};
 use super::common::{self, CliError};
-use crate::base::json;
-use crate::ir::{Input, InputSet, N_INPUTS};
-use crate::{Evaluator, Kernel};
+use lobe::base::json;
+use lobe::ir::{Input, InputSet, N_INPUTS};
+use lobe::{Evaluator, Kernel};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("set", args::help("Parameter values baked into the kernel, e.g. `n=200,a=16`")))]
@@ -114,7 +114,7 @@ fn at_inputs(at: &[(String, Vec<f64>)], used: InputSet) -> Result<([f64; N_INPUT
     let mut notes = vec![];
     for (k, d) in dirs.iter_mut().enumerate() {
         let name = ["L", "V"][k];
-        let (u, scaled) = super::points::unit(*d).ok_or_else(|| {
+        let (u, scaled) = lobe::numerics::points::unit(*d).ok_or_else(|| {
             CliError::hint(format!("--at: {name} = ({}, {}, {}) has no direction", d[0], d[1], d[2]), format!("give {name}=x,y,z, not all 0"))
         })?;
         if scaled {
@@ -123,7 +123,7 @@ fn at_inputs(at: &[(String, Vec<f64>)], used: InputSet) -> Result<([f64; N_INPUT
         *d = u;
     }
     let note = (!notes.is_empty()).then(|| notes.join("; "));
-    Ok((crate::numerics::inputs_from_dirs(dirs[0], dirs[1]), note))
+    Ok((lobe::numerics::inputs_from_dirs(dirs[0], dirs[1]), note))
 }
 
 /// The inputs every kernel reads.
@@ -150,7 +150,7 @@ fn json_of(v: &[f64]) -> serde_json::Value {
 pub fn run(a: &EvalArgs) -> Result<(), CliError> {
     let set = a.set.list();
     let f = a.formula.load()?;
-    let pass = |opts| crate::numerics::robust::with_pass(opts, a.prefer.pass(crate::numerics::robust::PassOptions::default().points));
+    let pass = |opts| lobe::numerics::robust::with_pass(opts, a.prefer.pass(lobe::numerics::robust::PassOptions::default().points));
     let ks: Vec<Kernel> = if a.normalize {
         if f.is_rgb() {
             return Err(CliError::hint(
@@ -161,12 +161,12 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
         // The coefficient depends on every parameter: bake them all (--set values, declared defaults for the rest).
         let mut bake = set.clone();
         bake.extend(f.params.iter().filter(|p| !set.iter().any(|(k, _)| *k == p.name)).map(|p| (p.name.clone(), p.default)));
-        let s = crate::simplified(&f, &pass(crate::Options { bake, ..Default::default() }))?;
-        vec![crate::build_kernel(std::sync::Arc::new(crate::numerics::normalize::bake_coefficient(s)?), a.backend.kind, a.backend.math.mode)?]
+        let s = lobe::simplified(&f, &pass(lobe::Options { bake, ..Default::default() }))?;
+        vec![lobe::build_kernel(std::sync::Arc::new(lobe::numerics::normalize::bake_coefficient(s)?), a.backend.kind, a.backend.math.mode)?]
     } else {
         let mut ks = vec![];
         for c in f.channels() {
-            ks.push(crate::compile_formula(c, &pass(a.backend.options(set.clone())))?);
+            ks.push(lobe::compile_formula(c, &pass(a.backend.options(set.clone())))?);
         }
         ks
     };
@@ -210,10 +210,10 @@ fn run_points(a: &EvalArgs, ks: &[Kernel], path: &str, params: &[f64], set: &[(S
     if a.normalize {
         baked.extend(formula.params.iter().map(|p| p.name.clone()));
     }
-    let pts = super::points::parse(name, &text, formula, used(ks), &baked)?;
+    let pts = lobe::numerics::points::parse(name, &text, formula, used(ks), &baked)?;
     ks.iter().for_each(Kernel::warm_up);
     let t = std::time::Instant::now();
-    let channels: Vec<Vec<f64>> = ks.iter().map(|k| super::points::evaluate(k, &pts, params)).collect();
+    let channels: Vec<Vec<f64>> = ks.iter().map(|k| lobe::numerics::points::evaluate(k, &pts, params)).collect();
     let elapsed = t.elapsed();
     let point = |i: usize| -> Vec<f64> { channels.iter().map(|c| c[i]).collect() };
     let note = (pts.normalised > 0).then(|| format!("{} of {} rows had a non-unit L or V; they were normalised", pts.normalised, pts.len));

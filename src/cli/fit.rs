@@ -1,13 +1,13 @@
 //! `lobe fit FILE --reference REF --param a=1..1000[:step] [--param …] [--metric mean-abs] [--json]`
 //!
-//! JSON keys are documented in [`crate::numerics`].
+//! JSON keys are documented in [`lobe::numerics`].
 
 use super::args::{self, AgainstReference, BackendArg, Json, Params};
 use super::common::{self, CliError};
-use crate::base::json;
-use crate::numerics::fit::{fit, FitOptions, FreeParam, Metric};
-use crate::numerics::parse_range;
-use crate::Kernel;
+use lobe::base::json;
+use lobe::numerics::fit::{fit, FitOptions, FreeParam, Metric};
+use lobe::numerics::parse_range;
+use lobe::Kernel;
 use std::io::IsTerminal;
 
 #[derive(clap::Args, Debug)]
@@ -155,9 +155,9 @@ pub fn report(a: &FitArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::numerics::twins;
+    use lobe::numerics::twins;
     use crate::cli::energy::tests::twin_kernel;
-    use crate::ir::Input;
+    use lobe::ir::Input;
     use clap::Parser;
 
     #[derive(Parser)]
