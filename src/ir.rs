@@ -505,6 +505,18 @@ impl Formula {
         }
     }
 
+    /// [`Formula::channels`] for reports per formula: a colour formula's channels are named `NAME (red)`,
+    /// `NAME (green)`, `NAME (blue)`.
+    pub fn named_channels(&self) -> Vec<Formula> {
+        let mut chans = self.channels();
+        if chans.len() == 3 {
+            for (c, name) in chans.iter_mut().zip(["red", "green", "blue"]) {
+                c.meta.name = Some(format!("{} ({name})", self.display_name()));
+            }
+        }
+        chans
+    }
+
     /// A colour formula from one arena with three channel roots: each channel is compacted into a scalar
     /// formula of its own; the result is the red one, carrying all three in [`Formula::rgb`].
     pub fn from_channels(meta: Meta, params: Vec<ParamDecl>, ir: &Ir, roots: [NodeId; 3], file: String, source: String) -> Formula {

@@ -15,7 +15,7 @@
 //! render     scenes, shapes, camera, rasteriser, shading, images, image comparison
 //! report     bench measurement and tables, plots
 //! serve      `lobe serve`: the interactive page's HTTP server (page assets embedded)
-//! cli        clap subcommands over the layers above (main.rs dispatches)
+//! main.rs    the `lobe` binary: its cli modules hold the clap subcommands over the layers above
 //! ```
 //!
 //! The front end knows nothing of Cranelift; every backend consumes only [`ir::Formula`]; builtins come from
@@ -32,7 +32,6 @@ pub mod numerics;
 pub mod render;
 pub mod report;
 pub mod serve;
-pub mod cli;
 
 pub use builtins::Mode;
 pub use backend::{Backend, Columns, Evaluator, Kernel};

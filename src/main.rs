@@ -1,7 +1,8 @@
 //! The `lobe` command: clap subcommands only; each one's logic lives in the library.
 
+mod cli;
+
 use clap::{Parser, Subcommand};
-use lobe::cli;
 use std::io::IsTerminal;
 
 #[derive(Parser)]

@@ -1,8 +1,8 @@
 //! The one rule for numbers in JSON output. JSON has no NaN or infinity, and `null` would hide which of
 //! them a check produced, so a finite value is written as a number and a non-finite one as the string `"NaN"`,
 //! `"inf"` or `"-inf"`. Result types apply it per field with
-//! `#[serde(serialize_with = "crate::base::json::num")]`; objects built with `serde_json::json!` wrap their
-//! numbers in [`value`].
+//! `#[serde(serialize_with = "crate::base::json::num")]` (or [`opt_num`]); a name → number object is a
+//! [`Named`]; the few values built as `serde_json::Value` wrap their numbers in [`value`].
 
 use serde::Serializer;
 
@@ -29,6 +29,33 @@ pub fn value(v: f64) -> serde_json::Value {
         serde_json::Value::from(v)
     } else {
         serde_json::Value::String(v.to_string())
+    }
+}
+
+/// An object mapping each name to its number (parameters, inputs), in the given order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Named(pub Vec<(String, f64)>);
+
+impl Named {
+    pub fn new<'a>(pairs: impl IntoIterator<Item = (&'a str, f64)>) -> Named {
+        Named(pairs.into_iter().map(|(k, v)| (k.to_string(), v)).collect())
+    }
+}
+
+impl serde::Serialize for Named {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        struct Num(f64);
+        impl serde::Serialize for Num {
+            fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+                num(&self.0, s)
+            }
+        }
+        let mut m = s.serialize_map(Some(self.0.len()))?;
+        for (k, v) in &self.0 {
+            m.serialize_entry(k, &Num(*v))?;
+        }
+        m.end()
     }
 }
 
@@ -59,5 +86,6 @@ mod tests {
         assert_eq!(serde_json::to_value(Maybe(None)).unwrap(), serde_json::Value::Null);
         assert_eq!(serde_json::to_value(Maybe(Some(f64::NAN))).unwrap(), value(f64::NAN));
         assert_eq!(named([("n", 50.0), ("a", f64::INFINITY)]), serde_json::json!({"n": 50.0, "a": "inf"}));
+        assert_eq!(serde_json::to_value(Named::new([("n", 50.0), ("a", f64::INFINITY)])).unwrap(), named([("n", 50.0), ("a", f64::INFINITY)]));
     }
 }

@@ -1,12 +1,11 @@
 //! `lobe accuracy FILE --reference examples/brdfs/blinn.brdf [--set a=268] [--q 8] [--json]`
 //!
-//! JSON keys are documented in [`crate::numerics`].
+//! JSON keys are documented in [`lobe::numerics`].
 
 use super::args::{self, AgainstReference, BackendArg, Json, Params};
 use super::common::{self, CliError};
-use crate::base::json;
-use crate::numerics::accuracy::{accuracy, AccuracyOptions};
-use crate::Kernel;
+use lobe::numerics::accuracy::{accuracy, AccuracyJson, AccuracyOptions};
+use lobe::Kernel;
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("set", args::help("Values of the formula's other parameters, e.g. `a=268` (n is swept over 1..1000)")))]
@@ -63,19 +62,7 @@ pub fn report(a: &AccuracyArgs, k: &Kernel, r: &Kernel) -> Result<String, CliErr
     }
     let secs = t.elapsed().as_secs_f64();
     if a.json.on {
-        let v = json::value;
-        let obj = serde_json::json!({
-            "mean_abs_grid": v(rep.mean_abs_grid),
-            "epicenter_max_rel_pct": v(rep.epicenter.value * 100.0), "epicenter_worst_n": v(rep.epicenter.n),
-            "inflection_max_rel_pct": v(rep.inflection.value * 100.0), "inflection_worst_n": v(rep.inflection.n),
-            "max_abs": v(rep.max_abs.value), "max_abs_n": v(rep.max_abs.n), "max_abs_angle_deg": v(rep.max_abs.angle_deg),
-            "cutoff_max_rel_pct": v(rep.cutoff_rel.value * 100.0), "cutoff_worst_n": v(rep.cutoff_rel.n),
-            "cutoff_worst_angle_deg": v(rep.cutoff_rel.angle_deg),
-            "lobe_ratio_min": v(rep.lobe_ratio_min.value), "lobe_ratio_min_n": v(rep.lobe_ratio_min.n),
-            "lobe_ratio_max": v(rep.lobe_ratio_max.value), "lobe_ratio_max_n": v(rep.lobe_ratio_max.n),
-            "q": v(a.q), "nan_points": rep.nan_points, "seconds": v(secs),
-        });
-        outln!(out, "{obj}");
+        outln!(out, "{}", common::to_json(&AccuracyJson::new(&rep, a.q, secs))?);
         return Ok(out);
     }
     outln!(out, "{} vs {} (n = 1..{}, lobe variable {}):", k.formula.display_name(), r.formula.display_name(), a.n_max, lobe.name());
@@ -110,9 +97,9 @@ pub fn report(a: &AccuracyArgs, k: &Kernel, r: &Kernel) -> Result<String, CliErr
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::numerics::twins;
+    use lobe::numerics::twins;
     use crate::cli::energy::tests::twin_kernel;
-    use crate::ir::Input;
+    use lobe::ir::Input;
     use clap::Parser;
 
     #[derive(Parser)]

@@ -4,9 +4,9 @@
 //! with `#[command(mut_arg("set", args::help("…")))]`; the name, syntax and parsing stay the shared ones.
 
 use super::common::{self, CliError};
-use crate::ir::{Formula, Input, InputSet};
-use crate::base::output;
-use crate::{Backend, Kernel};
+use lobe::ir::{Formula, Input, InputSet};
+use lobe::base::output;
+use lobe::{Backend, Kernel};
 use std::path::{Path, PathBuf};
 
 /// Parses `lo..hi` (both numbers) as `--range` and `--param` take it.
@@ -42,18 +42,8 @@ impl FormulaSource {
     }
 
     /// Loads the formula and compiles it with `set` baked in (the accuracy pass at its defaults).
-    pub fn kernel(&self, set: &[(String, f64)], backend: Backend, math: crate::Mode) -> Result<Kernel, CliError> {
+    pub fn kernel(&self, set: &[(String, f64)], backend: Backend, math: lobe::Mode) -> Result<Kernel, CliError> {
         common::load_kernel(self.file.as_deref(), self.expr.as_deref(), set, backend, math)
-    }
-
-    /// [`FormulaSource::kernel`] with the accuracy pass set by `--prefer`.
-    pub fn kernel_with(&self, set: &[(String, f64)], backend: Backend, prefer: &PreferArg) -> Result<Kernel, CliError> {
-        let f = self.load()?;
-        let opts = crate::numerics::robust::with_pass(
-            crate::Options { backend, bake: set.to_vec(), ..Default::default() },
-            prefer.pass(crate::numerics::robust::PassOptions::default().points),
-        );
-        Ok(crate::compile_formula(f, &opts)?)
     }
 }
 
@@ -92,8 +82,8 @@ pub struct BackendArg {
 
 impl BackendArg {
     /// Compile options for this backend and math mode with `bake` baked in.
-    pub fn options(&self, bake: Vec<(String, f64)>) -> crate::Options {
-        crate::Options { backend: self.kind, bake, math: self.math.mode, ..crate::Options::default() }
+    pub fn options(&self, bake: Vec<(String, f64)>) -> lobe::Options {
+        lobe::Options { backend: self.kind, bake, math: self.math.mode, ..lobe::Options::default() }
     }
 }
 
@@ -103,7 +93,7 @@ pub struct MathArg {
     /// Math mode: `precise` (every builtin within a few ulp, the default) or `fast` (within 1e-6, fewer
     /// operations); `lobe check` lists each builtin's bound.
     #[arg(id = "math", long = "math", value_name = "MODE", default_value = "precise")]
-    pub mode: crate::Mode,
+    pub mode: lobe::Mode,
 }
 
 /// `--prefer speed|accuracy` and `--max-cost RATIO`: what the accuracy pass keeps (`numerics::robust`).
@@ -112,7 +102,7 @@ pub struct PreferArg {
     /// `accuracy`: keep rewrites that lower the measured error within --max-cost × the fastest form's cost;
     /// `speed`: keep only rewrites that cost nothing.
     #[arg(id = "prefer", long = "prefer", value_name = "PREFER", default_value = "accuracy")]
-    pub prefer: crate::numerics::robust::Prefer,
+    pub prefer: lobe::numerics::robust::Prefer,
     /// Cost budget of `--prefer accuracy`, as a multiple of the fastest form's static cost (≥ 1).
     #[arg(id = "max_cost", long = "max-cost", value_name = "RATIO", default_value_t = 1.3, value_parser = parse_ratio)]
     pub max_cost: f64,
@@ -127,8 +117,8 @@ fn parse_ratio(s: &str) -> Result<f64, String> {
 
 impl PreferArg {
     /// The pass settings, measured on `points` domain points.
-    pub fn pass(&self, points: usize) -> crate::numerics::robust::PassOptions {
-        crate::numerics::robust::PassOptions { prefer: self.prefer, max_cost: self.max_cost, points, ..Default::default() }
+    pub fn pass(&self, points: usize) -> lobe::numerics::robust::PassOptions {
+        lobe::numerics::robust::PassOptions { prefer: self.prefer, max_cost: self.max_cost, points, ..Default::default() }
     }
 }
 
@@ -157,7 +147,7 @@ impl LobeVar {
                 CliError::hint(format!("--lobe: `{s}` is not an input"), "the lobe variable is NH (Blinn-style) or VR (Phong-style)")
             }),
             None => {
-                let (lobe, note) = crate::numerics::choose_lobe_input(used);
+                let (lobe, note) = lobe::numerics::choose_lobe_input(used);
                 if let (Some(n), false) = (note, quiet) {
                     eprintln!("note: {n}");
                 }
@@ -184,13 +174,13 @@ impl AgainstReference {
     /// The formula's kernel in `b`'s backend and math mode, and the reference's (precise: it is the yardstick).
     pub fn kernels(&self, set: &[(String, f64)], b: &BackendArg) -> Result<(Kernel, Kernel), CliError> {
         let k = self.formula.kernel(set, b.kind, b.math.mode)?;
-        let r = common::load_kernel(Some(&self.reference), None, &[], b.kind, crate::Mode::Precise)?;
+        let r = common::load_kernel(Some(&self.reference), None, &[], b.kind, lobe::Mode::Precise)?;
         Ok((k, r))
     }
 
     /// The lobe variables of the formula `k` ([`LobeVar::resolve`]) and of the reference `r` (the one it reads).
     pub fn lobes(&self, k: &Kernel, r: &Kernel, quiet: bool) -> Result<(Input, Input), CliError> {
-        Ok((self.lobe.resolve(k.used_inputs(), quiet)?, crate::numerics::choose_lobe_input(r.used_inputs()).0))
+        Ok((self.lobe.resolve(k.used_inputs(), quiet)?, lobe::numerics::choose_lobe_input(r.used_inputs()).0))
     }
 }
 
@@ -207,7 +197,7 @@ impl Force {
     /// recognised by `is_ours` nor `--force`d ([`output::check`]). Commands call this before doing the work, so
     /// a bad path costs nothing.
     pub fn check(&self, path: &Path, is_ours: fn(&[u8]) -> bool) -> Result<(), CliError> {
-        use crate::base::diag::Hint;
+        use lobe::base::diag::Hint;
         output::check(path, self.on, is_ours)
             .map_err(|d| if d.hints.is_empty() { d.hint(Hint::AllowOverwrite) } else { d }.into())
     }

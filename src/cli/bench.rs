@@ -7,12 +7,12 @@
 
 use super::args::{self, Force, Json, Params};
 use super::common::{self, CliError};
-use crate::numerics::accuracy::{accuracy, AccuracyOptions};
-use crate::numerics::{choose_lobe_input, energy};
-use crate::report::measure::{measure_kernel, sample_points, MeasureOptions};
-use crate::report::bench::{self, BenchRow};
-use crate::report::plot::{self, CostError, Format};
-use crate::{Backend, Formula, Options};
+use lobe::numerics::accuracy::{accuracy, AccuracyOptions};
+use lobe::numerics::{choose_lobe_input, energy};
+use lobe::report::measure::{measure_kernel, sample_points, MeasureOptions};
+use lobe::report::bench::{self, BenchRow};
+use lobe::report::plot::{self, CostError, Format};
+use lobe::{Backend, Formula, Options};
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -63,7 +63,7 @@ fn catalogue() -> Result<Vec<String>, CliError> {
 
 /// Median ns/eval of a hand-written Rust twin over the same points the JIT is timed on, called through the
 /// same prepared `Evaluator` path as the JIT kernel (so the comparison is of the code, not of the call path).
-fn time_twin(ev: &dyn crate::Evaluator, params: &[f64], samples: usize) -> f64 {
+fn time_twin(ev: &dyn lobe::Evaluator, params: &[f64], samples: usize) -> f64 {
     let pts = sample_points(4096, 0x5EED);
     let ev = ev.prepare(params);
     let mut ns: Vec<f64> = (0..samples.max(1) + 1)
@@ -84,22 +84,22 @@ fn time_twin(ev: &dyn crate::Evaluator, params: &[f64], samples: usize) -> f64 {
 
 /// The largest (ulps, relative) distance of `kernel`'s batched values from the precise interpreter's over the
 /// timed points (NaN on one side only counts as infinitely far).
-fn error_vs_precise(kernel: &crate::Kernel, params: &[f64]) -> (f64, f64) {
+fn error_vs_precise(kernel: &lobe::Kernel, params: &[f64]) -> (f64, f64) {
     let pts = sample_points(4096, 0x5EED);
-    let cols: Vec<Vec<f64>> = (0..crate::N_INPUTS).map(|i| pts.iter().map(|r| r[i]).collect()).collect();
-    let columns = crate::Columns::new(std::array::from_fn(|i| cols[i].as_slice()));
+    let cols: Vec<Vec<f64>> = (0..lobe::N_INPUTS).map(|i| pts.iter().map(|r| r[i]).collect()).collect();
+    let columns = lobe::Columns::new(std::array::from_fn(|i| cols[i].as_slice()));
     let mut got: Vec<f64> = vec![0.0; pts.len()];
-    crate::Evaluator::eval_batch(kernel, &columns, params, &mut got);
-    let reference = crate::backend::interp::Interp::with_mode(&kernel.formula, crate::Mode::Precise);
+    lobe::Evaluator::eval_batch(kernel, &columns, params, &mut got);
+    let reference = lobe::backend::interp::Interp::with_mode(&kernel.formula, lobe::Mode::Precise);
     let mut worst = (0.0f64, 0.0f64);
     for (p, g) in pts.iter().zip(&got) {
-        let want = crate::Evaluator::eval(&reference, p, params);
+        let want = lobe::Evaluator::eval(&reference, p, params);
         let (u, r) = if want.is_nan() && g.is_nan() || want == *g {
             (0.0, 0.0)
         } else if !want.is_finite() || !g.is_finite() {
             (f64::INFINITY, f64::INFINITY)
         } else {
-            (crate::numerics::robust::ulps(*g, want), (g - want).abs() / want.abs().max(f64::MIN_POSITIVE))
+            (lobe::numerics::robust::ulps(*g, want), (g - want).abs() / want.abs().max(f64::MIN_POSITIVE))
         };
         worst = (worst.0.max(u), worst.1.max(r));
     }
@@ -110,19 +110,19 @@ fn row(
     f: &Formula,
     path: &str,
     set: &[(String, f64)],
-    reference: &crate::Kernel,
+    reference: &lobe::Kernel,
     a: &BenchArgs,
-    math: crate::Mode,
+    math: lobe::Mode,
 ) -> Result<BenchRow, CliError> {
     let set = common::set_for(f, set);
     let params = common::param_values(f, &set);
     let opts = |bake: Vec<(String, f64)>| Options { backend: Backend::Jit, bake, math, ..Options::default() };
-    let baked = crate::compile_formula(f.clone(), &opts(set.clone()))?;
-    let live = crate::compile_formula(f.clone(), &opts(vec![]))?;
+    let baked = lobe::compile_formula(f.clone(), &opts(set.clone()))?;
+    let live = lobe::compile_formula(f.clone(), &opts(vec![]))?;
     let m = measure_kernel(&baked, &params, MeasureOptions { points: 4096, samples: a.samples })
         .map_err(|e| CliError::msg(format!("{path}: {e}")))?;
     let stem = Path::new(path).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-    let native_ns = crate::numerics::twins::by_stem(&stem).map(|t| time_twin(t.ev.as_ref(), &params, a.samples));
+    let native_ns = lobe::numerics::twins::by_stem(&stem).map(|t| time_twin(t.ev.as_ref(), &params, a.samples));
     let (lobe, _) = choose_lobe_input(live.used_inputs());
     let (ref_lobe, _) = choose_lobe_input(reference.used_inputs());
     let acc = accuracy(&live, &params, lobe, reference, &reference.default_params(), ref_lobe, &AccuracyOptions::default());
@@ -135,10 +135,10 @@ fn row(
     let spread = (m.scalar_jit.p75_ns - m.scalar_jit.p25_ns) / 2.0 / m.scalar_jit.median_ns;
     let (max_ulp_vs_precise, max_rel_vs_precise) = error_vs_precise(&baked, &params);
     // Numerical error and cost of the accuracy pass's kernel (numerics::robust).
-    let bake = crate::resolve_bake(f, &set)?;
-    let pass = crate::numerics::robust::improve(f, &bake, &Default::default());
+    let bake = lobe::resolve_bake(f, &set)?;
+    let pass = lobe::numerics::robust::improve(f, &bake, &Default::default());
     let robust_jit_ns = if pass.trials.iter().any(|t| t.kept) {
-        let k = crate::build_kernel(std::sync::Arc::new(pass.formula.clone()), Backend::Jit, math)?;
+        let k = lobe::build_kernel(std::sync::Arc::new(pass.formula.clone()), Backend::Jit, math)?;
         measure_kernel(&k, &params, MeasureOptions { points: 4096, samples: a.samples })
             .map_err(|e| CliError::msg(format!("{path}: {e}")))?
             .scalar_jit
@@ -187,17 +187,17 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
     };
     let formulas = files.iter().map(|p| common::load_formula(Some(p), None)).collect::<Result<Vec<_>, _>>()?;
     common::check_set_names(&formulas.iter().collect::<Vec<_>>(), &set)?;
-    let reference = common::load_kernel(Some(&a.reference), None, &[], Backend::Jit, crate::Mode::Precise)?;
+    let reference = common::load_kernel(Some(&a.reference), None, &[], Backend::Jit, lobe::Mode::Precise)?;
     let mut rows = Vec::new();
     let progress = !a.json.on && std::io::IsTerminal::is_terminal(&std::io::stderr());
     let modes = match a.math.as_str() {
-        "fast" => vec![crate::Mode::Fast],
-        "both" => vec![crate::Mode::Precise, crate::Mode::Fast],
-        _ => vec![crate::Mode::Precise],
+        "fast" => vec![lobe::Mode::Fast],
+        "both" => vec![lobe::Mode::Precise, lobe::Mode::Fast],
+        _ => vec![lobe::Mode::Precise],
     };
     // A colour formula is measured channel by channel: one row per channel, named `NAME (red)` etc.; its cost
     // is the sum of its rows.
-    let channels: Vec<_> = formulas.iter().zip(&files).flat_map(|(f, p)| common::named_channels(f).into_iter().map(move |c| (c, p))).collect();
+    let channels: Vec<_> = formulas.iter().zip(&files).flat_map(|(f, p)| f.named_channels().into_iter().map(move |c| (c, p))).collect();
     for (f, path) in &channels {
         let (f, path) = (f, *path);
         for &math in &modes {

@@ -5,11 +5,11 @@
 //! input, which rewrite bought what, and where the formula is ill-conditioned by nature.
 
 use super::args::{self, FormulaSource, Json, Params, PreferArg};
-use super::common::{self, CliError};
-use crate::base::json;
-use crate::ir::{Formula, Input};
-use crate::numerics::robust::{self, ErrorStats, Worst};
-use crate::{Backend, Options};
+use super::common::CliError;
+use lobe::base::json;
+use lobe::ir::{Formula, Input};
+use lobe::numerics::robust::{self, ErrorStats, Worst};
+use lobe::{Backend, Options};
 use serde_json::json;
 
 #[derive(clap::Args, Debug)]
@@ -32,10 +32,10 @@ pub struct CheckArgs {
 }
 
 /// The builtins the simplified formula calls, each with its stated bound in `mode` (sorted by table order).
-fn builtin_bounds(f: &crate::Formula, mode: crate::Mode) -> Vec<(&'static str, String)> {
+fn builtin_bounds(f: &lobe::Formula, mode: lobe::Mode) -> Vec<(&'static str, String)> {
     let mut used = vec![];
     f.ir.walk(f.root, |n| {
-        if let crate::ir::Node::Call(b, _) = n {
+        if let lobe::ir::Node::Call(b, _) = n {
             used.push(*b);
         }
     });
@@ -101,9 +101,9 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
     // A colour formula: the red channel is checked and shown, and the output says so (`lobe check --sweep`
     // and `lobe bench` report every channel).
     let colour = whole.is_rgb().then_some("red");
-    let f = common::named_channels(&whole).remove(0);
-    let bake = crate::resolve_bake(&f, &set)?;
-    let (simplified, report) = crate::simplify::simplify_report(&f, &bake);
+    let f = whole.named_channels().remove(0);
+    let bake = lobe::resolve_bake(&f, &set)?;
+    let (simplified, report) = lobe::simplify::simplify_report(&f, &bake);
     let (nodes_before, nodes_after) = (report.nodes_before, report.nodes_after);
     let used = simplified.used_inputs();
     let unused: Vec<&str> = Input::ALL.iter().filter(|i| !used.contains(**i)).map(|i| i.name()).collect();
@@ -112,12 +112,12 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
     let pass = robust::improve(&f, &bake, &robust::PassOptions { math: a.math.mode, ..a.prefer.pass(a.points as usize) });
     let pass_ms = t_pass.elapsed().as_secs_f64() * 1e3;
     // How far the worst well-conditioned point is from the ill-conditioned threshold.
-    let truth_f = crate::simplify::bake_only(&f, &bake);
+    let truth_f = lobe::simplify::bake_only(&f, &bake);
     let cond_well = pass.after.worst_well.as_ref().map(|w| robust::condition_ulps(&truth_f, &w.point, w.truth));
     let opts = |backend| Options { backend, bake: set.clone(), math: a.math.mode, ..Options::default() };
     let bounds = builtin_bounds(&simplified, a.math.mode);
-    let jit = crate::compile_formula(f.clone(), &opts(Backend::Jit))?;
-    let interp = crate::compile_formula(f.clone(), &opts(Backend::Interp))?;
+    let jit = lobe::compile_formula(f.clone(), &opts(Backend::Jit))?;
+    let interp = lobe::compile_formula(f.clone(), &opts(Backend::Interp))?;
     let params: Vec<serde_json::Value> = f
         .params
         .iter()
@@ -144,7 +144,7 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
             "nodes_after": nodes_after,
             "rewrites": report.fired.iter().map(|(k, v)| json!({"rule": k, "count": v})).collect::<Vec<_>>(),
             "rounding_changes": report.rounding.iter().map(|r| {
-                let (line, col) = crate::base::span::line_col(&f.source, r.span.start as usize);
+                let (line, col) = lobe::base::span::line_col(&f.source, r.span.start as usize);
                 json!({"rule": r.rule, "line": line, "col": col, "detail": r.detail})
             }).collect::<Vec<_>>(),
             "passes": report.passes,
@@ -202,7 +202,7 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
         println!("  rewrites    {} ({} passes)", r.join(", "), report.passes);
     }
     for r in &report.rounding {
-        let (line, col) = crate::base::span::line_col(&f.source, r.span.start as usize);
+        let (line, col) = lobe::base::span::line_col(&f.source, r.span.start as usize);
         println!("  rounding    {}:{line}:{col} {}: {}", f.file, r.rule, r.detail);
     }
     println!(

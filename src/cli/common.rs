@@ -2,9 +2,9 @@
 //! applying `name=value,…` lists, hints for misspelt names, `--json` documents, recognising lobe's own
 //! output files, and the CLI's error, which words the library's structured hints with this CLI's flags.
 
-use crate::base::diag::{Diagnostic, Diagnostics, Hint, Setting, Wording};
-use crate::ir::Formula;
-use crate::{Backend, Kernel, Options};
+use lobe::base::diag::{Diagnostic, Diagnostics, Hint, Setting, Wording};
+use lobe::ir::Formula;
+use lobe::{Backend, Kernel, Options};
 use std::fmt;
 
 /// An error a subcommand reports: rendered diagnostics, or one message with its hints.
@@ -87,7 +87,7 @@ impl From<Diagnostics> for CliError {
     }
 }
 
-pub use crate::base::source::{read_source, source_from_bytes};
+pub use lobe::base::source::{read_source, source_from_bytes};
 
 /// Loads and lowers a formula from a path (or `-`), or from `--expr` text when given; warnings go to stderr.
 pub fn load_formula(path: Option<&str>, expr: Option<&str>) -> Result<Formula, CliError> {
@@ -104,7 +104,7 @@ pub fn load_formula_with(path: Option<&str>, expr: Option<&str>, show_warnings: 
             return Err(CliError::hint("no formula given", "pass a .brdf file, `-` for standard input, or --expr '…'"))
         }
     };
-    let (f, warnings) = crate::front::parse_with_warnings(&name, &src)?;
+    let (f, warnings) = lobe::front::parse_with_warnings(&name, &src)?;
     if show_warnings && !warnings.items.is_empty() {
         use std::io::IsTerminal;
         let color = std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none();
@@ -120,23 +120,23 @@ pub fn load_kernel(
     expr: Option<&str>,
     set: &[(String, f64)],
     backend: Backend,
-    math: crate::Mode,
+    math: lobe::Mode,
 ) -> Result<Kernel, CliError> {
     compile_kernel(load_formula(path, expr)?, set, backend, math)
 }
 
 /// [`load_kernel`]'s compilation of an already loaded formula (e.g. one channel of a colour formula).
-pub fn compile_kernel(f: Formula, set: &[(String, f64)], backend: Backend, math: crate::Mode) -> Result<Kernel, CliError> {
+pub fn compile_kernel(f: Formula, set: &[(String, f64)], backend: Backend, math: lobe::Mode) -> Result<Kernel, CliError> {
     let opts = Options { backend, bake: set.to_vec(), math, ..Options::default() };
-    let opts = crate::numerics::robust::with_pass(opts, Default::default());
-    Ok(crate::compile_formula(f, &opts)?)
+    let opts = lobe::numerics::robust::with_pass(opts, Default::default());
+    Ok(lobe::compile_formula(f, &opts)?)
 }
 
-pub use crate::front::parse_assignments;
+pub use lobe::front::parse_assignments;
 
 /// Refuses a `--threads` count the renderer would refuse, in the flag's words.
 pub fn check_threads(threads: usize) -> Result<(), CliError> {
-    use crate::render::MAX_THREADS;
+    use lobe::render::MAX_THREADS;
     if threads > MAX_THREADS {
         return Err(CliError::msg(format!("--threads {threads} is more than {MAX_THREADS}; 0 uses one per core")));
     }
@@ -164,7 +164,7 @@ pub fn to_json<T: serde::Serialize + ?Sized>(v: &T) -> Result<String, CliError> 
 /// Recognises files lobe wrote: PNGs carry a `Software: lobe` tEXt chunk, SVGs and text exports a lobe header.
 pub fn is_lobe_output(bytes: &[u8]) -> bool {
     let head = String::from_utf8_lossy(&bytes[..bytes.len().min(400)]);
-    crate::render::image::is_lobe_png(bytes) || head.contains("made by lobe") || head.contains("exported by lobe")
+    lobe::render::image::is_lobe_png(bytes) || head.contains("made by lobe") || head.contains("exported by lobe")
 }
 
 /// For commands over several formulas: the `--set` values each formula declares. A name no formula declares
@@ -185,19 +185,7 @@ pub fn check_set_names(formulas: &[&Formula], set: &[(String, f64)]) -> Result<(
     Ok(())
 }
 
-pub use crate::front::did_you_mean;
-
-/// The scalar formulas of `f` for a command that reports per formula: `f` itself, or its red, green and blue
-/// channels named `NAME (red)`, `NAME (green)`, `NAME (blue)`.
-pub fn named_channels(f: &Formula) -> Vec<Formula> {
-    let mut chans = f.channels();
-    if chans.len() == 3 {
-        for (c, name) in chans.iter_mut().zip(["red", "green", "blue"]) {
-            c.meta.name = Some(format!("{} ({name})", f.display_name()));
-        }
-    }
-    chans
-}
+pub use lobe::front::did_you_mean;
 
 #[cfg(test)]
 mod tests {

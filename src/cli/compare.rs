@@ -1,18 +1,18 @@
 //! `lobe compare A.brdf B.brdf [--scene S.toml] [--set n=50] -o cmp.png [--json] [--sweep-n 5,10,…]`
 //!
-//! Numbers in `--json` follow [`crate::base::json`]: two identical images have `"psnr": "inf"`.
+//! Numbers in `--json` follow [`lobe::base::json`]: two identical images have `"psnr": "inf"`.
 
 use super::args::{self, BackendArg, Json, Output, Params};
 use super::common::{self, CliError};
-use crate::base::json;
-use crate::render::compare::{self, CompareJob, Comparison, Metrics};
-use crate::render::image::{self, Transfer};
-use crate::render::scene::LobeCompiler;
-use crate::render::RenderOptions;
+use lobe::base::json;
+use lobe::render::compare::{self, CompareJob, Comparison, Metrics};
+use lobe::render::image::{self, Transfer};
+use lobe::render::scene::LobeCompiler;
+use lobe::render::RenderOptions;
 use serde::Serialize;
 use std::path::PathBuf;
 
-pub use crate::render::scene::PAPER_SCENE;
+pub use lobe::render::scene::PAPER_SCENE;
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("set", args::help("Parameter values for both formulas, e.g. `n=50`")))]
@@ -90,7 +90,7 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
         ..RenderOptions::default()
     };
     let lobe_compiler = LobeCompiler { backend: a.backend.kind, math: a.backend.math.mode };
-    let compiler: &dyn crate::render::scene::BrdfCompiler = &lobe_compiler;
+    let compiler: &dyn lobe::render::scene::BrdfCompiler = &lobe_compiler;
     let base_set = a.set.list();
     let sets: Vec<Vec<(String, f64)>> = if a.sweep_n.is_empty() {
         vec![base_set.clone()]

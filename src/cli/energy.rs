@@ -1,20 +1,20 @@
 //! `lobe energy FILE --set n=50 [--mode lobe|full] [--range 1..1000 [--against F.brdf | --against-expr E]] [--json]`
 //!
-//! JSON keys are documented in [`crate::numerics`]. A colour formula is checked per channel: the text shows
+//! JSON keys are documented in [`lobe::numerics`]. A colour formula is checked per channel: the text shows
 //! each channel under a `channel r/g/b` heading; `--json` prints the red channel's object with one more key,
 //! `"channels"`: the three channels' objects (red, green, blue), each with the keys of a scalar formula's.
 //! `--mode full` on a formula that reads direction components integrates over the azimuth of L too
-//! ([`crate::numerics::energy::full_energy_for`]): `albedo` then holds max over φᵢ of ρ(θᵢ, φᵢ), and the JSON
+//! ([`lobe::numerics::energy::full_energy_for`]): `albedo` then holds max over φᵢ of ρ(θᵢ, φᵢ), and the JSON
 //! adds `phi_i_at_max_deg` and `albedo_phi` (every θᵢ, φᵢ, ρ).
 
 use super::args::{self, BackendArg, Force, FormulaSource, Json, LobeVar, Params};
 use super::common::{self, CliError};
-use crate::base::json;
-use crate::ir::Input;
-use crate::numerics::energy::{coef_sweep, full_energy_for, lobe_integral, score_against};
+use lobe::base::json::Named;
+use lobe::ir::Input;
+use lobe::numerics::energy::{coef_sweep, full_energy_for, lobe_integral, score_against};
+use lobe::numerics::energy::{EnergyReport, FullReport, LobeReport, PerChannel, RangeReport};
 use super::args::parse_range;
-use crate::{Backend, Evaluator, Kernel};
-use serde_json::json;
+use lobe::{Backend, Evaluator, Kernel};
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
 pub enum Mode {
@@ -77,47 +77,49 @@ pub fn run(a: &EnergyArgs) -> Result<(), CliError> {
         (file, expr) => {
             // A fitted coefficient reads no input by design: its "reads no input" warning is noise here.
             let f = common::load_formula_with(file.as_deref(), expr.as_deref(), false)?;
-            Some(crate::compile_formula(f, &a.backend.options(vec![]))?)
+            Some(lobe::compile_formula(f, &a.backend.options(vec![]))?)
         }
     };
     print!("{}", report_channels(a, &ks, against.as_ref())?);
     Ok(())
 }
 
+/// One channel's output: the `--json` report, or the text.
+enum Out {
+    Json(EnergyReport),
+    Text(String),
+}
+
 /// The output for a formula's channel kernels (one, or red, green, blue; see the module docs).
-pub fn report_channels(a: &EnergyArgs, ks: &[Kernel], against: Option<&Kernel>) -> Result<String, CliError> {
-    if ks.len() == 1 {
-        return report(a, &ks[0], against);
-    }
-    if a.range.is_some() {
+fn report_channels(a: &EnergyArgs, ks: &[Kernel], against: Option<&Kernel>) -> Result<String, CliError> {
+    if ks.len() > 1 && a.range.is_some() {
         return Err(CliError::hint("--range works on scalar formulas only", "this formula has a colour result; drop --range"));
     }
-    let mut parts = Vec::with_capacity(ks.len());
+    let (mut reports, mut texts) = (vec![], vec![]);
     for k in ks {
-        parts.push(report(a, k, against)?);
+        match report(a, k, against)? {
+            Out::Json(r) => reports.push(r),
+            Out::Text(t) => texts.push(t),
+        }
     }
-    if !a.json.on {
-        return Ok(["r", "g", "b"].iter().zip(&parts).map(|(c, p)| format!("channel {c}:\n{p}")).collect());
+    if a.json.on {
+        return Ok(format!("{}\n", common::to_json(&PerChannel::new(reports))?));
     }
-    let objs = parts
-        .iter()
-        .map(|p| serde_json::from_str::<serde_json::Value>(p))
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| CliError::msg(format!("cannot write JSON: {e}")))?;
-    let mut red = objs[0].clone();
-    red["channels"] = serde_json::Value::Array(objs);
-    Ok(format!("{red}\n"))
+    if texts.len() == 1 {
+        return Ok(texts.remove(0));
+    }
+    Ok(["r", "g", "b"].iter().zip(&texts).map(|(c, p)| format!("channel {c}:\n{p}")).collect())
 }
 
 /// The command's output for one already compiled kernel (the formula, and the fitted coefficient if any).
-pub fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<String, CliError> {
+fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<Out, CliError> {
     let mut out = String::new();
     let params = common::param_values(&k.formula, &a.set.list());
     let lobe: Input = a.lobe.resolve(k.used_inputs(), a.json.on)?;
     let name = k.formula.display_name();
     // `params` of the JSON output; under --range, n is the swept variable, not a parameter.
     let shown = k.formula.params.iter().zip(&params).filter(|(d, _)| a.range.is_none() || d.name != "n");
-    let params_json = json::named(shown.map(|(d, v)| (d.name.as_str(), *v)));
+    let shown = Named::new(shown.map(|(d, v)| (d.name.as_str(), *v)));
 
     if a.mode == Mode::Full {
         if a.range.is_some() {
@@ -125,75 +127,56 @@ pub fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<St
         }
         let r = full_energy_for(k, k.used_inputs(), &params)?;
         if a.json.on {
-            let v = json::value;
-            let rows: Vec<_> = r.albedo.iter().map(|(t, rho)| json!({"theta_i_deg": v(*t), "rho": v(*rho)})).collect();
-            let rec = &r.reciprocity;
-            let mut obj = json!({
-                "mode": "full", "params": params_json, "coef": v(r.coef), "albedo_max": v(r.albedo_max),
-                "theta_i_at_max_deg": v(r.theta_i_at_max_deg), "albedo": rows,
-                "reciprocity_max_rel": v(rec.max_rel),
-                "reciprocity_worst": {"theta_l_deg": v(rec.theta_l_deg), "theta_v_deg": v(rec.theta_v_deg), "phi_v_deg": v(rec.phi_v_deg)},
-            });
-            if let Some(p) = r.phi_i_at_max_deg {
-                obj["phi_i_at_max_deg"] = v(p);
-                obj["albedo_phi"] = r.albedo_phi.iter().map(|(t, p, rho)| json!({"theta_i_deg": v(*t), "phi_i_deg": v(*p), "rho": v(*rho)})).collect();
-            }
-            outln!(out, "{obj}");
-        } else {
-            outln!(out, "{name}: hemispherical-directional albedo ρ(θᵢ) = ∫ f·cosθₒ dωₒ");
-            if r.phi_i_at_max_deg.is_some() {
-                outln!(out, "  (the formula reads directions: ρ(θᵢ) is the maximum over the azimuth φᵢ = 0°, 15°, …, 345° of L)");
-            }
-            outln!(out, "  θᵢ (deg)   ρ(θᵢ)");
-            for (t, v) in &r.albedo {
-                if t.fract() != 0.0 || (*t as i64) % 5 == 0 {
-                    outln!(out, "  {t:>8.1}   {v:.8}");
-                }
-            }
-            let phi = r.phi_i_at_max_deg.map(|p| format!(", φᵢ = {p}°")).unwrap_or_default();
-            outln!(out, "max ρ = {:.8} at θᵢ = {}°{phi}; coefficient 1/max ρ = {:.8}", r.albedo_max, r.theta_i_at_max_deg, r.coef);
-            if r.albedo_max > 1.0 + 1e-9 {
-                outln!(out, "  the formula reflects more energy than it receives at θᵢ = {}° (ρ > 1)", r.theta_i_at_max_deg);
-            }
-            let rec = &r.reciprocity;
-            outln!(out, 
-                "reciprocity: worst |f(L,V) − f(V,L)|/max = {:.3e} at θ_L = {}°, θ_V = {}°, φ_V = {}° ({} pairs){}",
-                rec.max_rel,
-                rec.theta_l_deg,
-                rec.theta_v_deg,
-                rec.phi_v_deg,
-                rec.pairs,
-                if rec.max_rel < 1e-12 { " — reciprocal" } else { "" }
-            );
+            return Ok(Out::Json(EnergyReport::Full(FullReport::new(shown, &r))));
         }
-        return Ok(out);
+        outln!(out, "{name}: hemispherical-directional albedo ρ(θᵢ) = ∫ f·cosθₒ dωₒ");
+        if r.phi_i_at_max_deg.is_some() {
+            outln!(out, "  (the formula reads directions: ρ(θᵢ) is the maximum over the azimuth φᵢ = 0°, 15°, …, 345° of L)");
+        }
+        outln!(out, "  θᵢ (deg)   ρ(θᵢ)");
+        for (t, v) in &r.albedo {
+            if t.fract() != 0.0 || (*t as i64) % 5 == 0 {
+                outln!(out, "  {t:>8.1}   {v:.8}");
+            }
+        }
+        let phi = r.phi_i_at_max_deg.map(|p| format!(", φᵢ = {p}°")).unwrap_or_default();
+        outln!(out, "max ρ = {:.8} at θᵢ = {}°{phi}; coefficient 1/max ρ = {:.8}", r.albedo_max, r.theta_i_at_max_deg, r.coef);
+        if r.albedo_max > 1.0 + 1e-9 {
+            outln!(out, "  the formula reflects more energy than it receives at θᵢ = {}° (ρ > 1)", r.theta_i_at_max_deg);
+        }
+        let rec = &r.reciprocity;
+        outln!(out, 
+            "reciprocity: worst |f(L,V) − f(V,L)|/max = {:.3e} at θ_L = {}°, θ_V = {}°, φ_V = {}° ({} pairs){}",
+            rec.max_rel,
+            rec.theta_l_deg,
+            rec.theta_v_deg,
+            rec.phi_v_deg,
+            rec.pairs,
+            if rec.max_rel < 1e-12 { " — reciprocal" } else { "" }
+        );
+        return Ok(Out::Text(out));
     }
 
     let Some(range) = &a.range else {
         let r = lobe_integral(k, &params, lobe)?;
         if a.json.on {
-            let obj = json!({"mode": "lobe", "params": params_json, "coef": json::value(r.coef()),
-                             "integral": json::value(r.integral), "lobe_input": lobe.name(), "evals": r.evals,
-                             "skipped_nan_up_to": r.skipped.map(|s| json::value(s.0)),
-                             "skipped_bound": r.skipped.map(|s| json::value(s.1))});
-            outln!(out, "{obj}");
-        } else {
-            let shown: Vec<String> = k.formula.params.iter().zip(&params).map(|(d, v)| format!("{}={v}", d.name)).collect();
-            outln!(out, "{name} ({}): coef = 1/(2π·Int) = {:.9}", shown.join(", "), r.coef());
-            outln!(out, "  Int = ∫₀¹ max(f(c),0)·c dc = {:.12e} (± {:.1e}, {} evaluations)", r.integral, r.error, r.evals);
-            outln!(out, "  lobe variable {} = cos θ; NL = 1, NV = cos θ (light at the normal)", lobe.name());
-            if let Some((c, bound)) = r.skipped {
-                outln!(
-                    out,
-                    "  skipped: the formula is NaN (0/0 or ∞·0) for {} ≤ {c:e}; taken as its limit from the right (that piece adds ≤ {bound:.1e} to Int)",
-                    lobe.name()
-                );
-            }
-            for c in &r.kinks {
-                outln!(out, "  the lobe is clamped to zero beyond θ = {:.6}° ({} = {c:.9})", c.acos().to_degrees(), lobe.name());
-            }
+            return Ok(Out::Json(EnergyReport::Lobe(LobeReport::new(shown, lobe, &r))));
         }
-        return Ok(out);
+        let shown: Vec<String> = k.formula.params.iter().zip(&params).map(|(d, v)| format!("{}={v}", d.name)).collect();
+        outln!(out, "{name} ({}): coef = 1/(2π·Int) = {:.9}", shown.join(", "), r.coef());
+        outln!(out, "  Int = ∫₀¹ max(f(c),0)·c dc = {:.12e} (± {:.1e}, {} evaluations)", r.integral, r.error, r.evals);
+        outln!(out, "  lobe variable {} = cos θ; NL = 1, NV = cos θ (light at the normal)", lobe.name());
+        if let Some((c, bound)) = r.skipped {
+            outln!(
+                out,
+                "  skipped: the formula is NaN (0/0 or ∞·0) for {} ≤ {c:e}; taken as its limit from the right (that piece adds ≤ {bound:.1e} to Int)",
+                lobe.name()
+            );
+        }
+        for c in &r.kinks {
+            outln!(out, "  the lobe is clamped to zero beyond θ = {:.6}° ({} = {c:.9})", c.acos().to_degrees(), lobe.name());
+        }
+        return Ok(Out::Text(out));
     };
 
     let (lo, hi) = parse_range(range).map_err(|e| CliError::hint(format!("--range: {e}"), "e.g. --range 1..1000"))?;
@@ -238,22 +221,14 @@ pub fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<St
             if let Some(i) = n_idx {
                 p[i] = n;
             }
-            ak.eval(&[0.0; crate::N_INPUTS], &p)
+            ak.eval(&[0.0; lobe::N_INPUTS], &p)
         })
     });
     if let Some(path) = &a.plot {
         plot_range(path, &name, &coefs, score.as_ref(), a.force)?;
     }
     if a.json.on {
-        let rows: Vec<_> = coefs.iter().map(|(n, c)| json!({"n": json::value(*n), "coef": json::value(*c)})).collect();
-        let mut obj = json!({"mode": "lobe", "params": params_json, "lobe_input": lobe.name(), "range": rows});
-        if let Some(s) = &score {
-            obj["against_max_abs"] = json::value(s.max_abs);
-            obj["against_worst_n"] = json::value(s.worst_n);
-            obj["against_mean_abs"] = json::value(s.mean_abs);
-        }
-        outln!(out, "{obj}");
-        return Ok(out);
+        return Ok(Out::Json(EnergyReport::Range(RangeReport::new(shown, lobe, &coefs, score.as_ref()))));
     }
     outln!(out, "{name}: coef(n) = 1/(2π·Int(n)), lobe variable {}", lobe.name());
     match &score {
@@ -277,7 +252,7 @@ pub fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<St
             );
         }
     }
-    Ok(out)
+    Ok(Out::Text(out))
 }
 
 /// Writes coef(n) (exact, and fitted when scored) as a plot.
@@ -285,10 +260,10 @@ fn plot_range(
     path: &std::path::Path,
     name: &str,
     coefs: &[(f64, f64)],
-    score: Option<&crate::numerics::energy::AgainstScore>,
+    score: Option<&lobe::numerics::energy::AgainstScore>,
     force: Force,
 ) -> Result<(), CliError> {
-    use crate::report::plot::{self, Format, Series};
+    use lobe::report::plot::{self, Format, Series};
     let format = Format::from_path(path).map_err(|e| CliError::hint(e, "use --plot coef.png or coef.svg"))?;
     let mut series = vec![Series {
         name: "exact coef(n) = 1/(2π·Int)".into(),
@@ -306,10 +281,10 @@ fn plot_range(
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::builtins::Builtin;
-    use crate::numerics::twins::{self, Twin};
-    use crate::base::span::Span;
-    use crate::ir::{Formula, Ir, Meta, ParamDecl, ParamKind};
+    use lobe::builtins::Builtin;
+    use lobe::numerics::twins::{self, Twin};
+    use lobe::base::span::Span;
+    use lobe::ir::{Formula, Ir, Meta, ParamDecl, ParamKind};
     use clap::Parser;
     use std::sync::Arc;
 
@@ -331,7 +306,7 @@ pub(crate) mod tests {
 
     /// A kernel whose evaluator is a twin, with a formula declaring the twin's parameters and reading `input`.
     pub fn twin_kernel(t: Twin, input: Input, extra: &[(&str, f64, f64, f64)]) -> Kernel {
-        Kernel::new(Arc::new(power_formula(input, extra)), Backend::Interp, crate::Mode::Precise, Arc::from(t.ev), std::time::Duration::ZERO)
+        Kernel::new(Arc::new(power_formula(input, extra)), Backend::Interp, lobe::Mode::Precise, Arc::from(t.ev), std::time::Duration::ZERO)
     }
 
     #[derive(Parser)]
@@ -351,10 +326,10 @@ pub(crate) mod tests {
     #[test]
     fn lobe_mode_json_and_text() {
         let k = twin_kernel(twins::phong(), Input::VR, &[]);
-        let v = json(&report(&args(&["--set", "n=100", "--json"]), &k, None).unwrap());
+        let v = json(&report_channels(&args(&["--set", "n=100", "--json"]), std::slice::from_ref(&k), None).unwrap());
         assert!((v["coef"].as_f64().unwrap() - 102.0 / (2.0 * std::f64::consts::PI)).abs() < 1e-9);
         assert_eq!(v["lobe_input"], "VR");
-        let t = report(&args(&["--set", "n=100"]), &k, None).unwrap();
+        let t = report_channels(&args(&["--set", "n=100"]), std::slice::from_ref(&k), None).unwrap();
         assert!(t.contains("coef = 1/(2π·Int) = 16.2338"), "{t}");
     }
 
@@ -364,21 +339,21 @@ pub(crate) mod tests {
         let exact = Kernel::new(
             Arc::new(power_formula(Input::NH, &[])),
             Backend::Interp,
-            crate::Mode::Precise,
-            Arc::new(crate::backend::FnEvaluator(|_: &[f64; crate::N_INPUTS], p: &[f64]| (p[0] + 2.0) / (2.0 * std::f64::consts::PI))),
+            lobe::Mode::Precise,
+            Arc::new(lobe::backend::FnEvaluator(|_: &[f64; lobe::N_INPUTS], p: &[f64]| (p[0] + 2.0) / (2.0 * std::f64::consts::PI))),
             std::time::Duration::ZERO,
         );
-        let v = json(&report(&args(&["--range", "1..40", "--against-expr", "x", "--json"]), &k, Some(&exact)).unwrap());
+        let v = json(&report_channels(&args(&["--range", "1..40", "--against-expr", "x", "--json"]), std::slice::from_ref(&k), Some(&exact)).unwrap());
         assert!(v["against_max_abs"].as_f64().unwrap() < 1e-9, "{v}");
         assert_eq!(v["range"].as_array().unwrap().len(), 40);
-        let e = report(&args(&["--range", "0..40"]), &k, None).unwrap_err();
+        let e = report_channels(&args(&["--range", "0..40"]), std::slice::from_ref(&k), None).unwrap_err();
         assert!(e.render(false).contains("declared range of n"));
     }
 
     #[test]
     fn full_mode_json_has_the_documented_keys() {
         let k = twin_kernel(twins::phong(), Input::VR, &[]);
-        let v = json(&report(&args(&["--set", "n=10", "--mode", "full", "--json"]), &k, None).unwrap());
+        let v = json(&report_channels(&args(&["--set", "n=10", "--mode", "full", "--json"]), std::slice::from_ref(&k), None).unwrap());
         for key in ["coef", "albedo_max", "theta_i_at_max_deg", "reciprocity_max_rel", "albedo"] {
             assert!(!v[key].is_null(), "missing {key}: {v}");
         }
@@ -387,9 +362,9 @@ pub(crate) mod tests {
 
     #[test]
     fn zero_lobe_is_a_clear_error() {
-        let zero = Twin { name: "zero", params: &["n"], defaults: vec![50.0], ev: Box::new(crate::backend::FnEvaluator(|_: &[f64; crate::N_INPUTS], _: &[f64]| 0.0)) };
+        let zero = Twin { name: "zero", params: &["n"], defaults: vec![50.0], ev: Box::new(lobe::backend::FnEvaluator(|_: &[f64; lobe::N_INPUTS], _: &[f64]| 0.0)) };
         let k = twin_kernel(zero, Input::NH, &[]);
-        let e = report(&args(&[]), &k, None).unwrap_err();
+        let e = report_channels(&args(&[]), std::slice::from_ref(&k), None).unwrap_err();
         assert!(e.render(false).contains("integral is zero; cannot normalise"));
     }
 }

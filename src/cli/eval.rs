@@ -8,9 +8,9 @@
 
 use super::args::{self, BackendArg, FormulaSource, Json, Params, PreferArg};
 use super::common::{self, CliError};
-use crate::base::json;
-use crate::ir::{Input, InputSet, N_INPUTS};
-use crate::{Evaluator, Kernel};
+use lobe::report::eval::{EvalReport, PointValue, PointsReport};
+use lobe::ir::{Input, InputSet, N_INPUTS};
+use lobe::{Evaluator, Kernel};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("set", args::help("Parameter values baked into the kernel, e.g. `n=200,a=16`")))]
@@ -114,7 +114,7 @@ fn at_inputs(at: &[(String, Vec<f64>)], used: InputSet) -> Result<([f64; N_INPUT
     let mut notes = vec![];
     for (k, d) in dirs.iter_mut().enumerate() {
         let name = ["L", "V"][k];
-        let (u, scaled) = super::points::unit(*d).ok_or_else(|| {
+        let (u, scaled) = lobe::numerics::points::unit(*d).ok_or_else(|| {
             CliError::hint(format!("--at: {name} = ({}, {}, {}) has no direction", d[0], d[1], d[2]), format!("give {name}=x,y,z, not all 0"))
         })?;
         if scaled {
@@ -123,7 +123,7 @@ fn at_inputs(at: &[(String, Vec<f64>)], used: InputSet) -> Result<([f64; N_INPUT
         *d = u;
     }
     let note = (!notes.is_empty()).then(|| notes.join("; "));
-    Ok((crate::numerics::inputs_from_dirs(dirs[0], dirs[1]), note))
+    Ok((lobe::numerics::inputs_from_dirs(dirs[0], dirs[1]), note))
 }
 
 /// The inputs every kernel reads.
@@ -139,18 +139,10 @@ fn show(v: &[f64]) -> String {
     }
 }
 
-/// One point's values as JSON: the number, or `[r, g, b]`.
-fn json_of(v: &[f64]) -> serde_json::Value {
-    match v {
-        [one] => json::value(*one),
-        _ => serde_json::Value::Array(v.iter().map(|x| json::value(*x)).collect()),
-    }
-}
-
 pub fn run(a: &EvalArgs) -> Result<(), CliError> {
     let set = a.set.list();
     let f = a.formula.load()?;
-    let pass = |opts| crate::numerics::robust::with_pass(opts, a.prefer.pass(crate::numerics::robust::PassOptions::default().points));
+    let pass = |opts| lobe::numerics::robust::with_pass(opts, a.prefer.pass(lobe::numerics::robust::PassOptions::default().points));
     let ks: Vec<Kernel> = if a.normalize {
         if f.is_rgb() {
             return Err(CliError::hint(
@@ -161,12 +153,12 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
         // The coefficient depends on every parameter: bake them all (--set values, declared defaults for the rest).
         let mut bake = set.clone();
         bake.extend(f.params.iter().filter(|p| !set.iter().any(|(k, _)| *k == p.name)).map(|p| (p.name.clone(), p.default)));
-        let s = crate::simplified(&f, &pass(crate::Options { bake, ..Default::default() }))?;
-        vec![crate::build_kernel(std::sync::Arc::new(crate::numerics::normalize::bake_coefficient(s)?), a.backend.kind, a.backend.math.mode)?]
+        let s = lobe::simplified(&f, &pass(lobe::Options { bake, ..Default::default() }))?;
+        vec![lobe::build_kernel(std::sync::Arc::new(lobe::numerics::normalize::bake_coefficient(s)?), a.backend.kind, a.backend.math.mode)?]
     } else {
         let mut ks = vec![];
         for c in f.channels() {
-            ks.push(crate::compile_formula(c, &pass(a.backend.options(set.clone())))?);
+            ks.push(lobe::compile_formula(c, &pass(a.backend.options(set.clone())))?);
         }
         ks
     };
@@ -176,30 +168,20 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
     }
     let (x, note) = at_inputs(&a.at.concat(), used(&ks))?;
     let v: Vec<f64> = ks.iter().map(|k| k.eval(&x, &params)).collect();
-    let obj = || serde_json::json!({ "value": json_of(&v), "backend": ks[0].backend.name(), "compile_us": compile_us(&ks) });
-    emit(a.json.on, obj, note, || format!("{}\n", show(&v)));
+    if a.json.on {
+        println!("{}", common::to_json(&EvalReport::new(&ks, v, note))?);
+    } else {
+        emit(note, &show(&v));
+    }
     Ok(())
 }
 
-/// The kernels' compile time, summed over channels, in µs.
-fn compile_us(ks: &[Kernel]) -> serde_json::Value {
-    json::value(ks.iter().map(|k| k.compile_time.as_secs_f64()).sum::<f64>() * 1e6)
-}
-
-/// Prints the JSON object (with the note, if any) under `--json`; else the note on stderr and `text` on stdout.
-fn emit(json: bool, obj: impl FnOnce() -> serde_json::Value, note: Option<String>, text: impl FnOnce() -> String) {
-    if json {
-        let mut obj = obj();
-        if let Some(n) = note {
-            obj["note"] = n.into();
-        }
-        println!("{obj}");
-    } else {
-        if let Some(n) = note {
-            eprintln!("note: {n}");
-        }
-        print!("{}", text());
+/// The note (if any) on stderr, then `text` on stdout.
+fn emit(note: Option<String>, text: &str) {
+    if let Some(n) = note {
+        eprintln!("note: {n}");
     }
+    print!("{text}");
 }
 
 fn run_points(a: &EvalArgs, ks: &[Kernel], path: &str, params: &[f64], set: &[(String, f64)]) -> Result<(), CliError> {
@@ -210,32 +192,24 @@ fn run_points(a: &EvalArgs, ks: &[Kernel], path: &str, params: &[f64], set: &[(S
     if a.normalize {
         baked.extend(formula.params.iter().map(|p| p.name.clone()));
     }
-    let pts = super::points::parse(name, &text, formula, used(ks), &baked)?;
+    let pts = lobe::numerics::points::parse(name, &text, formula, used(ks), &baked)?;
     ks.iter().for_each(Kernel::warm_up);
     let t = std::time::Instant::now();
-    let channels: Vec<Vec<f64>> = ks.iter().map(|k| super::points::evaluate(k, &pts, params)).collect();
+    let channels: Vec<Vec<f64>> = ks.iter().map(|k| lobe::numerics::points::evaluate(k, &pts, params)).collect();
     let elapsed = t.elapsed();
     let point = |i: usize| -> Vec<f64> { channels.iter().map(|c| c[i]).collect() };
     let note = (pts.normalised > 0).then(|| format!("{} of {} rows had a non-unit L or V; they were normalised", pts.normalised, pts.len));
-    let obj = || {
-        serde_json::json!({
-            "values": (0..pts.len).map(|i| json_of(&point(i))).collect::<Vec<_>>(),
-            "points": pts.len,
-            "backend": ks[0].backend.name(),
-            "math": ks[0].math.name(),
-            "compile_us": compile_us(ks),
-            "eval_ns_per_point": json::value(elapsed.as_nanos() as f64 / pts.len.max(1) as f64),
-        })
-    };
-    let text = || {
-        let mut out = String::with_capacity(pts.len * 20 * ks.len());
-        for i in 0..pts.len {
-            out.push_str(&show(&point(i)));
-            out.push('\n');
-        }
-        out
-    };
-    emit(a.json.on, obj, note, text);
+    if a.json.on {
+        let values = (0..pts.len).map(|i| PointValue(point(i))).collect();
+        println!("{}", common::to_json(&PointsReport::new(ks, values, elapsed, note))?);
+        return Ok(());
+    }
+    let mut text = String::with_capacity(pts.len * 20 * ks.len());
+    for i in 0..pts.len {
+        text.push_str(&show(&point(i)));
+        text.push('\n');
+    }
+    emit(note, &text);
     Ok(())
 }
 
@@ -250,6 +224,5 @@ mod tests {
         assert!(parse_at("L=1,2").is_err() && parse_at("NH=1,2").is_err() && parse_at("NH=1,NH=2").is_err());
         assert_eq!(show(&[0.5]), "0.5");
         assert_eq!(show(&[0.5, 1.0, f64::NAN]), "[0.5, 1, NaN]");
-        assert_eq!(json_of(&[0.5, 1.0, f64::NAN]).to_string(), r#"[0.5,1.0,"NaN"]"#);
     }
 }

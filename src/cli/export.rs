@@ -2,7 +2,7 @@
 
 use super::args::{self, FormulaSource, Output, Params};
 use super::common::CliError;
-use crate::backend::glsl::{self, Dialect};
+use lobe::backend::glsl::{self, Dialect};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("set", args::help("Parameters baked as constants, e.g. `n=50`; the others become function arguments")))]
@@ -30,7 +30,7 @@ fn is_ours(bytes: &[u8]) -> bool {
 }
 
 pub fn run(a: &ExportArgs) -> Result<(), CliError> {
-    let k = a.formula.kernel(&a.set.list(), crate::Backend::Interp, crate::Mode::Precise)?;
+    let k = a.formula.kernel(&a.set.list(), lobe::Backend::Interp, lobe::Mode::Precise)?;
     let text = if a.brdf_explorer {
         glsl::brdf_explorer(&k.formula)
     } else {

@@ -1,13 +1,12 @@
 //! `lobe fit FILE --reference REF --param a=1..1000[:step] [--param …] [--metric mean-abs] [--json]`
 //!
-//! JSON keys are documented in [`crate::numerics`].
+//! JSON keys are documented in [`lobe::numerics`].
 
 use super::args::{self, AgainstReference, BackendArg, Json, Params};
 use super::common::{self, CliError};
-use crate::base::json;
-use crate::numerics::fit::{fit, FitOptions, FreeParam, Metric};
+use lobe::numerics::fit::{fit, FitJson, FitOptions, FreeParam, Metric};
 use super::args::parse_range;
-use crate::Kernel;
+use lobe::Kernel;
 use std::io::IsTerminal;
 
 #[derive(clap::Args, Debug)]
@@ -123,16 +122,7 @@ pub fn report(a: &FitArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
     let secs = t.elapsed().as_secs_f64();
     let names: Vec<&str> = free.iter().map(|f| f.name.as_str()).collect();
     if a.json.on {
-        let best: Vec<_> = rep
-            .best
-            .iter()
-            .map(|c| {
-                let p = json::named(free.iter().map(|f| (f.name.as_str(), c.params[f.index])));
-                serde_json::json!({"params": p, "score": json::value(c.score), "refined": c.refined})
-            })
-            .collect();
-        let obj = serde_json::json!({"best": best, "metric": a.metric.name(), "evaluated": rep.evaluated, "seconds": json::value(secs)});
-        outln!(out, "{obj}");
+        outln!(out, "{}", common::to_json(&FitJson::new(&rep, &free, a.metric, secs))?);
         return Ok(out);
     }
     outln!(out, 
@@ -155,9 +145,9 @@ pub fn report(a: &FitArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::numerics::twins;
+    use lobe::numerics::twins;
     use crate::cli::energy::tests::twin_kernel;
-    use crate::ir::Input;
+    use lobe::ir::Input;
     use clap::Parser;
 
     #[derive(Parser)]

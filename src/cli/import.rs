@@ -1,5 +1,5 @@
 //! `lobe import FILE [-o out.brdf]`: a formula file (a BRDF Explorer `.brdf`, typically) written back as lobe's
-//! own language, for people to read and edit. The text is [`crate::ir::print::source`] of the lowered,
+//! own language, for people to read and edit. The text is [`lobe::ir::print::source`] of the lowered,
 //! unsimplified formula, so reading it back gives the same IR and the same values.
 
 use super::args::{self, FormulaSource, Output};
@@ -27,7 +27,7 @@ pub fn run(a: &ImportArgs) -> Result<(), CliError> {
     }
     let f = a.formula.load()?;
     let from = a.formula.file.as_deref().unwrap_or("<expr>");
-    let text = crate::ir::print::source(&f, &format!("{from}, {MARK}: the same function in lobe's language"));
+    let text = lobe::ir::print::source(&f, &format!("{from}, {MARK}: the same function in lobe's language"));
     match &a.out.path {
         Some(p) => a.out.force.write(p, text.as_bytes(), is_ours),
         None => {

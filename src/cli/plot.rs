@@ -2,8 +2,8 @@
 
 use super::args::{self, Output, Params};
 use super::common::{self, CliError};
-use crate::report::plot::{self, Format, LobeOptions, Series};
-use crate::Backend;
+use lobe::report::plot::{self, Format, LobeOptions, Series};
+use lobe::Backend;
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("set", args::help("Parameter values, e.g. `n=50,a=16` (each formula takes the ones it declares)")))]
@@ -57,7 +57,7 @@ pub fn run(a: &PlotArgs) -> Result<(), CliError> {
     for f in &formulas {
         let s = common::set_for(f, &set);
         let params = common::param_values(f, &s);
-        let k = crate::compile_formula(f.clone(), &crate::Options { backend: Backend::Jit, bake: s, ..Default::default() })?;
+        let k = lobe::compile_formula(f.clone(), &lobe::Options { backend: Backend::Jit, bake: s, ..Default::default() })?;
         series.push(Series { name: f.display_name(), points: plot::lobe_points(&k, k.used_inputs(), &params) });
     }
     let n_label = set.iter().find(|(k, _)| k == "n").map(|(_, v)| format!("n = {v}")).unwrap_or_else(|| "default parameters".into());

@@ -2,9 +2,10 @@
 
 use super::args::{self, BackendArg, Json, Output, Params};
 use super::common::{self, CliError};
-use crate::render::image::{self, Transfer};
-use crate::render::scene::{self, LobeCompiler, LoadOptions};
-use crate::render::{self as r, CutoffEffect, RenderOptions, RenderStats};
+use lobe::render::image::{self, Transfer};
+use lobe::render::scene::{self, LobeCompiler, LoadOptions};
+use lobe::render::{self as r, RenderOptions};
+use lobe::report::render as report;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -55,7 +56,7 @@ pub enum Shading {
     Spans,
 }
 
-pub use crate::render::parse_size;
+pub use lobe::render::parse_size;
 
 /// The default output path: `<scene stem>.png` in the current directory.
 pub fn default_output(scene: &Path) -> PathBuf {
@@ -93,118 +94,19 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
     }
     if a.stats || a.json.on {
         let cut = r::cutoff_effect(&sc, &ropts, &frame, &stats).map_err(CliError::msg)?;
-        let t = Times { encode, wall };
         if a.json.on {
-            let mut j = stats_json(&stats, &t, a.backend.kind.name(), &math_of(&sc.materials), cut.as_ref());
-            j["shading"] = serde_json::json!(if ropts.program { "program" } else { "spans" });
-            println!("{j}");
+            let t = report::Times { encode, wall };
+            let j = report::StatsReport::new(&stats, &t, a.backend.kind.name(), &sc.materials, ropts.program, cut.as_ref());
+            println!("{}", common::to_json(&j)?);
         } else {
-            eprint!("{}", format_stats(&stats, encode));
-            eprint!("{}", format_cutoff(cut.as_ref()));
+            eprint!("{}", report::stats_text(&stats, encode));
+            eprint!("{}", report::cutoff_text(cut.as_ref()));
         }
     }
     if !a.quiet {
         eprintln!("wrote {} ({}×{})", out.display(), stats.width, stats.height);
     }
     Ok(())
-}
-
-/// The math modes of the scene's kernels for the report: `precise`, `fast`, or `fast+precise` when materials
-/// differ (scene key `math`).
-pub fn math_of(materials: &[r::Material]) -> String {
-    let mut modes: Vec<&str> = materials.iter().map(|m| m.math.name()).collect();
-    modes.sort_unstable();
-    modes.dedup();
-    modes.join("+")
-}
-
-/// Wall times the CLI measures around the render.
-pub struct Times {
-    pub encode: std::time::Duration,
-    /// Render, encode and write.
-    pub wall: std::time::Duration,
-}
-
-/// The `--stats --json` object (keys listed in README.md). Times in ms except the per-pixel/per-element ns.
-pub fn stats_json(s: &RenderStats, t: &Times, backend: &str, math: &str, cut: Option<&CutoffEffect>) -> serde_json::Value {
-    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
-    let cutoff = cut.map(|c| {
-        serde_json::json!({
-            "skipped_evals": c.skipped,
-            "max_channel_diff": c.max_channel_diff,
-            "pixels_differing": c.pixels_differing,
-            "manhattan": c.metrics.manhattan,
-            "psnr": if c.metrics.psnr.is_finite() { serde_json::json!(c.metrics.psnr) } else { serde_json::Value::Null },
-        })
-    });
-    serde_json::json!({
-        "width": s.width,
-        "height": s.height,
-        "threads": s.threads,
-        "backend": backend,
-        "math": math,
-        "triangles": s.triangles,
-        "tiles_touched": s.tiles_touched,
-        "visible_px": s.visible_pixels,
-        "evals": s.evals,
-        "kernel_calls": s.kernel_calls,
-        "nan": s.nan,
-        "shade_ns_per_px": s.shade_ns_per_px(),
-        "geometry_ns_per_px": s.geometry_ns_per_px(),
-        "kernel_ns_per_eval": s.kernel_ns_per_eval(),
-        "setup_ms": ms(s.setup),
-        "raster_ms": ms(s.raster_cpu),
-        "shade_ms": ms(s.shade_cpu),
-        "kernel_ms": ms(s.kernel_cpu),
-        "program_compile_ms": ms(s.program_compile),
-        "render_ms": ms(s.render_wall),
-        "encode_ms": ms(t.encode),
-        "wall_ms": ms(t.wall),
-        "mpixels_per_s": s.mpixels_per_s(),
-        "cutoff": cutoff,
-    })
-}
-
-/// The `--stats` lines about the cut-off (empty without one).
-pub fn format_cutoff(cut: Option<&CutoffEffect>) -> String {
-    match cut {
-        None => String::new(),
-        Some(c) => format!(
-            "  cut-off: {} evaluations skipped; against the full render: max channel difference {}, {} pixels differ, mean |Δ gray| {:.4}\n",
-            c.skipped, c.max_channel_diff, c.pixels_differing, c.metrics.manhattan
-        ),
-    }
-}
-
-/// The `--stats` report.
-pub fn format_stats(s: &RenderStats, encode: std::time::Duration) -> String {
-    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
-    format!(
-        "render: {}×{} px, {} thread(s), {} triangles, {}/{} tiles touched\n\
-         \x20 time: {:.2} ms wall ({:.2} Mpixel/s); setup+binning {:.2} ms; raster {:.2} ms cpu; shading {:.2} ms cpu (compiled code {:.2}); encode {:.2} ms; shading programs built in {:.2} ms\n\
-         \x20 shading: {} visible px, {:.1} ns cpu per visible px ({:.1} outside compiled code), {} evaluations of F ({:.2} ns of compiled code each) in {} calls, {} NaN\n",
-        s.width,
-        s.height,
-        s.threads,
-        s.triangles,
-        s.tiles_touched,
-        s.tiles,
-        ms(s.render_wall),
-        s.mpixels_per_s(),
-        ms(s.setup),
-        ms(s.raster_cpu),
-        ms(s.shade_cpu),
-        ms(s.kernel_cpu),
-        ms(encode),
-        ms(s.program_compile),
-        s.visible_pixels,
-        s.shade_ns_per_px(),
-        s.geometry_ns_per_px(),
-        s.evals,
-        s.kernel_ns_per_eval(),
-        s.kernel_calls,
-        s.nan
-    )
 }
 
 #[cfg(test)]

@@ -1,5 +1,5 @@
 //! `lobe serve [FILES…] [--scene SCENE] [--port 8080] [--bind 127.0.0.1]`: the interactive page
-//! ([`crate::serve`]). Prints the address and serves until stopped.
+//! ([`lobe::serve`]). Prints the address and serves until stopped.
 
 use super::common::CliError;
 use std::path::PathBuf;
@@ -21,16 +21,16 @@ pub struct ServeArgs {
 }
 
 pub fn run(a: &ServeArgs) -> Result<(), CliError> {
-    let cfg = crate::serve::Config {
+    let cfg = lobe::serve::Config {
         paths: a.files.clone(),
         scene: a.scene.clone(),
         bind: Some(a.bind),
         port: a.port,
-        limits: crate::serve::Limits::default(),
+        limits: lobe::serve::Limits::default(),
     };
-    let server = crate::serve::start(cfg).map_err(|e| match e {
-        crate::serve::StartError::Scene(d) => CliError::Diagnostics(d),
-        crate::serve::StartError::Other(m) => CliError::hint(m, "check the paths and that the port is free (--port 0 picks one)"),
+    let server = lobe::serve::start(cfg).map_err(|e| match e {
+        lobe::serve::StartError::Scene(d) => CliError::Diagnostics(d),
+        lobe::serve::StartError::Other(m) => CliError::hint(m, "check the paths and that the port is free (--port 0 picks one)"),
     })?;
     println!("lobe serve: http://{}/", server.addr);
     if !a.bind.is_loopback() {

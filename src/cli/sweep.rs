@@ -2,16 +2,16 @@
 //! `lobe check --sweep`).
 //!
 //! Evaluates the *unclamped* formula (root `max(raw, 0)` peeled) over the domain (see
-//! [`crate::numerics::sweep`]) twice: as written (the plain simplification) and as compiled (the accuracy
+//! [`lobe::numerics::sweep`]) twice: as written (the plain simplification) and as compiled (the accuracy
 //! pass's choice, which `eval`, `energy`, `fit`, … run), so a bad region shows beside whether lobe's code still
 //! has it. Exits with status 1 when a kind listed in `--deny` occurs in the compiled formula (in the formula as
 //! written with `--as-written`), after printing the report.
 
 use super::args::{self, BackendArg, FormulaSource, Json, Params, PreferArg};
 use super::common::{self, CliError};
-use crate::base::json;
-use crate::ir::Formula;
-use crate::numerics::sweep::{extent, extent_polar, sweep, Example, RegionStats, SweepOptions, SweepReport};
+use lobe::base::json;
+use lobe::ir::Formula;
+use lobe::numerics::sweep::{extent, extent_polar, sweep, Example, RegionStats, SweepOptions, SweepReport};
 
 use serde::Serialize;
 
@@ -81,7 +81,7 @@ fn example_json(e: &Option<Example>, names: &[String]) -> serde_json::Value {
     match e {
         None => serde_json::Value::Null,
         Some(e) => serde_json::json!({
-            "inputs": json::named(crate::Input::ALL.iter().map(|i| (i.name(), e.inputs[i.index()]))),
+            "inputs": json::named(lobe::Input::ALL.iter().map(|i| (i.name(), e.inputs[i.index()]))),
             "params": json::named(names.iter().map(String::as_str).zip(e.params.iter().copied())),
             "value": json::value(e.value),
         }),
@@ -97,7 +97,7 @@ fn compact(v: f64) -> String {
     }
 }
 
-fn example_text(e: &Example, used: crate::ir::InputSet, names: &[String]) -> String {
+fn example_text(e: &Example, used: lobe::ir::InputSet, names: &[String]) -> String {
     let mut parts: Vec<String> = used.iter().map(|i| format!("{}={}", i.name(), compact(e.inputs[i.index()]))).collect();
     parts.extend(names.iter().zip(&e.params).map(|(n, v)| format!("{n}={}", compact(*v))));
     format!("{} → {}", parts.join(" "), compact(e.value))
@@ -117,7 +117,7 @@ pub fn run(a: &SweepArgs) -> Result<(), CliError> {
     // `{"channels": {"red": …, "green": …, "blue": …}}`.
     let mut denied = vec![];
     let mut objects = serde_json::Map::new();
-    for c in common::named_channels(&f) {
+    for c in f.named_channels() {
         let (text, d) = report(a, &c)?;
         denied.extend(d.into_iter().filter(|k| !denied.contains(k)).collect::<Vec<_>>());
         match (f.is_rgb(), a.json.on) {
@@ -140,7 +140,7 @@ pub fn run(a: &SweepArgs) -> Result<(), CliError> {
 
 /// One example's bad-region extents: along each input read (independent cosines) or along L's and V's polar
 /// angles (geometry), as (label, lo, hi).
-fn extents(k: &crate::Kernel, rep: &SweepReport, used: crate::ir::InputSet, e: &Example, bad: &dyn Fn(f64) -> bool) -> Vec<(String, f64, f64)> {
+fn extents(k: &lobe::Kernel, rep: &SweepReport, used: lobe::ir::InputSet, e: &Example, bad: &dyn Fn(f64) -> bool) -> Vec<(String, f64, f64)> {
     if rep.domain.is_geometric() {
         [(true, "NL = Lz", "along L's polar angle"), (false, "NV = Vz", "along V's polar angle")]
             .into_iter()
@@ -164,7 +164,7 @@ fn kinds(r: &RegionStats, bound: f64) -> [Kind<'_>; 4] {
     ]
 }
 
-fn regions_json<'a>(k: &crate::Kernel, rep: &'a SweepReport, used: crate::ir::InputSet, names: &[String]) -> Vec<RegionJson<'a>> {
+fn regions_json<'a>(k: &lobe::Kernel, rep: &'a SweepReport, used: lobe::ir::InputSet, names: &[String]) -> Vec<RegionJson<'a>> {
     rep.regions
         .iter()
         .map(|r| {
@@ -184,7 +184,7 @@ fn regions_json<'a>(k: &crate::Kernel, rep: &'a SweepReport, used: crate::ir::In
 }
 
 /// The first examples of each region and kind with their extents, as text lines.
-fn examples_text(out: &mut String, k: &crate::Kernel, rep: &SweepReport, used: crate::ir::InputSet, names: &[String], label: &str) {
+fn examples_text(out: &mut String, k: &lobe::Kernel, rep: &SweepReport, used: lobe::ir::InputSet, names: &[String], label: &str) {
     for r in &rep.regions {
         for (kind, _, e, bad) in kinds(r, rep.bound) {
             if let Some(e) = e {
@@ -211,12 +211,12 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliEr
     let set = a.set.list();
     let mut decls = f.params.clone();
     let u = f.unclamped();
-    let k = crate::compile_formula(u.clone(), &a.backend.options(set.clone()))?;
+    let k = lobe::compile_formula(u.clone(), &a.backend.options(set.clone()))?;
     let compiled = if a.as_written {
         None
     } else {
-        let opts = crate::numerics::robust::with_pass(a.backend.options(set.clone()), a.prefer.pass(crate::numerics::robust::PassOptions::default().points));
-        Some(crate::compile_formula(u, &opts)?)
+        let opts = lobe::numerics::robust::with_pass(a.backend.options(set.clone()), a.prefer.pass(lobe::numerics::robust::PassOptions::default().points));
+        Some(lobe::compile_formula(u, &opts)?)
     };
     // Baked parameters are fixed: sweep them at their value only.
     for (name, v) in &set {
@@ -229,7 +229,7 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliEr
     let used = f.used_inputs();
     let opts = SweepOptions { bound: a.bound, max_evals: a.max_evals };
     let rep = sweep(&k, used, &decls, &opts);
-    let text = |k: &crate::Kernel| k.formula.to_program_text().replace('\n', "; ");
+    let text = |k: &lobe::Kernel| k.formula.to_program_text().replace('\n', "; ");
     // The compiled form's sweep, run only when the accuracy pass kept a rewrite (otherwise it is `rep`).
     let changed = compiled.as_ref().filter(|c| text(c) != text(&k));
     let crep_changed = changed.map(|c| sweep(c, used, &decls, &opts));
@@ -288,7 +288,7 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliEr
 mod tests {
     use super::*;
     use crate::cli::energy::tests::power_formula;
-    use crate::ir::Input;
+    use lobe::ir::Input;
     use clap::Parser;
 
     #[derive(Parser)]

@@ -3,10 +3,10 @@
 
 use super::args::{Output, Params};
 use super::common::{self, CliError};
-use crate::render::image;
-use crate::render::scene::{self, LoadOptions, LobeCompiler};
-use crate::render::{self as r, RenderOptions};
-use crate::base::watch::{watch, Next};
+use lobe::render::image;
+use lobe::render::scene::{self, LoadOptions, LobeCompiler};
+use lobe::render::{self as r, RenderOptions};
+use lobe::base::watch::{watch, Next};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -38,7 +38,7 @@ fn reload(a: &WatchArgs, src: String) -> Result<String, CliError> {
     let t0 = Instant::now();
     let name = a.file.display().to_string();
     let opts = LoadOptions { size: Some(a.size), set: a.set.list(), formula_override: Some((name, src)) };
-    let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: crate::Backend::Jit, math: crate::Mode::Precise })?;
+    let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: lobe::Backend::Jit, math: lobe::Mode::Precise })?;
     let compile = t0.elapsed();
     let ropts = RenderOptions::default();
     let (frame, stats) = r::render(&sc, &ropts).map_err(CliError::msg)?;

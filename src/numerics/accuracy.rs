@@ -23,6 +23,7 @@
 
 use super::{lobe_inputs, Diagnostic};
 use crate::backend::{Columns, Evaluator};
+use crate::base::json;
 use crate::ir::Input;
 use crate::N_INPUTS;
 use rayon::prelude::*;
@@ -364,6 +365,72 @@ pub fn accuracy(
     // A NaN anywhere (either grid) makes the mean NaN.
     rep.mean_abs_grid = papers_mean(per_n.iter().map(|p| p.sum_abs), rep.nan_points, opts.n_max);
     Ok(rep)
+}
+
+/// `lobe accuracy --json` (keys listed in README.md; numbers follow [`crate::base::json`]): the metrics of an
+/// [`AccuracyReport`], relative errors in percent, with `q`, the NaN count and the time taken.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct AccuracyJson {
+    #[serde(serialize_with = "json::num")]
+    pub mean_abs_grid: f64,
+    #[serde(serialize_with = "json::num")]
+    pub epicenter_max_rel_pct: f64,
+    #[serde(serialize_with = "json::num")]
+    pub epicenter_worst_n: f64,
+    #[serde(serialize_with = "json::num")]
+    pub inflection_max_rel_pct: f64,
+    #[serde(serialize_with = "json::num")]
+    pub inflection_worst_n: f64,
+    #[serde(serialize_with = "json::num")]
+    pub max_abs: f64,
+    #[serde(serialize_with = "json::num")]
+    pub max_abs_n: f64,
+    #[serde(serialize_with = "json::num")]
+    pub max_abs_angle_deg: f64,
+    #[serde(serialize_with = "json::num")]
+    pub cutoff_max_rel_pct: f64,
+    #[serde(serialize_with = "json::num")]
+    pub cutoff_worst_n: f64,
+    #[serde(serialize_with = "json::num")]
+    pub cutoff_worst_angle_deg: f64,
+    #[serde(serialize_with = "json::num")]
+    pub lobe_ratio_min: f64,
+    #[serde(serialize_with = "json::num")]
+    pub lobe_ratio_min_n: f64,
+    #[serde(serialize_with = "json::num")]
+    pub lobe_ratio_max: f64,
+    #[serde(serialize_with = "json::num")]
+    pub lobe_ratio_max_n: f64,
+    #[serde(serialize_with = "json::num")]
+    pub q: f64,
+    pub nan_points: usize,
+    #[serde(serialize_with = "json::num")]
+    pub seconds: f64,
+}
+
+impl AccuracyJson {
+    pub fn new(rep: &AccuracyReport, q: f64, seconds: f64) -> AccuracyJson {
+        AccuracyJson {
+            mean_abs_grid: rep.mean_abs_grid,
+            epicenter_max_rel_pct: rep.epicenter.value * 100.0,
+            epicenter_worst_n: rep.epicenter.n,
+            inflection_max_rel_pct: rep.inflection.value * 100.0,
+            inflection_worst_n: rep.inflection.n,
+            max_abs: rep.max_abs.value,
+            max_abs_n: rep.max_abs.n,
+            max_abs_angle_deg: rep.max_abs.angle_deg,
+            cutoff_max_rel_pct: rep.cutoff_rel.value * 100.0,
+            cutoff_worst_n: rep.cutoff_rel.n,
+            cutoff_worst_angle_deg: rep.cutoff_rel.angle_deg,
+            lobe_ratio_min: rep.lobe_ratio_min.value,
+            lobe_ratio_min_n: rep.lobe_ratio_min.n,
+            lobe_ratio_max: rep.lobe_ratio_max.value,
+            lobe_ratio_max_n: rep.lobe_ratio_max.n,
+            q,
+            nan_points: rep.nan_points,
+            seconds,
+        }
+    }
 }
 
 #[cfg(test)]

@@ -28,6 +28,7 @@
 
 use super::quad::integrate;
 use super::{dir, inputs_from_dirs, lobe_inputs, Diagnostic, V3};
+use crate::base::json::{self, Named};
 use crate::ir::Input;
 use crate::backend::Evaluator;
 use rayon::prelude::*;
@@ -451,6 +452,188 @@ fn summarise(rows: Vec<(f64, f64)>, reciprocity: Reciprocity) -> Result<FullEner
             "the formula is ≤ 0 (clamped to 0) everywhere for these parameters"));
     }
     Ok(FullEnergy { albedo: rows, albedo_max, theta_i_at_max_deg: at, coef: 1.0 / albedo_max, reciprocity, albedo_phi: vec![], phi_i_at_max_deg: None })
+}
+
+/// `lobe energy --json`: one of the three modes' reports (keys listed in README.md; numbers follow
+/// [`crate::base::json`]).
+#[derive(Clone, Debug, serde::Serialize)]
+#[serde(untagged)]
+pub enum EnergyReport {
+    Lobe(LobeReport),
+    Full(FullReport),
+    Range(RangeReport),
+}
+
+/// The lobe mode at one set of parameters.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct LobeReport {
+    /// Always `"lobe"`.
+    pub mode: &'static str,
+    pub params: Named,
+    #[serde(serialize_with = "json::num")]
+    pub coef: f64,
+    #[serde(serialize_with = "json::num")]
+    pub integral: f64,
+    pub lobe_input: &'static str,
+    pub evals: usize,
+    #[serde(serialize_with = "json::opt_num")]
+    pub skipped_nan_up_to: Option<f64>,
+    #[serde(serialize_with = "json::opt_num")]
+    pub skipped_bound: Option<f64>,
+}
+
+impl LobeReport {
+    pub fn new(params: Named, lobe: Input, r: &LobeIntegral) -> LobeReport {
+        LobeReport {
+            mode: "lobe",
+            params,
+            coef: r.coef(),
+            integral: r.integral,
+            lobe_input: lobe.name(),
+            evals: r.evals,
+            skipped_nan_up_to: r.skipped.map(|s| s.0),
+            skipped_bound: r.skipped.map(|s| s.1),
+        }
+    }
+}
+
+/// The full mode: albedo over incidence angles and reciprocity.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct FullReport {
+    /// Always `"full"`.
+    pub mode: &'static str,
+    pub params: Named,
+    #[serde(serialize_with = "json::num")]
+    pub coef: f64,
+    #[serde(serialize_with = "json::num")]
+    pub albedo_max: f64,
+    #[serde(serialize_with = "json::num")]
+    pub theta_i_at_max_deg: f64,
+    pub albedo: Vec<AlbedoRow>,
+    #[serde(serialize_with = "json::num")]
+    pub reciprocity_max_rel: f64,
+    pub reciprocity_worst: ReciprocityWorst,
+    /// Only for a formula that reads directions.
+    #[serde(serialize_with = "json::opt_num", skip_serializing_if = "Option::is_none")]
+    pub phi_i_at_max_deg: Option<f64>,
+    /// Only for a formula that reads directions: every (θᵢ, φᵢ, ρ).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub albedo_phi: Option<Vec<AlbedoPhiRow>>,
+}
+
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct AlbedoRow {
+    #[serde(serialize_with = "json::num")]
+    pub theta_i_deg: f64,
+    #[serde(serialize_with = "json::num")]
+    pub rho: f64,
+}
+
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct AlbedoPhiRow {
+    #[serde(serialize_with = "json::num")]
+    pub theta_i_deg: f64,
+    #[serde(serialize_with = "json::num")]
+    pub phi_i_deg: f64,
+    #[serde(serialize_with = "json::num")]
+    pub rho: f64,
+}
+
+/// Where reciprocity is worst.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ReciprocityWorst {
+    #[serde(serialize_with = "json::num")]
+    pub theta_l_deg: f64,
+    #[serde(serialize_with = "json::num")]
+    pub theta_v_deg: f64,
+    #[serde(serialize_with = "json::num")]
+    pub phi_v_deg: f64,
+}
+
+impl FullReport {
+    pub fn new(params: Named, r: &FullEnergy) -> FullReport {
+        let rec = &r.reciprocity;
+        FullReport {
+            mode: "full",
+            params,
+            coef: r.coef,
+            albedo_max: r.albedo_max,
+            theta_i_at_max_deg: r.theta_i_at_max_deg,
+            albedo: r.albedo.iter().map(|&(theta_i_deg, rho)| AlbedoRow { theta_i_deg, rho }).collect(),
+            reciprocity_max_rel: rec.max_rel,
+            reciprocity_worst: ReciprocityWorst { theta_l_deg: rec.theta_l_deg, theta_v_deg: rec.theta_v_deg, phi_v_deg: rec.phi_v_deg },
+            phi_i_at_max_deg: r.phi_i_at_max_deg,
+            albedo_phi: r.phi_i_at_max_deg.map(|_| {
+                r.albedo_phi.iter().map(|&(theta_i_deg, phi_i_deg, rho)| AlbedoPhiRow { theta_i_deg, phi_i_deg, rho }).collect()
+            }),
+        }
+    }
+}
+
+/// The lobe mode over a range of n, optionally scored against a fitted coefficient.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct RangeReport {
+    /// Always `"lobe"`.
+    pub mode: &'static str,
+    /// The parameters other than the swept n.
+    pub params: Named,
+    pub lobe_input: &'static str,
+    pub range: Vec<CoefRow>,
+    #[serde(flatten, skip_serializing_if = "Option::is_none")]
+    pub against: Option<AgainstReport>,
+}
+
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CoefRow {
+    #[serde(serialize_with = "json::num")]
+    pub n: f64,
+    #[serde(serialize_with = "json::num")]
+    pub coef: f64,
+}
+
+/// [`AgainstScore`] in the report.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct AgainstReport {
+    #[serde(serialize_with = "json::num")]
+    pub against_max_abs: f64,
+    #[serde(serialize_with = "json::num")]
+    pub against_worst_n: f64,
+    #[serde(serialize_with = "json::num")]
+    pub against_mean_abs: f64,
+}
+
+impl RangeReport {
+    /// `coefs` are (n, coef(n)).
+    pub fn new(params: Named, lobe: Input, coefs: &[(f64, f64)], score: Option<&AgainstScore>) -> RangeReport {
+        RangeReport {
+            mode: "lobe",
+            params,
+            lobe_input: lobe.name(),
+            range: coefs.iter().map(|&(n, coef)| CoefRow { n, coef }).collect(),
+            against: score.map(|s| AgainstReport { against_max_abs: s.max_abs, against_worst_n: s.worst_n, against_mean_abs: s.mean_abs }),
+        }
+    }
+}
+
+/// A report per channel: a scalar formula's own, or for a colour formula the red channel's keys at the top
+/// level and all three channels' reports (red, green, blue) under `channels`.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct PerChannel<T> {
+    #[serde(flatten)]
+    pub first: T,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub channels: Option<Vec<T>>,
+}
+
+impl<T: Clone> PerChannel<T> {
+    /// `reports` has one element per channel (one or three).
+    pub fn new(mut reports: Vec<T>) -> PerChannel<T> {
+        if reports.len() == 1 {
+            PerChannel { first: reports.remove(0), channels: None }
+        } else {
+            PerChannel { first: reports[0].clone(), channels: Some(reports) }
+        }
+    }
 }
 
 #[cfg(test)]

@@ -19,6 +19,7 @@ use super::accuracy::{
 };
 use super::{lobe_inputs, Diagnostic};
 use crate::backend::Evaluator;
+use crate::base::json::{self, Named};
 use crate::ir::Input;
 use rayon::prelude::*;
 
@@ -328,6 +329,42 @@ fn nelder_mead(eval: &mut impl FnMut(&[f64]) -> (f64, Vec<f64>), x0: &[f64], ste
     simplex.sort_by(|a, b| a.0.total_cmp(&b.0));
     let best = simplex.swap_remove(0);
     eval(&best.1)
+}
+
+/// `lobe fit --json` (keys listed in README.md; numbers follow [`crate::base::json`]).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct FitJson {
+    /// Best first.
+    pub best: Vec<CandidateJson>,
+    pub metric: &'static str,
+    pub evaluated: usize,
+    #[serde(serialize_with = "json::num")]
+    pub seconds: f64,
+}
+
+/// A [`Candidate`]: the searched parameters by name.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CandidateJson {
+    pub params: Named,
+    #[serde(serialize_with = "json::num")]
+    pub score: f64,
+    pub refined: bool,
+}
+
+impl FitJson {
+    /// `free` are the searched parameters.
+    pub fn new(rep: &FitReport, free: &[FreeParam], metric: Metric, seconds: f64) -> FitJson {
+        let best = rep
+            .best
+            .iter()
+            .map(|c| CandidateJson {
+                params: Named::new(free.iter().map(|f| (f.name.as_str(), c.params[f.index]))),
+                score: c.score,
+                refined: c.refined,
+            })
+            .collect();
+        FitJson { best, metric: metric.name(), evaluated: rep.evaluated, seconds }
+    }
 }
 
 #[cfg(test)]

@@ -59,6 +59,7 @@ pub mod accuracy;
 pub mod energy;
 pub mod fit;
 pub mod normalize;
+pub mod points;
 pub mod published;
 pub mod quad;
 pub mod robust;

@@ -1,6 +1,8 @@
-//! Reports for people and other tools: timing a kernel's evaluation paths ([`measure`]), the speed-against-
-//! error table of `lobe bench` ([`bench`]), and lobe plots ([`plot`]).
+//! Reports for people and other tools: `lobe eval`'s values ([`eval`]), timing a kernel's evaluation paths ([`measure`]), the speed-against-
+//! error table of `lobe bench` ([`bench`]), lobe plots ([`plot`]), and a render's stage split ([`render`]).
 
 pub mod bench;
+pub mod eval;
 pub mod measure;
 pub mod plot;
+pub mod render;

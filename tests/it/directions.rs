@@ -123,7 +123,7 @@ fn missing_or_zero_directions_are_clear_errors() {
 /// the scalar evaluation at each point.
 #[test]
 fn colour_formulas_evaluate_per_channel_on_both_backends() {
-    use lobe::cli::points;
+    use lobe::numerics::points;
     use lobe::{Backend, Evaluator};
     let f = crate::export::aniso_colour();
     let csv = direction_csv();
@@ -158,7 +158,7 @@ fn colour_formulas_evaluate_per_channel_on_both_backends() {
 fn sweep_of_a_colour_direction_formula_runs_per_channel_on_geometry() {
     use lobe::numerics::sweep::{sweep, SweepOptions};
     let f = crate::export::aniso_colour();
-    let chans = lobe::cli::common::named_channels(&f);
+    let chans = f.named_channels();
     assert_eq!(chans.iter().map(|c| c.display_name()).collect::<Vec<_>>(), ["aniso_colour (red)", "aniso_colour (green)", "aniso_colour (blue)"]);
     for c in chans {
         let k = lobe::compile_formula(c.unclamped(), &lobe::Options::default()).unwrap();

@@ -383,27 +383,25 @@ fn full_energy_integrates_over_the_azimuth_for_direction_formulas() {
     }
 }
 
-#[derive(clap::Parser)]
-struct EnergyCli {
-    #[command(flatten)]
-    a: lobe::cli::energy::EnergyArgs,
-}
-
-fn energy_args(v: &[&str]) -> lobe::cli::energy::EnergyArgs {
-    use clap::Parser;
-    EnergyCli::try_parse_from(std::iter::once("energy").chain(v.iter().copied())).unwrap().a
-}
-
 fn channel_kernels(f: Formula) -> Vec<lobe::Kernel> {
     f.channels().into_iter().map(|c| lobe::compile_formula(c, &lobe::Options { backend: Backend::Jit, ..Default::default() }).unwrap()).collect()
 }
 
 #[test]
 fn energy_reports_each_channel_of_a_colour_formula() {
-    use lobe::cli::energy::report_channels;
+    use lobe::base::json::Named;
+    use lobe::numerics::energy::{FullReport, PerChannel};
     let ks = channel_kernels(principled());
     assert_eq!(ks.len(), 3);
-    let v: serde_json::Value = serde_json::from_str(&report_channels(&energy_args(&["--mode", "full", "--json"]), &ks, None).unwrap()).unwrap();
+    let reports: Vec<FullReport> = ks
+        .iter()
+        .map(|k| {
+            let p = k.default_params();
+            let named = Named::new(k.formula.params.iter().zip(&p).map(|(d, v)| (d.name.as_str(), *v)));
+            FullReport::new(named, &full_energy_for(k, k.used_inputs(), &p).unwrap())
+        })
+        .collect();
+    let v = serde_json::to_value(PerChannel::new(reports)).unwrap();
     let ch = v["channels"].as_array().expect("channels");
     assert_eq!(ch.len(), 3);
     // The top-level keys are the red channel's.
@@ -417,16 +415,27 @@ fn energy_reports_each_channel_of_a_colour_formula() {
         assert!(r0 > base + 0.01 && r0 < base + 0.1, "channel {c}: ρ(0) = {r0}");
     }
     assert!(ch.iter().all(|c| c["phi_i_at_max_deg"].is_number() && c["albedo_phi"].is_array()));
-    // Text (lobe mode, the papers' coefficient): one section per channel.
-    let t = report_channels(&energy_args(&[]), &ks, None).unwrap();
+    // The command's text (lobe mode, the papers' coefficient): one section per channel.
+    let colour = "vec3(NH^n, 0.5*NH^n, 0.25*NH^n)";
+    let o = crate::cli::lobe(&["energy", "--expr", colour], None);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let t = String::from_utf8_lossy(&o.stdout);
     for c in ["channel r:", "channel g:", "channel b:"] {
         assert!(t.contains(c), "{c}: {t}");
     }
     assert_eq!(t.matches("coef = 1/(2π·Int)").count(), 3, "{t}");
-    assert!(report_channels(&energy_args(&["--range", "1..2"]), &ks, None).unwrap_err().render(false).contains("scalar formulas only"));
+    let o = crate::cli::lobe(&["energy", "--expr", colour, "--range", "1..2"], None);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("scalar formulas only"));
     // A scalar formula's output has no channels.
+    let o = crate::cli::lobe(&["energy", "examples/brdfs/blinn.brdf", "--json"], None);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(v["channels"].is_null() && v["coef"].is_number());
+    // The library's report of one channel has no channels either.
     let w = channel_kernels(ward_default());
-    let v: serde_json::Value = serde_json::from_str(&report_channels(&energy_args(&["--json"]), &w, None).unwrap()).unwrap();
+    let p = w[0].default_params();
+    let one = PerChannel::new(vec![FullReport::new(Named::default(), &full_energy_for(&w[0], w[0].used_inputs(), &p).unwrap())]);
+    let v = serde_json::to_value(one).unwrap();
     assert!(v["channels"].is_null() && v["coef"].is_number());
 }
 

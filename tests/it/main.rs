@@ -12,6 +12,7 @@ mod front;
 mod fuzz;
 mod hostile;
 mod jit;
+mod json_keys;
 mod layers;
 mod mathlib;
 mod parse_errors;

@@ -427,7 +427,7 @@ fn render_stats_report() {
             let _ = t;
             let t = std::time::Instant::now();
             let png = f.image.encode_png().unwrap();
-            print!("{}", lobe::cli::render::format_stats(&st, t.elapsed()));
+            print!("{}", lobe::report::render::stats_text(&st, t.elapsed()));
             println!("  ({} bytes PNG)", png.len());
         }
     }

@@ -1,0 +1,212 @@
+//! Many points from CSV text, evaluated by the batched kernel (`lobe eval --points`).
+//!
+//! The CSV has a header naming its columns: inputs and, optionally, parameters of the formula (which then stay
+//! live: no recompilation per row). The inputs are either the six direction components `Lx,Ly,Lz,Vx,Vy,Vz`
+//! (local frame: N = +z, X = +x, Y = +y), from which every input is computed as the renderer does
+//! ([`super::inputs_from_dirs`]; non-unit directions are normalised and counted, a zero vector is an
+//! error), or cosine columns (NL, NV, NH, VR, VH; those not named are 0), which only a formula that reads no
+//! direction can take. Parameters not named take their `--set` or declared values. Rows of equal parameter values that follow each other form one batch, so a
+//! file with no parameter columns is a single call of the batched kernel. Errors point at the CSV's line and
+//! column with the usual caret diagnostics.
+
+use super::{dot, inputs_from_dirs, V3};
+use crate::base::diag::{Diagnostic, Diagnostics};
+use crate::base::span::Span;
+use crate::ir::{Formula, Input, InputSet, N_INPUTS};
+use crate::{Columns, Evaluator, Kernel};
+
+/// What a header column names.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Column {
+    Input(Input),
+    Param(usize),
+}
+
+/// Parsed points: input columns (empty when not named) and per-row parameter values.
+pub struct Points {
+    /// Rows whose L or V was not of unit length (normalised before use).
+    pub normalised: usize,
+    pub inputs: [Vec<f64>; N_INPUTS],
+    /// Parameter indices named by the header.
+    pub param_columns: Vec<usize>,
+    /// One row of values per point for `param_columns`.
+    pub params: Vec<Vec<f64>>,
+    pub len: usize,
+}
+
+fn span(start: usize, len: usize) -> Span {
+    Span { start: start as u32, end: (start + len.max(1)) as u32 }
+}
+
+/// `v` scaled to unit length, and whether it had to be; `None` for a zero or non-finite vector.
+pub fn unit(v: V3) -> Option<(V3, bool)> {
+    let len = dot(v, v).sqrt();
+    if !(len > 0.0 && len.is_finite()) {
+        return None;
+    }
+    // Within a few ulp of 1 the vector is taken as given (text of a unit vector rarely has length exactly 1).
+    if (len - 1.0).abs() <= 4.0 * f64::EPSILON {
+        return Some((v, false));
+    }
+    Some((v.map(|c| c / len), true))
+}
+
+/// Parses `text` (named `file` in diagnostics) for formula `f`, whose compiled channels read `used`; `baked` are
+/// parameters baked by `--set`, which cannot also be columns.
+pub fn parse(file: &str, text: &str, f: &Formula, used: InputSet, baked: &[String]) -> Result<Points, Diagnostics> {
+    let fail = |d: Diagnostic| Diagnostics::single_in(file, text, d);
+    let text_start = if text.starts_with('\u{feff}') { 3 } else { 0 };
+    let mut lines = text[text_start..].split('\n').scan(text_start, |off, line| {
+        let start = *off;
+        *off += line.len() + 1;
+        Some((start, line.strip_suffix('\r').unwrap_or(line)))
+    });
+    let Some((hstart, header)) = lines.by_ref().find(|(_, l)| !l.trim().is_empty()) else {
+        return Err(fail(Diagnostic::error("no header line: the CSV is empty").hint("the first line names the columns, e.g. `NH,NL,n`")));
+    };
+    let names: Vec<String> = f.params.iter().map(|p| p.name.clone()).collect();
+    let mut columns = vec![];
+    let mut at = hstart;
+    for cell in header.split(',') {
+        let name = cell.trim();
+        let s = span(at + (cell.len() - cell.trim_start().len()), name.len());
+        at += cell.len() + 1;
+        let col = if let Some(i) = Input::from_name(name) {
+            Column::Input(i)
+        } else if let Some(p) = f.param_index(name) {
+            if baked.iter().any(|b| b == name) {
+                return Err(fail(Diagnostic::error(format!("parameter `{name}` is both baked by --set and a column"))
+                    .at(s, "a column here")
+                    .hint("drop it from --set (a column keeps it live), or drop the column")));
+            }
+            Column::Param(p)
+        } else {
+            let mut known: Vec<&str> = Input::ALL.map(Input::name).to_vec();
+            known.extend(names.iter().map(String::as_str));
+            let hint = crate::front::did_you_mean(name, &known, "columns may be inputs or parameters: ");
+            return Err(fail(Diagnostic::error(format!("`{name}` is neither an input nor a parameter of the formula")).at(s, "unknown column").hint(hint)));
+        };
+        if columns.contains(&col) {
+            return Err(fail(Diagnostic::error(format!("column `{name}` appears twice")).at(s, "again here")));
+        }
+        columns.push(col);
+    }
+    let param_columns: Vec<usize> = columns.iter().filter_map(|c| if let Column::Param(p) = c { Some(*p) } else { None }).collect();
+    let named = |i: Input| columns.contains(&Column::Input(i));
+    let header_span = span(hstart, header.len());
+    let directions = Input::DIRECTIONS.iter().any(|i| named(*i));
+    if directions {
+        let missing: Vec<&str> = Input::DIRECTIONS.iter().filter(|i| !named(**i)).map(|i| i.name()).collect();
+        if !missing.is_empty() {
+            return Err(fail(Diagnostic::error(format!("direction columns without {}", missing.join(", ")))
+                .at(header_span, "this header")
+                .hint("give all six components Lx,Ly,Lz,Vx,Vy,Vz (local frame: N = +z, X = +x, Y = +y)")));
+        }
+        if let Some(c) = Input::ALL.iter().find(|i| !i.is_direction() && named(**i)) {
+            return Err(fail(Diagnostic::error(format!("both directions and the cosine column {}", c.name()))
+                .at(header_span, "this header")
+                .hint("with Lx..Vz every cosine is computed from the directions; drop the cosine columns")));
+        }
+    } else if used.reads_directions() {
+        let reads: Vec<&str> = used.iter().filter(|i| i.is_direction()).map(Input::name).collect();
+        return Err(fail(Diagnostic::error(format!("the formula reads directions ({}), but the CSV has no direction columns", reads.join(", ")))
+            .at(header_span, "this header")
+            .hint("give the columns Lx,Ly,Lz,Vx,Vy,Vz (unit L and V in the local frame: N = +z, X = +x, Y = +y); cosines follow from them")));
+    }
+    let mut pts = Points { normalised: 0, inputs: Default::default(), param_columns, params: vec![], len: 0 };
+    let mut row_inputs = [0.0; N_INPUTS];
+    for (start, line) in lines {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let mut row_params = Vec::with_capacity(pts.param_columns.len());
+        let mut at = start;
+        let mut n = 0;
+        let mut cells = [Span::default(); N_INPUTS];
+        for cell in line.split(',') {
+            let s = span(at + (cell.len() - cell.trim_start().len()), cell.trim().len());
+            at += cell.len() + 1;
+            let Some(col) = columns.get(n) else {
+                return Err(fail(Diagnostic::error(format!("more values than the header's {} columns", columns.len())).at(s, "extra value")));
+            };
+            n += 1;
+            let v: f64 = cell.trim().parse().map_err(|_| {
+                fail(Diagnostic::error(format!("`{}` is not a number", cell.trim())).at(s, "expected a number").hint("values are decimal numbers such as 0.95, 1e-3, nan or inf"))
+            })?;
+            match *col {
+                Column::Input(i) => {
+                    row_inputs[i.index()] = v;
+                    cells[i.index()] = s;
+                }
+                Column::Param(p) => {
+                    let d = &f.params[p];
+                    if !d.admits(v) {
+                        return Err(fail(Diagnostic::error(format!(
+                            "{} = {v} is outside its declared range {}..{}",
+                            d.name,
+                            crate::ir::print::number(d.lo),
+                            crate::ir::print::number(d.hi)
+                        ))
+                        .at(s, "out of range")));
+                    }
+                    row_params.push(v);
+                }
+            }
+        }
+        if n < columns.len() {
+            return Err(fail(Diagnostic::error(format!("{n} values where the header has {}", columns.len())).at(span(start, line.len()), "short row")));
+        }
+        if directions {
+            let mut dirs = [[0.0; 3]; 2];
+            let mut scaled_any = false;
+            for (k, (d, first)) in dirs.iter_mut().zip([Input::Lx, Input::Vx]).enumerate() {
+                let raw: V3 = std::array::from_fn(|c| row_inputs[first.index() + c]);
+                let Some((u, scaled)) = unit(raw) else {
+                    let (a, b) = (cells[first.index()], cells[first.index() + 2]);
+                    let name = ["L", "V"][k];
+                    return Err(fail(Diagnostic::error(format!("{name} = ({}, {}, {}) has no direction", raw[0], raw[1], raw[2]))
+                        .at(Span { start: a.start, end: b.end }, "a zero or non-finite vector")
+                        .hint(format!("{name} is a direction: give three finite components, not all 0"))));
+                };
+                scaled_any |= scaled;
+                *d = u;
+            }
+            pts.normalised += usize::from(scaled_any);
+            let x = inputs_from_dirs(dirs[0], dirs[1]);
+            for (col, v) in pts.inputs.iter_mut().zip(x) {
+                col.push(v);
+            }
+        } else {
+            for c in &columns {
+                if let Column::Input(i) = c {
+                    pts.inputs[i.index()].push(row_inputs[i.index()]);
+                }
+            }
+        }
+        pts.params.push(row_params);
+        pts.len += 1;
+    }
+    Ok(pts)
+}
+
+/// Evaluates every point with the batched kernel: one batch per run of rows with equal parameter values.
+pub fn evaluate(k: &Kernel, pts: &Points, base_params: &[f64]) -> Vec<f64> {
+    let mut out = vec![0.0; pts.len];
+    let zeros = vec![0.0; pts.len];
+    let cols: [&[f64]; N_INPUTS] = std::array::from_fn(|i| if pts.inputs[i].is_empty() { zeros.as_slice() } else { pts.inputs[i].as_slice() });
+    let mut params = base_params.to_vec();
+    let mut start = 0;
+    while start < pts.len {
+        let mut end = start + 1;
+        while end < pts.len && pts.params[end] == pts.params[start] {
+            end += 1;
+        }
+        for (slot, v) in pts.param_columns.iter().zip(&pts.params[start]) {
+            params[*slot] = *v;
+        }
+        let part: [&[f64]; N_INPUTS] = std::array::from_fn(|i| &cols[i][start..end]);
+        k.eval_batch(&Columns::new(part), &params, &mut out[start..end]);
+        start = end;
+    }
+    out
+}

@@ -1,0 +1,103 @@
+//! `lobe eval --json`: the value at one point, or the values at every point of a CSV, with what produced
+//! them (keys listed in README.md; numbers follow [`crate::base::json`]).
+
+use crate::base::json;
+use crate::Kernel;
+use serde::Serialize;
+
+/// One point's value: a number for a scalar formula, `[r, g, b]` for a colour one.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PointValue(pub Vec<f64>);
+
+impl Serialize for PointValue {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeSeq;
+        match self.0.as_slice() {
+            [one] => json::num(one, s),
+            all => {
+                let mut seq = s.serialize_seq(Some(all.len()))?;
+                for v in all {
+                    seq.serialize_element(&Num(*v))?;
+                }
+                seq.end()
+            }
+        }
+    }
+}
+
+/// An `f64` serialised under [`crate::base::json`]'s rule.
+struct Num(f64);
+
+impl Serialize for Num {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        json::num(&self.0, s)
+    }
+}
+
+/// The kernels' compile time, summed over channels, in µs.
+fn compile_us(ks: &[Kernel]) -> f64 {
+    ks.iter().map(|k| k.compile_time.as_secs_f64()).sum::<f64>() * 1e6
+}
+
+/// `lobe eval` at one point.
+#[derive(Clone, Debug, Serialize)]
+pub struct EvalReport {
+    pub value: PointValue,
+    pub backend: &'static str,
+    #[serde(serialize_with = "json::num")]
+    pub compile_us: f64,
+    /// Set when a direction was normalised.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
+}
+
+impl EvalReport {
+    /// `value` from the channel kernels `ks`.
+    pub fn new(ks: &[Kernel], value: Vec<f64>, note: Option<String>) -> EvalReport {
+        EvalReport { value: PointValue(value), backend: ks[0].backend.name(), compile_us: compile_us(ks), note }
+    }
+}
+
+/// `lobe eval --points`.
+#[derive(Clone, Debug, Serialize)]
+pub struct PointsReport {
+    pub values: Vec<PointValue>,
+    pub points: usize,
+    pub backend: &'static str,
+    pub math: &'static str,
+    #[serde(serialize_with = "json::num")]
+    pub compile_us: f64,
+    #[serde(serialize_with = "json::num")]
+    pub eval_ns_per_point: f64,
+    /// Set when rows had a non-unit L or V.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
+}
+
+impl PointsReport {
+    /// `values` per point from the channel kernels `ks`, evaluated in `elapsed`.
+    pub fn new(ks: &[Kernel], values: Vec<PointValue>, elapsed: std::time::Duration, note: Option<String>) -> PointsReport {
+        let points = values.len();
+        PointsReport {
+            values,
+            points,
+            backend: ks[0].backend.name(),
+            math: ks[0].math.name(),
+            compile_us: compile_us(ks),
+            eval_ns_per_point: elapsed.as_nanos() as f64 / points.max(1) as f64,
+            note,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_value_is_a_number_or_a_triple_under_the_json_rule() {
+        assert_eq!(serde_json::to_string(&PointValue(vec![0.25])).unwrap(), "0.25");
+        assert_eq!(serde_json::to_string(&PointValue(vec![f64::INFINITY])).unwrap(), r#""inf""#);
+        assert_eq!(serde_json::to_string(&PointValue(vec![0.5, 1.0, f64::NAN])).unwrap(), r#"[0.5,1.0,"NaN"]"#);
+    }
+}

@@ -1,0 +1,109 @@
+//! The `--json` keys are a stable interface (README, "JSON keys (stable)"): every command that prints JSON runs
+//! on a small input and the set of key paths of its output — nested objects joined with `.`, array elements
+//! collapsed into `[]` — must equal `tests/snapshots/json_keys/CASE.keys`. Values are not compared (they are
+//! timings and measurements); a key that appears, disappears or changes from `null` to an object does show.
+//! `LOBE_BLESS=1` rewrites the snapshots from the current outputs.
+
+use super::cli::lobe;
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+/// The key paths of `v` under `prefix`, into `out`.
+fn key_paths(v: &serde_json::Value, prefix: &str, out: &mut BTreeSet<String>) {
+    match v {
+        serde_json::Value::Object(m) => {
+            for (k, x) in m {
+                let p = if prefix.is_empty() { k.clone() } else { format!("{prefix}.{k}") };
+                out.insert(p.clone());
+                key_paths(x, &p, out);
+            }
+        }
+        serde_json::Value::Array(a) => {
+            let p = format!("{prefix}[]");
+            for x in a {
+                key_paths(x, &p, out);
+            }
+        }
+        _ => {}
+    }
+}
+
+fn snapshot_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/snapshots/json_keys")
+}
+
+/// A formula with a parameter other than `n`, which `fit` can search (the metric sweeps `n` itself).
+const FIT_FORMULA: &str = "param a = 2 in 1..100\nNH^(a*n) / a";
+/// A small colour formula (three channels, each cheap to check).
+const COLOUR: &str = "vec3(NH, NH^2, 1 - NH)";
+
+#[test]
+fn every_json_output_keeps_its_keys() {
+    let dir = crate::scratch_dir("json-keys", "run");
+    let points = dir.join("points.csv");
+    std::fs::write(&points, "NH,NL\n0.5,0.7\n0.9,0.1\n").unwrap();
+    let png = dir.join("out.png");
+    let cut_scene = dir.join("cutoff.toml");
+    let phong = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/brdfs/phong.brdf");
+    let scene = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes/paper_sphere.toml"))
+        .unwrap()
+        .replace("../brdfs/modified_schlick_vr.brdf", &phong.display().to_string())
+        .replace("\nks = 0.5\n", "\nks = 0.5\ncutoff = 8\n");
+    std::fs::write(&cut_scene, scene).unwrap();
+    let (points, png, cut_scene) = (points.display().to_string(), png.display().to_string(), cut_scene.display().to_string());
+    let blinn = "examples/brdfs/blinn.brdf";
+    let cases: Vec<(&str, Vec<&str>)> = vec![
+        ("eval", vec!["eval", blinn, "--set", "n=2", "--at", "NH=0.5", "--json"]),
+        ("eval_note", vec!["eval", "--expr", "dot(N, L)", "--at", "L=0,0,2,V=0,0,1", "--json"]),
+        ("eval_points", vec!["eval", blinn, "--points", &points, "--json"]),
+        ("eval_colour", vec!["eval", "--expr", COLOUR, "--at", "NH=0.5", "--json"]),
+        ("eval_colour_points", vec!["eval", "--expr", COLOUR, "--points", &points, "--json"]),
+        ("check", vec!["check", "examples/brdfs/beckmann.brdf", "--points", "200", "--json"]),
+        ("check_colour", vec!["check", "--expr", COLOUR, "--points", "200", "--json"]),
+        ("sweep", vec!["sweep", "examples/brdfs/beckmann.brdf", "--max-evals", "2000", "--json"]),
+        ("sweep_as_written", vec!["sweep", blinn, "--max-evals", "2000", "--as-written", "--json"]),
+        ("sweep_colour", vec!["sweep", "--expr", COLOUR, "--max-evals", "2000", "--json"]),
+        ("energy_lobe", vec!["energy", blinn, "--set", "n=10", "--json"]),
+        ("energy_full", vec!["energy", blinn, "--set", "n=10", "--mode", "full", "--json"]),
+        ("energy_full_directions", vec!["energy", "--expr", "max(dot(X, L), 0) / pi", "--mode", "full", "--json"]),
+        ("energy_range", vec!["energy", blinn, "--range", "1..5", "--json"]),
+        ("energy_range_against", vec!["energy", blinn, "--range", "1..5", "--against-expr", "(n+2)/(2*pi)", "--json"]),
+        ("energy_colour", vec!["energy", "--expr", COLOUR, "--json"]),
+        ("accuracy", vec!["accuracy", "examples/brdfs/phong.brdf", "--reference", blinn, "--n-max", "20", "--json"]),
+        ("fit", vec!["fit", "--expr", FIT_FORMULA, "--reference", blinn, "--param", "a=1..4", "--n-max", "20", "--quiet", "--json"]),
+        ("compare", vec!["compare", blinn, "examples/brdfs/phong.brdf", "--size", "16", "--json"]),
+        ("compare_sweep", vec!["compare", blinn, "examples/brdfs/phong.brdf", "--size", "16", "--sweep-n", "5,10", "--json"]),
+        ("bench", vec!["bench", "examples/brdfs/gaussian.brdf", "--samples", "3", "--no-albedo", "--json"]),
+        ("render_stats", vec!["render", "examples/scenes/paper_sphere.toml", "--size", "16", "-q", "-o", &png, "--stats", "--json"]),
+        ("render_stats_cutoff", vec!["render", &cut_scene, "--size", "16", "-q", "-o", &png, "--force", "--stats", "--json"]),
+    ];
+    let bless = std::env::var("LOBE_BLESS").is_ok_and(|v| v == "1");
+    let mut failures = vec![];
+    for (name, args) in &cases {
+        let o = lobe(args, None);
+        assert!(o.status.success(), "{name}: {}", String::from_utf8_lossy(&o.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout)
+            .unwrap_or_else(|e| panic!("{name}: not JSON ({e}):\n{}", String::from_utf8_lossy(&o.stdout)));
+        let mut keys = BTreeSet::new();
+        key_paths(&v, "", &mut keys);
+        let text: String = keys.iter().map(|k| format!("{k}\n")).collect();
+        let path = snapshot_dir().join(format!("{name}.keys"));
+        if bless {
+            std::fs::create_dir_all(snapshot_dir()).unwrap();
+            std::fs::write(&path, &text).unwrap();
+            continue;
+        }
+        let want = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e} (LOBE_BLESS=1 writes it)", path.display()));
+        if want != text {
+            let want: BTreeSet<&str> = want.lines().collect();
+            let got: BTreeSet<&str> = text.lines().collect();
+            failures.push(format!(
+                "{name}: missing {:?}, new {:?}",
+                want.difference(&got).collect::<Vec<_>>(),
+                got.difference(&want).collect::<Vec<_>>()
+            ));
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(failures.is_empty(), "--json keys changed:\n{}", failures.join("\n"));
+}
