@@ -40,10 +40,9 @@ pub struct RenderArgs {
     /// No progress bar.
     #[arg(short, long)]
     pub quiet: bool,
-    /// How materials are shaded: `program` compiles each material's whole shading (geometry, every light, F,
-    /// colour) into one program that the chosen backend runs, so `--backend interp` runs the same program;
-    /// `spans` runs Rust loops for the geometry and calls the backend only for F (faster today on scenes with
-    /// several lights and an expensive formula; see BENCHMARKS.md). Both give the same image.
+    /// How materials are shaded: `program` (the only way) compiles each material's whole shading (geometry,
+    /// every light, F, colour) into one program that the chosen backend runs, so `--backend interp` runs the
+    /// same program.
     #[arg(long, value_enum, default_value_t = Shading::Program)]
     pub shading: Shading,
 }
@@ -52,7 +51,6 @@ pub struct RenderArgs {
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Shading {
     Program,
-    Spans,
 }
 
 pub use crate::render::parse_size;
@@ -76,7 +74,6 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
         transfer: if a.srgb { Transfer::Srgb } else { Transfer::Linear },
         progress: !a.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr()),
         cutoff: true,
-        program: a.shading == Shading::Program,
     };
     let t0 = Instant::now();
     let (frame, stats) = r::render(&sc, &ropts).map_err(CliError::msg)?;
@@ -93,7 +90,8 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
         let t = Times { encode, wall };
         if a.json.on {
             let mut j = stats_json(&stats, &t, a.backend.kind.name(), &math_of(&sc.materials), cut.as_ref());
-            j["shading"] = serde_json::json!(if ropts.program { "program" } else { "spans" });
+            // Always "program": every material shades through its program.
+            j["shading"] = serde_json::json!("program");
             println!("{j}");
         } else {
             eprint!("{}", format_stats(&stats, encode));
