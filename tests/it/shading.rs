@@ -171,8 +171,9 @@ fn reference(m: &r::Material, spec: &rp::Spec, p: V3, n: V3, t: V3) -> ([f64; 3]
                 let mut g = 0.0;
                 if lit {
                     let raw = k.eval(&x, &m.params);
-                    g = if raw.abs() < f64::INFINITY { raw } else { 0.0 };
-                    counts[0] += f64::from(u8::from(!(raw.abs() < f64::INFINITY)));
+                    let finite = raw.abs() < f64::INFINITY;
+                    g = if finite { raw } else { 0.0 };
+                    counts[0] += if finite { 0.0 } else { 1.0 };
                 }
                 f[c] = if spec.times_nl { g * nl } else { g };
             }
