@@ -20,8 +20,8 @@ use super::raster::{GBuffer, ScreenTri, Setup, EMPTY};
 use super::Scene;
 use std::time::Instant;
 
-/// Pixels shaded together: every column of a span (~25 of them, 2 KiB each) stays in the L1 cache between
-/// the steps, and the kernel call per span and light (~50 ns of dispatch) is well amortised.
+/// Pixels shaded together: a span's columns (~18 of them, 2 KiB each) stay in the L1 cache between
+/// interpolation, the program and the 8-bit conversion, and the program call per span is well amortised.
 pub const SPAN: usize = 256;
 
 /// Reusable per-thread buffers, so shading a tile allocates nothing in the steady state.
