@@ -98,11 +98,12 @@ pub(in crate::backend::jit) fn build(
 /// Cook–Torrance and no slower elsewhere: BENCHMARKS.md).
 const STEP: usize = 4;
 
-/// Whether the main loop interleaves [`STEP`] vectors: when F calls the math library or the scene has several
-/// lights. Cranelift schedules no instructions, so one vector's long chains (roots, divisions, the library's
-/// polynomials: hundreds of cycles from the loads to the colour) leave the core idle unless an independent
-/// vector's instructions sit beside them in program order; interleaving costs registers (more spills), which one
-/// light and a cheap formula do not win back (measured: BENCHMARKS.md, 2026-11-30 issue 11 third pass).
+/// Whether the main loop interleaves [`STEP`] vectors: when the program calls the math library or has several
+/// regions (lights, in the renderer's programs). Cranelift schedules no instructions, so one vector's long
+/// chains (roots, divisions, the library's polynomials: hundreds of cycles from the loads to the outputs) leave
+/// the core idle unless an independent vector's instructions sit beside them in program order; interleaving
+/// costs registers (more spills), which one region of cheap arithmetic does not win back (measured:
+/// BENCHMARKS.md, 2026-11-30 issue 11 third pass).
 fn interleaves(p: &Program) -> bool {
     p.regions.len() > 1 || p.ir.nodes().iter().any(|n| matches!(n, Node::Call(b, _) if b.info().lowering == Lowering::Math))
 }
