@@ -72,13 +72,11 @@ fn split() {
     let rounds: usize = std::env::var("LOBE_SPLIT_ROUNDS").ok().and_then(|s| s.parse().ok()).unwrap_or(5);
     let only = std::env::var("LOBE_SPLIT_ONLY").unwrap_or_default();
     let program = RenderOptions { threads: 1, ..RenderOptions::default() };
-    let spans = RenderOptions { program: false, ..program };
     println!("render split, 1 thread, best of {rounds} alternating renders (ns per visible pixel; kernel ns per evaluation)");
-    println!("  program: the compiled shading program (JIT) and the same program interpreted; spans: the Rust span loops");
-    println!("  with one batched kernel call per span and light (the previous path). prog = the program's own share.");
+    println!("  program: the compiled shading program (JIT) and the same program interpreted. prog = the program's own share.");
     println!(
-        "{:<20} {:>5} {:>8} {:>8} {:>8} {:>7} {:>8} {:>8} {:>7} {:>8} {:>8} {:>7} {:>7} {:>7}",
-        "scene", "size", "visible", "jit prg", "int prg", "int/jit", "jit spn", "int spn", "int/jit", "prog", "batch", "jit/bat", "raster", "encode"
+        "{:<20} {:>5} {:>8} {:>8} {:>8} {:>7} {:>8} {:>8} {:>7} {:>7} {:>7}",
+        "scene", "size", "visible", "jit prg", "int prg", "int/jit", "prog", "batch", "jit/bat", "raster", "encode"
     );
     for (file, size) in [
         ("paper_sphere.toml", 4096),
@@ -91,9 +89,9 @@ fn split() {
             continue;
         }
         let scenes = [load(file, size, Backend::Jit), load(file, size, Backend::Interp)];
-        // JIT program, interpreted program, JIT span loops, interpreted span loops.
-        let runs = [(0, &program), (1, &program), (0, &spans), (1, &spans)];
-        let mut best: [Option<Best>; 4] = [None; 4];
+        // JIT program, interpreted program.
+        let runs = [(0, &program), (1, &program)];
+        let mut best: [Option<Best>; 2] = [None; 2];
         let mut visible = 0;
         for _ in 0..rounds {
             for ((k, o), b) in runs.iter().zip(&mut best) {
@@ -104,20 +102,17 @@ fn split() {
                 visible = st.visible_pixels;
             }
         }
-        let [jp, ip, js, is] = best.map(|b| b.unwrap_or_default());
+        let [jp, ip] = best.map(|b| b.unwrap_or_default());
         let m = &scenes[0].materials[0];
         let batch = batch_ns(m.evaluator.as_ref(), &m.params);
         println!(
-            "{:<20} {:>5} {:>8} {:>8.1} {:>8.1} {:>6.1}× {:>8.1} {:>8.1} {:>6.1}× {:>8.1} {:>8.2} {:>6.1}× {:>5.1}ms {:>5.1}ms",
+            "{:<20} {:>5} {:>8} {:>8.1} {:>8.1} {:>6.1}× {:>8.1} {:>8.2} {:>6.1}× {:>5.1}ms {:>5.1}ms",
             file.trim_end_matches(".toml"),
             size,
             visible,
             jp.shade,
             ip.shade,
             ip.shade / jp.shade,
-            js.shade,
-            is.shade,
-            is.shade / js.shade,
             jp.shade - jp.geometry,
             batch,
             jp.shade / batch,

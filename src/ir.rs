@@ -207,7 +207,7 @@ pub enum Node {
     Binary(BinOp, NodeId, NodeId),
     /// A builtin from the one table; unused argument slots hold the first argument and are ignored.
     Call(Builtin, [NodeId; 3]),
-    /// Per-element data column k of a shading program ([`crate::backend::shading`]): a varying leaf like an
+    /// Per-element data column k of a multi-output program ([`crate::backend::program`]): a varying leaf like an
     /// `Input`, but not a BRDF input. Front ends never produce it, so formulas never contain it.
     Column(u16),
 }

@@ -6,25 +6,68 @@
 //! the interpreter's math mode ([`Builtin::eval_in`]: the math library's code on `f64`), the same code the JIT
 //! emits, so the two agree bit for bit.
 //!
+//! Multi-output programs ([`super::program::Program`]) run through the same instructions ([`ProgramInterp`]):
+//! the invariant nodes once per call, then per element the outer nodes and each guarded region whose lit
+//! value is non-zero (a skipped region's outputs are +0, as the JIT's branch gives).
+//!
 //! Cost: one dispatch (the `match`) and one scratch write per live node, so time grows linearly with the
 //! simplified formula's size; this per-node overhead is what the JIT removes (measured ratios and times:
 //! BENCHMARKS.md).
 
 use crate::builtins::{Builtin, Mode};
 use crate::ir::{BinOp, Formula, Node, N_INPUTS};
+use super::program::{Class, Program};
 use super::{Columns, Evaluator, Prepared};
 use std::cell::RefCell;
 
+/// One node's operation, its operands slots of the scratch array.
 #[derive(Clone, Copy, Debug)]
 enum Instr {
     Const(f64),
     Input(u8),
+    Column(u16),
     Param(u16),
     Neg(u32),
     Bin(BinOp, u32, u32),
     Call1(Builtin, u32),
     Call2(Builtin, u32, u32),
     Call3(Builtin, u32, u32, u32),
+}
+
+impl Instr {
+    fn of(node: Node) -> Instr {
+        match node {
+            Node::Const(b) => Instr::Const(f64::from_bits(b)),
+            Node::Input(i) => Instr::Input(i.index() as u8),
+            Node::Column(k) => Instr::Column(k),
+            Node::Param(p) => Instr::Param(p),
+            Node::Neg(a) => Instr::Neg(a.0),
+            Node::Binary(op, a, b) => Instr::Bin(op, a.0, b.0),
+            Node::Call(b, a) => match b.arity() {
+                1 => Instr::Call1(b, a[0].0),
+                2 => Instr::Call2(b, a[0].0, a[1].0),
+                _ => Instr::Call3(b, a[0].0, a[1].0, a[2].0),
+            },
+        }
+    }
+
+    /// The value for element `i`: operands from `s`, inputs from `x`, data columns from `cols` (a missing
+    /// input, column or parameter reads as NaN, never out of bounds: formulas have no columns, programs no
+    /// inputs).
+    #[inline(always)]
+    fn exec(self, s: &[f64], x: &[f64], cols: &[&[f64]], i: usize, params: &[f64], mode: Mode) -> f64 {
+        match self {
+            Instr::Const(c) => c,
+            Instr::Input(k) => x.get(k as usize).copied().unwrap_or(f64::NAN),
+            Instr::Column(k) => cols.get(k as usize).and_then(|c| c.get(i)).copied().unwrap_or(f64::NAN),
+            Instr::Param(p) => params.get(p as usize).copied().unwrap_or(f64::NAN),
+            Instr::Neg(a) => -s[a as usize],
+            Instr::Bin(op, a, b) => op.apply(s[a as usize], s[b as usize]),
+            Instr::Call1(f, a) => f.eval_in(mode, &[s[a as usize]]),
+            Instr::Call2(f, a, b) => f.eval_in(mode, &[s[a as usize], s[b as usize]]),
+            Instr::Call3(f, a, b, c) => f.eval_in(mode, &[s[a as usize], s[b as usize], s[c as usize]]),
+        }
+    }
 }
 
 /// A flattened formula ready for interpretation.
@@ -49,24 +92,8 @@ impl Interp {
 
     pub fn with_mode(f: &Formula, mode: Mode) -> Interp {
         let (ir, root) = f.ir.compact(f.root);
-        let code = ir
-            .nodes()
-            .iter()
-            .map(|n| match *n {
-                Node::Const(b) => Instr::Const(f64::from_bits(b)),
-                Node::Input(i) => Instr::Input(i.index() as u8),
-                Node::Param(p) => Instr::Param(p),
-                // Formulas have no data columns; shading programs run in `backend::shading`'s interpreter.
-                Node::Column(_) => Instr::Const(f64::NAN),
-                Node::Neg(a) => Instr::Neg(a.0),
-                Node::Binary(op, a, b) => Instr::Bin(op, a.0, b.0),
-                Node::Call(b, a) => match b.arity() {
-                    1 => Instr::Call1(b, a[0].0),
-                    2 => Instr::Call2(b, a[0].0, a[1].0),
-                    _ => Instr::Call3(b, a[0].0, a[1].0, a[2].0),
-                },
-            })
-            .collect::<Vec<_>>();
+        // A data column (formulas have none) reads as NaN, like a missing input.
+        let code = ir.nodes().iter().map(|n| Instr::of(*n)).collect::<Vec<_>>();
         debug_assert_eq!(root.index() + 1, code.len(), "compact puts the root last");
         Interp { code, n_params: f.params.len(), mode }
     }
@@ -82,17 +109,7 @@ impl Interp {
     fn run(&self, x: &[f64; N_INPUTS], params: &[f64], s: &mut Vec<f64>) -> f64 {
         s.clear();
         for ins in &self.code {
-            let v = match *ins {
-                Instr::Const(c) => c,
-                Instr::Input(i) => x[i as usize],
-                // A missing parameter value is NaN, never an out-of-bounds read.
-                Instr::Param(p) => params.get(p as usize).copied().unwrap_or(f64::NAN),
-                Instr::Neg(a) => -s[a as usize],
-                Instr::Bin(op, a, b) => op.apply(s[a as usize], s[b as usize]),
-                Instr::Call1(f, a) => f.eval_in(self.mode, &[s[a as usize]]),
-                Instr::Call2(f, a, b) => f.eval_in(self.mode, &[s[a as usize], s[b as usize]]),
-                Instr::Call3(f, a, b, c) => f.eval_in(self.mode, &[s[a as usize], s[b as usize], s[c as usize]]),
-            };
+            let v = ins.exec(s, x, &[], 0, params, self.mode);
             s.push(v);
         }
         s.last().copied().unwrap_or(f64::NAN)
@@ -144,6 +161,95 @@ impl Evaluator for Interp {
                 x[k] = c.get(i).copied().unwrap_or(0.0);
             }
             *o = self.run(&x, params, &mut s);
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Step {
+    /// Slot `dst` = the instruction's value (its operands are slots of earlier nodes).
+    Op(u32, Instr),
+    /// If slot `lit` is zero: the slots `outs` (a range of `ProgramInterp::outs`) become +0 and the next
+    /// `skip` steps are skipped.
+    Guard { lit: u32, skip: u32, outs: (u32, u32) },
+}
+
+/// A flattened multi-output program: the reference semantics of [`Program`] (module doc), one loop over its
+/// steps per element, its invariants once per call.
+#[derive(Clone, Debug)]
+pub struct ProgramInterp {
+    invariant: Vec<(u32, Instr)>,
+    steps: Vec<Step>,
+    outs: Vec<u32>,
+    outputs: Vec<u32>,
+    len: usize,
+    columns: usize,
+    mode: Mode,
+}
+
+impl ProgramInterp {
+    pub fn new(p: &Program, mode: Mode) -> ProgramInterp {
+        let mut invariant = vec![];
+        let mut steps = vec![];
+        let mut outs = vec![];
+        let mut next = 0;
+        for id in p.ir.ids() {
+            let ins = Instr::of(*p.ir.node(id));
+            match p.class[id.index()] {
+                Class::Invariant => invariant.push((id.0, ins)),
+                Class::Outer => steps.push(Step::Op(id.0, ins)),
+                Class::Guarded => {}
+            }
+            while let Some(r) = p.regions.get(next).filter(|r| r.at == id) {
+                let o0 = outs.len() as u32;
+                outs.extend(r.outputs.iter().map(|o| o.0));
+                steps.push(Step::Guard { lit: r.lit.0, skip: r.nodes.len() as u32, outs: (o0, outs.len() as u32) });
+                steps.extend(r.nodes.iter().map(|n| Step::Op(n.0, Instr::of(*p.ir.node(*n)))));
+                next += 1;
+            }
+        }
+        let outputs = p.outputs.iter().map(|o| o.0).collect();
+        ProgramInterp { invariant, steps, outs, outputs, len: p.ir.len(), columns: p.columns, mode }
+    }
+
+    /// Number of outputs.
+    pub fn outputs(&self) -> usize {
+        self.outputs.len()
+    }
+
+    /// Runs the program on `len` elements: `cols` are the data columns, `outs` one column per output (with
+    /// fewer or shorter data columns than the program reads, or fewer outputs than it has, every output is NaN;
+    /// an output shorter than `len` gets its first elements).
+    pub fn run(&self, cols: &[&[f64]], params: &[f64], outs: &mut [&mut [f64]], len: usize) {
+        if cols.len() < self.columns || cols[..self.columns].iter().any(|c| c.len() < len) || outs.len() < self.outputs.len() {
+            outs.iter_mut().for_each(|o| o.iter_mut().for_each(|x| *x = f64::NAN));
+            return;
+        }
+        let mut s = vec![0.0; self.len];
+        for &(d, ins) in &self.invariant {
+            s[d as usize] = ins.exec(&s, &[], cols, 0, params, self.mode);
+        }
+        for i in 0..len {
+            let mut k = 0;
+            while k < self.steps.len() {
+                match self.steps[k] {
+                    Step::Op(d, ins) => s[d as usize] = ins.exec(&s, &[], cols, i, params, self.mode),
+                    Step::Guard { lit, skip, outs: (a, b) } => {
+                        if s[lit as usize] == 0.0 {
+                            for o in &self.outs[a as usize..b as usize] {
+                                s[*o as usize] = 0.0;
+                            }
+                            k += skip as usize;
+                        }
+                    }
+                }
+                k += 1;
+            }
+            for (o, &slot) in outs.iter_mut().zip(&self.outputs) {
+                if let Some(x) = o.get_mut(i) {
+                    *x = s[slot as usize];
+                }
+            }
         }
     }
 }

@@ -2,12 +2,14 @@
 //! prints. [`Evaluator`] is the one interface the renderer and the numerics call; [`Kernel`] pairs a formula
 //! with its evaluator. [`interp`] is the reference semantics, [`jit`] compiles the same IR with Cranelift (the
 //! only `unsafe` in lobe), [`glsl`] emits GLSL/WGSL text from it. All three read builtins from the one table.
+//! [`program`] is the multi-output form (several outputs over data columns, guarded regions) that the
+//! interpreter and the JIT also run.
 
 mod kernel;
 
 pub mod glsl;
 pub mod interp;
 pub mod jit;
-pub mod shading;
+pub mod program;
 
 pub use kernel::{AsEvaluator, Backend, Columns, Evaluator, FnEvaluator, Kernel, Prepared};

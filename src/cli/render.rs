@@ -41,10 +41,9 @@ pub struct RenderArgs {
     /// No progress bar.
     #[arg(short, long)]
     pub quiet: bool,
-    /// How materials are shaded: `program` compiles each material's whole shading (geometry, every light, F,
-    /// colour) into one program that the chosen backend runs, so `--backend interp` runs the same program;
-    /// `spans` runs Rust loops for the geometry and calls the backend only for F (faster today on scenes with
-    /// several lights and an expensive formula; see BENCHMARKS.md). Both give the same image.
+    /// How materials are shaded: `program` (the only way) compiles each material's whole shading (geometry,
+    /// every light, F, colour) into one program that the chosen backend runs, so `--backend interp` runs the
+    /// same program.
     #[arg(long, value_enum, default_value_t = Shading::Program)]
     pub shading: Shading,
 }
@@ -53,7 +52,6 @@ pub struct RenderArgs {
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Shading {
     Program,
-    Spans,
 }
 
 pub use lobe::render::parse_size;
@@ -76,7 +74,6 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
         tile: a.tile as usize,
         transfer: if a.srgb { Transfer::Srgb } else { Transfer::Linear },
         cutoff: true,
-        program: a.shading == Shading::Program,
     };
     let t0 = Instant::now();
     common::check_threads(a.threads)?;
@@ -96,7 +93,7 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
         let cut = r::cutoff_effect(&sc, &ropts, &frame, &stats).map_err(CliError::msg)?;
         if a.json.on {
             let t = report::Times { encode, wall };
-            let j = report::StatsReport::new(&stats, &t, a.backend.kind.name(), &sc.materials, ropts.program, cut.as_ref());
+            let j = report::StatsReport::new(&stats, &t, a.backend.kind.name(), &sc.materials, cut.as_ref());
             println!("{}", common::to_json(&j)?);
         } else {
             eprint!("{}", report::stats_text(&stats, encode));

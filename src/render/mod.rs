@@ -8,16 +8,16 @@
 //!    (integer edge functions, top-left rule, 1/w depth test), then shade the visible pixels in
 //!    structure-of-arrays spans of up to [`shade::SPAN`] pixels, following each material's [`plan::ShadingPlan`] (computed once
 //!    per frame: which cosines the formula reads, the uniforms, the cut-off) compiled into a shading program
-//!    (one call per span: [`shade::shade_tile`], [`crate::backend::shading`]), and convert to 8 bits into the
+//!    (one call per span: [`shade::shade_tile`], [`program`]), and convert to 8 bits into the
 //!    frame; tiles no triangle touches are filled with the background and cost nothing else;
 //! 3. PNG encoding and atomic output ([`image`]).
 //!
-//! Materials are `Arc<dyn Evaluator>` (three for a colour formula, one per channel) plus the set of inputs the
-//! formula reads (a tangent frame per pixel only if it reads direction components) and, for lobe formulas,
-//! the simplified formulas themselves ([`ProgramSource`]): each render builds the material's shading program
-//! from them and compiles it with the material's backend, so "JIT vs interpreter" compares the same program
-//! (geometry, F and colour sum) compiled or interpreted. A plain Rust closure (tests and benches) is shaded by
-//! the Rust span loops with one batched kernel call per span and light.
+//! Materials are the simplified lobe formulas ([`ProgramSource`]: one, or three for a colour formula) with
+//! their kernels (`Arc<dyn Evaluator>`, for the numerical checks: normalisation, cut-off) and the set of
+//! inputs the formula reads (a tangent frame per pixel only if it reads direction components). Every
+//! material shades through its program: each render builds it from the formulas ([`program::build`]) and
+//! compiles it with the material's backend, so "JIT vs interpreter" compares the same program (geometry, F
+//! and colour sum) compiled or interpreted.
 //!
 //! Determinism: every tile is computed from its own bin in scene order and written to its own pixels, and
 //! all counters are integers, so 1 thread and N threads give byte-identical images and equal counts.
@@ -28,8 +28,8 @@
 //! interpreter 15–30× that) — then rasterisation (a few edge-function steps per
 //! covered pixel, ~5 ns); setup and binning are per triangle and small; tiles the scene does not touch cost
 //! only the background fill. PNG encoding is a separate, serial stage. Stage times are thread CPU time
-//! (`cpu-time`), so a loaded machine does not inflate them; the compiled code's share (`kernel_cpu`: the
-//! program's calls, F included, or the kernel's on the span-loop path) is its wall time scaled by the tile's
+//! (`cpu-time`), so a loaded machine does not inflate them; the programs' share (`kernel_cpu`: their calls,
+//! F included) is its wall time scaled by the tile's
 //! CPU/wall ratio — inside a fused program F's own time is not separable, so benches report the batched
 //! kernel's ns/element measured beside it. Measured numbers: BENCHMARKS.md.
 
@@ -38,6 +38,7 @@ pub mod compare;
 pub mod image;
 pub mod mesh;
 pub mod plan;
+pub mod program;
 pub mod raster;
 pub mod scene;
 pub mod shade;
@@ -120,9 +121,9 @@ pub struct Material {
     pub cutoff: Option<plan::Cutoff>,
     /// The math mode of the material's kernel (for reports).
     pub math: crate::Mode,
-    /// What the shading program is built from (`None` for kernels that are not lobe formulas, e.g. Rust
-    /// closures: those are shaded by the Rust span loops and one batched kernel call per span and light).
-    pub program: Option<ProgramSource>,
+    /// What the shading program is built from (the kernels above are the same formulas, for the numerical
+    /// checks: normalisation, cut-off).
+    pub program: ProgramSource,
 }
 
 /// The compiled formula's channels and backend, from which each render builds the material's shading program.
@@ -135,7 +136,7 @@ pub struct ProgramSource {
 }
 
 impl Material {
-    /// The kernels to call per pixel and light: one, or red, green, blue.
+    /// The channels' kernels: one, or red, green, blue.
     pub fn kernels(&self) -> impl Iterator<Item = &dyn Evaluator> {
         std::iter::once(self.evaluator.as_ref()).chain(self.green_blue.iter().flat_map(|gb| gb.iter().map(|e| e.as_ref())))
     }
@@ -191,14 +192,11 @@ pub struct RenderOptions {
     pub transfer: Transfer,
     /// Apply the materials' cut-offs (off: evaluate F everywhere, to measure what the cut-off changes).
     pub cutoff: bool,
-    /// Shade with each material's compiled shading program (off: the Rust span loops with one batched kernel
-    /// call per span and light, the previous path, kept for comparison and for non-lobe kernels).
-    pub program: bool,
 }
 
 impl Default for RenderOptions {
     fn default() -> RenderOptions {
-        RenderOptions { threads: 0, tile: 64, transfer: Transfer::Linear, cutoff: true, program: true }
+        RenderOptions { threads: 0, tile: 64, transfer: Transfer::Linear, cutoff: true }
     }
 }
 
@@ -223,8 +221,8 @@ pub struct RenderStats {
     pub raster_cpu: Duration,
     /// Shading, including the kernel time and the conversion to 8 bits.
     pub shade_cpu: Duration,
-    /// The part of `shade_cpu` spent inside compiled code: the shading programs' calls (which include F and
-    /// all the geometry after interpolation), or the kernel's batched calls on the span-loop path.
+    /// The part of `shade_cpu` spent inside the shading programs' calls (which include F and all the geometry
+    /// after interpolation).
     pub kernel_cpu: Duration,
     /// Building and compiling the shading programs (wall, before the tiles; ~0 on a code-cache hit).
     pub program_compile: Duration,
@@ -240,13 +238,13 @@ impl RenderStats {
     pub fn shade_ns_per_px(&self) -> f64 {
         self.shade_cpu.as_nanos() as f64 / self.visible_pixels.max(1) as f64
     }
-    /// Shading CPU time outside compiled code per visible pixel, ns: interpolation, grouping and the 8-bit
-    /// conversion (with the span loops off the program path: also the geometry and colour sum).
+    /// Shading CPU time outside the shading programs per visible pixel, ns: interpolation, grouping and the
+    /// 8-bit conversion.
     pub fn geometry_ns_per_px(&self) -> f64 {
         (self.shade_cpu.saturating_sub(self.kernel_cpu)).as_nanos() as f64 / self.visible_pixels.max(1) as f64
     }
-    /// Compiled-code CPU time per evaluation of F, ns (0 when nothing was evaluated): with shading programs
-    /// this includes the geometry and colour sum around F.
+    /// Shading-program CPU time per evaluation of F, ns (0 when nothing was evaluated): this includes the
+    /// geometry and colour sum around F.
     pub fn kernel_ns_per_eval(&self) -> f64 {
         if self.evals == 0 { 0.0 } else { self.kernel_cpu.as_nanos() as f64 / self.evals as f64 }
     }
@@ -262,7 +260,8 @@ pub struct Frame {
 /// Most worker threads a render starts (more only adds scheduling cost on any machine lobe targets).
 pub const MAX_THREADS: usize = 256;
 
-/// Renders `scene`. Fails only if the thread count is over [`MAX_THREADS`] or the pool cannot be built.
+/// Renders `scene`. Fails only if the thread count is over [`MAX_THREADS`], the pool cannot be built, or a
+/// material's shading program cannot be built.
 pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<(Frame, RenderStats), String> {
     render_observed(scene, opts, &|_, _| {})
 }
@@ -274,17 +273,17 @@ pub fn render_observed(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u
         return Err(format!("{} worker threads is more than {MAX_THREADS}; 0 uses one per core", opts.threads));
     }
     if opts.threads == 0 {
-        Ok(render_in_pool(scene, opts, progress))
+        render_in_pool(scene, opts, progress)
     } else {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(opts.threads)
             .build()
             .map_err(|e| format!("cannot start {} threads: {e}", opts.threads))?;
-        Ok(pool.install(|| render_in_pool(scene, opts, progress)))
+        pool.install(|| render_in_pool(scene, opts, progress))
     }
 }
 
-fn render_in_pool(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64, u64) + Sync)) -> (Frame, RenderStats) {
+fn render_in_pool(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64, u64) + Sync)) -> Result<(Frame, RenderStats), String> {
     let t0 = Instant::now();
     let (w, h) = (scene.width, scene.height);
     let tile = opts.tile.clamp(8, 256);
@@ -298,16 +297,13 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64, u
     let setup_time = t0.elapsed();
 
     let bg = scene.background.to_array().map(|c| opts.transfer.encode(c));
-    let plans: Vec<plan::ShadingPlan> = scene.materials.iter().map(|m| plan::ShadingPlan::new(m, scene.ambient, opts.cutoff)).collect();
     let tc = Instant::now();
-    let programs: Vec<Option<shade::ProgramRun>> = scene
+    let programs: Vec<program::ProgramRun> = scene
         .materials
         .iter()
-        .zip(&plans)
-        .map(|(m, p)| if opts.program { shade::ProgramRun::new(scene, m, p) } else { None })
-        .collect();
+        .map(|m| program::ProgramRun::new(scene, m, &plan::ShadingPlan::new(m, scene.ambient, opts.cutoff)))
+        .collect::<Result<_, _>>()?;
     let program_compile = tc.elapsed();
-    let plans: Vec<(plan::ShadingPlan, Option<shade::ProgramRun>)> = plans.into_iter().zip(programs).collect();
     let timers = Timers::default();
     let (tiles_done, tiles) = (AtomicU64::new(0), setup.bins.len() as u64);
     let mut rgb = vec![0u8; w * h * 3];
@@ -330,7 +326,7 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64, u
             let mut counts = shade::ShadeCounts::default();
             for tx in 0..setup.tiles_x {
                 let t = ty * setup.tiles_x + tx;
-                let shaded = tile_pixels(scene, &plans, &setup, t, sc, opts.transfer, bg, &timers);
+                let shaded = tile_pixels(scene, &programs, &setup, t, sc, opts.transfer, bg, &timers);
                 progress(tiles_done.fetch_add(1, Ordering::Relaxed) + 1, tiles);
                 let Some(c) = shaded else { continue };
                 counts += c;
@@ -369,7 +365,7 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64, u
         program_compile,
         render_wall: t0.elapsed(),
     };
-    (Frame { image: Image { width: w, height: h, rgb }, covered }, stats)
+    Ok((Frame { image: Image { width: w, height: h, rgb }, covered }, stats))
 }
 
 /// This thread's CPU time in ns (the wall clock where the platform has no thread clock): stage times are CPU
@@ -395,7 +391,7 @@ struct Timers {
 #[allow(clippy::too_many_arguments)]
 fn tile_pixels(
     scene: &Scene,
-    plans: &[(plan::ShadingPlan, Option<shade::ProgramRun>)],
+    programs: &[program::ProgramRun],
     setup: &raster::Setup,
     t: usize,
     sc: &mut shade::Scratch,
@@ -412,7 +408,7 @@ fn tile_pixels(
     raster::raster_tile(setup, t, &mut sc.gb);
     let c1 = thread_cpu();
     let t1 = Instant::now();
-    let (counts, kernel_wall) = shade::shade_tile(scene, plans, setup, n, sc, transfer, bg);
+    let (counts, kernel_wall) = shade::shade_tile(scene, programs, setup, n, sc, transfer, bg);
     let (c2, wall) = (thread_cpu(), t1.elapsed().as_nanos().max(1) as u64);
     let shade_cpu = c2.saturating_sub(c1);
     // The kernel is timed by the wall clock (a thread-CPU clock read costs ~0.3 µs, too much per call);

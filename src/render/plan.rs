@@ -24,23 +24,19 @@
 //!
 //! A formula that reads directions in the local frame (L, V, N, X, Y, as BRDF Explorer's `BRDF(L, V, N, X, Y)`)
 //! gets the two frame steps; a cosine formula never runs them, so it pays nothing for tangent frames. A
-//! colour formula (`Formula.rgb`) has one kernel per channel, all three called on the same compacted columns;
-//! a scalar formula's F serves all three channels. Energy normalisation (`coef`) is per channel too.
+//! colour formula (`Formula.rgb`) has one F per channel, its three channels sharing their common nodes; a
+//! scalar formula's F serves all three channels. Energy normalisation (`coef`) is per channel too.
 //!
-//! The steps are written twice, on purpose: as the shading program ([`crate::backend::shading`], built from
-//! this plan by [`super::shade::spec`]; one lobe IR with the formula inlined, the steps after interpolation
-//! as IR nodes, run by the interpreter or compiled by the JIT — the path every lobe formula takes), and as
-//! the Rust span loops of `shade.rs` (kernels that are not lobe formulas, e.g. Rust closures, and the
-//! comparison `RenderOptions::program = false`). The program computes inverse lengths as exact `1/sqrt`, the
-//! span loops from an f32 estimate and one Newton step, so the two paths agree within one 8-bit level
-//! (tested on every example scene). In the program the kernel row is a guarded region per light (F only
-//! where some lane is lit; no compaction), F non-finite → 0 and counted, and a colour formula's three
-//! channels share their common nodes.
+//! The steps are written once, as the material's shading program ([`super::program`], built from this plan
+//! by [`super::program::spec`]): one lobe IR with the formula inlined and the steps after interpolation as IR
+//! nodes, run by the interpreter or compiled by the JIT. Inverse lengths are exact `1/sqrt`; the kernel row
+//! is a guarded region per light (F only where some lane is lit; no compaction), F non-finite → 0 and
+//! counted.
 //!
 //! Cost model: per visible pixel ~25 flops (surface) + ~20 and two square roots (view); per lit pixel and
 //! light ~15 flops and one square root (light), 5 (view·light), 6 and one root (half), 3 (reflect), the
-//! kernel, 9 (colour); plus one gather per kernel column. Directions add ~9 flops per pixel (tangent
-//! interpolation), ~40 and one root (frame) and ~12 per light; colour adds two kernel calls and scatters.
+//! kernel, 9 (colour). Directions add ~9 flops per pixel (tangent
+//! interpolation), ~40 and one root (frame) and ~12 per light; colour adds F's two other channels.
 //! Measured split: BENCHMARKS.md.
 
 use super::Material;

@@ -7,117 +7,21 @@
 //! triangle's attributes are loop constants there); two-sided triangles turn the normal to the viewer. The
 //! colours go back to the tile run by run (contiguous pixels), so no per-pixel index list is built.
 //!
-//! Then, for a material whose kernels are lobe formulas, one call of its shading program ([`ProgramRun`]:
-//! [`crate::backend::shading`], compiled once per render) takes those columns to the colour and the counters
-//! — the JIT's batched function or the interpreter running the same program. Otherwise (kernels that are Rust
-//! closures, or `RenderOptions::program` off) every step of the material's [`ShadingPlan`] is one branch-free
-//! loop over the columns, which LLVM vectorises (SSE2 f64x2; the inverse lengths take an f32 estimate and one
-//! f64 Newton step); per light the lit pixels (NL > 0, lobe cosine above the cut-off) are compacted into the
-//! kernel's columns and the kernel is called once for the span with [`Evaluator::eval_batch`], F scattered
-//! back (a NaN or ±inf counted and 0: no light). Both end in the 8-bit conversion. Nothing here
-//! allocates in the steady state ([`Scratch`] is per thread).
+//! Then one call of the material's shading program ([`ProgramRun`]: [`super::program`], compiled once per
+//! render) takes those columns to the colour and the counters — the JIT's batched function or the interpreter
+//! running the same program — and the span ends in the 8-bit conversion. Nothing here allocates in the steady
+//! state ([`Scratch`] is per thread).
 //!
-//! Cost model: see [`super::plan`] and [`crate::backend::shading`]; measured numbers: BENCHMARKS.md.
+//! Cost model: see [`super::plan`] and [`super::program`]; measured numbers: BENCHMARKS.md.
 
 use super::image::Transfer;
-use super::plan::ShadingPlan;
+use super::program::{ProgramRun, COLUMNS, N_OUTPUTS};
 use super::raster::{GBuffer, ScreenTri, Setup, EMPTY};
-use super::{LightKind, Scene};
-use super::Material;
-use crate::backend::shading::{self, N_OUTPUTS};
-use crate::backend::{Columns, Evaluator};
-use crate::ir::Input;
-use std::sync::Arc;
+use super::Scene;
 use std::time::Instant;
 
-/// A shading program ready to run: interpreted, or compiled by the JIT.
-#[derive(Clone)]
-pub enum ProgramCode {
-    Interp(Arc<shading::Interp>),
-    Jit(Arc<crate::backend::jit::ShadeCode>),
-}
-
-impl ProgramCode {
-    /// Compiles `p` for `backend` in math mode `mode` (the JIT through its code cache).
-    pub fn new(p: &shading::Program, backend: crate::backend::Backend, mode: crate::Mode) -> Result<ProgramCode, crate::backend::jit::JitError> {
-        Ok(match backend {
-            crate::backend::Backend::Interp => ProgramCode::Interp(Arc::new(shading::Interp::new(p, mode))),
-            crate::backend::Backend::Jit => ProgramCode::Jit(crate::backend::jit::shade_code(p, mode)?),
-        })
-    }
-
-    /// The parameter-only work for `params`, computed once per render (the JIT's prepared block; empty for
-    /// the interpreter, which does it per call).
-    pub fn prepare(&self, params: &[f64]) -> Vec<f64> {
-        match self {
-            ProgramCode::Interp(_) => vec![],
-            ProgramCode::Jit(c) => c.prepare(params),
-        }
-    }
-
-    /// Runs the program on `len` pixels (every column and output at least `len` long; otherwise nothing
-    /// runs and the outputs are NaN). `block` is [`ProgramCode::prepare`]'s result for `params`.
-    pub fn run(&self, cols: &[&[f64]], params: &[f64], block: &[f64], outs: &mut [&mut [f64]; N_OUTPUTS], len: usize) {
-        match self {
-            ProgramCode::Interp(i) => i.run(cols, params, outs, len),
-            ProgramCode::Jit(c) => {
-                if c.run(cols, params, block, outs, len).is_err() {
-                    outs.iter_mut().for_each(|o| o.iter_mut().for_each(|x| *x = f64::NAN));
-                }
-            }
-        }
-    }
-}
-
-/// A material's compiled shading program for one render, with its prepared parameter block.
-pub struct ProgramRun {
-    code: ProgramCode,
-    block: Vec<f64>,
-    params: Vec<f64>,
-    /// The program reads the tangent (columns 6..9).
-    tangent: bool,
-}
-
-impl ProgramRun {
-    /// The program `plan` describes for `m` under `scene`'s eye and lights, compiled with the material's
-    /// backend and math mode; `None` when the material's kernels are not lobe formulas or compilation failed
-    /// (then the span loops shade it, with the same result within rounding).
-    pub fn new(scene: &Scene, m: &Material, plan: &ShadingPlan) -> Option<ProgramRun> {
-        let src = m.program.as_ref()?;
-        let spec = spec(scene, plan);
-        let channels: Vec<&crate::ir::Formula> = src.channels.iter().map(|f| f.as_ref()).collect();
-        let program = shading::Program::new(&spec, &channels).ok()?;
-        let code = ProgramCode::new(&program, src.backend, src.math).ok()?;
-        let block = code.prepare(&m.params);
-        Some(ProgramRun { code, block, params: m.params.clone(), tangent: program.columns > 6 })
-    }
-}
-
-/// The shading program's description from the plan (see [`shading::Spec`]).
-pub fn spec(scene: &Scene, plan: &ShadingPlan) -> shading::Spec {
-    let lights = scene
-        .lights
-        .iter()
-        .map(|l| match l.kind {
-            LightKind::Point(p) => shading::Light { point: true, at: p.to_array(), color: l.color.to_array() },
-            LightKind::Directional(d) => shading::Light { point: false, at: (-d).to_array(), color: l.color.to_array() },
-        })
-        .collect();
-    shading::Spec {
-        eye: scene.camera.position.to_array(),
-        lights,
-        ambient: plan.ambient,
-        diffuse: plan.diffuse,
-        spec: plan.spec,
-        specular: plan.specular,
-        times_nl: plan.times_nl,
-        tangent_rotation: plan.directions.then_some(plan.tangent_rotation),
-        cutoff: plan.cutoff.map(|c| (c.input, c.cos)),
-    }
-}
-
-/// Pixels shaded together: every column of a span (~25 of them, 2 KiB each) stays in the L1 cache between
-/// the steps, and the kernel call per span and light (~50 ns of dispatch) is well amortised.
+/// Pixels shaded together: a span's columns (~18 of them, 2 KiB each) stay in the L1 cache between
+/// interpolation, the program and the 8-bit conversion, and the program call per span is well amortised.
 pub const SPAN: usize = 256;
 
 /// Reusable per-thread buffers, so shading a tile allocates nothing in the steady state.
@@ -152,35 +56,14 @@ struct Group {
     segs: Vec<(u32, u32, u32)>,
     p: [Vec<f64>; 3],
     n: [Vec<f64>; 3],
-    v: [Vec<f64>; 3],
-    inv_n: Vec<f64>,
-    inv_v: Vec<f64>,
-    nv: Vec<f64>,
-    /// The tangent frame (formulas that read directions only): the interpolated tangent, then the unit
-    /// tangent and bitangent of the local frame; the view and light directions' components in it.
+    /// The interpolated tangent (formulas that read directions only).
     t: [Vec<f64>; 3],
-    bt: [Vec<f64>; 3],
-    vx: Vec<f64>,
-    vy: Vec<f64>,
-    lx: Vec<f64>,
-    ly: Vec<f64>,
-    nl: Vec<f64>,
-    vl: Vec<f64>,
-    nh: Vec<f64>,
-    vh: Vec<f64>,
-    vr: Vec<f64>,
-    /// F per pixel and channel for the current light (0 where not evaluated); a scalar formula fills only
-    /// channel 0, which the colour step then reads for all three.
-    f: [Vec<f64>; 3],
+    /// The program's colour outputs per pixel.
     acc: [Vec<f64>; 3],
     /// Each pixel's 8-bit colour, packed (r | g << 8 | b << 16).
     levels: Vec<u32>,
     /// The shading program's counters per pixel (non-finite F, evaluations, cut-off skips).
     cnt: [Vec<f64>; 3],
-    /// The kernel batch: group positions of the evaluated pixels, their inputs, and F.
-    idx: Vec<u32>,
-    cols: [Vec<f64>; crate::N_INPUTS],
-    out: Vec<f64>,
 }
 
 /// Counters for one tile, summed over tiles (integers, so the sum is independent of thread count).
@@ -204,10 +87,10 @@ impl std::ops::AddAssign for ShadeCounts {
     }
 }
 
-/// Shades the tile whose G-buffer is in `sc.gb` (`tw × th` pixels) with the per-material `plans`; the 8-bit
-/// result (background where nothing is visible) is left in `sc.rgb`. Returns the counters and the time
-/// spent inside the kernel, in nanoseconds.
-pub fn shade_tile(scene: &Scene, plans: &[(ShadingPlan, Option<ProgramRun>)], s: &Setup, n: usize, sc: &mut Scratch, transfer: Transfer, bg: [u8; 3]) -> (ShadeCounts, u64) {
+/// Shades the tile whose G-buffer is in `sc.gb` (`tw × th` pixels) with the per-material `programs`; the
+/// 8-bit result (background where nothing is visible) is left in `sc.rgb`. Returns the counters and the time
+/// spent inside the programs, in nanoseconds.
+pub fn shade_tile(scene: &Scene, programs: &[ProgramRun], s: &Setup, n: usize, sc: &mut Scratch, transfer: Transfer, bg: [u8; 3]) -> (ShadeCounts, u64) {
     let mut counts = ShadeCounts::default();
     let mut kernel_ns = 0;
     sc.rgb.resize(n * 3, 0);
@@ -225,44 +108,9 @@ pub fn shade_tile(scene: &Scene, plans: &[(ShadingPlan, Option<ProgramRun>)], s:
         let end = start + sc.runs[start..].iter().take_while(|r| r.material == m).count();
         let runs = &sc.runs[start..end];
         start = end;
-        let (plan, program) = &plans[m as usize];
-        if let Some(pr) = program {
-            for_each_span(g, runs, s, &sc.gb, eye, pr.tangent, |g| {
-                kernel_ns += run_program(g, pr, &mut counts);
-                encode(g, &mut sc.rgb, transfer);
-            });
-            continue;
-        }
-        let mat = &scene.materials[m as usize];
-        // The material's kernels (one, or red, green, blue), without allocating.
-        let mut kernels: [&dyn Evaluator; 3] = [mat.evaluator.as_ref(); 3];
-        let mut nk = 0;
-        for k in mat.kernels() {
-            kernels[nk] = k;
-            nk += 1;
-        }
-        for_each_span(g, runs, s, &sc.gb, eye, plan.directions, |g| {
-            view(g, eye);
-            if plan.directions {
-                frame(g, plan.tangent_rotation);
-            }
-            for (c, a) in g.acc.iter_mut().enumerate() {
-                a.clear();
-                a.resize(g.len, plan.ambient[c]);
-            }
-            for light in &scene.lights {
-                light_step(g, light.kind, plan.view_light, plan.directions);
-                if plan.half {
-                    half(g);
-                }
-                if plan.reflect {
-                    reflect(g);
-                }
-                if plan.specular {
-                    kernel_ns += kernel(g, plan, &kernels[..nk], &mat.params, &mut counts);
-                }
-                colour(g, plan, light.color.to_array());
-            }
+        let pr = &programs[m as usize];
+        for_each_span(g, runs, s, &sc.gb, eye, pr.tangent, |g| {
+            kernel_ns += run_program(g, pr, &mut counts);
             encode(g, &mut sc.rgb, transfer);
         });
     }
@@ -344,7 +192,7 @@ fn run_program(g: &mut Group, pr: &ProgramRun, counts: &mut ShadeCounts) -> u64 
     let m = g.len;
     let ([px, py, pz], [nx, ny, nz], [tx, ty, tz]) = (&g.p, &g.n, &g.t);
     let tk = if pr.tangent { m } else { 0 };
-    let cols: [&[f64]; shading::MAX_COLUMNS] = [&px[..m], &py[..m], &pz[..m], &nx[..m], &ny[..m], &nz[..m], &tx[..tk], &ty[..tk], &tz[..tk]];
+    let cols: [&[f64]; COLUMNS] = [&px[..m], &py[..m], &pz[..m], &nx[..m], &ny[..m], &nz[..m], &tx[..tk], &ty[..tk], &tz[..tk]];
     let [r, gg, b] = &mut g.acc;
     let [c0, c1, c2] = &mut g.cnt;
     let mut outs: [&mut [f64]; N_OUTPUTS] = [fit(r, m), fit(gg, m), fit(b, m), fit(c0, m), fit(c1, m), fit(c2, m)];
@@ -373,15 +221,6 @@ fn run_program(g: &mut Group, pr: &ProgramRun, counts: &mut ShadeCounts) -> u64 
 fn fit<T: Copy + Default>(v: &mut Vec<T>, m: usize) -> &mut [T] {
     v.resize(m, T::default());
     &mut v[..m]
-}
-
-/// 1/√x to ~1e-14 relative without an f64 square root or division, which the f64 loops would otherwise
-/// queue three times per pixel on the divider: an f32 estimate (four lanes per instruction), then one
-/// Newton step in f64. x = 0, or beyond the f32 range (lengths over ~1e19), gives NaN or 0: no light.
-#[inline(always)]
-fn rsqrt(x: f64) -> f64 {
-    let y = f64::from(1.0 / (x as f32).sqrt());
-    y * (1.5 - 0.5 * x * y * y)
 }
 
 /// The surface step for one piece of a run of triangle `tri`: p and n (and with `TAN` the tangent) at span
@@ -419,250 +258,6 @@ fn surface<const TAN: bool>(g: &mut Group, k: usize, tri: &ScreenTri, bary: &[[f
                 ny[i] = -ny[i];
                 nz[i] = -nz[i];
             }
-        }
-    }
-}
-
-/// The view step: v = eye − p, 1/|n|, 1/|v|, NV.
-fn view(g: &mut Group, eye: [f64; 3]) {
-    let m = g.len;
-    let (inv_n, inv_v, nv) = (fit(&mut g.inv_n, m), fit(&mut g.inv_v, m), fit(&mut g.nv, m));
-    let [vx, vy, vz] = &mut g.v;
-    let (vx, vy, vz) = (fit(vx, m), fit(vy, m), fit(vz, m));
-    let [px, py, pz] = &g.p;
-    let [nx, ny, nz] = &g.n;
-    let (px, py, pz, nx, ny, nz) = (&px[..m], &py[..m], &pz[..m], &nx[..m], &ny[..m], &nz[..m]);
-    for i in 0..m {
-        let (x, y, z) = (eye[0] - px[i], eye[1] - py[i], eye[2] - pz[i]);
-        let inn = rsqrt(nx[i] * nx[i] + ny[i] * ny[i] + nz[i] * nz[i]);
-        let ivv = rsqrt(x * x + y * y + z * z);
-        vx[i] = x;
-        vy[i] = y;
-        vz[i] = z;
-        inv_n[i] = inn;
-        inv_v[i] = ivv;
-        nv[i] = (nx[i] * x + ny[i] * y + nz[i] * z) * inn * ivv;
-    }
-}
-
-/// The frame step (formulas that read directions): the interpolated tangent made orthogonal to the normal
-/// and unit (Gram–Schmidt; where it is parallel to the normal, Duff et al.'s frame of the normal instead),
-/// the bitangent N̂ × T̂, both turned about N̂ by the material's tangent angle (`rot` = (cos, sin)), and the
-/// view direction's components Vx = V̂·T̂, Vy = V̂·B̂ (Vz is NV).
-fn frame(g: &mut Group, rot: [f64; 2]) {
-    let m = g.len;
-    let (vxo, vyo) = (fit(&mut g.vx, m), fit(&mut g.vy, m));
-    let [bx, by, bz] = &mut g.bt;
-    let (bx, by, bz) = (fit(bx, m), fit(by, m), fit(bz, m));
-    let [tx, ty, tz] = &mut g.t;
-    let (tx, ty, tz) = (&mut tx[..m], &mut ty[..m], &mut tz[..m]);
-    let [nx, ny, nz] = &g.n;
-    let [vx, vy, vz] = &g.v;
-    let (nx, ny, nz, vx, vy, vz) = (&nx[..m], &ny[..m], &nz[..m], &vx[..m], &vy[..m], &vz[..m]);
-    let (inv_n, inv_v) = (&g.inv_n[..m], &g.inv_v[..m]);
-    let [c, s] = rot;
-    for i in 0..m {
-        let (a, b, d) = (nx[i] * inv_n[i], ny[i] * inv_n[i], nz[i] * inv_n[i]);
-        let k = a * tx[i] + b * ty[i] + d * tz[i];
-        let (ux, uy, uz) = (tx[i] - a * k, ty[i] - b * k, tz[i] - d * k);
-        let l2 = ux * ux + uy * uy + uz * uz;
-        let ok = l2 > 1e-20;
-        // Duff et al. 2017's tangent of (a, b, d) for the degenerate case (see mesh::onb_tangent).
-        let sign = if d < 0.0 { -1.0 } else { 1.0 };
-        let q = -1.0 / (sign + d);
-        let (ox, oy, oz) = (1.0 + sign * a * a * q, sign * a * b * q, -sign * a);
-        let il = if ok { rsqrt(l2) } else { 1.0 };
-        let (ux, uy, uz) = if ok { (ux * il, uy * il, uz * il) } else { (ox, oy, oz) };
-        // B̂ = N̂ × T̂, then the rotation by the tangent angle in the tangent plane.
-        let (wx, wy, wz) = (b * uz - d * uy, d * ux - a * uz, a * uy - b * ux);
-        let (t0, t1, t2) = (c * ux + s * wx, c * uy + s * wy, c * uz + s * wz);
-        let (b0, b1, b2) = (c * wx - s * ux, c * wy - s * uy, c * wz - s * uz);
-        tx[i] = t0;
-        ty[i] = t1;
-        tz[i] = t2;
-        bx[i] = b0;
-        by[i] = b1;
-        bz[i] = b2;
-        vxo[i] = (vx[i] * t0 + vy[i] * t1 + vz[i] * t2) * inv_v[i];
-        vyo[i] = (vx[i] * b0 + vy[i] * b1 + vz[i] * b2) * inv_v[i];
-    }
-}
-
-/// The light step (NL; VL if the plan needs it; Lx, Ly if the formula reads directions) for one light.
-fn light_step(g: &mut Group, kind: LightKind, view_light: bool, dirs: bool) {
-    let (p, d) = match kind {
-        LightKind::Point(lp) => (true, lp.to_array()),
-        LightKind::Directional(dir) => (false, (-dir).to_array()),
-    };
-    match (p, view_light, dirs) {
-        (true, true, true) => light_loop::<true, true, true>(g, d),
-        (true, true, false) => light_loop::<true, true, false>(g, d),
-        (true, false, true) => light_loop::<true, false, true>(g, d),
-        (true, false, false) => light_loop::<true, false, false>(g, d),
-        (false, true, true) => light_loop::<false, true, true>(g, d),
-        (false, true, false) => light_loop::<false, true, false>(g, d),
-        (false, false, true) => light_loop::<false, false, true>(g, d),
-        (false, false, false) => light_loop::<false, false, false>(g, d),
-    }
-}
-
-/// `POINT`: `l` is the light's position (l = pos − p, normalised here); else `l` is the unit direction
-/// towards the light. `VL`: also compute V̂·L̂. `DIR`: also L̂·T̂ and L̂·B̂ (the frame step ran).
-fn light_loop<const POINT: bool, const VL: bool, const DIR: bool>(g: &mut Group, l: [f64; 3]) {
-    let m = g.len;
-    let (nl, vl) = (fit(&mut g.nl, m), fit(&mut g.vl, m));
-    let (lx, ly) = if DIR { (fit(&mut g.lx, m), fit(&mut g.ly, m)) } else { (&mut g.lx[..0], &mut g.ly[..0]) };
-    let ([tx, ty, tz], [bx, by, bz]) = (&g.t, &g.bt);
-    let k = if DIR { m } else { 0 };
-    let (tx, ty, tz, bx, by, bz) = (&tx[..k], &ty[..k], &tz[..k], &bx[..k], &by[..k], &bz[..k]);
-    let [px, py, pz] = &g.p;
-    let [nx, ny, nz] = &g.n;
-    let [vx, vy, vz] = &g.v;
-    let (px, py, pz, nx, ny, nz) = (&px[..m], &py[..m], &pz[..m], &nx[..m], &ny[..m], &nz[..m]);
-    let (vx, vy, vz, inv_n, inv_v) = (&vx[..m], &vy[..m], &vz[..m], &g.inv_n[..m], &g.inv_v[..m]);
-    for i in 0..m {
-        let (x, y, z, il) = if POINT {
-            let (x, y, z) = (l[0] - px[i], l[1] - py[i], l[2] - pz[i]);
-            (x, y, z, rsqrt(x * x + y * y + z * z))
-        } else {
-            (l[0], l[1], l[2], 1.0)
-        };
-        nl[i] = (nx[i] * x + ny[i] * y + nz[i] * z) * inv_n[i] * il;
-        if VL {
-            vl[i] = (vx[i] * x + vy[i] * y + vz[i] * z) * inv_v[i] * il;
-        }
-        if DIR {
-            lx[i] = (tx[i] * x + ty[i] * y + tz[i] * z) * il;
-            ly[i] = (bx[i] * x + by[i] * y + bz[i] * z) * il;
-        }
-    }
-}
-
-/// The half step: |L̂ + V̂|² = 2 + 2VL, so NH = (NL + NV)/|L̂ + V̂| and VH = (1 + VL)/|L̂ + V̂| (both 0 where
-/// L = −V and H is undefined, as a zero half vector gives).
-fn half(g: &mut Group) {
-    let m = g.len;
-    let (nh, vh) = (fit(&mut g.nh, m), fit(&mut g.vh, m));
-    let (nl, nv, vl) = (&g.nl[..m], &g.nv[..m], &g.vl[..m]);
-    for i in 0..m {
-        let h2 = 2.0 + 2.0 * vl[i];
-        let ih = if h2 > 1e-300 { 1.0 / h2.sqrt() } else { 0.0 };
-        nh[i] = (nl[i] + nv[i]) * ih;
-        vh[i] = (1.0 + vl[i]) * ih;
-    }
-}
-
-/// The reflect step: V̂·R̂ = 2·NL·NV − VL.
-fn reflect(g: &mut Group) {
-    let m = g.len;
-    let vr = fit(&mut g.vr, m);
-    let (nl, nv, vl) = (&g.nl[..m], &g.nv[..m], &g.vl[..m]);
-    for i in 0..m {
-        vr[i] = 2.0 * nl[i] * nv[i] - vl[i];
-    }
-}
-
-/// The kernel step: compacts the pixels to evaluate, calls each channel's kernel once (one for a scalar
-/// formula, three for a colour one, on the same columns), scatters F back into `g.f` (0 where not evaluated,
-/// and where F is NaN or ±inf — counted per channel: an infinite lobe is a defect, not a highlight).
-/// Returns the nanoseconds spent in the kernels.
-fn kernel(g: &mut Group, plan: &ShadingPlan, kernels: &[&dyn Evaluator], params: &[f64], counts: &mut ShadeCounts) -> u64 {
-    let m = g.len;
-    let nl = &g.nl[..m];
-    let idx = fit(&mut g.idx, m);
-    let mut lit = 0;
-    let mut count = 0;
-    match plan.cutoff {
-        None => {
-            for (i, &c) in nl.iter().enumerate() {
-                idx[count] = i as u32;
-                count += usize::from(c > 0.0);
-            }
-            lit = count;
-        }
-        Some(cut) => {
-            let lobe = if cut.input == Input::NH { &g.nh[..m] } else { &g.vr[..m] };
-            for (i, (&c, &x)) in nl.iter().zip(lobe).enumerate() {
-                idx[count] = i as u32;
-                lit += usize::from(c > 0.0);
-                count += usize::from(c > 0.0 && x >= cut.cos);
-            }
-        }
-    }
-    counts.cut += (lit - count) as u64;
-    for f in &mut g.f[..kernels.len()] {
-        fit(f, m).fill(0.0);
-    }
-    if count == 0 {
-        return 0;
-    }
-    let idx = &g.idx[..count];
-    // In Input::ALL order; Lz is NL and Vz is NV (both unclamped).
-    let sources: [&[f64]; crate::N_INPUTS] = [&g.nl, &g.nv, &g.nh, &g.vr, &g.vh, &g.lx, &g.ly, &g.nl, &g.vx, &g.vy, &g.nv];
-    for (k, (col, src)) in g.cols.iter_mut().zip(sources).enumerate() {
-        col.clear();
-        if k == Input::NL.index() || plan.reads.contains(Input::ALL[k]) {
-            col.extend(idx.iter().map(|&i| src[i as usize]));
-        }
-    }
-    let out = fit(&mut g.out, count);
-    let cols = Columns::new(std::array::from_fn(|k| g.cols[k].as_slice()));
-    let mut ns = 0;
-    for (ev, f) in kernels.iter().zip(&mut g.f) {
-        let t = Instant::now();
-        ev.eval_batch(&cols, params, out);
-        ns += t.elapsed().as_nanos() as u64;
-        counts.kernel_calls += 1;
-        counts.evals += count as u64;
-        for (&i, &v) in idx.iter().zip(out.iter()) {
-            if v.is_finite() {
-                f[i as usize] = v;
-            } else {
-                counts.nan += 1;
-            }
-        }
-        if plan.times_nl {
-            for &i in idx {
-                f[i as usize] *= g.nl[i as usize];
-            }
-        }
-    }
-    ns
-}
-
-/// The colour step for one light: acc += Il·(kd·C·max(NL, 0) + ks·coef·Cs·F). Unlit pixels add exactly +0
-/// (F is 0 there and NL is clamped), so the sum equals skipping them.
-fn colour(g: &mut Group, plan: &ShadingPlan, il: [f64; 3]) {
-    let m = g.len;
-    let nl = &g.nl[..m];
-    let [r, gg, b] = &mut g.acc;
-    let (r, gg, b) = (&mut r[..m], &mut gg[..m], &mut b[..m]);
-    let (d, s) = (plan.diffuse, plan.spec);
-    if plan.specular && plan.channels == 3 {
-        // Filled by the kernel step for this light, one column per channel.
-        let [f0, f1, f2] = &g.f;
-        let (fr, fg, fb) = (&f0[..m], &f1[..m], &f2[..m]);
-        for i in 0..m {
-            let n = if nl[i] > 0.0 { nl[i] } else { 0.0 };
-            r[i] += il[0] * (d[0] * n + s[0] * fr[i]);
-            gg[i] += il[1] * (d[1] * n + s[1] * fg[i]);
-            b[i] += il[2] * (d[2] * n + s[2] * fb[i]);
-        }
-    } else if plan.specular {
-        // A scalar formula: one F for the three channels (one load per pixel).
-        let f = &g.f[0][..m];
-        for i in 0..m {
-            let n = if nl[i] > 0.0 { nl[i] } else { 0.0 };
-            r[i] += il[0] * (d[0] * n + s[0] * f[i]);
-            gg[i] += il[1] * (d[1] * n + s[1] * f[i]);
-            b[i] += il[2] * (d[2] * n + s[2] * f[i]);
-        }
-    } else {
-        for i in 0..m {
-            let n = if nl[i] > 0.0 { nl[i] } else { 0.0 };
-            r[i] += il[0] * (d[0] * n);
-            gg[i] += il[1] * (d[1] * n);
-            b[i] += il[2] * (d[2] * n);
         }
     }
 }

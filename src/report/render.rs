@@ -44,7 +44,8 @@ pub struct StatsReport {
     pub mpixels_per_s: f64,
     /// What the materials' cut-offs changed against the frame rendered without them; `None` without one.
     pub cutoff: Option<CutoffReport>,
-    /// `program` or `spans`.
+    /// Always `program`: every material shades through its compiled shading program (the key stays for tools
+    /// that read it).
     pub shading: &'static str,
 }
 
@@ -60,8 +61,8 @@ pub struct CutoffReport {
 }
 
 impl StatsReport {
-    /// The report of a render on `backend` with the scene's `materials`, shaded by programs or spans.
-    pub fn new(s: &RenderStats, t: &Times, backend: &'static str, materials: &[Material], program: bool, cut: Option<&CutoffEffect>) -> Self {
+    /// The report of a render on `backend` with the scene's `materials`.
+    pub fn new(s: &RenderStats, t: &Times, backend: &'static str, materials: &[Material], cut: Option<&CutoffEffect>) -> Self {
         StatsReport {
             width: s.width,
             height: s.height,
@@ -93,7 +94,7 @@ impl StatsReport {
                 manhattan: c.metrics.manhattan,
                 psnr: c.metrics.psnr.is_finite().then_some(c.metrics.psnr),
             }),
-            shading: if program { "program" } else { "spans" },
+            shading: "program",
         }
     }
 }

@@ -232,7 +232,7 @@ enum Source {
     /// `col_i[off]` (one value of the lane type) from the batched kernel's hoisted column bases.
     Cols { bases: [Option<Value>; N_INPUTS], off: Value },
     /// A shading program's data columns (`Node::Column(k)` reads `data_k[off]`); it has no `Input` nodes.
-    Data { bases: [Option<Value>; shade::MAX_COLUMNS], off: Value },
+    Data { bases: [Option<Value>; crate::backend::program::MAX_COLUMNS], off: Value },
 }
 
 type Callees = [Option<FuncRef>; Builtin::ALL.len()];
@@ -878,27 +878,32 @@ pub(super) fn build_batch(
     }
     // The loop-variant nodes of one step, translated in each lane type over the shared invariants.
     let step = LoopStep { cx: &cx, plan, bases, out };
-    batch_loop(&mut b, ptr, len, zero, splats, cx.invariants.clone(), &step)?;
+    batch_loop(&mut b, ptr, len, zero, splats, cx.invariants.clone(), &step, 1)?;
     b.finalize(module.target_config());
     Ok(())
 }
 
-/// One step of a batched function's loop, emitted in each lane type over the invariants `vals` (as `L`
-/// values) for the `L::LANES` elements at index `i`.
+/// One step of a batched function's loop, emitted in each lane type: `at.len()` copies, copy `c` for the
+/// `L::LANES` elements at index `at[c]` over the invariants `vals[c]` (as `L` values). Copies may interleave
+/// their instructions (the shading programs' wide step) or follow one another.
 trait LoopBody {
-    fn emit<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Option<Value>>, i: Value) -> Result<(), JitError>;
+    fn emit<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Vec<Option<Value>>>, at: &[Value]) -> Result<(), JitError>;
 }
 
-/// The loop of a batched function, continuing from the entry block (which has computed `splats`, the
-/// invariants in lane type [`V`], and `invariants`, the same in `F64`):
+/// The loop of every batched function (kernels and multi-output programs), continuing from the entry block
+/// (which has computed `splats`, the invariants in lane type [`V`], and `invariants`, the same in `F64`);
+/// `zero` is the pointer-sized constant 0:
 ///
 /// ```text
+/// wide(i):     (when wide > 1) i < len & !(wide·V::LANES − 1) ? wide_body : header(i)
+/// wide_body:   `wide` copies, the vectors at i, i + V::LANES, …; wide(i + wide·V::LANES)
 /// header(i):   i < len & !(V::LANES − 1) ? body : tail_check
 /// body:        the V::LANES elements at i; header(i + V::LANES)
 /// tail_check:  len & (V::LANES − 1) ≠ 0 ? tail : exit
 /// tail:        the last element, in F64 (one element: V has at most two lanes)
 /// exit:        return
 /// ```
+#[allow(clippy::too_many_arguments)]
 fn batch_loop<S: LoopBody>(
     b: &mut FunctionBuilder,
     ptr: Type,
@@ -907,16 +912,43 @@ fn batch_loop<S: LoopBody>(
     splats: Vec<Option<Value>>,
     invariants: Vec<Option<Value>>,
     step: &S,
+    wide: usize,
 ) -> Result<(), JitError> {
     // A wider lane type leaves up to LANES − 1 elements and needs a tail loop instead of one tail element.
     const { assert!(V::LANES == 1 || V::LANES == 2, "the batch tail handles one element") };
+    if !wide.is_power_of_two() {
+        return Err(JitError::Internal(format!("a loop step of {wide} vectors")));
+    }
+    let start = if wide > 1 {
+        let (header, body, rest) = (b.create_block(), b.create_block(), b.create_block());
+        let per_step = wide as i64 * i64::from(V::LANES);
+        let wide_end = b.ins().band_imm_s(len, -per_step);
+        b.ins().jump(header, &[BlockArg::Value(zero)]);
+        b.switch_to_block(header);
+        let i = b.append_block_param(header, ptr);
+        let more = b.ins().icmp(IntCC::UnsignedLessThan, i, wide_end);
+        b.ins().brif(more, body, &[], rest, &[BlockArg::Value(i)]);
+        b.switch_to_block(body);
+        b.seal_block(body);
+        let at: Vec<Value> = (0..wide).map(|k| if k == 0 { i } else { b.ins().iadd_imm_u(i, (k as i64) * i64::from(V::LANES)) }).collect();
+        step.emit::<V>(b, vec![splats.clone(); wide], &at)?;
+        let next = b.ins().iadd_imm_u(i, per_step);
+        b.ins().jump(header, &[BlockArg::Value(next)]);
+        b.seal_block(header);
+        b.switch_to_block(rest);
+        let start = b.append_block_param(rest, ptr);
+        b.seal_block(rest);
+        start
+    } else {
+        zero
+    };
     let header = b.create_block();
     let body = b.create_block();
     let tail_check = b.create_block();
     let tail = b.create_block();
     let exit = b.create_block();
     let vector_end = b.ins().band_imm_s(len, -i64::from(V::LANES));
-    b.ins().jump(header, &[BlockArg::Value(zero)]);
+    b.ins().jump(header, &[BlockArg::Value(start)]);
 
     b.switch_to_block(header);
     let i = b.append_block_param(header, ptr);
@@ -925,7 +957,7 @@ fn batch_loop<S: LoopBody>(
 
     b.switch_to_block(body);
     b.seal_block(body);
-    step.emit::<V>(b, splats, i)?;
+    step.emit::<V>(b, vec![splats], &[i])?;
     let next = b.ins().iadd_imm_u(i, i64::from(V::LANES));
     b.ins().jump(header, &[BlockArg::Value(next)]);
     b.seal_block(header);
@@ -937,7 +969,7 @@ fn batch_loop<S: LoopBody>(
 
     b.switch_to_block(tail);
     b.seal_block(tail);
-    step.emit::<F64>(b, invariants, vector_end)?;
+    step.emit::<F64>(b, vec![invariants], &[vector_end])?;
     b.ins().jump(exit, &[]);
 
     b.switch_to_block(exit);
@@ -956,17 +988,19 @@ struct LoopStep<'a> {
 }
 
 impl LoopBody for LoopStep<'_> {
-    /// Translates the loop-variant nodes for the `L::LANES` elements at index `i` (`vals` holds the invariants
-    /// as `L` values) and stores the root to `out[i..]`.
-    fn emit<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Option<Value>>, i: Value) -> Result<(), JitError> {
-        let off = b.ins().ishl_imm_u(i, 3);
-        let source = Source::Cols { bases: self.bases, off };
-        let mut t = self.cx.translator::<L>(b, vals, source);
-        let root = self.plan.root;
-        t.nodes(root.index() + 1, |id| self.plan.variant(id))?;
-        let r = t.arg(root)?;
-        let dst = b.ins().iadd(self.out, off);
-        b.ins().store(mem(), r, dst, 0);
+    /// Per copy: translates the loop-variant nodes for the `L::LANES` elements at index `i` and stores the
+    /// root to `out[i..]`.
+    fn emit<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Vec<Option<Value>>>, at: &[Value]) -> Result<(), JitError> {
+        for (vals, &i) in vals.into_iter().zip(at) {
+            let off = b.ins().ishl_imm_u(i, 3);
+            let source = Source::Cols { bases: self.bases, off };
+            let mut t = self.cx.translator::<L>(b, vals, source);
+            let root = self.plan.root;
+            t.nodes(root.index() + 1, |id| self.plan.variant(id))?;
+            let r = t.arg(root)?;
+            let dst = b.ins().iadd(self.out, off);
+            b.ins().store(mem(), r, dst, 0);
+        }
         Ok(())
     }
 }

@@ -44,6 +44,7 @@ mod codegen;
 
 use crate::base::diag::Diagnostic;
 use crate::ir::{Formula, InputSet, Ir, NodeId, N_INPUTS};
+use crate::backend::program::{MAX_COLUMNS, MAX_OUTPUTS};
 use crate::backend::{Columns, Evaluator, Prepared};
 use crate::builtins::Mode;
 use cranelift_codegen::ir::UserFuncName;
@@ -144,9 +145,8 @@ type BatchFn = unsafe extern "C" fn(*const *const f64, *const f64, *const f64, *
 /// copies of the body) is defined in the same module on the first batch call, so kernels that are only ever
 /// evaluated point by point (the numerical checks) never pay for it.
 pub struct Compiled {
-    /// Locked only to add the batched kernel and to free the code on drop; the `Mutex` also makes the holder
-    /// `Sync` without `unsafe`.
-    module: Mutex<Option<JITModule>>,
+    /// The memory the entry points below point into.
+    code: Code,
     scalar: ScalarFn,
     /// Computes the prepared parameter block (`None` when nothing is carried: `block_len` = 0).
     prepare: Option<PrepareFn>,
@@ -174,11 +174,8 @@ impl Compiled {
     /// The batched kernel, compiled on first use (concurrent first callers wait for one compile).
     fn batch(&self) -> Option<BatchFn> {
         let r = self.batch.get_or_init(|| {
-            let mut guard = self.module.lock().map_err(|_| "JIT module lock poisoned".to_string())?;
-            let module = guard.as_mut().ok_or("JIT module already freed")?;
             let w = codegen::Build { ir: &self.ir, plan: &self.plan, imports: &self.imports, mode: self.mode, fma: host_fma(), outline: codegen::outlines(&self.ir) };
-            let f = with_jit(|j| j.define_batch(module, &w)).map_err(|e| e.to_string())?;
-            Ok(f)
+            self.code.with_module(|module| with_jit(|j| j.define_batch(module, &w))).map_err(|e| e.to_string())
         });
         r.as_ref().ok().copied()
     }
@@ -245,20 +242,62 @@ impl Compiled {
     }
 }
 
-/// The module out of its lock (poisoned or not), for freeing it on drop.
-fn take_module(m: &mut Mutex<Option<JITModule>>) -> Option<JITModule> {
-    match m.get_mut() {
-        Ok(m) => m.take(),
-        Err(poisoned) => poisoned.into_inner().take(),
+/// JIT memory: one `JITModule` for the host, its code freed when this is dropped. The one owner of
+/// generated code, for kernels ([`Compiled`]) and multi-output programs ([`ShadeCode`]) alike.
+///
+/// Function pointers into the module are handed out only to the struct that holds this `Code` as a field
+/// (and to nobody when a compile fails: then the `Code` is dropped inside the compile function). Dropping a
+/// `JITModule` without `free_memory` would leak it (cranelift-jit keeps escaped pointers valid that way), so
+/// this frees it explicitly.
+pub(crate) struct Code {
+    /// Locked only to add a function to a finalized module (the batched kernel) and to free the code; the
+    /// `Mutex` also makes the holder `Sync` without `unsafe`.
+    module: Mutex<Option<JITModule>>,
+}
+
+impl Code {
+    /// A fresh module for the host ISA resolving `ir`'s math symbols in `mode` and the runtime's (`fma`).
+    fn for_ir(ir: &Ir, mode: Mode, outline: bool) -> Result<Code, JitError> {
+        let mut builder = JITBuilder::with_isa(host_isa()?, default_libcall_names());
+        for (sym, ptr) in codegen::used_symbols(ir, mode, outline) {
+            builder.symbol(sym, ptr);
+        }
+        runtime_symbols(&mut builder);
+        Ok(Code::owning(JITModule::new(builder)))
+    }
+
+    /// Takes ownership of `module` (its memory is freed with this `Code`).
+    fn owning(module: JITModule) -> Code {
+        Code { module: Mutex::new(Some(module)) }
+    }
+
+    /// The module, while this `Code` is exclusively held (during a compile).
+    fn module_mut(&mut self) -> Result<&mut JITModule, JitError> {
+        match self.module.get_mut() {
+            Ok(m) => m.as_mut(),
+            Err(poisoned) => poisoned.into_inner().as_mut(),
+        }
+        .ok_or(JitError::Internal("JIT module already freed".into()))
+    }
+
+    /// Runs `f` on the module under its lock (to add a function to shared code).
+    fn with_module<R>(&self, f: impl FnOnce(&mut JITModule) -> Result<R, JitError>) -> Result<R, JitError> {
+        let mut guard = self.module.lock().map_err(|_| JitError::Internal("JIT module lock poisoned".into()))?;
+        f(guard.as_mut().ok_or(JitError::Internal("JIT module already freed".into()))?)
     }
 }
 
-impl Drop for Compiled {
+impl Drop for Code {
     fn drop(&mut self) {
-        if let Some(m) = take_module(&mut self.module) {
-            // Safety: `scalar` and `batch` point into this module's memory and are only reachable through
-            // `self`, which is being dropped; every `JitKernel` holds an `Arc<Compiled>`, so no kernel can call
-            // the code after this point, and no call is running (a running call borrows a kernel).
+        let module = match self.module.get_mut() {
+            Ok(m) => m.take(),
+            Err(poisoned) => poisoned.into_inner().take(),
+        };
+        if let Some(m) = module {
+            // Safety: every pointer into this module's memory is a field of the struct that owns this `Code`
+            // (`Compiled`, `ShadeCode`), or never left a failed compile; that struct is being dropped, and its
+            // users hold it through an `Arc`, so no code can be called after this point and no call is running
+            // (a running call borrows its owner).
             unsafe { m.free_memory() };
         }
     }
@@ -360,31 +399,17 @@ impl Jit {
             return Err(JitError::Internal("root outside the arena".into()));
         }
         let outline = codegen::outlines(ir);
-        let mut builder = JITBuilder::with_isa(host_isa()?, default_libcall_names());
-        for (sym, ptr) in codegen::used_symbols(ir, mode, outline) {
-            builder.symbol(sym, ptr);
-        }
-        runtime_symbols(&mut builder);
-        let mut module = JITModule::new(builder);
+        // On an error below, `code` is dropped (its memory freed) before any pointer into it escapes.
+        let mut code = Code::for_ir(ir, mode, outline)?;
+        let module = code.module_mut()?;
         let plan = codegen::Plan::new(ir, root);
-        let defined = codegen::declare_imports(&mut module, ir, mode, outline).and_then(|imports| {
-            let w = codegen::Build { ir, plan: &plan, imports: &imports, mode, fma: host_fma(), outline };
-            self.define_scalar(&mut module, &w).map(|fns| (fns, imports))
-        });
-        let ((scalar, prepare), imports) = match defined {
-            Ok(x) => x,
-            Err(e) => {
-                // Safety: no pointer into the module escaped, so nothing can call into the memory being freed.
-                // (Dropping the module instead would leak it: cranelift-jit leaks on drop to keep any escaped
-                // pointers valid.)
-                unsafe { module.free_memory() };
-                return Err(e);
-            }
-        };
+        let imports = codegen::declare_imports(module, ir, mode, outline)?;
+        let w = codegen::Build { ir, plan: &plan, imports: &imports, mode, fma: host_fma(), outline };
+        let (scalar, prepare) = self.define_scalar(module, &w)?;
         let params_read = ir.used_params(root).last().map_or(0, |p| *p as usize + 1);
         static NEXT_ID: AtomicU64 = AtomicU64::new(1);
         Ok(Compiled {
-            module: Mutex::new(Some(module)),
+            code,
             scalar,
             prepare,
             block_len: plan.carried.len(),
@@ -475,19 +500,15 @@ pub fn disassemble(f: &Formula, mode: Mode) -> Result<(String, String), JitError
     let mut j = Jit::new();
     j.disasm = true;
     let c = j.translate(&ir, root, mode)?;
-    {
-        let mut guard = c.module.lock().map_err(|_| JitError::Internal("module lock poisoned".into()))?;
-        let module = guard.as_mut().ok_or(JitError::Internal("module freed".into()))?;
-        let w = codegen::Build { ir: &c.ir, plan: &c.plan, imports: &c.imports, mode: c.mode, fma: host_fma(), outline: codegen::outlines(&c.ir) };
-        j.define_batch(module, &w)?;
-    }
+    let w = codegen::Build { ir: &c.ir, plan: &c.plan, imports: &c.imports, mode: c.mode, fma: host_fma(), outline: codegen::outlines(&c.ir) };
+    c.code.with_module(|module| j.define_batch(module, &w))?;
     // The listings are in definition order: scalar, prepare (when the formula has a prepared block), batch.
     let l = std::mem::take(&mut j.listing);
     Ok((l.first().cloned().unwrap_or_default(), l.last().cloned().unwrap_or_default()))
 }
 
-/// The machine code (Cranelift's listing) of a shading program's loop, for checking what it compiles to.
-pub fn disassemble_program(p: &crate::backend::shading::Program, mode: Mode) -> Result<String, JitError> {
+/// The machine code (Cranelift's listing) of a multi-output program's loop, for checking what it compiles to.
+pub fn disassemble_program(p: &crate::backend::program::Program, mode: Mode) -> Result<String, JitError> {
     let mut j = Jit::new();
     j.disasm = true;
     j.translate_program(p, mode)?;
@@ -621,14 +642,17 @@ impl Evaluator for JitKernel {
 
 type ProgramFn = unsafe extern "C" fn(*const *const f64, *const f64, *const f64, *const *mut f64, usize);
 
-/// A compiled shading program ([`crate::backend::shading`]): its module, the loop function and the prepare
+/// A compiled multi-output program ([`crate::backend::program`]): its module, the loop function and the prepare
 /// function of its parameter-only work.
 pub struct ShadeCode {
-    module: Mutex<Option<JITModule>>,
+    /// The memory `run` and `prepare` point into (held for its drop).
+    _code: Code,
     run: ProgramFn,
     prepare: Option<PrepareFn>,
     block_len: usize,
     columns: usize,
+    /// Output columns the code writes.
+    outputs: usize,
     /// Parameter slots the code reads (`max index + 1`).
     params_read: usize,
     /// Cranelift's time for the program (when it was compiled; a cache hit costs nothing).
@@ -640,10 +664,15 @@ fn shade_cache() -> &'static Mutex<cache::Lru<ShadeCode>> {
     CACHE.get_or_init(|| Mutex::new(cache::Lru::new(DEFAULT_CACHE_CAPACITY)))
 }
 
-/// Compiles a shading program (through a cache keyed like the kernels': the IR's structure, its roots and
+/// Compiles a multi-output program (through a cache keyed like the kernels': the IR's structure, its roots and
 /// the math mode), so a frame whose parameters changed reuses the code.
-pub fn shade_code(p: &crate::backend::shading::Program, mode: Mode) -> Result<Arc<ShadeCode>, JitError> {
-    let key = cache::Key::of_roots(&p.ir, &p.roots(), mode);
+pub fn shade_code(p: &crate::backend::program::Program, mode: Mode) -> Result<Arc<ShadeCode>, JitError> {
+    // The roots, then the shape (output count, each region's), so two programs that list the same roots
+    // differently never share code.
+    let mut roots = p.roots();
+    roots.push(NodeId(p.outputs.len() as u32));
+    roots.extend(p.regions.iter().map(|r| NodeId(r.outputs.len() as u32)));
+    let key = cache::Key::of_roots(&p.ir, &roots, mode);
     let lock = || shade_cache().lock().unwrap_or_else(|e| e.into_inner());
     let hit = lock().get(&key);
     if let Some(c) = hit {
@@ -658,39 +687,28 @@ pub fn shade_code(p: &crate::backend::shading::Program, mode: Mode) -> Result<Ar
 }
 
 impl Jit {
-    /// Compiles a shading program into a fresh module: its loop and (when something is carried) its
+    /// Compiles a multi-output program into a fresh module: its loop and (when something is carried) its
     /// prepare function.
-    fn translate_program(&mut self, p: &crate::backend::shading::Program, mode: Mode) -> Result<ShadeCode, JitError> {
+    fn translate_program(&mut self, p: &crate::backend::program::Program, mode: Mode) -> Result<ShadeCode, JitError> {
         let outline = codegen::shade::outlines(p);
-        let mut builder = JITBuilder::with_isa(host_isa()?, default_libcall_names());
-        for (sym, ptr) in codegen::used_symbols(&p.ir, mode, outline) {
-            builder.symbol(sym, ptr);
-        }
-        let mut module = JITModule::new(builder);
-        let defined = codegen::shade::plan(p).and_then(|plan| {
-            let imports = codegen::declare_imports(&mut module, &p.ir, mode, outline)?;
-            let w = codegen::Build { ir: &p.ir, plan: &plan, imports: &imports, mode, fma: host_fma(), outline };
-            let sig = codegen::shade::signature(&module);
-            let run = self.define(&mut module, &sig, |m, c, f| codegen::shade::build(m, c, f, &w, p))?;
-            let prepare = if plan.carried.is_empty() {
-                None
-            } else {
-                let sig = codegen::prepare_signature(&module);
-                Some(self.define(&mut module, &sig, |m, c, f| codegen::build_prepare(m, c, f, &w))?)
-            };
-            module.finalize_definitions()?;
-            let run = Self::address(&module, run)?;
-            let prepare = prepare.map(|id| Self::address(&module, id)).transpose()?;
-            Ok((run, prepare, plan.carried.len()))
-        });
-        let (run, prepare, block_len) = match defined {
-            Ok(x) => x,
-            Err(e) => {
-                // Safety: no pointer into the module escaped, so nothing can call into the memory being freed.
-                unsafe { module.free_memory() };
-                return Err(e);
-            }
+        // On an error below, `code` is dropped (its memory freed) before any pointer into it escapes.
+        let mut code = Code::for_ir(&p.ir, mode, outline)?;
+        let module = code.module_mut()?;
+        let plan = codegen::shade::plan(p)?;
+        let imports = codegen::declare_imports(module, &p.ir, mode, outline)?;
+        let w = codegen::Build { ir: &p.ir, plan: &plan, imports: &imports, mode, fma: host_fma(), outline };
+        let sig = codegen::shade::signature(module);
+        let run = self.define(module, &sig, |m, c, f| codegen::shade::build(m, c, f, &w, p))?;
+        let prepare = if plan.carried.is_empty() {
+            None
+        } else {
+            let sig = codegen::prepare_signature(module);
+            Some(self.define(module, &sig, |m, c, f| codegen::build_prepare(m, c, f, &w))?)
         };
+        module.finalize_definitions()?;
+        let run = Self::address(module, run)?;
+        let prepare = prepare.map(|id| Self::address(module, id)).transpose()?;
+        let block_len = plan.carried.len();
         let params_read = p.ir.nodes().iter().filter_map(|n| if let crate::ir::Node::Param(k) = n { Some(*k as usize + 1) } else { None }).max().unwrap_or(0);
         // Safety: each address is the entry of a function just compiled with exactly the signature of the type
         // it becomes (the host's C calling convention); it stays valid while `module` lives, which the returned
@@ -699,11 +717,12 @@ impl Jit {
             (std::mem::transmute::<*const u8, ProgramFn>(run), prepare.map(|q| std::mem::transmute::<*const u8, PrepareFn>(q)))
         };
         Ok(ShadeCode {
-            module: Mutex::new(Some(module)),
+            _code: code,
             run,
             prepare,
             block_len,
             columns: p.columns,
+            outputs: p.outputs.len(),
             params_read: params_read.max(p.n_params),
             compile_time: std::time::Duration::ZERO,
         })
@@ -726,13 +745,14 @@ impl ShadeCode {
     }
 
     /// Runs the program on `len` elements. Checked: at least the program's columns, each `len` long or more,
-    /// every output `len` long or more, `params` with every slot read, `block` from [`ShadeCode::prepare`].
-    pub fn run(&self, cols: &[&[f64]], params: &[f64], block: &[f64], outs: &mut [&mut [f64]; crate::backend::shading::N_OUTPUTS], len: usize) -> Result<(), String> {
+    /// one output per program output, each `len` long or more, `params` with every slot read, `block` from
+    /// [`ShadeCode::prepare`].
+    pub fn run(&self, cols: &[&[f64]], params: &[f64], block: &[f64], outs: &mut [&mut [f64]], len: usize) -> Result<(), String> {
         if cols.len() < self.columns || cols[..self.columns].iter().any(|c| c.len() < len) {
-            return Err(format!("a shading program needs {} data columns of {len} elements", self.columns));
+            return Err(format!("a program needs {} data columns of {len} elements", self.columns));
         }
-        if outs.iter().any(|o| o.len() < len) || block.len() != self.block_len {
-            return Err("shading program outputs or block too short".into());
+        if outs.len() != self.outputs || outs.iter().any(|o| o.len() < len) || block.len() != self.block_len {
+            return Err("program outputs or block too short".into());
         }
         if params.len() < self.params_read {
             // A missing parameter is NaN, as in the interpreter.
@@ -740,26 +760,19 @@ impl ShadeCode {
             p.resize(self.params_read, f64::NAN);
             return self.run(cols, &p, block, outs, len);
         }
-        let mut ptrs = [std::ptr::null::<f64>(); codegen::shade::MAX_COLUMNS];
+        let mut ptrs = [std::ptr::null::<f64>(); MAX_COLUMNS];
         for (p, c) in ptrs.iter_mut().zip(cols) {
             *p = c.as_ptr();
         }
-        let out_ptrs: [*mut f64; crate::backend::shading::N_OUTPUTS] = std::array::from_fn(|k| outs[k].as_mut_ptr());
+        let mut out_ptrs = [std::ptr::null_mut::<f64>(); MAX_OUTPUTS];
+        for (p, o) in out_ptrs.iter_mut().zip(outs.iter_mut()) {
+            *p = o.as_mut_ptr();
+        }
         // Safety: checked just above: the `columns` column pointers the code reads each have `len` elements,
-        // every output has `len` elements and is exclusively borrowed (distinct `&mut` slices), `params` has
+        // each of the `outputs` outputs the code writes has `len` elements and is exclusively borrowed (distinct `&mut` slices), `params` has
         // every slot the code reads and `block` the `block_len` slots; the code lives as long as `self`.
         unsafe { (self.run)(ptrs.as_ptr(), params.as_ptr(), block.as_ptr(), out_ptrs.as_ptr(), len) };
         Ok(())
-    }
-}
-
-impl Drop for ShadeCode {
-    fn drop(&mut self) {
-        if let Some(m) = take_module(&mut self.module) {
-            // Safety: `run` and `prepare` point into this module and are only reachable through `self`, which
-            // is being dropped; every user holds an `Arc<ShadeCode>`, so no call is running.
-            unsafe { m.free_memory() };
-        }
     }
 }
 
@@ -806,7 +819,8 @@ mod tests {
         assert!(!isa.has_native_fma());
         let mut builder = JITBuilder::with_isa(isa, default_libcall_names());
         runtime_symbols(&mut builder);
-        let mut module = JITModule::new(builder);
+        let mut code = Code::owning(JITModule::new(builder));
+        let module = code.module_mut().expect("fresh module");
         let mut ctx = module.make_context();
         let mut fctx = FunctionBuilderContext::new();
         let mut ids = vec![];
@@ -840,13 +854,13 @@ mod tests {
         assert_eq!(a * b + c, 0.0, "the unfused result differs");
         for id in ids {
             let f = module.get_finalized_function(id);
-            // Safety: `f` was just compiled with signature (f64, f64, f64) -> f64 and `module` outlives the call.
+            // Safety: `f` was just compiled with signature (f64, f64, f64) -> f64 and `code` outlives the call.
             let call = unsafe { std::mem::transmute::<*const u8, extern "C" fn(f64, f64, f64) -> f64>(f) };
             assert_eq!(call(a, b, c), -(2f64.powi(-60)));
             assert_eq!(call(0.1, 10.0, -1.0).to_bits(), 0.1f64.mul_add(10.0, -1.0).to_bits());
         }
-        // Safety: no pointer into the module is used after this point.
-        unsafe { module.free_memory() };
+        // Dropping `code` frees the module; no pointer into it is used after this point.
+        drop(code);
     }
 
     #[test]

@@ -1,35 +1,35 @@
-//! A shading program ([`crate::backend::shading`]) → one batched function over data columns with several
-//! outputs:
+//! A multi-output program ([`crate::backend::program`]) → one batched function over data columns with
+//! several outputs:
 //!
 //! `extern "C" fn(cols: *const *const f64, params, block, outs: *const *mut f64, len: usize)`
 //!
-//! the batched kernel's loop (F64X2 body, one F64 tail element), preceded, when F calls the math library or
-//! there are several lights, by a loop handling four vectors per step, their nodes interleaved ([`interleaves`]);
+//! the batched kernel's loop (`batch_loop`: F64X2 body, one F64 tail element), preceded, when the program
+//! calls the math library or has several regions, by its wide step of four vectors, their nodes interleaved
+//! ([`interleaves`]);
 //! the same translator (so the lanes, the hoisted invariants and the prepared parameter block, and the inline
 //! math library are the kernel's), reading `Node::Column(k)` from `cols[k]` and storing each output to
 //! `outs[o]`. A guarded region is a branch on `any(lit)` over the step's lanes: its nodes are translated in a
 //! block of their own, and its outputs reach the rest through the join block's parameters (+0 when the branch
 //! is not taken); the outer values it reads are pinned before the first region that reads them
-//! ([`anchors`]), so they are computed once per pixel.
+//! ([`anchors`]), so they are computed once per element.
 //!
-//! Cost: per pixel the program's own operations (see [`crate::backend::shading`]) plus one 16-byte store per
+//! Cost: per element the program's own operations plus one 16-byte store per
 //! anchored value; the interleaved loop costs spills (16 vector registers for four vectors' live values) and wins
 //! where latency dominates (measured: BENCHMARKS.md).
 //!
-//! A child of `codegen`, so it uses the translator's private parts as they are; codegen only gained the
-//! `Source::Data` variant and the `Node::Column` arm.
+//! A child of `codegen`, so it uses the translator's private parts and its one loop builder as they are;
+//! codegen only gained the `Source::Data` variant and the `Node::Column` arm.
 
 use super::*;
-use crate::backend::shading::{Class, Program, Region, N_OUTPUTS};
+use crate::backend::program::{Class, Program, Region, MAX_COLUMNS};
 use cranelift_codegen::ir::{StackSlotData, StackSlotKind};
-pub use crate::backend::shading::MAX_COLUMNS;
 
 /// The carried-node plan of a program: the kernel's plan over the whole arena, plus every output that reads
 /// no column and is not a bare constant or parameter (the loop stores it from the block).
 pub(in crate::backend::jit) fn plan(p: &Program) -> Result<Plan, JitError> {
-    let last = NodeId(p.ir.len().checked_sub(1).ok_or(JitError::Internal("empty shading program".into()))? as u32);
+    let last = NodeId(p.ir.len().checked_sub(1).ok_or(JitError::Internal("empty program".into()))? as u32);
     let mut plan = Plan::new(&p.ir, last);
-    for o in p.outputs {
+    for &o in &p.outputs {
         let trivial = matches!(p.ir.node(o), Node::Const(_) | Node::Param(_));
         if !plan.variant(o) && !trivial && !plan.carried.contains(&o) {
             plan.carried.push(o);
@@ -39,7 +39,7 @@ pub(in crate::backend::jit) fn plan(p: &Program) -> Result<Plan, JitError> {
 }
 
 /// Whether the program calls the math library instead of inlining it: [`OUTLINE_AT`] applies per copy of
-/// the formula (one per light region), so a scene with more lights does not switch its formula to calls.
+/// the formula (one per region: a light in the renderer's programs), so more regions do not switch a formula to calls.
 pub(in crate::backend::jit) fn outlines(p: &Program) -> bool {
     let calls = p.ir.nodes().iter().filter(|n| matches!(n, Node::Call(b, _) if b.info().lowering == Lowering::Math)).count();
     calls / p.regions.len().max(1) > OUTLINE_AT
@@ -50,8 +50,8 @@ pub(in crate::backend::jit) fn signature(module: &JITModule) -> Signature {
     super::signature(module, 5, false)
 }
 
-/// Builds the program's function (see the module doc; the loops: [`STEP`] vectors per step when [`interleaves`]
-/// holds, then [`batch_loop`]).
+/// Builds the program's function (see the module doc; the loop: [`batch_loop`], [`STEP`] vectors per wide
+/// step when [`interleaves`] holds).
 pub(in crate::backend::jit) fn build(
     module: &mut JITModule,
     ctx: &mut Context,
@@ -69,7 +69,7 @@ pub(in crate::backend::jit) fn build(
     for (k, base) in bases.iter_mut().enumerate().take(p.columns.min(MAX_COLUMNS)) {
         *base = Some(b.ins().load(ptr, mem(), cols, (k * 8) as i32));
     }
-    let out_bases: Vec<Value> = (0..N_OUTPUTS).map(|k| b.ins().load(ptr, mem(), outs, (k * 8) as i32)).collect();
+    let out_bases: Vec<Value> = (0..p.outputs.len()).map(|k| b.ins().load(ptr, mem(), outs, (k * 8) as i32)).collect();
     let zero = b.ins().iconst(ptr, 0);
     let mut cx = Shared { ir, params, callees, invariants: vec![], mode: w.mode, fma: w.fma, outline: w.outline };
     let vals = plan.load_carried(&mut b, block, n);
@@ -86,31 +86,10 @@ pub(in crate::backend::jit) fn build(
     let slot = b.create_sized_stack_slot(StackSlotData::new(StackSlotKind::ExplicitSlot, (16 * STEP * count.max(1)) as u32, 4));
     let anchor = b.ins().stack_addr(ptr, slot, 0);
     let step = Step { cx: &cx, p, bases, outs: &out_bases, anchor, first: &first, stride: 16 * count as i32 };
-    // With transcendental F or several lights: STEP vectors per step while that many remain, then
-    // batch_loop's one vector and one element.
-    let start = if interleaves(p) {
-        let (header, body, rest) = (b.create_block(), b.create_block(), b.create_block());
-        let step_end = b.ins().band_imm_s(len, -(STEP as i64 * i64::from(V::LANES)));
-        b.ins().jump(header, &[BlockArg::Value(zero)]);
-        b.switch_to_block(header);
-        let i = b.append_block_param(header, ptr);
-        let more = b.ins().icmp(IntCC::UnsignedLessThan, i, step_end);
-        b.ins().brif(more, body, &[], rest, &[BlockArg::Value(i)]);
-        b.switch_to_block(body);
-        b.seal_block(body);
-        let at: Vec<Value> = (0..STEP).map(|k| if k == 0 { i } else { b.ins().iadd_imm_u(i, (k as i64) * i64::from(V::LANES)) }).collect();
-        step.emit_copies::<V>(&mut b, vec![splats.clone(); STEP], &at)?;
-        let next = b.ins().iadd_imm_u(i, STEP as i64 * i64::from(V::LANES));
-        b.ins().jump(header, &[BlockArg::Value(next)]);
-        b.seal_block(header);
-        b.switch_to_block(rest);
-        let start = b.append_block_param(rest, ptr);
-        b.seal_block(rest);
-        start
-    } else {
-        zero
-    };
-    batch_loop(&mut b, ptr, len, start, splats, cx.invariants.clone(), &step)?;
+    // With transcendental math or several regions: STEP vectors per step while that many remain, then
+    // one vector and one element.
+    let wide = if interleaves(p) { STEP } else { 1 };
+    batch_loop(&mut b, ptr, len, zero, splats, cx.invariants.clone(), &step, wide)?;
     b.finalize(module.target_config());
     Ok(())
 }
@@ -119,11 +98,12 @@ pub(in crate::backend::jit) fn build(
 /// Cook–Torrance and no slower elsewhere: BENCHMARKS.md).
 const STEP: usize = 4;
 
-/// Whether the main loop interleaves [`STEP`] vectors: when F calls the math library or the scene has several
-/// lights. Cranelift schedules no instructions, so one vector's long chains (roots, divisions, the library's
-/// polynomials: hundreds of cycles from the loads to the colour) leave the core idle unless an independent
-/// vector's instructions sit beside them in program order; interleaving costs registers (more spills), which one
-/// light and a cheap formula do not win back (measured: BENCHMARKS.md, 2026-11-30 issue 11 third pass).
+/// Whether the main loop interleaves [`STEP`] vectors: when the program calls the math library or has several
+/// regions (lights, in the renderer's programs). Cranelift schedules no instructions, so one vector's long
+/// chains (roots, divisions, the library's polynomials: hundreds of cycles from the loads to the outputs) leave
+/// the core idle unless an independent vector's instructions sit beside them in program order; interleaving
+/// costs registers (more spills), which one region of cheap arithmetic does not win back (measured:
+/// BENCHMARKS.md, 2026-11-30 issue 11 third pass).
 fn interleaves(p: &Program) -> bool {
     p.regions.len() > 1 || p.ir.nodes().iter().any(|n| matches!(n, Node::Call(b, _) if b.info().lowering == Lowering::Math))
 }
@@ -142,8 +122,8 @@ struct Step<'a> {
 }
 
 impl LoopBody for Step<'_> {
-    fn emit<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Option<Value>>, i: Value) -> Result<(), JitError> {
-        self.emit_copies::<L>(b, vec![vals], &[i])
+    fn emit<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Vec<Option<Value>>>, at: &[Value]) -> Result<(), JitError> {
+        self.emit_copies::<L>(b, vals, at)
     }
 }
 
@@ -251,7 +231,7 @@ fn arg(vals: &[Option<Value>], id: NodeId) -> Result<Value, JitError> {
 /// regions share (NV, 1/|v|, …) and nothing outside them uses would be computed inside the first region's
 /// block and again inside each later one, which that block does not dominate. Storing it (a fixed use,
 /// never read; distinct offsets, so no store is dead) before the first region's branch keeps it there,
-/// computed once per pixel.
+/// computed once per element.
 fn anchors(p: &Program) -> (Vec<Vec<(NodeId, i32)>>, usize) {
     let mut seen = vec![false; p.ir.len()];
     let mut count = 0;

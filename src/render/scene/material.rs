@@ -43,8 +43,8 @@ pub struct CompiledBrdf {
     pub used: InputSet,
     /// The math mode the kernel runs.
     pub math: Mode,
-    /// The formulas behind the kernels, for the renderer's shading programs (`None`: not lobe formulas).
-    pub program: Option<crate::render::ProgramSource>,
+    /// The formulas behind the kernels, for the renderer's shading programs.
+    pub program: crate::render::ProgramSource,
 }
 
 /// The real pipeline: `lobe::compile_source` with the chosen backend, in `math` unless a material says otherwise.
@@ -83,11 +83,11 @@ impl CompiledBrdf {
             green_blue: (ks.len() == 3).then(|| [dynamic(&ks[1]), dynamic(&ks[2])]),
             used: ks.iter().map(|k| k.used_inputs()).collect(),
             math: ks[0].math,
-            program: Some(crate::render::ProgramSource {
+            program: crate::render::ProgramSource {
                 channels: ks.iter().map(|k| k.formula.clone()).collect(),
                 backend: ks[0].backend,
                 math: ks[0].math,
-            }),
+            },
         }
     }
 }

@@ -1,0 +1,437 @@
+//! The renderer's lighting model as a multi-output program: a material's whole shading, from per-pixel data
+//! columns to the pixel colour, as one lobe IR ([`crate::backend::program::Program`]) that the interpreter
+//! runs and the JIT compiles; the backends see only the IR, its outputs and its guarded regions.
+//!
+//! Design. The renderer fills a [`Spec`] per material from its [`ShadingPlan`] ([`spec`]) (eye, lights, the colour
+//! uniforms, which geometric quantities the formula reads, the cut-off) and [`build`] writes, as IR over
+//! `Node::Column` leaves (interpolated position, normal and, for formulas that read directions, tangent):
+//! the view vector and its inverse length, 1/|n|, per light NL (lit = NL > 0, and the lobe cosine above the
+//! cut-off), VL/NH/VH/VR and the local-frame components only when the formula reads what needs them, the
+//! formula itself inlined with those nodes in place of its `Input`s (each channel of a colour formula, sharing
+//! their common nodes through hash-consing), F non-finite → 0 and counted, and the colour sum
+//! I = ka·Ia·C + Σ Il·(kd·NL⁺·C + ks·coef·F·Cs). Lights, colours and coefficients are constants; the formula's
+//! parameters stay `Param` nodes, so changing them needs no recompilation.
+//!
+//! Outputs ([`Out`]): r, g, b, and three per-pixel counters (non-finite F, evaluations, cut-off skips), small
+//! integers in f64 that the renderer sums exactly.
+//!
+//! Guarded regions. F of light k is computed only where some pixel is lit by k: light k's guarded values
+//! (`select(lit_k, F', 0)` per channel and its non-finite flag) are one region, +0 wherever `lit_k` is zero,
+//! so a backend skipping the region where nothing is lit gives the same bits.
+//!
+//! Cost model (per pixel, before F): ~30 flops, two square roots and two divisions for the view step; per
+//! light ~15 flops, one root and one division (point lights), ~10 more and one root for the half vector; the
+//! frame adds ~45 flops and a root per pixel (work that several light regions need is computed once, outside
+//! them). Measured (BENCHMARKS.md): the JIT program ~6 ns per pixel for one light and a cheap formula. The
+//! loop is bound by its instruction count, not by the divider: without the inverse lengths' roots and divisions
+//! it would be only ~16 % faster, and f32 ones (converted at the boundary) made it slower, so inverse lengths
+//! are exact `1/sqrt` in f64 (an f32 geometry does not pay on 128-bit lanes: BENCHMARKS.md, shade5).
+
+use super::plan::ShadingPlan;
+use super::{LightKind, Material, Scene};
+use crate::backend::interp::ProgramInterp;
+use crate::backend::jit::{JitError, ShadeCode};
+use crate::backend::program::Program;
+use crate::backend::Backend;
+use crate::base::span::Span;
+use crate::builtins::{Builtin, Mode};
+use std::sync::Arc;
+use crate::ir::{BinOp, Formula, Input, Ir, Node, NodeId, N_INPUTS};
+
+/// The data columns a lighting program reads: position, normal, tangent (3 each; the tangent only for
+/// formulas that read directions).
+pub const COLUMNS: usize = 9;
+
+/// The program's outputs, per pixel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Out {
+    R,
+    G,
+    B,
+    /// Non-finite F values (counted per channel and light; drawn as no light).
+    NonFinite,
+    /// F evaluations (lit pixel × light × channel).
+    Evals,
+    /// Lit pixel × light pairs the cut-off skipped.
+    Cut,
+}
+
+pub const N_OUTPUTS: usize = 6;
+
+/// One light of the scene, in world space.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Light {
+    /// A point light at `at`; else `at` is the unit direction towards the light.
+    pub point: bool,
+    pub at: [f64; 3],
+    pub color: [f64; 3],
+}
+
+/// What a material's shading computes, as the renderer's plan decided it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Spec {
+    pub eye: [f64; 3],
+    pub lights: Vec<Light>,
+    /// ka·Ia·C, kd·C, ks·coef·Cs.
+    pub ambient: [f64; 3],
+    pub diffuse: [f64; 3],
+    pub spec: [f64; 3],
+    /// F is evaluated at all (ks ≠ 0).
+    pub specular: bool,
+    /// F is multiplied by NL.
+    pub times_nl: bool,
+    /// (cos, sin) of the tangent angle, when the formula reads directions (columns 6..9 hold the tangent).
+    pub tangent_rotation: Option<[f64; 2]>,
+    /// F is not evaluated where this lobe cosine is below the value.
+    pub cutoff: Option<(Input, f64)>,
+}
+
+/// IR construction with the few folds that keep trivial nodes out (×1, +0 with a constant).
+struct Builder {
+    ir: Ir,
+    s: Span,
+}
+
+impl Builder {
+    fn k(&mut self, v: f64) -> NodeId {
+        self.ir.konst(v, self.s)
+    }
+    fn bin(&mut self, op: BinOp, a: NodeId, b: NodeId) -> NodeId {
+        if op == BinOp::Mul && self.ir.node(b).as_const() == Some(1.0) {
+            return a;
+        }
+        self.ir.bin(op, a, b, self.s)
+    }
+    fn add(&mut self, a: NodeId, b: NodeId) -> NodeId {
+        self.bin(BinOp::Add, a, b)
+    }
+    fn sub(&mut self, a: NodeId, b: NodeId) -> NodeId {
+        self.bin(BinOp::Sub, a, b)
+    }
+    fn mul(&mut self, a: NodeId, b: NodeId) -> NodeId {
+        self.bin(BinOp::Mul, a, b)
+    }
+    fn call(&mut self, f: Builtin, args: &[NodeId]) -> NodeId {
+        self.ir.call(f, args, self.s)
+    }
+    fn dot(&mut self, a: [NodeId; 3], b: [NodeId; 3]) -> NodeId {
+        let x = self.mul(a[0], b[0]);
+        let y = self.mul(a[1], b[1]);
+        let z = self.mul(a[2], b[2]);
+        let xy = self.add(x, y);
+        self.add(xy, z)
+    }
+    /// 1/√x.
+    fn inv_len(&mut self, x: NodeId) -> NodeId {
+        let one = self.k(1.0);
+        let r = self.call(Builtin::Sqrt, &[x]);
+        self.bin(BinOp::Div, one, r)
+    }
+    /// `c ? a : b` with `c` a 0/1 flag.
+    fn select(&mut self, c: NodeId, a: NodeId, b: NodeId) -> NodeId {
+        self.call(Builtin::Select, &[c, a, b])
+    }
+    fn lt(&mut self, a: NodeId, b: NodeId) -> NodeId {
+        self.call(Builtin::Lt, &[a, b])
+    }
+    fn le(&mut self, a: NodeId, b: NodeId) -> NodeId {
+        self.call(Builtin::Le, &[a, b])
+    }
+    fn splat(&mut self, v: [f64; 3]) -> [NodeId; 3] {
+        v.map(|c| self.k(c))
+    }
+    fn sub3(&mut self, a: [NodeId; 3], b: [NodeId; 3]) -> [NodeId; 3] {
+        [self.sub(a[0], b[0]), self.sub(a[1], b[1]), self.sub(a[2], b[2])]
+    }
+
+    /// Copies the compacted formula `f` in, with `inputs` in place of its inputs; returns its root.
+    fn inline(&mut self, f: &Formula, inputs: &[Option<NodeId>; N_INPUTS]) -> Result<NodeId, String> {
+        let (fir, root) = f.ir.compact(f.root);
+        let mut map = Vec::with_capacity(fir.len());
+        for id in fir.ids() {
+            let n = match *fir.node(id) {
+                Node::Input(i) => inputs[i.index()].ok_or_else(|| format!("the shading program has no value for input {}", i.name()))?,
+                Node::Column(k) => return Err(format!("a formula reads data column {k}")),
+                n => {
+                    let m = n.map_args(|a| map[a.index()]);
+                    self.ir.push(m, fir.span(id))
+                }
+            };
+            map.push(n);
+        }
+        Ok(map[root.index()])
+    }
+}
+
+/// The program shading with `spec` and the formula's channels (one, or red, green, blue): outputs in [`Out`]
+/// order, one guarded region per light where F is evaluated.
+pub fn build(spec: &Spec, channels: &[&Formula]) -> Result<Program, String> {
+    if !(channels.len() == 1 || channels.len() == 3) {
+        return Err(format!("a shading program takes 1 or 3 channels, not {}", channels.len()));
+    }
+    let mut b = Builder { ir: Ir::new(), s: Span::default() };
+    let cols: Vec<NodeId> = (0..COLUMNS as u16).map(|k| b.ir.column(k, Span::default())).collect();
+    let (p, n) = ([cols[0], cols[1], cols[2]], [cols[3], cols[4], cols[5]]);
+    let zero = b.k(0.0);
+    let one = b.k(1.0);
+    let two = b.k(2.0);
+    let eye = b.splat(spec.eye);
+    // The view step: v = eye − p, 1/|n|, 1/|v|, NV.
+    let v = b.sub3(eye, p);
+    let nn = b.dot(n, n);
+    let inv_n = b.inv_len(nn);
+    let vv = b.dot(v, v);
+    let inv_v = b.inv_len(vv);
+    let nvr = b.dot(n, v);
+    let nvn = b.mul(nvr, inv_n);
+    let nv = b.mul(nvn, inv_v);
+    let reads = channels.iter().map(|f| f.used_inputs()).collect::<crate::ir::InputSet>();
+    let needs = |i: Input| reads.contains(i);
+    let view_light = needs(Input::NH) || needs(Input::VH) || needs(Input::VR);
+    // The frame step: T̂ = norm(t − N̂(N̂·t)) (Duff et al.'s tangent of N̂ where t ∥ n), B̂ = N̂ × T̂, turned.
+    let frame = spec.tangent_rotation.map(|[c, s]| {
+        let t = [cols[6], cols[7], cols[8]];
+        let nh = [b.mul(n[0], inv_n), b.mul(n[1], inv_n), b.mul(n[2], inv_n)];
+        let kk = b.dot(nh, t);
+        let proj = [b.mul(nh[0], kk), b.mul(nh[1], kk), b.mul(nh[2], kk)];
+        let u = b.sub3(t, proj);
+        let l2 = b.dot(u, u);
+        let eps = b.k(1e-20);
+        let ok = b.lt(eps, l2);
+        let neg = b.lt(nh[2], zero);
+        let m1 = b.k(-1.0);
+        let sign = b.select(neg, m1, one);
+        let sd = b.add(sign, nh[2]);
+        let q = b.bin(BinOp::Div, m1, sd);
+        // Duff's tangent (1 + s·a²·q, s·a·b·q, −s·a), s·a built once.
+        let sa = b.mul(sign, nh[0]);
+        let saa = b.mul(sa, nh[0]);
+        let saq = b.mul(saa, q);
+        let ox = b.add(one, saq);
+        let sab = b.mul(sa, nh[1]);
+        let oy = b.mul(sab, q);
+        let oz = b.ir.neg(sa, Span::default());
+        let il = b.inv_len(l2);
+        let il = b.select(ok, il, one);
+        let un = [b.mul(u[0], il), b.mul(u[1], il), b.mul(u[2], il)];
+        let u = [b.select(ok, un[0], ox), b.select(ok, un[1], oy), b.select(ok, un[2], oz)];
+        let cross = |b: &mut Builder, i: usize, j: usize| {
+            let x = b.mul(nh[i], u[j]);
+            let y = b.mul(nh[j], u[i]);
+            b.sub(x, y)
+        };
+        let w = [cross(&mut b, 1, 2), cross(&mut b, 2, 0), cross(&mut b, 0, 1)];
+        let (ck, sk) = (b.k(c), b.k(s));
+        let rot = |b: &mut Builder, x: NodeId, y: NodeId, sign: f64| {
+            let cx = b.mul(ck, x);
+            let sy = b.mul(sk, y);
+            if sign > 0.0 { b.add(cx, sy) } else { b.sub(cx, sy) }
+        };
+        let tt = [rot(&mut b, u[0], w[0], 1.0), rot(&mut b, u[1], w[1], 1.0), rot(&mut b, u[2], w[2], 1.0)];
+        let bb = [rot(&mut b, w[0], u[0], -1.0), rot(&mut b, w[1], u[1], -1.0), rot(&mut b, w[2], u[2], -1.0)];
+        let vt = b.dot(v, tt);
+        let vx = b.mul(vt, inv_v);
+        let vb = b.dot(v, bb);
+        let vy = b.mul(vb, inv_v);
+        (tt, bb, vx, vy)
+    });
+    let mut acc = b.splat(spec.ambient);
+    let mut counters: [Option<NodeId>; 3] = [None; 3];
+    let count = |b: &mut Builder, c: &mut Option<NodeId>, x: NodeId| *c = Some(c.map_or(x, |c| b.add(c, x)));
+    let mut regions: Vec<(NodeId, Vec<NodeId>)> = vec![];
+    for light in &spec.lights {
+        let (l, il) = if light.point {
+            let lp = b.splat(light.at);
+            let l = b.sub3(lp, p);
+            let ll = b.dot(l, l);
+            (l, b.inv_len(ll))
+        } else {
+            (b.splat(light.at), one)
+        };
+        let nlr = b.dot(n, l);
+        let nln = b.mul(nlr, inv_n);
+        let nl = b.mul(nln, il);
+        let lit_nl = b.lt(zero, nl);
+        let mut x: [Option<NodeId>; N_INPUTS] = [None; N_INPUTS];
+        x[Input::NL.index()] = Some(nl);
+        x[Input::Lz.index()] = Some(nl);
+        x[Input::NV.index()] = Some(nv);
+        x[Input::Vz.index()] = Some(nv);
+        if view_light {
+            let vlr = b.dot(v, l);
+            let vln = b.mul(vlr, inv_v);
+            let vl = b.mul(vln, il);
+            if needs(Input::NH) || needs(Input::VH) {
+                // |L̂ + V̂|² = 2 + 2VL; H undefined (0) where L = −V.
+                let tvl = b.mul(two, vl);
+                let h2 = b.add(two, tvl);
+                let tiny = b.k(1e-300);
+                let ok = b.lt(tiny, h2);
+                let ih = b.inv_len(h2);
+                let ih = b.select(ok, ih, zero);
+                let s = b.add(nl, nv);
+                x[Input::NH.index()] = Some(b.mul(s, ih));
+                let s = b.add(one, vl);
+                x[Input::VH.index()] = Some(b.mul(s, ih));
+            }
+            if needs(Input::VR) {
+                let tn = b.mul(two, nl);
+                let tnv = b.mul(tn, nv);
+                x[Input::VR.index()] = Some(b.sub(tnv, vl));
+            }
+        }
+        if let Some((tt, bb, vx, vy)) = frame {
+            x[Input::Vx.index()] = Some(vx);
+            x[Input::Vy.index()] = Some(vy);
+            let lt = b.dot(l, tt);
+            x[Input::Lx.index()] = Some(b.mul(lt, il));
+            let lb = b.dot(l, bb);
+            x[Input::Ly.index()] = Some(b.mul(lb, il));
+        }
+        let lit = match spec.cutoff {
+            Some((input, cos)) => {
+                let lobe = x[input.index()].ok_or_else(|| format!("the cut-off's cosine {} is not computed", input.name()))?;
+                let c = b.k(cos);
+                let above = b.le(c, lobe);
+                b.select(lit_nl, above, zero)
+            }
+            None => lit_nl,
+        };
+        let n_pos = b.select(lit_nl, nl, zero);
+        let mut f = [zero; 3];
+        if spec.specular {
+            let raw = channels.iter().map(|c| b.inline(c, &x)).collect::<Result<Vec<_>, _>>()?;
+            let inf = b.k(f64::INFINITY);
+            let mut outs = vec![];
+            let mut flags = vec![];
+            for r in &raw {
+                let a = b.call(Builtin::Abs, &[*r]);
+                let fin = b.lt(a, inf);
+                let fz = b.select(fin, *r, zero);
+                let bad = b.sub(one, fin);
+                outs.push(b.select(lit, fz, zero));
+                flags.push(b.select(lit, bad, zero));
+            }
+            for (c, g) in outs.iter().enumerate() {
+                f[c] = if spec.times_nl { b.mul(*g, nl) } else { *g };
+            }
+            if raw.len() == 1 {
+                f = [f[0]; 3];
+            }
+            for fl in &flags {
+                count(&mut b, &mut counters[0], *fl);
+            }
+            let nk = b.k(raw.len() as f64);
+            let ev = b.mul(lit, nk);
+            count(&mut b, &mut counters[1], ev);
+            if spec.cutoff.is_some() {
+                let cut = b.sub(lit_nl, lit);
+                count(&mut b, &mut counters[2], cut);
+            }
+            regions.push((lit, outs.into_iter().chain(flags).collect()));
+        }
+        for c in 0..3 {
+            let d = b.k(spec.diffuse[c]);
+            let dn = b.mul(d, n_pos);
+            let term = if spec.specular {
+                let s = b.k(spec.spec[c]);
+                let sf = b.mul(s, f[c]);
+                b.add(dn, sf)
+            } else {
+                dn
+            };
+            let ilc = b.k(light.color[c]);
+            let t = b.mul(ilc, term);
+            acc[c] = b.add(acc[c], t);
+        }
+    }
+    let [c0, c1, c2] = counters.map(|c| c.unwrap_or(zero));
+    let outs = [acc[0], acc[1], acc[2], c0, c1, c2];
+    let n_params = channels.iter().map(|c| c.params.len()).max().unwrap_or(0);
+    // The compacted program reads the tangent only when the formula reads directions.
+    Program::new(&b.ir, &outs, &regions, n_params)
+}
+
+/// A program ready to run: interpreted, or compiled by the JIT.
+#[derive(Clone)]
+pub enum ProgramCode {
+    Interp(Arc<ProgramInterp>),
+    Jit(Arc<ShadeCode>),
+}
+
+impl ProgramCode {
+    /// Compiles `p` for `backend` in math mode `mode` (the JIT through its code cache).
+    pub fn new(p: &Program, backend: Backend, mode: Mode) -> Result<ProgramCode, JitError> {
+        Ok(match backend {
+            Backend::Interp => ProgramCode::Interp(Arc::new(ProgramInterp::new(p, mode))),
+            Backend::Jit => ProgramCode::Jit(crate::backend::jit::shade_code(p, mode)?),
+        })
+    }
+
+    /// The parameter-only work for `params`, computed once per render (the JIT's prepared block; empty for
+    /// the interpreter, which does it per call).
+    pub fn prepare(&self, params: &[f64]) -> Vec<f64> {
+        match self {
+            ProgramCode::Interp(_) => vec![],
+            ProgramCode::Jit(c) => c.prepare(params),
+        }
+    }
+
+    /// Runs the program on `len` pixels (every column and output at least `len` long; otherwise nothing
+    /// runs and the outputs are NaN). `block` is [`ProgramCode::prepare`]'s result for `params`.
+    pub fn run(&self, cols: &[&[f64]], params: &[f64], block: &[f64], outs: &mut [&mut [f64]], len: usize) {
+        match self {
+            ProgramCode::Interp(i) => i.run(cols, params, outs, len),
+            ProgramCode::Jit(c) => {
+                if c.run(cols, params, block, outs, len).is_err() {
+                    outs.iter_mut().for_each(|o| o.iter_mut().for_each(|x| *x = f64::NAN));
+                }
+            }
+        }
+    }
+}
+
+/// A material's compiled shading program for one render, with its prepared parameter block.
+pub struct ProgramRun {
+    pub(super) code: ProgramCode,
+    pub(super) block: Vec<f64>,
+    pub(super) params: Vec<f64>,
+    /// The program reads the tangent (columns 6..9).
+    pub(super) tangent: bool,
+}
+
+impl ProgramRun {
+    /// The program `plan` describes for `m` under `scene`'s eye and lights, compiled with the material's
+    /// backend and math mode.
+    pub fn new(scene: &Scene, m: &Material, plan: &ShadingPlan) -> Result<ProgramRun, String> {
+        let src = &m.program;
+        let channels: Vec<&Formula> = src.channels.iter().map(|f| f.as_ref()).collect();
+        let program = build(&spec(scene, plan), &channels).map_err(|e| format!("material `{}`: {e}", m.name))?;
+        let code = ProgramCode::new(&program, src.backend, src.math).map_err(|e| format!("material `{}`: {e}", m.name))?;
+        let block = code.prepare(&m.params);
+        Ok(ProgramRun { code, block, params: m.params.clone(), tangent: program.columns > 6 })
+    }
+}
+
+/// The lighting program's description from the plan (see [`Spec`]).
+pub fn spec(scene: &Scene, plan: &ShadingPlan) -> Spec {
+    let lights = scene
+        .lights
+        .iter()
+        .map(|l| match l.kind {
+            LightKind::Point(p) => Light { point: true, at: p.to_array(), color: l.color.to_array() },
+            LightKind::Directional(d) => Light { point: false, at: (-d).to_array(), color: l.color.to_array() },
+        })
+        .collect();
+    Spec {
+        eye: scene.camera.position.to_array(),
+        lights,
+        ambient: plan.ambient,
+        diffuse: plan.diffuse,
+        spec: plan.spec,
+        specular: plan.specular,
+        times_nl: plan.times_nl,
+        tangent_rotation: plan.directions.then_some(plan.tangent_rotation),
+        cutoff: plan.cutoff.map(|c| (c.input, c.cos)),
+    }
+}
