@@ -93,8 +93,9 @@ impl Wording for Plain {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Diagnostic {
     pub severity: Severity,
-    /// The setting the message is about, shown before it (`SETTING: message`).
-    pub subject: Option<Setting>,
+    /// The setting the message is about, shown before it (`SETTING: message`); boxed, as it is rare and the
+    /// type travels in every `Result` of the front end.
+    pub subject: Option<Box<Setting>>,
     pub message: String,
     /// The main location and its label (what is wrong *here*).
     pub primary: Option<(Span, String)>,
@@ -132,7 +133,7 @@ impl Diagnostic {
     }
     /// The message is about `s`, a setting of this run.
     pub fn about(mut self, s: Setting) -> Diagnostic {
-        self.subject = Some(s);
+        self.subject = Some(Box::new(s));
         self
     }
     /// The message as the user reads it: the subject, if any, then the message.

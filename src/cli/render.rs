@@ -106,20 +106,6 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
     Ok(())
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn sizes_parse_and_are_bounded() {
-        assert_eq!(parse_size("1024").unwrap(), (1024, 1024));
-        assert_eq!(parse_size("640x480").unwrap(), (640, 480));
-        assert!(parse_size("5000").is_err());
-        assert!(parse_size("0").is_err());
-        assert!(parse_size("axb").is_err());
-    }
-}
-
 /// The render's progress on stderr: an indicatif bar that appears only once the render has run for half a
 /// second (a quick render prints nothing).
 struct TileBar {
@@ -155,5 +141,19 @@ impl TileBar {
         if let Some(b) = &self.bar {
             b.finish_and_clear();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_parse_and_are_bounded() {
+        assert_eq!(parse_size("1024").unwrap(), (1024, 1024));
+        assert_eq!(parse_size("640x480").unwrap(), (640, 480));
+        assert!(parse_size("5000").is_err());
+        assert!(parse_size("0").is_err());
+        assert!(parse_size("axb").is_err());
     }
 }

@@ -75,9 +75,8 @@ pub fn lobe_integral(ev: &dyn Evaluator, params: &[f64], lobe: Input) -> Result<
     let f = |c: f64| ev.eval(&lobe_inputs(c, lobe), params);
     let at_normal = f(1.0);
     if at_normal.is_infinite() {
-        return Err(Diagnostic::error(
-            format!("the formula is infinite at the normal ({}): the lobe cannot be normalised", describe(lobe, 1.0))).hint(
-            "a BRDF lobe must be finite at its peak; check for a division by (1 − c) or similar"));
+        return Err(Diagnostic::error(format!("the formula is infinite at the normal ({}): the lobe cannot be normalised", describe(lobe, 1.0)))
+            .hint("a BRDF lobe must be finite at its peak; check for a division by (1 − c) or similar"));
     }
     // Scan for NaN and for the switches between zero and positive.
     let mut xs: Vec<f64> = (0..=64).map(|i| i as f64 / 64.0).collect();
@@ -111,9 +110,8 @@ pub fn lobe_integral(ev: &dyn Evaluator, params: &[f64], lobe: Input) -> Result<
         start = b;
     }
     if let Some(i) = ys.iter().enumerate().position(|(i, y)| y.is_nan() && (i >= lead || lead == xs.len())) {
-        return Err(Diagnostic::error(
-            format!("the formula is NaN at {}", describe(lobe, xs[i]))).hint(
-            "run `lobe sweep` on the file to see where it is undefined"));
+        return Err(Diagnostic::error(format!("the formula is NaN at {}", describe(lobe, xs[i])))
+            .hint("run `lobe sweep` on the file to see where it is undefined"));
     }
     // Breakpoints at every switch; only switches next to a non-negligible value are reported as cut-offs
     // (c^1000 underflowing to 0 near 62° is not a clamp).
@@ -164,28 +162,24 @@ pub fn lobe_integral(ev: &dyn Evaluator, params: &[f64], lobe: Input) -> Result<
     );
     evals += r.evals;
     if let Some(c) = nan_at {
-        return Err(Diagnostic::error(
-            format!("the formula is NaN at {}", describe(lobe, c))).hint(
-            "run `lobe sweep` on the file to see where it is undefined"));
+        return Err(Diagnostic::error(format!("the formula is NaN at {}", describe(lobe, c)))
+            .hint("run `lobe sweep` on the file to see where it is undefined"));
     }
     if !r.value.is_finite() || !r.converged && r.error > 1e-7 * r.value.abs() {
-        return Err(Diagnostic::error(
-            format!(
-                "the lobe integral does not converge (estimate {:e} ± {:e} after {} evaluations): the lobe is not integrable",
-                r.value, r.error, r.evals
-            )).hint(
-            "the formula probably has a pole inside [0°, 90°]; check its denominators"));
+        return Err(Diagnostic::error(format!(
+            "the lobe integral does not converge (estimate {:e} ± {:e} after {} evaluations): the lobe is not integrable",
+            r.value, r.error, r.evals
+        ))
+            .hint("the formula probably has a pole inside [0°, 90°]; check its denominators"));
     }
     if r.value <= 0.0 {
-        return Err(Diagnostic::error(
-            "the integral is zero; cannot normalise").hint(
-            "the formula is ≤ 0 (clamped to 0) at every angle for these parameters"));
+        return Err(Diagnostic::error("the integral is zero; cannot normalise")
+            .hint("the formula is ≤ 0 (clamped to 0) at every angle for these parameters"));
     }
     if let Some((c, bound)) = skipped {
         if c > SKIP_MAX || bound.is_nan() || bound > REL_TOL * r.value {
-            return Err(Diagnostic::error(
-                format!("the formula is NaN for {} ≤ {c:e} and that piece is not negligible", lobe.name())).hint(
-                "run `lobe check` on the file: the accuracy pass may remove the NaN"));
+            return Err(Diagnostic::error(format!("the formula is NaN for {} ≤ {c:e} and that piece is not negligible", lobe.name()))
+                .hint("run `lobe check` on the file: the accuracy pass may remove the NaN"));
         }
     }
     Ok(LobeIntegral { integral: r.value, error: r.error, evals, kinks, skipped })
@@ -308,22 +302,20 @@ pub fn albedo_at(ev: &dyn Evaluator, params: &[f64], theta_i: f64, phi_i: Option
     if let Some((a, p)) = nan {
         let v: V3 = std::array::from_fn(|k| a.cos() * r[k] + a.sin() * (p.cos() * t1[k] + p.sin() * t2[k]));
         let x = inputs_from_dirs(l, v);
-        return Err(Diagnostic::error(
-            format!(
-                "the formula is NaN at θᵢ = {:.3}° with NL={:.6} NV={:.6} NH={:.6} VR={:.6} VH={:.6}",
-                t.to_degrees(),
-                x[0],
-                x[1],
-                x[2],
-                x[3],
-                x[4]
-            )).hint(
-            "run `lobe sweep` on the file to see where it is undefined"));
+        return Err(Diagnostic::error(format!(
+            "the formula is NaN at θᵢ = {:.3}° with NL={:.6} NV={:.6} NH={:.6} VR={:.6} VH={:.6}",
+            t.to_degrees(),
+            x[0],
+            x[1],
+            x[2],
+            x[3],
+            x[4]
+        ))
+            .hint("run `lobe sweep` on the file to see where it is undefined"));
     }
     if !q.value.is_finite() || (!q.converged && q.error > 1e-5 * q.value.abs()) {
-        return Err(Diagnostic::error(
-            format!("the albedo integral at θᵢ = {:.3}° does not converge (estimate {:e})", t.to_degrees(), q.value)).hint(
-            "the formula probably has a pole on the hemisphere"));
+        return Err(Diagnostic::error(format!("the albedo integral at θᵢ = {:.3}° does not converge (estimate {:e})", t.to_degrees(), q.value))
+            .hint("the formula probably has a pole on the hemisphere"));
     }
     Ok(q.value)
 }
@@ -447,9 +439,8 @@ fn summarise(rows: Vec<(f64, f64)>, reciprocity: Reciprocity) -> Result<FullEner
         }
     }
     if albedo_max <= 0.0 {
-        return Err(Diagnostic::error(
-            "the albedo is zero at every incidence angle; cannot normalise").hint(
-            "the formula is ≤ 0 (clamped to 0) everywhere for these parameters"));
+        return Err(Diagnostic::error("the albedo is zero at every incidence angle; cannot normalise")
+            .hint("the formula is ≤ 0 (clamped to 0) everywhere for these parameters"));
     }
     Ok(FullEnergy { albedo: rows, albedo_max, theta_i_at_max_deg: at, coef: 1.0 / albedo_max, reciprocity, albedo_phi: vec![], phi_i_at_max_deg: None })
 }

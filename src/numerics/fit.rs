@@ -203,9 +203,8 @@ pub fn fit(
         return Err(Diagnostic::error("nothing to fit").hint(crate::base::diag::Hint::FitSomeParam));
     }
     if let Some(f) = free.iter().find(|f| f.index == 0 || f.index >= base_params.len()) {
-        return Err(Diagnostic::error(
-            format!("cannot fit `{}`", f.name)).hint(
-            if f.index == 0 { "n is swept by the metric itself; fit the other parameters" } else { "not a parameter of the formula" }));
+        return Err(Diagnostic::error(format!("cannot fit `{}`", f.name))
+            .hint(if f.index == 0 { "n is swept by the metric itself; fit the other parameters" } else { "not a parameter of the formula" }));
     }
     check_n_max(opts.n_max)?;
     let grids: Vec<Vec<f64>> = free.iter().map(FreeParam::grid).collect::<Result<_, _>>()?;

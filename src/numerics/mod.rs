@@ -133,9 +133,8 @@ pub fn inputs_from_dirs(l: V3, v: V3) -> [f64; N_INPUTS] {
 pub fn check_param_values(decls: &[crate::ir::ParamDecl], params: &[f64]) -> Result<(), Diagnostic> {
     for (d, v) in decls.iter().zip(params) {
         if !d.admits(*v) {
-            return Err(Diagnostic::error(
-                format!("parameter `{}` = {v} is outside its declared range {}..{}", d.name, d.lo, d.hi)).hint(
-                format!("choose {} in {}..{}", d.name, d.lo, d.hi)));
+            return Err(Diagnostic::error(format!("parameter `{}` = {v} is outside its declared range {}..{}", d.name, d.lo, d.hi))
+                .hint(format!("choose {} in {}..{}", d.name, d.lo, d.hi)));
         }
     }
     Ok(())

@@ -15,9 +15,8 @@ pub fn coefficient(ev: &dyn Evaluator, used: InputSet, params: &[f64]) -> Result
     let (lobe, _) = choose_lobe_input(used);
     let coef = energy::normalization_coef(ev, params, lobe)?;
     if !coef.is_finite() {
-        return Err(Diagnostic::error(
-            format!("the lobe integral is too small to normalise: 1/(2π·Int) overflows double precision ({coef})")).hint(
-            "the formula is scaled by a tiny constant; drop the constant (normalisation removes any scale anyway)"));
+        return Err(Diagnostic::error(format!("the lobe integral is too small to normalise: 1/(2π·Int) overflows double precision ({coef})"))
+            .hint("the formula is scaled by a tiny constant; drop the constant (normalisation removes any scale anyway)"));
     }
     Ok(coef)
 }
@@ -27,9 +26,8 @@ pub fn coefficient(ev: &dyn Evaluator, used: InputSet, params: &[f64]) -> Result
 pub fn bake_coefficient(f: Formula) -> Result<Formula, Diagnostic> {
     let live: Vec<&str> = f.ir.used_params(f.root).iter().map(|&i| f.params[i as usize].name.as_str()).collect();
     if !live.is_empty() {
-        return Err(Diagnostic::error(
-            format!("cannot normalise {}: parameter(s) {} are not baked", f.display_name(), live.join(", "))).hint(
-            crate::base::diag::Hint::BakeEveryParam));
+        return Err(Diagnostic::error(format!("cannot normalise {}: parameter(s) {} are not baked", f.display_name(), live.join(", ")))
+            .hint(crate::base::diag::Hint::BakeEveryParam));
     }
     let coef = coefficient(&Interp::new(&f), f.used_inputs(), &f.default_params())
         .map_err(|e| Diagnostic { message: format!("cannot normalise {}: {}", f.display_name(), e.message), ..e })?;

@@ -124,7 +124,7 @@ impl BrdfCompiler for Live<'_> {
 /// The compile error back as diagnostics (the scene loader wants them); a size refusal becomes one item.
 fn diagnostics_of(file: &str, src: &str, e: ApiError) -> Diagnostics {
     let mut ds = Diagnostics::new(file, src);
-    ds.push(crate::Diagnostic::error(e.error.message));
+    ds.push(crate::Diagnostic::error(e.error.message.clone()));
     ds
 }
 

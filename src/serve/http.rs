@@ -244,16 +244,17 @@ impl Reply {
 #[derive(Debug)]
 pub struct ApiError {
     pub status: u16,
-    pub error: Diagnostic,
+    /// Boxed: the error travels in every handler's `Result`.
+    pub error: Box<Diagnostic>,
     pub diagnostics: Option<serde_json::Value>,
 }
 
 impl ApiError {
     pub fn new(status: u16, error: impl Into<String>) -> ApiError {
-        ApiError { status, error: Diagnostic::error(error), diagnostics: None }
+        ApiError { status, error: Box::new(Diagnostic::error(error)), diagnostics: None }
     }
     pub fn hint(mut self, h: impl Into<String>) -> ApiError {
-        self.error = self.error.hint(h.into());
+        self.error.hints.push(h.into().into());
         self
     }
     pub fn bad(error: impl Into<String>) -> ApiError {
@@ -276,14 +277,14 @@ impl ApiError {
 impl From<crate::Diagnostics> for ApiError {
     fn from(ds: crate::Diagnostics) -> ApiError {
         let first = ds.errors().next().map(|d| d.text(&Plain)).unwrap_or_else(|| "invalid input".into());
-        ApiError { status: 422, error: Diagnostic::error(first), diagnostics: Some(ds.to_json()) }
+        ApiError { status: 422, error: Box::new(Diagnostic::error(first)), diagnostics: Some(ds.to_json()) }
     }
 }
 
 /// A failed check (one unlocated message with its hints): 422.
 impl From<Diagnostic> for ApiError {
     fn from(e: Diagnostic) -> ApiError {
-        ApiError { status: 422, error: e, diagnostics: None }
+        ApiError { status: 422, error: Box::new(e), diagnostics: None }
     }
 }
 
