@@ -1,7 +1,7 @@
 //! lobe: a compiler and JIT for BRDF formulas.
 //!
-//! The pipeline, one layer per folder; every import points down this list, and nothing below `cli` knows the
-//! CLI exists:
+//! The pipeline, one layer per folder; every import points down this list, and the library does not know the
+//! CLI (the binary's `cli` modules) exists:
 //!
 //! ```text
 //! base       spans, diagnostics, reading sources, file polling

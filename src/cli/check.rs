@@ -5,12 +5,10 @@
 //! input, which rewrite bought what, and where the formula is ill-conditioned by nature.
 
 use super::args::{self, FormulaSource, Json, Params, PreferArg};
-use super::common::CliError;
-use lobe::base::json;
+use super::common::{self, CliError};
 use lobe::ir::{Formula, Input};
-use lobe::numerics::robust::{self, ErrorStats, Worst};
+use lobe::numerics::robust::{self, ErrorStats, ErrorStatsJson, Worst};
 use lobe::{Backend, Options};
-use serde_json::json;
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("set", args::help("Parameters to bake as constants, e.g. `n=50`")))]
@@ -53,31 +51,6 @@ fn point_text(f: &Formula, w: &Worst) -> String {
     format!("{} → {:e} (true {:e})", parts.join(", "), w.got, w.truth)
 }
 
-fn worst_json(f: &Formula, w: &Option<Worst>) -> serde_json::Value {
-    match w {
-        None => serde_json::Value::Null,
-        Some(w) => {
-            let used = f.used_inputs();
-            json!({
-                "inputs": json::named(used.iter().map(|i| (i.name(), w.point.x[i.index()]))),
-                "params": json::named(f.params.iter().zip(&w.point.p).map(|(d, v)| (d.name.as_str(), *v))),
-                "value": json::value(w.got), "truth": json::value(w.truth), "bits": json::value(w.bits),
-            })
-        }
-    }
-}
-
-fn stats_json(f: &Formula, s: &ErrorStats) -> serde_json::Value {
-    json!({
-        "bits_error_avg": json::value(s.avg_bits), "bits_error_max": json::value(s.max_bits),
-        "bits_error_worst": worst_json(f, &s.worst),
-        "bits_error_max_well_conditioned": json::value(s.max_bits_well),
-        "bits_error_worst_well_conditioned": worst_json(f, &s.worst_well),
-        "nonfinite_where_finite": s.nonfinite, "ill_conditioned": s.ill_conditioned, "undefined": s.undefined,
-        "limit_points": s.limits,
-    })
-}
-
 fn stats_line(f: &Formula, s: &ErrorStats) -> String {
     let mut out = format!("avg {:.2} bits, max {:.2} bits", s.avg_bits, s.max_bits);
     if let Some(w) = &s.worst {
@@ -118,65 +91,59 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
     let bounds = builtin_bounds(&simplified, a.math.mode);
     let jit = lobe::compile_formula(f.clone(), &opts(Backend::Jit))?;
     let interp = lobe::compile_formula(f.clone(), &opts(Backend::Interp))?;
-    let params: Vec<serde_json::Value> = f
-        .params
-        .iter()
-        .enumerate()
-        .map(|(i, p)| {
-            let baked = bake.iter().find(|(j, _)| *j == i).map(|(_, v)| *v);
-            json!({
-                "name": p.name, "default": json::value(p.default), "lo": json::value(p.lo), "hi": json::value(p.hi),
-                "baked": baked.map(json::value), "live": live.contains(&(i as u16)),
-            })
-        })
-        .collect();
     if a.json.on {
-        let obj = json!({
-            "file": f.file,
-            "name": f.display_name(),
-            "citation": f.meta.citation,
-            "channel": colour,
-            "params": params,
-            // The let form: printing shared `let`s as a tree grows exponentially with their depth.
-            "formula": f.to_program_text(),
-            "simplified": simplified.to_program_text(),
-            "nodes_before": nodes_before,
-            "nodes_after": nodes_after,
-            "rewrites": report.fired.iter().map(|(k, v)| json!({"rule": k, "count": v})).collect::<Vec<_>>(),
-            "rounding_changes": report.rounding.iter().map(|r| {
+        let params = f
+            .params
+            .iter()
+            .enumerate()
+            .map(|(i, p)| robust::ParamJson {
+                name: p.name.clone(),
+                default: p.default,
+                lo: p.lo,
+                hi: p.hi,
+                baked: bake.iter().find(|(j, _)| *j == i).map(|(_, v)| *v),
+                live: live.contains(&(i as u16)),
+            })
+            .collect();
+        let rounding_changes = report
+            .rounding
+            .iter()
+            .map(|r| {
                 let (line, col) = lobe::base::span::line_col(&f.source, r.span.start as usize);
-                json!({"rule": r.rule, "line": line, "col": col, "detail": r.detail})
-            }).collect::<Vec<_>>(),
-            "passes": report.passes,
-            "used_inputs": used.iter().map(|i| i.name()).collect::<Vec<_>>(),
-            "unused_inputs": unused,
-            "math": a.math.mode.name(),
-            "builtins": bounds.iter().map(|(n, b)| json!({"name": n, "bound": b})).collect::<Vec<_>>(),
-            "points": pass.points,
-            "bits_error_avg": json::value(pass.after.avg_bits),
-            "bits_error_max": json::value(pass.after.max_bits),
-            "bits_error_worst": worst_json(&f, &pass.after.worst),
-            "bits_error_max_well_conditioned": json::value(pass.after.max_bits_well),
-            "bits_error_worst_well_conditioned": worst_json(&f, &pass.after.worst_well),
-            "condition_ulps_at_worst_well_conditioned": cond_well.map(json::value),
-            "nonfinite_where_finite": pass.after.nonfinite,
-            "ill_conditioned": pass.after.ill_conditioned,
-            "undefined": pass.after.undefined,
-            "limit_points": pass.after.limits,
-            "before": stats_json(&f, &pass.before),
-            "accuracy_rewrites": pass.trials.iter().map(|t| json!({
-                "rule": t.rule, "kept": t.kept, "reason": t.reason, "cost_ratio": json::value(t.cost / pass.cost_before),
-                "bits_error_avg": json::value(t.stats.avg_bits), "bits_error_max": json::value(t.stats.max_bits),
-                "nonfinite_where_finite": t.stats.nonfinite,
-            })).collect::<Vec<_>>(),
-            "compiled": pass.formula.to_program_text(),
-            "cost_ratio": json::value(pass.cost_after / pass.cost_before),
-            "compile_us": {
-                "jit": json::value(jit.compile_time.as_secs_f64() * 1e6),
-                "interp": json::value(interp.compile_time.as_secs_f64() * 1e6),
+                robust::RoundingJson { rule: r.rule, line, col, detail: r.detail.clone() }
+            })
+            .collect();
+        let obj = robust::CheckReport {
+            file: f.file.clone(),
+            name: f.display_name().to_string(),
+            citation: f.meta.citation.clone(),
+            channel: colour,
+            params,
+            // The let form: printing shared `let`s as a tree grows exponentially with their depth.
+            formula: f.to_program_text(),
+            simplified: simplified.to_program_text(),
+            nodes_before,
+            nodes_after,
+            rewrites: report.fired.iter().map(|(k, v)| robust::RewriteCount { rule: k, count: *v }).collect(),
+            rounding_changes,
+            passes: report.passes,
+            used_inputs: used.iter().map(|i| i.name()).collect(),
+            unused_inputs: unused,
+            math: a.math.mode.name(),
+            builtins: bounds.iter().map(|(n, b)| robust::BuiltinBound { name: n, bound: b.clone() }).collect(),
+            points: pass.points,
+            after: ErrorStatsJson::new(&f, &pass.after),
+            condition_ulps_at_worst_well_conditioned: cond_well,
+            before: ErrorStatsJson::new(&f, &pass.before),
+            accuracy_rewrites: robust::TrialJson::all(&pass),
+            compiled: pass.formula.to_program_text(),
+            cost_ratio: pass.cost_after / pass.cost_before,
+            compile_us: robust::CompileUs {
+                jit: jit.compile_time.as_secs_f64() * 1e6,
+                interp: interp.compile_time.as_secs_f64() * 1e6,
             },
-        });
-        println!("{obj}");
+        };
+        println!("{}", common::to_json(&obj)?);
         return Ok(());
     }
     println!("{} — {}", f.file, f.display_name());

@@ -4,12 +4,10 @@
 
 use super::args::{self, BackendArg, Json, Output, Params};
 use super::common::{self, CliError};
-use lobe::base::json;
-use lobe::render::compare::{self, CompareJob, Comparison, Metrics};
+use lobe::render::compare::{self, CompareJob};
 use lobe::render::image::{self, Transfer};
 use lobe::render::scene::LobeCompiler;
 use lobe::render::RenderOptions;
-use serde::Serialize;
 use std::path::PathBuf;
 
 pub use lobe::render::scene::PAPER_SCENE;
@@ -46,25 +44,6 @@ pub struct CompareArgs {
     pub srgb: bool,
     #[command(flatten)]
     pub json: Json,
-}
-
-/// One comparison in the `--json` output: the two files, the n it ran at (with --sweep-n), the metrics, the
-/// image size and the NaN counts of A and B.
-#[derive(Serialize)]
-struct Row<'a> {
-    a: &'a str,
-    b: &'a str,
-    #[serde(serialize_with = "json::opt_num")]
-    n: Option<f64>,
-    #[serde(flatten)]
-    metrics: &'a Metrics,
-    width: usize,
-    height: usize,
-    nan: [u64; 2],
-}
-
-fn row<'a>(a: &'a CompareArgs, c: &'a Comparison) -> Row<'a> {
-    Row { a: &a.a, b: &a.b, n: c.n, metrics: &c.metrics, width: c.a.image.width, height: c.a.image.height, nan: c.nan }
 }
 
 pub fn run(a: &CompareArgs) -> Result<(), CliError> {
@@ -112,9 +91,9 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
     }
     if a.json.on {
         let json = if a.sweep_n.is_empty() {
-            common::to_json(&row(a, &rows[0]))?
+            common::to_json(&rows[0].json(&a.a, &a.b))?
         } else {
-            common::to_json(&rows.iter().map(|c| row(a, c)).collect::<Vec<_>>())?
+            common::to_json(&rows.iter().map(|c| c.json(&a.a, &a.b)).collect::<Vec<_>>())?
         };
         println!("{json}");
     } else {

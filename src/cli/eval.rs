@@ -171,7 +171,7 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
     if a.json.on {
         println!("{}", common::to_json(&EvalReport::new(&ks, v, note))?);
     } else {
-        emit(note, &show(&v));
+        emit(note, &format!("{}\n", show(&v)));
     }
     Ok(())
 }

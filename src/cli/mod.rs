@@ -1,6 +1,7 @@
-//! The `lobe` subcommands: one file each, holding a clap `Args` struct and a `run` function that calls the
-//! library and prints. Flags several commands share are flattened from [`args`]; loading formulas, `--set`
-//! lists and the error type are in [`common`]. No numerical or rendering logic lives here.
+//! The `lobe` subcommands, compiled into the binary only: one file each, holding a clap `Args` struct and a
+//! `run` function that calls the library, fills its typed reports and prints them (or words them as text).
+//! Flags several commands share are flattened from [`args`]; loading formulas, `--set` lists and the error
+//! type are in [`common`]. No numerical or rendering logic lives here.
 
 /// `writeln!` into the report string (formatting into a `String` cannot fail).
 macro_rules! outln {

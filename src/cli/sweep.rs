@@ -9,11 +9,8 @@
 
 use super::args::{self, BackendArg, FormulaSource, Json, Params, PreferArg};
 use super::common::{self, CliError};
-use lobe::base::json;
 use lobe::ir::Formula;
-use lobe::numerics::sweep::{extent, extent_polar, sweep, Example, RegionStats, SweepOptions, SweepReport};
-
-use serde::Serialize;
+use lobe::numerics::sweep::{example_extents, kinds, sweep, ChannelsJson, Example, RegionStats, SweepJson, SweepOptions, SweepReport};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("set", args::help("Fix parameters instead of sweeping their declared ranges, e.g. `a=16`")))]
@@ -42,51 +39,8 @@ pub struct SweepArgs {
     pub json: Json,
 }
 
-/// The `--json` object: the total counts, then each region's counts with its first examples.
-#[derive(Serialize)]
-struct SweepJson<'a> {
-    #[serde(flatten)]
-    total: &'a RegionStats,
-    #[serde(serialize_with = "json::num")]
-    bound: f64,
-    exhaustive: bool,
-    /// How points were chosen (`DomainKind::describe`).
-    domain: &'static str,
-    regions: Vec<RegionJson<'a>>,
-    /// The same sweep of the compiled formula (absent with `--as-written`).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    compiled: Option<CompiledJson<'a>>,
-}
-
-#[derive(Serialize)]
-struct RegionJson<'a> {
-    region: &'static str,
-    #[serde(flatten)]
-    counts: &'a RegionStats,
-    first: serde_json::Value,
-    extents: Vec<serde_json::Value>,
-}
-
-#[derive(Serialize)]
-struct CompiledJson<'a> {
-    formula: String,
-    #[serde(flatten)]
-    total: &'a RegionStats,
-    regions: Vec<RegionJson<'a>>,
-}
-
+/// The kinds `--deny` takes.
 const KINDS: [&str; 4] = ["nan", "inf", "negative", "bound"];
-
-fn example_json(e: &Option<Example>, names: &[String]) -> serde_json::Value {
-    match e {
-        None => serde_json::Value::Null,
-        Some(e) => serde_json::json!({
-            "inputs": json::named(lobe::Input::ALL.iter().map(|i| (i.name(), e.inputs[i.index()]))),
-            "params": json::named(names.iter().map(String::as_str).zip(e.params.iter().copied())),
-            "value": json::value(e.value),
-        }),
-    }
-}
 
 /// A number for the text report: plain for ordinary magnitudes, scientific otherwise.
 fn compact(v: f64) -> String {
@@ -116,20 +70,21 @@ pub fn run(a: &SweepArgs) -> Result<(), CliError> {
     // A colour formula is swept channel by channel (each a scalar formula); --json then gives
     // `{"channels": {"red": …, "green": …, "blue": …}}`.
     let mut denied = vec![];
-    let mut objects = serde_json::Map::new();
+    let mut channels = ChannelsJson::default();
     for c in f.named_channels() {
-        let (text, d) = report(a, &c)?;
+        let (out, d) = report(a, &c)?;
         denied.extend(d.into_iter().filter(|k| !denied.contains(k)).collect::<Vec<_>>());
-        match (f.is_rgb(), a.json.on) {
-            (true, true) => {
+        match out {
+            Out::Json(j) if f.is_rgb() => {
                 let channel = c.display_name().rsplit_once(" (").map_or(String::new(), |(_, ch)| ch.trim_end_matches(')').to_string());
-                objects.insert(channel, serde_json::from_str(&text).map_err(|e| CliError::msg(e.to_string()))?);
+                channels.channels.insert(channel, *j);
             }
-            _ => print!("{text}"),
+            Out::Json(j) => println!("{}", common::to_json(&j)?),
+            Out::Text(t) => print!("{t}"),
         }
     }
     if f.is_rgb() && a.json.on {
-        println!("{}", serde_json::json!({ "channels": objects }));
+        println!("{}", common::to_json(&channels)?);
     }
     if !denied.is_empty() {
         eprintln!("error: denied kinds occurred: {}", denied.join(", "));
@@ -138,58 +93,13 @@ pub fn run(a: &SweepArgs) -> Result<(), CliError> {
     Ok(())
 }
 
-/// One example's bad-region extents: along each input read (independent cosines) or along L's and V's polar
-/// angles (geometry), as (label, lo, hi).
-fn extents(k: &lobe::Kernel, rep: &SweepReport, used: lobe::ir::InputSet, e: &Example, bad: &dyn Fn(f64) -> bool) -> Vec<(String, f64, f64)> {
-    if rep.domain.is_geometric() {
-        [(true, "NL = Lz", "along L's polar angle"), (false, "NV = Vz", "along V's polar angle")]
-            .into_iter()
-            .filter_map(|(light, name, how)| extent_polar(k, &e.inputs, &e.params, light, bad).map(|(lo, hi)| (format!("{name} {how}"), lo, hi)))
-            .collect()
-    } else {
-        used.iter().filter_map(|i| extent(k, &e.inputs, &e.params, i.index(), bad).map(|(lo, hi)| (i.name().to_string(), lo, hi))).collect()
-    }
-}
-
-/// One kind a sweep counts: label, JSON key, the region's first example, and the predicate on a value.
-type Kind<'a> = (&'static str, &'static str, &'a Option<Example>, Box<dyn Fn(f64) -> bool>);
-
-/// The four kinds a sweep counts, for one region.
-fn kinds(r: &RegionStats, bound: f64) -> [Kind<'_>; 4] {
-    [
-        ("NaN", "nan", &r.first_nan, Box::new(f64::is_nan)),
-        ("inf", "inf", &r.first_inf, Box::new(f64::is_infinite)),
-        ("negative", "negative", &r.first_negative, Box::new(|y: f64| y < 0.0)),
-        ("over bound", "over_bound", &r.first_over_bound, Box::new(move |y: f64| y > bound)),
-    ]
-}
-
-fn regions_json<'a>(k: &lobe::Kernel, rep: &'a SweepReport, used: lobe::ir::InputSet, names: &[String]) -> Vec<RegionJson<'a>> {
-    rep.regions
-        .iter()
-        .map(|r| {
-            let mut first = serde_json::Map::new();
-            let mut ext = vec![];
-            for (_, key, e, bad) in kinds(r, rep.bound) {
-                first.insert(key.into(), example_json(e, names));
-                if let Some(e) = e {
-                    for (along, lo, hi) in extents(k, rep, used, e, &*bad) {
-                        ext.push(serde_json::json!({"kind": key, "along": along, "lo": json::value(lo), "hi": json::value(hi)}));
-                    }
-                }
-            }
-            RegionJson { region: r.region, counts: r, first: serde_json::Value::Object(first), extents: ext }
-        })
-        .collect()
-}
-
 /// The first examples of each region and kind with their extents, as text lines.
 fn examples_text(out: &mut String, k: &lobe::Kernel, rep: &SweepReport, used: lobe::ir::InputSet, names: &[String], label: &str) {
     for r in &rep.regions {
         for (kind, _, e, bad) in kinds(r, rep.bound) {
             if let Some(e) = e {
                 outln!(out, "  {label}first {kind} in {}: {}", r.region, example_text(e, used, names));
-                for (along, lo, hi) in extents(k, rep, used, e, &*bad) {
+                for (along, lo, hi) in example_extents(k, rep, used, e, &*bad) {
                     outln!(out, "    {kind} for {along} in [{}, {}] (the rest as in the example)", compact(lo), compact(hi));
                 }
             }
@@ -205,8 +115,14 @@ fn cell(a: u64, b: Option<u64>) -> String {
     }
 }
 
+/// One formula's (or channel's) output: the `--json` report, or the text.
+pub enum Out {
+    Json(Box<SweepJson>),
+    Text(String),
+}
+
 /// The command's output for a lowered formula, and the `--deny` kinds that occurred.
-pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliError> {
+pub fn report(a: &SweepArgs, f: &Formula) -> Result<(Out, Vec<String>), CliError> {
     let mut out = String::new();
     let set = a.set.list();
     let mut decls = f.params.clone();
@@ -236,17 +152,13 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliEr
     let crep = crep_changed.as_ref().or(compiled.as_ref().map(|_| &rep));
     let names: Vec<String> = decls.iter().map(|d| d.name.clone()).collect();
     let t = &rep.total;
+    let judged = crep.map_or(t, |cr| &cr.total);
+    let denied: Vec<String> = a.deny.iter().filter(|d| judged.count(d) > 0).cloned().collect();
     if a.json.on {
-        let obj = SweepJson {
-            total: t,
-            bound: rep.bound,
-            exhaustive: rep.exhaustive,
-            domain: rep.domain.describe(),
-            regions: regions_json(&k, &rep, used, &names),
-            compiled: compiled.as_ref().zip(crep).map(|(c, cr)| CompiledJson { formula: text(c), total: &cr.total, regions: regions_json(c, cr, used, &names) }),
-        };
-        outln!(out, "{}", common::to_json(&obj)?);
-    } else {
+        let c = compiled.as_ref().zip(crep).map(|(c, cr)| (c as &dyn lobe::Evaluator, text(c), cr));
+        return Ok((Out::Json(Box::new(SweepJson::new(&k, &rep, used, &names, c))), denied));
+    }
+    {
         outln!(
             out,
             "{}: unclamped formula over {} points ({} of {}; inputs read: {})",
@@ -279,9 +191,7 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(String, Vec<String>), CliEr
             examples_text(&mut out, c, cr, used, &names, "compiled: ");
         }
     }
-    let judged = crep.map_or(t, |cr| &cr.total);
-    let denied: Vec<String> = a.deny.iter().filter(|d| judged.count(d) > 0).cloned().collect();
-    Ok((out, denied))
+    Ok((Out::Text(out), denied))
 }
 
 #[cfg(test)]
@@ -301,13 +211,13 @@ mod tests {
     fn clean_formula_passes_deny_and_reports_json() {
         let f = power_formula(Input::NH, &[]);
         let a = T::try_parse_from(["sweep", "--json", "--deny", "nan,inf", "--backend", "interp"]).unwrap().a;
-        let (text, denied) = report(&a, &f).unwrap();
+        let (Out::Json(j), denied) = report(&a, &f).unwrap() else { panic!("--json gives the report") };
         assert!(denied.is_empty());
-        let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let v = serde_json::to_value(&j).unwrap();
         assert_eq!((v["nan"].as_u64(), v["inf"].as_u64(), v["negative"].as_u64()), (Some(0), Some(0), Some(0)));
         // pow(c, n) with n ≥ 1 is ≤ 1: a bound of 0.5 is exceeded, and `--deny bound` says so.
         let a = T::try_parse_from(["sweep", "--bound", "0.5", "--deny", "bound", "--backend", "interp"]).unwrap().a;
-        let (text, denied) = report(&a, &f).unwrap();
+        let (Out::Text(text), denied) = report(&a, &f).unwrap() else { panic!("text without --json") };
         assert_eq!(denied, vec!["bound".to_string()]);
         assert!(text.contains("first over bound"), "{text}");
     }

@@ -30,6 +30,7 @@
 //! Cost: about `max_evals` batched evaluations (default 2 M; never fewer than 64 input points per parameter
 //! combination), in parallel over parameter combinations; measured times in BENCHMARKS.md.
 
+use crate::base::json::{self, Named};
 use crate::builtins::Builtin;
 use crate::ir::{Formula, InputSet, Node, ParamDecl, N_INPUTS};
 use crate::backend::{Columns, Evaluator};
@@ -460,6 +461,148 @@ fn coprime_stride(m: u64) -> u64 {
         s += 2;
     }
     s.max(1)
+}
+
+/// One kind a sweep counts: label, JSON key, the region's first example, and the predicate on a value.
+pub type Kind<'a> = (&'static str, &'static str, &'a Option<Example>, Box<dyn Fn(f64) -> bool>);
+
+/// The four kinds a sweep counts, for one region.
+pub fn kinds(r: &RegionStats, bound: f64) -> [Kind<'_>; 4] {
+    [
+        ("NaN", "nan", &r.first_nan, Box::new(f64::is_nan)),
+        ("inf", "inf", &r.first_inf, Box::new(f64::is_infinite)),
+        ("negative", "negative", &r.first_negative, Box::new(|y: f64| y < 0.0)),
+        ("over bound", "over_bound", &r.first_over_bound, Box::new(move |y: f64| y > bound)),
+    ]
+}
+
+/// One example's bad-region extents: along each input read (independent cosines) or along L's and V's polar
+/// angles (geometry), as (label, lo, hi).
+pub fn example_extents(ev: &dyn Evaluator, rep: &SweepReport, used: InputSet, e: &Example, bad: &dyn Fn(f64) -> bool) -> Vec<(String, f64, f64)> {
+    if rep.domain.is_geometric() {
+        [(true, "NL = Lz", "along L's polar angle"), (false, "NV = Vz", "along V's polar angle")]
+            .into_iter()
+            .filter_map(|(light, name, how)| extent_polar(ev, &e.inputs, &e.params, light, bad).map(|(lo, hi)| (format!("{name} {how}"), lo, hi)))
+            .collect()
+    } else {
+        used.iter().filter_map(|i| extent(ev, &e.inputs, &e.params, i.index(), bad).map(|(lo, hi)| (i.name().to_string(), lo, hi))).collect()
+    }
+}
+
+/// `lobe sweep --json` (keys listed in README.md; numbers follow [`crate::base::json`]): the total counts,
+/// then each region's counts with its first examples.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SweepJson {
+    #[serde(flatten)]
+    pub total: RegionStats,
+    #[serde(serialize_with = "json::num")]
+    pub bound: f64,
+    pub exhaustive: bool,
+    /// How points were chosen (`DomainKind::describe`).
+    pub domain: &'static str,
+    pub regions: Vec<RegionJson>,
+    /// The same sweep of the compiled formula (absent with `--as-written`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub compiled: Option<CompiledJson>,
+}
+
+/// A region's counts, its first example of each kind and their extents.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct RegionJson {
+    pub region: &'static str,
+    #[serde(flatten)]
+    pub counts: RegionStats,
+    pub first: FirstExamples,
+    pub extents: Vec<ExtentJson>,
+}
+
+/// The sweep of the compiled formula (the accuracy pass's choice) with its text.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CompiledJson {
+    pub formula: String,
+    #[serde(flatten)]
+    pub total: RegionStats,
+    pub regions: Vec<RegionJson>,
+}
+
+/// The first example of each kind in a region (`null` where none occurred).
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct FirstExamples {
+    pub nan: Option<ExampleJson>,
+    pub inf: Option<ExampleJson>,
+    pub negative: Option<ExampleJson>,
+    pub over_bound: Option<ExampleJson>,
+}
+
+/// An [`Example`] with its inputs and parameters by name.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ExampleJson {
+    pub inputs: Named,
+    pub params: Named,
+    #[serde(serialize_with = "json::num")]
+    pub value: f64,
+}
+
+/// Where one kind extends from an example: along which input, from `lo` to `hi`.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ExtentJson {
+    pub kind: &'static str,
+    pub along: String,
+    #[serde(serialize_with = "json::num")]
+    pub lo: f64,
+    #[serde(serialize_with = "json::num")]
+    pub hi: f64,
+}
+
+/// A colour formula's sweep: `{"channels": {"red": …, "green": …, "blue": …}}`.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct ChannelsJson {
+    pub channels: std::collections::BTreeMap<String, SweepJson>,
+}
+
+impl SweepJson {
+    /// The report of `rep`, the sweep of `ev` over inputs `used` and parameters `names`, and of the compiled
+    /// formula's (`ev` of the compiled form, its text, its sweep), if any.
+    pub fn new(ev: &dyn Evaluator, rep: &SweepReport, used: InputSet, names: &[String], compiled: Option<(&dyn Evaluator, String, &SweepReport)>) -> SweepJson {
+        SweepJson {
+            total: rep.total.clone(),
+            bound: rep.bound,
+            exhaustive: rep.exhaustive,
+            domain: rep.domain.describe(),
+            regions: regions_json(ev, rep, used, names),
+            compiled: compiled.map(|(c, formula, cr)| CompiledJson { formula, total: cr.total.clone(), regions: regions_json(c, cr, used, names) }),
+        }
+    }
+}
+
+fn regions_json(ev: &dyn Evaluator, rep: &SweepReport, used: InputSet, names: &[String]) -> Vec<RegionJson> {
+    let example = |e: &Example| ExampleJson {
+        inputs: Named::new(crate::ir::Input::ALL.iter().map(|i| (i.name(), e.inputs[i.index()]))),
+        params: Named::new(names.iter().map(String::as_str).zip(e.params.iter().copied())),
+        value: e.value,
+    };
+    rep.regions
+        .iter()
+        .map(|r| {
+            let mut first = FirstExamples::default();
+            let mut extents = vec![];
+            for (_, key, e, bad) in kinds(r, rep.bound) {
+                let slot = match key {
+                    "nan" => &mut first.nan,
+                    "inf" => &mut first.inf,
+                    "negative" => &mut first.negative,
+                    _ => &mut first.over_bound,
+                };
+                *slot = e.as_ref().map(example);
+                if let Some(e) = e {
+                    for (along, lo, hi) in example_extents(ev, rep, used, e, &*bad) {
+                        extents.push(ExtentJson { kind: key, along, lo, hi });
+                    }
+                }
+            }
+            RegionJson { region: r.region, counts: r.clone(), first, extents }
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -134,6 +134,28 @@ pub struct Comparison {
     pub nan: [u64; 2],
 }
 
+/// One comparison in `lobe compare --json`: the two files, the n it ran at (with a sweep over n), the metrics,
+/// the image size and the NaN counts of A and B (numbers follow [`crate::base::json`]).
+#[derive(serde::Serialize)]
+pub struct ComparisonJson<'a> {
+    pub a: &'a str,
+    pub b: &'a str,
+    #[serde(serialize_with = "crate::base::json::opt_num")]
+    pub n: Option<f64>,
+    #[serde(flatten)]
+    pub metrics: &'a Metrics,
+    pub width: usize,
+    pub height: usize,
+    pub nan: [u64; 2],
+}
+
+impl Comparison {
+    /// The report of this comparison of the files `a` and `b`.
+    pub fn json<'a>(&'a self, a: &'a str, b: &'a str) -> ComparisonJson<'a> {
+        ComparisonJson { a, b, n: self.n, metrics: &self.metrics, width: self.a.image.width, height: self.a.image.height, nan: self.nan }
+    }
+}
+
 /// What [`compare_formulas`] and [`compare_sweep`] render: a scene (name, TOML text, base directory for
 /// relative paths) and two formulas (file name, source).
 pub struct CompareJob<'a> {

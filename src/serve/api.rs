@@ -319,21 +319,44 @@ pub fn compile(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
         let (name, text) = formula_field(&req)?;
         let c = st.compiled(&name, &text)?;
         let f = &c.kernel().formula;
-        let params: Vec<Value> = f
+        let params = f
             .params
             .iter()
-            .map(|p| json!({"name": p.name, "default": p.default, "lo": crate::base::json::value(p.lo), "hi": crate::base::json::value(p.hi)}))
+            .map(|p| CompiledParam { name: p.name.clone(), default: p.default, lo: p.lo, hi: p.hi })
             .collect();
-        Ok(Reply::ok_json(json!({
-            "name": f.display_name(),
-            "params": params,
-            "used_inputs": f.used_inputs().iter().map(|i| i.name()).collect::<Vec<_>>(),
-            "simplified": f.to_text(),
-            "parse_us": c.parse_us,
-            "compile_us": c.kernel().compile_time.as_secs_f64() * 1e6,
-            "warnings": c.warnings.to_json(),
-        })))
+        Ok(Reply::ok_report(&CompileReply {
+            name: f.display_name().to_string(),
+            params,
+            used_inputs: f.used_inputs().iter().map(|i| i.name()).collect(),
+            simplified: f.to_text(),
+            parse_us: c.parse_us,
+            compile_us: c.kernel().compile_time.as_secs_f64() * 1e6,
+            warnings: c.warnings.to_json(),
+        }))
     })
+}
+
+/// The `/api/compile` reply.
+#[derive(serde::Serialize)]
+struct CompileReply {
+    name: String,
+    params: Vec<CompiledParam>,
+    used_inputs: Vec<&'static str>,
+    simplified: String,
+    parse_us: f64,
+    compile_us: f64,
+    warnings: Value,
+}
+
+/// A declared parameter for the page's sliders (the range's ends follow [`crate::base::json`]).
+#[derive(serde::Serialize)]
+struct CompiledParam {
+    name: String,
+    default: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
+    lo: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
+    hi: f64,
 }
 
 /// `POST /api/render {name, text, params, size}`: the served scene with every material's formula replaced by
@@ -414,18 +437,17 @@ pub fn analyze(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
         // The accuracy grid (91 000 points plus fine grids per n) dominates.
         check_cost(st, &k, 2.0e6, "this analysis")?;
         let params = values(&k, &set)?;
-        let mut out = json!({});
-        let num = crate::base::json::value;
+        let mut out = AnalyzeReply::default();
         match crate::numerics::normalize::coefficient(k.as_ref(), k.used_inputs(), &params) {
-            Ok(c) => out["coef"] = num(c),
-            Err(e) => out["coef_error"] = e.message.into(),
+            Ok(c) => out.coef = Some(c),
+            Err(e) => out.coef_error = Some(e.message),
         }
         match crate::numerics::energy::full_energy_for(k.as_ref(), k.used_inputs(), &params) {
             Ok(e) => {
-                out["albedo_max"] = num(e.albedo_max);
-                out["theta_i_at_max_deg"] = num(e.theta_i_at_max_deg);
+                out.albedo_max = Some(e.albedo_max);
+                out.theta_i_at_max_deg = Some(e.theta_i_at_max_deg);
             }
-            Err(e) => out["albedo_error"] = e.message.into(),
+            Err(e) => out.albedo_error = Some(e.message),
         }
         if let Some(r) = req.get("reference") {
             let (rn, rt) = formula_field(r)?;
@@ -435,19 +457,51 @@ pub fn analyze(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
             let rlobe = crate::numerics::choose_lobe_input(rk.used_inputs()).0;
             let opts = crate::numerics::accuracy::AccuracyOptions::default();
             let a = crate::numerics::accuracy::accuracy(k.as_ref(), &params, lobe, rk.as_ref(), &rp, rlobe, &opts)?;
-            out["reference"] = rk.formula.display_name().into();
-            out["mean_abs_grid"] = num(a.mean_abs_grid);
-            out["epicenter_max_rel_pct"] = num(a.epicenter.value * 100.0);
-            out["max_abs"] = num(a.max_abs.value);
+            out.reference = Some(rk.formula.display_name().to_string());
+            out.mean_abs_grid = Some(a.mean_abs_grid);
+            out.epicenter_max_rel_pct = Some(a.epicenter.value * 100.0);
+            out.max_abs = Some(a.max_abs.value);
         }
         let m = crate::report::measure::measure_kernel(&k, &params, crate::report::measure::MeasureOptions { points: 2048, samples: 9 })
             .map_err(|e| ApiError::new(422, e.to_string()))?;
-        out["jit_ns"] = num(m.scalar_jit.median_ns);
-        out["jit_batch_ns"] = num(m.batched_jit.median_ns);
-        out["interp_ns"] = num(m.interp.median_ns);
-        out["compile_us"] = num(m.compile.as_secs_f64() * 1e6);
-        Ok(Reply::ok_json(out))
+        out.jit_ns = m.scalar_jit.median_ns;
+        out.jit_batch_ns = m.batched_jit.median_ns;
+        out.interp_ns = m.interp.median_ns;
+        out.compile_us = m.compile.as_secs_f64() * 1e6;
+        Ok(Reply::ok_report(&out))
     })
+}
+
+/// The `/api/analyze` reply: each check's value, or its `_error` when it failed; the accuracy metrics only
+/// with a reference. Numbers follow [`crate::base::json`].
+#[derive(Default, serde::Serialize)]
+struct AnalyzeReply {
+    #[serde(serialize_with = "crate::base::json::opt_num", skip_serializing_if = "Option::is_none")]
+    coef: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    coef_error: Option<String>,
+    #[serde(serialize_with = "crate::base::json::opt_num", skip_serializing_if = "Option::is_none")]
+    albedo_max: Option<f64>,
+    #[serde(serialize_with = "crate::base::json::opt_num", skip_serializing_if = "Option::is_none")]
+    theta_i_at_max_deg: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    albedo_error: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    reference: Option<String>,
+    #[serde(serialize_with = "crate::base::json::opt_num", skip_serializing_if = "Option::is_none")]
+    mean_abs_grid: Option<f64>,
+    #[serde(serialize_with = "crate::base::json::opt_num", skip_serializing_if = "Option::is_none")]
+    epicenter_max_rel_pct: Option<f64>,
+    #[serde(serialize_with = "crate::base::json::opt_num", skip_serializing_if = "Option::is_none")]
+    max_abs: Option<f64>,
+    #[serde(serialize_with = "crate::base::json::num")]
+    jit_ns: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
+    jit_batch_ns: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
+    interp_ns: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
+    compile_us: f64,
 }
 
 /// `POST /api/save {path, text, hash, force}`: writes a served `.brdf` file atomically. Refused with 409 when

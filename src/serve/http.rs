@@ -229,6 +229,13 @@ impl Reply {
     pub fn ok_json(v: serde_json::Value) -> Reply {
         Reply::json(200, &v)
     }
+    /// A typed report as the JSON body (a serialisation failure, which lobe's report types do not have, is a 500).
+    pub fn ok_report<T: serde::Serialize>(v: &T) -> Reply {
+        match serde_json::to_vec(v) {
+            Ok(body) => Reply { status: 200, content_type: "application/json", headers: vec![], body },
+            Err(e) => Reply::json(500, &serde_json::json!({ "error": format!("cannot write JSON: {e}") })),
+        }
+    }
     pub fn bytes(content_type: &'static str, body: Vec<u8>) -> Reply {
         Reply { status: 200, content_type, headers: vec![], body }
     }
