@@ -125,7 +125,7 @@ impl PreferArg {
 /// `--json`: one JSON object on standard output instead of the report.
 #[derive(clap::Args, Clone, Copy, Debug)]
 pub struct Json {
-    /// Print one JSON object (its keys are listed in README.md).
+    /// Print one JSON object (its keys are listed in docs/commands.md).
     #[arg(id = "json", long = "json")]
     pub on: bool,
 }

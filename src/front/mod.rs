@@ -6,7 +6,7 @@
 //! policy → `ir::Formula`).
 //! Every stage reports into one list, so a file with several mistakes gets all of them, sorted by position.
 //!
-//! The language, in brief (grammar/formula.lalrpop is the definition; README.md has the reference):
+//! The language, in brief (grammar/formula.lalrpop is the definition; docs/language.md has the reference):
 //!
 //! ```text
 //! # comment                                  statements end at a newline or `;`

@@ -367,7 +367,7 @@ pub fn accuracy(
     Ok(rep)
 }
 
-/// `lobe accuracy --json` (keys listed in README.md; numbers follow [`crate::base::json`]): the metrics of an
+/// The accuracy command's JSON report (keys listed in docs/commands.md; numbers follow [`crate::base::json`]): the metrics of an
 /// [`AccuracyReport`], relative errors in percent, with `q`, the NaN count and the time taken.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct AccuracyJson {

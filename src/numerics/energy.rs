@@ -445,7 +445,7 @@ fn summarise(rows: Vec<(f64, f64)>, reciprocity: Reciprocity) -> Result<FullEner
     Ok(FullEnergy { albedo: rows, albedo_max, theta_i_at_max_deg: at, coef: 1.0 / albedo_max, reciprocity, albedo_phi: vec![], phi_i_at_max_deg: None })
 }
 
-/// `lobe energy --json`: one of the three modes' reports (keys listed in README.md; numbers follow
+/// The energy command's JSON report: one of the three modes' (keys listed in docs/commands.md; numbers follow
 /// [`crate::base::json`]).
 #[derive(Clone, Debug, serde::Serialize)]
 #[serde(untagged)]

@@ -330,7 +330,7 @@ fn nelder_mead(eval: &mut impl FnMut(&[f64]) -> (f64, Vec<f64>), x0: &[f64], ste
     eval(&best.1)
 }
 
-/// `lobe fit --json` (keys listed in README.md; numbers follow [`crate::base::json`]).
+/// The fit command's JSON report (keys listed in docs/commands.md; numbers follow [`crate::base::json`]).
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct FitJson {
     /// Best first.

@@ -1,16 +1,16 @@
-//! Many points from CSV text, evaluated by the batched kernel (`lobe eval --points`).
+//! Many points from CSV text, evaluated by the batched kernel (the eval command on a points file).
 //!
 //! The CSV has a header naming its columns: inputs and, optionally, parameters of the formula (which then stay
 //! live: no recompilation per row). The inputs are either the six direction components `Lx,Ly,Lz,Vx,Vy,Vz`
 //! (local frame: N = +z, X = +x, Y = +y), from which every input is computed as the renderer does
 //! ([`super::inputs_from_dirs`]; non-unit directions are normalised and counted, a zero vector is an
 //! error), or cosine columns (NL, NV, NH, VR, VH; those not named are 0), which only a formula that reads no
-//! direction can take. Parameters not named take their `--set` or declared values. Rows of equal parameter values that follow each other form one batch, so a
+//! direction can take. Parameters not named take their baked or declared values. Rows of equal parameter values that follow each other form one batch, so a
 //! file with no parameter columns is a single call of the batched kernel. Errors point at the CSV's line and
 //! column with the usual caret diagnostics.
 
 use super::{dot, inputs_from_dirs, V3};
-use crate::base::diag::{Diagnostic, Diagnostics};
+use crate::base::diag::{Diagnostic, Diagnostics, Setting};
 use crate::base::span::Span;
 use crate::ir::{Formula, Input, InputSet, N_INPUTS};
 use crate::{Columns, Evaluator, Kernel};
@@ -52,7 +52,7 @@ pub fn unit(v: V3) -> Option<(V3, bool)> {
 }
 
 /// Parses `text` (named `file` in diagnostics) for formula `f`, whose compiled channels read `used`; `baked` are
-/// parameters baked by `--set`, which cannot also be columns.
+/// parameters baked for this run, which cannot also be columns.
 pub fn parse(file: &str, text: &str, f: &Formula, used: InputSet, baked: &[String]) -> Result<Points, Diagnostics> {
     let fail = |d: Diagnostic| Diagnostics::single_in(file, text, d);
     let text_start = if text.starts_with('\u{feff}') { 3 } else { 0 };
@@ -75,9 +75,9 @@ pub fn parse(file: &str, text: &str, f: &Formula, used: InputSet, baked: &[Strin
             Column::Input(i)
         } else if let Some(p) = f.param_index(name) {
             if baked.iter().any(|b| b == name) {
-                return Err(fail(Diagnostic::error(format!("parameter `{name}` is both baked by --set and a column"))
+                return Err(fail(Diagnostic::error(format!("parameter `{name}` is both baked and a column")).about(Setting::Param { name: name.to_string(), value: None })
                     .at(s, "a column here")
-                    .hint("drop it from --set (a column keeps it live), or drop the column")));
+                    .hint("bake it or give it as a column, not both (a column keeps it live)")));
             }
             Column::Param(p)
         } else {

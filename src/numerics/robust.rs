@@ -666,7 +666,7 @@ pub fn with_pass(mut opts: crate::Options, pass: PassOptions) -> crate::Options 
     opts
 }
 
-/// `lobe check --json` (keys listed in README.md; numbers follow [`crate::base::json`]): the formula, its
+/// The check command's JSON report (keys listed in docs/commands.md; numbers follow [`crate::base::json`]): the formula, its
 /// simplification, the builtins' bounds, the pass's [`Outcome`] (the error after the pass at the top level,
 /// `before` for the plain simplification), and the compile times. The caller fills it; the error statistics
 /// come from [`ErrorStatsJson::new`].

@@ -489,7 +489,7 @@ pub fn example_extents(ev: &dyn Evaluator, rep: &SweepReport, used: InputSet, e:
     }
 }
 
-/// `lobe sweep --json` (keys listed in README.md; numbers follow [`crate::base::json`]): the total counts,
+/// The sweep's JSON report (keys listed in docs/commands.md; numbers follow [`crate::base::json`]): the total counts,
 /// then each region's counts with its first examples.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct SweepJson {
@@ -501,7 +501,7 @@ pub struct SweepJson {
     /// How points were chosen (`DomainKind::describe`).
     pub domain: &'static str,
     pub regions: Vec<RegionJson>,
-    /// The same sweep of the compiled formula (absent with `--as-written`).
+    /// The same sweep of the compiled formula (absent when only the form as written is swept).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub compiled: Option<CompiledJson>,
 }

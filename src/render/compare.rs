@@ -134,7 +134,7 @@ pub struct Comparison {
     pub nan: [u64; 2],
 }
 
-/// One comparison in `lobe compare --json`: the two files, the n it ran at (with a sweep over n), the metrics,
+/// One comparison in the compare command's JSON report: the two files, the n it ran at (with a sweep over n), the metrics,
 /// the image size and the NaN counts of A and B (numbers follow [`crate::base::json`]).
 #[derive(serde::Serialize)]
 pub struct ComparisonJson<'a> {

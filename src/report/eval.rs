@@ -1,5 +1,5 @@
-//! `lobe eval --json`: the value at one point, or the values at every point of a CSV, with what produced
-//! them (keys listed in README.md; numbers follow [`crate::base::json`]).
+//! The eval command's JSON report: the value at one point, or the values at every point of a CSV, with what produced
+//! them (keys listed in docs/commands.md; numbers follow [`crate::base::json`]).
 
 use crate::base::json;
 use crate::Kernel;
@@ -58,7 +58,7 @@ impl EvalReport {
     }
 }
 
-/// `lobe eval --points`.
+/// The eval command's JSON report for many points.
 #[derive(Clone, Debug, Serialize)]
 pub struct PointsReport {
     pub values: Vec<PointValue>,

@@ -1,5 +1,5 @@
-//! What `lobe render --stats` reports about a render: the stage split as text, and [`StatsReport`], the
-//! `--json` object (keys listed in README.md). Times are in ms except the per-pixel and per-evaluation ns.
+//! What the render command's statistics report about a render: the stage split as text, and [`StatsReport`],
+//! its JSON object (keys listed in docs/commands.md). Times are in ms except the per-pixel and per-evaluation ns.
 
 use crate::render::{CutoffEffect, Material, RenderStats};
 use serde::Serialize;
@@ -16,7 +16,7 @@ pub struct Times {
     pub wall: Duration,
 }
 
-/// The `--stats --json` object.
+/// The statistics as a JSON object.
 #[derive(Serialize)]
 pub struct StatsReport {
     pub width: usize,
@@ -108,7 +108,7 @@ pub fn math_of(materials: &[Material]) -> String {
     modes.join("+")
 }
 
-/// The `--stats` text: size, threads, the time of each stage, and the shading throughput.
+/// The statistics as text: size, threads, the time of each stage, and the shading throughput.
 pub fn stats_text(s: &RenderStats, encode: Duration) -> String {
     format!(
         "render: {}×{} px, {} thread(s), {} triangles, {}/{} tiles touched\n\
@@ -138,7 +138,7 @@ pub fn stats_text(s: &RenderStats, encode: Duration) -> String {
     )
 }
 
-/// The `--stats` lines about the cut-off (empty without one).
+/// The statistics' lines about the cut-off (empty without one).
 pub fn cutoff_text(cut: Option<&CutoffEffect>) -> String {
     match cut {
         None => String::new(),

@@ -85,7 +85,7 @@
 //! ns of the 14-multiplication chain for NH¹⁰⁰⁰); leaves and negation 0.
 //! Nodes that read no input (parameters only) cost nothing: the kernels compute them once per parameter set
 //! (the prepared block, hoisted out of batch loops).
-//! It ranks candidates; the kernel's run time, measured in `lobe bench`, is what the README reports.
+//! It ranks candidates; the kernel's run time, measured in `lobe bench`, is what BENCHMARKS.md reports.
 
 use super::range::Range;
 use super::{node_ranges, Policy};

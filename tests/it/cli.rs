@@ -288,7 +288,7 @@ fn eval_points_reads_csv_and_agrees_with_single_evaluations() {
     let o = lobe(&["eval", &file, "--points", "-"], Some(b"NH,k\n0.5,9\n"));
     assert_clean_error(&o, "parameter out of range", "outside its declared range");
     let o = lobe(&["eval", &file, "--points", "-", "--set", "k=2"], Some(b"NH,k\n0.5,1\n"));
-    assert_clean_error(&o, "baked and a column", "both baked by --set and a column");
+    assert_clean_error(&o, "baked and a column", "--set k: parameter `k` is both baked and a column");
     let o = lobe(&["eval", &file, "--points", "/nonexistent/p.csv"], None);
     assert_clean_error(&o, "missing file", "/nonexistent/p.csv");
     let _ = std::fs::remove_dir_all(&dir);

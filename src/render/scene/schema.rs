@@ -1,5 +1,5 @@
 //! The scene file format as serde structs: they mirror the TOML of the format documented in [`super`] one to
-//! one, with its defaults (README.md § Scenes shows the same example; keep the three in step).
+//! one, with its defaults (docs/scenes.md shows the same example; keep the three in step).
 //!
 //! Every table denies unknown keys. Values that need a location in messages are [`Spanned`]; nothing here
 //! checks ranges or cross-references — that is `mod.rs` (size, camera, lights, objects), `shapes.rs` and
