@@ -121,13 +121,6 @@ impl Input {
     }
 }
 
-/// Kernel inputs from the five cosines alone, directions zero: for formulas that read only cosines.
-pub fn from_cosines(c: [f64; 5]) -> [f64; N_INPUTS] {
-    let mut x = [0.0; N_INPUTS];
-    x[..5].copy_from_slice(&c);
-    x
-}
-
 /// A set of inputs, as a bit mask; what a formula reads, so callers skip computing the rest.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct InputSet(pub u16);

@@ -27,7 +27,8 @@
 //! (`benches/energy.rs` reproduces them).
 
 use super::quad::integrate;
-use super::{dir, inputs_from_dirs, lobe_inputs, CheckError, V3};
+use super::{dir, CheckError, V3};
+use crate::frame::{inputs_from_dirs, lobe_inputs};
 use crate::ir::Input;
 use crate::backend::Evaluator;
 use rayon::prelude::*;

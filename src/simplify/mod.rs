@@ -81,9 +81,9 @@
 
 pub mod accuracy;
 mod cancel;
+pub mod emit;
 mod powi;
 pub mod range;
-pub mod sexpr;
 
 use crate::builtins::Builtin;
 use crate::base::span::Span;
