@@ -16,6 +16,7 @@
 
 use crate::builtins::Builtin;
 use crate::base::span::Span;
+use rustc_hash::FxHashMap;
 use std::collections::HashMap;
 use std::fmt;
 
@@ -256,7 +257,8 @@ impl Node {
 pub struct Ir {
     nodes: Vec<Node>,
     spans: Vec<Span>,
-    intern: HashMap<Node, NodeId>,
+    /// Hash-consing: FxHash, not std's SipHash (no untrusted keys here; hashing dominated the simplifier's time).
+    intern: FxHashMap<Node, NodeId>,
 }
 
 impl Ir {
