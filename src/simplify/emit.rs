@@ -61,7 +61,7 @@ mod tests {
     use crate::ir::{Input, Node};
 
     #[test]
-    fn two_sum_error_reuses_the_sum_node() {
+    fn sum_error_reuses_the_sum_node() {
         let mut ir = Ir::new();
         let sp = Span::default();
         let (a, b) = (ir.input(Input::NL, sp), ir.input(Input::NV, sp));
