@@ -16,6 +16,7 @@
 
 use crate::builtins::Builtin;
 use crate::base::span::Span;
+use rustc_hash::FxHashMap;
 use std::collections::HashMap;
 use std::fmt;
 
@@ -119,13 +120,6 @@ impl Input {
             Input::Vz => "view direction, component along the normal N (local frame; equals N·V unclamped)",
         }
     }
-}
-
-/// Kernel inputs from the five cosines alone, directions zero: for formulas that read only cosines.
-pub fn from_cosines(c: [f64; 5]) -> [f64; N_INPUTS] {
-    let mut x = [0.0; N_INPUTS];
-    x[..5].copy_from_slice(&c);
-    x
 }
 
 /// A set of inputs, as a bit mask; what a formula reads, so callers skip computing the rest.
@@ -263,7 +257,8 @@ impl Node {
 pub struct Ir {
     nodes: Vec<Node>,
     spans: Vec<Span>,
-    intern: HashMap<Node, NodeId>,
+    /// Hash-consing: FxHash, not std's SipHash (no untrusted keys here; hashing dominated the simplifier's time).
+    intern: FxHashMap<Node, NodeId>,
 }
 
 impl Ir {

@@ -6,6 +6,7 @@
 //! ```text
 //! base       spans, diagnostics, reading sources, file polling
 //! ir         the resolved expression (arena, hash-consed); builtins: the one table of functions
+//! frame      the shading frame: N, X, Y and the directions L, V → the kernel inputs
 //! front      .brdf text → logos tokens → lalrpop AST with spans → names/arity resolved → ir::Formula
 //! simplify   fixpoint rewrites, baked parameters, integer powers, used inputs
 //! backend    the Evaluator interface and Kernel; interpreter (reference), Cranelift JIT, GLSL/WGSL emission
@@ -25,6 +26,7 @@
 pub mod base;
 pub mod builtins;
 pub mod ir;
+pub mod frame;
 pub mod front;
 pub mod simplify;
 pub mod backend;
@@ -36,7 +38,8 @@ pub mod serve;
 pub use builtins::Mode;
 pub use backend::{Backend, Columns, Evaluator, Kernel};
 pub use base::diag::{Diagnostic, Diagnostics, Hint};
-pub use ir::{from_cosines, Formula, Input, N_INPUTS};
+pub use frame::{from_cosines, Frame};
+pub use ir::{Formula, Input, N_INPUTS};
 
 use std::sync::Arc;
 use std::time::Instant;

@@ -37,6 +37,9 @@
 #![allow(clippy::excessive_precision, clippy::approx_constant)]
 
 use super::Builtin;
+use super::dd::{self, fast_two_sum, two_sum};
+/// Dekker's product, for targets without an FMA (the JIT's [`Emit::two_prod`]).
+pub use super::dd::dekker_two_prod;
 
 /// The two math modes: which definition of each builtin a kernel runs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -144,11 +147,75 @@ pub trait Emit {
         Self: Sized,
     {
         let p = self.mul(a, b);
-        let np = self.neg(p);
-        (p, self.fma(a, b, np))
+        (p, dd::two_prod_err(self, a, b, p))
     }
     /// `m ? libm(x) : r` lane by lane, `libm` being the C library's version of `f` ([`Builtin::libm1`]).
     fn fallback(&mut self, m: Self::M, x: Self::V, r: Self::V, f: Builtin) -> Self::V;
+}
+
+/// The IEEE arithmetic subset of [`Emit`]: what every emitter has, including one that builds IR nodes (which
+/// has no bit-level operations). Double-double arithmetic ([`super::dd`]) and the shading frame's input
+/// formulas are written over it; every [`Emit`] is an `Arith` with the same operations.
+pub trait Arith {
+    type V: Copy;
+    fn konst(&mut self, c: f64) -> Self::V;
+    fn add(&mut self, a: Self::V, b: Self::V) -> Self::V;
+    fn sub(&mut self, a: Self::V, b: Self::V) -> Self::V;
+    fn mul(&mut self, a: Self::V, b: Self::V) -> Self::V;
+    fn div(&mut self, a: Self::V, b: Self::V) -> Self::V;
+    fn neg(&mut self, a: Self::V) -> Self::V;
+    fn sqrt(&mut self, a: Self::V) -> Self::V;
+    /// `a·b + c` rounded once.
+    fn fma(&mut self, a: Self::V, b: Self::V, c: Self::V) -> Self::V;
+    /// `c > 0 ? a : b` (`b` for a NaN `c`); both values are computed.
+    fn positive_select(&mut self, c: Self::V, a: Self::V, b: Self::V) -> Self::V;
+    /// `a·b` as `(p, err)`, exactly (see [`Emit::two_prod`]).
+    fn two_prod(&mut self, a: Self::V, b: Self::V) -> (Self::V, Self::V)
+    where
+        Self: Sized,
+    {
+        let p = self.mul(a, b);
+        (p, dd::two_prod_err(self, a, b, p))
+    }
+}
+
+impl<E: Emit> Arith for E {
+    type V = <E as Emit>::V;
+    fn konst(&mut self, c: f64) -> Self::V {
+        Emit::konst(self, c)
+    }
+    fn add(&mut self, a: Self::V, b: Self::V) -> Self::V {
+        Emit::add(self, a, b)
+    }
+    fn sub(&mut self, a: Self::V, b: Self::V) -> Self::V {
+        Emit::sub(self, a, b)
+    }
+    fn mul(&mut self, a: Self::V, b: Self::V) -> Self::V {
+        Emit::mul(self, a, b)
+    }
+    fn div(&mut self, a: Self::V, b: Self::V) -> Self::V {
+        Emit::div(self, a, b)
+    }
+    fn neg(&mut self, a: Self::V) -> Self::V {
+        Emit::neg(self, a)
+    }
+    fn sqrt(&mut self, a: Self::V) -> Self::V {
+        Emit::sqrt(self, a)
+    }
+    fn fma(&mut self, a: Self::V, b: Self::V, c: Self::V) -> Self::V {
+        Emit::fma(self, a, b, c)
+    }
+    fn positive_select(&mut self, c: Self::V, a: Self::V, b: Self::V) -> Self::V {
+        let zero = Emit::konst(self, 0.0);
+        let m = Emit::lt(self, zero, c);
+        Emit::select(self, m, a, b)
+    }
+    fn two_prod(&mut self, a: Self::V, b: Self::V) -> (Self::V, Self::V)
+    where
+        Self: Sized,
+    {
+        Emit::two_prod(self, a, b)
+    }
 }
 
 /// 1.5·2^52: adding and subtracting it rounds |x| < 2^51 to the nearest integer (ties to even), and the integer
@@ -354,46 +421,6 @@ fn is_int<E: Emit>(e: &mut E, x: E::V) -> E::M {
     let r = e.sub(t, k);
     let exact = e.eq(r, a);
     e.or(big, exact)
-}
-
-/// `a + b` as an unevaluated sum `(s, err)`, exactly (Knuth's two-sum, no magnitude condition).
-fn two_sum<E: Emit>(e: &mut E, a: E::V, b: E::V) -> (E::V, E::V) {
-    let s = e.add(a, b);
-    let bb = e.sub(s, a);
-    let ab = e.sub(s, bb);
-    let db = e.sub(b, bb);
-    let da = e.sub(a, ab);
-    (s, e.add(da, db))
-}
-
-/// `a + b` exactly when |a| ≥ |b| (Dekker's fast two-sum).
-fn fast_two_sum<E: Emit>(e: &mut E, a: E::V, b: E::V) -> (E::V, E::V) {
-    let s = e.add(a, b);
-    let t = e.sub(s, a);
-    (s, e.sub(b, t))
-}
-
-/// Veltkamp's split: `a = hi + lo` with 26-bit halves (|a| < 2^996).
-fn split<E: Emit>(e: &mut E, a: E::V) -> (E::V, E::V) {
-    let c = mulk(e, a, 134217729.0);
-    let d = e.sub(c, a);
-    let hi = e.sub(c, d);
-    (hi, e.sub(a, hi))
-}
-
-/// `a·b` as `(p, err)` exactly (Dekker's product, no FMA), for operands whose product does not underflow.
-pub fn dekker_two_prod<E: Emit>(e: &mut E, a: E::V, b: E::V) -> (E::V, E::V) {
-    let p = e.mul(a, b);
-    let (ah, al) = split(e, a);
-    let (bh, bl) = split(e, b);
-    let hh = e.mul(ah, bh);
-    let t = e.sub(hh, p);
-    let hl = e.mul(ah, bl);
-    let t = e.add(t, hl);
-    let lh = e.mul(al, bh);
-    let t = e.add(t, lh);
-    let ll = e.mul(al, bl);
-    (p, e.add(t, ll))
 }
 
 // ---- exp ----

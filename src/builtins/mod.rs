@@ -13,6 +13,7 @@
 //! be 1 + 1 ulp, and acos of it must not be NaN). Everything else follows IEEE 754 and C99 (pow's special cases,
 //! NaN in → NaN out).
 
+pub mod dd;
 pub mod math;
 pub mod math_tables;
 

@@ -29,10 +29,8 @@ pub struct Ident<'s> {
 /// builtins, `&&`/`||` to selects).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum BinOp {
-    Add,
-    Sub,
-    Mul,
-    Div,
+    /// `+ - * /`: the IR's own operators.
+    Arith(crate::ir::BinOp),
     Pow,
     Cmp(Cmp),
     And,
@@ -42,10 +40,7 @@ pub enum BinOp {
 impl BinOp {
     pub fn symbol(self) -> &'static str {
         match self {
-            BinOp::Add => "+",
-            BinOp::Sub => "-",
-            BinOp::Mul => "*",
-            BinOp::Div => "/",
+            BinOp::Arith(op) => op.symbol(),
             BinOp::Pow => "^",
             BinOp::Cmp(c) => c.symbol(),
             BinOp::And => "&&",

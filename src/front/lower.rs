@@ -28,7 +28,7 @@ use super::values::{Val, Values, DERIVED};
 use crate::base::diag::Diagnostic;
 use crate::base::span::Span;
 use crate::builtins::Builtin;
-use crate::ir::{BinOp, Formula, Input, Ir, Meta, NodeId, ParamDecl, ParamKind};
+use crate::ir::{Formula, Input, Ir, Meta, NodeId, ParamDecl, ParamKind};
 use std::collections::{HashMap, HashSet};
 
 /// Default and range of the implicit specular exponent `n`.
@@ -808,10 +808,7 @@ impl<'a, 's> Lowerer<'a, 's> {
                     let (a, b) = (args[0], args[1]);
                     let mut vs = Values::new(&mut self.ir, span);
                     let (r, what) = match op {
-                        AstOp::Add => (vs.arith(BinOp::Add, a, b), "arith"),
-                        AstOp::Sub => (vs.arith(BinOp::Sub, a, b), "arith"),
-                        AstOp::Mul => (vs.arith(BinOp::Mul, a, b), "arith"),
-                        AstOp::Div => (vs.arith(BinOp::Div, a, b), "arith"),
+                        AstOp::Arith(op) => (vs.arith(*op, a, b), "arith"),
                         AstOp::Pow => (vs.builtin(Builtin::Pow, &[a, b]), "arith"),
                         AstOp::Cmp(c) => (vs.compare(*c, a, b), "cmp"),
                         AstOp::And => (vs.and(a, b), "cond"),

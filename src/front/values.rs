@@ -14,6 +14,7 @@
 
 use crate::base::span::Span;
 use crate::builtins::Builtin;
+use crate::frame::Frame;
 use crate::ir::{BinOp, Input, Ir, Node, NodeId};
 
 /// A typed value: a float, a bool (a node that is 0 or 1), or a 3-vector.
@@ -126,9 +127,9 @@ impl<'a> Values<'a> {
         Some(match name {
             "L" => Val::V([Input::Lx, Input::Ly, Input::Lz].map(|i| self.ir.input(i, self.span))),
             "V" => Val::V([Input::Vx, Input::Vy, Input::Vz].map(|i| self.ir.input(i, self.span))),
-            "N" => k(self, [0.0, 0.0, 1.0]),
-            "X" => k(self, [1.0, 0.0, 0.0]),
-            "Y" => k(self, [0.0, 1.0, 0.0]),
+            "N" => k(self, Frame::LOCAL.n),
+            "X" => k(self, Frame::LOCAL.x),
+            "Y" => k(self, Frame::LOCAL.y),
             _ => return None,
         })
     }

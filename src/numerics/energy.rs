@@ -27,8 +27,9 @@
 //! (`benches/energy.rs` reproduces them).
 
 use super::quad::integrate;
-use super::{dir, inputs_from_dirs, lobe_inputs, Diagnostic, V3};
+use super::{dir, Diagnostic, V3};
 use crate::base::json::{self, Named};
+use crate::frame::{inputs_from_dirs, lobe_inputs};
 use crate::ir::Input;
 use crate::backend::Evaluator;
 use rayon::prelude::*;

@@ -60,7 +60,6 @@ pub mod energy;
 pub mod fit;
 pub mod normalize;
 pub mod points;
-pub mod published;
 pub mod quad;
 pub mod robust;
 pub mod sweep;
@@ -68,18 +67,7 @@ pub mod truth;
 pub mod twins;
 
 use crate::base::diag::Diagnostic;
-use crate::ir::{Input, InputSet, N_INPUTS};
-
-/// The inputs for lobe angle `c = cos θ` under the lobe convention (module docs); `lobe` is additionally set
-/// to `c` (a no-op for NH, VR and NV).
-///
-/// The directions are L = N and V at angle θ = acos c in the x–z plane, so NV = VR = c as the cosines say.
-pub fn lobe_inputs(c: f64, lobe: Input) -> [f64; N_INPUTS] {
-    let s = (1.0 - c * c).max(0.0).sqrt();
-    let mut x = [1.0, c, c, c, (0.5 * (1.0 + c)).max(0.0).sqrt(), 0.0, 0.0, 1.0, s, 0.0, c];
-    x[lobe.index()] = c;
-    x
-}
+use crate::ir::{Input, InputSet};
 
 /// The lobe variable of a formula reading `used`: NH or VR, whichever it reads. If it reads both or neither,
 /// NH, with a note saying so (the value is the same under the lobe convention).
@@ -98,8 +86,7 @@ pub fn choose_lobe_input(used: InputSet) -> (Input, Option<String>) {
     }
 }
 
-/// A 3-vector, for the full-geometry checks.
-pub type V3 = [f64; 3];
+pub use crate::frame::{inputs_from_dirs, lobe_inputs, V3};
 
 pub fn dot(a: V3, b: V3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
@@ -115,18 +102,6 @@ pub fn dir(theta: f64, phi: f64) -> V3 {
 pub fn dir_from_cos(c: f64, phi: f64) -> V3 {
     let s = (1.0 - c * c).max(0.0).sqrt();
     [s * phi.cos(), s * phi.sin(), c]
-}
-
-/// Every input from real geometry in the local frame (N = +z, X = +x, Y = +y), unit L and V; H = norm(L + V), R = 2(N·L)N − L.
-/// When V = −L (H undefined) NH and VH are 0.
-pub fn inputs_from_dirs(l: V3, v: V3) -> [f64; N_INPUTS] {
-    let nl = l[2];
-    let nv = v[2];
-    let h = [l[0] + v[0], l[1] + v[1], l[2] + v[2]];
-    let hl = dot(h, h).sqrt();
-    let (nh, vh) = if hl > 0.0 { (h[2] / hl, dot(v, h) / hl) } else { (0.0, 0.0) };
-    let r = [-l[0], -l[1], 2.0 * nl - l[2]];
-    [nl, nv, nh, dot(v, r), vh, l[0], l[1], l[2], v[0], v[1], v[2]]
 }
 
 /// Checks parameter values against declarations (range and finiteness), for checks that vary them.

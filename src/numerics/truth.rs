@@ -30,57 +30,20 @@
 // The double-double constants are written with every digit of their published values (QD library).
 #![allow(clippy::excessive_precision)]
 
+use crate::builtins::dd;
+use crate::builtins::math::Direct;
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Node, N_INPUTS};
 use std::cmp::Ordering;
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
-type Dd = (f64, f64);
+type Dd = dd::Dd<f64>;
 
 /// π in three parts (QD library constants).
 const PI3: [f64; 3] = [std::f64::consts::PI, 1.224646799147353207e-16, -2.994769809718339666e-33];
 /// ln 2 as a double-double.
 const LN2: Dd = (std::f64::consts::LN_2, 2.319046813846299558e-17);
 
-fn two_sum(a: f64, b: f64) -> Dd {
-    let s = a + b;
-    let bb = s - a;
-    (s, (a - (s - bb)) + (b - bb))
-}
-fn quick_two_sum(a: f64, b: f64) -> Dd {
-    let s = a + b;
-    (s, b - (s - a))
-}
-fn two_prod(a: f64, b: f64) -> Dd {
-    let p = a * b;
-    (p, a.mul_add(b, -p))
-}
-fn dd_add(a: Dd, b: Dd) -> Dd {
-    let (s1, s2) = two_sum(a.0, b.0);
-    let (t1, t2) = two_sum(a.1, b.1);
-    let (s1, s2) = quick_two_sum(s1, s2 + t1);
-    quick_two_sum(s1, s2 + t2)
-}
-fn dd_neg(a: Dd) -> Dd {
-    (-a.0, -a.1)
-}
-fn dd_mul(a: Dd, b: Dd) -> Dd {
-    let (p, e) = two_prod(a.0, b.0);
-    quick_two_sum(p, e + (a.0 * b.1 + a.1 * b.0))
-}
-fn dd_div(a: Dd, b: Dd) -> Dd {
-    let q1 = a.0 / b.0;
-    let r = dd_add(a, dd_neg(dd_mul((q1, 0.0), b)));
-    let q2 = r.0 / b.0;
-    let r = dd_add(r, dd_neg(dd_mul((q2, 0.0), b)));
-    let q3 = r.0 / b.0;
-    dd_add(quick_two_sum(q1, q2), (q3, 0.0))
-}
-fn dd_sqrt(a: Dd) -> Dd {
-    let s = a.0.sqrt();
-    let (p, e) = two_prod(s, s);
-    quick_two_sum(s, ((a.0 - p) - e + a.1) / (2.0 * s))
-}
 /// x·2^k for any k, in steps that neither overflow nor underflow the scale factor.
 fn ldexp(mut x: f64, mut k: i64) -> f64 {
     while k > 1000 {
@@ -128,7 +91,7 @@ impl Xf {
         if d.1 == 0.0 && (d.0 == 0.0 || !d.0.is_finite()) {
             return Xf::special(d.0);
         }
-        let (hi, lo) = quick_two_sum(d.0, d.1);
+        let (hi, lo) = dd::fast_two_sum(&mut Direct, d.0, d.1);
         if hi == 0.0 || !hi.is_finite() {
             return Xf { hi, lo: 0.0, e: 0 };
         }
@@ -203,9 +166,9 @@ impl Xf {
             return b;
         }
         if d >= 0 {
-            Xf::make(dd_add((a.hi, a.lo), (ldexp(b.hi, -d), ldexp(b.lo, -d))), a.e)
+            Xf::make(dd::add(&mut Direct, (a.hi, a.lo), (ldexp(b.hi, -d), ldexp(b.lo, -d))), a.e)
         } else {
-            Xf::make(dd_add((ldexp(a.hi, d), ldexp(a.lo, d)), (b.hi, b.lo)), b.e)
+            Xf::make(dd::add(&mut Direct, (ldexp(a.hi, d), ldexp(a.lo, d)), (b.hi, b.lo)), b.e)
         }
     }
     fn xsub(self, b: Xf) -> Xf {
@@ -216,20 +179,20 @@ impl Xf {
             // A finite non-zero operand acts as ±1: the result is ±0, ±∞ or NaN, as in f64.
             return Xf::special(self.hi.signum_or_special() * b.hi.signum_or_special());
         }
-        Xf::make(dd_mul((self.hi, self.lo), (b.hi, b.lo)), self.e.saturating_add(b.e))
+        Xf::make(dd::mul(&mut Direct, (self.hi, self.lo), (b.hi, b.lo)), self.e.saturating_add(b.e))
     }
     fn xdiv(self, b: Xf) -> Xf {
         if self.is_special() || b.is_special() {
             return Xf::special(self.hi.signum_or_special() / b.hi.signum_or_special());
         }
-        Xf::make(dd_div((self.hi, self.lo), (b.hi, b.lo)), self.e.saturating_sub(b.e))
+        Xf::make(dd::div(&mut Direct, (self.hi, self.lo), (b.hi, b.lo)), self.e.saturating_sub(b.e))
     }
     pub fn sqrt(self) -> Xf {
         if self.is_special() || self.hi < 0.0 {
             return Xf::special(self.hi.sqrt());
         }
         let (m, e) = if self.e % 2 != 0 { ((2.0 * self.hi, 2.0 * self.lo), self.e - 1) } else { ((self.hi, self.lo), self.e) };
-        Xf::make(dd_sqrt(m), e / 2)
+        Xf::make(dd::sqrt(&mut Direct, m), e / 2)
     }
 
     /// Total order on non-NaN values, −0 = +0 (as IEEE comparison); `None` with a NaN.
@@ -286,22 +249,22 @@ impl Xf {
         }
         let x = self.to_dd();
         let k = (x.0 / LN2.0).round();
-        let r = dd_add(x, dd_neg(dd_mul((k, 0.0), LN2)));
+        let r = dd::add(&mut Direct, x, dd::neg(&mut Direct, dd::mul(&mut Direct, (k, 0.0), LN2)));
         // expm1 of r/2^10 by Taylor, then (1 + y)² − 1 = y(2 + y) ten times.
         let s = (ldexp(r.0, -10), ldexp(r.1, -10));
         let mut term = s;
         let mut y = s;
         for i in 2..=12 {
-            term = dd_div(dd_mul(term, s), (f64::from(i), 0.0));
-            y = dd_add(y, term);
+            term = dd::div(&mut Direct, dd::mul(&mut Direct, term, s), (f64::from(i), 0.0));
+            y = dd::add(&mut Direct, y, term);
             if term.0.abs() < 1e-36 {
                 break;
             }
         }
         for _ in 0..10 {
-            y = dd_mul(y, dd_add((2.0, 0.0), y));
+            y = dd::mul(&mut Direct, y, dd::add(&mut Direct, (2.0, 0.0), y));
         }
-        Xf::make(dd_add((1.0, 0.0), y), k as i64)
+        Xf::make(dd::add(&mut Direct, (1.0, 0.0), y), k as i64)
     }
 
     pub fn ln(self) -> Xf {
@@ -312,7 +275,7 @@ impl Xf {
         let m = Xf { e: 0, ..self };
         let y0 = Xf::from_f64(self.hi.ln());
         let y1 = y0.add(m.mul(y0.neg().exp())).sub(Xf::ONE);
-        let e = Xf::from_dd(dd_mul((self.e as f64, 0.0), LN2));
+        let e = Xf::from_dd(dd::mul(&mut Direct, (self.e as f64, 0.0), LN2));
         y1.add(e)
     }
 
@@ -379,17 +342,17 @@ impl Xf {
         // r = x − k·π/2 with π/2 in three parts (k < 2^41, so k·p exact-ish in dd).
         let mut r = x;
         for p in PI3 {
-            r = dd_add(r, dd_neg(dd_mul((k, 0.0), (p / 2.0, 0.0))));
+            r = dd::add(&mut Direct, r, dd::neg(&mut Direct, dd::mul(&mut Direct, (k, 0.0), (p / 2.0, 0.0))));
         }
-        let r2 = dd_mul(r, r);
+        let r2 = dd::mul(&mut Direct, r, r);
         let (mut s, mut ts) = (r, r);
         let (mut c, mut tc) = ((1.0, 0.0), (1.0, 0.0));
         for i in 1..30 {
             let a = f64::from(2 * i);
-            ts = dd_neg(dd_div(dd_mul(ts, r2), (a * (a + 1.0), 0.0)));
-            tc = dd_neg(dd_div(dd_mul(tc, r2), ((a - 1.0) * a, 0.0)));
-            s = dd_add(s, ts);
-            c = dd_add(c, tc);
+            ts = dd::neg(&mut Direct, dd::div(&mut Direct, dd::mul(&mut Direct, ts, r2), (a * (a + 1.0), 0.0)));
+            tc = dd::neg(&mut Direct, dd::div(&mut Direct, dd::mul(&mut Direct, tc, r2), ((a - 1.0) * a, 0.0)));
+            s = dd::add(&mut Direct, s, ts);
+            c = dd::add(&mut Direct, c, tc);
             if ts.0.abs() < 1e-40 && tc.0.abs() < 1e-40 {
                 break;
             }
@@ -413,7 +376,7 @@ impl Xf {
         }
         if self.e > 8 {
             // atan x = ±π/2 − atan(1/x): near ±π/2 the Newton step below loses bits (cos y is tiny there).
-            let half_pi = Xf::from_dd(dd_mul((PI3[0], PI3[1]), (0.5, 0.0)));
+            let half_pi = Xf::from_dd(dd::mul(&mut Direct, (PI3[0], PI3[1]), (0.5, 0.0)));
             let h = if self.sign_negative() { half_pi.neg() } else { half_pi };
             return h.sub(Xf::ONE.div(self).atan());
         }
@@ -428,7 +391,7 @@ impl Xf {
         let x = self.max(Xf::ONE.neg()).min(Xf::ONE);
         let d = Xf::ONE.sub(x).mul(Xf::ONE.add(x)).sqrt();
         if d.is_zero() {
-            let h = Xf::from_dd(dd_mul((PI3[0], PI3[1]), (0.5, 0.0)));
+            let h = Xf::from_dd(dd::mul(&mut Direct, (PI3[0], PI3[1]), (0.5, 0.0)));
             return if x.sign_negative() { h.neg() } else { h };
         }
         x.div(d).atan()
@@ -640,7 +603,7 @@ mod tests {
     }
     /// |a − b| ≤ tol·|b| with b a double-double reference.
     fn close(a: Xf, b: Dd, tol: f64) -> bool {
-        let d = dd_add(dd(a), dd_neg(b));
+        let d = dd::add(&mut Direct, dd(a), dd::neg(&mut Direct, b));
         (d.0.abs()) <= tol * b.0.abs()
     }
 

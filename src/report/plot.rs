@@ -830,7 +830,7 @@ where
                 root.present().map_err(err)?;
             }
             // The renderer's encoder: same `Software: lobe` marker, so lobe may later replace its own plot.
-            crate::render::image::Image { width: size.0 as usize, height: size.1 as usize, rgb: buf }.encode_png()
+            crate::base::image::Image { width: size.0 as usize, height: size.1 as usize, rgb: buf }.encode_png()
         }
         Format::Svg => {
             let mut s = String::new();
@@ -937,7 +937,7 @@ mod tests {
     fn scatter_renders_bench_like_data_in_both_formats() {
         let v = bench_like();
         let png = speed_error(&v, "Speed against error", "scalar JIT ns/eval (log)", "mean |Δ| vs reference (log)", Format::Png).unwrap();
-        let img = crate::render::image::Image::decode_png(&png).unwrap();
+        let img = crate::base::image::Image::decode_png(&png).unwrap();
         assert_eq!((img.width, img.height), (SCATTER_SIZE.0 as usize, SCATTER_SIZE.1 as usize));
         if let Some(path) = std::env::var_os("LOBE_PLOT_EXAMPLE") {
             std::fs::write(path, &png).unwrap();

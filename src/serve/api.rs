@@ -238,7 +238,7 @@ fn ropts() -> RenderOptions {
     RenderOptions { threads: cores, ..RenderOptions::default() }
 }
 
-fn png(img: &crate::render::image::Image) -> Result<Vec<u8>, ApiError> {
+fn png(img: &crate::base::image::Image) -> Result<Vec<u8>, ApiError> {
     img.encode_png().map_err(|e| ApiError::new(500, e))
 }
 

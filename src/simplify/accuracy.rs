@@ -89,6 +89,9 @@
 
 use super::range::Range;
 use super::{node_ranges, Policy};
+use super::emit::IrEmit;
+use crate::builtins::dd;
+use crate::builtins::math::Arith;
 use crate::base::span::Span;
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Ir, Node, NodeId};
@@ -290,9 +293,7 @@ pub fn compensated_powers(f: &Formula) -> Option<Formula> {
                 have.push((a + b, h, None));
                 continue;
             }
-            let h = ir.bin(BinOp::Mul, ha, hb, s);
-            let nh = ir.neg(h, s);
-            let mut l = ir.call(Builtin::Fma, &[ha, hb, nh], s);
+            let (h, mut l) = IrEmit::new(ir, s).two_prod(ha, hb);
             if a == b {
                 if let Some(la) = la {
                     let two = ir.bin(BinOp::Add, ha, ha, s);
@@ -926,20 +927,11 @@ fn sum_error(ir: &mut Ir, (a, ra): (NodeId, Range), (b, rb): (NodeId, Range), s:
     } else {
         (None, a)
     };
-    if let Some(big) = big {
-        let z = ir.bin(BinOp::Sub, s, big, sp);
-        return ir.bin(BinOp::Sub, small, z, sp);
+    let em = &mut IrEmit::new(ir, sp);
+    match big {
+        Some(big) => dd::fast_two_sum_err(em, big, small, s),
+        None => dd::two_sum_err(em, a, b, s),
     }
-    two_sum_error(ir, a, b, s, sp)
-}
-
-/// Knuth's 2Sum: the exact error `a + b − s` of `s = a + b` whatever the magnitudes (five operations).
-pub(super) fn two_sum_error(ir: &mut Ir, a: NodeId, b: NodeId, s: NodeId, sp: Span) -> NodeId {
-    let bb = ir.bin(BinOp::Sub, s, a, sp);
-    let ab = ir.bin(BinOp::Sub, s, bb, sp);
-    let ea = ir.bin(BinOp::Sub, a, ab, sp);
-    let eb = ir.bin(BinOp::Sub, b, bb, sp);
-    ir.bin(BinOp::Add, ea, eb, sp)
 }
 
 pub(super) fn add_opt(ir: &mut Ir, a: Option<NodeId>, b: Option<NodeId>, sp: Span) -> Option<NodeId> {
@@ -990,7 +982,7 @@ fn rounding_error(f: &Formula, ranges: &[Range], ir: &mut Ir, map: &[NodeId], (x
             let ns = ir.neg(s, sp);
             if op == BinOp::Mul {
                 // (a + ea)(b + eb) − ab ≈ ea·b + a·eb, ab − s exact in one fma.
-                let mut e = ir.call(Builtin::Fma, &[av, bv, ns], sp);
+                let mut e = dd::two_prod_err(&mut IrEmit::new(ir, sp), av, bv, s);
                 if let Some(ea) = ea {
                     e = ir.call(Builtin::Fma, &[ea, bv, e], sp);
                 }

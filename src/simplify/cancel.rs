@@ -50,7 +50,10 @@
 //! measured (BENCHMARKS.md, robust7). `compensated-params`: nothing per point (the prepared block grows; compile
 //! time with it, e.g. F_kutlog's JIT from ~6 to ~30 ms).
 
-use super::accuracy::{add_opt, divide_apart, product, rebuild, two_sum_error};
+use super::accuracy::{add_opt, divide_apart, product, rebuild};
+use super::emit::IrEmit;
+use crate::builtins::dd;
+use crate::builtins::math::Arith;
 use crate::base::span::Span;
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Ir, Node, NodeId};
@@ -127,9 +130,8 @@ impl Builder<'_> {
     /// the sum is exact anyway).
     fn norm(&self, ir: &mut Ir, hi: NodeId, lo: Option<NodeId>) -> Dd {
         let Some(lo) = lo else { return Dd { hi, lo: None } };
-        let s = ir.bin(BinOp::Add, hi, lo, self.sp);
-        let d = ir.bin(BinOp::Sub, s, hi, self.sp);
-        Dd { hi: s, lo: Some(ir.bin(BinOp::Sub, lo, d, self.sp)) }
+        let (hi, lo) = dd::fast_two_sum(&mut IrEmit::new(ir, self.sp), hi, lo);
+        Dd { hi, lo: Some(lo) }
     }
 
     fn neg(&self, ir: &mut Ir, a: Dd) -> Dd {
@@ -140,7 +142,7 @@ impl Builder<'_> {
         let sp = self.sp;
         // s + e = a.hi + b.hi exactly.
         let s = ir.bin(BinOp::Add, a.hi, b.hi, sp);
-        let e = two_sum_error(ir, a.hi, b.hi, s, sp);
+        let e = dd::two_sum_err(&mut IrEmit::new(ir, sp), a.hi, b.hi, s);
         let lo = add_opt(ir, a.lo, b.lo, sp);
         let lo = add_opt(ir, Some(e), lo, sp);
         self.norm(ir, s, lo)
@@ -161,9 +163,7 @@ impl Builder<'_> {
             let hi = ir.bin(BinOp::Mul, a.hi, b.hi, sp);
             return Dd { hi, lo: a.lo.map(|l| ir.bin(BinOp::Mul, l, b.hi, sp)) };
         }
-        let p = ir.bin(BinOp::Mul, a.hi, b.hi, sp);
-        let np = ir.neg(p, sp);
-        let mut e = ir.call(Builtin::Fma, &[a.hi, b.hi, np], sp);
+        let (p, mut e) = IrEmit::new(ir, sp).two_prod(a.hi, b.hi);
         if let Some(bl) = b.lo {
             e = ir.call(Builtin::Fma, &[a.hi, bl, e], sp);
         }
@@ -428,8 +428,7 @@ fn core_error(f: &Formula, ir: &mut Ir, map: &[NodeId], num: &[NodeId], den: &[N
         ([x], []) => tail(ir, *x),
         ([x, y], []) => {
             let (xv, yv) = (map[x.index()], map[y.index()]);
-            let nq = ir.neg(q, sp);
-            let mut e = ir.call(Builtin::Fma, &[xv, yv, nq], sp);
+            let mut e = dd::two_prod_err(&mut IrEmit::new(ir, sp), xv, yv, q);
             // (x + xˡ)(y + yˡ) − x·y ≈ xˡ·y + x·yˡ; a square's two terms are one, 2x·xˡ.
             if x == y {
                 if let Some(l) = tail(ir, *x) {
@@ -510,9 +509,7 @@ pub(super) fn compensated_exp(f: &Formula) -> (Ir, NodeId, bool) {
             let n = n.unwrap_or_else(|| ir.konst(1.0, sp));
             d.map_or(n, |d| ir.bin(BinOp::Div, n, d, sp))
         };
-        let a = ir.bin(BinOp::Mul, k.hi, q, sp);
-        let na = ir.neg(a, sp);
-        let mut t = ir.call(Builtin::Fma, &[k.hi, q, na], sp);
+        let (a, mut t) = IrEmit::new(ir, sp).two_prod(k.hi, q);
         if let Some(kl) = k.lo {
             t = ir.call(Builtin::Fma, &[kl, q, t], sp);
         }

@@ -14,8 +14,8 @@
 //! a `let` used only in a branch that folded away, and any input only it read, disappear from
 //! [`Formula::used_inputs`]. Each rewrite below is introduced by its pattern in a comment (`// x*1 → x`) and
 //! counted by name in the [`Report`]. Cost: linear in the nodes per pass, dominated by hash-consing — perf
-//! showed ~60 % of the time in SipHash inside `Ir::push`, so a faster hasher there would halve it (measured
-//! times: BENCHMARKS.md).
+//! showed ~60 % of the time in SipHash inside `Ir::push`, which now hashes with FxHash (`benches/simplify.rs`
+//! times every catalogue formula; before/after in BENCHMARKS.md).
 //!
 //! Constants fold through [`BinOp::apply`] and [`Builtin::eval`] — the functions every backend uses — so
 //! folding never changes a value.
@@ -81,9 +81,9 @@
 
 pub mod accuracy;
 mod cancel;
+pub mod emit;
 mod powi;
 pub mod range;
-pub mod sexpr;
 
 use crate::builtins::Builtin;
 use crate::base::span::Span;

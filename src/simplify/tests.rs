@@ -1,10 +1,10 @@
-//! Unit tests of what the simplifier decides without evaluating a formula: the exact-reciprocal guard, the
-//! exact policy, spans, program text, and the libm facts behind `pow-zero` and `pow-one`. The tests that
-//! compare values before and after simplifying need an evaluator, which lives in a layer above (`backend`), so
-//! they are integration tests: `tests/it/simplify.rs`, module `rewrites` (one per rewrite, the refusals, the
-//! fixpoint, baking, used inputs, and the accuracy measurements quoted in the module docs).
+//! Unit tests of what the simplifier decides without evaluating a formula: the exact-reciprocal guard and the
+//! libm facts behind `pow-zero` and `pow-one`. The tests built from s-expressions (exact policy, spans, program
+//! text) and those that compare values before and after simplifying need a test fixture or an evaluator, which
+//! live outside the library, so they are integration tests: `tests/it/simplify.rs` (modules `decisions` and
+//! `rewrites`: one per rewrite, the refusals, the fixpoint, baking, used inputs, and the accuracy measurements
+//! quoted in the module docs).
 
-use super::sexpr::formula;
 use super::*;
 
 #[test]
@@ -14,33 +14,6 @@ fn division_by_a_non_power_of_two_is_not_an_exact_reciprocal() {
     assert!(!exact_reciprocal(f64::from_bits(1 << 20)));
     assert!(!exact_reciprocal(2f64.powi(1023)), "1/2^1023 is subnormal");
     assert!(exact_reciprocal(-0.125));
-}
-
-#[test]
-fn exact_policy_keeps_pow_calls() {
-    let f = formula("(pow NH 4)", &[]).unwrap();
-    let (g, r) = simplify_with(&f, &[], &Policy::exact());
-    assert_eq!(g.to_text(), "pow(clamp(NH, 0, 1), 4)");
-    assert!(r.rounding.is_empty());
-}
-
-#[test]
-fn rewritten_nodes_keep_the_replaced_span() {
-    let src = "(pow NH 3)";
-    let f = formula(src, &[]).unwrap();
-    let (g, r) = simplify_report(&f, &[]);
-    let pow_span = f.ir.ids().find(|id| matches!(f.ir.node(*id), Node::Call(Builtin::Pow, _))).map(|id| f.ir.span(id));
-    assert_eq!(Some(g.ir.span(g.root)), pow_span);
-    assert_eq!(Some(r.rounding[0].span), pow_span);
-}
-
-#[test]
-fn program_text_names_shared_subexpressions() {
-    let f = formula("(/ NH (+ (- n (* n NH)) NH))", &[]).unwrap();
-    let g = simplify(&f, &[(0, 50.0)]);
-    assert_eq!(g.to_program_text(), "let nh = clamp(NH, 0, 1)\nnh / (50 * (1 - nh) + nh)");
-    let g = simplify(&formula("(pow NH 4)", &[]).unwrap(), &[]);
-    assert_eq!(g.to_program_text(), "let nh = clamp(NH, 0, 1)\nlet t1 = nh * nh\nt1 * t1");
 }
 
 #[test]

@@ -3,7 +3,8 @@
 use crate::energy::power_lobe;
 use lobe::numerics::accuracy::{accuracy, AccuracyOptions};
 use lobe::numerics::sweep::{sweep, SweepOptions};
-use lobe::numerics::{published, twins};
+use crate::fixtures::published;
+use lobe::numerics::twins;
 use lobe::ir::Input;
 use lobe::{build_kernel, Backend};
 use std::sync::Arc;

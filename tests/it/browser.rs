@@ -210,7 +210,7 @@ fn browser_types_drags_and_matches_the_cli() {
     assert_ne!(scene, lobe::render::scene::PAPER_SCENE);
     std::fs::write(d.join("scene.toml"), scene).unwrap();
     let cli = cli_render(&d.join("scene.toml"), &set.join(","), "512", &d.join("cli.png"));
-    let (page, cli) = (lobe::render::image::Image::decode_png(&after).unwrap(), lobe::render::image::Image::decode_png(&cli).unwrap());
+    let (page, cli) = (lobe::base::image::Image::decode_png(&after).unwrap(), lobe::base::image::Image::decode_png(&cli).unwrap());
     assert_eq!((page.width, page.height), (cli.width, cli.height));
     let diffs: Vec<u8> = page.rgb.iter().zip(&cli.rgb).map(|(a, c)| a.abs_diff(*c)).filter(|&x| x > 0).collect();
     println!("page vs lobe render --set {}: {} of {} channels differ, max difference {}", set.join(","), diffs.len(), cli.rgb.len(), diffs.iter().max().unwrap_or(&0));

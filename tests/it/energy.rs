@@ -2,7 +2,8 @@
 //! the hand-written twins.
 
 use lobe::numerics::energy::{albedo, full_energy, lobe_integral, normalization_coef};
-use lobe::numerics::{published, twins};
+use crate::fixtures::published;
+use lobe::numerics::twins;
 use lobe::ir::{Formula, Input};
 use lobe::{build_kernel, Backend};
 use std::f64::consts::PI;

@@ -185,7 +185,7 @@ fn highlight_scene(params: &str, extra: &str) -> String {
 
 /// The highlight's extent in pixels along the image's x and y: the bounding box of the pixels at least half
 /// as bright (red channel) as the brightest.
-fn highlight_extent(im: &lobe::render::image::Image) -> (usize, usize) {
+fn highlight_extent(im: &lobe::base::image::Image) -> (usize, usize) {
     let max = im.rgb.chunks_exact(3).map(|p| p[0]).max().unwrap();
     assert!(max > 20 && max < 255, "the highlight must be visible and not clipped (max {max})");
     let (mut x0, mut x1, mut y0, mut y1) = (usize::MAX, 0, usize::MAX, 0);

@@ -132,7 +132,7 @@ fn replacing_an_output_keeps_its_link_and_its_mode() {
     assert_eq!(r.code, Some(0), "{}", r.stderr);
     assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink(), "the link became a file");
     assert_eq!(std::fs::metadata(&real).unwrap().permissions().mode() & 0o777, 0o600, "the mode was reset");
-    let png = lobe::render::image::Image::decode_png(&std::fs::read(&real).unwrap()).unwrap();
+    let png = lobe::base::image::Image::decode_png(&std::fs::read(&real).unwrap()).unwrap();
     assert_eq!(png.width, 24, "the link's target was not rewritten");
     let leftovers: Vec<_> = std::fs::read_dir(&d).unwrap().flatten().filter(|e| e.file_name().to_string_lossy().contains("lobe-tmp")).collect();
     assert!(leftovers.is_empty(), "temporary files left behind");
@@ -344,7 +344,7 @@ fn an_infinite_lobe_is_no_light_and_counted() {
     let r = lobe(&["render", &s(&d.join("s.toml")), "--size", "32", "-o", &s(&out), "--stats"]);
     assert_eq!(r.code, Some(0), "{}", r.stderr);
     assert!(r.stderr.contains("NaN or ±inf"), "{}", r.stderr);
-    let im = lobe::render::image::Image::decode_png(&std::fs::read(&out).unwrap()).unwrap();
+    let im = lobe::base::image::Image::decode_png(&std::fs::read(&out).unwrap()).unwrap();
     assert!(im.rgb.iter().all(|&c| c == 0), "an infinite lobe was drawn as light");
     let _ = std::fs::remove_dir_all(&d);
 }

@@ -20,6 +20,7 @@ mod simplify;
 mod accuracy;
 mod energy;
 mod explorer_render;
+mod fixtures;
 mod render;
 mod robust;
 mod serve;

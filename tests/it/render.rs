@@ -9,7 +9,8 @@
 use glam::DVec3;
 use lobe::ir::{Input, InputSet};
 use lobe::render::compare::{self, CompareJob};
-use lobe::render::image::{Image, Transfer};
+use lobe::base::image::Image;
+use lobe::render::image::Transfer;
 use lobe::render::scene::{self, LoadOptions, LobeCompiler};
 
 const JIT: LobeCompiler = LobeCompiler { backend: lobe::Backend::Jit, math: lobe::Mode::Precise };

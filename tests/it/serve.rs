@@ -283,7 +283,7 @@ fn live_render_compare_plot_and_analysis_answer() {
     let s = Served::start(&["examples/brdfs"]);
     let r = s.post("/api/render", &json!({"text": "VR^n", "params": {"n": 50}, "size": 128}));
     assert_eq!(r.status, 200);
-    let img = lobe::render::image::Image::decode_png(&r.body).unwrap();
+    let img = lobe::base::image::Image::decode_png(&r.body).unwrap();
     assert_eq!((img.width, img.height), (128, 128));
     let r2 = s.post("/api/render", &json!({"text": "VR^n", "params": {"n": 5}, "size": 128}));
     assert_ne!(r.body, r2.body, "a new parameter value changes the image");
@@ -291,7 +291,7 @@ fn live_render_compare_plot_and_analysis_answer() {
     assert_eq!(r.status, 200);
     let m: Value = serde_json::from_str(r.header("X-Lobe-Metrics").unwrap()).unwrap();
     assert!(m["manhattan"].as_f64().unwrap() > 0.0, "{m}");
-    assert_eq!(lobe::render::image::Image::decode_png(&r.body).unwrap().width, 3 * 96);
+    assert_eq!(lobe::base::image::Image::decode_png(&r.body).unwrap().width, 3 * 96);
     let r = s.post("/api/plot", &json!({"formulas": [{"text": "VR^n"}, {"text": "NH^n"}], "params": {"n": 20}, "polar": true}));
     assert_eq!(r.status, 200);
     let r = s.post("/api/analyze", &json!({"text": "VR^n", "params": {"n": 10}, "reference": {"text": "NH^n"}}));

@@ -16,7 +16,7 @@
 use lobe::builtins::Builtin;
 use lobe::backend::interp::Interp;
 use lobe::ir::Node;
-use lobe::simplify::sexpr::{formula, formula_literal, ParamSpec};
+use crate::fixtures::sexpr::{formula, formula_literal, ParamSpec};
 use lobe::simplify::{simplify, simplify_report, simplify_with, Policy};
 use lobe::{Evaluator, Formula, Input};
 use proptest::prelude::*;
@@ -454,7 +454,7 @@ mod rewrites {
     use lobe::backend::interp::Interp;
     use lobe::builtins::Builtin;
     use lobe::ir::{BinOp, Node};
-    use lobe::simplify::sexpr::{formula, formula_literal};
+    use crate::fixtures::sexpr::{formula, formula_literal};
     use lobe::simplify::{simplify, simplify_report, simplify_with, Policy, Report};
     use lobe::{Evaluator, Formula, Input};
 
@@ -796,5 +796,41 @@ mod rewrites {
         assert!(r.to_string().contains("inputs used: none (was NL)"), "{r}");
         assert_eq!(eval(&g, 0.4, &[]), 9.0);
         assert_eq!(g.to_program_text(), "9");
+    }
+}
+
+/// What the simplifier decides without evaluating a formula: the exact policy, spans, program text (moved here
+/// with the s-expression reader; the exact-reciprocal guard and the libm facts stay unit tests in the crate).
+mod decisions {
+    use crate::fixtures::sexpr::formula;
+    use lobe::builtins::Builtin;
+    use lobe::ir::Node;
+    use lobe::simplify::{simplify, simplify_report, simplify_with, Policy};
+
+    #[test]
+    fn exact_policy_keeps_pow_calls() {
+        let f = formula("(pow NH 4)", &[]).unwrap();
+        let (g, r) = simplify_with(&f, &[], &Policy::exact());
+        assert_eq!(g.to_text(), "pow(clamp(NH, 0, 1), 4)");
+        assert!(r.rounding.is_empty());
+    }
+
+    #[test]
+    fn rewritten_nodes_keep_the_replaced_span() {
+        let src = "(pow NH 3)";
+        let f = formula(src, &[]).unwrap();
+        let (g, r) = simplify_report(&f, &[]);
+        let pow_span = f.ir.ids().find(|id| matches!(f.ir.node(*id), Node::Call(Builtin::Pow, _))).map(|id| f.ir.span(id));
+        assert_eq!(Some(g.ir.span(g.root)), pow_span);
+        assert_eq!(Some(r.rounding[0].span), pow_span);
+    }
+
+    #[test]
+    fn program_text_names_shared_subexpressions() {
+        let f = formula("(/ NH (+ (- n (* n NH)) NH))", &[]).unwrap();
+        let g = simplify(&f, &[(0, 50.0)]);
+        assert_eq!(g.to_program_text(), "let nh = clamp(NH, 0, 1)\nnh / (50 * (1 - nh) + nh)");
+        let g = simplify(&formula("(pow NH 4)", &[]).unwrap(), &[]);
+        assert_eq!(g.to_program_text(), "let nh = clamp(NH, 0, 1)\nlet t1 = nh * nh\nt1 * t1");
     }
 }
