@@ -10,7 +10,8 @@
 //! Two conventions without directions: [`from_cosines`] (a formula that reads only cosines needs no frame) and
 //! [`lobe_inputs`] (the papers' one-angle lobe, `numerics` module docs).
 
-use crate::builtins::math::{Arith, Direct};
+use crate::builtins::dd::Arith;
+use crate::builtins::math::Direct;
 use crate::ir::{Input, N_INPUTS};
 
 /// A 3-vector.

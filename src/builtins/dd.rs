@@ -9,7 +9,33 @@
 //!
 //! [`Direct`]: super::math::Direct
 
-use super::math::Arith;
+/// The IEEE arithmetic subset of [`Emit`](super::math::Emit): what every emitter has, including one that builds IR nodes (which
+/// has no bit-level operations). Double-double arithmetic (this module) and the shading frame's input
+/// formulas are written over it; every [`Emit`](super::math::Emit) is an `Arith` with the same operations.
+pub trait Arith {
+    type V: Copy;
+    fn konst(&mut self, c: f64) -> Self::V;
+    fn add(&mut self, a: Self::V, b: Self::V) -> Self::V;
+    fn sub(&mut self, a: Self::V, b: Self::V) -> Self::V;
+    fn mul(&mut self, a: Self::V, b: Self::V) -> Self::V;
+    fn div(&mut self, a: Self::V, b: Self::V) -> Self::V;
+    fn neg(&mut self, a: Self::V) -> Self::V;
+    fn sqrt(&mut self, a: Self::V) -> Self::V;
+    /// `a·b + c` rounded once.
+    fn fma(&mut self, a: Self::V, b: Self::V, c: Self::V) -> Self::V;
+    /// `c > 0 ? a : b` (`b` for a NaN `c`); both values are computed.
+    fn positive_select(&mut self, c: Self::V, a: Self::V, b: Self::V) -> Self::V;
+    /// `a·b` as `(p, err)`, exactly (`err = fma(a, b, −p)`; a target without a hardware FMA may use Dekker's product instead, the same exact value).
+    fn two_prod(&mut self, a: Self::V, b: Self::V) -> (Self::V, Self::V)
+    where
+        Self: Sized,
+    {
+        let p = self.mul(a, b);
+        (p, two_prod_err(self, a, b, p))
+    }
+}
+
+
 
 /// `a + b` as an unevaluated sum `(s, err)`, exactly (Knuth's 2Sum, no magnitude condition).
 pub fn two_sum<E: Arith>(e: &mut E, a: E::V, b: E::V) -> (E::V, E::V) {

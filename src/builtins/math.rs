@@ -37,8 +37,8 @@
 #![allow(clippy::excessive_precision, clippy::approx_constant)]
 
 use super::Builtin;
-use super::dd::{self, fast_two_sum, two_sum};
-/// Dekker's product, for targets without an FMA (the JIT's [`Emit::two_prod`]).
+use super::dd::{fast_two_sum, two_sum, Arith};
+/// Dekker's product, for targets without an FMA (the JIT's [`Arith::two_prod`]).
 pub use super::dd::dekker_two_prod;
 
 /// The two math modes: which definition of each builtin a kernel runs.
@@ -81,20 +81,9 @@ impl std::fmt::Display for Mode {
 
 /// The primitives the library is written in. `V` is a value (one `f64` or a vector of lanes), `M` the result of
 /// a comparison (one flag per lane). Each method is one IEEE operation or an exact bit operation.
-pub trait Emit {
-    type V: Copy;
+pub trait Emit: Arith {
     type M: Copy;
-    fn konst(&mut self, c: f64) -> Self::V;
-    fn add(&mut self, a: Self::V, b: Self::V) -> Self::V;
-    fn sub(&mut self, a: Self::V, b: Self::V) -> Self::V;
-    fn mul(&mut self, a: Self::V, b: Self::V) -> Self::V;
-    fn div(&mut self, a: Self::V, b: Self::V) -> Self::V;
-    fn neg(&mut self, a: Self::V) -> Self::V;
     fn abs(&mut self, a: Self::V) -> Self::V;
-    fn sqrt(&mut self, a: Self::V) -> Self::V;
-    /// `a·b + c` rounded once (IEEE fusedMultiplyAdd): the same bits on every target, with or without a
-    /// hardware FMA (the JIT falls back to a correctly rounded library call).
-    fn fma(&mut self, a: Self::V, b: Self::V, c: Self::V) -> Self::V;
     /// `a < b` (false when either is NaN).
     fn lt(&mut self, a: Self::V, b: Self::V) -> Self::M;
     /// `a <= b` (false when either is NaN).
@@ -140,82 +129,8 @@ pub trait Emit {
         let _ = (f, args);
         self.rare(m, r, slow)
     }
-    /// `a·b` as `(p, err)`, exactly (for products that do not underflow): `err = fma(a, b, −p)`. A target
-    /// without a hardware FMA may use Dekker's product instead, the same exact value without a library call.
-    fn two_prod(&mut self, a: Self::V, b: Self::V) -> (Self::V, Self::V)
-    where
-        Self: Sized,
-    {
-        let p = self.mul(a, b);
-        (p, dd::two_prod_err(self, a, b, p))
-    }
     /// `m ? libm(x) : r` lane by lane, `libm` being the C library's version of `f` ([`Builtin::libm1`]).
     fn fallback(&mut self, m: Self::M, x: Self::V, r: Self::V, f: Builtin) -> Self::V;
-}
-
-/// The IEEE arithmetic subset of [`Emit`]: what every emitter has, including one that builds IR nodes (which
-/// has no bit-level operations). Double-double arithmetic ([`super::dd`]) and the shading frame's input
-/// formulas are written over it; every [`Emit`] is an `Arith` with the same operations.
-pub trait Arith {
-    type V: Copy;
-    fn konst(&mut self, c: f64) -> Self::V;
-    fn add(&mut self, a: Self::V, b: Self::V) -> Self::V;
-    fn sub(&mut self, a: Self::V, b: Self::V) -> Self::V;
-    fn mul(&mut self, a: Self::V, b: Self::V) -> Self::V;
-    fn div(&mut self, a: Self::V, b: Self::V) -> Self::V;
-    fn neg(&mut self, a: Self::V) -> Self::V;
-    fn sqrt(&mut self, a: Self::V) -> Self::V;
-    /// `a·b + c` rounded once.
-    fn fma(&mut self, a: Self::V, b: Self::V, c: Self::V) -> Self::V;
-    /// `c > 0 ? a : b` (`b` for a NaN `c`); both values are computed.
-    fn positive_select(&mut self, c: Self::V, a: Self::V, b: Self::V) -> Self::V;
-    /// `a·b` as `(p, err)`, exactly (see [`Emit::two_prod`]).
-    fn two_prod(&mut self, a: Self::V, b: Self::V) -> (Self::V, Self::V)
-    where
-        Self: Sized,
-    {
-        let p = self.mul(a, b);
-        (p, dd::two_prod_err(self, a, b, p))
-    }
-}
-
-impl<E: Emit> Arith for E {
-    type V = <E as Emit>::V;
-    fn konst(&mut self, c: f64) -> Self::V {
-        Emit::konst(self, c)
-    }
-    fn add(&mut self, a: Self::V, b: Self::V) -> Self::V {
-        Emit::add(self, a, b)
-    }
-    fn sub(&mut self, a: Self::V, b: Self::V) -> Self::V {
-        Emit::sub(self, a, b)
-    }
-    fn mul(&mut self, a: Self::V, b: Self::V) -> Self::V {
-        Emit::mul(self, a, b)
-    }
-    fn div(&mut self, a: Self::V, b: Self::V) -> Self::V {
-        Emit::div(self, a, b)
-    }
-    fn neg(&mut self, a: Self::V) -> Self::V {
-        Emit::neg(self, a)
-    }
-    fn sqrt(&mut self, a: Self::V) -> Self::V {
-        Emit::sqrt(self, a)
-    }
-    fn fma(&mut self, a: Self::V, b: Self::V, c: Self::V) -> Self::V {
-        Emit::fma(self, a, b, c)
-    }
-    fn positive_select(&mut self, c: Self::V, a: Self::V, b: Self::V) -> Self::V {
-        let zero = Emit::konst(self, 0.0);
-        let m = Emit::lt(self, zero, c);
-        Emit::select(self, m, a, b)
-    }
-    fn two_prod(&mut self, a: Self::V, b: Self::V) -> (Self::V, Self::V)
-    where
-        Self: Sized,
-    {
-        Emit::two_prod(self, a, b)
-    }
 }
 
 /// 1.5·2^52: adding and subtracting it rounds |x| < 2^51 to the nearest integer (ties to even), and the integer
@@ -245,9 +160,8 @@ pub fn table_index(x: f64, len: usize) -> usize {
 /// Runs the library on plain `f64`: the reference semantics, used by the interpreter and constant folding.
 pub struct Direct;
 
-impl Emit for Direct {
+impl Arith for Direct {
     type V = f64;
-    type M = bool;
     fn konst(&mut self, c: f64) -> f64 {
         c
     }
@@ -266,14 +180,21 @@ impl Emit for Direct {
     fn neg(&mut self, a: f64) -> f64 {
         -a
     }
-    fn abs(&mut self, a: f64) -> f64 {
-        a.abs()
-    }
     fn sqrt(&mut self, a: f64) -> f64 {
         a.sqrt()
     }
     fn fma(&mut self, a: f64, b: f64, c: f64) -> f64 {
         a.mul_add(b, c)
+    }
+    fn positive_select(&mut self, c: f64, a: f64, b: f64) -> f64 {
+        if 0.0 < c { a } else { b }
+    }
+}
+
+impl Emit for Direct {
+    type M = bool;
+    fn abs(&mut self, a: f64) -> f64 {
+        a.abs()
     }
     fn lt(&mut self, a: f64, b: f64) -> bool {
         a < b

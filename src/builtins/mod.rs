@@ -617,7 +617,7 @@ impl Builtin {
             Builtin::Min => fmin(args[0], args[1]),
             Builtin::Max => fmax(args[0], args[1]),
             Builtin::Clamp => clamp(args[0], args[1], args[2]),
-            Builtin::Fma => math::Emit::fma(&mut math::Direct, args[0], args[1], args[2]),
+            Builtin::Fma => dd::Arith::fma(&mut math::Direct, args[0], args[1], args[2]),
             _ => self.emit(&mut math::Direct, mode, args).unwrap_or(f64::NAN),
         }
     }

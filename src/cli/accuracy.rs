@@ -98,19 +98,13 @@ pub fn report(a: &AccuracyArgs, k: &Kernel, r: &Kernel) -> Result<String, CliErr
 mod tests {
     use super::*;
     use lobe::numerics::twins;
-    use crate::cli::energy::tests::twin_kernel;
+    use crate::cli::energy::tests::{parse, twin_kernel};
     use lobe::ir::Input;
-    use clap::Parser;
 
-    #[derive(Parser)]
-    struct T {
-        #[command(flatten)]
-        a: AccuracyArgs,
-    }
 
     #[test]
     fn json_keys_and_published_mean() {
-        let a = T::try_parse_from(["accuracy", "--reference", "blinn.brdf", "--json", "--n-max", "1000"]).unwrap().a;
+        let a = parse::<AccuracyArgs>(&["accuracy", "--reference", "blinn.brdf", "--json", "--n-max", "1000"]);
         let k = twin_kernel(twins::modified_schlick(), Input::NH, &[]);
         let r = twin_kernel(twins::blinn(), Input::NH, &[]);
         let v: serde_json::Value = serde_json::from_str(&report(&a, &k, &r).unwrap()).unwrap();
@@ -118,7 +112,7 @@ mod tests {
         for key in ["epicenter_max_rel_pct", "inflection_max_rel_pct", "max_abs", "cutoff_max_rel_pct", "lobe_ratio_max"] {
             assert!(v[key].as_f64().is_some(), "missing {key}: {v}");
         }
-        let a = T::try_parse_from(["accuracy", "--reference", "b", "--set", "n=3"]).unwrap().a;
+        let a = parse::<AccuracyArgs>(&["accuracy", "--reference", "b", "--set", "n=3"]);
         assert!(report(&a, &k, &r).is_err());
     }
 }

@@ -285,7 +285,6 @@ pub(crate) mod tests {
     use lobe::numerics::twins::{self, Twin};
     use lobe::base::span::Span;
     use lobe::ir::{Formula, Ir, Meta, ParamDecl, ParamKind};
-    use clap::Parser;
     use std::sync::Arc;
 
     /// `max(pow(clamp(INPUT, 0, 1), n), 0)` with the given extra parameters declared (n first).
@@ -309,14 +308,14 @@ pub(crate) mod tests {
         Kernel::new(Arc::new(power_formula(input, extra)), Backend::Interp, lobe::Mode::Precise, Arc::from(t.ev), std::time::Duration::ZERO)
     }
 
-    #[derive(Parser)]
-    struct T {
-        #[command(flatten)]
-        a: EnergyArgs,
+    /// A subcommand's arguments parsed from `argv` (its name first), as clap parses them for the binary.
+    pub fn parse<A: clap::Args + clap::FromArgMatches>(argv: &[&str]) -> A {
+        let m = A::augment_args(clap::Command::new("lobe")).try_get_matches_from(argv).unwrap_or_else(|e| panic!("{e}"));
+        A::from_arg_matches(&m).unwrap_or_else(|e| panic!("{e}"))
     }
 
     fn args(v: &[&str]) -> EnergyArgs {
-        T::try_parse_from(std::iter::once("energy").chain(v.iter().copied())).unwrap().a
+        parse(&[&["energy"], v].concat())
     }
 
     fn json(s: &str) -> serde_json::Value {

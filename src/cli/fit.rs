@@ -146,28 +146,22 @@ pub fn report(a: &FitArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
 mod tests {
     use super::*;
     use lobe::numerics::twins;
-    use crate::cli::energy::tests::twin_kernel;
+    use crate::cli::energy::tests::{parse, twin_kernel};
     use lobe::ir::Input;
-    use clap::Parser;
 
-    #[derive(Parser)]
-    struct T {
-        #[command(flatten)]
-        a: FitArgs,
-    }
 
     #[test]
     fn finds_268_and_reports_json() {
-        let a = T::try_parse_from(["fit", "--reference", "b", "--param", "a=260..280", "--json", "--quiet"]).unwrap().a;
+        let a = parse::<FitArgs>(&["fit", "--reference", "b", "--param", "a=260..280", "--json", "--quiet"]);
         let k = twin_kernel(twins::f_st(), Input::NH, &[("a", 16.0, 1.0, 1000.0)]);
         let r = twin_kernel(twins::blinn(), Input::NH, &[]);
         let v: serde_json::Value = serde_json::from_str(&report(&a, &k, &r).unwrap()).unwrap();
         let best = &v["best"].as_array().unwrap();
         let grid = best.iter().find(|c| c["refined"] == false).unwrap();
         assert_eq!(grid["params"]["a"].as_f64(), Some(268.0), "{v}");
-        let a = T::try_parse_from(["fit", "--reference", "b", "--param", "b=1..3"]).unwrap().a;
+        let a = parse::<FitArgs>(&["fit", "--reference", "b", "--param", "b=1..3"]);
         assert!(report(&a, &k, &r).unwrap_err().render(false).contains("no parameter `b`"));
-        let a = T::try_parse_from(["fit", "--reference", "b", "--param", "a=0..3"]).unwrap().a;
+        let a = parse::<FitArgs>(&["fit", "--reference", "b", "--param", "a=0..3"]);
         assert!(report(&a, &k, &r).unwrap_err().render(false).contains("declared range"));
     }
 

@@ -91,7 +91,7 @@ use super::range::Range;
 use super::{node_ranges, Policy};
 use super::emit::IrEmit;
 use crate::builtins::dd;
-use crate::builtins::math::Arith;
+use crate::builtins::dd::Arith;
 use crate::base::span::Span;
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Ir, Node, NodeId};

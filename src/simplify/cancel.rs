@@ -53,7 +53,7 @@
 use super::accuracy::{add_opt, divide_apart, product, rebuild};
 use super::emit::IrEmit;
 use crate::builtins::dd;
-use crate::builtins::math::Arith;
+use crate::builtins::dd::Arith;
 use crate::base::span::Span;
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Ir, Node, NodeId};

@@ -5,7 +5,7 @@
 //! node.
 
 use crate::base::span::Span;
-use crate::builtins::math::Arith;
+use crate::builtins::dd::Arith;
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Ir, NodeId};
 

@@ -20,6 +20,7 @@
 //! is a [`JitError`] rather than a panic.
 
 use super::JitError;
+use crate::builtins::dd::Arith;
 use crate::builtins::math::{self, Emit};
 use crate::builtins::{Builtin, Libm, Lowering, Mode};
 use crate::ir::{BinOp, Input, Ir, Node, NodeId, N_INPUTS};
@@ -432,7 +433,7 @@ impl<L: Lanes> Translator<'_, '_, L> {
             // One rounding, as Rust's `mul_add` (the interpreter's); a libm call on a target without FMA.
             Builtin::Fma => {
                 let (y, z) = (self.arg(args[1])?, self.arg(args[2])?);
-                Emit::fma(self, x, y, z)
+                Arith::fma(self, x, y, z)
             }
             other => return Err(JitError::Internal(format!("builtin `{}` is not an inline lowering", other.name()))),
         })
@@ -494,9 +495,8 @@ impl<L: Lanes> Translator<'_, '_, L> {
 
 /// The math library's primitives as Cranelift instructions in lane type `L`: one instruction each (the bit
 /// operations a short integer sequence), so the JIT runs exactly the code the interpreter runs on `f64`.
-impl<L: Lanes> Emit for Translator<'_, '_, L> {
+impl<L: Lanes> Arith for Translator<'_, '_, L> {
     type V = Value;
-    type M = Value;
     fn konst(&mut self, c: f64) -> Value {
         L::konst(self.b, c.to_bits())
     }
@@ -515,9 +515,6 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
     fn neg(&mut self, a: Value) -> Value {
         self.b.ins().fneg(a)
     }
-    fn abs(&mut self, a: Value) -> Value {
-        self.b.ins().fabs(a)
-    }
     fn sqrt(&mut self, a: Value) -> Value {
         self.b.ins().sqrt(a)
     }
@@ -525,6 +522,27 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
     /// with the JIT builder), which is correctly rounded too, so the bits are the same.
     fn fma(&mut self, a: Value, b: Value, c: Value) -> Value {
         self.b.ins().fma(a, b, c)
+    }
+    fn positive_select(&mut self, c: Value, a: Value, b: Value) -> Value {
+        let zero = L::konst(self.b, 0);
+        let m = self.b.ins().fcmp(FloatCC::LessThan, zero, c);
+        L::select(self.b, m, a, b)
+    }
+    fn two_prod(&mut self, a: Value, b: Value) -> (Value, Value) {
+        if !self.cx.fma {
+            return math::dekker_two_prod(self, a, b);
+        }
+        let p = self.b.ins().fmul(a, b);
+        let np = self.b.ins().fneg(p);
+        (p, self.b.ins().fma(a, b, np))
+    }
+}
+
+/// The math library's comparisons, masks and bit operations on lane type `L`.
+impl<L: Lanes> Emit for Translator<'_, '_, L> {
+    type M = Value;
+    fn abs(&mut self, a: Value) -> Value {
+        self.b.ins().fabs(a)
     }
     fn lt(&mut self, a: Value, b: Value) -> Value {
         self.b.ins().fcmp(FloatCC::LessThan, a, b)
@@ -590,14 +608,6 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
     /// Per lane: the index as an integer (the magic-number conversion), clamped with an unsigned `umin` to the
     /// table's last element — so whatever `x` holds, the load stays inside the table — then a load from the
     /// `'static` table, whose address is a constant in the code.
-    fn two_prod(&mut self, a: Value, b: Value) -> (Value, Value) {
-        if !self.cx.fma {
-            return math::dekker_two_prod(self, a, b);
-        }
-        let p = self.b.ins().fmul(a, b);
-        let np = self.b.ins().fneg(p);
-        (p, self.b.ins().fma(a, b, np))
-    }
     /// The row offsets masked to the table and scaled to bytes in all lanes at once (`pand`, `psllq`: whatever
     /// `x` holds, the load stays inside the table), then per lane one 16-byte row load (`F64X2`) and the heads
     /// and tails gathered by two shuffles (`punpcklqdq`/`punpckhqdq`); in `F64`, two scalar loads.
