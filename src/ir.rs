@@ -25,7 +25,7 @@ use std::fmt;
 pub struct NodeId(pub u32);
 
 impl NodeId {
-    pub fn index(self) -> usize {
+    pub(crate) fn index(self) -> usize {
         self.0 as usize
     }
 }
@@ -70,10 +70,8 @@ impl Input {
         Input::Vy,
         Input::Vz,
     ];
-    /// The cosine inputs of the small DSL (clamped to [0, 1] by its lowering).
-    pub const COSINES: [Input; 5] = [Input::NL, Input::NV, Input::NH, Input::VR, Input::VH];
     /// The direction components in the local frame (never clamped: they range over [−1, 1]).
-    pub const DIRECTIONS: [Input; 6] = [Input::Lx, Input::Ly, Input::Lz, Input::Vx, Input::Vy, Input::Vz];
+    pub(crate) const DIRECTIONS: [Input; 6] = [Input::Lx, Input::Ly, Input::Lz, Input::Vx, Input::Vy, Input::Vz];
 
     pub fn index(self) -> usize {
         self as usize
@@ -105,7 +103,7 @@ impl Input {
     }
 
     /// What the input means, for hints and reports.
-    pub fn describe(self) -> &'static str {
+    pub(crate) fn describe(self) -> &'static str {
         match self {
             Input::NL => "cosine between the normal and the light direction",
             Input::NV => "cosine between the normal and the view direction",
@@ -171,7 +169,7 @@ pub enum BinOp {
 }
 
 impl BinOp {
-    pub fn symbol(self) -> &'static str {
+    pub(crate) fn symbol(self) -> &'static str {
         match self {
             BinOp::Add => "+",
             BinOp::Sub => "-",
@@ -179,7 +177,7 @@ impl BinOp {
             BinOp::Div => "/",
         }
     }
-    pub fn apply(self, a: f64, b: f64) -> f64 {
+    pub(crate) fn apply(self, a: f64, b: f64) -> f64 {
         match self {
             BinOp::Add => a + b,
             BinOp::Sub => a - b,
@@ -207,11 +205,11 @@ pub enum Node {
 }
 
 impl Node {
-    pub fn constant(v: f64) -> Node {
+    pub(crate) fn constant(v: f64) -> Node {
         Node::Const(v.to_bits())
     }
 
-    pub fn as_const(&self) -> Option<f64> {
+    pub(crate) fn as_const(&self) -> Option<f64> {
         match self {
             Node::Const(b) => Some(f64::from_bits(*b)),
             _ => None,
@@ -219,7 +217,7 @@ impl Node {
     }
 
     /// Calls `f` on every operand, in order.
-    pub fn for_each_arg(&self, mut f: impl FnMut(NodeId)) {
+    pub(crate) fn for_each_arg(&self, mut f: impl FnMut(NodeId)) {
         match self {
             Node::Const(_) | Node::Input(_) | Node::Param(_) | Node::Column(_) => {}
             Node::Neg(a) => f(*a),
@@ -232,7 +230,7 @@ impl Node {
     }
 
     /// The same node with every operand mapped through `m`.
-    pub fn map_args(&self, mut m: impl FnMut(NodeId) -> NodeId) -> Node {
+    pub(crate) fn map_args(&self, mut m: impl FnMut(NodeId) -> NodeId) -> Node {
         match *self {
             Node::Const(_) | Node::Input(_) | Node::Param(_) | Node::Column(_) => *self,
             Node::Neg(a) => Node::Neg(m(a)),
@@ -331,7 +329,7 @@ impl Ir {
     }
 
     /// [`Ir::compact`] for several roots (a program with several outputs); returns the new roots in order.
-    pub fn compact_many(&self, roots: &[NodeId]) -> (Ir, Vec<NodeId>) {
+    pub(crate) fn compact_many(&self, roots: &[NodeId]) -> (Ir, Vec<NodeId>) {
         let top = roots.iter().map(|r| r.index() + 1).max().unwrap_or(0);
         let mut live = vec![false; top];
         for r in roots {
@@ -356,7 +354,7 @@ impl Ir {
 
     /// Per node, whether it reads no input and no column, directly or through its operands: constants,
     /// parameters and work on them only, which the kernels compute once per parameter set.
-    pub fn invariant(&self) -> Vec<bool> {
+    pub(crate) fn invariant(&self) -> Vec<bool> {
         let mut inv = vec![false; self.nodes.len()];
         for (i, n) in self.nodes.iter().enumerate() {
             let mut all = !matches!(n, Node::Input(_) | Node::Column(_));
@@ -367,7 +365,7 @@ impl Ir {
     }
 
     /// Inputs read by the expression rooted at `root`.
-    pub fn used_inputs(&self, root: NodeId) -> InputSet {
+    pub(crate) fn used_inputs(&self, root: NodeId) -> InputSet {
         let mut set = InputSet::default();
         self.walk(root, |n| {
             if let Node::Input(i) = n {
@@ -404,12 +402,12 @@ impl Ir {
     }
 
     /// How many times each node is used as an operand within the graph rooted at `root` (the root counts 1).
-    pub fn use_counts(&self, root: NodeId) -> Vec<u32> {
+    pub(crate) fn use_counts(&self, root: NodeId) -> Vec<u32> {
         self.use_counts_of(&[root])
     }
 
     /// [`Ir::use_counts`] over the union of the graphs rooted at `roots` (each root counts 1 per listing).
-    pub fn use_counts_of(&self, roots: &[NodeId]) -> Vec<u32> {
+    pub(crate) fn use_counts_of(&self, roots: &[NodeId]) -> Vec<u32> {
         let mut counts = vec![0u32; self.nodes.len()];
         let mut seen = vec![false; self.nodes.len()];
         for r in roots {
@@ -525,7 +523,7 @@ impl Formula {
 
     /// The roots to print or emit together, in one arena of live nodes only: the formula's own, or its three
     /// colour channels' (hash-consing shares what the channels have in common).
-    pub fn merged_roots(&self) -> (Ir, Vec<NodeId>) {
+    pub(crate) fn merged_roots(&self) -> (Ir, Vec<NodeId>) {
         let mut ir = Ir::new();
         let mut roots = Vec::new();
         for c in self.channels() {
@@ -610,7 +608,7 @@ pub mod print {
     }
 
     /// A number for people: `pi`, `inf`, `nan`, or the shortest decimal that reads back exactly.
-    pub fn number(v: f64) -> String {
+    pub(crate) fn number(v: f64) -> String {
         if v.is_nan() {
             return "nan".into();
         }
@@ -628,7 +626,7 @@ pub mod print {
         }
     }
 
-    pub fn expr(f: &Formula, id: NodeId) -> String {
+    pub(crate) fn expr(f: &Formula, id: NodeId) -> String {
         let mut out = String::new();
         write(f, id, &mut out, &HashMap::new());
         out
@@ -637,7 +635,7 @@ pub mod print {
     /// The formula with every shared non-leaf subexpression named once, as the .brdf language writes it:
     /// `let nh = clamp(NH, 0, 1)` for a clamped input read several times, `let t1 = …` otherwise, then the
     /// final expression. A chain like x^4 prints as `let t1 = x * x` and `t1 * t1`, showing what is computed.
-    pub fn with_lets(f: &Formula) -> String {
+    pub(crate) fn with_lets(f: &Formula) -> String {
         let (mut out, roots) = with_lets_of(f, &[f.root]);
         out.push_str(&roots[0]);
         out
@@ -645,7 +643,7 @@ pub mod print {
 
     /// [`with_lets`] for several roots of `f.ir` (the channels of a colour formula, say): the `let` lines shared
     /// by all of them, then each root's expression.
-    pub fn with_lets_of(f: &Formula, roots: &[NodeId]) -> (String, Vec<String>) {
+    pub(crate) fn with_lets_of(f: &Formula, roots: &[NodeId]) -> (String, Vec<String>) {
         let counts = f.ir.use_counts_of(roots);
         let mut names: HashMap<NodeId, String> = HashMap::new();
         // The names given so far, for the uniqueness check (a scan of `names` made printing quadratic).

@@ -127,7 +127,7 @@ fn group(p: &ParamDecl) -> &str {
 /// (reserved in both languages) becomes
 /// `p_NAME` with underscores collapsed, made unique; every other name is kept, so an exported signature reads
 /// as the .brdf file does. The three channels of a colour parameter share one identifier (a `vec3`).
-pub fn param_names(f: &Formula) -> Vec<String> {
+pub(crate) fn param_names(f: &Formula) -> Vec<String> {
     let needs_mangling = |n: &str| {
         RESERVED.contains(&n)
             || n.starts_with("gl_")

@@ -74,8 +74,6 @@ impl Instr {
 #[derive(Clone, Debug)]
 pub struct Interp {
     code: Vec<Instr>,
-    /// Number of parameters the formula declares (the params slice must be at least this long).
-    n_params: usize,
     /// Which definition of the transcendental builtins runs.
     mode: Mode,
 }
@@ -95,15 +93,7 @@ impl Interp {
         // A data column (formulas have none) reads as NaN, like a missing input.
         let code = ir.nodes().iter().map(|n| Instr::of(*n)).collect::<Vec<_>>();
         debug_assert_eq!(root.index() + 1, code.len(), "compact puts the root last");
-        Interp { code, n_params: f.params.len(), mode }
-    }
-
-    /// Number of instructions (live IR nodes).
-    pub fn len(&self) -> usize {
-        self.code.len()
-    }
-    pub fn is_empty(&self) -> bool {
-        self.code.is_empty()
+        Interp { code, mode }
     }
 
     fn run(&self, x: &[f64; N_INPUTS], params: &[f64], s: &mut Vec<f64>) -> f64 {
@@ -113,11 +103,6 @@ impl Interp {
             s.push(v);
         }
         s.last().copied().unwrap_or(f64::NAN)
-    }
-
-    /// Number of parameters expected.
-    pub fn n_params(&self) -> usize {
-        self.n_params
     }
 }
 
@@ -130,7 +115,7 @@ pub struct PreparedInterp<'a> {
 
 impl PreparedInterp<'_> {
     #[inline]
-    pub fn eval(&self, x: &[f64; N_INPUTS]) -> f64 {
+    pub(crate) fn eval(&self, x: &[f64; N_INPUTS]) -> f64 {
         match self.scratch.try_borrow_mut() {
             Ok(mut s) => self.interp.run(x, &self.params, &mut s),
             // Re-entrant use (the formula's evaluation calling back into this prepared form): a fresh buffer.
@@ -188,7 +173,7 @@ pub struct ProgramInterp {
 }
 
 impl ProgramInterp {
-    pub fn new(p: &Program, mode: Mode) -> ProgramInterp {
+    pub(crate) fn new(p: &Program, mode: Mode) -> ProgramInterp {
         let mut invariant = vec![];
         let mut steps = vec![];
         let mut outs = vec![];
@@ -212,15 +197,10 @@ impl ProgramInterp {
         ProgramInterp { invariant, steps, outs, outputs, len: p.ir.len(), columns: p.columns, mode }
     }
 
-    /// Number of outputs.
-    pub fn outputs(&self) -> usize {
-        self.outputs.len()
-    }
-
     /// Runs the program on `len` elements: `cols` are the data columns, `outs` one column per output (with
     /// fewer or shorter data columns than the program reads, or fewer outputs than it has, every output is NaN;
     /// an output shorter than `len` gets its first elements).
-    pub fn run(&self, cols: &[&[f64]], params: &[f64], outs: &mut [&mut [f64]], len: usize) {
+    pub(crate) fn run(&self, cols: &[&[f64]], params: &[f64], outs: &mut [&mut [f64]], len: usize) {
         if cols.len() < self.columns || cols[..self.columns].iter().any(|c| c.len() < len) || outs.len() < self.outputs.len() {
             outs.iter_mut().for_each(|o| o.iter_mut().for_each(|x| *x = f64::NAN));
             return;

@@ -27,7 +27,7 @@ impl<'a> Columns<'a> {
     pub fn new(cols: [&'a [f64]; N_INPUTS]) -> Columns<'a> {
         Columns { cols }
     }
-    pub fn col(&self, i: Input) -> &'a [f64] {
+    pub(crate) fn col(&self, i: Input) -> &'a [f64] {
         self.cols[i.index()]
     }
 }

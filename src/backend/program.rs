@@ -17,7 +17,7 @@
 use crate::ir::{Ir, Node, NodeId};
 
 /// Most data columns a program may read.
-pub const MAX_COLUMNS: usize = 16;
+pub(crate) const MAX_COLUMNS: usize = 16;
 
 /// Most outputs a program may have.
 pub const MAX_OUTPUTS: usize = 16;
@@ -62,7 +62,7 @@ impl Program {
     /// The program computing `outputs` of `ir`, with `guarded` = (lit, outputs) regions (module doc); compacts
     /// the IR to the live nodes. Regions whose order does not allow guarding are dropped (their nodes are then
     /// computed for every element: the same values).
-    pub fn new(ir: &Ir, outputs: &[NodeId], guarded: &[(NodeId, Vec<NodeId>)], n_params: usize) -> Result<Program, String> {
+    pub(crate) fn new(ir: &Ir, outputs: &[NodeId], guarded: &[(NodeId, Vec<NodeId>)], n_params: usize) -> Result<Program, String> {
         if outputs.is_empty() || outputs.len() > MAX_OUTPUTS {
             return Err(format!("a program has 1 to {MAX_OUTPUTS} outputs, not {}", outputs.len()));
         }
@@ -175,17 +175,12 @@ impl Program {
 
     /// Every root a compiled program depends on (for the code cache key): outputs, then per region its lit
     /// value and outputs.
-    pub fn roots(&self) -> Vec<NodeId> {
+    pub(crate) fn roots(&self) -> Vec<NodeId> {
         let mut r = self.outputs.clone();
         for g in &self.regions {
             r.push(g.lit);
             r.extend(&g.outputs);
         }
         r
-    }
-
-    /// Nodes evaluated per element when every region runs (for reports).
-    pub fn varying_nodes(&self) -> usize {
-        self.class.iter().filter(|c| **c == Class::Outer).count() + self.regions.iter().map(|r| r.nodes.len()).sum::<usize>()
     }
 }

@@ -68,7 +68,7 @@ pub trait Wording {
 
 /// Words hints and settings by what they are, naming no front end's controls (library callers, tests, the
 /// web page).
-pub struct Plain;
+pub(crate) struct Plain;
 
 impl Wording for Plain {
     fn hint(&self, h: &Hint) -> String {
@@ -116,14 +116,14 @@ impl Diagnostic {
             hints: vec![],
         }
     }
-    pub fn warning(message: impl Into<String>) -> Diagnostic {
+    pub(crate) fn warning(message: impl Into<String>) -> Diagnostic {
         Diagnostic { severity: Severity::Warning, ..Diagnostic::error(message) }
     }
-    pub fn at(mut self, span: Span, label: impl Into<String>) -> Diagnostic {
+    pub(crate) fn at(mut self, span: Span, label: impl Into<String>) -> Diagnostic {
         self.primary = Some((span, label.into()));
         self
     }
-    pub fn also(mut self, span: Span, label: impl Into<String>) -> Diagnostic {
+    pub(crate) fn also(mut self, span: Span, label: impl Into<String>) -> Diagnostic {
         self.secondary.push((span, label.into()));
         self
     }
@@ -132,7 +132,7 @@ impl Diagnostic {
         self
     }
     /// The message is about `s`, a setting of this run.
-    pub fn about(mut self, s: Setting) -> Diagnostic {
+    pub(crate) fn about(mut self, s: Setting) -> Diagnostic {
         self.subject = Some(Box::new(s));
         self
     }
@@ -178,22 +178,22 @@ pub struct Diagnostics {
 }
 
 impl Diagnostics {
-    pub fn new(file: impl Into<String>, source: impl Into<String>) -> Diagnostics {
+    pub(crate) fn new(file: impl Into<String>, source: impl Into<String>) -> Diagnostics {
         Diagnostics { file: file.into(), source: source.into(), items: vec![] }
     }
     /// A single error that has no useful location (an unreadable file, say).
-    pub fn single(file: impl Into<String>, d: Diagnostic) -> Diagnostics {
+    pub(crate) fn single(file: impl Into<String>, d: Diagnostic) -> Diagnostics {
         let mut ds = Diagnostics::new(file, "");
         ds.push(d);
         ds
     }
     /// A single error located in `source`.
-    pub fn single_in(file: impl Into<String>, source: impl Into<String>, d: Diagnostic) -> Diagnostics {
+    pub(crate) fn single_in(file: impl Into<String>, source: impl Into<String>, d: Diagnostic) -> Diagnostics {
         let mut ds = Diagnostics::new(file, source);
         ds.push(d);
         ds
     }
-    pub fn push(&mut self, d: Diagnostic) {
+    pub(crate) fn push(&mut self, d: Diagnostic) {
         self.items.push(d);
     }
     pub fn has_errors(&self) -> bool {
@@ -267,7 +267,7 @@ impl Diagnostics {
     /// `message`, `file`, the primary span's 1-based `line`/`col` and `end_line`/`end_col` (absent when the
     /// item has no place), its `label`, `hints`, and `rendered`, the caret text [`Diagnostics::render`] prints;
     /// all in [`Plain`] words.
-    pub fn to_json(&self) -> serde_json::Value {
+    pub(crate) fn to_json(&self) -> serde_json::Value {
         let items = self.items.iter().map(|d| {
             let mut o = serde_json::json!({
                 "severity": match d.severity { Severity::Error => "error", Severity::Warning => "warning" },

@@ -26,7 +26,7 @@ impl Image {
         [self.rgb[o], self.rgb[o + 1], self.rgb[o + 2]]
     }
 
-    pub fn set(&mut self, x: usize, y: usize, c: [u8; 3]) {
+    pub(crate) fn set(&mut self, x: usize, y: usize, c: [u8; 3]) {
         let o = (y * self.width + x) * 3;
         self.rgb[o..o + 3].copy_from_slice(&c);
     }

@@ -7,7 +7,7 @@
 use serde::Serializer;
 
 /// `serialize_with` helper for an `f64` field.
-pub fn num<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+pub(crate) fn num<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
     if v.is_finite() {
         s.serialize_f64(*v)
     } else {
@@ -16,19 +16,10 @@ pub fn num<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
 }
 
 /// `serialize_with` helper for an `Option<f64>` field: `None` is `null`.
-pub fn opt_num<S: Serializer>(v: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
+pub(crate) fn opt_num<S: Serializer>(v: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
     match v {
         Some(v) => num(v, s),
         None => s.serialize_none(),
-    }
-}
-
-/// A number as a `serde_json::Value` under the same rule.
-pub fn value(v: f64) -> serde_json::Value {
-    if v.is_finite() {
-        serde_json::Value::from(v)
-    } else {
-        serde_json::Value::String(v.to_string())
     }
 }
 
@@ -59,8 +50,19 @@ impl serde::Serialize for Named {
     }
 }
 
-/// An object mapping each name to its value (parameters, inputs).
-pub fn named<'a>(pairs: impl IntoIterator<Item = (&'a str, f64)>) -> serde_json::Value {
+/// A number as a `serde_json::Value` under the same rule (the tests' view of it).
+#[cfg(test)]
+fn value(v: f64) -> serde_json::Value {
+    if v.is_finite() {
+        serde_json::Value::from(v)
+    } else {
+        serde_json::Value::String(v.to_string())
+    }
+}
+
+/// An object mapping each name to its value, as [`value`] writes numbers.
+#[cfg(test)]
+fn named<'a>(pairs: impl IntoIterator<Item = (&'a str, f64)>) -> serde_json::Value {
     serde_json::Value::Object(pairs.into_iter().map(|(k, v)| (k.to_string(), value(v))).collect())
 }
 

@@ -24,7 +24,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
 /// How much of an existing file is read to decide whether lobe wrote it.
-pub const PREFIX_BYTES: u64 = 64 * 1024;
+pub(crate) const PREFIX_BYTES: u64 = 64 * 1024;
 
 /// Temporary files being written right now, so a signal handler can remove them.
 static IN_FLIGHT: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
@@ -90,7 +90,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), String> {
 }
 
 /// Removes the temporary files of writes in progress (for a signal handler: the process is about to exit).
-pub fn remove_temporaries() {
+pub(crate) fn remove_temporaries() {
     for p in lock_in_flight().drain(..) {
         let _ = std::fs::remove_file(p);
     }

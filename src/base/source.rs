@@ -7,7 +7,7 @@ use super::span::line_col;
 use std::io::Read;
 
 /// Largest formula source accepted.
-pub const MAX_SOURCE_BYTES: usize = 1 << 20;
+pub(crate) const MAX_SOURCE_BYTES: usize = 1 << 20;
 
 /// Why [`read_regular_file`] read nothing.
 #[derive(Debug)]

@@ -18,9 +18,6 @@ impl Span {
     pub fn range(self) -> std::ops::Range<usize> {
         self.start as usize..self.end as usize
     }
-    pub fn is_empty(self) -> bool {
-        self.start >= self.end
-    }
 }
 
 /// 1-based line and column (in characters) of a byte offset, for messages that do not use carets.

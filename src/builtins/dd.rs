@@ -38,13 +38,13 @@ pub trait Arith {
 
 
 /// `a + b` as an unevaluated sum `(s, err)`, exactly (Knuth's 2Sum, no magnitude condition).
-pub fn two_sum<E: Arith>(e: &mut E, a: E::V, b: E::V) -> (E::V, E::V) {
+pub(crate) fn two_sum<E: Arith>(e: &mut E, a: E::V, b: E::V) -> (E::V, E::V) {
     let s = e.add(a, b);
     (s, two_sum_err(e, a, b, s))
 }
 
 /// The exact error `a + b − s` of `s = fl(a + b)`, whatever the magnitudes (Knuth's 2Sum: five operations).
-pub fn two_sum_err<E: Arith>(e: &mut E, a: E::V, b: E::V, s: E::V) -> E::V {
+pub(crate) fn two_sum_err<E: Arith>(e: &mut E, a: E::V, b: E::V, s: E::V) -> E::V {
     let bb = e.sub(s, a);
     let ab = e.sub(s, bb);
     let da = e.sub(a, ab);
@@ -54,26 +54,26 @@ pub fn two_sum_err<E: Arith>(e: &mut E, a: E::V, b: E::V, s: E::V) -> E::V {
 
 /// `a + b` exactly when |a| ≥ |b| (Dekker's Fast2Sum), as `(s, err)`; also the renormalisation of a
 /// double-double whose parts may overlap.
-pub fn fast_two_sum<E: Arith>(e: &mut E, a: E::V, b: E::V) -> (E::V, E::V) {
+pub(crate) fn fast_two_sum<E: Arith>(e: &mut E, a: E::V, b: E::V) -> (E::V, E::V) {
     let s = e.add(a, b);
     (s, fast_two_sum_err(e, a, b, s))
 }
 
 /// The exact error `a + b − s` of `s = fl(a + b)` when |a| ≥ |b| (two operations).
-pub fn fast_two_sum_err<E: Arith>(e: &mut E, a: E::V, b: E::V, s: E::V) -> E::V {
+pub(crate) fn fast_two_sum_err<E: Arith>(e: &mut E, a: E::V, b: E::V, s: E::V) -> E::V {
     let t = e.sub(s, a);
     e.sub(b, t)
 }
 
 /// The exact error `a·b − p` of `p = fl(a·b)` by one fused multiply-add (for products that do not underflow).
 /// [`Arith::two_prod`] is this unless the target lacks an FMA, where it may use [`dekker_two_prod`].
-pub fn two_prod_err<E: Arith>(e: &mut E, a: E::V, b: E::V, p: E::V) -> E::V {
+pub(crate) fn two_prod_err<E: Arith>(e: &mut E, a: E::V, b: E::V, p: E::V) -> E::V {
     let np = e.neg(p);
     e.fma(a, b, np)
 }
 
 /// Veltkamp's split: `a = hi + lo` with 26-bit halves (|a| < 2^996).
-pub fn split<E: Arith>(e: &mut E, a: E::V) -> (E::V, E::V) {
+pub(crate) fn split<E: Arith>(e: &mut E, a: E::V) -> (E::V, E::V) {
     let k = e.konst(134217729.0);
     let c = e.mul(a, k);
     let d = e.sub(c, a);
@@ -97,10 +97,10 @@ pub fn dekker_two_prod<E: Arith>(e: &mut E, a: E::V, b: E::V) -> (E::V, E::V) {
 }
 
 /// A double-double value.
-pub type Dd<V> = (V, V);
+pub(crate) type Dd<V> = (V, V);
 
 /// `a + b` (the accurate sum: both parts by 2Sum, renormalised twice; QD's `ieee_add`).
-pub fn add<E: Arith>(e: &mut E, a: Dd<E::V>, b: Dd<E::V>) -> Dd<E::V> {
+pub(crate) fn add<E: Arith>(e: &mut E, a: Dd<E::V>, b: Dd<E::V>) -> Dd<E::V> {
     let (s1, s2) = two_sum(e, a.0, b.0);
     let (t1, t2) = two_sum(e, a.1, b.1);
     let s2 = e.add(s2, t1);
@@ -110,12 +110,12 @@ pub fn add<E: Arith>(e: &mut E, a: Dd<E::V>, b: Dd<E::V>) -> Dd<E::V> {
 }
 
 /// `−a`.
-pub fn neg<E: Arith>(e: &mut E, a: Dd<E::V>) -> Dd<E::V> {
+pub(crate) fn neg<E: Arith>(e: &mut E, a: Dd<E::V>) -> Dd<E::V> {
     (e.neg(a.0), e.neg(a.1))
 }
 
 /// `a·b`: the heads' exact product plus the cross terms (the tails' product is below the precision).
-pub fn mul<E: Arith>(e: &mut E, a: Dd<E::V>, b: Dd<E::V>) -> Dd<E::V> {
+pub(crate) fn mul<E: Arith>(e: &mut E, a: Dd<E::V>, b: Dd<E::V>) -> Dd<E::V> {
     let (p, err) = e.two_prod(a.0, b.0);
     let x = e.mul(a.0, b.1);
     let y = e.mul(a.1, b.0);
@@ -125,7 +125,7 @@ pub fn mul<E: Arith>(e: &mut E, a: Dd<E::V>, b: Dd<E::V>) -> Dd<E::V> {
 }
 
 /// `a/b`: three quotient digits, each from the exact remainder of the previous ones.
-pub fn div<E: Arith>(e: &mut E, a: Dd<E::V>, b: Dd<E::V>) -> Dd<E::V> {
+pub(crate) fn div<E: Arith>(e: &mut E, a: Dd<E::V>, b: Dd<E::V>) -> Dd<E::V> {
     let zero = e.konst(0.0);
     let q1 = e.div(a.0, b.0);
     let m = mul(e, (q1, zero), b);
@@ -141,7 +141,7 @@ pub fn div<E: Arith>(e: &mut E, a: Dd<E::V>, b: Dd<E::V>) -> Dd<E::V> {
 }
 
 /// `√a` for a > 0: libm's root corrected by one Newton step on the exact remainder.
-pub fn sqrt<E: Arith>(e: &mut E, a: Dd<E::V>) -> Dd<E::V> {
+pub(crate) fn sqrt<E: Arith>(e: &mut E, a: Dd<E::V>) -> Dd<E::V> {
     let s = e.sqrt(a.0);
     let (p, err) = e.two_prod(s, s);
     let r = e.sub(a.0, p);

@@ -81,7 +81,7 @@ impl std::fmt::Display for Mode {
 
 /// The primitives the library is written in. `V` is a value (one `f64` or a vector of lanes), `M` the result of
 /// a comparison (one flag per lane). Each method is one IEEE operation or an exact bit operation.
-pub trait Emit: Arith {
+pub(crate) trait Emit: Arith {
     type M: Copy;
     fn abs(&mut self, a: Self::V) -> Self::V;
     /// `a < b` (false when either is NaN).
@@ -135,30 +135,30 @@ pub trait Emit: Arith {
 
 /// 1.5·2^52: adding and subtracting it rounds |x| < 2^51 to the nearest integer (ties to even), and the integer
 /// then sits in the low bits of `x + MAGIC`.
-pub const MAGIC: f64 = 6755399441055744.0;
+pub(crate) const MAGIC: f64 = 6755399441055744.0;
 const TWO52: f64 = 4503599627370496.0;
 
 /// The scalar definition of [`Emit::pow2i`], shared by [`Direct`] and the JIT's tests.
-pub fn pow2i(k: f64) -> f64 {
+pub(crate) fn pow2i(k: f64) -> f64 {
     let i = (k + MAGIC).to_bits().wrapping_add(1023u64.wrapping_sub(MAGIC.to_bits()));
     f64::from_bits(i << 52)
 }
 
 /// The scalar definition of [`Emit::exponent_field`].
-pub fn exponent_field(x: f64) -> f64 {
+pub(crate) fn exponent_field(x: f64) -> f64 {
     f64::from_bits(((x.to_bits() >> 52) & 0x7ff) | TWO52.to_bits()) - TWO52
 }
 
 /// The scalar definition of the index [`Emit::lookup_pair`] reads: the low bits of `x + MAGIC`, which hold
 /// the nearest integer to `x` in two's complement (MAGIC's low 51 bits are zero), masked to the table's
 /// power-of-two `len`: that integer modulo `len`.
-pub fn table_index(x: f64, len: usize) -> usize {
+pub(crate) fn table_index(x: f64, len: usize) -> usize {
     debug_assert!(len.is_power_of_two());
     ((x + MAGIC).to_bits() & (len as u64 - 1)) as usize
 }
 
 /// Runs the library on plain `f64`: the reference semantics, used by the interpreter and constant folding.
-pub struct Direct;
+pub(crate) struct Direct;
 
 impl Arith for Direct {
     type V = f64;
@@ -432,7 +432,7 @@ fn exp_parts_tail<E: Emit>(e: &mut E, xh: E::V, xl: E::V, lo: f64, hi: f64) -> E
     ExpParts { y, q, t_hi, tmp }
 }
 
-pub fn exp<E: Emit>(e: &mut E, x: E::V) -> E::V {
+pub(crate) fn exp<E: Emit>(e: &mut E, x: E::V) -> E::V {
     let zero = e.konst(0.0);
     exp_dd(e, x, zero)
 }
@@ -457,7 +457,7 @@ const EXP_FAST_2P: [f64; 7] = [
 /// (an x86 microcode assist costs ~100 cycles per subnormal operand or result); above e^709.78 the final
 /// product overflows to +inf by itself, NaN passes through the clamp, and below −708 the result is flushed to
 /// 0 (an absolute error < 3.3e-308).
-pub fn exp_fast<E: Emit>(e: &mut E, x: E::V) -> E::V {
+pub(crate) fn exp_fast<E: Emit>(e: &mut E, x: E::V) -> E::V {
     let below = ltk(e, x, -708.0);
     let xc = clamp_to(e, x, -708.0, 709.9);
     let kx = mulk(e, xc, INV_LN2);
@@ -525,7 +525,7 @@ fn log_specials<E: Emit>(e: &mut E, x: E::V, r: E::V) -> E::V {
     e.select(nan, x, r)
 }
 
-pub fn ln<E: Emit>(e: &mut E, x: E::V) -> E::V {
+pub(crate) fn ln<E: Emit>(e: &mut E, x: E::V) -> E::V {
     let (k, f) = reduce_log(e, x);
     let two_f = addk(e, f, 2.0);
     let s = e.div(f, two_f);
@@ -552,7 +552,7 @@ pub fn ln<E: Emit>(e: &mut E, x: E::V) -> E::V {
 
 /// Fast ln: the same reduction, ln m = 2·atanh(s) by its Taylor series to s^13 (|s| ≤ 0.172: < 1e-11 relative,
 /// small enough that pow's exp(y·ln x) stays within 1e-6).
-pub fn ln_fast<E: Emit>(e: &mut E, x: E::V) -> E::V {
+pub(crate) fn ln_fast<E: Emit>(e: &mut E, x: E::V) -> E::V {
     let (k, f) = reduce_log(e, x);
     let r = ln_fast_reduced(e, k, f);
     log_specials(e, x, r)
@@ -700,7 +700,7 @@ fn pow_exponent<E: Emit>(e: &mut E, x: E::V, y: E::V) -> (E::V, E::V) {
     fast_two_sum(e, p, pl)
 }
 
-pub fn pow<E: Emit>(e: &mut E, x: E::V, y: E::V) -> E::V {
+pub(crate) fn pow<E: Emit>(e: &mut E, x: E::V, y: E::V) -> E::V {
     let (ph, pl) = pow_exponent(e, x, y);
     let mag = exp_dd(e, ph, pl);
     pow_finish(e, x, y, mag)
@@ -729,7 +729,7 @@ fn pow_finish<E: Emit>(e: &mut E, x: E::V, y: E::V, mag: E::V) -> E::V {
     e.rare(special, mag, &mut |e| pow_specials(e, x, y, mag))
 }
 
-pub fn pow_fast<E: Emit>(e: &mut E, x: E::V, y: E::V) -> E::V {
+pub(crate) fn pow_fast<E: Emit>(e: &mut E, x: E::V, y: E::V) -> E::V {
     let (ax, ys) = pow_operands(e, x, y);
     let (k, f) = reduce_log(e, ax);
     let l = ln_fast_reduced(e, k, f);
@@ -873,7 +873,7 @@ fn asin_impl<E: Emit>(e: &mut E, x: E::V, precise: bool) -> E::V {
     e.select(small, res_small, big)
 }
 
-pub fn acos<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
+pub(crate) fn acos<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
     let x = clamp_to(e, x, -1.0, 1.0);
     match mode {
         Mode::Precise => acos_impl(e, x),
@@ -906,7 +906,7 @@ fn acos_fast<E: Emit>(e: &mut E, x: E::V) -> E::V {
     e.select(neg, flipped, r)
 }
 
-pub fn asin<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
+pub(crate) fn asin<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
     let x = clamp_to(e, x, -1.0, 1.0);
     asin_impl(e, x, mode == Mode::Precise)
 }
@@ -943,7 +943,7 @@ const AT_EVEN: [f64; 5] = [
 
 /// atan (fdlibm): |x| reduced by one of five Möbius maps x' = (a·|x| − b)/(c + d·|x|), chosen by selects, then
 /// atan|x| = hi − ((x'·S(x'²) − lo) − x').
-pub fn atan<E: Emit>(e: &mut E, x: E::V) -> E::V {
+pub(crate) fn atan<E: Emit>(e: &mut E, x: E::V) -> E::V {
     let ax = e.abs(x);
     // (bound, a, b, c, d, hi, lo) per interval, from the top: each select overrides the wider interval.
     let rows: [(f64, [f64; 4], f64, f64); 4] = [
@@ -1132,17 +1132,17 @@ fn sin_cos<E: Emit>(e: &mut E, x: E::V, phase: f64, mode: Mode, f: Builtin) -> E
     e.fallback(far, x, res, f)
 }
 
-pub fn sin<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
+pub(crate) fn sin<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
     sin_cos(e, x, 0.0, mode, Builtin::Sin)
 }
 
-pub fn cos<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
+pub(crate) fn cos<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
     sin_cos(e, x, 1.0, mode, Builtin::Cos)
 }
 
 /// tan = sin/cos of the reduced argument (−cos/sin in odd quadrants). Fast mode keeps the precise reduction:
 /// near a pole tan ≈ −1/y, so the reduced argument's absolute error becomes relative error in the result.
-pub fn tan<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
+pub(crate) fn tan<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
     let precise = mode == Mode::Precise;
     let (j, y0, y1) = trig_reduce(e, x, true);
     let s = kernel_sin(e, y0, y1, precise);
@@ -1163,11 +1163,11 @@ pub fn tan<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
 
 /// The exact builtins of [`Lowering::Logic`](super::Lowering::Logic): comparisons as 0/1 values, the select,
 /// floor. Written in the same primitives as the rest of the library, so every backend runs one definition.
-pub mod logic {
+pub(crate) mod logic {
     use super::*;
 
     /// A comparison's flag as a number: 1 where `m` holds, else 0.
-    pub fn flag<E: Emit>(e: &mut E, m: impl FnOnce(&mut E) -> E::M) -> E::V {
+    pub(crate) fn flag<E: Emit>(e: &mut E, m: impl FnOnce(&mut E) -> E::M) -> E::V {
         let m = m(e);
         let one = e.konst(1.0);
         let zero = e.konst(0.0);
@@ -1176,7 +1176,7 @@ pub mod logic {
 
     /// `c != 0 ? a : b` (a NaN condition counts as true, as in C). Both values are computed; only the chosen
     /// one reaches the result, so an infinite or NaN untaken branch cannot poison it as a 0/1 blend would.
-    pub fn select<E: Emit>(e: &mut E, c: E::V, a: E::V, b: E::V) -> E::V {
+    pub(crate) fn select<E: Emit>(e: &mut E, c: E::V, a: E::V, b: E::V) -> E::V {
         let zero = e.konst(0.0);
         let off = e.eq(c, zero);
         e.select(off, b, a)
@@ -1185,7 +1185,7 @@ pub mod logic {
     /// The largest integer ≤ x, exactly (−0 stays −0; NaN and ±inf pass through), without a rounding
     /// instruction: below 2^52, adding and subtracting 2^52 to |x| rounds it to the nearest integer, which is
     /// then stepped down (x ≥ 0) or up (x < 0, as a magnitude) when it overshot.
-    pub fn floor<E: Emit>(e: &mut E, x: E::V) -> E::V {
+    pub(crate) fn floor<E: Emit>(e: &mut E, x: E::V) -> E::V {
         let a = e.abs(x);
         let big = e.konst(TWO52);
         let t0 = e.add(a, big);
@@ -1223,7 +1223,7 @@ pub mod logic {
 /// Special values follow `exp(a)*b/c`, except that a zero exponential (a < −745.2) times an infinite b/c is 0:
 /// an infinite b/c stands for an overflowed finite factor, and the accuracy pass forms this builtin only from
 /// products whose exp factor is what vanishes there.
-pub fn exp_mul_div<E: Emit>(e: &mut E, a: E::V, b: E::V, c: E::V) -> E::V {
+pub(crate) fn exp_mul_div<E: Emit>(e: &mut E, a: E::V, b: E::V, c: E::V) -> E::V {
     let zero = e.konst(0.0);
     let (y, q) = exp_parts(e, a, zero, -1416.0, 1416.0);
     let bc = e.div(b, c);
@@ -1333,7 +1333,7 @@ fn exp_mul_div_scaled<E: Emit>(e: &mut E, a: E::V, b: E::V, c: E::V) -> E::V {
 /// roundings of x·R and s·R (small next to the result) and √z's own (times R). The intermediates are acos's
 /// own ([`acos_parts`]), so inside one kernel the JIT computes them once. Cost: ~12 additions, 2 selects
 /// and a compare beside acos.
-pub fn acos_lo<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
+pub(crate) fn acos_lo<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
     if mode == Mode::Fast {
         return e.konst(0.0);
     }
@@ -1377,7 +1377,7 @@ const POW_LO_MIN: f64 = 2.0041683600089728e-292; // 2^-969
 /// Why: acos(Q^(1/k)) with Q^(1/k) near 1 (F_kutlog) multiplies pow's relative error by up to ~20; a parameter-
 /// only subtree computed in double-double (`compensated-params`) needs pow's tail to be worth doing. The same
 /// instructions as pow up to exp's scaling, plus two; no special-case block.
-pub fn pow_lo<E: Emit>(e: &mut E, x: E::V, y: E::V, mode: Mode) -> E::V {
+pub(crate) fn pow_lo<E: Emit>(e: &mut E, x: E::V, y: E::V, mode: Mode) -> E::V {
     if mode == Mode::Fast {
         return e.konst(0.0);
     }

@@ -80,12 +80,12 @@ pub const EXP_T_TAIL: [f64; 128] = [
 ];
 
 /// `EXP_T_HI` and `EXP_T_TAIL` as rows, for `Emit::lookup_pair`.
-pub static EXP_T: [[f64; 2]; 128] = pairs(&EXP_T_HI, &EXP_T_TAIL);
+pub(crate) static EXP_T: [[f64; 2]; 128] = pairs(&EXP_T_HI, &EXP_T_TAIL);
 
 /// Two tables as one table of rows `[a[j], b[j]]`, padded to `M` rows (a power of two, ≥ N) with copies of
 /// the last row: [`Emit::lookup_pair`](super::math::Emit::lookup_pair) masks its index to the table, which
 /// costs one vector `and` where a clamp took a compare and a conditional move per lane.
-pub const fn pairs<const N: usize, const M: usize>(a: &[f64; N], b: &[f64; N]) -> [[f64; 2]; M] {
+pub(crate) const fn pairs<const N: usize, const M: usize>(a: &[f64; N], b: &[f64; N]) -> [[f64; 2]; M] {
     assert!(N > 0 && M >= N && M.is_power_of_two(), "a lookup table has a power-of-two length");
     let mut out = [[0.0; 2]; M];
     let mut j = 0;

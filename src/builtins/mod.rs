@@ -14,7 +14,7 @@
 //! NaN in → NaN out).
 
 pub mod dd;
-pub mod math;
+pub(crate) mod math;
 pub mod math_tables;
 
 pub use math::Mode;
@@ -218,7 +218,7 @@ lib1!(lobe_ln_precise, Ln, Precise);
 lib1!(lobe_ln_fast, Ln, Fast);
 
 /// IEEE 754-2019 `minimum`: NaN if either is NaN, −0 < +0. This is Cranelift's `fmin`.
-pub fn fmin(a: f64, b: f64) -> f64 {
+pub(crate) fn fmin(a: f64, b: f64) -> f64 {
     if a.is_nan() || b.is_nan() {
         f64::NAN
     } else if a == b {
@@ -236,7 +236,7 @@ pub fn fmin(a: f64, b: f64) -> f64 {
 }
 
 /// IEEE 754-2019 `maximum`: NaN if either is NaN, +0 > −0. This is Cranelift's `fmax`.
-pub fn fmax(a: f64, b: f64) -> f64 {
+pub(crate) fn fmax(a: f64, b: f64) -> f64 {
     if a.is_nan() || b.is_nan() {
         f64::NAN
     } else if a == b {
@@ -253,7 +253,7 @@ pub fn fmax(a: f64, b: f64) -> f64 {
 }
 
 /// `clamp(x, lo, hi) = min(max(x, lo), hi)` with the NaN-propagating min/max above.
-pub fn clamp(x: f64, lo: f64, hi: f64) -> f64 {
+pub(crate) fn clamp(x: f64, lo: f64, hi: f64) -> f64 {
     fmin(fmax(x, lo), hi)
 }
 
@@ -586,7 +586,7 @@ impl Builtin {
         self.info().arity
     }
     /// The WGSL spelling (see [`BuiltinInfo::wgsl`]).
-    pub fn wgsl(self) -> &'static str {
+    pub(crate) fn wgsl(self) -> &'static str {
         let i = self.info();
         if i.wgsl.is_empty() {
             i.glsl
@@ -600,7 +600,7 @@ impl Builtin {
     }
 
     /// All rows of the table.
-    pub fn table() -> &'static [BuiltinInfo] {
+    pub(crate) fn table() -> &'static [BuiltinInfo] {
         &TABLE
     }
 
@@ -624,7 +624,7 @@ impl Builtin {
 
     /// The library code of a [`Lowering::Math`] or [`Lowering::Logic`] builtin on `args` (exactly `arity()`
     /// values), emitted through `e`; `None` for the inline builtins, whose lowering is the backend's.
-    pub fn emit<E: math::Emit>(self, e: &mut E, mode: Mode, args: &[E::V]) -> Option<E::V> {
+    pub(crate) fn emit<E: math::Emit>(self, e: &mut E, mode: Mode, args: &[E::V]) -> Option<E::V> {
         use math::*;
         let fast = mode == Mode::Fast;
         let x = args[0];
@@ -669,7 +669,7 @@ impl Builtin {
 
     /// The math library's code for this builtin in `mode` as a C function (symbol and pointer), for call sites
     /// the JIT does not inline; `None` for the inline builtins.
-    pub fn outlined(self, mode: Mode) -> Option<(&'static str, Libm)> {
+    pub(crate) fn outlined(self, mode: Mode) -> Option<(&'static str, Libm)> {
         Some(match (self, mode) {
             (Builtin::Pow, Mode::Precise) => ("lobe_pow_precise", Libm::F2(lobe_pow_precise)),
             (Builtin::Pow, Mode::Fast) => ("lobe_pow_fast", Libm::F2(lobe_pow_fast)),
@@ -700,7 +700,7 @@ impl Builtin {
     }
 
     /// The one-argument C library function, if that is what this builtin's libm is.
-    pub fn libm1(self) -> Option<extern "C" fn(f64) -> f64> {
+    pub(crate) fn libm1(self) -> Option<extern "C" fn(f64) -> f64> {
         match self.info().libm {
             Libm::F1(f) => Some(f),
             _ => None,

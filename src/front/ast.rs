@@ -10,17 +10,17 @@ use crate::base::span::Span;
 
 /// Index of an expression in [`Ast::exprs`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct ExprId(pub u32);
+pub(crate) struct ExprId(pub u32);
 
 impl ExprId {
-    pub fn index(self) -> usize {
+    pub(crate) fn index(self) -> usize {
         self.0 as usize
     }
 }
 
 /// A name as written, with its span.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Ident<'s> {
+pub(crate) struct Ident<'s> {
     pub name: &'s str,
     pub span: Span,
 }
@@ -28,7 +28,7 @@ pub struct Ident<'s> {
 /// A binary operator as written (`^` is lowered to the `pow` builtin, comparisons to the exact comparison
 /// builtins, `&&`/`||` to selects).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum BinOp {
+pub(crate) enum BinOp {
     /// `+ - * /`: the IR's own operators.
     Arith(crate::ir::BinOp),
     Pow,
@@ -37,20 +37,9 @@ pub enum BinOp {
     Or,
 }
 
-impl BinOp {
-    pub fn symbol(self) -> &'static str {
-        match self {
-            BinOp::Arith(op) => op.symbol(),
-            BinOp::Pow => "^",
-            BinOp::Cmp(c) => c.symbol(),
-            BinOp::And => "&&",
-            BinOp::Or => "||",
-        }
-    }
-}
 
 #[derive(Clone, Debug, PartialEq)]
-pub enum ExprKind<'s> {
+pub(crate) enum ExprKind<'s> {
     Num(f64),
     /// `true` / `false`.
     Bool(bool),
@@ -71,14 +60,14 @@ pub enum ExprKind<'s> {
 }
 
 #[derive(Clone, Debug, PartialEq)]
-pub struct Expr<'s> {
+pub(crate) struct Expr<'s> {
     pub kind: ExprKind<'s>,
     pub span: Span,
 }
 
 impl Expr<'_> {
     /// Calls `f` on every operand, in order.
-    pub fn for_each_child(&self, mut f: impl FnMut(ExprId)) {
+    pub(crate) fn for_each_child(&self, mut f: impl FnMut(ExprId)) {
         match &self.kind {
             ExprKind::Num(_) | ExprKind::Bool(_) | ExprKind::Name(_) | ExprKind::Error => {}
             ExprKind::Neg(a) | ExprKind::Not(a) | ExprKind::Paren(a) | ExprKind::Field(a, _) => f(*a),
@@ -98,14 +87,14 @@ impl Expr<'_> {
 
 /// A number in a `param` declaration (an optional `-` and a literal).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Lit {
+pub(crate) struct Lit {
     pub value: f64,
     pub span: Span,
 }
 
 /// The default of a `param`, which also decides its kind.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum ParamDefault<'s> {
+pub(crate) enum ParamDefault<'s> {
     /// `param k = 0.5`: a float.
     Num(Lit),
     /// `param aniso = true`: a bool (0 or 1).
@@ -116,7 +105,7 @@ pub enum ParamDefault<'s> {
 }
 
 impl ParamDefault<'_> {
-    pub fn span(&self) -> Span {
+    pub(crate) fn span(&self) -> Span {
         match self {
             ParamDefault::Num(l) => l.span,
             ParamDefault::Bool(_, s) | ParamDefault::Color(_, _, s) => *s,
@@ -125,7 +114,7 @@ impl ParamDefault<'_> {
 }
 
 #[derive(Clone, Debug, PartialEq)]
-pub enum StmtKind<'s> {
+pub(crate) enum StmtKind<'s> {
     /// `@key "value"`, or `@key word` (`quoted` false; only `@domain raw` takes a bare word).
     Meta { key: Ident<'s>, value: &'s str, value_span: Span, quoted: bool },
     /// `param name = default [in lo..hi]`.
@@ -141,28 +130,42 @@ pub enum StmtKind<'s> {
 }
 
 #[derive(Clone, Debug, PartialEq)]
-pub struct Stmt<'s> {
+pub(crate) struct Stmt<'s> {
     pub kind: StmtKind<'s>,
     pub span: Span,
 }
 
 /// A parsed file: statements in source order over one expression arena.
 #[derive(Clone, Debug, Default)]
-pub struct Ast<'s> {
+pub(crate) struct Ast<'s> {
     pub exprs: Vec<Expr<'s>>,
     pub stmts: Vec<Stmt<'s>>,
 }
 
 impl<'s> Ast<'s> {
-    pub fn push(&mut self, kind: ExprKind<'s>, span: Span) -> ExprId {
+    pub(crate) fn push(&mut self, kind: ExprKind<'s>, span: Span) -> ExprId {
         let id = ExprId(self.exprs.len() as u32);
         self.exprs.push(Expr { kind, span });
         id
     }
-    pub fn expr(&self, id: ExprId) -> &Expr<'s> {
+    pub(crate) fn expr(&self, id: ExprId) -> &Expr<'s> {
         &self.exprs[id.index()]
     }
-    pub fn span(&self, id: ExprId) -> Span {
+    pub(crate) fn span(&self, id: ExprId) -> Span {
         self.exprs[id.index()].span
+    }
+}
+
+/// The operator as the language spells it (the parser's tests print trees with it).
+#[cfg(test)]
+impl BinOp {
+    pub(crate) fn symbol(self) -> &'static str {
+        match self {
+            BinOp::Arith(op) => op.symbol(),
+            BinOp::Pow => "^",
+            BinOp::Cmp(c) => c.symbol(),
+            BinOp::And => "&&",
+            BinOp::Or => "||",
+        }
     }
 }

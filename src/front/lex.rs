@@ -28,7 +28,7 @@ use logos::Logos;
 
 /// Deepest parenthesis nesting accepted. Real formulas nest fewer than 10 levels; the limit keeps every later
 /// recursive consumer (printers, other tools) far from the stack limit.
-pub const MAX_DEPTH: usize = 200;
+pub(crate) const MAX_DEPTH: usize = 200;
 
 /// How a numeric literal is spelled, decided by [`number_tail`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -171,7 +171,7 @@ fn number_tail(lex: &mut logos::Lexer<Raw>, had_point: bool) -> NumShape {
 
 /// A token as the grammar sees it.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Tok<'s> {
+pub(crate) enum Tok<'s> {
     Let,
     Param,
     In,
@@ -218,11 +218,11 @@ pub enum Tok<'s> {
 
 impl Tok<'_> {
     /// Ends an operand: a following operand means an operator is missing.
-    pub fn ends_operand(self) -> bool {
+    pub(crate) fn ends_operand(self) -> bool {
         matches!(self, Tok::Num(_) | Tok::Ident(_) | Tok::RParen | Tok::True | Tok::False)
     }
     /// Can start an operand (unary minus aside).
-    pub fn starts_operand(self) -> bool {
+    pub(crate) fn starts_operand(self) -> bool {
         matches!(self, Tok::Num(_) | Tok::Ident(_) | Tok::LParen | Tok::True | Tok::False)
     }
     /// A token after which the line obviously continues.
@@ -259,14 +259,14 @@ impl Tok<'_> {
     fn starts_statement(self) -> bool {
         matches!(self, Tok::Let | Tok::Param | Tok::Fn | Tok::Meta(_))
     }
-    pub fn is_binary_operator(self) -> bool {
+    pub(crate) fn is_binary_operator(self) -> bool {
         matches!(self, Tok::Plus | Tok::Minus | Tok::Star | Tok::Slash | Tok::Caret) || self.is_comparison_or_logic()
     }
 }
 
 /// The lexer's output: tokens for the parser and the lexical diagnostics.
 #[derive(Debug, Default)]
-pub struct Lexed<'s> {
+pub(crate) struct Lexed<'s> {
     pub toks: Vec<(usize, Tok<'s>, usize)>,
     pub diags: Vec<Diagnostic>,
     /// Lexing stopped early (nesting too deep); the token list is incomplete and must not be parsed.
@@ -274,7 +274,7 @@ pub struct Lexed<'s> {
 }
 
 /// Lexes `src` into parser tokens, reporting lexical mistakes.
-pub fn lex(src: &str) -> Lexed<'_> {
+pub(crate) fn lex(src: &str) -> Lexed<'_> {
     let mut diags = Vec::new();
     let toks = raw_tokens(src, &mut diags);
     let mut out = Lexed { toks: Vec::with_capacity(toks.len()), diags, fatal: false };

@@ -32,13 +32,13 @@ use crate::ir::{Formula, Input, Ir, Meta, NodeId, ParamDecl, ParamKind};
 use std::collections::{HashMap, HashSet};
 
 /// Default and range of the implicit specular exponent `n`.
-pub const N_DEFAULT: (f64, f64, f64) = (50.0, 1.0, 1000.0);
+pub(crate) const N_DEFAULT: (f64, f64, f64) = (50.0, 1.0, 1000.0);
 
 /// Deepest chain of function calls inside function bodies that is inlined.
-pub const MAX_INLINE_DEPTH: usize = 64;
+pub(crate) const MAX_INLINE_DEPTH: usize = 64;
 
 /// Most expression nodes inlined from function bodies in one file (about 8× the nodes of a 1 MB file).
-pub const MAX_INLINED: usize = 4_000_000;
+pub(crate) const MAX_INLINED: usize = 4_000_000;
 
 /// Inputs in the order suggestions prefer them (most common first: Blinn, Phong, then the rest).
 const INPUT_PREFERENCE: [&str; 5] = ["NH", "VR", "NL", "NV", "VH"];
@@ -138,7 +138,7 @@ struct Lowerer<'a, 's> {
 
 /// Lowers a parsed file. `syntax_failed` suppresses the structural errors a syntax error may have caused
 /// (a formula line that failed to parse is not "missing"). Returns `None` when any error was reported.
-pub fn lower(
+pub(crate) fn lower(
     file: &str,
     src: &str,
     ast: &Ast<'_>,

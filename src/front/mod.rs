@@ -33,10 +33,10 @@
 //! `Ir::push` hash-consing), then parsing, then lexing, and over-deep nesting is rejected after
 //! [`lex::MAX_DEPTH`] + 1 tokens. Measured times: BENCHMARKS.md.
 
-pub mod ast;
-pub mod explorer;
-pub mod lex;
-pub mod lower;
+pub(crate) mod ast;
+pub(crate) mod explorer;
+pub(crate) mod lex;
+pub(crate) mod lower;
 pub mod parse;
 pub mod values;
 
@@ -104,7 +104,7 @@ pub fn did_you_mean(name: &str, known: &[&str], intro: &str) -> String {
 }
 
 /// The closest candidate by edit distance, if close enough to be a plausible typo.
-pub fn suggest<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
+pub(crate) fn suggest<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
     let lname = name.to_lowercase();
     candidates
         .into_iter()

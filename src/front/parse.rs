@@ -24,33 +24,33 @@ type Recovered<'s> = ErrorRecovery<usize, Tok<'s>, Infallible>;
 
 /// What the grammar's actions write to.
 #[derive(Debug, Default)]
-pub struct State<'s> {
+pub(crate) struct State<'s> {
     pub ast: Ast<'s>,
     pub recovered: Vec<Recovered<'s>>,
 }
 
 impl<'s> State<'s> {
-    pub fn stmt(&mut self, kind: StmtKind<'s>, l: usize, r: usize) {
+    pub(crate) fn stmt(&mut self, kind: StmtKind<'s>, l: usize, r: usize) {
         self.ast.stmts.push(Stmt { kind, span: Span::new(l, r) });
     }
-    pub fn bin(&mut self, op: BinOp, a: ExprId, b: ExprId) -> ExprId {
+    pub(crate) fn bin(&mut self, op: BinOp, a: ExprId, b: ExprId) -> ExprId {
         let span = self.ast.span(a).join(self.ast.span(b));
         self.ast.push(ExprKind::Binary(op, a, b), span)
     }
-    pub fn neg(&mut self, a: ExprId, l: usize) -> ExprId {
+    pub(crate) fn neg(&mut self, a: ExprId, l: usize) -> ExprId {
         let span = Span::new(l, self.ast.span(a).end as usize);
         self.ast.push(ExprKind::Neg(a), span)
     }
-    pub fn not(&mut self, a: ExprId, l: usize) -> ExprId {
+    pub(crate) fn not(&mut self, a: ExprId, l: usize) -> ExprId {
         let span = Span::new(l, self.ast.span(a).end as usize);
         self.ast.push(ExprKind::Not(a), span)
     }
-    pub fn select(&mut self, c: ExprId, a: ExprId, b: ExprId) -> ExprId {
+    pub(crate) fn select(&mut self, c: ExprId, a: ExprId, b: ExprId) -> ExprId {
         let span = self.ast.span(c).join(self.ast.span(b));
         self.ast.push(ExprKind::Select(c, a, b), span)
     }
     /// Widens the span of `e` leftwards to `l` (to cover a leading keyword).
-    pub fn extend_left(&mut self, e: ExprId, l: usize) -> ExprId {
+    pub(crate) fn extend_left(&mut self, e: ExprId, l: usize) -> ExprId {
         let s = &mut self.ast.exprs[e.index()].span;
         *s = Span::new(l, s.end as usize);
         e
@@ -58,7 +58,7 @@ impl<'s> State<'s> {
 }
 
 /// Parses the tokens into an AST; syntax errors are appended to `diags`.
-pub fn parse<'s>(src: &str, lexed: &Lexed<'s>, diags: &mut Vec<Diagnostic>) -> Ast<'s> {
+pub(crate) fn parse<'s>(src: &str, lexed: &Lexed<'s>, diags: &mut Vec<Diagnostic>) -> Ast<'s> {
     let mut st = State::default();
     let toks = &lexed.toks;
     let result = grammar::FileParser::new().parse(&mut st, toks.iter().copied().map(Ok::<_, Infallible>));

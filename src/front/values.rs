@@ -27,14 +27,14 @@ pub enum Val {
 
 /// The type of a [`Val`], for messages.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Ty {
+pub(crate) enum Ty {
     Float,
     Bool,
     Vec3,
 }
 
 impl Ty {
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             Ty::Float => "float",
             Ty::Bool => "bool",
@@ -44,7 +44,7 @@ impl Ty {
 }
 
 impl Val {
-    pub fn ty(self) -> Ty {
+    pub(crate) fn ty(self) -> Ty {
         match self {
             Val::F(_) => Ty::Float,
             Val::B(_) => Ty::Bool,
@@ -65,7 +65,7 @@ pub enum Cmp {
 }
 
 impl Cmp {
-    pub fn symbol(self) -> &'static str {
+    pub(crate) fn symbol(self) -> &'static str {
         match self {
             Cmp::Lt => "<",
             Cmp::Le => "<=",
@@ -78,7 +78,7 @@ impl Cmp {
 }
 
 /// Functions beyond the builtins table that both languages accept, expanded here. Each is `(name, arity, doc)`.
-pub const DERIVED: [(&str, usize, &str); 14] = [
+pub(crate) const DERIVED: [(&str, usize, &str); 14] = [
     ("dot", 2, "dot(a, b): dot product of two vec3"),
     ("cross", 2, "cross(a, b): cross product of two vec3"),
     ("length", 1, "length(v): Euclidean length of a vec3 (|x| of a float)"),
@@ -108,7 +108,7 @@ impl<'a> Values<'a> {
         Values { ir, span }
     }
 
-    pub fn konst(&mut self, v: f64) -> NodeId {
+    pub(crate) fn konst(&mut self, v: f64) -> NodeId {
         self.ir.konst(v, self.span)
     }
 
@@ -117,7 +117,7 @@ impl<'a> Values<'a> {
     }
 
     /// A bool constant.
-    pub fn boolean(&mut self, b: bool) -> Val {
+    pub(crate) fn boolean(&mut self, b: bool) -> Val {
         Val::B(self.konst(if b { 1.0 } else { 0.0 }))
     }
 
@@ -152,7 +152,7 @@ impl<'a> Values<'a> {
     }
 
     /// One scalar operation, with the structural folds of the module docs.
-    pub fn bin(&mut self, op: BinOp, a: NodeId, b: NodeId) -> NodeId {
+    pub(crate) fn bin(&mut self, op: BinOp, a: NodeId, b: NodeId) -> NodeId {
         match op {
             BinOp::Mul => {
                 if self.is_exact(a, 1.0) {
@@ -184,7 +184,7 @@ impl<'a> Values<'a> {
         self.ir.bin(op, a, b, self.span)
     }
 
-    pub fn call(&mut self, f: Builtin, args: &[NodeId]) -> NodeId {
+    pub(crate) fn call(&mut self, f: Builtin, args: &[NodeId]) -> NodeId {
         if args.iter().all(|a| self.const_of(*a).is_some()) {
             let v: Vec<f64> = args.iter().map(|a| self.const_of(*a).unwrap_or(f64::NAN)).collect();
             return self.konst(f.eval(&v));
@@ -232,7 +232,7 @@ impl<'a> Values<'a> {
         }
     }
 
-    pub fn boolean_of(&self, a: Val, what: &str) -> Result<NodeId, String> {
+    pub(crate) fn boolean_of(&self, a: Val, what: &str) -> Result<NodeId, String> {
         match a {
             Val::B(x) => Ok(x),
             _ => Err(format!("{what} needs a bool, not {}", a.ty().name())),
@@ -267,7 +267,7 @@ impl<'a> Values<'a> {
         acc.unwrap_or_else(|| self.konst(0.0))
     }
 
-    pub fn cross(&mut self, a: Val, b: Val) -> R {
+    pub(crate) fn cross(&mut self, a: Val, b: Val) -> R {
         let (x, y) = (self.vector(a, "cross")?, self.vector(b, "cross")?);
         let mut c = |i: usize, j: usize| {
             let p = self.bin(BinOp::Mul, x[i], y[j]);
@@ -277,7 +277,7 @@ impl<'a> Values<'a> {
         Ok(Val::V([c(1, 2), c(2, 0), c(0, 1)]))
     }
 
-    pub fn length(&mut self, a: Val) -> R {
+    pub(crate) fn length(&mut self, a: Val) -> R {
         Ok(match a {
             Val::F(x) => Val::F(self.call(Builtin::Abs, &[x])),
             Val::V(v) => {
@@ -295,7 +295,7 @@ impl<'a> Values<'a> {
     }
 
     /// GLSL's `reflect(I, N) = I − 2·dot(N, I)·N`.
-    pub fn reflect(&mut self, i: Val, n: Val) -> R {
+    pub(crate) fn reflect(&mut self, i: Val, n: Val) -> R {
         let d = self.dot(n, i)?;
         let two = self.num(2.0);
         let k = self.arith(BinOp::Mul, two, d)?;
@@ -322,7 +322,7 @@ impl<'a> Values<'a> {
         Ok(Val::B(self.call(f, &[l, r])))
     }
 
-    pub fn not(&mut self, a: Val) -> R {
+    pub(crate) fn not(&mut self, a: Val) -> R {
         let x = self.boolean_of(a, "`!`")?;
         let zero = self.konst(0.0);
         Ok(Val::B(self.call(Builtin::Eq, &[x, zero])))
@@ -335,7 +335,7 @@ impl<'a> Values<'a> {
         Ok(Val::B(self.call(Builtin::Select, &[x, y, zero])))
     }
 
-    pub fn or(&mut self, a: Val, b: Val) -> R {
+    pub(crate) fn or(&mut self, a: Val, b: Val) -> R {
         let (x, y) = (self.boolean_of(a, "`||`")?, self.boolean_of(b, "`||`")?);
         let one = self.konst(1.0);
         Ok(Val::B(self.call(Builtin::Select, &[x, one, y])))
@@ -463,7 +463,7 @@ impl<'a> Values<'a> {
 
     /// The named shorthands of the cosine language beyond its inputs, from the direction inputs: LV, HX, HY,
     /// LX, LY, VX, VY (H = normalize(L + V)). `None` for other names.
-    pub fn shorthand(&mut self, name: &str) -> Option<Val> {
+    pub(crate) fn shorthand(&mut self, name: &str) -> Option<Val> {
         let l = self.frame("L")?;
         let v = self.frame("V")?;
         let h = |s: &mut Self| {

@@ -29,24 +29,24 @@ use crate::N_INPUTS;
 use rayon::prelude::*;
 
 /// Number of angles of the papers' grid: 0°..90° in steps of 1°.
-pub const PAPERS_ANGLES: usize = 91;
+pub(crate) const PAPERS_ANGLES: usize = 91;
 
 /// Smallest n of the papers' epicentre metric (F_dsh uses 9, see [`AccuracyOptions::epicenter_from`]).
-pub const EPICENTER_FROM: u32 = 2;
+pub(crate) const EPICENTER_FROM: u32 = 2;
 
 /// The lobe cosine at the epicentre of `n`: where cos^n = e^−1.2 ≈ 0.3, i.e. c = exp(−1.2/n) (the angle is
 /// acos(c)). Both the reference and the formula are evaluated at exactly this c.
-pub fn epicenter_cos(n: f64) -> f64 {
+pub(crate) fn epicenter_cos(n: f64) -> f64 {
     (-1.2 / n).exp()
 }
 
 /// Relative error |F − R| / |R|.
-pub fn rel(f: f64, r: f64) -> f64 {
+pub(crate) fn rel(f: f64, r: f64) -> f64 {
     (f - r).abs() / r.abs()
 }
 
 /// `p` with its first slot (n) replaced, or `[n]` when empty.
-pub fn with_n(p: &[f64], n: f64) -> Vec<f64> {
+pub(crate) fn with_n(p: &[f64], n: f64) -> Vec<f64> {
     let mut v = p.to_vec();
     if v.is_empty() {
         v.push(n)
@@ -57,13 +57,13 @@ pub fn with_n(p: &[f64], n: f64) -> Vec<f64> {
 }
 
 /// Lobe angles (degrees) and their five input columns under the lobe convention, for batched evaluation.
-pub struct AngleGrid {
+pub(crate) struct AngleGrid {
     deg: Vec<f64>,
     cols: [Vec<f64>; N_INPUTS],
 }
 
 impl AngleGrid {
-    pub fn new(deg: Vec<f64>, lobe: Input) -> AngleGrid {
+    pub(crate) fn new(deg: Vec<f64>, lobe: Input) -> AngleGrid {
         let mut cols: [Vec<f64>; N_INPUTS] = Default::default();
         for d in &deg {
             let x = lobe_inputs(d.to_radians().cos(), lobe);
@@ -75,28 +75,28 @@ impl AngleGrid {
     }
 
     /// The papers' grid: [`PAPERS_ANGLES`] angles, 0°..90° step 1°.
-    pub fn papers(lobe: Input) -> AngleGrid {
+    pub(crate) fn papers(lobe: Input) -> AngleGrid {
         AngleGrid::new((0..PAPERS_ANGLES as u32).map(f64::from).collect(), lobe)
     }
 
     /// The fine grid of the max-error and cut-off metrics: 0°..90° step 0.05° (1 801 angles).
-    pub fn fine(lobe: Input) -> AngleGrid {
+    pub(crate) fn fine(lobe: Input) -> AngleGrid {
         AngleGrid::new((0..=1800).map(|i| i as f64 * 0.05).collect(), lobe)
     }
 
     /// The angles in degrees.
-    pub fn deg(&self) -> &[f64] {
+    pub(crate) fn deg(&self) -> &[f64] {
         &self.deg
     }
 
     /// `ev` at every angle into `out` (one batched call; `out` has one slot per angle).
-    pub fn eval_into(&self, ev: &dyn Evaluator, params: &[f64], out: &mut [f64]) {
+    pub(crate) fn eval_into(&self, ev: &dyn Evaluator, params: &[f64], out: &mut [f64]) {
         let c = Columns::new(std::array::from_fn(|k| self.cols[k].as_slice()));
         ev.eval_batch(&c, params, out);
     }
 
     /// `ev` at every angle.
-    pub fn eval(&self, ev: &dyn Evaluator, params: &[f64]) -> Vec<f64> {
+    pub(crate) fn eval(&self, ev: &dyn Evaluator, params: &[f64]) -> Vec<f64> {
         let mut out = vec![0.0; self.deg.len()];
         self.eval_into(ev, params, &mut out);
         out
@@ -105,7 +105,7 @@ impl AngleGrid {
 
 /// The reference lobe on the papers' grid, evaluated once: one row of [`PAPERS_ANGLES`] values per
 /// n = 1..=n_max, and its value at each n's epicentre ([`epicenter_cos`]).
-pub struct PapersReference {
+pub(crate) struct PapersReference {
     rows: Vec<f64>,
     epicenter: Vec<f64>,
 }
@@ -113,7 +113,7 @@ pub struct PapersReference {
 impl PapersReference {
     /// Evaluates `reference` (lobe variable `ref_lobe`, parameters `ref_params` with n replaced) for
     /// n = 1..=n_max, in parallel over n.
-    pub fn new(reference: &dyn Evaluator, ref_params: &[f64], ref_lobe: Input, n_max: u32) -> PapersReference {
+    pub(crate) fn new(reference: &dyn Evaluator, ref_params: &[f64], ref_lobe: Input, n_max: u32) -> PapersReference {
         let grid = AngleGrid::papers(ref_lobe);
         let per_n: Vec<(Vec<f64>, f64)> = (1..=n_max)
             .into_par_iter()
@@ -133,27 +133,27 @@ impl PapersReference {
     }
 
     /// The reference at the papers' angles for `n` (1 ≤ n ≤ n_max).
-    pub fn row(&self, n: u32) -> &[f64] {
+    pub(crate) fn row(&self, n: u32) -> &[f64] {
         let i = (n as usize - 1) * PAPERS_ANGLES;
         &self.rows[i..i + PAPERS_ANGLES]
     }
 
     /// The reference at the epicentre of `n` (1 ≤ n ≤ n_max).
-    pub fn at_epicenter(&self, n: u32) -> f64 {
+    pub(crate) fn at_epicenter(&self, n: u32) -> f64 {
         self.epicenter[n as usize - 1]
     }
 }
 
 /// |F − R| over one row of a grid: the sum and the max of the differences that are not NaN, and how many are.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct RowError {
+pub(crate) struct RowError {
     pub sum: f64,
     pub max: f64,
     pub nan: usize,
 }
 
 impl RowError {
-    pub fn new(f: &[f64], r: &[f64]) -> RowError {
+    pub(crate) fn new(f: &[f64], r: &[f64]) -> RowError {
         let mut e = RowError::default();
         for (a, b) in f.iter().zip(r) {
             let d = (a - b).abs();
@@ -170,7 +170,7 @@ impl RowError {
 
 /// The papers' mean |F − R|: the per-n row sums added in order of n, over [`PAPERS_ANGLES`] × n_max points;
 /// NaN when `nan` points were NaN.
-pub fn papers_mean(row_sums: impl IntoIterator<Item = f64>, nan: usize, n_max: u32) -> f64 {
+pub(crate) fn papers_mean(row_sums: impl IntoIterator<Item = f64>, nan: usize, n_max: u32) -> f64 {
     let sum = row_sums.into_iter().fold(0.0, |s, r| s + r);
     if nan > 0 {
         f64::NAN
@@ -180,7 +180,7 @@ pub fn papers_mean(row_sums: impl IntoIterator<Item = f64>, nan: usize, n_max: u
 }
 
 /// The smallest usable `n_max` for the papers' metrics is 3 (the inflection metric starts there).
-pub fn check_n_max(n_max: u32) -> Result<(), Diagnostic> {
+pub(crate) fn check_n_max(n_max: u32) -> Result<(), Diagnostic> {
     if n_max < 3 {
         return Err(Diagnostic::error("n_max must be at least 3"));
     }

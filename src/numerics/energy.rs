@@ -333,12 +333,12 @@ pub struct Reciprocity {
 
 /// f(L,V) vs f(V,L): L at θ_L ∈ {0, 5, …, 85, 89}° (φ_L = 0, by symmetry), V at every θ_V of the same list and
 /// φ_V ∈ {0, 15, …, 345}°. NaN on either side counts as a violation of 1.
-pub fn reciprocity(ev: &dyn Evaluator, params: &[f64]) -> Reciprocity {
+pub(crate) fn reciprocity(ev: &dyn Evaluator, params: &[f64]) -> Reciprocity {
     reciprocity_over(ev, params, &[0.0])
 }
 
 /// [`reciprocity`] with L at each azimuth of `phis_l_deg` (φ_V is then relative to φ_L).
-pub fn reciprocity_over(ev: &dyn Evaluator, params: &[f64], phis_l_deg: &[f64]) -> Reciprocity {
+pub(crate) fn reciprocity_over(ev: &dyn Evaluator, params: &[f64], phis_l_deg: &[f64]) -> Reciprocity {
     let thetas: Vec<f64> = (0..18).map(|i| i as f64 * 5.0).chain([89.0]).collect();
     let mut best = Reciprocity { max_rel: 0.0, theta_l_deg: 0.0, theta_v_deg: 0.0, phi_v_deg: 0.0, pairs: 0 };
     for (&tl, &pl) in thetas.iter().flat_map(|t| phis_l_deg.iter().map(move |p| (t, p))) {
@@ -384,7 +384,7 @@ pub struct FullEnergy {
 }
 
 /// The azimuths of L for formulas that read directions: 0°, 15°, …, 345°.
-pub const AZIMUTHS_DEG: [f64; 24] = {
+pub(crate) const AZIMUTHS_DEG: [f64; 24] = {
     let mut a = [0.0; 24];
     let mut k = 0;
     while k < 24 {
@@ -418,7 +418,7 @@ pub fn full_energy_for(ev: &dyn Evaluator, used: crate::ir::InputSet, params: &[
 }
 
 /// The incidence angles of the full mode: 0°, 1°, …, 89°, 89.9°.
-pub fn full_mode_angles() -> Vec<f64> {
+pub(crate) fn full_mode_angles() -> Vec<f64> {
     (0..90).map(f64::from).chain([89.9]).collect()
 }
 

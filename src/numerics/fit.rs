@@ -128,7 +128,7 @@ pub struct FitReport {
 }
 
 /// Scores candidates against a reference evaluated once on the papers' grid ([`PapersReference`]).
-pub struct Scorer<'a> {
+pub(crate) struct Scorer<'a> {
     ev: &'a dyn Evaluator,
     lobe: Input,
     metric: Metric,
@@ -138,7 +138,7 @@ pub struct Scorer<'a> {
 }
 
 impl<'a> Scorer<'a> {
-    pub fn new(ev: &'a dyn Evaluator, lobe: Input, reference: &dyn Evaluator, ref_params: &[f64], ref_lobe: Input, metric: Metric, n_max: u32) -> Scorer<'a> {
+    pub(crate) fn new(ev: &'a dyn Evaluator, lobe: Input, reference: &dyn Evaluator, ref_params: &[f64], ref_lobe: Input, metric: Metric, n_max: u32) -> Scorer<'a> {
         let reference = PapersReference::new(reference, ref_params, ref_lobe, n_max);
         Scorer { ev, lobe, metric, n_max, grid: AngleGrid::papers(lobe), reference }
     }
@@ -146,7 +146,7 @@ impl<'a> Scorer<'a> {
     /// The metric for one full parameter vector (n is replaced as the metric sweeps it). A NaN anywhere
     /// scores +inf. Mean |Δ| is [`papers_mean`], bit for bit what [`accuracy`](super::accuracy::accuracy)
     /// reports as `mean_abs_grid` for the same parameters.
-    pub fn score(&self, params: &[f64]) -> f64 {
+    pub(crate) fn score(&self, params: &[f64]) -> f64 {
         let mut p = with_n(params, 1.0);
         let s = match self.metric {
             Metric::MeanAbs | Metric::MaxAbs => {

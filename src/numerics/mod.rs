@@ -88,7 +88,7 @@ pub fn choose_lobe_input(used: InputSet) -> (Input, Option<String>) {
 
 pub use crate::frame::{inputs_from_dirs, lobe_inputs, V3};
 
-pub fn dot(a: V3, b: V3) -> f64 {
+pub(crate) fn dot(a: V3, b: V3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
@@ -99,20 +99,9 @@ pub fn dir(theta: f64, phi: f64) -> V3 {
 
 /// A unit direction whose cosine with the normal is exactly `c` (so denormal and 1 − ulp cosines are reachable,
 /// which polar angles are not) at azimuth `phi`.
-pub fn dir_from_cos(c: f64, phi: f64) -> V3 {
+pub(crate) fn dir_from_cos(c: f64, phi: f64) -> V3 {
     let s = (1.0 - c * c).max(0.0).sqrt();
     [s * phi.cos(), s * phi.sin(), c]
-}
-
-/// Checks parameter values against declarations (range and finiteness), for checks that vary them.
-pub fn check_param_values(decls: &[crate::ir::ParamDecl], params: &[f64]) -> Result<(), Diagnostic> {
-    for (d, v) in decls.iter().zip(params) {
-        if !d.admits(*v) {
-            return Err(Diagnostic::error(format!("parameter `{}` = {v} is outside its declared range {}..{}", d.name, d.lo, d.hi))
-                .hint(format!("choose {} in {}..{}", d.name, d.lo, d.hi)));
-        }
-    }
-    Ok(())
 }
 
 #[cfg(test)]

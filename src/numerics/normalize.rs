@@ -11,7 +11,7 @@ use crate::ir::{BinOp, Formula, InputSet};
 /// The exact normalisation coefficient of a kernel reading `used`, at `params`.
 /// A lobe whose integral is so small that `1/(2π·Int)` overflows (e.g. `NH^n * 1e-310`) is refused rather
 /// than normalised to infinity.
-pub fn coefficient(ev: &dyn Evaluator, used: InputSet, params: &[f64]) -> Result<f64, Diagnostic> {
+pub(crate) fn coefficient(ev: &dyn Evaluator, used: InputSet, params: &[f64]) -> Result<f64, Diagnostic> {
     let (lobe, _) = choose_lobe_input(used);
     let coef = energy::normalization_coef(ev, params, lobe)?;
     if !coef.is_finite() {

@@ -35,7 +35,7 @@ const WG: [f64; 4] = [0.129_484_966_168_869_7, 0.279_705_391_489_276_7, 0.381_83
 
 /// An integral with its estimated absolute error.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct QuadResult {
+pub(crate) struct QuadResult {
     pub value: f64,
     pub error: f64,
     /// Integrand evaluations used.
@@ -45,7 +45,7 @@ pub struct QuadResult {
 }
 
 /// One GK15 panel on [a, b]: (Kronrod value, |Kronrod − Gauss|).
-pub fn gk15(f: &mut impl FnMut(f64) -> f64, a: f64, b: f64) -> (f64, f64) {
+pub(crate) fn gk15(f: &mut impl FnMut(f64) -> f64, a: f64, b: f64) -> (f64, f64) {
     let c = 0.5 * (a + b);
     let h = 0.5 * (b - a);
     let fc = f(c);
@@ -89,7 +89,7 @@ impl Ord for Panel {
 /// Integrates `f` over `[breaks[0], breaks.last()]` (breaks sorted ascending; duplicates are skipped) until the
 /// estimated error is at most `max(abs_tol, rel_tol·|I|)` or `max_panels` panels exist. A NaN anywhere makes the
 /// result NaN (the caller reports it; quadrature never hides a NaN).
-pub fn integrate(mut f: impl FnMut(f64) -> f64, breaks: &[f64], rel_tol: f64, abs_tol: f64, max_panels: usize) -> QuadResult {
+pub(crate) fn integrate(mut f: impl FnMut(f64) -> f64, breaks: &[f64], rel_tol: f64, abs_tol: f64, max_panels: usize) -> QuadResult {
     let mut heap = BinaryHeap::new();
     let mut evals = 0;
     let (mut total, mut err) = (0.0, 0.0);

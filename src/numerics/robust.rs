@@ -105,12 +105,12 @@ pub fn ulps(a: f64, b: f64) -> f64 {
 }
 
 /// Herbie's bits of error: log2(ulps + 1).
-pub fn bits(a: f64, b: f64) -> f64 {
+pub(crate) fn bits(a: f64, b: f64) -> f64 {
     (ulps(a, b) + 1.0).log2()
 }
 
 /// The edge classes every input draws from (module docs).
-pub const EDGES: [f64; 13] = [
+pub(crate) const EDGES: [f64; 13] = [
     0.0,
     1.0,
     1.0 - 1.1102230246251565e-16,
@@ -248,13 +248,6 @@ pub struct ErrorStats {
     pub worst_well: Option<Worst>,
 }
 
-impl ErrorStats {
-    /// Max ulps at well-conditioned points.
-    pub fn max_ulps_well(&self) -> f64 {
-        2f64.powf(self.max_bits_well) - 1.0
-    }
-}
-
 /// How many ulps the truth moves when one read input or live parameter moves by one ulp (the larger of the
 /// two directions); a finite-difference condition number in ulps.
 pub fn condition_ulps(truth_f: &Formula, pt: &Point, t: f64) -> f64 {
@@ -299,13 +292,13 @@ pub fn condition_ulps(truth_f: &Formula, pt: &Point, t: f64) -> f64 {
 /// The truth at one point rounded to f64 ([`truth::eval`]), or where that is not finite the limit along an edge
 /// input when there is one ([`truth::limit`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TruthAt {
+pub(crate) struct TruthAt {
     pub value: f64,
     pub limit: bool,
 }
 
 impl TruthAt {
-    pub fn new(truth_f: &Formula, pt: &Point) -> TruthAt {
+    pub(crate) fn new(truth_f: &Formula, pt: &Point) -> TruthAt {
         let value = truth::eval(truth_f, &pt.x, &pt.p);
         if value.is_finite() {
             return TruthAt { value, limit: false };
@@ -318,7 +311,7 @@ impl TruthAt {
 }
 
 /// The truth at every point, in parallel: computed once and shared by every candidate the pass measures.
-pub fn truths(truth_f: &Formula, points: &[Point]) -> Vec<TruthAt> {
+pub(crate) fn truths(truth_f: &Formula, points: &[Point]) -> Vec<TruthAt> {
     points.par_iter().map(|pt| TruthAt::new(truth_f, pt)).collect()
 }
 
@@ -392,7 +385,7 @@ pub fn measure(ev: &dyn Evaluator, truth_f: &Formula, points: &[Point]) -> Error
 }
 
 /// [`measure`] with the truth at each point given ([`truths`]).
-pub fn measure_against(ev: &dyn Evaluator, truth_f: &Formula, points: &[Point], truths: &[TruthAt]) -> ErrorStats {
+pub(crate) fn measure_against(ev: &dyn Evaluator, truth_f: &Formula, points: &[Point], truths: &[TruthAt]) -> ErrorStats {
     let acc = points
         .par_chunks(256)
         .zip(truths.par_chunks(256))
@@ -446,7 +439,7 @@ impl Default for PassOptions {
 /// Most truth work per measurement, in static cost units × points ([`cost`]); a formula above ~200 cost units
 /// (40 shared trigonometric `let`s, say) is measured on fewer points than asked, and the report says how many.
 /// Every catalogue formula (cost ≤ ~150) gets 10⁵ points.
-pub const MAX_WORK: f64 = 2e7;
+pub(crate) const MAX_WORK: f64 = 2e7;
 
 /// One candidate tried by the pass.
 #[derive(Clone, Debug)]
@@ -646,7 +639,7 @@ fn retries(trials: &[Trial]) -> Vec<Rule> {
 
 /// The accuracy pass as the compile step's chooser ([`crate::FormulaChooser`]).
 #[derive(Clone, Copy, Debug, Default)]
-pub struct Chooser(pub PassOptions);
+pub(crate) struct Chooser(pub PassOptions);
 
 impl crate::FormulaChooser for Chooser {
     fn choose(&self, original: &Formula, bake: &[(usize, f64)], simplified: Formula) -> Formula {
@@ -778,7 +771,7 @@ pub struct WorstJson {
 }
 
 impl WorstJson {
-    pub fn new(f: &Formula, w: &Worst) -> WorstJson {
+    pub(crate) fn new(f: &Formula, w: &Worst) -> WorstJson {
         WorstJson {
             inputs: Named::new(f.used_inputs().iter().map(|i| (i.name(), w.point.x[i.index()]))),
             params: Named::new(f.params.iter().zip(&w.point.p).map(|(d, v)| (d.name.as_str(), *v))),

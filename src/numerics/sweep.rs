@@ -84,7 +84,7 @@ fn grid() -> Vec<(f64, usize)> {
 
 /// Values tried for one parameter: the range ends, the default, and interior points (geometric when the
 /// range is positive, since exponents act multiplicatively).
-pub fn param_values(d: &ParamDecl) -> Vec<f64> {
+pub(crate) fn param_values(d: &ParamDecl) -> Vec<f64> {
     let mut v = vec![d.lo, d.hi, d.default];
     if d.name == "n" {
         v.extend([1.0, 1.0 + 1e-9, 1.5, 2.0, 3.0, 5.0, 10.0, 50.0, 100.0, 268.0, 500.0, 999.0, 1000.0]);
@@ -187,7 +187,7 @@ pub struct SweepReport {
 /// `None` when the example's value of the input is outside [0, 1]. Assumes the bad set is one interval along
 /// the line, which holds for the underflow and overflow regions this is for (it reports the interval around
 /// the example either way).
-pub fn extent(ev: &dyn Evaluator, x: &[f64; N_INPUTS], params: &[f64], input: usize, bad: impl Fn(f64) -> bool) -> Option<(f64, f64)> {
+pub(crate) fn extent(ev: &dyn Evaluator, x: &[f64; N_INPUTS], params: &[f64], input: usize, bad: impl Fn(f64) -> bool) -> Option<(f64, f64)> {
     bad_interval(x[input], |t| {
         let mut y = *x;
         y[input] = t;
@@ -248,7 +248,7 @@ pub enum DomainKind {
 }
 
 impl DomainKind {
-    pub fn of(used: InputSet) -> DomainKind {
+    pub(crate) fn of(used: InputSet) -> DomainKind {
         use crate::ir::Input;
         if used.reads_directions() {
             DomainKind::Directions
@@ -269,7 +269,7 @@ impl DomainKind {
     }
 
     /// Whether points are (L, V) pairs (extents then follow a polar angle, not one input).
-    pub fn is_geometric(self) -> bool {
+    pub(crate) fn is_geometric(self) -> bool {
         self != DomainKind::Independent
     }
 }
@@ -332,7 +332,7 @@ impl Domain {
 /// (a point of a geometric sweep, whose inputs hold L and V), the interval of that direction's cosine in [0, 1],
 /// its azimuth and the other direction fixed, over which `bad` still holds; every input is recomputed from the
 /// pair. `None` when the direction is below the horizon.
-pub fn extent_polar(ev: &dyn Evaluator, x: &[f64; N_INPUTS], params: &[f64], light: bool, bad: impl Fn(f64) -> bool) -> Option<(f64, f64)> {
+pub(crate) fn extent_polar(ev: &dyn Evaluator, x: &[f64; N_INPUTS], params: &[f64], light: bool, bad: impl Fn(f64) -> bool) -> Option<(f64, f64)> {
     let (l, v) = ([x[5], x[6], x[7]], [x[8], x[9], x[10]]);
     let d = if light { l } else { v };
     let phi = if d[0] == 0.0 && d[1] == 0.0 { 0.0 } else { d[1].atan2(d[0]) };
@@ -464,7 +464,7 @@ fn coprime_stride(m: u64) -> u64 {
 }
 
 /// One kind a sweep counts: label, JSON key, the region's first example, and the predicate on a value.
-pub type Kind<'a> = (&'static str, &'static str, &'a Option<Example>, Box<dyn Fn(f64) -> bool>);
+pub(crate) type Kind<'a> = (&'static str, &'static str, &'a Option<Example>, Box<dyn Fn(f64) -> bool>);
 
 /// The four kinds a sweep counts, for one region.
 pub fn kinds(r: &RegionStats, bound: f64) -> [Kind<'_>; 4] {

@@ -82,9 +82,9 @@ pub struct Xf {
 }
 
 impl Xf {
-    pub const ZERO: Xf = Xf { hi: 0.0, lo: 0.0, e: 0 };
+    pub(crate) const ZERO: Xf = Xf { hi: 0.0, lo: 0.0, e: 0 };
     pub const ONE: Xf = Xf { hi: 1.0, lo: 0.0, e: 0 };
-    pub const NAN: Xf = Xf { hi: f64::NAN, lo: 0.0, e: 0 };
+    pub(crate) const NAN: Xf = Xf { hi: f64::NAN, lo: 0.0, e: 0 };
 
     /// `(hi + lo)·2^e`, normalised.
     fn make(d: Dd, e: i64) -> Xf {
@@ -108,10 +108,10 @@ impl Xf {
     fn is_special(self) -> bool {
         self.hi == 0.0 || !self.hi.is_finite()
     }
-    pub fn is_nan(self) -> bool {
+    pub(crate) fn is_nan(self) -> bool {
         self.hi.is_nan()
     }
-    pub fn is_zero(self) -> bool {
+    pub(crate) fn is_zero(self) -> bool {
         self.hi == 0.0
     }
     fn sign_negative(self) -> bool {
@@ -138,7 +138,7 @@ impl Xf {
     fn xneg(self) -> Xf {
         Xf { hi: -self.hi, lo: -self.lo, e: self.e }
     }
-    pub fn abs(self) -> Xf {
+    pub(crate) fn abs(self) -> Xf {
         if self.sign_negative() {
             self.neg()
         } else {
@@ -187,7 +187,7 @@ impl Xf {
         }
         Xf::make(dd::div(&mut Direct, (self.hi, self.lo), (b.hi, b.lo)), self.e.saturating_sub(b.e))
     }
-    pub fn sqrt(self) -> Xf {
+    pub(crate) fn sqrt(self) -> Xf {
         if self.is_special() || self.hi < 0.0 {
             return Xf::special(self.hi.sqrt());
         }
@@ -196,7 +196,7 @@ impl Xf {
     }
 
     /// Total order on non-NaN values, −0 = +0 (as IEEE comparison); `None` with a NaN.
-    pub fn partial_cmp(self, b: Xf) -> Option<Ordering> {
+    pub(crate) fn partial_cmp(self, b: Xf) -> Option<Ordering> {
         if self.is_nan() || b.is_nan() {
             return None;
         }
@@ -495,7 +495,7 @@ fn call(f: Builtin, a: &[Xf]) -> Xf {
 
 /// The formula's exact value at inputs `x` and parameters `params` (a missing parameter is NaN, as in the
 /// interpreter), before rounding.
-pub fn eval_x(f: &Formula, x: &[f64; N_INPUTS], params: &[f64]) -> Xf {
+pub(crate) fn eval_x(f: &Formula, x: &[f64; N_INPUTS], params: &[f64]) -> Xf {
     eval_xs(f, &x.map(Xf::from_f64), params)
 }
 

@@ -45,7 +45,7 @@ pub struct Def {
 
 impl Def {
     /// The twin behind the `Evaluator` interface.
-    pub fn twin(&self) -> Twin {
+    pub(crate) fn twin(&self) -> Twin {
         Twin { name: self.name, params: self.params, defaults: self.defaults.to_vec(), ev: Box::new(FnEvaluator(self.f)) }
     }
 }
@@ -66,33 +66,33 @@ macro_rules! lobe {
 }
 
 /// Phong (1.4): VR^n.
-pub const PHONG: Def = n_only("phong", "Phong", lobe!(VR, |c, n| c.powf(n)));
+pub(crate) const PHONG: Def = n_only("phong", "Phong", lobe!(VR, |c, n| c.powf(n)));
 /// Blinn (1.5): NH^n — the usual reference.
-pub const BLINN: Def = n_only("blinn", "Blinn", lobe!(NH, |c, n| c.powf(n)));
+pub(crate) const BLINN: Def = n_only("blinn", "Blinn", lobe!(NH, |c, n| c.powf(n)));
 /// Schlick (1.6): c / (n − n·c + c).
-pub const SCHLICK: Def = n_only("schlick", "Schlick", lobe!(NH, |c, n| c / (n - n * c + c)));
+pub(crate) const SCHLICK: Def = n_only("schlick", "Schlick", lobe!(NH, |c, n| c / (n - n * c + c)));
 /// Modified Schlick F_MSH (2.3): 2c / (1.25·(n − n·c + 1.25c)²).
-pub const MODIFIED_SCHLICK: Def = n_only("modified_schlick", "Modified Schlick", lobe!(NH, |c, n| {
+pub(crate) const MODIFIED_SCHLICK: Def = n_only("modified_schlick", "Modified Schlick", lobe!(NH, |c, n| {
     let d = n - n * c + 1.25 * c;
     2.0 * c / (1.25 * d * d)
 }));
 /// F_dsh (2.26), as written in models.md:
 /// c/(n − n c + c) + ( 2(c + 0.1)^8 / (1.25(1.25n − 1.25 n c + 1.25 c^8)² + 1.5) − 0.25 ).
-pub const DSH: Def = n_only("dsh", "F_dsh", lobe!(NH, |c, n| {
+pub(crate) const DSH: Def = n_only("dsh", "F_dsh", lobe!(NH, |c, n| {
     let d = 1.25 * n - 1.25 * n * c + 1.25 * c.powi(8);
     c / (n - n * c + c) + (2.0 * (c + 0.1).powi(8) / (1.25 * d * d + 1.5) - 0.25)
 }));
 /// F_SCOS (3.1): max(n/2·(c − 1) + 1, 0)², zero beyond acos((n−2)/n).
-pub const SCOS: Def = n_only("scos", "F_SCOS", lobe!(NH, |c, n| fmax(n / 2.0 * (c - 1.0) + 1.0, 0.0).powi(2)));
+pub(crate) const SCOS: Def = n_only("scos", "F_SCOS", lobe!(NH, |c, n| fmax(n / 2.0 * (c - 1.0) + 1.0, 0.0).powi(2)));
 /// F_SCOS2 (3.10): max((−1.1/(−n + n c − 2c))·n·(c − 1) + 1, 0)², zero beyond acos(n/(n+20)).
-pub const SCOS2: Def =
+pub(crate) const SCOS2: Def =
     n_only("scos2", "F_SCOS2", lobe!(NH, |c, n| fmax((-1.1 / (-n + n * c - 2.0 * c)) * n * (c - 1.0) + 1.0, 0.0).powi(2)));
 /// Quadratic (3.18): 0.786n·c² + (1 − 0.786n)·c.
-pub const QUADRATIC: Def = n_only("quadratic", "Quadratic", lobe!(NH, |c, n| 0.786 * n * c * c + (1.0 - 0.786 * n) * c));
+pub(crate) const QUADRATIC: Def = n_only("quadratic", "Quadratic", lobe!(NH, |c, n| 0.786 * n * c * c + (1.0 - 0.786 * n) * c));
 /// Gaussian (1.7): exp(−n·acos(c)²/2).
-pub const GAUSSIAN: Def = n_only("gaussian", "Gaussian", lobe!(NH, |c, n| (-n * c.acos().powi(2) / 2.0).exp()));
+pub(crate) const GAUSSIAN: Def = n_only("gaussian", "Gaussian", lobe!(NH, |c, n| (-n * c.acos().powi(2) / 2.0).exp()));
 /// F_ST (3.15): max(n/a·(c − 1) + 1, 0)^a; parameters n, a.
-pub const F_ST: Def = Def {
+pub(crate) const F_ST: Def = Def {
     stem: "fst",
     name: "F_ST",
     params: &["n", "a"],
@@ -104,7 +104,7 @@ pub const F_ST: Def = Def {
 };
 /// F_kutlog (article): cos^k(acos(Q^(1/k)) / acos(Q^(1/n)) · x), x = acos(NH), zero where the argument
 /// passes π/2; parameters n, k, Q.
-pub const KUTLOG: Def = Def {
+pub(crate) const KUTLOG: Def = Def {
     stem: "kutlog",
     name: "F_kutlog",
     params: &["n", "k", "Q"],
@@ -138,11 +138,6 @@ macro_rules! constructors {
 constructors! {
     phong = PHONG, blinn = BLINN, schlick = SCHLICK, modified_schlick = MODIFIED_SCHLICK, dsh = DSH, scos = SCOS,
     scos2 = SCOS2, f_st = F_ST, quadratic = QUADRATIC, gaussian = GAUSSIAN, kutlog = KUTLOG,
-}
-
-/// Every twin, for table-driven tests.
-pub fn all() -> Vec<Twin> {
-    DEFS.iter().map(Def::twin).collect()
 }
 
 /// The definition of a catalogue file's twin (`examples/brdfs/<stem>.brdf`), if there is one.

@@ -16,7 +16,7 @@ pub struct Camera {
 
 impl Camera {
     /// Checks the camera is usable; the message names what is wrong.
-    pub fn validate(&self) -> Result<(), String> {
+    pub(crate) fn validate(&self) -> Result<(), String> {
         let dir = self.look_at - self.position;
         if !(self.position.is_finite() && self.look_at.is_finite() && self.up.is_finite()) {
             return Err("camera vectors must be finite".into());
@@ -37,7 +37,7 @@ impl Camera {
     }
 
     /// World → view matrix (right-handed, looking down −z, `up` projected to +y).
-    pub fn view(&self) -> DMat4 {
+    pub(crate) fn view(&self) -> DMat4 {
         let f = (self.look_at - self.position).normalize();
         let s = f.cross(self.up).normalize();
         let u = s.cross(f);
@@ -51,7 +51,7 @@ impl Camera {
     }
 
     /// World → clip transform for an image of the given aspect (width/height).
-    pub fn clip_transform(&self, aspect: f64) -> ClipTransform {
+    pub(crate) fn clip_transform(&self, aspect: f64) -> ClipTransform {
         let f = 1.0 / (self.fov_deg.to_radians() / 2.0).tan();
         ClipTransform { view: self.view(), sx: f / aspect, sy: f }
     }
@@ -59,7 +59,7 @@ impl Camera {
 
 /// World → clip, cached per render.
 #[derive(Clone, Copy, Debug)]
-pub struct ClipTransform {
+pub(crate) struct ClipTransform {
     view: DMat4,
     sx: f64,
     sy: f64,
@@ -67,7 +67,7 @@ pub struct ClipTransform {
 
 impl ClipTransform {
     /// `(x_clip, y_clip, unused, w)`; a point is in front of the camera when `w > 0`.
-    pub fn apply(&self, p: DVec3) -> DVec4 {
+    pub(crate) fn apply(&self, p: DVec3) -> DVec4 {
         let v = self.view.transform_point3(p);
         DVec4::new(v.x * self.sx, v.y * self.sy, 0.0, -v.z)
     }

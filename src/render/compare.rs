@@ -32,7 +32,7 @@ pub struct Metrics {
     pub psnr: f64,
 }
 
-pub fn gray(p: [u8; 3]) -> f64 {
+pub(crate) fn gray(p: [u8; 3]) -> f64 {
     0.299 * p[0] as f64 + 0.587 * p[1] as f64 + 0.114 * p[2] as f64
 }
 
@@ -72,14 +72,14 @@ pub fn metrics(a: &Image, b: &Image, covered: &[bool]) -> Result<Metrics, String
 }
 
 /// A heat-map colour for t ∈ [0, 1]: black → red → yellow → white.
-pub fn heat(t: f64) -> [u8; 3] {
+pub(crate) fn heat(t: f64) -> [u8; 3] {
     let t = if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) } * 3.0;
     let c = |x: f64| (x.clamp(0.0, 1.0) * 255.0).round() as u8;
     [c(t), c(t - 1.0), c(t - 2.0)]
 }
 
 /// A | B | heat map of |Δ gray|, scaled so that `scale` (0..255 gray levels) is white. Returns the image.
-pub fn side_by_side(a: &Image, b: &Image, scale: f64) -> Image {
+pub(crate) fn side_by_side(a: &Image, b: &Image, scale: f64) -> Image {
     let (w, h) = (a.width, a.height);
     let mut out = Image::new(3 * w, h);
     for y in 0..h {
@@ -193,7 +193,7 @@ pub fn compare_sweep(
 }
 
 /// One comparison in already loaded geometry: materials with formula A, render; formula B, render; metrics.
-pub fn compare_in(
+pub(crate) fn compare_in(
     geometry: &super::scene::Geometry,
     a: (&str, &str),
     b: (&str, &str),

@@ -66,7 +66,7 @@ impl Mesh {
 
     /// A torus around the y axis: ring radius `major`, tube radius `minor`, `segments` around the ring and
     /// `sides` around the tube.
-    pub fn torus(major: f64, minor: f64, segments: u32, sides: u32) -> Mesh {
+    pub(crate) fn torus(major: f64, minor: f64, segments: u32, sides: u32) -> Mesh {
         let (segments, sides) = (segments.max(3), sides.max(3));
         let mut m = Mesh::default();
         for i in 0..=segments {
@@ -96,7 +96,7 @@ impl Mesh {
 
     /// Builds a mesh from raw positions and triangles, computing smooth area-weighted vertex normals (for OBJ
     /// files without `vn` lines).
-    pub fn with_smooth_normals(positions: Vec<DVec3>, triangles: Vec<[u32; 3]>) -> Mesh {
+    pub(crate) fn with_smooth_normals(positions: Vec<DVec3>, triangles: Vec<[u32; 3]>) -> Mesh {
         let mut normals = vec![DVec3::ZERO; positions.len()];
         for t in &triangles {
             let [a, b, c] = t.map(|i| positions[i as usize]);
@@ -113,7 +113,7 @@ impl Mesh {
     /// Replaces the tangents by those of a UV map (`uv[i]` per vertex): per triangle T = (e1·Δv2 − e2·Δv1)/det
     /// (the direction of growing u), summed at each vertex, then orthonormalised against its normal; a vertex
     /// whose triangles all have degenerate UVs gets [`onb_tangent`].
-    pub fn set_uv_tangents(&mut self, uv: &[[f64; 2]]) {
+    pub(crate) fn set_uv_tangents(&mut self, uv: &[[f64; 2]]) {
         let mut acc = vec![DVec3::ZERO; self.positions.len()];
         for t in &self.triangles {
             let [a, b, c] = t.map(|i| i as usize);
@@ -134,7 +134,7 @@ impl Mesh {
     }
 
     /// The tangent of vertex `i` ([`onb_tangent`] of its normal when the mesh has none).
-    pub fn tangent(&self, i: usize) -> DVec3 {
+    pub(crate) fn tangent(&self, i: usize) -> DVec3 {
         self.tangents.get(i).copied().unwrap_or_else(|| onb_tangent(self.normals[i]))
     }
 
@@ -160,17 +160,11 @@ impl Mesh {
             }
         }
     }
-
-    /// Axis-aligned bounds (min, max); `None` for an empty mesh.
-    pub fn bounds(&self) -> Option<(DVec3, DVec3)> {
-        let first = *self.positions.first()?;
-        Some(self.positions.iter().fold((first, first), |(lo, hi), p| (lo.min(*p), hi.max(*p))))
-    }
 }
 
 /// A unit tangent orthogonal to the unit normal `n`, continuous in `n` except across n.z = 0: the first
 /// vector of Duff et al. 2017's branchless orthonormal basis ("Building an Orthonormal Basis, Revisited").
-pub fn onb_tangent(n: DVec3) -> DVec3 {
+pub(crate) fn onb_tangent(n: DVec3) -> DVec3 {
     let sign = 1f64.copysign(n.z);
     let a = -1.0 / (sign + n.z);
     let b = n.x * n.y * a;
@@ -179,7 +173,7 @@ pub fn onb_tangent(n: DVec3) -> DVec3 {
 
 /// Gram–Schmidt: `t` minus its component along the unit normal `n`, normalised; [`onb_tangent`] when `t` is
 /// (nearly) parallel to `n`, zero or not finite.
-pub fn orthonormal_tangent(t: DVec3, n: DVec3) -> DVec3 {
+pub(crate) fn orthonormal_tangent(t: DVec3, n: DVec3) -> DVec3 {
     (t - n * n.dot(t)).try_normalize().filter(|u| u.dot(n).abs() < 1e-6).unwrap_or_else(|| onb_tangent(n))
 }
 
@@ -200,7 +194,7 @@ pub struct ObjError {
 }
 
 /// Largest OBJ file read (a bound on time and memory for a wrong path such as /dev/zero; ~4 M triangles).
-pub const MAX_OBJ_BYTES: u64 = 256 << 20;
+pub(crate) const MAX_OBJ_BYTES: u64 = 256 << 20;
 
 /// Loads every model of an OBJ file into one mesh (triangulated; smooth normals computed when the file has
 /// none). The text is first checked line by line by [`obj_fault`] — tobj reports only an error kind, and
@@ -274,7 +268,7 @@ pub fn load_obj(path: &std::path::Path) -> Result<Mesh, ObjError> {
 /// a vertex without three numbers finite in f32 (what tobj stores), a zero or non-finite normal, a face
 /// with fewer than three corners or an index out of range, or a face corner without a normal index in a file
 /// that has normals (half the faces would silently get computed normals).
-pub fn obj_fault(src: &str) -> Option<(usize, String)> {
+pub(crate) fn obj_fault(src: &str) -> Option<(usize, String)> {
     let (mut nv, mut nvt, mut nvn) = (0i64, 0i64, 0i64);
     let has_normals = src.lines().any(|l| l.split_whitespace().next() == Some("vn"));
     for (i, line) in src.lines().enumerate() {
@@ -331,7 +325,8 @@ pub fn obj_fault(src: &str) -> Option<(usize, String)> {
 }
 
 /// The line of [`obj_fault`].
-pub fn locate_obj_fault(src: &str) -> Option<usize> {
+#[cfg(test)]
+fn locate_obj_fault(src: &str) -> Option<usize> {
     obj_fault(src).map(|(line, _)| line)
 }
 

@@ -33,7 +33,7 @@
 //! CPU/wall ratio — inside a fused program F's own time is not separable, so benches report the batched
 //! kernel's ns/element measured beside it. Measured numbers: BENCHMARKS.md.
 
-pub mod camera;
+pub(crate) mod camera;
 pub mod compare;
 pub mod image;
 pub mod mesh;
@@ -55,7 +55,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// Largest image side accepted.
-pub const MAX_SIZE: usize = 4096;
+pub(crate) const MAX_SIZE: usize = 4096;
 
 /// An image size `N` (square) or `WxH`, each 1..=[`MAX_SIZE`] (the image size a front end asks for).
 pub fn parse_size(s: &str) -> Result<(usize, usize), String> {
@@ -231,7 +231,7 @@ pub struct RenderStats {
 }
 
 impl RenderStats {
-    pub fn mpixels_per_s(&self) -> f64 {
+    pub(crate) fn mpixels_per_s(&self) -> f64 {
         (self.width * self.height) as f64 / self.render_wall.as_secs_f64().max(1e-12) / 1e6
     }
     /// Shading CPU time per visible pixel, ns.

@@ -61,7 +61,7 @@ impl Cutoff {
     /// Finds the cut-off angle of a formula of one lobe cosine (NH or VR): the smallest angle θ from the lobe's
     /// axis such that F(cos θ') < 2^−q at every sampled θ' ≥ θ (0.01° steps up to 90°; a NaN counts as "not
     /// below", so a defect is never cut away). Costs 9 001 scalar evaluations, once per material.
-    pub fn find(ev: &dyn Evaluator, used: InputSet, params: &[f64], q: f64) -> Result<Cutoff, String> {
+    pub(crate) fn find(ev: &dyn Evaluator, used: InputSet, params: &[f64], q: f64) -> Result<Cutoff, String> {
         if !(q > 0.0 && q <= 1000.0) {
             return Err(format!("cutoff = {q} is not a usable exponent q (the lobe is cut where F < 2^-q); use q in (0, 1000], e.g. 8"));
         }

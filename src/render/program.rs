@@ -42,20 +42,9 @@ use crate::ir::{BinOp, Formula, Input, Ir, Node, NodeId, N_INPUTS};
 /// formulas that read directions).
 pub const COLUMNS: usize = 9;
 
-/// The program's outputs, per pixel.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Out {
-    R,
-    G,
-    B,
-    /// Non-finite F values (counted per channel and light; drawn as no light).
-    NonFinite,
-    /// F evaluations (lit pixel × light × channel).
-    Evals,
-    /// Lit pixel × light pairs the cut-off skipped.
-    Cut,
-}
-
+/// The program's outputs per pixel, in order: r, g, b, then three counters — non-finite F values (counted per
+/// channel and light; drawn as no light), F evaluations (lit pixel × light × channel), and lit pixel × light
+/// pairs the cut-off skipped.
 pub const N_OUTPUTS: usize = 6;
 
 /// One light of the scene, in world space.
@@ -392,7 +381,7 @@ impl ProgramCode {
 }
 
 /// A material's compiled shading program for one render, with its prepared parameter block.
-pub struct ProgramRun {
+pub(crate) struct ProgramRun {
     pub(super) code: ProgramCode,
     pub(super) block: Vec<f64>,
     pub(super) params: Vec<f64>,
@@ -403,7 +392,7 @@ pub struct ProgramRun {
 impl ProgramRun {
     /// The program `plan` describes for `m` under `scene`'s eye and lights, compiled with the material's
     /// backend and math mode.
-    pub fn new(scene: &Scene, m: &Material, plan: &ShadingPlan) -> Result<ProgramRun, String> {
+    pub(crate) fn new(scene: &Scene, m: &Material, plan: &ShadingPlan) -> Result<ProgramRun, String> {
         let src = &m.program;
         let channels: Vec<&Formula> = src.channels.iter().map(|f| f.as_ref()).collect();
         let program = build(&spec(scene, plan), &channels).map_err(|e| format!("material `{}`: {e}", m.name))?;

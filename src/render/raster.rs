@@ -18,18 +18,18 @@ use super::mesh::Mesh;
 use glam::{DVec3, DVec4};
 
 /// Sub-pixel precision: coordinates are snapped to 1/`SUB` pixel.
-pub const SUB: i64 = 256;
+pub(crate) const SUB: i64 = 256;
 /// Screen coordinates stay within ±`GUARD_PX` pixels, so every edge-function product fits an i64 easily.
 const GUARD_PX: f64 = 32768.0;
 /// Near plane in clip w (world units along the view axis).
 const NEAR_W: f64 = 1e-6;
 /// Marks a pixel no triangle covers.
-pub const EMPTY: u32 = u32::MAX;
+pub(crate) const EMPTY: u32 = u32::MAX;
 
 /// A triangle ready for rasterisation: fixed-point screen vertices (counter-clockwise with y down, i.e.
 /// positive area) and the world-space attributes shading interpolates.
 #[derive(Clone, Debug)]
-pub struct ScreenTri {
+pub(crate) struct ScreenTri {
     pub x: [i64; 3],
     pub y: [i64; 3],
     pub inv_w: [f64; 3],
@@ -47,18 +47,17 @@ pub struct ScreenTri {
 
 /// The binned frame: triangles and, for each tile in row-major order, the indices of those touching it.
 #[derive(Debug, Default)]
-pub struct Setup {
+pub(crate) struct Setup {
     pub tris: Vec<ScreenTri>,
     pub bins: Vec<Vec<u32>>,
     pub tile: usize,
     pub tiles_x: usize,
-    pub tiles_y: usize,
     pub width: usize,
     pub height: usize,
 }
 
 /// One object to draw.
-pub struct DrawItem<'a> {
+pub(crate) struct DrawItem<'a> {
     pub mesh: &'a Mesh,
     pub material: u32,
     /// Drop triangles facing away from the camera (closed meshes).
@@ -80,10 +79,10 @@ impl ClipVert {
 }
 
 /// Projects, clips and bins every triangle of `items`.
-pub fn setup(items: &[DrawItem], xf: &ClipTransform, width: usize, height: usize, tile: usize) -> Setup {
+pub(crate) fn setup(items: &[DrawItem], xf: &ClipTransform, width: usize, height: usize, tile: usize) -> Setup {
     let tiles_x = width.div_ceil(tile);
     let tiles_y = height.div_ceil(tile);
-    let mut s = Setup { tris: vec![], bins: vec![vec![]; tiles_x * tiles_y], tile, tiles_x, tiles_y, width, height };
+    let mut s = Setup { tris: vec![], bins: vec![vec![]; tiles_x * tiles_y], tile, tiles_x, width, height };
     // Guard band in NDC units per axis.
     let gx = GUARD_PX * 2.0 / width as f64;
     let gy = GUARD_PX * 2.0 / height as f64;
@@ -194,7 +193,7 @@ fn emit(s: &mut Setup, v: &[ClipVert; 3], item: &DrawItem) {
 /// Per-tile raster output: for each pixel the nearest triangle (or [`EMPTY`]) and the perspective-correct
 /// barycentric weights of its first two vertices.
 #[derive(Clone, Debug, Default)]
-pub struct GBuffer {
+pub(crate) struct GBuffer {
     pub depth: Vec<f64>,
     pub tri: Vec<u32>,
     pub bary: Vec<[f64; 2]>,
@@ -212,14 +211,14 @@ impl GBuffer {
 }
 
 /// The pixel rectangle of tile `t`: (x0, y0, width, height).
-pub fn tile_rect(s: &Setup, t: usize) -> (usize, usize, usize, usize) {
+pub(crate) fn tile_rect(s: &Setup, t: usize) -> (usize, usize, usize, usize) {
     let (tx, ty) = (t % s.tiles_x, t / s.tiles_x);
     let (x0, y0) = (tx * s.tile, ty * s.tile);
     (x0, y0, s.tile.min(s.width - x0), s.tile.min(s.height - y0))
 }
 
 /// Rasterises tile `t` into `gb` (row-major, `tw × th`). Returns the number of pixel coverage tests.
-pub fn raster_tile(s: &Setup, t: usize, gb: &mut GBuffer) -> u64 {
+pub(crate) fn raster_tile(s: &Setup, t: usize, gb: &mut GBuffer) -> u64 {
     let (tx0, ty0, tw, th) = tile_rect(s, t);
     gb.reset(tw * th);
     let mut tests = 0u64;

@@ -26,7 +26,7 @@ pub const SPAN: usize = 256;
 
 /// Reusable per-thread buffers, so shading a tile allocates nothing in the steady state.
 #[derive(Default)]
-pub struct Scratch {
+pub(crate) struct Scratch {
     pub gb: GBuffer,
     /// The tile's runs of pixels covered by one triangle, in pixel order (by material, then pixel, in a tile
     /// of several materials).
@@ -68,7 +68,7 @@ struct Group {
 
 /// Counters for one tile, summed over tiles (integers, so the sum is independent of thread count).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct ShadeCounts {
+pub(crate) struct ShadeCounts {
     pub visible: u64,
     pub evals: u64,
     pub kernel_calls: u64,
@@ -90,7 +90,7 @@ impl std::ops::AddAssign for ShadeCounts {
 /// Shades the tile whose G-buffer is in `sc.gb` (`tw × th` pixels) with the per-material `programs`; the
 /// 8-bit result (background where nothing is visible) is left in `sc.rgb`. Returns the counters and the time
 /// spent inside the programs, in nanoseconds.
-pub fn shade_tile(scene: &Scene, programs: &[ProgramRun], s: &Setup, n: usize, sc: &mut Scratch, transfer: Transfer, bg: [u8; 3]) -> (ShadeCounts, u64) {
+pub(crate) fn shade_tile(scene: &Scene, programs: &[ProgramRun], s: &Setup, n: usize, sc: &mut Scratch, transfer: Transfer, bg: [u8; 3]) -> (ShadeCounts, u64) {
     let mut counts = ShadeCounts::default();
     let mut kernel_ns = 0;
     sc.rgb.resize(n * 3, 0);

@@ -247,7 +247,7 @@ pub fn speed_error(points: &[CostError], title: &str, x_desc: &str, y_desc: &str
 
 /// An axis-aligned box in pixels (y grows downwards).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Rect {
+pub(crate) struct Rect {
     pub x0: f64,
     pub y0: f64,
     pub x1: f64,
@@ -256,10 +256,10 @@ pub struct Rect {
 
 impl Rect {
     /// Open intersection: boxes that only touch do not intersect.
-    pub fn intersects(&self, o: &Rect) -> bool {
+    pub(crate) fn intersects(&self, o: &Rect) -> bool {
         self.x0 < o.x1 && o.x0 < self.x1 && self.y0 < o.y1 && o.y0 < self.y1
     }
-    pub fn contains(&self, o: &Rect) -> bool {
+    pub(crate) fn contains(&self, o: &Rect) -> bool {
         self.x0 <= o.x0 && o.x1 <= self.x1 && self.y0 <= o.y0 && o.y1 <= self.y1
     }
     fn grow(&self, d: f64) -> Rect {
@@ -302,7 +302,7 @@ fn segments_cross(a: [(f64, f64); 2], b: [(f64, f64); 2]) -> bool {
 
 /// Where a label went: its text box and, when it sits away from its point, a leader line (point → box).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PlacedLabel {
+pub(crate) struct PlacedLabel {
     pub rect: Rect,
     pub leader: Option<[(f64, f64); 2]>,
 }
@@ -310,7 +310,7 @@ pub struct PlacedLabel {
 /// What [`place_labels`] places: one label of `sizes[i]` (width, height) per point `anchors[i]`, whose
 /// marker covers a square of half-side `marker`; every box stays inside `bounds`, off `obstacles`, and off
 /// the `avoid` segments (e.g. the Pareto line) when some other position allows.
-pub struct LabelProblem<'a> {
+pub(crate) struct LabelProblem<'a> {
     pub anchors: &'a [(f64, f64)],
     pub sizes: &'a [(f64, f64)],
     pub marker: f64,
@@ -330,7 +330,7 @@ const MAX_LEADER: f64 = 400.0;
 /// within two rings, one that also stays off the `avoid` segments and, if beside its point, is nearer to it
 /// than to any other point. `None` only when no ring up to `MAX_LEADER` has room.
 /// Cost: O(n² · candidates) box tests; 33 bench labels take milliseconds, far less than drawing them.
-pub fn place_labels(p: &LabelProblem) -> Vec<Option<PlacedLabel>> {
+pub(crate) fn place_labels(p: &LabelProblem) -> Vec<Option<PlacedLabel>> {
     let n = p.anchors.len();
     let markers: Vec<Rect> = p.anchors.iter().map(|&a| Rect::around(a, p.marker + 1.0)).collect();
     let crowd = |i: usize| {

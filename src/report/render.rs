@@ -101,7 +101,7 @@ impl StatsReport {
 
 /// The math modes of the scene's kernels: `precise`, `fast`, or `fast+precise` when materials differ (scene
 /// key `math`).
-pub fn math_of(materials: &[Material]) -> String {
+pub(crate) fn math_of(materials: &[Material]) -> String {
     let mut modes: Vec<&str> = materials.iter().map(|m| m.math.name()).collect();
     modes.sort_unstable();
     modes.dedup();

@@ -44,7 +44,7 @@ impl Compiled {
 }
 
 /// Everything the endpoints share.
-pub struct State {
+pub(crate) struct State {
     pub roots: Roots,
     /// The scene page renders use: a served file, or `None` for the built-in paper sphere.
     pub scene: Option<PathBuf>,
@@ -63,7 +63,7 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 }
 
 impl State {
-    pub fn new(roots: Roots, scene: Option<PathBuf>, files: Vec<String>, limits: Limits) -> State {
+    pub(crate) fn new(roots: Roots, scene: Option<PathBuf>, files: Vec<String>, limits: Limits) -> State {
         State { roots, scene, files, limits, kernels: Mutex::default(), geometry: Mutex::default(), jobs: AtomicUsize::new(0) }
     }
 
@@ -108,7 +108,7 @@ impl State {
 }
 
 /// A [`BrdfCompiler`] over the live-parameter cache: parameter values are not baked but passed at render time.
-pub struct Live<'a>(&'a State);
+pub(crate) struct Live<'a>(&'a State);
 
 impl BrdfCompiler for Live<'_> {
     fn declare(&self, file: &str, src: &str) -> Result<Vec<ParamDecl>, Diagnostics> {
@@ -132,7 +132,7 @@ fn diagnostics_of(file: &str, src: &str, e: ApiError) -> Diagnostics {
 /// passes (the job finishes in the background and its result is dropped), and refuses new work with 503 while
 /// `max_jobs` jobs run. With the cost budget checked before each job, a hostile request costs at most one job
 /// slot for a bounded time, and the page's other requests keep being served.
-pub fn limited<T: Send + 'static>(st: &Arc<State>, work: impl FnOnce(&State) -> Result<T, ApiError> + Send + 'static) -> Result<T, ApiError> {
+pub(crate) fn limited<T: Send + 'static>(st: &Arc<State>, work: impl FnOnce(&State) -> Result<T, ApiError> + Send + 'static) -> Result<T, ApiError> {
     let max = st.limits.max_jobs;
     if st.jobs.fetch_add(1, Ordering::SeqCst) >= max {
         st.jobs.fetch_sub(1, Ordering::SeqCst);
@@ -174,7 +174,7 @@ fn check_cost(st: &State, k: &Kernel, evals: f64, what: &str) -> Result<(), ApiE
 }
 
 /// FNV-1a of a file's bytes: the page sends it back on save to detect edits made on disk meanwhile.
-pub fn content_hash(bytes: &[u8]) -> String {
+pub(crate) fn content_hash(bytes: &[u8]) -> String {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     for &b in bytes {
         h = (h ^ b as u64).wrapping_mul(0x100_0000_01b3);
@@ -245,7 +245,7 @@ fn png(img: &crate::base::image::Image) -> Result<Vec<u8>, ApiError> {
 // ---- endpoints ----
 
 /// `GET /api/session`: what the page needs to start.
-pub fn session(st: &State) -> Reply {
+pub(crate) fn session(st: &State) -> Reply {
     let scene = st.scene.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "paper_sphere.toml (built in)".into());
     Reply::ok_json(json!({
         "files": list_files(&st.roots, "brdf"),
@@ -296,7 +296,7 @@ fn list_files(roots: &Roots, ext: &str) -> Vec<String> {
 }
 
 /// `GET /api/file?path=…`: a served file's text and content hash.
-pub fn file(st: &State, path: &str) -> Result<Reply, ApiError> {
+pub(crate) fn file(st: &State, path: &str) -> Result<Reply, ApiError> {
     let p = st.roots.resolve(path)?;
     let bytes = read_limited(&p, crate::base::source::MAX_SOURCE_BYTES as u64)?;
     let hash = content_hash(&bytes);
@@ -314,7 +314,7 @@ fn read_limited(p: &Path, max: u64) -> Result<Vec<u8>, ApiError> {
 }
 
 /// `POST /api/compile {name, text}`: parameters (with ranges), inputs, the simplified formula, warnings.
-pub fn compile(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
+pub(crate) fn compile(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
     limited(st, move |st| {
         let (name, text) = formula_field(&req)?;
         let c = st.compiled(&name, &text)?;
@@ -361,7 +361,7 @@ struct CompiledParam {
 
 /// `POST /api/render {name, text, params, size}`: the served scene with every material's formula replaced by
 /// the page's, parameters live; PNG with the server-side time in `X-Lobe-Render-Ms`.
-pub fn render(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
+pub(crate) fn render(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
     limited(st, move |st| {
         let t = Instant::now();
         let (name, text) = formula_field(&req)?;
@@ -381,7 +381,7 @@ pub fn render(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
 
 /// `POST /api/compare {a: {name, text}, b: {name, text}, params, size}`: A | B | heat map as PNG, the metrics
 /// (`manhattan`, `manhattan_covered`, `max_gray_diff`, `rmse`, `psnr`) as JSON in `X-Lobe-Metrics`.
-pub fn compare(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
+pub(crate) fn compare(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
     limited(st, move |st| {
         let a = formula_field(req.get("a").ok_or_else(|| ApiError::bad("missing `a`"))?)?;
         let b = formula_field(req.get("b").ok_or_else(|| ApiError::bad("missing `b`"))?)?;
@@ -400,7 +400,7 @@ pub fn compare(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
 }
 
 /// `POST /api/plot {formulas: [{name, text}…], params, polar}`: the lobes of up to four formulas.
-pub fn plot(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
+pub(crate) fn plot(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
     limited(st, move |st| {
         let set = params_field(&req)?;
         let polar = req.get("polar").and_then(Value::as_bool).unwrap_or(false);
@@ -429,7 +429,7 @@ pub fn plot(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
 /// `POST /api/analyze {name, text, params, reference: {name, text}}`: the energy coefficient, the maximum
 /// albedo (and its incidence angle), the papers' error metrics against the reference, ns/eval of the compiled
 /// kernel (scalar and batched JIT, interpreter) and its compile time.
-pub fn analyze(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
+pub(crate) fn analyze(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
     limited(st, move |st| {
         let (name, text) = formula_field(&req)?;
         let set = params_field(&req)?;
@@ -506,7 +506,7 @@ struct AnalyzeReply {
 
 /// `POST /api/save {path, text, hash, force}`: writes a served `.brdf` file atomically. Refused with 409 when
 /// the file on disk no longer has the `hash` the page loaded (someone else changed it), unless `force`.
-pub fn save(st: &State, req: &Value) -> Result<Reply, ApiError> {
+pub(crate) fn save(st: &State, req: &Value) -> Result<Reply, ApiError> {
     let path = str_field(req, "path")?;
     let text = str_field(req, "text")?;
     let force = req.get("force").and_then(Value::as_bool).unwrap_or(false);
@@ -528,7 +528,7 @@ pub fn save(st: &State, req: &Value) -> Result<Reply, ApiError> {
 
 /// `GET /render.png?file=SCENE&set=n=50&size=256`: exactly what rendering SCENE with n = 50 at size 256 gives (JIT,
 /// linear transfer, default tiles and threads), so the bytes equal the CLI's output file.
-pub fn render_png(st: &Arc<State>, query: &str) -> Result<Reply, ApiError> {
+pub(crate) fn render_png(st: &Arc<State>, query: &str) -> Result<Reply, ApiError> {
     let mut file = None;
     let mut set = vec![];
     let mut size = None;

@@ -21,15 +21,15 @@ use std::sync::Arc;
 use std::time::Duration;
 
 /// Largest request head (request line and headers).
-pub const MAX_HEAD: usize = 16 << 10;
+pub(crate) const MAX_HEAD: usize = 16 << 10;
 /// Connections served at once (a browser opens about six per host).
-pub const MAX_CONNECTIONS: usize = 32;
+pub(crate) const MAX_CONNECTIONS: usize = 32;
 /// How long a connection may sit idle, or take to send a request or read a response.
-pub const IDLE: Duration = Duration::from_secs(30);
+pub(crate) const IDLE: Duration = Duration::from_secs(30);
 
 /// A parsed request.
 #[derive(Debug)]
-pub struct Request {
+pub(crate) struct Request {
     pub method: String,
     /// The path without the query.
     pub path: String,
@@ -41,14 +41,14 @@ pub struct Request {
 
 impl Request {
     /// A header's value (names compare case-insensitively).
-    pub fn header(&self, name: &str) -> Option<&str> {
+    pub(crate) fn header(&self, name: &str) -> Option<&str> {
         self.headers.iter().find(|(k, _)| k.eq_ignore_ascii_case(name)).map(|(_, v)| v.as_str())
     }
 }
 
 /// Listens on `addr` and answers every request with `handler` until the process ends. Returns the bound
 /// address and the accept thread.
-pub fn listen(
+pub(crate) fn listen(
     addr: SocketAddr,
     body_cap: usize,
     handler: Arc<dyn Fn(&Request) -> Reply + Send + Sync>,
@@ -148,7 +148,7 @@ fn reason(status: u16) -> &'static str {
 
 /// Reads one request; `Ok(None)` when the client closed (or idled out) between requests. The flag says
 /// whether the connection stays open afterwards.
-pub fn read_request(input: &mut dyn BufRead, body_cap: usize) -> Result<Option<(Request, bool)>, ApiError> {
+pub(crate) fn read_request(input: &mut dyn BufRead, body_cap: usize) -> Result<Option<(Request, bool)>, ApiError> {
     let mut head = Vec::new();
     loop {
         let before = head.len();
@@ -215,7 +215,7 @@ pub fn read_request(input: &mut dyn BufRead, body_cap: usize) -> Result<Option<(
 
 /// A response: status, content type, extra headers, body.
 #[derive(Debug)]
-pub struct Reply {
+pub(crate) struct Reply {
     pub status: u16,
     pub content_type: &'static str,
     pub headers: Vec<(&'static str, String)>,
@@ -223,23 +223,23 @@ pub struct Reply {
 }
 
 impl Reply {
-    pub fn json(status: u16, v: &serde_json::Value) -> Reply {
+    pub(crate) fn json(status: u16, v: &serde_json::Value) -> Reply {
         Reply { status, content_type: "application/json", headers: vec![], body: v.to_string().into_bytes() }
     }
-    pub fn ok_json(v: serde_json::Value) -> Reply {
+    pub(crate) fn ok_json(v: serde_json::Value) -> Reply {
         Reply::json(200, &v)
     }
     /// A typed report as the JSON body (a serialisation failure, which lobe's report types do not have, is a 500).
-    pub fn ok_report<T: serde::Serialize>(v: &T) -> Reply {
+    pub(crate) fn ok_report<T: serde::Serialize>(v: &T) -> Reply {
         match serde_json::to_vec(v) {
             Ok(body) => Reply { status: 200, content_type: "application/json", headers: vec![], body },
             Err(e) => Reply::json(500, &serde_json::json!({ "error": format!("cannot write JSON: {e}") })),
         }
     }
-    pub fn bytes(content_type: &'static str, body: Vec<u8>) -> Reply {
+    pub(crate) fn bytes(content_type: &'static str, body: Vec<u8>) -> Reply {
         Reply { status: 200, content_type, headers: vec![], body }
     }
-    pub fn header(mut self, k: &'static str, v: String) -> Reply {
+    pub(crate) fn header(mut self, k: &'static str, v: String) -> Reply {
         self.headers.push((k, v));
         self
     }
@@ -249,7 +249,7 @@ impl Reply {
 /// `error` and `hint` are the [`Diagnostic`]'s message and hints in [`Plain`] words (the page has no flags);
 /// `diagnostics` are [`crate::Diagnostics::to_json`] items (file, line, col, caret text), as the CLI prints.
 #[derive(Debug)]
-pub struct ApiError {
+pub(crate) struct ApiError {
     pub status: u16,
     /// Boxed: the error travels in every handler's `Result`.
     pub error: Box<Diagnostic>,
@@ -257,17 +257,17 @@ pub struct ApiError {
 }
 
 impl ApiError {
-    pub fn new(status: u16, error: impl Into<String>) -> ApiError {
+    pub(crate) fn new(status: u16, error: impl Into<String>) -> ApiError {
         ApiError { status, error: Box::new(Diagnostic::error(error)), diagnostics: None }
     }
-    pub fn hint(mut self, h: impl Into<String>) -> ApiError {
+    pub(crate) fn hint(mut self, h: impl Into<String>) -> ApiError {
         self.error.hints.push(h.into().into());
         self
     }
-    pub fn bad(error: impl Into<String>) -> ApiError {
+    pub(crate) fn bad(error: impl Into<String>) -> ApiError {
         ApiError::new(400, error)
     }
-    pub fn reply(&self) -> Reply {
+    pub(crate) fn reply(&self) -> Reply {
         let mut v = serde_json::json!({ "error": self.error.text(&Plain) });
         let hints = self.error.hint_texts(&Plain);
         if !hints.is_empty() {
@@ -296,7 +296,7 @@ impl From<Diagnostic> for ApiError {
 }
 
 /// Decodes `%XX` and `+` in a query component. Invalid escapes are kept as written; invalid UTF-8 is refused.
-pub fn percent_decode(s: &str) -> Result<String, ApiError> {
+pub(crate) fn percent_decode(s: &str) -> Result<String, ApiError> {
     let b = s.as_bytes();
     let mut out = Vec::with_capacity(b.len());
     let mut i = 0;
@@ -316,7 +316,7 @@ pub fn percent_decode(s: &str) -> Result<String, ApiError> {
 }
 
 /// `a=1&b=x%20y` → pairs, decoded, in order.
-pub fn query_pairs(q: &str) -> Result<Vec<(String, String)>, ApiError> {
+pub(crate) fn query_pairs(q: &str) -> Result<Vec<(String, String)>, ApiError> {
     q.split('&')
         .filter(|p| !p.is_empty())
         .map(|p| {
@@ -327,19 +327,19 @@ pub fn query_pairs(q: &str) -> Result<Vec<(String, String)>, ApiError> {
 }
 
 /// A JSON request body.
-pub fn json_body(bytes: &[u8]) -> Result<serde_json::Value, ApiError> {
+pub(crate) fn json_body(bytes: &[u8]) -> Result<serde_json::Value, ApiError> {
     serde_json::from_slice(bytes).map_err(|e| ApiError::bad(format!("the request body is not valid JSON: {e}")))
 }
 
 /// The directories a server may read and write under, canonicalised once at start.
 #[derive(Clone, Debug)]
-pub struct Roots {
+pub(crate) struct Roots {
     dirs: Vec<PathBuf>,
 }
 
 impl Roots {
     /// Canonicalises `dirs` (each must exist).
-    pub fn new(dirs: &[PathBuf]) -> Result<Roots, String> {
+    pub(crate) fn new(dirs: &[PathBuf]) -> Result<Roots, String> {
         let mut out: Vec<PathBuf> = vec![];
         for d in dirs {
             let c = std::fs::canonicalize(d).map_err(|e| format!("cannot serve `{}`: {e}", d.display()))?;
@@ -353,7 +353,7 @@ impl Roots {
         Ok(Roots { dirs: out })
     }
 
-    pub fn dirs(&self) -> &[PathBuf] {
+    pub(crate) fn dirs(&self) -> &[PathBuf] {
         &self.dirs
     }
 
@@ -361,7 +361,7 @@ impl Roots {
     /// Refused: `..` components (400, before touching the file system), anything that does not exist (404),
     /// and a path that — after resolving symbolic links — leaves every served directory (403), which covers
     /// absolute paths elsewhere and links pointing out.
-    pub fn resolve(&self, requested: &str) -> Result<PathBuf, ApiError> {
+    pub(crate) fn resolve(&self, requested: &str) -> Result<PathBuf, ApiError> {
         let p = Path::new(requested);
         if requested.is_empty() {
             return Err(ApiError::bad("no file named").hint("pass a path such as examples/brdfs/phong.brdf"));

@@ -26,9 +26,9 @@
 //! encoding; for the paper sphere at 512² that is a few milliseconds of shading and a few of encoding
 //! (BENCHMARKS.md has the measured frame time in a real browser). Compiling is ~0.1 ms per formula text.
 
-pub mod api;
-pub mod http;
-pub mod page;
+pub(crate) mod api;
+pub(crate) mod http;
+pub(crate) mod page;
 
 use http::{ApiError, Reply, Roots};
 use std::net::SocketAddr;

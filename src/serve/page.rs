@@ -4,7 +4,7 @@
 use super::http::Reply;
 
 /// A page asset by name; unknown names are a 404-shaped reply.
-pub fn asset(name: &str) -> Reply {
+pub(crate) fn asset(name: &str) -> Reply {
     let (ct, body): (&'static str, &'static str) = match name {
         "index.html" => ("text/html; charset=utf-8", include_str!("../../assets/serve/index.html")),
         "app.js" => ("text/javascript; charset=utf-8", include_str!("../../assets/serve/app.js")),

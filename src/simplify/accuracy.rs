@@ -113,7 +113,7 @@ pub enum Rule {
 }
 
 impl Rule {
-    pub const ALL: [Rule; 11] = [
+    pub(crate) const ALL: [Rule; 11] = [
         Rule::SplitSqrt,
         Rule::SmithG1,
         Rule::CancelMin,
@@ -128,7 +128,7 @@ impl Rule {
         Rule::CompensatedExp,
     ];
 
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             Rule::SplitSqrt => "split-sqrt",
             Rule::QuotientChain => "quotient-chain",
@@ -145,7 +145,7 @@ impl Rule {
     }
 
     /// What the rule does, for reports.
-    pub fn describe(self) -> &'static str {
+    pub(crate) fn describe(self) -> &'static str {
         match self {
             Rule::SplitSqrt => "sqrt(a*b) as sqrt(a)*sqrt(b): no underflow of a*b",
             Rule::QuotientChain => "products/quotients reassociated: divide by each tiny-or-huge factor separately",
@@ -198,7 +198,7 @@ impl Rule {
 /// subtree qualifies. The chooser simplifies it with the bake set, so a baked parameter folds the same
 /// expression the live kernel's prepared block computes. Free per point: the block is computed once per
 /// parameter set.
-pub fn compensated_params(f: &Formula) -> Option<Formula> {
+pub(crate) fn compensated_params(f: &Formula) -> Option<Formula> {
     let (ir, root, fired) = super::cancel::compensated_params(f);
     fired.then(|| Formula { ir, root, ..f.clone() })
 }
@@ -369,10 +369,10 @@ fn underflow_guard(f: &Formula, ir: &mut Ir, map: &[NodeId], x: NodeId, k: u32, 
 /// How much multiplicity (module docs of [`compensated_powers`]) the chain's last, uncompensated steps may
 /// have: their roundings bound the result's relative error by 3u, under 3 ulp, so with live `pow` (≤ 0.51 ulp
 /// measured) baked and live stay within the 4 ulp.
-pub const UNTAILED_WEIGHT: u32 = 3;
+pub(crate) const UNTAILED_WEIGHT: u32 = 3;
 
 /// Static cost of a formula's live nodes (module docs).
-pub fn cost(f: &Formula) -> f64 {
+pub(crate) fn cost(f: &Formula) -> f64 {
     // Nodes that read no input are the prepared block's, computed once per parameter set, not per point.
     let inv = f.ir.invariant();
     let uses = f.ir.use_counts(f.root);

@@ -10,13 +10,13 @@ use crate::builtins::Builtin;
 use crate::ir::{BinOp, Ir, NodeId};
 
 /// Appends to `ir`, each node spanning `sp`.
-pub struct IrEmit<'a> {
+pub(crate) struct IrEmit<'a> {
     pub ir: &'a mut Ir,
     pub sp: Span,
 }
 
 impl<'a> IrEmit<'a> {
-    pub fn new(ir: &'a mut Ir, sp: Span) -> IrEmit<'a> {
+    pub(crate) fn new(ir: &'a mut Ir, sp: Span) -> IrEmit<'a> {
         IrEmit { ir, sp }
     }
 }

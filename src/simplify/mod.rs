@@ -81,9 +81,9 @@
 
 pub mod accuracy;
 mod cancel;
-pub mod emit;
+pub(crate) mod emit;
 mod powi;
-pub mod range;
+pub(crate) mod range;
 
 use crate::builtins::Builtin;
 use crate::base::span::Span;
@@ -281,7 +281,7 @@ pub fn simplify_with(f: &Formula, bake: &[(usize, f64)], policy: &Policy) -> (Fo
 
 /// The range of every node of `f` under `policy`, computed without rewriting (what the accuracy pass's
 /// guards read). `f`'s arena is hash-consed, so its ids are kept.
-pub fn node_ranges(f: &Formula, policy: &Policy) -> Vec<Range> {
+pub(crate) fn node_ranges(f: &Formula, policy: &Policy) -> Vec<Range> {
     let mut rw = Rewriter::new(&f.params, &[], policy);
     for id in f.ir.ids() {
         rw.push(*f.ir.node(id), f.ir.span(id));

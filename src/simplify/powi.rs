@@ -37,7 +37,7 @@ pub const MAX_EXPONENT: u32 = 1024;
 
 /// The steps computing x^k (k ≥ 1): each step `(a, b)` makes x^(a+b) from the already computed x^a and x^b.
 /// The last step produces x^k; an empty list means k = 1.
-pub fn steps(k: u32) -> Vec<(u32, u32)> {
+pub(crate) fn steps(k: u32) -> Vec<(u32, u32)> {
     let chain: Vec<u32> = if (k as usize) < CHAINS.len() {
         CHAINS[k as usize].to_vec()
     } else {
@@ -69,14 +69,14 @@ pub fn steps(k: u32) -> Vec<(u32, u32)> {
 }
 
 /// Number of multiplications for x^k.
-pub fn cost(k: u32) -> usize {
+pub(crate) fn cost(k: u32) -> usize {
     steps(k).len()
 }
 
 /// How many times each step's power enters x^k (indexed like [`steps`]): to first order the chain's relative
 /// error is Σ mⱼ·δⱼ over the steps' rounding errors δⱼ (|δⱼ| ≤ u), and Σ mⱼ = k − 1 for every chain. The early
 /// steps weigh most (binary x^1000: x² and x³ enter 256 times each, the last step once).
-pub fn multiplicities(k: u32) -> Vec<u32> {
+pub(crate) fn multiplicities(k: u32) -> Vec<u32> {
     let st = steps(k);
     let mut m = vec![0u32; st.len()];
     if let Some(last) = m.last_mut() {

@@ -12,11 +12,11 @@ use crate::builtins::Builtin;
 use std::f64::consts::{FRAC_PI_2, PI};
 
 /// Ulps by which bounds computed through a libm function are widened (glibc documents < 1–2 ulp).
-pub const LIBM_SLACK: u32 = 4;
+pub(crate) const LIBM_SLACK: u32 = 4;
 
 /// Bounds on the values a node can take; see the module docs.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Range {
+pub(crate) struct Range {
     /// Smallest non-NaN value (may be −inf).
     pub lo: f64,
     /// Largest non-NaN value (may be +inf).
@@ -47,9 +47,9 @@ fn up(mut v: f64, n: u32) -> f64 {
 
 impl Range {
     /// Anything, NaN included.
-    pub const TOP: Range = Range { lo: f64::NEG_INFINITY, hi: f64::INFINITY, nan: true, negz: true };
+    pub(crate) const TOP: Range = Range { lo: f64::NEG_INFINITY, hi: f64::INFINITY, nan: true, negz: true };
 
-    pub fn new(lo: f64, hi: f64, nan: bool, negz: bool) -> Range {
+    pub(crate) fn new(lo: f64, hi: f64, nan: bool, negz: bool) -> Range {
         if lo.is_nan() || hi.is_nan() || lo > hi {
             return Range::TOP;
         }
@@ -57,7 +57,7 @@ impl Range {
         Range { lo: lo + 0.0, hi: hi + 0.0, nan, negz }
     }
 
-    pub fn constant(v: f64) -> Range {
+    pub(crate) fn constant(v: f64) -> Range {
         if v.is_nan() {
             // NaN only; TOP is sound (and a NaN constant is rare enough not to matter).
             return Range::TOP;
@@ -66,27 +66,27 @@ impl Range {
     }
 
     /// Every non-NaN value has a clear sign bit (≥ +0).
-    pub fn nonneg(self) -> bool {
+    pub(crate) fn nonneg(self) -> bool {
         self.lo >= 0.0 && !self.negz
     }
     /// No NaN and no infinity.
-    pub fn finite(self) -> bool {
+    pub(crate) fn finite(self) -> bool {
         !self.nan && self.lo.is_finite() && self.hi.is_finite()
     }
-    pub fn contains_zero(self) -> bool {
+    pub(crate) fn contains_zero(self) -> bool {
         self.lo <= 0.0 && self.hi >= 0.0
     }
     /// Zero is impossible (neither sign).
-    pub fn excludes_zero(self) -> bool {
+    pub(crate) fn excludes_zero(self) -> bool {
         !self.contains_zero()
     }
-    pub fn within(self, lo: f64, hi: f64) -> bool {
+    pub(crate) fn within(self, lo: f64, hi: f64) -> bool {
         self.lo >= lo && self.hi <= hi
     }
 
     /// `x·x` of one value: never below +0 ((−0)² = +0), NaN only from NaN (inf² = inf). The corners of `x·y`
     /// would allow lo·hi < 0 for a range containing zero.
-    pub fn square(self) -> Range {
+    pub(crate) fn square(self) -> Range {
         let (a, b) = (self.lo * self.lo, self.hi * self.hi);
         let lo = if self.contains_zero() { 0.0 } else { a.min(b) };
         Range::new(lo, a.max(b), self.nan, false)
@@ -169,11 +169,11 @@ impl Range {
         Range { negz: Range::sign_negz(a, b, r), ..r }
     }
 
-    pub fn min(self, b: Range) -> Range {
+    pub(crate) fn min(self, b: Range) -> Range {
         Range::new(self.lo.min(b.lo), self.hi.min(b.hi), self.nan || b.nan, self.negz || b.negz)
     }
 
-    pub fn max(self, b: Range) -> Range {
+    pub(crate) fn max(self, b: Range) -> Range {
         let a = self;
         // IEEE maximum returns −0 only when one is −0 and the other is −0 or below.
         let negz = (a.negz && (b.negz || b.lo < 0.0)) || (b.negz && (a.negz || a.lo < 0.0));
@@ -181,7 +181,7 @@ impl Range {
     }
 
     /// Range of a builtin call (`args` has `f.arity()` ranges; `konst` holds argument constants if known).
-    pub fn call(f: Builtin, args: &[Range], konst: &[Option<f64>]) -> Range {
+    pub(crate) fn call(f: Builtin, args: &[Range], konst: &[Option<f64>]) -> Range {
         let a = args[0];
         let inf = a.lo.is_infinite() || a.hi.is_infinite();
         match f {

@@ -15,7 +15,7 @@ use std::sync::Arc;
 
 /// Structural key of a compacted IR.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
-pub struct Key {
+pub(crate) struct Key {
     nodes: Vec<Node>,
     root: u32,
     mode: Mode,
@@ -25,19 +25,19 @@ pub struct Key {
 
 impl Key {
     /// `ir` must be compacted (nodes reachable from `root` only).
-    pub fn new(ir: &Ir, root: crate::ir::NodeId, mode: Mode) -> Key {
+    pub(crate) fn new(ir: &Ir, root: crate::ir::NodeId, mode: Mode) -> Key {
         Key { nodes: ir.nodes().to_vec(), root: root.0, mode, more: vec![] }
     }
 
     /// The key of a compacted program with several roots (`roots` non-empty).
-    pub fn of_roots(ir: &Ir, roots: &[crate::ir::NodeId], mode: Mode) -> Key {
+    pub(crate) fn of_roots(ir: &Ir, roots: &[crate::ir::NodeId], mode: Mode) -> Key {
         let more = roots.iter().skip(1).map(|r| r.0).collect();
         Key { nodes: ir.nodes().to_vec(), root: roots.first().map_or(u32::MAX, |r| r.0), mode, more }
     }
 }
 
 /// A least-recently-used map from [`Key`] to shared values.
-pub struct Lru<V> {
+pub(crate) struct Lru<V> {
     map: HashMap<Key, (Arc<V>, u64)>,
     clock: u64,
     capacity: usize,
@@ -46,11 +46,11 @@ pub struct Lru<V> {
 }
 
 impl<V> Lru<V> {
-    pub fn new(capacity: usize) -> Lru<V> {
+    pub(crate) fn new(capacity: usize) -> Lru<V> {
         Lru { map: HashMap::new(), clock: 0, capacity, hits: 0, misses: 0 }
     }
 
-    pub fn get(&mut self, k: &Key) -> Option<Arc<V>> {
+    pub(crate) fn get(&mut self, k: &Key) -> Option<Arc<V>> {
         self.clock += 1;
         match self.map.get_mut(k) {
             Some((v, stamp)) => {
@@ -65,7 +65,7 @@ impl<V> Lru<V> {
         }
     }
 
-    pub fn insert(&mut self, k: Key, v: Arc<V>) {
+    pub(crate) fn insert(&mut self, k: Key, v: Arc<V>) {
         if self.capacity == 0 {
             return;
         }
@@ -79,19 +79,21 @@ impl<V> Lru<V> {
         self.map.insert(k, (v, self.clock));
     }
 
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.map.len()
     }
-    pub fn is_empty(&self) -> bool {
+
+    #[cfg(test)]
+    fn is_empty(&self) -> bool {
         self.map.is_empty()
     }
 
-    pub fn capacity(&self) -> usize {
+    pub(crate) fn capacity(&self) -> usize {
         self.capacity
     }
 
     /// Changes the bound (0 disables caching), evicting the oldest entries as needed.
-    pub fn set_capacity(&mut self, capacity: usize) {
+    pub(crate) fn set_capacity(&mut self, capacity: usize) {
         self.capacity = capacity;
         while self.map.len() > capacity {
             let oldest = self.map.iter().min_by_key(|(_, (_, s))| *s).map(|(k, _)| k.clone());

@@ -38,7 +38,7 @@
 // The one module allowed `unsafe`: calling and freeing generated code (each block has its `# Safety` note).
 #![allow(unsafe_code)]
 
-pub mod cache;
+pub(crate) mod cache;
 pub use codegen::OUTLINE_AT;
 mod codegen;
 
@@ -91,7 +91,7 @@ impl From<ModuleError> for JitError {
 
 impl JitError {
     /// The error as a diagnostic, with a hint to fall back to the interpreter.
-    pub fn to_diagnostic(&self) -> Diagnostic {
+    pub(crate) fn to_diagnostic(&self) -> Diagnostic {
         Diagnostic::error(self.to_string()).hint(crate::base::diag::Hint::UseInterpreter)
     }
 }
@@ -144,7 +144,7 @@ type BatchFn = unsafe extern "C" fn(*const *const f64, *const f64, *const f64, *
 /// The scalar kernel is compiled eagerly; the batched kernel (about 60% of the compile time: a loop and two
 /// copies of the body) is defined in the same module on the first batch call, so kernels that are only ever
 /// evaluated point by point (the numerical checks) never pay for it.
-pub struct Compiled {
+pub(crate) struct Compiled {
     /// The memory the entry points below point into.
     code: Code,
     scalar: ScalarFn,
@@ -304,7 +304,7 @@ impl Drop for Code {
 }
 
 /// Owns the reusable Cranelift contexts (one per thread, see [`with_jit`]).
-pub struct Jit {
+pub(crate) struct Jit {
     ctx: Context,
     fctx: FunctionBuilderContext,
     /// When set, the machine code listing of each function compiled is kept in `listing`.
@@ -319,7 +319,7 @@ impl Default for Jit {
 }
 
 impl Jit {
-    pub fn new() -> Jit {
+    pub(crate) fn new() -> Jit {
         Jit { ctx: Context::new(), fctx: FunctionBuilderContext::new(), disasm: false, listing: vec![] }
     }
 
@@ -394,7 +394,7 @@ impl Jit {
 
     /// Compiles a compacted IR (every node reachable from `root`, root last) into a fresh module. Only the
     /// scalar kernel (and the prepare function) is built now; the batched one on the first batch call.
-    pub fn translate(&mut self, ir: &Ir, root: NodeId, mode: Mode) -> Result<Compiled, JitError> {
+    pub(crate) fn translate(&mut self, ir: &Ir, root: NodeId, mode: Mode) -> Result<Compiled, JitError> {
         if root.index() >= ir.len() {
             return Err(JitError::Internal("root outside the arena".into()));
         }
@@ -431,7 +431,7 @@ thread_local! {
 }
 
 /// Runs `f` with this thread's [`Jit`] (a fresh one if it is already in use, e.g. re-entrantly).
-pub fn with_jit<R>(f: impl FnOnce(&mut Jit) -> R) -> R {
+pub(crate) fn with_jit<R>(f: impl FnOnce(&mut Jit) -> R) -> R {
     JIT.with(|j| match j.try_borrow_mut() {
         Ok(mut j) => f(&mut j),
         Err(_) => f(&mut Jit::new()),
@@ -439,7 +439,7 @@ pub fn with_jit<R>(f: impl FnOnce(&mut Jit) -> R) -> R {
 }
 
 /// Default bound of the compiled-code cache (entries; each is a few KiB of code).
-pub const DEFAULT_CACHE_CAPACITY: usize = 128;
+pub(crate) const DEFAULT_CACHE_CAPACITY: usize = 128;
 
 fn cache() -> &'static Mutex<cache::Lru<Compiled>> {
     static CACHE: OnceLock<Mutex<cache::Lru<Compiled>>> = OnceLock::new();
@@ -542,7 +542,7 @@ impl JitKernel {
 
     /// Compiles the batched kernel now rather than on the first batch call (e.g. before timing a render).
     /// Returns whether it is available (if not, batches run through the scalar kernel).
-    pub fn prepare_batch(&self) -> bool {
+    pub(crate) fn prepare_batch(&self) -> bool {
         self.code.batch().is_some()
     }
 
@@ -583,21 +583,17 @@ pub struct PreparedJit<'a> {
     params: Vec<f64>,
     /// `kernel.code.block_len` slots, computed from `params`.
     block: Vec<f64>,
-    kernel: &'a JitKernel,
+    /// Holds the borrow that keeps the code alive while this is used.
+    _kernel: &'a JitKernel,
 }
 
 impl PreparedJit<'_> {
     #[inline(always)]
-    pub fn eval(&self, x: &[f64; N_INPUTS]) -> f64 {
+    pub(crate) fn eval(&self, x: &[f64; N_INPUTS]) -> f64 {
         // Safety: `x` has the inputs the code may read; `params` has every slot it reads (padded to `n_params`
         // in `prepare`); `block` was computed from these `params` by this code's prepare function and has its
         // `block_len` slots; `scalar` is `kernel.code.scalar`, alive while `kernel` (borrowed by `self`) lives.
         unsafe { (self.scalar)(x.as_ptr(), self.params.as_ptr(), self.block.as_ptr()) }
-    }
-
-    /// The kernel this was prepared from.
-    pub fn kernel(&self) -> &JitKernel {
-        self.kernel
     }
 }
 
@@ -606,7 +602,7 @@ impl Evaluator for JitKernel {
         let params = if params.len() >= self.n_params { params.to_vec() } else { self.padded(params) };
         let mut block = vec![0.0; self.code.block_len];
         self.code.prepare_into(&params, &mut block);
-        Prepared::Jit(PreparedJit { scalar: self.scalar, params, block, kernel: self })
+        Prepared::Jit(PreparedJit { scalar: self.scalar, params, block, _kernel: self })
     }
 
     fn eval(&self, x: &[f64; N_INPUTS], params: &[f64]) -> f64 {
@@ -666,7 +662,7 @@ fn shade_cache() -> &'static Mutex<cache::Lru<ShadeCode>> {
 
 /// Compiles a multi-output program (through a cache keyed like the kernels': the IR's structure, its roots and
 /// the math mode), so a frame whose parameters changed reuses the code.
-pub fn shade_code(p: &crate::backend::program::Program, mode: Mode) -> Result<Arc<ShadeCode>, JitError> {
+pub(crate) fn shade_code(p: &crate::backend::program::Program, mode: Mode) -> Result<Arc<ShadeCode>, JitError> {
     // The roots, then the shape (output count, each region's), so two programs that list the same roots
     // differently never share code.
     let mut roots = p.roots();
@@ -732,7 +728,7 @@ impl Jit {
 impl ShadeCode {
     /// The prepared parameter block for `params` (computed once per render and material; a missing parameter
     /// is NaN, as in the interpreter).
-    pub fn prepare(&self, params: &[f64]) -> Vec<f64> {
+    pub(crate) fn prepare(&self, params: &[f64]) -> Vec<f64> {
         let mut p = params.to_vec();
         p.resize(p.len().max(self.params_read), f64::NAN);
         let mut block = vec![0.0; self.block_len];
@@ -747,7 +743,7 @@ impl ShadeCode {
     /// Runs the program on `len` elements. Checked: at least the program's columns, each `len` long or more,
     /// one output per program output, each `len` long or more, `params` with every slot read, `block` from
     /// [`ShadeCode::prepare`].
-    pub fn run(&self, cols: &[&[f64]], params: &[f64], block: &[f64], outs: &mut [&mut [f64]], len: usize) -> Result<(), String> {
+    pub(crate) fn run(&self, cols: &[&[f64]], params: &[f64], block: &[f64], outs: &mut [&mut [f64]], len: usize) -> Result<(), String> {
         if cols.len() < self.columns || cols[..self.columns].iter().any(|c| c.len() < len) {
             return Err(format!("a program needs {} data columns of {len} elements", self.columns));
         }
@@ -777,7 +773,7 @@ impl ShadeCode {
 }
 
 /// Compiles `f` with the JIT and reports failure as a diagnostic on the formula's file.
-pub fn kernel_evaluator(f: &Formula, mode: Mode) -> Result<Arc<dyn Evaluator>, Diagnostic> {
+pub(crate) fn kernel_evaluator(f: &Formula, mode: Mode) -> Result<Arc<dyn Evaluator>, Diagnostic> {
     jit_kernel(f, mode).map(|k| Arc::new(k) as Arc<dyn Evaluator>).map_err(|e| e.to_diagnostic())
 }
 

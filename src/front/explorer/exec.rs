@@ -25,7 +25,7 @@ use crate::front::values::{Ty, Val, Values};
 use crate::ir::{BinOp, Formula, Ir, Meta, NodeId, ParamDecl};
 
 /// Most expression evaluations (counting every inlined copy) one file may take.
-pub const MAX_WORK: u64 = 2_000_000;
+pub(crate) const MAX_WORK: u64 = 2_000_000;
 /// Deepest chain of helper calls (GLSL has no recursion; this bounds the Rust stack).
 const MAX_CALLS: usize = 64;
 /// Deepest recursion of the lowering (nested expressions and blocks, summed over inlined calls): the parser
@@ -83,7 +83,7 @@ fn err(span: Span, msg: impl Into<String>, hint: &str) -> Diagnostic {
 }
 
 /// Lowers `BRDF` of the parsed shader into a formula with `params` (n first).
-pub fn lower(file: &str, src: &str, params: Vec<ParamDecl>, declared: &[Declared], items: &[Item], shader: Span) -> R<Formula> {
+pub(crate) fn lower(file: &str, src: &str, params: Vec<ParamDecl>, declared: &[Declared], items: &[Item], shader: Span) -> R<Formula> {
     let mut ir = Ir::new();
     let mut ex = Exec { vb: Values::new(&mut ir, shader), funcs: vec![], globals: vec![], work: 0, calls: 0, nest: 0 };
     for d in declared {

@@ -13,10 +13,10 @@ use crate::front::values::Cmp;
 use crate::ir::BinOp;
 
 /// Deepest nesting of expressions, statements and blocks accepted (the corpus needs under 20).
-pub const MAX_DEPTH: u32 = 200;
+pub(crate) const MAX_DEPTH: u32 = 200;
 
 #[derive(Clone, Debug, PartialEq)]
-pub enum Tok {
+pub(crate) enum Tok {
     /// A number and whether it is an integer literal (no `.`, no exponent): GLSL divides integers exactly.
     Num(f64, bool),
     Ident(String),
@@ -25,7 +25,7 @@ pub enum Tok {
 }
 
 #[derive(Clone, Debug)]
-pub struct Token {
+pub(crate) struct Token {
     pub tok: Tok,
     pub span: Span,
 }
@@ -37,7 +37,7 @@ const PUNCT: [&str; 37] = [
 ];
 
 /// Tokens of `src[start..end]`, spans absolute in `src`.
-pub fn lex(src: &str, start: usize, end: usize) -> Result<Vec<Token>, Diagnostic> {
+pub(crate) fn lex(src: &str, start: usize, end: usize) -> Result<Vec<Token>, Diagnostic> {
     let b = src.as_bytes();
     let mut i = start;
     let mut out = Vec::new();
@@ -119,7 +119,7 @@ pub fn lex(src: &str, start: usize, end: usize) -> Result<Vec<Token>, Diagnostic
 
 /// The value types of the subset; `Void` only as a function's result.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Type {
+pub(crate) enum Type {
     Float,
     Bool,
     Vec3,
@@ -127,7 +127,7 @@ pub enum Type {
 }
 
 impl Type {
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             Type::Float => "float",
             Type::Bool => "bool",
@@ -139,7 +139,7 @@ impl Type {
 
 /// A binary operator: arithmetic and comparisons as [`Values`](crate::front::values::Values) names them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Op {
+pub(crate) enum Op {
     Arith(BinOp),
     Cmp(Cmp),
     And,
@@ -163,14 +163,14 @@ const BINARY: [(&str, Op, u8); 12] = [
 ];
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Unary {
+pub(crate) enum Unary {
     Neg,
     Plus,
     Not,
 }
 
 #[derive(Clone, Debug)]
-pub struct Expr {
+pub(crate) struct Expr {
     pub kind: ExprKind,
     pub span: Span,
     /// Height of the tree below (a leaf is 1); bounded by [`MAX_DEPTH`].
@@ -178,7 +178,7 @@ pub struct Expr {
 }
 
 #[derive(Clone, Debug)]
-pub enum ExprKind {
+pub(crate) enum ExprKind {
     /// A literal and whether it is an integer.
     Num(f64, bool),
     Bool(bool),
@@ -195,21 +195,21 @@ pub enum ExprKind {
 
 /// What an assignment writes: a variable or one component of it.
 #[derive(Clone, Debug)]
-pub struct Target {
+pub(crate) struct Target {
     pub name: String,
     pub span: Span,
     pub component: Option<Box<Expr>>,
 }
 
 #[derive(Clone, Debug)]
-pub struct Declarator {
+pub(crate) struct Declarator {
     pub name: String,
     pub span: Span,
     pub init: Option<Expr>,
 }
 
 #[derive(Clone, Debug)]
-pub enum Stmt {
+pub(crate) enum Stmt {
     Decl { ty: Type, konst: bool, vars: Vec<Declarator> },
     Assign { target: Target, op: Option<Op>, value: Expr, span: Span },
     If { cond: Expr, then: Vec<Stmt>, els: Option<Vec<Stmt>> },
@@ -219,7 +219,7 @@ pub enum Stmt {
 }
 
 #[derive(Clone, Debug)]
-pub struct Func {
+pub(crate) struct Func {
     pub name: String,
     pub name_span: Span,
     pub ret: Type,
@@ -228,7 +228,7 @@ pub struct Func {
 }
 
 #[derive(Clone, Debug)]
-pub enum Item {
+pub(crate) enum Item {
     Global { ty: Type, konst: bool, vars: Vec<Declarator> },
     Func(Func),
 }
@@ -236,7 +236,7 @@ pub enum Item {
 type R<T> = Result<T, Diagnostic>;
 
 /// Parses the shader's tokens into items (globals and functions, in source order).
-pub fn parse(toks: &[Token]) -> R<Vec<Item>> {
+pub(crate) fn parse(toks: &[Token]) -> R<Vec<Item>> {
     let mut p = Parser { toks, pos: 0, depth: 0 };
     let mut items = Vec::new();
     while p.peek() != &Tok::Eof {
@@ -735,7 +735,7 @@ fn not_assignable(span: Span) -> Diagnostic {
 }
 
 /// The component index of a one-letter swizzle (`x`/`r`/`s` → 0, …).
-pub fn component_of(letter: &str, span: Span) -> R<usize> {
+pub(crate) fn component_of(letter: &str, span: Span) -> R<usize> {
     match letter {
         "x" | "r" | "s" => Ok(0),
         "y" | "g" | "t" => Ok(1),

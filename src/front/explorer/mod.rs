@@ -22,22 +22,22 @@
 //! hash-consed arena shares what repeats). Lowering stops at [`exec::MAX_WORK`] expression evaluations so a file
 //! whose helpers call each other twice per level cannot expand exponentially.
 
-pub mod exec;
-pub mod glsl;
+pub(crate) mod exec;
+pub(crate) mod glsl;
 
 use crate::base::diag::{Diagnostic, Diagnostics};
 use crate::base::span::Span;
 use crate::ir::{ParamDecl, ParamKind};
 
 /// Whether `src` is a BRDF Explorer file rather than lobe's own language.
-pub fn is_explorer(src: &str) -> bool {
+pub(crate) fn is_explorer(src: &str) -> bool {
     let first = src.lines().map(str::trim).find(|l| !l.is_empty() && !l.starts_with('#'));
     first == Some("analytic") || src.lines().any(|l| l.trim() == "::begin shader")
 }
 
 /// A declared parameter and, for a colour, its first index; `index` is into the formula's parameter list.
 #[derive(Clone, Debug)]
-pub struct Declared {
+pub(crate) struct Declared {
     pub name: String,
     pub span: Span,
     pub kind: glsl::Type,
@@ -52,7 +52,7 @@ struct Sections {
 }
 
 /// Parses and lowers a BRDF Explorer file; on success also returns warnings (possibly none).
-pub fn parse(file: &str, src: &str) -> Result<(crate::ir::Formula, Diagnostics), Diagnostics> {
+pub(crate) fn parse(file: &str, src: &str) -> Result<(crate::ir::Formula, Diagnostics), Diagnostics> {
     let mut warnings = Diagnostics::new(file, src);
     let fail = |d: Diagnostic| Diagnostics::single_in(file, src, d);
     let s = sections(src, &mut warnings).map_err(fail)?;

@@ -76,7 +76,7 @@ pub fn compile_channels(f: crate::ir::Formula, opts: &crate::Options) -> Result<
 impl CompiledBrdf {
     /// A material's kernels from a formula's channel kernels ([`crate::ir::Formula::channels`] order: one, or
     /// red, green, blue).
-    pub fn from_kernels(ks: &[Arc<crate::Kernel>]) -> CompiledBrdf {
+    pub(crate) fn from_kernels(ks: &[Arc<crate::Kernel>]) -> CompiledBrdf {
         let dynamic = |k: &Arc<crate::Kernel>| k.clone() as Arc<dyn Evaluator>;
         CompiledBrdf {
             evaluator: dynamic(&ks[0]),

@@ -115,7 +115,7 @@ pub struct Geometry {
 
 impl Geometry {
     /// The scene file's name, as diagnostics show it.
-    pub fn name(&self) -> &str {
+    pub(crate) fn name(&self) -> &str {
         &self.name
     }
 
@@ -137,7 +137,7 @@ impl Geometry {
 
 /// The dotted key a byte offset of the TOML text belongs to, for messages: the key on its line (if the
 /// offset is at or after `key =`) under the nearest `[table]` / `[[array]]` header above it.
-pub fn key_at(src: &str, offset: usize) -> Option<String> {
+pub(crate) fn key_at(src: &str, offset: usize) -> Option<String> {
     let offset = offset.min(src.len());
     let line_start = src[..offset].rfind('\n').map(|i| i + 1).unwrap_or(0);
     let line = src[line_start..].lines().next().unwrap_or("");
@@ -195,7 +195,7 @@ pub(in crate::render) fn parse_geometry_deferred(name: &str, src: &str, base: &P
 }
 
 /// Largest scene file read: a scene is a page of TOML (meshes live in their own files).
-pub const MAX_SCENE_BYTES: u64 = 4 << 20;
+pub(crate) const MAX_SCENE_BYTES: u64 = 4 << 20;
 
 fn read_scene(path: &Path) -> Result<(String, String, PathBuf), Diagnostics> {
     use crate::base::source::{read_regular_file, ReadError};
