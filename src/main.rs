@@ -44,9 +44,25 @@ enum Cmd {
     Serve(cli::serve::ServeArgs),
 }
 
+/// A reader that stops early (`lobe check … | head -1`) closes the pipe, and the next write to it fails with
+/// EPIPE, which `print!` reports by panicking. The command did nothing wrong: end quietly with the shell's status
+/// for a broken pipe (128 + SIGPIPE), as a C program killed by SIGPIPE would.
+fn quiet_on_broken_pipe() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let p = info.payload();
+        let msg = p.downcast_ref::<String>().map(String::as_str).or_else(|| p.downcast_ref::<&str>().copied()).unwrap_or("");
+        if msg.contains("failed printing to std") && msg.contains("os error 32") {
+            std::process::exit(141);
+        }
+        default(info);
+    }));
+}
+
 fn main() {
     // A killed write must not leave `.NAME.lobe-tmp-PID` files behind.
     lobe::base::output::clean_up_on_signals();
+    quiet_on_broken_pipe();
     // `lobe check --sweep FILE` is the spelling of `lobe sweep FILE`.
     let mut args: Vec<std::ffi::OsString> = std::env::args_os().collect();
     if args.get(1).is_some_and(|a| a == "check") && args.iter().any(|a| a == "--sweep") {

@@ -307,3 +307,28 @@ fn bench_measures_both_math_modes_against_the_precise_interpreter() {
     let fast = row("fast")["max_rel_vs_precise"].as_f64().unwrap();
     assert!(fast > 0.0 && fast < 1e-5, "fast Gaussian vs precise: {fast}");
 }
+
+/// A reader that closes the pipe early (`lobe eval … | head -1`) ends lobe quietly: exit 0 or 141 (the
+/// broken-pipe status), never a panic message. 200 000 output lines are far more than a pipe buffers, so the
+/// child is still writing when the pipe closes.
+#[test]
+fn a_closed_stdout_pipe_ends_quietly() {
+    use std::io::{BufRead, BufReader};
+    let rows: String = std::iter::once("NH\n".to_string()).chain((0..200_000).map(|i| format!("{}\n", (i % 1000) as f64 / 1000.0))).collect();
+    let points = std::env::temp_dir().join(format!("lobe-pipe-{}.csv", std::process::id()));
+    std::fs::write(&points, rows).unwrap();
+    let mut c = Command::new(env!("CARGO_BIN_EXE_lobe"));
+    c.args(["eval", "examples/brdfs/blinn.brdf", "--set", "n=20", "--points", points.to_str().unwrap()]);
+    c.current_dir(env!("CARGO_MANIFEST_DIR")).stdout(Stdio::piped()).stderr(Stdio::piped()).stdin(Stdio::null());
+    let mut child = c.spawn().unwrap();
+    let mut out = BufReader::new(child.stdout.take().unwrap());
+    let mut first = String::new();
+    out.read_line(&mut first).unwrap();
+    drop(out);
+    let o = child.wait_with_output().unwrap();
+    let _ = std::fs::remove_file(&points);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!first.trim().is_empty(), "no first line");
+    assert!(matches!(o.status.code(), Some(0) | Some(141)), "status {:?}, stderr:\n{e}", o.status);
+    assert!(!e.contains("panicked"), "stderr:\n{e}");
+}
