@@ -39,7 +39,7 @@ pub struct EnergyArgs {
     #[arg(long)]
     pub range: Option<String>,
     /// Step of the --range sweep.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     pub step: f64,
     /// A .brdf whose value is a fitted coef(n, params…) to score against the exact one (needs --range).
     #[arg(long, requires = "range", conflicts_with = "against_expr")]

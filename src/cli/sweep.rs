@@ -20,7 +20,7 @@ pub struct SweepArgs {
     #[command(flatten)]
     pub set: Params,
     /// Values above this are counted as over the bound.
-    #[arg(long, default_value_t = 1e6)]
+    #[arg(long, default_value_t = 1e6, allow_negative_numbers = true)]
     pub bound: f64,
     /// Evaluation budget (the full grid is subsampled above it).
     #[arg(long, default_value_t = 2_000_000, value_parser = clap::value_parser!(u64).range(1..))]
@@ -63,8 +63,8 @@ pub fn run(a: &SweepArgs) -> Result<(), CliError> {
             return Err(CliError::hint(format!("--deny: unknown kind `{d}`"), "kinds are nan, inf, negative, bound"));
         }
     }
-    if !(a.bound.is_finite() || a.bound == f64::INFINITY) {
-        return Err(CliError::hint("--bound must be a number", "e.g. --bound 1e6"));
+    if a.bound.is_nan() || a.bound <= 0.0 {
+        return Err(CliError::hint(format!("--bound {} must be a positive number", a.bound), "e.g. --bound 1e6 (values above it are counted)"));
     }
     let f = a.formula.load()?;
     // A colour formula is swept channel by channel (each a scalar formula); --json then gives

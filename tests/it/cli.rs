@@ -332,3 +332,12 @@ fn a_closed_stdout_pipe_ends_quietly() {
     assert!(matches!(o.status.code(), Some(0) | Some(141)), "status {:?}, stderr:\n{e}", o.status);
     assert!(!e.contains("panicked"), "stderr:\n{e}");
 }
+
+/// Negative numbers after a flag are its value, checked by lobe, not a flag clap refuses.
+#[test]
+fn negative_flag_values_get_lobes_own_errors() {
+    let o = lobe(&["sweep", "examples/brdfs/blinn.brdf", "--bound", "-1"], None);
+    assert_clean_error(&o, "negative bound", "--bound -1 must be a positive number");
+    let o = lobe(&["energy", "examples/brdfs/blinn.brdf", "--range", "1..10", "--step", "-1"], None);
+    assert_clean_error(&o, "negative step", "--step -1 must be positive");
+}
