@@ -134,9 +134,16 @@ fn used(ks: &[Kernel]) -> InputSet {
 /// One point's values as text: the number, or `[r, g, b]`.
 fn show(v: &[f64]) -> String {
     match v {
-        [one] => format!("{one}"),
-        _ => format!("[{}]", v.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(", ")),
+        [one] => number(*one),
+        _ => format!("[{}]", v.iter().map(|x| number(*x)).collect::<Vec<_>>().join(", ")),
     }
+}
+
+/// The shortest text that reads back to `v` exactly: the plain decimal, or the exponent form where that is
+/// shorter (1.2e-300, not a 300-digit decimal).
+fn number(v: f64) -> String {
+    let (d, e) = (format!("{v}"), format!("{v:e}"));
+    if e.len() < d.len() { e } else { d }
 }
 
 pub fn run(a: &EvalArgs) -> Result<(), CliError> {

@@ -341,3 +341,16 @@ fn negative_flag_values_get_lobes_own_errors() {
     let o = lobe(&["energy", "examples/brdfs/blinn.brdf", "--range", "1..10", "--step", "-1"], None);
     assert_clean_error(&o, "negative step", "--step -1 must be positive");
 }
+
+/// Tiny and huge values print in exponent form (shortest text that reads back exactly), ordinary ones as decimals.
+#[test]
+fn eval_prints_tiny_values_in_exponent_form() {
+    let o = lobe(&["eval", "examples/brdfs/beckmann.brdf", "--set", "m=0.3", "--at", "NH=0.5"], None);
+    let t = String::from_utf8_lossy(&o.stdout).trim().to_string();
+    assert!(t.contains('e') && t.len() < 25, "{t}");
+    let j = lobe(&["eval", "examples/brdfs/beckmann.brdf", "--set", "m=0.3", "--at", "NH=0.5", "--json"], None);
+    let v: serde_json::Value = serde_json::from_slice(&j.stdout).unwrap();
+    assert_eq!(t.parse::<f64>().unwrap(), v["value"].as_f64().unwrap());
+    let o = lobe(&["eval", "examples/brdfs/modified_schlick.brdf", "--set", "n=50", "--at", "NH=0.95"], None);
+    assert_eq!(String::from_utf8_lossy(&o.stdout).trim(), "0.11178397012352757");
+}
