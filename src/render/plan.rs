@@ -109,20 +109,13 @@ impl Cutoff {
 /// What shading one material computes (see the module doc for the step table).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ShadingPlan {
-    /// Inputs the kernel reads; NL is always passed too (it is computed anyway).
-    pub reads: InputSet,
-    /// The view·light step (NH, VH or VR read).
-    pub view_light: bool,
-    /// The half-vector step (NH or VH read).
-    pub half: bool,
-    /// The reflect step (VR read).
+    /// The reflect step (VR read); the program decides the view·light and half-vector steps from the inputs
+    /// its formulas read.
     pub reflect: bool,
     /// The frame steps (a direction component read).
     pub directions: bool,
     /// (cos, sin) of the material's tangent angle: T and B are turned by it about N.
     pub tangent_rotation: [f64; 2],
-    /// Kernels per pixel and light: 1 (scalar formula) or 3 (colour formula, one per channel).
-    pub channels: usize,
     /// F is multiplied by NL (the material's `times_nl`), applied when F is scattered back.
     pub times_nl: bool,
     /// The kernel runs at all (ks ≠ 0).
@@ -141,18 +134,12 @@ impl ShadingPlan {
     /// The plan for `m` under a scene's ambient light; `cutoff` = false ignores the material's cut-off.
     pub fn new(m: &Material, ambient: glam::DVec3, cutoff: bool) -> ShadingPlan {
         let r = m.used;
-        let half = r.contains(Input::NH) || r.contains(Input::VH);
-        let reflect = r.contains(Input::VR);
         let spec = m.specular * m.coef * m.ks;
         let (s, c) = m.tangent_angle_deg.to_radians().sin_cos();
         ShadingPlan {
-            reads: r,
-            view_light: half || reflect,
-            half,
-            reflect,
+            reflect: r.contains(Input::VR),
             directions: r.reads_directions(),
             tangent_rotation: [c, s],
-            channels: if m.green_blue.is_some() { 3 } else { 1 },
             times_nl: m.times_nl,
             specular: m.ks != 0.0,
             cutoff: if cutoff { m.cutoff } else { None },
