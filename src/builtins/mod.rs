@@ -4,10 +4,11 @@
 //! interpreter and constant folding call [`Builtin::eval_in`]; the JIT emits sqrt/abs/min/max/clamp as native
 //! instructions ([`Lowering::Inline`], modelled exactly by the functions here) and every transcendental
 //! builtin ([`Lowering::Math`]) as the straight-line code of [`math`], the same definition the interpreter runs,
-//! so the two agree bit for bit in each [`Mode`]; the GLSL export prints [`BuiltinInfo::glsl`]. Each row states
-//! its error bound in each mode ([`Bound`]), which `lobe check` prints and the tests verify; the C library's
-//! version ([`BuiltinInfo::libm`]) is kept as the reference the bounds are measured against and as the
-//! fallback for huge trigonometric arguments.
+//! so the two agree bit for bit in each [`Mode`]; the GLSL export prints [`BuiltinInfo::glsl`]. Three rows are
+//! [internal](BuiltinInfo::internal): formed only by the accuracy pass, not callable from user text. Each row
+//! states its error bound in each mode ([`Bound`]), which `lobe check` prints and the tests verify; the C
+//! library's version ([`BuiltinInfo::libm`]) is kept as the reference the bounds are measured against and as
+//! the fallback for huge trigonometric arguments.
 //!
 //! Domain policy: `acos` and `asin` clamp their argument to [−1, 1] (a cosine computed from rounded vectors can
 //! be 1 + 1 ulp, and acos of it must not be NaN). Everything else follows IEEE 754 and C99 (pow's special cases,
@@ -119,6 +120,11 @@ pub struct BuiltinInfo {
     pub wgsl: &'static str,
     /// One line for `lobe help` and hints.
     pub doc: &'static str,
+    /// `Some(what to write instead)` for a builtin only the accuracy pass forms (rewrites for f64: double-double
+    /// tails, exponentials scaled by powers of two beyond f32's range). It is not a function of the language:
+    /// the front ends refuse it in user text with this hint ([`crate::front::parse_internal`] reads it back, for
+    /// tests and the pass's own output), and no hint or suggestion offers it.
+    pub internal: Option<&'static str>,
 }
 
 /// expmuldiv's C-library spelling, `exp(a)*b/c` as written (it underflows where the builtin does not).
@@ -269,6 +275,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "pow({0}, {1})",
         wgsl: "",
         doc: "pow(x, y) = x^y; integer constant exponents become multiplications",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::Cos,
@@ -281,6 +288,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "cos({0})",
         wgsl: "",
         doc: "cosine of an angle in radians",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::Sin,
@@ -293,6 +301,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "sin({0})",
         wgsl: "",
         doc: "sine of an angle in radians",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::Tan,
@@ -305,6 +314,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "tan({0})",
         wgsl: "",
         doc: "tangent of an angle in radians",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::Acos,
@@ -317,6 +327,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "acos(clamp({0}, -1.0, 1.0))",
         wgsl: "",
         doc: "arc cosine in radians; the argument is clamped to [-1, 1]",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::Asin,
@@ -329,6 +340,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "asin(clamp({0}, -1.0, 1.0))",
         wgsl: "",
         doc: "arc sine in radians; the argument is clamped to [-1, 1]",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::Atan,
@@ -341,6 +353,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "atan({0})",
         wgsl: "",
         doc: "arc tangent in radians",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::Exp,
@@ -353,6 +366,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "exp({0})",
         wgsl: "",
         doc: "e^x",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::Ln,
@@ -365,6 +379,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "log({0})",
         wgsl: "",
         doc: "natural logarithm",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::Sqrt,
@@ -377,6 +392,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "sqrt({0})",
         wgsl: "",
         doc: "square root (NaN below 0)",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::Abs,
@@ -389,6 +405,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "abs({0})",
         wgsl: "",
         doc: "absolute value",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::Min,
@@ -401,6 +418,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "min({0}, {1})",
         wgsl: "",
         doc: "smaller of two values (NaN if either is NaN)",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::Max,
@@ -413,6 +431,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "max({0}, {1})",
         wgsl: "",
         doc: "larger of two values (NaN if either is NaN)",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::Clamp,
@@ -425,6 +444,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "clamp({0}, {1}, {2})",
         wgsl: "",
         doc: "clamp(x, lo, hi) = min(max(x, lo), hi)",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::Floor,
@@ -437,6 +457,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "floor({0})",
         wgsl: "",
         doc: "largest integer not above x",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::Lt,
@@ -449,6 +470,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "float({0} < {1})",
         wgsl: "f32({0} < {1})",
         doc: "1 if a < b, else 0 (0 when either is NaN); what `a < b` and `b > a` mean",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::Le,
@@ -461,6 +483,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "float({0} <= {1})",
         wgsl: "f32({0} <= {1})",
         doc: "1 if a <= b, else 0 (0 when either is NaN); what `a <= b` and `b >= a` mean",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::Eq,
@@ -473,6 +496,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "float({0} == {1})",
         wgsl: "f32({0} == {1})",
         doc: "1 if a == b, else 0 (0 when either is NaN)",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::Ne,
@@ -485,6 +509,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "float({0} != {1})",
         wgsl: "f32({0} != {1})",
         doc: "1 if a != b, else 0 (1 when either is NaN)",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::Select,
@@ -497,6 +522,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "({0} != 0.0 ? {1} : {2})",
         wgsl: "select({2}, {1}, {0} != 0.0)",
         doc: "select(c, a, b) = a if c is true (not 0), else b; the untaken value never reaches the result",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::Fma,
@@ -509,6 +535,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "fma({0}, {1}, {2})",
         wgsl: "",
         doc: "fma(a, b, c) = a*b + c rounded once (the accuracy pass's compensated power chains use it)",
+        internal: None,
     },
     BuiltinInfo {
         builtin: Builtin::ExpMulDiv,
@@ -521,6 +548,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "(exp({0}) * {1} / {2})",
         wgsl: "",
         doc: "expmuldiv(a, b, c) = exp(a)*b/c with no intermediate underflow or overflow (the accuracy pass forms it)",
+        internal: Some("write `exp(a) * b / c`; the accuracy pass forms expmuldiv itself where exp(a) alone would under- or overflow"),
     },
     BuiltinInfo {
         builtin: Builtin::AcosLo,
@@ -533,6 +561,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "0.0",
         wgsl: "",
         doc: "acoslo(x) = acos(x) minus lobe's acos(x): its rounding error, 0 in fast math (the accuracy pass forms it)",
+        internal: Some("write `acos(x)`; the accuracy pass adds acos's rounding error (acoslo) itself where that pays"),
     },
     BuiltinInfo {
         builtin: Builtin::PowLo,
@@ -545,6 +574,7 @@ const TABLE: [BuiltinInfo; 24] = [
         glsl: "0.0",
         wgsl: "",
         doc: "powlo(x, y) = pow(x, y) minus lobe's pow(x, y): its rounding error, 0 in fast math (the accuracy pass forms it)",
+        internal: Some("write `pow(x, y)`; the accuracy pass adds pow's rounding error (powlo) itself where that pays"),
     },
 ];
 
@@ -595,13 +625,19 @@ impl Builtin {
         }
     }
 
+    /// The builtin of this name, internal ones included (the front ends decide whether text may call it).
     pub fn from_name(name: &str) -> Option<Builtin> {
         TABLE.iter().find(|r| r.name == name).map(|r| r.builtin)
     }
 
-    /// All rows of the table.
-    pub(crate) fn table() -> &'static [BuiltinInfo] {
-        &TABLE
+    /// The rows user text may call: the table without the [internal](Self::is_internal) builtins.
+    pub(crate) fn language() -> impl Iterator<Item = &'static BuiltinInfo> {
+        TABLE.iter().filter(|r| r.internal.is_none())
+    }
+
+    /// Only the accuracy pass forms it ([`BuiltinInfo::internal`]): not a function of the language.
+    pub fn is_internal(self) -> bool {
+        self.info().internal.is_some()
     }
 
     /// Reference semantics in precise mode; `args` has exactly `arity()` values.
@@ -739,6 +775,10 @@ mod tests {
             // Only the trigonometric functions fall back to the C library (for huge arguments).
             let trig = matches!(b, Builtin::Sin | Builtin::Cos | Builtin::Tan);
             assert_eq!(!r.symbol.is_empty(), trig, "{}", r.name);
+            // Exactly the accuracy pass's own builtins are internal.
+            let internal = matches!(b, Builtin::ExpMulDiv | Builtin::AcosLo | Builtin::PowLo);
+            assert_eq!(b.is_internal(), internal, "{}", r.name);
+            assert_eq!(Builtin::language().any(|l| l.builtin == *b), !internal, "{}", r.name);
         }
     }
 

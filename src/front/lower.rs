@@ -134,15 +134,19 @@ struct Lowerer<'a, 's> {
     diags: Vec<Diagnostic>,
     /// Errors inside function bodies already reported (message, span start), so each shows once.
     reported: HashSet<(String, u32)>,
+    /// The text may call the accuracy pass's internal builtins ([`super::parse_internal`]).
+    internal: bool,
 }
 
 /// Lowers a parsed file. `syntax_failed` suppresses the structural errors a syntax error may have caused
-/// (a formula line that failed to parse is not "missing"). Returns `None` when any error was reported.
+/// (a formula line that failed to parse is not "missing"); `internal` lets it call the internal builtins
+/// ([`Builtin::is_internal`]). Returns `None` when any error was reported.
 pub(crate) fn lower(
     file: &str,
     src: &str,
     ast: &Ast<'_>,
     syntax_failed: bool,
+    internal: bool,
     diags: &mut Vec<Diagnostic>,
 ) -> Option<Formula> {
     let mut lw = Lowerer {
@@ -162,6 +166,7 @@ pub(crate) fn lower(
         memo: vec![Slot::Todo; ast.exprs.len()],
         diags: vec![],
         reported: HashSet::new(),
+        internal,
     };
     let meta = lw.meta();
     lw.declare_params();
@@ -366,8 +371,14 @@ impl<'a, 's> Lowerer<'a, 's> {
         meta
     }
 
-    /// What a name already means, if it is reserved (input, frame vector, shorthand, constant, function).
-    fn reserved(name: &str) -> Option<String> {
+    /// The builtin `name` calls: one of the language's, or with [`Lowerer::internal`] any of the table's.
+    fn builtin(&self, name: &str) -> Option<Builtin> {
+        Builtin::from_name(name).filter(|b| self.internal || !b.is_internal())
+    }
+
+    /// What a name already means, if it is reserved (input, frame vector, shorthand, constant, function). An
+    /// internal builtin's name is free unless the text may call it.
+    fn reserved(&self, name: &str) -> Option<String> {
         if let Some(i) = Input::from_name(name) {
             return Some(format!("the input {} ({})", i.name(), i.describe()));
         }
@@ -383,14 +394,14 @@ impl<'a, 's> Lowerer<'a, 's> {
         if let Some((_, doc)) = derived(name) {
             return Some(format!("the function {name} ({doc})"));
         }
-        Builtin::from_name(name).map(|b| format!("the function {}", signature(b)))
+        self.builtin(name).map(|b| format!("the function {}", signature(b)))
     }
 
     fn declare_params(&mut self) {
         let mut declared: HashMap<&'s str, Span> = HashMap::new();
         for s in &self.ast.stmts {
             let StmtKind::Param { name, default, range } = &s.kind else { continue };
-            if let Some(what) = Self::reserved(name.name) {
+            if let Some(what) = self.reserved(name.name) {
                 self.error(
                     Diagnostic::error(format!("`param {}` would shadow {what}", name.name))
                         .at(name.span, "this name is taken")
@@ -637,7 +648,7 @@ impl<'a, 's> Lowerer<'a, 's> {
 
     fn let_(&mut self, name: Ident<'s>, value: ExprId) {
         let mut ok = true;
-        if let Some(what) = Self::reserved(name.name) {
+        if let Some(what) = self.reserved(name.name) {
             self.error(
                 Diagnostic::error(format!("`let {}` would shadow {what}", name.name))
                     .at(name.span, "this name is taken")
@@ -676,7 +687,7 @@ impl<'a, 's> Lowerer<'a, 's> {
     /// then makes the function callable by the statements below it.
     fn fn_def(&mut self, name: Ident<'s>, args: &[Ident<'s>], body: ExprId) {
         let before = self.diags.len();
-        let taken = Self::reserved(name.name).or_else(|| {
+        let taken = self.reserved(name.name).or_else(|| {
             if self.param_names.contains_key(name.name) {
                 Some(format!("the parameter `{}`", name.name))
             } else if self.scope.contains_key(name.name) {
@@ -698,7 +709,7 @@ impl<'a, 's> Lowerer<'a, 's> {
         }
         let mut bound: Vec<(&'s str, Slot)> = Vec::with_capacity(args.len());
         for a in args {
-            if let Some(what) = Self::reserved(a.name) {
+            if let Some(what) = self.reserved(a.name) {
                 self.error(
                     Diagnostic::error(format!("argument `{}` would shadow {what}", a.name))
                         .at(a.span, "this name is taken")
@@ -718,7 +729,7 @@ impl<'a, 's> Lowerer<'a, 's> {
         let mut memo = vec![Slot::Todo; body.index() + 1 - lo];
         self.tree(body, &mut memo, lo, &ctx);
         let ok = self.diags.len() == before;
-        if self.fn_names.contains_key(name.name) || Self::reserved(name.name).is_some() {
+        if self.fn_names.contains_key(name.name) || self.reserved(name.name).is_some() {
             return;
         }
         self.fn_names.insert(name.name, self.fns.len());
@@ -882,7 +893,7 @@ impl<'a, 's> Lowerer<'a, 's> {
         if n.name == "pi" {
             return Slot::Done(Val::F(vs.konst(std::f64::consts::PI)));
         }
-        if let Some(b) = Builtin::from_name(n.name) {
+        if let Some(b) = self.builtin(n.name) {
             self.error(
                 Diagnostic::error(format!("`{}` is a function, not a variable", n.name))
                     .at(span, "used without arguments")
@@ -904,6 +915,11 @@ impl<'a, 's> Lowerer<'a, 's> {
                     .at(span, "used without arguments")
                     .hint(format!("call it with its arguments: `{}(…)`", n.name)),
             );
+            return Slot::Poison;
+        }
+        if let Some(b) = Builtin::from_name(n.name).filter(|_| !self.all_lets.contains_key(n.name)) {
+            // An internal builtin (the language's were taken above).
+            self.error(super::internal_builtin(b, span));
             return Slot::Poison;
         }
         let d = self.unknown_variable(n, ctx);
@@ -1009,7 +1025,7 @@ impl<'a, 's> Lowerer<'a, 's> {
             );
             return Slot::Poison;
         }
-        if let Some(b) = Builtin::from_name(n.name) {
+        if let Some(b) = self.builtin(n.name) {
             if b.arity() != nargs {
                 self.error(
                     Diagnostic::error(format!("{} takes {}, found {nargs}", n.name, plural(b.arity(), "argument")))
@@ -1063,8 +1079,13 @@ impl<'a, 's> Lowerer<'a, 's> {
             );
             return Slot::Poison;
         }
+        if let Some(b) = Builtin::from_name(n.name) {
+            // An internal builtin (the language's were taken above): refused, with what to write instead.
+            self.error(super::internal_builtin(b, n.span));
+            return Slot::Poison;
+        }
         let alias = FUNCTION_ALIASES.iter().find(|(a, _)| a.eq_ignore_ascii_case(n.name)).map(|(_, b)| *b);
-        let mut names: Vec<&str> = Builtin::table().iter().map(|r| r.name).collect();
+        let mut names: Vec<&str> = Builtin::language().map(|r| r.name).collect();
         names.extend(DERIVED.iter().map(|d| d.0));
         names.push("rgb");
         names.extend(self.fns[..ctx.visible_fns].iter().map(|f| f.name.name));

@@ -40,8 +40,10 @@ pub(crate) mod lower;
 pub mod parse;
 pub mod values;
 
-use crate::ir::Formula;
 use crate::base::diag::{Diagnostic, Diagnostics, Severity};
+use crate::base::span::Span;
+use crate::builtins::Builtin;
+use crate::ir::Formula;
 
 /// At most this many errors are rendered; the rest are summarised in one line.
 pub const MAX_ERRORS: usize = 25;
@@ -54,6 +56,27 @@ pub fn parse(file: &str, src: &str) -> Result<Formula, Diagnostics> {
 /// Parses and lowers one .brdf source file; on success also returns the warnings (unused `let`/`param`, a
 /// formula that reads no input), possibly empty. On failure the diagnostics hold every error found.
 pub fn parse_with_warnings(file: &str, src: &str) -> Result<(Formula, Diagnostics), Diagnostics> {
+    read(file, src, false)
+}
+
+/// [`parse`] that also accepts the accuracy pass's internal builtins (`expmuldiv`, `acoslo`, `powlo`:
+/// [`Builtin::is_internal`]); for tests and for reading back the pass's own output. Their names are then
+/// reserved, as every builtin's is. A BRDF Explorer file is read as [`parse`] reads it.
+pub fn parse_internal(file: &str, src: &str) -> Result<Formula, Diagnostics> {
+    read(file, src, true).map(|(f, _)| f)
+}
+
+/// The error for user text that calls (or names) an internal builtin, at `span`, with the table's hint of what
+/// to write instead.
+pub(crate) fn internal_builtin(b: Builtin, span: Span) -> Diagnostic {
+    Diagnostic::error(format!("`{}` is internal to the accuracy pass, not a function of the language", b.name()))
+        .at(span, "only the accuracy pass forms this")
+        .hint(b.info().internal.unwrap_or("write the formula with the language's functions"))
+}
+
+/// The parse path behind [`parse_with_warnings`] and [`parse_internal`]: `internal` lets the text call the
+/// internal builtins.
+fn read(file: &str, src: &str, internal: bool) -> Result<(Formula, Diagnostics), Diagnostics> {
     if explorer::is_explorer(src) {
         return explorer::parse(file, src);
     }
@@ -65,7 +88,7 @@ pub fn parse_with_warnings(file: &str, src: &str) -> Result<(Formula, Diagnostic
     } else {
         let ast = parse::parse(src, &lexed, &mut items);
         let syntax_failed = !items.is_empty();
-        lower::lower(file, src, &ast, syntax_failed, &mut items)
+        lower::lower(file, src, &ast, syntax_failed, internal, &mut items)
     };
     // Reading order; diagnostics without a location (a missing formula) come first.
     items.sort_by_key(|d| d.primary.as_ref().map(|p| (p.0.start, p.0.end)));

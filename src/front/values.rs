@@ -384,10 +384,11 @@ impl<'a> Values<'a> {
         Ok(Val::V(out))
     }
 
-    /// A function by name: a builtin of the table (applied per component to vectors) or one of [`DERIVED`].
-    /// `None` when the name is neither; `Some(Err)` for a wrong argument count or type.
+    /// A function by name: a builtin of the language (applied per component to vectors) or one of [`DERIVED`].
+    /// `None` when the name is neither, as for an internal builtin ([`Builtin::is_internal`]: not a function of
+    /// either language); `Some(Err)` for a wrong argument count or type.
     pub fn function(&mut self, name: &str, args: &[Val]) -> Option<R> {
-        if let Some(b) = Builtin::from_name(name) {
+        if let Some(b) = Builtin::from_name(name).filter(|b| !b.is_internal()) {
             if args.len() != b.arity() {
                 return Some(Err(format!("`{name}` takes {} argument(s), got {}", b.arity(), args.len())));
             }

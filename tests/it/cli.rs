@@ -354,3 +354,27 @@ fn eval_prints_tiny_values_in_exponent_form() {
     let o = lobe(&["eval", "examples/brdfs/modified_schlick.brdf", "--set", "n=50", "--at", "NH=0.95"], None);
     assert_eq!(String::from_utf8_lossy(&o.stdout).trim(), "0.11178397012352757");
 }
+
+/// Each of the accuracy pass's internal builtins, called from a .brdf file, ends `lobe eval` and `lobe check`
+/// with the front end's error at file:line:col and its hint of what to write instead.
+#[test]
+fn internal_builtins_in_a_file_are_refused_by_eval_and_check() {
+    let dir = crate::scratch_dir("cli", "internal");
+    for (name, call, instead) in [
+        ("expmuldiv", "expmuldiv(NH - 1, 2, NL)", "write `exp(a) * b / c`"),
+        ("acoslo", "acoslo(NH)", "write `acos(x)`"),
+        ("powlo", "powlo(NH, n)", "write `pow(x, y)`"),
+    ] {
+        let path = dir.join(format!("{name}.brdf"));
+        std::fs::write(&path, format!("# calls {name}\nlet c = NH\nc + {call}\n")).unwrap();
+        let p = path.display().to_string();
+        for args in [&["eval", &p, "--at", "NH=0.5,NL=0.5"][..], &["check", &p][..]] {
+            let o = lobe(args, None);
+            let what = format!("{} {name}", args[0]);
+            assert_clean_error(&o, &what, &format!("`{name}` is internal to the accuracy pass, not a function of the language"));
+            assert_clean_error(&o, &what, &format!("{name}.brdf:3:5"));
+            assert_clean_error(&o, &what, instead);
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

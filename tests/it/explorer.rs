@@ -425,6 +425,9 @@ fn diagnostics_name_the_construct_and_its_line() {
     assert!(msg("unknown_function.brdf").contains("did you mean `fresnel`?"));
     assert!(msg("type_error.brdf").contains("is a vec3, but a float is expected"));
     assert!(msg("struct.brdf").contains("structs are not supported"));
+    let internal = msg("internal_builtin.brdf");
+    assert!(internal.contains("`acoslo` is internal to the accuracy pass") && internal.contains("internal_builtin.brdf:9:27"), "{internal}");
+    assert!(internal.contains("write `acos(x)`"), "{internal}");
 }
 
 /// Runs `lobe ARGS` and fails if it takes longer than `secs`; returns (exit code, stderr).

@@ -163,7 +163,8 @@ struct Tally {
 }
 
 fn run_case(src: &str, r: &mut Rng, t: &mut Tally) -> Result<(), String> {
-    let f = match lobe::front::parse("fuzz.brdf", src) {
+    // The internal builtins too: the generator calls every builtin, and both backends must agree on them.
+    let f = match lobe::front::parse_internal("fuzz.brdf", src) {
         Ok(f) => f,
         Err(d) => {
             let text = d.render(false);

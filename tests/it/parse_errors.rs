@@ -115,6 +115,18 @@ fn each_mistake_gets_its_message_and_hint() {
         ]),
         ("loop_misuse", &["`for` loops are not part of the formula language", "`sum` is defined twice"]),
         ("case_mismatch", &["did you mean `NH`?", "did you mean `cos`?", "did you mean `pi`?"]),
+        ("internal_builtins", &[
+            "`expmuldiv` is internal to the accuracy pass, not a function of the language",
+            "internal_builtins.brdf:3:9",
+            "write `exp(a) * b / c`",
+            "`acoslo` is internal to the accuracy pass, not a function of the language",
+            "internal_builtins.brdf:4:20",
+            "write `acos(x)`",
+            "`powlo` is internal to the accuracy pass, not a function of the language",
+            "internal_builtins.brdf:5:22",
+            "write `pow(x, y)`",
+        ]),
+        ("internal_name_as_param", &["`acoslo` is a variable, not a function", "internal_name_as_param.brdf:3:1"]),
     ];
     for (name, needles) in want {
         let path = dir().join(format!("{name}.brdf"));
@@ -136,4 +148,45 @@ fn several_errors_are_all_reported() {
     let src = fs::read_to_string(dir().join("several_errors.brdf")).expect("case");
     let d = lobe::front::parse("several_errors.brdf", &src).expect_err("rejected");
     assert!(d.errors().count() >= 5, "{}", d.render(false));
+}
+
+/// The accuracy pass's internal builtins are no names of the language: user text may use them for its own
+/// parameters, `let`s and functions (which are then what the name means, never the builtin), names no builtin
+/// by them in a hint or suggestion, and refuses them as calls. `parse_internal` reads them back as calls — and
+/// there, as every builtin's name, they are reserved.
+#[test]
+fn internal_builtin_names_are_free_in_user_text() {
+    use lobe::builtins::Builtin;
+    use lobe::ir::Node;
+    let internal = |f: &lobe::Formula| f.ir.nodes().iter().any(|n| matches!(n, Node::Call(b, _) if b.is_internal()));
+    for src in [
+        "param acoslo = 2 in 0..4\nacoslo * NH",
+        "let powlo = NH * NH\npowlo + NL",
+        "fn expmuldiv(a, b, c) = exp(a) * b / c\nexpmuldiv(NH - 1, 2, NL)",
+        "fn acoslo(x) = acos(x)\nacoslo(NH)",
+    ] {
+        let f = lobe::front::parse("free.brdf", src).unwrap_or_else(|d| panic!("{src}\n{}", d.render(false)));
+        assert!(!internal(&f), "{src}: became an internal builtin");
+        let d = lobe::front::parse_internal("free.brdf", src).expect_err(src).render(false);
+        assert!(d.contains("would shadow the function"), "{src}: parse_internal reserves the name\n{d}");
+    }
+    for name in ["expmuldiv", "acoslo", "powlo"] {
+        let b = Builtin::from_name(name).unwrap();
+        assert!(b.is_internal());
+        let args = vec!["NH"; b.arity()].join(", ");
+        let call = format!("{name}({args})");
+        let f = lobe::front::parse_internal("internal.brdf", &call).unwrap_or_else(|d| panic!("{}", d.render(false)));
+        assert!(internal(&f), "{call}");
+        let d = lobe::front::parse("user.brdf", &call).expect_err(&call).render(false);
+        assert!(d.contains(&format!("`{name}` is internal to the accuracy pass")) && d.contains("user.brdf:1:1"), "{d}");
+        // Named without a call, too; and never a suggestion for a near miss nor in the list of functions.
+        let d = lobe::front::parse("user.brdf", &format!("NH * {name}")).expect_err(name).render(false);
+        assert!(d.contains(&format!("`{name}` is internal to the accuracy pass")), "{d}");
+        for typo in [format!("{name}x({args})"), format!("{}({args})", &name[..name.len() - 1])] {
+            let d = lobe::front::parse("user.brdf", &typo).expect_err(&typo).render(false);
+            assert!(!d.contains(&format!("`{name}`")) && !d.contains(&format!(" {name},")), "{typo}:\n{d}");
+        }
+    }
+    let d = lobe::front::parse("user.brdf", "zzqq(NH)").expect_err("unknown").render(false);
+    assert!(d.contains("the functions are pow, cos") && !d.contains("acoslo") && !d.contains("powlo") && !d.contains("expmuldiv"), "{d}");
 }

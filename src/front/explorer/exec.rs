@@ -501,6 +501,9 @@ impl<'a> Exec<'a> {
             }
             _ => {}
         }
+        if let Some(b) = Builtin::from_name(name).filter(|b| b.is_internal()) {
+            return Err(crate::front::internal_builtin(b, nsp));
+        }
         if !GLSL_FUNCTIONS.contains(&name) {
             let mut known: Vec<&str> = GLSL_FUNCTIONS.to_vec();
             known.extend(visible.iter().map(|f| f.name.as_str()));
