@@ -4,7 +4,10 @@
 //! Design: one expression emitter ([`emit`]) writes every body: one statement per IR node that is used more
 //! than once or is a call (so shared subexpressions are computed once, as in the kernel), everything else
 //! inlined with full parentheses (no reliance on the target language's precedence). Builtins are spelled by the
-//! table's `glsl` column, which is also valid WGSL for every builtin lobe has. A colour formula's three channels
+//! table's `glsl` column, which is also valid WGSL for every builtin lobe has. The accuracy pass's internal
+//! builtins ([`Builtin::is_internal`]) have no spelling: their rewrites are for f64 (double-double tails,
+//! scalings by 2^600 that are ∞ in a GPU float), so an export is made from the plain simplification, and a
+//! formula that still holds one is refused with an error. A colour formula's three channels
 //! are merged into one arena first, so what they share is computed once and the function returns a `vec3`.
 //! The GLSL/WGSL function takes only the inputs the formula reads and its live parameters (a colour parameter as
 //! one `vec3`), so a shader that uses it computes nothing extra — the same "model only what the scene needs"
@@ -17,6 +20,8 @@
 //! `min`/`max` need not propagate NaN; `pow(x, y)` is undefined on GPUs for x < 0 and for x = 0, y ≤ 0; in BRDF
 //! Explorer, `normalize(L + V)` is undefined when V = −L, where lobe's inputs give NH = VH = 0.
 
+use crate::base::diag::Diagnostic;
+use crate::builtins::Builtin;
 use crate::ir::{Formula, Input, InputSet, Ir, Node, NodeId, ParamDecl, ParamKind};
 use std::fmt::Write;
 
@@ -214,8 +219,8 @@ fn uses_of(ir: &Ir, roots: &[NodeId]) -> (InputSet, Vec<u16>) {
 /// to `out` one indented statement per node that is shared (by any of `roots`) or is a call, binding it to a
 /// temporary `tK`; every other node is inlined with full parentheses. Returns each root's expression.
 /// Inputs are referred to by name (function arguments or locals) and parameters by `params` (see
-/// [`param_reads`]).
-fn emit(ir: &Ir, roots: &[NodeId], d: Dialect, exact: bool, params: &[String], out: &mut String) -> Vec<String> {
+/// [`param_reads`]). An internal builtin is refused ([`refuse_internal`]).
+fn emit(ir: &Ir, roots: &[NodeId], d: Dialect, exact: bool, params: &[String], out: &mut String) -> Result<Vec<String>, Diagnostic> {
     let mut uses = vec![0u32; ir.len()];
     for r in roots {
         for (u, c) in uses.iter_mut().zip(ir.use_counts(*r)) {
@@ -244,6 +249,7 @@ fn emit(ir: &Ir, roots: &[NodeId], d: Dialect, exact: bool, params: &[String], o
             Node::Column(k) => format!("column{k}"),
             Node::Neg(a) => format!("(-{})", t(a)),
             Node::Binary(op, a, b) => format!("({} {} {})", t(a), op.symbol(), t(b)),
+            Node::Call(b, _) if b.is_internal() => return Err(refuse_internal(b)),
             Node::Call(b, a) => {
                 let mut s = match d {
                     Dialect::Glsl => b.info().glsl,
@@ -270,7 +276,16 @@ fn emit(ir: &Ir, roots: &[NodeId], d: Dialect, exact: bool, params: &[String], o
             text.push(e);
         }
     }
-    roots.iter().map(|r| text[r.index()].clone()).collect()
+    Ok(roots.iter().map(|r| text[r.index()].clone()).collect())
+}
+
+/// The error for a formula that holds an internal builtin: a shader has no spelling for it.
+fn refuse_internal(b: Builtin) -> Diagnostic {
+    Diagnostic::error(format!(
+        "`{}` cannot be exported: it is internal to the accuracy pass, whose rewrites are for f64, not a GPU's f32",
+        b.name()
+    ))
+    .hint("export the plain simplification (the formula compiled without the accuracy pass)")
 }
 
 /// The header every export starts with (each line to be prefixed by the target's comment marker): what the
@@ -310,7 +325,8 @@ fn header(f: &Formula, inputs: InputSet, live: &[u16], lang: &str) -> Vec<String
 
 /// Exports the formula as one shader function: the inputs it reads and its live parameters as arguments (a
 /// colour parameter as one `vec3`), returning `float` (`f32`) or, for a colour formula, `vec3` (`vec3<f32>`).
-pub fn export(f: &Formula, d: Dialect) -> String {
+/// An error when the formula holds an internal builtin (see the module documentation).
+pub fn export(f: &Formula, d: Dialect) -> Result<String, Diagnostic> {
     let (ir, roots) = f.merged_roots();
     let (inputs, live) = uses_of(&ir, &roots);
     let names = param_names(f);
@@ -336,10 +352,10 @@ pub fn export(f: &Formula, d: Dialect) -> String {
         (Dialect::Glsl, _) => writeln!(out, "{} {name}({}) {{", if rgb { "vec3" } else { "float" }, args.join(", ")),
         (Dialect::Wgsl, _) => writeln!(out, "fn {name}({}) -> {} {{", args.join(", "), if rgb { "vec3<f32>" } else { "f32" }),
     };
-    let results = emit(&ir, &roots, d, false, &param_reads(f, &names, false), &mut out);
+    let results = emit(&ir, &roots, d, false, &param_reads(f, &names, false), &mut out)?;
     let _ = writeln!(out, "    return {};", result(&results, d));
     let _ = writeln!(out, "}}");
-    out
+    Ok(out)
 }
 
 /// The returned expression: the scalar, or `vec3(r, g, b)`.
@@ -390,8 +406,9 @@ fn be_input(i: Input) -> &'static str {
 /// `::begin shader` block defining `vec3 BRDF(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)` that computes only the
 /// inputs the formula reads and then the body [`export`] writes (the same emitter). BRDF Explorer declares
 /// each parameter as a uniform of its type (`uniform float`, `uniform bool`, `uniform vec3`), so a bool is
-/// read as `float(NAME)` and a colour channel as `NAME.r`; a scalar formula returns `vec3(F)`.
-pub fn brdf_explorer(f: &Formula) -> String {
+/// read as `float(NAME)` and a colour channel as `NAME.r`; a scalar formula returns `vec3(F)`. An error when
+/// the formula holds an internal builtin, as for [`export`].
+pub fn brdf_explorer(f: &Formula) -> Result<String, Diagnostic> {
     let (ir, roots) = f.merged_roots();
     let (inputs, live) = uses_of(&ir, &roots);
     let names = param_names(f);
@@ -437,18 +454,19 @@ pub fn brdf_explorer(f: &Formula) -> String {
     for i in inputs.iter() {
         let _ = writeln!(out, "    float {} = {};", i.name(), be_input(i));
     }
-    let results = emit(&ir, &roots, Dialect::Glsl, true, &param_reads(f, &names, true), &mut out);
+    let results = emit(&ir, &roots, Dialect::Glsl, true, &param_reads(f, &names, true), &mut out)?;
     let ret = match results.as_slice() {
         [one] => format!("vec3({one})"),
         _ => result(&results, Dialect::Glsl),
     };
     let _ = writeln!(out, "    return {ret};\n}}\n::end shader");
-    out
+    Ok(out)
 }
 
-/// A complete fragment shader around the exported GLSL function (for validators and quick previews).
-pub fn glsl_test_shader(f: &Formula) -> String {
-    let func = export(f, Dialect::Glsl);
+/// A complete fragment shader around the exported GLSL function (for validators and quick previews); an error
+/// as for [`export`].
+pub fn glsl_test_shader(f: &Formula) -> Result<String, Diagnostic> {
+    let func = export(f, Dialect::Glsl)?;
     let (ir, roots) = f.merged_roots();
     let (inputs, live) = uses_of(&ir, &roots);
     let mut call_args: Vec<String> = inputs.iter().map(|_| "0.5".to_string()).collect();
@@ -461,7 +479,7 @@ pub fn glsl_test_shader(f: &Formula) -> String {
     }
     let call = format!("{}({})", function_name(f), call_args.join(", "));
     let value = if roots.len() == 3 { format!("vec4({call}, 1.0)") } else { format!("vec4({call})") };
-    format!("#version 450\n{func}\nlayout(location = 0) out vec4 color;\nvoid main() {{\n    color = {value};\n}}\n")
+    Ok(format!("#version 450\n{func}\nlayout(location = 0) out vec4 color;\nvoid main() {{\n    color = {value};\n}}\n"))
 }
 
 #[cfg(test)]
@@ -477,11 +495,36 @@ mod tests {
         let names = param_names(&f);
         assert_eq!(names, ["n", "p_t0", "p_float_1", "p_gl_Position", "p_alias", "p_float", "p_a_b"]);
         for d in [Dialect::Glsl, Dialect::Wgsl] {
-            let text = export(&f, d);
+            let text = export(&f, d).unwrap();
             assert!(text.lines().all(|l| l.starts_with("//") || !l.contains("define")), "{text}");
             assert!(!text.contains('\r'), "{text}");
             let code: String = text.lines().filter(|l| !l.starts_with("//")).collect::<Vec<_>>().join("\n");
             assert!(code.contains("p_gl_Position") && !code.contains(" gl_Position"), "{text}");
+        }
+    }
+
+    /// A formula that holds one of the accuracy pass's internal builtins (read with `parse_internal`, as the
+    /// pass's output would hold it) is refused by every export with an error naming it, never written as
+    /// something else.
+    #[test]
+    fn exports_refuse_internal_builtins() {
+        for (name, src) in [
+            ("expmuldiv", "param m = 0.3 in 0.01..1\nNL * expmuldiv(NH - 1, m, NV)"),
+            ("acoslo", "acos(NH) + acoslo(NH)"),
+            ("powlo", "pow(NH, n) + powlo(NH, n)"),
+        ] {
+            let f = crate::front::parse_internal("internal.brdf", src).unwrap_or_else(|d| panic!("{}", d.render(false)));
+            let f = crate::simplify::simplify(&f, &[(0, 50.0)]);
+            assert!(f.ir.nodes().iter().any(|n| matches!(n, Node::Call(b, _) if b.is_internal())), "{name}: {}", f.to_program_text());
+            let errors = [export(&f, Dialect::Glsl), export(&f, Dialect::Wgsl), brdf_explorer(&f), glsl_test_shader(&f)];
+            for e in errors {
+                let e = e.expect_err(name);
+                assert!(e.message.contains(&format!("`{name}` cannot be exported")), "{e}");
+                assert!(!e.hints.is_empty(), "{e}");
+            }
+            // The same formula without the internal call exports.
+            let plain = crate::front::parse("plain.brdf", "acos(NH) + pow(NH, n)").unwrap();
+            assert!(export(&plain, Dialect::Glsl).is_ok());
         }
     }
 }

@@ -5,10 +5,10 @@
 //! instructions ([`Lowering::Inline`], modelled exactly by the functions here) and every transcendental
 //! builtin ([`Lowering::Math`]) as the straight-line code of [`math`], the same definition the interpreter runs,
 //! so the two agree bit for bit in each [`Mode`]; the GLSL export prints [`BuiltinInfo::glsl`]. Three rows are
-//! [internal](BuiltinInfo::internal): formed only by the accuracy pass, not callable from user text. Each row
-//! states its error bound in each mode ([`Bound`]), which `lobe check` prints and the tests verify; the C
-//! library's version ([`BuiltinInfo::libm`]) is kept as the reference the bounds are measured against and as
-//! the fallback for huge trigonometric arguments.
+//! [internal](BuiltinInfo::internal): formed only by the accuracy pass, not callable from user text, never
+//! exported. Each row states its error bound in each mode ([`Bound`]), which `lobe check` prints and the tests
+//! verify; the C library's version ([`BuiltinInfo::libm`]) is kept as the reference the bounds are measured
+//! against and as the fallback for huge trigonometric arguments.
 //!
 //! Domain policy: `acos` and `asin` clamp their argument to [−1, 1] (a cosine computed from rounded vectors can
 //! be 1 + 1 ulp, and acos of it must not be NaN). Everything else follows IEEE 754 and C99 (pow's special cases,
@@ -114,7 +114,8 @@ pub struct BuiltinInfo {
     /// Symbol the JIT registers for the libm fallback (empty when there is none).
     pub symbol: &'static str,
     pub bound: Bound,
-    /// GLSL spelling; `{0}`, `{1}`, `{2}` are the arguments.
+    /// GLSL spelling; `{0}`, `{1}`, `{2}` are the arguments. Empty for an [internal](Self::internal) builtin:
+    /// no shader export writes one (the export refuses it).
     pub glsl: &'static str,
     /// WGSL spelling where it differs from GLSL's (empty: the same).
     pub wgsl: &'static str,
@@ -123,7 +124,7 @@ pub struct BuiltinInfo {
     /// `Some(what to write instead)` for a builtin only the accuracy pass forms (rewrites for f64: double-double
     /// tails, exponentials scaled by powers of two beyond f32's range). It is not a function of the language:
     /// the front ends refuse it in user text with this hint ([`crate::front::parse_internal`] reads it back, for
-    /// tests and the pass's own output), and no hint or suggestion offers it.
+    /// tests and the pass's own output), no hint or suggestion offers it, and no shader export writes it.
     pub internal: Option<&'static str>,
 }
 
@@ -545,7 +546,7 @@ const TABLE: [BuiltinInfo; 24] = [
         libm: Libm::F3(lobe_expmuldiv_libm),
         symbol: "",
         bound: Bound::math(2.0),
-        glsl: "(exp({0}) * {1} / {2})",
+        glsl: "",
         wgsl: "",
         doc: "expmuldiv(a, b, c) = exp(a)*b/c with no intermediate underflow or overflow (the accuracy pass forms it)",
         internal: Some("write `exp(a) * b / c`; the accuracy pass forms expmuldiv itself where exp(a) alone would under- or overflow"),
@@ -558,7 +559,7 @@ const TABLE: [BuiltinInfo; 24] = [
         libm: Libm::F1(lobe_acoslo_libm),
         symbol: "",
         bound: Bound::math(1.0),
-        glsl: "0.0",
+        glsl: "",
         wgsl: "",
         doc: "acoslo(x) = acos(x) minus lobe's acos(x): its rounding error, 0 in fast math (the accuracy pass forms it)",
         internal: Some("write `acos(x)`; the accuracy pass adds acos's rounding error (acoslo) itself where that pays"),
@@ -571,7 +572,7 @@ const TABLE: [BuiltinInfo; 24] = [
         libm: Libm::F2(lobe_powlo_libm),
         symbol: "",
         bound: Bound::math(1.0),
-        glsl: "0.0",
+        glsl: "",
         wgsl: "",
         doc: "powlo(x, y) = pow(x, y) minus lobe's pow(x, y): its rounding error, 0 in fast math (the accuracy pass forms it)",
         internal: Some("write `pow(x, y)`; the accuracy pass adds pow's rounding error (powlo) itself where that pays"),
@@ -635,7 +636,8 @@ impl Builtin {
         TABLE.iter().filter(|r| r.internal.is_none())
     }
 
-    /// Only the accuracy pass forms it ([`BuiltinInfo::internal`]): not a function of the language.
+    /// Only the accuracy pass forms it ([`BuiltinInfo::internal`]): not a function of the language, and never
+    /// written by a shader export.
     pub fn is_internal(self) -> bool {
         self.info().internal.is_some()
     }
@@ -775,9 +777,10 @@ mod tests {
             // Only the trigonometric functions fall back to the C library (for huge arguments).
             let trig = matches!(b, Builtin::Sin | Builtin::Cos | Builtin::Tan);
             assert_eq!(!r.symbol.is_empty(), trig, "{}", r.name);
-            // Exactly the accuracy pass's own builtins are internal.
+            // Exactly the accuracy pass's own builtins are internal, and only they have no shader spelling.
             let internal = matches!(b, Builtin::ExpMulDiv | Builtin::AcosLo | Builtin::PowLo);
             assert_eq!(b.is_internal(), internal, "{}", r.name);
+            assert_eq!(r.glsl.is_empty(), internal, "{}", r.name);
             assert_eq!(Builtin::language().any(|l| l.builtin == *b), !internal, "{}", r.name);
         }
     }

@@ -45,6 +45,11 @@ impl FormulaSource {
     pub fn kernel(&self, set: &[(String, f64)], backend: Backend, math: lobe::Mode) -> Result<Kernel, CliError> {
         common::load_kernel(self.file.as_deref(), self.expr.as_deref(), set, backend, math)
     }
+
+    /// Loads the formula and simplifies it with `set` baked in, without the accuracy pass (what exports write).
+    pub fn plain(&self, set: &[(String, f64)]) -> Result<Formula, CliError> {
+        common::load_plain(self.file.as_deref(), self.expr.as_deref(), set)
+    }
 }
 
 /// `--set name=value,…`, repeatable.

@@ -132,6 +132,13 @@ pub fn compile_kernel(f: Formula, set: &[(String, f64)], backend: Backend, math:
     Ok(lobe::compile_formula(f, &opts)?)
 }
 
+/// Loads a formula and simplifies it with `set`'s values baked in, without the accuracy pass: the plain
+/// simplification, which shader exports are made from (the pass's rewrites are for f64).
+pub fn load_plain(path: Option<&str>, expr: Option<&str>, set: &[(String, f64)]) -> Result<Formula, CliError> {
+    let f = load_formula(path, expr)?;
+    Ok(lobe::simplified(&f, &Options { bake: set.to_vec(), ..Options::default() })?)
+}
+
 pub use lobe::front::parse_assignments;
 
 /// Refuses a `--threads` count the renderer would refuse, in the flag's words.

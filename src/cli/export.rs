@@ -29,12 +29,14 @@ fn is_ours(bytes: &[u8]) -> bool {
     String::from_utf8_lossy(&bytes[..bytes.len().min(400)]).contains("— exported by lobe")
 }
 
+/// Exports the plain simplification with the `--set` values baked: the accuracy pass's rewrites are for f64
+/// (double-double tails, scalings that overflow a GPU's f32), and its internal builtins have no shader spelling.
 pub fn run(a: &ExportArgs) -> Result<(), CliError> {
-    let k = a.formula.kernel(&a.set.list(), lobe::Backend::Interp, lobe::Mode::Precise)?;
+    let f = a.formula.plain(&a.set.list())?;
     let text = if a.brdf_explorer {
-        glsl::brdf_explorer(&k.formula)
+        glsl::brdf_explorer(&f)?
     } else {
-        glsl::export(&k.formula, if a.wgsl { Dialect::Wgsl } else { Dialect::Glsl })
+        glsl::export(&f, if a.wgsl { Dialect::Wgsl } else { Dialect::Glsl })?
     };
     match &a.out.path {
         Some(p) => a.out.force.write(p, text.as_bytes(), is_ours),

@@ -48,7 +48,7 @@ fn every_catalogue_formula_exports_valid_glsl() {
     for path in catalogue() {
         for bake in [&[][..], &[("n", 50.0)][..]] {
             let f = formula(&path, bake);
-            let shader = glsl::glsl_test_shader(&f);
+            let shader = glsl::glsl_test_shader(&f).unwrap();
             let file = dir.join(format!("{}.frag", glsl::function_name(&f)));
             std::fs::write(&file, &shader).unwrap();
             let out = Command::new(&v).arg(&file).output().unwrap();
@@ -75,7 +75,7 @@ fn exports_match_golden_files() {
         ("kutlog", &[("n", 100.0)][..], Dialect::Wgsl, "wgsl"),
     ] {
         let f = formula(&root().join(format!("examples/brdfs/{name}.brdf")), bake);
-        let text = glsl::export(&f, d).replace(env!("CARGO_PKG_VERSION"), "VERSION");
+        let text = glsl::export(&f, d).unwrap().replace(env!("CARGO_PKG_VERSION"), "VERSION");
         let golden = gdir.join(format!("{name}.{ext}"));
         if bless {
             std::fs::create_dir_all(&gdir).unwrap();
@@ -90,10 +90,10 @@ fn exports_match_golden_files() {
 #[test]
 fn export_takes_only_used_inputs_and_live_params() {
     let f = formula(&root().join("examples/brdfs/modified_schlick.brdf"), &[]);
-    let text = glsl::export(&f, Dialect::Glsl);
+    let text = glsl::export(&f, Dialect::Glsl).unwrap();
     assert!(text.contains("float lobe_modified_schlick(float NH, float n)"), "{text}");
     let baked = formula(&root().join("examples/brdfs/modified_schlick.brdf"), &[("n", 50.0)]);
-    let text = glsl::export(&baked, Dialect::Glsl);
+    let text = glsl::export(&baked, Dialect::Glsl).unwrap();
     assert!(text.contains("float lobe_modified_schlick(float NH)"), "{text}");
 }
 
@@ -110,7 +110,7 @@ fn hostile_parameter_names_export_valid_glsl() {
     let dir = std::env::temp_dir().join(format!("lobe-glsl-hostile-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let file = dir.join("hostile.frag");
-    let shader = glsl::glsl_test_shader(&f);
+    let shader = glsl::glsl_test_shader(&f).unwrap();
     std::fs::write(&file, &shader).unwrap();
     let out = Command::new(&v).arg(&file).output().unwrap();
     assert!(out.status.success(), "not valid GLSL:\n{}\n{shader}", String::from_utf8_lossy(&out.stdout));
@@ -248,7 +248,7 @@ fn every_catalogue_file_exports_to_brdf_explorer_and_validates_in_its_template()
     for path in catalogue() {
         for bake in [&[][..], &[("n", 50.0)][..]] {
             let f = formula(&path, bake);
-            let text = glsl::brdf_explorer(&f);
+            let text = glsl::brdf_explorer(&f).unwrap();
             assert!(text.contains("vec3 BRDF(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)"), "{text}");
             // `n` is declared only when the formula reads it.
             assert_eq!(text.contains("\nfloat n "), bake.is_empty() && f.ir.used_params(f.root).contains(&0), "{text}");
@@ -265,7 +265,7 @@ fn direction_bool_and_colour_formulas_export_everywhere() {
     let colour = simplified(&aniso_colour(), &[]);
     let red = colour.channels().remove(0);
     let baked = simplified(&aniso_colour(), &[("iso", 1.0), ("base.g", 0.5)]);
-    let be = glsl::brdf_explorer(&colour);
+    let be = glsl::brdf_explorer(&colour).unwrap();
     for want in [
         "float ax 0.01 1 0.2",
         "bool iso 0",
@@ -280,18 +280,18 @@ fn direction_bool_and_colour_formulas_export_everywhere() {
         assert!(be.contains(want), "missing `{want}`:\n{be}");
     }
     assert!(!be.contains("float n ") && !be.contains("NH"), "{be}");
-    let red_be = glsl::brdf_explorer(&red);
+    let red_be = glsl::brdf_explorer(&red).unwrap();
     let shader = red_be.split("::begin shader").nth(1).unwrap();
     assert!(red_be.contains("color base 0.8 0.6 0.2") && shader.contains("base.r") && !shader.contains("base.g"), "{red_be}");
     // --glsl / --wgsl: directions are arguments, a colour is one vec3 argument, the result a vec3.
-    let g = glsl::export(&colour, Dialect::Glsl);
+    let g = glsl::export(&colour, Dialect::Glsl).unwrap();
     assert!(g.contains("vec3 lobe_aniso_colour(float Lx, float Ly, float Lz, float Vx, float Vy, float Vz, float ax, float ay, float iso, vec3 base, float gain)"), "{g}");
     assert!(g.contains("return vec3("), "{g}");
-    let w = glsl::export(&colour, Dialect::Wgsl);
+    let w = glsl::export(&colour, Dialect::Wgsl).unwrap();
     assert!(w.contains("base: vec3<f32>, gain: f32) -> vec3<f32> {") && w.contains("return vec3<f32>("), "{w}");
-    let wr = glsl::export(&red, Dialect::Wgsl);
+    let wr = glsl::export(&red, Dialect::Wgsl).unwrap();
     assert!(wr.contains("Lx: f32") && wr.contains("base: vec3<f32>") && wr.contains(") -> f32 {"), "{wr}");
-    let gb = glsl::export(&baked, Dialect::Glsl);
+    let gb = glsl::export(&baked, Dialect::Glsl).unwrap();
     assert!(!gb.contains("float iso") && gb.contains("vec3 base"), "{gb}");
     let Some(v) = validator() else {
         eprintln!("glslangValidator not installed: direction and colour exports not validated");
@@ -299,8 +299,8 @@ fn direction_bool_and_colour_formulas_export_everywhere() {
     };
     let dir = crate::scratch_dir("export", "directions");
     for (name, f) in [("colour", &colour), ("red", &red), ("baked", &baked)] {
-        validate(&v, &dir, &format!("be-{name}"), &brdf_explorer_shader(&glsl::brdf_explorer(f)));
-        validate(&v, &dir, &format!("glsl-{name}"), &glsl::glsl_test_shader(f));
+        validate(&v, &dir, &format!("be-{name}"), &brdf_explorer_shader(&glsl::brdf_explorer(f).unwrap()));
+        validate(&v, &dir, &format!("glsl-{name}"), &glsl::glsl_test_shader(f).unwrap());
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -356,4 +356,69 @@ fn export_command_writes_brdf_explorer_files() {
     assert!(!text.contains("float n "), "n is baked:\n{text}");
     let both = Command::new(lobe).args(["export", "--glsl", "--brdf-explorer"]).arg(&blinn).output().unwrap();
     assert!(!both.status.success() && String::from_utf8_lossy(&both.stderr).contains("cannot be used with"));
+}
+
+/// What an export must never contain: the accuracy pass's internal builtins (no shader has them) and its
+/// 2^600 scaling (∞ in a GPU's f32).
+const NOT_IN_EXPORTS: [&str; 4] = ["acoslo", "powlo", "expmuldiv", "4.149515568880993e180"];
+
+/// `lobe export --glsl|--wgsl|--brdf-explorer` writes the plain simplification with the `--set` values baked,
+/// not the accuracy pass's form: for every catalogue and BRDF Explorer example the text is the library's export
+/// of `lobe::simplified` (no pass), holds no internal builtin nor the pass's 2^600 scaling, and validates
+/// (glslangValidator for GLSL, naga for WGSL, where installed).
+#[test]
+fn exports_are_the_plain_simplification_without_internal_builtins() {
+    let lobe = env!("CARGO_BIN_EXE_lobe");
+    let run = |args: &[&str]| {
+        let out = Command::new(lobe).args(args).current_dir(root()).output().unwrap();
+        assert!(out.status.success(), "lobe {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let naga = Command::new("naga").arg("--version").output().is_ok_and(|o| o.status.success());
+    let glslang = validator();
+    let dir = crate::scratch_dir("export", "plain");
+    let explorer = std::fs::read_dir(root().join("examples/explorer")).unwrap().map(|e| e.unwrap().path());
+    let files: Vec<PathBuf> = catalogue().into_iter().chain(explorer.filter(|p| p.extension().is_some_and(|x| x == "brdf"))).collect();
+    assert!(files.len() >= 20, "{} example files", files.len());
+    for path in &files {
+        let rel = path.strip_prefix(root()).unwrap().to_str().unwrap().to_string();
+        let src = std::fs::read_to_string(path).unwrap();
+        let f = lobe::front::parse(&rel, &src).unwrap_or_else(|d| panic!("{}", d.render(false)));
+        for set in [None, Some("n=50")] {
+            let mut args = vec![rel.as_str()];
+            let mut bake = vec![];
+            if let Some(s) = set {
+                args.extend(["--set", s]);
+                bake.push(("n", 50.0));
+            }
+            let plain = simplified(&f, &bake);
+            for (flag, want) in [
+                ("--glsl", glsl::export(&plain, Dialect::Glsl).unwrap()),
+                ("--wgsl", glsl::export(&plain, Dialect::Wgsl).unwrap()),
+                ("--brdf-explorer", glsl::brdf_explorer(&plain).unwrap()),
+            ] {
+                let text = run(&[&["export", flag][..], &args].concat());
+                assert_eq!(text, want, "{rel} {flag} {set:?}: not the plain simplification's export");
+                for bad in NOT_IN_EXPORTS {
+                    assert!(!text.contains(bad), "{rel} {flag} {set:?} contains `{bad}`:\n{text}");
+                }
+                let stem = format!("{}-{}", glsl::function_name(&plain), set.map_or(0, |_| 1));
+                match flag {
+                    "--glsl" => {
+                        if let Some(v) = &glslang {
+                            validate(v, &dir, &stem, &format!("#version 450\n{text}\nvoid main() {{}}\n"));
+                        }
+                    }
+                    "--wgsl" if naga => {
+                        let file = dir.join(format!("{stem}.wgsl"));
+                        std::fs::write(&file, &text).unwrap();
+                        let out = Command::new("naga").arg(&file).output().unwrap();
+                        assert!(out.status.success(), "{rel}: naga refuses the WGSL:\n{}\n{text}", String::from_utf8_lossy(&out.stderr));
+                    }
+                    _ => {}
+                }
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }
