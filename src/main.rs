@@ -10,6 +10,10 @@ use std::io::IsTerminal;
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
+    /// Do not read or store the accuracy pass's decisions in the cache directory (`$LOBE_CACHE_DIR`, else the
+    /// platform's, e.g. ~/.cache/lobe): search again.
+    #[arg(long, global = true)]
+    no_cache: bool,
 }
 
 #[derive(Subcommand)]
@@ -70,6 +74,7 @@ fn main() {
         args.retain(|a| a != "--sweep");
     }
     let cli = Cli::parse_from(args);
+    cli::common::use_cache(!cli.no_cache);
     let result = match &cli.cmd {
         Cmd::Eval(a) => cli::eval::run(a),
         Cmd::Watch(a) => cli::watch::run(a),

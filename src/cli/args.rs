@@ -113,6 +113,14 @@ pub struct PreferArg {
     pub max_cost: f64,
 }
 
+/// A positive number of seconds.
+pub fn parse_seconds(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v > 0.0 && v.is_finite() => Ok(v),
+        _ => Err(format!("`{s}` is not a positive number of seconds (e.g. 2 or 0.5)")),
+    }
+}
+
 fn parse_ratio(s: &str) -> Result<f64, String> {
     match s.trim().parse::<f64>() {
         Ok(v) if v >= 1.0 && !v.is_nan() => Ok(v),

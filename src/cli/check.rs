@@ -23,6 +23,9 @@ pub struct CheckArgs {
     /// their ranges).
     #[arg(long, default_value_t = 100_000, value_parser = clap::value_parser!(u64).range(1..=100_000_000))]
     pub points: u64,
+    /// Seconds the accuracy pass may search before it keeps the best form found so far (the report says so).
+    #[arg(long, value_name = "SECONDS", default_value_t = 10.0, value_parser = args::parse_seconds)]
+    pub budget: f64,
     #[command(flatten)]
     pub json: Json,
     #[command(flatten)]
@@ -59,10 +62,16 @@ fn stats_line(f: &Formula, s: &ErrorStats) -> String {
     if s.ill_conditioned > 0 {
         out.push_str(&format!("; max {:.2} bits where well conditioned", s.max_bits_well));
     }
-    if s.nonfinite > 0 {
-        out.push_str(&format!("; NaN/inf where the true value is finite at {} points", s.nonfinite));
-        if let Some(w) = &s.first_nonfinite {
-            out.push_str(&format!(", e.g. {}", point_text(f, w)));
+    for (n, first, what) in [
+        (s.nonfinite, &s.first_nonfinite, "NaN/inf where the true value is finite"),
+        (s.wrong_sign, &s.first_wrong_sign, "the wrong sign"),
+        (s.pole_misses, &s.first_pole_miss, "not the exact infinity at a pole"),
+    ] {
+        if n > 0 {
+            out.push_str(&format!("; {what} at {n} points"));
+            if let Some(w) = first {
+                out.push_str(&format!(", e.g. {}", point_text(f, w)));
+            }
         }
     }
     out
@@ -82,11 +91,16 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
     let unused: Vec<&str> = Input::ALL.iter().filter(|i| !used.contains(**i)).map(|i| i.name()).collect();
     let live = simplified.ir.used_params(simplified.root);
     let t_pass = std::time::Instant::now();
-    let pass = robust::improve(&f, &bake, &robust::PassOptions { math: a.math.mode, ..a.prefer.pass(a.points as usize) });
+    let opts = robust::PassOptions {
+        math: a.math.mode,
+        conditioning: robust::Conditioning::Everywhere,
+        budget: std::time::Duration::from_secs_f64(a.budget),
+        ..a.prefer.pass(a.points as usize)
+    };
+    let pass = robust::improve(&f, &bake, &opts);
     let pass_ms = t_pass.elapsed().as_secs_f64() * 1e3;
-    // How far the worst well-conditioned point is from the ill-conditioned threshold.
-    let truth_f = lobe::simplify::bake_only(&f, &bake);
-    let cond_well = pass.after.worst_well.as_ref().map(|w| robust::condition_ulps(&truth_f, &w.point, w.truth));
+    // How far the worst well-conditioned point is from the ill-conditioned threshold (measured everywhere).
+    let cond_well = pass.after.condition_at_worst_well;
     let opts = |backend| Options { backend, bake: set.clone(), math: a.math.mode, ..Options::default() };
     let bounds = builtin_bounds(&simplified, a.math.mode);
     let jit = lobe::compile_formula(f.clone(), &opts(Backend::Jit))?;
@@ -136,6 +150,7 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
             condition_ulps_at_worst_well_conditioned: cond_well,
             before: ErrorStatsJson::new(&f, &pass.before),
             accuracy_rewrites: robust::TrialJson::all(&pass),
+            truncated: pass.truncated,
             compiled: pass.formula.to_program_text(),
             cost_ratio: pass.cost_after / pass.cost_before,
             compile_us: robust::CompileUs {
@@ -216,6 +231,9 @@ fn print_accuracy(f: &Formula, pass: &robust::Outcome, asked: usize, ms: f64, co
             }
         );
     }
+    if pass.truncated {
+        println!("    stopped   the search reached its time budget; the best form found so far is kept (raise it with --budget)");
+    }
     println!("    after     {}", stats_line(f, &pass.after));
     if pass.trials.iter().any(|t| t.kept) {
         println!("    compiled  {}", pass.formula.to_program_text().replace('\n', "\n              "));
@@ -228,6 +246,9 @@ fn print_accuracy(f: &Formula, pass: &robust::Outcome, asked: usize, ms: f64, co
             format_args!("{:.2}", w.bits),
             point_text(f, w)
         );
+    }
+    if a.poles > 0 {
+        println!("    at {} points the exact value is infinite (a pole); {} of them get that infinity", a.poles, a.poles - a.pole_misses);
     }
     if a.ill_conditioned > 0 {
         let pct = 100.0 * a.ill_conditioned as f64 / a.points.max(1) as f64;

@@ -128,8 +128,20 @@ pub fn load_kernel(
 /// [`load_kernel`]'s compilation of an already loaded formula (e.g. one channel of a colour formula).
 pub fn compile_kernel(f: Formula, set: &[(String, f64)], backend: Backend, math: lobe::Mode) -> Result<Kernel, CliError> {
     let opts = Options { backend, bake: set.to_vec(), math, ..Options::default() };
-    let opts = lobe::numerics::robust::with_pass(opts, Default::default());
-    Ok(lobe::compile_formula(f, &opts)?)
+    Ok(lobe::compile_formula(f, &with_pass(opts, Default::default()))?)
+}
+
+static USE_CACHE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(true);
+
+/// `--no-cache` turns the accuracy pass's decision cache off for this process.
+pub fn use_cache(on: bool) {
+    USE_CACHE.store(on, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// Compile options with the accuracy pass on, its decisions cached unless `--no-cache` was given.
+pub fn with_pass(opts: Options, pass: lobe::numerics::robust::PassOptions) -> Options {
+    let cache = USE_CACHE.load(std::sync::atomic::Ordering::Relaxed).then(lobe::numerics::pass_cache::Cache::platform).flatten();
+    lobe::numerics::robust::with_pass_cached(opts, pass, cache)
 }
 
 /// Loads a formula and simplifies it with `set`'s values baked in, without the accuracy pass: the plain

@@ -149,7 +149,7 @@ fn number(v: f64) -> String {
 pub fn run(a: &EvalArgs) -> Result<(), CliError> {
     let set = a.set.list();
     let f = a.formula.load()?;
-    let pass = |opts| lobe::numerics::robust::with_pass(opts, a.prefer.pass(lobe::numerics::robust::PassOptions::default().points));
+    let pass = |opts| super::common::with_pass(opts, a.prefer.pass(lobe::numerics::robust::PassOptions::default().points));
     let ks: Vec<Kernel> = if a.normalize {
         if f.is_rgb() {
             return Err(CliError::hint(

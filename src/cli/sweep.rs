@@ -131,7 +131,7 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(Out, Vec<String>), CliError
     let compiled = if a.as_written {
         None
     } else {
-        let opts = lobe::numerics::robust::with_pass(a.backend.options(set.clone()), a.prefer.pass(lobe::numerics::robust::PassOptions::default().points));
+        let opts = super::common::with_pass(a.backend.options(set.clone()), a.prefer.pass(lobe::numerics::robust::PassOptions::default().points));
         Some(lobe::compile_formula(u, &opts)?)
     };
     // Baked parameters are fixed: sweep them at their value only.

@@ -61,6 +61,7 @@ pub mod fit;
 pub mod normalize;
 pub mod points;
 pub mod quad;
+pub mod pass_cache;
 pub mod robust;
 pub mod sweep;
 pub mod truth;

@@ -22,7 +22,7 @@
 //! - pow: binary powering for integer exponents up to 2¹⁶, exp(y·ln|x|) otherwise.
 //!
 //! Limits (documented, not hidden): trigonometric arguments beyond 2⁴⁰ (never in a BRDF) fall back to libm;
-//! `exp` of arguments beyond ±2⁵² saturates to ∞ / 0 (the true value is outside any f64 by 10¹⁵ binades);
+//! `exp` of arguments beyond ±2⁵² saturates to ∞ / the smallest positive value (2^(−2⁶⁰): outside any f64 by 10¹⁵ binades, but positive, so a pole times it stays a pole); sums are exact for operands up to 1100 binades apart (beyond, the smaller one is below any subnormal at that scale), but a value that is exactly 0 by cancellation may come out as ~2⁻¹⁰⁶ of its terms, which a huge divisor can turn into a large number;
 //! rounding to a subnormal f64 rounds twice (≤ 1 ulp of the subnormal).
 //!
 //! Cost: ~20–60 ns per node in a release build (exp/ln/trig ~0.3–1 µs): a catalogue formula is 1–5 µs per point.
@@ -158,11 +158,14 @@ impl Xf {
             // Both special, or one infinite/NaN: the f64 rule decides (a finite operand's size is irrelevant).
             return Xf::special(a.hi + b.hi);
         }
+        // Aligned to the larger exponent, a much smaller operand becomes the low part (any f64 below half an ulp
+        // of the high part is one): 1 + 10⁻⁴³ is held exactly, so (c − 1) + 1 at c = 10⁻⁴³ is c, not 0. Only below
+        // the smallest subnormal of the scale does it vanish.
         let d = a.e.saturating_sub(b.e);
-        if d > 120 {
+        if d > 1100 {
             return a;
         }
-        if d < -120 {
+        if d < -1100 {
             return b;
         }
         if d >= 0 {
@@ -245,7 +248,10 @@ impl Xf {
             return if self.is_zero() { Xf::ONE } else { Xf::special(self.hi.exp()) };
         }
         if self.e >= 52 {
-            return if self.sign_negative() { Xf::ZERO } else { Xf::special(f64::INFINITY) };
+            // Beyond every exponent an Xf holds. Below, the exponential is still positive: the smallest positive
+            // Xf stands for it, so ∞·e^(−10¹⁵⁴) is ∞ (Ward at NL = 0 beside a vanishing exp), while any finite
+            // product of it rounds to +0. Above, +∞.
+            return if self.sign_negative() { Xf { hi: 1.0, lo: 0.0, e: -(1i64 << 60) } } else { Xf::special(f64::INFINITY) };
         }
         let x = self.to_dd();
         let k = (x.0 / LN2.0).round();

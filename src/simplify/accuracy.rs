@@ -1066,13 +1066,20 @@ fn compensated_base(f: &Formula, ranges: &[Range]) -> (Ir, NodeId, bool) {
         // The sum's own rounding error and, to first order, its addends' (F_ST's n/a·(c − 1)).
         let e = rounding_error(f, ranges, ir, map, (sum, map[sum.index()]), &mut vec![None; f.ir.len()], sp)?;
         let (s, y) = (map[sum.index()], map[y.index()]);
-        // pow(s + e, y) = pow(s, y)·(1 + y·e/s + O(e²)); s ≤ 0 (clamped to a zero base) divides by the smallest
-        // normal instead, where p = 0 (or NaN for a negative base, as before) and the correction is finite.
+        // pow(s + e, y) = pow(s, y)·(1 + y·e/s + O((y·e/s)²)). The pair is renormalised first (Fast2Sum: s' the
+        // sum s + e rounded, e' what it left out), so |e'/s'| ≤ 2⁻⁵³ and the first order holds even where the sum
+        // cancelled (F_ST at n = a and NH = 10⁻²⁰: s = 0, e = NH, so s' = NH and e' = 0). s' ≤ 0 (clamped to a zero
+        // base) divides by the smallest normal instead, so the correction is finite.
+        let (s, e) = dd::fast_two_sum(&mut IrEmit::new(ir, sp), s, e);
+        let b = match *f.ir.node(base) {
+            Node::Call(Builtin::Max, [_, z, _]) => ir.call(Builtin::Max, &[s, map[z.index()]], sp),
+            _ => s,
+        };
         let tiny = ir.konst(f64::MIN_POSITIVE, sp);
         let den = ir.call(Builtin::Max, &[s, tiny], sp);
         let r = ir.bin(BinOp::Div, e, den, sp);
         let yr = ir.bin(BinOp::Mul, y, r, sp);
-        let p = ir.call(Builtin::Pow, &[map[base.index()], y], sp);
+        let p = ir.call(Builtin::Pow, &[b, y], sp);
         Some(ir.call(Builtin::Fma, &[p, yr, p], sp))
     })
 }

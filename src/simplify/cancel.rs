@@ -224,25 +224,26 @@ impl Builder<'_> {
         vec![Some(Dd { hi: ir.konst(1.0, self.sp), lo: None })]
     }
 
-    /// `x` (an old node of some shape) as numerator and denominator polynomials.
-    fn rat(&mut self, ir: &mut Ir, map: &[NodeId], x: NodeId, shapes: &[Option<Shape>]) -> (Poly, Poly) {
+    /// `x` (an old node of some shape) as numerator and denominator polynomials; a parameter-only node as
+    /// `leaf` gives it (its double-double value).
+    fn rat(&mut self, ir: &mut Ir, x: NodeId, shapes: &[Option<Shape>], leaf: &mut dyn FnMut(&mut Ir, NodeId) -> Dd) -> (Poly, Poly) {
         if let Some(r) = self.rats.get(&x) {
             return r.clone();
         }
         let one = self.one(ir);
         let r = if self.inv[x.index()] {
-            // Taken as computed (rounded), as a baked parameter's folding computes it: the baked and the live
-            // kernel then start from the same coefficients and agree (tests/it/robust.rs).
-            (vec![Some(Dd { hi: map[x.index()], lo: None })], one)
+            // In double-double (the quadratic model's 1 − 0.786·n at n = 1/0.786 is the low part of 0.786·n):
+            // the live kernel computes it once per parameter set, and a baked one folds the same expression.
+            (vec![Some(leaf(ir, x))], one)
         } else {
             match *self.f.ir.node(x) {
                 Node::Neg(a) => {
-                    let (n, d) = self.rat(ir, map, a, shapes);
+                    let (n, d) = self.rat(ir, a, shapes, leaf);
                     (self.pneg(ir, &n), d)
                 }
                 Node::Binary(op, a, b) if shapes[x.index()].is_some() => {
-                    let (na, da) = self.rat(ir, map, a, shapes);
-                    let (nb, db) = self.rat(ir, map, b, shapes);
+                    let (na, da) = self.rat(ir, a, shapes, leaf);
+                    let (nb, db) = self.rat(ir, b, shapes, leaf);
                     let nb = if op == BinOp::Sub { self.pneg(ir, &nb) } else { nb };
                     match op {
                         BinOp::Add | BinOp::Sub => {
@@ -310,6 +311,7 @@ pub(super) fn rational_form(f: &Formula) -> (Ir, NodeId, bool) {
     let uses = f.ir.use_counts(f.root);
     let ranges = super::node_ranges(f, &super::Policy::default());
     let mut b = Builder { f, inv: &inv, sp: Span::default(), rats: HashMap::new() };
+    let mut pd = ParamDd { b: Builder { f, inv: &inv, sp: Span::default(), rats: HashMap::new() }, ranges: &ranges, memo: HashMap::new() };
     rebuild(f, |ir, map, id, n| {
         if inv[id.index()] || in_sum[id.index()] && uses[id.index()] <= 1 || !matches!(n, Node::Binary(BinOp::Add | BinOp::Sub, ..)) {
             return None;
@@ -349,26 +351,29 @@ pub(super) fn rational_form(f: &Formula) -> (Ir, NodeId, bool) {
             return None;
         }
         b.sp = f.ir.span(id);
+        pd.b.sp = b.sp;
         let one = b.one(ir);
         let (mut num, mut den): (Poly, Poly) = (vec![None], one);
         for (t, neg) in ts {
-            let (n, d) = b.rat(ir, map, t, &shapes);
+            let (n, d) = b.rat(ir, t, &shapes, &mut |ir, x| pd.dd(ir, map, x));
             let n = if neg { b.pneg(ir, &n) } else { n };
             let l = b.pmul(ir, &num, &d);
             let r = b.pmul(ir, &n, &den);
             num = b.padd(ir, &l, &r);
             den = b.pmul(ir, &den, &d);
         }
-        // A polynomial (constant denominator) is left as written: degree 1 written as a sum rounds at most
-        // twice where it is well conditioned (Modified cosine's n/2·(c − 1) + 1, c − 1 exact by Sterbenz); the
-        // fma form gains only where the value's own zero makes it ill-conditioned, and there the pass's choice
-        // differs between baked and live kernels, which must agree (tests/it/robust.rs).
-        if den.len() < 2 {
-            return None;
-        }
         let x = map[atom.index()];
-        let (nv, dv) = (b.eval(ir, &num, x), b.eval(ir, &den, x));
-        let mut v = ir.bin(BinOp::Div, nv, dv, b.sp);
+        // A polynomial (constant denominator): its coefficients divided by that constant in double-double, and
+        // no division per point. The same cost as Modified cosine's n/2·(c − 1) + 1 written, and exact where the
+        // written form cancels to nothing (n = 2 at c = 10⁻¹⁰: 1 + (c − 1) loses c − 1's rounding, ~10⁻¹⁶).
+        let mut v = if den.len() < 2 {
+            let d0 = den.first().copied().flatten()?;
+            let num: Poly = num.iter().map(|c| c.map(|c| b.div(ir, c, d0))).collect();
+            b.eval(ir, &num, x)
+        } else {
+            let (nv, dv) = (b.eval(ir, &num, x), b.eval(ir, &den, x));
+            ir.bin(BinOp::Div, nv, dv, b.sp)
+        };
         for (t, neg) in rest {
             v = ir.bin(if neg { BinOp::Sub } else { BinOp::Add }, v, map[t.index()], b.sp);
         }
@@ -748,17 +753,19 @@ mod tests {
         assert!(t.contains("fma("), "{t}");
         let t = apply("let c = NH\nc/(n - n*c + c) - 0.25").unwrap();
         assert!(t.contains("fma(") && t.matches(" / ").count() == 1, "{t}");
-        // A polynomial is left as written.
-        assert!(apply("n*0.5*(NH - 1) + 1").is_none());
+        // A polynomial of degree 1: two fmas of double-double coefficients, no division.
+        let t = apply("n*0.5*(NH - 1) + 1").unwrap();
+        assert!(t.contains("fma(") && !t.contains(" / "), "{t}");
         // A term of higher degree is added to the regrouped part as written.
         let t = apply("let c = NH\nc/(n - n*c + c) + (c^8 - 0.25)").unwrap();
         assert!(t.contains("fma(") && t.matches(" / ").count() == 1 && t.contains("t2 * t2"), "{t}");
         // Same-signed qualifying terms beside it are not regrouped.
         assert!(apply("let c = NH\nc/(n - n*c + c) + (c^8 + 0.25)").is_none());
-        // Degree 2 over one atom, two atoms, a sum already x + a₀, same-signed terms are left alone.
+        // Degree 2 over one atom, two atoms, a sum already x + a₀ are left alone; a linear one is rewritten.
         assert!(apply("NH*NH - n*NH").is_none());
         assert!(apply("NH/(n + NL) - 1").is_none());
         assert!(apply("NH - n").is_none());
+        // n·(1 − NH) and NH are both ≥ 0: no cancellation to move.
         assert!(apply("n*(1 - NH) + NH").is_none());
         assert!(apply("1/(n*(1 - NH) - NH) - 1").is_some());
     }

@@ -279,6 +279,50 @@ pub fn simplify_with(f: &Formula, bake: &[(usize, f64)], policy: &Policy) -> (Fo
     (out, report)
 }
 
+/// The sign of a formula's value by range analysis: what the accuracy pass must keep ([`keep_sign`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Sign {
+    /// ≥ 0 (or NaN) everywhere.
+    NonNeg,
+    /// ≤ 0 (or NaN) everywhere.
+    NonPos,
+    Any,
+}
+
+/// The sign of `f` as written with `bake` folded (range analysis of the unsimplified formula: a clamp, a
+/// square or a pow of a clamped base bound it even where the simplifier later drops the clamp as redundant).
+pub fn sign_of(f: &Formula, bake: &[(usize, f64)]) -> Sign {
+    let g = bake_only(f, bake);
+    let r = node_ranges(&g, &Policy::default())[g.root.index()];
+    if r.lo >= 0.0 {
+        Sign::NonNeg
+    } else if r.hi <= 0.0 {
+        Sign::NonPos
+    } else {
+        Sign::Any
+    }
+}
+
+/// `g` with its result clamped at 0 (`max`/`min`, which keep NaN) where `sign` bounds it and `g`'s own range
+/// analysis does not: a rewrite moves roundings, never the sign (a compensated correction below a cut-off once
+/// went below 0). Costs one node where it applies; nothing where the range already shows the sign.
+pub fn keep_sign(sign: &Sign, g: Formula) -> Formula {
+    let r = node_ranges(&g, &Policy::default())[g.root.index()];
+    let (b, bad) = match sign {
+        Sign::NonNeg => (Builtin::Max, r.lo < 0.0),
+        Sign::NonPos => (Builtin::Min, r.hi > 0.0),
+        Sign::Any => return g,
+    };
+    if !bad {
+        return g;
+    }
+    let mut g = g;
+    let sp = g.ir.span(g.root);
+    let zero = g.ir.konst(0.0, sp);
+    g.root = g.ir.call(b, &[g.root, zero], sp);
+    g
+}
+
 /// The range of every node of `f` under `policy`, computed without rewriting (what the accuracy pass's
 /// guards read). `f`'s arena is hash-consed, so its ids are kept.
 pub(crate) fn node_ranges(f: &Formula, policy: &Policy) -> Vec<Range> {

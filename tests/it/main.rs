@@ -19,6 +19,7 @@ mod parse_errors;
 mod simplify;
 mod accuracy;
 mod energy;
+mod everywhere;
 mod explorer_render;
 mod fixtures;
 mod render;
