@@ -8,7 +8,7 @@
 //! ≤ 500 ms per explorer file, ≤ 5 ms from the cache, check ≤ 10 s.
 
 use lobe::numerics::pass_cache::Cache;
-use lobe::numerics::robust::{self, Conditioning, PassOptions};
+use lobe::numerics::robust::{self, Conditioning, DecisionStore, PassOptions};
 use std::path::PathBuf;
 use std::time::Instant;
 

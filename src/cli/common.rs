@@ -138,9 +138,15 @@ pub fn use_cache(on: bool) {
     USE_CACHE.store(on, std::sync::atomic::Ordering::Relaxed);
 }
 
-/// Compile options with the accuracy pass on, its decisions cached unless `--no-cache` was given.
+/// Compile options with the accuracy pass on, its search bounded by 2 s (it keeps the best form so far), its
+/// decisions cached unless `--no-cache` was given.
 pub fn with_pass(opts: Options, pass: lobe::numerics::robust::PassOptions) -> Options {
-    let cache = USE_CACHE.load(std::sync::atomic::Ordering::Relaxed).then(lobe::numerics::pass_cache::Cache::platform).flatten();
+    let pass = lobe::numerics::robust::PassOptions { budget: std::time::Duration::from_secs(2), ..pass };
+    let cache = USE_CACHE
+        .load(std::sync::atomic::Ordering::Relaxed)
+        .then(lobe::numerics::pass_cache::Cache::platform)
+        .flatten()
+        .map(|c| std::sync::Arc::new(c) as std::sync::Arc<dyn lobe::numerics::robust::DecisionStore>);
     lobe::numerics::robust::with_pass_cached(opts, pass, cache)
 }
 

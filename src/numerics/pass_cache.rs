@@ -10,7 +10,7 @@
 //! to a temporary file renamed into place, so concurrent commands never read half a file. Any I/O error is a
 //! miss or a skipped store: the cache never makes a command fail.
 
-use super::robust::{Cand, Decision, PassOptions, Step};
+use super::robust::{Cand, Decision, DecisionStore, PassOptions, Step};
 use crate::ir::Formula;
 use crate::simplify::accuracy::Rule;
 use std::path::PathBuf;
@@ -73,8 +73,11 @@ impl Cache {
         self.dir.join(format!("{:032x}.pass", fnv1a128(key.as_bytes())))
     }
 
+}
+
+impl DecisionStore for Cache {
     /// The stored decision for this formula, baked values and options, if any.
-    pub fn load(&self, f: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Option<Decision> {
+    fn load(&self, f: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Option<Decision> {
         let key = Cache::key(f, bake, o);
         let text = std::fs::read_to_string(self.path(&key)).ok()?;
         let (head, body) = text.split_once("\n--\n")?;
@@ -82,7 +85,7 @@ impl Cache {
     }
 
     /// Stores a decision (errors ignored: a later command searches again).
-    pub fn store(&self, f: &Formula, bake: &[(usize, f64)], o: &PassOptions, d: &Decision) {
+    fn store(&self, f: &Formula, bake: &[(usize, f64)], o: &PassOptions, d: &Decision) {
         let key = Cache::key(f, bake, o);
         let path = self.path(&key);
         let tmp = path.with_extension(format!("tmp{}", std::process::id()));

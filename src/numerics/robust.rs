@@ -9,15 +9,17 @@
 //! maximum over a sample of the domain with the worst input, counts the points where the result is NaN/∞ but the
 //! truth is finite, the points where the formula is undefined even in exact arithmetic (0/0, ∞·0 at e.g. NH = 0
 //! exactly, with no limit along an input on its edge, [`truth::limit`]; left out of the averages; where the
-//! limit exists it is the truth, and the report counts those points), and the points where the formula is *ill-conditioned by nature*: a 1-ulp
-//! change of one input or live parameter moves the true value by more than [`ILL_CONDITIONED_ULPS`] ulps, so no
+//! limit exists it is the truth, and the report counts those points), poles (the exact value ±∞, which the
+//! result must be), and the points where the formula is *ill-conditioned by nature*: a 1-ulp
+//! change of one input moves the true value by more than [`ILL_CONDITIONED_ULPS`] ulps, so no
 //! f64 evaluation can be accurate there (the Gaussian at large n: exp amplifies its argument). The maximum over
 //! well-conditioned points is reported separately.
 //!
 //! The domain ([`sample`]): every input the formula reads in [0, 1], a quarter of the values from the edge
 //! classes (0, 1, 1 − 2⁻⁵³, 1 − 2⁻⁵², the smallest denormal, a denormal, 2⁻¹⁰²², 10⁻³⁰⁰, 1.6·10⁻¹⁶², 10⁻¹⁵⁴,
 //! 10⁻⁷⁷, 10⁻²⁰, ½), a quarter 1 − 10⁻ᵘ (u ∈ [0, 16]), a fifth log-uniform down to 10⁻³²³, the rest uniform;
-//! live parameters over their declared ranges (endpoints, uniform, log-uniform). A formula that reads VH with
+//! live parameters over their declared ranges (endpoints, [`special_values`], uniform, log-uniform; a tenth of
+//! the points with two parameters equal), bools at 0 and 1 only. A formula that reads VH with
 //! NL or NV gets geometrically possible combinations only: N·(L + V) = |L + V|·NH and |L + V| = 2·VH, so
 //! NL + NV = 2·NH·VH (VH = 0 means L = −V, where NL = NV = 0); the total is split at a random fraction drawn
 //! like an input (edge classes included). Other inputs are drawn independently, the conservative choice for a
@@ -28,40 +30,34 @@
 //! the normal, so L + V ∥ N, tiny at grazing angles), every input computed from the pair by
 //! [`super::inputs_from_dirs`]. Deterministic (fixed seed).
 //!
-//! The pass ([`improve`]): start from the simplified formula (the fastest form lobe builds), try
-//! `compensated-params` first (it rewrites the formula before baking, so a baked parameter folds what the live
-//! kernel computes), then each candidate of `simplify::accuracy` in turn on the current best, keep it when it is more accurate — fewer non-finite
-//! results where the truth is finite, then a lower maximum over well-conditioned points (by half a bit, or from
-//! above [`TARGET_BITS`] to within it), then a lower average — and its static cost ([`crate::simplify::accuracy::cost`]) stays within the budget: [`Prefer::Speed`] keeps
-//! only rewrites that cost nothing, [`Prefer::Accuracy`] (default) those within `max_cost` (1.3) × the fastest
-//! form's cost — up to [`NONFINITE_BUDGET`] (2×) for a rewrite that removes NaN/∞ results where the true
-//! value is finite, since those are wrong answers, not imprecise ones — and up to the cost of the `pow`-call
-//! form for `compensated-power` (large baked integer powers as compensated chains): a baked exponent then never
-//! costs more than the live formula, which calls pow, and agrees with it within a few ulp instead of the plain
-//! chain's hundreds. Each trial is reported with what it bought. A rule applied everywhere that was dropped as
-//! no more accurate is tried once more after a later rule was kept: two defects at the same points (a zero
-//! normalize length and an underflowing 1/(NL·NV)) each hide the other's fix.
+//! The pass ([`improve`]): a search with every parameter live, from the simplified formula (the fastest form
+//! lobe builds): each candidate ([`Cand`]: a rule of `simplify::accuracy` at a site, or a whole-formula form) is
+//! built from the current best, measured on the same points against the same truth, and kept when [`better`] —
+//! the invariants first (no more NaN/∞ where the truth is finite, missed poles or wrong signs), no point taken
+//! beyond [`TARGET_BITS`] where it was within it unless ten times as many are fixed, then fewer well-conditioned
+//! points beyond the target, a lower maximum, fewer points near the target, a lower average — and within the
+//! cost budget ([`crate::simplify::accuracy::cost`]): [`Prefer::Speed`] keeps only rewrites that cost nothing,
+//! [`Prefer::Accuracy`] (default) those within `max_cost` (1.3) × the fastest form's cost, up to
+//! [`NONFINITE_BUDGET`] (2×) for a rewrite that keeps lobe's promise at more points ([`keeps_promise`]), and up
+//! to the pow calls' cost for compensated power chains. A rule applied everywhere that was dropped as no more
+//! accurate is tried once more after a later rule was kept (two defects at the same points each hide the other's
+//! fix). Every candidate keeps the formula's sign where range analysis of the formula as written bounds it
+//! ([`crate::simplify::keep_sign`]). The search stops at [`PassOptions::budget`] with the best form so far.
 //!
-//! Bake-consistent choices: a baked kernel must agree with the live one at the baked values (within 4 ulp,
-//! tests/it/robust.rs), but a pass measured on the baked domain alone decides by what that domain needs, so it
-//! dropped rewrites the live pass kept (Beckmann's `compensated-exp` at m = 0.3, F_dsh's `rational-form` at
-//! n = 50), and the two kernels then differ by the correction. So with baked values the pass first decides
-//! with every parameter live, then bakes that choice: the live choice simplified with the values folded in
-//! (`live-choice`, its first trial), parameter-only subexpressions folding to exactly what the live kernel
-//! computes once per parameter set (the folder and the backends share `BinOp::apply` and `Builtin::eval`).
-//! Replaying the live rules on the baked form instead would need their sites to match across two arenas
-//! whose folding differs; baking the choice keeps it by construction. It is kept unless it measures less
-//! accurate than the plain baked form (ties kept) or costs more than both the budget and the live kernel
-//! (folding only removes work, so in practice never). The search then goes on from it with the rules the
-//! live choice did not keep, the power candidates built from it: a baked exponent still gets its
-//! compensated chain (the live kernel calls pow). A baked value the formula does not read is dropped first
-//! (the live decision is then the whole decision). Cost: a baked formula's pass measures twice (live, then
-//! baked), ~2× the time; with nothing kept live, it is the baked pass alone plus the live one's measuring.
+//! Decided once, for every parameter value: with baked values the live decision is baked (the live choice
+//! simplified with the values folded in, integer powers above 8 kept as pow calls as the live kernel calls pow,
+//! then their compensated chains where no less accurate and cheaper) and no other rule is tried, so a baked
+//! kernel computes what the live one does: parameter-only subexpressions fold to exactly what the live kernel's
+//! prepared block computes (the folder and the backends share `BinOp::apply` and `Builtin::eval`). The decision
+//! ([`Decision`]: the kept steps) replays without measuring ([`replay`]), which is what the on-disk cache
+//! ([`super::pass_cache`]) stores.
 //!
-//! Cost: one truth evaluation per point (1–5 µs for a catalogue formula in release; a limit, up to three per
-//! input on an edge, only where it is not finite), computed once per pass ([`truths`]), plus one interpreter
-//! evaluation per point and candidate, plus the condition estimate (two truth evaluations per read input) at the
-//! points with more than 4 bits of error; parallel over points (rayon). 10⁵ points: 0.3–2 s per formula.
+//! Cost: one truth evaluation per point (1–5 µs for a catalogue formula in release; a limit only where it is
+//! NaN), computed once per pass ([`Reference`]), one interpreter evaluation per point and candidate, and the
+//! condition (two truth evaluations per read input) once per point where some candidate is more than
+//! [`TARGET_BITS`] off, or everywhere for the report ([`Conditioning::Everywhere`]); parallel over points
+//! (rayon). On one core: 3–110 ms per catalogue formula, up to ~430 ms for BRDF Explorer's largest files
+//! (BENCHMARKS.md, the `pass` bench).
 
 use super::truth;
 use crate::base::json::{self, Named};
@@ -576,6 +572,17 @@ pub struct PassOptions {
     pub conditioning: Conditioning,
 }
 
+impl PassOptions {
+    /// The static cost a rewrite may reach, the fastest form costing `cost_before`: itself under
+    /// [`Prefer::Speed`], `max_cost` × it under [`Prefer::Accuracy`].
+    fn budget_for(&self, cost_before: f64) -> f64 {
+        match self.prefer {
+            Prefer::Speed => cost_before,
+            Prefer::Accuracy => self.max_cost * cost_before,
+        }
+    }
+}
+
 impl Default for PassOptions {
     fn default() -> PassOptions {
         PassOptions {
@@ -584,7 +591,8 @@ impl Default for PassOptions {
             points: 4096,
             seed: 0x5eed_1ab5,
             math: crate::Mode::Precise,
-            budget: std::time::Duration::from_secs(2),
+            // A library caller gets the whole search (deterministic); the CLI's compiles set 2 s.
+            budget: std::time::Duration::from_secs(600),
             conditioning: Conditioning::WhereInaccurate,
         }
     }
@@ -909,10 +917,7 @@ fn live_pass(orig: &Formula, o: &PassOptions, started: std::time::Instant) -> Ou
     let bench = Bench { reference: Reference::new(&truth_f, sample(orig, &[], n, o.seed)), o, started };
     let (before, mut cur_got) = bench.run(&base, None);
     let cost_before = cost(&base);
-    let base_budget = match o.prefer {
-        Prefer::Speed => cost_before,
-        Prefer::Accuracy => o.max_cost * cost_before,
-    };
+    let base_budget = o.budget_for(cost_before);
     let (mut cur, mut cur_stats, mut cur_cost) = (base.clone(), before.clone(), cost_before);
     let mut trials: Vec<Trial> = Vec::new();
     let mut steps = Vec::new();
@@ -1005,10 +1010,7 @@ fn baked_pass(orig: &Formula, bake: &[(usize, f64)], live: &Outcome, o: &PassOpt
     let bench = Bench { reference: Reference::new(&truth_f, sample(orig, bake, n, o.seed)), o, started };
     let (before, mut cur_got) = bench.run(&base, None);
     let cost_before = cost(&base);
-    let base_budget = match o.prefer {
-        Prefer::Speed => cost_before,
-        Prefer::Accuracy => o.max_cost * cost_before,
-    };
+    let base_budget = o.budget_for(cost_before);
     let (mut cur, mut cur_stats, mut cur_cost) = (base.clone(), before.clone(), cost_before);
     let mut trials = Vec::new();
     let mut decision = Decision { live: live.decision.live.clone(), ..Decision::default() };
@@ -1112,7 +1114,14 @@ fn retries(trials: &[Trial]) -> Vec<Cand> {
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Chooser {
     pass: PassOptions,
-    cache: Option<super::pass_cache::Cache>,
+    cache: Option<std::sync::Arc<dyn DecisionStore>>,
+}
+
+/// Where decisions are kept between commands ([`super::pass_cache::Cache`] on disk): keyed by the formula, its
+/// baked values and the options; a miss or a failed store changes nothing but the time taken.
+pub trait DecisionStore: Send + Sync + std::fmt::Debug {
+    fn load(&self, f: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Option<Decision>;
+    fn store(&self, f: &Formula, bake: &[(usize, f64)], o: &PassOptions, d: &Decision);
 }
 
 impl crate::FormulaChooser for Chooser {
@@ -1137,9 +1146,9 @@ pub fn with_pass(opts: crate::Options, pass: PassOptions) -> crate::Options {
     with_pass_cached(opts, pass, None)
 }
 
-/// Compile options with the accuracy pass on, its decisions kept in `cache` (a directory;
-/// [`super::pass_cache::Cache::platform`] is the user's cache directory).
-pub fn with_pass_cached(mut opts: crate::Options, pass: PassOptions, cache: Option<super::pass_cache::Cache>) -> crate::Options {
+/// Compile options with the accuracy pass on, its decisions kept in `cache` ([`super::pass_cache::Cache::platform`]
+/// is the user's cache directory).
+pub fn with_pass_cached(mut opts: crate::Options, pass: PassOptions, cache: Option<std::sync::Arc<dyn DecisionStore>>) -> crate::Options {
     let pass = PassOptions { math: opts.math, ..pass };
     opts.accuracy = Some(std::sync::Arc::new(Chooser { pass, cache }));
     opts

@@ -22,8 +22,9 @@
 //!   c ∈ [0.5, 2] (Sterbenz), so near c = 1 the result rounds ~twice instead of cancelling two terms of size A.
 //!   The same cost (three multiplications and two additions either way).
 //!
-//! - `compensated-base`: `pow(a + b, y)` (y live) → `p + p·y·(e/s)` with s = a + b, p = pow(s, y) and e the
-//!   rounding error of the sum and of the `+ − × /` below it ([`rounding_error`]): pow amplifies its base's
+//! - `compensated-base`: `pow(a + b, y)` (y live) → `p + p·y·(e'/s')` with (s', e') the renormalised pair of
+//!   s = a + b and e, the rounding error of the sum and of the `+ − × /` below it ([`rounding_error`]), and
+//!   p = pow(s', y): |e'/s'| ≤ 2⁻⁵³ even where s cancels to nothing (F_ST at n = a). pow amplifies its base's
 //!   relative error y times, so F_ST's `(n/a·(c − 1) + 1)^a` at a = 1000 lost 500 ulp where its condition is
 //!   1, and at a = 640 still 16 ulp with the sum's error alone (n/a and c − 1 round too). Cost ~12–20.
 //! - `compensated-sum`: `a + b` where a and b may have opposite signs (by range) → `(a + b) + e`, e as above,

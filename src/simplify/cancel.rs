@@ -4,10 +4,12 @@
 //! # Design
 //! `rational-form`: a sum whose terms are rational in one live *atom* x (an input, or any live node that is
 //! not `+ − × /`), with coefficients that read no input, is the quotient of two polynomials in x. With both of
-//! degree ≤ 1, the denominator not constant, the sum is rewritten `(a₁·x + a₀)/(b₁·x + b₀)`, each polynomial evaluated as
-//! `fma(a₁ʰ, x, a₀ʰ) + fma(a₁ˡ, x, a₀ˡ)`, where every coefficient is a double-double `aʰ + aˡ` computed exactly
-//! (2Sum, fma two-product) from the values of the subexpressions that read no
-//! input (as the kernel computes them, which is what a baked parameter folds to: baked and live agree).
+//! degree ≤ 1, the sum is rewritten `(a₁·x + a₀)/(b₁·x + b₀)` (a polynomial, the denominator constant,
+//! as `a₁·x + a₀` with the constant divided into its coefficients), each polynomial evaluated as
+//! `fma(a₁ʰ, x, a₀ʰ) + fma(a₁ˡ, x, a₀ˡ)`, where every coefficient is a double-double `aʰ + aˡ` computed (2Sum, fma
+//! two-product) from the subexpressions that read no input, themselves in double-double (the quadratic model's
+//! 1 − 0.786·n at n = 1/0.786 is the low part of 0.786·n). A baked kernel folds the same expression the live
+//! one's prepared block computes: the pass decides live and bakes that decision (`numerics::robust`).
 //! In a sum with other terms (of higher degree, or in another atom), the terms that qualify are regrouped and
 //! the others added to the quotient as written: F_dsh's c/(n(1 − c) + c) − 0.25 beside its c⁸ term, where
 //! the first two cancel (0.266 − 0.25). That changes where the whole sum rounds, so a baked and a live kernel
