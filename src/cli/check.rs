@@ -24,7 +24,7 @@ pub struct CheckArgs {
     #[arg(long, default_value_t = 100_000, value_parser = clap::value_parser!(u64).range(1..=100_000_000))]
     pub points: u64,
     /// Seconds the accuracy pass may search before it keeps the best form found so far (the report says so).
-    #[arg(long, value_name = "SECONDS", default_value_t = 10.0, value_parser = args::parse_seconds)]
+    #[arg(long, value_name = "SECONDS", default_value_t = 10.0, value_parser = args::parse_seconds, allow_negative_numbers = true)]
     pub budget: f64,
     #[command(flatten)]
     pub json: Json,

@@ -1281,6 +1281,24 @@ mod tests {
     }
 
     #[test]
+    fn compensated_base_corrects_a_live_power_of_a_sum() {
+        let f = parse("param a = 16 in 1..1000\nmax(n/a*(NH - 1) + 1, 0)^a");
+        let g = Rule::CompensatedBase.apply(&f).unwrap();
+        let t = g.to_program_text();
+        // One pow, the correction an fma, the renormalised base clamped as written.
+        assert_eq!(t.matches("pow(").count(), 1, "{t}");
+        assert!(t.contains("fma(") && t.contains("max("), "{t}");
+        // At n = a the sum cancels to nothing (s = 0, e = NH): the renormalised base is NH itself.
+        let ev = crate::backend::interp::Interp::new(&g);
+        let mut x = [0.5; crate::ir::N_INPUTS];
+        x[crate::ir::Input::NH.index()] = 1e-20;
+        assert_eq!(crate::backend::Evaluator::eval(&ev, &x, &[1.0, 1.0]), 1e-20);
+        // A constant exponent (a chain) and a base that is not a sum are left alone.
+        assert!(Rule::CompensatedBase.apply(&parse("(NH + 1)^3")).is_none());
+        assert!(Rule::CompensatedBase.apply(&parse("NH^n")).is_none());
+    }
+
+    #[test]
     fn cost_leaves_out_the_prepared_block() {
         // n/a reads no input: computed once per parameter set, so it costs nothing per point.
         let (a, b) = (parse("param a = 16 in 1..1000\nn/a*NH"), parse("param a = 16 in 1..1000\nn*NH"));

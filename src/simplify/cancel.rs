@@ -786,6 +786,19 @@ mod tests {
     }
 
     #[test]
+    fn compensated_params_computes_parameter_parts_in_double_double() {
+        let f = parse("param k = 2 in 1..5\nparam Q = 0.5 in 0.1..0.9\nacos(pow(Q, 1/k)) * NH");
+        let (ir, root, fired) = compensated_params(&f);
+        assert!(fired);
+        let t = super::super::simplify_with(&Formula { ir, root, ..f }, &[], &super::super::Policy::default()).0.to_program_text();
+        // pow's and acos's own roundings through their tails, rounded once where NH reads the product.
+        assert!(t.contains("powlo(") && t.contains("acoslo("), "{t}");
+        // A parameter part that rounds once (n·2) or none (n) is left as the kernel computes it.
+        assert!(!compensated_params(&parse("n * 2 * NH")).2);
+        assert!(!compensated_params(&parse("n * NH")).2);
+    }
+
+    #[test]
     fn compensated_exp_carries_the_exponent_tail() {
         let apply = |src: &str| {
             let f = parse(src);

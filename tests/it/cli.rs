@@ -378,3 +378,33 @@ fn internal_builtins_in_a_file_are_refused_by_eval_and_check() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The accuracy pass's decision is stored in `$LOBE_CACHE_DIR` by the first command and replayed by the next
+/// (the same value); `--no-cache` neither reads nor writes it; an unusable cache directory is not an error.
+#[test]
+fn the_pass_decision_cache_is_used_and_can_be_bypassed() {
+    let dir = crate::scratch_dir("cli", "pass-cache");
+    let run = |args: &[&str], cache: &std::path::Path| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_lobe"));
+        c.args(args).current_dir(env!("CARGO_MANIFEST_DIR")).env("NO_COLOR", "1").env("LOBE_CACHE_DIR", cache);
+        c.output().unwrap()
+    };
+    let args = ["eval", "examples/brdfs/fst.brdf", "--set", "n=16,a=16", "--at", "NH=1e-4"];
+    let first = run(&args, &dir);
+    assert!(first.status.success(), "{}", stderr(&first));
+    let files = || std::fs::read_dir(&dir).unwrap().filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "pass")).count();
+    assert!(files() >= 1, "no decision stored");
+    let second = run(&args, &dir);
+    assert_eq!(String::from_utf8_lossy(&first.stdout), String::from_utf8_lossy(&second.stdout));
+    assert_eq!(String::from_utf8_lossy(&first.stdout).trim(), "1.0000000000000008e-64");
+    let other = crate::scratch_dir("cli", "pass-cache-off");
+    let off = run(&["--no-cache", "eval", "examples/brdfs/fst.brdf", "--at", "NH=0.9"], &other);
+    assert!(off.status.success() && std::fs::read_dir(&other).unwrap().next().is_none(), "--no-cache wrote the cache");
+    let bad = run(&args, std::path::Path::new("/proc/no/such/dir"));
+    assert!(bad.status.success(), "{}", stderr(&bad));
+    // A usage error: clap's exit code 2, lobe's words.
+    let o = lobe(&["check", "examples/brdfs/fst.brdf", "--budget", "-1"], None);
+    assert!(o.status.code() == Some(2) && stderr(&o).contains("positive number of seconds"), "{}", stderr(&o));
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&other);
+}
