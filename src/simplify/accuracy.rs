@@ -66,8 +66,8 @@
 //!   carried as a relative tail t: e + e·t, or into expmuldiv's b.
 //! - `compensated-params` (in `cancel.rs`, through [`compensated_params`]): each parameter-only subtree the
 //!   kernel reads, when it rounds more than once or calls pow or acos, in double-double (pow's and acos's own
-//!   roundings through the builtins `powlo` and `acoslo`) and rounded once. Applied before baking, so baked and
-//!   live kernels compute the same value; free per point (F_kutlog's acos(Q^(1/k))/acos(Q^(1/n)), where acos
+//!   roundings through the builtins `powlo` and `acoslo`) and rounded once. Applied to the live formula, so a
+//!   baked kernel folds the value the live one's prepared block computes; free per point (F_kutlog's acos(Q^(1/k))/acos(Q^(1/n)), where acos
 //!   near 1 multiplied pow's half ulp ~20 times).
 //!
 //! Another candidate, large integer powers kept as `pow` calls instead of multiplication chains, is the
@@ -194,10 +194,9 @@ impl Rule {
     }
 }
 
-/// The `compensated-params` candidate's source: `f` (unsimplified, before baking) with each parameter-only
-/// subtree the kernel reads computed in double-double and rounded once ([`super::cancel`]); `None` when no
-/// subtree qualifies. The chooser simplifies it with the bake set, so a baked parameter folds the same
-/// expression the live kernel's prepared block computes. Free per point: the block is computed once per
+/// The `compensated-params` candidate: `f` (the live formula) with each parameter-only subtree the kernel reads
+/// computed in double-double and rounded once ([`super::cancel`]); `None` when no subtree qualifies. Baking the
+/// pass's decision folds the same expression the live kernel's prepared block computes. Free per point: the block is computed once per
 /// parameter set.
 pub(crate) fn compensated_params(f: &Formula) -> Option<Formula> {
     let (ir, root, fired) = super::cancel::compensated_params(f);

@@ -40,8 +40,8 @@
 //! `pow + powlo` plus its operands' low parts to first order, acos as `acos + acoslo − xˡ/√((1 − x)(1 + x))` (the
 //! first-order term dropped where it is not small next to acos: near ±1 acos grows like √(1 − x)), sqrt with its
 //! fma remainder, exp and ln with their operands' low parts, and rounded once where the kernel reads it. The rule
-//! runs on the formula before baking (`numerics::robust`): baking then folds the same double-double expression
-//! through the same builtins the live kernel's prepared block runs, so the two agree bit for bit.
+//! runs on the live formula (`numerics::robust`); baking the decision then folds the same double-double
+//! expression through the same builtins the live kernel's prepared block runs, so the two agree bit for bit.
 //!
 //! # Cost model
 //! Coefficients read no input: free ([`super::accuracy::cost`]). Per point: two fmas and an addition per
@@ -705,11 +705,10 @@ impl ParamDd<'_> {
     }
 }
 
-// p(params) feeding a live node → hi + lo of p in double-double, rounded once
 /// `compensated-params`: each maximal parameter-only subtree that a live node reads, and whose plain evaluation
 /// rounds at least twice (or calls pow or acos), computed in double-double and rounded once where the kernel
-/// reads it. Runs on the formula *before* baking (`numerics::robust`), so a baked parameter folds the same
-/// double-double expression the live kernel's prepared block computes: baked and live agree bit for bit.
+/// reads it. Runs on the live formula (`numerics::robust`), so a baked parameter folds the same double-double
+/// expression the live kernel's prepared block computes: baked and live agree bit for bit.
 pub(super) fn compensated_params(f: &Formula) -> (Ir, NodeId, bool) {
     let inv = f.ir.invariant();
     let ranges = super::node_ranges(f, &super::Policy::default());
