@@ -32,13 +32,13 @@
 //!
 //! The pass ([`improve`]): a search with every parameter live, from the simplified formula (the fastest form
 //! lobe builds): each candidate ([`Cand`]: a rule of `simplify::accuracy` at a site, or a whole-formula form) is
-//! built from the current best, measured on the same points against the same truth, and kept when [`better`] —
+//! built from the current best, measured on the same points against the same truth, and kept when more accurate (`better`) —
 //! the invariants first (no more NaN/∞ where the truth is finite, missed poles or wrong signs), no point taken
 //! beyond [`TARGET_BITS`] where it was within it unless ten times as many are fixed, then fewer well-conditioned
 //! points beyond the target, a lower maximum, fewer points near the target, a lower average — and within the
-//! cost budget ([`crate::simplify::accuracy::cost`]): [`Prefer::Speed`] keeps only rewrites that cost nothing,
+//! cost budget (`simplify::accuracy::cost`): [`Prefer::Speed`] keeps only rewrites that cost nothing,
 //! [`Prefer::Accuracy`] (default) those within `max_cost` (1.3) × the fastest form's cost, up to
-//! [`NONFINITE_BUDGET`] (2×) for a rewrite that keeps lobe's promise at more points ([`keeps_promise`]), and up
+//! [`NONFINITE_BUDGET`] (2×) for a rewrite that keeps lobe's promise at more points (`keeps_promise`), and up
 //! to the pow calls' cost for compensated power chains. A rule applied everywhere that was dropped as no more
 //! accurate is tried once more after a later rule was kept (two defects at the same points each hide the other's
 //! fix). Every candidate keeps the formula's sign where range analysis of the formula as written bounds it
@@ -605,7 +605,7 @@ pub(crate) const MAX_WORK: f64 = 2e7;
 /// A candidate of the pass: one of the simplifier's rules ([`Rule`]) or a whole-formula alternative.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Cand {
-    /// Parameter-only subexpressions in double-double, rounded once ([`compensated_params`]).
+    /// Parameter-only subexpressions in double-double, rounded once (`simplify::accuracy::compensated_params`).
     Params,
     /// Integer powers above 8 as pow calls ([`pow_call_policy`]).
     PowCall,
