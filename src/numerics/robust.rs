@@ -313,6 +313,15 @@ pub struct ErrorStats {
     pub condition_at_worst_well: Option<f64>,
 }
 
+impl ErrorStats {
+    /// The wrong answers, as opposed to imprecise ones: NaN/∞ where the truth is finite, missed poles, results
+    /// of the wrong sign, well-conditioned points beyond [`TARGET_BITS`] (in that order; the first three are
+    /// the invariants no rewrite may trade).
+    fn wrong_answers(&self) -> [usize; 4] {
+        [self.nonfinite, self.pole_misses, self.wrong_sign, self.over_target]
+    }
+}
+
 /// How many ulps the truth moves when one read input moves by one ulp (the larger of the two directions); a
 /// finite-difference condition number in ulps. Parameters are not perturbed: a parameter's value reaches the
 /// kernel exactly as given (a baked one is a constant, a live one an argument), so where the formula is
@@ -729,9 +738,8 @@ fn better(a: &ErrorStats, b: &ErrorStats) -> bool {
     if !pays_for_regressions(a, b) {
         return false;
     }
-    let inv = |s: &ErrorStats| [s.nonfinite, s.pole_misses, s.wrong_sign];
-    let (ia, ib) = (inv(a), inv(b));
-    if ia.iter().zip(&ib).any(|(x, y)| x > y) {
+    let (ia, ib) = (&a.wrong_answers()[..3], &b.wrong_answers()[..3]);
+    if ia.iter().zip(ib).any(|(x, y)| x > y) {
         return false;
     }
     if ia != ib {
@@ -760,25 +768,23 @@ fn better_measured(a: &ErrorStats, b: &ErrorStats) -> bool {
     a.near_target + (b.near_target / 10).max(2) <= b.near_target || a.avg_bits < b.avg_bits - 0.05
 }
 
-/// `a` gets more points right than `b` in the sense of lobe's promise — fewer NaN/∞ where the truth is
-/// finite, missed poles, wrong signs, or well-conditioned points beyond [`TARGET_BITS`] — and none fewer: such a
-/// rewrite may cost up to [`NONFINITE_BUDGET`] × the fastest form, since those are wrong answers, not
-/// imprecise ones.
 /// Points `a` gets wrong that `b` got right ([`ErrorStats::regressions`]) are allowed only where `a` fixes ten
 /// times as many (NaN/∞, missed poles, wrong signs, well-conditioned points beyond the target): a rewrite must be
 /// at least as accurate everywhere it was measured, except where it trades a handful of points for thousands
 /// (a quotient chain that ends NaN at every grazing angle but rounds differently at a few facing pairs).
 fn pays_for_regressions(a: &ErrorStats, b: &ErrorStats) -> bool {
-    let wrong = |s: &ErrorStats| s.nonfinite + s.pole_misses + s.wrong_sign + s.over_target;
+    let wrong = |s: &ErrorStats| s.wrong_answers().iter().sum::<usize>();
     a.regressions == 0 || wrong(b) >= wrong(a) + 10 * a.regressions
 }
 
+/// `a` gets more points right than `b` in the sense of lobe's promise ([`ErrorStats::wrong_answers`]) and none
+/// fewer: such a rewrite may cost up to [`NONFINITE_BUDGET`] × the fastest form, since those are wrong answers,
+/// not imprecise ones.
 fn keeps_promise(a: &ErrorStats, b: &ErrorStats) -> bool {
     if !pays_for_regressions(a, b) {
         return false;
     }
-    let v = |s: &ErrorStats| [s.nonfinite, s.pole_misses, s.wrong_sign, s.over_target];
-    let (va, vb) = (v(a), v(b));
+    let (va, vb) = (a.wrong_answers(), b.wrong_answers());
     if !va.iter().zip(&vb).all(|(x, y)| x <= y) {
         return false;
     }
@@ -852,7 +858,10 @@ pub fn replay(orig: &Formula, bake: &[(usize, f64)], d: &Decision, prefer: Prefe
     let src = if d.live.is_empty() { orig } else { &live };
     let cands = Candidates::new(if d.baked_live_choice { src } else { orig }, &bake, sign);
     match (d.baked_power, d.baked_live_choice) {
-        (Some(_), _) => cands.compensated.clone().map(|g| crate::simplify::keep_sign(&sign, g)).unwrap_or_else(|| cands.base(orig)),
+        (Some(c), _) => {
+            let base = cands.base(orig);
+            cands.build(c, &base, None).unwrap_or(base)
+        }
         (None, true) => baked_live(&cands, src, prefer),
         (None, false) => cands.base(orig),
     }
@@ -1014,9 +1023,13 @@ fn baked_pass(orig: &Formula, bake: &[(usize, f64)], live: &Outcome, o: &PassOpt
     let (mut cur, mut cur_stats, mut cur_cost) = (base.clone(), before.clone(), cost_before);
     let mut trials = Vec::new();
     let mut decision = Decision { live: live.decision.live.clone(), ..Decision::default() };
-    let src = if live.decision.live.is_empty() { orig } else { &live.formula };
-    let lc = Candidates::new(src, bake, sign);
-    let cand = baked_live(&lc, src, o.prefer);
+    // The live choice's candidates; the plain ones when the live pass kept nothing (the same source).
+    let (src, lc_live) = match live.decision.live.is_empty() {
+        true => (orig, None),
+        false => (&live.formula, Some(Candidates::new(&live.formula, bake, sign))),
+    };
+    let lc = lc_live.as_ref().unwrap_or(&plain);
+    let cand = baked_live(lc, src, o.prefer);
     if cand.to_program_text() != base.to_program_text() {
         let (stats, got) = bench.run(&cand, None);
         let c = cost(&cand);
@@ -1040,9 +1053,8 @@ fn baked_pass(orig: &Formula, bake: &[(usize, f64)], live: &Outcome, o: &PassOpt
         }
     }
     let mut truncated = false;
-    let power = if decision.baked_live_choice { lc.compensated.clone() } else { plain.compensated.clone() };
-    let power = power.map(|g| crate::simplify::keep_sign(&sign, g));
-    if let (Some(cand), true) = (power, o.prefer == Prefer::Accuracy) {
+    let power = if decision.baked_live_choice { lc } else { &plain };
+    if let (Some(cand), true) = (power.build(Cand::CompensatedPower, &cur, None), o.prefer == Prefer::Accuracy) {
         if bench.out_of_time() {
             truncated = true;
         } else {
@@ -1052,7 +1064,7 @@ fn baked_pass(orig: &Formula, bake: &[(usize, f64)], live: &Outcome, o: &PassOpt
             // In place of pow calls: no less accurate (within a bit) and cheaper; in place of plain chains: more
             // accurate within the pow calls' cost.
             let no_worse = stats.regressions == 0
-                && [stats.nonfinite, stats.pole_misses, stats.wrong_sign, stats.over_target] <= [cur_stats.nonfinite, cur_stats.pole_misses, cur_stats.wrong_sign, cur_stats.over_target]
+                && stats.wrong_answers().iter().zip(&cur_stats.wrong_answers()).all(|(x, y)| x <= y)
                 && stats.max_bits_well <= cur_stats.max_bits_well.max(TARGET_BITS - 2.0) + 1.0;
             let verdict = if decision.baked_live_choice {
                 if no_worse && cost_c < cur_cost { Verdict::Kept } else if no_worse { Verdict::OverBudget } else { Verdict::NotBetter }
