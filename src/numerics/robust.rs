@@ -1138,8 +1138,10 @@ pub trait DecisionStore: Send + Sync + std::fmt::Debug {
 
 impl crate::FormulaChooser for Chooser {
     fn choose(&self, original: &Formula, bake: &[(usize, f64)], simplified: Formula) -> Formula {
+        // A decision that keeps nothing compiles the plain simplification, searched or replayed alike (the
+        // replay's base may carry a sign clamp the compile step's simplification does not).
         if let Some(d) = self.cache.as_ref().and_then(|c| c.load(original, bake, &self.pass)) {
-            return replay(original, bake, &d, self.pass.prefer);
+            return if d == Decision::default() { simplified } else { replay(original, bake, &d, self.pass.prefer) };
         }
         let out = improve(original, bake, &self.pass);
         if let Some(c) = &self.cache {

@@ -275,3 +275,25 @@ fn bool_parameters_are_sampled_at_zero_and_one() {
         assert!(ones > 1000 && ones < 3000, "{ones}");
     }
 }
+
+/// The second compile of a formula replays the first's decision from the cache and compiles the same formula,
+/// live and baked, on every catalogue file.
+#[test]
+fn a_cached_decision_compiles_what_the_search_compiled() {
+    use lobe::numerics::pass_cache::Cache;
+    let dir = crate::scratch_dir("everywhere", "cache");
+    let store: std::sync::Arc<dyn robust::DecisionStore> = std::sync::Arc::new(Cache::at(&dir));
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/brdfs");
+    for path in std::fs::read_dir(&root).unwrap().filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|e| e == "brdf")) {
+        let f = lobe::front::parse(&path.to_string_lossy(), &std::fs::read_to_string(&path).unwrap()).unwrap();
+        for bake in [vec![], f.params.iter().map(|d| (d.name.clone(), d.default)).collect::<Vec<_>>()] {
+            let compile = || {
+                let opts = Options { backend: Backend::Interp, bake: bake.clone(), ..Default::default() };
+                lobe::compile_formula(f.clone(), &robust::with_pass_cached(opts, PassOptions::default(), Some(store.clone()))).unwrap().formula.to_program_text()
+            };
+            let (searched, replayed) = (compile(), compile());
+            assert_eq!(searched, replayed, "{} {bake:?}", path.display());
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
