@@ -105,10 +105,6 @@ fn fnv1a128(bytes: &[u8]) -> u128 {
     h
 }
 
-fn cand_name(c: Cand) -> &'static str {
-    c.name()
-}
-
 fn cand_of(name: &str) -> Option<Cand> {
     [Cand::Params, Cand::PowCall, Cand::CompensatedPower].into_iter().chain(Rule::ALL.iter().map(|&r| Cand::Rule(r))).find(|c| c.name() == name)
 }
@@ -116,10 +112,10 @@ fn cand_of(name: &str) -> Option<Cand> {
 fn render(d: &Decision) -> String {
     let mut s = String::new();
     for st in &d.live {
-        s += &format!("live {} {}\n", cand_name(st.cand), st.site.map_or("-".to_string(), |k| k.to_string()));
+        s += &format!("live {} {}\n", st.cand.name(), st.site.map_or("-".to_string(), |k| k.to_string()));
     }
     s += &format!("baked-live-choice {}\n", u8::from(d.baked_live_choice));
-    s += &format!("baked-power {}\n", d.baked_power.map_or("-", cand_name));
+    s += &format!("baked-power {}\n", d.baked_power.map_or("-", Cand::name));
     s
 }
 

@@ -123,7 +123,11 @@ struct Builder<'a> {
     rats: HashMap<NodeId, (Poly, Poly)>,
 }
 
-impl Builder<'_> {
+impl<'a> Builder<'a> {
+    fn new(f: &'a Formula, inv: &'a [bool]) -> Builder<'a> {
+        Builder { f, inv, sp: Span::default(), rats: HashMap::new() }
+    }
+
     fn is(&self, ir: &Ir, x: NodeId, v: f64) -> bool {
         ir.node(x).as_const() == Some(v)
     }
@@ -312,8 +316,8 @@ pub(super) fn rational_form(f: &Formula) -> (Ir, NodeId, bool) {
     }
     let uses = f.ir.use_counts(f.root);
     let ranges = super::node_ranges(f, &super::Policy::default());
-    let mut b = Builder { f, inv: &inv, sp: Span::default(), rats: HashMap::new() };
-    let mut pd = ParamDd { b: Builder { f, inv: &inv, sp: Span::default(), rats: HashMap::new() }, ranges: &ranges, memo: HashMap::new() };
+    let mut b = Builder::new(f, &inv);
+    let mut pd = ParamDd { b: Builder::new(f, &inv), ranges: &ranges, memo: HashMap::new() };
     rebuild(f, |ir, map, id, n| {
         if inv[id.index()] || in_sum[id.index()] && uses[id.index()] <= 1 || !matches!(n, Node::Binary(BinOp::Add | BinOp::Sub, ..)) {
             return None;
@@ -461,7 +465,7 @@ fn core_error(f: &Formula, ir: &mut Ir, map: &[NodeId], num: &[NodeId], den: &[N
 pub(super) fn compensated_exp(f: &Formula) -> (Ir, NodeId, bool) {
     let inv = f.ir.invariant();
     let ranges = super::node_ranges(f, &super::Policy::default());
-    let mut b = Builder { f, inv: &inv, sp: Span::default(), rats: HashMap::new() };
+    let mut b = Builder::new(f, &inv);
     rebuild(f, |ir, map, id, n| {
         let Node::Call(call @ (Builtin::Exp | Builtin::ExpMulDiv), [arg, bv, cv]) = n else { return None };
         if inv[arg.index()] {
@@ -719,7 +723,7 @@ pub(super) fn compensated_params(f: &Formula) -> (Ir, NodeId, bool) {
         }
     }
     let mut count = HashMap::new();
-    let mut pd = ParamDd { b: Builder { f, inv: &inv, sp: Span::default(), rats: HashMap::new() }, ranges: &ranges, memo: HashMap::new() };
+    let mut pd = ParamDd { b: Builder::new(f, &inv), ranges: &ranges, memo: HashMap::new() };
     rebuild(f, |ir, map, id, _| {
         if !boundary[id.index()] || roundings(f, id, &mut count) < 2 {
             return None;
