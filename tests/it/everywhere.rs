@@ -10,6 +10,7 @@
 //! BENCHMARKS.md shows; `.ci/run` runs it.
 
 use lobe::numerics::robust::{self, Conditioning, PassOptions, Reference};
+use lobe::base::rng::Rng;
 use lobe::{Backend, Kernel, Options};
 
 const SETS: usize = 20;
@@ -18,15 +19,6 @@ const POINTS: usize = 10_000;
 fn compile(f: &lobe::Formula, bake: &[(String, f64)]) -> Kernel {
     let opts = Options { backend: Backend::Jit, bake: bake.to_vec(), ..Default::default() };
     lobe::compile_formula(f.clone(), &robust::with_pass(opts, PassOptions::default())).unwrap()
-}
-
-/// The test's own generator (not the pass's sampler).
-struct Lcg(u64);
-impl Lcg {
-    fn unit(&mut self) -> f64 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
 }
 
 /// `SETS` parameter vectors for `f` (module docs).
@@ -41,9 +33,9 @@ fn parameter_sets(f: &lobe::Formula, seed: u64) -> Vec<Vec<f64>> {
             sets.push(s);
         }
     }
-    let mut r = Lcg(seed);
+    let mut r = Rng(seed);
     let floats: Vec<usize> = (0..f.params.len()).filter(|&k| f.params[k].kind == ParamKind::Float).collect();
-    let random = |r: &mut Lcg, d: &lobe::ir::ParamDecl| match d.kind {
+    let random = |r: &mut Rng, d: &lobe::ir::ParamDecl| match d.kind {
         ParamKind::Bool => f64::from(r.unit() < 0.5),
         _ if r.unit() < 0.5 || d.lo <= 0.0 => d.lo + r.unit() * (d.hi - d.lo),
         _ => d.lo * (d.hi / d.lo).powf(r.unit()),
@@ -216,7 +208,7 @@ fn clamped_formulas_never_go_negative() {
     let p = [22.854215831848464, 16.0];
     let v = lobe::Evaluator::eval(&k, &at_nh(0.29991034836980857), &p);
     assert!(v >= 0.0, "{v:e}");
-    let mut r = Lcg(17);
+    let mut r = Rng(17);
     let (ni, ai) = (f.param_index("n").unwrap(), f.param_index("a").unwrap());
     let mut negative = 0;
     for _ in 0..20_000 {
