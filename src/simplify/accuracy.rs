@@ -3,6 +3,9 @@
 //! # Design
 //! Herbie's split (Panchekha et al., PLDI 2015): this module only *proposes* — each [`Rule`] rewrites a whole
 //! simplified formula into an algebraically equal one and states its cost ([`cost`]); it evaluates nothing.
+//! Every rule reads the formula through one [`Analysis`] (ranges, guards, product lists), built once for all
+//! the rules and sites tried on a formula; the builders they share are in `rewrite.rs`, below this module and
+//! `cancel.rs`.
 //! Which candidates are kept is decided above the backends (`numerics::robust`), by measured bits of error
 //! against a higher-precision truth over the formula's domain, within a cost budget. A rule that does not
 //! apply returns `None`. Every rule is exact in real arithmetic; what changes is where f64 rounds:
@@ -89,6 +92,7 @@
 //! It ranks candidates; the kernel's run time, measured in `lobe bench`, is what BENCHMARKS.md reports.
 
 use super::range::Range;
+use super::rewrite::{add_opt, balanced_product, divide_apart, divide_by, product, rebuild, safe, Analysis};
 use super::{node_ranges, Policy};
 use super::emit::IrEmit;
 use crate::builtins::dd;
@@ -172,24 +176,28 @@ impl Rule {
     /// can keep it where it helps and leave it where it only costs (Beckmann: the product whose exp factor
     /// vanishes, not the exponent's own quotient). `quotient-chain` and `compensated-sum` have sites, `scaled-exp` variants; the others apply everywhere.
     pub fn apply_at(self, f: &Formula, site: Option<usize>) -> Option<Formula> {
-        let ranges = node_ranges(f, &Policy::default());
+        self.apply_in(&Analysis::new(f.clone()), site)
+    }
+
+    /// [`Rule::apply_at`] on an analysed formula: the analysis is shared by every rule and site tried on it.
+    pub(crate) fn apply_in(self, a: &Analysis, site: Option<usize>) -> Option<Formula> {
         let (ir, root, fired) = match self {
-            Rule::SplitSqrt => split_sqrt(f, &ranges),
-            Rule::QuotientChain => quotient_chain(f, &ranges, site),
-            Rule::FactorQuadratic => factor_quadratic(f),
-            Rule::CompensatedBase => compensated_base(f, &ranges),
-            Rule::CompensatedSum => compensated_sum(f, &ranges, site.unwrap_or(0)),
-            Rule::ScaledExp => scaled_exp(f, &ranges, site.unwrap_or(0)),
-            Rule::SmithG1 => smith_g1(f, &ranges),
-            Rule::CancelMin => cancel_min(f, &ranges),
-            Rule::ScaledNorm => scaled_norm(f),
-            Rule::RationalForm => super::cancel::rational_form(f),
-            Rule::CompensatedExp => super::cancel::compensated_exp(f),
+            Rule::SplitSqrt => split_sqrt(a),
+            Rule::QuotientChain => quotient_chain(a, site),
+            Rule::FactorQuadratic => factor_quadratic(a),
+            Rule::CompensatedBase => compensated_base(a),
+            Rule::CompensatedSum => compensated_sum(a, site.unwrap_or(0)),
+            Rule::ScaledExp => scaled_exp(a, site.unwrap_or(0)),
+            Rule::SmithG1 => smith_g1(a),
+            Rule::CancelMin => cancel_min(a),
+            Rule::ScaledNorm => scaled_norm(a),
+            Rule::RationalForm => super::cancel::rational_form(a),
+            Rule::CompensatedExp => super::cancel::compensated_exp(a),
         };
         if !fired {
             return None;
         }
-        let g = Formula { ir, root, ..f.clone() };
+        let g = Formula { ir, root, ..a.f.clone() };
         Some(super::simplify_with(&g, &[], &Policy::default()).0)
     }
 }
@@ -199,7 +207,7 @@ impl Rule {
 /// pass's decision folds the same expression the live kernel's prepared block computes. Free per point: the block is computed once per
 /// parameter set.
 pub(crate) fn compensated_params(f: &Formula) -> Option<Formula> {
-    let (ir, root, fired) = super::cancel::compensated_params(f);
+    let (ir, root, fired) = super::cancel::compensated_params(&Analysis::new(f.clone()));
     fired.then(|| Formula { ir, root, ..f.clone() })
 }
 
@@ -397,76 +405,9 @@ pub(crate) fn cost(f: &Formula) -> f64 {
     f.ir.ids().filter(|id| uses[id.index()] > 0 && !inv[id.index()]).map(|id| weight(f.ir.node(id))).sum()
 }
 
-/// Rebuilds `f` node by node through `rw`, which returns the new node for an old one given the map so far.
-pub(super) fn rebuild(f: &Formula, mut rw: impl FnMut(&mut Ir, &[NodeId], NodeId, Node) -> Option<NodeId>) -> (Ir, NodeId, bool) {
-    let mut ir = Ir::new();
-    let mut map: Vec<NodeId> = Vec::with_capacity(f.ir.len());
-    let mut fired = false;
-    for id in f.ir.ids() {
-        let span = f.ir.span(id);
-        let old = *f.ir.node(id);
-        let new = match rw(&mut ir, &map, id, old) {
-            Some(n) => {
-                fired = true;
-                n
-            }
-            None => ir.push(old.map_args(|a| map[a.index()]), span),
-        };
-        map.push(new);
-    }
-    let (ir, root) = ir.compact(map[f.root.index()]);
-    (ir, root, fired)
-}
-
-/// Per node, the nodes known to be > 0 (or NaN) wherever its value is used: it is reached only through the
-/// else branch of selects `x <= 0 ? … : …` (and `x <= 0 || y <= 0`, which the front end writes as
-/// `select(x <= 0, 1, y <= 0)`). An explorer BRDF's `if (NdotL <= 0.0 || NdotV <= 0.0) return 0` guards its
-/// body this way, while the inputs' own ranges include negative cosines. `None`: not reachable from the root.
-fn positive_guards(f: &Formula) -> Vec<Option<Vec<NodeId>>> {
-    let ir = &f.ir;
-    // Nodes `x` with `x > 0` (or NaN) wherever `cond` is false.
-    fn falses(ir: &Ir, cond: NodeId, out: &mut Vec<NodeId>) {
-        match *ir.node(cond) {
-            Node::Call(Builtin::Le, [x, z, _]) if ir.node(z).as_const() == Some(0.0) => out.push(x),
-            Node::Call(Builtin::Select, [p, one, q]) if ir.node(one).as_const().is_some_and(|v| v != 0.0 && !v.is_nan()) => {
-                falses(ir, p, out);
-                falses(ir, q, out);
-            }
-            _ => {}
-        }
-    }
-    let mut g: Vec<Option<Vec<NodeId>>> = vec![None; ir.len()];
-    g[f.root.index()] = Some(vec![]);
-    // Parents have larger ids than their operands: a reverse sweep sees every parent before its children.
-    for i in (0..=f.root.index()).rev() {
-        let Some(mine) = g[i].clone() else { continue };
-        let id = NodeId(i as u32);
-        let node = *ir.node(id);
-        let mut give = |child: NodeId, extra: &[NodeId]| {
-            let mut set = mine.clone();
-            set.extend_from_slice(extra);
-            let slot = &mut g[child.index()];
-            *slot = Some(match slot.take() {
-                None => set,
-                Some(old) => old.into_iter().filter(|x| set.contains(x)).collect(),
-            });
-        };
-        if let Node::Call(Builtin::Select, [c, t, e]) = node {
-            let mut pos = vec![];
-            falses(ir, c, &mut pos);
-            give(c, &[]);
-            give(t, &[]);
-            give(e, &pos);
-        } else {
-            node.for_each_arg(|a| give(a, &[]));
-        }
-    }
-    g
-}
-
 // sqrt(a*b) → sqrt(a)*sqrt(b)   when a ≥ +0 and b ≥ +0 (by range, or by a guard around the sqrt)
-fn split_sqrt(f: &Formula, ranges: &[Range]) -> (Ir, NodeId, bool) {
-    let guards = positive_guards(f);
+fn split_sqrt(a: &Analysis) -> (Ir, NodeId, bool) {
+    let (f, ranges, guards) = (&a.f, a.ranges(), a.guards());
     rebuild(f, |ir, map, id, n| {
         let Node::Call(Builtin::Sqrt, [x, ..]) = n else { return None };
         let Node::Binary(BinOp::Mul, a, b) = *f.ir.node(x) else { return None };
@@ -481,65 +422,9 @@ fn split_sqrt(f: &Formula, ranges: &[Range]) -> (Ir, NodeId, bool) {
     })
 }
 
-/// Most factors a flattened product keeps; a longer one (a long power chain) stays one factor.
-const MAX_FACTORS: usize = 12;
-
-fn safe(r: Range) -> bool {
-    let (lo, hi) = (2f64.powi(-300), 2f64.powi(300));
-    !r.nan && ((r.lo >= lo && r.hi <= hi) || (r.hi <= -lo && r.lo >= -hi))
-}
-
-/// Per node, its (numerator, denominator) factor lists of atomic nodes when it is a short tree of `*` and `/`.
-type Lists = Vec<Option<(Vec<NodeId>, Vec<NodeId>)>>;
-
-fn product_lists(f: &Formula, max: usize) -> Lists {
-    let mut lists: Lists = Vec::with_capacity(f.ir.len());
-    for id in f.ir.ids() {
-        let of = |x: NodeId, lists: &Lists| match &lists[x.index()] {
-            Some(l) => l.clone(),
-            None if f.ir.node(x).as_const() == Some(1.0) => (vec![], vec![]),
-            None => (vec![x], vec![]),
-        };
-        let l = match *f.ir.node(id) {
-            Node::Binary(op @ (BinOp::Mul | BinOp::Div), a, b) => {
-                let (mut n, mut d) = of(a, &lists);
-                let (mut n2, mut d2) = of(b, &lists);
-                if op == BinOp::Div {
-                    std::mem::swap(&mut n2, &mut d2);
-                }
-                n.extend(n2);
-                d.extend(d2);
-                Some((n, d))
-            }
-            _ => None,
-        };
-        lists.push(l.filter(|(n, d)| n.len() + d.len() <= max));
-    }
-    lists
-}
-
-/// The product of `xs` (mapped to the new arena), `None` when empty.
-pub(super) fn product(ir: &mut Ir, map: &[NodeId], xs: &[NodeId], s: Span) -> Option<NodeId> {
-    let mut it = xs.iter().map(|x| map[x.index()]);
-    let first = it.next()?;
-    Some(it.fold(first, |acc, x| ir.bin(BinOp::Mul, acc, x, s)))
-}
-
-/// The product of `xs` (non-empty, mapped to the new arena) as a balanced tree, `x·x` first, so its latency is
-/// log₂ of the count and the simplifier shares each square (NH⁴ as t1·t1, t1 = NH·NH, the exponent's own).
-fn balanced_product(ir: &mut Ir, map: &[NodeId], xs: &[NodeId], s: Span) -> NodeId {
-    let mut sorted = xs.to_vec();
-    sorted.sort();
-    let mut level: Vec<NodeId> = sorted.iter().map(|x| map[x.index()]).collect();
-    while level.len() > 1 {
-        level = level.chunks(2).map(|c| if c.len() == 2 { ir.bin(BinOp::Mul, c[0], c[1], s) } else { c[0] }).collect();
-    }
-    level[0]
-}
-
 // x / (a*b*…) → x / (safe factors) / a / b / …   dividing by each factor that may be tiny or huge on its own
-fn quotient_chain(f: &Formula, ranges: &[Range], only: Option<usize>) -> (Ir, NodeId, bool) {
-    let lists = product_lists(f, MAX_FACTORS);
+fn quotient_chain(a: &Analysis, only: Option<usize>) -> (Ir, NodeId, bool) {
+    let (f, ranges, lists) = (&a.f, a.ranges(), a.lists());
     let mut site = 0;
     rebuild(f, |ir, map, id, _| {
         let (num, den) = lists[id.index()].as_ref()?;
@@ -557,30 +442,11 @@ fn quotient_chain(f: &Formula, ranges: &[Range], only: Option<usize>) -> (Ir, No
     })
 }
 
-/// `num / safe_den / unsafe_den₁ / …` (new-arena nodes): the whole numerator first (in a BRDF the factor that
-/// vanishes, exp(−1/x²), is there, and it must meet the divisions as 0, not as ∞·0), then the safe divisors at
-/// once, then each divisor that may be tiny or huge on its own.
-pub(super) fn divide_apart(ir: &mut Ir, map: &[NodeId], num: &[NodeId], safe_den: &[NodeId], unsafe_den: &[NodeId], s: Span) -> NodeId {
-    let v = product(ir, map, num, s).unwrap_or_else(|| ir.konst(1.0, s));
-    divide_by(ir, map, v, safe_den, unsafe_den, s)
-}
-
-/// [`divide_apart`] for a numerator already built (`v`, a new-arena node).
-fn divide_by(ir: &mut Ir, map: &[NodeId], mut v: NodeId, safe_den: &[NodeId], unsafe_den: &[NodeId], s: Span) -> NodeId {
-    if let Some(d) = product(ir, map, safe_den, s) {
-        v = ir.bin(BinOp::Div, v, d, s);
-    }
-    for d in unsafe_den {
-        v = ir.bin(BinOp::Div, v, map[d.index()], s);
-    }
-    v
-}
-
 // exp(E)·n₁·…/(d₁·…·d_k) → expmuldiv(E, n₁·…/(d₁·…·d_{k−1}), d_k)   (variant 0; 1: dividing by the safe d_i and
 // the exponent's own at once, then by each other that may be tiny or huge in turn, two of them by `two_divisors`; 2: expmuldiv(E/2, expmuldiv(E/2, n₁·…/d₁/…/d_{k−2}, d_{k−1}),
 // d_k))
-fn scaled_exp(f: &Formula, ranges: &[Range], variant: usize) -> (Ir, NodeId, bool) {
-    let lists = product_lists(f, MAX_FACTORS);
+fn scaled_exp(a: &Analysis, variant: usize) -> (Ir, NodeId, bool) {
+    let (f, ranges, lists) = (&a.f, a.ranges(), a.lists());
     rebuild(f, |ir, map, id, old| {
         let (num, den) = lists[id.index()].as_ref()?;
         let at = num.iter().position(|x| matches!(f.ir.node(*x), Node::Call(Builtin::Exp, _)))?;
@@ -708,8 +574,8 @@ fn two_divisors(ir: &mut Ir, map: &[NodeId], (arg, rest): (NodeId, &[NodeId]), d
 
 // K/(1 + sqrt(1 + A·((1 − c·c)/(c·c)))) → K·c/(c + sqrt(c·c + A·(1 − c·c)))   for c > 0, then c/c cancelled
 // in the products around it
-fn smith_g1(f: &Formula, ranges: &[Range]) -> (Ir, NodeId, bool) {
-    let guards = positive_guards(f);
+fn smith_g1(a: &Analysis) -> (Ir, NodeId, bool) {
+    let (f, ranges, guards) = (&a.f, a.ranges(), a.guards());
     let ir0 = &f.ir;
     let is_one = |x: NodeId| ir0.node(x).as_const() == Some(1.0);
     // (A, c, c·c) when `x` is 1 + A·((1 − c·c)/(c·c)) (either operand order of + and ·).
@@ -752,17 +618,15 @@ fn smith_g1(f: &Formula, ranges: &[Range]) -> (Ir, NodeId, bool) {
         return (ir, root, false);
     }
     let g = Formula { ir, root, ..f.clone() };
-    let (ir, root, _) = cancel_positive(&g);
+    let (ir, root, _) = cancel_positive(&Analysis::new(g));
     (ir, root, true)
 }
 
 // x·…/(x·…) → …/…   for x > 0 by range or guard (exact in real arithmetic); the divisors that remain are
 // divided one by one (safe ones first, as a product), as in `quotient-chain`
-fn cancel_positive(f: &Formula) -> (Ir, NodeId, bool) {
+fn cancel_positive(a: &Analysis) -> (Ir, NodeId, bool) {
     // Longer lists than elsewhere: a microfacet BRDF's D·G·F/(4·NL·NV) has 14 factors once G is rationalised.
-    let lists = product_lists(f, 2 * MAX_FACTORS);
-    let guards = positive_guards(f);
-    let ranges = node_ranges(f, &Policy::default());
+    let (f, lists, guards, ranges) = (&a.f, a.wide_lists(), a.guards(), a.ranges());
     rebuild(f, |ir, map, id, _| {
         let (num, den) = lists[id.index()].as_ref()?;
         let pos = |x: NodeId| {
@@ -792,8 +656,8 @@ fn cancel_positive(f: &Formula) -> (Ir, NodeId, bool) {
 
 // z·min(K, c·x, c·y)/(v·x·y) → z·min(K·d/min(x, y), n)/(v·d)/max(x, y)   for K > 0 and x, y, n, d ≥ 0 by range,
 // c = n/d the product/quotient of the factors both arguments share (the min's arguments in any order and nesting)
-fn cancel_min(f: &Formula, ranges: &[Range]) -> (Ir, NodeId, bool) {
-    let lists = product_lists(f, MAX_FACTORS);
+fn cancel_min(a: &Analysis) -> (Ir, NodeId, bool) {
+    let (f, ranges, lists) = (&a.f, a.ranges(), a.lists());
     let ir0 = &f.ir;
     fn leaves(ir: &Ir, x: NodeId, out: &mut Vec<NodeId>) {
         match *ir.node(x) {
@@ -877,7 +741,8 @@ fn cancel_min(f: &Formula, ranges: &[Range]) -> (Ir, NodeId, bool) {
 
 // x / sqrt(a·a + b·b + …) → (x·s) / sqrt((a·s)·(a·s) + …),  s = 2^600 if max(|a|, |b|, …) < 2^-500 else 1,
 // x one of a, b, …: the squares of a tiny vector (L + V at L ≈ −V) no longer underflow to a zero length
-fn scaled_norm(f: &Formula) -> (Ir, NodeId, bool) {
+fn scaled_norm(a: &Analysis) -> (Ir, NodeId, bool) {
+    let f = &a.f;
     let ir0 = &f.ir;
     fn squares(ir: &Ir, x: NodeId, out: &mut Vec<NodeId>) -> bool {
         match *ir.node(x) {
@@ -931,13 +796,6 @@ fn sum_error(ir: &mut Ir, (a, ra): (NodeId, Range), (b, rb): (NodeId, Range), s:
     match big {
         Some(big) => dd::fast_two_sum_err(em, big, small, s),
         None => dd::two_sum_err(em, a, b, s),
-    }
-}
-
-pub(super) fn add_opt(ir: &mut Ir, a: Option<NodeId>, b: Option<NodeId>, sp: Span) -> Option<NodeId> {
-    match (a, b) {
-        (Some(a), Some(b)) => Some(ir.bin(BinOp::Add, a, b, sp)),
-        (a, b) => a.or(b),
     }
 }
 
@@ -1015,7 +873,8 @@ fn memoize(memo: &mut [Option<Option<NodeId>>], x: NodeId, e: Option<NodeId>) ->
 
 // a + b → (a + b) + e, e the first-order rounding error of the sum and the `+ − × /` below it, where a and b
 // may have opposite signs (the sum may cancel: F_dsh, F_SCOS2); one site at a time
-fn compensated_sum(f: &Formula, ranges: &[Range], only: usize) -> (Ir, NodeId, bool) {
+fn compensated_sum(a: &Analysis, only: usize) -> (Ir, NodeId, bool) {
+    let (f, ranges) = (&a.f, a.ranges());
     let mut site = 0;
     let inv = f.ir.invariant();
     rebuild(f, |ir, map, id, n| {
@@ -1048,7 +907,8 @@ fn compensated_sum(f: &Formula, ranges: &[Range], only: usize) -> (Ir, NodeId, b
 }
 
 // pow(s, y) with s = a + b (or max(a + b, 0)) → p + p·y·(e/s), p = pow(s, y), e = a + b − s exactly (2Sum)
-fn compensated_base(f: &Formula, ranges: &[Range]) -> (Ir, NodeId, bool) {
+fn compensated_base(a: &Analysis) -> (Ir, NodeId, bool) {
+    let (f, ranges) = (&a.f, a.ranges());
     rebuild(f, |ir, map, id, n| {
         let Node::Call(Builtin::Pow, [base, y, _]) = n else { return None };
         // Constant exponents become chains (or compensated chains); this is for pow calls.
@@ -1085,7 +945,8 @@ fn compensated_base(f: &Formula, ranges: &[Range]) -> (Ir, NodeId, bool) {
 }
 
 // A*c^2 + (1 - A)*c → c*(1 + A*(c - 1))
-fn factor_quadratic(f: &Formula) -> (Ir, NodeId, bool) {
+fn factor_quadratic(a: &Analysis) -> (Ir, NodeId, bool) {
+    let f = &a.f;
     let ir0 = &f.ir;
     // (A, c) when `id` is A*(c*c) or (c*c)*A.
     let square_term = |id: NodeId| -> Option<(NodeId, NodeId)> {

@@ -52,7 +52,7 @@
 //! measured (BENCHMARKS.md, robust7). `compensated-params`: nothing per point (the prepared block grows; compile
 //! time with it, e.g. F_kutlog's JIT from ~6 to ~30 ms).
 
-use super::accuracy::{add_opt, divide_apart, product, rebuild};
+use super::rewrite::{add_opt, divide_apart, product, rebuild, Analysis};
 use super::emit::IrEmit;
 use crate::builtins::dd;
 use crate::builtins::dd::Arith;
@@ -303,9 +303,9 @@ fn terms(f: &Formula, inv: &[bool], x: NodeId, neg: bool, out: &mut Vec<(NodeId,
 }
 
 // Σ ±tᵢ (tᵢ rational in one atom, of degree ≤ 1 together) → (a₁x + a₀)/(b₁x + b₀)
-pub(super) fn rational_form(f: &Formula) -> (Ir, NodeId, bool) {
-    let inv = f.ir.invariant();
-    let shapes = shapes(f, &inv);
+pub(super) fn rational_form(a: &Analysis) -> (Ir, NodeId, bool) {
+    let (f, inv, ranges) = (&a.f, a.invariant(), a.ranges());
+    let shapes = shapes(f, inv);
     // A sum's root: a live `+`/`−` none of whose users is one (the whole tree is rewritten at its root).
     let mut in_sum = vec![false; f.ir.len()];
     for i in (0..f.ir.len()).rev() {
@@ -315,15 +315,14 @@ pub(super) fn rational_form(f: &Formula) -> (Ir, NodeId, bool) {
         }
     }
     let uses = f.ir.use_counts(f.root);
-    let ranges = super::node_ranges(f, &super::Policy::default());
-    let mut b = Builder::new(f, &inv);
-    let mut pd = ParamDd { b: Builder::new(f, &inv), ranges: &ranges, memo: HashMap::new() };
+    let mut b = Builder::new(f, inv);
+    let mut pd = ParamDd { b: Builder::new(f, inv), ranges, memo: HashMap::new() };
     rebuild(f, |ir, map, id, n| {
         if inv[id.index()] || in_sum[id.index()] && uses[id.index()] <= 1 || !matches!(n, Node::Binary(BinOp::Add | BinOp::Sub, ..)) {
             return None;
         }
         let mut all = vec![];
-        terms(f, &inv, id, false, &mut all);
+        terms(f, inv, id, false, &mut all);
         // The terms that are rational in one atom and of degree ≤ 1 together join, in order (F_dsh's
         // c/(n − n·c + c) and −0.25); the others (its c⁸ term) are added to the joined quotient as written.
         let mut acc: Option<Shape> = None;
@@ -462,16 +461,15 @@ fn core_error(f: &Formula, ir: &mut Ir, map: &[NodeId], num: &[NodeId], den: &[N
 
 // exp(K·q) → e + e·t, e = exp(Kʰ·q);  expmuldiv(K·q, K_b·u, c) → expmuldiv(Kʰ·q, (K_b + K_b·t)·u, c)
 // t = (K·q − Kʰ·q) to first order: K = Kʰ + Kˡ the parameter-only factors in double-double, q the live ones
-pub(super) fn compensated_exp(f: &Formula) -> (Ir, NodeId, bool) {
-    let inv = f.ir.invariant();
-    let ranges = super::node_ranges(f, &super::Policy::default());
-    let mut b = Builder::new(f, &inv);
+pub(super) fn compensated_exp(a: &Analysis) -> (Ir, NodeId, bool) {
+    let (f, inv, ranges) = (&a.f, a.invariant(), a.ranges());
+    let mut b = Builder::new(f, inv);
     rebuild(f, |ir, map, id, n| {
         let Node::Call(call @ (Builtin::Exp | Builtin::ExpMulDiv), [arg, bv, cv]) = n else { return None };
         if inv[arg.index()] {
             return None;
         }
-        let (negated, num, den) = factors(f, &inv, arg)?;
+        let (negated, num, den) = factors(f, inv, arg)?;
         // An exponent ≤ 0 (by its factors' signs): where a divisor of it vanishes, the exponential does.
         let mut neg = negated;
         for x in num.iter().chain(&den) {
@@ -536,7 +534,7 @@ pub(super) fn compensated_exp(f: &Formula) -> (Ir, NodeId, bool) {
             // value computed once per parameter set, finite where b overflows).
             let rc = ranges[cv.index()];
             let c_carries = rc.lo.is_finite() && rc.hi.is_finite() && !rc.nan;
-            let (negb, bn, bd) = factors(f, &inv, bv)?;
+            let (negb, bn, bd) = factors(f, inv, bv)?;
             let (kbn, un): (Vec<NodeId>, Vec<NodeId>) = bn.iter().partition(|x| inv[x.index()]);
             let (kbd, ud): (Vec<NodeId>, Vec<NodeId>) = bd.iter().partition(|x| inv[x.index()]);
             let kb = (kbn.len() + kbd.len() > 0).then(|| divide_apart(ir, map, &kbn, &kbd, &[], sp));
@@ -713,9 +711,8 @@ impl ParamDd<'_> {
 /// rounds at least twice (or calls pow or acos), computed in double-double and rounded once where the kernel
 /// reads it. Runs on the live formula (`numerics::robust`), so a baked parameter folds the same double-double
 /// expression the live kernel's prepared block computes: baked and live agree bit for bit.
-pub(super) fn compensated_params(f: &Formula) -> (Ir, NodeId, bool) {
-    let inv = f.ir.invariant();
-    let ranges = super::node_ranges(f, &super::Policy::default());
+pub(super) fn compensated_params(a: &Analysis) -> (Ir, NodeId, bool) {
+    let (f, inv, ranges) = (&a.f, a.invariant(), a.ranges());
     let mut boundary = vec![false; f.ir.len()];
     for id in f.ir.ids() {
         if !inv[id.index()] {
@@ -723,7 +720,7 @@ pub(super) fn compensated_params(f: &Formula) -> (Ir, NodeId, bool) {
         }
     }
     let mut count = HashMap::new();
-    let mut pd = ParamDd { b: Builder::new(f, &inv), ranges: &ranges, memo: HashMap::new() };
+    let mut pd = ParamDd { b: Builder::new(f, inv), ranges, memo: HashMap::new() };
     rebuild(f, |ir, map, id, _| {
         if !boundary[id.index()] || roundings(f, id, &mut count) < 2 {
             return None;
@@ -746,7 +743,7 @@ mod tests {
 
     fn apply(src: &str) -> Option<String> {
         let f = parse(src);
-        let (ir, root, fired) = rational_form(&f);
+        let (ir, root, fired) = rational_form(&Analysis::new(f.clone()));
         fired.then(|| super::super::simplify_with(&Formula { ir, root, ..f }, &[], &super::super::Policy::default()).0.to_program_text())
     }
 
@@ -791,21 +788,21 @@ mod tests {
     #[test]
     fn compensated_params_computes_parameter_parts_in_double_double() {
         let f = parse("param k = 2 in 1..5\nparam Q = 0.5 in 0.1..0.9\nacos(pow(Q, 1/k)) * NH");
-        let (ir, root, fired) = compensated_params(&f);
+        let (ir, root, fired) = compensated_params(&Analysis::new(f.clone()));
         assert!(fired);
         let t = super::super::simplify_with(&Formula { ir, root, ..f }, &[], &super::super::Policy::default()).0.to_program_text();
         // pow's and acos's own roundings through their tails, rounded once where NH reads the product.
         assert!(t.contains("powlo(") && t.contains("acoslo("), "{t}");
         // A parameter part that rounds once (n·2) or none (n) is left as the kernel computes it.
-        assert!(!compensated_params(&parse("n * 2 * NH")).2);
-        assert!(!compensated_params(&parse("n * NH")).2);
+        assert!(!compensated_params(&Analysis::new(parse("n * 2 * NH"))).2);
+        assert!(!compensated_params(&Analysis::new(parse("n * NH"))).2);
     }
 
     #[test]
     fn compensated_exp_carries_the_exponent_tail() {
         let apply = |src: &str| {
             let f = parse(src);
-            let (ir, root, fired) = compensated_exp(&f);
+            let (ir, root, fired) = compensated_exp(&Analysis::new(f.clone()));
             fired.then(|| super::super::simplify_with(&Formula { ir, root, ..f }, &[], &super::super::Policy::default()).0.to_program_text())
         };
         // Beckmann after scaled-exp: K = 1/m² in double-double, the tail on b's parameter-only factor, the

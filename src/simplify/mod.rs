@@ -81,6 +81,7 @@
 
 pub mod accuracy;
 mod cancel;
+pub(crate) mod rewrite;
 pub(crate) mod emit;
 mod powi;
 pub(crate) mod range;
