@@ -130,8 +130,14 @@ fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<Out, C
             return Ok(Out::Json(EnergyReport::Full(FullReport::new(shown, &r))));
         }
         outln!(out, "{name}: hemispherical-directional albedo ρ(θᵢ) = ∫ f·cosθₒ dωₒ");
-        if r.phi_i_at_max_deg.is_some() {
-            outln!(out, "  (the formula reads directions: ρ(θᵢ) is the maximum over the azimuth φᵢ = 0°, 15°, …, 345° of L)");
+        match r.isotropic {
+            Some(true) => outln!(
+                out,
+                "  (the formula reads directions, but its values turn with the frame about N at {} random pairs: ρ(θᵢ) at φᵢ = 0° stands for every φᵢ)",
+                lobe::numerics::energy::ISOTROPY_PAIRS
+            ),
+            Some(false) => outln!(out, "  (the formula reads directions: ρ(θᵢ) is the maximum over the azimuth φᵢ = 0°, 15°, …, 345° of L)"),
+            None => {}
         }
         outln!(out, "  θᵢ (deg)   ρ(θᵢ)");
         for (t, v) in &r.albedo {

@@ -21,7 +21,8 @@
 //! halving), for L at every φᵢ of [`AZIMUTHS_DEG`] (the frame of the integration turned about N), and
 //! reports ρ(θᵢ) = max over φᵢ, the maximum over both angles and where it is; reciprocity is checked with L at
 //! those azimuths too. That costs ~48× the isotropic evaluations (24 azimuths, each integral over twice the
-//! azimuth range).
+//! azimuth range) — unless the formula's values turn with the frame about N ([`turns_with_the_frame`], tested
+//! at 4096 random pairs and angles: a GGX written with a half vector), when one azimuth stands for all (~2×).
 //!
 //! Cost: see the module docs of [`numerics`](super) (evaluation counts); measured times in BENCHMARKS.md
 //! (`benches/energy.rs` reproduces them).
@@ -381,6 +382,9 @@ pub struct FullEnergy {
     /// φᵢ at each θᵢ, and the φᵢ of the overall maximum. Empty and `None` for a cosine formula.
     pub albedo_phi: Vec<(f64, f64, f64)>,
     pub phi_i_at_max_deg: Option<f64>,
+    /// For a formula that reads directions: whether it passed [`turns_with_the_frame`], so that `albedo_phi`
+    /// holds φᵢ = 0 only (every φᵢ has that albedo). `None` for a cosine formula.
+    pub isotropic: Option<bool>,
 }
 
 /// The azimuths of L for formulas that read directions: 0°, 15°, …, 345°.
@@ -400,21 +404,45 @@ pub fn full_energy_for(ev: &dyn Evaluator, used: crate::ir::InputSet, params: &[
     if !used.reads_directions() {
         return full_energy(ev, params);
     }
-    let grid: Vec<(f64, f64)> = full_mode_angles().into_iter().flat_map(|t| AZIMUTHS_DEG.map(|p| (t, p))).collect();
+    // A formula whose values turn with the frame about N has one albedo for every φᵢ: the sweep over φᵢ
+    // would integrate the same function 24 times.
+    let isotropic = turns_with_the_frame(ev, params);
+    let azimuths: &[f64] = if isotropic { &[0.0] } else { &AZIMUTHS_DEG };
+    let grid: Vec<(f64, f64)> = full_mode_angles().into_iter().flat_map(|t| azimuths.iter().map(move |&p| (t, p))).collect();
     let cells: Result<Vec<(f64, f64, f64)>, Diagnostic> = grid
         .par_iter()
         .map(|&(t, p)| albedo_at(ev, params, t.to_radians(), Some(p.to_radians())).map(|r| (t, p, r)))
         .collect();
     let cells = cells?;
     let rows: Vec<(f64, f64)> = cells
-        .chunks(AZIMUTHS_DEG.len())
+        .chunks(azimuths.len())
         .map(|c| (c[0].0, c.iter().map(|x| x.2).fold(f64::NEG_INFINITY, f64::max)))
         .collect();
     let mut r = summarise(rows, reciprocity_over(ev, params, &AZIMUTHS_DEG))?;
     let best = cells.iter().filter(|c| c.0 == r.theta_i_at_max_deg).max_by(|a, b| a.2.total_cmp(&b.2));
     r.phi_i_at_max_deg = best.map(|c| c.1);
     r.albedo_phi = cells;
+    r.isotropic = Some(isotropic);
     Ok(r)
+}
+
+/// Pairs [`turns_with_the_frame`] tries.
+pub const ISOTROPY_PAIRS: usize = 4096;
+
+/// Whether `ev` gives the same value at (L, V) and at both turned about N by the same angle, at
+/// [`ISOTROPY_PAIRS`] random pairs and angles (within 10⁻⁹ relative: the turned components round): a sampled
+/// test of isotropy. A formula that reads the tangent frame (anisotropic Ward with αx ≠ αy) fails it at almost
+/// every pair; one written with direction components but only through cosines (a half vector's N·H) passes.
+pub fn turns_with_the_frame(ev: &dyn Evaluator, params: &[f64]) -> bool {
+    let mut r = crate::base::rng::Rng(0x150_7209);
+    let mut unit = || r.unit();
+    (0..ISOTROPY_PAIRS).all(|_| {
+        let (tl, pl, tv, pv, turn) = (unit() * FRAC_PI_2, unit() * 2.0 * PI, unit() * FRAC_PI_2, unit() * 2.0 * PI, unit() * 2.0 * PI);
+        let (l, v) = (dir(tl, pl), dir(tv, pv));
+        let (lt, vt) = (dir(tl, pl + turn), dir(tv, pv + turn));
+        let (a, b) = (ev.eval(&inputs_from_dirs(l, v), params), ev.eval(&inputs_from_dirs(lt, vt), params));
+        a == b || (a.is_nan() && b.is_nan()) || (a - b).abs() <= 1e-9 * a.abs().max(b.abs())
+    })
 }
 
 /// The incidence angles of the full mode: 0°, 1°, …, 89°, 89.9°.
@@ -443,7 +471,7 @@ fn summarise(rows: Vec<(f64, f64)>, reciprocity: Reciprocity) -> Result<FullEner
         return Err(Diagnostic::error("the albedo is zero at every incidence angle; cannot normalise")
             .hint("the formula is ≤ 0 (clamped to 0) everywhere for these parameters"));
     }
-    Ok(FullEnergy { albedo: rows, albedo_max, theta_i_at_max_deg: at, coef: 1.0 / albedo_max, reciprocity, albedo_phi: vec![], phi_i_at_max_deg: None })
+    Ok(FullEnergy { albedo: rows, albedo_max, theta_i_at_max_deg: at, coef: 1.0 / albedo_max, reciprocity, albedo_phi: vec![], phi_i_at_max_deg: None, isotropic: None })
 }
 
 /// The energy command's JSON report: one of the three modes' (keys listed in docs/commands.md; numbers follow
@@ -511,6 +539,10 @@ pub struct FullReport {
     /// Only for a formula that reads directions: every (θᵢ, φᵢ, ρ).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub albedo_phi: Option<Vec<AlbedoPhiRow>>,
+    /// Only for a formula that reads directions: its values turn with the frame about N on the sampled pairs,
+    /// so `albedo_phi` has φᵢ = 0 only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub isotropic: Option<bool>,
 }
 
 #[derive(Clone, Debug, serde::Serialize)]
@@ -558,6 +590,7 @@ impl FullReport {
             albedo_phi: r.phi_i_at_max_deg.map(|_| {
                 r.albedo_phi.iter().map(|&(theta_i_deg, phi_i_deg, rho)| AlbedoPhiRow { theta_i_deg, phi_i_deg, rho }).collect()
             }),
+            isotropic: r.isotropic,
         }
     }
 }

@@ -328,27 +328,24 @@ impl ErrorStats {
 /// kernel exactly as given (a baked one is a constant, a live one an argument), so where the formula is
 /// sensitive to it (F_ST's n/a·(c − 1) + 1 at n = a) the kernel must still be accurate.
 pub fn condition_ulps(truth_f: &Formula, pt: &Point, t: f64) -> f64 {
-    let used = truth_f.used_inputs();
+    let moves: Vec<(usize, f64)> = truth_f
+        .used_inputs()
+        .iter()
+        .map(|i| (i.index(), pt.x[i.index()]))
+        .filter(|&(_, v)| v != 0.0)
+        .flat_map(|(i, v)| [(i, v.next_up()), (i, v.next_down())])
+        .collect();
+    let values = truth::eval_moves(truth_f, &pt.x, &pt.p, &moves);
     let mut worst: f64 = 0.0;
-    let mut probe = |x: [f64; N_INPUTS], p: &[f64]| {
-        let mut u = truth::eval(truth_f, &x, p);
+    for (&(i, w), mut u) in moves.iter().zip(values) {
         // At a limit point its neighbours along the other inputs are limits too.
         if u.is_nan() {
-            u = truth::limit(truth_f, &x, p).unwrap_or(u);
+            let mut x = pt.x;
+            x[i] = w;
+            u = truth::limit(truth_f, &x, &pt.p).unwrap_or(u);
         }
         if !u.is_nan() {
             worst = worst.max(ulps(u, t));
-        }
-    };
-    for i in used.iter() {
-        let v = pt.x[i.index()];
-        if v == 0.0 {
-            continue;
-        }
-        for w in [v.next_up(), v.next_down()] {
-            let mut x = pt.x;
-            x[i.index()] = w;
-            probe(x, &pt.p);
         }
     }
     worst

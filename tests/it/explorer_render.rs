@@ -358,6 +358,16 @@ fn full_energy_integrates_over_the_azimuth_for_direction_formulas() {
         let b = albedo_at(&k, &[0.2, 0.2], f64::to_radians(d), Some(1.1)).unwrap();
         assert!((a - b).abs() < 1e-6 * a, "θ = {d}: {a} vs {b}");
     }
+    // So the full mode sees it turn with the frame and integrates one azimuth, with the sweep's maximum; the
+    // anisotropic one it does not.
+    use lobe::numerics::energy::turns_with_the_frame;
+    assert!(!turns_with_the_frame(&k, &p) && e.isotropic == Some(false));
+    assert!(turns_with_the_frame(&k, &[0.2, 0.2]));
+    let iso = full_energy_for(&k, k.used_inputs(), &[0.2, 0.2]).unwrap();
+    assert_eq!((iso.isotropic, iso.albedo_phi.len(), iso.phi_i_at_max_deg), (Some(true), iso.albedo.len(), Some(0.0)));
+    let t = f64::to_radians(iso.theta_i_at_max_deg);
+    let swept = (0..24).map(|j| albedo_at(&k, &[0.2, 0.2], t, Some(f64::to_radians(15.0 * j as f64))).unwrap()).fold(0.0, f64::max);
+    assert!((swept - iso.albedo_max).abs() < 1e-9 * swept, "{swept} vs {}", iso.albedo_max);
 }
 
 fn channel_kernels(f: Formula) -> Vec<lobe::Kernel> {
