@@ -48,6 +48,9 @@
 //!   and the exponent halved over two nested builtins so two tiny divisors (Cook–Torrance's NL, NV ~1e-224)
 //!   each meet one half (twice the cost). One division by a product rather than a chain: dependent divisions
 //!   add latency the static cost does not see (Cook–Torrance's `/nh/nh/nh/nh`: 1.36× measured at 1.23× static).
+//!   A divisor that may be exactly 0 and reads inputs no other factor reads (Ward's √NL) makes a pole there, which
+//!   the builtin (an infinite b/c taken for an overflowed factor) would turn into 0 where e^E underflows: such
+//!   a product is guarded, `d == 0 ? rest/d : expmuldiv(…)` ([`pole_guard`], +6 per product).
 //!
 //! - `smith-g1`: Smith's G1 for GGX written with tan², `K/(1 + sqrt(1 + A·(1 − c²)/c²))`, → `K·c/(c + sqrt(c² +
 //!   A·(1 − c²)))` for c > 0 (range or guard), then c cancelled against a divisor c of the products around it
@@ -445,9 +448,58 @@ fn quotient_chain(a: &Analysis, only: Option<usize>) -> (Ir, NodeId, bool) {
 // exp(E)·n₁·…/(d₁·…·d_k) → expmuldiv(E, n₁·…/(d₁·…·d_{k−1}), d_k)   (variant 0; 1: dividing by the safe d_i and
 // the exponent's own at once, then by each other that may be tiny or huge in turn, two of them by `two_divisors`; 2: expmuldiv(E/2, expmuldiv(E/2, n₁·…/d₁/…/d_{k−2}, d_{k−1}),
 // d_k))
-fn scaled_exp(a: &Analysis, variant: usize) -> (Ir, NodeId, bool) {
-    let (f, ranges, lists) = (&a.f, a.ranges(), a.lists());
+fn scaled_exp(an: &Analysis, variant: usize) -> (Ir, NodeId, bool) {
+    let (f, lists) = (&an.f, an.lists());
     rebuild(f, |ir, map, id, old| {
+        let (r, rewritten) = scaled_exp_at(an, ir, map, id, old, variant)?;
+        let (num, den) = lists[id.index()].as_ref()?;
+        Some(if rewritten { pole_guard(an, ir, map, (num, den), r, f.ir.span(id)) } else { r })
+    })
+}
+
+/// Where a divisor `d` that may be exactly 0 reads inputs no other factor of the product reads (Ward's √NL),
+/// the exact value at d = 0 is a pole, ±∞ — e^E > 0 for every finite E, and nothing else there moves with d —
+/// while expmuldiv sees b/c = ∞ as an overflowed finite factor and gives 0 where e^E underflows. So
+/// `d₁ == 0 || … ? rest/(d₁·…) : r`, `rest` the product's other factors with the exponential taken as 1 (it
+/// is positive): ±∞ at a pole, NaN (0/0, as the truth) where the rest vanishes too. `r` unchanged when there
+/// is no such divisor (Beckmann's NH is read by the exponent; Cook–Torrance's NL by G beside it).
+fn pole_guard(an: &Analysis, ir: &mut Ir, map: &[NodeId], (num, den): (&[NodeId], &[NodeId]), r: NodeId, s: Span) -> NodeId {
+    let (f, ranges, reads) = (&an.f, an.ranges(), an.reads());
+    let all: Vec<NodeId> = num.iter().chain(den).copied().collect();
+    let lone: Vec<NodeId> = den
+        .iter()
+        .copied()
+        .filter(|&d| {
+            let rd = ranges[d.index()];
+            let others = all.iter().filter(|&&x| x != d).fold(0u16, |m, x| m | reads[x.index()]);
+            rd.lo <= 0.0 && rd.hi >= 0.0 && reads[d.index()] != 0 && reads[d.index()] & others == 0 && all.iter().filter(|&&x| x == d).count() == 1
+        })
+        .collect();
+    if lone.is_empty() {
+        return r;
+    }
+    let zero = ir.konst(0.0, s);
+    let one = ir.konst(1.0, s);
+    let mut cond = None;
+    for d in &lone {
+        let z = ir.call(Builtin::Eq, &[map[d.index()], zero], s);
+        cond = Some(match cond {
+            None => z,
+            Some(c) => ir.call(Builtin::Select, &[c, one, z], s),
+        });
+    }
+    let cond = cond.expect("a lone divisor");
+    let rest: Vec<NodeId> = num.iter().copied().filter(|x| !matches!(f.ir.node(*x), Node::Call(Builtin::Exp, _))).collect();
+    let n = product(ir, map, &rest, s).unwrap_or(one);
+    let d = product(ir, map, den, s).unwrap_or(one);
+    let pole = ir.bin(BinOp::Div, n, d, s);
+    ir.call(Builtin::Select, &[cond, pole, r], s)
+}
+
+/// [`scaled_exp`] at one product node (`None`: not a product with an exp factor).
+fn scaled_exp_at(an: &Analysis, ir: &mut Ir, map: &[NodeId], id: NodeId, old: Node, variant: usize) -> Option<(NodeId, bool)> {
+    let (f, ranges, lists) = (&an.f, an.ranges(), an.lists());
+    {
         let (num, den) = lists[id.index()].as_ref()?;
         let at = num.iter().position(|x| matches!(f.ir.node(*x), Node::Call(Builtin::Exp, _)))?;
         let Node::Call(Builtin::Exp, [arg, ..]) = *f.ir.node(num[at]) else { return None };
@@ -464,12 +516,12 @@ fn scaled_exp(a: &Analysis, variant: usize) -> (Ir, NodeId, bool) {
         // Variant 1 takes two such divisors apart at run time ([`two_divisors`]).
         let two = variant == 1 && n_risky == 2 && den.iter().all(|d| risky(d) || safe(ranges[d.index()]) || covered.contains(d));
         if n_risky > if variant == 2 { 2 } else { 1 } && !two {
-            return Some(ir.push(old.map_args(|a| map[a.index()]), f.ir.span(id)));
+            return Some((ir.push(old.map_args(|a| map[a.index()]), f.ir.span(id)), false));
         }
         let s = f.ir.span(id);
         let rest: Vec<NodeId> = num.iter().enumerate().filter(|(i, _)| *i != at).map(|(_, x)| *x).collect();
         if two {
-            return Some(two_divisors(ir, map, (map[arg.index()], &rest), den, ranges, |d| risky(d), s));
+            return Some((two_divisors(ir, map, (map[arg.index()], &rest), den, ranges, |d| risky(d), s), true));
         }
         // Safe divisors first, so the last ones (the divisors kept apart) are those that may be tiny or huge.
         let (mut dens, unsafe_den): (Vec<NodeId>, Vec<NodeId>) = den.iter().partition(|d| safe(ranges[d.index()]));
@@ -511,8 +563,8 @@ fn scaled_exp(a: &Analysis, variant: usize) -> (Ir, NodeId, bool) {
             a = ir.bin(BinOp::Mul, a, half, s);
             b = ir.call(Builtin::ExpMulDiv, &[a, b, map[d.index()]], s);
         }
-        Some(ir.call(Builtin::ExpMulDiv, &[a, b, c], s))
-    })
+        Some((ir.call(Builtin::ExpMulDiv, &[a, b, c], s), true))
+    }
 }
 
 /// The safe divisors and the exponent's own (`cov`) as one divisor, `None` when there are neither: with the

@@ -19,6 +19,7 @@ pub(crate) struct Analysis {
     guards: OnceCell<Vec<Option<Vec<NodeId>>>>,
     lists: OnceCell<Lists>,
     wide_lists: OnceCell<Lists>,
+    reads: OnceCell<Vec<u16>>,
 }
 
 impl Analysis {
@@ -30,6 +31,7 @@ impl Analysis {
             guards: OnceCell::new(),
             lists: OnceCell::new(),
             wide_lists: OnceCell::new(),
+            reads: OnceCell::new(),
         }
     }
 
@@ -51,6 +53,23 @@ impl Analysis {
     /// Per node, its factor lists of at most [`MAX_FACTORS`] ([`product_lists`]).
     pub(crate) fn lists(&self) -> &Lists {
         self.lists.get_or_init(|| product_lists(&self.f, MAX_FACTORS))
+    }
+
+    /// Per node, the inputs its value reads, a bit per [`crate::ir::Input`] index.
+    pub(crate) fn reads(&self) -> &[u16] {
+        self.reads.get_or_init(|| {
+            let mut r: Vec<u16> = Vec::with_capacity(self.f.ir.len());
+            for id in self.f.ir.ids() {
+                let node = *self.f.ir.node(id);
+                let mut m = match node {
+                    Node::Input(i) => 1u16 << i.index(),
+                    _ => 0,
+                };
+                node.for_each_arg(|a| m |= r[a.index()]);
+                r.push(m);
+            }
+            r
+        })
     }
 
     /// [`Analysis::lists`] of up to twice as many factors (cancel-min's products, which carry a min's terms).

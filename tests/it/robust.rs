@@ -84,6 +84,31 @@ fn ward_and_cook_torrance_are_finite_when_nl_nv_underflows() {
     }
 }
 
+/// Ward at NL = 0 or NV = 0 is a pole, 1/√0 times a positive exponential, whatever NH: +∞ (the pass's
+/// expmuldiv took the infinite b/c for an overflowed factor and gave 0 where e^E underflowed, 1 810 of 4 003
+/// pole points on 10⁵). Live and baked, at random NH (tiny ones included) and m.
+#[test]
+fn ward_is_infinite_at_its_poles_whatever_the_exponential() {
+    let mut r = lobe::base::rng::Rng(77);
+    let live = robust_kernel("ward", &[]);
+    let k = load("ward").param_index("m").unwrap();
+    for i in 0..400 {
+        let m = 0.01 + 0.99 * r.unit();
+        let mut p = live.default_params();
+        p[k] = m;
+        let nh = if i % 4 == 0 { 5e-324 } else { r.unit().powi(1 + (i % 200)) };
+        let other = r.unit().max(1e-300);
+        let x = if i % 2 == 0 { at(0.0, other, nh, 0.5) } else { at(other, 0.0, nh, 0.5) };
+        let t = truth::eval(&load("ward"), &x, &p);
+        assert_eq!(t, f64::INFINITY, "truth at {x:?}, m = {m}");
+        assert_eq!(live.eval(&x, &p), f64::INFINITY, "live at NH = {nh:e}, m = {m}");
+        if i % 40 == 0 {
+            let baked = robust_kernel("ward", &[("m", m)]);
+            assert_eq!(baked.eval(&x, &baked.default_params()), f64::INFINITY, "baked m = {m} at NH = {nh:e}");
+        }
+    }
+}
+
 /// Blinn at n = 1000: the plain chain loses hundreds of ulps; the pow call stays within an ulp and the compensated
 /// chain (the pass's default choice) within its 3u bound (< 3 ulp), so baked and live agree within 4 ulp.
 #[test]
