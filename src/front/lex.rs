@@ -42,11 +42,12 @@ enum NumShape {
 
 /// Raw spellings recognised by the logos DFA.
 #[derive(Logos, Clone, Copy, Debug, PartialEq)]
-#[logos(skip r"[ \t\r\x0C]+")]
+#[logos(skip r"[ \t\x0C]+")]
 // A comment runs to the end of its line, by definition: the greedy repetition is the point.
-#[logos(skip(r"#[^\n]*", allow_greedy = true))]
+#[logos(skip(r"#[^\r\n]*", allow_greedy = true))]
 enum Raw {
-    #[token("\n")]
+    /// A line break: `\n`, `\r\n`, or a lone `\r` (old Mac files), as [`crate::base::span::line_col`] counts them.
+    #[regex(r"\n|\r\n?")]
     Newline,
     #[token(";")]
     Semi,
@@ -121,9 +122,9 @@ enum Raw {
     /// `.5` — a leading point: an error, repaired to 0.5.
     #[regex(r"\.[0-9]+", |lex| number_tail(lex, true))]
     LeadingDot(NumShape),
-    #[regex(r#""[^"\n]*""#)]
+    #[regex(r#""[^"\r\n]*""#)]
     Str,
-    #[regex(r#""[^"\n]*"#)]
+    #[regex(r#""[^"\r\n]*"#)]
     UnterminatedStr,
     #[regex("@[A-Za-z_][A-Za-z0-9_]*")]
     Meta,
@@ -595,6 +596,13 @@ mod tests {
         assert_eq!(toks("(a\n+ b)"), vec![LParen, Ident("a"), Plus, Ident("b"), RParen]);
         assert_eq!(toks("f(a,\nb)"), vec![Ident("f"), LParen, Ident("a"), Comma, Ident("b"), RParen]);
         assert_eq!(toks("a\r\nb"), vec![Ident("a"), Newline, Ident("b")]);
+        // A lone CR is a line break too, in code, after a comment and after a string.
+        assert_eq!(toks("a\rb"), vec![Ident("a"), Newline, Ident("b")]);
+        assert_eq!(toks("a # c\rb"), vec![Ident("a"), Newline, Ident("b")]);
+        assert_eq!(toks("@name \"x\"\rb"), vec![Meta("name"), Str("x"), Newline, Ident("b")]);
+        assert_eq!(toks("a\r\r\nb"), vec![Ident("a"), Newline, Ident("b")]);
+        let l = lex("@cite \"abc\rNH");
+        assert_eq!((l.diags.len(), l.toks[1].1), (1, Str("abc")));
     }
 
     #[test]

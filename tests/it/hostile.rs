@@ -159,12 +159,15 @@ fn log_plots_with_nothing_positive_end_with_an_error() {
 fn shader_export_mangles_hostile_names_and_metadata() {
     let d = scratch("export");
     let f = d.join("hostile.brdf");
-    std::fs::write(&f, "@name \"x\r#define pow(a,b) 0.0\"\nparam t0 = 1\nparam float = 2\nparam gl_Position = 3\nparam output = 4\nparam alias = 5\nparam var = 6\nparam loop = 7\nparam f32 = 8\npow(NH, n) * t0 * float * gl_Position * output * alias * var * loop * f32\n").unwrap();
+    // A CR ends the line, in a string too: metadata cannot smuggle one into the shader.
+    std::fs::write(&f, "@name \"x\r#define pow(a,b) 0.0\"\nNH\n").unwrap();
+    refused(&lobe(&["export", "--glsl", &s(&f)]), "a CR in @name", "unterminated string");
+    std::fs::write(&f, "@name \"x\u{2028}#define pow(a,b) 0.0\x0b#define exp(a) 0.0\"\nparam t0 = 1\nparam float = 2\nparam gl_Position = 3\nparam output = 4\nparam alias = 5\nparam var = 6\nparam loop = 7\nparam f32 = 8\npow(NH, n) * t0 * float * gl_Position * output * alias * var * loop * f32\n").unwrap();
     for dialect in ["--glsl", "--wgsl"] {
         let r = lobe(&["export", dialect, &s(&f)]);
         assert_eq!(r.code, Some(0), "{}", r.stderr);
         let text = String::from_utf8_lossy(&r.stdout);
-        assert!(!text.contains('\r'), "{text}");
+        assert!(!text.contains(['\r', '\u{2028}', '\x0b']), "{text}");
         assert!(text.lines().all(|l| l.trim_start().starts_with("//") || !l.contains("#define")), "{text}");
         for name in ["t0", "float", "gl_Position", "output", "alias", "var", "loop", "f32"] {
             assert!(text.contains(&format!("p_{name}")), "{name} not mangled:\n{text}");

@@ -127,6 +127,7 @@ fn each_mistake_gets_its_message_and_hint() {
             "write `pow(x, y)`",
         ]),
         ("internal_name_as_param", &["`acoslo` is a variable, not a function", "internal_name_as_param.brdf:3:1"]),
+        ("lone_cr", &["expected an operand after `^`", "lone_cr.brdf:3:12"]),
     ];
     for (name, needles) in want {
         let path = dir().join(format!("{name}.brdf"));
