@@ -127,6 +127,7 @@ fn each_mistake_gets_its_message_and_hint() {
             "write `pow(x, y)`",
         ]),
         ("internal_name_as_param", &["`acoslo` is a variable, not a function", "internal_name_as_param.brdf:3:1"]),
+        ("digit_separators", &["number `1_000` has `_` between its digits", "write `1000`", "write `0.50`"]),
         ("lone_cr", &["expected an operand after `^`", "lone_cr.brdf:3:12"]),
     ];
     for (name, needles) in want {
