@@ -316,6 +316,8 @@ fn messages_say_what_the_user_meant() {
     let r = lobe(&["eval", "--expr", "1_0*NH", "--at", "NH=1"]);
     refused(&r, "1_0", "digit separators are not supported: write `10`");
     assert!(!r.stderr.contains("1 * _0"), "{}", r.stderr);
+    let r = lobe(&["eval", "--expr", "param a = NH\nNH^a", "--at", "NH=1"]);
+    refused(&r, "param a = NH", "a parameter's default must be a constant number");
     let r = lobe(&["eval", "--expr", "-NH+1", "--at", "NH=0.25"]);
     assert_eq!((r.code, String::from_utf8_lossy(&r.stdout).trim()), (Some(0), "0.75"), "{}", r.stderr);
     let bom = d.join("bom.brdf");
