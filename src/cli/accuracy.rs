@@ -30,7 +30,7 @@ pub struct AccuracyArgs {
 }
 
 pub fn run(a: &AccuracyArgs) -> Result<(), CliError> {
-    let (k, r) = a.against.kernels(&a.set.list(), &a.backend)?;
+    let (k, r) = a.against.kernels(&a.set.list()?, &a.backend)?;
     print!("{}", report(a, &k, &r)?);
     Ok(())
 }
@@ -38,7 +38,7 @@ pub fn run(a: &AccuracyArgs) -> Result<(), CliError> {
 /// The command's output for already compiled kernels (formula `k`, reference `r`).
 pub fn report(a: &AccuracyArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
     let mut out = String::new();
-    let set = a.set.list();
+    let set = a.set.list()?;
     if set.iter().any(|(k, _)| k == "n") {
         return Err(CliError::hint("accuracy sweeps n itself; --set n is not allowed", "set only the other parameters"));
     }

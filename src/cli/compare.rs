@@ -70,7 +70,7 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
     };
     let lobe_compiler = LobeCompiler { backend: a.backend.kind, math: a.backend.math.mode };
     let compiler: &dyn lobe::render::scene::BrdfCompiler = &lobe_compiler;
-    let base_set = a.set.list();
+    let base_set = a.set.list()?;
     let sets: Vec<Vec<(String, f64)>> = if a.sweep_n.is_empty() {
         vec![base_set.clone()]
     } else {

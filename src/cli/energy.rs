@@ -61,7 +61,7 @@ pub struct EnergyArgs {
 }
 
 pub fn run(a: &EnergyArgs) -> Result<(), CliError> {
-    let set = a.set.list();
+    let set = a.set.list()?;
     if a.range.is_some() && set.iter().any(|(k, _)| k == "n") {
         return Err(CliError::hint("--set n conflicts with --range", "--range sweeps n; drop n from --set"));
     }
@@ -114,7 +114,7 @@ fn report_channels(a: &EnergyArgs, ks: &[Kernel], against: Option<&Kernel>) -> R
 /// The command's output for one already compiled kernel (the formula, and the fitted coefficient if any).
 fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<Out, CliError> {
     let mut out = String::new();
-    let params = common::param_values(&k.formula, &a.set.list());
+    let params = common::param_values(&k.formula, &a.set.list()?);
     let lobe: Input = a.lobe.resolve(k.used_inputs(), a.json.on)?;
     let name = k.formula.display_name();
     // `params` of the JSON output; under --range, n is the swept variable, not a parameter.

@@ -67,7 +67,7 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
     // Refuse a bad output path before doing any work, and write nothing unless everything succeeds.
     a.out.force.check(&out, image::is_lobe_png)?;
     Output::png_only(&out)?;
-    let opts = LoadOptions { size: a.size, set: a.set.list(), formula_override: None };
+    let opts = LoadOptions { size: a.size, set: a.set.list()?, formula_override: None };
     let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: a.backend.kind, math: a.backend.math.mode })?;
     let ropts = RenderOptions {
         threads: a.threads,

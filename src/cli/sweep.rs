@@ -124,7 +124,7 @@ pub enum Out {
 /// The command's output for a lowered formula, and the `--deny` kinds that occurred.
 pub fn report(a: &SweepArgs, f: &Formula) -> Result<(Out, Vec<String>), CliError> {
     let mut out = String::new();
-    let set = a.set.list();
+    let set = a.set.list()?;
     let mut decls = f.params.clone();
     let u = f.unclamped();
     let k = lobe::compile_formula(u.clone(), &a.backend.options(set.clone()))?;

@@ -37,7 +37,7 @@ pub struct WatchArgs {
 fn reload(a: &WatchArgs, src: String) -> Result<String, CliError> {
     let t0 = Instant::now();
     let name = a.file.display().to_string();
-    let opts = LoadOptions { size: Some(a.size), set: a.set.list(), formula_override: Some((name, src)) };
+    let opts = LoadOptions { size: Some(a.size), set: a.set.list()?, formula_override: Some((name, src)) };
     let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: lobe::Backend::Jit, math: lobe::Mode::Precise })?;
     let compile = t0.elapsed();
     let ropts = RenderOptions::default();
@@ -55,6 +55,7 @@ fn reload(a: &WatchArgs, src: String) -> Result<String, CliError> {
 }
 
 pub fn run(a: &WatchArgs) -> Result<(), CliError> {
+    a.set.list()?;
     a.out.force.check(a.out.required(), image::is_lobe_png)?;
     Output::png_only(a.out.required())?;
     if !a.scene.is_file() {

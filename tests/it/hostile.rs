@@ -356,3 +356,36 @@ fn an_infinite_lobe_is_no_light_and_counted() {
     assert!(im.rgb.iter().all(|&c| c == 0), "an infinite lobe was drawn as light");
     let _ = std::fs::remove_dir_all(&d);
 }
+
+#[test]
+fn a_flag_repeated_with_another_value_is_refused_in_every_command() {
+    let d = scratch("repeat");
+    let two = d.join("two.brdf");
+    std::fs::write(&two, "param a = 1 in 0..10\nNH^n * a\n").unwrap();
+    let two = s(&two);
+    let r = lobe(&["eval", &two, "--set", "n=5", "--set", "n=6", "--at", "NH=0.5"]);
+    refused(&r, "--set twice", "--set gives `n` twice: n=5 and n=6");
+    assert!(r.stderr.contains("help:"), "{}", r.stderr);
+    let r = lobe(&["eval", &two, "--at", "NH=0.5", "--at", "NH=0.7"]);
+    refused(&r, "--at twice", "--at gives `NH` twice: NH=0.5 and NH=0.7");
+    let r = lobe(&["eval", "--expr", "L.z * V.z", "--at", "L=0,0,1", "--at", "Lz=0.5,V=0,0,1"]);
+    refused(&r, "L and Lz", "--at gives Lz twice: L=0,0,1 and Lz=0.5");
+    // Distinct names across flags, and a repeat with the same value, still work.
+    let r = lobe(&["eval", &two, "--set", "n=2", "--set", "a=3", "--at", "NH=0.5", "--at", "NH=0.5"]);
+    assert_eq!((r.code, String::from_utf8_lossy(&r.stdout).trim()), (Some(0), "0.75"), "{}", r.stderr);
+    // Every command takes --set through the same parsing.
+    let out = s(&d.join("o.png"));
+    for args in [
+        vec!["render", "examples/scenes/paper_sphere.toml", "--size", "16", "-o", &out],
+        vec!["sweep", &two],
+        vec!["energy", &two],
+        vec!["check", &two],
+        vec!["export", "--glsl", &two],
+        vec!["compare", "examples/brdfs/blinn.brdf", &two, "--size", "16"],
+    ] {
+        let r = lobe(&[&args[..], &["--set", "n=5", "--set", "n=6"][..]].concat());
+        refused(&r, &format!("{args:?}"), "--set gives `n` twice: n=5 and n=6");
+    }
+    assert!(!d.join("o.png").exists());
+    let _ = std::fs::remove_dir_all(&d);
+}
