@@ -389,3 +389,22 @@ fn a_flag_repeated_with_another_value_is_refused_in_every_command() {
     assert!(!d.join("o.png").exists());
     let _ = std::fs::remove_dir_all(&d);
 }
+
+#[test]
+fn sweep_keeps_to_its_budget_or_names_the_minimum() {
+    let r = lobe(&["sweep", "examples/brdfs/blinn.brdf", "--max-evals", "1"]);
+    refused(&r, "--max-evals 1", "minimum of 513 evaluations (19 parameter combinations × 27 input points each)");
+    assert!(r.stdout.is_empty(), "{}", String::from_utf8_lossy(&r.stdout));
+    let r = lobe(&["sweep", "examples/brdfs/blinn.brdf", "--max-evals", "513", "--as-written"]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert!(String::from_utf8_lossy(&r.stdout).contains("over 513 points"), "{}", String::from_utf8_lossy(&r.stdout));
+    // On geometry (3 456 pairs per combination) the grid is subsampled to the budget, for both forms.
+    let r = lobe(&["sweep", "--expr", "NL * NV * NH^n", "--max-evals", "5000", "--json"]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    let v: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    let evaluated = v["evaluated"].as_u64().unwrap();
+    assert!((1216..=5000).contains(&evaluated), "{v}");
+    if let Some(c) = v["compiled"]["evaluated"].as_u64() {
+        assert!(c <= 5000, "{v}");
+    }
+}
