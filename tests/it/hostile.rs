@@ -408,3 +408,21 @@ fn sweep_keeps_to_its_budget_or_names_the_minimum() {
         assert!(c <= 5000, "{v}");
     }
 }
+
+#[test]
+fn temporaries_left_by_killed_writers_go_on_the_next_write_to_the_directory() {
+    let d = scratch("stale");
+    // Pids beyond any real one: their writers are gone. One for the output, one for another file; pid 1 lives.
+    let stale = [".o.png.lobe-tmp-4294967295", ".other.png.lobe-tmp-4294967294"].map(|n| d.join(n));
+    let live = d.join(".third.png.lobe-tmp-1");
+    for p in stale.iter().chain([&live]) {
+        std::fs::write(p, b"half a PNG").unwrap();
+    }
+    let r = lobe(&["render", "examples/scenes/paper_sphere.toml", "--size", "16", "-o", &s(&d.join("o.png"))]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    for p in &stale {
+        assert!(!p.exists(), "{} was left", p.display());
+    }
+    assert!(live.exists(), "a live writer's temporary was removed");
+    let _ = std::fs::remove_dir_all(&d);
+}
