@@ -426,3 +426,14 @@ fn temporaries_left_by_killed_writers_go_on_the_next_write_to_the_directory() {
     assert!(live.exists(), "a live writer's temporary was removed");
     let _ = std::fs::remove_dir_all(&d);
 }
+
+#[test]
+fn an_out_of_range_value_gets_its_error_alone() {
+    // A --sweep-n value out of range: that error alone, named after --sweep-n.
+    let r = lobe(&["compare", "examples/brdfs/blinn.brdf", "examples/brdfs/phong.brdf", "--sweep-n", "0,5", "--size", "16"]);
+    refused(&r, "--sweep-n 0,5", "--sweep-n 0: material `glossy`: value 0");
+    assert_eq!(r.stderr.matches("error:").count(), 1, "{}", r.stderr);
+    let r = lobe(&["render", "examples/scenes/paper_sphere.toml", "--set", "n=0", "--size", "16", "-o", "/tmp/never.png"]);
+    refused(&r, "render --set n=0", "outside the formula's declared range");
+    assert!(!r.stderr.contains("no material's formula declares"), "{}", r.stderr);
+}
