@@ -115,7 +115,6 @@ fn report_channels(a: &EnergyArgs, ks: &[Kernel], against: Option<&Kernel>) -> R
 fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<Out, CliError> {
     let mut out = String::new();
     let params = common::param_values(&k.formula, &a.set.list()?);
-    let lobe: Input = a.lobe.resolve(k.used_inputs(), a.json.on)?;
     let name = k.formula.display_name();
     // `params` of the JSON output; under --range, n is the swept variable, not a parameter.
     let shown = k.formula.params.iter().zip(&params).filter(|(d, _)| a.range.is_none() || d.name != "n");
@@ -124,6 +123,10 @@ fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<Out, C
     if a.mode == Mode::Full {
         if a.range.is_some() {
             return Err(CliError::hint("--range works in lobe mode only", "drop --mode full, or drop --range"));
+        }
+        // Full mode integrates over real geometry: there is no lobe variable to choose (nor a note about it).
+        if a.lobe.name.is_some() {
+            return Err(CliError::hint("--lobe works in lobe mode only", "drop --mode full, or drop --lobe"));
         }
         let r = full_energy_for(k, k.used_inputs(), &params)?;
         if a.json.on {
@@ -157,6 +160,7 @@ fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<Out, C
         return Ok(Out::Text(out));
     }
 
+    let lobe: Input = a.lobe.resolve(k.used_inputs(), a.json.on)?;
     let Some(range) = &a.range else {
         let r = lobe_integral(k, &params, lobe)?;
         if a.json.on {

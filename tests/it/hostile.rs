@@ -437,3 +437,14 @@ fn an_out_of_range_value_gets_its_error_alone() {
     refused(&r, "render --set n=0", "outside the formula's declared range");
     assert!(!r.stderr.contains("no material's formula declares"), "{}", r.stderr);
 }
+
+#[test]
+fn energy_prints_only_the_notes_of_its_mode() {
+    // The lobe-variable note belongs to lobe mode.
+    let r = lobe(&["energy", "--expr", "NH^n * VR", "--mode", "full"]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert!(!r.stderr.contains("note:"), "{}", r.stderr);
+    let r = lobe(&["energy", "--expr", "NH^n * VR"]);
+    assert!(r.code == Some(0) && r.stderr.contains("note: the formula reads both NH and VR"), "{}", r.stderr);
+    refused(&lobe(&["energy", "--expr", "NH^n", "--mode", "full", "--lobe", "NH"]), "--lobe in full mode", "lobe mode only");
+}
