@@ -279,6 +279,9 @@ fn numerical_commands_refuse_what_they_cannot_answer() {
     assert_eq!(r.code, Some(0), "{}", r.stderr);
     let text = String::from_utf8_lossy(&r.stdout);
     assert!(!text.contains("-inf") && text.contains("undefined"), "{text}");
+    // Nothing is "NaN % at n = NaN" or an infinite ratio: it says why the metrics are undefined.
+    assert!(!text.contains("NaN") && !text.contains("inf %") && !text.contains("inf ("), "{text}");
+    assert!(text.contains("the reference is 0 at every angle and n"), "{text}");
     // compare: a --set name only B declares applies to B.
     let r = lobe(&["compare", "examples/brdfs/blinn.brdf", &a_only, "--set", "a=16", "--size", "16", "--json"]);
     assert_eq!(r.code, Some(0), "{}", r.stderr);
