@@ -303,6 +303,7 @@ fn numerical_commands_refuse_what_they_cannot_answer() {
     let r = lobe(&["watch", &broken, "--scene", "examples/scenes/paper_sphere.toml", "-o", &s(&out), "--size", "16", "--count", "1"]);
     assert_eq!(r.code, Some(1), "{}", r.stderr);
     assert!(!out.exists());
+    assert!(r.stderr.contains("no image yet") && !r.stderr.contains("keeping the last good image"), "{}", r.stderr);
     // compare on a scene without objects.
     let empty = write("empty.toml", "[camera]\nposition = [0, 0, 6]\n");
     let r = lobe(&["compare", "examples/brdfs/blinn.brdf", "examples/brdfs/phong.brdf", "--scene", &empty, "--size", "16"]);
