@@ -452,3 +452,43 @@ fn energy_prints_only_the_notes_of_its_mode() {
     assert!(r.code == Some(0) && r.stderr.contains("note: the formula reads both NH and VR"), "{}", r.stderr);
     refused(&lobe(&["energy", "--expr", "NH^n", "--mode", "full", "--lobe", "NH"]), "--lobe in full mode", "lobe mode only");
 }
+
+#[test]
+fn supersampling_averages_samples_and_one_sample_is_the_plain_render() {
+    let d = scratch("aa");
+    // Flat white (ambient only) on black: without supersampling every pixel is 0 or 255.
+    let flat = "background = [0, 0, 0]\nambient = [1, 1, 1]\n[camera]\nposition = [0, 0, 6]\n[[light]]\nkind = \"point\"\n\
+                position = [10, 0, 10]\n[materials.m]\nformula = \"0*NH\"\nka = 1\nkd = 0\nks = 0\n[[object]]\nshape = \"sphere\"\nmaterial = \"m\"\n";
+    std::fs::write(d.join("flat.toml"), flat).unwrap();
+    std::fs::write(d.join("flat2.toml"), format!("aa = 2\n{flat}")).unwrap();
+    let render = |scene: &str, extra: &[&str], out: &str| -> Vec<u8> {
+        let o = d.join(out);
+        let r = lobe(&[&["render", &s(&d.join(scene)), "--size", "48", "-o", &s(&o)][..], extra].concat());
+        assert_eq!(r.code, Some(0), "{scene} {extra:?}: {}", r.stderr);
+        std::fs::read(&o).unwrap()
+    };
+    let plain = render("flat.toml", &[], "plain.png");
+    assert_eq!(render("flat.toml", &["--aa", "1"], "aa1.png"), plain, "--aa 1 is not the plain render");
+    let aa2 = render("flat.toml", &["--aa", "2"], "aa2.png");
+    assert_ne!(aa2, plain);
+    let levels = |png: &[u8]| lobe::base::image::Image::decode_png(png).unwrap().rgb;
+    assert!(levels(&plain).iter().all(|&v| v == 0 || v == 255));
+    let smooth = levels(&aa2);
+    // Edge pixels take the quarter levels of 2×2 samples; the inside stays white, the outside black.
+    for q in [64u8, 128, 191] {
+        assert!(smooth.contains(&q), "no edge pixel at {q}");
+    }
+    assert!(smooth.iter().all(|&v| [0, 64, 128, 191, 255].contains(&v)), "a level no 2×2 average gives");
+    assert!(smooth.contains(&255) && smooth.contains(&0));
+    // The scene's `aa` is the default; the flag wins.
+    assert_eq!(render("flat2.toml", &[], "s2.png"), aa2);
+    assert_eq!(render("flat2.toml", &["--aa", "1"], "s1.png"), plain);
+    for bad in ["0", "9", "two"] {
+        let r = lobe(&["render", &s(&d.join("flat.toml")), "--aa", bad, "-o", &s(&d.join("bad.png"))]);
+        assert!(r.code == Some(2) && r.stderr.contains("--aa"), "--aa {bad}: {:?} {}", r.code, r.stderr);
+    }
+    std::fs::write(d.join("flat9.toml"), format!("aa = 9\n{flat}")).unwrap();
+    refused(&lobe(&["render", &s(&d.join("flat9.toml")), "-o", &s(&d.join("bad.png"))]), "aa = 9", "`aa` = 9 is outside 1..=8");
+    assert!(!d.join("bad.png").exists());
+    let _ = std::fs::remove_dir_all(&d);
+}
