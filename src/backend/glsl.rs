@@ -488,16 +488,18 @@ mod tests {
 
     #[test]
     fn hostile_names_are_mangled_and_metadata_cannot_inject_code() {
-        let src = "@name \"x\\r#define pow(a,b) 0.0\"\nparam t0 = 1\nparam float = 2\nparam gl_Position = 3\nparam alias = 4\n\
+        // A CR ends the line (also in a string), so a name cannot hold one; a Unicode line separator or a
+        // vertical tab is what is left to try.
+        let src = "@name \"x\\u{2028}#define pow(a,b) 0.0\\x0b#define exp(a) 0.0\"\nparam t0 = 1\nparam float = 2\nparam gl_Position = 3\nparam alias = 4\n\
                    param p_float = 5\nparam a__b = 6\nNH^n * t0 + float + gl_Position + alias + p_float + a__b\n";
-        let src = src.replace("\\r", "\r");
+        let src = src.replace("\\u{2028}", "\u{2028}").replace("\\x0b", "\x0b");
         let f = crate::front::parse("hostile.brdf", &src).unwrap_or_else(|d| panic!("{}", d.render(false)));
         let names = param_names(&f);
         assert_eq!(names, ["n", "p_t0", "p_float_1", "p_gl_Position", "p_alias", "p_float", "p_a_b"]);
         for d in [Dialect::Glsl, Dialect::Wgsl] {
             let text = export(&f, d).unwrap();
             assert!(text.lines().all(|l| l.starts_with("//") || !l.contains("define")), "{text}");
-            assert!(!text.contains('\r'), "{text}");
+            assert!(!text.contains(['\r', '\u{2028}', '\x0b']), "{text}");
             let code: String = text.lines().filter(|l| !l.starts_with("//")).collect::<Vec<_>>().join("\n");
             assert!(code.contains("p_gl_Position") && !code.contains(" gl_Position"), "{text}");
         }

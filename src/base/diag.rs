@@ -9,7 +9,7 @@
 //! what to change ([`Hint`]) are structured; the front end that shows the error words them through a
 //! [`Wording`] (the CLI names its flags, the web page its controls). [`Plain`] words them without either.
 
-use super::span::{line_col, Span};
+use super::span::{is_line_break, line_col, lone_cr_as_lf, Span};
 use codespan_reporting::diagnostic::{Diagnostic as CsDiag, Label};
 use codespan_reporting::files::SimpleFile;
 use codespan_reporting::term::{self, termcolor::Buffer};
@@ -211,7 +211,10 @@ impl Diagnostics {
 
     /// [`Diagnostics::render`] with hints and settings in a front end's words.
     pub fn render_with(&self, color: bool, w: &dyn Wording) -> String {
-        let file = SimpleFile::new(self.file.as_str(), self.source.as_str());
+        // The caret renderer knows `\n` and `\r\n` line ends only: a lone `\r` (a line break to the lexer) is
+        // shown as one, not echoed raw (the terminal would draw the next line over this one).
+        let shown = lone_cr_as_lf(&self.source);
+        let file = SimpleFile::new(self.file.as_str(), shown.as_ref());
         let mut buf = if color { Buffer::ansi() } else { Buffer::no_color() };
         let config = term::Config::default();
         let len = self.source.len();
@@ -230,8 +233,8 @@ impl Diagnostics {
             // place instead.
             let too_long = |s: Span| {
                 let (r, bytes) = (clip(s), self.source.as_bytes());
-                let start = bytes[..r.start].iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
-                let end = bytes[r.end..].iter().position(|&b| b == b'\n').map_or(len, |i| r.end + i);
+                let start = (0..r.start).rev().find(|&i| is_line_break(bytes, i)).map_or(0, |i| i + 1);
+                let end = (r.end..len).find(|&i| bytes[i] == b'\n' || bytes[i] == b'\r').unwrap_or(len);
                 end - start > MAX_ECHOED_LINE
             };
             let mut labels = vec![];

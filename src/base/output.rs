@@ -11,8 +11,9 @@
 //! - a **symlink** is followed: the file it points to is replaced and the link stays a link (a dangling link
 //!   is refused); the **permissions** of a replaced file are kept;
 //! - temporary files are removed on failure, on SIGINT/SIGTERM/SIGHUP ([`remove_temporaries`], called by the
-//!   CLI's signal handler), and — for ones a killed process left behind — on the next write to the same
-//!   directory.
+//!   CLI's signal handler), and — for ones a killed process left behind, whatever file they were for — on the
+//!   next write to the same directory (a writer's death is told from `/proc`; without it, only temporaries
+//!   older than an hour are taken as left behind).
 //!
 //! [`check`] answers "may I write here?"; commands call it early (before a long render) and again right before
 //! [`write_atomic`], so a file another program put there in between (e.g. during `lobe watch`) is not
@@ -69,7 +70,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), String> {
     }
     let dir = parent_dir(&target);
     let name = target.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
-    remove_stale_temporaries(&dir, &name);
+    remove_stale_temporaries(&dir);
     let tmp = dir.join(format!(".{name}.lobe-tmp-{}", std::process::id()));
     lock_in_flight().push(tmp.clone());
     let result = (|| -> std::io::Result<()> {
@@ -117,24 +118,53 @@ fn lock_in_flight() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
     IN_FLIGHT.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-/// Temporaries for `name` left by processes that no longer run (killed mid-write). Only on systems with
-/// `/proc`, where "no longer runs" can be told; elsewhere they are left alone.
-fn remove_stale_temporaries(dir: &Path, name: &str) {
-    if !Path::new("/proc/self").exists() {
-        return;
-    }
-    let prefix = format!(".{name}.lobe-tmp-");
+/// How old a temporary must be before a system without `/proc` (where a writer's liveness cannot be told)
+/// takes it for one a killed process left: writes last seconds, so an hour is far beyond any live one.
+const STALE_AGE: std::time::Duration = std::time::Duration::from_secs(3600);
+
+/// Removes the temporaries (`.NAME.lobe-tmp-PID`, any target name) in `dir` that killed writes left behind: on
+/// systems with `/proc`, those of processes that no longer run, and this process's own ones that no write of
+/// it has in flight (a PID reused after a reboot or in a new container); elsewhere those older than
+/// [`STALE_AGE`]. Only regular files of exactly that name shape are touched.
+fn remove_stale_temporaries(dir: &Path) {
     let Ok(entries) = std::fs::read_dir(dir) else { return };
+    let proc_fs = Path::new("/proc/self").exists();
     for e in entries.flatten() {
         let file = e.file_name();
-        let Some(pid) = file.to_str().and_then(|f| f.strip_prefix(&prefix)).and_then(|p| p.parse::<u32>().ok()) else {
+        let Some(pid) = file.to_str().and_then(temporary_pid) else { continue };
+        let Ok(meta) = e.metadata() else { continue };
+        if !meta.is_file() {
             continue;
+        }
+        let path = e.path();
+        let stale = if proc_fs {
+            if pid == std::process::id() {
+                // Held under the lock, so a write of this process cannot register it in between.
+                let in_flight = lock_in_flight();
+                let mine = !in_flight.contains(&path);
+                if mine {
+                    let _ = std::fs::remove_file(&path);
+                }
+                continue;
+            }
+            !Path::new(&format!("/proc/{pid}")).exists()
+        } else {
+            meta.modified().ok().and_then(|t| t.elapsed().ok()).is_some_and(|age| age > STALE_AGE)
         };
-        let regular = e.file_type().map(|t| t.is_file()).unwrap_or(false);
-        if regular && pid != std::process::id() && !Path::new(&format!("/proc/{pid}")).exists() {
-            let _ = std::fs::remove_file(e.path());
+        if stale {
+            let _ = std::fs::remove_file(&path);
         }
     }
+}
+
+/// The writer's PID of a temporary file name `.NAME.lobe-tmp-PID` (NAME not empty), or `None` for any other
+/// name.
+fn temporary_pid(file: &str) -> Option<u32> {
+    let (head, pid) = file.rsplit_once(".lobe-tmp-")?;
+    if head.len() < 2 || !head.starts_with('.') || pid.is_empty() || !pid.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    pid.parse().ok()
 }
 
 /// The path to write: `path` itself, or the file a symlink at `path` points to.
@@ -205,6 +235,15 @@ mod tests {
     }
 
     #[test]
+    fn temporary_names_are_recognised_exactly() {
+        assert_eq!(temporary_pid(".o.png.lobe-tmp-123"), Some(123));
+        assert_eq!(temporary_pid(".a.lobe-tmp-x.lobe-tmp-9"), Some(9));
+        for name in ["o.png.lobe-tmp-1", ".lobe-tmp-1", ".o.lobe-tmp-", ".o.lobe-tmp-1x", ".o.lobe-tmp--1", ".o.png"] {
+            assert_eq!(temporary_pid(name), None, "{name}");
+        }
+    }
+
+    #[test]
     fn refuses_foreign_and_non_regular_files() {
         let d = scratch("foreign");
         let p = d.join("notes.txt");
@@ -234,10 +273,21 @@ mod tests {
         std::fs::set_permissions(&real, std::fs::Permissions::from_mode(0o600)).unwrap();
         let link = d.join("link.png");
         std::os::unix::fs::symlink(&real, &link).unwrap();
-        // A temporary left by a process that no longer exists (pid beyond any real one).
+        // Temporaries left by processes that no longer exist (pids beyond any real one), for this file and
+        // for another; one with this process's pid that no write has in flight (a reused pid); and files
+        // that are not such temporaries, or belong to a live process (pid 1), which stay.
         let stale = d.join(".real.png.lobe-tmp-4294967295");
-        std::fs::write(&stale, b"").unwrap();
+        let other = d.join(".other.svg.lobe-tmp-4294967294");
+        let reused = d.join(format!(".real.png.lobe-tmp-{}", std::process::id()));
+        let kept = ["notes.lobe-tmp-7", ".x.lobe-tmp-12a", ".lobe-tmp-5", ".live.png.lobe-tmp-1"].map(|n| d.join(n));
+        for p in [&stale, &other, &reused].into_iter().chain(&kept) {
+            std::fs::write(p, b"").unwrap();
+        }
         write(&link, b"LOBE new", false, ours).unwrap();
+        assert!(!other.exists() && !reused.exists());
+        for p in &kept {
+            assert!(p.exists(), "{} was removed", p.display());
+        }
         assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink());
         assert_eq!(std::fs::read(&real).unwrap(), b"LOBE new");
         assert_eq!(std::fs::metadata(&real).unwrap().permissions().mode() & 0o777, 0o600);

@@ -4,7 +4,7 @@
 
 use super::args::{self, AgainstReference, BackendArg, Json, Params};
 use super::common::{self, CliError};
-use lobe::numerics::accuracy::{accuracy, AccuracyJson, AccuracyOptions};
+use lobe::numerics::accuracy::{accuracy, AccuracyJson, AccuracyOptions, Worst};
 use lobe::Kernel;
 
 #[derive(clap::Args, Debug)]
@@ -30,7 +30,7 @@ pub struct AccuracyArgs {
 }
 
 pub fn run(a: &AccuracyArgs) -> Result<(), CliError> {
-    let (k, r) = a.against.kernels(&a.set.list(), &a.backend)?;
+    let (k, r) = a.against.kernels(&a.set.list()?, &a.backend)?;
     print!("{}", report(a, &k, &r)?);
     Ok(())
 }
@@ -38,7 +38,7 @@ pub fn run(a: &AccuracyArgs) -> Result<(), CliError> {
 /// The command's output for already compiled kernels (formula `k`, reference `r`).
 pub fn report(a: &AccuracyArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
     let mut out = String::new();
-    let set = a.set.list();
+    let set = a.set.list()?;
     if set.iter().any(|(k, _)| k == "n") {
         return Err(CliError::hint("accuracy sweeps n itself; --set n is not allowed", "set only the other parameters"));
     }
@@ -60,6 +60,15 @@ pub fn report(a: &AccuracyArgs, k: &Kernel, r: &Kernel) -> Result<String, CliErr
             m.value = f64::NAN;
         }
     }
+    // A reference that is 0 everywhere defines no relative error and no lobe size anywhere (the values found
+    // are x/0 = inf or 0/0 = NaN at arbitrary n): all undefined.
+    let ref_zero = rep.reference_peak == 0.0 || rep.reference_peak.is_nan();
+    if ref_zero {
+        let undefined = Worst { value: f64::NAN, n: f64::NAN, angle_deg: f64::NAN };
+        for m in [&mut rep.epicenter, &mut rep.inflection, &mut rep.cutoff_rel, &mut rep.lobe_ratio_min, &mut rep.lobe_ratio_max] {
+            *m = undefined;
+        }
+    }
     let secs = t.elapsed().as_secs_f64();
     if a.json.on {
         outln!(out, "{}", common::to_json(&AccuracyJson::new(&rep, a.q, secs))?);
@@ -67,25 +76,36 @@ pub fn report(a: &AccuracyArgs, k: &Kernel, r: &Kernel) -> Result<String, CliErr
     }
     outln!(out, "{} vs {} (n = 1..{}, lobe variable {}):", k.formula.display_name(), r.formula.display_name(), a.n_max, lobe.name());
     outln!(out, "  mean |Δ| on the 91×{} grid (0°..90° step 1°):   {:.6e}", a.n_max, rep.mean_abs_grid);
+    // A metric without an n where it is defined reads "undefined", not "NaN % at n = NaN".
+    let rel = |m: &Worst, at: String| if m.n.is_nan() { "undefined".to_string() } else { format!("{:.4} % at n = {}{at}", m.value * 100.0, m.n) };
     outln!(out, 
-        "  epicentre max rel. error, n ∈ [{}, {}]:          {:.4} % at n = {} (x = {:.4}°)",
-        a.epicenter_from, a.n_max, rep.epicenter.value * 100.0, rep.epicenter.n, rep.epicenter.angle_deg
+        "  epicentre max rel. error, n ∈ [{}, {}]:          {}",
+        a.epicenter_from, a.n_max, rel(&rep.epicenter, format!(" (x = {:.4}°)", rep.epicenter.angle_deg))
     );
     outln!(out, 
-        "  inflection max rel. error, n ∈ [3, {}]:          {:.4} % at n = {} (x = {:.4}°)",
-        a.n_max, rep.inflection.value * 100.0, rep.inflection.n, rep.inflection.angle_deg
+        "  inflection max rel. error, n ∈ [3, {}]:          {}",
+        a.n_max, rel(&rep.inflection, format!(" (x = {:.4}°)", rep.inflection.angle_deg))
     );
     outln!(out, "  max |Δ| over angles (step 0.05°):               {:.6} at n = {}, {:.2}°", rep.max_abs.value, rep.max_abs.n, rep.max_abs.angle_deg);
     outln!(out, 
-        "  max rel. error where the reference ≥ 2^−{}:       {:.4} % at n = {}, {:.2}°",
-        a.q, rep.cutoff_rel.value * 100.0, rep.cutoff_rel.n, rep.cutoff_rel.angle_deg
+        "  max rel. error where the reference ≥ 2^−{}:       {}",
+        a.q, rel(&rep.cutoff_rel, format!(", {:.2}°", rep.cutoff_rel.angle_deg))
     );
-    outln!(out, 
-        "  lobe-size ratio (cut-off angle / reference's):   {:.4} (n = {}) … {:.4} (n = {})",
-        rep.lobe_ratio_min.value, rep.lobe_ratio_min.n, rep.lobe_ratio_max.value, rep.lobe_ratio_max.n
-    );
-    if [&rep.epicenter, &rep.inflection, &rep.cutoff_rel].iter().any(|m| m.n.is_nan()) {
-        outln!(out, "  (a relative error shown as NaN is undefined: the reference is 0 wherever it applies)");
+    if ref_zero {
+        outln!(out, "  lobe-size ratio (cut-off angle / reference's):   undefined");
+        outln!(out, "  the reference is 0 at every angle and n: relative errors and the lobe-size ratio are undefined;");
+        outln!(out, "  max |Δ| above is the formula's own largest value");
+    } else if rep.lobe_ratio_min.n.is_nan() {
+        // No n has a finite ratio: the reference's lobe never reaches the cut-off level (its cut-off angle is 0).
+        outln!(out, "  lobe-size ratio (cut-off angle / reference's):   undefined (the reference is below 2^−{} at every angle)", a.q);
+    } else {
+        outln!(out, 
+            "  lobe-size ratio (cut-off angle / reference's):   {:.4} (n = {}) … {:.4} (n = {})",
+            rep.lobe_ratio_min.value, rep.lobe_ratio_min.n, rep.lobe_ratio_max.value, rep.lobe_ratio_max.n
+        );
+    }
+    if !ref_zero && [&rep.epicenter, &rep.inflection, &rep.cutoff_rel].iter().any(|m| m.n.is_nan()) {
+        outln!(out, "  (undefined: the reference is 0 (for the cut-off metric, below 2^−{}) wherever that metric applies)", a.q);
     }
     if rep.nan_points > 0 {
         outln!(out, "  {} grid points were NaN (counted as the worst error); run `lobe sweep` on the file", rep.nan_points);

@@ -61,18 +61,32 @@ pub struct Params {
 }
 
 impl Params {
-    /// Every assignment, one per name: a later `--set` flag overrides an earlier one (as a later `--at` does);
-    /// a name twice within one flag is refused when parsing.
-    pub fn list(&self) -> Vec<(String, f64)> {
-        let mut out: Vec<(String, f64)> = Vec::new();
-        for (k, v) in self.groups.concat() {
-            match out.iter_mut().find(|(j, _)| *j == k) {
-                Some(slot) => slot.1 = v,
-                None => out.push((k, v)),
-            }
-        }
-        out
+    /// Every assignment, one per name, in the order given. A name in several `--set` flags with the same value
+    /// counts once; with different values it is refused (a later flag does not silently win), as a name
+    /// twice within one flag is when parsing.
+    pub fn list(&self) -> Result<Vec<(String, f64)>, CliError> {
+        merge_repeated("--set", &self.groups, |v| common::short_number(*v))
     }
+}
+
+/// The items of a repeatable `name=value` flag (`--set`, `--at`) given as several flags, merged into one list:
+/// a name repeated with an equal value counts once, with a different value it is an error naming the flag,
+/// the name and both values. `show` writes a value as the user would.
+pub fn merge_repeated<T: Clone + PartialEq>(flag: &str, groups: &[Vec<(String, T)>], show: impl Fn(&T) -> String) -> Result<Vec<(String, T)>, CliError> {
+    let mut out: Vec<(String, T)> = Vec::new();
+    for (k, v) in groups.iter().flatten() {
+        match out.iter().find(|(j, _)| j == k) {
+            Some((_, w)) if w == v => {}
+            Some((_, w)) => {
+                return Err(CliError::hint(
+                    format!("{flag} gives `{k}` twice: {k}={} and {k}={}", show(w), show(v)),
+                    format!("give `{k}` once; a later {flag} does not replace an earlier one"),
+                ))
+            }
+            None => out.push((k.clone(), v.clone())),
+        }
+    }
+    Ok(out)
 }
 
 /// `--backend jit|interp` and `--math precise|fast`.
@@ -282,11 +296,16 @@ mod tests {
         let a = parse(&["t", "f.brdf", "--set", "n=2,a=3", "--set", "k=1", "--backend", "interp", "--json", "-o", "x", "--force"])
             .unwrap();
         assert_eq!(a.formula.file.as_deref(), Some("f.brdf"));
-        assert_eq!(a.set.list(), vec![("n".into(), 2.0), ("a".into(), 3.0), ("k".into(), 1.0)]);
+        assert_eq!(a.set.list().unwrap(), vec![("n".into(), 2.0), ("a".into(), 3.0), ("k".into(), 1.0)]);
         assert_eq!((a.backend.kind, a.json.on, a.out.force.on), (Backend::Interp, true, true));
         assert_eq!(a.out.path.as_deref(), Some(Path::new("x")));
         let d = parse(&["t"]).unwrap();
-        assert_eq!((d.backend.kind, d.json.on, d.out.path, d.set.list()), (Backend::Jit, false, None, vec![]));
+        assert_eq!((d.backend.kind, d.json.on, d.out.path, d.set.list().unwrap()), (Backend::Jit, false, None, vec![]));
+        // The same name in two flags: once with the same value, an error naming both with different ones.
+        let a = parse(&["t", "--set", "n=5", "--set", "a=3,n=5"]).unwrap();
+        assert_eq!(a.set.list().unwrap(), vec![("n".into(), 5.0), ("a".into(), 3.0)]);
+        let e = parse(&["t", "--set", "n=5", "--set", "n=6"]).unwrap().set.list().unwrap_err().render(false);
+        assert!(e.contains("--set gives `n` twice: n=5 and n=6") && e.contains("help"), "{e}");
         assert!(parse(&["t", "f.brdf", "--expr", "NH"]).is_err());
         assert!(parse(&["t", "--set", "n"]).is_err());
         let help = Every::augment_args(clap::Command::new("t")).render_help().to_string();

@@ -174,7 +174,7 @@ fn row(
 pub fn run(a: &BenchArgs) -> Result<(), CliError> {
     let files = if a.files.is_empty() { catalogue()? } else { a.files.clone() };
     let set: Vec<(String, f64)> = {
-        let s = a.set.list();
+        let s = a.set.list()?;
         if s.iter().any(|(k, _)| k == "n") {
             s
         } else {

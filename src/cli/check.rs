@@ -78,7 +78,7 @@ fn stats_line(f: &Formula, s: &ErrorStats) -> String {
 }
 
 pub fn run(a: &CheckArgs) -> Result<(), CliError> {
-    let set = a.set.list();
+    let set = a.set.list()?;
     let whole = a.formula.load()?;
     // A colour formula: the red channel is checked and shown, and the output says so (`lobe check --sweep`
     // and `lobe bench` report every channel).

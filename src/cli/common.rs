@@ -160,6 +160,13 @@ pub fn load_plain(path: Option<&str>, expr: Option<&str>, set: &[(String, f64)])
 pub use lobe::front::parse_assignments;
 
 /// Refuses a `--threads` count the renderer would refuse, in the flag's words.
+/// The shortest text that reads back to `v` exactly: the plain decimal, or the exponent form where that is
+/// shorter (1.2e-300, not a 300-digit decimal).
+pub fn short_number(v: f64) -> String {
+    let (d, e) = (format!("{v}"), format!("{v:e}"));
+    if e.len() < d.len() { e } else { d }
+}
+
 pub fn check_threads(threads: usize) -> Result<(), CliError> {
     use lobe::render::MAX_THREADS;
     if threads > MAX_THREADS {

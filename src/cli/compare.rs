@@ -4,6 +4,7 @@
 
 use super::args::{self, BackendArg, Json, Output, Params};
 use super::common::{self, CliError};
+use lobe::base::diag::Setting;
 use lobe::render::compare::{self, CompareJob};
 use lobe::render::image::{self, Transfer};
 use lobe::render::scene::LobeCompiler;
@@ -70,7 +71,10 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
     };
     let lobe_compiler = LobeCompiler { backend: a.backend.kind, math: a.backend.math.mode };
     let compiler: &dyn lobe::render::scene::BrdfCompiler = &lobe_compiler;
-    let base_set = a.set.list();
+    let base_set = a.set.list()?;
+    if !a.sweep_n.is_empty() && base_set.iter().any(|(k, _)| k == "n") {
+        return Err(CliError::hint("--set n conflicts with --sweep-n", "--sweep-n gives the values of n; drop n from --set"));
+    }
     let sets: Vec<Vec<(String, f64)>> = if a.sweep_n.is_empty() {
         vec![base_set.clone()]
     } else {
@@ -83,7 +87,18 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
             })
             .collect()
     };
-    let rows = compare::compare_sweep(&job, &sets, compiler, &ropts)?;
+    let rows = compare::compare_sweep(&job, &sets, compiler, &ropts).map_err(|mut ds| {
+        // A value of n from --sweep-n is named as that flag's, not as a --set.
+        for d in &mut ds.items {
+            if let Some(Setting::Param { name, value: Some(v) }) = d.subject.as_deref() {
+                if name == "n" && a.sweep_n.contains(v) {
+                    d.message = format!("--sweep-n {v}: {}", d.message);
+                    d.subject = None;
+                }
+            }
+        }
+        CliError::from(ds)
+    })?;
     let scale = rows.iter().map(|c| c.metrics.max_gray_diff).fold(0.0, f64::max).max(1.0);
     if let Some(out) = &a.out.path {
         let png = compare::sweep_image(&rows, scale).encode_png().map_err(CliError::msg)?;

@@ -61,7 +61,7 @@ pub struct EnergyArgs {
 }
 
 pub fn run(a: &EnergyArgs) -> Result<(), CliError> {
-    let set = a.set.list();
+    let set = a.set.list()?;
     if a.range.is_some() && set.iter().any(|(k, _)| k == "n") {
         return Err(CliError::hint("--set n conflicts with --range", "--range sweeps n; drop n from --set"));
     }
@@ -114,8 +114,7 @@ fn report_channels(a: &EnergyArgs, ks: &[Kernel], against: Option<&Kernel>) -> R
 /// The command's output for one already compiled kernel (the formula, and the fitted coefficient if any).
 fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<Out, CliError> {
     let mut out = String::new();
-    let params = common::param_values(&k.formula, &a.set.list());
-    let lobe: Input = a.lobe.resolve(k.used_inputs(), a.json.on)?;
+    let params = common::param_values(&k.formula, &a.set.list()?);
     let name = k.formula.display_name();
     // `params` of the JSON output; under --range, n is the swept variable, not a parameter.
     let shown = k.formula.params.iter().zip(&params).filter(|(d, _)| a.range.is_none() || d.name != "n");
@@ -124,6 +123,10 @@ fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<Out, C
     if a.mode == Mode::Full {
         if a.range.is_some() {
             return Err(CliError::hint("--range works in lobe mode only", "drop --mode full, or drop --range"));
+        }
+        // Full mode integrates over real geometry: there is no lobe variable to choose (nor a note about it).
+        if a.lobe.name.is_some() {
+            return Err(CliError::hint("--lobe works in lobe mode only", "drop --mode full, or drop --lobe"));
         }
         let r = full_energy_for(k, k.used_inputs(), &params)?;
         if a.json.on {
@@ -163,6 +166,7 @@ fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<Out, C
         return Ok(Out::Text(out));
     }
 
+    let lobe: Input = a.lobe.resolve(k.used_inputs(), a.json.on)?;
     let Some(range) = &a.range else {
         let r = lobe_integral(k, &params, lobe)?;
         if a.json.on {

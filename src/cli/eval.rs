@@ -77,10 +77,29 @@ fn at_inputs(at: &[(String, Vec<f64>)], used: InputSet) -> Result<([f64; N_INPUT
     let mut x = [0.0; N_INPUTS];
     let mut dirs = [[0.0; 3]; 2];
     let (mut cosines, mut directions) = (false, false);
-    for (name, v) in at {
+    // Which item (its index in `at`) gave each direction component: `L=…` and `Lx=…` both give Lx.
+    let item = |k: usize| format!("{}={}", at[k].0, at[k].1.iter().map(|x| number(*x)).collect::<Vec<_>>().join(","));
+    let mut given: [[Option<(usize, f64)>; 3]; 2] = Default::default();
+    let mut give = |d: usize, c: usize, k: usize, v: f64| -> Result<(), CliError> {
+        match given[d][c] {
+            Some((first, w)) if w != v => Err(CliError::hint(
+                format!("--at gives {} twice: {} and {}", Input::ALL[Input::Lx.index() + 3 * d + c].name(), item(first), item(k)),
+                "give each direction component once, as L=x,y,z or as Lx=…",
+            )),
+            _ => {
+                given[d][c] = Some((k, v));
+                Ok(())
+            }
+        }
+    };
+    for (k, (name, v)) in at.iter().enumerate() {
         let slot = match name.as_str() {
             "L" | "V" => {
-                dirs[usize::from(name == "V")].copy_from_slice(v);
+                let d = usize::from(name == "V");
+                for (c, &vc) in v.iter().enumerate() {
+                    give(d, c, k, vc)?;
+                }
+                dirs[d].copy_from_slice(v);
                 directions = true;
                 continue;
             }
@@ -92,6 +111,7 @@ fn at_inputs(at: &[(String, Vec<f64>)], used: InputSet) -> Result<([f64; N_INPUT
         };
         if slot.is_direction() {
             let i = slot.index() - Input::Lx.index();
+            give(i / 3, i % 3, k, v[0])?;
             dirs[i / 3][i % 3] = v[0];
             directions = true;
         } else {
@@ -139,15 +159,11 @@ fn show(v: &[f64]) -> String {
     }
 }
 
-/// The shortest text that reads back to `v` exactly: the plain decimal, or the exponent form where that is
-/// shorter (1.2e-300, not a 300-digit decimal).
-fn number(v: f64) -> String {
-    let (d, e) = (format!("{v}"), format!("{v:e}"));
-    if e.len() < d.len() { e } else { d }
-}
+use common::short_number as number;
 
 pub fn run(a: &EvalArgs) -> Result<(), CliError> {
-    let set = a.set.list();
+    let set = a.set.list()?;
+    let at = args::merge_repeated("--at", &a.at, |v| v.iter().map(|x| number(*x)).collect::<Vec<_>>().join(","))?;
     let f = a.formula.load()?;
     let pass = |opts| super::common::with_pass(opts, a.prefer.pass(lobe::numerics::robust::PassOptions::default().points));
     let ks: Vec<Kernel> = if a.normalize {
@@ -173,7 +189,7 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
     if let Some(path) = &a.points {
         return run_points(a, &ks, path, &params, &set);
     }
-    let (x, note) = at_inputs(&a.at.concat(), used(&ks))?;
+    let (x, note) = at_inputs(&at, used(&ks))?;
     let v: Vec<f64> = ks.iter().map(|k| k.eval(&x, &params)).collect();
     if a.json.on {
         println!("{}", common::to_json(&EvalReport::new(&ks, v, note))?);

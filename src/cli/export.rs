@@ -32,7 +32,7 @@ fn is_ours(bytes: &[u8]) -> bool {
 /// Exports the plain simplification with the `--set` values baked: the accuracy pass's rewrites are for f64
 /// (double-double tails, scalings that overflow a GPU's f32), and its internal builtins have no shader spelling.
 pub fn run(a: &ExportArgs) -> Result<(), CliError> {
-    let f = a.formula.plain(&a.set.list())?;
+    let f = a.formula.plain(&a.set.list()?)?;
     let text = if a.brdf_explorer {
         glsl::brdf_explorer(&f)?
     } else {

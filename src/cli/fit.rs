@@ -63,7 +63,7 @@ fn free_specs(a: &FitArgs) -> Result<Vec<FreeSpec>, CliError> {
 }
 
 pub fn run(a: &FitArgs) -> Result<(), CliError> {
-    let set = a.set.list();
+    let set = a.set.list()?;
     for (name, ..) in free_specs(a)? {
         if set.iter().any(|(k, _)| *k == name) {
             return Err(CliError::hint(format!("`{name}` is both searched (--param) and fixed (--set)"), "drop one of them"));
@@ -77,7 +77,7 @@ pub fn run(a: &FitArgs) -> Result<(), CliError> {
 /// The command's output for already compiled kernels (formula `k`, reference `r`).
 pub fn report(a: &FitArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
     let mut out = String::new();
-    let set = a.set.list();
+    let set = a.set.list()?;
     let mut free = vec![];
     for (name, lo, hi, step) in free_specs(a)? {
         let Some(index) = k.formula.param_index(&name) else {

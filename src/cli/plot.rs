@@ -46,7 +46,7 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 pub fn run(a: &PlotArgs) -> Result<(), CliError> {
     let output = a.out.required();
     let format = Format::from_path(output).map_err(|e| CliError::hint(e, "use -o lobes.png or -o lobes.svg"))?;
-    let set = a.set.list();
+    let set = a.set.list()?;
     let mut files = a.files.clone();
     if let Some(r) = &a.reference {
         files.push(r.clone());

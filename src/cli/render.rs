@@ -1,4 +1,4 @@
-//! `lobe render SCENE [-o out.png] [--size 1024] [--set n=200] [--backend jit|interp] [--threads N] [--stats [--json]]`
+//! `lobe render SCENE [-o out.png] [--size 1024] [--aa 2] [--set n=200] [--backend jit|interp] [--threads N] [--stats [--json]]`
 
 use super::args::{self, BackendArg, Json, Output, Params};
 use super::common::{self, CliError};
@@ -30,6 +30,9 @@ pub struct RenderArgs {
     /// Tile side in pixels.
     #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u16).range(8..=256))]
     pub tile: u16,
+    /// Supersampling: N×N samples per pixel, averaged (1..=8; default: the scene's `aa`, else 1).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(1..=lobe::render::MAX_AA as i64))]
+    pub aa: Option<u8>,
     /// Encode with the sRGB curve instead of the papers' linear clamp to 0..255.
     #[arg(long)]
     pub srgb: bool,
@@ -67,13 +70,14 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
     // Refuse a bad output path before doing any work, and write nothing unless everything succeeds.
     a.out.force.check(&out, image::is_lobe_png)?;
     Output::png_only(&out)?;
-    let opts = LoadOptions { size: a.size, set: a.set.list(), formula_override: None };
+    let opts = LoadOptions { size: a.size, set: a.set.list()?, formula_override: None };
     let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: a.backend.kind, math: a.backend.math.mode })?;
     let ropts = RenderOptions {
         threads: a.threads,
         tile: a.tile as usize,
         transfer: if a.srgb { Transfer::Srgb } else { Transfer::Linear },
         cutoff: true,
+        aa: a.aa.map(usize::from),
     };
     let t0 = Instant::now();
     common::check_threads(a.threads)?;

@@ -22,7 +22,8 @@ pub struct SweepArgs {
     /// Values above this are counted as over the bound.
     #[arg(long, default_value_t = 1e6, allow_negative_numbers = true)]
     pub bound: f64,
-    /// Evaluation budget (the full grid is subsampled above it).
+    /// Evaluation budget (the full grid is subsampled above it; a budget below the sweep's minimum — every
+    /// parameter combination with 64 input points — is refused).
     #[arg(long, default_value_t = 2_000_000, value_parser = clap::value_parser!(u64).range(1..))]
     pub max_evals: u64,
     /// Fail (exit 1) if any of these occur in the compiled formula: nan, inf, negative, bound.
@@ -124,16 +125,8 @@ pub enum Out {
 /// The command's output for a lowered formula, and the `--deny` kinds that occurred.
 pub fn report(a: &SweepArgs, f: &Formula) -> Result<(Out, Vec<String>), CliError> {
     let mut out = String::new();
-    let set = a.set.list();
+    let set = a.set.list()?;
     let mut decls = f.params.clone();
-    let u = f.unclamped();
-    let k = lobe::compile_formula(u.clone(), &a.backend.options(set.clone()))?;
-    let compiled = if a.as_written {
-        None
-    } else {
-        let opts = super::common::with_pass(a.backend.options(set.clone()), a.prefer.pass(lobe::numerics::robust::PassOptions::default().points));
-        Some(lobe::compile_formula(u, &opts)?)
-    };
     // Baked parameters are fixed: sweep them at their value only.
     for (name, v) in &set {
         if let Some(i) = f.param_index(name) {
@@ -143,6 +136,26 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(Out, Vec<String>), CliError
         }
     }
     let used = f.used_inputs();
+    // Every parameter combination gets its share of points: a smaller budget cannot be kept.
+    let (combos, per) = lobe::numerics::sweep::min_evals(used, &decls);
+    let least = combos.saturating_mul(per);
+    if a.max_evals < least {
+        return Err(CliError::hint(
+            format!(
+                "--max-evals {} is below this sweep's minimum of {least} evaluations ({combos} parameter combinations × {per} input points each)",
+                a.max_evals
+            ),
+            format!("give --max-evals {least} or more, or fix parameters with --set so fewer combinations are swept"),
+        ));
+    }
+    let u = f.unclamped();
+    let k = lobe::compile_formula(u.clone(), &a.backend.options(set.clone()))?;
+    let compiled = if a.as_written {
+        None
+    } else {
+        let opts = super::common::with_pass(a.backend.options(set.clone()), a.prefer.pass(lobe::numerics::robust::PassOptions::default().points));
+        Some(lobe::compile_formula(u, &opts)?)
+    };
     let opts = SweepOptions { bound: a.bound, max_evals: a.max_evals };
     let rep = sweep(&k, used, &decls, &opts);
     let text = |k: &lobe::Kernel| k.formula.to_program_text().replace('\n', "; ");

@@ -1,5 +1,6 @@
 //! `lobe watch FILE --scene SCENE -o out.png [--size 512] [--set n=50]`: recompile and re-render whenever
-//! the .brdf file changes. On an error the diagnostics are printed and the last good image is kept.
+//! the .brdf file changes. On an error the diagnostics are printed and the last good image is kept (before the
+//! first good one, the message says there is no image yet).
 
 use super::args::{Output, Params};
 use super::common::{self, CliError};
@@ -37,7 +38,7 @@ pub struct WatchArgs {
 fn reload(a: &WatchArgs, src: String) -> Result<String, CliError> {
     let t0 = Instant::now();
     let name = a.file.display().to_string();
-    let opts = LoadOptions { size: Some(a.size), set: a.set.list(), formula_override: Some((name, src)) };
+    let opts = LoadOptions { size: Some(a.size), set: a.set.list()?, formula_override: Some((name, src)) };
     let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: lobe::Backend::Jit, math: lobe::Mode::Precise })?;
     let compile = t0.elapsed();
     let ropts = RenderOptions::default();
@@ -54,7 +55,20 @@ fn reload(a: &WatchArgs, src: String) -> Result<String, CliError> {
     ))
 }
 
+/// What a failed reload leaves at the output: the last image this session rendered; before the first success,
+/// the image an earlier run left there, or no image at all.
+fn failed_note(rendered: bool, out: &std::path::Path) -> String {
+    if rendered {
+        "(keeping the last good image; fix the file and save again)".to_string()
+    } else if out.exists() {
+        format!("(keeping the last good image, {}, from before this watch started; fix the file and save again)", out.display())
+    } else {
+        format!("(no image yet: {} is written after the first successful reload; fix the file and save again)", out.display())
+    }
+}
+
 pub fn run(a: &WatchArgs) -> Result<(), CliError> {
+    a.set.list()?;
     a.out.force.check(a.out.required(), image::is_lobe_png)?;
     Output::png_only(a.out.required())?;
     if !a.scene.is_file() {
@@ -63,6 +77,8 @@ pub fn run(a: &WatchArgs) -> Result<(), CliError> {
     eprintln!("watching {} (scene {}); Ctrl-C to stop", a.file.display(), a.scene.display());
     let mut reloads = 0;
     let mut last_failed = false;
+    // Whether this session has written an image yet (only then is there a "last good image" to keep).
+    let mut rendered = false;
     watch(&a.file, Duration::from_millis(a.interval_ms.max(10)), |bytes| {
         match bytes {
             None => eprintln!("{} is missing; waiting for it to appear", a.file.display()),
@@ -71,14 +87,14 @@ pub fn run(a: &WatchArgs) -> Result<(), CliError> {
                 let name = a.file.display().to_string();
                 match common::source_from_bytes(&name, b).map_err(CliError::from).and_then(|src| reload(a, src)) {
                     Ok(line) => {
-                        last_failed = false;
+                        (last_failed, rendered) = (false, true);
                         eprintln!("{line}")
                     }
                     Err(e) => {
                         last_failed = true;
                         let color = std::io::IsTerminal::is_terminal(&std::io::stderr());
                         eprint!("{}", e.render(color));
-                        eprintln!("(keeping the last good image; fix the file and save again)");
+                        eprintln!("{}", failed_note(rendered, a.out.required()));
                     }
                 }
             }

@@ -42,11 +42,12 @@ enum NumShape {
 
 /// Raw spellings recognised by the logos DFA.
 #[derive(Logos, Clone, Copy, Debug, PartialEq)]
-#[logos(skip r"[ \t\r\x0C]+")]
+#[logos(skip r"[ \t\x0C]+")]
 // A comment runs to the end of its line, by definition: the greedy repetition is the point.
-#[logos(skip(r"#[^\n]*", allow_greedy = true))]
+#[logos(skip(r"#[^\r\n]*", allow_greedy = true))]
 enum Raw {
-    #[token("\n")]
+    /// A line break: `\n`, `\r\n`, or a lone `\r` (old Mac files), as [`crate::base::span::line_col`] counts them.
+    #[regex(r"\n|\r\n?")]
     Newline,
     #[token(";")]
     Semi,
@@ -117,33 +118,62 @@ enum Raw {
     /// Digits; the callback takes the fraction and exponent by hand, because `1..1000` must lex as
     /// `1`, `..`, `1000` while `2.` alone is a mistake, which a DFA without lookahead cannot tell apart.
     #[regex("[0-9]+", |lex| number_tail(lex, false))]
-    Number(NumShape),
+    Number(NumSpelling),
     /// `.5` — a leading point: an error, repaired to 0.5.
     #[regex(r"\.[0-9]+", |lex| number_tail(lex, true))]
-    LeadingDot(NumShape),
-    #[regex(r#""[^"\n]*""#)]
+    LeadingDot(NumSpelling),
+    #[regex(r#""[^"\r\n]*""#)]
     Str,
-    #[regex(r#""[^"\n]*"#)]
+    #[regex(r#""[^"\r\n]*"#)]
     UnterminatedStr,
     #[regex("@[A-Za-z_][A-Za-z0-9_]*")]
     Meta,
 }
 
+/// How a numeric literal is spelled: its [`NumShape`], and whether `_` separates its digits (`1_000`, which
+/// lobe does not accept: reported, and read without the `_`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct NumSpelling {
+    shape: NumShape,
+    separators: bool,
+}
+
+/// Consumes digit groups after separators, `(_+[0-9]+)*`, from `i`: the index after them and whether there
+/// were any.
+fn separated_digits(at: &impl Fn(usize) -> u8, mut i: usize) -> (usize, bool) {
+    let mut any = false;
+    loop {
+        let mut j = i;
+        while at(j) == b'_' {
+            j += 1;
+        }
+        if j == i || !at(j).is_ascii_digit() {
+            return (i, any);
+        }
+        while at(j).is_ascii_digit() {
+            j += 1;
+        }
+        (i, any) = (j, true);
+    }
+}
+
 /// Consumes the rest of a number after its leading digits (or leading `.digits`).
-fn number_tail(lex: &mut logos::Lexer<Raw>, had_point: bool) -> NumShape {
+fn number_tail(lex: &mut logos::Lexer<Raw>, had_point: bool) -> NumSpelling {
     let rest = lex.remainder().as_bytes();
     let at = |i: usize| rest.get(i).copied().unwrap_or(0);
-    let mut i = 0;
+    let (mut i, mut separators) = separated_digits(&at, 0);
     let mut shape = NumShape::Ok;
-    if !had_point && at(0) == b'.' {
-        if at(1).is_ascii_digit() {
-            i = 1;
+    if !had_point && at(i) == b'.' {
+        if at(i + 1).is_ascii_digit() {
+            i += 1;
             while at(i).is_ascii_digit() {
                 i += 1;
             }
-        } else if at(1) != b'.' {
+            let (j, sep) = separated_digits(&at, i);
+            (i, separators) = (j, separators || sep);
+        } else if at(i + 1) != b'.' {
             // `2.` (but not `2..`, the range operator).
-            i = 1;
+            i += 1;
             shape = NumShape::TrailingDot;
         }
     }
@@ -166,7 +196,7 @@ fn number_tail(lex: &mut logos::Lexer<Raw>, had_point: bool) -> NumShape {
         }
     }
     lex.bump(i);
-    shape
+    NumSpelling { shape, separators }
 }
 
 /// A token as the grammar sees it.
@@ -346,8 +376,8 @@ fn raw_tokens<'s>(src: &'s str, diags: &mut Vec<Diagnostic>) -> Vec<(Tok<'s>, Sp
             Raw::True => Tok::True,
             Raw::False => Tok::False,
             Raw::Ident => Tok::Ident(text),
-            Raw::Number(shape) => Tok::Num(number(text, shape, false, span, diags)),
-            Raw::LeadingDot(shape) => Tok::Num(number(text, shape, true, span, diags)),
+            Raw::Number(spelling) => Tok::Num(number(text, spelling, false, span, diags)),
+            Raw::LeadingDot(spelling) => Tok::Num(number(text, spelling, true, span, diags)),
             Raw::Str => Tok::Str(&text[1..text.len() - 1]),
             Raw::UnterminatedStr => {
                 diags.push(
@@ -366,8 +396,15 @@ fn raw_tokens<'s>(src: &'s str, diags: &mut Vec<Diagnostic>) -> Vec<(Tok<'s>, Sp
 }
 
 /// The value of a number literal; bad spellings are reported and repaired to the evident intent.
-fn number(text: &str, shape: NumShape, leading_dot: bool, span: Span, diags: &mut Vec<Diagnostic>) -> f64 {
-    let mut fixed = text.to_string();
+fn number(text: &str, spelling: NumSpelling, leading_dot: bool, span: Span, diags: &mut Vec<Diagnostic>) -> f64 {
+    let mut fixed = text.replace('_', "");
+    if spelling.separators {
+        diags.push(
+            Diagnostic::error(format!("number `{text}` has `_` between its digits"))
+                .at(span, "digit separators are not part of the language")
+                .hint(format!("digit separators are not supported: write `{fixed}`")),
+        );
+    }
     if leading_dot {
         fixed.insert(0, '0');
         diags.push(
@@ -376,16 +413,16 @@ fn number(text: &str, shape: NumShape, leading_dot: bool, span: Span, diags: &mu
                 .hint(format!("write `{fixed}`")),
         );
     }
-    match shape {
+    match spelling.shape {
         NumShape::Ok => {}
         NumShape::TrailingDot => {
-            let int = text.trim_end_matches('.');
+            let int = fixed.trim_end_matches('.').to_string();
             diags.push(
                 Diagnostic::error(format!("number `{text}` has no digits after the decimal point"))
                     .at(span, "a number cannot end with `.`")
                     .hint(format!("write `{int}` or `{int}.0`")),
             );
-            fixed = int.to_string();
+            fixed = int;
         }
         NumShape::EmptyExponent => {
             diags.push(
@@ -393,7 +430,7 @@ fn number(text: &str, shape: NumShape, leading_dot: bool, span: Span, diags: &mu
                     .at(span, "digits must follow the `e`")
                     .hint("write the exponent in full, like `1e-3` or `1.5E+2`"),
             );
-            fixed = text.trim_end_matches(['+', '-']).trim_end_matches(['e', 'E']).to_string();
+            fixed = fixed.trim_end_matches(['+', '-']).trim_end_matches(['e', 'E']).to_string();
         }
     }
     match fixed.parse::<f64>() {
@@ -585,6 +622,16 @@ mod tests {
             assert_eq!(l.toks[0].1, Tok::Num(v), "{src}");
         }
         assert_eq!(lex("1e999").diags.len(), 1);
+        // Digit separators: one message naming the number without them, and that value.
+        for (src, v, fixed) in [("1_0", 10.0, "`10`"), ("1_000.2_5", 1000.25, "`1000.25`"), ("1__0e2", 1000.0, "`10e2`")] {
+            let l = lex(src);
+            assert_eq!(l.toks.iter().map(|t| t.1).collect::<Vec<_>>(), [Tok::Num(v)], "{src}");
+            assert_eq!(l.diags.len(), 1, "{src}: {:?}", l.diags);
+            let d = &l.diags[0];
+            assert!(d.message.contains(src) && d.hint_texts(&crate::base::diag::Plain)[0].contains(fixed), "{src}: {d}");
+        }
+        // A name that starts with `_` after a number is still a name (a missing operator, for the parser).
+        assert_eq!(toks("2_x"), vec![Tok::Num(2.0), Tok::Ident("_x")]);
     }
 
     #[test]
@@ -595,6 +642,13 @@ mod tests {
         assert_eq!(toks("(a\n+ b)"), vec![LParen, Ident("a"), Plus, Ident("b"), RParen]);
         assert_eq!(toks("f(a,\nb)"), vec![Ident("f"), LParen, Ident("a"), Comma, Ident("b"), RParen]);
         assert_eq!(toks("a\r\nb"), vec![Ident("a"), Newline, Ident("b")]);
+        // A lone CR is a line break too, in code, after a comment and after a string.
+        assert_eq!(toks("a\rb"), vec![Ident("a"), Newline, Ident("b")]);
+        assert_eq!(toks("a # c\rb"), vec![Ident("a"), Newline, Ident("b")]);
+        assert_eq!(toks("@name \"x\"\rb"), vec![Meta("name"), Str("x"), Newline, Ident("b")]);
+        assert_eq!(toks("a\r\r\nb"), vec![Ident("a"), Newline, Ident("b")]);
+        let l = lex("@cite \"abc\rNH");
+        assert_eq!((l.diags.len(), l.toks[1].1), (1, Str("abc")));
     }
 
     #[test]

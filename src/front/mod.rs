@@ -198,4 +198,18 @@ mod tests {
         assert_eq!(super::suggest("acoss", ["acos", "cos"]), Some("acos"));
         assert_eq!(super::suggest("zzzzzz", ["acos", "cos"]), None);
     }
+
+    #[test]
+    fn a_lone_cr_breaks_lines_like_lf_and_crlf() {
+        for src in ["let a = NH\na^n", "let a = NH\r\na^n", "let a = NH\ra^n"] {
+            let f = super::parse("f.brdf", src).unwrap_or_else(|d| panic!("{src:?}: {d}"));
+            assert_eq!(f.used_inputs().iter().map(|i| i.name()).collect::<Vec<_>>(), ["NH"], "{src:?}");
+        }
+        // Errors after a lone CR are placed on the next line, and the caret text shows the line alone.
+        let d = super::parse("f.brdf", "let a = NH\ra ^^ n").unwrap_err();
+        let text = d.render(false);
+        assert!(text.contains("f.brdf:2:4"), "{text}");
+        assert!(!text.contains('\r'), "{text:?}");
+        assert_eq!(d.to_json()[0]["line"], 2);
+    }
 }

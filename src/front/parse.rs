@@ -83,9 +83,30 @@ fn index_of(toks: &[(usize, Tok, usize)], l: usize, tok: Tok, r: usize) -> Optio
     (first..toks.len()).take_while(|&i| toks[i].0 == l).find(|&i| toks[i].1 == tok && toks[i].2 == r)
 }
 
+/// Source text as a message quotes it: on one line (control characters such as a newline escaped, never
+/// raw) and at most [`QUOTED_CHARS`] characters.
+fn quoted(text: &str) -> String {
+    let mut out = String::new();
+    for (i, c) in text.chars().enumerate() {
+        if i == QUOTED_CHARS {
+            out.push('…');
+            break;
+        }
+        if c.is_control() {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// Longest piece of source a syntax error's message quotes.
+const QUOTED_CHARS: usize = 40;
+
 /// How a token reads in a message.
 fn describe(src: &str, tok: Tok, l: usize, r: usize) -> String {
-    let text = src.get(l..r).unwrap_or("");
+    let text = quoted(src.get(l..r).unwrap_or(""));
     match tok {
         Tok::Newline if text == ";" => "`;`".into(),
         Tok::Newline => "the end of the line".into(),
@@ -133,6 +154,44 @@ fn expected_phrase(expected: &[String]) -> String {
             format!("{} or {}", parts.join(", "), last)
         }
     }
+}
+
+/// The error for a `param` whose default is not a constant (`param a = NH`), when the syntax error at token
+/// `idx` lies between the statement's `=` and its `in` (or its end); `None` otherwise.
+fn param_default_error(src: &str, toks: &[(usize, Tok, usize)], stmt_start: usize, idx: usize) -> Option<Diagnostic> {
+    if toks.get(stmt_start).map(|t| t.1) != Some(Tok::Param) {
+        return None;
+    }
+    let eq = (stmt_start..idx.min(toks.len())).find(|&i| toks[i].1 == Tok::Eq)?;
+    if toks[eq + 1..idx.min(toks.len())].iter().any(|t| t.1 == Tok::In) {
+        return None;
+    }
+    // The default as written: from after `=` to the end of the statement (or its `in`).
+    let end = (idx..toks.len()).find(|&i| matches!(toks[i].1, Tok::Newline | Tok::In)).unwrap_or(toks.len());
+    let name = match toks.get(stmt_start + 1) {
+        Some(&(l, Tok::Ident(_), r)) => src.get(l..r).unwrap_or("a"),
+        _ => "a",
+    };
+    let example = format!("param {name} = 16 in 1..1000");
+    let hint = |default: &str| {
+        format!(
+            "write a number, like `{example}` (a bool parameter takes `true` or `false`, a colour `rgb(0.8, 0.6, 0.2)`); \
+             a value computed from the inputs is a `let`: `let {name} = {default}`"
+        )
+    };
+    let d = if end > eq + 1 {
+        let (l, r) = (toks[eq + 1].0, toks[end - 1].2);
+        let text = quoted(src.get(l..r).unwrap_or(""));
+        Diagnostic::error(format!("a parameter's default must be a constant number, not `{text}`"))
+            .at(Span::new(l, r), "not a constant")
+            .hint(hint(&text))
+    } else {
+        let (l, r) = (toks[eq].0, toks[eq].2);
+        Diagnostic::error("a parameter needs a default value after `=`")
+            .at(Span::new(l, r), "no value follows")
+            .hint(hint("…"))
+    };
+    Some(d)
 }
 
 /// A syntax error as a diagnostic; `None` when the lexer already reported the cause.
@@ -184,6 +243,7 @@ fn syntax_error(src: &str, toks: &[(usize, Tok, usize)], e: &ParseError<usize, T
             return None;
         }
         let (ptext, ctext) = (src.get(pl..pr).unwrap_or(""), cur.and_then(|(l, _, r)| src.get(l..r)).unwrap_or(""));
+        let (pshown, cshown) = (quoted(ptext), quoted(ctext));
         // `2 NH`, `a (b)`, `) (`: two operands in a row.
         let operator_expected = expected.iter().any(|e| e.trim_matches('"') == "*");
         // `0x10`, `0b101`: other bases are not numbers in lobe (not a missing `*`).
@@ -196,7 +256,7 @@ fn syntax_error(src: &str, toks: &[(usize, Tok, usize)], e: &ParseError<usize, T
         if let (Some(radix), true) = (radix, ptext == "0" && pr == cur_span.start as usize) {
             let value = i64::from_str_radix(&ctext[1..], radix).ok();
             return Some(
-                Diagnostic::error(format!("`{ptext}{ctext}` is not a number: lobe's numbers are decimal"))
+                Diagnostic::error(format!("`{pshown}{cshown}` is not a number: lobe's numbers are decimal"))
                     .at(Span::new(pl, cur_span.end as usize), "written here")
                     .hint(match value {
                         Some(v) => format!("write `{v}`"),
@@ -206,10 +266,10 @@ fn syntax_error(src: &str, toks: &[(usize, Tok, usize)], e: &ParseError<usize, T
         }
         if pt.ends_operand() && ct.starts_operand() && !ctext.is_empty() && operator_expected {
             return Some(
-                Diagnostic::error(format!("missing operator between `{ptext}` and `{ctext}`"))
+                Diagnostic::error(format!("missing operator between `{pshown}` and `{cshown}`"))
                     .at(cur_span, "expected an operator before this")
                     .also(Span::new(pl, pr), "this operand ends here")
-                    .hint(format!("did you mean `{ptext} * {ctext}`? Multiplication needs an explicit `*`")),
+                    .hint(format!("did you mean `{pshown} * {cshown}`? Multiplication needs an explicit `*`")),
             );
         }
         if pt == Tok::Star && ct == Tok::Star {
@@ -229,7 +289,7 @@ fn syntax_error(src: &str, toks: &[(usize, Tok, usize)], e: &ParseError<usize, T
     }
     if let Some((pl, pt, pr)) = prev {
         if pt.is_binary_operator() && !cur.is_some_and(|c| c.1.starts_operand() || c.1 == Tok::Minus) {
-            let op = src.get(pl..pr).unwrap_or("");
+            let op = quoted(src.get(pl..pr).unwrap_or(""));
             let mut d = Diagnostic::error(format!("expected an operand after `{op}`, found {found}"));
             d = if cur.is_none_or(|c| c.1 == Tok::Newline || c.0 == c.2) {
                 d.at(Span::new(pl, pr), "nothing follows this operator")
@@ -239,13 +299,15 @@ fn syntax_error(src: &str, toks: &[(usize, Tok, usize)], e: &ParseError<usize, T
             return Some(d.hint(format!("complete the expression after `{op}`, or remove the trailing `{op}`")));
         }
     }
+    if let Some(d) = param_default_error(src, toks, stmt_start, idx) {
+        return Some(d);
+    }
     let what = expected_phrase(expected);
-    let mut d = match prev {
-        Some((pl, _, pr)) if cur.is_some() || prev.is_some() => {
-            let ptext = src.get(pl..pr).unwrap_or("");
-            Diagnostic::error(format!("expected {what} after `{ptext}`, found {found}"))
-        }
-        _ => Diagnostic::error(format!("expected {what}, found {found}")),
+    // What came before, unless the statement starts here (after a line end, or a `)` the lexer inserted).
+    let after = prev.filter(|&(pl, pt, pr)| pt != Tok::Newline && pl < pr).map(|(pl, _, pr)| quoted(src.get(pl..pr).unwrap_or("")));
+    let mut d = match after {
+        Some(ptext) => Diagnostic::error(format!("expected {what} after `{ptext}`, found {found}")),
+        None => Diagnostic::error(format!("expected {what}, found {found}")),
     };
     d = d.at(cur_span, format!("expected {what}"));
     let hint = match stmt_kind {
@@ -349,6 +411,46 @@ mod tests {
         let StmtKind::Let { value, .. } = ast.stmts[0].kind else { panic!() };
         assert_eq!(&src[ast.span(value).range()], "(NH + 1)");
         assert_eq!(&src[ast.stmts[1].span.range()], "2 * c");
+    }
+
+    /// Every diagnostic of `src`, lexer's and parser's.
+    fn diagnostics(src: &str) -> Vec<Diagnostic> {
+        let l = lex(src);
+        let mut d = l.diags.clone();
+        parse(src, &l, &mut d);
+        d
+    }
+
+    #[test]
+    fn messages_quote_no_raw_line_breaks() {
+        for src in ["@name \"abc\n= 3\nNH", "\"abc\n\"\nNH", "@name \"abc\r= 3\rNH", "NH\n= 2", "a\r\n)\r\n= 1"] {
+            let ds = diagnostics(src);
+            assert!(!ds.is_empty(), "{src:?}");
+            for d in &ds {
+                let shown = format!("{d} {:?}", d.primary.as_ref().map(|p| &p.1));
+                assert!(!shown.contains(['\n', '\r']), "{src:?}: {shown:?}");
+            }
+        }
+        // The statement after a line end starts there: no "after" the line end.
+        let ds = diagnostics("@name \"abc\n= 3\nNH");
+        assert!(ds.iter().any(|d| d.message == "expected an expression, found `=`"), "{ds:#?}");
+    }
+
+    #[test]
+    fn a_parameter_default_that_is_not_a_number_says_so() {
+        for (src, quoted) in [("param a = NH\nNH^a", "`NH`"), ("param k = 2*NL in 0..4\nNH^k", "`2*NL`"), ("param a = sqrt(2)\nNH^a", "`sqrt(2)`")] {
+            let ds = diagnostics(src);
+            assert_eq!(ds.len(), 1, "{src:?}: {ds:#?}");
+            let d = &ds[0];
+            assert_eq!(d.message, format!("a parameter's default must be a constant number, not {quoted}"), "{src:?}");
+            let hint = d.hint_texts(&crate::base::diag::Plain).join(" ");
+            assert!(hint.contains("write a number") && hint.contains(&format!("= {}", quoted.trim_matches('`'))), "{src:?}: {hint}");
+        }
+        let ds = diagnostics("param a =");
+        assert_eq!(ds[0].message, "a parameter needs a default value after `=`", "{ds:#?}");
+        // A bad range is still a range error, and good defaults parse.
+        assert!(diagnostics("param a = 2 in NH..3\nNH^a").iter().all(|d| !d.message.contains("default")));
+        parse_ok("param a = -2 in -4..4\nparam b = true\nparam c = rgb(1, 0.5, 0)\nNH");
     }
 
     #[test]

@@ -242,6 +242,9 @@ pub struct AccuracyReport {
     pub lobe_ratio_max: Worst,
     /// Points where F or R was NaN (counted as the worst error wherever they occur).
     pub nan_points: usize,
+    /// The reference's largest |value| on the fine angle grid over every n (NaN ignored): 0 when it is zero
+    /// everywhere, and then every relative metric and the lobe-size ratio are undefined.
+    pub reference_peak: f64,
 }
 
 /// The first angle (degrees) from the normal where `f < level`, bisected between fine-grid samples;
@@ -293,6 +296,7 @@ pub fn accuracy(
         ratio: Worst,
         epi: Option<Worst>,
         infl: Option<Worst>,
+        ref_peak: f64,
     }
     let per_n: Vec<PerN> = (1..=opts.n_max)
         .into_par_iter()
@@ -332,7 +336,8 @@ pub fn accuracy(
                 let v = rel(ev.eval(&lobe_inputs(c, lobe), &p), reference.eval(&lobe_inputs(c, ref_lobe), &pr));
                 Worst { value: v, n, angle_deg: x.to_degrees() }
             });
-            PerN { sum_abs: coarse.sum, nan, max_abs, cutoff_rel, ratio, epi, infl }
+            let ref_peak = r.iter().map(|v| v.abs()).filter(|v| !v.is_nan()).fold(0.0, f64::max);
+            PerN { sum_abs: coarse.sum, nan, max_abs, cutoff_rel, ratio, epi, infl, ref_peak }
         })
         .collect();
     let mut rep = AccuracyReport {
@@ -345,6 +350,7 @@ pub fn accuracy(
         lobe_ratio_min: Worst { value: f64::INFINITY, n: f64::NAN, angle_deg: f64::NAN },
         lobe_ratio_max: Worst::none(),
         nan_points: 0,
+        reference_peak: per_n.iter().map(|p| p.ref_peak).fold(0.0, f64::max),
     };
     for p in &per_n {
         rep.nan_points += p.nan;

@@ -370,7 +370,18 @@ fn bad_interval(v: f64, at: impl Fn(f64) -> bool) -> Option<(f64, f64)> {
     Some((lo, hi))
 }
 
-/// Sweeps `ev` (normally the [`Formula::unclamped`] kernel) over the domain described in the module docs.
+/// The smallest sweep of a formula reading `used` with parameters `decls`: every parameter combination, each
+/// with at least 64 input points (all of them when the input grid is smaller). Returns (combinations, points
+/// per combination); their product is the fewest evaluations [`sweep`] makes, whatever
+/// [`SweepOptions::max_evals`] says, so a front end should refuse a smaller budget.
+pub fn min_evals(used: InputSet, decls: &[ParamDecl]) -> (u64, u64) {
+    let gsize = Domain::new(DomainKind::of(used), used).size();
+    let combos: u64 = decls.iter().map(|d| param_values(d).len().max(1) as u64).product();
+    (combos, 64.min(gsize))
+}
+
+/// Sweeps `ev` (normally the [`Formula::unclamped`] kernel) over the domain described in the module docs:
+/// at most `opts.max_evals` evaluations, and never fewer than [`min_evals`].
 pub fn sweep(ev: &dyn Evaluator, used: InputSet, decls: &[ParamDecl], opts: &SweepOptions) -> SweepReport {
     let kind = DomainKind::of(used);
     let domain = Domain::new(kind, used);
@@ -379,7 +390,8 @@ pub fn sweep(ev: &dyn Evaluator, used: InputSet, decls: &[ParamDecl], opts: &Swe
     let pv: Vec<Vec<f64>> = decls.iter().map(param_values).collect();
     let combos: u64 = pv.iter().map(|v| v.len().max(1) as u64).product();
     let exhaustive = combos.saturating_mul(gsize) <= opts.max_evals;
-    let per_combo = if exhaustive { gsize } else { (opts.max_evals / combos.max(1)).clamp(64.min(gsize), gsize) };
+    let floor = min_evals(used, decls).1;
+    let per_combo = if exhaustive { gsize } else { (opts.max_evals / combos.max(1)).clamp(floor, gsize) };
     let per_combo_stats: Vec<Vec<RegionStats>> = (0..combos)
         .into_par_iter()
         .map(|ci| {

@@ -57,6 +57,9 @@ use std::time::{Duration, Instant};
 /// Largest image side accepted.
 pub(crate) const MAX_SIZE: usize = 4096;
 
+/// Most supersamples per pixel side ([`RenderOptions::aa`], a scene's `aa`): 8×8 = 64 renders of the frame.
+pub const MAX_AA: usize = 8;
+
 /// An image size `N` (square) or `WxH`, each 1..=[`MAX_SIZE`] (the image size a front end asks for).
 pub fn parse_size(s: &str) -> Result<(usize, usize), String> {
     let one = |t: &str| -> Result<usize, String> {
@@ -174,6 +177,8 @@ pub struct Object {
 pub struct Scene {
     pub width: usize,
     pub height: usize,
+    /// Supersampling from the scene file: `aa`×`aa` samples per pixel (1: none); [`RenderOptions::aa`] overrides it.
+    pub aa: usize,
     pub camera: Camera,
     pub background: DVec3,
     pub ambient: DVec3,
@@ -192,15 +197,21 @@ pub struct RenderOptions {
     pub transfer: Transfer,
     /// Apply the materials' cut-offs (off: evaluate F everywhere, to measure what the cut-off changes).
     pub cutoff: bool,
+    /// Supersampling: `aa`×`aa` samples per pixel, 1..=[`MAX_AA`]; `None` takes the scene's [`Scene::aa`].
+    /// The frame is rendered once per sample, each time sampled at the centre of one cell of an `aa`×`aa`
+    /// grid over the pixel, and the 8-bit samples are averaged (in linear light for [`Transfer::Srgb`]);
+    /// 1 is the plain render, byte for byte. The counters of [`RenderStats`] then count samples.
+    pub aa: Option<usize>,
 }
 
 impl Default for RenderOptions {
     fn default() -> RenderOptions {
-        RenderOptions { threads: 0, tile: 64, transfer: Transfer::Linear, cutoff: true }
+        RenderOptions { threads: 0, tile: 64, transfer: Transfer::Linear, cutoff: true, aa: None }
     }
 }
 
-/// What a render measured. Times named `*_cpu` are thread CPU time summed over threads.
+/// What a render measured. Times named `*_cpu` are thread CPU time summed over threads; with supersampling
+/// the counts (visible pixels, evaluations, NaN, cut-off skips) and stage times are summed over the samples.
 #[derive(Clone, Debug, Default)]
 pub struct RenderStats {
     pub width: usize,
@@ -260,8 +271,8 @@ pub struct Frame {
 /// Most worker threads a render starts (more only adds scheduling cost on any machine lobe targets).
 pub const MAX_THREADS: usize = 256;
 
-/// Renders `scene`. Fails only if the thread count is over [`MAX_THREADS`], the pool cannot be built, or a
-/// material's shading program cannot be built.
+/// Renders `scene`. Fails only if the thread count is over [`MAX_THREADS`], the supersampling is outside
+/// 1..=[`MAX_AA`], the pool cannot be built, or a material's shading program cannot be built.
 pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<(Frame, RenderStats), String> {
     render_observed(scene, opts, &|_, _| {})
 }
@@ -271,6 +282,10 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Result<(Frame, RenderStats
 pub fn render_observed(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64, u64) + Sync)) -> Result<(Frame, RenderStats), String> {
     if opts.threads > MAX_THREADS {
         return Err(format!("{} worker threads is more than {MAX_THREADS}; 0 uses one per core", opts.threads));
+    }
+    let aa = opts.aa.unwrap_or(scene.aa);
+    if !(1..=MAX_AA).contains(&aa) {
+        return Err(format!("supersampling {aa}×{aa} is outside 1..={MAX_AA} samples per pixel side"));
     }
     if opts.threads == 0 {
         render_in_pool(scene, opts, progress)
@@ -287,14 +302,20 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64, u
     let t0 = Instant::now();
     let (w, h) = (scene.width, scene.height);
     let tile = opts.tile.clamp(8, 256);
+    let aa = opts.aa.unwrap_or(scene.aa).clamp(1, MAX_AA);
     let items: Vec<raster::DrawItem> = scene
         .objects
         .iter()
         .map(|o| raster::DrawItem { mesh: &o.mesh, material: o.material as u32, cull_backfaces: o.cull_backfaces })
         .collect();
     let xf = scene.camera.clip_transform(w as f64 / h as f64);
-    let setup = raster::setup(&items, &xf, w, h, tile);
-    let setup_time = t0.elapsed();
+    // Sample k of the aa×aa grid: the centre of its cell, in pixels from the pixel's centre (0, 0 for aa = 1).
+    let offset = |k: usize| {
+        let cell = |i: usize| if aa == 1 { 0.0 } else { (i as f64 + 0.5) / aa as f64 - 0.5 };
+        [cell(k % aa), cell(k / aa)]
+    };
+    let first = raster::setup(&items, &xf, w, h, tile, offset(0));
+    let mut setup_time = t0.elapsed();
 
     let bg = scene.background.to_array().map(|c| opts.transfer.encode(c));
     let tc = Instant::now();
@@ -305,7 +326,70 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64, u
         .collect::<Result<_, _>>()?;
     let program_compile = tc.elapsed();
     let timers = Timers::default();
-    let (tiles_done, tiles) = (AtomicU64::new(0), setup.bins.len() as u64);
+    let samples = aa * aa;
+    let (tiles_done, tiles) = (AtomicU64::new(0), first.bins.len() as u64);
+    let pass = |setup: &raster::Setup| {
+        frame_pass(scene, &programs, setup, opts.transfer, bg, &timers, &|| {
+            progress(tiles_done.fetch_add(1, Ordering::Relaxed) + 1, tiles * samples as u64)
+        })
+    };
+    let (mut rgb, mut covered, mut counts) = pass(&first);
+    if samples > 1 {
+        // Sum the samples' levels (sRGB ones decoded to linear light first), then the mean of each pixel.
+        let linear = SampleSum::new(opts.transfer);
+        let mut sum: Vec<u32> = rgb.iter().map(|&v| linear.add(v)).collect();
+        for k in 1..samples {
+            let ts = Instant::now();
+            let setup = raster::setup(&items, &xf, w, h, tile, offset(k));
+            setup_time += ts.elapsed();
+            let (rgb_k, covered_k, counts_k) = pass(&setup);
+            for (s, &v) in sum.iter_mut().zip(&rgb_k) {
+                *s += linear.add(v);
+            }
+            for (c, &ck) in covered.iter_mut().zip(&covered_k) {
+                *c |= ck;
+            }
+            counts += counts_k;
+        }
+        for (v, &s) in rgb.iter_mut().zip(&sum) {
+            *v = linear.mean(s, samples as u32);
+        }
+    }
+    let stats = RenderStats {
+        width: w,
+        height: h,
+        threads: rayon::current_num_threads(),
+        triangles: first.tris.len(),
+        tiles: first.bins.len(),
+        tiles_touched: first.bins.iter().filter(|b| !b.is_empty()).count(),
+        visible_pixels: counts.visible,
+        evals: counts.evals,
+        kernel_calls: counts.kernel_calls,
+        nan: counts.nan,
+        cut: counts.cut,
+        setup: setup_time,
+        raster_cpu: Duration::from_nanos(timers.raster.load(Ordering::Relaxed)),
+        shade_cpu: Duration::from_nanos(timers.shade.load(Ordering::Relaxed)),
+        kernel_cpu: Duration::from_nanos(timers.kernel.load(Ordering::Relaxed)),
+        program_compile,
+        render_wall: t0.elapsed(),
+    };
+    Ok((Frame { image: Image { width: w, height: h, rgb }, covered }, stats))
+}
+
+/// One rendering of the whole frame from its binned triangles: the 8-bit pixels, the coverage and the
+/// counters; `tile_done` is called after each tile.
+#[allow(clippy::too_many_arguments)]
+fn frame_pass(
+    scene: &Scene,
+    programs: &[program::ProgramRun],
+    setup: &raster::Setup,
+    transfer: Transfer,
+    bg: [u8; 3],
+    timers: &Timers,
+    tile_done: &(dyn Fn() + Sync),
+) -> (Vec<u8>, Vec<bool>, shade::ShadeCounts) {
+    let (w, h, tile) = (setup.width, setup.height, setup.tile);
     let mut rgb = vec![0u8; w * h * 3];
     let mut covered = vec![false; w * h];
     // One task per band of tiles: its tiles are shaded in order into the thread's scratch and copied straight
@@ -326,11 +410,11 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64, u
             let mut counts = shade::ShadeCounts::default();
             for tx in 0..setup.tiles_x {
                 let t = ty * setup.tiles_x + tx;
-                let shaded = tile_pixels(scene, &programs, &setup, t, sc, opts.transfer, bg, &timers);
-                progress(tiles_done.fetch_add(1, Ordering::Relaxed) + 1, tiles);
+                let shaded = tile_pixels(scene, programs, setup, t, sc, transfer, bg, timers);
+                tile_done();
                 let Some(c) = shaded else { continue };
                 counts += c;
-                let (x0, _, tw, th) = raster::tile_rect(&setup, t);
+                let (x0, _, tw, th) = raster::tile_rect(setup, t);
                 for y in 0..th {
                     band[(y * w + x0) * 3..(y * w + x0 + tw) * 3].copy_from_slice(&sc.rgb[y * tw * 3..(y + 1) * tw * 3]);
                     let cov = &mut band_cov[y * w + x0..y * w + x0 + tw];
@@ -346,26 +430,42 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64, u
     for c in band_counts {
         counts += c;
     }
-    let stats = RenderStats {
-        width: w,
-        height: h,
-        threads: rayon::current_num_threads(),
-        triangles: setup.tris.len(),
-        tiles: setup.bins.len(),
-        tiles_touched: setup.bins.iter().filter(|b| !b.is_empty()).count(),
-        visible_pixels: counts.visible,
-        evals: counts.evals,
-        kernel_calls: counts.kernel_calls,
-        nan: counts.nan,
-        cut: counts.cut,
-        setup: setup_time,
-        raster_cpu: Duration::from_nanos(timers.raster.load(Ordering::Relaxed)),
-        shade_cpu: Duration::from_nanos(timers.shade.load(Ordering::Relaxed)),
-        kernel_cpu: Duration::from_nanos(timers.kernel.load(Ordering::Relaxed)),
-        program_compile,
-        render_wall: t0.elapsed(),
-    };
-    Ok((Frame { image: Image { width: w, height: h, rgb }, covered }, stats))
+    (rgb, covered, counts)
+}
+
+/// How supersamples' 8-bit levels are summed and averaged: linear levels as they are; sRGB levels decoded to
+/// linear light in units of 2^−24 (a sum of 64 fits a u32), averaged there and encoded again.
+struct SampleSum {
+    /// The decoded value of each sRGB level; `None` for the linear transfer.
+    srgb: Option<Box<[u32; 256]>>,
+}
+
+impl SampleSum {
+    const UNIT: f64 = (1u32 << 24) as f64;
+
+    fn new(transfer: Transfer) -> SampleSum {
+        let srgb = (transfer == Transfer::Srgb).then(|| {
+            Box::new(std::array::from_fn(|v| {
+                let c = v as f64 / 255.0;
+                let lin = if c <= 0.040_45 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) };
+                (lin * Self::UNIT).round() as u32
+            }))
+        });
+        SampleSum { srgb }
+    }
+    fn add(&self, level: u8) -> u32 {
+        match &self.srgb {
+            None => u32::from(level),
+            Some(t) => t[level as usize],
+        }
+    }
+    /// The level of the mean of `n` samples summing to `sum`, rounded half up.
+    fn mean(&self, sum: u32, n: u32) -> u8 {
+        match &self.srgb {
+            None => ((sum + n / 2) / n) as u8,
+            Some(_) => Transfer::Srgb.encode(f64::from(sum) / f64::from(n) / Self::UNIT),
+        }
+    }
 }
 
 /// This thread's CPU time in ns (the wall clock where the platform has no thread clock): stage times are CPU
@@ -452,3 +552,25 @@ pub fn cutoff_effect(scene: &Scene, opts: &RenderOptions, frame: &Frame, stats: 
     Ok(Some(CutoffEffect { skipped: stats.cut, max_channel_diff: max, pixels_differing: differing, metrics }))
 }
 
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn averaging_equal_samples_keeps_the_level() {
+        for transfer in [Transfer::Linear, Transfer::Srgb] {
+            let s = SampleSum::new(transfer);
+            for n in [4u32, 9, 64] {
+                for v in 0..=255u8 {
+                    assert_eq!(s.mean(s.add(v) * n, n), v, "{transfer:?}: {n} samples of {v}");
+                }
+            }
+        }
+        // Half black, half white: linear 127.5 rounds up; sRGB averages light, so it is brighter than 128.
+        let lin = SampleSum::new(Transfer::Linear);
+        assert_eq!(lin.mean(2 * lin.add(255), 4), 128);
+        let srgb = SampleSum::new(Transfer::Srgb);
+        assert_eq!(srgb.mean(2 * srgb.add(255), 4), Transfer::Srgb.encode(0.5));
+    }
+}

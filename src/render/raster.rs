@@ -54,6 +54,8 @@ pub(crate) struct Setup {
     pub tiles_x: usize,
     pub width: usize,
     pub height: usize,
+    /// Where each pixel is sampled, in pixels from its centre (supersampling moves it; 0, 0 otherwise).
+    pub offset: [f64; 2],
 }
 
 /// One object to draw.
@@ -78,11 +80,12 @@ impl ClipVert {
     }
 }
 
-/// Projects, clips and bins every triangle of `items`.
-pub(crate) fn setup(items: &[DrawItem], xf: &ClipTransform, width: usize, height: usize, tile: usize) -> Setup {
+/// Projects, clips and bins every triangle of `items`, for pixels sampled `offset` pixels from their centres
+/// (the geometry moves by −`offset`; [0, 0] samples the centres).
+pub(crate) fn setup(items: &[DrawItem], xf: &ClipTransform, width: usize, height: usize, tile: usize, offset: [f64; 2]) -> Setup {
     let tiles_x = width.div_ceil(tile);
     let tiles_y = height.div_ceil(tile);
-    let mut s = Setup { tris: vec![], bins: vec![vec![]; tiles_x * tiles_y], tile, tiles_x, width, height };
+    let mut s = Setup { tris: vec![], bins: vec![vec![]; tiles_x * tiles_y], tile, tiles_x, width, height, offset };
     // Guard band in NDC units per axis.
     let gx = GUARD_PX * 2.0 / width as f64;
     let gy = GUARD_PX * 2.0 / height as f64;
@@ -146,8 +149,9 @@ fn emit(s: &mut Setup, v: &[ClipVert; 3], item: &DrawItem) {
     for i in 0..3 {
         let c = v[i].c;
         inv_w[i] = 1.0 / c.w;
-        x[i] = (((c.x * inv_w[i] + 1.0) * 0.5 * w) * SUB as f64).round() as i64;
-        y[i] = (((1.0 - c.y * inv_w[i]) * 0.5 * h) * SUB as f64).round() as i64;
+        // Subtracting a zero offset leaves every value as it was (bit for bit).
+        x[i] = (((c.x * inv_w[i] + 1.0) * 0.5 * w - s.offset[0]) * SUB as f64).round() as i64;
+        y[i] = (((1.0 - c.y * inv_w[i]) * 0.5 * h - s.offset[1]) * SUB as f64).round() as i64;
     }
     let mut area = (x[1] - x[0]) * (y[2] - y[0]) - (y[1] - y[0]) * (x[2] - x[0]);
     // Counter-clockwise in the world (front-facing) is clockwise on a y-down screen: negative area.
@@ -299,7 +303,7 @@ mod tests {
         };
         let cam = Camera { position: DVec3::new(0.0, 0.0, 2.0), look_at: DVec3::ZERO, up: DVec3::Y, fov_deg: 90.0 };
         let items = [DrawItem { mesh: &mesh, material: 0, cull_backfaces: true }];
-        setup(&items, &cam.clip_transform(w as f64 / h as f64), w, h, 8)
+        setup(&items, &cam.clip_transform(w as f64 / h as f64), w, h, 8, [0.0; 2])
     }
 
     #[test]
@@ -334,8 +338,8 @@ mod tests {
         };
         let cam = Camera { position: DVec3::new(0.0, 0.0, 2.0), look_at: DVec3::ZERO, up: DVec3::Y, fov_deg: 60.0 };
         let xf = cam.clip_transform(1.0);
-        assert!(setup(&[DrawItem { mesh: &mesh, material: 0, cull_backfaces: true }], &xf, 16, 16, 8).tris.is_empty());
-        assert_eq!(setup(&[DrawItem { mesh: &mesh, material: 0, cull_backfaces: false }], &xf, 16, 16, 8).tris.len(), 1);
+        assert!(setup(&[DrawItem { mesh: &mesh, material: 0, cull_backfaces: true }], &xf, 16, 16, 8, [0.0; 2]).tris.is_empty());
+        assert_eq!(setup(&[DrawItem { mesh: &mesh, material: 0, cull_backfaces: false }], &xf, 16, 16, 8, [0.0; 2]).tris.len(), 1);
         // A huge triangle through the camera plane: clipped, never NaN or overflowing coordinates.
         let big = Mesh {
             positions: vec![DVec3::new(-100.0, -1.0, 10.0), DVec3::new(100.0, -1.0, 10.0), DVec3::new(0.0, -1.0, -100.0)],
@@ -343,7 +347,7 @@ mod tests {
             tangents: vec![],
             triangles: vec![[0, 1, 2]],
         };
-        let s = setup(&[DrawItem { mesh: &big, material: 0, cull_backfaces: false }], &xf, 16, 16, 8);
+        let s = setup(&[DrawItem { mesh: &big, material: 0, cull_backfaces: false }], &xf, 16, 16, 8, [0.0; 2]);
         assert!(!s.tris.is_empty());
         for t in &s.tris {
             assert!(t.inv_w.iter().all(|w| w.is_finite() && *w > 0.0));

@@ -159,12 +159,15 @@ fn log_plots_with_nothing_positive_end_with_an_error() {
 fn shader_export_mangles_hostile_names_and_metadata() {
     let d = scratch("export");
     let f = d.join("hostile.brdf");
-    std::fs::write(&f, "@name \"x\r#define pow(a,b) 0.0\"\nparam t0 = 1\nparam float = 2\nparam gl_Position = 3\nparam output = 4\nparam alias = 5\nparam var = 6\nparam loop = 7\nparam f32 = 8\npow(NH, n) * t0 * float * gl_Position * output * alias * var * loop * f32\n").unwrap();
+    // A CR ends the line, in a string too: metadata cannot smuggle one into the shader.
+    std::fs::write(&f, "@name \"x\r#define pow(a,b) 0.0\"\nNH\n").unwrap();
+    refused(&lobe(&["export", "--glsl", &s(&f)]), "a CR in @name", "unterminated string");
+    std::fs::write(&f, "@name \"x\u{2028}#define pow(a,b) 0.0\x0b#define exp(a) 0.0\"\nparam t0 = 1\nparam float = 2\nparam gl_Position = 3\nparam output = 4\nparam alias = 5\nparam var = 6\nparam loop = 7\nparam f32 = 8\npow(NH, n) * t0 * float * gl_Position * output * alias * var * loop * f32\n").unwrap();
     for dialect in ["--glsl", "--wgsl"] {
         let r = lobe(&["export", dialect, &s(&f)]);
         assert_eq!(r.code, Some(0), "{}", r.stderr);
         let text = String::from_utf8_lossy(&r.stdout);
-        assert!(!text.contains('\r'), "{text}");
+        assert!(!text.contains(['\r', '\u{2028}', '\x0b']), "{text}");
         assert!(text.lines().all(|l| l.trim_start().starts_with("//") || !l.contains("#define")), "{text}");
         for name in ["t0", "float", "gl_Position", "output", "alias", "var", "loop", "f32"] {
             assert!(text.contains(&format!("p_{name}")), "{name} not mangled:\n{text}");
@@ -276,6 +279,9 @@ fn numerical_commands_refuse_what_they_cannot_answer() {
     assert_eq!(r.code, Some(0), "{}", r.stderr);
     let text = String::from_utf8_lossy(&r.stdout);
     assert!(!text.contains("-inf") && text.contains("undefined"), "{text}");
+    // Nothing is "NaN % at n = NaN" or an infinite ratio: it says why the metrics are undefined.
+    assert!(!text.contains("NaN") && !text.contains("inf %") && !text.contains("inf ("), "{text}");
+    assert!(text.contains("the reference is 0 at every angle and n"), "{text}");
     // compare: a --set name only B declares applies to B.
     let r = lobe(&["compare", "examples/brdfs/blinn.brdf", &a_only, "--set", "a=16", "--size", "16", "--json"]);
     assert_eq!(r.code, Some(0), "{}", r.stderr);
@@ -297,6 +303,7 @@ fn numerical_commands_refuse_what_they_cannot_answer() {
     let r = lobe(&["watch", &broken, "--scene", "examples/scenes/paper_sphere.toml", "-o", &s(&out), "--size", "16", "--count", "1"]);
     assert_eq!(r.code, Some(1), "{}", r.stderr);
     assert!(!out.exists());
+    assert!(r.stderr.contains("no image yet") && !r.stderr.contains("keeping the last good image"), "{}", r.stderr);
     // compare on a scene without objects.
     let empty = write("empty.toml", "[camera]\nposition = [0, 0, 6]\n");
     let r = lobe(&["compare", "examples/brdfs/blinn.brdf", "examples/brdfs/phong.brdf", "--scene", &empty, "--size", "16"]);
@@ -310,6 +317,11 @@ fn messages_say_what_the_user_meant() {
     let r = lobe(&["eval", "--expr", "0x10 * NH", "--at", "NH=1"]);
     refused(&r, "0x10", "write `16`");
     assert!(!r.stderr.contains("0 * x10"), "{}", r.stderr);
+    let r = lobe(&["eval", "--expr", "1_0*NH", "--at", "NH=1"]);
+    refused(&r, "1_0", "digit separators are not supported: write `10`");
+    assert!(!r.stderr.contains("1 * _0"), "{}", r.stderr);
+    let r = lobe(&["eval", "--expr", "param a = NH\nNH^a", "--at", "NH=1"]);
+    refused(&r, "param a = NH", "a parameter's default must be a constant number");
     let r = lobe(&["eval", "--expr", "-NH+1", "--at", "NH=0.25"]);
     assert_eq!((r.code, String::from_utf8_lossy(&r.stdout).trim()), (Some(0), "0.75"), "{}", r.stderr);
     let bom = d.join("bom.brdf");
@@ -346,5 +358,137 @@ fn an_infinite_lobe_is_no_light_and_counted() {
     assert!(r.stderr.contains("NaN or ±inf"), "{}", r.stderr);
     let im = lobe::base::image::Image::decode_png(&std::fs::read(&out).unwrap()).unwrap();
     assert!(im.rgb.iter().all(|&c| c == 0), "an infinite lobe was drawn as light");
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn a_flag_repeated_with_another_value_is_refused_in_every_command() {
+    let d = scratch("repeat");
+    let two = d.join("two.brdf");
+    std::fs::write(&two, "param a = 1 in 0..10\nNH^n * a\n").unwrap();
+    let two = s(&two);
+    let r = lobe(&["eval", &two, "--set", "n=5", "--set", "n=6", "--at", "NH=0.5"]);
+    refused(&r, "--set twice", "--set gives `n` twice: n=5 and n=6");
+    assert!(r.stderr.contains("help:"), "{}", r.stderr);
+    let r = lobe(&["eval", &two, "--at", "NH=0.5", "--at", "NH=0.7"]);
+    refused(&r, "--at twice", "--at gives `NH` twice: NH=0.5 and NH=0.7");
+    let r = lobe(&["eval", "--expr", "L.z * V.z", "--at", "L=0,0,1", "--at", "Lz=0.5,V=0,0,1"]);
+    refused(&r, "L and Lz", "--at gives Lz twice: L=0,0,1 and Lz=0.5");
+    // Distinct names across flags, and a repeat with the same value, still work.
+    let r = lobe(&["eval", &two, "--set", "n=2", "--set", "a=3", "--at", "NH=0.5", "--at", "NH=0.5"]);
+    assert_eq!((r.code, String::from_utf8_lossy(&r.stdout).trim()), (Some(0), "0.75"), "{}", r.stderr);
+    // Every command takes --set through the same parsing.
+    let out = s(&d.join("o.png"));
+    for args in [
+        vec!["render", "examples/scenes/paper_sphere.toml", "--size", "16", "-o", &out],
+        vec!["sweep", &two],
+        vec!["energy", &two],
+        vec!["check", &two],
+        vec!["export", "--glsl", &two],
+        vec!["compare", "examples/brdfs/blinn.brdf", &two, "--size", "16"],
+    ] {
+        let r = lobe(&[&args[..], &["--set", "n=5", "--set", "n=6"][..]].concat());
+        refused(&r, &format!("{args:?}"), "--set gives `n` twice: n=5 and n=6");
+    }
+    assert!(!d.join("o.png").exists());
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn sweep_keeps_to_its_budget_or_names_the_minimum() {
+    let r = lobe(&["sweep", "examples/brdfs/blinn.brdf", "--max-evals", "1"]);
+    refused(&r, "--max-evals 1", "minimum of 513 evaluations (19 parameter combinations × 27 input points each)");
+    assert!(r.stdout.is_empty(), "{}", String::from_utf8_lossy(&r.stdout));
+    let r = lobe(&["sweep", "examples/brdfs/blinn.brdf", "--max-evals", "513", "--as-written"]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert!(String::from_utf8_lossy(&r.stdout).contains("over 513 points"), "{}", String::from_utf8_lossy(&r.stdout));
+    // On geometry (3 456 pairs per combination) the grid is subsampled to the budget, for both forms.
+    let r = lobe(&["sweep", "--expr", "NL * NV * NH^n", "--max-evals", "5000", "--json"]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    let v: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    let evaluated = v["evaluated"].as_u64().unwrap();
+    assert!((1216..=5000).contains(&evaluated), "{v}");
+    if let Some(c) = v["compiled"]["evaluated"].as_u64() {
+        assert!(c <= 5000, "{v}");
+    }
+}
+
+#[test]
+fn temporaries_left_by_killed_writers_go_on_the_next_write_to_the_directory() {
+    let d = scratch("stale");
+    // Pids beyond any real one: their writers are gone. One for the output, one for another file; pid 1 lives.
+    let stale = [".o.png.lobe-tmp-4294967295", ".other.png.lobe-tmp-4294967294"].map(|n| d.join(n));
+    let live = d.join(".third.png.lobe-tmp-1");
+    for p in stale.iter().chain([&live]) {
+        std::fs::write(p, b"half a PNG").unwrap();
+    }
+    let r = lobe(&["render", "examples/scenes/paper_sphere.toml", "--size", "16", "-o", &s(&d.join("o.png"))]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    for p in &stale {
+        assert!(!p.exists(), "{} was left", p.display());
+    }
+    assert!(live.exists(), "a live writer's temporary was removed");
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn an_out_of_range_value_gets_its_error_alone() {
+    // A --sweep-n value out of range: that error alone, named after --sweep-n.
+    let r = lobe(&["compare", "examples/brdfs/blinn.brdf", "examples/brdfs/phong.brdf", "--sweep-n", "0,5", "--size", "16"]);
+    refused(&r, "--sweep-n 0,5", "--sweep-n 0: material `glossy`: value 0");
+    assert_eq!(r.stderr.matches("error:").count(), 1, "{}", r.stderr);
+    let r = lobe(&["render", "examples/scenes/paper_sphere.toml", "--set", "n=0", "--size", "16", "-o", "/tmp/never.png"]);
+    refused(&r, "render --set n=0", "outside the formula's declared range");
+    assert!(!r.stderr.contains("no material's formula declares"), "{}", r.stderr);
+}
+
+#[test]
+fn energy_prints_only_the_notes_of_its_mode() {
+    // The lobe-variable note belongs to lobe mode.
+    let r = lobe(&["energy", "--expr", "NH^n * VR", "--mode", "full"]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert!(!r.stderr.contains("note:"), "{}", r.stderr);
+    let r = lobe(&["energy", "--expr", "NH^n * VR"]);
+    assert!(r.code == Some(0) && r.stderr.contains("note: the formula reads both NH and VR"), "{}", r.stderr);
+    refused(&lobe(&["energy", "--expr", "NH^n", "--mode", "full", "--lobe", "NH"]), "--lobe in full mode", "lobe mode only");
+}
+
+#[test]
+fn supersampling_averages_samples_and_one_sample_is_the_plain_render() {
+    let d = scratch("aa");
+    // Flat white (ambient only) on black: without supersampling every pixel is 0 or 255.
+    let flat = "background = [0, 0, 0]\nambient = [1, 1, 1]\n[camera]\nposition = [0, 0, 6]\n[[light]]\nkind = \"point\"\n\
+                position = [10, 0, 10]\n[materials.m]\nformula = \"0*NH\"\nka = 1\nkd = 0\nks = 0\n[[object]]\nshape = \"sphere\"\nmaterial = \"m\"\n";
+    std::fs::write(d.join("flat.toml"), flat).unwrap();
+    std::fs::write(d.join("flat2.toml"), format!("aa = 2\n{flat}")).unwrap();
+    let render = |scene: &str, extra: &[&str], out: &str| -> Vec<u8> {
+        let o = d.join(out);
+        let r = lobe(&[&["render", &s(&d.join(scene)), "--size", "48", "-o", &s(&o)][..], extra].concat());
+        assert_eq!(r.code, Some(0), "{scene} {extra:?}: {}", r.stderr);
+        std::fs::read(&o).unwrap()
+    };
+    let plain = render("flat.toml", &[], "plain.png");
+    assert_eq!(render("flat.toml", &["--aa", "1"], "aa1.png"), plain, "--aa 1 is not the plain render");
+    let aa2 = render("flat.toml", &["--aa", "2"], "aa2.png");
+    assert_ne!(aa2, plain);
+    let levels = |png: &[u8]| lobe::base::image::Image::decode_png(png).unwrap().rgb;
+    assert!(levels(&plain).iter().all(|&v| v == 0 || v == 255));
+    let smooth = levels(&aa2);
+    // Edge pixels take the quarter levels of 2×2 samples; the inside stays white, the outside black.
+    for q in [64u8, 128, 191] {
+        assert!(smooth.contains(&q), "no edge pixel at {q}");
+    }
+    assert!(smooth.iter().all(|&v| [0, 64, 128, 191, 255].contains(&v)), "a level no 2×2 average gives");
+    assert!(smooth.contains(&255) && smooth.contains(&0));
+    // The scene's `aa` is the default; the flag wins.
+    assert_eq!(render("flat2.toml", &[], "s2.png"), aa2);
+    assert_eq!(render("flat2.toml", &["--aa", "1"], "s1.png"), plain);
+    for bad in ["0", "9", "two"] {
+        let r = lobe(&["render", &s(&d.join("flat.toml")), "--aa", bad, "-o", &s(&d.join("bad.png"))]);
+        assert!(r.code == Some(2) && r.stderr.contains("--aa"), "--aa {bad}: {:?} {}", r.code, r.stderr);
+    }
+    std::fs::write(d.join("flat9.toml"), format!("aa = 9\n{flat}")).unwrap();
+    refused(&lobe(&["render", &s(&d.join("flat9.toml")), "-o", &s(&d.join("bad.png"))]), "aa = 9", "`aa` = 9 is outside 1..=8");
+    assert!(!d.join("bad.png").exists());
     let _ = std::fs::remove_dir_all(&d);
 }

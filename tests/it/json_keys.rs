@@ -60,7 +60,7 @@ fn every_json_output_keeps_its_keys() {
         ("eval_colour_points", vec!["eval", "--expr", COLOUR, "--points", &points, "--json"]),
         ("check", vec!["check", "examples/brdfs/beckmann.brdf", "--points", "200", "--json"]),
         ("check_colour", vec!["check", "--expr", COLOUR, "--points", "200", "--json"]),
-        ("sweep", vec!["sweep", "examples/brdfs/beckmann.brdf", "--max-evals", "2000", "--json"]),
+        ("sweep", vec!["sweep", "examples/brdfs/beckmann.brdf", "--max-evals", "5000", "--json"]),
         ("sweep_as_written", vec!["sweep", blinn, "--max-evals", "2000", "--as-written", "--json"]),
         ("sweep_colour", vec!["sweep", "--expr", COLOUR, "--max-evals", "2000", "--json"]),
         ("energy_lobe", vec!["energy", blinn, "--set", "n=10", "--json"]),

@@ -127,6 +127,10 @@ fn each_mistake_gets_its_message_and_hint() {
             "write `pow(x, y)`",
         ]),
         ("internal_name_as_param", &["`acoslo` is a variable, not a function", "internal_name_as_param.brdf:3:1"]),
+        ("digit_separators", &["number `1_000` has `_` between its digits", "write `1000`", "write `0.50`"]),
+        ("param_default", &["a parameter's default must be a constant number, not `NH`", "not `2 * n`", "`let a = NH`"]),
+        ("unterminated_string_then_more", &["unterminated string", "expected an expression, found `=`", "then_more.brdf:2:1"]),
+        ("lone_cr", &["expected an operand after `^`", "lone_cr.brdf:3:12"]),
     ];
     for (name, needles) in want {
         let path = dir().join(format!("{name}.brdf"));
@@ -141,6 +145,19 @@ fn each_mistake_gets_its_message_and_hint() {
         assert!(helps >= heads, "{name}: {heads} diagnostics but {helps} hints\n{text}");
     }
     assert_eq!(want.len(), cases().len(), "every snapshot case has an entry in this table");
+    // No message quotes a raw line break of the source (the caret lines show the source itself, line by line).
+    for path in cases() {
+        let src = fs::read_to_string(&path).expect("readable case");
+        let d = match lobe::front::parse_with_warnings("f.brdf", &src) {
+            Ok((_, w)) => w,
+            Err(d) => d,
+        };
+        for item in &d.items {
+            let text = format!("{item}");
+            assert!(!text.contains(['\n', '\r']), "{}: {text:?}", path.display());
+        }
+        assert!(!d.render(false).contains('\r'), "{}: a raw CR in the rendered text", path.display());
+    }
 }
 
 #[test]

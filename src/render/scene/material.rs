@@ -120,15 +120,20 @@ pub(super) fn build_all(
 ) -> Result<Vec<Material>, Diagnostics> {
     let mut materials = vec![];
     let mut set_used = vec![false; choice.set.len()];
+    // A material that failed may not have reached the set values: then "no material declares `k`" is unknown.
+    let mut all_built = true;
     for (mname, m) in tables {
         match build_material(at, mname, m, choice, compiler, &mut set_used) {
             Ok(mat) => materials.push(mat),
-            Err(MatError::Scene(d)) => ds.push(d),
+            Err(MatError::Scene(d)) => {
+                ds.push(d);
+                all_built = false;
+            }
             Err(MatError::Formula(fd)) => return Err(if ds.has_errors() { ds.clone() } else { fd }),
         }
     }
     for (i, (k, _)) in choice.set.iter().enumerate() {
-        if !set_used[i] && !tables.is_empty() {
+        if !set_used[i] && !tables.is_empty() && all_built {
             ds.push(
                 Diagnostic::error(format!("no material's formula declares a parameter `{k}`"))
                     .about(Setting::Param { name: k.clone(), value: None })
@@ -224,6 +229,8 @@ fn build_material(
             Ok(true) => set_used[i] = true,
             Ok(false) => {}
             Err(msg) => {
+                // The formula declares the name (the value is what is wrong).
+                set_used[i] = true;
                 let d = Diagnostic::error(format!("material `{mname}`: {msg}")).about(Setting::Param { name: k.clone(), value: Some(*v) });
                 return Err(MatError::Scene(d.at(span_of(m.span()), "this material")));
             }

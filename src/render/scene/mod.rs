@@ -3,6 +3,7 @@
 //! ```toml
 //! width = 512                    # image size, 1..=4096 each (default 512×512)
 //! height = 512
+//! aa = 1                         # supersampling: aa×aa samples per pixel, averaged, 1..=8 (default 1: none)
 //! background = [0, 0, 0]         # linear RGB, 0..1
 //! ambient = [1, 0, 0]            # Ia
 //!
@@ -69,7 +70,7 @@ mod shapes;
 pub use material::{compile_channels, BrdfCompiler, CompiledBrdf, LobeCompiler};
 
 use super::camera::Camera;
-use super::{Light, LightKind, Object, Scene, MAX_SIZE};
+use super::{Light, LightKind, Object, Scene, MAX_AA, MAX_SIZE};
 use crate::base::diag::{Diagnostic, Diagnostics};
 use crate::base::span::Span;
 use glam::DVec3;
@@ -266,6 +267,14 @@ fn check(name: &str, src: &str, base: &Path, size: Option<(usize, usize)>) -> Re
     if let Some((w, h)) = size {
         (width, height) = (w, h);
     }
+    let aa = match &file.aa {
+        None => 1,
+        Some(s) if (1..=MAX_AA as i64).contains(s.get_ref()) => *s.get_ref() as usize,
+        Some(s) => {
+            err(&mut before, s.span(), format!("`aa` = {} is outside 1..={MAX_AA}", s.get_ref()), "samples per pixel side");
+            1
+        }
+    };
 
     // Camera.
     let c = file.camera.get_ref();
@@ -341,7 +350,7 @@ fn check(name: &str, src: &str, base: &Path, size: Option<(usize, usize)>) -> Re
         }
     }
     Ok(Geometry {
-        scene: Scene { width, height, camera, background, ambient, lights, materials: vec![], objects },
+        scene: Scene { width, height, aa, camera, background, ambient, lights, materials: vec![], objects },
         name: name.to_string(),
         src: src.to_string(),
         base: base.to_path_buf(),

@@ -21,6 +21,8 @@ pub(super) fn is_colour(c: &V3) -> bool {
 pub(super) struct SceneFile {
     pub width: Option<Spanned<i64>>,
     pub height: Option<Spanned<i64>>,
+    /// Supersampling: `aa`×`aa` samples per pixel.
+    pub aa: Option<Spanned<i64>>,
     pub background: Option<Spanned<V3>>,
     pub ambient: Option<Spanned<V3>>,
     pub camera: Spanned<CameraDef>,
