@@ -22,7 +22,7 @@ use std::time::{Duration, Instant};
 fn load(file: &str, size: usize, backend: Backend) -> render::Scene {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("examples/scenes").join(file);
     let opts = LoadOptions { size: Some((size, size)), ..LoadOptions::default() };
-    scene::load_scene(&path, &opts, &LobeCompiler { backend, math: lobe::Mode::Precise }).unwrap_or_else(|d| panic!("{}", d.render(false)))
+    scene::load_scene(&path, &opts, &LobeCompiler::plain(backend, lobe::Mode::Precise)).unwrap_or_else(|d| panic!("{}", d.render(false)))
 }
 
 /// The batched kernel on its own: ns per element over 4096-element batches of cosines in (0, 1].

@@ -141,13 +141,20 @@ pub fn use_cache(on: bool) {
 /// Compile options with the accuracy pass on, its search bounded by 2 s (it keeps the best form so far), its
 /// decisions cached unless `--no-cache` was given.
 pub fn with_pass(opts: Options, pass: lobe::numerics::robust::PassOptions) -> Options {
-    let pass = lobe::numerics::robust::PassOptions { budget: std::time::Duration::from_secs(2), ..pass };
+    let pass = lobe::numerics::robust::PassOptions { budget: lobe::numerics::robust::COMMAND_BUDGET, ..pass };
     let cache = USE_CACHE
         .load(std::sync::atomic::Ordering::Relaxed)
         .then(lobe::numerics::pass_cache::Cache::platform)
         .flatten()
         .map(|c| std::sync::Arc::new(c) as std::sync::Arc<dyn lobe::numerics::robust::DecisionStore>);
     lobe::numerics::robust::with_pass_cached(opts, pass, cache)
+}
+
+/// The scene compiler of `render`, `compare` and `watch`: the backend's kernels through the accuracy pass in
+/// `math`, as `eval` compiles (cached, so a second render of a scene pays nothing for it).
+pub fn scene_compiler(backend: lobe::Backend, math: lobe::Mode) -> lobe::render::scene::LobeCompiler {
+    let pass = lobe::numerics::robust::PassOptions { math, ..Default::default() };
+    lobe::render::scene::LobeCompiler { backend, math, accuracy: with_pass(Options::default(), pass).accuracy }
 }
 
 /// Loads a formula and simplifies it with `set`'s values baked in, without the accuracy pass: the plain

@@ -7,7 +7,6 @@ use super::common::{self, CliError};
 use lobe::base::diag::Setting;
 use lobe::render::compare::{self, CompareJob};
 use lobe::render::image::{self, Transfer};
-use lobe::render::scene::LobeCompiler;
 use lobe::render::RenderOptions;
 use std::path::PathBuf;
 
@@ -69,7 +68,7 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
         transfer: if a.srgb { Transfer::Srgb } else { Transfer::Linear },
         ..RenderOptions::default()
     };
-    let lobe_compiler = LobeCompiler { backend: a.backend.kind, math: a.backend.math.mode };
+    let lobe_compiler = super::common::scene_compiler(a.backend.kind, a.backend.math.mode);
     let compiler: &dyn lobe::render::scene::BrdfCompiler = &lobe_compiler;
     let base_set = a.set.list()?;
     if !a.sweep_n.is_empty() && base_set.iter().any(|(k, _)| k == "n") {

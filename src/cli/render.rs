@@ -3,7 +3,7 @@
 use super::args::{self, BackendArg, Json, Output, Params};
 use super::common::{self, CliError};
 use lobe::render::image::{self, Transfer};
-use lobe::render::scene::{self, LobeCompiler, LoadOptions};
+use lobe::render::scene::{self, LoadOptions};
 use lobe::render::{self as r, RenderOptions};
 use lobe::report::render as report;
 use std::path::{Path, PathBuf};
@@ -71,7 +71,7 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
     a.out.force.check(&out, image::is_lobe_png)?;
     Output::png_only(&out)?;
     let opts = LoadOptions { size: a.size, set: a.set.list()?, formula_override: None };
-    let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: a.backend.kind, math: a.backend.math.mode })?;
+    let sc = scene::load_scene(&a.scene, &opts, &super::common::scene_compiler(a.backend.kind, a.backend.math.mode))?;
     let ropts = RenderOptions {
         threads: a.threads,
         tile: a.tile as usize,

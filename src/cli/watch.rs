@@ -5,7 +5,7 @@
 use super::args::{Output, Params};
 use super::common::{self, CliError};
 use lobe::render::image;
-use lobe::render::scene::{self, LoadOptions, LobeCompiler};
+use lobe::render::scene::{self, LoadOptions};
 use lobe::render::{self as r, RenderOptions};
 use lobe::base::watch::{watch, Next};
 use std::path::PathBuf;
@@ -39,7 +39,7 @@ fn reload(a: &WatchArgs, src: String) -> Result<String, CliError> {
     let t0 = Instant::now();
     let name = a.file.display().to_string();
     let opts = LoadOptions { size: Some(a.size), set: a.set.list()?, formula_override: Some((name, src)) };
-    let sc = scene::load_scene(&a.scene, &opts, &LobeCompiler { backend: lobe::Backend::Jit, math: lobe::Mode::Precise })?;
+    let sc = scene::load_scene(&a.scene, &opts, &super::common::scene_compiler(lobe::Backend::Jit, lobe::Mode::Precise))?;
     let compile = t0.elapsed();
     let ropts = RenderOptions::default();
     let (frame, stats) = r::render(&sc, &ropts).map_err(CliError::msg)?;

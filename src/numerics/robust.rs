@@ -560,6 +560,10 @@ impl std::str::FromStr for Prefer {
     }
 }
 
+/// The search budget of commands that compile a formula to use it (`eval`, `render`, `energy`, the page's
+/// renders): small, so the first command on a new file answers quickly; the decision cache makes the second free.
+pub const COMMAND_BUDGET: std::time::Duration = std::time::Duration::from_secs(2);
+
 /// Settings of the accuracy pass.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PassOptions {

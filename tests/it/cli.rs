@@ -408,3 +408,25 @@ fn the_pass_decision_cache_is_used_and_can_be_bypassed() {
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_dir_all(&other);
 }
+
+/// `lobe render` shades with the accuracy pass's form, as `eval` computes: the bundled Cook–Torrance scene has no
+/// NaN pixel (the plain form is 0/0 at the silhouette, where an interpolated normal makes N·V ≤ 0 beside N·L > 0:
+/// thousands of NaN pixels at 2048²), and the plain kernels still show them, so the scene is the hard case.
+#[test]
+fn renders_shade_with_the_accuracy_pass_and_have_no_nan_pixels() {
+    let dir = std::env::temp_dir().join(format!("lobe-render-pass-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("ct.png");
+    let o = lobe(&["render", "examples/scenes/fill_cook_torrance.toml", "--size", "512", "--stats", "--json", "-o", out.to_str().unwrap()], None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["nan"], 0, "{j}");
+    assert!(j["visible_px"].as_u64().unwrap() > 100_000, "{j}");
+    let plain = lobe::render::scene::LobeCompiler::plain(lobe::Backend::Jit, lobe::Mode::Precise);
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/scenes/fill_cook_torrance.toml");
+    let opts = lobe::render::scene::LoadOptions { size: Some((512, 512)), ..Default::default() };
+    let sc = lobe::render::scene::load_scene(&path, &opts, &plain).unwrap_or_else(|d| panic!("{}", d.render(false)));
+    let (_, stats) = lobe::render::render(&sc, &lobe::render::RenderOptions::default()).unwrap();
+    assert!(stats.nan > 0, "the plain form has no NaN pixel here any more: {stats:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -224,7 +224,7 @@ const UNIT_FRAME: &str = "select(lt(abs(Lx*Lx + Ly*Ly + Lz*Lz - 1), 1e-9) * lt(a
 fn the_local_frame_gives_unit_directions_on_every_shape() {
     let src = std::fs::read_to_string(root().join("examples/scenes/torus.toml")).unwrap();
     let opts = LoadOptions { size: Some((96, 96)), formula_override: Some(("frame.brdf".into(), UNIT_FRAME.into())), ..Default::default() };
-    let mut s = scene::parse_scene("torus.toml", &src, &root().join("examples/scenes"), &opts, &LobeCompiler { backend: Backend::Jit, math: lobe::Mode::Precise }).unwrap_or_else(|d| panic!("{}", d.render(false)));
+    let mut s = scene::parse_scene("torus.toml", &src, &root().join("examples/scenes"), &opts, &LobeCompiler::plain(Backend::Jit, lobe::Mode::Precise)).unwrap_or_else(|d| panic!("{}", d.render(false)));
     // Torus, sphere and an OBJ with UVs in one frame.
     let mesh = lobe::render::mesh::load_obj(&root().join("examples/meshes/uv_roof.obj")).unwrap();
     s.objects.push(r::Object { mesh: Arc::new(mesh), material: 0, cull_backfaces: false });
@@ -305,7 +305,7 @@ fn example_scenes_load_with_the_formulas_they_name() {
         assert!(st.visible_pixels > 1000 && st.nan == 0, "{name}: {st:?}");
         assert_eq!(fr.image.rgb, render(&s, 1).0.image.rgb, "{name}: determinism");
         if root().join("examples/explorer").join(real).exists() {
-            let jit = LobeCompiler { backend: Backend::Jit, math: lobe::Mode::Precise };
+            let jit = LobeCompiler::plain(Backend::Jit, lobe::Mode::Precise);
             let s = scene::load_scene(&path, &LoadOptions { size: Some((96, 96)), ..LoadOptions::default() }, &jit).unwrap_or_else(|d| panic!("{}", d.render(false)));
             assert!(render(&s, 2).1.visible_pixels > 1000);
         }

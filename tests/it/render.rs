@@ -13,7 +13,7 @@ use lobe::base::image::Image;
 use lobe::render::image::Transfer;
 use lobe::render::scene::{self, LoadOptions, LobeCompiler};
 
-const JIT: LobeCompiler = LobeCompiler { backend: lobe::Backend::Jit, math: lobe::Mode::Precise };
+const JIT: LobeCompiler = LobeCompiler::plain(lobe::Backend::Jit, lobe::Mode::Precise);
 use lobe::render::{self as r, RenderOptions};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -340,7 +340,7 @@ fn jit_and_interpreter_render_within_one_level() {
     for brdf in ["phong.brdf", "schlick_vr.brdf", "modified_schlick_vr.brdf", "blinn.brdf"] {
         let src = std::fs::read_to_string(root().join("examples/brdfs").join(brdf)).unwrap();
         let o = LoadOptions { formula_override: Some((brdf.into(), src)), ..opts.clone() };
-        let load = |b| scene::load_scene(&scene_file("paper_sphere.toml"), &o, &LobeCompiler { backend: b, math: lobe::Mode::Precise }).map_err(|d| d.render(false));
+        let load = |b| scene::load_scene(&scene_file("paper_sphere.toml"), &o, &LobeCompiler::plain(b, lobe::Mode::Precise)).map_err(|d| d.render(false));
         let (j, i) = (load(lobe::Backend::Jit).unwrap(), load(lobe::Backend::Interp).unwrap());
         let (fj, fi) = (render(&j, 2).0, render(&i, 2).0);
         assert!(fj.image.rgb.iter().zip(&fi.image.rgb).all(|(a, b)| a.abs_diff(*b) <= 1), "{brdf}");
@@ -564,7 +564,7 @@ fn fast_math_materials_render_within_one_level_of_precise() {
         let src = std::fs::read_to_string(root().join("examples/brdfs").join(brdf)).unwrap();
         let o = LoadOptions { formula_override: Some((brdf.into(), src)), ..opts.clone() };
         let load = |math| {
-            let c = LobeCompiler { backend: lobe::Backend::Jit, math };
+            let c = LobeCompiler::plain(lobe::Backend::Jit, math);
             scene::load_scene(&scene_file("paper_sphere.toml"), &o, &c).map_err(|d| d.render(false)).unwrap()
         };
         let (p, f) = (load(lobe::Mode::Precise), load(lobe::Mode::Fast));

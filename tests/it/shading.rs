@@ -21,7 +21,7 @@ fn scenes() -> Vec<PathBuf> {
 
 fn load(path: &Path, size: usize, backend: Backend, math: Mode) -> r::Scene {
     let opts = LoadOptions { size: Some((size, size)), ..LoadOptions::default() };
-    scene::load_scene(path, &opts, &LobeCompiler { backend, math }).unwrap_or_else(|d| panic!("{}", d.render(false)))
+    scene::load_scene(path, &opts, &LobeCompiler::plain(backend, math)).unwrap_or_else(|d| panic!("{}", d.render(false)))
 }
 
 /// Pseudo-random data columns: positions near the origin, normals and tangents of any direction (some

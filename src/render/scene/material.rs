@@ -47,10 +47,21 @@ pub struct CompiledBrdf {
     pub program: crate::render::ProgramSource,
 }
 
-/// The real pipeline: `lobe::compile_source` with the chosen backend, in `math` unless a material says otherwise.
+/// The real pipeline: `lobe::compile_source` with the chosen backend, in `math` unless a material says otherwise,
+/// through `accuracy` when one is given (the accuracy pass's choice, as `eval` and `energy` compile: a render
+/// then shades with the form that has no NaN where the value is finite).
+#[derive(Clone, Debug)]
 pub struct LobeCompiler {
     pub backend: Backend,
     pub math: Mode,
+    pub accuracy: Option<Arc<dyn crate::FormulaChooser>>,
+}
+
+impl LobeCompiler {
+    /// The plain simplification's kernels on `backend` in `math`, without an accuracy pass.
+    pub const fn plain(backend: Backend, math: Mode) -> LobeCompiler {
+        LobeCompiler { backend, math, accuracy: None }
+    }
 }
 
 impl BrdfCompiler for LobeCompiler {
@@ -59,7 +70,7 @@ impl BrdfCompiler for LobeCompiler {
     }
     fn build(&self, file: &str, src: &str, values: &[(String, f64)], math: Option<Mode>) -> Result<CompiledBrdf, Diagnostics> {
         let math = math.unwrap_or(self.math);
-        let opts = crate::Options { backend: self.backend, bake: values.to_vec(), math, ..crate::Options::default() };
+        let opts = crate::Options { backend: self.backend, bake: values.to_vec(), math, accuracy: self.accuracy.clone(), ..crate::Options::default() };
         compile_channels(crate::front::parse(file, src)?, &opts)
     }
 }
