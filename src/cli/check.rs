@@ -97,7 +97,9 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
         budget: std::time::Duration::from_secs_f64(a.budget),
         ..a.prefer.pass(a.points as usize)
     };
-    let pass = robust::improve(&f, &bake, &opts);
+    let spinner = Spinner::new(!a.json.on && std::io::IsTerminal::is_terminal(&std::io::stderr()));
+    let pass = robust::improve_observed(&f, &bake, &opts, &|stage| spinner.show(stage));
+    spinner.finish();
     let pass_ms = t_pass.elapsed().as_secs_f64() * 1e3;
     // How far the worst well-conditioned point is from the ill-conditioned threshold (measured everywhere).
     let cond_well = pass.after.condition_at_worst_well;
@@ -269,5 +271,56 @@ fn print_accuracy(f: &Formula, pass: &robust::Outcome, asked: usize, ms: f64, co
             "    not finite in exact arithmetic (0/0, ∞·0, or a pole such as an input exactly 0), and no limit along an input, at {} points; not counted",
             a.undefined
         );
+    }
+}
+
+/// What the accuracy pass is doing, on stderr, once it has run for a second (a quick check prints nothing):
+/// a spinner with the stage and the elapsed time, cleared before the report.
+struct Spinner {
+    bar: Option<indicatif::ProgressBar>,
+    done: std::sync::Arc<(std::sync::Mutex<bool>, std::sync::Condvar)>,
+}
+
+impl Spinner {
+    fn new(enabled: bool) -> Spinner {
+        let done = std::sync::Arc::new((std::sync::Mutex::new(false), std::sync::Condvar::new()));
+        let bar = enabled.then(|| {
+            let b = indicatif::ProgressBar::with_draw_target(None, indicatif::ProgressDrawTarget::hidden());
+            if let Ok(style) = indicatif::ProgressStyle::with_template("{spinner} accuracy pass: {msg} {elapsed}") {
+                b.set_style(style);
+            }
+            let (b2, done2) = (b.clone(), done.clone());
+            std::thread::spawn(move || {
+                let (lock, cv) = &*done2;
+                let Ok(guard) = lock.lock() else { return };
+                let Ok((finished, _)) = cv.wait_timeout_while(guard, std::time::Duration::from_secs(1), |d| !*d) else { return };
+                if !*finished {
+                    b2.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+                    b2.enable_steady_tick(std::time::Duration::from_millis(120));
+                }
+            });
+            b
+        });
+        Spinner { bar, done }
+    }
+
+    fn show(&self, stage: robust::Stage) {
+        let Some(b) = &self.bar else { return };
+        b.set_message(match stage {
+            robust::Stage::Truth { points } => format!("the truth at {points} points"),
+            robust::Stage::Candidate { name, tried } => format!("candidate {tried} ({name})"),
+            robust::Stage::Report => "the report (conditioning at every point)".to_string(),
+        });
+    }
+
+    fn finish(&self) {
+        let (lock, cv) = &*self.done;
+        if let Ok(mut d) = lock.lock() {
+            *d = true;
+        }
+        cv.notify_all();
+        if let Some(b) = &self.bar {
+            b.finish_and_clear();
+        }
     }
 }

@@ -884,6 +884,18 @@ struct Bench<'a> {
     reference: Reference<'a>,
     o: &'a PassOptions,
     started: std::time::Instant,
+    observe: &'a dyn Fn(Stage),
+}
+
+/// What the pass is doing, for a progress display ([`improve_observed`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    /// The truth at the sample's points (the first and, with few candidates, the largest part).
+    Truth { points: usize },
+    /// Measuring a candidate, the `tried`-th of the search.
+    Candidate { name: &'static str, tried: usize },
+    /// The final report of the chosen form (with the conditioning measured everywhere for `lobe check`).
+    Report,
 }
 
 impl Bench<'_> {
@@ -898,6 +910,7 @@ impl Bench<'_> {
 
     /// The final report of a formula, with the conditioning the options ask for.
     fn report(&self, f: &Formula, s: ErrorStats) -> ErrorStats {
+        (self.observe)(Stage::Report);
         match self.o.conditioning {
             Conditioning::WhereInaccurate => s,
             Conditioning::Everywhere => self.reference.measure(&Interp::with_mode(f, self.o.math), Conditioning::Everywhere),
@@ -911,23 +924,29 @@ fn points_for(base: &Formula, o: &PassOptions) -> usize {
 
 /// The accuracy pass on `orig` with `bake` folded in (module docs).
 pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcome {
+    improve_observed(orig, bake, o, &|_| {})
+}
+
+/// [`improve`], telling `observe` each [`Stage`] as it starts.
+pub fn improve_observed(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions, observe: &dyn Fn(Stage)) -> Outcome {
     let started = std::time::Instant::now();
     let bake = read_bake(orig, bake);
-    let live = live_pass(orig, o, started);
+    let live = live_pass(orig, o, started, observe);
     if bake.is_empty() {
         return live;
     }
-    baked_pass(orig, &bake, &live, o, started)
+    baked_pass(orig, &bake, &live, o, started, observe)
 }
 
 /// The search with every parameter live (module docs).
-fn live_pass(orig: &Formula, o: &PassOptions, started: std::time::Instant) -> Outcome {
+fn live_pass(orig: &Formula, o: &PassOptions, started: std::time::Instant, observe: &dyn Fn(Stage)) -> Outcome {
     let sign = crate::simplify::sign_of(orig, &[]);
     let cands = Candidates::new(orig, &[], sign);
     let base = cands.base(orig);
     let truth_f = crate::simplify::bake_only(orig, &[]);
     let n = points_for(&base, o);
-    let bench = Bench { reference: Reference::new(&truth_f, sample(orig, &[], n, o.seed)), o, started };
+    observe(Stage::Truth { points: n });
+    let bench = Bench { reference: Reference::new(&truth_f, sample(orig, &[], n, o.seed)), o, started, observe };
     let (before, mut cur_got) = bench.run(&base, None);
     let cost_before = cost(&base);
     let base_budget = o.budget_for(cost_before);
@@ -965,6 +984,7 @@ fn live_pass(orig: &Formula, o: &PassOptions, started: std::time::Instant) -> Ou
             k += 1;
             continue;
         }
+        observe(Stage::Candidate { name: c.name(), tried: trials.len() + 1 });
         let (stats, got) = bench.run(&cand, Some(&cur_got));
         let cost_c = cost(&cand);
         let fixes = keeps_promise(&stats, &cur_stats);
@@ -1014,13 +1034,14 @@ fn live_pass(orig: &Formula, o: &PassOptions, started: std::time::Instant) -> Ou
 /// lobe's promise at more points; then the compensated chains of those powers where they are no less accurate
 /// and cheaper (within 3 ulp of pow). No other rule is tried, so the baked kernel agrees with the live one.
 /// `Prefer::Speed` bakes with the simplifier's own chains (the fastest form).
-fn baked_pass(orig: &Formula, bake: &[(usize, f64)], live: &Outcome, o: &PassOptions, started: std::time::Instant) -> Outcome {
+fn baked_pass(orig: &Formula, bake: &[(usize, f64)], live: &Outcome, o: &PassOptions, started: std::time::Instant, observe: &dyn Fn(Stage)) -> Outcome {
     let sign = crate::simplify::sign_of(orig, bake);
     let plain = Candidates::new(orig, bake, sign);
     let base = plain.base(orig);
     let truth_f = crate::simplify::bake_only(orig, bake);
     let n = points_for(&base, o);
-    let bench = Bench { reference: Reference::new(&truth_f, sample(orig, bake, n, o.seed)), o, started };
+    observe(Stage::Truth { points: n });
+    let bench = Bench { reference: Reference::new(&truth_f, sample(orig, bake, n, o.seed)), o, started, observe };
     let (before, mut cur_got) = bench.run(&base, None);
     let cost_before = cost(&base);
     let base_budget = o.budget_for(cost_before);
@@ -1421,6 +1442,22 @@ mod tests {
             }
             assert!(compared > 1000, "{}: {compared} points compared", r.name());
         }
+    }
+
+    /// The stages a progress display sees: the truth first, each measured candidate in order, the report last;
+    /// observing changes nothing.
+    #[test]
+    fn the_pass_reports_its_stages_in_order() {
+        let f = crate::front::parse("b.brdf", "param m = 0.3 in 0.01..1\n1/(m^2 * NH^4) * exp((NH^2 - 1) / (m^2 * NH^2))").unwrap();
+        let o = PassOptions { points: 512, ..PassOptions::default() };
+        let seen = std::sync::Mutex::new(vec![]);
+        let out = improve_observed(&f, &[], &o, &|s| seen.lock().unwrap().push(s));
+        let seen = seen.into_inner().unwrap();
+        assert_eq!(seen.first(), Some(&Stage::Truth { points: out.points }));
+        assert_eq!(seen.last(), Some(&Stage::Report));
+        let tried: Vec<usize> = seen.iter().filter_map(|s| if let Stage::Candidate { tried, .. } = s { Some(*tried) } else { None }).collect();
+        assert_eq!(tried, (1..=out.trials.len()).collect::<Vec<_>>());
+        assert_eq!(out.formula.to_program_text(), improve(&f, &[], &o).formula.to_program_text());
     }
 
     #[test]
