@@ -103,7 +103,8 @@ fn hostile_parameter_names_export_valid_glsl() {
         eprintln!("glslangValidator not installed: hostile names checked by the unit test only");
         return;
     };
-    let src = "@name \"x\r#define pow(a,b) 0.0\"\nparam t0 = 1\nparam float = 2\nparam gl_Position = 3\nparam output = 4\n\
+    // A line separator in the name (a CR would end the string): the export must not let it start a directive.
+    let src = "@name \"x\u{2028}#define pow(a,b) 0.0\"\nparam t0 = 1\nparam float = 2\nparam gl_Position = 3\nparam output = 4\n\
                param alias = 5\nparam var = 6\nparam loop = 7\nparam f32 = 8\nparam main = 9\nparam __x = 1\n\
                let a = pow(NH, n)\nlet b = a * a + t0\nb * b * float * gl_Position * output * alias * var * loop * f32 * main * __x\n";
     let f = lobe::front::parse("hostile.brdf", src).unwrap_or_else(|d| panic!("{}", d.render(false)));
