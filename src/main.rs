@@ -63,7 +63,27 @@ fn quiet_on_broken_pipe() {
     }));
 }
 
+/// Stack reserved for the command's thread. Formulas are trees up to the 1 MiB source cap (a 600 000-node chain
+/// such as `NH+NH+…`), and the passes that recurse over them (lowering, printing, the accuracy pass's rules) need
+/// more than a default 8 MiB main thread: address space only, the pages a command touches are all it uses.
+const COMMAND_STACK: usize = 1 << 30;
+/// The same for rayon's workers (the pass measures candidates and the renderer shades tiles on them).
+const WORKER_STACK: usize = 256 << 20;
+
 fn main() {
+    // Without the pool (a platform that refuses the reservation) rayon builds its default one on first use.
+    let _ = rayon::ThreadPoolBuilder::new().stack_size(WORKER_STACK).build_global();
+    let run = std::thread::Builder::new().name("lobe".into()).stack_size(COMMAND_STACK).spawn(command);
+    match run.map(|t| t.join()) {
+        Ok(Ok(())) => {}
+        // The panic hook has printed the message.
+        Ok(Err(_)) => std::process::exit(101),
+        // No thread with that stack (address space refused): run on this one.
+        Err(_) => command(),
+    }
+}
+
+fn command() {
     // A killed write must not leave `.NAME.lobe-tmp-PID` files behind.
     lobe::base::output::clean_up_on_signals();
     quiet_on_broken_pipe();

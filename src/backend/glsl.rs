@@ -220,6 +220,9 @@ fn uses_of(ir: &Ir, roots: &[NodeId]) -> (InputSet, Vec<u16>) {
 /// temporary `tK`; every other node is inlined with full parentheses. Returns each root's expression.
 /// Inputs are referred to by name (function arguments or locals) and parameters by `params` (see
 /// [`param_reads`]). An internal builtin is refused ([`refuse_internal`]).
+/// The longest expression text written inline; a longer one is bound to a temporary.
+const MAX_INLINE_CHARS: usize = 1000;
+
 fn emit(ir: &Ir, roots: &[NodeId], d: Dialect, exact: bool, params: &[String], out: &mut String) -> Result<Vec<String>, Diagnostic> {
     let mut uses = vec![0u32; ir.len()];
     for r in roots {
@@ -263,7 +266,11 @@ fn emit(ir: &Ir, roots: &[NodeId], d: Dialect, exact: bool, params: &[String], o
             }
         };
         let leaf = matches!(node, Node::Const(_) | Node::Input(_) | Node::Param(_) | Node::Column(_));
-        let bind = Some(id) != single && !leaf && (uses[id.index()] > 1 || matches!(node, Node::Call(..)));
+        // A long expression gets a name too: a chain of single-use nodes (`NH+NH+…`, 600 000 deep under the
+        // source cap) would otherwise copy its growing text at every node (quadratic; 23 GB) and nest deeper
+        // than shader compilers take.
+        let long = e.len() > MAX_INLINE_CHARS;
+        let bind = Some(id) != single && !leaf && (uses[id.index()] > 1 || matches!(node, Node::Call(..)) || long);
         if bind {
             let tname = format!("t{ntemps}");
             ntemps += 1;

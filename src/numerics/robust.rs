@@ -918,8 +918,13 @@ impl Bench<'_> {
     }
 }
 
-fn points_for(base: &Formula, o: &PassOptions) -> usize {
-    o.points.min((MAX_WORK / cost(base).max(1.0)) as usize).max(64)
+/// The points a search measures: fewer for a costly kernel, and for a formula whose truth (every node as
+/// written, parameter-only ones included, at every point) is far larger than its simplified kernel — an eighth
+/// of a cost unit per node, so only such formulas are affected (a 10⁶-node chain that simplifies to `NH`).
+fn points_for(base: &Formula, truth_f: &Formula, o: &PassOptions) -> usize {
+    let truth_nodes = truth_f.ir.use_counts(truth_f.root).iter().filter(|&&u| u > 0).count() as f64;
+    let work = cost(base).max(truth_nodes / 8.0).max(1.0);
+    o.points.min((MAX_WORK / work) as usize).max(64)
 }
 
 /// The accuracy pass on `orig` with `bake` folded in (module docs).
@@ -944,7 +949,7 @@ fn live_pass(orig: &Formula, o: &PassOptions, started: std::time::Instant, obser
     let cands = Candidates::new(orig, &[], sign);
     let base = cands.base(orig);
     let truth_f = crate::simplify::bake_only(orig, &[]);
-    let n = points_for(&base, o);
+    let n = points_for(&base, &truth_f, o);
     observe(Stage::Truth { points: n });
     let bench = Bench { reference: Reference::new(&truth_f, sample(orig, &[], n, o.seed)), o, started, observe };
     let (before, mut cur_got) = bench.run(&base, None);
@@ -1039,7 +1044,7 @@ fn baked_pass(orig: &Formula, bake: &[(usize, f64)], live: &Outcome, o: &PassOpt
     let plain = Candidates::new(orig, bake, sign);
     let base = plain.base(orig);
     let truth_f = crate::simplify::bake_only(orig, bake);
-    let n = points_for(&base, o);
+    let n = points_for(&base, &truth_f, o);
     observe(Stage::Truth { points: n });
     let bench = Bench { reference: Reference::new(&truth_f, sample(orig, bake, n, o.seed)), o, started, observe };
     let (before, mut cur_got) = bench.run(&base, None);
