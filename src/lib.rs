@@ -36,7 +36,7 @@ pub mod report;
 pub mod serve;
 
 pub use builtins::Mode;
-pub use backend::{Backend, Columns, Evaluator, Kernel};
+pub use backend::{Backend, Columns, Evaluator, Kernel, Tier};
 pub use base::diag::{Diagnostic, Diagnostics, Hint};
 pub use frame::{from_cosines, Frame};
 pub use ir::{Formula, Input, N_INPUTS};
@@ -97,8 +97,18 @@ pub fn build_kernel(f: Arc<Formula>, backend: Backend, math: Mode) -> Result<Ker
     let ev: Arc<dyn Evaluator> = match backend {
         Backend::Interp => Arc::new(backend::interp::Interp::with_mode(&f, math)),
         Backend::Jit => backend::jit::kernel_evaluator(&f, math).map_err(|d| Diagnostics::single(&f.file, d))?,
+        #[cfg(feature = "llvm")]
+        Backend::Llvm => backend::llvm::kernel_evaluator(&f, math).map_err(|d| Diagnostics::single(&f.file, d))?,
+        #[cfg(not(feature = "llvm"))]
+        Backend::Llvm => return Err(Diagnostics::single(&f.file, llvm_missing())),
     };
     Ok(Kernel::new(f, backend, math, ev, t.elapsed()))
+}
+
+/// Why a build without the cargo feature `llvm` cannot give an LLVM kernel, and how to get one.
+pub fn llvm_missing() -> Diagnostic {
+    Diagnostic::error("this build of lobe has no LLVM tier")
+        .hint("rebuild with `cargo build --release --features llvm` (needs LLVM 19: `apt-get install llvm-19-dev libpolly-19-dev libzstd-dev`), or use `--tier cranelift`")
 }
 
 /// Checks the names and ranges of parameter values to bake against the formula's declared parameters.
