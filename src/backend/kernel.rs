@@ -169,6 +169,18 @@ impl Tier {
         }
     }
 
+    /// The LLVM tier's lanes on this host (`None` in a build without it).
+    pub fn llvm_lanes() -> Option<u32> {
+        #[cfg(feature = "llvm")]
+        {
+            super::llvm::host().ok().map(|h| h.lanes)
+        }
+        #[cfg(not(feature = "llvm"))]
+        {
+            None
+        }
+    }
+
     /// Whether this build has the LLVM tier and it can target the host.
     pub fn llvm_available() -> bool {
         #[cfg(feature = "llvm")]
