@@ -107,8 +107,7 @@ pub fn build_kernel(f: Arc<Formula>, backend: Backend, math: Mode) -> Result<Ker
 
 /// Why a build without the cargo feature `llvm` cannot give an LLVM kernel, and how to get one.
 pub fn llvm_missing() -> Diagnostic {
-    Diagnostic::error("this build of lobe has no LLVM tier")
-        .hint("rebuild with `cargo build --release --features llvm` (needs LLVM 19: `apt-get install llvm-19-dev libpolly-19-dev libzstd-dev`), or use `--tier cranelift`")
+    Diagnostic::error("this build of lobe has no LLVM tier").hint(Hint::BuildWithLlvm)
 }
 
 /// Checks the names and ranges of parameter values to bake against the formula's declared parameters.

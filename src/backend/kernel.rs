@@ -158,11 +158,11 @@ impl Tier {
     }
 
     /// The backend that `backend` with this tier means: the tier picks the JIT; the interpreter has none
-    /// (`--backend interp --tier llvm` is a contradiction, reported as such).
+    /// (the interpreter with the LLVM tier is a contradiction, reported as such).
     pub fn resolve(self, backend: Backend) -> Result<Backend, String> {
         match (backend, self) {
             (Backend::Interp, Tier::Cranelift | Tier::Auto) => Ok(Backend::Interp),
-            (Backend::Interp, Tier::Llvm) => Err("`--tier llvm` picks a JIT; it does not apply to `--backend interp`".into()),
+            (Backend::Interp, Tier::Llvm) => Err("the LLVM tier is a JIT; it does not apply to the interpreter backend".into()),
             (_, Tier::Cranelift) => Ok(Backend::Jit),
             (_, Tier::Llvm) => Ok(Backend::Llvm),
             (_, Tier::Auto) => Ok(if Tier::llvm_available() { Backend::Llvm } else { Backend::Jit }),

@@ -58,7 +58,7 @@ pub struct BenchRow {
     #[serde(serialize_with = "crate::base::json::num")]
     pub robust_jit_ns: f64,
     pub pareto: bool,
-    /// The batched tiers side by side (`--tier llvm|auto` in a build with the LLVM tier; absent otherwise).
+    /// The batched tiers side by side (the `llvm` or `auto` tier in a build with the LLVM tier; absent otherwise).
     #[serde(flatten)]
     pub tiers: Option<TierColumns>,
 }

@@ -333,7 +333,7 @@ fn tier_picks_the_jit_or_says_how_to_get_llvm() {
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!(v[0].get("llvm_batch_ns").is_none(), "{v}");
     let o = lobe(&["eval", file, "--at", "NH=0.5", "--backend", "interp", "--tier", "llvm"], None);
-    assert_clean_error(&o, "interp with a JIT tier", "does not apply to `--backend interp`");
+    assert_clean_error(&o, "interp with a JIT tier", "does not apply to the interpreter backend");
     let o = lobe(&["eval", file, "--at", "NH=0.5", "--tier", "gcc"], None);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("expected `cranelift`, `llvm` or `auto`"), "{}", stderr(&o));

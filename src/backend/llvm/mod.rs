@@ -71,7 +71,7 @@ pub fn host() -> Result<&'static Host, JitError> {
     .map_err(|e| JitError::Host(e.clone()))
 }
 
-/// Whether the LLVM tier can compile for this host (what `--tier auto` asks).
+/// Whether the LLVM tier can compile for this host (what the `auto` tier asks).
 pub fn available() -> bool {
     host().is_ok()
 }
