@@ -9,7 +9,8 @@
 //! frame      the shading frame: N, X, Y and the directions L, V → the kernel inputs
 //! front      .brdf text → logos tokens → lalrpop AST with spans → names/arity resolved → ir::Formula
 //! simplify   fixpoint rewrites, baked parameters, integer powers, used inputs
-//! backend    the Evaluator interface and Kernel; interpreter (reference), Cranelift JIT, GLSL/WGSL emission
+//! backend    the Evaluator interface and Kernel; interpreter (reference), Cranelift JIT, the LLVM tier (cargo
+//!            feature `llvm`: batched kernels in the host's widest lanes), GLSL/WGSL emission
 //! lib.rs     the compile entry points: compile_source, compile_formula, build_kernel
 //! numerics   energy and normalisation, accuracy against a reference, the domain sweep, fits, twins; the
 //!            higher-precision truth and the accuracy pass's measured choice (passed down as a FormulaChooser)
