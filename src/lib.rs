@@ -9,7 +9,8 @@
 //! frame      the shading frame: N, X, Y and the directions L, V → the kernel inputs
 //! front      .brdf text → logos tokens → lalrpop AST with spans → names/arity resolved → ir::Formula
 //! simplify   fixpoint rewrites, baked parameters, integer powers, used inputs
-//! backend    the Evaluator interface and Kernel; interpreter (reference), Cranelift JIT, GLSL/WGSL emission
+//! backend    the Evaluator interface and Kernel; interpreter (reference), Cranelift JIT, the LLVM tier (cargo
+//!            feature `llvm`: batched kernels in the host's widest lanes), GLSL/WGSL emission
 //! lib.rs     the compile entry points: compile_source, compile_formula, build_kernel
 //! numerics   energy and normalisation, accuracy against a reference, the domain sweep, fits, twins; the
 //!            higher-precision truth and the accuracy pass's measured choice (passed down as a FormulaChooser)
@@ -36,7 +37,7 @@ pub mod report;
 pub mod serve;
 
 pub use builtins::Mode;
-pub use backend::{Backend, Columns, Evaluator, Kernel};
+pub use backend::{Backend, Columns, Evaluator, Kernel, Tier};
 pub use base::diag::{Diagnostic, Diagnostics, Hint};
 pub use frame::{from_cosines, Frame};
 pub use ir::{Formula, Input, N_INPUTS};
@@ -97,8 +98,17 @@ pub fn build_kernel(f: Arc<Formula>, backend: Backend, math: Mode) -> Result<Ker
     let ev: Arc<dyn Evaluator> = match backend {
         Backend::Interp => Arc::new(backend::interp::Interp::with_mode(&f, math)),
         Backend::Jit => backend::jit::kernel_evaluator(&f, math).map_err(|d| Diagnostics::single(&f.file, d))?,
+        #[cfg(feature = "llvm")]
+        Backend::Llvm => backend::llvm::kernel_evaluator(&f, math).map_err(|d| Diagnostics::single(&f.file, d))?,
+        #[cfg(not(feature = "llvm"))]
+        Backend::Llvm => return Err(Diagnostics::single(&f.file, llvm_missing())),
     };
     Ok(Kernel::new(f, backend, math, ev, t.elapsed()))
+}
+
+/// Why a build without the cargo feature `llvm` cannot give an LLVM kernel, and how to get one.
+pub fn llvm_missing() -> Diagnostic {
+    Diagnostic::error("this build of lobe has no LLVM tier").hint(Hint::BuildWithLlvm)
 }
 
 /// Checks the names and ranges of parameter values to bake against the formula's declared parameters.

@@ -78,6 +78,8 @@ pub trait Evaluator: AsEvaluator + Send + Sync {
 pub enum Prepared<'a> {
     Jit(super::jit::PreparedJit<'a>),
     Interp(super::interp::PreparedInterp<'a>),
+    #[cfg(feature = "llvm")]
+    Llvm(super::llvm::PreparedLlvm<'a>),
     /// Any other evaluator (closures, wrappers): its `eval` with the kept parameters.
     Other(&'a dyn Evaluator, Vec<f64>),
 }
@@ -90,6 +92,8 @@ impl Prepared<'_> {
         match self {
             Prepared::Jit(j) => j.eval(x),
             Prepared::Interp(i) => i.eval(x),
+            #[cfg(feature = "llvm")]
+            Prepared::Llvm(l) => l.eval(x),
             Prepared::Other(ev, params) => ev.eval(x, params),
         }
     }
@@ -108,8 +112,11 @@ impl<F: Fn(&[f64; N_INPUTS], &[f64]) -> f64 + Send + Sync> Evaluator for FnEvalu
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum Backend {
     Interp,
+    /// The Cranelift JIT.
     #[default]
     Jit,
+    /// The LLVM tier (kernels only; a build without the cargo feature `llvm` refuses it with a diagnostic).
+    Llvm,
 }
 
 impl Backend {
@@ -117,6 +124,84 @@ impl Backend {
         match self {
             Backend::Interp => "interp",
             Backend::Jit => "jit",
+            Backend::Llvm => "llvm",
+        }
+    }
+
+    /// The JIT tier of this backend (`None` for the interpreter).
+    pub fn tier(self) -> Option<Tier> {
+        match self {
+            Backend::Interp => None,
+            Backend::Jit => Some(Tier::Cranelift),
+            Backend::Llvm => Some(Tier::Llvm),
+        }
+    }
+}
+
+/// Which compiler a JIT kernel is built with: `cranelift` (fast to compile, two lanes), `llvm` (LLVM 19, the
+/// host's widest lanes; cargo feature `llvm`), or `auto` (LLVM when this build has it, else Cranelift).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Tier {
+    #[default]
+    Cranelift,
+    Llvm,
+    Auto,
+}
+
+impl Tier {
+    pub fn name(self) -> &'static str {
+        match self {
+            Tier::Cranelift => "cranelift",
+            Tier::Llvm => "llvm",
+            Tier::Auto => "auto",
+        }
+    }
+
+    /// The backend that `backend` with this tier means: the tier picks the JIT; the interpreter has none
+    /// (the interpreter with the LLVM tier is a contradiction, reported as such).
+    pub fn resolve(self, backend: Backend) -> Result<Backend, String> {
+        match (backend, self) {
+            (Backend::Interp, Tier::Cranelift | Tier::Auto) => Ok(Backend::Interp),
+            (Backend::Interp, Tier::Llvm) => Err("the LLVM tier is a JIT; it does not apply to the interpreter backend".into()),
+            (_, Tier::Cranelift) => Ok(Backend::Jit),
+            (_, Tier::Llvm) => Ok(Backend::Llvm),
+            (_, Tier::Auto) => Ok(if Tier::llvm_available() { Backend::Llvm } else { Backend::Jit }),
+        }
+    }
+
+    /// The LLVM tier's lanes on this host (`None` in a build without it).
+    pub fn llvm_lanes() -> Option<u32> {
+        #[cfg(feature = "llvm")]
+        {
+            super::llvm::host().ok().map(|h| h.lanes)
+        }
+        #[cfg(not(feature = "llvm"))]
+        {
+            None
+        }
+    }
+
+    /// Whether this build has the LLVM tier and it can target the host.
+    pub fn llvm_available() -> bool {
+        #[cfg(feature = "llvm")]
+        {
+            super::llvm::available()
+        }
+        #[cfg(not(feature = "llvm"))]
+        {
+            false
+        }
+    }
+}
+
+impl std::str::FromStr for Tier {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Tier, String> {
+        match s {
+            "cranelift" => Ok(Tier::Cranelift),
+            "llvm" => Ok(Tier::Llvm),
+            "auto" => Ok(Tier::Auto),
+            _ => Err(format!("unknown tier `{s}`; expected `cranelift`, `llvm` or `auto`")),
         }
     }
 }

@@ -39,6 +39,8 @@ pub enum Hint {
     BakeEveryParam,
     /// A fit needs at least one parameter to vary, with its range.
     FitSomeParam,
+    /// The LLVM tier was asked of a build without it: how to build it in, or use the Cranelift tier.
+    BuildWithLlvm,
 }
 
 impl From<String> for Hint {
@@ -70,6 +72,9 @@ pub trait Wording {
 /// web page).
 pub(crate) struct Plain;
 
+/// Debian's packages the cargo feature `llvm` builds against.
+pub const LLVM_PACKAGES: &str = "needs LLVM 19: apt-get install llvm-19-dev libpolly-19-dev libzstd-dev";
+
 impl Wording for Plain {
     fn hint(&self, h: &Hint) -> String {
         match h {
@@ -79,6 +84,7 @@ impl Wording for Plain {
             Hint::InputNotParam { name } => format!("`{name}` is an input (a cosine), not a parameter; give it as an input value"),
             Hint::BakeEveryParam => "give every parameter a value before normalising".into(),
             Hint::FitSomeParam => "name at least one parameter to fit, with its range (e.g. a in 1..1000)".into(),
+            Hint::BuildWithLlvm => format!("rebuild lobe with the cargo feature `llvm` ({LLVM_PACKAGES}), or use the Cranelift tier"),
         }
     }
     fn setting(&self, s: &Setting) -> String {

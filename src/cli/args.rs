@@ -106,6 +106,27 @@ impl BackendArg {
     }
 }
 
+/// `--tier cranelift|llvm|auto`: which compiler `--backend jit` means.
+#[derive(clap::Args, Clone, Copy, Debug)]
+pub struct TierArg {
+    /// JIT tier: `cranelift` (the default), `llvm` (LLVM 19 in the host's widest f64 lanes: a build with
+    /// `--features llvm`), or `auto` (LLVM when this build has it, else Cranelift).
+    #[arg(id = "tier", long = "tier", value_name = "TIER", default_value = "cranelift")]
+    pub tier: lobe::Tier,
+}
+
+impl TierArg {
+    /// The backend `backend` with this tier means; `llvm` in a build without the LLVM tier is an error with the
+    /// rebuild hint (not a failure later, at the first compile).
+    pub fn backend(&self, backend: Backend) -> Result<Backend, CliError> {
+        let b = self.tier.resolve(backend).map_err(|e| CliError::hint(e, "drop --tier, or use --backend jit"))?;
+        if b == Backend::Llvm && !lobe::Tier::llvm_available() {
+            return Err(CliError::Error(lobe::llvm_missing()));
+        }
+        Ok(b)
+    }
+}
+
 /// `--math precise|fast`: which definition of the transcendental builtins kernels run.
 #[derive(clap::Args, Clone, Copy, Debug)]
 pub struct MathArg {

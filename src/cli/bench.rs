@@ -3,7 +3,9 @@
 //! Speed against error, in one run: for each formula its compile time, ns/eval on the scalar JIT, the batched
 //! JIT and the interpreter (and hand-written Rust where lobe has a twin), its error against the reference on
 //! the papers' grid, and its energy at the benchmark n. The table is sorted by cost with the Pareto front
-//! marked; `--plot` draws cost against error.
+//! marked; `--plot` draws cost against error. With the LLVM tier in the build (`--tier auto`, the default, or
+//! `--tier llvm`), a second table times Cranelift's and LLVM's batched kernels side by side on the same points
+//! (`--timing-points`), with each tier's compile time.
 
 use super::args::{self, Force, Json, Params};
 use super::common::{self, CliError};
@@ -45,6 +47,61 @@ pub struct BenchArgs {
     pub math: String,
     #[command(flatten)]
     pub force: Force,
+    /// Batched tiers to time: `auto` (Cranelift, and LLVM when this build has it), `llvm` (both; an error in a
+    /// build without `--features llvm`) or `cranelift` (Cranelift only).
+    #[arg(long = "tier", value_name = "TIER", default_value = "auto")]
+    pub tier: lobe::Tier,
+    /// Points per timed pass (every timing column).
+    #[arg(long = "timing-points", value_name = "N", default_value_t = 4096, value_parser = clap::value_parser!(u64).range(1..=1 << 26))]
+    pub timing_points: u64,
+}
+
+impl BenchArgs {
+    /// Whether to time the LLVM tier.
+    fn llvm(&self) -> Result<bool, CliError> {
+        match self.tier {
+            lobe::Tier::Cranelift => Ok(false),
+            lobe::Tier::Auto => Ok(lobe::Tier::llvm_available()),
+            lobe::Tier::Llvm if lobe::Tier::llvm_available() => Ok(true),
+            lobe::Tier::Llvm => Err(CliError::Error(lobe::llvm_missing())),
+        }
+    }
+
+    fn measure(&self) -> MeasureOptions {
+        MeasureOptions { points: self.timing_points as usize, samples: self.samples }
+    }
+}
+
+/// Cranelift's and LLVM's batched kernels of `baked`'s formula, timed on the same points, and their compile
+/// times (median of three compiles each).
+fn tier_columns(baked: &lobe::Kernel, params: &[f64], a: &BenchArgs) -> Result<bench::TierColumns, CliError> {
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let f = &baked.formula;
+    let mut cl = vec![];
+    let mut ll = vec![];
+    let mut llvm = None;
+    for _ in 0..3 {
+        let t = Instant::now();
+        let j = lobe::backend::jit::jit_kernel_uncached(f, baked.math).map_err(|e| CliError::msg(e.to_string()))?;
+        lobe::Evaluator::warm_up(&j);
+        cl.push(t.elapsed().as_secs_f64() * 1e3);
+        let k = lobe::build_kernel(f.clone(), Backend::Llvm, baked.math)?;
+        ll.push(k.compile_time.as_secs_f64() * 1e3);
+        llvm = Some(k);
+    }
+    let llvm = llvm.ok_or_else(|| CliError::msg("no LLVM kernel"))?;
+    let opts = a.measure();
+    Ok(bench::TierColumns {
+        cranelift_batch_ns: lobe::report::measure::time_batched(baked, params, opts).median_ns,
+        llvm_batch_ns: lobe::report::measure::time_batched(&llvm, params, opts).median_ns,
+        llvm_lanes: lobe::Tier::llvm_lanes().unwrap_or(0),
+        cranelift_compile_ms: median(cl),
+        llvm_compile_ms: median(ll),
+        points: opts.points,
+    })
 }
 
 fn catalogue() -> Result<Vec<String>, CliError> {
@@ -119,8 +176,8 @@ fn row(
     let opts = |bake: Vec<(String, f64)>| Options { backend: Backend::Jit, bake, math, ..Options::default() };
     let baked = lobe::compile_formula(f.clone(), &opts(set.clone()))?;
     let live = lobe::compile_formula(f.clone(), &opts(vec![]))?;
-    let m = measure_kernel(&baked, &params, MeasureOptions { points: 4096, samples: a.samples })
-        .map_err(|e| CliError::msg(format!("{path}: {e}")))?;
+    let m = measure_kernel(&baked, &params, a.measure()).map_err(|e| CliError::msg(format!("{path}: {e}")))?;
+    let tiers = if a.llvm()? { Some(tier_columns(&baked, &params, a)?) } else { None };
     let stem = Path::new(path).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     let native_ns = lobe::numerics::twins::by_stem(&stem).map(|t| time_twin(t.ev.as_ref(), &params, a.samples));
     let (lobe, _) = choose_lobe_input(live.used_inputs());
@@ -139,7 +196,7 @@ fn row(
     let pass = lobe::numerics::robust::improve(f, &bake, &Default::default());
     let robust_jit_ns = if pass.trials.iter().any(|t| t.kept) {
         let k = lobe::build_kernel(std::sync::Arc::new(pass.formula.clone()), Backend::Jit, math)?;
-        measure_kernel(&k, &params, MeasureOptions { points: 4096, samples: a.samples })
+        measure_kernel(&k, &params, a.measure())
             .map_err(|e| CliError::msg(format!("{path}: {e}")))?
             .scalar_jit
             .median_ns
@@ -168,10 +225,13 @@ fn row(
         bits_error_max_before: pass.before.max_bits,
         robust_jit_ns,
         pareto: false,
+        tiers,
     })
 }
 
 pub fn run(a: &BenchArgs) -> Result<(), CliError> {
+    // Before any work: `--tier llvm` in a build without the LLVM tier is an error.
+    a.llvm()?;
     let files = if a.files.is_empty() { catalogue()? } else { a.files.clone() };
     let set: Vec<(String, f64)> = {
         let s = a.set.list()?;
@@ -216,8 +276,9 @@ pub fn run(a: &BenchArgs) -> Result<(), CliError> {
     } else {
         let n = set.iter().find(|(k, _)| k == "n").map(|(_, v)| *v).unwrap_or(50.0);
         println!("lobe bench — {} formulas, timings at n = {n} (baked), errors vs {} over n = 1..1000", rows.len(), a.reference);
-        println!("machine: {}; timings single-threaded, median of {} samples of 4096 points", bench::machine(), a.samples);
+        println!("machine: {}; timings single-threaded, median of {} samples of {} points", bench::machine(), a.samples, a.timing_points);
         print!("{}", bench::table(&rows));
+        print!("{}", bench::tiers_table(&rows));
     }
     if let (Some(path), Some(format)) = (&a.plot, plot_format) {
         let pts: Vec<CostError> = rows

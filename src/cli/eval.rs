@@ -1,4 +1,5 @@
-//! `lobe eval FILE --set n=50 --at NH=0.95,NL=0.7 [--normalize] [--backend jit|interp] [--math precise|fast] [--json]`
+//! `lobe eval FILE --set n=50 --at NH=0.95,NL=0.7 [--normalize] [--backend jit|interp] [--tier cranelift|llvm|auto]
+//! [--math precise|fast] [--json]`
 //! `lobe eval FILE --at L=0.3,0.1,0.9,V=0,0,1`: directions in the local frame (N = +z, X = +x, Y = +y); every
 //! input is then computed from them as the renderer does.
 //! `lobe eval FILE --points PATH|- [--json]`: every row of a CSV through the batched kernel ([`super::points`]).
@@ -6,7 +7,7 @@
 //! A colour formula is compiled channel by channel (three kernels sharing the parameters) and prints
 //! `[r, g, b]` per point.
 
-use super::args::{self, BackendArg, FormulaSource, Json, Params, PreferArg};
+use super::args::{self, BackendArg, FormulaSource, Json, Params, PreferArg, TierArg};
 use super::common::{self, CliError};
 use lobe::report::eval::{EvalReport, PointValue, PointsReport};
 use lobe::ir::{Input, InputSet, N_INPUTS};
@@ -34,6 +35,8 @@ pub struct EvalArgs {
     pub normalize: bool,
     #[command(flatten)]
     pub backend: BackendArg,
+    #[command(flatten)]
+    pub tier: TierArg,
     #[command(flatten)]
     pub prefer: PreferArg,
     #[command(flatten)]
@@ -165,6 +168,7 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
     let set = a.set.list()?;
     let at = args::merge_repeated("--at", &a.at, |v| v.iter().map(|x| number(*x)).collect::<Vec<_>>().join(","))?;
     let f = a.formula.load()?;
+    let backend = a.tier.backend(a.backend.kind)?;
     let pass = |opts| super::common::with_pass(opts, a.prefer.pass(lobe::numerics::robust::PassOptions::default().points));
     let ks: Vec<Kernel> = if a.normalize {
         if f.is_rgb() {
@@ -177,11 +181,11 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
         let mut bake = set.clone();
         bake.extend(f.params.iter().filter(|p| !set.iter().any(|(k, _)| *k == p.name)).map(|p| (p.name.clone(), p.default)));
         let s = lobe::simplified(&f, &pass(lobe::Options { bake, ..Default::default() }))?;
-        vec![lobe::build_kernel(std::sync::Arc::new(lobe::numerics::normalize::bake_coefficient(s)?), a.backend.kind, a.backend.math.mode)?]
+        vec![lobe::build_kernel(std::sync::Arc::new(lobe::numerics::normalize::bake_coefficient(s)?), backend, a.backend.math.mode)?]
     } else {
         let mut ks = vec![];
         for c in f.channels() {
-            ks.push(lobe::compile_formula(c, &pass(a.backend.options(set.clone())))?);
+            ks.push(lobe::compile_formula(c, &pass(lobe::Options { backend, ..a.backend.options(set.clone()) }))?);
         }
         ks
     };

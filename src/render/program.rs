@@ -354,6 +354,8 @@ impl ProgramCode {
         Ok(match backend {
             Backend::Interp => ProgramCode::Interp(Arc::new(ProgramInterp::new(p, mode))),
             Backend::Jit => ProgramCode::Jit(crate::backend::jit::shade_code(p, mode)?),
+            // The LLVM tier compiles kernels only, not multi-output shading programs.
+            Backend::Llvm => return Err(JitError::Host("the LLVM tier compiles kernels only; shading programs run on the Cranelift tier".into())),
         })
     }
 

@@ -58,6 +58,55 @@ pub struct BenchRow {
     #[serde(serialize_with = "crate::base::json::num")]
     pub robust_jit_ns: f64,
     pub pareto: bool,
+    /// The batched tiers side by side (the `llvm` or `auto` tier in a build with the LLVM tier; absent otherwise).
+    #[serde(flatten)]
+    pub tiers: Option<TierColumns>,
+}
+
+/// Cranelift's and LLVM's batched kernels of one formula, timed on the same points.
+#[derive(Clone, Debug, Serialize)]
+pub struct TierColumns {
+    /// ns per element, Cranelift's batched kernel (2 lanes) and LLVM's.
+    #[serde(serialize_with = "crate::base::json::num")]
+    pub cranelift_batch_ns: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
+    pub llvm_batch_ns: f64,
+    pub llvm_lanes: u32,
+    /// Compile time of everything a batch call needs (Cranelift: scalar, prepare and batched kernels; LLVM:
+    /// prepare and batched kernels), median of three compiles, ms.
+    #[serde(serialize_with = "crate::base::json::num")]
+    pub cranelift_compile_ms: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
+    pub llvm_compile_ms: f64,
+    /// Elements per timed pass.
+    pub points: usize,
+}
+
+/// The batched tiers' table: one line per row that has them (empty when none has).
+pub fn tiers_table(rows: &[BenchRow]) -> String {
+    let with: Vec<(&BenchRow, &TierColumns)> = rows.iter().filter_map(|r| r.tiers.as_ref().map(|t| (r, t))).collect();
+    if with.is_empty() {
+        return String::new();
+    }
+    let mut out = format!("\nbatched tiers ({} points per pass, 1 thread):\n", with[0].1.points);
+    out.push_str(&format!(
+        "{:<28} {:<7} {:>12} {:>12} {:>8} {:>5} {:>12} {:>10}\n",
+        "formula", "math", "cranelift ns", "llvm ns", "speedup", "lanes", "cranelift ms", "llvm ms"
+    ));
+    for (r, t) in with {
+        out.push_str(&format!(
+            "{:<28} {:<7} {:>12.2} {:>12.2} {:>7.2}× {:>5} {:>12.2} {:>10.1}\n",
+            truncate(&r.name, 28),
+            r.math,
+            t.cranelift_batch_ns,
+            t.llvm_batch_ns,
+            t.cranelift_batch_ns / t.llvm_batch_ns,
+            t.llvm_lanes,
+            t.cranelift_compile_ms,
+            t.llvm_compile_ms
+        ));
+    }
+    out
 }
 
 /// Marks `pareto` on every row (by `jit_ns` and `mean_abs_grid`).
@@ -179,6 +228,7 @@ mod tests {
             bits_error_max_before: 0.0,
             robust_jit_ns: ns,
             pareto: false,
+            tiers: None,
         }
     }
 

@@ -39,11 +39,23 @@ fn compile_us(ks: &[Kernel]) -> f64 {
     ks.iter().map(|k| k.compile_time.as_secs_f64()).sum::<f64>() * 1e6
 }
 
+/// The LLVM tier's lanes when `ks` are LLVM kernels.
+fn lanes(ks: &[Kernel]) -> Option<u32> {
+    if ks[0].backend == crate::Backend::Llvm {
+        crate::Tier::llvm_lanes()
+    } else {
+        None
+    }
+}
+
 /// `lobe eval` at one point.
 #[derive(Clone, Debug, Serialize)]
 pub struct EvalReport {
     pub value: PointValue,
     pub backend: &'static str,
+    /// The LLVM tier's lanes (absent for the other backends).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lanes: Option<u32>,
     #[serde(serialize_with = "json::num")]
     pub compile_us: f64,
     /// Set when a direction was normalised.
@@ -54,7 +66,7 @@ pub struct EvalReport {
 impl EvalReport {
     /// `value` from the channel kernels `ks`.
     pub fn new(ks: &[Kernel], value: Vec<f64>, note: Option<String>) -> EvalReport {
-        EvalReport { value: PointValue(value), backend: ks[0].backend.name(), compile_us: compile_us(ks), note }
+        EvalReport { value: PointValue(value), backend: ks[0].backend.name(), lanes: lanes(ks), compile_us: compile_us(ks), note }
     }
 }
 
@@ -64,6 +76,9 @@ pub struct PointsReport {
     pub values: Vec<PointValue>,
     pub points: usize,
     pub backend: &'static str,
+    /// The LLVM tier's lanes (absent for the other backends).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lanes: Option<u32>,
     pub math: &'static str,
     #[serde(serialize_with = "json::num")]
     pub compile_us: f64,
@@ -82,6 +97,7 @@ impl PointsReport {
             values,
             points,
             backend: ks[0].backend.name(),
+            lanes: lanes(ks),
             math: ks[0].math.name(),
             compile_us: compile_us(ks),
             eval_ns_per_point: elapsed.as_nanos() as f64 / points.max(1) as f64,

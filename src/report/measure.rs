@@ -152,6 +152,21 @@ pub fn measure_kernel(k: &Kernel, params: &[f64], opts: MeasureOptions) -> Resul
     Ok(Measurement { scalar_jit, batched_jit, interp: interp_t, compile: compiles[compiles.len() / 2] })
 }
 
+/// Median ns per element of `k`'s batched evaluation over `opts.points` sample points (the kernel warmed up
+/// first, so a lazily built batched kernel is not timed).
+pub fn time_batched(k: &Kernel, params: &[f64], opts: MeasureOptions) -> Timing {
+    let n = opts.points.max(1);
+    let rows = sample_points(n, 0x5EED);
+    let cols: Vec<Vec<f64>> = (0..N_INPUTS).map(|i| rows.iter().map(|r| r[i]).collect()).collect();
+    let columns = Columns::new(std::array::from_fn(|i| cols[i].as_slice()));
+    let mut out = vec![0.0; n];
+    k.warm_up();
+    time_per_eval(opts.samples, n, || {
+        k.eval_batch(black_box(&columns), black_box(params), &mut out);
+        black_box(&out);
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -294,6 +294,51 @@ fn eval_points_reads_csv_and_agrees_with_single_evaluations() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `--tier`: `llvm` gives the LLVM tier's kernel (the same values, bit for bit, as Cranelift's, reported as
+/// backend `llvm` with its lanes), or in a build without it a clean error that says how to get it; `auto` falls
+/// back to Cranelift there; `--backend interp --tier llvm` is refused; an unknown tier is a usage error.
+#[test]
+fn tier_picks_the_jit_or_says_how_to_get_llvm() {
+    let csv = b"NH,NL,VH,NV\n0.5,0.1,0.3,0.9\n0.9,0.2,0.8,0.7\n1,0,0.5,0.5\n0.25,1,0.1,0.2\n0.999,0.5,0.6,0.3\n";
+    let file = "examples/brdfs/cook_torrance.brdf";
+    let text = |tier: &str| {
+        let o = lobe(&["eval", file, "--points", "-", "--tier", tier], Some(csv));
+        (o.status.success(), String::from_utf8_lossy(&o.stdout).into_owned(), stderr(&o))
+    };
+    let (ok, cranelift, e) = text("cranelift");
+    assert!(ok, "{e}");
+    let o = lobe(&["eval", file, "--points", "-", "--tier", "auto", "--json"], Some(csv));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["backend"].as_str(), Some(if cfg!(feature = "llvm") { "llvm" } else { "jit" }), "{v}");
+    if cfg!(feature = "llvm") {
+        let (ok, llvm, e) = text("llvm");
+        assert!(ok, "{e}");
+        assert_eq!(llvm, cranelift, "the tiers' values differ");
+        let o = lobe(&["eval", file, "--at", "NH=0.9,NL=0.2,VH=0.8,NV=0.7", "--tier", "llvm", "--json"], None);
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(v["backend"].as_str(), Some("llvm"), "{v}");
+        assert!(v["lanes"].as_u64().is_some_and(|l| [2, 4, 8].contains(&l)), "{v}");
+        let o = lobe(&["bench", "examples/brdfs/blinn.brdf", "--samples", "3", "--no-albedo", "--tier", "llvm", "--json"], None);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert!(v[0]["llvm_batch_ns"].as_f64().is_some_and(|ns| ns > 0.0) && v[0]["cranelift_batch_ns"].as_f64().is_some(), "{v}");
+    } else {
+        let o = lobe(&["eval", file, "--points", "-", "--tier", "llvm"], Some(csv));
+        assert_clean_error(&o, "eval --tier llvm without the feature", "--features llvm");
+        let o = lobe(&["bench", "examples/brdfs/blinn.brdf", "--tier", "llvm"], None);
+        assert_clean_error(&o, "bench --tier llvm without the feature", "--features llvm");
+    }
+    let o = lobe(&["bench", "examples/brdfs/blinn.brdf", "--samples", "3", "--no-albedo", "--tier", "cranelift", "--json"], None);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(v[0].get("llvm_batch_ns").is_none(), "{v}");
+    let o = lobe(&["eval", file, "--at", "NH=0.5", "--backend", "interp", "--tier", "llvm"], None);
+    assert_clean_error(&o, "interp with a JIT tier", "does not apply to the interpreter backend");
+    let o = lobe(&["eval", file, "--at", "NH=0.5", "--tier", "gcc"], None);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("expected `cranelift`, `llvm` or `auto`"), "{}", stderr(&o));
+}
+
 /// `bench --math both`: two rows per formula, the error against the precise interpreter measured (0 ulp in
 /// precise mode, within the fast bound in fast mode).
 #[test]

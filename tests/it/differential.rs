@@ -8,6 +8,11 @@
 //! Both math modes. Agreement between backends: the same bits (or both NaN) — the JIT emits the math library's
 //! code the interpreter runs, and Cranelift neither reassociates nor fuses floating-point operations. Against
 //! the Rust twins (which call libm): within 4 ulp, or both NaN, or the same infinity.
+//!
+//! With the cargo feature `llvm`, every check runs on a third tier: the LLVM kernel (`Backend::Llvm`, the
+//! host's lanes), the same bits again; the catalogue also at every lane shape (2, 4, 8) and through the accuracy
+//! pass's chosen form, on the files of `examples/explorer` too. Point counts are odd (19, 75), so every batch
+//! ends in a partial vector.
 
 use lobe::builtins::Builtin;
 use lobe::base::span::Span;
@@ -188,27 +193,46 @@ fn param_sets() -> Vec<Vec<f64>> {
     vec![vec![1.0, 16.0, 0.3], vec![1000.0, 268.0, 0.05], vec![50.0, 0.5, 1e-300], vec![2.0, -3.0, 0.0]]
 }
 
-/// Compares the JIT (scalar and batched) with the interpreter on every point and parameter set.
+/// Compares a JIT kernel (scalar and batched) with the interpreter on every point and parameter set.
 fn check(jit: &Kernel, interp: &Kernel, pts: &[[f64; N_INPUTS]], sets: &[Vec<f64>]) -> Result<(), String> {
+    check_tiers(std::slice::from_ref(jit), interp, pts, sets)
+}
+
+/// [`check`] for each tier's kernel (the Cranelift JIT, and with the feature `llvm` the LLVM tier).
+fn check_tiers(tiers: &[Kernel], interp: &Kernel, pts: &[[f64; N_INPUTS]], sets: &[Vec<f64>]) -> Result<(), String> {
     let cols: Vec<Vec<f64>> = (0..N_INPUTS).map(|i| pts.iter().map(|p| p[i]).collect()).collect();
     let columns = Columns::new(std::array::from_fn(|i| cols[i].as_slice()));
     let mut out = vec![0.0; pts.len()];
     for ps in sets {
-        jit.eval_batch(&columns, ps, &mut out);
-        for (k, x) in pts.iter().enumerate() {
-            let want = interp.eval(x, ps);
-            let got = jit.eval(x, ps);
-            if !identical(want, got) || !identical(want, out[k]) {
-                return Err(format!(
-                    "{} ({} math)\n  at x = {x:?}, params = {ps:?}: interp {want:e}, jit scalar {got:e}, jit batched {:e}",
-                    interp.formula.to_text(),
-                    interp.math,
-                    out[k]
-                ));
+        let want: Vec<f64> = pts.iter().map(|x| interp.eval(x, ps)).collect();
+        for jit in tiers {
+            jit.eval_batch(&columns, ps, &mut out);
+            for (k, x) in pts.iter().enumerate() {
+                let got = jit.eval(x, ps);
+                if !identical(want[k], got) || !identical(want[k], out[k]) {
+                    return Err(format!(
+                        "{} ({} math)\n  at x = {x:?}, params = {ps:?}: interp {:e}, {} scalar {got:e}, {} batched {:e}",
+                        interp.formula.to_text(),
+                        interp.math,
+                        want[k],
+                        jit.backend.name(),
+                        jit.backend.name(),
+                        out[k]
+                    ));
+                }
             }
         }
     }
     Ok(())
+}
+
+/// The JIT backends of this build: Cranelift, and LLVM with the feature `llvm`.
+fn jit_backends() -> Vec<Backend> {
+    let mut v = vec![Backend::Jit];
+    if cfg!(feature = "llvm") {
+        v.push(Backend::Llvm);
+    }
+    v
 }
 
 /// The same bits, or both NaN (payloads may differ).
@@ -216,24 +240,42 @@ fn identical(a: f64, b: f64) -> bool {
     a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan())
 }
 
-fn both(f: Formula, bake: Vec<(String, f64)>, math: Mode) -> (Kernel, Kernel) {
+fn pair(f: Formula, bake: Vec<(String, f64)>, math: Mode, backend: Backend) -> (Kernel, Kernel) {
     let opts = |backend| Options { backend, bake: bake.clone(), no_simplify: false, math, accuracy: None };
-    let jit = compile_formula(f.clone(), &opts(Backend::Jit)).expect("jit compiles");
+    let jit = compile_formula(f.clone(), &opts(backend)).unwrap_or_else(|d| panic!("{} compiles: {}", backend.name(), d.render(false)));
     let interp = compile_formula(f, &opts(Backend::Interp)).expect("interp builds");
-    assert_eq!(jit.backend, Backend::Jit);
+    assert_eq!(jit.backend, backend);
     (jit, interp)
+}
+
+/// Every JIT tier's kernel of `f` and the interpreter's.
+fn tiers(f: Formula, math: Mode) -> (Vec<Kernel>, Kernel) {
+    let interp = compile_formula(f.clone(), &Options { backend: Backend::Interp, math, ..Options::default() }).expect("interp builds");
+    (jit_backends().into_iter().map(|b| pair(f.clone(), vec![], math, b).0).collect(), interp)
 }
 
 fn cases() -> u32 {
     std::env::var("LOBE_DIFF_CASES").ok().and_then(|s| s.parse().ok()).unwrap_or(10_000)
 }
 
-/// (a) 10 000 random formulas (set LOBE_DIFF_CASES to change), each on ~20 points × 4 parameter sets.
+/// (a) 10 000 random formulas (set LOBE_DIFF_CASES to change), each on 19 points × 4 parameter sets.
 #[test]
 fn random_formulas_agree() {
+    random_formulas(cases(), Backend::Jit);
+}
+
+/// (a) on the LLVM tier: a tenth of the cases (each is an LLVM compile of a few milliseconds).
+#[cfg(feature = "llvm")]
+#[test]
+fn random_formulas_agree_on_the_llvm_tier() {
+    random_formulas(cases().div_ceil(10), Backend::Llvm);
+}
+
+/// `cases` random formulas, each compiled for `backend` and the interpreter and compared by [`check`].
+fn random_formulas(cases: u32, backend: Backend) {
     let random = lobe::report::measure::sample_points(8, 42);
     let pts = points(&random);
-    let mut runner = TestRunner::new(Config { cases: cases(), failure_persistence: None, ..Config::default() });
+    let mut runner = TestRunner::new(Config { cases, failure_persistence: None, ..Config::default() });
     // Baked values must be finite (`resolve_bake` rejects the rest, as `--set` does).
     let finite: Vec<f64> = SPECIAL.iter().copied().filter(|v| v.is_finite()).collect();
     let modes = prop::sample::select(Mode::ALL.to_vec());
@@ -241,7 +283,7 @@ fn random_formulas_agree() {
     let result = runner.run(&strategy, |(e, policy, bake, math)| {
         let f = formula(&e, policy);
         let bake = bake.map(|(p, v)| vec![(f.params[p as usize].name.clone(), v)]).unwrap_or_default();
-        let (jit, interp) = both(f, bake, math);
+        let (jit, interp) = pair(f, bake, math, backend);
         check(&jit, &interp, &pts, &param_sets()).map_err(TestCaseError::fail)
     });
     if let Err(e) = result {
@@ -265,24 +307,31 @@ fn every_builtin_on_dense_inputs() {
             .map(|(i, c)| E::Bin(BinOp::Mul, Box::new(E::In(*i, c)), Box::new(E::P(0))))
             .collect();
         for math in Mode::ALL {
-            let (jit, interp) = both(formula(&E::Call(f, args.clone()), false), vec![], math);
-            check(&jit, &interp, &pts, &param_sets()).unwrap_or_else(|e| panic!("{f}: {e}"));
-            check(&jit, &interp, &pts[..1], &param_sets()).unwrap_or_else(|e| panic!("{f}: {e}"));
+            let (jits, interp) = tiers(formula(&E::Call(f, args.clone()), false), math);
+            for len in [pts.len(), 1, 13] {
+                check_tiers(&jits, &interp, &pts[..len], &param_sets()).unwrap_or_else(|e| panic!("{f}: {e}"));
+            }
         }
     }
 }
 
 // ---- the catalogue -------------------------------------------------------------------------------------------
 
-/// Every `examples/brdfs/*.brdf` compiled by `lobe::compile_source` for both backends in math mode `math`, as
-/// (stem, JIT, interpreter), sorted by stem.
-fn catalogue(math: Mode) -> Vec<(String, Kernel, Kernel)> {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/brdfs");
+/// The `.brdf` files of `examples/<dir>`, sorted.
+fn catalogue_files(dir: &str) -> Vec<std::path::PathBuf> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples").join(dir);
     let entries = std::fs::read_dir(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
     let mut files: Vec<_> =
         entries.filter_map(|e| e.ok()).map(|e| e.path()).filter(|p| p.extension().is_some_and(|x| x == "brdf")).collect();
     files.sort();
     assert!(!files.is_empty(), "{} has no .brdf files", dir.display());
+    files
+}
+
+/// Every `examples/brdfs/*.brdf` compiled by `lobe::compile_source` for both backends in math mode `math`, as
+/// (stem, JIT, interpreter), sorted by stem.
+fn catalogue(math: Mode) -> Vec<(String, Kernel, Kernel)> {
+    let files = catalogue_files("brdfs");
     files
         .iter()
         .map(|path| {
@@ -307,6 +356,59 @@ fn catalogue_files_agree() {
         let mut sets = param_sets();
         sets.push(jit.default_params());
         check(&jit, &interp, &pts, &sets).unwrap_or_else(|e| panic!("{stem}: {e}"));
+    }
+}
+
+/// (b) on every tier: each file of `examples/brdfs` and `examples/explorer`, both math modes, as simplified and
+/// as the accuracy pass chose it; the interpreter, Cranelift, and LLVM at 2, 4 and 8 lanes (whatever the host's:
+/// LLVM splits wider vectors), on 75 points (odd: a partial last vector) and a 37-point prefix, at the defaults,
+/// random values inside each declared range and the random formulas' sets.
+#[cfg(feature = "llvm")]
+#[test]
+fn catalogue_files_agree_on_every_tier() {
+    use lobe::numerics::robust::{self, PassOptions};
+    use std::sync::Arc;
+    let pts = points(&lobe::report::measure::sample_points(64, 13));
+    assert_eq!(pts.len() % 2, 1);
+    let mut s = 0x2545_F491_4F6C_DD1Du64;
+    let mut unit = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let files: Vec<_> = catalogue_files("brdfs").into_iter().chain(catalogue_files("explorer")).collect();
+    for path in &files {
+        let name = path.display().to_string();
+        let src = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{name}: {e}"));
+        for math in Mode::ALL {
+            let plain = Options { backend: Backend::Interp, math, ..Options::default() };
+            let chosen = robust::with_pass(plain.clone(), PassOptions::default());
+            for (form, opts) in [("simplified", plain), ("accuracy pass", chosen)] {
+                let interp = lobe::compile_source(&name, &src, &opts).unwrap_or_else(|d| panic!("{name}: {}", d.render(false)));
+                let f = interp.formula.clone();
+                let mut jits = vec![lobe::build_kernel(f.clone(), Backend::Jit, math).expect("cranelift compiles")];
+                for lanes in [2, 4, 8] {
+                    let k = lobe::backend::llvm::llvm_kernel_with_lanes(&f, math, lanes).unwrap_or_else(|e| panic!("{name}: {e}"));
+                    let t = k.compile_time;
+                    jits.push(Kernel::new(f.clone(), Backend::Llvm, math, Arc::new(k), t));
+                }
+                jits.push(lobe::build_kernel(f.clone(), Backend::Llvm, math).expect("llvm compiles at the host's lanes"));
+                let mut sets = param_sets();
+                sets.push(interp.default_params());
+                for _ in 0..4 {
+                    sets.push(
+                        f.params
+                            .iter()
+                            .map(|d| if (d.hi - d.lo).is_finite() { d.lo + (d.hi - d.lo) * unit() } else { d.default * (0.5 + unit()) })
+                            .collect(),
+                    );
+                }
+                for len in [pts.len(), 37] {
+                    check_tiers(&jits, &interp, &pts[..len], &sets).unwrap_or_else(|e| panic!("{name} ({form}): {e}"));
+                }
+            }
+        }
     }
 }
 
@@ -369,13 +471,19 @@ fn prepared_eval_matches_eval_on_the_catalogue() {
             for _ in 0..4 {
                 sets.push(jit.formula.params.iter().map(|d| d.lo + (d.hi - d.lo) * unit()).collect());
             }
-            for k in [&jit, &interp] {
+            #[allow(unused_mut)]
+            let mut kernels = vec![jit, interp];
+            #[cfg(feature = "llvm")]
+            kernels.push(lobe::build_kernel(kernels[0].formula.clone(), Backend::Llvm, math).expect("llvm compiles"));
+            for k in &kernels {
                 for ps in &sets {
                     let prepared = k.prepare(ps);
-                    let kind_ok = matches!(
-                        (&prepared, k.backend),
-                        (lobe::backend::Prepared::Jit(_), Backend::Jit) | (lobe::backend::Prepared::Interp(_), Backend::Interp)
-                    );
+                    let kind_ok = match (&prepared, k.backend) {
+                        (lobe::backend::Prepared::Jit(_), Backend::Jit) | (lobe::backend::Prepared::Interp(_), Backend::Interp) => true,
+                        #[cfg(feature = "llvm")]
+                        (lobe::backend::Prepared::Llvm(_), Backend::Llvm) => true,
+                        _ => false,
+                    };
                     assert!(kind_ok, "{stem}: {} kernel prepared as another backend", k.backend.name());
                     for x in &pts {
                         let (want, got) = (k.eval(x, ps), prepared.eval(x));

@@ -52,7 +52,8 @@ fn every_json_output_keeps_its_keys() {
     std::fs::write(&cut_scene, scene).unwrap();
     let (points, png, cut_scene) = (points.display().to_string(), png.display().to_string(), cut_scene.display().to_string());
     let blinn = "examples/brdfs/blinn.brdf";
-    let cases: Vec<(&str, Vec<&str>)> = vec![
+    #[allow(unused_mut)]
+    let mut cases: Vec<(&str, Vec<&str>)> = vec![
         ("eval", vec!["eval", blinn, "--set", "n=2", "--at", "NH=0.5", "--json"]),
         ("eval_note", vec!["eval", "--expr", "dot(N, L)", "--at", "L=0,0,2,V=0,0,1", "--json"]),
         ("eval_points", vec!["eval", blinn, "--points", &points, "--json"]),
@@ -73,10 +74,17 @@ fn every_json_output_keeps_its_keys() {
         ("fit", vec!["fit", "--expr", FIT_FORMULA, "--reference", blinn, "--param", "a=1..4", "--n-max", "20", "--quiet", "--json"]),
         ("compare", vec!["compare", blinn, "examples/brdfs/phong.brdf", "--size", "16", "--json"]),
         ("compare_sweep", vec!["compare", blinn, "examples/brdfs/phong.brdf", "--size", "16", "--sweep-n", "5,10", "--json"]),
-        ("bench", vec!["bench", "examples/brdfs/gaussian.brdf", "--samples", "3", "--no-albedo", "--json"]),
+        // `--tier cranelift`: the same keys whether or not the build has the LLVM tier (`bench_tiers` below).
+        ("bench", vec!["bench", "examples/brdfs/gaussian.brdf", "--samples", "3", "--no-albedo", "--tier", "cranelift", "--json"]),
         ("render_stats", vec!["render", "examples/scenes/paper_sphere.toml", "--size", "16", "-q", "-o", &png, "--stats", "--json"]),
         ("render_stats_cutoff", vec!["render", &cut_scene, "--size", "16", "-q", "-o", &png, "--force", "--stats", "--json"]),
     ];
+    // The LLVM tier's keys: bench's side-by-side columns, eval's lanes.
+    #[cfg(feature = "llvm")]
+    cases.extend([
+        ("bench_tiers", vec!["bench", "examples/brdfs/gaussian.brdf", "--samples", "3", "--no-albedo", "--tier", "llvm", "--json"]),
+        ("eval_points_llvm", vec!["eval", blinn, "--points", &points, "--tier", "llvm", "--json"]),
+    ]);
     let bless = std::env::var("LOBE_BLESS").is_ok_and(|v| v == "1");
     let mut failures = vec![];
     for (name, args) in &cases {

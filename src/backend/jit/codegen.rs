@@ -50,7 +50,7 @@ pub(super) type Imports = [Option<FuncId>; Builtin::ALL.len()];
 pub const OUTLINE_AT: usize = 24;
 
 /// Whether `ir`'s math builtins are called rather than inlined ([`OUTLINE_AT`]).
-pub(super) fn outlines(ir: &Ir) -> bool {
+pub(crate) fn outlines(ir: &Ir) -> bool {
     ir.nodes().iter().filter(|n| matches!(n, Node::Call(b, _) if b.info().lowering == Lowering::Math)).count() > OUTLINE_AT
 }
 
@@ -691,15 +691,15 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
 /// once per parameter set into a block of `f64`s, and both kernels load them from there, so per-call and
 /// per-element work is only what depends on the inputs. Constants and bare parameters are not carried (a
 /// constant is an immediate, a parameter one load).
-pub(super) struct Plan {
+pub(crate) struct Plan {
     inv: Vec<bool>,
     /// Block slot of each carried node, in block order.
-    pub carried: Vec<NodeId>,
-    root: NodeId,
+    pub(crate) carried: Vec<NodeId>,
+    pub(crate) root: NodeId,
 }
 
 impl Plan {
-    pub(super) fn new(ir: &Ir, root: NodeId) -> Plan {
+    pub(crate) fn new(ir: &Ir, root: NodeId) -> Plan {
         let n = root.index() + 1;
         let inv = ir.invariant();
         let mut needed = vec![false; ir.len()];
@@ -715,7 +715,7 @@ impl Plan {
     }
 
     /// Whether node `id` is computed per call / per element (reads an input).
-    fn variant(&self, id: NodeId) -> bool {
+    pub(crate) fn variant(&self, id: NodeId) -> bool {
         !self.inv[id.index()]
     }
 

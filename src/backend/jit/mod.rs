@@ -41,6 +41,9 @@
 pub(crate) mod cache;
 pub use codegen::OUTLINE_AT;
 mod codegen;
+// Where each node is computed and when the library is called rather than inlined: the LLVM tier's too.
+#[cfg(feature = "llvm")]
+pub(crate) use codegen::{outlines, Plan};
 
 use crate::base::diag::Diagnostic;
 use crate::ir::{Formula, InputSet, Ir, NodeId, N_INPUTS};

@@ -1,0 +1,839 @@
+//! IR → LLVM IR: one generator over `<W x double>` lanes (W = 1 for the prepare function, the host's lane count
+//! for the batch loop), with one method per IR node kind, implementing the math library's [`Emit`] so every
+//! builtin is the library's code (the definition the interpreter runs on `f64`), emitted in the kernel's lanes.
+//!
+//! Two function shapes, the Cranelift tier's:
+//! * `lobe_prepare(params: *const f64, block: *mut f64)`: the carried parameter-only nodes ([`Plan`]);
+//! * `lobe_batch(cols: *const *const f64, params, block, out: *mut f64, len: usize)`.
+//!
+//! Values are vectors of `W` lanes (`<1 x double>` in the prepare function, which LLVM scalarises); masks are
+//! `<W x i1>`; the bit operations work on `<W x i64>`. No instruction carries fast-math flags, and nothing is
+//! written as `llvm.fmuladd`, so LLVM neither reassociates, contracts nor approximates: every operation is the
+//! IEEE operation the interpreter performs (the tests check the machine code for fused or estimated ops).
+//!
+//! Where the Cranelift tier calls a Rust function (the library compiled by rustc for outlined call sites and
+//! the rare lanes of `expmuldiv`, the C library's trigonometric fallbacks), this calls the same `extern "C"`
+//! function, once per lane, through its address as a constant. Errors are collected, never panicked on.
+
+use crate::backend::jit::Plan;
+use crate::builtins::dd::Arith;
+use crate::builtins::math::{self, Emit};
+use crate::builtins::{Builtin, Libm, Lowering, Mode};
+use crate::ir::{BinOp, Input, Ir, Node, NodeId, N_INPUTS};
+use inkwell::attributes::AttributeLoc;
+use inkwell::basic_block::BasicBlock;
+use inkwell::builder::{Builder, BuilderError};
+use inkwell::context::Context;
+use inkwell::intrinsics::Intrinsic;
+use inkwell::module::Module;
+use inkwell::types::{BasicTypeEnum, VectorType};
+use inkwell::values::{BasicMetadataValueEnum, BasicValue, BasicValueEnum, FunctionValue, IntValue, PointerValue, VectorValue};
+use inkwell::{FloatPredicate, IntPredicate};
+
+/// Names of the two functions in every module.
+pub(super) const BATCH: &str = "lobe_batch";
+pub(super) const PREPARE: &str = "lobe_prepare";
+
+/// What every function of one module shares.
+pub(super) struct Unit<'a, 'ctx> {
+    pub cx: &'ctx Context,
+    pub module: &'a Module<'ctx>,
+    pub ir: &'a Ir,
+    pub plan: &'a Plan,
+    pub mode: Mode,
+    /// The host has a fused multiply-add (exact two-products in two instructions, as the Cranelift tier).
+    pub fma: bool,
+    /// Math builtins are calls to the compiled library ([`crate::backend::jit::OUTLINE_AT`]), not inline code.
+    pub outline: bool,
+    /// `target-cpu` and `target-features` of every function: the host's.
+    pub cpu: &'a str,
+    pub features: &'a str,
+}
+
+/// Translates IR nodes into LLVM values of `W` lanes.
+struct Gen<'a, 'ctx> {
+    u: &'a Unit<'a, 'ctx>,
+    b: Builder<'ctx>,
+    func: FunctionValue<'ctx>,
+    w: u32,
+    /// `<W x double>`, `<W x i64>`, `<W x i1>`.
+    fty: VectorType<'ctx>,
+    ity: VectorType<'ctx>,
+    mty: VectorType<'ctx>,
+    params: PointerValue<'ctx>,
+    /// The value of each translated node.
+    vals: Vec<Option<VectorValue<'ctx>>>,
+    /// The loop step's input vectors.
+    inputs: [Option<VectorValue<'ctx>>; N_INPUTS],
+    /// The first error raised (inside an [`Emit`] method, which cannot return one).
+    error: Option<String>,
+}
+
+impl<'a, 'ctx> Gen<'a, 'ctx> {
+    fn new(u: &'a Unit<'a, 'ctx>, func: FunctionValue<'ctx>, w: u32, params: PointerValue<'ctx>) -> Self {
+        Gen {
+            u,
+            b: u.cx.create_builder(),
+            func,
+            w,
+            fty: u.cx.f64_type().vec_type(w),
+            ity: u.cx.i64_type().vec_type(w),
+            mty: u.cx.bool_type().vec_type(w),
+            params,
+            vals: vec![None; u.ir.len()],
+            inputs: [None; N_INPUTS],
+            error: None,
+        }
+    }
+
+    fn fail(&mut self, e: impl std::fmt::Display) {
+        if self.error.is_none() {
+            self.error = Some(e.to_string());
+        }
+    }
+
+    /// A builder result that is a vector (of the type of `like` on error, after recording it).
+    fn vec_of(&mut self, r: Result<BasicValueEnum<'ctx>, BuilderError>, like: VectorType<'ctx>) -> VectorValue<'ctx> {
+        match r {
+            Ok(BasicValueEnum::VectorValue(v)) => v,
+            Ok(other) => {
+                self.fail(format!("expected a vector, got {other:?}"));
+                like.get_poison()
+            }
+            Err(e) => {
+                self.fail(e);
+                like.get_poison()
+            }
+        }
+    }
+
+    fn ok(&mut self, r: Result<VectorValue<'ctx>, BuilderError>, like: VectorType<'ctx>) -> VectorValue<'ctx> {
+        r.unwrap_or_else(|e| {
+            self.fail(e);
+            like.get_poison()
+        })
+    }
+
+    fn f(&mut self, r: Result<VectorValue<'ctx>, BuilderError>) -> VectorValue<'ctx> {
+        self.ok(r, self.fty)
+    }
+
+    fn m(&mut self, r: Result<VectorValue<'ctx>, BuilderError>) -> VectorValue<'ctx> {
+        self.ok(r, self.mty)
+    }
+
+    fn i(&mut self, r: Result<VectorValue<'ctx>, BuilderError>) -> VectorValue<'ctx> {
+        self.ok(r, self.ity)
+    }
+
+    /// Records a builder error of a statement (store, branch).
+    fn done<T>(&mut self, r: Result<T, BuilderError>) {
+        if let Err(e) = r {
+            self.fail(e);
+        }
+    }
+
+    fn scalar<T>(&mut self, r: Result<T, BuilderError>, poison: T) -> T {
+        r.unwrap_or_else(|e| {
+            self.fail(e);
+            poison
+        })
+    }
+
+    fn i64c(&self, v: u64) -> IntValue<'ctx> {
+        self.u.cx.i64_type().const_int(v, false)
+    }
+
+    fn i32c(&self, v: u64) -> IntValue<'ctx> {
+        self.u.cx.i32_type().const_int(v, false)
+    }
+
+    /// Every lane the double with bits `bits` (exact: NaN payloads and signed zeros included).
+    fn fconst(&self, bits: u64) -> VectorValue<'ctx> {
+        let c = self.u.cx.f64_type().const_float(f64::from_bits(bits));
+        VectorType::const_vector(&vec![c; self.w as usize])
+    }
+
+    fn iconst(&self, v: u64) -> VectorValue<'ctx> {
+        VectorType::const_vector(&vec![self.i64c(v); self.w as usize])
+    }
+
+    fn all_true(&self) -> VectorValue<'ctx> {
+        VectorType::const_vector(&vec![self.u.cx.bool_type().const_int(1, false); self.w as usize])
+    }
+
+    /// The scalar `s` in every lane.
+    fn splat(&mut self, s: BasicValueEnum<'ctx>, ty: VectorType<'ctx>) -> VectorValue<'ctx> {
+        let one = self.b.build_insert_element(ty.get_poison(), s, self.i32c(0), "");
+        let one = self.ok(one, ty);
+        if self.w == 1 {
+            return one;
+        }
+        let zeros = VectorType::const_vector(&vec![self.u.cx.i32_type().const_zero(); self.w as usize]);
+        let r = self.b.build_shuffle_vector(one, ty.get_poison(), zeros, "");
+        self.ok(r, ty)
+    }
+
+    /// A double loaded from `base + 8·k`, alignment 8.
+    fn load_f64(&mut self, base: PointerValue<'ctx>, k: u64) -> BasicValueEnum<'ctx> {
+        let p = self.offset(base, self.i64c(8 * k));
+        let f = self.u.cx.f64_type();
+        let v = self.b.build_load(f, p, "");
+        self.scalar(v, f.get_poison().as_basic_value_enum())
+    }
+
+    /// `base + bytes` (integer arithmetic on the address: no `getelementptr`, which inkwell marks unsafe).
+    fn offset(&mut self, base: PointerValue<'ctx>, bytes: IntValue<'ctx>) -> PointerValue<'ctx> {
+        let i64t = self.u.cx.i64_type();
+        let ptr = self.u.cx.ptr_type(Default::default());
+        let a = self.b.build_ptr_to_int(base, i64t, "");
+        let a = self.scalar(a, i64t.get_poison());
+        let s = self.b.build_int_add(a, bytes, "");
+        let s = self.scalar(s, i64t.get_poison());
+        let p = self.b.build_int_to_ptr(s, ptr, "");
+        self.scalar(p, ptr.get_poison())
+    }
+
+    fn intrinsic(&mut self, name: &str, tys: &[BasicTypeEnum<'ctx>]) -> Option<FunctionValue<'ctx>> {
+        let f = Intrinsic::find(name).and_then(|i| i.get_declaration(self.u.module, tys));
+        if f.is_none() {
+            self.fail(format!("LLVM has no intrinsic {name}"));
+        }
+        f
+    }
+
+    /// A call of the intrinsic `name` overloaded on the lane type, returning a vector of type `ret`.
+    fn call_intrinsic(&mut self, name: &str, tys: &[BasicTypeEnum<'ctx>], args: &[BasicMetadataValueEnum<'ctx>], ret: VectorType<'ctx>) -> VectorValue<'ctx> {
+        let Some(f) = self.intrinsic(name, tys) else { return ret.get_poison() };
+        match self.b.build_call(f, args, "") {
+            Ok(c) => match c.try_as_basic_value() {
+                inkwell::values::ValueKind::Basic(v) => self.vec_of(Ok(v), ret),
+                inkwell::values::ValueKind::Instruction(_) => {
+                    self.fail(format!("{name} returned nothing"));
+                    ret.get_poison()
+                }
+            },
+            Err(e) => {
+                self.fail(e);
+                ret.get_poison()
+            }
+        }
+    }
+
+    /// A lane-wise floating-point intrinsic (`llvm.sqrt`, `llvm.fma`, `llvm.minimum`, …).
+    fn fop(&mut self, name: &str, args: &[VectorValue<'ctx>]) -> VectorValue<'ctx> {
+        let args: Vec<BasicMetadataValueEnum> = args.iter().map(|a| (*a).into()).collect();
+        self.call_intrinsic(name, &[self.fty.into()], &args, self.fty)
+    }
+
+    /// Whether any lane of `m` is set, as an `i1`.
+    fn any(&mut self, m: VectorValue<'ctx>) -> IntValue<'ctx> {
+        let wide = match std::num::NonZeroU32::new(self.w).map(|w| self.u.cx.custom_width_int_type(w)) {
+            Some(Ok(t)) => t,
+            _ => {
+                self.fail(format!("no {}-bit integer type", self.w));
+                return self.u.cx.bool_type().get_poison();
+            }
+        };
+        let bits = self.b.build_bit_cast(m, wide, "");
+        let bits = match bits {
+            Ok(BasicValueEnum::IntValue(i)) => i,
+            Ok(_) | Err(_) => {
+                self.fail("mask bitcast");
+                wide.get_poison()
+            }
+        };
+        let r = self.b.build_int_compare(IntPredicate::NE, bits, wide.const_zero(), "");
+        self.scalar(r, self.u.cx.bool_type().get_poison())
+    }
+
+    /// The `extern "C"` function at `addr` of `args.len()` doubles, called on each lane; the results gathered.
+    fn call_lanes(&mut self, addr: usize, args: &[VectorValue<'ctx>]) -> VectorValue<'ctx> {
+        let f64t = self.u.cx.f64_type();
+        let ptr = self.u.cx.ptr_type(Default::default());
+        let arg_tys: Vec<_> = args.iter().map(|_| f64t.into()).collect();
+        let fty = f64t.fn_type(&arg_tys, false);
+        let callee = self.i64c(addr as u64).const_to_pointer(ptr);
+        let mut out = self.fty.get_poison();
+        for lane in 0..self.w {
+            let idx = self.i32c(u64::from(lane));
+            let mut lane_args: Vec<BasicMetadataValueEnum> = Vec::with_capacity(args.len());
+            for a in args {
+                let x = self.b.build_extract_element(*a, idx, "");
+                lane_args.push(self.scalar(x, f64t.get_poison().as_basic_value_enum()).into());
+            }
+            let r = match self.b.build_indirect_call(fty, callee, &lane_args, "") {
+                Ok(c) => match c.try_as_basic_value() {
+                    inkwell::values::ValueKind::Basic(v) => v,
+                    inkwell::values::ValueKind::Instruction(_) => {
+                        self.fail("a library call returned nothing");
+                        f64t.get_poison().into()
+                    }
+                },
+                Err(e) => {
+                    self.fail(e);
+                    f64t.get_poison().into()
+                }
+            };
+            let ins = self.b.build_insert_element(out, r, idx, "");
+            out = self.f(ins);
+        }
+        out
+    }
+
+    /// The lanes whose index is below `rem` (recomputed where used: a value of `load_part` does not dominate
+    /// `store_part`).
+    fn part_mask(&mut self, rem: IntValue<'ctx>) -> VectorValue<'ctx> {
+        let iota = VectorType::const_vector(&(0..self.w).map(|k| self.i64c(u64::from(k))).collect::<Vec<_>>());
+        let r = self.splat(rem.into(), self.ity);
+        let m = self.b.build_int_compare(IntPredicate::ULT, iota, r, "");
+        self.m(m)
+    }
+
+    /// Sets a load's or store's alignment to 8 (columns are `f64` slices, not vector-aligned).
+    fn align(&mut self, v: Result<inkwell::values::InstructionValue<'ctx>, BuilderError>) {
+        match v {
+            Ok(ins) => {
+                if ins.set_alignment(8).is_err() {
+                    self.fail("alignment");
+                }
+            }
+            Err(e) => self.fail(e),
+        }
+    }
+
+    /// A new block after the current one.
+    fn block(&self, name: &str) -> BasicBlock<'ctx> {
+        self.u.cx.append_basic_block(self.func, name)
+    }
+
+    fn current(&mut self) -> BasicBlock<'ctx> {
+        match self.b.get_insert_block() {
+            Some(bb) => bb,
+            None => {
+                self.fail("builder outside a block");
+                self.block("lost")
+            }
+        }
+    }
+
+    // ---- IR nodes ---------------------------------------------------------------------------------------------
+
+    fn arg(&mut self, id: NodeId) -> VectorValue<'ctx> {
+        match self.vals.get(id.index()).copied().flatten() {
+            Some(v) => v,
+            None => {
+                self.fail(format!("operand t{} used before it was translated", id.0));
+                self.fty.get_poison()
+            }
+        }
+    }
+
+    fn node(&mut self, id: NodeId) {
+        let v = match *self.u.ir.node(id) {
+            Node::Const(bits) => self.fconst(bits),
+            Node::Input(i) => self.input(i),
+            Node::Param(p) => {
+                let s = self.load_f64(self.params, u64::from(p));
+                self.splat(s, self.fty)
+            }
+            Node::Column(k) => {
+                self.fail(format!("data column {k} in a kernel"));
+                self.fty.get_poison()
+            }
+            Node::Neg(a) => {
+                let a = self.arg(a);
+                Arith::neg(self, a)
+            }
+            Node::Binary(op, a, b) => {
+                let (a, b) = (self.arg(a), self.arg(b));
+                match op {
+                    BinOp::Add => Arith::add(self, a, b),
+                    BinOp::Sub => Arith::sub(self, a, b),
+                    BinOp::Mul => Arith::mul(self, a, b),
+                    BinOp::Div => Arith::div(self, a, b),
+                }
+            }
+            Node::Call(f, args) => self.call(f, args),
+        };
+        match self.vals.get_mut(id.index()) {
+            Some(slot) => *slot = Some(v),
+            None => self.fail(format!("node t{} outside the arena", id.0)),
+        }
+    }
+
+    /// Translates, in order, every node up to the root for which `pick` holds.
+    fn nodes(&mut self, pick: impl Fn(NodeId) -> bool) {
+        for id in self.u.ir.ids().take(self.u.plan.root.index() + 1) {
+            if pick(id) {
+                self.node(id);
+            }
+        }
+    }
+
+    fn input(&mut self, i: Input) -> VectorValue<'ctx> {
+        match self.inputs[i.index()] {
+            Some(v) => v,
+            None => {
+                self.fail(format!("input {} has no column", i.name()));
+                self.fty.get_poison()
+            }
+        }
+    }
+
+    fn call(&mut self, f: Builtin, args: [NodeId; 3]) -> VectorValue<'ctx> {
+        let vals: Vec<_> = args[..f.arity()].iter().map(|a| self.arg(*a)).collect();
+        let lowering = f.info().lowering;
+        if lowering == Lowering::Inline {
+            return self.inline(f, &vals);
+        }
+        if self.u.outline && lowering == Lowering::Math {
+            return match f.outlined(self.u.mode) {
+                Some((_, lib)) => self.call_lanes(libm_addr(lib), &vals),
+                None => {
+                    self.fail(format!("builtin `{}` has no library function", f.name()));
+                    self.fty.get_poison()
+                }
+            };
+        }
+        match f.emit(self, self.u.mode, &vals) {
+            Some(v) => v,
+            None => {
+                self.fail(format!("builtin `{}` has no library code", f.name()));
+                self.fty.get_poison()
+            }
+        }
+    }
+
+    /// sqrt, abs, min, max, clamp, fma: LLVM's intrinsics with exactly the table's semantics (`llvm.minimum` and
+    /// `llvm.maximum` are IEEE 754-2019's: NaN-propagating, −0 < +0, as [`crate::builtins::fmin`]).
+    fn inline(&mut self, f: Builtin, v: &[VectorValue<'ctx>]) -> VectorValue<'ctx> {
+        match (f, v) {
+            (Builtin::Sqrt, [x]) => self.fop("llvm.sqrt", &[*x]),
+            (Builtin::Abs, [x]) => self.fop("llvm.fabs", &[*x]),
+            (Builtin::Min, [a, b]) => self.fop("llvm.minimum", &[*a, *b]),
+            (Builtin::Max, [a, b]) => self.fop("llvm.maximum", &[*a, *b]),
+            (Builtin::Clamp, [x, lo, hi]) => {
+                let m = self.fop("llvm.maximum", &[*x, *lo]);
+                self.fop("llvm.minimum", &[m, *hi])
+            }
+            (Builtin::Fma, [a, b, c]) => self.fop("llvm.fma", &[*a, *b, *c]),
+            _ => {
+                self.fail(format!("builtin `{}` is not an inline lowering", f.name()));
+                self.fty.get_poison()
+            }
+        }
+    }
+
+    /// `any(m) ? (m ? callee(args) : r) : r`, one call per lane in a rare block.
+    fn rare_lanes(&mut self, m: VectorValue<'ctx>, r: VectorValue<'ctx>, addr: usize, args: &[VectorValue<'ctx>]) -> VectorValue<'ctx> {
+        let args = args.to_vec();
+        self.rare(m, r, &mut |g| {
+            let y = g.call_lanes(addr, &args);
+            g.select(m, y, r)
+        })
+    }
+}
+
+/// The address of a library function.
+fn libm_addr(l: Libm) -> usize {
+    match l {
+        Libm::F1(f) => f as usize,
+        Libm::F2(f) => f as usize,
+        Libm::F3(f) => f as usize,
+        Libm::Exact => 0,
+    }
+}
+
+/// The library's IEEE primitives as LLVM instructions without fast-math flags.
+impl<'ctx> Arith for Gen<'_, 'ctx> {
+    type V = VectorValue<'ctx>;
+    fn konst(&mut self, c: f64) -> Self::V {
+        self.fconst(c.to_bits())
+    }
+    fn add(&mut self, a: Self::V, b: Self::V) -> Self::V {
+        let r = self.b.build_float_add(a, b, "");
+        self.f(r)
+    }
+    fn sub(&mut self, a: Self::V, b: Self::V) -> Self::V {
+        let r = self.b.build_float_sub(a, b, "");
+        self.f(r)
+    }
+    fn mul(&mut self, a: Self::V, b: Self::V) -> Self::V {
+        let r = self.b.build_float_mul(a, b, "");
+        self.f(r)
+    }
+    fn div(&mut self, a: Self::V, b: Self::V) -> Self::V {
+        let r = self.b.build_float_div(a, b, "");
+        self.f(r)
+    }
+    fn neg(&mut self, a: Self::V) -> Self::V {
+        let r = self.b.build_float_neg(a, "");
+        self.f(r)
+    }
+    fn sqrt(&mut self, a: Self::V) -> Self::V {
+        self.fop("llvm.sqrt", &[a])
+    }
+    /// `llvm.fma`: correctly rounded always (a call of the C library's `fma` on a host without the instruction).
+    fn fma(&mut self, a: Self::V, b: Self::V, c: Self::V) -> Self::V {
+        self.fop("llvm.fma", &[a, b, c])
+    }
+    fn positive_select(&mut self, c: Self::V, a: Self::V, b: Self::V) -> Self::V {
+        let zero = self.fconst(0);
+        let m = self.b.build_float_compare(FloatPredicate::OLT, zero, c, "");
+        let m = self.m(m);
+        self.select(m, a, b)
+    }
+    fn two_prod(&mut self, a: Self::V, b: Self::V) -> (Self::V, Self::V) {
+        if !self.u.fma {
+            return math::dekker_two_prod(self, a, b);
+        }
+        let p = Arith::mul(self, a, b);
+        let np = Arith::neg(self, p);
+        (p, self.fop("llvm.fma", &[a, b, np]))
+    }
+}
+
+/// The library's comparisons, masks and bit operations on `W` lanes.
+impl<'ctx> Emit for Gen<'_, 'ctx> {
+    type M = VectorValue<'ctx>;
+    fn abs(&mut self, a: Self::V) -> Self::V {
+        self.fop("llvm.fabs", &[a])
+    }
+    fn lt(&mut self, a: Self::V, b: Self::V) -> Self::M {
+        let r = self.b.build_float_compare(FloatPredicate::OLT, a, b, "");
+        self.m(r)
+    }
+    fn le(&mut self, a: Self::V, b: Self::V) -> Self::M {
+        let r = self.b.build_float_compare(FloatPredicate::OLE, a, b, "");
+        self.m(r)
+    }
+    fn eq(&mut self, a: Self::V, b: Self::V) -> Self::M {
+        let r = self.b.build_float_compare(FloatPredicate::OEQ, a, b, "");
+        self.m(r)
+    }
+    fn and(&mut self, a: Self::M, b: Self::M) -> Self::M {
+        let r = self.b.build_and(a, b, "");
+        self.m(r)
+    }
+    fn or(&mut self, a: Self::M, b: Self::M) -> Self::M {
+        let r = self.b.build_or(a, b, "");
+        self.m(r)
+    }
+    fn not(&mut self, a: Self::M) -> Self::M {
+        let r = self.b.build_xor(a, self.all_true(), "");
+        self.m(r)
+    }
+    fn select(&mut self, m: Self::M, a: Self::V, b: Self::V) -> Self::V {
+        let r = self.b.build_select(m, a, b, "");
+        self.vec_of(r, self.fty)
+    }
+    fn mask_bits(&mut self, x: Self::V, and: u64, or: u64) -> Self::V {
+        let i = self.b.build_bit_cast(x, self.ity, "");
+        let i = self.vec_of(i, self.ity);
+        let r = self.b.build_and(i, self.iconst(and), "");
+        let mut i = self.i(r);
+        if or != 0 {
+            let r = self.b.build_or(i, self.iconst(or), "");
+            i = self.i(r);
+        }
+        let f = self.b.build_bit_cast(i, self.fty, "");
+        self.vec_of(f, self.fty)
+    }
+    fn pow2i(&mut self, k: Self::V) -> Self::V {
+        let magic = self.fconst(math::MAGIC.to_bits());
+        let t = Arith::add(self, k, magic);
+        let i = self.b.build_bit_cast(t, self.ity, "");
+        let i = self.vec_of(i, self.ity);
+        let bias = self.iconst(1023u64.wrapping_sub(math::MAGIC.to_bits()));
+        let r = self.b.build_int_add(i, bias, "");
+        let i = self.i(r);
+        let r = self.b.build_left_shift(i, self.iconst(52), "");
+        let i = self.i(r);
+        let f = self.b.build_bit_cast(i, self.fty, "");
+        self.vec_of(f, self.fty)
+    }
+    fn exponent_field(&mut self, x: Self::V) -> Self::V {
+        const TWO52: f64 = 4503599627370496.0;
+        let i = self.b.build_bit_cast(x, self.ity, "");
+        let i = self.vec_of(i, self.ity);
+        let r = self.b.build_right_shift(i, self.iconst(52), false, "");
+        let i = self.i(r);
+        let r = self.b.build_and(i, self.iconst(0x7ff), "");
+        let i = self.i(r);
+        let r = self.b.build_or(i, self.iconst(TWO52.to_bits()), "");
+        let i = self.i(r);
+        let f = self.b.build_bit_cast(i, self.fty, "");
+        let f = self.vec_of(f, self.fty);
+        let t = self.fconst(TWO52.to_bits());
+        Arith::sub(self, f, t)
+    }
+    /// The row index masked to the table (whatever `x` holds, the loads stay inside it) and scaled to bytes in
+    /// all lanes, then two gathers (heads and tails) from the `'static` table, whose address is a constant.
+    fn lookup_pair(&mut self, table: &'static [[f64; 2]], x: Self::V) -> (Self::V, Self::V) {
+        if !table.len().is_power_of_two() {
+            self.fail("lookup in a table whose length is not a power of two");
+            return (x, x);
+        }
+        let magic = self.fconst(math::MAGIC.to_bits());
+        let t = Arith::add(self, x, magic);
+        let i = self.b.build_bit_cast(t, self.ity, "");
+        let i = self.vec_of(i, self.ity);
+        let r = self.b.build_and(i, self.iconst(table.len() as u64 - 1), "");
+        let i = self.i(r);
+        let r = self.b.build_left_shift(i, self.iconst(4), "");
+        let off = self.i(r);
+        let base = self.iconst(table.as_ptr() as u64);
+        let r = self.b.build_int_add(base, off, "");
+        let heads = self.i(r);
+        let r = self.b.build_int_add(heads, self.iconst(8), "");
+        let tails = self.i(r);
+        let pty = self.u.cx.ptr_type(Default::default()).vec_type(self.w);
+        let gather = |g: &mut Self, addrs: VectorValue<'ctx>| {
+            let p = g.b.build_cast(inkwell::values::InstructionOpcode::IntToPtr, addrs, pty, "");
+            let p = g.vec_of(p, pty);
+            let args = [p.into(), g.i32c(8).into(), g.all_true().into(), g.fty.get_poison().into()];
+            g.call_intrinsic("llvm.masked.gather", &[g.fty.into(), pty.into()], &args, g.fty)
+        };
+        let h = gather(self, heads);
+        let t = gather(self, tails);
+        (h, t)
+    }
+    /// `any(m) ? slow() : r`, the slow code in a block of its own (weighted as rarely taken).
+    fn rare(&mut self, m: Self::M, r: Self::V, slow: &mut dyn FnMut(&mut Self) -> Self::V) -> Self::V {
+        let any = self.any(m);
+        let from = self.current();
+        let cold = self.block("rare");
+        let join = self.block("join");
+        match self.b.build_conditional_branch(any, cold, join) {
+            Ok(br) => {
+                let cx = self.u.cx;
+                let i32t = cx.i32_type();
+                let weights = cx.metadata_node(&[cx.metadata_string("branch_weights").into(), i32t.const_int(1, false).into(), i32t.const_int(2000, false).into()]);
+                if br.set_metadata(weights, cx.get_kind_id("prof")).is_err() {
+                    self.fail("branch weights");
+                }
+            }
+            Err(e) => self.fail(e),
+        }
+        self.b.position_at_end(cold);
+        let v = slow(self);
+        let cold_end = self.current();
+        let br = self.b.build_unconditional_branch(join);
+        self.done(br);
+        self.b.position_at_end(join);
+        let phi = self.b.build_phi(self.fty, "");
+        match phi {
+            Ok(phi) => {
+                phi.add_incoming(&[(&r, from), (&v, cold_end)]);
+                self.vec_of(Ok(phi.as_basic_value()), self.fty)
+            }
+            Err(e) => {
+                self.fail(e);
+                r
+            }
+        }
+    }
+    /// `f`'s library function compiled by rustc, called per lane (the Cranelift tier's choice too: the rare
+    /// code's constants do not stay live across the common path).
+    fn rare_call(&mut self, m: Self::M, r: Self::V, f: Builtin, args: &[Self::V], slow: &mut dyn FnMut(&mut Self) -> Self::V) -> Self::V {
+        match f.outlined(self.u.mode) {
+            Some((_, lib)) => self.rare_lanes(m, r, libm_addr(lib), args),
+            None => self.rare(m, r, slow),
+        }
+    }
+    /// `any(m) ? (m ? libm(x) : r) : r`: the C library's version of `f` on the lanes that need it.
+    fn fallback(&mut self, m: Self::M, x: Self::V, r: Self::V, f: Builtin) -> Self::V {
+        match f.libm1() {
+            Some(libm) => self.rare_lanes(m, r, libm as usize, &[x]),
+            None => {
+                self.fail(format!("`{}` has no one-argument C library function", f.name()));
+                r
+            }
+        }
+    }
+}
+
+/// Declares a function `void name(ptr × pointers[, i64])` with the host's CPU and features.
+fn declare<'ctx>(u: &Unit<'_, 'ctx>, name: &str, pointers: usize, len: bool) -> FunctionValue<'ctx> {
+    let ptr = u.cx.ptr_type(Default::default());
+    let mut params: Vec<inkwell::types::BasicMetadataTypeEnum> = vec![ptr.into(); pointers];
+    if len {
+        params.push(u.cx.i64_type().into());
+    }
+    let fty = u.cx.void_type().fn_type(&params, false);
+    let f = u.module.add_function(name, fty, None);
+    for (k, v) in [("target-cpu", u.cpu), ("target-features", u.features)] {
+        f.add_attribute(AttributeLoc::Function, u.cx.create_string_attribute(k, v));
+    }
+    let nounwind = inkwell::attributes::Attribute::get_named_enum_kind_id("nounwind");
+    f.add_attribute(AttributeLoc::Function, u.cx.create_enum_attribute(nounwind, 0));
+    f
+}
+
+fn param(f: FunctionValue<'_>, k: u32) -> Result<PointerValue<'_>, String> {
+    match f.get_nth_param(k) {
+        Some(BasicValueEnum::PointerValue(p)) => Ok(p),
+        _ => Err(format!("parameter {k} is not a pointer")),
+    }
+}
+
+/// `lobe_prepare`: every carried node computed (one lane) and stored to the block.
+pub(super) fn build_prepare(u: &Unit) -> Result<(), String> {
+    let f = declare(u, PREPARE, 2, false);
+    let (params, block) = (param(f, 0)?, param(f, 1)?);
+    let mut g = Gen::new(u, f, 1, params);
+    let entry = g.block("entry");
+    g.b.position_at_end(entry);
+    g.nodes(|id| !u.plan.variant(id));
+    for (k, id) in u.plan.carried.iter().enumerate() {
+        let v = g.arg(*id);
+        let s = g.b.build_extract_element(v, g.i32c(0), "");
+        let s = g.scalar(s, u.cx.f64_type().get_poison().into());
+        let p = g.offset(block, g.i64c(8 * k as u64));
+        let st = g.b.build_store(p, s);
+        g.done(st);
+    }
+    let r = g.b.build_return(None);
+    g.done(r);
+    g.error.map_or(Ok(()), Err)
+}
+
+/// `lobe_batch` in `w` lanes:
+///
+/// ```text
+/// entry:   column bases; carried nodes loaded from the block, constants and parameters, splatted;
+///          len = 0 ? exit : loop
+/// loop(i): full = len − i ≥ W; full ? load : load_part
+/// load:    the W inputs at i                            load_part: the len − i inputs at i (masked loads)
+/// step:    the loop-variant nodes; full ? store : store_part
+/// store:   out[i..i+W] = root                           store_part: out[i..len] = root (masked store)
+/// latch:   i + W < len ? loop(i + W) : exit
+/// ```
+///
+/// One copy of the body serves the full vectors and the tail (len not a multiple of W), so compile time does
+/// not double for the tail; the two branches on `full` are taken the same way on every step but the last.
+pub(super) fn build_batch(u: &Unit, w: u32) -> Result<(), String> {
+    let f = declare(u, BATCH, 4, true);
+    let (cols, params, block, out) = (param(f, 0)?, param(f, 1)?, param(f, 2)?, param(f, 3)?);
+    let len = match f.get_nth_param(4) {
+        Some(BasicValueEnum::IntValue(l)) => l,
+        _ => return Err("len parameter".into()),
+    };
+    let used = u.ir.used_inputs(u.plan.root);
+    let mut g = Gen::new(u, f, w, params);
+    let ptr = u.cx.ptr_type(Default::default());
+    let i64t = u.cx.i64_type();
+    let entry = g.block("entry");
+    g.b.position_at_end(entry);
+
+    let mut bases: [Option<PointerValue>; N_INPUTS] = [None; N_INPUTS];
+    for i in used.iter() {
+        let p = g.offset(cols, g.i64c(8 * i.index() as u64));
+        let l = g.b.build_load(ptr, p, "");
+        bases[i.index()] = match l {
+            Ok(BasicValueEnum::PointerValue(p)) => Some(p),
+            _ => return Err("column base load".into()),
+        };
+    }
+    for (k, id) in u.plan.carried.iter().enumerate() {
+        let s = g.load_f64(block, k as u64);
+        g.vals[id.index()] = Some(g.splat(s, g.fty));
+    }
+    g.nodes(|id| !u.plan.variant(id) && matches!(u.ir.node(id), Node::Const(_) | Node::Param(_)));
+
+    let (head, load, load_part, step, store, store_part, latch, exit) =
+        (g.block("loop"), g.block("load"), g.block("load_part"), g.block("step"), g.block("store"), g.block("store_part"), g.block("latch"), g.block("exit"));
+    let empty = g.b.build_int_compare(IntPredicate::EQ, len, i64t.const_zero(), "");
+    let empty = g.scalar(empty, u.cx.bool_type().get_poison());
+    let pre = g.current();
+    let br = g.b.build_conditional_branch(empty, exit, head);
+    g.done(br);
+
+    // loop(i)
+    g.b.position_at_end(head);
+    let i = match g.b.build_phi(i64t, "i") {
+        Ok(p) => p,
+        Err(e) => return Err(e.to_string()),
+    };
+    let iv = i.as_basic_value().into_int_value();
+    let rem = g.b.build_int_sub(len, iv, "");
+    let rem = g.scalar(rem, i64t.get_poison());
+    let full = g.b.build_int_compare(IntPredicate::UGE, rem, g.i64c(u64::from(w)), "");
+    let full = g.scalar(full, u.cx.bool_type().get_poison());
+    let byte_off = g.b.build_left_shift(iv, g.i64c(3), "");
+    let byte_off = g.scalar(byte_off, i64t.get_poison());
+    let br = g.b.build_conditional_branch(full, load, load_part);
+    g.done(br);
+
+
+    // load / load_part, joined in `step` by a phi per input.
+    let mut loaded: Vec<(Input, VectorValue, VectorValue)> = vec![];
+    g.b.position_at_end(load);
+    let mut full_vals = vec![];
+    for inp in used.iter() {
+        let Some(base) = bases[inp.index()] else { continue };
+        let p = g.offset(base, byte_off);
+        let l = g.b.build_load(g.fty, p, "");
+        let v = g.vec_of(l, g.fty);
+        if let Some(ins) = v.as_instruction_value() {
+            g.align(Ok(ins));
+        }
+        full_vals.push((inp, v));
+    }
+    let br = g.b.build_unconditional_branch(step);
+    g.done(br);
+    g.b.position_at_end(load_part);
+    let m = g.part_mask(rem);
+    for (inp, v) in full_vals {
+        let Some(base) = bases[inp.index()] else { continue };
+        let p = g.offset(base, byte_off);
+        let args = [p.into(), g.i32c(8).into(), m.into(), g.fty.const_zero().into()];
+        let pv = g.call_intrinsic("llvm.masked.load", &[g.fty.into(), ptr.into()], &args, g.fty);
+        loaded.push((inp, v, pv));
+    }
+    let br = g.b.build_unconditional_branch(step);
+    g.done(br);
+
+    // step: the body, once.
+    g.b.position_at_end(step);
+    for (inp, v, pv) in loaded {
+        let phi = g.b.build_phi(g.fty, inp.name()).map_err(|e| e.to_string())?;
+        phi.add_incoming(&[(&v, load), (&pv, load_part)]);
+        g.inputs[inp.index()] = Some(g.vec_of(Ok(phi.as_basic_value()), g.fty));
+    }
+    g.nodes(|id| u.plan.variant(id));
+    let r = g.arg(u.plan.root);
+    let br = g.b.build_conditional_branch(full, store, store_part);
+    g.done(br);
+
+    g.b.position_at_end(store);
+    let p = g.offset(out, byte_off);
+    let st = g.b.build_store(p, r);
+    g.align(st);
+    let br = g.b.build_unconditional_branch(latch);
+    g.done(br);
+
+    g.b.position_at_end(store_part);
+    let m = g.part_mask(rem);
+    let p = g.offset(out, byte_off);
+    let Some(ms) = g.intrinsic("llvm.masked.store", &[g.fty.into(), ptr.into()]) else { return Err(g.error.unwrap_or_default()) };
+    let c = g.b.build_call(ms, &[r.into(), p.into(), g.i32c(8).into(), m.into()], "");
+    g.done(c);
+    let br = g.b.build_unconditional_branch(latch);
+    g.done(br);
+
+    g.b.position_at_end(latch);
+    let next = g.b.build_int_add(iv, g.i64c(u64::from(w)), "");
+    let next = g.scalar(next, i64t.get_poison());
+    let more = g.b.build_int_compare(IntPredicate::ULT, next, len, "");
+    let more = g.scalar(more, u.cx.bool_type().get_poison());
+    let br = g.b.build_conditional_branch(more, head, exit);
+    g.done(br);
+    i.add_incoming(&[(&i64t.const_zero(), pre), (&next, latch)]);
+
+    g.b.position_at_end(exit);
+    let r = g.b.build_return(None);
+    g.done(r);
+    g.error.map_or(Ok(()), Err)
+}

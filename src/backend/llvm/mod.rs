@@ -1,0 +1,393 @@
+//! The LLVM tier (cargo feature `llvm`): a simplified [`Formula`] → a batched kernel compiled by LLVM 19
+//! (through inkwell), in the host's widest `f64` lanes: 8 with AVX-512, 4 with AVX2, 2 otherwise.
+//!
+//! Same IR, same math, same bits as the interpreter and the Cranelift tier ([`crate::backend::jit`]): the
+//! generator ([`codegen`]) implements the math library's `Emit`, so every builtin is the library's own code; it
+//! shares the Cranelift tier's [`Plan`] (parameter-only work in a prepared block, computed once per batch by a
+//! prepare function) and its rule for calling the library instead of inlining it (`outlines`). The module
+//! is optimised with LLVM's `default<O2>` pipeline; no instruction carries fast-math flags and none is
+//! `llvm.fmuladd`, so nothing is reassociated, contracted into an FMA or replaced by an estimate (the tests
+//! read the machine code to check).
+//!
+//! Kernels only: a scalar call ([`Evaluator::eval`]) runs the batched kernel on one element (its masked tail),
+//! and multi-output shading programs stay on Cranelift. No code cache yet: every call of [`llvm_kernel`]
+//! compiles.
+//!
+//! Ownership: one [`Code`] per compiled formula holds the LLVM context and the MCJIT execution engine that
+//! owns the machine code; dropping it frees both. `unsafe` is confined to this file: turning the engine's
+//! addresses into function pointers, calling them, and the lifetime and `Send`/`Sync` of [`Code`] (each with
+//! its `# Safety` note).
+
+// Calling and owning generated code (each block has its `# Safety` note).
+#![allow(unsafe_code)]
+
+mod codegen;
+
+use super::jit::{outlines, JitError, Plan};
+use super::{Columns, Evaluator, Prepared};
+use crate::base::diag::Diagnostic;
+use crate::builtins::Mode;
+use crate::ir::{Formula, InputSet, Ir, NodeId, N_INPUTS};
+use inkwell::context::Context;
+use inkwell::execution_engine::ExecutionEngine;
+use inkwell::passes::PassBuilderOptions;
+use inkwell::targets::{CodeModel, FileType, InitializationConfig, RelocMode, Target, TargetMachine};
+use inkwell::OptimizationLevel;
+use std::sync::{Arc, OnceLock};
+use std::time::{Duration, Instant};
+
+/// The host as LLVM sees it.
+#[derive(Clone, Debug)]
+pub struct Host {
+    /// LLVM's name of the host CPU (`znver4`, `skylake-avx512`, …).
+    pub cpu: String,
+    /// Its feature string (`+avx2,+fma,…`), given to every function.
+    pub features: String,
+    /// `f64` lanes of the batch loop: 8 with AVX-512, 4 with AVX2, 2 otherwise.
+    pub lanes: u32,
+    /// A native fused multiply-add.
+    pub fma: bool,
+}
+
+/// The host, detected once (and LLVM's native target initialised).
+pub fn host() -> Result<&'static Host, JitError> {
+    static HOST: OnceLock<Result<Host, String>> = OnceLock::new();
+    HOST.get_or_init(|| {
+        Target::initialize_native(&InitializationConfig::default())?;
+        let cpu = TargetMachine::get_host_cpu_name().to_string();
+        let features = TargetMachine::get_host_cpu_features().to_string();
+        let has = |f: &str| features.split(',').any(|x| x == f);
+        let lanes = if has("+avx512f") {
+            8
+        } else if has("+avx2") {
+            4
+        } else {
+            2
+        };
+        let fma = has("+fma") || cfg!(target_arch = "aarch64");
+        Ok(Host { cpu, features, lanes, fma })
+    })
+    .as_ref()
+    .map_err(|e| JitError::Host(e.clone()))
+}
+
+/// Whether the LLVM tier can compile for this host (what the `auto` tier asks).
+pub fn available() -> bool {
+    host().is_ok()
+}
+
+/// A target machine for the host (the optimiser's cost model, and the listing in tests).
+fn target_machine(h: &Host) -> Result<TargetMachine, JitError> {
+    let triple = TargetMachine::get_default_triple();
+    let target = Target::from_triple(&triple).map_err(|e| JitError::Host(e.to_string()))?;
+    target
+        .create_target_machine(&triple, &h.cpu, &h.features, OptimizationLevel::Aggressive, RelocMode::Default, CodeModel::JITDefault)
+        .ok_or_else(|| JitError::Host(format!("LLVM has no target machine for {}", h.cpu)))
+}
+
+type PrepareFn = unsafe extern "C" fn(*const f64, *mut f64);
+type BatchFn = unsafe extern "C" fn(*const *const f64, *const f64, *const f64, *mut f64, usize);
+
+/// One compiled formula's LLVM context and execution engine (which owns the module and its machine code).
+/// Dropping it frees the code, then the context (fields drop in declaration order).
+///
+/// Function pointers into the engine's memory are handed out only to the [`Compiled`] that holds this `Code`.
+pub(crate) struct Code {
+    _engine: ExecutionEngine<'static>,
+    _context: Context,
+}
+
+// Safety: after `compile` returns, nothing reads or changes the engine or the context: they are only kept to
+// be dropped, which takes `&mut self` (so never concurrently with anything). The generated code they own is
+// pure (it reads its arguments, writes its output) and may run on any thread at once.
+unsafe impl Send for Code {}
+// Safety: as above, `&Code` gives access to nothing.
+unsafe impl Sync for Code {}
+
+/// Machine code for one formula: the batched kernel, the prepare function, and what the wrapper checks.
+pub(crate) struct Compiled {
+    batch: BatchFn,
+    /// Computes the prepared parameter block (`None` when nothing is carried).
+    prepare: Option<PrepareFn>,
+    block_len: usize,
+    /// Parameter slots the code reads (`max index + 1`).
+    params_read: usize,
+    /// Inputs the code reads (their columns must be full length).
+    inputs: InputSet,
+    /// The memory `batch` and `prepare` point into: after them, so it is dropped last.
+    _code: Code,
+}
+
+/// The function-pointer types are exactly the C signatures `codegen` declares.
+fn address(engine: &ExecutionEngine, name: &str) -> Result<usize, JitError> {
+    match engine.get_function_address(name) {
+        Ok(0) | Err(_) => Err(JitError::Internal(format!("no address for {name}"))),
+        Ok(a) => Ok(a),
+    }
+}
+
+/// What one compile produced besides the code (for reports and tests).
+pub struct Stats {
+    pub lanes: u32,
+    pub compile_time: Duration,
+    /// The optimised module's machine code, when asked for.
+    pub listing: Option<String>,
+}
+
+/// Compiles a compacted IR (root last) to a batched kernel of `lanes` lanes.
+fn compile(ir: &Ir, root: NodeId, mode: Mode, lanes: u32, listing: bool) -> Result<(Compiled, Stats), JitError> {
+    if root.index() >= ir.len() {
+        return Err(JitError::Internal("root outside the arena".into()));
+    }
+    if !lanes.is_power_of_two() || lanes > 16 {
+        return Err(JitError::Internal(format!("{lanes} lanes")));
+    }
+    let t = Instant::now();
+    let h = host()?;
+    let tm = target_machine(h)?;
+    let context = Context::create();
+    let module = context.create_module("lobe");
+    module.set_triple(&tm.get_triple());
+    module.set_data_layout(&tm.get_target_data().get_data_layout());
+    let plan = Plan::new(ir, root);
+    let u = codegen::Unit { cx: &context, module: &module, ir, plan: &plan, mode, fma: h.fma, outline: outlines(ir), cpu: &h.cpu, features: &h.features };
+    if !plan.carried.is_empty() {
+        codegen::build_prepare(&u).map_err(JitError::Internal)?;
+    }
+    codegen::build_batch(&u, lanes).map_err(JitError::Internal)?;
+    module.verify().map_err(|e| JitError::Internal(format!("LLVM rejected the module: {e}")))?;
+    module.run_passes("default<O2>", &tm, PassBuilderOptions::create()).map_err(|e| JitError::Module(e.to_string()))?;
+    let listing = if listing {
+        let buf = tm.write_to_memory_buffer(&module, FileType::Assembly).map_err(|e| JitError::Module(e.to_string()))?;
+        Some(String::from_utf8_lossy(buf.as_slice()).into_owned())
+    } else {
+        None
+    };
+    let engine = module.create_jit_execution_engine(OptimizationLevel::Aggressive).map_err(|e| JitError::Module(e.to_string()))?;
+    let batch = address(&engine, codegen::BATCH)?;
+    let prepare = if plan.carried.is_empty() { None } else { Some(address(&engine, codegen::PREPARE)?) };
+    // The module is owned by the engine from here on; dropping the handle only releases its share.
+    drop(module);
+    // Safety: the engine borrows `context` only in its type (inkwell's lifetime ties it to the context's
+    // borrow); `Code` keeps both and drops the engine first, so the context outlives every use of the engine.
+    let engine = unsafe { std::mem::transmute::<ExecutionEngine<'_>, ExecutionEngine<'static>>(engine) };
+    let code = Code { _engine: engine, _context: context };
+    // Safety: each address is the entry of a function `codegen` just defined with exactly the C signature of the
+    // type it becomes; it stays valid while `code` (the engine that owns the machine code) lives, and the
+    // returned `Compiled` owns `code`.
+    let (batch, prepare) = unsafe {
+        (std::mem::transmute::<usize, BatchFn>(batch), prepare.map(|p| std::mem::transmute::<usize, PrepareFn>(p)))
+    };
+    let params_read = ir.used_params(root).last().map_or(0, |p| *p as usize + 1);
+    let compiled = Compiled { batch, prepare, block_len: plan.carried.len(), params_read, inputs: ir.used_inputs(root), _code: code };
+    Ok((compiled, Stats { lanes, compile_time: t.elapsed(), listing }))
+}
+
+/// An LLVM-compiled formula behind the [`Evaluator`] interface.
+#[derive(Clone)]
+pub struct LlvmKernel {
+    code: Arc<Compiled>,
+    /// Parameter slots the caller must supply: max(declared, read by the code).
+    n_params: usize,
+    /// Lanes of the batch loop.
+    pub lanes: u32,
+    /// LLVM's time for this formula (IR generation, optimisation, machine code).
+    pub compile_time: Duration,
+}
+
+/// Compiles a simplified formula with the host's lane count.
+pub fn llvm_kernel(f: &Formula, mode: Mode) -> Result<LlvmKernel, JitError> {
+    llvm_kernel_with_lanes(f, mode, host()?.lanes)
+}
+
+/// Compiles a simplified formula with `lanes` lanes (a power of two ≤ 16; LLVM splits a vector wider than the
+/// host's registers), for tests of every lane shape on one host.
+pub fn llvm_kernel_with_lanes(f: &Formula, mode: Mode, lanes: u32) -> Result<LlvmKernel, JitError> {
+    let (ir, root) = f.ir.compact(f.root);
+    let (code, stats) = compile(&ir, root, mode, lanes, false)?;
+    Ok(LlvmKernel { n_params: f.params.len().max(code.params_read), code: Arc::new(code), lanes, compile_time: stats.compile_time })
+}
+
+/// The machine code LLVM emits for `f`'s kernel (host lanes), for checking what it compiles to.
+pub fn assembly(f: &Formula, mode: Mode) -> Result<String, JitError> {
+    let (ir, root) = f.ir.compact(f.root);
+    let (_, stats) = compile(&ir, root, mode, host()?.lanes, true)?;
+    Ok(stats.listing.unwrap_or_default())
+}
+
+/// Compiles `f` with the LLVM tier and reports failure as a diagnostic.
+pub(crate) fn kernel_evaluator(f: &Formula, mode: Mode) -> Result<Arc<dyn Evaluator>, Diagnostic> {
+    llvm_kernel(f, mode).map(|k| Arc::new(k) as Arc<dyn Evaluator>).map_err(|e| e.to_diagnostic())
+}
+
+impl Compiled {
+    /// The prepared block for `params` (every slot the code reads present).
+    fn block(&self, params: &[f64]) -> Vec<f64> {
+        let mut block = vec![0.0; self.block_len];
+        if let (Some(prepare), true) = (self.prepare, params.len() >= self.params_read) {
+            // Safety: `params` has every slot the code reads (checked just above); `block` has exactly the
+            // `block_len` slots the prepare function writes. The code lives as long as `self`.
+            unsafe { prepare(params.as_ptr(), block.as_mut_ptr()) }
+        }
+        block
+    }
+
+    /// One element: the batched kernel on `len = 1` (its masked tail), `x` as five one-element columns.
+    fn one(&self, x: &[f64; N_INPUTS], params: &[f64], block: &[f64]) -> f64 {
+        let ptrs: [*const f64; N_INPUTS] = std::array::from_fn(|i| &x[i] as *const f64);
+        let mut out = [0.0f64];
+        if params.len() >= self.params_read && block.len() == self.block_len {
+            // Safety: each column pointer addresses one element of `x` (len = 1); `params` has every slot the
+            // code reads and `block` its `block_len` slots (checked just above); `out` has the one element
+            // written. The code lives as long as `self`.
+            unsafe { (self.batch)(ptrs.as_ptr(), params.as_ptr(), block.as_ptr(), out.as_mut_ptr(), 1) }
+        }
+        out[0]
+    }
+}
+
+impl LlvmKernel {
+    /// `params` padded with NaN to the declared count: a missing parameter is NaN, as in the interpreter.
+    fn padded(&self, params: &[f64]) -> Vec<f64> {
+        let mut p = params.to_vec();
+        p.resize(p.len().max(self.n_params), f64::NAN);
+        p
+    }
+}
+
+/// An LLVM kernel bound to one parameter vector: the parameters padded and the prepared block computed once.
+pub struct PreparedLlvm<'a> {
+    params: Vec<f64>,
+    block: Vec<f64>,
+    kernel: &'a LlvmKernel,
+}
+
+impl PreparedLlvm<'_> {
+    #[inline]
+    pub(crate) fn eval(&self, x: &[f64; N_INPUTS]) -> f64 {
+        self.kernel.code.one(x, &self.params, &self.block)
+    }
+}
+
+impl Evaluator for LlvmKernel {
+    fn eval(&self, x: &[f64; N_INPUTS], params: &[f64]) -> f64 {
+        let p = self.padded(params);
+        self.code.one(x, &p, &self.code.block(&p))
+    }
+
+    /// Runs the kernel once, so a timed first batch does not pay for the first touch of the code pages.
+    fn warm_up(&self) {
+        std::hint::black_box(self.eval(&[0.5; N_INPUTS], &[]));
+    }
+
+    fn prepare(&self, params: &[f64]) -> Prepared<'_> {
+        let params = self.padded(params);
+        let block = self.code.block(&params);
+        Prepared::Llvm(PreparedLlvm { params, block, kernel: self })
+    }
+
+    fn eval_batch(&self, cols: &Columns, params: &[f64], out: &mut [f64]) {
+        let c = &self.code;
+        if !c.inputs.iter().all(|i| cols.col(i).len() == out.len()) {
+            // Ragged columns: interpreter semantics, a missing element reads as 0.
+            let mut x = [0.0; N_INPUTS];
+            for (i, o) in out.iter_mut().enumerate() {
+                for (k, col) in cols.cols.iter().enumerate() {
+                    x[k] = col.get(i).copied().unwrap_or(0.0);
+                }
+                *o = self.eval(&x, params);
+            }
+            return;
+        }
+        let p = self.padded(params);
+        let block = c.block(&p);
+        let ptrs: [*const f64; N_INPUTS] = std::array::from_fn(|i| cols.cols[i].as_ptr());
+        // Safety: `p` has every slot the code reads (padded to `n_params` ≥ `params_read`), `block` the
+        // `block_len` slots, every column the code reads has exactly `out.len()` elements (checked above) and
+        // unread columns are never dereferenced; the code reads `len` elements of those columns (the last
+        // partial vector by masked loads) and writes `len` elements of `out`, which is exclusively borrowed.
+        // The code lives as long as `self.code`.
+        unsafe { (c.batch)(ptrs.as_ptr(), p.as_ptr(), block.as_ptr(), out.as_mut_ptr(), out.len()) }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn formula(src: &str) -> Formula {
+        let f = crate::front::parse("t.brdf", src).unwrap_or_else(|d| panic!("{}", d.render(false)));
+        crate::simplify::simplify(&f, &[])
+    }
+
+    #[test]
+    fn host_lanes_follow_the_features() {
+        let h = host().expect("LLVM knows the host");
+        assert!([2, 4, 8].contains(&h.lanes), "{h:?}");
+        if h.features.contains("+avx512f") {
+            assert_eq!(h.lanes, 8);
+        }
+    }
+
+    /// `a·b + c` stays a multiply and an add (LLVM contracts only `llvm.fmuladd` or `contract` flags, and
+    /// there are none); an explicit `fma` is one fused operation; no reciprocal or square-root estimate.
+    #[test]
+    fn no_contraction_no_estimates() {
+        // Inputs are clamped to [0, 1]: a = b = 1 − 2^-30, c = −(1 − 2^-29); a·b + c is 0 unfused, 2^-60 fused.
+        let f = formula("param c = -1 in -2..2\nNL * NV + c");
+        let k = llvm_kernel(&f, Mode::Precise).expect("compiles");
+        let (a, c) = (1.0 - 2f64.powi(-30), -(1.0 - 2f64.powi(-29)));
+        assert_eq!(a * a + c, 0.0, "the unfused result");
+        assert_eq!(a.mul_add(a, c), 2f64.powi(-60), "the fused result");
+        let n = 13;
+        let cols: Vec<Vec<f64>> = (0..N_INPUTS).map(|i| vec![if i < 2 { a } else { 0.0 }; n]).collect();
+        let columns = Columns::new(std::array::from_fn(|i| cols[i].as_slice()));
+        let mut out = vec![1.0; n];
+        // Parameters in declaration order: `n` (every formula has it), then `c`.
+        k.eval_batch(&columns, &[1.0, c], &mut out);
+        assert!(out.iter().all(|o| o.to_bits() == 0), "{out:?}");
+        let asm = assembly(&f, Mode::Precise).expect("listing");
+        assert!(!asm.contains("fmadd") && !asm.contains("fmla"), "contracted:\n{asm}");
+        let fused = assembly(&formula("fma(NL, NV, NH)"), Mode::Precise).expect("listing");
+        if host().expect("host").fma && cfg!(target_arch = "x86_64") {
+            assert!(fused.contains("vfmadd"), "no fma:\n{fused}");
+        }
+        let divs = assembly(&formula("1 / NL + 1 / sqrt(NV)"), Mode::Fast).expect("listing");
+        for estimate in ["rcp", "rsqrt", "frecpe", "frsqrte"] {
+            assert!(!divs.contains(estimate), "{estimate}:\n{divs}");
+        }
+        let pow = assembly(&formula("param n = 20 in 1..100\npow(NH, n) * exp(NL) / acos(NV)"), Mode::Precise).expect("listing");
+        assert!(!pow.contains("rcp") && !pow.contains("rsqrt"), "estimate in the library's code");
+    }
+
+    #[test]
+    fn bad_root_is_an_error_not_a_panic() {
+        let ir = Ir::new();
+        let e = compile(&ir, NodeId(3), Mode::Precise, 4, false).err().map(|e| e.to_string());
+        assert_eq!(e.as_deref(), Some("internal JIT error: root outside the arena"));
+    }
+
+    /// Every length from 0 to 3·lanes + 1 (full vectors, a partial one, none), every lane shape.
+    #[test]
+    fn every_length_and_lane_shape_matches_the_interpreter() {
+        let f = formula("param n = 20 in 1..100\npow(NH, n) * (n + 2) / (8 * pi) + sin(VH * 40)");
+        let interp = crate::backend::interp::Interp::with_mode(&f, Mode::Precise);
+        for lanes in [2, 4, 8, 16] {
+            let k = llvm_kernel_with_lanes(&f, Mode::Precise, lanes).expect("compiles");
+            for len in 0..=(3 * lanes as usize + 1) {
+                let cols: Vec<Vec<f64>> = (0..N_INPUTS).map(|c| (0..len).map(|i| ((i * 7 + c * 3) % 11) as f64 / 10.0).collect()).collect();
+                let columns = Columns::new(std::array::from_fn(|i| cols[i].as_slice()));
+                let mut out = vec![f64::NAN; len + 1];
+                let last = out[len];
+                k.eval_batch(&columns, &[37.0], &mut out[..len]);
+                assert!(out[len].is_nan() && last.is_nan(), "wrote past the end");
+                for (i, o) in out[..len].iter().enumerate() {
+                    let x: [f64; N_INPUTS] = std::array::from_fn(|c| cols[c][i]);
+                    let want = interp.eval(&x, &[37.0]);
+                    assert_eq!(o.to_bits(), want.to_bits(), "lanes {lanes}, len {len}, element {i}");
+                    assert_eq!(k.eval(&x, &[37.0]).to_bits(), want.to_bits());
+                }
+            }
+        }
+    }
+}
