@@ -370,13 +370,8 @@ fn catalogue_files_agree_on_every_tier() {
     use std::sync::Arc;
     let pts = points(&lobe::report::measure::sample_points(64, 13));
     assert_eq!(pts.len() % 2, 1);
-    let mut s = 0x2545_F491_4F6C_DD1Du64;
-    let mut unit = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rng = lobe::base::rng::Rng(0x2545_F491_4F6C_DD1D);
+    let mut unit = move || rng.unit();
     let files: Vec<_> = catalogue_files("brdfs").into_iter().chain(catalogue_files("explorer")).collect();
     for path in &files {
         let name = path.display().to_string();
