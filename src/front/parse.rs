@@ -445,6 +445,9 @@ mod tests {
             assert_eq!(d.message, format!("a parameter's default must be a constant number, not {quoted}"), "{src:?}");
             let hint = d.hint_texts(&crate::base::diag::Plain).join(" ");
             assert!(hint.contains("write a number") && hint.contains(&format!("= {}", quoted.trim_matches('`'))), "{src:?}: {hint}");
+            // The name is still bound (to an error value): its use below adds no "unknown variable".
+            let all = crate::front::parse("p.brdf", src).unwrap_err().items;
+            assert_eq!(all.len(), 1, "{src:?}: {all:#?}");
         }
         let ds = diagnostics("param a =");
         assert_eq!(ds[0].message, "a parameter needs a default value after `=`", "{ds:#?}");
