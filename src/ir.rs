@@ -364,6 +364,20 @@ impl Ir {
         inv
     }
 
+    /// Per node, the inputs its value reads (one pass in arena order: operands come first).
+    pub(crate) fn input_sets(&self) -> Vec<InputSet> {
+        let mut sets: Vec<InputSet> = Vec::with_capacity(self.nodes.len());
+        for n in &self.nodes {
+            let mut s = InputSet::default();
+            if let Node::Input(i) = n {
+                s.insert(*i);
+            }
+            n.for_each_arg(|a| s.0 |= sets[a.index()].0);
+            sets.push(s);
+        }
+        sets
+    }
+
     /// Inputs read by the expression rooted at `root`.
     pub(crate) fn used_inputs(&self, root: NodeId) -> InputSet {
         let mut set = InputSet::default();

@@ -144,13 +144,7 @@ pub fn use_cache(on: bool) {
 /// Compile options with the accuracy pass on, its search bounded by 2 s (it keeps the best form so far), its
 /// decisions cached unless `--no-cache` was given.
 pub fn with_pass(opts: Options, pass: lobe::numerics::robust::PassOptions) -> Options {
-    let pass = lobe::numerics::robust::PassOptions { budget: lobe::numerics::robust::COMMAND_BUDGET, ..pass };
-    let cache = USE_CACHE
-        .load(std::sync::atomic::Ordering::Relaxed)
-        .then(lobe::numerics::pass_cache::Cache::platform)
-        .flatten()
-        .map(|c| std::sync::Arc::new(c) as std::sync::Arc<dyn lobe::numerics::robust::DecisionStore>);
-    lobe::numerics::robust::with_pass_cached(opts, pass, cache)
+    lobe::numerics::pass_cache::command_pass(opts, pass, USE_CACHE.load(std::sync::atomic::Ordering::Relaxed))
 }
 
 /// The scene compiler of `render`, `compare` and `watch`: the backend's kernels through the accuracy pass in

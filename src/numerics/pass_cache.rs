@@ -75,6 +75,15 @@ impl Cache {
 
 }
 
+/// Compile options with the accuracy pass as the commands run it: its search bounded by
+/// [`super::robust::COMMAND_BUDGET`], its decisions read from and stored in the platform cache when `cached`
+/// and there is a cache directory.
+pub fn command_pass(opts: crate::Options, pass: PassOptions, cached: bool) -> crate::Options {
+    let pass = PassOptions { budget: super::robust::COMMAND_BUDGET, ..pass };
+    let store = cached.then(Cache::platform).flatten().map(|c| std::sync::Arc::new(c) as std::sync::Arc<dyn DecisionStore>);
+    super::robust::with_pass_cached(opts, pass, store)
+}
+
 impl DecisionStore for Cache {
     /// The stored decision for this formula, baked values and options, if any.
     fn load(&self, f: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Option<Decision> {

@@ -62,10 +62,9 @@ fn ldexp(mut x: f64, mut k: i64) -> f64 {
     }
     x * pow2(k)
 }
-/// 2^k for |k| ≤ 1022, from its bits (exact; `powi` was a tenth of the truth's time).
+/// 2^k for |k| ≤ 1022: the math library's exact power of two (`powi` was a tenth of the truth's time).
 fn pow2(k: i64) -> f64 {
-    debug_assert!((-1022..=1023).contains(&k));
-    f64::from_bits(((k + 1023) as u64) << 52)
+    crate::builtins::math::pow2i(k as f64)
 }
 /// 1/i! for i = 0 … 12 in double-double (exp's Taylor terms multiply by these instead of dividing by i).
 fn inverse_factorials() -> &'static [Dd; 13] {
@@ -538,17 +537,10 @@ fn eval_xs(f: &Formula, x: &[Xf; N_INPUTS], params: &[f64]) -> Xf {
 pub fn eval_moves(f: &Formula, x: &[f64; N_INPUTS], params: &[f64], moves: &[(usize, f64)]) -> Vec<f64> {
     let n = f.root.index() + 1;
     let xs = x.map(Xf::from_f64);
-    // Per node, the inputs it reads (a bit each), and its value at `x`.
-    let mut reads: Vec<u16> = Vec::with_capacity(n);
+    // Per node, the inputs it reads, and its value at `x`.
+    let reads = f.ir.input_sets();
     let mut base: Vec<Xf> = Vec::with_capacity(n);
     for id in f.ir.ids().take(n) {
-        let node = *f.ir.node(id);
-        let mut r = match node {
-            Node::Input(i) => 1u16 << i.index(),
-            _ => 0,
-        };
-        node.for_each_arg(|a| r |= reads[a.index()]);
-        reads.push(r);
         let value = node_value(f, id, &base, &xs, params);
         base.push(value);
     }
@@ -558,10 +550,10 @@ pub fn eval_moves(f: &Formula, x: &[f64; N_INPUTS], params: &[f64], moves: &[(us
         .map(|&(i, w)| {
             let mut moved = xs;
             moved[i] = Xf::from_f64(w);
-            let bit = 1u16 << i;
+            let input = crate::ir::Input::ALL[i];
             for id in f.ir.ids().take(n) {
                 let k = id.index();
-                v[k] = if reads[k] & bit != 0 { node_value(f, id, &v, &moved, params) } else { base[k] };
+                v[k] = if reads[k].contains(input) { node_value(f, id, &v, &moved, params) } else { base[k] };
             }
             v[n - 1].to_f64()
         })

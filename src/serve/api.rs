@@ -557,9 +557,7 @@ pub(crate) fn render_png(st: &Arc<State>, query: &str) -> Result<Reply, ApiError
         }
         let opts = LoadOptions { size, set, formula_override: None };
         // Through the accuracy pass and its decision cache, as `lobe render` compiles, so the bytes are the CLI's.
-        let cache = crate::numerics::pass_cache::Cache::platform().map(|c| Arc::new(c) as Arc<dyn crate::numerics::robust::DecisionStore>);
-        let pass = crate::numerics::robust::PassOptions { budget: crate::numerics::robust::COMMAND_BUDGET, ..Default::default() };
-        let accuracy = crate::numerics::robust::with_pass_cached(Options::default(), pass, cache).accuracy;
+        let accuracy = crate::numerics::pass_cache::command_pass(Options::default(), Default::default(), true).accuracy;
         let sc = scene::load_scene(&path, &opts, &LobeCompiler { backend: Backend::Jit, math: crate::Mode::Precise, accuracy })?;
         let (frame, _) = crate::render::render(&sc, &ropts()).map_err(|e| ApiError::new(500, e))?;
         Ok(Reply::bytes("image/png", png(&frame.image)?))

@@ -471,8 +471,9 @@ fn pole_guard(an: &Analysis, ir: &mut Ir, map: &[NodeId], (num, den): (&[NodeId]
         .copied()
         .filter(|&d| {
             let rd = ranges[d.index()];
-            let others = all.iter().filter(|&&x| x != d).fold(0u16, |m, x| m | reads[x.index()]);
-            rd.lo <= 0.0 && rd.hi >= 0.0 && reads[d.index()] != 0 && reads[d.index()] & others == 0 && all.iter().filter(|&&x| x == d).count() == 1
+            let others = all.iter().filter(|&&x| x != d).fold(0u16, |m, x| m | reads[x.index()].0);
+            let mine = reads[d.index()].0;
+            rd.lo <= 0.0 && rd.hi >= 0.0 && mine != 0 && mine & others == 0 && all.iter().filter(|&&x| x == d).count() == 1
         })
         .collect();
     if lone.is_empty() {

@@ -8,7 +8,7 @@ use super::range::Range;
 use super::{node_ranges, Policy};
 use crate::base::span::Span;
 use crate::builtins::Builtin;
-use crate::ir::{BinOp, Formula, Ir, Node, NodeId};
+use crate::ir::{BinOp, Formula, InputSet, Ir, Node, NodeId};
 use std::cell::OnceCell;
 
 /// The facts about one formula the rules read. Each is computed the first time a rule asks for it.
@@ -19,7 +19,7 @@ pub(crate) struct Analysis {
     guards: OnceCell<Vec<Option<Vec<NodeId>>>>,
     lists: OnceCell<Lists>,
     wide_lists: OnceCell<Lists>,
-    reads: OnceCell<Vec<u16>>,
+    reads: OnceCell<Vec<InputSet>>,
 }
 
 impl Analysis {
@@ -55,21 +55,9 @@ impl Analysis {
         self.lists.get_or_init(|| product_lists(&self.f, MAX_FACTORS))
     }
 
-    /// Per node, the inputs its value reads, a bit per [`crate::ir::Input`] index.
-    pub(crate) fn reads(&self) -> &[u16] {
-        self.reads.get_or_init(|| {
-            let mut r: Vec<u16> = Vec::with_capacity(self.f.ir.len());
-            for id in self.f.ir.ids() {
-                let node = *self.f.ir.node(id);
-                let mut m = match node {
-                    Node::Input(i) => 1u16 << i.index(),
-                    _ => 0,
-                };
-                node.for_each_arg(|a| m |= r[a.index()]);
-                r.push(m);
-            }
-            r
-        })
+    /// Per node, the inputs its value reads ([`Ir::input_sets`]).
+    pub(crate) fn reads(&self) -> &[InputSet] {
+        self.reads.get_or_init(|| self.f.ir.input_sets())
     }
 
     /// [`Analysis::lists`] of up to twice as many factors (cancel-min's products, which carry a min's terms).
