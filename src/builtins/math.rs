@@ -459,7 +459,16 @@ const EXP_FAST_2P: [f64; 7] = [
 /// 0 (an absolute error < 3.3e-308).
 pub(crate) fn exp_fast<E: Emit>(e: &mut E, x: E::V) -> E::V {
     let below = ltk(e, x, -708.0);
-    let xc = clamp_to(e, x, -708.0, 709.9);
+    let (p2, k1) = exp_fast_parts(e, x, -708.0, 709.9);
+    let s = e.pow2i(k1);
+    let y = e.mul(p2, s);
+    e.zero_where(below, y)
+}
+
+/// Fast exp before its scaling: `(y, q)` with e^x ≈ y·2^q, y = 2·P(r) in [1.4, 2.9], x clamped to [lo, hi]
+/// (within ±1416, so q stays in [`scale2`]'s range).
+fn exp_fast_parts<E: Emit>(e: &mut E, x: E::V, lo: f64, hi: f64) -> (E::V, E::V) {
+    let xc = clamp_to(e, x, lo, hi);
     let kx = mulk(e, xc, INV_LN2);
     let k = round_int(e, kx);
     let nhi = e.konst(-LN2_HI);
@@ -467,10 +476,7 @@ pub(crate) fn exp_fast<E: Emit>(e: &mut E, x: E::V) -> E::V {
     let nlo = e.konst(-LN2_LO);
     let r = e.fma(k, nlo, hi);
     let p2 = horner(e, r, &EXP_FAST_2P);
-    let k1 = addk(e, k, -1.0);
-    let s = e.pow2i(k1);
-    let y = e.mul(p2, s);
-    e.zero_where(below, y)
+    (p2, addk(e, k, -1.0))
 }
 
 // ---- ln ----
@@ -1223,9 +1229,16 @@ pub(crate) mod logic {
 /// Special values follow `exp(a)*b/c`, except that a zero exponential (a < −745.2) times an infinite b/c is 0:
 /// an infinite b/c stands for an overflowed finite factor, and the accuracy pass forms this builtin only from
 /// products whose exp factor is what vanishes there.
-pub(crate) fn exp_mul_div<E: Emit>(e: &mut E, a: E::V, b: E::V, c: E::V) -> E::V {
-    let zero = e.konst(0.0);
-    let (y, q) = exp_parts(e, a, zero, -1416.0, 1416.0);
+///
+/// Fast mode takes e^a = y·2^q from fast exp's reduction and polynomial ([`exp_fast_parts`]: no table, no
+/// double-double; ≤ 1e-8 relative) and keeps the rest, rare branch included: the same range in both modes.
+pub(crate) fn exp_mul_div<E: Emit>(e: &mut E, a: E::V, b: E::V, c: E::V, mode: Mode) -> E::V {
+    let (y, q) = if mode == Mode::Fast {
+        exp_fast_parts(e, a, -1416.0, 1416.0)
+    } else {
+        let zero = e.konst(0.0);
+        exp_parts(e, a, zero, -1416.0, 1416.0)
+    };
     let bc = e.div(b, c);
     let s = e.mul(y, bc);
     let r = scale2(e, s, q);

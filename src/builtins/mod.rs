@@ -133,9 +133,13 @@ extern "C" fn lobe_expmuldiv_libm(a: f64, b: f64, c: f64) -> f64 {
     a.exp() * b / c
 }
 
-/// expmuldiv's library code compiled by rustc (both modes run the same code), for outlined call sites.
-extern "C" fn lobe_expmuldiv(a: f64, b: f64, c: f64) -> f64 {
-    math::exp_mul_div(&mut math::Direct, a, b, c)
+/// expmuldiv's library code compiled by rustc, for outlined call sites.
+extern "C" fn lobe_expmuldiv_precise(a: f64, b: f64, c: f64) -> f64 {
+    math::exp_mul_div(&mut math::Direct, a, b, c, Mode::Precise)
+}
+
+extern "C" fn lobe_expmuldiv_fast(a: f64, b: f64, c: f64) -> f64 {
+    math::exp_mul_div(&mut math::Direct, a, b, c, Mode::Fast)
 }
 
 /// acoslo's C-library spelling: the C library's acos minus lobe's (both within an ulp, so a rough reference).
@@ -688,7 +692,7 @@ impl Builtin {
                 e.not(eq)
             }),
             Builtin::Select => logic::select(e, x, args[1], args[2]),
-            Builtin::ExpMulDiv => exp_mul_div(e, x, args[1], args[2]),
+            Builtin::ExpMulDiv => exp_mul_div(e, x, args[1], args[2], mode),
             Builtin::AcosLo => acos_lo(e, x, mode),
             Builtin::PowLo => pow_lo(e, x, args[1], mode),
             Builtin::Sqrt | Builtin::Abs | Builtin::Min | Builtin::Max | Builtin::Clamp | Builtin::Fma => return None,
@@ -727,7 +731,8 @@ impl Builtin {
             (Builtin::Exp, Mode::Fast) => ("lobe_exp_fast", Libm::F1(lobe_exp_fast)),
             (Builtin::Ln, Mode::Precise) => ("lobe_ln_precise", Libm::F1(lobe_ln_precise)),
             (Builtin::Ln, Mode::Fast) => ("lobe_ln_fast", Libm::F1(lobe_ln_fast)),
-            (Builtin::ExpMulDiv, _) => ("lobe_expmuldiv", Libm::F3(lobe_expmuldiv)),
+            (Builtin::ExpMulDiv, Mode::Precise) => ("lobe_expmuldiv_precise", Libm::F3(lobe_expmuldiv_precise)),
+            (Builtin::ExpMulDiv, Mode::Fast) => ("lobe_expmuldiv_fast", Libm::F3(lobe_expmuldiv_fast)),
             (Builtin::AcosLo, Mode::Precise) => ("lobe_acoslo_precise", Libm::F1(lobe_acoslo_precise)),
             (Builtin::AcosLo, Mode::Fast) => ("lobe_acoslo_fast", Libm::F1(lobe_acoslo_fast)),
             (Builtin::PowLo, Mode::Precise) => ("lobe_powlo_precise", Libm::F2(lobe_powlo_precise)),

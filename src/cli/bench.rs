@@ -10,6 +10,7 @@
 use super::args::{self, Force, Json, Params};
 use super::common::{self, CliError};
 use lobe::numerics::accuracy::{accuracy, AccuracyOptions};
+use lobe::numerics::robust::{self, Conditioning, Reference};
 use lobe::numerics::{choose_lobe_input, energy};
 use lobe::report::measure::{measure_kernel, sample_points, MeasureOptions};
 use lobe::report::bench::{self, BenchRow};
@@ -173,13 +174,26 @@ fn row(
 ) -> Result<BenchRow, CliError> {
     let set = common::set_for(f, set);
     let params = common::param_values(f, &set);
-    let opts = |bake: Vec<(String, f64)>| Options { backend: Backend::Jit, bake, math, ..Options::default() };
-    let baked = lobe::compile_formula(f.clone(), &opts(set.clone()))?;
-    let live = lobe::compile_formula(f.clone(), &opts(vec![]))?;
-    let m = measure_kernel(&baked, &params, a.measure()).map_err(|e| CliError::msg(format!("{path}: {e}")))?;
-    let tiers = if a.llvm()? { Some(tier_columns(&baked, &params, a)?) } else { None };
+    let timing = |k: &lobe::Kernel| measure_kernel(k, &params, a.measure()).map_err(|e| CliError::msg(format!("{path}: {e}")));
+    // The two kernels of the formula at the benchmark values: the plain simplification and the accuracy pass's
+    // choice (what eval, render and the other commands compile). The row's columns describe the pass's kernel;
+    // `plain_*` the plain one, each timed and measured against the truth in the row's math mode.
+    let plain = lobe::compile_formula(f.clone(), &Options { backend: Backend::Jit, bake: set.clone(), math, ..Options::default() })?;
+    let bake = lobe::resolve_bake(f, &set)?;
+    let started = Instant::now();
+    let pass = lobe::numerics::robust::improve(f, &bake, &Default::default());
+    let pass_ms = started.elapsed().as_secs_f64() * 1e3;
+    let kernel = lobe::build_kernel(std::sync::Arc::new(pass.formula.clone()), Backend::Jit, math)?;
+    let truth_f = lobe::simplify::bake_only(f, &bake);
+    let truth = Reference::new(&truth_f, robust::sample(f, &bake, ERROR_POINTS, ERROR_SEED));
+    let (err, plain_err) = (truth.measure(&kernel, Conditioning::Everywhere), truth.measure(&plain, Conditioning::Everywhere));
+    let m = timing(&kernel)?;
+    let mp = timing(&plain)?;
+    let tiers = if a.llvm()? { Some(tier_columns(&kernel, &params, a)?) } else { None };
     let stem = Path::new(path).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     let native_ns = lobe::numerics::twins::by_stem(&stem).map(|t| time_twin(t.ev.as_ref(), &params, a.samples));
+    // The model's distance from the reference lobe over n = 1..1000 (live n): a property of the formula.
+    let live = lobe::compile_formula(f.clone(), &Options { backend: Backend::Jit, math, ..Options::default() })?;
     let (lobe, _) = choose_lobe_input(live.used_inputs());
     let (ref_lobe, _) = choose_lobe_input(reference.used_inputs());
     let acc = accuracy(&live, &params, lobe, reference, &reference.default_params(), ref_lobe, &AccuracyOptions::default());
@@ -187,22 +201,9 @@ fn row(
         Ok(r) => (r.mean_abs_grid, r.epicenter.value * 100.0, r.max_abs.value),
         Err(_) => (f64::NAN, f64::NAN, f64::NAN),
     };
-    let coef_n50 = energy::normalization_coef(&baked, &params, lobe).ok();
-    let albedo_max = if a.no_albedo { None } else { energy::full_energy_for(&baked, baked.used_inputs(), &params).ok().map(|e| e.albedo_max) };
-    let spread = (m.scalar_jit.p75_ns - m.scalar_jit.p25_ns) / 2.0 / m.scalar_jit.median_ns;
-    let (max_ulp_vs_precise, max_rel_vs_precise) = error_vs_precise(&baked, &params);
-    // Numerical error and cost of the accuracy pass's kernel (numerics::robust).
-    let bake = lobe::resolve_bake(f, &set)?;
-    let pass = lobe::numerics::robust::improve(f, &bake, &Default::default());
-    let robust_jit_ns = if pass.trials.iter().any(|t| t.kept) {
-        let k = lobe::build_kernel(std::sync::Arc::new(pass.formula.clone()), Backend::Jit, math)?;
-        measure_kernel(&k, &params, a.measure())
-            .map_err(|e| CliError::msg(format!("{path}: {e}")))?
-            .scalar_jit
-            .median_ns
-    } else {
-        m.scalar_jit.median_ns
-    };
+    let coef_n50 = energy::normalization_coef(&kernel, &params, lobe).ok();
+    let albedo_max = if a.no_albedo { None } else { energy::full_energy_for(&kernel, kernel.used_inputs(), &params).ok().map(|e| e.albedo_max) };
+    let (max_ulp_vs_precise, max_rel_vs_precise) = error_vs_precise(&kernel, &params);
     Ok(BenchRow {
         name: f.display_name(),
         file: path.to_string(),
@@ -210,8 +211,9 @@ fn row(
         max_ulp_vs_precise,
         max_rel_vs_precise,
         compile_us: m.compile.as_secs_f64() * 1e6,
+        pass_ms,
         jit_ns: m.scalar_jit.median_ns,
-        jit_spread: spread,
+        jit_spread: m.scalar_jit.spread(),
         jit_batch_ns: m.batched_jit.median_ns,
         interp_ns: m.interp.median_ns,
         native_ns,
@@ -220,14 +222,23 @@ fn row(
         max_abs,
         coef_n50,
         albedo_max,
-        bits_error_avg: pass.after.avg_bits,
-        bits_error_max: pass.after.max_bits,
-        bits_error_max_before: pass.before.max_bits,
-        robust_jit_ns,
+        bits_error_avg: err.avg_bits,
+        bits_error_max: err.max_bits,
+        plain: bench::PlainKernel {
+            jit_ns: mp.scalar_jit.median_ns,
+            jit_spread: mp.scalar_jit.spread(),
+            jit_batch_ns: mp.batched_jit.median_ns,
+            bits_error_avg: plain_err.avg_bits,
+            bits_error_max: plain_err.max_bits,
+        },
         pareto: false,
         tiers,
     })
 }
+
+/// Domain points (and their seed) on which both kernels of a row are measured against the truth.
+const ERROR_POINTS: usize = 4096;
+const ERROR_SEED: u64 = 0xBE4C;
 
 pub fn run(a: &BenchArgs) -> Result<(), CliError> {
     // Before any work: `--tier llvm` in a build without the LLVM tier is an error.

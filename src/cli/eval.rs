@@ -220,15 +220,21 @@ fn run_points(a: &EvalArgs, ks: &[Kernel], path: &str, params: &[f64], set: &[(S
         baked.extend(formula.params.iter().map(|p| p.name.clone()));
     }
     let pts = lobe::numerics::points::parse(name, &text, formula, used(ks), &baked)?;
-    ks.iter().for_each(Kernel::warm_up);
-    let t = std::time::Instant::now();
-    let channels: Vec<Vec<f64>> = ks.iter().map(|k| lobe::numerics::points::evaluate(k, &pts, params)).collect();
-    let elapsed = t.elapsed();
+    let mut channels: Vec<Vec<f64>> = ks.iter().map(|k| lobe::numerics::points::evaluate(k, &pts, params)).collect();
+    // The reported cost is the steady state (kernels warm, output buffers touched), not the first call.
+    let ns_per_point = a.json.on.then(|| {
+        lobe::report::measure::steady_state(pts.len, || {
+            for (k, out) in ks.iter().zip(&mut channels) {
+                lobe::numerics::points::evaluate_into(k, &pts, params, std::hint::black_box(out));
+            }
+        })
+        .median_ns
+    });
     let point = |i: usize| -> Vec<f64> { channels.iter().map(|c| c[i]).collect() };
     let note = (pts.normalised > 0).then(|| format!("{} of {} rows had a non-unit L or V; they were normalised", pts.normalised, pts.len));
     if a.json.on {
         let values = (0..pts.len).map(|i| PointValue(point(i))).collect();
-        println!("{}", common::to_json(&PointsReport::new(ks, values, elapsed, note))?);
+        println!("{}", common::to_json(&PointsReport::new(ks, values, ns_per_point.unwrap_or(f64::NAN), note))?);
         return Ok(());
     }
     let mut text = String::with_capacity(pts.len * 20 * ks.len());

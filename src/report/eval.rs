@@ -82,6 +82,8 @@ pub struct PointsReport {
     pub math: &'static str,
     #[serde(serialize_with = "json::num")]
     pub compile_us: f64,
+    /// ns per point of evaluating every channel over the points in the steady state (kernels compiled and
+    /// warm, output written before): the median of repeated passes.
     #[serde(serialize_with = "json::num")]
     pub eval_ns_per_point: f64,
     /// Set when rows had a non-unit L or V.
@@ -90,8 +92,8 @@ pub struct PointsReport {
 }
 
 impl PointsReport {
-    /// `values` per point from the channel kernels `ks`, evaluated in `elapsed`.
-    pub fn new(ks: &[Kernel], values: Vec<PointValue>, elapsed: std::time::Duration, note: Option<String>) -> PointsReport {
+    /// `values` per point from the channel kernels `ks`, which cost `eval_ns_per_point`.
+    pub fn new(ks: &[Kernel], values: Vec<PointValue>, eval_ns_per_point: f64, note: Option<String>) -> PointsReport {
         let points = values.len();
         PointsReport {
             values,
@@ -100,7 +102,7 @@ impl PointsReport {
             lanes: lanes(ks),
             math: ks[0].math.name(),
             compile_us: compile_us(ks),
-            eval_ns_per_point: elapsed.as_nanos() as f64 / points.max(1) as f64,
+            eval_ns_per_point,
             note,
         }
     }

@@ -25,6 +25,11 @@ pub struct Timing {
 }
 
 impl Timing {
+    /// The relative half-width of the interquartile range: the measured noise of the median.
+    pub fn spread(&self) -> f64 {
+        (self.p75_ns - self.p25_ns) / 2.0 / self.median_ns
+    }
+
     fn from_samples(mut ns: Vec<f64>) -> Timing {
         ns.sort_by(f64::total_cmp);
         let at = |q: f64| ns.get(((ns.len() - 1) as f64 * q).round() as usize).copied().unwrap_or(f64::NAN);
@@ -112,6 +117,22 @@ fn time_per_eval(samples: usize, evals: usize, mut pass: impl FnMut()) -> Timing
             t.elapsed().as_nanos() as f64 / evals.max(1) as f64
         })
         .collect();
+    Timing::from_samples(ns)
+}
+
+/// ns per element of `pass` (which does `evals` elements) in its steady state: the caller has run it once
+/// (compiled, warm, output touched); passes repeat until at least 3 and 20 ms, or 1 s, have gone by.
+pub fn steady_state(evals: usize, mut pass: impl FnMut()) -> Timing {
+    let start = Instant::now();
+    let mut ns = vec![];
+    while ns.len() < 3 || (start.elapsed() < Duration::from_millis(20) && ns.len() < 1000) {
+        let t = Instant::now();
+        pass();
+        ns.push(t.elapsed().as_nanos() as f64 / evals.max(1) as f64);
+        if start.elapsed() > Duration::from_secs(1) {
+            break;
+        }
+    }
     Timing::from_samples(ns)
 }
 

@@ -418,3 +418,53 @@ fn math_tables_rederive() {
         assert!((EXP_T_TAIL[j] - tail).abs() <= 2f64.powi(-98), "EXP_T_TAIL[{j}] = {:e}, derived {tail:e}", EXP_T_TAIL[j]);
     }
 }
+
+/// expmuldiv (the accuracy pass's scaled exponential) in fast mode: within the fast bound of the precise one
+/// over exponents past both ends of e^a's range and b, c over every binade and sign (zeros and infinities
+/// too), the same class of value (0, ∞, NaN) everywhere, and the JIT's bits in fast mode. Relative error with
+/// a floor of 2^-1000: below it the results are subnormals, each rounded once.
+#[test]
+fn fast_expmuldiv_is_within_the_fast_bound_of_the_precise_one() {
+    let mut r = Rng(0xE4D1);
+    let special = [0.0, -0.0, f64::INFINITY, f64::MIN_POSITIVE, 5e-324, 1.0, f64::MAX];
+    let mut pts = vec![];
+    for i in 0..100_000 {
+        let a = if i % 2 == 0 { r.range(-1500.0, 1500.0) } else { r.range(-30.0, 5.0) };
+        let mut bc = || if r.unit() < 0.02 { special[(r.next() % 7) as usize] } else { r.log(-1074.0, 1023.0) };
+        let (b, c) = (bc(), bc());
+        pts.push([a, b, c]);
+    }
+    let bound = Builtin::ExpMulDiv.info().bound.fast_rel;
+    let mut worst = (0.0f64, [0.0; 3]);
+    for p in &pts {
+        let (fast, precise) = (Builtin::ExpMulDiv.eval_in(Mode::Fast, p), Builtin::ExpMulDiv.eval_in(Mode::Precise, p));
+        if !fast.is_finite() || !precise.is_finite() || precise == 0.0 {
+            let near_max = precise.is_finite() && precise.abs() > f64::MAX * (1.0 - 1e-6);
+            let near_zero = precise.abs() < 2f64.powi(-1000) && fast.abs() < 2f64.powi(-1000);
+            assert!(same_class(fast, precise) || near_max || near_zero, "expmuldiv{p:?}: fast {fast:e}, precise {precise:e}");
+            continue;
+        }
+        let e = (fast - precise).abs() / precise.abs().max(2f64.powi(-1000));
+        if e > worst.0 {
+            worst = (e, *p);
+        }
+    }
+    assert!(worst.0 <= bound, "fast expmuldiv: error {:e} at {:?} (stated ≤ {bound:e})", worst.0, worst.1);
+    println!("fast expmuldiv: max error {:.2e} (worst at {:?})", worst.0, worst.1);
+    // The JIT computes the interpreter's fast-mode bits.
+    let src = "expmuldiv(NH, NL, NV)";
+    let mut ir = Ir::new();
+    let args: Vec<_> = [Input::NH, Input::NL, Input::NV].iter().map(|i| ir.input(*i, S)).collect();
+    let root = ir.call(Builtin::ExpMulDiv, &args, S);
+    let formula = Arc::new(Formula { ir, root, source: src.into(), ..raw_formula(Builtin::Exp) });
+    let jit = lobe::build_kernel(formula, Backend::Jit, Mode::Fast).expect("compiles");
+    let col = |k: usize| pts.iter().map(|p| p[k]).collect::<Vec<f64>>();
+    let (a, b, c) = (col(0), col(1), col(2));
+    let cols = Columns::new(std::array::from_fn(|k| match k { 0 => b.as_slice(), 1 => c.as_slice(), 2 => a.as_slice(), _ => &[] }));
+    let mut got = vec![0.0; pts.len()];
+    jit.eval_batch(&cols, &[1.0], &mut got);
+    for (p, g) in pts.iter().zip(&got) {
+        let want = Builtin::ExpMulDiv.eval_in(Mode::Fast, p);
+        assert!(g.to_bits() == want.to_bits() || g.is_nan() && want.is_nan(), "JIT expmuldiv{p:?} = {g:e}, interpreter {want:e}");
+    }
+}
