@@ -59,6 +59,12 @@ pub struct Program {
 }
 
 impl Program {
+    /// Parameter slots a run must supply: those the program's formulas declare, and every slot it reads.
+    pub(crate) fn params_read(&self) -> usize {
+        let read = self.ir.nodes().iter().filter_map(|n| if let Node::Param(k) = n { Some(*k as usize + 1) } else { None }).max();
+        read.unwrap_or(0).max(self.n_params)
+    }
+
     /// The program computing `outputs` of `ir`, with `guarded` = (lit, outputs) regions (module doc); compacts
     /// the IR to the live nodes. Regions whose order does not allow guarding are dropped (their nodes are then
     /// computed for every element: the same values).

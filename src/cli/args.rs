@@ -89,41 +89,34 @@ pub fn merge_repeated<T: Clone + PartialEq>(flag: &str, groups: &[Vec<(String, T
     Ok(out)
 }
 
-/// `--backend jit|interp` and `--math precise|fast`.
+/// `--backend jit|interp`, `--tier cranelift|llvm|auto` and `--math precise|fast`.
 #[derive(clap::Args, Clone, Copy, Debug)]
 pub struct BackendArg {
-    /// Evaluation backend: `jit` (Cranelift) or `interp` (the reference interpreter).
+    /// Evaluation backend: `jit` (compiled by the `--tier`) or `interp` (the reference interpreter).
     #[arg(id = "backend", long = "backend", value_name = "BACKEND", default_value = "jit")]
-    pub kind: Backend,
+    kind: Backend,
+    /// JIT tier: `cranelift` (the default), `llvm` (LLVM 19 in the host's widest f64 lanes: a build with
+    /// `--features llvm`), or `auto` (LLVM when this build has it, else Cranelift).
+    #[arg(id = "tier", long = "tier", value_name = "TIER", default_value = "cranelift")]
+    tier: lobe::Tier,
     #[command(flatten)]
     pub math: MathArg,
 }
 
 impl BackendArg {
-    /// Compile options for this backend and math mode with `bake` baked in.
-    pub fn options(&self, bake: Vec<(String, f64)>) -> lobe::Options {
-        lobe::Options { backend: self.kind, bake, math: self.math.mode, ..lobe::Options::default() }
-    }
-}
-
-/// `--tier cranelift|llvm|auto`: which compiler `--backend jit` means.
-#[derive(clap::Args, Clone, Copy, Debug)]
-pub struct TierArg {
-    /// JIT tier: `cranelift` (the default), `llvm` (LLVM 19 in the host's widest f64 lanes: a build with
-    /// `--features llvm`), or `auto` (LLVM when this build has it, else Cranelift).
-    #[arg(id = "tier", long = "tier", value_name = "TIER", default_value = "cranelift")]
-    pub tier: lobe::Tier,
-}
-
-impl TierArg {
-    /// The backend `backend` with this tier means; `llvm` in a build without the LLVM tier is an error with the
-    /// rebuild hint (not a failure later, at the first compile).
-    pub fn backend(&self, backend: Backend) -> Result<Backend, CliError> {
-        let b = self.tier.resolve(backend).map_err(|e| CliError::hint(e, "drop --tier, or use --backend jit"))?;
+    /// The backend `--backend` with `--tier` means; `llvm` in a build without the LLVM tier is an error with
+    /// the rebuild hint (not a failure later, at the first compile).
+    pub fn backend(&self) -> Result<Backend, CliError> {
+        let b = self.tier.resolve(self.kind).map_err(|e| CliError::hint(e, "drop --tier, or use --backend jit"))?;
         if b == Backend::Llvm && !lobe::Tier::llvm_available() {
             return Err(CliError::Error(lobe::llvm_missing()));
         }
         Ok(b)
+    }
+
+    /// Compile options for this backend and math mode with `bake` baked in.
+    pub fn options(&self, bake: Vec<(String, f64)>) -> Result<lobe::Options, CliError> {
+        Ok(lobe::Options { backend: self.backend()?, bake, math: self.math.mode, ..lobe::Options::default() })
     }
 }
 

@@ -68,7 +68,7 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
         transfer: if a.srgb { Transfer::Srgb } else { Transfer::Linear },
         ..RenderOptions::default()
     };
-    let lobe_compiler = super::common::scene_compiler(a.backend.kind, a.backend.math.mode);
+    let lobe_compiler = super::common::scene_compiler(a.backend.backend()?, a.backend.math.mode);
     let compiler: &dyn lobe::render::scene::BrdfCompiler = &lobe_compiler;
     let base_set = a.set.list()?;
     if !a.sweep_n.is_empty() && base_set.iter().any(|(k, _)| k == "n") {

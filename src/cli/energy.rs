@@ -65,7 +65,7 @@ pub fn run(a: &EnergyArgs) -> Result<(), CliError> {
     if a.range.is_some() && set.iter().any(|(k, _)| k == "n") {
         return Err(CliError::hint("--set n conflicts with --range", "--range sweeps n; drop n from --set"));
     }
-    let backend: Backend = a.backend.kind;
+    let backend: Backend = a.backend.backend()?;
     let f = a.formula.load()?;
     let ks = f
         .channels()
@@ -77,7 +77,7 @@ pub fn run(a: &EnergyArgs) -> Result<(), CliError> {
         (file, expr) => {
             // A fitted coefficient reads no input by design: its "reads no input" warning is noise here.
             let f = common::load_formula_with(file.as_deref(), expr.as_deref(), false)?;
-            Some(lobe::compile_formula(f, &a.backend.options(vec![]))?)
+            Some(lobe::compile_formula(f, &a.backend.options(vec![])?)?)
         }
     };
     print!("{}", report_channels(a, &ks, against.as_ref())?);

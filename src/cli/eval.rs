@@ -7,7 +7,7 @@
 //! A colour formula is compiled channel by channel (three kernels sharing the parameters) and prints
 //! `[r, g, b]` per point.
 
-use super::args::{self, BackendArg, FormulaSource, Json, Params, PreferArg, TierArg};
+use super::args::{self, BackendArg, FormulaSource, Json, Params, PreferArg};
 use super::common::{self, CliError};
 use lobe::report::eval::{EvalReport, PointValue, PointsReport};
 use lobe::ir::{Input, InputSet, N_INPUTS};
@@ -35,8 +35,6 @@ pub struct EvalArgs {
     pub normalize: bool,
     #[command(flatten)]
     pub backend: BackendArg,
-    #[command(flatten)]
-    pub tier: TierArg,
     #[command(flatten)]
     pub prefer: PreferArg,
     #[command(flatten)]
@@ -168,7 +166,7 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
     let set = a.set.list()?;
     let at = args::merge_repeated("--at", &a.at, |v| v.iter().map(|x| number(*x)).collect::<Vec<_>>().join(","))?;
     let f = a.formula.load()?;
-    let backend = a.tier.backend(a.backend.kind)?;
+    let backend = a.backend.backend()?;
     let pass = |opts| super::common::with_pass(opts, a.prefer.pass(lobe::numerics::robust::PassOptions::default().points));
     let ks: Vec<Kernel> = if a.normalize {
         if f.is_rgb() {
@@ -185,7 +183,7 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
     } else {
         let mut ks = vec![];
         for c in f.channels() {
-            ks.push(lobe::compile_formula(c, &pass(lobe::Options { backend, ..a.backend.options(set.clone()) }))?);
+            ks.push(lobe::compile_formula(c, &pass(a.backend.options(set.clone())?))?);
         }
         ks
     };

@@ -71,7 +71,8 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
     a.out.force.check(&out, image::is_lobe_png)?;
     Output::png_only(&out)?;
     let opts = LoadOptions { size: a.size, set: a.set.list()?, formula_override: None };
-    let sc = scene::load_scene(&a.scene, &opts, &super::common::scene_compiler(a.backend.kind, a.backend.math.mode))?;
+    let backend = a.backend.backend()?;
+    let sc = scene::load_scene(&a.scene, &opts, &super::common::scene_compiler(backend, a.backend.math.mode))?;
     let ropts = RenderOptions {
         threads: a.threads,
         tile: a.tile as usize,
@@ -97,7 +98,7 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
         let cut = r::cutoff_effect(&sc, &ropts, &frame, &stats).map_err(CliError::msg)?;
         if a.json.on {
             let t = report::Times { encode, wall };
-            let j = report::StatsReport::new(&stats, &t, a.backend.kind.name(), &sc.materials, cut.as_ref());
+            let j = report::StatsReport::new(&stats, &t, backend.name(), &sc.materials, cut.as_ref());
             println!("{}", common::to_json(&j)?);
         } else {
             eprint!("{}", report::stats_text(&stats, encode));

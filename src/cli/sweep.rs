@@ -149,11 +149,11 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(Out, Vec<String>), CliError
         ));
     }
     let u = f.unclamped();
-    let k = lobe::compile_formula(u.clone(), &a.backend.options(set.clone()))?;
+    let k = lobe::compile_formula(u.clone(), &a.backend.options(set.clone())?)?;
     let compiled = if a.as_written {
         None
     } else {
-        let opts = super::common::with_pass(a.backend.options(set.clone()), a.prefer.pass(lobe::numerics::robust::PassOptions::default().points));
+        let opts = super::common::with_pass(a.backend.options(set.clone())?, a.prefer.pass(lobe::numerics::robust::PassOptions::default().points));
         Some(lobe::compile_formula(u, &opts)?)
     };
     let opts = SweepOptions { bound: a.bound, max_evals: a.max_evals };

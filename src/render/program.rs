@@ -354,8 +354,10 @@ impl ProgramCode {
         Ok(match backend {
             Backend::Interp => ProgramCode::Interp(Arc::new(ProgramInterp::new(p, mode))),
             Backend::Jit => ProgramCode::Jit(crate::backend::jit::shade_code(p, mode)?),
-            // The LLVM tier compiles kernels only, not multi-output shading programs.
-            Backend::Llvm => return Err(JitError::Host("the LLVM tier compiles kernels only; shading programs run on the Cranelift tier".into())),
+            #[cfg(feature = "llvm")]
+            Backend::Llvm => ProgramCode::Jit(crate::backend::llvm::program_code(p, mode)?),
+            #[cfg(not(feature = "llvm"))]
+            Backend::Llvm => return Err(JitError::Host("this build has no LLVM tier (cargo feature `llvm`)".into())),
         })
     }
 

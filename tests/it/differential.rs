@@ -61,7 +61,7 @@ fn agreement_rule_is_strict_enough() {
 
 /// An expression tree, lowered into the hash-consed IR (which shares equal subtrees).
 #[derive(Clone, Debug)]
-enum E {
+pub(crate) enum E {
     C(f64),
     /// An input, clamped to [0, 1] as the lowering does, or raw (to reach NaN/inf paths through builtins).
     In(Input, bool),
@@ -111,7 +111,7 @@ fn params() -> Vec<ParamDecl> {
 }
 
 /// A formula as the lowering would give it: the root is `max(raw, 0)` when `policy` is set.
-fn formula(e: &E, policy: bool) -> Formula {
+pub(crate) fn formula(e: &E, policy: bool) -> Formula {
     let mut ir = Ir::new();
     let mut root = e.lower(&mut ir);
     if policy {
@@ -152,7 +152,7 @@ fn leaf() -> impl Strategy<Value = E> {
     ]
 }
 
-fn expr() -> impl Strategy<Value = E> {
+pub(crate) fn expr() -> impl Strategy<Value = E> {
     leaf().prop_recursive(7, 40, 3, |inner| {
         prop_oneof![
             1 => inner.clone().prop_map(|a| E::Neg(Box::new(a))),
@@ -227,7 +227,7 @@ fn check_tiers(tiers: &[Kernel], interp: &Kernel, pts: &[[f64; N_INPUTS]], sets:
 }
 
 /// The JIT backends of this build: Cranelift, and LLVM with the feature `llvm`.
-fn jit_backends() -> Vec<Backend> {
+pub(crate) fn jit_backends() -> Vec<Backend> {
     let mut v = vec![Backend::Jit];
     if cfg!(feature = "llvm") {
         v.push(Backend::Llvm);

@@ -1,5 +1,6 @@
-//! Shading programs (`lobe::render::program` over `lobe::backend::program`): the interpreted and the
-//! JIT-compiled program agree bit for bit on every example scene in both math modes; the program agrees with
+//! Shading programs (`lobe::render::program` over `lobe::backend::program`): the interpreted program and every
+//! JIT tier's (Cranelift; LLVM with the feature `llvm`) agree bit for bit on every example scene in both math
+//! modes, on random formulas, and in whole renders; the program agrees with
 //! the lighting sum written out in Rust around the formula's own kernel (`Evaluator::eval`) on every example
 //! scene; the `Column` leaf runs through every backend.
 
@@ -60,6 +61,18 @@ fn run(c: &Compiled, cols: &[Vec<f64>], params: &[f64]) -> Vec<Vec<f64>> {
     outs
 }
 
+/// `b` has `a`'s bits in every output and element (NaN payloads included: the tiers run the same operations).
+fn same_outputs(a: &[Vec<f64>], b: &[Vec<f64>]) -> Result<(), String> {
+    for (k, (x, y)) in a.iter().zip(b).enumerate() {
+        for (e, (u, v)) in x.iter().zip(y).enumerate() {
+            if u.to_bits() != v.to_bits() {
+                return Err(format!("output {k} element {e}: interp {u} vs compiled {v}"));
+            }
+        }
+    }
+    Ok(())
+}
+
 #[test]
 fn interpreted_and_compiled_programs_agree_bit_for_bit_on_every_scene() {
     let cols = columns(301);
@@ -71,11 +84,11 @@ fn interpreted_and_compiled_programs_agree_bit_for_bit_on_every_scene() {
                     let plan = r::plan::ShadingPlan::new(m, s.ambient, cutoff);
                     let p = build(&s, m, &plan);
                     let i = Compiled::new(&p, Backend::Interp, math).unwrap();
-                    let j = Compiled::new(&p, Backend::Jit, math).unwrap();
-                    let (a, b) = (run(&i, &cols, &m.params), run(&j, &cols, &m.params));
-                    for (k, (x, y)) in a.iter().zip(&b).enumerate() {
-                        for (e, (u, v)) in x.iter().zip(y).enumerate() {
-                            assert!(u.to_bits() == v.to_bits(), "{}: {math:?} output {k} element {e}: interp {u} vs jit {v}", path.display());
+                    let a = run(&i, &cols, &m.params);
+                    for tier in crate::differential::jit_backends() {
+                        let j = Compiled::new(&p, tier, math).unwrap();
+                        if let Err(e) = same_outputs(&a, &run(&j, &cols, &m.params)) {
+                            panic!("{} ({}, {math:?}, cut-off {cutoff}): {e}", path.display(), tier.name());
                         }
                     }
                     // Something was shaded (the colour columns are not all ambient).
@@ -89,10 +102,56 @@ fn interpreted_and_compiled_programs_agree_bit_for_bit_on_every_scene() {
 #[test]
 fn jit_and_interpreted_program_renders_are_byte_identical() {
     for path in scenes() {
-        let (j, sj) = r::render(&load(&path, 48, Backend::Jit, Mode::Precise), &RenderOptions { threads: 2, tile: 16, ..RenderOptions::default() }).unwrap();
         let (i, si) = r::render(&load(&path, 48, Backend::Interp, Mode::Precise), &RenderOptions { threads: 1, tile: 16, ..RenderOptions::default() }).unwrap();
-        assert!(j.image == i.image, "{}", path.display());
-        assert_eq!((sj.evals, sj.nan, sj.cut), (si.evals, si.nan, si.cut), "{}", path.display());
+        for tier in crate::differential::jit_backends() {
+            let (j, sj) = r::render(&load(&path, 48, tier, Mode::Precise), &RenderOptions { threads: 2, tile: 16, ..RenderOptions::default() }).unwrap();
+            assert!(j.image == i.image, "{} ({})", path.display(), tier.name());
+            assert_eq!((sj.evals, sj.nan, sj.cut), (si.evals, si.nan, si.cut), "{} ({})", path.display(), tier.name());
+        }
+    }
+}
+
+/// Random formulas (the differential test's generator: every builtin, special constants, raw and clamped
+/// inputs, directions) as the specular term of a lighting program with a point and a directional light,
+/// random colours and, for some, a cut-off: every tier gives the interpreter's bits on odd-length columns (the
+/// tails of every lane count), whatever the formula computes (NaN and infinities included).
+#[test]
+fn random_formulas_shade_alike_on_every_tier() {
+    use proptest::prelude::*;
+    use proptest::test_runner::{Config, TestCaseError, TestRunner};
+    let cols = columns(37);
+    let cases = if cfg!(feature = "llvm") { 150 } else { 400 };
+    let mut runner = TestRunner::new(Config { cases, failure_persistence: None, ..Config::default() });
+    let colour = || prop::array::uniform3(0.0..2.0f64);
+    let strategy = (crate::differential::expr(), any::<bool>(), prop::sample::select(Mode::ALL.to_vec()), (colour(), colour(), colour()), any::<bool>(), -0.5..1.0f64);
+    let result = runner.run(&strategy, |(e, policy, math, (ambient, diffuse, spec_c), cut, cos)| {
+        let f = crate::differential::formula(&e, policy);
+        let reads = f.used_inputs();
+        let spec = rp::Spec {
+            eye: [0.3, -0.2, 4.0],
+            lights: vec![
+                rp::Light { point: true, at: [2.0, 3.0, 5.0], color: [1.0, 0.9, 0.8] },
+                rp::Light { point: false, at: [0.0, 0.6, 0.8], color: [0.5, 0.5, 0.7] },
+            ],
+            ambient,
+            diffuse,
+            spec: spec_c,
+            specular: true,
+            times_nl: policy,
+            tangent_rotation: reads.reads_directions().then_some([0.8, 0.6]),
+            cutoff: (cut && reads.contains(Input::NH)).then_some((Input::NH, cos)),
+        };
+        let p = rp::build(&spec, &[&f]).map_err(TestCaseError::fail)?;
+        let params = [1.5, -0.25, 7.0];
+        let want = run(&Compiled::new(&p, Backend::Interp, math).map_err(|e| TestCaseError::fail(e.to_string()))?, &cols, &params);
+        for tier in crate::differential::jit_backends() {
+            let c = Compiled::new(&p, tier, math).map_err(|e| TestCaseError::fail(format!("{}: {e}", tier.name())))?;
+            same_outputs(&want, &run(&c, &cols, &params)).map_err(|e| TestCaseError::fail(format!("{} ({math:?}): {e}", tier.name())))?;
+        }
+        Ok(())
+    });
+    if let Err(e) = result {
+        panic!("{e}");
     }
 }
 

@@ -29,6 +29,15 @@ impl Key {
         Key { nodes: ir.nodes().to_vec(), root: root.0, mode, more: vec![] }
     }
 
+    /// The key of a multi-output program: its roots, then its shape (output count, each region's), so two
+    /// programs that list the same roots differently never share code.
+    pub(crate) fn of_program(p: &crate::backend::program::Program, mode: Mode) -> Key {
+        let mut roots = p.roots();
+        roots.push(crate::ir::NodeId(p.outputs.len() as u32));
+        roots.extend(p.regions.iter().map(|r| crate::ir::NodeId(r.outputs.len() as u32)));
+        Key::of_roots(&p.ir, &roots, mode)
+    }
+
     /// The key of a compacted program with several roots (`roots` non-empty).
     pub(crate) fn of_roots(ir: &Ir, roots: &[crate::ir::NodeId], mode: Mode) -> Key {
         let more = roots.iter().skip(1).map(|r| r.0).collect();

@@ -44,6 +44,8 @@ mod codegen;
 // Where each node is computed and when the library is called rather than inlined: the LLVM tier's too.
 #[cfg(feature = "llvm")]
 pub(crate) use codegen::{outlines, Plan};
+#[cfg(feature = "llvm")]
+pub(crate) use codegen::shade::{outlines as program_outlines, plan as program_plan};
 
 use crate::base::diag::Diagnostic;
 use crate::ir::{Formula, InputSet, Ir, NodeId, N_INPUTS};
@@ -139,7 +141,7 @@ fn runtime_symbols(builder: &mut JITBuilder) {
 }
 
 type ScalarFn = unsafe extern "C" fn(*const f64, *const f64, *const f64) -> f64;
-type PrepareFn = unsafe extern "C" fn(*const f64, *mut f64);
+pub(crate) type PrepareFn = unsafe extern "C" fn(*const f64, *mut f64);
 type BatchFn = unsafe extern "C" fn(*const *const f64, *const f64, *const f64, *mut f64, usize);
 
 /// Finalized machine code for one formula: the module that owns the memory and the entry points.
@@ -639,13 +641,13 @@ impl Evaluator for JitKernel {
     }
 }
 
-type ProgramFn = unsafe extern "C" fn(*const *const f64, *const f64, *const f64, *const *mut f64, usize);
+/// A compiled program's loop: `(cols, params, block, outs, len)`, the ABI both JIT tiers emit.
+pub(crate) type ProgramFn = unsafe extern "C" fn(*const *const f64, *const f64, *const f64, *const *mut f64, usize);
 
-/// A compiled multi-output program ([`crate::backend::program`]): its module, the loop function and the prepare
-/// function of its parameter-only work.
+/// A compiled multi-output program ([`crate::backend::program`]), by either JIT tier: the loop function, the
+/// prepare function of its parameter-only work, and what owns their machine code (a Cranelift module or an
+/// LLVM execution engine).
 pub struct ShadeCode {
-    /// The memory `run` and `prepare` point into (held for its drop).
-    _code: Code,
     run: ProgramFn,
     prepare: Option<PrepareFn>,
     block_len: usize,
@@ -654,8 +656,12 @@ pub struct ShadeCode {
     outputs: usize,
     /// Parameter slots the code reads (`max index + 1`).
     params_read: usize,
-    /// Cranelift's time for the program (when it was compiled; a cache hit costs nothing).
+    /// The compiler's time for the program (when it was compiled; a cache hit costs nothing).
     pub compile_time: std::time::Duration,
+    /// The tier that compiled it ([`Backend::Jit`] or [`Backend::Llvm`]).
+    pub backend: crate::backend::Backend,
+    /// The memory `run` and `prepare` point into, freed when this is dropped.
+    _owner: Box<dyn Send + Sync>,
 }
 
 fn shade_cache() -> &'static Mutex<cache::Lru<ShadeCode>> {
@@ -666,12 +672,7 @@ fn shade_cache() -> &'static Mutex<cache::Lru<ShadeCode>> {
 /// Compiles a multi-output program (through a cache keyed like the kernels': the IR's structure, its roots and
 /// the math mode), so a frame whose parameters changed reuses the code.
 pub(crate) fn shade_code(p: &crate::backend::program::Program, mode: Mode) -> Result<Arc<ShadeCode>, JitError> {
-    // The roots, then the shape (output count, each region's), so two programs that list the same roots
-    // differently never share code.
-    let mut roots = p.roots();
-    roots.push(NodeId(p.outputs.len() as u32));
-    roots.extend(p.regions.iter().map(|r| NodeId(r.outputs.len() as u32)));
-    let key = cache::Key::of_roots(&p.ir, &roots, mode);
+    let key = cache::Key::of_program(p, mode);
     let lock = || shade_cache().lock().unwrap_or_else(|e| e.into_inner());
     let hit = lock().get(&key);
     if let Some(c) = hit {
@@ -708,27 +709,46 @@ impl Jit {
         let run = Self::address(module, run)?;
         let prepare = prepare.map(|id| Self::address(module, id)).transpose()?;
         let block_len = plan.carried.len();
-        let params_read = p.ir.nodes().iter().filter_map(|n| if let crate::ir::Node::Param(k) = n { Some(*k as usize + 1) } else { None }).max().unwrap_or(0);
         // Safety: each address is the entry of a function just compiled with exactly the signature of the type
         // it becomes (the host's C calling convention); it stays valid while `module` lives, which the returned
-        // `ShadeCode` owns.
-        let (run, prepare) = unsafe {
-            (std::mem::transmute::<*const u8, ProgramFn>(run), prepare.map(|q| std::mem::transmute::<*const u8, PrepareFn>(q)))
-        };
-        Ok(ShadeCode {
-            _code: code,
+        // `ShadeCode` owns. The loop reads `p.columns` columns, the parameters and `block_len` block slots, and
+        // writes each output, `len` elements (codegen::shade).
+        unsafe {
+            let (run, prepare) = (std::mem::transmute::<*const u8, ProgramFn>(run), prepare.map(|q| std::mem::transmute::<*const u8, PrepareFn>(q)));
+            Ok(ShadeCode::from_parts(run, prepare, block_len, p, crate::backend::Backend::Jit, Box::new(code)))
+        }
+    }
+}
+
+impl ShadeCode {
+    /// The code of program `p` ([`crate::backend::program::Program`]), compiled by `backend`.
+    ///
+    /// # Safety
+    /// `run` and `prepare` must be entries of functions with exactly the C signatures of their types, valid
+    /// while `owner` lives; `run` reads at most `p.columns` columns, `Program::params_read` parameters and `block_len`
+    /// block slots, and writes `p.outputs.len()` outputs, `len` elements of each; `prepare` reads the
+    /// parameters and writes exactly `block_len` slots.
+    pub(crate) unsafe fn from_parts(
+        run: ProgramFn,
+        prepare: Option<PrepareFn>,
+        block_len: usize,
+        p: &crate::backend::program::Program,
+        backend: crate::backend::Backend,
+        owner: Box<dyn Send + Sync>,
+    ) -> ShadeCode {
+        ShadeCode {
             run,
             prepare,
             block_len,
             columns: p.columns,
             outputs: p.outputs.len(),
-            params_read: params_read.max(p.n_params),
+            params_read: p.params_read(),
             compile_time: std::time::Duration::ZERO,
-        })
+            backend,
+            _owner: owner,
+        }
     }
-}
 
-impl ShadeCode {
     /// The prepared parameter block for `params` (computed once per render and material; a missing parameter
     /// is NaN, as in the interpreter).
     pub(crate) fn prepare(&self, params: &[f64]) -> Vec<f64> {

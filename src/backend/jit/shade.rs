@@ -26,7 +26,7 @@ use cranelift_codegen::ir::{StackSlotData, StackSlotKind};
 
 /// The carried-node plan of a program: the kernel's plan over the whole arena, plus every output that reads
 /// no column and is not a bare constant or parameter (the loop stores it from the block).
-pub(in crate::backend::jit) fn plan(p: &Program) -> Result<Plan, JitError> {
+pub(crate) fn plan(p: &Program) -> Result<Plan, JitError> {
     let last = NodeId(p.ir.len().checked_sub(1).ok_or(JitError::Internal("empty program".into()))? as u32);
     let mut plan = Plan::new(&p.ir, last);
     for &o in &p.outputs {
@@ -40,7 +40,7 @@ pub(in crate::backend::jit) fn plan(p: &Program) -> Result<Plan, JitError> {
 
 /// Whether the program calls the math library instead of inlining it: [`OUTLINE_AT`] applies per copy of
 /// the formula (one per region: a light in the renderer's programs), so more regions do not switch a formula to calls.
-pub(in crate::backend::jit) fn outlines(p: &Program) -> bool {
+pub(crate) fn outlines(p: &Program) -> bool {
     let calls = p.ir.nodes().iter().filter(|n| matches!(n, Node::Call(b, _) if b.info().lowering == Lowering::Math)).count();
     calls / p.regions.len().max(1) > OUTLINE_AT
 }

@@ -16,6 +16,7 @@
 //! function, once per lane, through its address as a constant. Errors are collected, never panicked on.
 
 use crate::backend::jit::Plan;
+use crate::backend::program::{Class, Program, Region, MAX_COLUMNS};
 use crate::builtins::dd::Arith;
 use crate::builtins::math::{self, Emit};
 use crate::builtins::{Builtin, Libm, Lowering, Mode};
@@ -30,9 +31,11 @@ use inkwell::types::{BasicTypeEnum, VectorType};
 use inkwell::values::{BasicMetadataValueEnum, BasicValue, BasicValueEnum, FunctionValue, IntValue, PointerValue, VectorValue};
 use inkwell::{FloatPredicate, IntPredicate};
 
-/// Names of the two functions in every module.
+/// Names of the functions: a kernel's module has the batch loop, a program's the program loop; both may have
+/// the prepare function.
 pub(super) const BATCH: &str = "lobe_batch";
 pub(super) const PREPARE: &str = "lobe_prepare";
+pub(super) const PROGRAM: &str = "lobe_program";
 
 /// What every function of one module shares.
 pub(super) struct Unit<'a, 'ctx> {
@@ -65,6 +68,8 @@ struct Gen<'a, 'ctx> {
     vals: Vec<Option<VectorValue<'ctx>>>,
     /// The loop step's input vectors.
     inputs: [Option<VectorValue<'ctx>>; N_INPUTS],
+    /// A program's data columns in the loop step (`Node::Column(k)`).
+    columns: Vec<Option<VectorValue<'ctx>>>,
     /// The first error raised (inside an [`Emit`] method, which cannot return one).
     error: Option<String>,
 }
@@ -82,6 +87,7 @@ impl<'a, 'ctx> Gen<'a, 'ctx> {
             params,
             vals: vec![None; u.ir.len()],
             inputs: [None; N_INPUTS],
+            columns: vec![None; MAX_COLUMNS],
             error: None,
         }
     }
@@ -337,10 +343,13 @@ impl<'a, 'ctx> Gen<'a, 'ctx> {
                 let s = self.load_f64(self.params, u64::from(p));
                 self.splat(s, self.fty)
             }
-            Node::Column(k) => {
-                self.fail(format!("data column {k} in a kernel"));
-                self.fty.get_poison()
-            }
+            Node::Column(k) => match self.columns.get(usize::from(k)).copied().flatten() {
+                Some(v) => v,
+                None => {
+                    self.fail(format!("data column {k} is not loaded"));
+                    self.fty.get_poison()
+                }
+            },
             Node::Neg(a) => {
                 let a = self.arg(a);
                 Arith::neg(self, a)
@@ -729,12 +738,7 @@ pub(super) fn build_batch(u: &Unit, w: u32) -> Result<(), String> {
 
     let mut bases: [Option<PointerValue>; N_INPUTS] = [None; N_INPUTS];
     for i in used.iter() {
-        let p = g.offset(cols, g.i64c(8 * i.index() as u64));
-        let l = g.b.build_load(ptr, p, "");
-        bases[i.index()] = match l {
-            Ok(BasicValueEnum::PointerValue(p)) => Some(p),
-            _ => return Err("column base load".into()),
-        };
+        bases[i.index()] = Some(load_ptr(&mut g, cols, i.index())?);
     }
     for (k, id) in u.plan.carried.iter().enumerate() {
         let s = g.load_f64(block, k as u64);
@@ -836,4 +840,193 @@ pub(super) fn build_batch(u: &Unit, w: u32) -> Result<(), String> {
     let r = g.b.build_return(None);
     g.done(r);
     g.error.map_or(Ok(()), Err)
+}
+
+/// `lobe_program(cols: *const *const f64, params, block, outs: *const *mut f64, len)` in `w` lanes: a
+/// multi-output program ([`crate::backend::program`]), the loop of [`build_batch`] over data columns:
+///
+/// ```text
+/// entry:   column and output bases; carried nodes from the block, constants and parameters, splatted
+/// loop(i): full = len − i ≥ W; the W (or len − i, masked) column values at i
+/// step:    the outer nodes in order; at each region's last output: any(lit ≠ 0) ? region : join, the
+///          region's outputs joined by phis (+0 from the skipping edge)
+/// store:   every output at i (masked on the last partial vector)
+/// ```
+///
+/// The region's nodes are translated in its own block, and their values are forgotten after it (only its
+/// outputs, through the phis, reach what follows), as the Cranelift tier does.
+pub(super) fn build_program(u: &Unit, w: u32, p: &Program) -> Result<(), String> {
+    let f = declare(u, PROGRAM, 4, true);
+    let (cols, params, block, outs) = (param(f, 0)?, param(f, 1)?, param(f, 2)?, param(f, 3)?);
+    let len = match f.get_nth_param(4) {
+        Some(BasicValueEnum::IntValue(l)) => l,
+        _ => return Err("len parameter".into()),
+    };
+    let mut g = Gen::new(u, f, w, params);
+    let ptr = u.cx.ptr_type(Default::default());
+    let i64t = u.cx.i64_type();
+    let entry = g.block("entry");
+    g.b.position_at_end(entry);
+    let mut read = [false; MAX_COLUMNS];
+    for n in p.ir.nodes() {
+        if let Node::Column(k) = n {
+            match read.get_mut(usize::from(*k)) {
+                Some(r) => *r = true,
+                None => return Err(format!("data column {k} beyond the {MAX_COLUMNS} a program may read")),
+            }
+        }
+    }
+    let mut bases = vec![];
+    for (k, _) in read.iter().enumerate().filter(|(_, r)| **r) {
+        bases.push((k, load_ptr(&mut g, cols, k)?));
+    }
+    let out_bases = (0..p.outputs.len()).map(|o| load_ptr(&mut g, outs, o)).collect::<Result<Vec<_>, _>>()?;
+    for (k, id) in u.plan.carried.iter().enumerate() {
+        let s = g.load_f64(block, k as u64);
+        g.vals[id.index()] = Some(g.splat(s, g.fty));
+    }
+    g.nodes(|id| !u.plan.variant(id) && matches!(u.ir.node(id), Node::Const(_) | Node::Param(_)));
+
+    let (head, load, load_part, step, store, store_part, latch, exit) =
+        (g.block("loop"), g.block("load"), g.block("load_part"), g.block("step"), g.block("store"), g.block("store_part"), g.block("latch"), g.block("exit"));
+    let empty = g.b.build_int_compare(IntPredicate::EQ, len, i64t.const_zero(), "");
+    let empty = g.scalar(empty, u.cx.bool_type().get_poison());
+    let pre = g.current();
+    let br = g.b.build_conditional_branch(empty, exit, head);
+    g.done(br);
+
+    g.b.position_at_end(head);
+    let i = g.b.build_phi(i64t, "i").map_err(|e| e.to_string())?;
+    let iv = i.as_basic_value().into_int_value();
+    let rem = g.b.build_int_sub(len, iv, "");
+    let rem = g.scalar(rem, i64t.get_poison());
+    let full = g.b.build_int_compare(IntPredicate::UGE, rem, g.i64c(u64::from(w)), "");
+    let full = g.scalar(full, u.cx.bool_type().get_poison());
+    let byte_off = g.b.build_left_shift(iv, g.i64c(3), "");
+    let byte_off = g.scalar(byte_off, i64t.get_poison());
+    let br = g.b.build_conditional_branch(full, load, load_part);
+    g.done(br);
+
+    g.b.position_at_end(load);
+    let mut full_vals = vec![];
+    for &(k, base) in &bases {
+        let at = g.offset(base, byte_off);
+        let l = g.b.build_load(g.fty, at, "");
+        let v = g.vec_of(l, g.fty);
+        if let Some(ins) = v.as_instruction_value() {
+            g.align(Ok(ins));
+        }
+        full_vals.push((k, base, v));
+    }
+    let br = g.b.build_unconditional_branch(step);
+    g.done(br);
+    g.b.position_at_end(load_part);
+    let m = g.part_mask(rem);
+    let mut loaded = vec![];
+    for (k, base, v) in full_vals {
+        let at = g.offset(base, byte_off);
+        let args = [at.into(), g.i32c(8).into(), m.into(), g.fty.const_zero().into()];
+        let pv = g.call_intrinsic("llvm.masked.load", &[g.fty.into(), ptr.into()], &args, g.fty);
+        loaded.push((k, v, pv));
+    }
+    let br = g.b.build_unconditional_branch(step);
+    g.done(br);
+
+    g.b.position_at_end(step);
+    for (k, v, pv) in loaded {
+        let phi = g.b.build_phi(g.fty, &format!("c{k}")).map_err(|e| e.to_string())?;
+        phi.add_incoming(&[(&v, load), (&pv, load_part)]);
+        g.columns[k] = Some(g.vec_of(Ok(phi.as_basic_value()), g.fty));
+    }
+    let mut next = 0;
+    for id in p.ir.ids() {
+        if p.class[id.index()] == Class::Outer {
+            g.node(id);
+        }
+        while let Some(r) = p.regions.get(next).filter(|r| r.at == id) {
+            region(&mut g, r);
+            next += 1;
+        }
+    }
+    let results: Vec<VectorValue> = p.outputs.iter().map(|o| g.arg(*o)).collect();
+    let br = g.b.build_conditional_branch(full, store, store_part);
+    g.done(br);
+
+    g.b.position_at_end(store);
+    for (r, base) in results.iter().zip(&out_bases) {
+        let at = g.offset(*base, byte_off);
+        let st = g.b.build_store(at, *r);
+        g.align(st);
+    }
+    let br = g.b.build_unconditional_branch(latch);
+    g.done(br);
+
+    g.b.position_at_end(store_part);
+    let m = g.part_mask(rem);
+    let Some(ms) = g.intrinsic("llvm.masked.store", &[g.fty.into(), ptr.into()]) else { return Err(g.error.unwrap_or_default()) };
+    for (r, base) in results.iter().zip(&out_bases) {
+        let at = g.offset(*base, byte_off);
+        let c = g.b.build_call(ms, &[(*r).into(), at.into(), g.i32c(8).into(), m.into()], "");
+        g.done(c);
+    }
+    let br = g.b.build_unconditional_branch(latch);
+    g.done(br);
+
+    g.b.position_at_end(latch);
+    let next_i = g.b.build_int_add(iv, g.i64c(u64::from(w)), "");
+    let next_i = g.scalar(next_i, i64t.get_poison());
+    let more = g.b.build_int_compare(IntPredicate::ULT, next_i, len, "");
+    let more = g.scalar(more, u.cx.bool_type().get_poison());
+    let br = g.b.build_conditional_branch(more, head, exit);
+    g.done(br);
+    i.add_incoming(&[(&i64t.const_zero(), pre), (&next_i, latch)]);
+
+    g.b.position_at_end(exit);
+    let r = g.b.build_return(None);
+    g.done(r);
+    g.error.map_or(Ok(()), Err)
+}
+
+/// The pointer at `base[k]`.
+fn load_ptr<'ctx>(g: &mut Gen<'_, 'ctx>, base: PointerValue<'ctx>, k: usize) -> Result<PointerValue<'ctx>, String> {
+    let at = g.offset(base, g.i64c(8 * k as u64));
+    match g.b.build_load(g.u.cx.ptr_type(Default::default()), at, "") {
+        Ok(BasicValueEnum::PointerValue(p)) => Ok(p),
+        _ => Err("pointer load".into()),
+    }
+}
+
+/// One guarded region: `any(lit ≠ 0) ? its nodes : +0` for its outputs (see [`build_program`]).
+fn region(g: &mut Gen<'_, '_>, r: &Region) {
+    let lit = g.arg(r.lit);
+    let zero = g.fconst(0);
+    // Not equal or unordered: a NaN lit runs the region, as the interpreter's `lit != 0`.
+    let m = g.b.build_float_compare(FloatPredicate::UNE, lit, zero, "");
+    let m = g.m(m);
+    let any = g.any(m);
+    let from = g.current();
+    let inside = g.block("region");
+    let join = g.block("join");
+    let br = g.b.build_conditional_branch(any, inside, join);
+    g.done(br);
+    g.b.position_at_end(inside);
+    let saved = g.vals.clone();
+    for id in &r.nodes {
+        g.node(*id);
+    }
+    let outs: Vec<VectorValue> = r.outputs.iter().map(|o| g.arg(*o)).collect();
+    let end = g.current();
+    let br = g.b.build_unconditional_branch(join);
+    g.done(br);
+    g.vals = saved;
+    g.b.position_at_end(join);
+    for (o, v) in r.outputs.iter().zip(outs) {
+        match g.b.build_phi(g.fty, "") {
+            Ok(phi) => {
+                phi.add_incoming(&[(&zero, from), (&v, end)]);
+                g.vals[o.index()] = Some(g.vec_of(Ok(phi.as_basic_value()), g.fty));
+            }
+            Err(e) => g.fail(e),
+        }
+    }
 }

@@ -9,9 +9,10 @@
 //! `llvm.fmuladd`, so nothing is reassociated, contracted into an FMA or replaced by an estimate (the tests
 //! read the machine code to check).
 //!
-//! Kernels only: a scalar call ([`Evaluator::eval`]) runs the batched kernel on one element (its masked tail),
-//! and multi-output shading programs stay on Cranelift. No code cache yet: every call of [`llvm_kernel`]
-//! compiles.
+//! Kernels and multi-output programs (the renderer's shading: [`program_code`], the Cranelift tier's ABI and
+//! `ShadeCode`, so the renderer runs either tier's code the same way). A kernel's scalar call
+//! ([`Evaluator::eval`]) runs the batched kernel on one element (its masked tail). Programs are cached in
+//! process; kernels are compiled on every call of [`llvm_kernel`].
 //!
 //! Ownership: one [`Code`] per compiled formula holds the LLVM context and the MCJIT execution engine that
 //! owns the machine code; dropping it frees both. `unsafe` is confined to this file: turning the engine's
@@ -23,8 +24,10 @@
 
 mod codegen;
 
-use super::jit::{outlines, JitError, Plan};
-use super::{Columns, Evaluator, Prepared};
+use super::jit::cache::{Key, Lru};
+use super::jit::{outlines, program_outlines, program_plan, JitError, Plan, PrepareFn, ProgramFn, ShadeCode, DEFAULT_CACHE_CAPACITY};
+use super::program::Program;
+use super::{Backend, Columns, Evaluator, Prepared};
 use crate::base::diag::Diagnostic;
 use crate::builtins::Mode;
 use crate::ir::{Formula, InputSet, Ir, NodeId, N_INPUTS};
@@ -33,7 +36,7 @@ use inkwell::execution_engine::ExecutionEngine;
 use inkwell::passes::PassBuilderOptions;
 use inkwell::targets::{CodeModel, FileType, InitializationConfig, RelocMode, Target, TargetMachine};
 use inkwell::OptimizationLevel;
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
 /// The host as LLVM sees it.
@@ -85,7 +88,6 @@ fn target_machine(h: &Host) -> Result<TargetMachine, JitError> {
         .ok_or_else(|| JitError::Host(format!("LLVM has no target machine for {}", h.cpu)))
 }
 
-type PrepareFn = unsafe extern "C" fn(*const f64, *mut f64);
 type BatchFn = unsafe extern "C" fn(*const *const f64, *const f64, *const f64, *mut f64, usize);
 
 /// One compiled formula's LLVM context and execution engine (which owns the module and its machine code).
@@ -134,11 +136,18 @@ pub struct Stats {
     pub listing: Option<String>,
 }
 
-/// Compiles a compacted IR (root last) to a batched kernel of `lanes` lanes.
-fn compile(ir: &Ir, root: NodeId, mode: Mode, lanes: u32, listing: bool) -> Result<(Compiled, Stats), JitError> {
-    if root.index() >= ir.len() {
-        return Err(JitError::Internal("root outside the arena".into()));
-    }
+/// A module compiled and loaded: what owns its code, the address of its main function and of its prepare
+/// function (when something is carried), and the compile's statistics.
+struct Loaded {
+    code: Code,
+    main: usize,
+    prepare: Option<usize>,
+    stats: Stats,
+}
+
+/// Builds one module over `ir` with `plan` (the prepare function when something is carried, then `build`'s
+/// main function, whose name it returns), optimises it with `default<O2>` and loads it.
+fn compile_module(ir: &Ir, plan: &Plan, mode: Mode, outline: bool, lanes: u32, listing: bool, build: impl FnOnce(&codegen::Unit) -> Result<&'static str, String>) -> Result<Loaded, JitError> {
     if !lanes.is_power_of_two() || lanes > 16 {
         return Err(JitError::Internal(format!("{lanes} lanes")));
     }
@@ -149,12 +158,11 @@ fn compile(ir: &Ir, root: NodeId, mode: Mode, lanes: u32, listing: bool) -> Resu
     let module = context.create_module("lobe");
     module.set_triple(&tm.get_triple());
     module.set_data_layout(&tm.get_target_data().get_data_layout());
-    let plan = Plan::new(ir, root);
-    let u = codegen::Unit { cx: &context, module: &module, ir, plan: &plan, mode, fma: h.fma, outline: outlines(ir), cpu: &h.cpu, features: &h.features };
+    let u = codegen::Unit { cx: &context, module: &module, ir, plan, mode, fma: h.fma, outline, cpu: &h.cpu, features: &h.features };
     if !plan.carried.is_empty() {
         codegen::build_prepare(&u).map_err(JitError::Internal)?;
     }
-    codegen::build_batch(&u, lanes).map_err(JitError::Internal)?;
+    let main = build(&u).map_err(JitError::Internal)?;
     module.verify().map_err(|e| JitError::Internal(format!("LLVM rejected the module: {e}")))?;
     module.run_passes("default<O2>", &tm, PassBuilderOptions::create()).map_err(|e| JitError::Module(e.to_string()))?;
     let listing = if listing {
@@ -164,23 +172,65 @@ fn compile(ir: &Ir, root: NodeId, mode: Mode, lanes: u32, listing: bool) -> Resu
         None
     };
     let engine = module.create_jit_execution_engine(OptimizationLevel::Aggressive).map_err(|e| JitError::Module(e.to_string()))?;
-    let batch = address(&engine, codegen::BATCH)?;
+    let main = address(&engine, main)?;
     let prepare = if plan.carried.is_empty() { None } else { Some(address(&engine, codegen::PREPARE)?) };
     // The module is owned by the engine from here on; dropping the handle only releases its share.
     drop(module);
     // Safety: the engine borrows `context` only in its type (inkwell's lifetime ties it to the context's
     // borrow); `Code` keeps both and drops the engine first, so the context outlives every use of the engine.
     let engine = unsafe { std::mem::transmute::<ExecutionEngine<'_>, ExecutionEngine<'static>>(engine) };
-    let code = Code { _engine: engine, _context: context };
+    Ok(Loaded { code: Code { _engine: engine, _context: context }, main, prepare, stats: Stats { lanes, compile_time: t.elapsed(), listing } })
+}
+
+/// Compiles a compacted IR (root last) to a batched kernel of `lanes` lanes.
+fn compile(ir: &Ir, root: NodeId, mode: Mode, lanes: u32, listing: bool) -> Result<(Compiled, Stats), JitError> {
+    if root.index() >= ir.len() {
+        return Err(JitError::Internal("root outside the arena".into()));
+    }
+    let plan = Plan::new(ir, root);
+    let l = compile_module(ir, &plan, mode, outlines(ir), lanes, listing, |u| codegen::build_batch(u, lanes).map(|()| codegen::BATCH))?;
     // Safety: each address is the entry of a function `codegen` just defined with exactly the C signature of the
-    // type it becomes; it stays valid while `code` (the engine that owns the machine code) lives, and the
-    // returned `Compiled` owns `code`.
+    // type it becomes; it stays valid while `l.code` (the engine that owns the machine code) lives, and the
+    // returned `Compiled` owns it.
     let (batch, prepare) = unsafe {
-        (std::mem::transmute::<usize, BatchFn>(batch), prepare.map(|p| std::mem::transmute::<usize, PrepareFn>(p)))
+        (std::mem::transmute::<usize, BatchFn>(l.main), l.prepare.map(|p| std::mem::transmute::<usize, PrepareFn>(p)))
     };
     let params_read = ir.used_params(root).last().map_or(0, |p| *p as usize + 1);
-    let compiled = Compiled { batch, prepare, block_len: plan.carried.len(), params_read, inputs: ir.used_inputs(root), _code: code };
-    Ok((compiled, Stats { lanes, compile_time: t.elapsed(), listing }))
+    let compiled = Compiled { batch, prepare, block_len: plan.carried.len(), params_read, inputs: ir.used_inputs(root), _code: l.code };
+    Ok((compiled, l.stats))
+}
+
+/// Compiles a multi-output program ([`crate::backend::program`]) in the host's lanes, through an in-process
+/// cache keyed as the Cranelift tier's (the IR's structure, its roots, the math mode).
+pub(crate) fn program_code(p: &Program, mode: Mode) -> Result<Arc<ShadeCode>, JitError> {
+    static CACHE: OnceLock<Mutex<Lru<ShadeCode>>> = OnceLock::new();
+    let cache = CACHE.get_or_init(|| Mutex::new(Lru::new(DEFAULT_CACHE_CAPACITY)));
+    let key = Key::of_program(p, mode);
+    let lock = || cache.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(c) = lock().get(&key) {
+        return Ok(c);
+    }
+    let c = Arc::new(program_uncached(p, mode, host()?.lanes)?);
+    lock().insert(key, c.clone());
+    Ok(c)
+}
+
+/// [`program_code`] without the cache, in `lanes` lanes.
+pub(crate) fn program_uncached(p: &Program, mode: Mode, lanes: u32) -> Result<ShadeCode, JitError> {
+    let plan = program_plan(p)?;
+    let l = compile_module(&p.ir, &plan, mode, program_outlines(p), lanes, false, |u| codegen::build_program(u, lanes, p).map(|()| codegen::PROGRAM))?;
+    // Safety: `codegen::build_program` and `build_prepare` defined these functions with exactly the C
+    // signatures of `ProgramFn` and `PrepareFn`; the loop reads at most `p.columns` columns, the parameters
+    // the program reads and the block's `carried.len()` slots, and writes every output, `len` elements each
+    // (masked on the last partial vector); the prepare function writes exactly the block. The addresses stay
+    // valid while `l.code` lives, which the `ShadeCode` owns.
+    let mut c = unsafe {
+        let run = std::mem::transmute::<usize, ProgramFn>(l.main);
+        let prepare = l.prepare.map(|q| std::mem::transmute::<usize, PrepareFn>(q));
+        ShadeCode::from_parts(run, prepare, plan.carried.len(), p, Backend::Llvm, Box::new(l.code))
+    };
+    c.compile_time = l.stats.compile_time;
+    Ok(c)
 }
 
 /// An LLVM-compiled formula behind the [`Evaluator`] interface.
@@ -386,6 +436,64 @@ mod tests {
                     let want = interp.eval(&x, &[37.0]);
                     assert_eq!(o.to_bits(), want.to_bits(), "lanes {lanes}, len {len}, element {i}");
                     assert_eq!(k.eval(&x, &[37.0]).to_bits(), want.to_bits());
+                }
+            }
+        }
+    }
+
+    /// A program with two guarded regions (one of them reading a parameter-only value, both transcendental),
+    /// at every lane shape and every length from 0 to 3·lanes + 1: the interpreter's bits in every output, and
+    /// nothing written past `len`.
+    #[test]
+    fn programs_match_the_interpreter_at_every_length_and_lane_shape() {
+        use crate::backend::interp::ProgramInterp;
+        use crate::base::span::Span;
+        use crate::builtins::Builtin;
+        use crate::ir::BinOp;
+        let s = Span::default();
+        let mut ir = Ir::new();
+        let (x, y) = (ir.column(0, s), ir.column(1, s));
+        let (zero, half) = (ir.konst(0.0, s), ir.konst(0.5, s));
+        let n = ir.param(0, s);
+        let lit1 = ir.call(Builtin::Lt, &[zero, x], s);
+        let p1 = ir.call(Builtin::Pow, &[x, n], s);
+        let s1 = ir.call(Builtin::Sin, &[y], s);
+        let f1 = ir.bin(BinOp::Mul, p1, s1, s);
+        let g1 = ir.call(Builtin::Select, &[lit1, f1, zero], s);
+        let lit2 = ir.call(Builtin::Lt, &[y, half], s);
+        let xy = ir.bin(BinOp::Mul, x, y, s);
+        let e = ir.call(Builtin::Exp, &[xy], s);
+        let a = ir.call(Builtin::Acos, &[y], s);
+        let n2 = ir.bin(BinOp::Mul, n, n, s);
+        let f2 = ir.bin(BinOp::Add, e, a, s);
+        let f2 = ir.bin(BinOp::Mul, f2, n2, s);
+        let g2 = ir.call(Builtin::Select, &[lit2, f2, zero], s);
+        let sum = ir.bin(BinOp::Add, x, y, s);
+        let o1 = ir.bin(BinOp::Add, sum, g1, s);
+        let o2 = ir.bin(BinOp::Sub, g2, g1, s);
+        let p = Program::new(&ir, &[o1, o2, lit2], &[(lit1, vec![g1]), (lit2, vec![g2])], 1).expect("a program");
+        assert_eq!(p.regions.len(), 2, "both regions are guarded");
+        let interp = ProgramInterp::new(&p, Mode::Precise);
+        let params = [2.5];
+        for lanes in [2, 4, 8, 16] {
+            let c = program_uncached(&p, Mode::Precise, lanes).expect("compiles");
+            let block = c.prepare(&params);
+            for len in 0..=(3 * lanes as usize + 1) {
+                let cols: Vec<Vec<f64>> = (0..2).map(|k| (0..len).map(|i| ((i * 7 + k * 5) % 13) as f64 / 6.0 - 1.0).collect()).collect();
+                let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+                let mut want = vec![vec![f64::NAN; len]; 3];
+                let mut got = vec![vec![f64::NAN; len + 1]; 3];
+                {
+                    let mut w: Vec<&mut [f64]> = want.iter_mut().map(|v| v.as_mut_slice()).collect();
+                    interp.run(&refs, &params, &mut w, len);
+                    let mut g: Vec<&mut [f64]> = got.iter_mut().map(|v| v.as_mut_slice()).collect();
+                    c.run(&refs, &params, &block, &mut g, len).expect("runs");
+                }
+                for (o, (w, g)) in want.iter().zip(&got).enumerate() {
+                    assert!(g[len].is_nan(), "lanes {lanes}, len {len}: output {o} written past the end");
+                    for (i, (a, b)) in w.iter().zip(g).enumerate() {
+                        assert_eq!(a.to_bits(), b.to_bits(), "lanes {lanes}, len {len}, output {o}, element {i}");
+                    }
                 }
             }
         }
