@@ -11,6 +11,8 @@
 //! simplify   fixpoint rewrites, baked parameters, integer powers, used inputs
 //! backend    the Evaluator interface and Kernel; interpreter (reference), Cranelift JIT, the LLVM tier (cargo
 //!            feature `llvm`: batched kernels in the host's widest lanes), GLSL/WGSL emission
+//! measured   MERL .binary tables: read (checked), write, tabulate, the half/difference lookup; each channel an
+//!            Evaluator, so a measurement goes wherever a kernel goes
 //! lib.rs     the compile entry points: compile_source, compile_formula, build_kernel
 //! numerics   energy and normalisation, accuracy against a reference, the domain sweep, fits, twins; the
 //!            higher-precision truth and the accuracy pass's measured choice (passed down as a FormulaChooser)
@@ -31,6 +33,7 @@ pub mod frame;
 pub mod front;
 pub mod simplify;
 pub mod backend;
+pub mod measured;
 pub mod numerics;
 pub mod render;
 pub mod report;

@@ -199,20 +199,34 @@ pub fn fit(
     opts: &FitOptions,
     progress: &(dyn Fn() + Sync),
 ) -> Result<FitReport, Diagnostic> {
-    if free.is_empty() {
-        return Err(Diagnostic::error("nothing to fit").hint(crate::base::diag::Hint::FitSomeParam));
-    }
     if let Some(f) = free.iter().find(|f| f.index == 0 || f.index >= base_params.len()) {
         return Err(Diagnostic::error(format!("cannot fit `{}`", f.name))
             .hint(if f.index == 0 { "n is swept by the metric itself; fit the other parameters" } else { "not a parameter of the formula" }));
     }
     check_n_max(opts.n_max)?;
+    let scorer = Scorer::new(ev, lobe, reference, ref_params, ref_lobe, opts.metric, opts.n_max);
+    search(base_params, free, opts.top, opts.refine, &|p| scorer.score(p), progress)
+}
+
+/// The search of [`fit`] over any score (lower is better; a NaN should score +inf): stage 1 scores every
+/// point of the free parameters' grid in parallel, stage 2 refines the best one continuously (golden
+/// section for one parameter, Nelder–Mead for several) within one grid step. Returns the `top` best.
+pub fn search(
+    base_params: &[f64],
+    free: &[FreeParam],
+    top: usize,
+    refine_best: bool,
+    score: &(dyn Fn(&[f64]) -> f64 + Sync),
+    progress: &(dyn Fn() + Sync),
+) -> Result<FitReport, Diagnostic> {
+    if free.is_empty() {
+        return Err(Diagnostic::error("nothing to fit").hint(crate::base::diag::Hint::FitSomeParam));
+    }
     let grids: Vec<Vec<f64>> = free.iter().map(FreeParam::grid).collect::<Result<_, _>>()?;
     let total: usize = grids.iter().map(Vec::len).product();
     if total > 2_000_000 {
         return Err(Diagnostic::error(format!("the grid has {total} points")).hint("use coarser steps (a=lo..hi:step) or fewer parameters"));
     }
-    let scorer = Scorer::new(ev, lobe, reference, ref_params, ref_lobe, opts.metric, opts.n_max);
     let point = |mut i: usize| {
         let mut p = base_params.to_vec();
         for (f, g) in free.iter().zip(&grids) {
@@ -225,21 +239,21 @@ pub fn fit(
         .into_par_iter()
         .map(|i| {
             let p = point(i);
-            let score = scorer.score(&p);
+            let score = score(&p);
             progress();
             Candidate { params: p, score, refined: false }
         })
         .collect();
     let mut evaluated = cands.len();
     cands.sort_by(|a, b| a.score.total_cmp(&b.score));
-    cands.truncate(opts.top.max(1));
-    if opts.refine {
+    cands.truncate(top.max(1));
+    if refine_best {
         if let Some(best) = cands.first().cloned() {
-            let (r, used) = refine(&scorer, &best.params, free);
+            let (r, used) = refine(score, &best.params, free);
             evaluated += used;
             if r.score < best.score {
                 cands.insert(0, r);
-                cands.truncate(opts.top.max(1));
+                cands.truncate(top.max(1));
             }
         }
     }
@@ -247,7 +261,7 @@ pub fn fit(
 }
 
 /// Continuous refinement within one grid step of `start`: golden section (1 parameter) or Nelder–Mead.
-fn refine(scorer: &Scorer, start: &[f64], free: &[FreeParam]) -> (Candidate, usize) {
+pub(crate) fn refine(score: &(dyn Fn(&[f64]) -> f64 + Sync), start: &[f64], free: &[FreeParam]) -> (Candidate, usize) {
     let mut used = 0;
     let mut eval = |x: &[f64]| {
         let mut p = start.to_vec();
@@ -255,7 +269,7 @@ fn refine(scorer: &Scorer, start: &[f64], free: &[FreeParam]) -> (Candidate, usi
             p[f.index] = v.clamp(f.lo, f.hi);
         }
         used += 1;
-        (scorer.score(&p), p)
+        (score(&p), p)
     };
     let x0: Vec<f64> = free.iter().map(|f| start[f.index]).collect();
     let steps: Vec<f64> = free.iter().map(FreeParam::step_size).collect();

@@ -58,6 +58,7 @@
 pub mod accuracy;
 pub mod energy;
 pub mod fit;
+pub mod measured;
 pub mod normalize;
 pub mod points;
 pub mod quad;
