@@ -13,6 +13,7 @@ with RAYON_NUM_THREADS=1, the cli column's conditions); `1t/cli` is their ratio.
 
 import argparse
 import ast
+import copy
 import glob
 import json
 import os
@@ -59,9 +60,8 @@ class Dialect(ast.NodeTransformer):
         self.calls, self.names = calls, names
 
     def visit_Call(self, node):
-        self.generic_visit(node)
         f = node.func.id
-        args = [ast.unparse(a) for a in node.args]
+        args = [ast.unparse(self.visit(a)) for a in node.args]
         if f not in self.calls:
             raise NotImplementedError(f)
         return ast.parse(self.calls[f](*args), mode="eval").body
@@ -95,7 +95,7 @@ NB_CALLS = {
 
 def translate(prog, calls, names):
     d = Dialect(calls, names)
-    return [(n, ast.unparse(d.visit(ast.fix_missing_locations(ast.Expression(body=e))).body)) for n, e in prog]
+    return [(n, ast.unparse(d.visit(copy.deepcopy(e)))) for n, e in prog]
 
 
 def numpy_fn(prog, args):

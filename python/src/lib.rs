@@ -544,6 +544,16 @@ fn encode_png<'py>(py: Python<'py>, rgb: numpy::PyReadonlyArray1<'py, u8>, width
     Ok(PyBytes::new(py, &png))
 }
 
+/// Panics inside lobe, on purpose: the tests check that a panic (here in a rayon worker, as in a batch split over
+/// threads) reaches Python as a `LobeError`, not an abort.
+#[pyfunction]
+fn _panic_for_tests(py: Python<'_>) -> PyResult<()> {
+    detached(py, "<test>", || {
+        (0..4).into_par_iter().for_each(|i| assert!(i < 2, "a deliberate panic in worker {i}"));
+        Ok(())
+    })
+}
+
 #[pymodule]
 fn _lobe(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("LobeError", m.py().get_type::<LobeError>())?;
@@ -552,6 +562,7 @@ fn _lobe(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_source, m)?)?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(encode_png, m)?)?;
+    m.add_function(wrap_pyfunction!(_panic_for_tests, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

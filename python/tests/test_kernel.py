@@ -153,21 +153,26 @@ def test_params_inputs_source_and_pickle():
 
 
 def test_bad_formula_has_line_and_column():
-    src = "# a comment\nparam n = 10 in 1..100\nNH^n + (1 +\n"
+    """A syntax error and an unknown name, each at its own line and column, with the caret text."""
     with pytest.raises(lobe.LobeError) as e:
-        lobe.compile(src)
+        lobe.compile("# a comment\nparam a = 10 in 1..100\nNH^a + (1 +\n")
     d = e.value.diagnostics[0]
-    assert d["severity"] == "error"
-    assert (d["line"], d["column"]) == (4, 1) or d["line"] == 3, d
-    assert "┌─" in d["rendered"] or "-->" in d["rendered"]
-    # An unknown name, located at its own line and column, with a did-you-mean hint.
+    assert d["severity"] == "error" and (d["line"], d["column"]) == (3, 11), d
+    assert "after `+`" in d["message"] and d["hint"] and "<text>:3:11" in d["rendered"]
+    assert len(e.value.diagnostics) == 2 and e.value.diagnostics[1]["message"] == "unterminated parenthesis"
+    assert str(e.value).startswith("error: expected an operand")
     with pytest.raises(lobe.LobeError) as e:
-        lobe.compile("param n = 10 in 1..100\n\n  NH^nn\n")
+        lobe.compile("param a = 10 in 1..100\n\n  NH^nn\n")
     d = e.value.diagnostics[0]
-    assert (d["line"], d["column"]) == (3, 6), d
-    assert d["file"] == "<text>" and "nn" in d["message"]
-    assert d["hint"] is None or isinstance(d["hint"], str)
-    assert "3:6" in d["rendered"]
+    assert (d["line"], d["column"], d["end_line"], d["end_column"]) == (3, 6, 3, 8), d
+    assert d["file"] == "<text>" and "unknown variable `nn`" in d["message"] and d["label"] == "not defined"
+    assert "^^ not defined" in d["rendered"]
+    # A missing file (a path object is always a path) is an error naming it.
+    import pathlib
+
+    with pytest.raises(lobe.LobeError) as e:
+        lobe.compile(pathlib.Path(ROOT) / "no-such.brdf")
+    assert "no-such.brdf" in str(e.value)
 
 
 def test_bad_calls_raise_lobe_error():
@@ -262,3 +267,11 @@ def test_render_returns_an_image(root):
     assert img.max() > 0
     with pytest.raises(lobe.LobeError):
         lobe.render(os.path.join(root, "no-such-scene.toml"))
+
+
+def test_a_panic_is_a_lobe_error():
+    """A panic inside lobe (in a worker thread) is raised as LobeError; the interpreter carries on."""
+    with pytest.raises(lobe.LobeError, match="internal error") as e:
+        lobe._lobe._panic_for_tests()
+    assert e.value.diagnostics and "deliberate panic" in e.value.diagnostics[0]["message"]
+    assert lobe.compile(BLINN)(NH=0.5, n=2) == 0.25
