@@ -188,7 +188,7 @@ impl Diagnostics {
         Diagnostics { file: file.into(), source: source.into(), items: vec![] }
     }
     /// A single error that has no useful location (an unreadable file, say).
-    pub(crate) fn single(file: impl Into<String>, d: Diagnostic) -> Diagnostics {
+    pub fn single(file: impl Into<String>, d: Diagnostic) -> Diagnostics {
         let mut ds = Diagnostics::new(file, "");
         ds.push(d);
         ds
@@ -276,7 +276,7 @@ impl Diagnostics {
     /// `message`, `file`, the primary span's 1-based `line`/`col` and `end_line`/`end_col` (absent when the
     /// item has no place), its `label`, `hints`, and `rendered`, the caret text [`Diagnostics::render`] prints;
     /// all in [`Plain`] words.
-    pub(crate) fn to_json(&self) -> serde_json::Value {
+    pub fn to_json(&self) -> serde_json::Value {
         let items = self.items.iter().map(|d| {
             let mut o = serde_json::json!({
                 "severity": match d.severity { Severity::Error => "error", Severity::Warning => "warning" },

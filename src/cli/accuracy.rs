@@ -54,21 +54,7 @@ pub fn report(a: &AccuracyArgs, k: &Kernel, r: &Kernel) -> Result<String, CliErr
     }
     let opts = AccuracyOptions { q: a.q, n_max: a.n_max, epicenter_from: a.epicenter_from, ..Default::default() };
     let mut rep = accuracy(k, &params, lobe, r, &r.default_params(), ref_lobe, &opts)?;
-    // A relative error with no n where it is defined (the reference is 0 there) is undefined: NaN, said so.
-    for m in [&mut rep.epicenter, &mut rep.inflection, &mut rep.cutoff_rel] {
-        if m.n.is_nan() {
-            m.value = f64::NAN;
-        }
-    }
-    // A reference that is 0 everywhere defines no relative error and no lobe size anywhere (the values found
-    // are x/0 = inf or 0/0 = NaN at arbitrary n): all undefined.
-    let ref_zero = rep.reference_peak == 0.0 || rep.reference_peak.is_nan();
-    if ref_zero {
-        let undefined = Worst { value: f64::NAN, n: f64::NAN, angle_deg: f64::NAN };
-        for m in [&mut rep.epicenter, &mut rep.inflection, &mut rep.cutoff_rel, &mut rep.lobe_ratio_min, &mut rep.lobe_ratio_max] {
-            *m = undefined;
-        }
-    }
+    let ref_zero = rep.mark_undefined();
     let secs = t.elapsed().as_secs_f64();
     if a.json.on {
         outln!(out, "{}", common::to_json(&AccuracyJson::new(&rep, a.q, secs))?);

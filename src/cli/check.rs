@@ -6,9 +6,8 @@
 
 use super::args::{self, FormulaSource, Json, Params, PreferArg};
 use super::common::{self, CliError};
-use lobe::ir::{Formula, Input};
-use lobe::numerics::robust::{self, ErrorStats, ErrorStatsJson, Worst};
-use lobe::{Backend, Options};
+use lobe::ir::Formula;
+use lobe::numerics::robust::{self, ErrorStats, Worst};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("set", args::help("Parameters to bake as constants, e.g. `n=50`")))]
@@ -30,19 +29,6 @@ pub struct CheckArgs {
     pub json: Json,
     #[command(flatten)]
     pub math: super::args::MathArg,
-}
-
-/// The builtins the simplified formula calls, each with its stated bound in `mode` (sorted by table order).
-fn builtin_bounds(f: &lobe::Formula, mode: lobe::Mode) -> Vec<(&'static str, String)> {
-    let mut used = vec![];
-    f.ir.walk(f.root, |n| {
-        if let lobe::ir::Node::Call(b, _) = n {
-            used.push(*b);
-        }
-    });
-    used.sort();
-    used.dedup();
-    used.into_iter().map(|b| (b.name(), b.info().bound.describe(mode))).collect()
 }
 
 /// A point as `NH=…, NL=… (n=…)`: the inputs the formula reads and its live parameters.
@@ -82,105 +68,34 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
     let whole = a.formula.load()?;
     // A colour formula: the red channel is checked and shown, and the output says so (`lobe check --sweep`
     // and `lobe bench` report every channel).
-    let colour = whole.is_rgb().then_some("red");
-    let f = whole.named_channels().remove(0);
-    let bake = lobe::resolve_bake(&f, &set)?;
-    let (simplified, report) = lobe::simplify::simplify_report(&f, &bake);
-    let (nodes_before, nodes_after) = (report.nodes_before, report.nodes_after);
-    let used = simplified.used_inputs();
-    let unused: Vec<&str> = Input::ALL.iter().filter(|i| !used.contains(**i)).map(|i| i.name()).collect();
-    let live = simplified.ir.used_params(simplified.root);
-    let t_pass = std::time::Instant::now();
-    let opts = robust::PassOptions {
-        math: a.math.mode,
-        conditioning: robust::Conditioning::Everywhere,
-        budget: std::time::Duration::from_secs_f64(a.budget),
-        ..a.prefer.pass(a.points as usize)
-    };
+    let opts = robust::PassOptions { math: a.math.mode, budget: std::time::Duration::from_secs_f64(a.budget), ..a.prefer.pass(a.points as usize) };
     let spinner = Spinner::new(!a.json.on && std::io::IsTerminal::is_terminal(&std::io::stderr()));
-    let pass = robust::improve_observed(&f, &bake, &opts, &|stage| spinner.show(stage));
+    let c = lobe::numerics::check::check(&whole, &set, &opts, &|stage| spinner.show(stage));
     spinner.finish();
-    let pass_ms = t_pass.elapsed().as_secs_f64() * 1e3;
-    // How far the worst well-conditioned point is from the ill-conditioned threshold (measured everywhere).
-    let cond_well = pass.after.condition_at_worst_well;
-    let opts = |backend| Options { backend, bake: set.clone(), math: a.math.mode, ..Options::default() };
-    let bounds = builtin_bounds(&simplified, a.math.mode);
-    let jit = lobe::compile_formula(f.clone(), &opts(Backend::Jit))?;
-    let interp = lobe::compile_formula(f.clone(), &opts(Backend::Interp))?;
+    let c = c?;
     if a.json.on {
-        let params = f
-            .params
-            .iter()
-            .enumerate()
-            .map(|(i, p)| robust::ParamJson {
-                name: p.name.clone(),
-                default: p.default,
-                lo: p.lo,
-                hi: p.hi,
-                baked: bake.iter().find(|(j, _)| *j == i).map(|(_, v)| *v),
-                live: live.contains(&(i as u16)),
-            })
-            .collect();
-        let rounding_changes = report
-            .rounding
-            .iter()
-            .map(|r| {
-                let (line, col) = lobe::base::span::line_col(&f.source, r.span.start as usize);
-                robust::RoundingJson { rule: r.rule, line, col, detail: r.detail.clone() }
-            })
-            .collect();
-        let obj = robust::CheckReport {
-            file: f.file.clone(),
-            name: f.display_name().to_string(),
-            citation: f.meta.citation.clone(),
-            channel: colour,
-            params,
-            // The let form: printing shared `let`s as a tree grows exponentially with their depth.
-            formula: f.to_program_text(),
-            simplified: simplified.to_program_text(),
-            nodes_before,
-            nodes_after,
-            rewrites: report.fired.iter().map(|(k, v)| robust::RewriteCount { rule: k, count: *v }).collect(),
-            rounding_changes,
-            passes: report.passes,
-            used_inputs: used.iter().map(|i| i.name()).collect(),
-            unused_inputs: unused,
-            math: a.math.mode.name(),
-            builtins: bounds.iter().map(|(n, b)| robust::BuiltinBound { name: n, bound: b.clone() }).collect(),
-            points: pass.points,
-            after: ErrorStatsJson::new(&f, &pass.after),
-            condition_ulps_at_worst_well_conditioned: cond_well,
-            before: ErrorStatsJson::new(&f, &pass.before),
-            accuracy_rewrites: robust::TrialJson::all(&pass),
-            truncated: pass.truncated,
-            compiled: pass.formula.to_program_text(),
-            cost_ratio: pass.cost_after / pass.cost_before,
-            compile_us: robust::CompileUs {
-                jit: jit.compile_time.as_secs_f64() * 1e6,
-                interp: interp.compile_time.as_secs_f64() * 1e6,
-            },
-        };
-        println!("{}", common::to_json(&obj)?);
+        println!("{}", common::to_json(&c.json())?);
         return Ok(());
     }
+    let (f, report, pass) = (&c.formula, &c.report, &c.pass);
     println!("{} — {}", f.file, f.display_name());
-    if colour.is_some() {
+    if c.channel.is_some() {
         println!("  colour      an RGB formula: the red channel is shown (check --sweep and bench report all three)");
     }
-    if let Some(c) = &f.meta.citation {
-        println!("  cite        {c}");
+    if let Some(cite) = &f.meta.citation {
+        println!("  cite        {cite}");
     }
     for (i, p) in f.params.iter().enumerate() {
-        let state = match bake.iter().find(|(j, _)| *j == i) {
+        let state = match c.bake.iter().find(|(j, _)| *j == i) {
             Some((_, v)) => format!("baked = {v}"),
-            None if live.contains(&(i as u16)) => "live".to_string(),
+            None if c.live.contains(&(i as u16)) => "live".to_string(),
             None => "unused".to_string(),
         };
         println!("  param       {} = {} in {}..{}  ({state})", p.name, p.default, p.lo, p.hi);
     }
     println!("  formula     {}", f.to_program_text().replace('\n', "\n              "));
-    println!("  simplified  {}", simplified.to_program_text().replace('\n', "\n              "));
-    println!("  nodes       {nodes_before} → {nodes_after}");
+    println!("  simplified  {}", c.simplified.to_program_text().replace('\n', "\n              "));
+    println!("  nodes       {} → {}", report.nodes_before, report.nodes_after);
     if !report.fired.is_empty() {
         let r: Vec<String> = report.fired.iter().map(|(k, v)| format!("{k} ×{v}")).collect();
         println!("  rewrites    {} ({} passes)", r.join(", "), report.passes);
@@ -191,19 +106,15 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
     }
     println!(
         "  reads       {}{}",
-        if used.is_empty() { "no input (a constant)".to_string() } else { used.to_string() },
-        if unused.is_empty() { String::new() } else { format!("   (a renderer skips {})", unused.join(", ")) }
+        if c.used.is_empty() { "no input (a constant)".to_string() } else { c.used.to_string() },
+        if c.unused.is_empty() { String::new() } else { format!("   (a renderer skips {})", c.unused.join(", ")) }
     );
-    if !bounds.is_empty() {
-        let b: Vec<String> = bounds.iter().map(|(n, b)| format!("{n} {b}")).collect();
+    if !c.bounds.is_empty() {
+        let b: Vec<String> = c.bounds.iter().map(|(n, b)| format!("{n} {b}")).collect();
         println!("  builtins    {} ({} math)", b.join(", "), a.math.mode);
     }
-    print_accuracy(&f, &pass, a.points as usize, pass_ms, cond_well);
-    println!(
-        "  compile     jit {:.0} µs, interpreter {:.0} µs",
-        jit.compile_time.as_secs_f64() * 1e6,
-        interp.compile_time.as_secs_f64() * 1e6
-    );
+    print_accuracy(f, pass, a.points as usize, c.pass_ms, c.cond_well);
+    println!("  compile     jit {:.0} µs, interpreter {:.0} µs", c.jit_us, c.interp_us);
     Ok(())
 }
 

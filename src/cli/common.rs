@@ -148,10 +148,14 @@ pub fn with_pass(opts: Options, pass: lobe::numerics::robust::PassOptions) -> Op
 }
 
 /// The scene compiler of `render`, `compare` and `watch`: the backend's kernels through the accuracy pass in
-/// `math`, as `eval` compiles (cached, so a second render of a scene pays nothing for it).
+/// `math`, as `eval` compiles (cached unless `--no-cache`).
 pub fn scene_compiler(backend: lobe::Backend, math: lobe::Mode) -> lobe::render::scene::LobeCompiler {
-    let pass = lobe::numerics::robust::PassOptions { math, ..Default::default() };
-    lobe::render::scene::LobeCompiler { backend, math, accuracy: with_pass(Options::default(), pass).accuracy }
+    lobe::numerics::pass_cache::command_scene_compiler(backend, math, USE_CACHE.load(std::sync::atomic::Ordering::Relaxed))
+}
+
+/// `--no-cache` as given: whether the accuracy pass's decisions are cached.
+pub fn cache_on() -> bool {
+    USE_CACHE.load(std::sync::atomic::Ordering::Relaxed)
 }
 
 /// Loads a formula and simplifies it with `set`'s values baked in, without the accuracy pass: the plain

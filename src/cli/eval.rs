@@ -181,11 +181,8 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
         let s = lobe::simplified(&f, &pass(lobe::Options { bake, ..Default::default() }))?;
         vec![lobe::build_kernel(std::sync::Arc::new(lobe::numerics::normalize::bake_coefficient(s)?), backend, a.backend.math.mode)?]
     } else {
-        let mut ks = vec![];
-        for c in f.channels() {
-            ks.push(lobe::compile_formula(c, &pass(a.backend.options(set.clone())?))?);
-        }
-        ks
+        let pass = a.prefer.pass(lobe::numerics::robust::PassOptions::default().points);
+        lobe::numerics::pass_cache::command_channels(&f, &set, backend, a.backend.math.mode, pass, common::cache_on())?
     };
     let params = common::param_values(&ks[0].formula, &set);
     if let Some(path) = &a.points {

@@ -10,7 +10,7 @@
 use super::args::{self, BackendArg, FormulaSource, Json, Params, PreferArg};
 use super::common::{self, CliError};
 use lobe::ir::Formula;
-use lobe::numerics::sweep::{example_extents, kinds, sweep, ChannelsJson, Example, RegionStats, SweepJson, SweepOptions, SweepReport};
+use lobe::numerics::sweep::{example_extents, kinds, ChannelsJson, Example, RegionStats, SweepJson, SweepOptions, SweepReport};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("set", args::help("Fix parameters instead of sweeping their declared ranges, e.g. `a=16`")))]
@@ -126,15 +126,7 @@ pub enum Out {
 pub fn report(a: &SweepArgs, f: &Formula) -> Result<(Out, Vec<String>), CliError> {
     let mut out = String::new();
     let set = a.set.list()?;
-    let mut decls = f.params.clone();
-    // Baked parameters are fixed: sweep them at their value only.
-    for (name, v) in &set {
-        if let Some(i) = f.param_index(name) {
-            decls[i].lo = *v;
-            decls[i].hi = *v;
-            decls[i].default = *v;
-        }
-    }
+    let decls = lobe::numerics::sweep::swept_decls(f, &set);
     let used = f.used_inputs();
     // Every parameter combination gets its share of points: a smaller budget cannot be kept.
     let (combos, per) = lobe::numerics::sweep::min_evals(used, &decls);
@@ -148,28 +140,18 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(Out, Vec<String>), CliError
             format!("give --max-evals {least} or more, or fix parameters with --set so fewer combinations are swept"),
         ));
     }
-    let u = f.unclamped();
-    let k = lobe::compile_formula(u.clone(), &a.backend.options(set.clone())?)?;
-    let compiled = if a.as_written {
-        None
-    } else {
-        let opts = super::common::with_pass(a.backend.options(set.clone())?, a.prefer.pass(lobe::numerics::robust::PassOptions::default().points));
-        Some(lobe::compile_formula(u, &opts)?)
-    };
-    let opts = SweepOptions { bound: a.bound, max_evals: a.max_evals };
-    let rep = sweep(&k, used, &decls, &opts);
-    let text = |k: &lobe::Kernel| k.formula.to_program_text().replace('\n', "; ");
-    // The compiled form's sweep, run only when the accuracy pass kept a rewrite (otherwise it is `rep`).
-    let changed = compiled.as_ref().filter(|c| text(c) != text(&k));
-    let crep_changed = changed.map(|c| sweep(c, used, &decls, &opts));
-    let crep = crep_changed.as_ref().or(compiled.as_ref().map(|_| &rep));
-    let names: Vec<String> = decls.iter().map(|d| d.name.clone()).collect();
+    let plain = a.backend.options(set.clone())?;
+    let pass = (!a.as_written).then(|| super::common::with_pass(plain.clone(), a.prefer.pass(lobe::numerics::robust::PassOptions::default().points)));
+    let run = lobe::numerics::sweep::sweep_formula(f, &set, &plain, pass.as_ref(), &SweepOptions { bound: a.bound, max_evals: a.max_evals })?;
+    let (k, rep, compiled, crep_changed, names) = (&run.k, &run.rep, &run.compiled, &run.crep_changed, &run.names);
+    let text = lobe::numerics::sweep::Run::text;
+    let changed = run.changed();
+    let crep = run.crep();
     let t = &rep.total;
     let judged = crep.map_or(t, |cr| &cr.total);
     let denied: Vec<String> = a.deny.iter().filter(|d| judged.count(d) > 0).cloned().collect();
     if a.json.on {
-        let c = compiled.as_ref().zip(crep).map(|(c, cr)| (c as &dyn lobe::Evaluator, text(c), cr));
-        return Ok((Out::Json(Box::new(SweepJson::new(&k, &rep, used, &names, c))), denied));
+        return Ok((Out::Json(Box::new(run.json())), denied));
     }
     {
         outln!(
@@ -181,7 +163,7 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(Out, Vec<String>), CliError
             rep.domain.describe(),
             if used.is_empty() { "none".to_string() } else { used.to_string() }
         );
-        outln!(out, "  as written  {}", text(&k));
+        outln!(out, "  as written  {}", text(k));
         match (&compiled, changed) {
             (_, Some(c)) => {
                 outln!(out, "  compiled    {}", text(c));
@@ -199,9 +181,9 @@ pub fn report(a: &SweepArgs, f: &Formula) -> Result<(Out, Vec<String>), CliError
             let cells: Vec<String> = ["nan", "inf", "negative", "bound"].iter().map(|kind| cell(r.count(kind), c.map(|c| c.count(kind)))).collect();
             outln!(out, "  {:<10} {:>10} {:>12} {:>12} {:>12} {:>12}", r.region, r.evaluated, cells[0], cells[1], cells[2], cells[3]);
         }
-        examples_text(&mut out, &k, &rep, used, &names, "");
-        if let (Some(c), Some(cr)) = (changed, &crep_changed) {
-            examples_text(&mut out, c, cr, used, &names, "compiled: ");
+        examples_text(&mut out, k, rep, used, names, "");
+        if let (Some(c), Some(cr)) = (changed, crep_changed) {
+            examples_text(&mut out, c, cr, used, names, "compiled: ");
         }
     }
     Ok((Out::Text(out), denied))

@@ -269,6 +269,28 @@ fn cutoff_deg(f: &dyn Fn(f64) -> f64, deg: &[f64], vals: &[f64], level: f64) -> 
     (0.5 * (a + b)).to_degrees()
 }
 
+impl AccuracyReport {
+    /// Marks the metrics that are undefined as NaN (value and n), as the accuracy command reports them: a
+    /// relative error with no n where it is defined (the reference is 0 there), and, when the reference is 0
+    /// everywhere, every relative error and the lobe-size ratio (the values found are x/0 = inf or 0/0 = NaN
+    /// at arbitrary n). Returns whether the reference is 0 everywhere.
+    pub fn mark_undefined(&mut self) -> bool {
+        for m in [&mut self.epicenter, &mut self.inflection, &mut self.cutoff_rel] {
+            if m.n.is_nan() {
+                m.value = f64::NAN;
+            }
+        }
+        let ref_zero = self.reference_peak == 0.0 || self.reference_peak.is_nan();
+        if ref_zero {
+            let undefined = Worst { value: f64::NAN, n: f64::NAN, angle_deg: f64::NAN };
+            for m in [&mut self.epicenter, &mut self.inflection, &mut self.cutoff_rel, &mut self.lobe_ratio_min, &mut self.lobe_ratio_max] {
+                *m = undefined;
+            }
+        }
+        ref_zero
+    }
+}
+
 /// Compares `ev` (lobe variable `lobe`, parameters `params`, n replaced) with `reference`.
 #[allow(clippy::too_many_arguments)]
 pub fn accuracy(

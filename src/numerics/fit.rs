@@ -260,6 +260,102 @@ pub fn search(
     Ok(FitReport { best: cands, evaluated })
 }
 
+/// What [`fit_points`] minimises over the points.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Loss {
+    /// The weighted mean of squared differences, Σ w·(f − t)² / Σ w (least squares).
+    #[default]
+    Mse,
+    /// The weighted mean of absolute differences, Σ w·|f − t| / Σ w.
+    Mae,
+    /// The largest weighted absolute difference, max w·|f − t|.
+    Max,
+}
+
+impl std::str::FromStr for Loss {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Loss, String> {
+        match s {
+            "mse" => Ok(Loss::Mse),
+            "mae" => Ok(Loss::Mae),
+            "max" => Ok(Loss::Max),
+            _ => Err(format!("unknown loss `{s}`; expected mse, mae or max")),
+        }
+    }
+}
+
+/// Target values to fit at given points: the inputs as batch columns, for each channel kernel its `len`
+/// target values (`target` holds them channel after channel), and optional per-point weights (≥ 0).
+#[derive(Clone, Copy, Debug)]
+pub struct PointsTarget<'a> {
+    pub cols: crate::Columns<'a>,
+    pub len: usize,
+    pub target: &'a [f64],
+    pub weights: Option<&'a [f64]>,
+}
+
+impl PointsTarget<'_> {
+    /// The loss of `channels` (one evaluator per channel) at the full parameter vector `params`, by the batched
+    /// kernels; NaN anywhere (or no positive weight) scores +inf.
+    pub fn score(&self, channels: &[&dyn Evaluator], params: &[f64], loss: Loss) -> f64 {
+        let mut out = vec![0.0; self.len];
+        let (mut sum, mut wsum, mut max) = (0.0f64, 0.0f64, 0.0f64);
+        for (c, ev) in channels.iter().enumerate() {
+            ev.eval_batch(&self.cols, params, &mut out);
+            let t = &self.target[c * self.len..(c + 1) * self.len];
+            for (i, (f, t)) in out.iter().zip(t).enumerate() {
+                let w = self.weights.map_or(1.0, |w| w[i]);
+                let d = (f - t).abs();
+                let e = if loss == Loss::Mse { d * d } else { d };
+                if e.is_nan() {
+                    return f64::INFINITY;
+                }
+                sum += w * e;
+                wsum += w;
+                max = max.max(w * d);
+            }
+        }
+        let s = match loss {
+            Loss::Max => max,
+            _ if wsum > 0.0 => sum / wsum,
+            _ => f64::INFINITY,
+        };
+        if s.is_nan() {
+            f64::INFINITY
+        } else {
+            s
+        }
+    }
+}
+
+/// Fits `free` parameters of `channels` (one evaluator per channel of one formula) to target values at given
+/// points ([`PointsTarget`]), by [`search`] over the loss. The shapes are the caller's to check: every read
+/// column, and the weights, have `len` values, and `target` has `len` per channel.
+#[allow(clippy::too_many_arguments)]
+pub fn fit_points(
+    channels: &[&dyn Evaluator],
+    base_params: &[f64],
+    points: &PointsTarget,
+    loss: Loss,
+    free: &[FreeParam],
+    top: usize,
+    refine_best: bool,
+) -> Result<FitReport, Diagnostic> {
+    if points.target.len() != points.len * channels.len() || points.weights.is_some_and(|w| w.len() != points.len) {
+        return Err(Diagnostic::error(format!(
+            "{} target values and {} weights for {} points of {} channel(s)",
+            points.target.len(),
+            points.weights.map_or(0, <[f64]>::len),
+            points.len,
+            channels.len()
+        )));
+    }
+    if points.weights.is_some_and(|w| w.iter().any(|w| !(*w >= 0.0 && w.is_finite()))) {
+        return Err(Diagnostic::error("a weight is negative or not finite").hint("weights are finite numbers ≥ 0"));
+    }
+    search(base_params, free, top, refine_best, &|p| points.score(channels, p, loss), &|| {})
+}
+
 /// Continuous refinement within one grid step of `start`: golden section (1 parameter) or Nelder–Mead.
 pub(crate) fn refine(score: &(dyn Fn(&[f64]) -> f64 + Sync), start: &[f64], free: &[FreeParam]) -> (Candidate, usize) {
     let mut used = 0;

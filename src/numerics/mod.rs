@@ -56,6 +56,7 @@
 //! Measured times, on the JIT, the interpreter and the twins: BENCHMARKS.md.
 
 pub mod accuracy;
+pub mod check;
 pub mod energy;
 pub mod fit;
 pub mod measured;

@@ -84,6 +84,29 @@ pub fn command_pass(opts: crate::Options, pass: PassOptions, cached: bool) -> cr
     super::robust::with_pass_cached(opts, pass, store)
 }
 
+/// A formula's kernels as the commands compile them (`eval`, and the Python binding, which must give the same
+/// bits): one per channel (red, green, blue for a colour formula), `bake` baked, through the accuracy pass of
+/// [`command_pass`] at `pass` (its math taken from `math`).
+pub fn command_channels(
+    f: &Formula,
+    bake: &[(String, f64)],
+    backend: crate::Backend,
+    math: crate::Mode,
+    pass: PassOptions,
+    cached: bool,
+) -> Result<Vec<crate::Kernel>, crate::Diagnostics> {
+    let opts = crate::Options { backend, bake: bake.to_vec(), math, ..crate::Options::default() };
+    let opts = command_pass(opts, pass, cached);
+    f.channels().into_iter().map(|c| crate::compile_formula(c, &opts)).collect()
+}
+
+/// The scene compiler of the commands that render: the backend's kernels through the accuracy pass in `math`,
+/// as [`command_channels`] compiles (cached when `cached`, so a second render of a scene pays nothing for it).
+pub fn command_scene_compiler(backend: crate::Backend, math: crate::Mode, cached: bool) -> crate::render::scene::LobeCompiler {
+    let pass = PassOptions { math, ..Default::default() };
+    crate::render::scene::LobeCompiler { backend, math, accuracy: command_pass(crate::Options::default(), pass, cached).accuracy }
+}
+
 impl DecisionStore for Cache {
     /// The stored decision for this formula, baked values and options, if any.
     fn load(&self, f: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Option<Decision> {

@@ -572,6 +572,83 @@ pub struct ChannelsJson {
     pub channels: std::collections::BTreeMap<String, SweepJson>,
 }
 
+/// A formula swept as the sweep command sweeps it: unclamped ([`Formula::unclamped`]), as written (the plain
+/// simplification) and, with the accuracy pass, as compiled; the compiled form is swept again only when the
+/// pass kept a rewrite.
+pub struct Run {
+    /// The parameters swept (baked ones fixed at their value), and their names.
+    pub decls: Vec<ParamDecl>,
+    pub names: Vec<String>,
+    pub used: InputSet,
+    /// The formula as written, and its sweep.
+    pub k: crate::Kernel,
+    pub rep: SweepReport,
+    /// The formula as compiled (with the pass), and its sweep when it differs from the one as written.
+    pub compiled: Option<crate::Kernel>,
+    pub crep_changed: Option<SweepReport>,
+}
+
+/// The parameters a sweep of `f` with `set` baked varies: baked ones are fixed, swept at their value only.
+pub fn swept_decls(f: &Formula, set: &[(String, f64)]) -> Vec<ParamDecl> {
+    let mut decls = f.params.clone();
+    for (name, v) in set {
+        if let Some(i) = f.param_index(name) {
+            decls[i].lo = *v;
+            decls[i].hi = *v;
+            decls[i].default = *v;
+        }
+    }
+    decls
+}
+
+/// Sweeps `f` with `set` baked: compiled with `plain` as written, and with `pass` (options carrying the
+/// accuracy pass) as compiled, when given.
+pub fn sweep_formula(f: &Formula, set: &[(String, f64)], plain: &crate::Options, pass: Option<&crate::Options>, opts: &SweepOptions) -> Result<Run, crate::Diagnostics> {
+    let decls = swept_decls(f, set);
+    let used = f.used_inputs();
+    // Every parameter combination gets its share of points: a smaller budget cannot be kept.
+    let (combos, per) = min_evals(used, &decls);
+    let least = combos.saturating_mul(per);
+    if opts.max_evals < least {
+        let d = crate::Diagnostic::error(format!(
+            "an evaluation budget of {} is below this sweep's minimum of {least} evaluations ({combos} parameter combinations × {per} input points each)",
+            opts.max_evals
+        ));
+        return Err(crate::Diagnostics::single(&f.file, d.hint(format!("allow {least} evaluations or more, or bake parameters so fewer combinations are swept"))));
+    }
+    let u = f.unclamped();
+    let k = crate::compile_formula(u.clone(), &crate::Options { bake: set.to_vec(), ..plain.clone() })?;
+    let compiled = match pass {
+        Some(p) => Some(crate::compile_formula(u, &crate::Options { bake: set.to_vec(), ..p.clone() })?),
+        None => None,
+    };
+    let rep = sweep(&k, used, &decls, opts);
+    let changed = compiled.as_ref().filter(|c| Run::text(c) != Run::text(&k));
+    let crep_changed = changed.map(|c| sweep(c, used, &decls, opts));
+    let names = decls.iter().map(|d| d.name.clone()).collect();
+    Ok(Run { decls, names, used, k, rep, compiled, crep_changed })
+}
+
+impl Run {
+    /// A kernel's formula on one line.
+    pub fn text(k: &crate::Kernel) -> String {
+        k.formula.to_program_text().replace('\n', "; ")
+    }
+    /// The compiled kernel when the accuracy pass changed the formula.
+    pub fn changed(&self) -> Option<&crate::Kernel> {
+        self.compiled.as_ref().filter(|_| self.crep_changed.is_some())
+    }
+    /// The compiled formula's sweep (the one as written when the pass kept no rewrite), with the pass.
+    pub fn crep(&self) -> Option<&SweepReport> {
+        self.crep_changed.as_ref().or(self.compiled.as_ref().map(|_| &self.rep))
+    }
+    /// The JSON report of the sweep command.
+    pub fn json(&self) -> SweepJson {
+        let c = self.compiled.as_ref().zip(self.crep()).map(|(c, cr)| (c as &dyn Evaluator, Run::text(c), cr));
+        SweepJson::new(&self.k, &self.rep, self.used, &self.names, c)
+    }
+}
+
 impl SweepJson {
     /// The report of `rep`, the sweep of `ev` over inputs `used` and parameters `names`, and of the compiled
     /// formula's (`ev` of the compiled form, its text, its sweep), if any.

@@ -1,0 +1,347 @@
+"""lobe: BRDF formulas (.brdf files) compiled to fast, accurate kernels for numpy.
+
+>>> import lobe, numpy as np
+>>> k = lobe.compile("examples/brdfs/blinn.brdf")
+>>> k(NH=np.linspace(0, 1, 5), n=100)
+
+A :class:`Kernel` evaluates on numpy arrays (broadcast together) of cosines (``NL``, ``NV``, ``NH``, ``VR``,
+``VH``) or of directions ``L`` and ``V`` of shape ``(..., 3)`` in the local frame (N = +z); parameters are
+given by name and default to the formula's declared values. The values are the ones ``lobe eval --points``
+prints, bit for bit. The checks (:meth:`Kernel.check`, :meth:`Kernel.energy`, :meth:`Kernel.accuracy`,
+:meth:`Kernel.sweep`) return the dicts the command line prints with ``--json``. :func:`fit` fits parameters to
+target values; :func:`render` renders a scene file to an image a notebook shows.
+
+Errors are :class:`LobeError`, whose ``diagnostics`` list says where (file, line, column) and why.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any, Dict, Mapping, Optional, Tuple, Union
+
+import numpy as np
+
+from . import _lobe
+from ._lobe import LobeError
+
+__all__ = ["compile", "Kernel", "LobeError", "fit", "render", "Image", "__version__"]
+__version__: str = _lobe.__version__
+
+_NAMES = ("NL", "NV", "NH", "VR", "VH")
+
+
+def _error(message: str, hint: Optional[str] = None) -> LobeError:
+    """A LobeError raised on the Python side, with one place-less diagnostic."""
+    text = f"error: {message}" + (f"\n  = help: {hint}" if hint else "")
+    e = LobeError(text)
+    e.diagnostics = [
+        {
+            "severity": "error",
+            "message": message,
+            "file": "",
+            "line": None,
+            "column": None,
+            "end_line": None,
+            "end_column": None,
+            "label": None,
+            "hint": hint,
+            "hints": [hint] if hint else [],
+            "rendered": text + "\n",
+        }
+    ]
+    return e
+
+
+def _flat(a: Any, shape: Tuple[int, ...], tail: Tuple[int, ...] = ()) -> np.ndarray:
+    """``a`` broadcast to ``shape + tail`` as C-contiguous, aligned float64, flattened to ``(-1,) + tail``: no
+    copy when it already is (arrays unpickled from out-of-band buffers may be unaligned: those are copied)."""
+    return np.require(np.broadcast_to(a, shape + tail), np.float64, ["C", "A"]).reshape((-1,) + tail)
+
+
+def _read(path_or_text: Union[str, "os.PathLike[str]"]) -> Tuple[str, str]:
+    """(file name, text): a path names an existing file; any other string is formula text."""
+    if isinstance(path_or_text, os.PathLike):
+        return _lobe.read_source(os.fspath(path_or_text))
+    if not isinstance(path_or_text, str):
+        raise TypeError(f"compile() takes a path or formula text, not {type(path_or_text).__name__}")
+    s = path_or_text
+    if "\n" not in s and len(s) < 4096 and os.path.isfile(s):
+        return _lobe.read_source(s)
+    return "<text>", s
+
+
+def compile(path_or_text: Union[str, "os.PathLike[str]"], *, math: str = "precise", **baked: float) -> "Kernel":
+    """Compile a formula: a path if it names an existing file, else formula text.
+
+    ``math`` is ``"precise"`` (lobe's correctly-rounded-or-close builtins) or ``"fast"``. Keyword arguments are
+    parameter values baked into the code as constants (``n=50``); the other parameters stay live and are given
+    per call. The formula is compiled exactly as ``lobe eval`` compiles it (the accuracy pass included, its
+    decisions cached on disk), so values match the command line bit for bit.
+    """
+    file, src = _read(path_or_text)
+    return _compile_text(file, src, math, baked)
+
+
+def _compile_text(file: str, src: str, math: str, baked: Mapping[str, float]) -> "Kernel":
+    items = [(str(k), float(v)) for k, v in baked.items()]
+    native, warnings = _lobe.compile(file, src, math, items)
+    if warnings:
+        import warnings as w
+
+        w.warn(warnings.rstrip(), stacklevel=3)
+    return Kernel._from_native(native)
+
+
+def _rebuild(file: str, source: str, math: str, baked: Any) -> "Kernel":
+    """Unpickling: compile again from the source text (in the worker process)."""
+    return _compile_text(file, source, math, dict(baked))
+
+
+class Kernel:
+    """A compiled formula. Call it with inputs and parameters as keywords; see the module docs.
+
+    Kernels pickle as their source text, baked values and math mode, and compile again where they are
+    unpickled (a Dask or Ray worker, a multiprocessing pool).
+    """
+
+    __slots__ = ("_native", "_defaults")
+
+    def __init__(self, *_: Any, **__: Any) -> None:
+        raise TypeError("use lobe.compile(path_or_text) to make a Kernel")
+
+    @classmethod
+    def _from_native(cls, native: Any) -> "Kernel":
+        k = object.__new__(cls)
+        k._native = native
+        k._defaults = [p[1] for p in native.params]
+        return k
+
+    # -- what it is -------------------------------------------------------------------------------------
+    @property
+    def name(self) -> str:
+        """The formula's display name."""
+        return self._native.name
+
+    @property
+    def file(self) -> str:
+        """The file it was read from (``"<text>"`` for formula text)."""
+        return self._native.file
+
+    @property
+    def source(self) -> str:
+        """The formula's source text."""
+        return self._native.source
+
+    @property
+    def math(self) -> str:
+        """``"precise"`` or ``"fast"``."""
+        return self._native.math
+
+    @property
+    def baked(self) -> Dict[str, float]:
+        """Parameters baked into the code, by name."""
+        return dict(self._native.baked)
+
+    @property
+    def params(self) -> Dict[str, float]:
+        """Every declared parameter's default (declaration order, ``n`` first); baked ones at their value."""
+        return {p[0]: p[1] for p in self._native.params}
+
+    @property
+    def param_ranges(self) -> Dict[str, Tuple[float, float]]:
+        """Every declared parameter's range (lo, hi)."""
+        return {p[0]: (p[2], p[3]) for p in self._native.params}
+
+    @property
+    def inputs(self) -> Tuple[str, ...]:
+        """The inputs the compiled kernel reads (``NH``, ``Lx``, …)."""
+        return tuple(self._native.inputs)
+
+    @property
+    def channels(self) -> int:
+        """1 for a scalar formula, 3 for a colour one (values then have a trailing axis of 3)."""
+        return self._native.channels
+
+    @property
+    def compiled(self) -> Tuple[str, ...]:
+        """The formula lobe compiled, per channel, as program text."""
+        return tuple(self._native.compiled)
+
+    def __repr__(self) -> str:
+        baked = "".join(f", {k}={v!r}" for k, v in self.baked.items())
+        return f"<lobe.Kernel {self.name!r} from {self.file!r}, math={self.math!r}{baked}>"
+
+    def __reduce__(self) -> Tuple[Any, Tuple[Any, ...]]:
+        return (_rebuild, self._native.state())
+
+    # -- evaluation -------------------------------------------------------------------------------------
+    def _prepare(self, kw: Mapping[str, Any]) -> Tuple[list, Any, Any, list, Tuple[int, ...]]:
+        """Split keywords into input columns (broadcast, contiguous float64, flattened) and the parameter
+        vector; returns (cosines, L, V, params, shape)."""
+        kinds = self._native.resolve(list(kw))
+        params = list(self._defaults)
+        cos, dirs = [], {}
+        for (name, value), (kind, i) in zip(kw.items(), kinds):
+            a = np.asarray(value, dtype=np.float64)
+            if kind == "param":
+                if a.size != 1:
+                    raise _error(
+                        f"parameter `{name}` takes one value, got an array of shape {a.shape}",
+                        "give one value per call (compile once, call once per parameter value)",
+                    )
+                params[i] = float(a.reshape(()))
+            elif kind == "input":
+                cos.append((i, a))
+            else:
+                if a.ndim == 0 or a.shape[-1] != 3:
+                    raise _error(f"{name} must have shape (..., 3), not {a.shape}", f"{name} is a direction: x, y, z in the local frame (N = +z)")
+                dirs[kind] = a
+        shapes = [a.shape for _, a in cos] + [a.shape[:-1] for a in dirs.values()]
+        try:
+            shape = np.broadcast_shapes(*shapes) if shapes else ()
+        except ValueError:
+            names = [n for n in kw if kinds[list(kw).index(n)][0] != "param"]
+            raise _error(f"the inputs' shapes do not broadcast: {dict(zip(names, shapes))}") from None
+        flat = [(i, _flat(a, shape)) for i, a in cos]
+        lv = [_flat(dirs[k], shape, (3,)) if k in dirs else None for k in ("L", "V")]
+        return flat, lv[0], lv[1], params, shape
+
+    def __call__(self, **inputs_and_params: Any) -> np.ndarray:
+        """Evaluate at every point: returns float64 of the broadcast shape (``(..., 3)`` for colour)."""
+        cos, L, V, params, shape = self._prepare(inputs_and_params)
+        n = int(np.prod(shape, dtype=np.int64))
+        out = self._native.eval((cos, L, V, n), params)
+        if self.channels == 1:
+            return out.reshape(shape)
+        return np.moveaxis(out.reshape((self.channels,) + shape), 0, -1)
+
+    # -- the checks (the CLI's --json reports) ----------------------------------------------------------
+    def _param_list(self, params: Mapping[str, float]) -> list:
+        kinds = self._native.resolve(list(params))
+        values = list(self._defaults)
+        for (name, v), (kind, i) in zip(params.items(), kinds):
+            if kind != "param":
+                raise _error(f"`{name}` is an input, not a parameter", "the checks choose their own inputs")
+            values[i] = float(v)
+        return values
+
+    def check(self, *, points: int = 100_000, budget: float = 10.0) -> Dict[str, Any]:
+        """What lobe made of the formula and its accuracy report: ``lobe check --json`` (the red channel of
+        a colour formula)."""
+        return self._native.check(int(points), float(budget))
+
+    def energy(self, *, mode: str = "lobe", lobe: Optional[str] = None, **params: float) -> Dict[str, Any]:
+        """The energy check: ``lobe energy --json`` (``mode="lobe"``: the papers' normalisation coefficient
+        along ``lobe`` (``"NH"`` or ``"VR"``, default the one read); ``mode="full"``: the albedo over
+        incidence angles and reciprocity). A colour formula adds ``"channels"``."""
+        return self._native.energy(mode, lobe, self._param_list(params))
+
+    def accuracy(self, reference: "Kernel", *, q: float = 8.0, n_max: int = 1000, epicenter_from: int = 2, **params: float) -> Dict[str, Any]:
+        """The papers' error metrics against ``reference`` over n = 1..n_max: ``lobe accuracy --json``."""
+        if not isinstance(reference, Kernel):
+            raise TypeError("reference must be a lobe.Kernel (lobe.compile(path))")
+        if "n" in params:
+            raise _error("accuracy sweeps n itself", "give only the other parameters")
+        return self._native.accuracy(reference._native, self._param_list(params), float(q), int(n_max), int(epicenter_from))
+
+    def sweep(self, *, bound: float = 1e6, max_evals: int = 2_000_000, as_written: bool = False) -> Dict[str, Any]:
+        """NaN, infinities, negative values and values over ``bound`` over the domain: ``lobe sweep --json``
+        (``{"channels": {...}}`` for a colour formula)."""
+        return self._native.sweep(float(bound), int(max_evals), bool(as_written))
+
+
+def fit(
+    kernel: Kernel,
+    target: Any,
+    params: Mapping[str, Union[Tuple[float, float], Tuple[float, float, float]]],
+    *,
+    weights: Any = None,
+    loss: str = "mse",
+    top: int = 5,
+    refine: bool = True,
+    **inputs: Any,
+) -> Dict[str, Any]:
+    """Fit ``kernel``'s parameters to ``target`` values at the points given by ``inputs``.
+
+    ``params`` names the parameters to search, each with its range ``(lo, hi)`` (integers when both ends are:
+    every integer is tried) or ``(lo, hi, step)``; other parameters may be fixed among ``inputs`` by name.
+    ``target`` (and ``weights``, ≥ 0) broadcast against the inputs (with a trailing axis of 3 for a colour
+    formula). ``loss`` is ``"mse"`` (weighted least squares), ``"mae"`` or ``"max"``. The search scores every
+    grid point (in parallel), then refines the best continuously (golden section for one parameter,
+    Nelder–Mead for several) — lobe's fit optimiser. The result is deterministic: the same on any machine
+    and thread count.
+
+    Returns ``{"params": {name: value, …} (the best full vector), "score": …, "loss": …, "evaluated": …,
+    "best": [{"params": …, "score": …, "refined": …}, …]}``.
+    """
+    if not isinstance(kernel, Kernel):
+        raise TypeError("fit() takes a lobe.Kernel first")
+    if not params:
+        raise _error("nothing to fit", "name at least one parameter with its range: params={'n': (1, 1000)}")
+    cos, L, V, values, shape = kernel._prepare(inputs)
+    n = int(np.prod(shape, dtype=np.int64))
+    c = kernel.channels
+    tshape = shape if c == 1 else shape + (c,)
+    t = np.asarray(target, dtype=np.float64)
+    try:
+        t = np.broadcast_to(t, tshape)
+    except ValueError:
+        raise _error(f"target of shape {t.shape} does not match the inputs' shape {tshape}") from None
+    t = _flat(np.moveaxis(t, -1, 0) if c > 1 else t, t.shape if c == 1 else (c,) + shape)
+    w = None
+    if weights is not None:
+        try:
+            w = _flat(np.asarray(weights, dtype=np.float64), shape)
+        except ValueError:
+            raise _error(f"weights do not match the inputs' shape {shape}") from None
+    names = list(kernel.params)
+    free = []
+    for name, rng in params.items():
+        if name not in names:
+            kernel._native.resolve([name])  # raises with a did-you-mean hint
+            raise _error(f"`{name}` is not a parameter")
+        r = tuple(rng)
+        if len(r) not in (2, 3):
+            raise _error(f"the range of `{name}` is (lo, hi) or (lo, hi, step), not {rng!r}")
+        free.append((names.index(name), float(r[0]), float(r[1]), float(r[2]) if len(r) == 3 else None))
+    best, evaluated = kernel._native.fit((cos, L, V, n), t, w, values, free, loss, int(top), bool(refine))
+    cands = [{"params": dict(zip(names, p)), "score": s, "refined": r} for p, s, r in best]
+    return {"params": cands[0]["params"], "score": cands[0]["score"], "loss": loss, "evaluated": evaluated, "best": cands}
+
+
+class Image(np.ndarray):
+    """A rendered image: an ``(H, W, 3)`` uint8 array that a notebook shows (``_repr_png_``)."""
+
+    def _repr_png_(self) -> bytes:
+        return self.png()
+
+    def png(self) -> bytes:
+        """The image as PNG bytes (lobe's encoder)."""
+        a = np.ascontiguousarray(self, dtype=np.uint8)
+        if a.ndim != 3 or a.shape[2] != 3:
+            raise _error(f"an image has shape (H, W, 3), not {a.shape}")
+        return _lobe.encode_png(a.view(np.ndarray).reshape(-1), a.shape[1], a.shape[0])
+
+    def save(self, path: Union[str, "os.PathLike[str]"]) -> None:
+        """Write the image as a PNG file."""
+        with open(path, "wb") as f:
+            f.write(self.png())
+
+
+def render(
+    scene: Union[str, "os.PathLike[str]"],
+    *,
+    size: Union[None, int, Tuple[int, int]] = None,
+    aa: Optional[int] = None,
+    srgb: bool = False,
+    threads: int = 0,
+    **params: float,
+) -> Image:
+    """Render a scene file (.toml, see examples/scenes/) as ``lobe render`` does; ``params`` are given to every
+    material whose formula declares them. ``size`` is N (square) or (width, height). Returns an
+    :class:`Image` (``(H, W, 3)`` uint8)."""
+    if isinstance(size, int):
+        size = (size, size)
+    wh = None if size is None else (int(size[0]), int(size[1]))
+    rgb, w, h = _lobe.render(os.fspath(scene), wh, [(k, float(v)) for k, v in params.items()], aa, bool(srgb), int(threads))
+    return np.frombuffer(rgb, dtype=np.uint8).reshape(h, w, 3).copy().view(Image)

@@ -1,0 +1,568 @@
+//! `lobe._lobe`: the native half of the Python package `lobe` (the Python half, `lobe/__init__.py`, does the
+//! numpy broadcasting and the Pythonic surface). Everything here is a thin layer over the `lobe` crate:
+//! formulas compile as `lobe eval` compiles them ([`lobe::numerics::pass_cache::command_channels`]), so values
+//! are the command's bits; the reports are the commands' JSON types, built by the same library functions.
+//!
+//! Errors are `lobe.LobeError` carrying the diagnostics; a panic anywhere below is caught and raised as a
+//! `LobeError` too, never an abort of the interpreter. Evaluation releases the GIL and splits large batches over
+//! rayon's threads.
+
+use lobe::base::diag::{Diagnostic, Diagnostics};
+use lobe::ir::{Formula, Input, N_INPUTS};
+use lobe::numerics::robust::PassOptions;
+use lobe::{Backend, Columns, Evaluator, Kernel, Mode};
+use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::create_exception;
+use pyo3::exceptions::PyException;
+use pyo3::prelude::*;
+use pyo3::types::{PyBytes, PyList};
+use rayon::prelude::*;
+use std::borrow::Cow;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+create_exception!(lobe, LobeError, PyException, "A formula, a scene or an argument lobe cannot take: `.diagnostics` says where and why.");
+
+/// Points per batched call when a batch is split over threads.
+const CHUNK: usize = 1 << 14;
+
+/// An error with no place in a source, from a message.
+fn plain(file: &str, d: Diagnostic) -> Diagnostics {
+    Diagnostics::single(file, d)
+}
+
+/// `LobeError` for `ds`: the message is the rendered caret text; `.diagnostics` is one dict per item with
+/// `severity`, `message`, `file`, `line`, `column`, `end_line`, `end_column` (None without a place), `label`,
+/// `hint` (the hints joined, or None), `hints` and `rendered`.
+fn lobe_error(py: Python<'_>, ds: &Diagnostics) -> PyErr {
+    let rendered = ds.render(false);
+    let mut items = ds.to_json();
+    if let Some(a) = items.as_array_mut() {
+        for o in a.iter_mut().filter_map(serde_json::Value::as_object_mut) {
+            let col = o.remove("col").unwrap_or(serde_json::Value::Null);
+            let end_col = o.remove("end_col").unwrap_or(serde_json::Value::Null);
+            o.insert("column".into(), col);
+            o.insert("end_column".into(), end_col);
+            for k in ["line", "end_line", "label"] {
+                o.entry(k).or_insert(serde_json::Value::Null);
+            }
+            let hints: Vec<String> = o["hints"].as_array().map(|h| h.iter().filter_map(|x| x.as_str().map(String::from)).collect()).unwrap_or_default();
+            o.insert("hint".into(), if hints.is_empty() { serde_json::Value::Null } else { hints.join("; ").into() });
+        }
+    }
+    let err = LobeError::new_err(rendered.trim_end().to_string());
+    let diags = json_to_py(py, &items.to_string()).unwrap_or_else(|_| PyList::empty(py).into_any().unbind());
+    // Setting an attribute on a fresh exception does not fail; if it did, the message still says it all.
+    let _ = err.value(py).setattr("diagnostics", diags);
+    err
+}
+
+/// A `LobeError` for a message without a place.
+fn msg_error(py: Python<'_>, file: &str, d: impl Into<Diagnostic>) -> PyErr {
+    lobe_error(py, &plain(file, d.into()))
+}
+
+/// JSON text as Python objects (dicts, lists, floats…).
+fn json_to_py(py: Python<'_>, text: &str) -> PyResult<Py<PyAny>> {
+    Ok(py.import("json")?.call_method1("loads", (text,))?.unbind())
+}
+
+/// A report type as the plain dict of the CLI's `--json`.
+fn report<T: serde::Serialize>(py: Python<'_>, v: &T) -> PyResult<Py<PyAny>> {
+    let text = serde_json::to_string(v).map_err(|e| msg_error(py, "", format!("cannot write the report: {e}")))?;
+    json_to_py(py, &text)
+}
+
+/// The panic's message, for the `LobeError` that replaces it.
+fn panic_text(p: Box<dyn std::any::Any + Send>) -> String {
+    let what = p.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| p.downcast_ref::<String>().cloned()).unwrap_or_default();
+    format!("internal error in lobe (a bug; please report it with the formula): {what}")
+}
+
+/// Runs `f` without the GIL, a panic in it caught and turned into a `LobeError`.
+fn detached<T: Send>(py: Python<'_>, file: &str, f: impl FnOnce() -> Result<T, Diagnostics> + Send) -> PyResult<T> {
+    match py.detach(|| catch_unwind(AssertUnwindSafe(f))) {
+        Ok(Ok(v)) => Ok(v),
+        Ok(Err(ds)) => Err(lobe_error(py, &ds)),
+        Err(p) => Err(msg_error(py, file, panic_text(p))),
+    }
+}
+
+fn math_mode(py: Python<'_>, math: &str) -> PyResult<Mode> {
+    match math {
+        "precise" => Ok(Mode::Precise),
+        "fast" => Ok(Mode::Fast),
+        _ => Err(msg_error(py, "", Diagnostic::error(format!("unknown math mode `{math}`")).hint("math is \"precise\" or \"fast\""))),
+    }
+}
+
+/// A compiled formula: one kernel per channel, and what it was compiled from (which pickling keeps).
+#[pyclass(frozen, module = "lobe._lobe")]
+pub struct Native {
+    /// The formula as lowered, before simplification (the checks start from it).
+    whole: Formula,
+    kernels: Vec<Kernel>,
+    file: String,
+    source: String,
+    math: Mode,
+    baked: Vec<(String, f64)>,
+}
+
+/// Points from Python: cosine columns (index in `Input::ALL`, values), L and V (`len` × 3), and `len`.
+type Points<'py> = (Vec<(usize, PyReadonlyArray1<'py, f64>)>, Option<PyReadonlyArray2<'py, f64>>, Option<PyReadonlyArray2<'py, f64>>, usize);
+
+/// One fit candidate for Python: the full parameter vector, its score, and whether the refinement found it.
+type FitCandidate = (Vec<f64>, f64, bool);
+
+/// Batch columns: borrowed from numpy where given, computed from L and V otherwise.
+struct Inputs<'a> {
+    cols: [Cow<'a, [f64]>; N_INPUTS],
+    len: usize,
+}
+
+impl Inputs<'_> {
+    fn columns(&self) -> Columns<'_> {
+        Columns::new(std::array::from_fn(|i| &*self.cols[i]))
+    }
+}
+
+/// `k`'s batched kernel over every point of `cols`, in `CHUNK`s over rayon's threads when there are many.
+fn eval_into(k: &Kernel, cols: &Columns, params: &[f64], out: &mut [f64]) {
+    if out.len() <= CHUNK {
+        return k.eval_batch(cols, params, out);
+    }
+    out.par_chunks_mut(CHUNK).enumerate().for_each(|(c, o)| {
+        let s = c * CHUNK;
+        let part = cols.cols.map(|col| if col.is_empty() { col } else { &col[s..s + o.len()] });
+        k.eval_batch(&Columns::new(part), params, o);
+    });
+}
+
+/// The kernel inputs from unit (or normalised, as `lobe eval --points` does) L and V rows of `l` and `v`
+/// (`len` × 3, row-major), for the inputs in `used`; `Err(i)`: row `i` has a zero or non-finite L or V.
+fn from_directions(l: &[f64], v: &[f64], len: usize, used: lobe::ir::InputSet) -> Result<[Vec<f64>; N_INPUTS], usize> {
+    let mut cols: [Vec<f64>; N_INPUTS] = std::array::from_fn(|i| if used.contains(Input::ALL[i]) { vec![0.0; len] } else { vec![] });
+    let mut chunks: Vec<Vec<(usize, &mut [f64])>> = (0..len.div_ceil(CHUNK)).map(|_| vec![]).collect();
+    for (i, col) in cols.iter_mut().enumerate() {
+        for (c, part) in col.chunks_mut(CHUNK).enumerate() {
+            chunks[c].push((i, part));
+        }
+    }
+    let bad = chunks.into_par_iter().enumerate().filter_map(|(c, mut parts)| {
+        for r in c * CHUNK..((c + 1) * CHUNK).min(len) {
+            let row = |a: &[f64]| [a[3 * r], a[3 * r + 1], a[3 * r + 2]];
+            let (Some((lu, _)), Some((vu, _))) = (lobe::numerics::points::unit(row(l)), lobe::numerics::points::unit(row(v))) else {
+                return Some(r);
+            };
+            let x = lobe::Frame::LOCAL.inputs(lu, vu);
+            for (i, part) in parts.iter_mut() {
+                part[r - c * CHUNK] = x[*i];
+            }
+        }
+        None
+    });
+    match bad.min() {
+        Some(r) => Err(r),
+        None => Ok(cols),
+    }
+}
+
+impl Native {
+    fn formula(&self) -> &Formula {
+        &self.kernels[0].formula
+    }
+
+    fn used(&self) -> lobe::ir::InputSet {
+        self.kernels.iter().map(Kernel::used_inputs).collect()
+    }
+
+    fn error(&self, py: Python<'_>, d: Diagnostic) -> PyErr {
+        msg_error(py, &self.file, d)
+    }
+
+    /// The batch columns from cosine arrays (`cos`: index in `Input::ALL` and values) or L and V arrays.
+    fn batch<'a>(
+        &self,
+        py: Python<'_>,
+        cos: &'a [(usize, PyReadonlyArray1<'a, f64>)],
+        l: Option<&'a PyReadonlyArray2<'a, f64>>,
+        v: Option<&'a PyReadonlyArray2<'a, f64>>,
+        len: usize,
+    ) -> PyResult<Inputs<'a>> {
+        let used = self.used();
+        let contiguous = |py: Python<'_>| self.error(py, Diagnostic::error("an input array is not contiguous float64 (lobe's Python side makes it so: a bug)"));
+        let mut cols: [Cow<'a, [f64]>; N_INPUTS] = Default::default();
+        for (i, a) in cos {
+            let s = a.as_slice().map_err(|_| contiguous(py))?;
+            if s.len() != len {
+                return Err(self.error(py, Diagnostic::error(format!("{} has {} values for {len} points", Input::ALL[*i].name(), s.len()))));
+            }
+            if used.contains(Input::ALL[*i]) {
+                cols[*i] = Cow::Borrowed(s);
+            }
+        }
+        match (l, v) {
+            (Some(l), Some(v)) => {
+                if !cos.is_empty() {
+                    return Err(self.error(py, Diagnostic::error("both directions (L, V) and cosines").hint("with L and V every cosine is computed from them; drop the cosines")));
+                }
+                let (ls, vs) = (l.as_slice().map_err(|_| contiguous(py))?, v.as_slice().map_err(|_| contiguous(py))?);
+                if l.shape() != [len, 3] || v.shape() != [len, 3] {
+                    return Err(self.error(py, Diagnostic::error("L and V must have shape (..., 3)")));
+                }
+                let dirs = py.detach(|| from_directions(ls, vs, len, used));
+                let computed = dirs.map_err(|r| {
+                    self.error(py, Diagnostic::error(format!("L or V at flat index {r} has no direction")).hint("L and V are directions: three finite components, not all 0"))
+                })?;
+                for (i, c) in computed.into_iter().enumerate() {
+                    if !c.is_empty() {
+                        cols[i] = Cow::Owned(c);
+                    }
+                }
+            }
+            (None, None) => {
+                if used.reads_directions() {
+                    let reads: Vec<&str> = used.iter().filter(|i| i.is_direction()).map(Input::name).collect();
+                    return Err(self.error(py, Diagnostic::error(format!("the formula reads directions ({})", reads.join(", "))).hint("give L and V, arrays of shape (..., 3) in the local frame (N = +z)")));
+                }
+                let missing: Vec<&str> = used.iter().filter(|i| cols[i.index()].is_empty()).map(Input::name).collect();
+                if !missing.is_empty() && len > 0 {
+                    return Err(self.error(py, Diagnostic::error(format!("the formula reads {}, which was not given", missing.join(", "))).hint(format!("give {} (or L and V)", missing.join(", ")))));
+                }
+            }
+            _ => return Err(self.error(py, Diagnostic::error("L without V, or V without L").hint("give both directions"))),
+        }
+        Ok(Inputs { cols, len })
+    }
+
+    /// A full parameter vector from Python: the right length, each value in its declared range.
+    fn check_params(&self, py: Python<'_>, params: &[f64]) -> PyResult<()> {
+        let f = self.formula();
+        if params.len() != f.params.len() {
+            return Err(self.error(py, Diagnostic::error(format!("{} parameter values for {} parameters", params.len(), f.params.len()))));
+        }
+        for (d, v) in f.params.iter().zip(params) {
+            if !d.admits(*v) && !self.baked.iter().any(|(k, _)| *k == d.name) {
+                return Err(self.error(py, Diagnostic::error(format!("{} = {v} is outside its declared range {}..{}", d.name, d.lo, d.hi)).hint(format!("choose a value in {}..{}", d.lo, d.hi))));
+            }
+        }
+        Ok(())
+    }
+
+    /// The declared default of every parameter, baked ones at their baked value.
+    fn param_values(&self) -> Vec<f64> {
+        let f = self.formula();
+        let mut p = f.default_params();
+        for (k, v) in &self.baked {
+            if let Some(i) = f.param_index(k) {
+                p[i] = *v;
+            }
+        }
+        p
+    }
+
+    /// One channel's lobe variable: the one named, else the one the formula reads.
+    fn lobe_input(&self, py: Python<'_>, k: &Kernel, name: Option<&str>) -> PyResult<Input> {
+        let Some(name) = name else { return Ok(lobe::numerics::choose_lobe_input(k.used_inputs()).0) };
+        Input::from_name(name).ok_or_else(|| {
+            self.error(py, Diagnostic::error(format!("lobe variable `{name}` is not an input")).hint("the lobe variable is NH (Blinn-style) or VR (Phong-style)"))
+        })
+    }
+}
+
+#[pymethods]
+impl Native {
+    #[getter]
+    fn file(&self) -> &str {
+        &self.file
+    }
+    #[getter]
+    fn source(&self) -> &str {
+        &self.source
+    }
+    #[getter]
+    fn math(&self) -> &'static str {
+        self.math.name()
+    }
+    #[getter]
+    fn baked(&self) -> Vec<(String, f64)> {
+        self.baked.clone()
+    }
+    #[getter]
+    fn name(&self) -> String {
+        self.whole.display_name()
+    }
+    #[getter]
+    fn channels(&self) -> usize {
+        self.kernels.len()
+    }
+    /// (name, default, lo, hi) per declared parameter, in order (`n` first); a baked one at its baked value.
+    #[getter]
+    fn params(&self) -> Vec<(String, f64, f64, f64)> {
+        self.formula().params.iter().zip(self.param_values()).map(|(d, v)| (d.name.clone(), v, d.lo, d.hi)).collect()
+    }
+    /// The inputs the compiled kernels read, in lobe's input order.
+    #[getter]
+    fn inputs(&self) -> Vec<&'static str> {
+        self.used().iter().map(Input::name).collect()
+    }
+    /// The compiled (simplified, accuracy pass applied) formula of each channel, as program text.
+    #[getter]
+    fn compiled(&self) -> Vec<String> {
+        self.kernels.iter().map(|k| k.formula.to_program_text()).collect()
+    }
+
+    /// What each keyword names: ("input", index), ("L", 0), ("V", 0) or ("param", index).
+    fn resolve(&self, py: Python<'_>, names: Vec<String>) -> PyResult<Vec<(&'static str, usize)>> {
+        let f = self.formula();
+        names
+            .iter()
+            .map(|n| {
+                if n == "L" || n == "V" {
+                    return Ok(if n == "L" { ("L", 0) } else { ("V", 0) });
+                }
+                match (Input::from_name(n), f.param_index(n)) {
+                    (Some(i), _) if i.is_direction() => Err(self.error(py, Diagnostic::error(format!("`{n}` is one direction component")).hint(format!("give the whole direction: {}=array of shape (..., 3)", &n[..1])))),
+                    (Some(i), _) => Ok(("input", i.index())),
+                    (None, Some(_)) if self.baked.iter().any(|(k, _)| k == n) => Err(self.error(py, Diagnostic::error(format!("parameter `{n}` is baked into this kernel")).hint("compile without baking it to vary it per call"))),
+                    (None, Some(p)) => Ok(("param", p)),
+                    (None, None) => {
+                        let mut known: Vec<&str> = ["NL", "NV", "NH", "VR", "VH", "L", "V"].to_vec();
+                        known.extend(f.params.iter().map(|p| p.name.as_str()));
+                        let hint = lobe::front::did_you_mean(n, &known, "inputs and parameters are: ");
+                        Err(self.error(py, Diagnostic::error(format!("`{n}` is neither an input nor a parameter of the formula")).hint(hint)))
+                    }
+                }
+            })
+            .collect()
+    }
+
+    /// Every point through every channel's batched kernel: `len` values per channel, channel after channel.
+    fn eval<'py>(&self, py: Python<'py>, points: Points<'py>, params: Vec<f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        self.check_params(py, &params)?;
+        let (cos, l, v, len) = points;
+        let inputs = self.batch(py, &cos, l.as_ref(), v.as_ref(), len)?;
+        // Zeroed memory from the allocator (fresh pages for large batches, no memset), handed to numpy as is.
+        let mut out = vec![0.0; len * self.kernels.len()];
+        detached(py, &self.file, || {
+            let cols = inputs.columns();
+            for (k, o) in self.kernels.iter().zip(out.chunks_mut(len.max(1))) {
+                eval_into(k, &cols, &params, o);
+            }
+            Ok(())
+        })?;
+        Ok(out.into_pyarray(py))
+    }
+
+    /// Fits `free` = [(param index, lo, hi, step or None)] to `target` (len values per channel, channel after
+    /// channel) at the points, by [`lobe::numerics::fit::fit_points`]. Returns the best candidates (full
+    /// parameter vector, score, refined) and how many scores were computed.
+    #[allow(clippy::too_many_arguments)]
+    fn fit<'py>(
+        &self,
+        py: Python<'py>,
+        points: Points<'py>,
+        target: PyReadonlyArray1<'py, f64>,
+        weights: Option<PyReadonlyArray1<'py, f64>>,
+        params: Vec<f64>,
+        free: Vec<(usize, f64, f64, Option<f64>)>,
+        loss: &str,
+        top: usize,
+        refine: bool,
+    ) -> PyResult<(Vec<FitCandidate>, usize)> {
+        use lobe::numerics::fit::{fit_points, FreeParam, Loss, PointsTarget};
+        self.check_params(py, &params)?;
+        let loss: Loss = loss.parse().map_err(|e: String| self.error(py, Diagnostic::error(e)))?;
+        let f = self.formula();
+        let mut fp = vec![];
+        for (index, lo, hi, step) in free {
+            let d = f.params.get(index).ok_or_else(|| self.error(py, Diagnostic::error(format!("no parameter {index}"))))?;
+            if self.baked.iter().any(|(k, _)| *k == d.name) {
+                return Err(self.error(py, Diagnostic::error(format!("parameter `{}` is baked into this kernel", d.name)).hint("compile without baking the parameters you fit")));
+            }
+            if !(lo <= hi && d.admits(lo) && d.admits(hi)) {
+                return Err(self.error(py, Diagnostic::error(format!("{}: {lo}..{hi} is not a range inside the declared {}..{}", d.name, d.lo, d.hi)).hint("search inside the declared range, or widen it in the file")));
+            }
+            fp.push(FreeParam { index, name: d.name.clone(), lo, hi, step });
+        }
+        let (cos, l, v, len) = points;
+        let inputs = self.batch(py, &cos, l.as_ref(), v.as_ref(), len)?;
+        let contiguous = || self.error(py, Diagnostic::error("target and weights must be contiguous float64"));
+        let target = target.as_slice().map_err(|_| contiguous())?;
+        let weights = match &weights {
+            Some(w) => Some(w.as_slice().map_err(|_| contiguous())?),
+            None => None,
+        };
+        let rep = detached(py, &self.file, || {
+            let pts = PointsTarget { cols: inputs.columns(), len: inputs.len, target, weights };
+            let chans: Vec<&dyn Evaluator> = self.kernels.iter().map(|k| k as &dyn Evaluator).collect();
+            fit_points(&chans, &params, &pts, loss, &fp, top, refine).map_err(|d| plain(&self.file, d))
+        })?;
+        Ok((rep.best.into_iter().map(|c| (c.params, c.score, c.refined)).collect(), rep.evaluated))
+    }
+
+    /// `lobe check --json` ([`lobe::numerics::check`]).
+    fn check(&self, py: Python<'_>, points: usize, budget: f64) -> PyResult<Py<PyAny>> {
+        if !(budget > 0.0 && budget.is_finite()) || points == 0 {
+            return Err(self.error(py, Diagnostic::error("points must be ≥ 1 and budget a positive number of seconds")));
+        }
+        let opts = PassOptions { math: self.math, budget: std::time::Duration::from_secs_f64(budget), points, ..PassOptions::default() };
+        let c = detached(py, &self.file, || lobe::numerics::check::check(&self.whole, &self.baked, &opts, &|_| {}))?;
+        report(py, &c.json())
+    }
+
+    /// `lobe energy --json` in lobe or full mode, per channel.
+    fn energy(&self, py: Python<'_>, mode: &str, lobe: Option<&str>, params: Vec<f64>) -> PyResult<Py<PyAny>> {
+        use lobe::numerics::energy::{full_energy_for, lobe_integral, EnergyReport, FullReport, LobeReport, PerChannel};
+        self.check_params(py, &params)?;
+        let full = match mode {
+            "lobe" => false,
+            "full" => true,
+            _ => return Err(self.error(py, Diagnostic::error(format!("unknown energy mode `{mode}`")).hint("mode is \"lobe\" or \"full\""))),
+        };
+        if full && lobe.is_some() {
+            return Err(self.error(py, Diagnostic::error("the lobe variable applies to mode \"lobe\" only")));
+        }
+        let shown = lobe::base::json::Named::new(self.formula().params.iter().zip(&params).map(|(d, v)| (d.name.as_str(), *v)));
+        let mut reports = vec![];
+        for k in &self.kernels {
+            let lobe = self.lobe_input(py, k, lobe)?;
+            let r = detached(py, &self.file, || {
+                let wrap = |d| plain(&self.file, d);
+                Ok(if full {
+                    EnergyReport::Full(FullReport::new(shown.clone(), &full_energy_for(k, k.used_inputs(), &params).map_err(wrap)?))
+                } else {
+                    EnergyReport::Lobe(LobeReport::new(shown.clone(), lobe, &lobe_integral(k, &params, lobe).map_err(wrap)?))
+                })
+            })?;
+            reports.push(r);
+        }
+        report(py, &PerChannel::new(reports))
+    }
+
+    /// `lobe accuracy --json` against `reference` (first channels), n = 1..n_max.
+    fn accuracy(&self, py: Python<'_>, reference: &Native, params: Vec<f64>, q: f64, n_max: u32, epicenter_from: u32) -> PyResult<Py<PyAny>> {
+        use lobe::numerics::accuracy::{accuracy, AccuracyJson, AccuracyOptions};
+        self.check_params(py, &params)?;
+        let (k, r) = (&self.kernels[0], &reference.kernels[0]);
+        let (lobe, ref_lobe) = (self.lobe_input(py, k, None)?, reference.lobe_input(py, r, None)?);
+        let opts = AccuracyOptions { q, n_max, epicenter_from, ..Default::default() };
+        let t = std::time::Instant::now();
+        let mut rep = detached(py, &self.file, || accuracy(k, &params, lobe, r, &reference.param_values(), ref_lobe, &opts).map_err(|d| plain(&self.file, d)))?;
+        rep.mark_undefined();
+        report(py, &AccuracyJson::new(&rep, q, t.elapsed().as_secs_f64()))
+    }
+
+    /// `lobe sweep --json`: the unclamped formula over its domain, as written and as compiled.
+    fn sweep(&self, py: Python<'_>, bound: f64, max_evals: u64, as_written: bool) -> PyResult<Py<PyAny>> {
+        use lobe::numerics::sweep::{sweep_formula, ChannelsJson, SweepOptions};
+        if bound.is_nan() || bound <= 0.0 {
+            return Err(self.error(py, Diagnostic::error(format!("bound {bound} must be a positive number"))));
+        }
+        let plain_opts = lobe::Options { math: self.math, ..lobe::Options::default() };
+        let pass = (!as_written).then(|| lobe::numerics::pass_cache::command_pass(plain_opts.clone(), PassOptions::default(), true));
+        let opts = SweepOptions { bound, max_evals };
+        let mut channels = ChannelsJson::default();
+        for c in self.whole.named_channels() {
+            let run = detached(py, &self.file, || sweep_formula(&c, &self.baked, &plain_opts, pass.as_ref(), &opts))?;
+            if !self.whole.is_rgb() {
+                return report(py, &run.json());
+            }
+            let name = c.display_name().rsplit_once(" (").map_or(String::new(), |(_, ch)| ch.trim_end_matches(')').to_string());
+            channels.channels.insert(name, run.json());
+        }
+        report(py, &channels)
+    }
+
+    /// `(file, source, math, baked)`: what `compile` rebuilds this kernel from (pickling).
+    fn state(&self) -> (String, String, &'static str, Vec<(String, f64)>) {
+        (self.file.clone(), self.source.clone(), self.math.name(), self.baked.clone())
+    }
+}
+
+/// Compiles formula text (named `file` in diagnostics) as `lobe eval` does, `baked` baked in, in `math`.
+/// Warnings are returned as rendered text.
+#[pyfunction]
+#[pyo3(signature = (file, source, math, baked))]
+fn compile(py: Python<'_>, file: String, source: String, math: &str, baked: Vec<(String, f64)>) -> PyResult<(Native, String)> {
+    let mode = math_mode(py, math)?;
+    let (whole, warnings) = detached(py, &file, || lobe::front::parse_with_warnings(&file, &source))?;
+    let warn = if warnings.items.is_empty() { String::new() } else { warnings.render(false) };
+    let pass = PassOptions::default();
+    let kernels = detached(py, &file, || {
+        let ks = lobe::numerics::pass_cache::command_channels(&whole, &baked, Backend::Jit, mode, pass, true)?;
+        ks.iter().for_each(Kernel::warm_up);
+        Ok(ks)
+    })?;
+    Ok((Native { whole, kernels, file, source, math: mode, baked }, warn))
+}
+
+/// A formula file's name and text, read as the command line reads it (size limit, UTF-8 checked).
+#[pyfunction]
+fn read_source(py: Python<'_>, path: &str) -> PyResult<(String, String)> {
+    lobe::base::source::read_source(path).map_err(|d| msg_error(py, path, d))
+}
+
+/// Renders a scene file as `lobe render` does; returns the RGB bytes, width and height.
+#[pyfunction]
+#[pyo3(signature = (scene, size, set, aa, srgb, threads))]
+fn render<'py>(
+    py: Python<'py>,
+    scene: &str,
+    size: Option<(usize, usize)>,
+    set: Vec<(String, f64)>,
+    aa: Option<usize>,
+    srgb: bool,
+    threads: usize,
+) -> PyResult<(Bound<'py, PyBytes>, usize, usize)> {
+    use lobe::render::image::Transfer;
+    use lobe::render::scene::{load_scene, LoadOptions};
+    if let Some((w, h)) = size {
+        let ok = |v: usize| (1..=4096).contains(&v);
+        if !ok(w) || !ok(h) {
+            return Err(msg_error(py, scene, Diagnostic::error(format!("image size {w}×{h}")).hint("each side is 1..=4096")));
+        }
+    }
+    let image = detached(py, scene, || {
+        let compiler = lobe::numerics::pass_cache::command_scene_compiler(Backend::Jit, Mode::Precise, true);
+        let sc = load_scene(std::path::Path::new(scene), &LoadOptions { size, set, formula_override: None }, &compiler)?;
+        let opts = lobe::render::RenderOptions { threads, transfer: if srgb { Transfer::Srgb } else { Transfer::Linear }, aa, ..Default::default() };
+        let (frame, _) = lobe::render::render(&sc, &opts).map_err(|e| plain(scene, Diagnostic::error(e)))?;
+        Ok(frame.image)
+    })?;
+    Ok((PyBytes::new(py, &image.rgb), image.width, image.height))
+}
+
+/// PNG bytes of `width` × `height` RGB pixels (row-major), by lobe's encoder.
+#[pyfunction]
+fn encode_png<'py>(py: Python<'py>, rgb: numpy::PyReadonlyArray1<'py, u8>, width: usize, height: usize) -> PyResult<Bound<'py, PyBytes>> {
+    let rgb = rgb.as_slice().map_err(|_| msg_error(py, "", Diagnostic::error("image data must be contiguous")))?;
+    if rgb.len() != width * height * 3 || width == 0 || height == 0 {
+        return Err(msg_error(py, "", Diagnostic::error(format!("{} bytes for a {width}×{height} RGB image", rgb.len()))));
+    }
+    let image = lobe::base::image::Image { width, height, rgb: rgb.to_vec() };
+    let png = image.encode_png().map_err(|e| msg_error(py, "", Diagnostic::error(e)))?;
+    Ok(PyBytes::new(py, &png))
+}
+
+/// Panics inside lobe, on purpose: the tests check that a panic (here in a rayon worker, as in a batch split over
+/// threads) reaches Python as a `LobeError`, not an abort.
+#[pyfunction]
+fn _panic_for_tests(py: Python<'_>) -> PyResult<()> {
+    detached(py, "<test>", || {
+        (0..4).into_par_iter().for_each(|i| assert!(i < 2, "a deliberate panic in worker {i}"));
+        Ok(())
+    })
+}
+
+#[pymodule]
+fn _lobe(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("LobeError", m.py().get_type::<LobeError>())?;
+    m.add_class::<Native>()?;
+    m.add_function(wrap_pyfunction!(compile, m)?)?;
+    m.add_function(wrap_pyfunction!(read_source, m)?)?;
+    m.add_function(wrap_pyfunction!(render, m)?)?;
+    m.add_function(wrap_pyfunction!(encode_png, m)?)?;
+    m.add_function(wrap_pyfunction!(_panic_for_tests, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}
