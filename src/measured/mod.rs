@@ -97,7 +97,7 @@ pub fn entry_dirs(i: usize, j: usize, k: usize) -> (V3, V3) {
 pub fn half_diff(l: V3, v: V3) -> Option<[f64; 3]> {
     let h = [l[0] + v[0], l[1] + v[1], l[2] + v[2]];
     let len = (h[0] * h[0] + h[1] * h[1] + h[2] * h[2]).sqrt();
-    if !(len > 0.0) {
+    if len.is_nan() || len <= 0.0 {
         return None;
     }
     let h = h.map(|x| x / len);
@@ -342,8 +342,8 @@ mod tests {
                     let want = (i, j, if j == 0 { 0 } else { k });
                     assert_eq!(got, Some(want), "{l:?} {v:?}");
                     if l[2] > 0.0 && v[2] > 0.0 {
-                        for c in 0..3 {
-                            assert_eq!(m.lookup(c, l, v), m.stored(c, index(want.0, want.1, want.2)) * SCALE[c]);
+                        for (c, scale) in SCALE.iter().enumerate() {
+                            assert_eq!(m.lookup(c, l, v), m.stored(c, index(want.0, want.1, want.2)) * scale);
                         }
                     }
                 }
@@ -425,8 +425,8 @@ mod tests {
         let e = index(10, 20, 30);
         let (l, v) = entry_dirs(10, 20, 30);
         let nh = crate::frame::inputs_from_dirs(l, v)[Input::NH.index()];
-        for c in 0..3 {
-            assert_eq!(m.stored(c, e), nh.powf(20.0) / SCALE[c]);
+        for (c, scale) in SCALE.iter().enumerate() {
+            assert_eq!(m.stored(c, e), nh.powf(20.0) / scale);
         }
         // θ_h near 90° with θ_d near 90°: V is below the surface, not measured.
         assert_eq!(m.value(0, index(89, 89, 0)), None);

@@ -308,7 +308,7 @@ mod tests {
 
     #[test]
     fn nan_and_empty_tables_are_handled() {
-        let t = table(|x| nh(x), [1.0; 3]);
+        let t = table(nh, [1.0; 3]);
         let s = Samples::new(&t, 9);
         let nan = FnEvaluator(|x: &[f64; N_INPUTS], _: &[f64]| if nh(x) > 0.99 { f64::NAN } else { 1.0 });
         assert_eq!(residual(&[&nan], &[], &s, MeasuredMetric::Rmse).error, f64::INFINITY);
