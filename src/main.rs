@@ -36,8 +36,10 @@ enum Cmd {
     Energy(cli::energy::EnergyArgs),
     /// Accuracy against a reference lobe (mean |Δ|, epicentre, inflection, cut-off metrics).
     Accuracy(cli::accuracy::AccuracyArgs),
-    /// Fit parameters to a reference lobe (exhaustive grid + continuous refinement).
+    /// Fit parameters to a reference lobe or to measured tables (exhaustive grid + continuous refinement).
     Fit(cli::fit::FitArgs),
+    /// Tabulate a formula into a measured table (MERL .binary), e.g. a synthetic measurement to fit.
+    Tabulate(cli::tabulate::TabulateArgs),
     /// Stability sweep: NaN, ±inf, negative and huge values over the whole domain.
     Sweep(cli::sweep::SweepArgs),
     /// Render a scene (TOML) to a PNG with the tile-based software renderer.
@@ -105,8 +107,10 @@ fn command() {
         Cmd::Check(a) => cli::check::run(a),
         Cmd::Energy(a) => cli::energy::run(a),
         Cmd::Accuracy(a) => cli::accuracy::run(a),
+        Cmd::Fit(a) if !a.measured.is_empty() => cli::fit_measured::run(a),
         Cmd::Fit(a) => cli::fit::run(a),
         Cmd::Sweep(a) => cli::sweep::run(a),
+        Cmd::Tabulate(a) => cli::tabulate::run(a),
         Cmd::Render(a) => cli::render::run(a),
         Cmd::Compare(a) => cli::compare::run(a),
         Cmd::Serve(a) => cli::serve::run(a),

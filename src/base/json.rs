@@ -7,7 +7,7 @@
 use serde::Serializer;
 
 /// `serialize_with` helper for an `f64` field.
-pub(crate) fn num<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+pub fn num<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
     if v.is_finite() {
         s.serialize_f64(*v)
     } else {

@@ -30,6 +30,10 @@ pub struct AccuracyArgs {
 }
 
 pub fn run(a: &AccuracyArgs) -> Result<(), CliError> {
+    if lobe::measured::is_measured_path(&a.against.reference) {
+        print!("{}", measured(a)?);
+        return Ok(());
+    }
     let (k, r) = a.against.kernels(&a.set.list()?, &a.backend)?;
     print!("{}", report(a, &k, &r)?);
     Ok(())
@@ -97,6 +101,48 @@ pub fn report(a: &AccuracyArgs, k: &Kernel, r: &Kernel) -> Result<String, CliErr
         outln!(out, "  {} grid points were NaN (counted as the worst error); run `lobe sweep` on the file", rep.nan_points);
     }
     outln!(out, "  ({secs:.2} s, backend {})", k.backend.name());
+    Ok(out)
+}
+
+/// Accuracy against a measured table: the formula at its parameters (defaults, then `--set`) scored by the
+/// measured fit's metrics over every measured entry, each with its closed-form colour scale
+/// ([`lobe::numerics::measured`]).
+fn measured(a: &AccuracyArgs) -> Result<String, CliError> {
+    use lobe::numerics::measured::{residual, MeasuredMetric, Samples};
+    let path = &a.against.reference;
+    let table = lobe::measured::Measured::read(path)?;
+    let set = a.set.list()?;
+    let f = a.against.formula.load()?;
+    let params = common::param_values(&f, &set);
+    let ks = f.channels().into_iter().map(|c| common::compile_kernel(c, &set, a.backend.backend()?, a.backend.math.mode)).collect::<Result<Vec<_>, _>>()?;
+    let channels: Vec<&dyn lobe::Evaluator> = ks.iter().map(|k| k as &dyn lobe::Evaluator).collect();
+    let s = Samples::new(&table, 1);
+    let [log, rmse] = [MeasuredMetric::Log, MeasuredMetric::Rmse].map(|m| residual(&channels, &params, &s, m));
+    let mut out = String::new();
+    if a.json.on {
+        #[derive(serde::Serialize)]
+        struct Json<'a> {
+            formula: String,
+            measured: &'a str,
+            entries: usize,
+            #[serde(serialize_with = "lobe::base::json::num")]
+            log: f64,
+            log_scale: [f64; 3],
+            #[serde(serialize_with = "lobe::base::json::num")]
+            rmse: f64,
+            rmse_scale: [f64; 3],
+        }
+        let j = Json { formula: f.display_name(), measured: path, entries: s.len(), log: log.error, log_scale: log.scale, rmse: rmse.error, rmse_scale: rmse.scale };
+        outln!(out, "{}", common::to_json(&j)?);
+        return Ok(out);
+    }
+    let shown: Vec<String> = f.params.iter().zip(&params).map(|(d, v)| format!("{}={}", d.name, common::short_number(*v))).collect();
+    outln!(out, "{} ({}) vs {path}: {} measured entries at the table's angles", f.display_name(), shown.join(", "), s.len());
+    for (name, r) in [("cosine-weighted log error", log), ("RMSE", rmse)] {
+        let [x, y, z] = r.scale;
+        outln!(out, "  {name:<26} {:.6e}  with colour scale ({x:.4}, {y:.4}, {z:.4})", r.error);
+    }
+    outln!(out, "  (fit the parameters: `lobe fit FILE --measured {path} --param …`)");
     Ok(out)
 }
 

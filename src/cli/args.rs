@@ -203,7 +203,7 @@ impl LobeVar {
 pub struct AgainstReference {
     #[command(flatten)]
     pub formula: FormulaSource,
-    /// The reference lobe (normally Blinn, cos^n).
+    /// The reference lobe (normally Blinn, cos^n); for `accuracy`, also a measured table (MERL .binary).
     #[arg(long)]
     pub reference: String,
     #[command(flatten)]

@@ -17,9 +17,9 @@ pub use lobe::render::scene::PAPER_SCENE;
 #[command(mut_arg("output", args::help("Output PNG: A | B | difference heat map (one row per n when sweeping)")))]
 #[command(mut_arg("json", args::help("Print JSON: an object with `manhattan`, `rmse`, `psnr`, … ; with --sweep-n an array of them, one per n")))]
 pub struct CompareArgs {
-    /// First formula (.brdf).
+    /// First formula (.brdf), or a measured table (MERL .binary).
     pub a: String,
-    /// Second formula (.brdf).
+    /// Second formula (.brdf), or a measured table (MERL .binary).
     pub b: String,
     /// Scene whose materials both formulas replace (default: the papers' sphere).
     #[arg(long)]
@@ -51,8 +51,8 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
         a.out.force.check(out, image::is_lobe_png)?;
         Output::png_only(out)?;
     }
-    let (fa, sa) = common::read_source(&a.a)?;
-    let (fb, sb) = common::read_source(&a.b)?;
+    let (fa, sa) = read_brdf(&a.a)?;
+    let (fb, sb) = read_brdf(&a.b)?;
     let (scene_name, scene_src, base) = match &a.scene {
         Some(p) => {
             let src = std::fs::read_to_string(p)
@@ -61,7 +61,7 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
         }
         None => ("<builtin paper_sphere.toml>".to_string(), PAPER_SCENE.to_string(), PathBuf::from(".")),
     };
-    let job = CompareJob { scene_name: &scene_name, scene_src: &scene_src, base: &base, a: (&fa, &sa), b: (&fb, &sb), size: a.size };
+    let job = CompareJob { scene_name: &scene_name, scene_src: &scene_src, base: &base, a: (&fa, &sa), b: (&fb, &sb), size: a.size, tint: [[1.0; 3]; 2] };
     common::check_threads(a.threads)?;
     let ropts = RenderOptions {
         threads: a.threads,
@@ -128,4 +128,14 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
         }
     }
     Ok(())
+}
+
+/// A formula's name and text, or for a measured table (`.binary`) its path and no text (the renderer reads
+/// the table), checked here so a bad file fails before any render.
+pub fn read_brdf(path: &str) -> Result<(String, String), CliError> {
+    if lobe::measured::is_measured_path(path) {
+        lobe::measured::Measured::read(path)?;
+        return Ok((path.to_string(), String::new()));
+    }
+    Ok(common::read_source(path)?)
 }

@@ -66,6 +66,10 @@ pub fn run(a: &EnergyArgs) -> Result<(), CliError> {
         return Err(CliError::hint("--set n conflicts with --range", "--range sweeps n; drop n from --set"));
     }
     let backend: Backend = a.backend.backend()?;
+    if let Some(p) = a.formula.file.as_deref().filter(|p| lobe::measured::is_measured_path(p)) {
+        print!("{}", measured_report(a, p)?);
+        return Ok(());
+    }
     let f = a.formula.load()?;
     let ks = f
         .channels()
@@ -95,9 +99,15 @@ fn report_channels(a: &EnergyArgs, ks: &[Kernel], against: Option<&Kernel>) -> R
     if ks.len() > 1 && a.range.is_some() {
         return Err(CliError::hint("--range works on scalar formulas only", "this formula has a colour result; drop --range"));
     }
+    let outs = ks.iter().map(|k| report(a, k, against)).collect::<Result<Vec<Out>, CliError>>()?;
+    join_channels(a, outs)
+}
+
+/// One channel's output as it is, or three under `channel r/g/b` headings (JSON: [`PerChannel`]).
+fn join_channels(a: &EnergyArgs, outs: Vec<Out>) -> Result<String, CliError> {
     let (mut reports, mut texts) = (vec![], vec![]);
-    for k in ks {
-        match report(a, k, against)? {
+    for o in outs {
+        match o {
             Out::Json(r) => reports.push(r),
             Out::Text(t) => texts.push(t),
         }
@@ -109,6 +119,68 @@ fn report_channels(a: &EnergyArgs, ks: &[Kernel], against: Option<&Kernel>) -> R
         return Ok(texts.remove(0));
     }
     Ok(["r", "g", "b"].iter().zip(&texts).map(|(c, p)| format!("channel {c}:\n{p}")).collect())
+}
+
+/// The full mode's report for one evaluator (a formula's channel kernel, or a measured table's channel).
+fn full_mode(a: &EnergyArgs, name: &str, ev: &dyn Evaluator, used: Option<lobe::ir::InputSet>, params: &[f64], shown: Named) -> Result<Out, CliError> {
+    let mut out = String::new();
+    // `None`: a measured table's channel (its own quadrature, lobe::numerics::energy::full_energy_tabulated).
+    let r = match used {
+        Some(used) => full_energy_for(ev, used, params)?,
+        None => lobe::numerics::energy::full_energy_tabulated(ev, params)?,
+    };
+    if a.json.on {
+        return Ok(Out::Json(EnergyReport::Full(FullReport::new(shown, &r))));
+    }
+    outln!(out, "{name}: hemispherical-directional albedo ρ(θᵢ) = ∫ f·cosθₒ dωₒ");
+    match r.isotropic {
+        Some(true) => outln!(
+            out,
+            "  (the formula reads directions, but its values turn with the frame about N at {} random pairs: ρ(θᵢ) at φᵢ = 0° stands for every φᵢ)",
+            lobe::numerics::energy::ISOTROPY_PAIRS
+        ),
+        Some(false) => outln!(out, "  (the formula reads directions: ρ(θᵢ) is the maximum over the azimuth φᵢ = 0°, 15°, …, 345° of L)"),
+        None => {}
+    }
+    outln!(out, "  θᵢ (deg)   ρ(θᵢ)");
+    for (t, v) in &r.albedo {
+        if t.fract() != 0.0 || (*t as i64) % 5 == 0 {
+            outln!(out, "  {t:>8.1}   {v:.8}");
+        }
+    }
+    let phi = r.phi_i_at_max_deg.map(|p| format!(", φᵢ = {p}°")).unwrap_or_default();
+    outln!(out, "max ρ = {:.8} at θᵢ = {}°{phi}; coefficient 1/max ρ = {:.8}", r.albedo_max, r.theta_i_at_max_deg, r.coef);
+    if r.albedo_max > 1.0 + 1e-9 {
+        outln!(out, "  the formula reflects more energy than it receives at θᵢ = {}° (ρ > 1)", r.theta_i_at_max_deg);
+    }
+    let rec = &r.reciprocity;
+    outln!(out, 
+        "reciprocity: worst |f(L,V) − f(V,L)|/max = {:.3e} at θ_L = {}°, θ_V = {}°, φ_V = {}° ({} pairs){}",
+        rec.max_rel,
+        rec.theta_l_deg,
+        rec.theta_v_deg,
+        rec.phi_v_deg,
+        rec.pairs,
+        if rec.max_rel < 1e-12 { " — reciprocal" } else { "" }
+    );
+    Ok(Out::Text(out))
+}
+
+/// `energy --mode full` of a measured table (`lobe::measured`): each channel's albedo, as a colour formula's.
+fn measured_report(a: &EnergyArgs, path: &str) -> Result<String, CliError> {
+    if a.mode != Mode::Full || a.range.is_some() || a.lobe.name.is_some() || a.against.is_some() || a.against_expr.is_some() || !a.set.list()?.is_empty() {
+        return Err(CliError::hint(
+            format!("`{path}` is a measured table: it has no parameters and no one-angle lobe"),
+            "its albedo is `lobe energy FILE.binary --mode full` (no --range, --lobe, --against or --set)",
+        ));
+    }
+    let table = std::sync::Arc::new(lobe::measured::Measured::read(path)?);
+    let outs = table
+        .channels()
+        .iter()
+        .map(|ev| full_mode(a, path, ev.as_ref(), None, &[], Named::new(std::iter::empty())))
+        .collect::<Result<Vec<Out>, CliError>>()?;
+    join_channels(a, outs)
 }
 
 /// The command's output for one already compiled kernel (the formula, and the fitted coefficient if any).
@@ -128,42 +200,7 @@ fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<Out, C
         if a.lobe.name.is_some() {
             return Err(CliError::hint("--lobe works in lobe mode only", "drop --mode full, or drop --lobe"));
         }
-        let r = full_energy_for(k, k.used_inputs(), &params)?;
-        if a.json.on {
-            return Ok(Out::Json(EnergyReport::Full(FullReport::new(shown, &r))));
-        }
-        outln!(out, "{name}: hemispherical-directional albedo ρ(θᵢ) = ∫ f·cosθₒ dωₒ");
-        match r.isotropic {
-            Some(true) => outln!(
-                out,
-                "  (the formula reads directions, but its values turn with the frame about N at {} random pairs: ρ(θᵢ) at φᵢ = 0° stands for every φᵢ)",
-                lobe::numerics::energy::ISOTROPY_PAIRS
-            ),
-            Some(false) => outln!(out, "  (the formula reads directions: ρ(θᵢ) is the maximum over the azimuth φᵢ = 0°, 15°, …, 345° of L)"),
-            None => {}
-        }
-        outln!(out, "  θᵢ (deg)   ρ(θᵢ)");
-        for (t, v) in &r.albedo {
-            if t.fract() != 0.0 || (*t as i64) % 5 == 0 {
-                outln!(out, "  {t:>8.1}   {v:.8}");
-            }
-        }
-        let phi = r.phi_i_at_max_deg.map(|p| format!(", φᵢ = {p}°")).unwrap_or_default();
-        outln!(out, "max ρ = {:.8} at θᵢ = {}°{phi}; coefficient 1/max ρ = {:.8}", r.albedo_max, r.theta_i_at_max_deg, r.coef);
-        if r.albedo_max > 1.0 + 1e-9 {
-            outln!(out, "  the formula reflects more energy than it receives at θᵢ = {}° (ρ > 1)", r.theta_i_at_max_deg);
-        }
-        let rec = &r.reciprocity;
-        outln!(out, 
-            "reciprocity: worst |f(L,V) − f(V,L)|/max = {:.3e} at θ_L = {}°, θ_V = {}°, φ_V = {}° ({} pairs){}",
-            rec.max_rel,
-            rec.theta_l_deg,
-            rec.theta_v_deg,
-            rec.phi_v_deg,
-            rec.pairs,
-            if rec.max_rel < 1e-12 { " — reciprocal" } else { "" }
-        );
-        return Ok(Out::Text(out));
+        return full_mode(a, &name, k, Some(k.used_inputs()), &params, shown);
     }
 
     let lobe: Input = a.lobe.resolve(k.used_inputs(), a.json.on)?;

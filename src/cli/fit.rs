@@ -1,8 +1,9 @@
 //! `lobe fit FILE --reference REF --param a=1..1000[:step] [--param …] [--metric mean-abs] [--json]`
+//! `lobe fit FILES… --measured TABLES|DIR… --param n=1..1000 [--metric log|rmse] [-o cmp.png] [--table t.csv]`
 //!
-//! JSON keys are documented in [`lobe::numerics`].
+//! JSON keys are documented in [`lobe::numerics`] and, for measured fits, in docs/measured.md.
 
-use super::args::{self, AgainstReference, BackendArg, Json, Params};
+use super::args::{self, AgainstReference, BackendArg, FormulaSource, Json, LobeVar, Output, Params};
 use super::common::{self, CliError};
 use lobe::numerics::fit::{fit, FitJson, FitOptions, FreeParam, Metric};
 use super::args::parse_range;
@@ -12,16 +13,40 @@ use std::io::IsTerminal;
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("set", args::help("Fixed values of other parameters, e.g. `k=2`")))]
 pub struct FitArgs {
+    /// Formula file(s) (.brdf); several only with --measured (each fitted to each table).
+    pub files: Vec<String>,
+    /// The formula inline instead of a file.
+    #[arg(long, conflicts_with = "files", allow_hyphen_values = true)]
+    pub expr: Option<String>,
+    /// The reference lobe (normally Blinn, cos^n).
+    #[arg(long, required_unless_present = "measured", conflicts_with = "measured")]
+    pub reference: Option<String>,
+    /// Measured tables (MERL .binary), or folders of them: fit to the measurement instead of a reference lobe.
+    #[arg(long, num_args = 1..)]
+    pub measured: Vec<String>,
     #[command(flatten)]
-    pub against: AgainstReference,
+    pub lobe: LobeVar,
     /// A parameter to search: `name=lo..hi` (integers when lo and hi are) or `name=lo..hi:step`.
     #[arg(long, required = true)]
     pub param: Vec<String>,
     #[command(flatten)]
     pub set: Params,
-    /// What to minimise: mean-abs (the papers'), max-abs, epicenter.
-    #[arg(long, default_value = "mean-abs")]
-    pub metric: Metric,
+    /// What to minimise: mean-abs (the papers', the default), max-abs, epicenter; against --measured: log
+    /// (cosine-weighted log error, the default) or rmse.
+    #[arg(long)]
+    pub metric: Option<String>,
+    /// --measured: use every STRIDE-th table index along each axis for the refinement and the residual.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=90))]
+    pub stride: u16,
+    /// --measured: the (coarser) stride of the grid stage.
+    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u16).range(1..=90))]
+    pub grid_stride: u16,
+    /// --measured: write the table of every formula × measurement fit (.csv or .json).
+    #[arg(long)]
+    pub table: Option<std::path::PathBuf>,
+    /// --measured: the comparison image (fitted formula | measurement | difference) on the papers' sphere.
+    #[command(flatten)]
+    pub out: Output,
     /// How many candidates to print.
     #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u16).range(1..))]
     pub top: u16,
@@ -55,13 +80,30 @@ pub fn parse_free(s: &str) -> Result<FreeSpec, String> {
 }
 
 /// Every `--param`, parsed.
-fn free_specs(a: &FitArgs) -> Result<Vec<FreeSpec>, CliError> {
+pub fn free_specs(a: &FitArgs) -> Result<Vec<FreeSpec>, CliError> {
     a.param
         .iter()
         .map(|p| parse_free(p).map_err(|e| CliError::hint(format!("--param: {e}"), "e.g. --param a=1..1000 or a=0.1..0.9:0.1")))
         .collect()
 }
 
+impl FitArgs {
+    /// The one formula measured against `--reference`.
+    fn against(&self) -> Result<AgainstReference, CliError> {
+        if self.files.len() > 1 {
+            return Err(CliError::hint("several formulas are fitted to measured tables only", "give one formula with --reference, or use --measured"));
+        }
+        let formula = FormulaSource { file: self.files.first().cloned(), expr: self.expr.clone() };
+        Ok(AgainstReference { formula, reference: self.reference.clone().unwrap_or_default(), lobe: self.lobe.clone() })
+    }
+
+    /// The papers' metric of a fit against a reference lobe.
+    fn lobe_metric(&self) -> Result<Metric, CliError> {
+        self.metric.as_deref().unwrap_or("mean-abs").parse().map_err(|e: String| CliError::hint(format!("--metric: {e}"), "log and rmse apply to --measured fits"))
+    }
+}
+
+/// A fit against `--reference` (`--measured` fits are [`super::fit_measured::run`]).
 pub fn run(a: &FitArgs) -> Result<(), CliError> {
     let set = a.set.list()?;
     for (name, ..) in free_specs(a)? {
@@ -69,7 +111,7 @@ pub fn run(a: &FitArgs) -> Result<(), CliError> {
             return Err(CliError::hint(format!("`{name}` is both searched (--param) and fixed (--set)"), "drop one of them"));
         }
     }
-    let (k, r) = a.against.kernels(&set, &a.backend)?;
+    let (k, r) = a.against()?.kernels(&set, &a.backend)?;
     print!("{}", report(a, &k, &r)?);
     Ok(())
 }
@@ -95,7 +137,8 @@ pub fn report(a: &FitArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
         free.push(FreeParam { index, name, lo, hi, step });
     }
     let params = common::param_values(&k.formula, &set);
-    let (lobe, ref_lobe) = a.against.lobes(k, r, a.json.on)?;
+    let metric = a.lobe_metric()?;
+    let (lobe, ref_lobe) = a.against()?.lobes(k, r, a.json.on)?;
     let mut total = 1usize;
     for f in &free {
         total = total.saturating_mul(f.grid()?.len());
@@ -109,7 +152,7 @@ pub fn report(a: &FitArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
         }
         b
     };
-    let opts = FitOptions { metric: a.metric, top: usize::from(a.top), refine: !a.no_refine, n_max: a.n_max };
+    let opts = FitOptions { metric, top: usize::from(a.top), refine: !a.no_refine, n_max: a.n_max };
     let t = std::time::Instant::now();
     let rep = fit(k, &params, lobe, r, &r.default_params(), ref_lobe, &free, &opts, &|| bar.inc(1))?;
     bar.finish_and_clear();
@@ -122,14 +165,14 @@ pub fn report(a: &FitArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
     let secs = t.elapsed().as_secs_f64();
     let names: Vec<&str> = free.iter().map(|f| f.name.as_str()).collect();
     if a.json.on {
-        outln!(out, "{}", common::to_json(&FitJson::new(&rep, &free, a.metric, secs))?);
+        outln!(out, "{}", common::to_json(&FitJson::new(&rep, &free, metric, secs))?);
         return Ok(out);
     }
     outln!(out, 
         "{} vs {}: {} over {} ({} grid points, {} scores in {secs:.2} s, backend {})",
         k.formula.display_name(),
         r.formula.display_name(),
-        a.metric.name(),
+        metric.name(),
         names.join(", "),
         total,
         rep.evaluated,

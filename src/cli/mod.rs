@@ -24,6 +24,8 @@ pub mod points;
 pub mod accuracy;
 pub mod energy;
 pub mod fit;
+pub mod fit_measured;
+pub mod tabulate;
 pub mod sweep;
 pub mod watch;
 pub mod render;

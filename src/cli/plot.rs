@@ -9,7 +9,7 @@ use lobe::Backend;
 #[command(mut_arg("set", args::help("Parameter values, e.g. `n=50,a=16` (each formula takes the ones it declares)")))]
 #[command(mut_arg("output", |a| a.required(true).help("Output image (.png or .svg)")))]
 pub struct PlotArgs {
-    /// Formula files (.brdf) to overlay.
+    /// Formula files (.brdf) and measured tables (MERL .binary) to overlay.
     #[arg(required = true)]
     pub files: Vec<String>,
     #[command(flatten)]
@@ -28,6 +28,11 @@ pub struct PlotArgs {
     /// With --reference: plot F − reference instead of the lobes.
     #[arg(long, requires = "reference")]
     pub error: bool,
+    /// Plot in the plane of incidence with the light at this angle from the normal (degrees, 0..90): value
+    /// against the signed view angle, mirror direction at −θᵢ. Measured tables (.binary) plot one curve per
+    /// channel.
+    #[arg(long)]
+    pub incidence: Option<f64>,
     /// Image size in pixels, WxH.
     #[arg(long, default_value = "900x600", value_parser = parse_size)]
     pub size: (u32, u32),
@@ -51,15 +56,36 @@ pub fn run(a: &PlotArgs) -> Result<(), CliError> {
     if let Some(r) = &a.reference {
         files.push(r.clone());
     }
-    let formulas = files.iter().map(|p| common::load_formula(Some(p), None)).collect::<Result<Vec<_>, _>>()?;
+    if let Some(t) = a.incidence.filter(|t| !(0.0..=90.0).contains(t)) {
+        return Err(CliError::hint(format!("--incidence {t} is outside 0..90 degrees"), "e.g. --incidence 30"));
+    }
+    let (tables, formula_files): (Vec<&String>, Vec<&String>) = files.iter().partition(|p| lobe::measured::is_measured_path(p));
+    let formulas = formula_files.iter().map(|p| common::load_formula(Some(p), None)).collect::<Result<Vec<_>, _>>()?;
     common::check_set_names(&formulas.iter().collect::<Vec<_>>(), &set)?;
+    let points = |ev: &dyn lobe::Evaluator, used, params: &[f64]| match a.incidence {
+        Some(t) => plot::incidence_points(ev, params, t),
+        None => plot::lobe_points(ev, used, params),
+    };
     let mut series = Vec::new();
     for f in &formulas {
         let s = common::set_for(f, &set);
         let params = common::param_values(f, &s);
         let k = lobe::compile_formula(f.clone(), &lobe::Options { backend: Backend::Jit, bake: s, ..Default::default() })?;
-        series.push(Series { name: f.display_name(), points: plot::lobe_points(&k, k.used_inputs(), &params) });
+        series.push(Series { name: f.display_name(), points: points(&k, k.used_inputs(), &params) });
     }
+    if a.reference.as_ref().is_some_and(|r| lobe::measured::is_measured_path(r)) {
+        return Err(CliError::hint("--reference takes a formula here", "plot the measured table beside the formulas: list it with them"));
+    }
+    // Measured tables after the formulas (and before the reference, which stays last).
+    let at = if a.reference.is_some() { series.len() - 1 } else { series.len() };
+    let mut measured = vec![];
+    for p in tables {
+        let t = std::sync::Arc::new(lobe::measured::Measured::read(p)?);
+        for (ev, c) in t.channels().iter().zip(["r", "g", "b"]) {
+            measured.push(Series { name: format!("{p} ({c})"), points: points(ev.as_ref(), lobe::measured::used_inputs(), &[]) });
+        }
+    }
+    series.splice(at..at, measured);
     let n_label = set.iter().find(|(k, _)| k == "n").map(|(_, v)| format!("n = {v}")).unwrap_or_else(|| "default parameters".into());
     let mut title = format!("Lobes, {n_label}");
     if a.error {
@@ -75,8 +101,16 @@ pub fn run(a: &PlotArgs) -> Result<(), CliError> {
     if a.polar && a.log {
         return Err(CliError::msg("--log applies to cartesian plots only (a log radius has no zero)"));
     }
-    let opts = LobeOptions { title, polar: a.polar, log: a.log, size: a.size };
-    let bytes = plot::lobes(&series, &opts, format).map_err(CliError::msg)?;
+    let bytes = match a.incidence {
+        Some(t) => {
+            if a.polar || a.log {
+                return Err(CliError::msg("--incidence draws a cartesian plot on a linear scale (drop --polar and --log)"));
+            }
+            let title = format!("{title}, light at θᵢ = {t}°");
+            plot::curves(&series, &title, "view angle θₒ in the plane of incidence (degrees; mirror at −θᵢ)", "value", format).map_err(CliError::msg)?
+        }
+        None => plot::lobes(&series, &LobeOptions { title, polar: a.polar, log: a.log, size: a.size }, format).map_err(CliError::msg)?,
+    };
     a.out.force.write(output, &bytes, common::is_lobe_output)?;
     eprintln!("wrote {}", output.display());
     Ok(())

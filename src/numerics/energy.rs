@@ -426,6 +426,38 @@ pub fn full_energy_for(ev: &dyn Evaluator, used: crate::ir::InputSet, params: &[
     Ok(r)
 }
 
+/// [`full_energy_for`] of an isotropic, piecewise-constant evaluator — a measured table's channel
+/// ([`crate::measured`]), whose steps would drive the adaptive quadrature to its subdivision limit everywhere:
+/// ρ(θᵢ) by the midpoint rule over 90 θₒ × 360 φₒ cells of the hemisphere (a table's own resolution), L at
+/// azimuth 0 (isotropic by construction, so `albedo_phi` holds φᵢ = 0 only).
+pub fn full_energy_tabulated(ev: &dyn Evaluator, params: &[f64]) -> Result<FullEnergy, Diagnostic> {
+    let (nt, np) = (90usize, 360usize);
+    let (dt, dp) = (FRAC_PI_2 / nt as f64, 2.0 * PI / np as f64);
+    let rows: Vec<(f64, f64)> = full_mode_angles()
+        .par_iter()
+        .map(|&deg| {
+            let l = dir(deg.to_radians(), 0.0);
+            let mut sum = 0.0;
+            for a in 0..nt {
+                let to = (a as f64 + 0.5) * dt;
+                let w = to.cos() * to.sin() * dt * dp;
+                for b in 0..np {
+                    let y = ev.eval(&inputs_from_dirs(l, dir(to, (b as f64 + 0.5) * dp)), params);
+                    if y.is_finite() {
+                        sum += crate::builtins::fmax(y, 0.0) * w;
+                    }
+                }
+            }
+            (deg, sum)
+        })
+        .collect();
+    let mut r = summarise(rows.clone(), reciprocity_over(ev, params, &[0.0]))?;
+    r.albedo_phi = rows.iter().map(|&(t, v)| (t, 0.0, v)).collect();
+    r.phi_i_at_max_deg = Some(0.0);
+    r.isotropic = Some(true);
+    Ok(r)
+}
+
 /// Pairs [`turns_with_the_frame`] tries.
 pub const ISOTROPY_PAIRS: usize = 4096;
 

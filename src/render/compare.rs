@@ -165,6 +165,9 @@ pub struct CompareJob<'a> {
     pub a: (&'a str, &'a str),
     pub b: (&'a str, &'a str),
     pub size: Option<(usize, usize)>,
+    /// Multiplies every material's specular colour in A's and in B's render (1, 1, 1: the scene's own); a
+    /// measured fit shows its fitted colour scale this way.
+    pub tint: [[f64; 3]; 2],
 }
 
 /// Renders the scene with every material's formula replaced by A, then by B (same ka/kd/ks, colours,
@@ -176,7 +179,7 @@ pub fn compare_formulas(
     ropts: &super::RenderOptions,
 ) -> Result<Comparison, crate::Diagnostics> {
     let geometry = super::scene::parse_geometry_deferred(job.scene_name, job.scene_src, job.base, job.size)?;
-    compare_in(&geometry, job.a, job.b, set, compiler, ropts)
+    compare_in(&geometry, job.a, job.b, job.tint, set, compiler, ropts)
 }
 
 /// [`compare_formulas`] at each of `sets` (one comparison per set, in order). The
@@ -189,14 +192,16 @@ pub fn compare_sweep(
     ropts: &super::RenderOptions,
 ) -> Result<Vec<Comparison>, crate::Diagnostics> {
     let geometry = super::scene::parse_geometry_deferred(job.scene_name, job.scene_src, job.base, job.size)?;
-    sets.iter().map(|set| compare_in(&geometry, job.a, job.b, set, compiler, ropts)).collect()
+    sets.iter().map(|set| compare_in(&geometry, job.a, job.b, job.tint, set, compiler, ropts)).collect()
 }
 
 /// One comparison in already loaded geometry: materials with formula A, render; formula B, render; metrics.
+/// A `.binary` file name is a measured table ([`crate::measured`]; its text is unused): it declares nothing.
 pub(crate) fn compare_in(
     geometry: &super::scene::Geometry,
     a: (&str, &str),
     b: (&str, &str),
+    tint: [[f64; 3]; 2],
     set: &[(String, f64)],
     compiler: &dyn super::scene::BrdfCompiler,
     ropts: &super::RenderOptions,
@@ -204,7 +209,8 @@ pub(crate) fn compare_in(
     let fail = |m: String| crate::Diagnostics::single(geometry.name(), crate::Diagnostic::error(m));
     // `set` applies to both formulas: each takes the names it declares; a name neither declares is a typo. (A
     // formula that does not parse keeps the whole set; its own diagnostics come from `with_materials`.)
-    let declared = [compiler.declare(a.0, a.1).ok(), compiler.declare(b.0, b.1).ok()];
+    let declare = |(f, src): (&str, &str)| if crate::measured::is_measured_path(f) { Some(vec![]) } else { compiler.declare(f, src).ok() };
+    let declared = [declare(a), declare(b)];
     if let [Some(da), Some(db)] = &declared {
         if let Some((k, _)) = set.iter().find(|(k, _)| !da.iter().chain(db).any(|p| p.name == *k)) {
             return Err(crate::Diagnostics::single(
@@ -222,7 +228,10 @@ pub(crate) fn compare_in(
             Some(d) => set.iter().filter(|(name, _)| d.iter().any(|p| p.name == *name)).cloned().collect(),
             None => set.to_vec(),
         };
-        let scene = geometry.with_materials(&own, Some(formula), compiler)?;
+        let mut scene = geometry.with_materials(&own, Some(formula), compiler)?;
+        for m in &mut scene.materials {
+            m.specular *= glam::DVec3::from_array(tint[k]);
+        }
         if scene.objects.is_empty() {
             return Err(crate::Diagnostics::single(
                 geometry.name(),

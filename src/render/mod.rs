@@ -12,6 +12,9 @@
 //!    frame; tiles no triangle touches are filled with the background and cost nothing else;
 //! 3. PNG encoding and atomic output ([`image`]).
 //!
+//! A measured material (a MERL table, [`crate::measured`]) has no formula: its three channels are evaluators
+//! that [`program::EvalShader`] calls per lit pixel and light, with the same lighting model in Rust.
+//!
 //! Materials are the simplified lobe formulas ([`ProgramSource`]: one, or three for a colour formula) with
 //! their kernels (`Arc<dyn Evaluator>`, for the numerical checks: normalisation, cut-off) and the set of
 //! inputs the formula reads (a tangent frame per pixel only if it reads direction components). Every
@@ -134,6 +137,9 @@ pub struct Material {
 pub struct ProgramSource {
     /// The simplified formula of each channel (one, or red, green, blue), parameters baked as compiled.
     pub channels: Vec<Arc<crate::ir::Formula>>,
+    /// A material without formulas (a measured table): its channels' evaluators (red, green, blue), shaded by
+    /// [`program::EvalShader`]'s Rust-side calls instead of a compiled program; `channels` is then empty.
+    pub evaluated: Option<[Arc<dyn Evaluator>; 3]>,
     pub backend: crate::backend::Backend,
     pub math: crate::Mode,
 }

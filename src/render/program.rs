@@ -346,6 +346,8 @@ pub fn build(spec: &Spec, channels: &[&Formula]) -> Result<Program, String> {
 pub enum ProgramCode {
     Interp(Arc<ProgramInterp>),
     Jit(Arc<ShadeCode>),
+    /// A material of evaluators without formulas (a measured table), shaded in Rust.
+    Evaluated(Arc<EvalShader>),
 }
 
 impl ProgramCode {
@@ -365,7 +367,7 @@ impl ProgramCode {
     /// the interpreter, which does it per call).
     pub fn prepare(&self, params: &[f64]) -> Vec<f64> {
         match self {
-            ProgramCode::Interp(_) => vec![],
+            ProgramCode::Interp(_) | ProgramCode::Evaluated(_) => vec![],
             ProgramCode::Jit(c) => c.prepare(params),
         }
     }
@@ -375,6 +377,7 @@ impl ProgramCode {
     pub fn run(&self, cols: &[&[f64]], params: &[f64], block: &[f64], outs: &mut [&mut [f64]], len: usize) {
         match self {
             ProgramCode::Interp(i) => i.run(cols, params, outs, len),
+            ProgramCode::Evaluated(e) => e.run(cols, params, outs, len),
             ProgramCode::Jit(c) => {
                 if c.run(cols, params, block, outs, len).is_err() {
                     outs.iter_mut().for_each(|o| o.iter_mut().for_each(|x| *x = f64::NAN));
@@ -398,11 +401,89 @@ impl ProgramRun {
     /// backend and math mode.
     pub(crate) fn new(scene: &Scene, m: &Material, plan: &ShadingPlan) -> Result<ProgramRun, String> {
         let src = &m.program;
+        if let Some(evs) = &src.evaluated {
+            let shader = EvalShader { spec: spec(scene, plan), channels: evs.clone() };
+            return Ok(ProgramRun { code: ProgramCode::Evaluated(Arc::new(shader)), block: vec![], params: m.params.clone(), tangent: true });
+        }
         let channels: Vec<&Formula> = src.channels.iter().map(|f| f.as_ref()).collect();
         let program = build(&spec(scene, plan), &channels).map_err(|e| format!("material `{}`: {e}", m.name))?;
         let code = ProgramCode::new(&program, src.backend, src.math).map_err(|e| format!("material `{}`: {e}", m.name))?;
         let block = code.prepare(&m.params);
         Ok(ProgramRun { code, block, params: m.params.clone(), tangent: program.columns > 6 })
+    }
+}
+
+/// The lighting model of [`build`] in Rust, for materials whose channels are evaluators without formulas (a
+/// measured table): per pixel the view step, the tangent frame (Duff et al.'s tangent where the interpolated one
+/// is parallel to N, turned by the tangent angle), per light L and V in that frame, each channel's value, and
+/// the same colour sum and counters. Values agree with a compiled program up to rounding (the order of
+/// operations differs), not bit for bit. A material with a cut-off is refused before this is built.
+pub struct EvalShader {
+    spec: Spec,
+    channels: [Arc<dyn crate::backend::Evaluator>; 3],
+}
+
+impl EvalShader {
+    /// Shades `len` pixels: columns as [`build`]'s program reads them, outputs in order (r, g, b and the [`N_OUTPUTS`] − 3 counters).
+    pub fn run(&self, cols: &[&[f64]], params: &[f64], outs: &mut [&mut [f64]], len: usize) {
+        if cols.len() < COLUMNS || outs.len() < N_OUTPUTS || cols.iter().any(|c| c.len() < len) || outs.iter().any(|o| o.len() < len) {
+            outs.iter_mut().for_each(|o| o.iter_mut().for_each(|x| *x = f64::NAN));
+            return;
+        }
+        let s = &self.spec;
+        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let unit = |a: [f64; 3]| {
+            let l = dot(a, a).sqrt();
+            a.map(|x| x / l)
+        };
+        for i in 0..len {
+            let col = |k: usize| [cols[k][i], cols[k + 1][i], cols[k + 2][i]];
+            let (p, n, t) = (col(0), unit(col(3)), col(6));
+            let v = unit([s.eye[0] - p[0], s.eye[1] - p[1], s.eye[2] - p[2]]);
+            let tn = dot(n, t);
+            let u = [t[0] - n[0] * tn, t[1] - n[1] * tn, t[2] - n[2] * tn];
+            let u = if dot(u, u) > 1e-20 {
+                unit(u)
+            } else {
+                let sign = if n[2] < 0.0 { -1.0 } else { 1.0 };
+                let q = -1.0 / (sign + n[2]);
+                [1.0 + sign * n[0] * n[0] * q, sign * n[0] * n[1] * q, -sign * n[0]]
+            };
+            let w = [n[1] * u[2] - n[2] * u[1], n[2] * u[0] - n[0] * u[2], n[0] * u[1] - n[1] * u[0]];
+            let [c, sn] = s.tangent_rotation.unwrap_or([1.0, 0.0]);
+            let tt: [f64; 3] = std::array::from_fn(|k| c * u[k] + sn * w[k]);
+            let bb: [f64; 3] = std::array::from_fn(|k| c * w[k] - sn * u[k]);
+            let local = |d: [f64; 3]| [dot(d, tt), dot(d, bb), dot(d, n)];
+            let lv = local(v);
+            let mut acc = s.ambient;
+            let mut counts = [0.0; 3];
+            for light in &s.lights {
+                let l = if light.point { unit([light.at[0] - p[0], light.at[1] - p[1], light.at[2] - p[2]]) } else { light.at };
+                let nl = dot(n, l);
+                let lit = nl > 0.0;
+                let mut f = [0.0; 3];
+                if s.specular && lit {
+                    let x = crate::frame::inputs_from_dirs(local(l), lv);
+                    for (fc, ev) in f.iter_mut().zip(&self.channels) {
+                        let y = ev.eval(&x, params);
+                        if y.is_finite() {
+                            *fc = if s.times_nl { y * nl } else { y };
+                        } else {
+                            counts[0] += 1.0;
+                        }
+                    }
+                    counts[1] += 3.0;
+                }
+                let nl_pos = if lit { nl } else { 0.0 };
+                for k in 0..3 {
+                    acc[k] += light.color[k] * (s.diffuse[k] * nl_pos + s.spec[k] * f[k]);
+                }
+            }
+            for k in 0..3 {
+                outs[k][i] = acc[k];
+                outs[3 + k][i] = counts[k];
+            }
+        }
     }
 }
 

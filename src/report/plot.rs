@@ -51,6 +51,22 @@ pub fn lobe_points(ev: &dyn crate::Evaluator, used: crate::ir::InputSet, params:
         .collect()
 }
 
+/// Samples a kernel in the plane of incidence: L at `theta_i_deg` from N (azimuth 0), V at the signed angle
+/// θₒ ∈ [−90°, 90°] from N in the same plane (V = (sin θₒ, 0, cos θₒ); the mirror direction is θₒ = −θᵢ), in
+/// steps of 0.25°, through [`crate::frame::inputs_from_dirs`] (so a formula and a measured table see the same
+/// geometry).
+pub fn incidence_points(ev: &dyn crate::Evaluator, params: &[f64], theta_i_deg: f64) -> Vec<(f64, f64)> {
+    let ti = theta_i_deg.to_radians();
+    let l = [ti.sin(), 0.0, ti.cos()];
+    (0..=720)
+        .map(|i| {
+            let deg = -90.0 + i as f64 * 0.25;
+            let t = deg.to_radians();
+            (deg, ev.eval(&crate::frame::inputs_from_dirs(l, [t.sin(), 0.0, t.cos()]), params))
+        })
+        .collect()
+}
+
 /// How to draw lobes.
 #[derive(Clone, Debug)]
 pub struct LobeOptions {

@@ -391,7 +391,7 @@ pub(crate) fn compare(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
             check_cost(st, st.compiled(n, t)?.kernel(), (size * size) as f64, "this comparison")?;
         }
         let g = st.geometry(size)?;
-        let c = crate::render::compare::compare_in(&g, (&a.0, &a.1), (&b.0, &b.1), &set, &Live(st), &ropts())?;
+        let c = crate::render::compare::compare_in(&g, (&a.0, &a.1), (&b.0, &b.1), [[1.0; 3]; 2], &set, &Live(st), &ropts())?;
         let scale = c.metrics.max_gray_diff.max(1.0);
         let bytes = png(&crate::render::compare::side_by_side(&c.a.image, &c.b.image, scale))?;
         let metrics = serde_json::to_string(&c.metrics).map_err(|e| ApiError::new(500, e.to_string()))?;

@@ -221,7 +221,7 @@ fn bench_and_plot_write_what_they_say() {
 /// it, and `--force` is what the refusal to overwrite asks for.
 #[test]
 fn shared_flags_parse_alike_in_every_command() {
-    let all = ["eval", "watch", "bench", "plot", "check", "export", "energy", "accuracy", "fit", "sweep", "render", "compare"];
+    let all = ["eval", "watch", "bench", "plot", "check", "export", "energy", "accuracy", "fit", "sweep", "render", "compare", "tabulate"];
     for cmd in all {
         let o = lobe(&[cmd, "--help"], None);
         assert!(o.status.success(), "{cmd} --help: {}", stderr(&o));

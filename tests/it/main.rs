@@ -13,6 +13,7 @@ mod fuzz;
 mod hostile;
 mod jit;
 mod json_keys;
+mod measured;
 mod layers;
 mod mathlib;
 mod parse_errors;

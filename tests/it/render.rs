@@ -42,7 +42,7 @@ fn render(s: &r::Scene, threads: usize) -> (r::Frame, r::RenderStats) {
 }
 
 /// Compares with the golden file, or writes it when LOBE_BLESS=1.
-fn golden(name: &str, im: &Image) {
+pub(crate) fn golden(name: &str, im: &Image) {
     let path = root().join("tests/golden").join(name);
     if std::env::var_os("LOBE_BLESS").is_some() {
         std::fs::write(&path, im.encode_png().unwrap()).unwrap();
@@ -319,7 +319,7 @@ fn table_4_2_shape() {
     let base = scene_file("");
     let ropts = RenderOptions { tile: 32, ..RenderOptions::default() };
     let run = |b: &str, n: f64| {
-        let job = CompareJob { scene_name: "paper", scene_src: &scene_src, base: &base, a: ("phong", &phong), b: ("b", b), size: Some((128, 128)) };
+        let job = CompareJob { scene_name: "paper", scene_src: &scene_src, base: &base, a: ("phong", &phong), b: ("b", b), size: Some((128, 128)), tint: [[1.0; 3]; 2] };
         compare::compare_formulas(&job, &[("n".into(), n)], &JIT, &ropts).unwrap().metrics
     };
     let mut prev = (f64::INFINITY, f64::INFINITY);
@@ -362,7 +362,7 @@ fn table_4_2_report() {
     for (label, b) in [("schlick", read("schlick_vr.brdf")), ("modified_schlick", read("modified_schlick_vr.brdf"))] {
         let mut rows = vec![];
         for (n, ps, pm) in published {
-            let job = CompareJob { scene_name: "paper", scene_src: &scene_src, base: &base, a: ("phong", &phong), b: (label, &b), size: None };
+            let job = CompareJob { scene_name: "paper", scene_src: &scene_src, base: &base, a: ("phong", &phong), b: (label, &b), size: None, tint: [[1.0; 3]; 2] };
             let c = compare::compare_formulas(&job, &[("n".into(), n)], &JIT, &ropts).unwrap();
             let m = &c.metrics;
             let publ = if label == "schlick" { ps } else { pm };
@@ -477,7 +477,7 @@ fn sweep_matches_rendering_each_n_separately() {
     let scene_src = std::fs::read_to_string(scene_file("paper_sphere.toml")).unwrap();
     let base = scene_file("");
     let ropts = RenderOptions { tile: 32, ..RenderOptions::default() };
-    let job = CompareJob { scene_name: "paper", scene_src: &scene_src, base: &base, a: ("phong", &phong), b: ("msh", &msh), size: Some((80, 64)) };
+    let job = CompareJob { scene_name: "paper", scene_src: &scene_src, base: &base, a: ("phong", &phong), b: ("msh", &msh), size: Some((80, 64)), tint: [[1.0; 3]; 2] };
     let ns = [5.0, 50.0, 500.0];
     let sets: Vec<Vec<(String, f64)>> = ns.iter().map(|&n| vec![("n".to_string(), n)]).collect();
     let rows = compare::compare_sweep(&job, &sets, &JIT, &ropts).unwrap();
@@ -540,7 +540,7 @@ fn staged_loading_keeps_the_diagnostics() {
     // compare: geometry errors and an out-of-range --set together, as one full load reports them.
     let phong = std::fs::read_to_string(root().join("examples/brdfs/phong.brdf")).unwrap();
     let base = scene_file("");
-    let job = CompareJob { scene_name: "bad.toml", scene_src: &src, base: &base, a: ("phong.brdf", &phong), b: ("b", "VR^n"), size: None };
+    let job = CompareJob { scene_name: "bad.toml", scene_src: &src, base: &base, a: ("phong.brdf", &phong), b: ("b", "VR^n"), size: None, tint: [[1.0; 3]; 2] };
     let set = vec![("n".to_string(), 1e9)];
     let cmp = match compare::compare_sweep(&job, std::slice::from_ref(&set), &JIT, &RenderOptions::default()) {
         Ok(_) => panic!("accepted"),

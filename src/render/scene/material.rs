@@ -96,6 +96,7 @@ impl CompiledBrdf {
             math: ks[0].math,
             program: crate::render::ProgramSource {
                 channels: ks.iter().map(|k| k.formula.clone()).collect(),
+                evaluated: None,
                 backend: ks[0].backend,
                 math: ks[0].math,
             },
@@ -164,6 +165,74 @@ enum MatError {
     Formula(Diagnostics),
 }
 
+fn here(s: std::ops::Range<usize>, msg: String, label: &str) -> MatError {
+    MatError::Scene(Diagnostic::error(msg).at(span_of(s), label.to_string()))
+}
+
+/// Checks the material's weights, colours and tangent angle; returns the angle (degrees).
+fn check_weights(mname: &str, m: &Spanned<MaterialDef>) -> Result<f64, MatError> {
+    let d = m.get_ref();
+    for (k, val) in [("ka", d.ka), ("kd", d.kd), ("ks", d.ks)] {
+        if !(val.is_finite() && val >= 0.0) {
+            return Err(here(m.span(), format!("materials.{mname}.{k} = {val} must be a finite number ≥ 0"), "this material"));
+        }
+    }
+    for (k, rgb) in [("color", d.color), ("specular", d.specular)] {
+        if !super::schema::is_colour(&rgb) {
+            return Err(here(m.span(), format!("materials.{mname}.{k} = {rgb:?} must be three finite numbers ≥ 0"), "this material"));
+        }
+    }
+    if let Some(a) = d.tangent_angle_deg.as_ref().filter(|a| !a.get_ref().is_finite()) {
+        return Err(here(a.span(), format!("materials.{mname}.tangent_angle_deg must be a finite angle in degrees"), "tangent angle"));
+    }
+    Ok(d.tangent_angle_deg.as_ref().map_or(0.0, |a| *a.get_ref()))
+}
+
+/// A material whose reflectance is the measured table at `path` (a MERL `.binary`, [`crate::measured`]):
+/// its three channels are the evaluators, shaded by the renderer's Rust-side lookup. A table has no
+/// parameters, normalisation, cut-off or math mode: the scene keys for them are refused, except that the
+/// formula-replacing run (`choice.formula`) ignores `params` as it ignores the ones a formula does not declare.
+fn measured_material(mname: &str, m: &Spanned<MaterialDef>, path: &str, span: std::ops::Range<usize>, replacing: bool) -> Result<Material, MatError> {
+    let d = m.get_ref();
+    let refuse = |key: &str| here(m.span(), format!("materials.{mname}.{key}: a measured material (`{path}`) has no {key}"), "this material");
+    if let Some((k, _)) = d.params.iter().next().filter(|_| !replacing) {
+        return Err(here(k.span(), format!("materials.{mname}.params: a measured material (`{path}`) has no parameters"), "remove `params`"));
+    }
+    if d.normalize {
+        return Err(refuse("normalize"));
+    }
+    if d.cutoff.is_some() {
+        return Err(refuse("cutoff"));
+    }
+    if d.math.is_some() {
+        return Err(refuse("math"));
+    }
+    let angle = check_weights(mname, m)?;
+    let table = crate::measured::Measured::read(path).map_err(|mut e| {
+        e.message = format!("materials.{mname}.brdf: {}", e.message);
+        MatError::Scene(e.at(span_of(span), "this measured file (relative to the scene file)"))
+    })?;
+    let [r, g, b] = std::sync::Arc::new(table).channels();
+    Ok(Material {
+        name: mname.to_string(),
+        evaluator: r.clone(),
+        green_blue: Some([g.clone(), b.clone()]),
+        used: crate::measured::used_inputs(),
+        params: vec![],
+        ka: d.ka,
+        kd: d.kd,
+        ks: d.ks,
+        color: d.color.into(),
+        specular: d.specular.into(),
+        coef: [1.0; 3].into(),
+        tangent_angle_deg: angle,
+        times_nl: d.times_nl,
+        cutoff: None,
+        math: Mode::default(),
+        program: crate::render::ProgramSource { channels: vec![], evaluated: Some([r, g, b]), backend: Backend::Interp, math: Mode::default() },
+    })
+}
+
 fn build_material(
     at: &SceneText,
     mname: &str,
@@ -173,7 +242,14 @@ fn build_material(
     set_used: &mut [bool],
 ) -> Result<Material, MatError> {
     let d = m.get_ref();
-    let here = |s: std::ops::Range<usize>, msg: String, label: &str| MatError::Scene(Diagnostic::error(msg).at(span_of(s), label.to_string()));
+    let measured = match (choice.formula, &d.brdf, &d.formula) {
+        (Some((f, _)), ..) if crate::measured::is_measured_path(f) => Some((f.to_string(), m.span())),
+        (None, Some(p), None) if crate::measured::is_measured_path(p.get_ref()) => Some((at.base.join(p.get_ref()).display().to_string(), p.span())),
+        _ => None,
+    };
+    if let Some((path, span)) = measured {
+        return measured_material(mname, m, &path, span, choice.formula.is_some());
+    }
     // Where the formula comes from, and the scene span to blame.
     let (file, src, key_span) = if let Some((f, s)) = choice.formula {
         (f.to_string(), s.to_string(), m.span())
@@ -252,20 +328,7 @@ fn build_material(
         Some(m) => Some(m.get_ref().parse::<Mode>().map_err(|msg| here(m.span(), format!("materials.{mname}.math: {msg}"), "unknown math mode"))?),
     };
     let compiled = compiler.build(&file, &src, &values, math).map_err(with_note)?;
-    for (k, val) in [("ka", d.ka), ("kd", d.kd), ("ks", d.ks)] {
-        if !(val.is_finite() && val >= 0.0) {
-            return Err(here(m.span(), format!("materials.{mname}.{k} = {val} must be a finite number ≥ 0"), "this material"));
-        }
-    }
-    for (k, rgb) in [("color", d.color), ("specular", d.specular)] {
-        if !super::schema::is_colour(&rgb) {
-            return Err(here(m.span(), format!("materials.{mname}.{k} = {rgb:?} must be three finite numbers ≥ 0"), "this material"));
-        }
-    }
-    let angle = d.tangent_angle_deg.as_ref().map_or(0.0, |a| *a.get_ref());
-    if let Some(a) = d.tangent_angle_deg.as_ref().filter(|a| !a.get_ref().is_finite()) {
-        return Err(here(a.span(), format!("materials.{mname}.tangent_angle_deg must be a finite angle in degrees"), "tangent angle"));
-    }
+    let angle = check_weights(mname, m)?;
     let params: Vec<f64> = values.iter().map(|(_, v)| *v).collect();
     let channels: Vec<&dyn Evaluator> =
         std::iter::once(compiled.evaluator.as_ref()).chain(compiled.green_blue.iter().flat_map(|gb| gb.iter().map(|e| e.as_ref()))).collect();

@@ -1,0 +1,365 @@
+//! `lobe fit FILES… --measured TABLES|DIR… --param n=1..1000 [--metric log|rmse] [-o cmp.png] [--table t.csv]`:
+//! formulas fitted to measured tables ([`lobe::numerics::measured`]), one fit or every formula × table in
+//! parallel into a table (Ngan et al.'s experiment). The format, metrics and keys: docs/measured.md.
+
+use super::args::Output;
+use super::common::{self, CliError};
+use super::fit::{free_specs, FitArgs};
+use lobe::base::json::{self, Named};
+use lobe::ir::Formula;
+use lobe::measured::{is_measured_path, Measured};
+use lobe::numerics::fit::FreeParam;
+use lobe::numerics::measured::{fit_measured, residual, MeasuredFit, MeasuredFitOptions, MeasuredMetric, Samples};
+use lobe::{Evaluator, Kernel};
+use rayon::prelude::*;
+use std::path::Path;
+use std::sync::Arc;
+
+/// A formula to fit: its name for reports, its file (or `<expr>`) and source, the loaded formula.
+struct Model {
+    file: String,
+    src: String,
+    formula: Formula,
+    kernels: Vec<Kernel>,
+    set: Vec<(String, f64)>,
+    free: Vec<FreeParam>,
+}
+
+/// One formula × table fit.
+struct Row<'a> {
+    model: &'a Model,
+    table: &'a str,
+    fit: MeasuredFit,
+    /// The best candidate's error under the other metric too: (log, rmse).
+    both: (f64, f64),
+    seconds: f64,
+}
+
+/// The measured files named by `--measured`: files as given, folders as their `.binary` files (sorted).
+fn table_paths(args: &[String]) -> Result<Vec<String>, CliError> {
+    let mut out = vec![];
+    for a in args {
+        let p = Path::new(a);
+        if p.is_dir() {
+            let rd = std::fs::read_dir(p).map_err(|e| CliError::hint(format!("--measured: cannot list `{a}`: {e}"), "check the folder"))?;
+            let mut found: Vec<String> =
+                rd.filter_map(|e| e.ok()).map(|e| e.path().display().to_string()).filter(|f| is_measured_path(f)).collect();
+            if found.is_empty() {
+                return Err(CliError::hint(format!("--measured: the folder `{a}` holds no .binary file"), "give MERL .binary files or a folder of them"));
+            }
+            found.sort();
+            out.extend(found);
+        } else {
+            out.push(a.clone());
+        }
+    }
+    Ok(out)
+}
+
+/// The searched parameters of `f`: each `--param` it declares and reads, inside its declared range (a single
+/// fit refuses a range beyond it; a batch fits the overlap, as each model has its own ranges).
+fn free_of(a: &FitArgs, f: &Formula, batch: bool) -> Result<Vec<FreeParam>, CliError> {
+    let reads = f.ir.used_params(f.root);
+    let mut free = vec![];
+    for (name, lo, hi, step) in free_specs(a)? {
+        let Some(index) = f.param_index(&name) else {
+            if batch {
+                continue;
+            }
+            let names: Vec<&str> = f.params.iter().map(|p| p.name.as_str()).collect();
+            return Err(CliError::hint(format!("--param: the formula has no parameter `{name}`"), common::did_you_mean(&name, &names, "its parameters are: ")));
+        };
+        if !reads.contains(&(index as u16)) {
+            continue;
+        }
+        let d = &f.params[index];
+        let (lo, hi) = if batch { (lo.max(d.lo), hi.min(d.hi)) } else { (lo, hi) };
+        if lo < d.lo || hi > d.hi || lo > hi {
+            if batch {
+                continue;
+            }
+            return Err(CliError::hint(
+                format!("--param {name}={lo}..{hi} leaves the declared range {}..{}", d.lo, d.hi),
+                "search inside the declared range, or widen it in the file",
+            ));
+        }
+        free.push(FreeParam { index, name, lo, hi, step });
+    }
+    if free.is_empty() && !batch {
+        return Err(CliError::hint("--param: the formula reads none of the parameters to search", "name a parameter the formula reads, e.g. --param n=1..1000"));
+    }
+    Ok(free)
+}
+
+pub fn run(a: &FitArgs) -> Result<(), CliError> {
+    let metric: MeasuredMetric = a.metric.as_deref().unwrap_or("log").parse().map_err(|e: String| CliError::hint(format!("--metric: {e}"), "--measured fits take --metric log or --metric rmse"))?;
+    let tables = table_paths(&a.measured)?;
+    if let Some(o) = &a.out.path {
+        a.out.force.check(o, lobe::render::image::is_lobe_png)?;
+        Output::png_only(o)?;
+    }
+    if let Some(t) = &a.table {
+        match t.extension().and_then(|e| e.to_str()) {
+            Some("csv" | "json") => {}
+            _ => return Err(CliError::hint(format!("--table `{}`: write a .csv or .json table", t.display()), "e.g. --table fits.csv")),
+        }
+        a.out.force.check(t, common::is_lobe_output)?;
+    }
+    let set = a.set.list()?;
+    for (name, ..) in free_specs(a)? {
+        if set.iter().any(|(k, _)| *k == name) {
+            return Err(CliError::hint(format!("`{name}` is both searched (--param) and fixed (--set)"), "drop one of them"));
+        }
+    }
+    let sources: Vec<(String, String)> = match &a.expr {
+        Some(e) => vec![("<expr>".to_string(), e.clone())],
+        None if a.files.is_empty() => return Err(CliError::hint("no formula given", "pass .brdf files, or --expr '…'")),
+        None => a.files.iter().map(|p| common::read_source(p).map_err(CliError::from)).collect::<Result<_, _>>()?,
+    };
+    let batch = sources.len() > 1 || tables.len() > 1 || a.table.is_some();
+    let mut models = vec![];
+    for (file, src) in sources {
+        let formula = common::load_formula(if file == "<expr>" { None } else { Some(&file) }, if file == "<expr>" { Some(&src) } else { None })?;
+        models.push((file, src, formula));
+    }
+    common::check_set_names(&models.iter().map(|m| &m.2).collect::<Vec<_>>(), &set)?;
+    let models: Vec<Model> = models
+        .into_iter()
+        .map(|(file, src, formula)| {
+            let own = common::set_for(&formula, &set);
+            let free = free_of(a, &formula, batch)?;
+            let kernels = formula.channels().into_iter().map(|c| common::compile_kernel(c, &own, a.backend.backend()?, a.backend.math.mode)).collect::<Result<Vec<_>, _>>()?;
+            Ok(Model { file, src, formula, kernels, set: own, free })
+        })
+        .collect::<Result<_, CliError>>()?;
+    // Every table is read (and checked) before any fit runs.
+    let loaded: Vec<Arc<Measured>> = tables.iter().map(|t| Measured::read(t).map(Arc::new)).collect::<Result<_, _>>()?;
+    let opts = MeasuredFitOptions { metric, stride: usize::from(a.stride), grid_stride: usize::from(a.grid_stride), top: usize::from(a.top), refine: !a.no_refine };
+    let pairs: Vec<(usize, usize)> = (0..models.len()).flat_map(|m| (0..loaded.len()).map(move |t| (m, t))).collect();
+    let rows: Vec<Row> = pairs
+        .par_iter()
+        .map(|&(m, t)| fit_one(&models[m], &tables[t], &loaded[t], &opts))
+        .collect::<Result<_, CliError>>()?;
+    if !batch {
+        return single(a, &rows[0], metric);
+    }
+    let text = table_text(&rows, metric);
+    if let Some(t) = &a.table {
+        let bytes = if t.extension().is_some_and(|e| e == "json") { table_json(&rows, metric)? } else { table_csv(&rows, metric) };
+        a.out.force.write(t, bytes.as_bytes(), common::is_lobe_output)?;
+    }
+    if a.json.on {
+        println!("{}", table_json(&rows, metric)?);
+    } else {
+        print!("{text}");
+        if let Some(t) = &a.table {
+            println!("wrote {}", t.display());
+        }
+    }
+    Ok(())
+}
+
+fn fit_one<'a>(model: &'a Model, path: &'a str, t: &Measured, opts: &MeasuredFitOptions) -> Result<Row<'a>, CliError> {
+    let start = std::time::Instant::now();
+    let channels: Vec<&dyn Evaluator> = model.kernels.iter().map(|k| k as &dyn Evaluator).collect();
+    let params = common::param_values(&model.formula, &model.set);
+    let fit = if model.free.is_empty() {
+        // Nothing to search: the formula as it is, with its colour scale.
+        let s = Samples::new(t, opts.stride);
+        let r = residual(&channels, &params, &s, opts.metric);
+        let best = vec![lobe::numerics::measured::MeasuredCandidate { params: params.clone(), residual: r, refined: false }];
+        MeasuredFit { best, evaluated: 1, entries: s.len(), grid_entries: s.len() }
+    } else {
+        fit_measured(&channels, &params, &model.free, t, opts, &|| {})?
+    };
+    let best = &fit.best[0].params;
+    let s = Samples::new(t, opts.stride);
+    let both = (residual(&channels, best, &s, MeasuredMetric::Log).error, residual(&channels, best, &s, MeasuredMetric::Rmse).error);
+    Ok(Row { model, table: path, fit, both, seconds: start.elapsed().as_secs_f64() })
+}
+
+/// The searched parameters of a candidate, `name=value` joined by `sep`.
+fn shown(model: &Model, params: &[f64], sep: &str) -> String {
+    let v: Vec<String> = model.free.iter().map(|f| format!("{}={}", f.name, common::short_number(params[f.index]))).collect();
+    if v.is_empty() { "-".into() } else { v.join(sep) }
+}
+
+fn single(a: &FitArgs, row: &Row, metric: MeasuredMetric) -> Result<(), CliError> {
+    let (m, fit) = (row.model, &row.fit);
+    let Some(best) = fit.best.first().filter(|b| b.residual.error.is_finite()) else {
+        return Err(CliError::hint(
+            format!("no candidate has a finite error: {} is NaN or infinite at some measured entry", m.formula.display_name()),
+            "run `lobe sweep` on the formula to see where",
+        ));
+    };
+    if let Some(o) = &a.out.path {
+        let png = comparison_png(a, row)?;
+        a.out.force.write(o, &png, lobe::render::image::is_lobe_png)?;
+    }
+    if a.json.on {
+        println!("{}", common::to_json(&RowJson::new(row, metric))?);
+        return Ok(());
+    }
+    println!(
+        "{} vs {}: {} error over {} entries (grid on {}), {} residuals in {:.2} s, backend {}",
+        m.formula.display_name(),
+        row.table,
+        metric.name(),
+        fit.entries,
+        fit.grid_entries,
+        fit.evaluated,
+        row.seconds,
+        m.kernels[0].backend.name()
+    );
+    for (i, c) in fit.best.iter().enumerate() {
+        let [r, g, b] = c.residual.scale;
+        println!(
+            "  {}. {:<30} error {:.6e}  scale ({r:.4}, {g:.4}, {b:.4}){}",
+            i + 1,
+            shown(m, &c.params, ", "),
+            c.residual.error,
+            if c.refined { "  (continuous refinement)" } else { "" }
+        );
+    }
+    println!("best: {}; log error {:.6e}, rmse {:.6e}", shown(m, &best.params, ", "), row.both.0, row.both.1);
+    if let Some(o) = &a.out.path {
+        println!("wrote {} (fitted formula | measurement | |Δgray| heat map)", o.display());
+    }
+    Ok(())
+}
+
+/// The fitted formula (its colour scale as the specular tint) beside the measurement on the papers' sphere.
+fn comparison_png(a: &FitArgs, row: &Row) -> Result<Vec<u8>, CliError> {
+    use lobe::render::compare::{compare_formulas, sweep_image, CompareJob};
+    let (m, best) = (row.model, &row.fit.best[0]);
+    let mut set = m.set.clone();
+    set.extend(m.free.iter().map(|f| (f.name.clone(), best.params[f.index])));
+    let scene = lobe::render::scene::PAPER_SCENE;
+    let job = CompareJob {
+        scene_name: "<builtin paper_sphere.toml>",
+        scene_src: scene,
+        base: Path::new("."),
+        a: (&m.file, &m.src),
+        b: (row.table, ""),
+        size: None,
+        tint: [best.residual.scale, [1.0; 3]],
+    };
+    let compiler = common::scene_compiler(a.backend.backend()?, a.backend.math.mode);
+    let c = compare_formulas(&job, &set, &compiler, &lobe::render::RenderOptions::default())?;
+    let scale = c.metrics.max_gray_diff.max(1.0);
+    sweep_image(std::slice::from_ref(&c), scale).encode_png().map_err(CliError::msg)
+}
+
+/// One fit in `--json` and `--table` JSON (keys in docs/measured.md).
+#[derive(serde::Serialize)]
+struct RowJson<'a> {
+    formula: String,
+    file: &'a str,
+    measured: &'a str,
+    metric: &'static str,
+    params: Named,
+    #[serde(serialize_with = "json::num")]
+    error: f64,
+    #[serde(serialize_with = "json::num")]
+    log: f64,
+    #[serde(serialize_with = "json::num")]
+    rmse: f64,
+    scale: [f64; 3],
+    entries: usize,
+    grid_entries: usize,
+    evaluated: usize,
+    #[serde(serialize_with = "json::num")]
+    seconds: f64,
+}
+
+impl<'a> RowJson<'a> {
+    fn new(r: &'a Row, metric: MeasuredMetric) -> RowJson<'a> {
+        let b = &r.fit.best[0];
+        RowJson {
+            formula: r.model.formula.display_name(),
+            file: &r.model.file,
+            measured: r.table,
+            metric: metric.name(),
+            params: Named::new(r.model.free.iter().map(|f| (f.name.as_str(), b.params[f.index]))),
+            error: b.residual.error,
+            log: r.both.0,
+            rmse: r.both.1,
+            scale: b.residual.scale,
+            entries: r.fit.entries,
+            grid_entries: r.fit.grid_entries,
+            evaluated: r.fit.evaluated,
+            seconds: r.seconds,
+        }
+    }
+}
+
+fn table_json(rows: &[Row], metric: MeasuredMetric) -> Result<String, CliError> {
+    #[derive(serde::Serialize)]
+    struct Doc<'a> {
+        generator: &'static str,
+        fits: Vec<RowJson<'a>>,
+    }
+    common::to_json(&Doc { generator: "made by lobe fit --measured", fits: rows.iter().map(|r| RowJson::new(r, metric)).collect() })
+}
+
+/// The CSV table: a `#` comment line naming lobe, then a header and one row per fit.
+fn table_csv(rows: &[Row], metric: MeasuredMetric) -> String {
+    let q = |s: &str| if s.contains([',', '"', '\n']) { format!("\"{}\"", s.replace('"', "\"\"")) } else { s.to_string() };
+    let mut out = format!("# made by lobe fit --measured (metric {})\n", metric.name());
+    out.push_str("formula,file,measured,params,error,log,rmse,scale_r,scale_g,scale_b,entries,seconds\n");
+    for r in rows {
+        let b = &r.fit.best[0];
+        let [sr, sg, sb] = b.residual.scale;
+        out.push_str(&format!(
+            "{},{},{},{},{:e},{:e},{:e},{sr},{sg},{sb},{},{:.3}\n",
+            q(&r.model.formula.display_name()),
+            q(&r.model.file),
+            q(r.table),
+            q(&shown(r.model, &b.params, ";")),
+            b.residual.error,
+            r.both.0,
+            r.both.1,
+            r.fit.entries,
+            r.seconds
+        ));
+    }
+    out
+}
+
+/// The table as text: one row per formula, one column per measured file (the error), best per column marked.
+fn table_text(rows: &[Row], metric: MeasuredMetric) -> String {
+    let mut tables: Vec<&str> = vec![];
+    for r in rows {
+        if !tables.contains(&r.table) {
+            tables.push(r.table);
+        }
+    }
+    let name = |t: &str| Path::new(t).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let mut out = format!("{} error of each formula's best fit (fitted parameters below each error)\n", metric.name());
+    out.push_str(&format!("{:<28}", "formula"));
+    for t in &tables {
+        out.push_str(&format!(" {:>22}", name(t)));
+    }
+    out.push('\n');
+    let mut seen: Vec<&str> = vec![];
+    for r in rows {
+        if seen.contains(&r.model.file.as_str()) {
+            continue;
+        }
+        seen.push(&r.model.file);
+        let mine: Vec<&Row> = rows.iter().filter(|x| x.model.file == r.model.file).collect();
+        out.push_str(&format!("{:<28}", r.model.formula.display_name()));
+        for t in &tables {
+            let cell = mine.iter().find(|x| x.table == *t).map(|x| format!("{:.4e}", x.fit.best[0].residual.error)).unwrap_or_default();
+            out.push_str(&format!(" {cell:>22}"));
+        }
+        out.push('\n');
+        out.push_str(&format!("{:<28}", ""));
+        for t in &tables {
+            let cell = mine.iter().find(|x| x.table == *t).map(|x| shown(x.model, &x.fit.best[0].params, " ")).unwrap_or_default();
+            out.push_str(&format!(" {cell:>22}"));
+        }
+        out.push('\n');
+    }
+    out
+}

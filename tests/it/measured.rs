@@ -1,0 +1,205 @@
+//! Measured materials end to end: synthetic MERL tables written by `lobe tabulate` into a scratch folder at run
+//! time (never checked in: 33 MB each), then fitted (Blinn's n and Beckmann's m recovered within 1 %), rendered
+//! and compared (golden images), integrated (`energy --mode full`), and hostile files refused with the file
+//! named, exit 1 and nothing written.
+
+use crate::cli::lobe;
+use lobe::base::image::Image;
+use lobe::measured::{Measured, ENTRIES, FILE_BYTES};
+use std::path::{Path, PathBuf};
+use std::process::Output;
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// A table of `formula` with `set`, written by `lobe tabulate` into `dir`.
+fn tabulate(dir: &Path, name: &str, formula: &str, set: &str, color: &str) -> String {
+    let out = dir.join(name).display().to_string();
+    let o = lobe(&["tabulate", formula, "--set", set, "--color", color, "-o", &out], None);
+    assert!(o.status.success(), "tabulate {formula}: {}", stderr(&o));
+    assert_eq!(std::fs::metadata(&out).unwrap().len(), FILE_BYTES as u64);
+    out
+}
+
+/// `lobe fit … --json` on a measured table, at strides that keep the test fast (1/27 of the entries for the
+/// refinement, 1/216 for the grid); the fitted value of `param`.
+fn fitted(formula: &str, table: &str, param: &str, range: &str) -> (f64, serde_json::Value) {
+    let p = format!("{param}={range}");
+    let o = lobe(&["fit", formula, "--measured", table, "--param", &p, "--stride", "3", "--grid-stride", "6", "--json"], None);
+    assert!(o.status.success(), "fit {formula}: {}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    (v["params"][param].as_f64().unwrap(), v)
+}
+
+#[test]
+fn fits_recover_blinns_n_and_beckmanns_m() {
+    let dir = crate::scratch_dir("measured", "fit");
+    let blinn = tabulate(&dir, "blinn120.binary", "examples/brdfs/blinn.brdf", "n=120", "1,1,1");
+    let (n, v) = fitted("examples/brdfs/blinn.brdf", &blinn, "n", "1..1000");
+    assert!((n - 120.0).abs() < 1.2, "n = {n}: {v}");
+    assert!(v["error"].as_f64().unwrap() < 1e-6 && v["metric"] == "log", "{v}");
+    let beckmann = tabulate(&dir, "beckmann.binary", "examples/brdfs/beckmann.brdf", "m=0.23", "0.9,0.6,0.3");
+    for metric in ["log", "rmse"] {
+        let o = lobe(&["fit", "examples/brdfs/beckmann.brdf", "--measured", &beckmann, "--param", "m=0.01..1", "--metric", metric, "--stride", "3", "--grid-stride", "6", "--json"], None);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        let m = v["params"]["m"].as_f64().unwrap();
+        assert!((m - 0.23).abs() < 0.0023, "{metric}: m = {m}: {v}");
+        let scale: Vec<f64> = v["scale"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+        for (s, want) in scale.iter().zip([0.9, 0.6, 0.3]) {
+            assert!((s - want).abs() < 0.01 * want, "{metric}: {v}");
+        }
+    }
+    // The batch: two formulas × both tables into a CSV table in one command.
+    let csv = dir.join("fits.csv");
+    let o = lobe(
+        &["fit", "examples/brdfs/blinn.brdf", "examples/brdfs/phong.brdf", "--measured", &dir.display().to_string(), "--param", "n=1..1000", "--stride", "6", "--grid-stride", "9", "--table", &csv.display().to_string()],
+        None,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let rows: Vec<&str> = text.lines().filter(|l| !l.starts_with('#')).collect();
+    assert_eq!(rows.len(), 5, "{text}");
+    assert!(rows[0].starts_with("formula,file,measured,params,error"), "{text}");
+    let blinn_row = rows.iter().find(|r| r.starts_with("Blinn,") && r.contains("blinn120")).unwrap();
+    assert!(blinn_row.contains("n=120"), "{blinn_row}");
+    assert!(stdout(&o).contains("Phong"), "{}", stdout(&o));
+    // A second run replaces the table lobe wrote.
+    let o = lobe(&["fit", "examples/brdfs/blinn.brdf", "--measured", &blinn, "--param", "n=1..1000", "--stride", "9", "--grid-stride", "9", "--table", &csv.display().to_string()], None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn golden(name: &str, im: &Image) {
+    crate::render::golden(name, im)
+}
+
+#[test]
+fn renders_compares_and_integrates_a_measured_material() {
+    let dir = crate::scratch_dir("measured", "render");
+    let table = tabulate(&dir, "gold.binary", "examples/brdfs/blinn.brdf", "n=60", "1,0.8,0.4");
+    let scene = dir.join("gold.toml");
+    let scene_src = std::fs::read_to_string("examples/scenes/paper_sphere.toml")
+        .unwrap()
+        .replace("brdf = \"../brdfs/modified_schlick_vr.brdf\"\nparams = { n = 50 }", "brdf = \"gold.binary\"");
+    assert!(scene_src.contains("gold.binary"));
+    std::fs::write(&scene, &scene_src).unwrap();
+    // Through the library, for the golden image.
+    let opts = lobe::render::scene::LoadOptions { size: Some((96, 96)), ..Default::default() };
+    let compiler = lobe::render::scene::LobeCompiler::plain(lobe::Backend::Jit, lobe::Mode::Precise);
+    let s = lobe::render::scene::load_scene(&scene, &opts, &compiler).unwrap_or_else(|d| panic!("{}", d.render(false)));
+    let (frame, stats) = lobe::render::render(&s, &lobe::render::RenderOptions { threads: 2, tile: 32, ..Default::default() }).unwrap();
+    assert!(stats.evals > 0 && stats.nan == 0);
+    golden("measured_gold.png", &frame.image);
+    // One thread gives the same bytes.
+    let (one, _) = lobe::render::render(&s, &lobe::render::RenderOptions { threads: 1, tile: 32, ..Default::default() }).unwrap();
+    assert_eq!(one.image.rgb, frame.image.rgb);
+    // The command line.
+    let png = dir.join("gold.png");
+    let o = lobe(&["render", &scene.display().to_string(), "--size", "96", "-o", &png.display().to_string()], None);
+    assert!(o.status.success() && png.exists(), "{}", stderr(&o));
+    // The formula against its own table: the measured render is the formula's up to the table's bins.
+    let cmp = dir.join("cmp.png");
+    let o = lobe(&["compare", "examples/brdfs/blinn.brdf", &table, "--set", "n=60", "--size", "96", "-o", &cmp.display().to_string(), "--json"], None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let covered = v["manhattan_covered"].as_f64().unwrap();
+    assert!(covered > 0.0 && covered < 3.0, "{v}");
+    golden("measured_compare_blinn.png", &Image::decode_png(&std::fs::read(&cmp).unwrap()).unwrap());
+    // The albedo of the table is the formula's up to the bins (the nearest entry is the one below the angle,
+    // so the table reads a little high: 7 % at n = 120, measured).
+    let o = lobe(&["energy", &table, "--mode", "full", "--json"], None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let red = v["albedo_max"].as_f64().unwrap();
+    let o = lobe(&["energy", "examples/brdfs/blinn.brdf", "--set", "n=60", "--mode", "full", "--json"], None);
+    let f: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let want = f["albedo_max"].as_f64().unwrap();
+    assert!((red - want).abs() < 0.15 * want, "table {red} vs formula {want}");
+    let blue = v["channels"][2]["albedo_max"].as_f64().unwrap();
+    assert!((blue - 0.4 * red).abs() < 1e-9 * red, "{blue} vs {red}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Random directions, parameters and tables: a lookup never panics, is finite and never negative.
+#[test]
+fn random_lookups_never_panic() {
+    let mut rng = lobe::base::rng::Rng(0x5eed);
+    let n = 1.0 + rng.unit() * 500.0;
+    let t = Measured::tabulate("random", &|l, v| {
+        let x = lobe::frame::inputs_from_dirs(l, v);
+        [x[2].powf(n), if rng_like(l[0]) { f64::NAN } else { 1.0 }, -1.0]
+    });
+    let mut r = lobe::base::rng::Rng(9);
+    for _ in 0..50_000 {
+        let mut d = || {
+            let (z, phi) = (r.unit() * 2.2 - 1.1, r.unit() * 7.0 - 0.3);
+            let s = (1.0 - z * z).max(0.0).sqrt();
+            [s * phi.cos(), s * phi.sin(), z]
+        };
+        let (l, v) = (d(), d());
+        for c in 0..3 {
+            let y = t.lookup(c, l, v);
+            assert!(y.is_finite() && y >= 0.0, "{l:?} {v:?}: {y}");
+        }
+    }
+    assert!(t.measured_entries() == 0 && ENTRIES > 0);
+}
+
+/// Part of the table not finite: a stand-in for a noisy formula.
+fn rng_like(x: f64) -> bool {
+    (x * 1e6).fract().abs() < 0.01
+}
+
+#[test]
+fn hostile_tables_are_clear_errors_and_write_nothing() {
+    let dir = crate::scratch_dir("measured", "hostile");
+    let good = Measured::tabulate("one", &|_, _| [1.0; 3]).to_bytes();
+    let mut cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        ("empty.binary", vec![], "shorter than the 12-byte header"),
+        ("short.binary", good[..1000].to_vec(), "truncated: 1000 bytes"),
+        ("cut.binary", good[..good.len() - 8].to_vec(), "1 values missing"),
+    ];
+    let mut dims = good.clone();
+    dims[..12].copy_from_slice(&[90i32, 180, 90].iter().flat_map(|d| d.to_le_bytes()).collect::<Vec<u8>>());
+    cases.push(("dims.binary", dims, "dimensions 90 × 180 × 90"));
+    let mut huge = good[..12].to_vec();
+    huge[..12].copy_from_slice(&[i32::MAX, i32::MAX, i32::MAX].iter().flat_map(|d| d.to_le_bytes()).collect::<Vec<u8>>());
+    cases.push(("huge.binary", huge, "dimensions 2147483647"));
+    let mut nan = good.clone();
+    let at = nan.len() - 8;
+    nan[at..].copy_from_slice(&f64::NAN.to_le_bytes());
+    cases.push(("nan.binary", nan, "the blue block holds 1 non-finite"));
+    for (name, bytes, needle) in &cases {
+        let p = dir.join(name).display().to_string();
+        std::fs::write(&p, bytes).unwrap();
+        let out = dir.join("out.png").display().to_string();
+        let runs: Vec<Vec<&str>> = vec![
+            vec!["fit", "examples/brdfs/blinn.brdf", "--measured", &p, "--param", "n=1..10", "-o", &out],
+            vec!["compare", "examples/brdfs/blinn.brdf", &p, "-o", &out],
+            vec!["energy", &p, "--mode", "full"],
+        ];
+        for args in runs {
+            let o = lobe(&args, None);
+            crate::cli::assert_clean_exit(o.status.code(), &stderr(&o), &format!("{args:?}"), needle);
+            assert!(stderr(&o).contains(name), "{args:?}: the file is not named:\n{}", stderr(&o));
+            assert!(!Path::new(&out).exists(), "{args:?} wrote {out}");
+        }
+    }
+    // A folder where a table should be, and a scene whose material is a broken table.
+    let o = lobe(&["energy", &dir.display().to_string(), "--mode", "full"], None);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    let scene = dir.join("s.toml");
+    let src = std::fs::read_to_string("examples/scenes/paper_sphere.toml").unwrap().replace("../brdfs/modified_schlick_vr.brdf", "cut.binary").replace("[materials.glossy]", "[materials.m]").replace("material = \"glossy\"", "material = \"m\"").replace("params = { n = 50 }\n", "");
+    std::fs::write(&scene, src).unwrap();
+    let out: PathBuf = dir.join("s.png");
+    let o = lobe(&["render", &scene.display().to_string(), "-o", &out.display().to_string()], None);
+    crate::cli::assert_clean_exit(o.status.code(), &stderr(&o), "render", "cut.binary");
+    assert!(stderr(&o).contains("materials.m.brdf") && !out.exists(), "{}", stderr(&o));
+    let _ = std::fs::remove_dir_all(&dir);
+}
