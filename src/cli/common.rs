@@ -150,7 +150,7 @@ pub fn with_pass(opts: Options, pass: lobe::numerics::robust::PassOptions) -> Op
 /// The scene compiler of `render`, `compare` and `watch`: the backend's kernels through the accuracy pass in
 /// `math`, as `eval` compiles (cached unless `--no-cache`).
 pub fn scene_compiler(backend: lobe::Backend, math: lobe::Mode) -> lobe::render::scene::LobeCompiler {
-    lobe::numerics::pass_cache::command_scene_compiler(backend, math, USE_CACHE.load(std::sync::atomic::Ordering::Relaxed))
+    lobe::render::scene::LobeCompiler::for_commands(backend, math, USE_CACHE.load(std::sync::atomic::Ordering::Relaxed))
 }
 
 /// `--no-cache` as given: whether the accuracy pass's decisions are cached.

@@ -100,13 +100,6 @@ pub fn command_channels(
     f.channels().into_iter().map(|c| crate::compile_formula(c, &opts)).collect()
 }
 
-/// The scene compiler of the commands that render: the backend's kernels through the accuracy pass in `math`,
-/// as [`command_channels`] compiles (cached when `cached`, so a second render of a scene pays nothing for it).
-pub fn command_scene_compiler(backend: crate::Backend, math: crate::Mode, cached: bool) -> crate::render::scene::LobeCompiler {
-    let pass = PassOptions { math, ..Default::default() };
-    crate::render::scene::LobeCompiler { backend, math, accuracy: command_pass(crate::Options::default(), pass, cached).accuracy }
-}
-
 impl DecisionStore for Cache {
     /// The stored decision for this formula, baked values and options, if any.
     fn load(&self, f: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Option<Decision> {

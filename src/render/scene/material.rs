@@ -58,6 +58,14 @@ pub struct LobeCompiler {
 }
 
 impl LobeCompiler {
+    /// The scene compiler of the commands that render: the backend's kernels through the accuracy pass in
+    /// `math`, as [`crate::numerics::pass_cache::command_channels`] compiles (cached when `cached`, so a
+    /// second render of a scene pays nothing for it).
+    pub fn for_commands(backend: Backend, math: Mode, cached: bool) -> LobeCompiler {
+        let pass = crate::numerics::robust::PassOptions { math, ..Default::default() };
+        LobeCompiler { backend, math, accuracy: crate::numerics::pass_cache::command_pass(crate::Options::default(), pass, cached).accuracy }
+    }
+
     /// The plain simplification's kernels on `backend` in `math`, without an accuracy pass.
     pub const fn plain(backend: Backend, math: Mode) -> LobeCompiler {
         LobeCompiler { backend, math, accuracy: None }
