@@ -2,9 +2,12 @@
 //! for the batch loop), with one method per IR node kind, implementing the math library's [`Emit`] so every
 //! builtin is the library's code (the definition the interpreter runs on `f64`), emitted in the kernel's lanes.
 //!
-//! Two function shapes, the Cranelift tier's:
+//! The Cranelift tier's function shapes:
 //! * `lobe_prepare(params: *const f64, block: *mut f64)`: the carried parameter-only nodes ([`Plan`]);
-//! * `lobe_batch(cols: *const *const f64, params, block, out: *mut f64, len: usize)`.
+//! * `lobe_batch(cols: *const *const f64, params, block, out: *mut f64, len: usize)`: a kernel;
+//! * `lobe_program(cols, params, block, outs: *const *mut f64, len: usize)`: a multi-output program;
+//!
+//! the last two over one loop ([`batch_loop`]).
 //!
 //! Values are vectors of `W` lanes (`<1 x double>` in the prepare function, which LLVM scalarises); masks are
 //! `<W x i1>`; the bit operations work on `<W x i64>`. No instruction carries fast-math flags, and nothing is
@@ -708,163 +711,37 @@ pub(super) fn build_prepare(u: &Unit) -> Result<(), String> {
     g.error.map_or(Ok(()), Err)
 }
 
-/// `lobe_batch` in `w` lanes:
-///
-/// ```text
-/// entry:   column bases; carried nodes loaded from the block, constants and parameters, splatted;
-///          len = 0 ? exit : loop
-/// loop(i): full = len − i ≥ W; full ? load : load_part
-/// load:    the W inputs at i                            load_part: the len − i inputs at i (masked loads)
-/// step:    the loop-variant nodes; full ? store : store_part
-/// store:   out[i..i+W] = root                           store_part: out[i..len] = root (masked store)
-/// latch:   i + W < len ? loop(i + W) : exit
-/// ```
-///
-/// One copy of the body serves the full vectors and the tail (len not a multiple of W), so compile time does
-/// not double for the tail; the two branches on `full` are taken the same way on every step but the last.
+/// `lobe_batch(cols, params, block, out: *mut f64, len)` in `w` lanes: the formula's inputs read from `cols`,
+/// its root stored to `out`, in [`batch_loop`]'s loop.
 pub(super) fn build_batch(u: &Unit, w: u32) -> Result<(), String> {
     let f = declare(u, BATCH, 4, true);
-    let (cols, params, block, out) = (param(f, 0)?, param(f, 1)?, param(f, 2)?, param(f, 3)?);
-    let len = match f.get_nth_param(4) {
-        Some(BasicValueEnum::IntValue(l)) => l,
-        _ => return Err("len parameter".into()),
-    };
-    let used = u.ir.used_inputs(u.plan.root);
-    let mut g = Gen::new(u, f, w, params);
-    let ptr = u.cx.ptr_type(Default::default());
-    let i64t = u.cx.i64_type();
+    let (cols, out) = (param(f, 0)?, param(f, 3)?);
+    let mut g = Gen::new(u, f, w, param(f, 1)?);
     let entry = g.block("entry");
     g.b.position_at_end(entry);
-
-    let mut bases: [Option<PointerValue>; N_INPUTS] = [None; N_INPUTS];
-    for i in used.iter() {
-        bases[i.index()] = Some(load_ptr(&mut g, cols, i.index())?);
+    let mut bases = vec![];
+    for i in u.ir.used_inputs(u.plan.root).iter() {
+        bases.push((i.index(), load_ptr(&mut g, cols, i.index())?));
     }
-    for (k, id) in u.plan.carried.iter().enumerate() {
-        let s = g.load_f64(block, k as u64);
-        g.vals[id.index()] = Some(g.splat(s, g.fty));
-    }
-    g.nodes(|id| !u.plan.variant(id) && matches!(u.ir.node(id), Node::Const(_) | Node::Param(_)));
-
-    let (head, load, load_part, step, store, store_part, latch, exit) =
-        (g.block("loop"), g.block("load"), g.block("load_part"), g.block("step"), g.block("store"), g.block("store_part"), g.block("latch"), g.block("exit"));
-    let empty = g.b.build_int_compare(IntPredicate::EQ, len, i64t.const_zero(), "");
-    let empty = g.scalar(empty, u.cx.bool_type().get_poison());
-    let pre = g.current();
-    let br = g.b.build_conditional_branch(empty, exit, head);
-    g.done(br);
-
-    // loop(i)
-    g.b.position_at_end(head);
-    let i = match g.b.build_phi(i64t, "i") {
-        Ok(p) => p,
-        Err(e) => return Err(e.to_string()),
-    };
-    let iv = i.as_basic_value().into_int_value();
-    let rem = g.b.build_int_sub(len, iv, "");
-    let rem = g.scalar(rem, i64t.get_poison());
-    let full = g.b.build_int_compare(IntPredicate::UGE, rem, g.i64c(u64::from(w)), "");
-    let full = g.scalar(full, u.cx.bool_type().get_poison());
-    let byte_off = g.b.build_left_shift(iv, g.i64c(3), "");
-    let byte_off = g.scalar(byte_off, i64t.get_poison());
-    let br = g.b.build_conditional_branch(full, load, load_part);
-    g.done(br);
-
-
-    // load / load_part, joined in `step` by a phi per input.
-    let mut loaded: Vec<(Input, VectorValue, VectorValue)> = vec![];
-    g.b.position_at_end(load);
-    let mut full_vals = vec![];
-    for inp in used.iter() {
-        let Some(base) = bases[inp.index()] else { continue };
-        let p = g.offset(base, byte_off);
-        let l = g.b.build_load(g.fty, p, "");
-        let v = g.vec_of(l, g.fty);
-        if let Some(ins) = v.as_instruction_value() {
-            g.align(Ok(ins));
+    batch_loop(&mut g, f, param(f, 2)?, &bases, &[out], |g, loaded| {
+        for (k, v) in loaded {
+            g.inputs[*k] = Some(*v);
         }
-        full_vals.push((inp, v));
-    }
-    let br = g.b.build_unconditional_branch(step);
-    g.done(br);
-    g.b.position_at_end(load_part);
-    let m = g.part_mask(rem);
-    for (inp, v) in full_vals {
-        let Some(base) = bases[inp.index()] else { continue };
-        let p = g.offset(base, byte_off);
-        let args = [p.into(), g.i32c(8).into(), m.into(), g.fty.const_zero().into()];
-        let pv = g.call_intrinsic("llvm.masked.load", &[g.fty.into(), ptr.into()], &args, g.fty);
-        loaded.push((inp, v, pv));
-    }
-    let br = g.b.build_unconditional_branch(step);
-    g.done(br);
-
-    // step: the body, once.
-    g.b.position_at_end(step);
-    for (inp, v, pv) in loaded {
-        let phi = g.b.build_phi(g.fty, inp.name()).map_err(|e| e.to_string())?;
-        phi.add_incoming(&[(&v, load), (&pv, load_part)]);
-        g.inputs[inp.index()] = Some(g.vec_of(Ok(phi.as_basic_value()), g.fty));
-    }
-    g.nodes(|id| u.plan.variant(id));
-    let r = g.arg(u.plan.root);
-    let br = g.b.build_conditional_branch(full, store, store_part);
-    g.done(br);
-
-    g.b.position_at_end(store);
-    let p = g.offset(out, byte_off);
-    let st = g.b.build_store(p, r);
-    g.align(st);
-    let br = g.b.build_unconditional_branch(latch);
-    g.done(br);
-
-    g.b.position_at_end(store_part);
-    let m = g.part_mask(rem);
-    let p = g.offset(out, byte_off);
-    let Some(ms) = g.intrinsic("llvm.masked.store", &[g.fty.into(), ptr.into()]) else { return Err(g.error.unwrap_or_default()) };
-    let c = g.b.build_call(ms, &[r.into(), p.into(), g.i32c(8).into(), m.into()], "");
-    g.done(c);
-    let br = g.b.build_unconditional_branch(latch);
-    g.done(br);
-
-    g.b.position_at_end(latch);
-    let next = g.b.build_int_add(iv, g.i64c(u64::from(w)), "");
-    let next = g.scalar(next, i64t.get_poison());
-    let more = g.b.build_int_compare(IntPredicate::ULT, next, len, "");
-    let more = g.scalar(more, u.cx.bool_type().get_poison());
-    let br = g.b.build_conditional_branch(more, head, exit);
-    g.done(br);
-    i.add_incoming(&[(&i64t.const_zero(), pre), (&next, latch)]);
-
-    g.b.position_at_end(exit);
-    let r = g.b.build_return(None);
-    g.done(r);
-    g.error.map_or(Ok(()), Err)
+        g.nodes(|id| u.plan.variant(id));
+        vec![g.arg(u.plan.root)]
+    })
 }
 
 /// `lobe_program(cols: *const *const f64, params, block, outs: *const *mut f64, len)` in `w` lanes: a
-/// multi-output program ([`crate::backend::program`]), the loop of [`build_batch`] over data columns:
-///
-/// ```text
-/// entry:   column and output bases; carried nodes from the block, constants and parameters, splatted
-/// loop(i): full = len − i ≥ W; the W (or len − i, masked) column values at i
-/// step:    the outer nodes in order; at each region's last output: any(lit ≠ 0) ? region : join, the
-///          region's outputs joined by phis (+0 from the skipping edge)
-/// store:   every output at i (masked on the last partial vector)
-/// ```
-///
-/// The region's nodes are translated in its own block, and their values are forgotten after it (only its
-/// outputs, through the phis, reach what follows), as the Cranelift tier does.
+/// multi-output program ([`crate::backend::program`]) in [`batch_loop`]'s loop, reading its data columns
+/// from `cols` and storing every output to `outs[o]`. The step translates the outer nodes in order and, at
+/// each region's last output, the region: `any(lit ≠ 0) ? region : join`, its outputs joined by phis (+0 from
+/// the skipping edge). The region's nodes are translated in its own block, and their values are forgotten
+/// after it (only its outputs, through the phis, reach what follows), as the Cranelift tier does.
 pub(super) fn build_program(u: &Unit, w: u32, p: &Program) -> Result<(), String> {
     let f = declare(u, PROGRAM, 4, true);
-    let (cols, params, block, outs) = (param(f, 0)?, param(f, 1)?, param(f, 2)?, param(f, 3)?);
-    let len = match f.get_nth_param(4) {
-        Some(BasicValueEnum::IntValue(l)) => l,
-        _ => return Err("len parameter".into()),
-    };
-    let mut g = Gen::new(u, f, w, params);
-    let ptr = u.cx.ptr_type(Default::default());
-    let i64t = u.cx.i64_type();
+    let (cols, outs) = (param(f, 0)?, param(f, 3)?);
+    let mut g = Gen::new(u, f, w, param(f, 1)?);
     let entry = g.block("entry");
     g.b.position_at_end(entry);
     let mut read = [false; MAX_COLUMNS];
@@ -881,13 +758,60 @@ pub(super) fn build_program(u: &Unit, w: u32, p: &Program) -> Result<(), String>
         bases.push((k, load_ptr(&mut g, cols, k)?));
     }
     let out_bases = (0..p.outputs.len()).map(|o| load_ptr(&mut g, outs, o)).collect::<Result<Vec<_>, _>>()?;
+    batch_loop(&mut g, f, param(f, 2)?, &bases, &out_bases, |g, loaded| {
+        for (k, v) in loaded {
+            g.columns[*k] = Some(*v);
+        }
+        let mut next = 0;
+        for id in p.ir.ids() {
+            if p.class[id.index()] == Class::Outer {
+                g.node(id);
+            }
+            while let Some(r) = p.regions.get(next).filter(|r| r.at == id) {
+                region(g, r);
+                next += 1;
+            }
+        }
+        p.outputs.iter().map(|o| g.arg(*o)).collect()
+    })
+}
+
+/// The loop of both function shapes, in `g`'s `W` lanes, from the entry block (where the caller loaded the
+/// column bases `cols`, (slot, base) pairs, and the output bases `outs`):
+///
+/// ```text
+/// entry:   carried nodes loaded from the block, constants and parameters, splatted; len = 0 ? exit : loop
+/// loop(i): full = len − i ≥ W; full ? load : load_part
+/// load:    the W column values at i                     load_part: the len − i values at i (masked loads)
+/// step:    `step` on the loaded (slot, vector) pairs → one vector per output; full ? store : store_part
+/// store:   outs[o][i..i+W] = vector o                   store_part: outs[o][i..len] (masked store)
+/// latch:   i + W < len ? loop(i + W) : exit
+/// ```
+///
+/// One copy of the body serves the full vectors and the tail (len not a multiple of W), so compile time does
+/// not double for the tail; the two branches on `full` are taken the same way on every step but the last.
+fn batch_loop<'ctx>(
+    g: &mut Gen<'_, 'ctx>,
+    f: FunctionValue<'ctx>,
+    block: PointerValue<'ctx>,
+    cols: &[(usize, PointerValue<'ctx>)],
+    outs: &[PointerValue<'ctx>],
+    step: impl FnOnce(&mut Gen<'_, 'ctx>, &[(usize, VectorValue<'ctx>)]) -> Vec<VectorValue<'ctx>>,
+) -> Result<(), String> {
+    let u = g.u;
+    let len = match f.get_nth_param(4) {
+        Some(BasicValueEnum::IntValue(l)) => l,
+        _ => return Err("len parameter".into()),
+    };
+    let ptr = u.cx.ptr_type(Default::default());
+    let i64t = u.cx.i64_type();
     for (k, id) in u.plan.carried.iter().enumerate() {
         let s = g.load_f64(block, k as u64);
         g.vals[id.index()] = Some(g.splat(s, g.fty));
     }
     g.nodes(|id| !u.plan.variant(id) && matches!(u.ir.node(id), Node::Const(_) | Node::Param(_)));
 
-    let (head, load, load_part, step, store, store_part, latch, exit) =
+    let (head, load, load_part, body, store, store_part, latch, exit) =
         (g.block("loop"), g.block("load"), g.block("load_part"), g.block("step"), g.block("store"), g.block("store_part"), g.block("latch"), g.block("exit"));
     let empty = g.b.build_int_compare(IntPredicate::EQ, len, i64t.const_zero(), "");
     let empty = g.scalar(empty, u.cx.bool_type().get_poison());
@@ -895,21 +819,23 @@ pub(super) fn build_program(u: &Unit, w: u32, p: &Program) -> Result<(), String>
     let br = g.b.build_conditional_branch(empty, exit, head);
     g.done(br);
 
+    // loop(i)
     g.b.position_at_end(head);
     let i = g.b.build_phi(i64t, "i").map_err(|e| e.to_string())?;
     let iv = i.as_basic_value().into_int_value();
     let rem = g.b.build_int_sub(len, iv, "");
     let rem = g.scalar(rem, i64t.get_poison());
-    let full = g.b.build_int_compare(IntPredicate::UGE, rem, g.i64c(u64::from(w)), "");
+    let full = g.b.build_int_compare(IntPredicate::UGE, rem, g.i64c(u64::from(g.w)), "");
     let full = g.scalar(full, u.cx.bool_type().get_poison());
     let byte_off = g.b.build_left_shift(iv, g.i64c(3), "");
     let byte_off = g.scalar(byte_off, i64t.get_poison());
     let br = g.b.build_conditional_branch(full, load, load_part);
     g.done(br);
 
+    // load / load_part, joined in `step` by a phi per column.
     g.b.position_at_end(load);
     let mut full_vals = vec![];
-    for &(k, base) in &bases {
+    for &(k, base) in cols {
         let at = g.offset(base, byte_off);
         let l = g.b.build_load(g.fty, at, "");
         let v = g.vec_of(l, g.fty);
@@ -918,42 +844,37 @@ pub(super) fn build_program(u: &Unit, w: u32, p: &Program) -> Result<(), String>
         }
         full_vals.push((k, base, v));
     }
-    let br = g.b.build_unconditional_branch(step);
+    let br = g.b.build_unconditional_branch(body);
     g.done(br);
     g.b.position_at_end(load_part);
     let m = g.part_mask(rem);
-    let mut loaded = vec![];
+    let mut parts = vec![];
     for (k, base, v) in full_vals {
         let at = g.offset(base, byte_off);
         let args = [at.into(), g.i32c(8).into(), m.into(), g.fty.const_zero().into()];
         let pv = g.call_intrinsic("llvm.masked.load", &[g.fty.into(), ptr.into()], &args, g.fty);
-        loaded.push((k, v, pv));
+        parts.push((k, v, pv));
     }
-    let br = g.b.build_unconditional_branch(step);
+    let br = g.b.build_unconditional_branch(body);
     g.done(br);
 
-    g.b.position_at_end(step);
-    for (k, v, pv) in loaded {
+    // step: the body, once.
+    g.b.position_at_end(body);
+    let mut loaded = vec![];
+    for (k, v, pv) in parts {
         let phi = g.b.build_phi(g.fty, &format!("c{k}")).map_err(|e| e.to_string())?;
         phi.add_incoming(&[(&v, load), (&pv, load_part)]);
-        g.columns[k] = Some(g.vec_of(Ok(phi.as_basic_value()), g.fty));
+        loaded.push((k, g.vec_of(Ok(phi.as_basic_value()), g.fty)));
     }
-    let mut next = 0;
-    for id in p.ir.ids() {
-        if p.class[id.index()] == Class::Outer {
-            g.node(id);
-        }
-        while let Some(r) = p.regions.get(next).filter(|r| r.at == id) {
-            region(&mut g, r);
-            next += 1;
-        }
+    let results = step(g, &loaded);
+    if results.len() != outs.len() {
+        return Err(format!("{} results for {} outputs", results.len(), outs.len()));
     }
-    let results: Vec<VectorValue> = p.outputs.iter().map(|o| g.arg(*o)).collect();
     let br = g.b.build_conditional_branch(full, store, store_part);
     g.done(br);
 
     g.b.position_at_end(store);
-    for (r, base) in results.iter().zip(&out_bases) {
+    for (r, base) in results.iter().zip(outs) {
         let at = g.offset(*base, byte_off);
         let st = g.b.build_store(at, *r);
         g.align(st);
@@ -963,8 +884,8 @@ pub(super) fn build_program(u: &Unit, w: u32, p: &Program) -> Result<(), String>
 
     g.b.position_at_end(store_part);
     let m = g.part_mask(rem);
-    let Some(ms) = g.intrinsic("llvm.masked.store", &[g.fty.into(), ptr.into()]) else { return Err(g.error.unwrap_or_default()) };
-    for (r, base) in results.iter().zip(&out_bases) {
+    let Some(ms) = g.intrinsic("llvm.masked.store", &[g.fty.into(), ptr.into()]) else { return Err(g.error.take().unwrap_or_default()) };
+    for (r, base) in results.iter().zip(outs) {
         let at = g.offset(*base, byte_off);
         let c = g.b.build_call(ms, &[(*r).into(), at.into(), g.i32c(8).into(), m.into()], "");
         g.done(c);
@@ -973,18 +894,18 @@ pub(super) fn build_program(u: &Unit, w: u32, p: &Program) -> Result<(), String>
     g.done(br);
 
     g.b.position_at_end(latch);
-    let next_i = g.b.build_int_add(iv, g.i64c(u64::from(w)), "");
-    let next_i = g.scalar(next_i, i64t.get_poison());
-    let more = g.b.build_int_compare(IntPredicate::ULT, next_i, len, "");
+    let next = g.b.build_int_add(iv, g.i64c(u64::from(g.w)), "");
+    let next = g.scalar(next, i64t.get_poison());
+    let more = g.b.build_int_compare(IntPredicate::ULT, next, len, "");
     let more = g.scalar(more, u.cx.bool_type().get_poison());
     let br = g.b.build_conditional_branch(more, head, exit);
     g.done(br);
-    i.add_incoming(&[(&i64t.const_zero(), pre), (&next_i, latch)]);
+    i.add_incoming(&[(&i64t.const_zero(), pre), (&next, latch)]);
 
     g.b.position_at_end(exit);
     let r = g.b.build_return(None);
     g.done(r);
-    g.error.map_or(Ok(()), Err)
+    g.error.take().map_or(Ok(()), Err)
 }
 
 /// The pointer at `base[k]`.
