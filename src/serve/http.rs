@@ -20,8 +20,8 @@
 //!
 //! Protocol subset: request bodies with `Content-Length` (at most the caller's cap, else 413 after draining a
 //! bounded amount so the client reads the answer; chunked bodies are refused with 411), keep-alive per
-//! HTTP/1.1. Build cost: tokio (rt, net, time), hyper (http1, server), hyper-util, http-body-util and their
-//! 8 dependencies add about a minute to a clean release build on one job (BENCHMARKS.md §11).
+//! HTTP/1.1. Build cost: tokio (rt, net, time), hyper (http1, server), hyper-util, http-body-util and the 7
+//! crates they add cost ~35 s of CPU in a clean release build, off its critical path (BENCHMARKS.md §11).
 
 use crate::base::diag::{Diagnostic, Plain};
 use crate::base::source::{read_regular_file, FileAccess, ReadError};

@@ -18,7 +18,7 @@
 //!   ([`crate::base::cancel`], polled by the renderer and the numerics; [`api::limited`]), and a cap on
 //!   computations in flight.
 //! - **Files**: only regular files under the directories the server was started with — the formula files'
-//!   and the `--scene`'s ([`http::Roots`]: no `..` in a request, symbolic links resolved before the check;
+//!   and the scene's ([`http::Roots`]: no `..` in a request, symbolic links resolved before the check;
 //!   FIFOs and devices refused without blocking). Everything a scene names (meshes, formula files, measured
 //!   tables) is read through the same rule ([`http::ServedFiles`], the scene loader's file-access policy);
 //!   a file outside is 403. Saving is atomic ([`crate::base::output::write_atomic`]), `.brdf` only, and
