@@ -486,7 +486,7 @@ impl FileAccess for ServedFiles {
                 return ReadError::Io(std::io::Error::from(std::io::ErrorKind::NotFound));
             }
             self.refused.store(true, Ordering::SeqCst);
-            ReadError::Refused("outside the directories lobe serve was started with".into())
+            ReadError::Refused("outside the directories lobe serve was started with (name its directory there to serve it)".into())
         })?;
         read_regular_file(&c, max)
     }

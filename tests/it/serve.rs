@@ -329,6 +329,8 @@ fn bad_command_lines_fail_cleanly() {
     for (args, says) in [
         (vec!["serve", "no/such/dir"], "cannot serve `no/such/dir`"),
         (vec!["serve", "--scene", "examples/brdfs/phong.brdf", "examples"], "phong.brdf:3:7"),
+        // The scene's mesh is in examples/meshes, which is not served.
+        (vec!["serve", "examples/brdfs", "--scene", "examples/scenes/mesh.toml"], "bumpy.obj: outside the directories"),
         (vec!["serve", "examples", "--port", &port], "cannot listen on 127.0.0.1"),
         (vec!["serve", "--bind", "localhost.example"], "invalid value"),
     ] {
