@@ -62,6 +62,12 @@
 //! material errors, in that order, exactly as the single pass this replaced did. For that, stage 1 keeps its
 //! errors inside the [`Geometry`] for stage 2 to report around the material errors; [`parse_geometry`] on its
 //! own reports them at once and hands out only error-free geometry.
+//!
+//! # Files
+//! The scene file and everything it names (meshes, formula files, measured tables) are read through one
+//! [`Files`] policy: [`LoadOptions::files`] for a full load, the argument of [`load_geometry`] /
+//! [`parse_geometry`] for stage 1, kept in the [`Geometry`] for stage 2. The commands pass the default (any
+//! regular file); `lobe serve` passes its served directories, so the loader itself has no server case.
 
 mod material;
 mod schema;
