@@ -524,7 +524,7 @@ fn render<'py>(
     }
     let image = detached(py, scene, || {
         let compiler = lobe::render::scene::LobeCompiler::for_commands(Backend::Jit, Mode::Precise, true);
-        let sc = load_scene(std::path::Path::new(scene), &LoadOptions { size, set, formula_override: None }, &compiler)?;
+        let sc = load_scene(std::path::Path::new(scene), &LoadOptions { size, set, ..LoadOptions::default() }, &compiler)?;
         let opts = lobe::render::RenderOptions { threads, transfer: if srgb { Transfer::Srgb } else { Transfer::Linear }, aa, ..Default::default() };
         let (frame, _) = lobe::render::render(&sc, &opts).map_err(|e| plain(scene, Diagnostic::error(e)))?;
         Ok(frame.image)

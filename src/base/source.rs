@@ -17,13 +17,35 @@ pub enum ReadError {
     NotRegular,
     /// More than the caller's limit.
     TooLarge,
+    /// The [`FileAccess`] policy does not allow this path (the policy's reason).
+    Refused(String),
+}
+
+impl std::fmt::Display for ReadError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ReadError::Io(e) => write!(f, "{e}"),
+            ReadError::NotRegular => f.write_str("not a regular file"),
+            ReadError::TooLarge => f.write_str("too large"),
+            ReadError::Refused(why) => f.write_str(why),
+        }
+    }
 }
 
 /// The bytes of the regular file at `path`, if it holds at most `max` bytes; never reads more than `max + 1`.
 /// For inputs that only make sense as files (scenes, meshes); formula sources also accept pipes (`-`,
-/// `<(…)`) and use [`read_source`].
+/// `<(…)`) and use [`read_source`]. A FIFO, device or socket is refused before it is opened, and the open
+/// itself does not block (`O_NONBLOCK`, then the type checked again on the open file), so one swapped in
+/// meanwhile is refused too.
 pub fn read_regular_file(path: &std::path::Path, max: u64) -> Result<Vec<u8>, ReadError> {
-    let file = std::fs::File::open(path).map_err(ReadError::Io)?;
+    if !std::fs::metadata(path).map_err(ReadError::Io)?.is_file() {
+        return Err(ReadError::NotRegular);
+    }
+    let mut open = std::fs::OpenOptions::new();
+    open.read(true);
+    #[cfg(unix)]
+    std::os::unix::fs::OpenOptionsExt::custom_flags(&mut open, libc::O_NONBLOCK);
+    let file = open.open(path).map_err(ReadError::Io)?;
     if !file.metadata().map_err(ReadError::Io)?.is_file() {
         return Err(ReadError::NotRegular);
     }
@@ -33,6 +55,69 @@ pub fn read_regular_file(path: &std::path::Path, max: u64) -> Result<Vec<u8>, Re
         return Err(ReadError::TooLarge);
     }
     Ok(bytes)
+}
+
+/// Which files a load may read: everything a scene names (the scene itself, meshes, formula files, measured
+/// tables) is read through one. The commands read anything ([`Files::any`]); `lobe serve` reads only regular
+/// files under the directories it serves. A policy answers [`ReadError::Refused`] without opening the file,
+/// so nothing of a refused file reaches an error message.
+pub trait FileAccess: Send + Sync {
+    /// The bytes of the file at `path` (at most `max`), or why not.
+    fn read(&self, path: &std::path::Path, max: u64) -> Result<Vec<u8>, ReadError>;
+}
+
+impl<T: FileAccess> FileAccess for std::sync::Arc<T> {
+    fn read(&self, path: &std::path::Path, max: u64) -> Result<Vec<u8>, ReadError> {
+        T::read(self, path, max)
+    }
+}
+
+/// Any regular file the process can read ([`read_regular_file`]).
+struct AnyFile;
+
+impl FileAccess for AnyFile {
+    fn read(&self, path: &std::path::Path, max: u64) -> Result<Vec<u8>, ReadError> {
+        read_regular_file(path, max)
+    }
+}
+
+/// A shared [`FileAccess`] policy; the default reads any regular file.
+#[derive(Clone)]
+pub struct Files(std::sync::Arc<dyn FileAccess>);
+
+impl Files {
+    /// Any regular file (the commands).
+    pub fn any() -> Files {
+        Files(std::sync::Arc::new(AnyFile))
+    }
+    pub fn new(policy: impl FileAccess + 'static) -> Files {
+        Files(std::sync::Arc::new(policy))
+    }
+    pub fn read(&self, path: &std::path::Path, max: u64) -> Result<Vec<u8>, ReadError> {
+        self.0.read(path, max)
+    }
+    /// A formula file: read through the policy, then checked as [`read_source`] checks one.
+    pub fn read_formula(&self, path: &str) -> Result<String, Diagnostic> {
+        let bytes = self.read(std::path::Path::new(path), MAX_SOURCE_BYTES as u64).map_err(|e| match e {
+            ReadError::TooLarge => Diagnostic::error(format!("`{path}` is larger than {} KiB; a formula file is a few lines", MAX_SOURCE_BYTES / 1024))
+                .hint("is this the right file?"),
+            ReadError::NotRegular => Diagnostic::error(format!("`{path}` is not a regular file")).hint("give a .brdf file"),
+            e => Diagnostic::error(format!("cannot open `{path}`: {e}")).hint("check the path"),
+        })?;
+        source_from_bytes(path, bytes)
+    }
+}
+
+impl Default for Files {
+    fn default() -> Files {
+        Files::any()
+    }
+}
+
+impl std::fmt::Debug for Files {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Files")
+    }
 }
 
 /// Reads a formula source from `path`, or standard input for `-`. Returns the display name and the text.

@@ -20,6 +20,7 @@ pub fn read(path: &str) -> Result<String, CliError> {
                 ReadError::Io(e) => e.to_string(),
                 ReadError::NotRegular => "not a regular file".into(),
                 ReadError::TooLarge => format!("more than {} MiB of points", MAX_POINTS_BYTES >> 20),
+                ReadError::Refused(why) => why,
             };
             CliError::hint(format!("{path}: {why}"), "--points takes a CSV file, or `-` for standard input")
         })?

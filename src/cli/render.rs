@@ -70,7 +70,7 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
     // Refuse a bad output path before doing any work, and write nothing unless everything succeeds.
     a.out.force.check(&out, image::is_lobe_png)?;
     Output::png_only(&out)?;
-    let opts = LoadOptions { size: a.size, set: a.set.list()?, formula_override: None };
+    let opts = LoadOptions { size: a.size, set: a.set.list()?, ..LoadOptions::default() };
     let backend = a.backend.backend()?;
     let sc = scene::load_scene(&a.scene, &opts, &super::common::scene_compiler(backend, a.backend.math.mode))?;
     let ropts = RenderOptions {
@@ -79,6 +79,7 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
         transfer: if a.srgb { Transfer::Srgb } else { Transfer::Linear },
         cutoff: true,
         aa: a.aa.map(usize::from),
+        ..RenderOptions::default()
     };
     let t0 = Instant::now();
     common::check_threads(a.threads)?;

@@ -1,4 +1,4 @@
-//! `lobe serve [FILES…] [--scene SCENE] [--port 8080] [--bind 127.0.0.1]`: the interactive page
+//! `lobe serve [FILES…] [--scene SCENE] [--port 8080] [--bind 127.0.0.1] [--deadline 10]`: the interactive page
 //! ([`lobe::serve`]). Prints the address and serves until stopped.
 
 use super::common::CliError;
@@ -18,6 +18,16 @@ pub struct ServeArgs {
     /// Address to listen on; loopback unless you say otherwise (the page can save files).
     #[arg(long, default_value = "127.0.0.1")]
     pub bind: std::net::IpAddr,
+    /// Seconds a computation (a render, an analysis) may run before it is stopped and answered 503.
+    #[arg(long, default_value_t = 10.0, value_parser = positive_seconds)]
+    pub deadline: f64,
+}
+
+fn positive_seconds(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v > 0.0 && v <= 86_400.0 => Ok(v),
+        _ => Err(format!("`{s}` is not a number of seconds in (0, 86400]")),
+    }
 }
 
 pub fn run(a: &ServeArgs) -> Result<(), CliError> {
@@ -26,7 +36,7 @@ pub fn run(a: &ServeArgs) -> Result<(), CliError> {
         scene: a.scene.clone(),
         bind: Some(a.bind),
         port: a.port,
-        limits: lobe::serve::Limits::default(),
+        limits: lobe::serve::Limits { deadline: std::time::Duration::from_secs_f64(a.deadline), ..Default::default() },
     };
     let server = lobe::serve::start(cfg).map_err(|e| match e {
         lobe::serve::StartError::Scene(d) => CliError::Diagnostics(d),

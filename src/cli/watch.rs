@@ -38,7 +38,7 @@ pub struct WatchArgs {
 fn reload(a: &WatchArgs, src: String) -> Result<String, CliError> {
     let t0 = Instant::now();
     let name = a.file.display().to_string();
-    let opts = LoadOptions { size: Some(a.size), set: a.set.list()?, formula_override: Some((name, src)) };
+    let opts = LoadOptions { size: Some(a.size), set: a.set.list()?, formula_override: Some((name, src)), ..LoadOptions::default() };
     let sc = scene::load_scene(&a.scene, &opts, &super::common::scene_compiler(lobe::Backend::Jit, lobe::Mode::Precise))?;
     let compile = t0.elapsed();
     let ropts = RenderOptions::default();

@@ -151,6 +151,18 @@ impl Measured {
         Measured::from_bytes(path, &bytes)
     }
 
+    /// [`Measured::read`], the file read through `files` (a scene's file-access policy) in one piece.
+    pub fn read_through(path: &str, files: &crate::base::source::Files) -> Result<Measured, Diagnostic> {
+        use crate::base::source::ReadError;
+        let bytes = files.read(std::path::Path::new(path), FILE_BYTES as u64).map_err(|e| match e {
+            ReadError::Io(e) => bad(path, format!("cannot open it: {e}"), "check the path"),
+            ReadError::NotRegular => bad(path, "is not a regular file", NOT_MERL),
+            ReadError::TooLarge => bad(path, format!("more than a 90 × 90 × 180 table's {FILE_BYTES} bytes"), NOT_MERL),
+            ReadError::Refused(why) => bad(path, why, "name a file under the directories being served"),
+        })?;
+        Measured::from_bytes(path, &bytes)
+    }
+
     /// Parses a whole file's bytes (`name` for messages).
     pub fn from_bytes(name: &str, bytes: &[u8]) -> Result<Measured, Diagnostic> {
         if bytes.len() < HEADER {

@@ -198,11 +198,13 @@ pub struct AccuracyOptions {
     pub epicenter_from: u32,
     /// Smallest n of the inflection metric (the papers: 3).
     pub inflection_from: u32,
+    /// Polled once per n: the computation fails with the cancellation once it trips (default: never).
+    pub cancel: crate::base::cancel::Cancel,
 }
 
 impl Default for AccuracyOptions {
     fn default() -> Self {
-        AccuracyOptions { q: 8.0, n_max: 1000, epicenter_from: EPICENTER_FROM, inflection_from: 3 }
+        AccuracyOptions { q: 8.0, n_max: 1000, epicenter_from: EPICENTER_FROM, inflection_from: 3, cancel: Default::default() }
     }
 }
 
@@ -320,9 +322,12 @@ pub fn accuracy(
         infl: Option<Worst>,
         ref_peak: f64,
     }
-    let per_n: Vec<PerN> = (1..=opts.n_max)
+    let per_n: Option<Vec<PerN>> = (1..=opts.n_max)
         .into_par_iter()
         .map(|ni| {
+            if opts.cancel.is_cancelled() {
+                return None;
+            }
             let n = f64::from(ni);
             let (p, pr) = (with_n(params, n), with_n(ref_params, n));
             let coarse = RowError::new(&gc.eval(ev, &p), reference_grid.row(ni));
@@ -359,9 +364,10 @@ pub fn accuracy(
                 Worst { value: v, n, angle_deg: x.to_degrees() }
             });
             let ref_peak = r.iter().map(|v| v.abs()).filter(|v| !v.is_nan()).fold(0.0, f64::max);
-            PerN { sum_abs: coarse.sum, nan, max_abs, cutoff_rel, ratio, epi, infl, ref_peak }
+            Some(PerN { sum_abs: coarse.sum, nan, max_abs, cutoff_rel, ratio, epi, infl, ref_peak })
         })
         .collect();
+    let per_n = per_n.ok_or(crate::base::cancel::Cancelled)?;
     let mut rep = AccuracyReport {
         mean_abs_grid: 0.0,
         epicenter: Worst::none(),

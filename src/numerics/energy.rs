@@ -27,6 +27,7 @@
 //! Cost: see the module docs of [`numerics`](super) (evaluation counts); measured times in BENCHMARKS.md
 //! (`benches/energy.rs` reproduces them).
 
+use crate::base::cancel::Cancel;
 use super::quad::integrate;
 use super::{dir, Diagnostic, V3};
 use crate::base::json::{self, Named};
@@ -246,6 +247,12 @@ pub fn albedo(ev: &dyn Evaluator, params: &[f64], theta_i: f64) -> Result<f64, D
 /// `ρ(θᵢ, φᵢ)` for any formula: L at polar angle θᵢ and azimuth φᵢ (radians) about N, V over the whole
 /// hemisphere (no symmetry assumed). `None` for φᵢ: [`albedo`].
 pub fn albedo_at(ev: &dyn Evaluator, params: &[f64], theta_i: f64, phi_i: Option<f64>) -> Result<f64, Diagnostic> {
+    albedo_until(ev, params, theta_i, phi_i, &Cancel::never())
+}
+
+/// [`albedo_at`], polling `cancel` before each inner integral (over φₒ at one θₒ): fails with the
+/// cancellation once it trips.
+fn albedo_until(ev: &dyn Evaluator, params: &[f64], theta_i: f64, phi_i: Option<f64>, cancel: &Cancel) -> Result<f64, Diagnostic> {
     let t = theta_i;
     let (st, ct) = t.sin_cos();
     let (sp, cp) = phi_i.unwrap_or(0.0).sin_cos();
@@ -259,6 +266,9 @@ pub fn albedo_at(ev: &dyn Evaluator, params: &[f64], theta_i: f64, phi_i: Option
     let mut nan = None;
     let mut nonconv = 0usize;
     let mut inner = |alpha: f64| -> f64 {
+        if cancel.is_cancelled() {
+            return 0.0;
+        }
         let (sa, ca) = alpha.sin_cos();
         // Horizon: N·V = ca·ct + sa·cosφ·st > 0.
         let phi_max = if sa * st <= 0.0 || ca * ct >= sa * st {
@@ -301,6 +311,7 @@ pub fn albedo_at(ev: &dyn Evaluator, params: &[f64], theta_i: f64, phi_i: Option
     breaks.sort_by(f64::total_cmp);
     breaks.dedup();
     let q = integrate(&mut inner, &breaks, 1e-8, 1e-14, 2000);
+    cancel.check()?;
     if let Some((a, p)) = nan {
         let v: V3 = std::array::from_fn(|k| a.cos() * r[k] + a.sin() * (p.cos() * t1[k] + p.sin() * t2[k]));
         let x = inputs_from_dirs(l, v);
@@ -401,8 +412,13 @@ pub(crate) const AZIMUTHS_DEG: [f64; 24] = {
 /// The full mode for a kernel that reads `used`: [`full_energy`] for a cosine formula; over θᵢ and φᵢ (see
 /// the module docs) when a direction component is read.
 pub fn full_energy_for(ev: &dyn Evaluator, used: crate::ir::InputSet, params: &[f64]) -> Result<FullEnergy, Diagnostic> {
+    full_energy_cancellable(ev, used, params, &Cancel::never())
+}
+
+/// [`full_energy_for`], polling `cancel` inside each albedo integral: fails with the cancellation once it trips.
+pub fn full_energy_cancellable(ev: &dyn Evaluator, used: crate::ir::InputSet, params: &[f64], cancel: &Cancel) -> Result<FullEnergy, Diagnostic> {
     if !used.reads_directions() {
-        return full_energy(ev, params);
+        return full_energy_in(ev, params, cancel);
     }
     // A formula whose values turn with the frame about N has one albedo for every φᵢ: the sweep over φᵢ
     // would integrate the same function 24 times.
@@ -411,7 +427,9 @@ pub fn full_energy_for(ev: &dyn Evaluator, used: crate::ir::InputSet, params: &[
     let grid: Vec<(f64, f64)> = full_mode_angles().into_iter().flat_map(|t| azimuths.iter().map(move |&p| (t, p))).collect();
     let cells: Result<Vec<(f64, f64, f64)>, Diagnostic> = grid
         .par_iter()
-        .map(|&(t, p)| albedo_at(ev, params, t.to_radians(), Some(p.to_radians())).map(|r| (t, p, r)))
+        .map(|&(t, p)| {
+            albedo_until(ev, params, t.to_radians(), Some(p.to_radians()), cancel).map(|r| (t, p, r))
+        })
         .collect();
     let cells = cells?;
     let rows: Vec<(f64, f64)> = cells
@@ -484,9 +502,17 @@ pub(crate) fn full_mode_angles() -> Vec<f64> {
 
 /// ρ(θᵢ) over [`full_mode_angles`] (in parallel), its maximum, and reciprocity.
 pub fn full_energy(ev: &dyn Evaluator, params: &[f64]) -> Result<FullEnergy, Diagnostic> {
+    full_energy_in(ev, params, &Cancel::never())
+}
+
+fn full_energy_in(ev: &dyn Evaluator, params: &[f64], cancel: &Cancel) -> Result<FullEnergy, Diagnostic> {
     let angles = full_mode_angles();
-    let rows: Result<Vec<(f64, f64)>, Diagnostic> =
-        angles.par_iter().map(|&d| albedo(ev, params, d.to_radians()).map(|r| (d, r))).collect();
+    let rows: Result<Vec<(f64, f64)>, Diagnostic> = angles
+        .par_iter()
+        .map(|&d| {
+            albedo_until(ev, params, d.to_radians(), None, cancel).map(|r| (d, r))
+        })
+        .collect();
     summarise(rows?, reciprocity(ev, params))
 }
 

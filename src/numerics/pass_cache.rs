@@ -79,9 +79,14 @@ impl Cache {
 /// [`super::robust::COMMAND_BUDGET`], its decisions read from and stored in the platform cache when `cached`
 /// and there is a cache directory.
 pub fn command_pass(opts: crate::Options, pass: PassOptions, cached: bool) -> crate::Options {
+    command_pass_until(opts, pass, cached, crate::base::cancel::Cancel::never())
+}
+
+/// [`command_pass`] whose searches also stop when `cancel` trips (the server's request deadline).
+pub fn command_pass_until(opts: crate::Options, pass: PassOptions, cached: bool, cancel: crate::base::cancel::Cancel) -> crate::Options {
     let pass = PassOptions { budget: super::robust::COMMAND_BUDGET, ..pass };
     let store = cached.then(Cache::platform).flatten().map(|c| std::sync::Arc::new(c) as std::sync::Arc<dyn DecisionStore>);
-    super::robust::with_pass_cached(opts, pass, store)
+    super::robust::with_pass_until(opts, pass, store, cancel)
 }
 
 /// A formula's kernels as the commands compile them (`eval`, and the Python binding, which must give the same

@@ -59,6 +59,7 @@
 //! (rayon). On one core: 3–110 ms per catalogue formula, up to ~430 ms for BRDF Explorer's largest files
 //! (BENCHMARKS.md, the `pass` bench).
 
+use crate::base::cancel::Cancel;
 use super::truth;
 use crate::base::json::{self, Named};
 use crate::base::rng::Rng;
@@ -883,7 +884,8 @@ fn read_bake(orig: &Formula, bake: &[(usize, f64)]) -> Vec<(usize, f64)> {
 struct Bench<'a> {
     reference: Reference<'a>,
     o: &'a PassOptions,
-    started: std::time::Instant,
+    /// Trips at the search's time budget ([`PassOptions::budget`]) or when the caller's token does.
+    stop: &'a Cancel,
     observe: &'a dyn Fn(Stage),
 }
 
@@ -905,7 +907,7 @@ impl Bench<'_> {
     }
 
     fn out_of_time(&self) -> bool {
-        self.started.elapsed() > self.o.budget
+        self.stop.is_cancelled()
     }
 
     /// The final report of a formula, with the conditioning the options ask for.
@@ -934,24 +936,30 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
 
 /// [`improve`], telling `observe` each [`Stage`] as it starts.
 pub fn improve_observed(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions, observe: &dyn Fn(Stage)) -> Outcome {
-    let started = std::time::Instant::now();
+    improve_cancellable(orig, bake, o, &Cancel::never(), observe)
+}
+
+/// [`improve_observed`], also stopping (with the best form so far, [`Outcome::truncated`]) once `cancel` trips:
+/// the time budget is a child of the caller's token, so one mechanism stops the search either way.
+pub fn improve_cancellable(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions, cancel: &Cancel, observe: &dyn Fn(Stage)) -> Outcome {
+    let stop = cancel.child(o.budget);
     let bake = read_bake(orig, bake);
-    let live = live_pass(orig, o, started, observe);
+    let live = live_pass(orig, o, &stop, observe);
     if bake.is_empty() {
         return live;
     }
-    baked_pass(orig, &bake, &live, o, started, observe)
+    baked_pass(orig, &bake, &live, o, &stop, observe)
 }
 
 /// The search with every parameter live (module docs).
-fn live_pass(orig: &Formula, o: &PassOptions, started: std::time::Instant, observe: &dyn Fn(Stage)) -> Outcome {
+fn live_pass(orig: &Formula, o: &PassOptions, stop: &Cancel, observe: &dyn Fn(Stage)) -> Outcome {
     let sign = crate::simplify::sign_of(orig, &[]);
     let cands = Candidates::new(orig, &[], sign);
     let base = cands.base(orig);
     let truth_f = crate::simplify::bake_only(orig, &[]);
     let n = points_for(&base, &truth_f, o);
     observe(Stage::Truth { points: n });
-    let bench = Bench { reference: Reference::new(&truth_f, sample(orig, &[], n, o.seed)), o, started, observe };
+    let bench = Bench { reference: Reference::new(&truth_f, sample(orig, &[], n, o.seed)), o, stop, observe };
     let (before, mut cur_got) = bench.run(&base, None);
     let cost_before = cost(&base);
     let base_budget = o.budget_for(cost_before);
@@ -1039,14 +1047,14 @@ fn live_pass(orig: &Formula, o: &PassOptions, started: std::time::Instant, obser
 /// lobe's promise at more points; then the compensated chains of those powers where they are no less accurate
 /// and cheaper (within 3 ulp of pow). No other rule is tried, so the baked kernel agrees with the live one.
 /// `Prefer::Speed` bakes with the simplifier's own chains (the fastest form).
-fn baked_pass(orig: &Formula, bake: &[(usize, f64)], live: &Outcome, o: &PassOptions, started: std::time::Instant, observe: &dyn Fn(Stage)) -> Outcome {
+fn baked_pass(orig: &Formula, bake: &[(usize, f64)], live: &Outcome, o: &PassOptions, stop: &Cancel, observe: &dyn Fn(Stage)) -> Outcome {
     let sign = crate::simplify::sign_of(orig, bake);
     let plain = Candidates::new(orig, bake, sign);
     let base = plain.base(orig);
     let truth_f = crate::simplify::bake_only(orig, bake);
     let n = points_for(&base, &truth_f, o);
     observe(Stage::Truth { points: n });
-    let bench = Bench { reference: Reference::new(&truth_f, sample(orig, bake, n, o.seed)), o, started, observe };
+    let bench = Bench { reference: Reference::new(&truth_f, sample(orig, bake, n, o.seed)), o, stop, observe };
     let (before, mut cur_got) = bench.run(&base, None);
     let cost_before = cost(&base);
     let base_budget = o.budget_for(cost_before);
@@ -1157,6 +1165,8 @@ fn retries(trials: &[Trial]) -> Vec<Cand> {
 pub(crate) struct Chooser {
     pass: PassOptions,
     cache: Option<std::sync::Arc<dyn DecisionStore>>,
+    /// Stops the search early (the compile then uses the best form so far and stores nothing).
+    cancel: Cancel,
 }
 
 /// Where decisions are kept between commands ([`super::pass_cache::Cache`] on disk): keyed by the formula, its
@@ -1173,8 +1183,9 @@ impl crate::FormulaChooser for Chooser {
         if let Some(d) = self.cache.as_ref().and_then(|c| c.load(original, bake, &self.pass)) {
             return if d == Decision::default() { simplified } else { replay(original, bake, &d, self.pass.prefer) };
         }
-        let out = improve(original, bake, &self.pass);
-        if let Some(c) = &self.cache {
+        let out = improve_cancellable(original, bake, &self.pass, &self.cancel, &|_| {});
+        // A search cut short by the caller is not this formula's decision: the next compile searches again.
+        if let Some(c) = self.cache.as_ref().filter(|_| !self.cancel.is_cancelled()) {
             c.store(original, bake, &self.pass, &out.decision);
         }
         if out.decision == Decision::default() {
@@ -1192,9 +1203,14 @@ pub fn with_pass(opts: crate::Options, pass: PassOptions) -> crate::Options {
 
 /// Compile options with the accuracy pass on, its decisions kept in `cache` ([`super::pass_cache::Cache::platform`]
 /// is the user's cache directory).
-pub fn with_pass_cached(mut opts: crate::Options, pass: PassOptions, cache: Option<std::sync::Arc<dyn DecisionStore>>) -> crate::Options {
+pub fn with_pass_cached(opts: crate::Options, pass: PassOptions, cache: Option<std::sync::Arc<dyn DecisionStore>>) -> crate::Options {
+    with_pass_until(opts, pass, cache, Cancel::never())
+}
+
+/// [`with_pass_cached`] whose searches also stop when `cancel` trips.
+pub fn with_pass_until(mut opts: crate::Options, pass: PassOptions, cache: Option<std::sync::Arc<dyn DecisionStore>>, cancel: Cancel) -> crate::Options {
     let pass = PassOptions { math: opts.math, ..pass };
-    opts.accuracy = Some(std::sync::Arc::new(Chooser { pass, cache }));
+    opts.accuracy = Some(std::sync::Arc::new(Chooser { pass, cache, cancel }));
     opts
 }
 

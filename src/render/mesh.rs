@@ -201,12 +201,18 @@ pub(crate) const MAX_OBJ_BYTES: u64 = 256 << 20;
 /// accepts values the renderer cannot use (`vn 0 0 0`, coordinates beyond f32) — so every fault is named with
 /// its line.
 pub fn load_obj(path: &std::path::Path) -> Result<Mesh, ObjError> {
-    use crate::base::source::{read_regular_file, ReadError};
-    let text = read_regular_file(path, MAX_OBJ_BYTES).map_err(|e| ObjError {
+    load_obj_through(path, &crate::base::source::Files::any())
+}
+
+/// [`load_obj`], the file read through `files` (a scene's file-access policy).
+pub fn load_obj_through(path: &std::path::Path, files: &crate::base::source::Files) -> Result<Mesh, ObjError> {
+    use crate::base::source::ReadError;
+    let text = files.read(path, MAX_OBJ_BYTES).map_err(|e| ObjError {
         message: match e {
             ReadError::Io(e) => format!("cannot read: {e}"),
             ReadError::NotRegular => "not a regular file".into(),
             ReadError::TooLarge => format!("larger than {} MiB; is this the right file?", MAX_OBJ_BYTES >> 20),
+            ReadError::Refused(why) => why,
         },
         line: None,
     })?;

@@ -194,7 +194,7 @@ pub struct Scene {
 }
 
 /// How to render.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct RenderOptions {
     /// Worker threads; 0 = rayon's default (one per core).
     pub threads: usize,
@@ -208,11 +208,13 @@ pub struct RenderOptions {
     /// grid over the pixel, and the 8-bit samples are averaged (in linear light for [`Transfer::Srgb`]);
     /// 1 is the plain render, byte for byte. The counters of [`RenderStats`] then count samples.
     pub aa: Option<usize>,
+    /// Stops the render between tiles once it trips ([`render`] then fails); the default never does.
+    pub cancel: crate::base::cancel::Cancel,
 }
 
 impl Default for RenderOptions {
     fn default() -> RenderOptions {
-        RenderOptions { threads: 0, tile: 64, transfer: Transfer::Linear, cutoff: true, aa: None }
+        RenderOptions { threads: 0, tile: 64, transfer: Transfer::Linear, cutoff: true, aa: None, cancel: Default::default() }
     }
 }
 
@@ -335,11 +337,12 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64, u
     let samples = aa * aa;
     let (tiles_done, tiles) = (AtomicU64::new(0), first.bins.len() as u64);
     let pass = |setup: &raster::Setup| {
-        frame_pass(scene, &programs, setup, opts.transfer, bg, &timers, &|| {
+        let r = frame_pass(scene, &programs, setup, opts.transfer, bg, &timers, &opts.cancel, &|| {
             progress(tiles_done.fetch_add(1, Ordering::Relaxed) + 1, tiles * samples as u64)
-        })
+        });
+        opts.cancel.check().map(|_| r).map_err(|c| format!("the render stopped: {c}"))
     };
-    let (mut rgb, mut covered, mut counts) = pass(&first);
+    let (mut rgb, mut covered, mut counts) = pass(&first)?;
     if samples > 1 {
         // Sum the samples' levels (sRGB ones decoded to linear light first), then the mean of each pixel.
         let linear = SampleSum::new(opts.transfer);
@@ -348,7 +351,7 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64, u
             let ts = Instant::now();
             let setup = raster::setup(&items, &xf, w, h, tile, offset(k));
             setup_time += ts.elapsed();
-            let (rgb_k, covered_k, counts_k) = pass(&setup);
+            let (rgb_k, covered_k, counts_k) = pass(&setup)?;
             for (s, &v) in sum.iter_mut().zip(&rgb_k) {
                 *s += linear.add(v);
             }
@@ -384,7 +387,8 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64, u
 }
 
 /// One rendering of the whole frame from its binned triangles: the 8-bit pixels, the coverage and the
-/// counters; `tile_done` is called after each tile.
+/// counters; `tile_done` is called after each tile. Once `cancel` trips the remaining tiles are skipped
+/// (the caller discards the frame).
 #[allow(clippy::too_many_arguments)]
 fn frame_pass(
     scene: &Scene,
@@ -393,6 +397,7 @@ fn frame_pass(
     transfer: Transfer,
     bg: [u8; 3],
     timers: &Timers,
+    cancel: &crate::base::cancel::Cancel,
     tile_done: &(dyn Fn() + Sync),
 ) -> (Vec<u8>, Vec<bool>, shade::ShadeCounts) {
     let (w, h, tile) = (setup.width, setup.height, setup.tile);
@@ -415,6 +420,9 @@ fn frame_pass(
             }
             let mut counts = shade::ShadeCounts::default();
             for tx in 0..setup.tiles_x {
+                if cancel.is_cancelled() {
+                    break;
+                }
                 let t = ty * setup.tiles_x + tx;
                 let shaded = tile_pixels(scene, programs, setup, t, sc, transfer, bg, timers);
                 tile_done();
@@ -545,7 +553,7 @@ pub fn cutoff_effect(scene: &Scene, opts: &RenderOptions, frame: &Frame, stats: 
     if !opts.cutoff || scene.materials.iter().all(|m| m.cutoff.is_none()) {
         return Ok(None);
     }
-    let (full, _) = render(scene, &RenderOptions { cutoff: false, ..*opts })?;
+    let (full, _) = render(scene, &RenderOptions { cutoff: false, ..opts.clone() })?;
     let (a, b) = (&frame.image.rgb, &full.image.rgb);
     let mut max = 0u8;
     let mut differing = 0u64;

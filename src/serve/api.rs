@@ -10,9 +10,11 @@
 //! Scene geometry is parsed and tessellated once per (scene, size). `/render.png` instead runs exactly the
 //! CLI's `lobe render` path (parameters baked), so its bytes equal the CLI's.
 
-use super::http::{self, ApiError, Reply, Roots};
+use super::http::{self, ApiError, Reply, Roots, ServedFiles};
 use super::Limits;
+use crate::base::cancel::Cancel;
 use crate::base::diag::Diagnostics;
+use crate::base::source::Files;
 use crate::ir::ParamDecl;
 use crate::render::scene::{self, BrdfCompiler, CompiledBrdf, Geometry, LoadOptions, LobeCompiler};
 use crate::render::RenderOptions;
@@ -94,9 +96,10 @@ impl State {
         if let Some(g) = lock(&self.geometry).get(&size) {
             return Ok(g.clone());
         }
+        let files = ServedFiles::new(&self.roots);
         let g = Arc::new(match &self.scene {
-            Some(p) => scene::load_geometry(p, Some((size, size)))?,
-            None => scene::parse_geometry("<builtin paper_sphere.toml>", scene::PAPER_SCENE, Path::new("."), Some((size, size)))?,
+            Some(p) => scene::load_geometry(p, Some((size, size)), &Files::new(files.clone())).map_err(scene_error(&files))?,
+            None => scene::parse_geometry("<builtin paper_sphere.toml>", scene::PAPER_SCENE, Path::new("."), Some((size, size)), &Files::new(files))?,
         });
         let mut cache = lock(&self.geometry);
         if cache.len() >= CACHE_ENTRIES {
@@ -128,33 +131,64 @@ fn diagnostics_of(file: &str, src: &str, e: ApiError) -> Diagnostics {
     ds
 }
 
-/// Runs `work` on its own thread with the request deadline: the HTTP worker answers 503 when the deadline
-/// passes (the job finishes in the background and its result is dropped), and refuses new work with 503 while
-/// `max_jobs` jobs run. With the cost budget checked before each job, a hostile request costs at most one job
-/// slot for a bounded time, and the page's other requests keep being served.
-pub(crate) fn limited<T: Send + 'static>(st: &Arc<State>, work: impl FnOnce(&State) -> Result<T, ApiError> + Send + 'static) -> Result<T, ApiError> {
+/// A computation's view of the server: the shared [`State`] (it derefs to it) and the job's [`Cancel`] token,
+/// which trips at the request deadline and which every long loop the job runs polls.
+pub(crate) struct Job<'a> {
+    st: &'a State,
+    pub cancel: Cancel,
+}
+
+impl std::ops::Deref for Job<'_> {
+    type Target = State;
+    fn deref(&self) -> &State {
+        self.st
+    }
+}
+
+/// Frees a job slot when the job ends, however it ends.
+struct Slot<'a>(&'a AtomicUsize);
+
+impl Drop for Slot<'_> {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+/// Runs `work` (on the calling thread: the HTTP layer's blocking pool) with a token that trips at the
+/// request deadline; refuses new work with 503 while `max_jobs` jobs run. A job past its deadline stops at
+/// its next poll — the renderer between tiles, the integrals between incidence angles, the accuracy metrics
+/// between n, the accuracy pass between candidates — and is answered 503; its slot is free again as soon as
+/// it has stopped. With the cost budget checked before each job, a hostile request costs at most one slot for
+/// about the deadline, and the page's other requests keep being served.
+pub(crate) fn limited<T>(st: &Arc<State>, work: impl FnOnce(&Job) -> Result<T, ApiError>) -> Result<T, ApiError> {
     let max = st.limits.max_jobs;
     if st.jobs.fetch_add(1, Ordering::SeqCst) >= max {
         st.jobs.fetch_sub(1, Ordering::SeqCst);
         return Err(ApiError::new(503, format!("the server is busy ({max} computations running)")).hint("try again in a moment"));
     }
-    let (tx, rx) = std::sync::mpsc::channel();
-    let st2 = st.clone();
-    let spawned = std::thread::Builder::new().name("lobe-serve-job".into()).spawn(move || {
-        let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| work(&st2)))
-            .unwrap_or_else(|_| Err(ApiError::new(500, "internal error in the computation")));
-        st2.jobs.fetch_sub(1, Ordering::SeqCst);
-        let _ = tx.send(r);
-    });
-    if let Err(e) = spawned {
-        st.jobs.fetch_sub(1, Ordering::SeqCst);
-        return Err(ApiError::new(503, format!("cannot start a worker thread: {e}")));
+    let _slot = Slot(&st.jobs);
+    let job = Job { st, cancel: Cancel::with_timeout(st.limits.deadline) };
+    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| work(&job)))
+        .unwrap_or_else(|_| Err(ApiError::new(500, "internal error in the computation")));
+    // A job stopped by its token fails with whatever error its loop gave; the deadline is the reason.
+    if job.cancel.is_cancelled() {
+        let secs = st.limits.deadline.as_secs_f64();
+        return Err(ApiError::new(503, format!("the computation took longer than {secs} s and was stopped"))
+            .hint("use a smaller size or a simpler formula"));
     }
-    let secs = st.limits.deadline.as_secs_f64();
-    match rx.recv_timeout(st.limits.deadline) {
-        Ok(r) => r,
-        Err(_) => Err(ApiError::new(503, format!("the computation took longer than {secs} s and was abandoned"))
-            .hint("use a smaller size or a simpler formula")),
+    r
+}
+
+/// A scene load's diagnostics as the answer: 403 when the load failed because the scene named a file outside
+/// the served directories (the diagnostics name the path only), else as any scene error (422).
+fn scene_error(files: &ServedFiles) -> impl Fn(Diagnostics) -> ApiError + '_ {
+    move |ds| {
+        let mut e = ApiError::from(ds);
+        if files.refused() {
+            e.status = 403;
+            e.error.hints.push("lobe serve reads only files under the directories it was started with".to_string().into());
+        }
+        e
     }
 }
 
@@ -232,10 +266,11 @@ fn values(k: &Kernel, set: &[(String, f64)]) -> Result<Vec<f64>, ApiError> {
 
 /// Every render gets its own pool of one thread per core (`threads` ≠ 0 makes [`crate::render::render`] build
 /// one): on rayon's shared pool a page frame would queue behind every tile of a slow 2048² comparison. A pool
-/// costs two thread spawns (tens of µs); the image does not depend on the thread count.
-fn ropts() -> RenderOptions {
+/// costs two thread spawns (tens of µs); the image does not depend on the thread count. The job's token
+/// stops the render between tiles.
+fn ropts(cancel: &Cancel) -> RenderOptions {
     let cores = std::thread::available_parallelism().map_or(2, |n| n.get()).min(crate::render::MAX_THREADS);
-    RenderOptions { threads: cores, ..RenderOptions::default() }
+    RenderOptions { threads: cores, cancel: cancel.clone(), ..RenderOptions::default() }
 }
 
 fn png(img: &crate::base::image::Image) -> Result<Vec<u8>, ApiError> {
@@ -253,6 +288,7 @@ pub(crate) fn session(st: &State) -> Reply {
         "open": st.files.first(),
         "scene": scene,
         "roots": st.roots.dirs().iter().map(|d| d.display().to_string()).collect::<Vec<_>>(),
+        "jobs_running": st.jobs.load(Ordering::SeqCst),
         "limits": { "max_size": st.limits.max_size, "formula_bytes": st.limits.formula_bytes, "body_bytes": st.limits.body_bytes,
                     "deadline_s": st.limits.deadline.as_secs_f64() },
     }))
@@ -310,6 +346,7 @@ fn read_limited(p: &Path, max: u64) -> Result<Vec<u8>, ApiError> {
         ReadError::Io(e) => ApiError::new(404, format!("cannot read `{}`: {e}", p.display())),
         ReadError::NotRegular => ApiError::new(403, format!("`{}` is not a regular file", p.display())),
         ReadError::TooLarge => ApiError::new(413, format!("`{}` is larger than {} KiB", p.display(), max / 1024)),
+        ReadError::Refused(why) => ApiError::new(403, format!("`{}`: {why}", p.display())),
     })
 }
 
@@ -371,7 +408,7 @@ pub(crate) fn render(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
         check_cost(st, c.kernel(), (size * size) as f64, "this render")?;
         let g = st.geometry(size)?;
         let sc = g.with_materials(&set, Some((&name, &text)), &Live(st))?;
-        let (frame, stats) = crate::render::render(&sc, &ropts()).map_err(|e| ApiError::new(500, e))?;
+        let (frame, stats) = crate::render::render(&sc, &ropts(&st.cancel)).map_err(|e| ApiError::new(500, e))?;
         let bytes = png(&frame.image)?;
         Ok(Reply::bytes("image/png", bytes)
             .header("X-Lobe-Render-Ms", format!("{:.3}", t.elapsed().as_secs_f64() * 1e3))
@@ -391,7 +428,7 @@ pub(crate) fn compare(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
             check_cost(st, st.compiled(n, t)?.kernel(), (size * size) as f64, "this comparison")?;
         }
         let g = st.geometry(size)?;
-        let c = crate::render::compare::compare_in(&g, (&a.0, &a.1), (&b.0, &b.1), [[1.0; 3]; 2], &set, &Live(st), &ropts())?;
+        let c = crate::render::compare::compare_in(&g, (&a.0, &a.1), (&b.0, &b.1), [[1.0; 3]; 2], &set, &Live(st), &ropts(&st.cancel))?;
         let scale = c.metrics.max_gray_diff.max(1.0);
         let bytes = png(&crate::render::compare::side_by_side(&c.a.image, &c.b.image, scale))?;
         let metrics = serde_json::to_string(&c.metrics).map_err(|e| ApiError::new(500, e.to_string()))?;
@@ -442,7 +479,7 @@ pub(crate) fn analyze(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
             Ok(c) => out.coef = Some(c),
             Err(e) => out.coef_error = Some(e.message),
         }
-        match crate::numerics::energy::full_energy_for(k.as_ref(), k.used_inputs(), &params) {
+        match crate::numerics::energy::full_energy_cancellable(k.as_ref(), k.used_inputs(), &params, &st.cancel) {
             Ok(e) => {
                 out.albedo_max = Some(e.albedo_max);
                 out.theta_i_at_max_deg = Some(e.theta_i_at_max_deg);
@@ -455,7 +492,7 @@ pub(crate) fn analyze(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
             let rp = rk.default_params();
             let lobe = crate::numerics::choose_lobe_input(k.used_inputs()).0;
             let rlobe = crate::numerics::choose_lobe_input(rk.used_inputs()).0;
-            let opts = crate::numerics::accuracy::AccuracyOptions::default();
+            let opts = crate::numerics::accuracy::AccuracyOptions { cancel: st.cancel.clone(), ..Default::default() };
             let a = crate::numerics::accuracy::accuracy(k.as_ref(), &params, lobe, rk.as_ref(), &rp, rlobe, &opts)?;
             out.reference = Some(rk.formula.display_name().to_string());
             out.mean_abs_grid = Some(a.mean_abs_grid);
@@ -549,17 +586,20 @@ pub(crate) fn render_png(st: &Arc<State>, query: &str) -> Result<Reply, ApiError
         }
     }
     limited(st, move |st| {
-        // The scene's own size when none is given: read it with the geometry, then check the cap.
-        let g = scene::load_geometry(&path, size)?;
+        // The scene's own size when none is given: read it with the geometry, then check the cap. The scene
+        // and every file it names are read through the served-files policy.
+        let files = ServedFiles::new(&st.roots);
+        let g = scene::load_geometry(&path, size, &Files::new(files.clone())).map_err(scene_error(&files))?;
         let (w, h) = (g.scene.width, g.scene.height);
         if w > st.limits.max_size || h > st.limits.max_size {
             return Err(ApiError::bad(format!("the scene is {w}×{h}, over the server's {max}×{max}")).hint("pass a smaller size="));
         }
-        let opts = LoadOptions { size, set, formula_override: None };
+        let opts = LoadOptions { size, set, formula_override: None, files: Files::new(files.clone()) };
         // Through the accuracy pass and its decision cache, as `lobe render` compiles, so the bytes are the CLI's.
-        let accuracy = crate::numerics::pass_cache::command_pass(Options::default(), Default::default(), true).accuracy;
-        let sc = scene::load_scene(&path, &opts, &LobeCompiler { backend: Backend::Jit, math: crate::Mode::Precise, accuracy })?;
-        let (frame, _) = crate::render::render(&sc, &ropts()).map_err(|e| ApiError::new(500, e))?;
+        let accuracy = crate::numerics::pass_cache::command_pass_until(Options::default(), Default::default(), true, st.cancel.clone()).accuracy;
+        let sc = scene::load_scene(&path, &opts, &LobeCompiler { backend: Backend::Jit, math: crate::Mode::Precise, accuracy })
+            .map_err(scene_error(&files))?;
+        let (frame, _) = crate::render::render(&sc, &ropts(&st.cancel)).map_err(|e| ApiError::new(500, e))?;
         Ok(Reply::bytes("image/png", png(&frame.image)?))
     })
 }
@@ -575,28 +615,27 @@ mod tests {
     }
 
     #[test]
-    fn late_jobs_are_abandoned_and_slots_are_bounded() {
+    fn late_jobs_are_stopped_and_free_their_slots() {
         let st = state(50, 1);
-        let (release, wait) = std::sync::mpsc::channel::<()>();
-        // A job that outlives its deadline: 503, and its slot stays taken until it ends.
-        let e = limited(&st, move |_| {
-            let _ = wait.recv_timeout(Duration::from_secs(30));
-            Ok(())
+        // A job that polls its token until it trips: stopped at the deadline, 503, and its slot is free at once.
+        let t = std::time::Instant::now();
+        let e = limited(&st, |job| {
+            while job.cancel.check().is_ok() {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            Err::<(), _>(ApiError::new(500, "stopped"))
         })
         .unwrap_err();
         assert_eq!(e.status, 503);
-        assert!(e.error.message.contains("longer than"), "{}", e.error);
-        let busy = limited(&st, |_| Ok(())).unwrap_err();
-        assert!(busy.status == 503 && busy.error.message.contains("busy"), "{}", busy.error);
-        release.send(()).unwrap();
-        let t = std::time::Instant::now();
-        while st.jobs.load(Ordering::SeqCst) > 0 && t.elapsed() < Duration::from_secs(30) {
-            std::thread::sleep(Duration::from_millis(5));
-        }
-        assert_eq!(limited(&state(10_000, 1), |_| Ok(7)).unwrap(), 7);
+        assert!(e.error.message.contains("longer than") && e.error.message.contains("stopped"), "{}", e.error);
+        assert!(t.elapsed() < Duration::from_secs(20), "the job ran on past its deadline");
+        assert_eq!(st.jobs.load(Ordering::SeqCst), 0);
         assert_eq!(limited(&st, |_| Ok(8)).unwrap(), 8, "the slot is free again");
-        // A panicking job (the panic message below in the test output is expected) is a 500 and frees its slot.
+        // While a job runs, a second one is refused as busy.
         let st = state(30_000, 1);
+        let busy = limited(&st, |_| Ok(limited(&st, |_| Ok(())).unwrap_err())).unwrap();
+        assert!(busy.status == 503 && busy.error.message.contains("busy"), "{}", busy.error);
+        // A panicking job (the panic message below in the test output is expected) is a 500 and frees its slot.
         assert_eq!(limited(&st, |_| -> Result<(), ApiError> { panic!("expected panic in a test job") }).unwrap_err().status, 500);
         assert_eq!(limited(&st, |_| Ok(9)).unwrap(), 9);
     }

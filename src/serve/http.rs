@@ -1,31 +1,55 @@
-//! The HTTP edge of `lobe serve`: a small HTTP/1.1 server on std threads ([`listen`]), replies, JSON errors,
-//! query strings, and the one rule for which files a request may name ([`Roots`]). Nothing here knows about
-//! formulas or scenes.
+//! The HTTP edge of `lobe serve`: hyper's HTTP/1.1 server on a current-thread tokio runtime ([`listen`]),
+//! replies, JSON errors, query strings, and the one rule for which files a request may name ([`Roots`],
+//! [`ServedFiles`]). Nothing here knows about formulas or scenes.
 //!
-//! Why not a crate: tiny_http 0.12 (the first choice) cannot set `TCP_NODELAY` and writes a response's head
-//! and body separately, so every response whose body fits one segment waited for the browser's delayed ACK —
-//! measured 44–48 ms per request on loopback, the whole frame budget. This server writes each response with
-//! one `write_all` on a no-delay socket, which also removes four dependencies.
+//! Why async: with a thread per connection, 32 clients sending one byte every 10 s held every thread and
+//! locked everyone else out. Here an idle or trickling connection is a few kilobytes on one reactor thread;
+//! the handlers (all blocking: compiles, renders, file reads) run on tokio's blocking pool, at most
+//! [`MAX_BLOCKING`] at once, never on the reactor.
 //!
-//! Protocol subset: request line + headers (at most [`MAX_HEAD`] bytes), a `Content-Length` body (at most the
-//! caller's cap; chunked request bodies are refused with 411), keep-alive per HTTP/1.1 (`Connection: close`
-//! honoured, HTTP/1.0 closes). One thread per connection, at most [`MAX_CONNECTIONS`] at once (the rest get
-//! 503); idle or slow connections are closed after [`IDLE`].
+//! Starvation defences, each bounded:
+//! - every accepted socket gets `TCP_NODELAY` (a response must not wait for the browser's delayed ACK: with
+//!   tiny_http, which could not set it, that cost 44–48 ms per request on loopback);
+//! - the request head must arrive within [`HEAD_TIMEOUT`] of the connection becoming ready for one — hyper's
+//!   header read timer, which also runs while a keep-alive connection idles, so it is the idle timeout too;
+//!   the body within [`BODY_TIMEOUT`]; a client that trickles bytes is dropped;
+//! - at most [`PER_CLIENT`] connections per client address and [`MAX_CONNECTIONS`] in all. A new connection
+//!   is always accepted: over a cap, the oldest connection that is not inside a request (idle, or still
+//!   sending its head) is shed to make room, so slow clients cannot lock out a new one even when every client
+//!   is 127.0.0.1. Only when every connection is inside a request is the new one refused (503).
+//!
+//! Protocol subset: request bodies with `Content-Length` (at most the caller's cap, else 413 after draining a
+//! bounded amount so the client reads the answer; chunked bodies are refused with 411), keep-alive per
+//! HTTP/1.1. Build cost: tokio (rt, net, time), hyper (http1, server), hyper-util, http-body-util and the 7
+//! crates they add cost ~35 s of CPU in a clean release build, off its critical path (BENCHMARKS.md §11).
 
 use crate::base::diag::{Diagnostic, Plain};
-use std::io::{BufRead, BufReader, Read, Write};
-use std::net::{SocketAddr, TcpListener, TcpStream};
+use crate::base::source::{read_regular_file, FileAccess, ReadError};
+use bytes::Bytes;
+use http_body_util::{BodyExt, Full};
+use hyper::body::Incoming;
+use std::net::{IpAddr, SocketAddr};
 use std::path::{Component, Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 /// Largest request head (request line and headers).
 pub(crate) const MAX_HEAD: usize = 16 << 10;
-/// Connections served at once (a browser opens about six per host).
-pub(crate) const MAX_CONNECTIONS: usize = 32;
-/// How long a connection may sit idle, or take to send a request or read a response.
-pub(crate) const IDLE: Duration = Duration::from_secs(30);
+/// Connections open at once, over all clients.
+pub(crate) const MAX_CONNECTIONS: usize = 256;
+/// Connections open at once from one client address (a browser opens about six per host).
+pub(crate) const PER_CLIENT: usize = 32;
+/// Handlers running at once (the blocking pool's size; computations are capped lower, by `Limits::max_jobs`).
+pub(crate) const MAX_BLOCKING: usize = 32;
+/// How long a connection may take to send a request head, counted from when it is ready for one (so it is
+/// also how long a keep-alive connection may idle).
+pub(crate) const HEAD_TIMEOUT: Duration = Duration::from_secs(10);
+/// How long a request may take to send its body.
+pub(crate) const BODY_TIMEOUT: Duration = Duration::from_secs(10);
+/// What is read and discarded of an oversized body before answering 413, and for how long at most.
+const DRAIN_BYTES: usize = 8 << 20;
+const DRAIN_TIMEOUT: Duration = Duration::from_secs(1);
 
 /// A parsed request.
 #[derive(Debug)]
@@ -46,151 +70,170 @@ impl Request {
     }
 }
 
+/// What answers requests: called on the blocking pool.
+pub(crate) type Handler = Arc<dyn Fn(&Request) -> Reply + Send + Sync>;
+
 /// Listens on `addr` and answers every request with `handler` until the process ends. Returns the bound
-/// address and the accept thread.
-pub(crate) fn listen(
-    addr: SocketAddr,
-    body_cap: usize,
-    handler: Arc<dyn Fn(&Request) -> Reply + Send + Sync>,
-) -> std::io::Result<(SocketAddr, std::thread::JoinHandle<()>)> {
-    let listener = TcpListener::bind(addr)?;
+/// address and the server's thread (the tokio runtime's).
+pub(crate) fn listen(addr: SocketAddr, body_cap: usize, handler: Handler) -> std::io::Result<(SocketAddr, std::thread::JoinHandle<()>)> {
+    let listener = std::net::TcpListener::bind(addr)?;
+    listener.set_nonblocking(true)?;
     let bound = listener.local_addr()?;
-    let open = Arc::new(AtomicUsize::new(0));
-    let accept = std::thread::Builder::new().name("lobe-serve-accept".into()).spawn(move || {
-        for stream in listener.incoming() {
-            let Ok(mut stream) = stream else { continue };
-            if open.fetch_add(1, Ordering::SeqCst) >= MAX_CONNECTIONS {
-                open.fetch_sub(1, Ordering::SeqCst);
-                let busy = ApiError::new(503, "too many connections").hint("close other tabs of this page").reply();
-                let _ = write_reply(&mut stream, &busy, false);
-                continue;
-            }
-            let (open2, handler) = (open.clone(), handler.clone());
-            let spawned = std::thread::Builder::new().name("lobe-serve-conn".into()).spawn(move || {
-                serve_connection(stream, body_cap, handler.as_ref());
-                open2.fetch_sub(1, Ordering::SeqCst);
-            });
-            if spawned.is_err() {
-                open.fetch_sub(1, Ordering::SeqCst);
-            }
-        }
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_io()
+        .enable_time()
+        .max_blocking_threads(MAX_BLOCKING)
+        .thread_name("lobe-serve-work")
+        .build()?;
+    let thread = std::thread::Builder::new().name("lobe-serve".into()).spawn(move || {
+        rt.block_on(async move {
+            let Ok(listener) = tokio::net::TcpListener::from_std(listener) else { return };
+            accept_loop(listener, body_cap, handler).await
+        })
     })?;
-    Ok((bound, accept))
+    Ok((bound, thread))
 }
 
-fn serve_connection(stream: TcpStream, body_cap: usize, handler: &(dyn Fn(&Request) -> Reply + Send + Sync)) {
-    let _ = stream.set_nodelay(true);
-    let _ = stream.set_read_timeout(Some(IDLE));
-    let _ = stream.set_write_timeout(Some(IDLE));
-    let Ok(mut out) = stream.try_clone() else { return };
-    let mut input = BufReader::new(stream);
+/// One open connection as the caps see it.
+struct Slot {
+    id: u64,
+    ip: IpAddr,
+    /// Requests of this connection being answered now (a connection inside a request is never shed).
+    busy: Arc<AtomicUsize>,
+    task: Option<tokio::task::AbortHandle>,
+}
+
+/// The open connections, oldest first.
+#[derive(Default)]
+struct Table {
+    slots: Vec<Slot>,
+    next: u64,
+}
+
+impl Table {
+    /// Admits a connection from `ip`, shedding the oldest idle ones over the caps; `None` when every
+    /// connection over a cap is inside a request.
+    fn admit(&mut self, ip: IpAddr) -> Option<(u64, Arc<AtomicUsize>)> {
+        loop {
+            let from_ip = self.slots.iter().filter(|s| s.ip == ip).count();
+            let same_ip = from_ip >= PER_CLIENT;
+            if !same_ip && self.slots.len() < MAX_CONNECTIONS {
+                break;
+            }
+            let idle = self.slots.iter().position(|s| (!same_ip || s.ip == ip) && s.busy.load(Ordering::SeqCst) == 0)?;
+            let shed = self.slots.remove(idle);
+            if let Some(t) = shed.task {
+                t.abort();
+            }
+        }
+        self.next += 1;
+        let busy = Arc::new(AtomicUsize::new(0));
+        self.slots.push(Slot { id: self.next, ip, busy: busy.clone(), task: None });
+        Some((self.next, busy))
+    }
+
+    fn remove(&mut self, id: u64) {
+        self.slots.retain(|s| s.id != id);
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Takes a connection out of the table when its task ends (normally, or aborted when shed).
+struct Leave(Arc<Mutex<Table>>, u64);
+
+impl Drop for Leave {
+    fn drop(&mut self) {
+        lock(&self.0).remove(self.1);
+    }
+}
+
+async fn accept_loop(listener: tokio::net::TcpListener, body_cap: usize, handler: Handler) {
+    let table = Arc::new(Mutex::new(Table::default()));
     loop {
-        match read_request(&mut input, body_cap) {
-            Ok(None) => return,
-            Ok(Some((rq, keep))) => {
-                if write_reply(&mut out, &handler(&rq), keep).is_err() || !keep {
-                    return;
-                }
-            }
-            // A malformed or oversized request: answer, close our side, and drain (boundedly) what the client
-            // is still sending, so that closing does not reset the connection before it reads the answer.
-            Err(e) => {
-                let _ = write_reply(&mut out, &e.reply(), false);
-                let _ = out.shutdown(std::net::Shutdown::Write);
-                let _ = input.get_ref().set_read_timeout(Some(Duration::from_secs(1)));
-                let _ = std::io::copy(&mut input.take(8 << 20), &mut std::io::sink());
-                return;
-            }
-        }
-    }
-}
-
-/// One response in one write: status line, length, headers, body.
-fn write_reply(out: &mut TcpStream, r: &Reply, keep: bool) -> std::io::Result<()> {
-    let mut head = format!(
-        "HTTP/1.1 {} {}\r\nContent-Type: {}\r\nContent-Length: {}\r\nConnection: {}\r\n",
-        r.status,
-        reason(r.status),
-        r.content_type,
-        r.body.len(),
-        if keep { "keep-alive" } else { "close" }
-    );
-    for (k, v) in &r.headers {
-        // Header values are the server's own; a stray line break would split the response.
-        if !v.contains(['\r', '\n']) {
-            head.push_str(&format!("{k}: {v}\r\n"));
-        }
-    }
-    head.push_str("\r\n");
-    let mut bytes = head.into_bytes();
-    bytes.extend_from_slice(&r.body);
-    out.write_all(&bytes)?;
-    out.flush()
-}
-
-fn reason(status: u16) -> &'static str {
-    match status {
-        200 => "OK",
-        400 => "Bad Request",
-        403 => "Forbidden",
-        404 => "Not Found",
-        405 => "Method Not Allowed",
-        409 => "Conflict",
-        411 => "Length Required",
-        413 => "Payload Too Large",
-        422 => "Unprocessable Entity",
-        431 => "Request Header Fields Too Large",
-        500 => "Internal Server Error",
-        503 => "Service Unavailable",
-        _ => "",
-    }
-}
-
-/// Reads one request; `Ok(None)` when the client closed (or idled out) between requests. The flag says
-/// whether the connection stays open afterwards.
-pub(crate) fn read_request(input: &mut dyn BufRead, body_cap: usize) -> Result<Option<(Request, bool)>, ApiError> {
-    let mut head = Vec::new();
-    loop {
-        let before = head.len();
-        let n = input
-            .take((MAX_HEAD + 1 - head.len()) as u64)
-            .read_until(b'\n', &mut head)
-            .map_err(|_| ApiError::bad("the request could not be read"))?;
-        if n == 0 {
-            if head.is_empty() {
-                return Ok(None);
-            }
-            return Err(ApiError::bad("the connection closed inside the request head"));
-        }
-        if head.len() > MAX_HEAD {
-            return Err(ApiError::new(431, format!("the request head is larger than {} KiB", MAX_HEAD >> 10)));
-        }
-        let line = &head[before..];
-        if line == b"\r\n" || line == b"\n" {
-            if before == 0 {
-                head.clear(); // tolerate blank lines between requests
+        let (stream, peer) = match listener.accept().await {
+            Ok(c) => c,
+            // Out of file descriptors, say: wait for connections to close rather than spin.
+            Err(_) => {
+                tokio::time::sleep(Duration::from_millis(20)).await;
                 continue;
             }
-            break;
+        };
+        let _ = stream.set_nodelay(true);
+        let mut t = lock(&table);
+        let Some((id, busy)) = t.admit(peer.ip()) else {
+            drop(t);
+            tokio::spawn(refuse(stream));
+            continue;
+        };
+        let leave = Leave(table.clone(), id);
+        let task = tokio::spawn(connection(stream, busy, leave, body_cap, handler.clone()));
+        if let Some(s) = t.slots.iter_mut().find(|s| s.id == id) {
+            s.task = Some(task.abort_handle());
         }
     }
-    let text = String::from_utf8(head).map_err(|_| ApiError::bad("the request head is not UTF-8"))?;
-    let mut lines = text.lines();
-    let first = lines.next().unwrap_or("");
-    let mut parts = first.split(' ');
-    let (Some(method), Some(target), Some(version), None) = (parts.next(), parts.next(), parts.next(), parts.next()) else {
-        return Err(ApiError::bad(format!("not an HTTP request line: `{}`", first.chars().take(80).collect::<String>())));
+}
+
+/// Every connection is inside a request: its first request is answered 503, then it closes.
+async fn refuse(stream: tokio::net::TcpStream) {
+    let service = hyper::service::service_fn(|_| async {
+        let r = ApiError::new(503, "too many connections").hint("close other tabs of this page").reply();
+        Ok::<_, std::convert::Infallible>(response(r))
+    });
+    let mut b = hyper::server::conn::http1::Builder::new();
+    b.timer(hyper_util::rt::TokioTimer::new()).header_read_timeout(DRAIN_TIMEOUT).keep_alive(false);
+    let _ = tokio::time::timeout(2 * DRAIN_TIMEOUT, b.serve_connection(hyper_util::rt::TokioIo::new(stream), service)).await;
+}
+
+async fn connection(stream: tokio::net::TcpStream, busy: Arc<AtomicUsize>, leave: Leave, body_cap: usize, handler: Handler) {
+    let _leave = leave;
+    let service = hyper::service::service_fn(move |rq: hyper::Request<Incoming>| {
+        let (busy, handler) = (busy.clone(), handler.clone());
+        async move { Ok::<_, std::convert::Infallible>(answer(rq, &busy, body_cap, handler).await) }
+    });
+    let mut b = hyper::server::conn::http1::Builder::new();
+    b.timer(hyper_util::rt::TokioTimer::new()).header_read_timeout(HEAD_TIMEOUT).max_buf_size(MAX_HEAD.max(8192)).keep_alive(true);
+    let _ = b.serve_connection(hyper_util::rt::TokioIo::new(stream), service).await;
+}
+
+/// Counts a request as being answered while it lives.
+struct Busy(Arc<AtomicUsize>);
+
+impl Drop for Busy {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+async fn answer(rq: hyper::Request<Incoming>, busy: &Arc<AtomicUsize>, body_cap: usize, handler: Handler) -> hyper::Response<Full<Bytes>> {
+    busy.fetch_add(1, Ordering::SeqCst);
+    let _busy = Busy(busy.clone());
+    let rq = match read_request(rq, body_cap).await {
+        Ok(rq) => rq,
+        // A refused request ends its connection: what the client sends next is not known to be a request.
+        Err(e) => return response(e.reply().header("Connection", "close".into())),
     };
-    if !version.starts_with("HTTP/1.") {
-        return Err(ApiError::bad(format!("unsupported protocol `{version}`")));
-    }
+    let reply = tokio::task::spawn_blocking(move || handler(&rq)).await;
+    response(reply.unwrap_or_else(|_| ApiError::new(500, "internal error while answering the request").reply()))
+}
+
+/// The head as a [`Request`], and the body (at most `body_cap` bytes, within [`BODY_TIMEOUT`]).
+async fn read_request(rq: hyper::Request<Incoming>, body_cap: usize) -> Result<Request, ApiError> {
+    let (parts, mut body) = rq.into_parts();
     let mut headers = vec![];
-    for l in lines.filter(|l| !l.is_empty()) {
-        let (k, v) = l.split_once(':').ok_or_else(|| ApiError::bad(format!("malformed header line `{l}`")))?;
-        headers.push((k.trim().to_string(), v.trim().to_string()));
+    for (k, v) in &parts.headers {
+        let v = v.to_str().map_err(|_| ApiError::bad(format!("the `{k}` header is not ASCII text")))?;
+        headers.push((k.as_str().to_string(), v.to_string()));
     }
-    let (path, query) = target.split_once('?').unwrap_or((target, ""));
-    let mut rq = Request { method: method.to_string(), path: path.to_string(), query: query.to_string(), headers, body: vec![] };
+    let mut rq = Request {
+        method: parts.method.as_str().to_string(),
+        path: parts.uri.path().to_string(),
+        query: parts.uri.query().unwrap_or("").to_string(),
+        headers,
+        body: vec![],
+    };
     if rq.header("Transfer-Encoding").is_some() {
         return Err(ApiError::new(411, "chunked request bodies are not accepted").hint("send Content-Length"));
     }
@@ -198,19 +241,50 @@ pub(crate) fn read_request(input: &mut dyn BufRead, body_cap: usize) -> Result<O
         None => 0,
         Some(v) => v.parse::<usize>().map_err(|_| ApiError::bad(format!("bad Content-Length `{v}`")))?,
     };
-    if len > body_cap {
-        return Err(ApiError::new(413, format!("the request body is larger than {} KiB", body_cap / 1024))
-            .hint("formulas are a few lines; the server caps request bodies"));
-    }
-    rq.body = vec![0; len];
-    input.read_exact(&mut rq.body).map_err(|_| ApiError::bad("the request body ended early"))?;
-    let connection = rq.header("Connection").map(str::to_ascii_lowercase);
-    let keep = match connection.as_deref() {
-        Some("close") => false,
-        Some("keep-alive") => true,
-        _ => version == "HTTP/1.1",
+    let too_large = || {
+        ApiError::new(413, format!("the request body is larger than {} KiB", body_cap / 1024))
+            .hint("formulas are a few lines; the server caps request bodies")
     };
-    Ok(Some((rq, keep)))
+    let mut seen = 0usize;
+    let out = &mut rq.body;
+    let read = tokio::time::timeout(if len > body_cap { DRAIN_TIMEOUT } else { BODY_TIMEOUT }, async {
+        while let Some(frame) = body.frame().await {
+            let frame = frame.map_err(|_| ApiError::bad("the request body ended early"))?;
+            if let Some(d) = frame.data_ref() {
+                seen += d.len();
+                if seen <= body_cap {
+                    out.extend_from_slice(d);
+                } else if seen > DRAIN_BYTES {
+                    break;
+                }
+            }
+        }
+        Ok(())
+    })
+    .await;
+    if seen > body_cap || len > body_cap {
+        return Err(too_large());
+    }
+    match read {
+        Err(_) => Err(ApiError::new(408, format!("the request body did not arrive within {} s", BODY_TIMEOUT.as_secs()))),
+        Ok(r) => r.map(|()| rq),
+    }
+}
+
+/// A [`Reply`] as hyper's response (its headers are the server's own; one that is not a valid header value
+/// is left out rather than split the response).
+fn response(r: Reply) -> hyper::Response<Full<Bytes>> {
+    let mut b = hyper::Response::builder().status(r.status).header("Content-Type", r.content_type);
+    for (k, v) in &r.headers {
+        if let Ok(v) = hyper::header::HeaderValue::from_str(v) {
+            b = b.header(*k, v);
+        }
+    }
+    b.body(Full::new(Bytes::from(r.body))).unwrap_or_else(|_| {
+        let mut fallback = hyper::Response::new(Full::new(Bytes::from_static(br#"{"error":"internal error: bad response"}"#)));
+        *fallback.status_mut() = hyper::StatusCode::INTERNAL_SERVER_ERROR;
+        fallback
+    })
 }
 
 /// A response: status, content type, extra headers, body.
@@ -369,14 +443,52 @@ impl Roots {
         if p.components().any(|c| c == Component::ParentDir) {
             return Err(ApiError::bad(format!("`{requested}`: `..` is not allowed in paths")).hint("name files under the served directories"));
         }
+        self.contains(p)
+    }
+
+    /// The canonical path of `p` if it exists and lies under a served directory once `..` and symbolic links
+    /// are resolved (404 if it does not exist, 403 outside). For paths inside files (a scene's `../brdfs/…`).
+    pub(crate) fn contains(&self, p: &Path) -> Result<PathBuf, ApiError> {
         let c = std::fs::canonicalize(p).map_err(|e| {
-            ApiError::new(404, format!("`{requested}`: {e}")).hint("the file list on the page shows what is served")
+            ApiError::new(404, format!("`{}`: {e}", p.display())).hint("the file list on the page shows what is served")
         })?;
         if !self.dirs.iter().any(|d| c.starts_with(d)) {
-            return Err(ApiError::new(403, format!("`{requested}` is outside the served directories"))
+            return Err(ApiError::new(403, format!("`{}` is outside the served directories", p.display()))
                 .hint("lobe serve reads and writes only under the directories it was started with"));
         }
         Ok(c)
+    }
+}
+
+/// The server's [`FileAccess`] policy for everything a scene names: regular files under the [`Roots`] only.
+/// It remembers whether it refused a path, so that a load that failed for that reason is answered 403 (its
+/// diagnostics name the path and never show the refused file's content, which is never opened).
+pub(crate) struct ServedFiles {
+    roots: Roots,
+    refused: AtomicBool,
+}
+
+impl ServedFiles {
+    pub(crate) fn new(roots: &Roots) -> Arc<ServedFiles> {
+        Arc::new(ServedFiles { roots: roots.clone(), refused: AtomicBool::new(false) })
+    }
+
+    /// Whether a path was refused for lying outside the served directories.
+    pub(crate) fn refused(&self) -> bool {
+        self.refused.load(Ordering::SeqCst)
+    }
+}
+
+impl FileAccess for ServedFiles {
+    fn read(&self, path: &Path, max: u64) -> Result<Vec<u8>, ReadError> {
+        let c = self.roots.contains(path).map_err(|e| {
+            if e.status == 404 {
+                return ReadError::Io(std::io::Error::from(std::io::ErrorKind::NotFound));
+            }
+            self.refused.store(true, Ordering::SeqCst);
+            ReadError::Refused("outside the directories lobe serve was started with (name its directory there to serve it)".into())
+        })?;
+        read_regular_file(&c, max)
     }
 }
 
@@ -395,23 +507,25 @@ mod tests {
         assert!(query_pairs("a=%ff").is_err());
     }
 
-    fn parse(raw: &[u8], cap: usize) -> Result<Option<(Request, bool)>, ApiError> {
-        read_request(&mut std::io::BufReader::new(raw), cap)
-    }
-
     #[test]
-    fn requests_parse_and_are_bounded() {
-        let (rq, keep) = parse(b"POST /api/x?a=1 HTTP/1.1\r\nHost: h\r\nContent-Length: 3\r\n\r\nabcNEXT", 3).unwrap().unwrap();
-        assert_eq!((rq.method.as_str(), rq.path.as_str(), rq.query.as_str(), rq.body.as_slice(), keep), ("POST", "/api/x", "a=1", &b"abc"[..], true));
-        assert_eq!(rq.header("host"), Some("h"));
-        assert!(!parse(b"GET / HTTP/1.0\r\n\r\n", 0).unwrap().unwrap().1);
-        assert!(!parse(b"GET / HTTP/1.1\r\nConnection: close\r\n\r\n", 0).unwrap().unwrap().1);
-        assert!(parse(b"", 0).unwrap().is_none());
-        assert_eq!(parse(b"POST / HTTP/1.1\r\nContent-Length: 4\r\n\r\nabcd", 3).unwrap_err().status, 413);
-        assert_eq!(parse(b"POST / HTTP/1.1\r\nTransfer-Encoding: chunked\r\n\r\n", 3).unwrap_err().status, 411);
-        assert_eq!(parse(b"POST / HTTP/1.1\r\nContent-Length: 9\r\n\r\nab", 30).unwrap_err().status, 400);
-        assert_eq!(parse(b"garbage\r\n\r\n", 0).unwrap_err().status, 400);
-        let long = format!("GET / HTTP/1.1\r\nX: {}\r\n\r\n", "a".repeat(MAX_HEAD));
-        assert_eq!(parse(long.as_bytes(), 0).unwrap_err().status, 431);
+    fn over_a_cap_the_oldest_idle_connection_is_shed() {
+        let (a, b): (IpAddr, IpAddr) = ("127.0.0.1".parse().unwrap(), "127.0.0.2".parse().unwrap());
+        let mut t = Table::default();
+        let first = t.admit(b).unwrap();
+        first.1.fetch_add(1, Ordering::SeqCst); // inside a request: never shed
+        let mut ids: Vec<u64> = (0..PER_CLIENT).map(|_| t.admit(a).unwrap().0).collect();
+        assert_eq!(t.slots.len(), PER_CLIENT + 1);
+        // One more from `a`: its oldest idle connection goes, the other client's stays.
+        let (new, _) = t.admit(a).unwrap();
+        assert!(!t.slots.iter().any(|s| s.id == ids[0]) && t.slots.iter().any(|s| s.id == first.0 && s.id != new));
+        ids.remove(0);
+        for s in &t.slots {
+            if s.ip == a {
+                s.busy.fetch_add(1, Ordering::SeqCst);
+            }
+        }
+        assert!(t.admit(a).is_none(), "every connection of `a` is inside a request: refused");
+        t.remove(ids[0]);
+        assert!(t.admit(a).is_some());
     }
 }

@@ -3,10 +3,10 @@
 //! the difference heat map and the papers' numbers, and save the formula back to its file.
 //!
 //! Design:
-//! - **HTTP**: a small HTTP/1.1 server on std threads ([`http::listen`]; no dependency) rather than axum +
-//!   tokio (~40 crates) or tiny_http (whose unconfigurable Nagle delay cost 44 ms per response, see
-//!   [`http`]): the server handles one person's page on loopback, so blocking I/O with a thread per
-//!   connection is enough, and a slow request holds its own connection while the others keep being served.
+//! - **HTTP**: hyper's HTTP/1.1 server on a current-thread tokio runtime ([`http::listen`]), the handlers on
+//!   tokio's bounded blocking pool: an idle or trickling connection costs no thread, timeouts drop slow
+//!   clients, and over the connection caps the oldest idle connection is shed, so a new client is always
+//!   served (see [`http`]; hyper rather than axum: the routing is one `match`, and axum adds tower's crates).
 //! - **Page**: `assets/serve/{index.html,app.js,app.css}`, plain JS, compiled in ([`page`]); no CDN.
 //! - **Endpoints** ([`api`]): `/api/session`, `/api/file`, `/api/compile`, `/api/render`, `/api/compare`,
 //!   `/api/plot`, `/api/analyze`, `/api/save`, and the scriptable `GET /render.png?file=SCENE&set=n=50&size=256`,
@@ -14,10 +14,15 @@
 //!   with file/line/col, as [`crate::Diagnostics::to_json`]), never a panic (a handler that panics anyway is
 //!   caught and answered with 500).
 //! - **Limits** ([`Limits`]): request bodies, formula size, image side, an estimated cost budget (IR nodes ×
-//!   evaluations) checked before work starts, a per-request deadline, and a cap on computations in flight.
-//! - **Files**: only under the directories the server was started with ([`http::Roots`]: no `..`, symbolic
-//!   links resolved before the check); saving is atomic ([`crate::base::output::write_atomic`]), `.brdf`
-//!   only, and refused with 409 when the file changed on disk since the page loaded it.
+//!   evaluations) checked before work starts, a per-request deadline at which the computation is stopped
+//!   ([`crate::base::cancel`], polled by the renderer and the numerics; [`api::limited`]), and a cap on
+//!   computations in flight.
+//! - **Files**: only regular files under the directories the server was started with — the formula files'
+//!   and the scene's ([`http::Roots`]: no `..` in a request, symbolic links resolved before the check;
+//!   FIFOs and devices refused without blocking). Everything a scene names (meshes, formula files, measured
+//!   tables) is read through the same rule ([`http::ServedFiles`], the scene loader's file-access policy);
+//!   a file outside is 403. Saving is atomic ([`crate::base::output::write_atomic`]), `.brdf` only, and
+//!   refused with 409 when the file changed on disk since the page loaded it.
 //! - **Cross-site requests**: POSTs must carry the `X-Lobe-Client` header (a page from another origin cannot
 //!   send it without a CORS preflight, which the server never approves), and on loopback the `Host` header
 //!   must name a loopback host (no DNS rebinding).
@@ -45,9 +50,9 @@ pub struct Limits {
     pub formula_bytes: usize,
     /// Largest image side.
     pub max_size: usize,
-    /// Longest a request waits for its computation.
+    /// Longest a computation runs: then it is stopped and the request answered 503.
     pub deadline: Duration,
-    /// Computations running at once (timed-out ones count until they finish).
+    /// Computations running at once (a stopped one counts until it has stopped, milliseconds after its deadline).
     pub max_jobs: usize,
     /// Largest estimated cost, in IR nodes × kernel evaluations (~1 ns each on the JIT).
     pub cost_budget: f64,
@@ -69,7 +74,8 @@ impl Default for Limits {
 /// What to serve.
 #[derive(Clone, Debug, Default)]
 pub struct Config {
-    /// Formula files and directories; their directories are the served ones (the current directory if empty).
+    /// Formula files and directories; their directories are the served ones (the current directory if empty),
+    /// and the scene's directory.
     pub paths: Vec<PathBuf>,
     /// The scene page renders use (default: the built-in paper sphere).
     pub scene: Option<PathBuf>,
@@ -120,16 +126,21 @@ pub fn start(cfg: Config) -> Result<Server, StartError> {
     if dirs.is_empty() {
         dirs.push(".".into());
     }
-    let roots = Roots::new(&dirs)?;
     let scene = match &cfg.scene {
         Some(s) => {
             let c = std::fs::canonicalize(s).map_err(|e| format!("cannot read scene `{}`: {e}", s.display()))?;
-            // Fail now, with the scene's own diagnostics, rather than on the page's first frame.
-            crate::render::scene::load_geometry(&c, None).map_err(StartError::Scene)?;
+            dirs.extend(c.parent().map(PathBuf::from));
             Some(c)
         }
         None => None,
     };
+    let roots = Roots::new(&dirs)?;
+    if let Some(c) = &scene {
+        // Fail now, with the scene's own diagnostics, rather than on the page's first frame; read as the page
+        // will read it.
+        let files = crate::base::source::Files::new(http::ServedFiles::new(&roots));
+        crate::render::scene::load_geometry(c, None, &files).map_err(StartError::Scene)?;
+    }
     let ip = cfg.bind.unwrap_or(std::net::IpAddr::V4(std::net::Ipv4Addr::LOCALHOST));
     let state = Arc::new(api::State::new(roots, scene, files, cfg.limits.clone()));
     let bound = Arc::new(std::sync::OnceLock::<SocketAddr>::new());

@@ -484,7 +484,7 @@ fn sweep_matches_rendering_each_n_separately() {
     assert_eq!(rows.len(), ns.len());
     for (row, set) in rows.iter().zip(&sets) {
         let alone = |(file, src): (&str, &str)| {
-            let opts = LoadOptions { size: job.size, set: set.clone(), formula_override: Some((file.into(), src.into())) };
+            let opts = LoadOptions { size: job.size, set: set.clone(), formula_override: Some((file.into(), src.into())), ..LoadOptions::default() };
             let s = scene::parse_scene("paper", &scene_src, &base, &opts, &JIT).unwrap();
             r::render(&s, &ropts).unwrap()
         };
@@ -504,7 +504,7 @@ fn sweep_matches_rendering_each_n_separately() {
 /// full load does.
 #[test]
 fn geometry_is_loaded_once_and_shared_by_its_scenes() {
-    let g = scene::load_geometry(&scene_file("torus.toml"), Some((90, 70))).unwrap_or_else(|d| panic!("{}", d.render(false)));
+    let g = scene::load_geometry(&scene_file("torus.toml"), Some((90, 70)), &Default::default()).unwrap_or_else(|d| panic!("{}", d.render(false)));
     assert_eq!((g.scene.width, g.scene.height), (90, 70));
     let s1 = g.with_materials(&[], None, &JIT).unwrap();
     let s2 = g.with_materials(&[("n".into(), 7.0)], None, &JIT).unwrap();
@@ -530,7 +530,7 @@ fn staged_loading_keeps_the_diagnostics() {
     let full = scene_err(&src);
     let (cam, mat, obj) = (full.find("[camera]").unwrap(), full.find("no parameter `m`").unwrap(), full.find("unknown material `mm`").unwrap());
     assert!(cam < mat && mat < obj, "{full}");
-    let geo = match scene::parse_geometry("bad.toml", &src, &scene_file(""), None) {
+    let geo = match scene::parse_geometry("bad.toml", &src, &scene_file(""), None, &Default::default()) {
         Ok(_) => panic!("accepted"),
         Err(d) => d.render(false),
     };

@@ -118,6 +118,8 @@ pub(super) struct SceneText<'a> {
     pub name: &'a str,
     pub src: &'a str,
     pub base: &'a Path,
+    /// What the formula files and measured tables are read through.
+    pub files: &'a crate::base::source::Files,
 }
 
 /// What to compile: `set` applies to every material whose formula declares the name (an error if none does);
@@ -200,7 +202,14 @@ fn check_weights(mname: &str, m: &Spanned<MaterialDef>) -> Result<f64, MatError>
 /// its three channels are the evaluators, shaded by the renderer's Rust-side lookup. A table has no
 /// parameters, normalisation, cut-off or math mode: the scene keys for them are refused, except that the
 /// formula-replacing run (`choice.formula`) ignores `params` as it ignores the ones a formula does not declare.
-fn measured_material(mname: &str, m: &Spanned<MaterialDef>, path: &str, span: std::ops::Range<usize>, replacing: bool) -> Result<Material, MatError> {
+fn measured_material(
+    at: &SceneText,
+    mname: &str,
+    m: &Spanned<MaterialDef>,
+    path: &str,
+    span: std::ops::Range<usize>,
+    replacing: bool,
+) -> Result<Material, MatError> {
     let d = m.get_ref();
     let refuse = |key: &str| here(m.span(), format!("materials.{mname}.{key}: a measured material (`{path}`) has no {key}"), "this material");
     if let Some((k, _)) = d.params.iter().next().filter(|_| !replacing) {
@@ -216,7 +225,7 @@ fn measured_material(mname: &str, m: &Spanned<MaterialDef>, path: &str, span: st
         return Err(refuse("math"));
     }
     let angle = check_weights(mname, m)?;
-    let table = crate::measured::Measured::read(path).map_err(|mut e| {
+    let table = crate::measured::Measured::read_through(path, at.files).map_err(|mut e| {
         e.message = format!("materials.{mname}.brdf: {}", e.message);
         MatError::Scene(e.at(span_of(span), "this measured file (relative to the scene file)"))
     })?;
@@ -256,7 +265,7 @@ fn build_material(
         _ => None,
     };
     if let Some((path, span)) = measured {
-        return measured_material(mname, m, &path, span, choice.formula.is_some());
+        return measured_material(at, mname, m, &path, span, choice.formula.is_some());
     }
     // Where the formula comes from, and the scene span to blame.
     let (file, src, key_span) = if let Some((f, s)) = choice.formula {
@@ -266,8 +275,8 @@ fn build_material(
             (Some(p), None) => {
                 let path: PathBuf = at.base.join(p.get_ref());
                 let file = path.display().to_string();
-                let src = match crate::base::source::read_source(&file) {
-                    Ok((_, s)) => s,
+                let src = match at.files.read_formula(&file) {
+                    Ok(s) => s,
                     Err(mut d) => {
                         d.message = format!("materials.{mname}.brdf: {}", d.message);
                         return Err(MatError::Scene(d.at(span_of(p.span()), "this path (relative to the scene file)")));

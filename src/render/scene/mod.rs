@@ -62,6 +62,12 @@
 //! material errors, in that order, exactly as the single pass this replaced did. For that, stage 1 keeps its
 //! errors inside the [`Geometry`] for stage 2 to report around the material errors; [`parse_geometry`] on its
 //! own reports them at once and hands out only error-free geometry.
+//!
+//! # Files
+//! The scene file and everything it names (meshes, formula files, measured tables) are read through one
+//! [`Files`] policy: [`LoadOptions::files`] for a full load, the argument of [`load_geometry`] /
+//! [`parse_geometry`] for stage 1, kept in the [`Geometry`] for stage 2. The commands pass the default (any
+//! regular file); `lobe serve` passes its served directories, so the loader itself has no server case.
 
 mod material;
 mod schema;
@@ -72,6 +78,7 @@ pub use material::{compile_channels, BrdfCompiler, CompiledBrdf, LobeCompiler};
 use super::camera::Camera;
 use super::{Light, LightKind, Object, Scene, MAX_AA, MAX_SIZE};
 use crate::base::diag::{Diagnostic, Diagnostics};
+use crate::base::source::Files;
 use crate::base::span::Span;
 use glam::DVec3;
 use schema::{is_colour, LightType, MaterialDef, SceneFile, V3};
@@ -94,6 +101,8 @@ pub struct LoadOptions {
     /// Replace every material's formula by this (file name, source); ka/kd/ks, colours and `normalize` stay.
     /// Scene `params` the replacement does not declare are ignored. Used by `lobe compare`.
     pub formula_override: Option<(String, String)>,
+    /// What the scene file and every file it names are read through (default: any regular file).
+    pub files: Files,
 }
 
 /// A scene file parsed and checked, everything but the compiled materials: stage 1 of loading (see the module
@@ -109,6 +118,8 @@ pub struct Geometry {
     src: String,
     base: PathBuf,
     materials: BTreeMap<String, Spanned<MaterialDef>>,
+    /// The file-access policy the geometry was loaded with; stage 2 reads the formula files through it too.
+    files: Files,
     /// Errors found in stage 1 that a full load reports around the material errors: size, camera and lights
     /// before them, objects after. Always empty in a geometry handed out by [`parse_geometry`].
     deferred: [Vec<Diagnostic>; 2],
@@ -126,7 +137,7 @@ impl Geometry {
     pub fn with_materials(&self, set: &[(String, f64)], formula: Option<(&str, &str)>, compiler: &dyn BrdfCompiler) -> Result<Scene, Diagnostics> {
         let mut ds = Diagnostics::new(self.name.as_str(), self.src.as_str());
         ds.items.extend(self.deferred[0].iter().cloned());
-        let at = material::SceneText { name: &self.name, src: &self.src, base: &self.base };
+        let at = material::SceneText { name: &self.name, src: &self.src, base: &self.base, files: &self.files };
         let materials = material::build_all(&at, &self.materials, &material::Choice { set, formula }, compiler, &mut ds)?;
         ds.items.extend(self.deferred[1].iter().cloned());
         if ds.has_errors() {
@@ -161,25 +172,26 @@ fn span_of(r: std::ops::Range<usize>) -> Span {
 
 /// Loads a scene file (both stages). Paths inside it are relative to its directory.
 pub fn load_scene(path: &Path, opts: &LoadOptions, compiler: &dyn BrdfCompiler) -> Result<Scene, Diagnostics> {
-    let (name, src, base) = read_scene(path)?;
+    let (name, src, base) = read_scene(path, &opts.files)?;
     parse_scene(&name, &src, &base, opts, compiler)
 }
 
 /// Parses scene text (both stages); `base` is the directory relative paths are resolved against.
 pub fn parse_scene(name: &str, src: &str, base: &Path, opts: &LoadOptions, compiler: &dyn BrdfCompiler) -> Result<Scene, Diagnostics> {
     let formula = opts.formula_override.as_ref().map(|(f, s)| (f.as_str(), s.as_str()));
-    check(name, src, base, opts.size)?.with_materials(&opts.set, formula, compiler)
+    check(name, src, base, opts.size, &opts.files)?.with_materials(&opts.set, formula, compiler)
 }
 
-/// Loads a scene file's geometry (stage 1); `size` replaces the file's image size.
-pub fn load_geometry(path: &Path, size: Option<(usize, usize)>) -> Result<Geometry, Diagnostics> {
-    let (name, src, base) = read_scene(path)?;
-    parse_geometry(&name, &src, &base, size)
+/// Loads a scene file's geometry (stage 1); `size` replaces the file's image size. The scene and every file it
+/// names, now or in stage 2, are read through `files`.
+pub fn load_geometry(path: &Path, size: Option<(usize, usize)>, files: &Files) -> Result<Geometry, Diagnostics> {
+    let (name, src, base) = read_scene(path, files)?;
+    parse_geometry(&name, &src, &base, size, files)
 }
 
 /// Parses scene text into its geometry (stage 1), reporting every error stage 1 finds.
-pub fn parse_geometry(name: &str, src: &str, base: &Path, size: Option<(usize, usize)>) -> Result<Geometry, Diagnostics> {
-    let mut g = check(name, src, base, size)?;
+pub fn parse_geometry(name: &str, src: &str, base: &Path, size: Option<(usize, usize)>, files: &Files) -> Result<Geometry, Diagnostics> {
+    let mut g = check(name, src, base, size, files)?;
     if g.deferred.iter().any(|d| !d.is_empty()) {
         let mut ds = Diagnostics::new(name, src);
         ds.items = std::mem::take(&mut g.deferred).concat();
@@ -192,22 +204,23 @@ pub fn parse_geometry(name: &str, src: &str, base: &Path, size: Option<(usize, u
 /// other than unparsable TOML are kept and reported by `with_materials` together with the material errors,
 /// so the diagnostics are exactly those of [`parse_scene`].
 pub(in crate::render) fn parse_geometry_deferred(name: &str, src: &str, base: &Path, size: Option<(usize, usize)>) -> Result<Geometry, Diagnostics> {
-    check(name, src, base, size)
+    check(name, src, base, size, &Files::any())
 }
 
 /// Largest scene file read: a scene is a page of TOML (meshes live in their own files).
 pub(crate) const MAX_SCENE_BYTES: u64 = 4 << 20;
 
-fn read_scene(path: &Path) -> Result<(String, String, PathBuf), Diagnostics> {
-    use crate::base::source::{read_regular_file, ReadError};
+fn read_scene(path: &Path, files: &Files) -> Result<(String, String, PathBuf), Diagnostics> {
+    use crate::base::source::ReadError;
     let name = path.display().to_string();
     let fail = |d: Diagnostic| Diagnostics::single(name.clone(), d);
-    let bytes = read_regular_file(path, MAX_SCENE_BYTES).map_err(|e| {
+    let bytes = files.read(path, MAX_SCENE_BYTES).map_err(|e| {
         fail(match e {
             ReadError::Io(e) => {
                 Diagnostic::error(format!("cannot read scene `{name}`: {e}")).hint("check the path; examples are in examples/scenes/")
             }
             ReadError::NotRegular => Diagnostic::error(format!("scene `{name}` is not a regular file")).hint("a scene is a TOML file"),
+            ReadError::Refused(why) => Diagnostic::error(format!("cannot read scene `{name}`: {why}")),
             ReadError::TooLarge => Diagnostic::error(format!("scene `{name}` is larger than {} MiB", MAX_SCENE_BYTES >> 20))
                 .hint("a scene is a page of TOML; put large meshes in .obj files referenced by `path`"),
         })
@@ -220,7 +233,7 @@ fn read_scene(path: &Path) -> Result<(String, String, PathBuf), Diagnostics> {
 }
 
 /// Stage 1. Fails only on TOML that does not fit the schema; every other error is kept in `deferred`.
-fn check(name: &str, src: &str, base: &Path, size: Option<(usize, usize)>) -> Result<Geometry, Diagnostics> {
+fn check(name: &str, src: &str, base: &Path, size: Option<(usize, usize)>, files: &Files) -> Result<Geometry, Diagnostics> {
     let file: SceneFile = match toml::from_str(src) {
         Ok(f) => f,
         Err(e) => {
@@ -344,7 +357,7 @@ fn check(name: &str, src: &str, base: &Path, size: Option<(usize, usize)>) -> Re
             after.push(diag);
             continue;
         };
-        match shapes::build_mesh(base, i, d) {
+        match shapes::build_mesh(base, files, i, d) {
             Ok(mesh) => objects.push(Object { mesh: Arc::new(mesh), material: mi, cull_backfaces: shapes::culls(d) }),
             Err((span, msg, label)) => err(&mut after, span, msg, &label),
         }
@@ -355,6 +368,7 @@ fn check(name: &str, src: &str, base: &Path, size: Option<(usize, usize)>) -> Re
         src: src.to_string(),
         base: base.to_path_buf(),
         materials: file.materials,
+        files: files.clone(),
         deferred: [before, after],
     })
 }

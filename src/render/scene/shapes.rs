@@ -12,7 +12,7 @@ use std::path::Path;
 pub(super) type MeshErr = (std::ops::Range<usize>, String, String);
 
 /// Builds object number `i`; relative mesh paths are resolved against `base`.
-pub(super) fn build_mesh(base: &Path, i: usize, d: &ObjectDef) -> Result<Mesh, MeshErr> {
+pub(super) fn build_mesh(base: &Path, files: &crate::base::source::Files, i: usize, d: &ObjectDef) -> Result<Mesh, MeshErr> {
     let shape = *d.shape.get_ref();
     let sspan = d.shape.span();
     let bad = |msg: String| (sspan.clone(), format!("object[{i}]: {msg}"), format!("shape = {shape:?}").to_lowercase());
@@ -61,7 +61,7 @@ pub(super) fn build_mesh(base: &Path, i: usize, d: &ObjectDef) -> Result<Mesh, M
                 return Err(bad("a mesh needs `path = \"file.obj\"` (relative to the scene file)".into()));
             };
             let full = base.join(p.get_ref());
-            mesh::load_obj(&full).map_err(|e| {
+            mesh::load_obj_through(&full, files).map_err(|e| {
                 let at = match e.line {
                     Some(l) => format!("{}:{l}: ", full.display()),
                     None => format!("{}: ", full.display()),
