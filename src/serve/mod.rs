@@ -9,10 +9,11 @@
 //!   connection is enough, and a slow request holds its own connection while the others keep being served.
 //! - **Page**: `assets/serve/{index.html,app.js,app.css}`, plain JS, compiled in ([`page`]); no CDN.
 //! - **Endpoints** ([`api`]): `/api/session`, `/api/file`, `/api/compile`, `/api/render`, `/api/compare`,
-//!   `/api/plot`, `/api/analyze`, `/api/save`, and the scriptable `GET /render.png?file=SCENE&set=n=50&size=256`,
-//!   byte-identical to `lobe render`. Every refusal is JSON `{"error", "hint", "diagnostics"}` (diagnostics
-//!   with file/line/col, as [`crate::Diagnostics::to_json`]), never a panic (a handler that panics anyway is
-//!   caught and answered with 500).
+//!   `/api/plot`, `/api/analyze`, `/api/save`, the BRDF Explorer views `/api/lobe` and `/api/slice` ([`views`]),
+//!   and the scriptable `GET /render.png?file=SCENE&set=n=50&size=256`, byte-identical to `lobe render`. Every
+//!   refusal is JSON `{"error", "hint", "diagnostics"}` (diagnostics with file/line/col, as
+//!   [`crate::Diagnostics::to_json`]), never a panic (a handler that panics anyway is caught and answered with
+//!   500).
 //! - **Limits** ([`Limits`]): request bodies, formula size, image side, an estimated cost budget (IR nodes ×
 //!   evaluations) checked before work starts, a per-request deadline, and a cap on computations in flight.
 //! - **Files**: only under the directories the server was started with ([`http::Roots`]: no `..`, symbolic
@@ -29,6 +30,7 @@
 pub(crate) mod api;
 pub(crate) mod http;
 pub(crate) mod page;
+pub(crate) mod views;
 
 use http::{ApiError, Reply, Roots};
 use std::net::SocketAddr;
@@ -195,6 +197,8 @@ fn route(state: &Arc<api::State>, addr: Option<SocketAddr>, rq: &http::Request) 
                 "/api/plot" => api::plot(state, req),
                 "/api/analyze" => api::analyze(state, req),
                 "/api/save" => api::save(state, &req),
+                "/api/lobe" => views::lobe(state, req),
+                "/api/slice" => views::slice(state, req),
                 _ => Err(ApiError::new(404, format!("no endpoint {p}"))),
             }
         }
