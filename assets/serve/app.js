@@ -13,6 +13,7 @@ const BUILTIN_REFS = [["Blinn: NH^n", "@name \"Blinn\"\nNH^n\n"], ["Phong: VR^n"
 const DEFAULT_TEXT = "# a formula in lobe syntax: inputs NL NV NH VR VH, parameter n\nVR^n\n";
 const COMPILE_DEBOUNCE_MS = 200;
 const REST_MS = 250;
+const VIEWS_MS = 200;
 const SERVER_SCENE = "\u0000server";
 
 // State, exposed as window.lobe for the browser test: frames[] holds the frame times (ms, request to image
@@ -286,9 +287,14 @@ function later(name, ms, f) {
 
 // The 3D lobe and the slice follow the frames: asked for when a frame is shown (so during a drag they update
 // at the frame rate without delaying the frames), and when the controls rest.
-let viewsStale = false;
+// During a drag they are asked for at most every VIEWS_MS: their drawing (two canvases repainted) would
+// otherwise land while the next frame is on its way and delay it.
+let viewsStale = false, viewsAt = -Infinity;
 function refreshViews() {
   if (!viewsStale || !lobe.ok || !$("views-box").open) return;
+  const wait = viewsAt + VIEWS_MS - performance.now();
+  if (wait > 0) { later("views", wait, refreshViews); return; }
+  viewsAt = performance.now();
   viewsStale = false;
   lobeView(viewRequest());
   sliceView({ ...formula(), params: { ...lobe.params }, res: 64 });

@@ -4,11 +4,14 @@
 //! [`crate::report::plot`], numbers through [`crate::numerics`] and [`crate::report::measure`].
 //!
 //! Live parameters: the page's formula is compiled once per text with **no** parameter baked (every
-//! parameter is a runtime argument), kept in a small cache, and handed to the scene loader through
-//! [`Live`], a [`BrdfCompiler`] that returns the cached kernel; a slider move then only builds a new
-//! material list (parameter values, the normalisation coefficient if the scene asks for it) and renders.
-//! Scene geometry is parsed and tessellated once per (scene, size). `/render.png` instead runs exactly the
-//! CLI's `lobe render` path (parameters baked), so its bytes equal the CLI's.
+//! parameter is a runtime argument) through the accuracy pass as the commands run it (budgeted, its decisions
+//! cached on disk; priced against the cost budget first), kept in a small cache, and handed to the scene
+//! loader through [`Live`], a [`BrdfCompiler`] that returns the cached kernel; a slider move then only builds
+//! a new material list (parameter values, the normalisation coefficient if the scene asks for it) and
+//! renders. The views ([`super::views`]), plots and numbers sample the same kernel. Scene geometry is parsed
+//! and tessellated once per (scene, version of its file, size). The exact frame (`/api/render` with `exact`,
+//! which the page asks for when the controls rest) and `/render.png` instead run the CLI's `lobe render`
+//! compile (parameters baked, [`LobeCompiler::for_commands`]), so their bytes equal the CLI's.
 
 use super::http::{self, ApiError, Reply, Roots};
 use super::Limits;
@@ -48,6 +51,10 @@ impl Compiled {
     }
 }
 
+/// A cached scene geometry: the scene file (`None`: the built-in paper sphere), its modification time, the
+/// image side.
+type SceneKey = (Option<PathBuf>, Option<std::time::SystemTime>, usize);
+
 /// Everything the endpoints share.
 pub(crate) struct State {
     pub roots: Roots,
@@ -57,8 +64,7 @@ pub(crate) struct State {
     pub files: Vec<String>,
     pub limits: Limits,
     kernels: Mutex<HashMap<(String, String), Arc<Compiled>>>,
-    /// Scene geometry per (scene file or `None` for the paper sphere, its modification time, image side).
-    geometry: Mutex<HashMap<(Option<PathBuf>, Option<std::time::SystemTime>, usize), Arc<Geometry>>>,
+    geometry: Mutex<HashMap<SceneKey, Arc<Geometry>>>,
     /// Compute jobs running now, including ones whose request already timed out.
     jobs: AtomicUsize,
 }
@@ -102,7 +108,8 @@ impl State {
         let kernels = f.channels().into_iter().map(|c| crate::compile_formula(c, &opts).map(Arc::new)).collect::<Result<Vec<_>, _>>()?;
         // The CLI's note about the lobe variable (plots, energy and accuracy use it), shown as a warning.
         if let Some(note) = crate::numerics::choose_lobe_input(kernels.iter().map(|k| k.used_inputs()).collect()).1 {
-            warnings.push(crate::Diagnostic::warning(note).hint("the energy coefficient and the error against the reference use this lobe variable"));
+            let hint = "the energy coefficient and the error against the reference use this lobe variable";
+            warnings.push(crate::Diagnostic::warning(note).hint(hint));
         }
         let c = Arc::new(Compiled { kernels, warnings, parse_us });
         let mut cache = lock(&self.kernels);
@@ -362,7 +369,10 @@ pub(crate) fn compile(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
         let params = f
             .params
             .iter()
-            .map(|p| CompiledParam { name: p.name.clone(), default: p.default, lo: p.lo, hi: p.hi, read: read.contains(&p.name.as_str()) })
+            .map(|p| {
+                let read = read.contains(&p.name.as_str());
+                CompiledParam { name: p.name.clone(), default: p.default, lo: p.lo, hi: p.hi, read }
+            })
             .collect();
         Ok(Reply::ok_report(&CompileReply {
             name: f.display_name().to_string(),
@@ -459,7 +469,8 @@ fn scene_set(st: &State, req: &Value, g: &Geometry) -> Result<Vec<(String, f64)>
     if !shared {
         return Ok(set);
     }
-    let moved: Vec<&str> = req.get("moved").and_then(Value::as_array).map(|a| a.iter().filter_map(Value::as_str).collect()).unwrap_or_default();
+    let moved: Vec<&str> =
+        req.get("moved").and_then(Value::as_array).map(|a| a.iter().filter_map(Value::as_str).collect()).unwrap_or_default();
     Ok(set.into_iter().filter(|(k, _)| moved.contains(&k.as_str())).collect())
 }
 
@@ -482,7 +493,9 @@ pub(crate) fn compare(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
         let scale = c.metrics.max_gray_diff.max(1.0);
         let image = super::views::with_colour_bar(&crate::render::compare::side_by_side(&c.a.image, &c.b.image, scale));
         let metrics = serde_json::to_string(&c.metrics).map_err(|e| ApiError::new(500, e.to_string()))?;
-        Ok(Reply::bytes("image/png", png(&image)?).header("X-Lobe-Metrics", metrics).header("X-Lobe-Heat-Scale", format!("{scale}")))
+        Ok(Reply::bytes("image/png", png(&image)?)
+            .header("X-Lobe-Metrics", metrics)
+            .header("X-Lobe-Heat-Scale", format!("{scale}")))
     })
 }
 

@@ -25,7 +25,11 @@
 //!
 //! Cost model: a slider move is one render of the scene with the cached kernel (no compilation) plus PNG
 //! encoding; for the paper sphere at 512² that is a few milliseconds of shading and a few of encoding
-//! (BENCHMARKS.md has the measured frame time in a real browser). Compiling is ~0.1 ms per formula text.
+//! (BENCHMARKS.md has the measured frame time in a real browser), and a 3D lobe and image slice of a few
+//! thousand kernel calls each (under a millisecond). A new formula text costs its accuracy pass: up to the
+//! commands' 2 s search the first time (principled: 1.8 s), a read of the decision cache afterwards (tens of
+//! milliseconds); the page debounces typing (200 ms) so a burst of keystrokes is one compile. The exact frame
+//! at rest compiles with the values baked, as `lobe render` does (its pass decisions cached the same way).
 
 pub(crate) mod api;
 pub(crate) mod http;

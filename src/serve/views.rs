@@ -22,7 +22,8 @@ use std::sync::Arc;
 /// `theta_i`, `phi_i` (degrees) of a request: `None` without `theta_i`; θᵢ must be in 0..90, φᵢ any finite angle.
 pub(crate) fn incidence_field(v: &Value) -> Result<Option<(f64, f64)>, ApiError> {
     let Some(t) = v.get("theta_i") else { return Ok(None) };
-    let t = t.as_f64().filter(|t| (0.0..90.0).contains(t)).ok_or_else(|| ApiError::bad("`theta_i` must be an angle in degrees in 0..90"))?;
+    let t = t.as_f64().filter(|t| (0.0..90.0).contains(t));
+    let t = t.ok_or_else(|| ApiError::bad("`theta_i` must be an angle in degrees in 0..90"))?;
     let p = match v.get("phi_i") {
         None => 0.0,
         Some(p) => p.as_f64().filter(|p| p.is_finite()).ok_or_else(|| ApiError::bad("`phi_i` must be a finite angle in degrees"))?,
@@ -71,7 +72,8 @@ pub(crate) fn lobe(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
         let values: Vec<f64> = (0..nt)
             .flat_map(|i| (0..np).map(move |j| (i, j)))
             .map(|(i, j)| {
-                let v = crate::numerics::dir((90.0 * i as f64 / (nt - 1) as f64).to_radians(), (360.0 * j as f64 / np as f64).to_radians());
+                let (to, po) = (90.0 * i as f64 / (nt - 1) as f64, 360.0 * j as f64 / np as f64);
+                let v = crate::numerics::dir(to.to_radians(), po.to_radians());
                 k.eval(&crate::frame::inputs_from_dirs(l, v), &params)
             })
             .collect();
@@ -91,7 +93,10 @@ pub(crate) fn slice(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
         let res = count_field(&req, "res", 64, 8, 256)?;
         let pd = match req.get("phi_d") {
             None => 90.0,
-            Some(p) => p.as_f64().filter(|p| p.is_finite()).ok_or_else(|| ApiError::bad("`phi_d` must be a finite angle in degrees"))?,
+            Some(p) => {
+                let p = p.as_f64().filter(|p| p.is_finite());
+                p.ok_or_else(|| ApiError::bad("`phi_d` must be a finite angle in degrees"))?
+            }
         };
         let (k, params) = kernel_and_params(st, &req)?;
         api::check_cost(st, &k, (res * res) as f64, "this image slice")?;
@@ -125,7 +130,14 @@ pub(crate) fn with_colour_bar(img: &crate::base::image::Image) -> crate::base::i
         let t = x as f64 / (third.max(2) - 1) as f64;
         let tick = (1..4).any(|q| x.abs_diff(q * third / 4) <= 1);
         for y in 0..BAR_ROWS {
-            let c = if tick && y >= BAR_ROWS - 4 { [128, 128, 128] } else if y < 2 { [0, 0, 0] } else { crate::render::compare::heat(t) };
+            // A black gap under the image, the ramp, grey ticks at its foot.
+            let c = if tick && y >= BAR_ROWS - 4 {
+                [128, 128, 128]
+            } else if y < 2 {
+                [0, 0, 0]
+            } else {
+                crate::render::compare::heat(t)
+            };
             out.set(w - third + x, h + y, c);
         }
     }

@@ -2,17 +2,20 @@
 //! client over `TcpStream` + serde_json, no async crates): load the page, type a formula (seeing the inline
 //! diagnostic while it is incomplete), drag the `n` slider, wait for the image to change, fetch the image and
 //! compare it with `lobe render` of the same formula and settings, open the side-by-side comparison, and print
-//! the median frame time (request → image shown) over the drag at 512² for the paper scene.
+//! the median frame time (request → image shown) over the drag at 512² for the paper scene, with the views
+//! following and with them closed. `browser_views_and_state_follow_the_file` drives the BRDF Explorer views,
+//! the file and scene switches (its doc lists what it checks).
 //!
 //! Needs Debian's `chromium` and `chromium-driver` (`apt-get install chromium chromium-driver`). Without them
-//! the test prints a notice and passes — except when `LOBE_REQUIRE_BROWSER=1` (set by `.ci/run`), where it
-//! fails saying what is missing. `LOBE_SCREENSHOT=path.png` also saves a screenshot of the page (the README's
-//! `assets/serve.png`).
+//! the tests print a notice and pass — except when `LOBE_REQUIRE_BROWSER=1` (set by `.ci/run`), where they
+//! fail saying what is missing. `LOBE_SCREENSHOT=path.png` also saves a screenshot of the page with every view
+//! (the README's `assets/serve.png`).
 //!
-//! The page renders with live parameters (n is a runtime argument: `pow`), the CLI bakes n (a multiplication
-//! chain), so the two images may differ by one 8-bit level in a few pixels; the test allows the golden-image
-//! tolerance (max channel difference 1, ≤ 0.1 % of pixels) and prints how many differ. `/render.png`, which
-//! bakes like the CLI, is byte-identical (`serve.rs`).
+//! Live frames render with live parameters (n is a runtime argument: `pow`), the CLI bakes n (a
+//! multiplication chain), so the two images may differ by one 8-bit level in a few pixels; the tests allow the
+//! golden-image tolerance (max channel difference 1, ≤ 0.1 % of pixels) and print how many differ. The exact
+//! frame the page shows once the controls rest bakes like the CLI and is byte-identical (principled.toml here,
+//! more in `serve.rs`, as `/render.png`).
 
 use super::serve::{cli_render, http, scratch, Served};
 use serde_json::{json, Value};
