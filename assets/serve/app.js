@@ -277,7 +277,7 @@ function requestFrame(exact) {
   frames(frameSettings(exact));
 }
 
-// ---- views: 3D lobe and image slice (fast: every change), plot, albedo, numbers (when the controls rest) ----
+// ---- views: 3D lobe and image slice (following the frames), plot, albedo, numbers (when the controls rest) ----
 
 const timers = {};
 function later(name, ms, f) {

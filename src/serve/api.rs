@@ -458,10 +458,11 @@ fn scene_field(st: &State, v: &Value) -> Result<Option<PathBuf>, ApiError> {
     }
 }
 
-/// The values a scene render applies, as `lobe render --set` applies them. When a material's own formula is the
-/// page's file (`path`), only the parameters the page has `moved`: each material keeps its scene values for the
-/// others (a scene of two materials of one formula stays two materials). Otherwise every value in `params`:
-/// the scene's values were written for another formula, and the page's formula renders at the page's values.
+/// The values a scene render applies, as the render command applies a run's values. When a material's own
+/// formula is the page's file (`path`), only the parameters the page has `moved`: each material keeps its scene
+/// values for the others (a scene of two materials of one formula stays two materials). Otherwise every value
+/// in `params`: the scene's values were written for another formula, and the page's formula renders at the
+/// page's values.
 fn scene_set(st: &State, req: &Value, g: &Geometry) -> Result<Vec<(String, f64)>, ApiError> {
     let set = params_field(req)?;
     let own = req.get("path").and_then(Value::as_str).and_then(|p| st.roots.resolve(p).ok());
