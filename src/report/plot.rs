@@ -56,13 +56,22 @@ pub fn lobe_points(ev: &dyn crate::Evaluator, used: crate::ir::InputSet, params:
 /// steps of 0.25°, through [`crate::frame::inputs_from_dirs`] (so a formula and a measured table see the same
 /// geometry).
 pub fn incidence_points(ev: &dyn crate::Evaluator, params: &[f64], theta_i_deg: f64) -> Vec<(f64, f64)> {
+    incidence_points_at(ev, params, theta_i_deg, 0.0)
+}
+
+/// [`incidence_points`] with the plane of incidence turned by `phi_i_deg` about N (L at azimuth φᵢ, V in the
+/// same plane): the same curve for an isotropic formula, another for one that reads the tangent frame.
+pub fn incidence_points_at(ev: &dyn crate::Evaluator, params: &[f64], theta_i_deg: f64, phi_i_deg: f64) -> Vec<(f64, f64)> {
     let ti = theta_i_deg.to_radians();
-    let l = [ti.sin(), 0.0, ti.cos()];
+    let (sp, cp) = phi_i_deg.to_radians().sin_cos();
+    // At φᵢ = 0 the y components are +0 exactly (no −0 from a negative sine times 0).
+    let turn = |x: f64, z: f64| if phi_i_deg == 0.0 { [x, 0.0, z] } else { [x * cp, x * sp, z] };
+    let l = turn(ti.sin(), ti.cos());
     (0..=720)
         .map(|i| {
             let deg = -90.0 + i as f64 * 0.25;
             let t = deg.to_radians();
-            (deg, ev.eval(&crate::frame::inputs_from_dirs(l, [t.sin(), 0.0, t.cos()]), params))
+            (deg, ev.eval(&crate::frame::inputs_from_dirs(l, turn(t.sin(), t.cos())), params))
         })
         .collect()
 }
@@ -145,23 +154,15 @@ pub fn lobes(series: &[Series], o: &LobeOptions, format: Format) -> DrawResult<V
         ($root:expr) => {{
             let root = $root;
             if o.polar {
-                let r = ymax * 1.05;
-                let mut chart = ChartBuilder::on(root)
-                    .caption(&o.title, ("sans-serif", 22))
-                    .margin(12)
-                    .x_label_area_size(30)
-                    .y_label_area_size(50)
-                    .build_cartesian_2d(-r..r, 0.0..r)
-                    .map_err(err)?;
-                chart.configure_mesh().x_desc("value · sin θ").y_desc("value · cos θ").draw().map_err(err)?;
-                draw_lines!(chart, series, |s: &Series| -> Vec<(f64, f64)> { s
-                        .points
-                        .iter()
-                        .rev()
-                        .map(|&(deg, v)| (-v.max(0.0) * deg.to_radians().sin(), v.max(0.0) * deg.to_radians().cos()))
-                        .chain(s.points.iter().map(|&(deg, v)| (v.max(0.0) * deg.to_radians().sin(), v.max(0.0) * deg.to_radians().cos())))
-                        .filter(|p| p.0.is_finite() && p.1.is_finite())
-                        .collect() });
+                // Both sides of the axis: θ → −θ mirrored, in the signed-angle form `polar` draws.
+                let signed: Vec<Series> = series
+                    .iter()
+                    .map(|s| Series {
+                        name: s.name.clone(),
+                        points: s.points.iter().rev().map(|&(d, v)| (-d, v)).chain(s.points.iter().copied()).collect(),
+                    })
+                    .collect();
+                polar(root, &o.title, &signed, ymax, None)?;
             } else if o.log {
                 let mut chart = ChartBuilder::on(root)
                     .caption(&o.title, ("sans-serif", 22))
@@ -194,8 +195,89 @@ pub fn lobes(series: &[Series], o: &LobeOptions, format: Format) -> DrawResult<V
     render_with(format, o.size, |r| body!(r), |r| body!(r))
 }
 
+/// A polar plot of signed-angle series (angle from the normal in degrees, −90..90; radius = value, negative
+/// values drawn at 0), with both axes to the same scale (a circle stays a circle) and, when given, the
+/// direction of the light (`light_deg`, on the opposite side from the mirror direction) as a grey ray.
+fn polar<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    title: &str,
+    series: &[Series],
+    ymax: f64,
+    light_deg: Option<f64>,
+) -> DrawResult<()> {
+    let r = ymax * 1.05;
+    let build = |xr: f64, yr: f64| {
+        ChartBuilder::on(root)
+            .caption(title, ("sans-serif", 22))
+            .margin(12)
+            .x_label_area_size(30)
+            .y_label_area_size(50)
+            .build_cartesian_2d(-xr..xr, 0.0..yr)
+            .map_err(err)
+    };
+    // The plotting area's pixels do not depend on the ranges: one unit gets as many pixels across as up,
+    // the larger of the two scales that fit −r..r across and 0..r up (the area is drawn again on a clean
+    // background).
+    let (w, h) = build(r, r)?.plotting_area().dim_in_pixel();
+    let (w, h) = (w.max(1) as f64, h.max(1) as f64);
+    let unit = (2.0 * r / w).max(r / h);
+    root.fill(&WHITE).map_err(err)?;
+    let mut chart = build(unit * w / 2.0, unit * h)?;
+    chart.configure_mesh().x_desc("value · sin θ").y_desc("value · cos θ").draw().map_err(err)?;
+    if let Some(t) = light_deg {
+        let t = t.to_radians();
+        let ray = [(0.0, 0.0), (-r * t.sin(), r * t.cos())];
+        let grey = RGBColor(150, 150, 150).stroke_width(1);
+        chart
+            .draw_series(LineSeries::new(ray, grey))
+            .map_err(err)?
+            .label("light")
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], grey));
+    }
+    draw_lines!(chart, series, |s: &Series| -> Vec<(f64, f64)> { s
+            .points
+            .iter()
+            .map(|&(deg, v)| (v.max(0.0) * deg.to_radians().sin(), v.max(0.0) * deg.to_radians().cos()))
+            .filter(|p| p.0.is_finite() && p.1.is_finite())
+            .collect() });
+    Ok(())
+}
+
+/// Lobes in the plane of incidence ([`incidence_points_at`] series) with the light at `theta_i_deg`: polar (to
+/// scale, the light drawn) or cartesian against the signed view angle.
+pub fn incidence_lobes(series: &[Series], o: &LobeOptions, theta_i_deg: f64, format: Format) -> DrawResult<Vec<u8>> {
+    if o.log {
+        return Err("the plane-of-incidence plot has a linear scale".into());
+    }
+    let finite = series.iter().flat_map(|s| s.points.iter().map(|p| p.1)).filter(|v| v.is_finite());
+    let ymax = finite.fold(f64::NEG_INFINITY, f64::max);
+    if ymax == f64::NEG_INFINITY {
+        return Err("nothing to plot: no curve has a finite value (is the formula NaN or infinite everywhere?)".into());
+    }
+    if !o.polar {
+        let title = format!("{}, light at θᵢ = {theta_i_deg}°", o.title);
+        let x_desc = "view angle θₒ in the plane of incidence (degrees; mirror at −θᵢ)";
+        return curves_sized(series, &title, x_desc, "value", format, o.size);
+    }
+    let ymax = ymax.max(1e-12);
+    let light = Some(theta_i_deg);
+    render_with(format, o.size, |r| polar(r, &o.title, series, ymax, light), |r| polar(r, &o.title, series, ymax, light))
+}
+
 /// Curves over any x range (e.g. the normalisation coefficient against n over a range of n).
 pub fn curves(series: &[Series], title: &str, x_desc: &str, y_desc: &str, format: Format) -> DrawResult<Vec<u8>> {
+    curves_sized(series, title, x_desc, y_desc, format, (900, 600))
+}
+
+/// [`curves`] in an image of `size` pixels.
+pub fn curves_sized(
+    series: &[Series],
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    format: Format,
+    size: (u32, u32),
+) -> DrawResult<Vec<u8>> {
     let pts = || series.iter().flat_map(|s| s.points.iter()).filter(|p| p.0.is_finite() && p.1.is_finite());
     let (xmin, xmax) = pts().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.0), b.max(p.0)));
     let (ymin, ymax) = pts().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.1), b.max(p.1)));
@@ -218,7 +300,7 @@ pub fn curves(series: &[Series], title: &str, x_desc: &str, y_desc: &str, format
             Ok(())
         }};
     }
-    render_with(format, (900, 600), |r| body!(r), |r| body!(r))
+    render_with(format, size, |r| body!(r), |r| body!(r))
 }
 
 /// One point of the speed-versus-error scatter.
@@ -881,6 +963,35 @@ mod tests {
         }
         let o = LobeOptions { title: "t".into(), polar: true, log: true, size: (320, 240) };
         assert!(lobes(&[cos_n(5.0)], &o, Format::Png).is_err());
+    }
+
+    #[test]
+    fn polar_plots_are_to_scale() {
+        // A value of 1 in every direction is a half circle: as wide (to each side) as it is tall, in pixels,
+        // whatever the image's aspect, for the lobe plot and the plane-of-incidence plot alike.
+        let half: Vec<(f64, f64)> = (0..=360).map(|i| (i as f64 * 0.25, 1.0)).collect();
+        let signed: Vec<(f64, f64)> = (0..=720).map(|i| (-90.0 + i as f64 * 0.25, 1.0)).collect();
+        for size in [(560, 400), (400, 500)] {
+            let o = LobeOptions { title: "t".into(), polar: true, log: false, size };
+            let one = |points: &[(f64, f64)]| [Series { name: "1".into(), points: points.to_vec() }];
+            let pngs = [lobes(&one(&half), &o, Format::Png), incidence_lobes(&one(&signed), &o, 30.0, Format::Png)];
+            for png in pngs.map(Result::unwrap) {
+                let img = crate::base::image::Image::decode_png(&png).unwrap();
+                let c = color(0);
+                // The curve's pixels (and the legend's sample line): the ends of the half circle on its lowest
+                // rows, its top straight above their midpoint.
+                let curve: Vec<(usize, usize)> = (0..img.height)
+                    .flat_map(|y| (0..img.width).map(move |x| (x, y)))
+                    .filter(|&(x, y)| img.pixel(x, y) == [c.0, c.1, c.2])
+                    .collect();
+                let bottom = curve.iter().map(|p| p.1).max().unwrap();
+                let foot = || curve.iter().filter(|p| p.1 + 3 >= bottom).map(|p| p.0);
+                let (x0, x1) = (foot().min().unwrap(), foot().max().unwrap());
+                let top = curve.iter().filter(|p| p.0.abs_diff((x0 + x1) / 2) <= 2).map(|p| p.1).min().unwrap();
+                let (across, up) = ((x1 - x0) as f64 / 2.0, (bottom - top) as f64);
+                assert!((across - up).abs() <= 3.0, "{size:?}: the half circle is {across} px to each side and {up} px tall");
+            }
+        }
     }
 
     #[test]

@@ -4,11 +4,14 @@
 //! [`crate::report::plot`], numbers through [`crate::numerics`] and [`crate::report::measure`].
 //!
 //! Live parameters: the page's formula is compiled once per text with **no** parameter baked (every
-//! parameter is a runtime argument), kept in a small cache, and handed to the scene loader through
-//! [`Live`], a [`BrdfCompiler`] that returns the cached kernel; a slider move then only builds a new
-//! material list (parameter values, the normalisation coefficient if the scene asks for it) and renders.
-//! Scene geometry is parsed and tessellated once per (scene, size). `/render.png` instead runs exactly the
-//! CLI's `lobe render` path (parameters baked), so its bytes equal the CLI's.
+//! parameter is a runtime argument) through the accuracy pass as the commands run it (budgeted, its decisions
+//! cached on disk; priced against the cost budget first), kept in a small cache, and handed to the scene
+//! loader through [`Live`], a [`BrdfCompiler`] that returns the cached kernel; a slider move then only builds
+//! a new material list (parameter values, the normalisation coefficient if the scene asks for it) and
+//! renders. The views ([`super::views`]), plots and numbers sample the same kernel. Scene geometry is parsed
+//! and tessellated once per (scene, version of its file, size). The exact frame (`/api/render` with `exact`,
+//! which the page asks for when the controls rest) and `/render.png` instead run the CLI's `lobe render`
+//! compile (parameters baked, [`LobeCompiler::for_commands`]), so their bytes equal the CLI's.
 
 use super::http::{self, ApiError, Reply, Roots, ServedFiles};
 use super::Limits;
@@ -29,21 +32,30 @@ use std::time::Instant;
 /// Entries kept in each cache before it is emptied (a typing user makes one entry per keystroke).
 const CACHE_ENTRIES: usize = 64;
 
+/// The accuracy pass's cost per IR node and domain point, in the budget's units (~1 ns): measured 2026-12-02,
+/// a 200-term sum of sines (~800 nodes, 4096 points) took 3.5 s of CPU in the pass, ~1 µs per node and point
+/// (the truth is evaluated in higher precision, for several candidates).
+const PASS_COST_PER_NODE_POINT: f64 = 1000.0;
+
 /// A formula compiled with every parameter live.
-struct Compiled {
+pub(super) struct Compiled {
     /// The formula's kernel, or a colour formula's red, green and blue ones (renders use all; the plots and
     /// analyses show the first).
-    kernels: Vec<Arc<Kernel>>,
+    pub(super) kernels: Vec<Arc<Kernel>>,
     warnings: Diagnostics,
     parse_us: f64,
 }
 
 impl Compiled {
     /// The formula's kernel, or a colour formula's red one.
-    fn kernel(&self) -> &Arc<Kernel> {
+    pub(super) fn kernel(&self) -> &Arc<Kernel> {
         &self.kernels[0]
     }
 }
+
+/// A cached scene geometry: the scene file (`None`: the built-in paper sphere), its modification time, the
+/// image side.
+type SceneKey = (Option<PathBuf>, Option<std::time::SystemTime>, usize);
 
 /// Everything the endpoints share.
 pub(crate) struct State {
@@ -54,8 +66,7 @@ pub(crate) struct State {
     pub files: Vec<String>,
     pub limits: Limits,
     kernels: Mutex<HashMap<(String, String), Arc<Compiled>>>,
-    /// The scene's geometry per image side (the scene is fixed for the server's life).
-    geometry: Mutex<HashMap<usize, Arc<Geometry>>>,
+    geometry: Mutex<HashMap<SceneKey, Arc<Geometry>>>,
     /// Compute jobs running now, including ones whose request already timed out.
     jobs: AtomicUsize,
 }
@@ -69,7 +80,7 @@ impl State {
         State { roots, scene, files, limits, kernels: Mutex::default(), geometry: Mutex::default(), jobs: AtomicUsize::new(0) }
     }
 
-    fn compiled(&self, name: &str, text: &str) -> Result<Arc<Compiled>, ApiError> {
+    pub(super) fn compiled(&self, name: &str, text: &str) -> Result<Arc<Compiled>, ApiError> {
         if text.len() > self.limits.formula_bytes {
             return Err(ApiError::new(413, format!("the formula is larger than {} KiB", self.limits.formula_bytes / 1024))
                 .hint("a formula is a few lines"));
@@ -81,8 +92,27 @@ impl State {
         let t = Instant::now();
         let (f, warnings) = crate::front::parse_with_warnings(name, text)?;
         let parse_us = t.elapsed().as_secs_f64() * 1e6;
-        let opts = Options { backend: Backend::Jit, ..Options::default() };
+        // Through the accuracy pass as the commands compile (`LobeCompiler::for_commands`), parameters live: the
+        // page shades and measures the form the CLI would, and the pass's decision is cached on disk. The pass
+        // measures against the high-precision truth, so it is priced like any work, before it starts.
+        let mut warnings = warnings;
+        let plain = Options { backend: Backend::Jit, ..Options::default() };
+        let points = crate::numerics::robust::PassOptions::default().points as f64;
+        let opts = if f.ir.len() as f64 * points * PASS_COST_PER_NODE_POINT <= self.limits.cost_budget {
+            live_options()
+        } else {
+            warnings.push(
+                crate::Diagnostic::warning("the accuracy pass was skipped: the formula is too large for the server's budget")
+                    .hint("the page shows the plain simplification; `lobe render` and `lobe eval` run the pass"),
+            );
+            plain
+        };
         let kernels = f.channels().into_iter().map(|c| crate::compile_formula(c, &opts).map(Arc::new)).collect::<Result<Vec<_>, _>>()?;
+        // The CLI's note about the lobe variable (plots, energy and accuracy use it), shown as a warning.
+        if let Some(note) = crate::numerics::choose_lobe_input(kernels.iter().map(|k| k.used_inputs()).collect()).1 {
+            let hint = "the energy coefficient and the error against the reference use this lobe variable";
+            warnings.push(crate::Diagnostic::warning(note).hint(hint));
+        }
         let c = Arc::new(Compiled { kernels, warnings, parse_us });
         let mut cache = lock(&self.kernels);
         if cache.len() >= CACHE_ENTRIES {
@@ -92,12 +122,16 @@ impl State {
         Ok(c)
     }
 
-    fn geometry(&self, size: usize) -> Result<Arc<Geometry>, ApiError> {
-        if let Some(g) = lock(&self.geometry).get(&size) {
+    /// The geometry of `scene` (a served file; `None`: the built-in paper sphere) at `size`², parsed once per
+    /// version of the file.
+    fn geometry(&self, scene: Option<&Path>, size: usize) -> Result<Arc<Geometry>, ApiError> {
+        let modified = scene.and_then(|p| std::fs::metadata(p).and_then(|m| m.modified()).ok());
+        let key = (scene.map(Path::to_path_buf), modified, size);
+        if let Some(g) = lock(&self.geometry).get(&key) {
             return Ok(g.clone());
         }
         let files = ServedFiles::new(&self.roots);
-        let g = Arc::new(match &self.scene {
+        let g = Arc::new(match scene {
             Some(p) => scene::load_geometry(p, Some((size, size)), &Files::new(files.clone())).map_err(scene_error(&files))?,
             None => scene::parse_geometry("<builtin paper_sphere.toml>", scene::PAPER_SCENE, Path::new("."), Some((size, size)), &Files::new(files))?,
         });
@@ -105,9 +139,16 @@ impl State {
         if cache.len() >= CACHE_ENTRIES {
             cache.clear();
         }
-        cache.insert(size, g.clone());
+        cache.insert(key, g.clone());
         Ok(g)
     }
+}
+
+/// The page's compile options: the JIT through the accuracy pass as [`LobeCompiler::for_commands`] runs it
+/// (its search budgeted, its decisions read from and stored in the platform cache), nothing baked.
+fn live_options() -> Options {
+    let pass = crate::numerics::robust::PassOptions::default();
+    crate::numerics::pass_cache::command_pass(Options { backend: Backend::Jit, ..Options::default() }, pass, true)
 }
 
 /// A [`BrdfCompiler`] over the live-parameter cache: parameter values are not baked but passed at render time.
@@ -193,7 +234,7 @@ fn scene_error(files: &ServedFiles) -> impl Fn(Diagnostics) -> ApiError + '_ {
 }
 
 /// Refuses work whose estimated cost (IR nodes × evaluations) is over the budget, before it starts.
-fn check_cost(st: &State, k: &Kernel, evals: f64, what: &str) -> Result<(), ApiError> {
+pub(super) fn check_cost(st: &State, k: &Kernel, evals: f64, what: &str) -> Result<(), ApiError> {
     let cost = k.formula.ir.len().max(1) as f64 * evals;
     if cost > st.limits.cost_budget {
         return Err(ApiError::new(422, format!(
@@ -223,13 +264,13 @@ fn str_field<'a>(v: &'a Value, k: &str) -> Result<&'a str, ApiError> {
 }
 
 /// A formula in a request: `{"name": "…", "text": "…"}` (name optional).
-fn formula_field(v: &Value) -> Result<(String, String), ApiError> {
+pub(super) fn formula_field(v: &Value) -> Result<(String, String), ApiError> {
     let name = v.get("name").and_then(Value::as_str).unwrap_or("<page>").to_string();
     Ok((name, str_field(v, "text")?.to_string()))
 }
 
 /// `{"params": {"n": 50, …}}` → a list of parameter values.
-fn params_field(v: &Value) -> Result<Vec<(String, f64)>, ApiError> {
+pub(super) fn params_field(v: &Value) -> Result<Vec<(String, f64)>, ApiError> {
     let Some(p) = v.get("params") else { return Ok(vec![]) };
     let obj = p.as_object().ok_or_else(|| ApiError::bad("`params` must be an object of numbers"))?;
     obj.iter()
@@ -253,7 +294,7 @@ fn size_field(st: &State, v: &Value) -> Result<usize, ApiError> {
 }
 
 /// Parameter values for a kernel: declared defaults, then `set` (range-checked like every parameter value given for a run).
-fn values(k: &Kernel, set: &[(String, f64)]) -> Result<Vec<f64>, ApiError> {
+pub(super) fn values(k: &Kernel, set: &[(String, f64)]) -> Result<Vec<f64>, ApiError> {
     crate::resolve_bake(&k.formula, set)?;
     let mut p = k.default_params();
     for (name, v) in set {
@@ -273,7 +314,7 @@ fn ropts(cancel: &Cancel) -> RenderOptions {
     RenderOptions { threads: cores, cancel: cancel.clone(), ..RenderOptions::default() }
 }
 
-fn png(img: &crate::base::image::Image) -> Result<Vec<u8>, ApiError> {
+pub(super) fn png(img: &crate::base::image::Image) -> Result<Vec<u8>, ApiError> {
     img.encode_png().map_err(|e| ApiError::new(500, e))
 }
 
@@ -356,10 +397,19 @@ pub(crate) fn compile(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
         let (name, text) = formula_field(&req)?;
         let c = st.compiled(&name, &text)?;
         let f = &c.kernel().formula;
+        // A parameter is read when any channel's compiled formula reads it (the page shows sliders for those only).
+        let read: Vec<&str> = c
+            .kernels
+            .iter()
+            .flat_map(|k| k.formula.ir.used_params(k.formula.root).into_iter().map(|i| k.formula.params[i as usize].name.as_str()))
+            .collect();
         let params = f
             .params
             .iter()
-            .map(|p| CompiledParam { name: p.name.clone(), default: p.default, lo: p.lo, hi: p.hi })
+            .map(|p| {
+                let read = read.contains(&p.name.as_str());
+                CompiledParam { name: p.name.clone(), default: p.default, lo: p.lo, hi: p.hi, read }
+            })
             .collect();
         Ok(Reply::ok_report(&CompileReply {
             name: f.display_name().to_string(),
@@ -394,20 +444,32 @@ struct CompiledParam {
     lo: f64,
     #[serde(serialize_with = "crate::base::json::num")]
     hi: f64,
+    /// Whether the compiled formula reads it (a declared parameter it never reads changes nothing).
+    read: bool,
 }
 
-/// `POST /api/render {name, text, params, size}`: the served scene with every material's formula replaced by
-/// the page's, parameters live; PNG with the server-side time in `X-Lobe-Render-Ms`.
+/// `POST /api/render {name, text, path, params, moved, size, scene, exact}`: `scene` (a served `.toml`; `""` for
+/// the built-in paper sphere; absent: the server's scene) with every material's formula replaced by the page's,
+/// at the values [`scene_set`] picks from `params`. Parameters live unless `exact`, which compiles as `lobe
+/// render` does (values baked, through the accuracy pass), so the bytes equal the CLI's: the page asks for it
+/// when the sliders rest. PNG, with the server-side time in `X-Lobe-Render-Ms` and the count of NaN/inf
+/// shading values in `X-Lobe-Nan`.
 pub(crate) fn render(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
     limited(st, move |st| {
         let t = Instant::now();
         let (name, text) = formula_field(&req)?;
-        let set = params_field(&req)?;
         let size = size_field(st, &req)?;
+        let scene = scene_field(st, &req)?;
+        let exact = req.get("exact").and_then(Value::as_bool).unwrap_or(false);
         let c = st.compiled(&name, &text)?;
         check_cost(st, c.kernel(), (size * size) as f64, "this render")?;
-        let g = st.geometry(size)?;
-        let sc = g.with_materials(&set, Some((&name, &text)), &Live(st))?;
+        let g = st.geometry(scene.as_deref(), size)?;
+        let set = scene_set(st, &req, &g)?;
+        let sc = if exact {
+            g.with_materials(&set, Some((&name, &text)), &LobeCompiler::for_commands(Backend::Jit, crate::Mode::Precise, true))?
+        } else {
+            g.with_materials(&set, Some((&name, &text)), &Live(st))?
+        };
         let (frame, stats) = crate::render::render(&sc, &ropts(&st.cancel)).map_err(|e| ApiError::new(500, e))?;
         let bytes = png(&frame.image)?;
         Ok(Reply::bytes("image/png", bytes)
@@ -416,31 +478,74 @@ pub(crate) fn render(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
     })
 }
 
-/// `POST /api/compare {a: {name, text}, b: {name, text}, params, size}`: A | B | heat map as PNG, the metrics
-/// (`manhattan`, `manhattan_covered`, `max_gray_diff`, `rmse`, `psnr`) as JSON in `X-Lobe-Metrics`.
+/// The scene of a page request: `scene` names a served `.toml` file, `""` the built-in paper sphere; without
+/// it, the scene the server was started with.
+fn scene_field(st: &State, v: &Value) -> Result<Option<PathBuf>, ApiError> {
+    match v.get("scene") {
+        None | Some(Value::Null) => Ok(st.scene.clone()),
+        Some(Value::String(s)) if s.is_empty() => Ok(None),
+        Some(Value::String(s)) => {
+            let p = st.roots.resolve(s)?;
+            if p.extension().is_none_or(|e| e != "toml") {
+                return Err(ApiError::bad(format!("`{s}` is not a scene (.toml) file")).hint("pick a scene from the page's list"));
+            }
+            Ok(Some(p))
+        }
+        Some(_) => Err(ApiError::bad("`scene` must be a path string")),
+    }
+}
+
+/// The values a scene render applies, as the render command applies a run's values. When a material's own
+/// formula is the page's file (`path`), only the parameters the page has `moved`: each material keeps its scene
+/// values for the others (a scene of two materials of one formula stays two materials). Otherwise every value
+/// in `params`: the scene's values were written for another formula, and the page's formula renders at the
+/// page's values.
+fn scene_set(st: &State, req: &Value, g: &Geometry) -> Result<Vec<(String, f64)>, ApiError> {
+    let set = params_field(req)?;
+    let own = req.get("path").and_then(Value::as_str).and_then(|p| st.roots.resolve(p).ok());
+    let shared = own.is_some_and(|own| g.material_files().iter().any(|f| std::fs::canonicalize(f).is_ok_and(|f| f == own)));
+    if !shared {
+        return Ok(set);
+    }
+    let moved: Vec<&str> =
+        req.get("moved").and_then(Value::as_array).map(|a| a.iter().filter_map(Value::as_str).collect()).unwrap_or_default();
+    Ok(set.into_iter().filter(|(k, _)| moved.contains(&k.as_str())).collect())
+}
+
+/// `POST /api/compare {a: {name, text}, b: {name, text}, path, params, moved, size, scene}`: A | B | heat map as PNG, the
+/// heat map's colour bar (0 → the largest difference) in a strip below it; the metrics (`manhattan`,
+/// `manhattan_covered`, `max_gray_diff`, `rmse`, `psnr`) as JSON in `X-Lobe-Metrics`, the gray difference
+/// the bar's right end stands for in `X-Lobe-Heat-Scale`.
 pub(crate) fn compare(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
     limited(st, move |st| {
         let a = formula_field(req.get("a").ok_or_else(|| ApiError::bad("missing `a`"))?)?;
         let b = formula_field(req.get("b").ok_or_else(|| ApiError::bad("missing `b`"))?)?;
-        let set = params_field(&req)?;
         let size = size_field(st, &req)?;
+        let scene = scene_field(st, &req)?;
         for (n, t) in [&a, &b] {
             check_cost(st, st.compiled(n, t)?.kernel(), (size * size) as f64, "this comparison")?;
         }
-        let g = st.geometry(size)?;
+        let g = st.geometry(scene.as_deref(), size)?;
+        let set = scene_set(st, &req, &g)?;
         let c = crate::render::compare::compare_in(&g, (&a.0, &a.1), (&b.0, &b.1), [[1.0; 3]; 2], &set, &Live(st), &ropts(&st.cancel))?;
         let scale = c.metrics.max_gray_diff.max(1.0);
-        let bytes = png(&crate::render::compare::side_by_side(&c.a.image, &c.b.image, scale))?;
+        let image = super::views::with_colour_bar(&crate::render::compare::side_by_side(&c.a.image, &c.b.image, scale));
         let metrics = serde_json::to_string(&c.metrics).map_err(|e| ApiError::new(500, e.to_string()))?;
-        Ok(Reply::bytes("image/png", bytes).header("X-Lobe-Metrics", metrics))
+        Ok(Reply::bytes("image/png", png(&image)?)
+            .header("X-Lobe-Metrics", metrics)
+            .header("X-Lobe-Heat-Scale", format!("{scale}")))
     })
 }
 
-/// `POST /api/plot {formulas: [{name, text}…], params, polar}`: the lobes of up to four formulas.
+/// `POST /api/plot {formulas: [{name, text}…], params, polar, theta_i, phi_i}`: up to four formulas overlaid.
+/// With `theta_i` (degrees, 0..90) the curves are in the plane of incidence at azimuth `phi_i` (degrees) with
+/// the light there, else the lobes under the lobe convention; polar plots are to scale. All-NaN curves are a
+/// 422 that says so.
 pub(crate) fn plot(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
     limited(st, move |st| {
         let set = params_field(&req)?;
         let polar = req.get("polar").and_then(Value::as_bool).unwrap_or(false);
+        let incidence = super::views::incidence_field(&req)?;
         let list = req.get("formulas").and_then(Value::as_array).ok_or_else(|| ApiError::bad("missing `formulas` array"))?;
         if list.is_empty() || list.len() > 4 {
             return Err(ApiError::bad("plot 1 to 4 formulas"));
@@ -451,20 +556,28 @@ pub(crate) fn plot(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
             let k = st.compiled(&name, &text)?.kernel().clone();
             let own: Vec<(String, f64)> = set.iter().filter(|(n, _)| k.formula.param_index(n).is_some()).cloned().collect();
             let params = values(&k, &own)?;
-            series.push(crate::report::plot::Series {
-                name: k.formula.display_name(),
-                points: crate::report::plot::lobe_points(k.as_ref(), k.used_inputs(), &params),
-            });
+            let points = match incidence {
+                Some((ti, pi)) => crate::report::plot::incidence_points_at(k.as_ref(), &params, ti, pi),
+                None => crate::report::plot::lobe_points(k.as_ref(), k.used_inputs(), &params),
+            };
+            series.push(crate::report::plot::Series { name: k.formula.display_name(), points });
+        }
+        if let Some(s) = series.iter().find(|s| !s.points.iter().any(|p| p.1.is_finite())) {
+            return Err(ApiError::new(422, format!("nothing to plot: `{}` is NaN or infinite at every sampled angle", s.name))
+                .hint("0/0 and ∞−∞ are NaN; `lobe sweep FILE` shows where a formula is undefined"));
         }
         let n = set.iter().find(|(k, _)| k == "n").map(|(_, v)| format!("n = {v}")).unwrap_or_default();
         let opts = crate::report::plot::LobeOptions { title: format!("Lobes {n}"), polar, log: false, size: (560, 400) };
-        let bytes = crate::report::plot::lobes(&series, &opts, crate::report::plot::Format::Png).map_err(|e| ApiError::new(500, e))?;
-        Ok(Reply::bytes("image/png", bytes))
+        let bytes = match incidence {
+            Some((ti, _)) => crate::report::plot::incidence_lobes(&series, &opts, ti, crate::report::plot::Format::Png),
+            None => crate::report::plot::lobes(&series, &opts, crate::report::plot::Format::Png),
+        };
+        Ok(Reply::bytes("image/png", bytes.map_err(|e| ApiError::new(500, e))?))
     })
 }
 
-/// `POST /api/analyze {name, text, params, reference: {name, text}}`: the energy coefficient, the maximum
-/// albedo (and its incidence angle), the papers' error metrics against the reference, ns/eval of the compiled
+/// `POST /api/analyze {name, text, params, reference: {name, text}}`: the energy coefficient, ρ(θᵢ) and its maximum
+/// (and the incidence angle of the maximum), the papers' error metrics against the reference, ns/eval of the compiled
 /// kernel (scalar and batched JIT, interpreter) and its compile time.
 pub(crate) fn analyze(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
     limited(st, move |st| {
@@ -483,6 +596,7 @@ pub(crate) fn analyze(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
             Ok(e) => {
                 out.albedo_max = Some(e.albedo_max);
                 out.theta_i_at_max_deg = Some(e.theta_i_at_max_deg);
+                out.albedo = e.albedo;
             }
             Err(e) => out.albedo_error = Some(e.message),
         }
@@ -523,6 +637,8 @@ struct AnalyzeReply {
     theta_i_at_max_deg: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     albedo_error: Option<String>,
+    /// ρ(θᵢ): (θᵢ in degrees, albedo) at 0°, 1°, …, 89°, 89.9° (the maximum over φᵢ for an anisotropic formula).
+    albedo: Vec<(f64, f64)>,
     #[serde(skip_serializing_if = "Option::is_none")]
     reference: Option<String>,
     #[serde(serialize_with = "crate::base::json::opt_num", skip_serializing_if = "Option::is_none")]
@@ -644,7 +760,9 @@ mod tests {
     fn formulas_over_the_cost_budget_are_refused_before_running() {
         let st = state(10_000, 2);
         let heavy: String = (0..400).map(|i| format!("sin(NH*{i}.5) + ")).collect::<String>() + "0";
-        let k = st.compiled("h.brdf", &heavy).unwrap().kernel().clone();
+        let c = st.compiled("h.brdf", &heavy).unwrap();
+        assert!(c.warnings.items.iter().any(|d| d.message.contains("accuracy pass was skipped")), "the pass is priced too");
+        let k = c.kernel().clone();
         assert!(check_cost(&st, &k, 64.0 * 64.0, "a small render").is_ok());
         let e = check_cost(&st, &k, 2048.0 * 2048.0, "this render").unwrap_err();
         assert_eq!(e.status, 422);

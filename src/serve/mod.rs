@@ -9,10 +9,11 @@
 //!   served (see [`http`]; hyper rather than axum: the routing is one `match`, and axum adds tower's crates).
 //! - **Page**: `assets/serve/{index.html,app.js,app.css}`, plain JS, compiled in ([`page`]); no CDN.
 //! - **Endpoints** ([`api`]): `/api/session`, `/api/file`, `/api/compile`, `/api/render`, `/api/compare`,
-//!   `/api/plot`, `/api/analyze`, `/api/save`, and the scriptable `GET /render.png?file=SCENE&set=n=50&size=256`,
-//!   byte-identical to `lobe render`. Every refusal is JSON `{"error", "hint", "diagnostics"}` (diagnostics
-//!   with file/line/col, as [`crate::Diagnostics::to_json`]), never a panic (a handler that panics anyway is
-//!   caught and answered with 500).
+//!   `/api/plot`, `/api/analyze`, `/api/save`, the BRDF Explorer views `/api/lobe` and `/api/slice` ([`views`]),
+//!   and the scriptable `GET /render.png?file=SCENE&set=n=50&size=256`, byte-identical to `lobe render`. Every
+//!   refusal is JSON `{"error", "hint", "diagnostics"}` (diagnostics with file/line/col, as
+//!   [`crate::Diagnostics::to_json`]), never a panic (a handler that panics anyway is caught and answered with
+//!   500).
 //! - **Limits** ([`Limits`]): request bodies, formula size, image side, an estimated cost budget (IR nodes ×
 //!   evaluations) checked before work starts, a per-request deadline at which the computation is stopped
 //!   ([`crate::base::cancel`], polled by the renderer and the numerics; [`api::limited`]), and a cap on
@@ -29,11 +30,16 @@
 //!
 //! Cost model: a slider move is one render of the scene with the cached kernel (no compilation) plus PNG
 //! encoding; for the paper sphere at 512² that is a few milliseconds of shading and a few of encoding
-//! (BENCHMARKS.md has the measured frame time in a real browser). Compiling is ~0.1 ms per formula text.
+//! (BENCHMARKS.md has the measured frame time in a real browser), and a 3D lobe and image slice of a few
+//! thousand kernel calls each (under a millisecond). A new formula text costs its accuracy pass: up to the
+//! commands' 2 s search the first time (principled: 1.8 s), a read of the decision cache afterwards (tens of
+//! milliseconds); the page debounces typing (200 ms) so a burst of keystrokes is one compile. The exact frame
+//! at rest compiles with the values baked, as `lobe render` does (its pass decisions cached the same way).
 
 pub(crate) mod api;
 pub(crate) mod http;
 pub(crate) mod page;
+pub(crate) mod views;
 
 use http::{ApiError, Reply, Roots};
 use std::net::SocketAddr;
@@ -206,6 +212,8 @@ fn route(state: &Arc<api::State>, addr: Option<SocketAddr>, rq: &http::Request) 
                 "/api/plot" => api::plot(state, req),
                 "/api/analyze" => api::analyze(state, req),
                 "/api/save" => api::save(state, &req),
+                "/api/lobe" => views::lobe(state, req),
+                "/api/slice" => views::slice(state, req),
                 _ => Err(ApiError::new(404, format!("no endpoint {p}"))),
             }
         }

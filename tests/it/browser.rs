@@ -2,17 +2,20 @@
 //! client over `TcpStream` + serde_json, no async crates): load the page, type a formula (seeing the inline
 //! diagnostic while it is incomplete), drag the `n` slider, wait for the image to change, fetch the image and
 //! compare it with `lobe render` of the same formula and settings, open the side-by-side comparison, and print
-//! the median frame time (request → image shown) over the drag at 512² for the paper scene.
+//! the median frame time (request → image shown) over the drag at 512² for the paper scene, with the views
+//! following and with them closed. `browser_views_and_state_follow_the_file` drives the BRDF Explorer views,
+//! the file and scene switches (its doc lists what it checks).
 //!
 //! Needs Debian's `chromium` and `chromium-driver` (`apt-get install chromium chromium-driver`). Without them
-//! the test prints a notice and passes — except when `LOBE_REQUIRE_BROWSER=1` (set by `.ci/run`), where it
-//! fails saying what is missing. `LOBE_SCREENSHOT=path.png` also saves a screenshot of the page (the README's
-//! `assets/serve.png`).
+//! the tests print a notice and pass — except when `LOBE_REQUIRE_BROWSER=1` (set by `.ci/run`), where they
+//! fail saying what is missing. `LOBE_SCREENSHOT=path.png` also saves a screenshot of the page with every view
+//! (the README's `assets/serve.png`).
 //!
-//! The page renders with live parameters (n is a runtime argument: `pow`), the CLI bakes n (a multiplication
-//! chain), so the two images may differ by one 8-bit level in a few pixels; the test allows the golden-image
-//! tolerance (max channel difference 1, ≤ 0.1 % of pixels) and prints how many differ. `/render.png`, which
-//! bakes like the CLI, is byte-identical (`serve.rs`).
+//! Live frames render with live parameters (n is a runtime argument: `pow`), the CLI bakes n (a
+//! multiplication chain), so the two images may differ by one 8-bit level in a few pixels; the tests allow the
+//! golden-image tolerance (max channel difference 1, ≤ 0.1 % of pixels) and print how many differ. The exact
+//! frame the page shows once the controls rest bakes like the CLI and is byte-identical (principled.toml here,
+//! more in `serve.rs`, as `/render.png`).
 
 use super::serve::{cli_render, http, scratch, Served};
 use serde_json::{json, Value};
@@ -132,17 +135,68 @@ fn base64_decodes() {
     assert_eq!(b64("YWJj"), b"abc");
 }
 
-#[test]
-fn browser_types_drags_and_matches_the_cli() {
+/// Drags the n slider over half its width (from its left end when `from` > 0, back from the middle when < 0,
+/// `from` pixels in from the end), waits for the last frame, and prints the frame times (request sent → image
+/// shown) over the drag; returns the median. Printed, not asserted: machines here are noisy.
+fn drag_n(b: &Browser, from: f64, what: &str) -> f64 {
+    b.js("lobe.frames = []; lobe.server_ms = []; lobe.draw_ms = [];");
+    let slider = b.element("#slider-n");
+    let rect = b.cmd("GET", &format!("/element/{}/rect", slider[ELEMENT].as_str().unwrap()), None);
+    let w = rect["width"].as_f64().unwrap();
+    let start = if from > 0.0 { -w / 2.0 + from } else { from };
+    let mut moves = vec![
+        json!({"type": "pointerMove", "duration": 0, "origin": slider, "x": start as i64, "y": 0}),
+        json!({"type": "pointerDown", "button": 0}),
+    ];
+    let steps = 60;
+    let step = (w * 0.5 / steps as f64).round() as i64 * if from > 0.0 { 1 } else { -1 };
+    for _ in 0..steps {
+        moves.push(json!({"type": "pointerMove", "duration": 15, "origin": "pointer", "x": step, "y": 0}));
+    }
+    moves.push(json!({"type": "pointerUp", "button": 0}));
+    let t = Instant::now();
+    b.cmd("POST", "/actions", Some(json!({"actions": [{"type": "pointer", "id": "mouse", "parameters": {"pointerType": "mouse"}, "actions": moves}]})));
+    b.wait("lobe.idle && lobe.shown.params.n == document.getElementById('slider-n').value", 60, "the last frame of the drag");
+    let drag = t.elapsed();
+    let mut frames: Vec<f64> = serde_json::from_value(b.js("return lobe.frames")).unwrap();
+    assert!(!frames.is_empty(), "no frame completed during the drag");
+    frames.sort_by(f64::total_cmp);
+    let median = frames[frames.len() / 2];
+    let mut server: Vec<f64> = serde_json::from_value(b.js("return lobe.server_ms")).unwrap();
+    server.sort_by(f64::total_cmp);
+    let p90 = frames[(frames.len() * 9 / 10).min(frames.len() - 1)];
+    let mut draws: Vec<f64> = serde_json::from_value(b.js("return lobe.draw_ms")).unwrap();
+    draws.sort_by(f64::total_cmp);
+    println!(
+        "serve frame time ({what}), paper scene 512², slider drag: median {median:.1} ms, p90 {p90:.1} ms over {} frames ({:.1} frames/s during a {:.2} s drag); server part (render + PNG) median {:.1} ms; 3D lobe drawn {} times, median {:.1} ms",
+        frames.len(),
+        frames.len() as f64 / drag.as_secs_f64(),
+        drag.as_secs_f64(),
+        server[server.len() / 2],
+        draws.len(),
+        draws.get(draws.len() / 2).copied().unwrap_or(0.0)
+    );
+    median
+}
+
+/// Chromium's path, or `None` (after a notice) when Chromium or chromedriver is missing and
+/// `LOBE_REQUIRE_BROWSER=1` is not set (then it panics).
+fn chromium(test: &str) -> Option<String> {
     let chromium = ["chromium", "chromium-browser", "google-chrome"].into_iter().find_map(which);
     let (Some(chromium), Some(_)) = (chromium, which("chromedriver")) else {
         let msg = "the browser test needs Chromium and chromedriver on PATH (Debian: apt-get install chromium chromium-driver)";
         if std::env::var("LOBE_REQUIRE_BROWSER").is_ok_and(|v| v == "1") {
             panic!("{msg}; LOBE_REQUIRE_BROWSER=1 makes this a failure");
         }
-        eprintln!("SKIPPED browser_types_drags_and_matches_the_cli: {msg}");
-        return;
+        eprintln!("SKIPPED {test}: {msg}");
+        return None;
     };
+    Some(chromium)
+}
+
+#[test]
+fn browser_types_drags_and_matches_the_cli() {
+    let Some(chromium) = chromium("browser_types_drags_and_matches_the_cli") else { return };
     let d = scratch("browser");
     let served = Served::start(&["examples/brdfs"]);
     let b = Browser::start(&chromium);
@@ -163,43 +217,12 @@ fn browser_types_drags_and_matches_the_cli() {
     b.wait("document.getElementById('slider-k')", 10, "the slider of the declared parameter k");
     let before = b.image("#frame");
 
-    // Drag the n slider from near its left end to the right, as a fast hand would: 60 pointer moves 15 ms
+    // Drag the n slider from near its left end to the middle, as a fast hand would: 60 pointer moves 15 ms
     // apart, faster than frames arrive, so the frames per second below are the page's, not the hand's.
-    b.js("lobe.frames = []; lobe.server_ms = [];");
-    let slider = b.element("#slider-n");
-    let rect = b.cmd("GET", &format!("/element/{}/rect", slider[ELEMENT].as_str().unwrap()), None);
-    let w = rect["width"].as_f64().unwrap();
-    let mut moves = vec![
-        json!({"type": "pointerMove", "duration": 0, "origin": slider, "x": (-w / 2.0 + 8.0) as i64, "y": 0}),
-        json!({"type": "pointerDown", "button": 0}),
-    ];
-    let steps = 60;
-    for _ in 0..steps {
-        moves.push(json!({"type": "pointerMove", "duration": 15, "origin": "pointer", "x": (w * 0.5 / steps as f64).round() as i64, "y": 0}));
-    }
-    moves.push(json!({"type": "pointerUp", "button": 0}));
-    let t = Instant::now();
-    b.cmd("POST", "/actions", Some(json!({"actions": [{"type": "pointer", "id": "mouse", "parameters": {"pointerType": "mouse"}, "actions": moves}]})));
-    b.wait("lobe.idle && lobe.shown.params.n == document.getElementById('slider-n').value", 60, "the last frame of the drag");
-    let drag = t.elapsed();
+    let median = drag_n(&b, 8.0, "the 3D lobe and image slice following");
     let after = b.image("#frame");
     assert_ne!(before, after, "the image changed with the slider");
-
-    // The frame times over the drag.
-    let mut frames: Vec<f64> = serde_json::from_value(b.js("return lobe.frames")).unwrap();
-    assert!(!frames.is_empty(), "no frame completed during the drag");
-    frames.sort_by(f64::total_cmp);
-    let median = frames[frames.len() / 2];
-    let mut server: Vec<f64> = serde_json::from_value(b.js("return lobe.server_ms")).unwrap();
-    server.sort_by(f64::total_cmp);
-    let p90 = frames[(frames.len() * 9 / 10).min(frames.len() - 1)];
-    println!(
-        "serve frame time, paper scene 512², slider drag: median {median:.1} ms, p90 {p90:.1} ms over {} frames ({:.1} frames/s during a {:.2} s drag); server part (render + PNG) median {:.1} ms",
-        frames.len(),
-        frames.len() as f64 / drag.as_secs_f64(),
-        drag.as_secs_f64(),
-        server[server.len() / 2]
-    );
+    assert!(median > 0.0);
 
     // The image on the page against `lobe render` of the same formula, scene and parameter values.
     let shown = b.js("return lobe.shown");
@@ -217,15 +240,144 @@ fn browser_types_drags_and_matches_the_cli() {
     assert!(diffs.iter().all(|&x| x <= 1) && diffs.len() * 1000 <= cli.rgb.len(), "page and CLI differ beyond the golden tolerance");
     assert!(page.rgb.iter().any(|&c| c > 0), "the page shows a lit sphere");
 
+    // The same drag (back from the middle) with the views panel closed: the frame time of the render alone.
+    b.js("document.getElementById('views-box').open = false;");
+    drag_n(&b, -8.0, "views closed");
+    b.js("document.getElementById('views-box').open = true;");
+
     // Side by side with Phong: the papers' numbers appear under the A | B | difference image.
     b.js("document.getElementById('compare-on').click()");
     b.wait("document.getElementById('cmp-info').textContent.includes('Manhattan') && document.getElementById('plot').naturalWidth > 0", 60, "the comparison");
     b.wait("document.getElementById('num-ns').textContent.includes('/')", 60, "the numbers panel");
     println!("compare: {}", b.js("return document.getElementById('cmp-info').textContent"));
     println!("numbers: ns/eval {}; coef {}", b.js("return document.getElementById('num-ns').textContent"), b.js("return document.getElementById('num-coef').textContent"));
-    assert_eq!(b.js("return lobe.errors"), json!(0), "the page showed an error: {}", b.js("return document.getElementById('status').textContent"));
+    assert_eq!(b.js("return lobe.errors"), json!(0), "the page showed errors: {}", b.js("return lobe.error_log"));
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+
+impl Browser {
+    /// Waits for the page's `confirm()` dialog, checks its text contains `says`, and accepts or dismisses it.
+    fn answer_confirm(&self, says: &str, accept: bool) {
+        let t = Instant::now();
+        let text = loop {
+            let r = http(self.addr, "GET", &format!("/session/{}/alert/text", self.session), &[], None);
+            if r.status == 200 {
+                break serde_json::from_slice::<Value>(&r.body).unwrap()["value"].as_str().unwrap_or("").to_string();
+            }
+            assert!(t.elapsed() < Duration::from_secs(20), "no confirm dialog appeared");
+            std::thread::sleep(Duration::from_millis(25));
+        };
+        assert!(text.contains(says), "dialog says {text:?}");
+        self.cmd("POST", if accept { "/alert/accept" } else { "/alert/dismiss" }, Some(json!({})));
+    }
+    /// Moves the slider `id` to `v` as a hand would (an `input` event).
+    fn slide(&self, id: &str, v: f64) {
+        self.js(&format!("const s = document.getElementById('slider-{id}'); s.value = {v}; s.dispatchEvent(new Event('input'));"));
+    }
+    /// Picks `value` in the `<select id>` (after the script returns, so a dialog it opens does not block it).
+    fn pick(&self, id: &str, value: &str) {
+        self.js(&format!("setTimeout(() => {{ const s = document.getElementById('{id}'); s.value = {}; s.dispatchEvent(new Event('change')); }}, 0);", json!(value)));
+    }
+    fn canvas(&self, id: &str) -> String {
+        self.js(&format!("return document.getElementById('{id}').toDataURL()")).as_str().unwrap().to_string()
+    }
+}
+
+/// The BRDF Explorer views and the state that follows the file, in Chromium: the 3D lobe, the image slice and
+/// the plot redraw when a slider or the incident direction moves (canvas pixels and plot bytes compared);
+/// compiles are debounced; switching files asks before discarding edits and resets the sliders to the file's
+/// declared values (gold_blinn.brdf: n = 80, compared with `lobe render --set n=80` within the golden
+/// tolerance); a formula that does not read `n` gets no `n` slider; the CLI's lobe-variable note shows in the
+/// diagnostics; principled.toml on the page (scene switcher) is the CLI's render byte for byte.
+/// `LOBE_SCREENSHOT=path.png` saves a screenshot of the page with every view (the README's assets/serve.png).
+#[test]
+fn browser_views_and_state_follow_the_file() {
+    let Some(chromium) = chromium("browser_views_and_state_follow_the_file") else { return };
+    let d = scratch("browser-views");
+    let served = Served::start(&["examples/brdfs", "examples/explorer", "examples/vector", "examples/scenes"]);
+    let b = Browser::start(&chromium);
+    b.cmd("POST", "/url", Some(json!({"url": format!("http://{}/", served.addr)})));
+    b.wait("window.lobe && lobe.renders >= 1 && lobe.idle && lobe.views.lobe >= 1 && lobe.views.slice >= 1 && lobe.views.plot >= 1", 60, "the first frame and views");
+
+    // A slider moves: the 3D lobe, the slice and the plot redraw with other pixels.
+    let (lobe0, slice0, plot0) = (b.canvas("lobe3d"), b.canvas("slice"), b.image("#plot"));
+    let seen = b.js("return [lobe.views.lobe, lobe.views.slice, lobe.views.plot]");
+    b.slide("n", 400.0);
+    b.wait(&format!("lobe.views.lobe > {} && lobe.views.slice > {} && lobe.views.plot > {}", seen[0], seen[1], seen[2]), 60, "the views after n moved");
+    assert_ne!(b.canvas("lobe3d"), lobe0, "the 3D lobe follows n");
+    assert_ne!(b.canvas("slice"), slice0, "the image slice follows n");
+    assert_ne!(b.image("#plot"), plot0, "the plot follows n");
+    // The incident direction moves: the 3D lobe and the plot follow (the slice does not depend on it).
+    let (lobe1, plot1) = (b.canvas("lobe3d"), b.image("#plot"));
+    let seen = b.js("return [lobe.views.lobe, lobe.views.plot]");
+    b.slide("theta_i", 65.0);
+    b.wait(&format!("lobe.views.lobe > {} && lobe.views.plot > {}", seen[0], seen[1]), 60, "the views after θᵢ moved");
+    assert_ne!(b.canvas("lobe3d"), lobe1, "the 3D lobe follows θᵢ");
+    assert_ne!(b.image("#plot"), plot1, "the plot follows θᵢ");
+    b.slide("phi_i", 120.0);
+    b.wait("document.getElementById('lobe3d-info').textContent.includes('φᵢ = 120°')", 30, "the lobe at φᵢ = 120°");
+    b.wait("lobe.views.albedo > 0", 60, "the albedo plot");
+    let albedo = b.canvas("albedo");
+    b.slide("theta_i", 20.0);
+    b.wait("document.getElementById('lobe3d-info').textContent.includes('θᵢ = 20°')", 30, "the lobe at θᵢ = 20°");
+    assert_ne!(b.canvas("albedo"), albedo, "the albedo plot marks θᵢ");
+
+    // Typing: compiles are debounced; a formula that reads both lobe variables gets the CLI's note; one that
+    // reads no `n` gets no `n` slider.
+    let editor = b.id("#editor");
+    let before: u64 = b.js("return lobe.compile_requests").as_u64().unwrap();
+    b.js("const e = document.getElementById('editor'); e.value = ''; e.dispatchEvent(new Event('input'));");
+    let typed = "param k = 0.5 in 0..1\nVR^n * NH^k\n";
+    b.cmd("POST", &format!("/element/{editor}/value"), Some(json!({"text": typed})));
+    b.wait(&format!("lobe.shown && lobe.shown.text === {} && lobe.idle", json!(typed)), 60, "a frame of the typed formula");
+    let sent = b.js("return lobe.compile_requests").as_u64().unwrap() - before;
+    println!("typing {} characters sent {sent} compiles", typed.len());
+    assert!(sent * 4 <= typed.len() as u64, "{sent} compiles for {} keystrokes: not debounced", typed.len());
+    b.wait("document.getElementById('diag').textContent.includes('reads both NH and VR')", 30, "the lobe-variable note");
+    b.js("const e = document.getElementById('editor'); e.value = 'param k = 1 in 0..2\\nNH * 2\\n'; e.dispatchEvent(new Event('input'));");
+    b.wait("lobe.shown && lobe.shown.text.startsWith('param k = 1 in 0..2') && lobe.idle", 60, "a frame of NH * 2");
+    assert_eq!(b.js("return [!!document.getElementById('slider-n'), !!document.getElementById('slider-k')]"), json!([false, false]), "no slider for a parameter the formula does not read");
+
+    // Switching files with unsaved edits asks first: dismissing keeps the edits, accepting opens the file
+    // with every slider at its declared value (n = 80), and the page renders at n = 80.
+    let gold = "examples/vector/gold_blinn.brdf";
+    b.pick("file", gold);
+    b.answer_confirm("unsaved edits", false);
+    b.wait("document.getElementById('file').value === lobe.path", 10, "the file list back on the edited file");
+    assert!(b.js("return document.getElementById('editor').value").as_str().unwrap().starts_with("param k = 1"), "the edits stay");
+    b.pick("file", gold);
+    b.answer_confirm("unsaved edits", true);
+    let gtext = std::fs::read_to_string(gold).unwrap();
+    b.wait(&format!("lobe.path === {} && lobe.shown && lobe.shown.text === {} && lobe.shown.exact && lobe.idle", json!(gold), json!(gtext)), 60, "the exact frame of gold_blinn");
+    let n: Vec<f64> = serde_json::from_value(b.js("return [+document.getElementById('slider-n').value, lobe.shown.params.n]")).unwrap();
+    assert_eq!(n, [80.0, 80.0], "the slider and the frame at gold_blinn's declared n");
+    let page = b.image("#frame");
+    let abs = std::fs::canonicalize(gold).unwrap();
+    let scene = lobe::render::scene::PAPER_SCENE.replace("brdf = \"../brdfs/modified_schlick_vr.brdf\"", &format!("brdf = {:?}", abs.display().to_string()));
+    std::fs::write(d.join("gold.toml"), scene).unwrap();
+    let cli = cli_render(&d.join("gold.toml"), "n=80", "512", &d.join("gold.png"));
+    let (p, c) = (lobe::base::image::Image::decode_png(&page).unwrap(), lobe::base::image::Image::decode_png(&cli).unwrap());
+    let diffs: Vec<u8> = p.rgb.iter().zip(&c.rgb).map(|(a, c)| a.abs_diff(*c)).filter(|&x| x > 0).collect();
+    println!("gold_blinn on the page vs lobe render --set n=80: {} of {} channels differ", diffs.len(), c.rgb.len());
+    assert!(diffs.iter().all(|&x| x <= 1) && diffs.len() * 1000 <= c.rgb.len(), "gold_blinn on the page is not lobe render at n = 80");
+
+    // The scene switcher: principled.toml with its own formula file shows both materials as the CLI does.
+    b.pick("scene", "examples/scenes/principled.toml");
+    b.pick("file", "examples/explorer/principled.brdf");
+    let ptext = std::fs::read_to_string("examples/explorer/principled.brdf").unwrap();
+    b.wait(&format!("lobe.shown && lobe.shown.text === {} && lobe.shown.scene === 'examples/scenes/principled.toml' && lobe.shown.exact && lobe.idle", json!(ptext)), 90, "the exact frame of principled.toml");
+    let cli = super::serve::cli_render_plain(std::path::Path::new("examples/scenes/principled.toml"), "512", &d.join("principled.png"));
+    assert!(b.image("#frame") == cli, "principled.toml on the page differs from lobe render");
+
+    // The comparison with its colour bar, for the screenshot.
+    b.slide("theta_i", 35.0);
+    b.js("document.getElementById('compare-on').click()");
+    b.wait("document.getElementById('cmp-info').textContent.includes('Manhattan') && document.getElementById('bar-hi').textContent.includes('gray')", 90, "the comparison");
+    b.wait("lobe.idle", 30, "the page at rest");
+    assert_eq!(b.js("return lobe.errors"), json!(0), "the page showed errors: {}", b.js("return lobe.error_log"));
     if let Ok(path) = std::env::var("LOBE_SCREENSHOT") {
-        std::thread::sleep(Duration::from_millis(300));
+        std::thread::sleep(Duration::from_millis(500));
         let png = b64(b.cmd("GET", "/screenshot", None).as_str().unwrap());
         std::fs::write(&path, png).unwrap();
         println!("wrote {path}");

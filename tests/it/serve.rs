@@ -466,5 +466,175 @@ fn the_scene_folder_is_served_and_scenes_cannot_name_outside_files() {
         assert!(r.json()["error"].as_str().is_some_and(|e| e.contains("outside")), "{f}: {body}");
     }
     assert_eq!(s.get(&format!("/render.png?file={}", served.join("ok.brdf").display())).status, 200);
+/// `lobe render SCENE --size SIZE` (no `--set`), its PNG bytes.
+pub(crate) fn cli_render_plain(scene: &Path, size: &str, out: &Path) -> Vec<u8> {
+    let o = Command::new(env!("CARGO_BIN_EXE_lobe"))
+        .args(["render", scene.to_str().unwrap(), "--size", size, "-q", "--force", "-o", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    std::fs::read(out).unwrap()
+}
+
+fn values(v: &Value) -> Vec<f64> {
+    v["values"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap_or(f64::NAN)).collect()
+}
+
+#[test]
+fn views_follow_the_parameters_and_the_incident_direction() {
+    let s = Served::start(&["examples/brdfs"]);
+    let lobe = |text: &str, n: f64, ti: f64, pi: f64| {
+        let r = s.post("/api/lobe", &json!({"text": text, "params": {"n": n}, "theta_i": ti, "phi_i": pi, "n_theta": 19, "n_phi": 36}));
+        assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+        r.json()
+    };
+    let a = lobe("VR^n", 20.0, 30.0, 0.0);
+    assert_eq!((a["n_theta"].as_u64(), a["n_phi"].as_u64(), values(&a).len()), (Some(19), Some(36), 19 * 36));
+    assert_ne!(values(&a), values(&lobe("VR^n", 60.0, 30.0, 0.0)), "the lobe follows n");
+    assert_ne!(values(&a), values(&lobe("VR^n", 20.0, 50.0, 0.0)), "the lobe follows θᵢ");
+    assert_ne!(values(&a), values(&lobe("VR^n", 20.0, 30.0, 90.0)), "the lobe follows φᵢ");
+    // Phong's peak is the mirror direction: θₒ = θᵢ, φₒ = φᵢ + 180° (grid steps of 5° and 10°).
+    for (ti, pi) in [(30.0, 0.0), (50.0, 90.0)] {
+        let v = values(&lobe("VR^n", 200.0, ti, pi));
+        let best = (0..v.len()).max_by(|&x, &y| v[x].total_cmp(&v[y])).unwrap();
+        let (t, p) = ((best / 36) as f64 * 5.0, (best % 36) as f64 * 10.0);
+        assert_eq!((t, p), (ti, (pi + 180.0) % 360.0), "peak of VR^200 at θᵢ={ti}, φᵢ={pi}");
+    }
+    // The same numbers as the CLI's kernel at one grid point (θₒ = 45°, φₒ = 90°; L at θᵢ = 30°, φᵢ = 0).
+    let (ti, to): (f64, f64) = (30f64.to_radians(), 45f64.to_radians());
+    let at = format!("L={},{},{},V={},{},{}", ti.sin(), 0.0, ti.cos(), to.sin() * 90f64.to_radians().cos(), to.sin(), to.cos());
+    let o = Command::new(env!("CARGO_BIN_EXE_lobe")).args(["eval", "--expr", "VR^n", "--set", "n=20", "--at", &at]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let cli: f64 = String::from_utf8_lossy(&o.stdout).trim().parse().unwrap();
+    let page = values(&a)[9 * 36 + 9];
+    assert!((page - cli).abs() <= 1e-12 * cli.abs().max(1e-300), "page {page} vs lobe eval {cli}");
+
+    // The image slice: θ_h × θ_d, below-horizon cells null, following n.
+    let slice = |n: f64| {
+        let r = s.post("/api/slice", &json!({"text": "NH^n", "params": {"n": n}, "res": 16}));
+        assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+        r.json()
+    };
+    let sl = slice(10.0);
+    let v = values(&sl);
+    assert_eq!(v.len(), 256);
+    assert!(v.iter().all(|x| x.is_finite()), "at φ_d = 90° both directions stay above the horizon");
+    let r = s.post("/api/slice", &json!({"text": "NH^n", "res": 16, "phi_d": 0})).json();
+    assert!(values(&r).iter().any(|x| x.is_nan()), "at φ_d = 0 large θ_h + θ_d put V below the horizon: null");
+    // NH = cos θ_h: the first row (θ_d = 0) is cos(θ_h)^n.
+    for (i, x) in v[..16].iter().enumerate() {
+        let want = (90f64 * i as f64 / 16.0).to_radians().cos().powf(10.0);
+        assert!((x - want).abs() < 1e-9, "slice[0][{i}] = {x}, cos^10 = {want}");
+    }
+    assert_ne!(v, values(&slice(40.0)));
+    // Bounds: too large a grid, a bad angle.
+    assert_eq!(s.post("/api/lobe", &json!({"text": "NH^n", "n_theta": 5000})).status, 400);
+    assert_eq!(s.post("/api/lobe", &json!({"text": "NH^n", "theta_i": 95})).status, 400);
+    assert_eq!(s.post("/api/slice", &json!({"text": "NH^n", "res": 4096})).status, 400);
+
+    // The plot in the plane of incidence (several formulas overlaid, polar to scale) changes with θᵢ.
+    let plot = |ti: f64, polar: bool| {
+        let r = s.post("/api/plot", &json!({"formulas": [{"text": "VR^n"}, {"text": "NH^n"}, {"text": "NL"}], "params": {"n": 20}, "polar": polar, "theta_i": ti, "phi_i": 0}));
+        assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+        r.body
+    };
+    assert_ne!(plot(20.0, true), plot(60.0, true));
+    assert_ne!(plot(20.0, false), plot(60.0, false));
+    // A formula that is NaN everywhere: a 4xx that says so, never a 500.
+    for body in [json!({"formulas": [{"text": "0/0*NH"}]}), json!({"formulas": [{"text": "0/0*NH"}], "theta_i": 30, "polar": true})] {
+        let r = s.post("/api/plot", &body);
+        assert_eq!(r.status, 422, "{}", String::from_utf8_lossy(&r.body));
+        let e = r.json();
+        assert!(e["error"].as_str().unwrap().contains("NaN") && e["hint"].as_str().is_some_and(|h| !h.is_empty()), "{e}");
+    }
+
+    // ρ(θᵢ) with the numbers; the heat map's colour bar under the comparison.
+    let a = s.post("/api/analyze", &json!({"text": "VR^n", "params": {"n": 10}})).json();
+    let rows = a["albedo"].as_array().unwrap();
+    assert_eq!(rows.len(), 91, "{a}");
+    assert_eq!(rows.iter().map(|r| r[1].as_f64().unwrap()).fold(0.0, f64::max), a["albedo_max"].as_f64().unwrap());
+    let r = s.post("/api/compare", &json!({"a": {"text": "VR^n"}, "b": {"text": "NH^n"}, "params": {"n": 20}, "size": 64}));
+    assert_eq!(r.status, 200);
+    let img = lobe::base::image::Image::decode_png(&r.body).unwrap();
+    assert_eq!((img.width, img.height), (3 * 64, 64 + 14));
+    assert_eq!(img.pixel(3 * 64 - 1, 64 + 6), [255, 255, 255], "the bar ends white");
+    assert_eq!(img.pixel(2 * 64, 64 + 6), [0, 0, 0], "the bar starts black");
+    assert!(r.header("X-Lobe-Heat-Scale").unwrap().parse::<f64>().unwrap() >= 1.0);
+}
+
+#[test]
+fn compile_reports_what_the_cli_reports() {
+    let s = Served::start(&["examples/brdfs"]);
+    // The CLI's note on a formula that reads both lobe variables, as a warning in the reply.
+    let r = s.post("/api/compile", &json!({"text": "param k = 0.25 in 0..1\nVR^n * (1 - k) + k * NH^n"}));
+    assert_eq!(r.status, 200);
+    let c = r.json();
+    let w = c["warnings"].as_array().unwrap();
+    assert!(w.iter().any(|d| d["message"].as_str().unwrap().contains("reads both NH and VR")), "{c}");
+    let read = |c: &Value, name: &str| c["params"].as_array().unwrap().iter().find(|p| p["name"] == json!(name)).map(|p| p["read"].clone());
+    assert_eq!(read(&c, "k"), Some(json!(true)));
+    assert_eq!(read(&c, "n"), Some(json!(true)));
+    // A declared parameter the formula never reads is reported as such (the page shows no slider for it).
+    let c = s.post("/api/compile", &json!({"text": "param k = 1 in 0..2\nNH * 2"})).json();
+    assert_eq!(read(&c, "k"), Some(json!(false)), "{c}");
+    assert!(read(&c, "n").is_none_or(|r| r == json!(false)), "{c}");
+    // The page compiles the accuracy pass's form, as `lobe check` shows the CLI does.
+    let text = std::fs::read_to_string("examples/brdfs/modified_schlick_vr.brdf").unwrap();
+    let c = s.post("/api/compile", &json!({"text": text})).json();
+    assert!(c["simplified"].as_str().is_some_and(|t| !t.is_empty()), "{c}");
+}
+
+#[test]
+fn scenes_on_the_page_render_as_the_cli_renders_them() {
+    let d = scratch("scenes");
+    let s = Served::start(&["examples"]);
+    let session = s.get("/api/session").json();
+    assert!(session["scenes"].as_array().unwrap().iter().any(|x| x == "examples/scenes/principled.toml"), "{session}");
+    let principled = "examples/explorer/principled.brdf";
+    let text = std::fs::read_to_string(principled).unwrap();
+    let defaults: serde_json::Map<String, Value> = s.post("/api/compile", &json!({"text": text})).json()["params"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["read"] == json!(true))
+        .map(|p| (p["name"].as_str().unwrap().to_string(), p["default"].clone()))
+        .collect();
+    // Two materials of one formula with their own values: the exact frame is the CLI's, byte for byte; the
+    // live frame is within the golden tolerance of it (so it too shows a dielectric and a metal).
+    let req = |exact: bool| {
+        json!({"name": principled, "text": text, "path": principled, "params": defaults, "moved": [], "scene": "examples/scenes/principled.toml", "size": 96, "exact": exact})
+    };
+    let cli = cli_render_plain(Path::new("examples/scenes/principled.toml"), "96", &d.join("p.png"));
+    let exact = s.post("/api/render", &req(true));
+    assert_eq!(exact.status, 200, "{}", String::from_utf8_lossy(&exact.body));
+    assert!(exact.body == cli, "the page's exact principled.toml differs from lobe render");
+    let live = lobe::base::image::Image::decode_png(&s.post("/api/render", &req(false)).body).unwrap();
+    let cli = lobe::base::image::Image::decode_png(&cli).unwrap();
+    let diffs = live.rgb.iter().zip(&cli.rgb).filter(|(a, c)| a.abs_diff(**c) > 0).count();
+    assert!(live.rgb.iter().zip(&cli.rgb).all(|(a, c)| a.abs_diff(*c) <= 1) && diffs * 1000 <= cli.rgb.len(), "{diffs} channels differ");
+    // A moved slider applies to every material, as `lobe render --set` does.
+    let mut moved = req(true);
+    moved["params"]["roughness"] = json!(0.8);
+    moved["moved"] = json!(["roughness"]);
+    let cli = {
+        let o = d.join("r.png");
+        cli_render(Path::new("examples/scenes/principled.toml"), "roughness=0.8", "96", &o)
+    };
+    assert!(s.post("/api/render", &moved).body == cli, "roughness=0.8 on both materials");
+
+    // Another formula on the paper sphere renders at its own declared values (gold_blinn: n = 80), not at the
+    // scene's n = 50, which was written for the scene's formula.
+    let gold = "examples/vector/gold_blinn.brdf";
+    let gtext = std::fs::read_to_string(gold).unwrap();
+    let r = s.post("/api/render", &json!({"name": gold, "text": gtext, "path": gold, "params": {"n": 80}, "scene": "", "size": 96, "exact": true}));
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    let abs = std::fs::canonicalize(gold).unwrap();
+    let scene = lobe::render::scene::PAPER_SCENE.replace("brdf = \"../brdfs/modified_schlick_vr.brdf\"", &format!("brdf = {:?}", abs.display().to_string()));
+    std::fs::write(d.join("gold.toml"), scene).unwrap();
+    assert!(r.body == cli_render(&d.join("gold.toml"), "n=80", "96", &d.join("g.png")), "gold_blinn at n = 80");
+    assert_ne!(r.body, cli_render(&d.join("gold.toml"), "n=50", "96", &d.join("g50.png")));
+    // Not a scene: refused with a hint.
+    let r = s.post("/api/render", &json!({"text": "NH^n", "scene": "examples/brdfs/phong.brdf", "size": 32}));
+    assert_eq!(r.status, 400);
     let _ = std::fs::remove_dir_all(&d);
 }

@@ -131,6 +131,11 @@ impl Geometry {
         &self.name
     }
 
+    /// The formula files the materials name (`brdf = "…"`, joined to the scene's directory), in table order.
+    pub fn material_files(&self) -> Vec<PathBuf> {
+        self.materials.values().filter_map(|m| m.get_ref().brdf.as_ref().map(|p| self.base.join(p.get_ref()))).collect()
+    }
+
     /// Compiles the materials (stage 2) and returns the scene. `set` applies to every material whose formula
     /// declares the name (an error if none does); `formula` = (file name, source) replaces every material's
     /// formula, keeping ka/kd/ks, colours and `normalize` (scene `params` it does not declare are ignored).
