@@ -294,7 +294,7 @@ def drjit_columns(dr, f):
 
 
 def build_module(lobe, f):
-    k = lobe.compile(f.path)
+    k = lobe.compile(f.path, **f.baked)
     inputs = {c: f.cols[c] for c in k.inputs}
     return (lambda: k(**inputs)), (lambda r: r)
 
@@ -322,7 +322,8 @@ class Formula:
         c = run_json([binary, "check", path, "--json", "--points", "1000"])
         defaults = [(p["name"], float(p["default"])) for p in c["params"]]
         # `lobe eval`'s and `lobe check`'s --set: every parameter baked at its default (none with --live).
-        self.set = [] if live else ["--set", ",".join(f"{k}={v!r}" for k, v in defaults)]
+        self.baked = {} if live else dict(defaults)
+        self.set = ["--set", ",".join(f"{k}={v!r}" for k, v in defaults)] if self.baked else []
         if self.set:
             c = run_json([binary, "check", path, *self.set, "--json", "--points", "1000"])
         self.name = c["name"]
