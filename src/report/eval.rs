@@ -69,7 +69,7 @@ impl EvalReport {
         EvalReport { value: PointValue(value), backend: ks[0].backend.name(), lanes: lanes(ks), compile_us: compile_us(ks), note }
     }
 
-    /// The report of a value that is the ground truth (`--truth`): backend `truth`, nothing compiled.
+    /// The report of a value that is the ground truth: backend `truth`, nothing compiled.
     pub fn truth(self) -> EvalReport {
         EvalReport { backend: TRUTH, lanes: None, compile_us: 0.0, ..self }
     }
@@ -78,7 +78,7 @@ impl EvalReport {
 /// The backend name of values that are the ground truth ([`crate::numerics::truth`]).
 const TRUTH: &str = "truth";
 
-/// How `--points` values were timed.
+/// How the values at many points were timed.
 #[derive(Clone, Copy, Debug)]
 pub enum PointsTiming {
     /// The steady state of the batched kernels (wall and thread CPU time, [`crate::report::measure::steady_state`]).
@@ -133,7 +133,7 @@ impl PointsReport {
         }
     }
 
-    /// The report of values that are the ground truth (`--truth`): backend and math `truth`, nothing compiled.
+    /// The report of values that are the ground truth: backend and math `truth`, nothing compiled.
     pub fn truth(self) -> PointsReport {
         PointsReport { backend: TRUTH, math: TRUTH, lanes: None, compile_us: 0.0, ..self }
     }
