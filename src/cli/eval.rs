@@ -9,7 +9,7 @@
 
 use super::args::{self, BackendArg, FormulaSource, Json, Params, PreferArg};
 use super::common::{self, CliError};
-use lobe::report::eval::{EvalReport, PointValue, PointsReport};
+use lobe::report::eval::{EvalReport, PointValue, PointsReport, PointsTiming};
 use lobe::ir::{Input, InputSet, N_INPUTS};
 use lobe::{Evaluator, Kernel};
 
@@ -33,6 +33,11 @@ pub struct EvalArgs {
     /// every parameter).
     #[arg(long)]
     pub normalize: bool,
+    /// Print the ground truth instead of a kernel's value: the formula as written (--set values folded)
+    /// evaluated in ~104-bit precision with an unbounded exponent and rounded to f64, what `lobe check`
+    /// measures errors against (µs per point, all threads)
+    #[arg(long, conflicts_with = "normalize")]
+    pub truth: bool,
     #[command(flatten)]
     pub backend: BackendArg,
     #[command(flatten)]
@@ -185,13 +190,18 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
         lobe::numerics::pass_cache::command_channels(&f, &set, backend, a.backend.math.mode, pass, common::cache_on())?
     };
     let params = common::param_values(&ks[0].formula, &set);
+    let truth = if a.truth { Some(truth_channels(&f, &set)?) } else { None };
     if let Some(path) = &a.points {
-        return run_points(a, &ks, path, &params, &set);
+        return run_points(a, &ks, truth.as_deref(), path, &params, &set);
     }
     let (x, note) = at_inputs(&at, used(&ks))?;
-    let v: Vec<f64> = ks.iter().map(|k| k.eval(&x, &params)).collect();
+    let v: Vec<f64> = match &truth {
+        Some(t) => t.iter().map(|g| lobe::numerics::truth::eval(g, &x, &params)).collect(),
+        None => ks.iter().map(|k| k.eval(&x, &params)).collect(),
+    };
     if a.json.on {
-        println!("{}", common::to_json(&EvalReport::new(&ks, v, note))?);
+        let r = EvalReport::new(&ks, v, note);
+        println!("{}", common::to_json(&if truth.is_some() { r.truth() } else { r })?);
     } else {
         emit(note, &format!("{}\n", show(&v)));
     }
@@ -206,7 +216,18 @@ fn emit(note: Option<String>, text: &str) {
     print!("{text}");
 }
 
-fn run_points(a: &EvalArgs, ks: &[Kernel], path: &str, params: &[f64], set: &[(String, f64)]) -> Result<(), CliError> {
+/// The truth's formulas (`--truth`): the formula as written with `set` folded, one per colour channel.
+fn truth_channels(f: &lobe::ir::Formula, set: &[(String, f64)]) -> Result<Vec<lobe::ir::Formula>, CliError> {
+    let t = lobe::simplify::bake_only(f, &lobe::resolve_bake(f, set)?);
+    Ok(match t.rgb {
+        Some(c) => c.to_vec(),
+        None => vec![t],
+    })
+}
+
+/// `--points`: every row through the kernels `ks`, timed in the steady state with `--json`; or, with `truth`,
+/// through the truth's formulas, in one pass (timed as it is).
+fn run_points(a: &EvalArgs, ks: &[Kernel], truth: Option<&[lobe::ir::Formula]>, path: &str, params: &[f64], set: &[(String, f64)]) -> Result<(), CliError> {
     let text = super::points::read(path)?;
     let name = if path == "-" { "<stdin>" } else { path };
     let formula = &ks[0].formula;
@@ -214,22 +235,36 @@ fn run_points(a: &EvalArgs, ks: &[Kernel], path: &str, params: &[f64], set: &[(S
     if a.normalize {
         baked.extend(formula.params.iter().map(|p| p.name.clone()));
     }
-    let pts = lobe::numerics::points::parse(name, &text, formula, used(ks), &baked)?;
-    let mut channels: Vec<Vec<f64>> = ks.iter().map(|k| lobe::numerics::points::evaluate(k, &pts, params)).collect();
-    // The reported cost is the steady state (kernels warm, output buffers touched), not the first call.
-    let ns_per_point = a.json.on.then(|| {
-        lobe::report::measure::steady_state(pts.len, || {
-            for (k, out) in ks.iter().zip(&mut channels) {
-                lobe::numerics::points::evaluate_into(k, &pts, params, std::hint::black_box(out));
-            }
-        })
-        .median_ns
-    });
+    // The truth may read an input the simplified kernels no longer do.
+    let truth_inputs = truth.unwrap_or_default().iter().map(lobe::ir::Formula::used_inputs);
+    let read = std::iter::once(used(ks)).chain(truth_inputs).collect();
+    let pts = lobe::numerics::points::parse(name, &text, formula, read, &baked)?;
+    let started = std::time::Instant::now();
+    let (channels, timing) = match truth {
+        Some(t) => {
+            let c: Vec<Vec<f64>> = t.iter().map(|g| lobe::numerics::points::truth(g, &pts, params)).collect();
+            let ns = started.elapsed().as_nanos() as f64 / pts.len.max(1) as f64;
+            (c, PointsTiming::OnePass(ns))
+        }
+        None => {
+            let mut c: Vec<Vec<f64>> = ks.iter().map(|k| lobe::numerics::points::evaluate(k, &pts, params)).collect();
+            // The reported cost is the steady state (kernels warm, output buffers touched), not the first call.
+            let steady = a.json.on.then(|| {
+                lobe::report::measure::steady_state(pts.len, || {
+                    for (k, out) in ks.iter().zip(&mut c) {
+                        lobe::numerics::points::evaluate_into(k, &pts, params, std::hint::black_box(out));
+                    }
+                })
+            });
+            (c, steady.map_or(PointsTiming::OnePass(f64::NAN), PointsTiming::Steady))
+        }
+    };
     let point = |i: usize| -> Vec<f64> { channels.iter().map(|c| c[i]).collect() };
     let note = (pts.normalised > 0).then(|| format!("{} of {} rows had a non-unit L or V; they were normalised", pts.normalised, pts.len));
     if a.json.on {
         let values = (0..pts.len).map(|i| PointValue(point(i))).collect();
-        println!("{}", common::to_json(&PointsReport::new(ks, values, ns_per_point.unwrap_or(f64::NAN), note))?);
+        let r = PointsReport::new(ks, values, timing, note);
+        println!("{}", common::to_json(&if truth.is_some() { r.truth() } else { r })?);
         return Ok(());
     }
     let mut text = String::with_capacity(pts.len * 20 * ks.len());

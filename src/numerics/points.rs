@@ -35,6 +35,9 @@ pub struct Points {
     /// `len` zeros, read in place of every input column the file does not give (built once at parse, so an
     /// evaluation allocates nothing but its output).
     zeros: Vec<f64>,
+    /// The runs of consecutive rows with equal parameter values, each one batch (found once at parse: scanning
+    /// `params` per evaluation cost more than a cheap kernel at 2²⁰ rows).
+    runs: Vec<std::ops::Range<usize>>,
 }
 
 fn span(start: usize, len: usize) -> Span {
@@ -116,7 +119,7 @@ pub fn parse(file: &str, text: &str, f: &Formula, used: InputSet, baked: &[Strin
             .at(header_span, "this header")
             .hint("give the columns Lx,Ly,Lz,Vx,Vy,Vz (unit L and V in the local frame: N = +z, X = +x, Y = +y); cosines follow from them")));
     }
-    let mut pts = Points { normalised: 0, inputs: Default::default(), param_columns, params: vec![], len: 0, zeros: vec![] };
+    let mut pts = Points { normalised: 0, inputs: Default::default(), param_columns, params: vec![], len: 0, zeros: vec![], runs: vec![] };
     let mut row_inputs = [0.0; N_INPUTS];
     for (start, line) in lines {
         if line.trim().is_empty() {
@@ -192,7 +195,33 @@ pub fn parse(file: &str, text: &str, f: &Formula, used: InputSet, baked: &[Strin
     if pts.inputs.iter().any(Vec::is_empty) {
         pts.zeros = vec![0.0; pts.len];
     }
+    let mut start = 0;
+    while start < pts.len {
+        let mut end = start + 1;
+        while end < pts.len && pts.params[end] == pts.params[start] {
+            end += 1;
+        }
+        pts.runs.push(start..end);
+        start = end;
+    }
     Ok(pts)
+}
+
+/// The ground truth ([`super::truth`]) of `f` (the formula as written, baked values folded) at every point, in
+/// parallel: what a kernel's values at these points are measured against. An input the file does not give is 0.
+pub fn truth(f: &Formula, pts: &Points, base_params: &[f64]) -> Vec<f64> {
+    use rayon::prelude::*;
+    (0..pts.len)
+        .into_par_iter()
+        .map(|i| {
+            let x: [f64; N_INPUTS] = std::array::from_fn(|k| pts.inputs[k].get(i).copied().unwrap_or(0.0));
+            let mut params = base_params.to_vec();
+            for (slot, v) in pts.param_columns.iter().zip(&pts.params[i]) {
+                params[*slot] = *v;
+            }
+            super::truth::eval(f, &x, &params)
+        })
+        .collect()
 }
 
 /// Evaluates every point with the batched kernel: one batch per run of rows with equal parameter values.
@@ -207,17 +236,11 @@ pub fn evaluate_into(k: &Kernel, pts: &Points, base_params: &[f64], out: &mut [f
     assert_eq!(out.len(), pts.len, "one output per point");
     let cols: [&[f64]; N_INPUTS] = std::array::from_fn(|i| if pts.inputs[i].is_empty() { pts.zeros.as_slice() } else { pts.inputs[i].as_slice() });
     let mut params = base_params.to_vec();
-    let mut start = 0;
-    while start < pts.len {
-        let mut end = start + 1;
-        while end < pts.len && pts.params[end] == pts.params[start] {
-            end += 1;
-        }
-        for (slot, v) in pts.param_columns.iter().zip(&pts.params[start]) {
+    for run in &pts.runs {
+        for (slot, v) in pts.param_columns.iter().zip(&pts.params[run.start]) {
             params[*slot] = *v;
         }
-        let part: [&[f64]; N_INPUTS] = std::array::from_fn(|i| &cols[i][start..end]);
-        k.eval_batch(&Columns::new(part), &params, &mut out[start..end]);
-        start = end;
+        let part: [&[f64]; N_INPUTS] = std::array::from_fn(|i| &cols[i][run.clone()]);
+        k.eval_batch(&Columns::new(part), &params, &mut out[run.clone()]);
     }
 }

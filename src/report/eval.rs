@@ -68,6 +68,23 @@ impl EvalReport {
     pub fn new(ks: &[Kernel], value: Vec<f64>, note: Option<String>) -> EvalReport {
         EvalReport { value: PointValue(value), backend: ks[0].backend.name(), lanes: lanes(ks), compile_us: compile_us(ks), note }
     }
+
+    /// The report of a value that is the ground truth: backend `truth`, nothing compiled.
+    pub fn truth(self) -> EvalReport {
+        EvalReport { backend: TRUTH, lanes: None, compile_us: 0.0, ..self }
+    }
+}
+
+/// The backend name of values that are the ground truth ([`crate::numerics::truth`]).
+const TRUTH: &str = "truth";
+
+/// How the values at many points were timed.
+#[derive(Clone, Copy, Debug)]
+pub enum PointsTiming {
+    /// The steady state of the batched kernels (wall and thread CPU time, [`crate::report::measure::steady_state`]).
+    Steady(crate::report::measure::Steady),
+    /// The one pass that computed the values, ns per point of wall time (NaN: not timed).
+    OnePass(f64),
 }
 
 /// The eval command's JSON report for many points.
@@ -83,18 +100,26 @@ pub struct PointsReport {
     #[serde(serialize_with = "json::num")]
     pub compile_us: f64,
     /// ns per point of evaluating every channel over the points in the steady state (kernels compiled and
-    /// warm, output written before): the median of repeated passes.
+    /// warm, output written before): the median of repeated passes, wall time; for the truth, its one pass.
     #[serde(serialize_with = "json::num")]
     pub eval_ns_per_point: f64,
+    /// The same passes in this thread's CPU time (the batched kernels run on it), which a shared machine does
+    /// not inflate (absent for the truth, which runs on every thread).
+    #[serde(skip_serializing_if = "Option::is_none", serialize_with = "json::opt_num")]
+    pub eval_cpu_ns_per_point: Option<f64>,
     /// Set when rows had a non-unit L or V.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub note: Option<String>,
 }
 
 impl PointsReport {
-    /// `values` per point from the channel kernels `ks`, which cost `eval_ns_per_point`.
-    pub fn new(ks: &[Kernel], values: Vec<PointValue>, eval_ns_per_point: f64, note: Option<String>) -> PointsReport {
+    /// `values` per point from the channel kernels `ks`, timed as `timing` says.
+    pub fn new(ks: &[Kernel], values: Vec<PointValue>, timing: PointsTiming, note: Option<String>) -> PointsReport {
         let points = values.len();
+        let (eval_ns_per_point, eval_cpu_ns_per_point) = match timing {
+            PointsTiming::Steady(s) => (s.wall.median_ns, Some(s.cpu.median_ns)),
+            PointsTiming::OnePass(ns) => (ns, None),
+        };
         PointsReport {
             values,
             points,
@@ -103,8 +128,14 @@ impl PointsReport {
             math: ks[0].math.name(),
             compile_us: compile_us(ks),
             eval_ns_per_point,
+            eval_cpu_ns_per_point,
             note,
         }
+    }
+
+    /// The report of values that are the ground truth: backend and math `truth`, nothing compiled.
+    pub fn truth(self) -> PointsReport {
+        PointsReport { backend: TRUTH, math: TRUTH, lanes: None, compile_us: 0.0, ..self }
     }
 }
 

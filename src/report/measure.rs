@@ -120,20 +120,38 @@ fn time_per_eval(samples: usize, evals: usize, mut pass: impl FnMut()) -> Timing
     Timing::from_samples(ns)
 }
 
+/// A steady-state measurement on two clocks, over the same passes.
+#[derive(Clone, Copy, Debug)]
+pub struct Steady {
+    /// Wall time per element.
+    pub wall: Timing,
+    /// The calling thread's CPU time per element (the wall clock where the platform has no thread clock): what a
+    /// shared machine does not inflate when the work runs on this thread.
+    pub cpu: Timing,
+}
+
+/// This thread's CPU time, or `None` where the platform has no thread clock.
+fn thread_cpu() -> Option<Duration> {
+    cpu_time::ThreadTime::try_now().ok().map(|t| t.as_duration())
+}
+
 /// ns per element of `pass` (which does `evals` elements) in its steady state: the caller has run it once
 /// (compiled, warm, output touched); passes repeat until at least 3 and 20 ms, or 1 s, have gone by.
-pub fn steady_state(evals: usize, mut pass: impl FnMut()) -> Timing {
+pub fn steady_state(evals: usize, mut pass: impl FnMut()) -> Steady {
     let start = Instant::now();
-    let mut ns = vec![];
-    while ns.len() < 3 || (start.elapsed() < Duration::from_millis(20) && ns.len() < 1000) {
-        let t = Instant::now();
+    let (mut wall, mut cpu) = (vec![], vec![]);
+    let per = |d: Duration| d.as_nanos() as f64 / evals.max(1) as f64;
+    while wall.len() < 3 || (start.elapsed() < Duration::from_millis(20) && wall.len() < 1000) {
+        let (t, c) = (Instant::now(), thread_cpu());
         pass();
-        ns.push(t.elapsed().as_nanos() as f64 / evals.max(1) as f64);
+        let w = t.elapsed();
+        wall.push(per(w));
+        cpu.push(per(c.zip(thread_cpu()).map_or(w, |(a, b)| b.saturating_sub(a))));
         if start.elapsed() > Duration::from_secs(1) {
             break;
         }
     }
-    Timing::from_samples(ns)
+    Steady { wall: Timing::from_samples(wall), cpu: Timing::from_samples(cpu) }
 }
 
 /// Measures scalar JIT, batched JIT and interpreter ns/eval for `k`'s formula with `params`.

@@ -294,6 +294,33 @@ fn eval_points_reads_csv_and_agrees_with_single_evaluations() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `eval --truth`: the formula as written in high precision, rounded once: `(k + NH) − k` is NH exactly, where
+/// f64 arithmetic as written gives 0 at NH = 1e-20. --set folds k, a parameter column stays live, the report
+/// names backend `truth`; with --normalize it is a usage error.
+#[test]
+fn eval_truth_is_the_formula_as_written_in_high_precision() {
+    let dir = std::env::temp_dir().join(format!("lobe-truth-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("t.brdf");
+    std::fs::write(&file, "param k = 2 in 1..4\n(k + NH) - k\n").unwrap();
+    let file = file.display().to_string();
+    let o = lobe(&["eval", &file, "--at", "NH=1e-20", "--set", "k=3", "--truth", "--json"], None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!((v["backend"].as_str(), v["value"].as_f64()), (Some("truth"), Some(1e-20)), "{v}");
+    let csv = "NH,k\n1e-20,2\n0.25,3.5\n1,1\n";
+    let o = lobe(&["eval", &file, "--points", "-", "--truth"], Some(csv.as_bytes()));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let values: Vec<f64> = String::from_utf8_lossy(&o.stdout).lines().map(|l| l.parse().unwrap()).collect();
+    assert_eq!(values, vec![1e-20, 0.25, 1.0]);
+    let o = lobe(&["eval", &file, "--points", "-", "--truth", "--json"], Some(csv.as_bytes()));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!((v["backend"].as_str(), v["math"].as_str(), v["points"].as_u64()), (Some("truth"), Some("truth"), Some(3)), "{v}");
+    let o = lobe(&["eval", &file, "--at", "NH=0.5", "--truth", "--normalize"], None);
+    assert!(!o.status.success() && stderr(&o).contains("cannot be used with"), "{}", stderr(&o));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// `--tier`: `llvm` gives the LLVM tier's kernel (the same values, bit for bit, as Cranelift's, reported as
 /// backend `llvm` with its lanes), or in a build without it a clean error that says how to get it; `auto` falls
 /// back to Cranelift there; `--backend interp --tier llvm` is refused; an unknown tier is a usage error.

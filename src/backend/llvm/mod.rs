@@ -1,5 +1,6 @@
 //! The LLVM tier (cargo feature `llvm`): a simplified [`Formula`] → a batched kernel compiled by LLVM 19
-//! (through inkwell), in the host's widest `f64` lanes: 8 with AVX-512, 4 with AVX2, 2 otherwise.
+//! (through inkwell), 8 `f64` lanes per step where the host has 256-bit vectors or wider (one AVX-512 register, or
+//! two AVX2 ones), 2 otherwise.
 //!
 //! Same IR, same math, same bits as the interpreter and the Cranelift tier ([`crate::backend::jit`]): the
 //! generator ([`codegen`]) implements the math library's `Emit`, so every builtin is the library's own code; it
@@ -46,7 +47,7 @@ pub struct Host {
     pub cpu: String,
     /// Its feature string (`+avx2,+fma,…`), given to every function.
     pub features: String,
-    /// `f64` lanes of the batch loop: 8 with AVX-512, 4 with AVX2, 2 otherwise.
+    /// `f64` lanes of the batch loop: 8 with AVX-512 or AVX2, 2 otherwise.
     pub lanes: u32,
     /// A native fused multiply-add.
     pub fma: bool,
@@ -60,13 +61,10 @@ pub fn host() -> Result<&'static Host, JitError> {
         let cpu = TargetMachine::get_host_cpu_name().to_string();
         let features = TargetMachine::get_host_cpu_features().to_string();
         let has = |f: &str| features.split(',').any(|x| x == f);
-        let lanes = if has("+avx512f") {
-            8
-        } else if has("+avx2") {
-            4
-        } else {
-            2
-        };
+        // With AVX2 a step is two 4-lane registers, which LLVM interleaves: the two independent halves hide the
+        // latency of the divider and of the math library's FMA chains (1.1–1.5× faster than one register per
+        // step on the transcendental catalogue formulas on Zen 3; BENCHMARKS.md §15).
+        let lanes = if has("+avx512f") || has("+avx2") { 8 } else { 2 };
         let fma = has("+fma") || cfg!(target_arch = "aarch64");
         Ok(Host { cpu, features, lanes, fma })
     })
