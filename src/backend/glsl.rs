@@ -27,8 +27,73 @@ use std::fmt::Write;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Dialect {
-    Glsl,
+    Glsl(GlslVersion),
     Wgsl,
+}
+
+/// The GLSL an export is written for. What differs: `fma` exists from GLSL 4.00 (and ES 3.20) only, so for 330
+/// and ES 300 it is written `a * b + c` (which a compiler may or may not fuse; the header says so); ES declares
+/// every float `highp`, so the function computes in 32 bits whatever default precision the shader including it
+/// declares.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum GlslVersion {
+    V330,
+    #[default]
+    V450,
+    Es300,
+}
+
+impl GlslVersion {
+    pub const ALL: [GlslVersion; 3] = [GlslVersion::V330, GlslVersion::V450, GlslVersion::Es300];
+
+    /// The version's short name: `330`, `450`, `es300`.
+    pub fn name(self) -> &'static str {
+        match self {
+            GlslVersion::V330 => "330",
+            GlslVersion::V450 => "450",
+            GlslVersion::Es300 => "es300",
+        }
+    }
+
+    /// The `#version` line of a shader in this version.
+    pub fn directive(self) -> &'static str {
+        match self {
+            GlslVersion::V330 => "#version 330 core",
+            GlslVersion::V450 => "#version 450",
+            GlslVersion::Es300 => "#version 300 es",
+        }
+    }
+
+    fn has_fma(self) -> bool {
+        self == GlslVersion::V450
+    }
+
+    /// The scalar and vector types of declarations.
+    fn types(self) -> (&'static str, &'static str) {
+        match self {
+            GlslVersion::Es300 => ("highp float", "highp vec3"),
+            _ => ("float", "vec3"),
+        }
+    }
+}
+
+impl std::str::FromStr for GlslVersion {
+    type Err = String;
+    fn from_str(s: &str) -> Result<GlslVersion, String> {
+        GlslVersion::ALL
+            .into_iter()
+            .find(|v| v.name() == s)
+            .ok_or_else(|| format!("unknown GLSL version `{s}`; expected `330`, `450` or `es300`"))
+    }
+}
+
+impl Dialect {
+    fn glsl(self) -> Option<GlslVersion> {
+        match self {
+            Dialect::Glsl(v) => Some(v),
+            Dialect::Wgsl => None,
+        }
+    }
 }
 
 /// A valid identifier for the function: `lobe_` + the file stem with non-identifier characters replaced.
@@ -91,32 +156,40 @@ fn comment_text(s: &str) -> String {
 
 /// A literal for `v`: the shortest text that round-trips the f32 value the shader computes with, or with
 /// `exact` the f64 value (for text lobe reads back: a BRDF Explorer file imported again keeps lobe's constants;
-/// the GPU still rounds it to f32).
-fn literal(v: f64, d: Dialect, exact: bool) -> String {
-    let bits = |b: u32| match d {
-        Dialect::Glsl => format!("uintBitsToFloat({b:#010x}u)"),
-        Dialect::Wgsl => format!("bitcast<f32>({b:#010x}u)"),
-    };
-    if v.is_nan() {
-        return bits(0x7fc0_0000);
-    }
-    if v.is_infinite() {
-        return bits(if v > 0.0 { 0x7f80_0000 } else { 0xff80_0000 });
-    }
-    // f32 is what the shader computes in; print the shortest text that round-trips the f32 value. A value
-    // beyond f32's range (the accuracy pass's 2^600-style scales) is still exact text when lobe reads it back:
-    // the GPU compiler rounds it to f32 ∞ as the bit pattern would, and lobe keeps the finite f64 constant.
-    let f = v as f32;
-    if f.is_infinite() && !exact {
-        return bits(if f > 0.0 { 0x7f80_0000 } else { 0xff80_0000 });
-    }
-    let s = if exact { format!("{v:?}") } else { format!("{f:?}") };
+/// the GPU still rounds it to f32). A constant a shader cannot hold is refused ([`f32_trouble`]).
+fn literal(v: f64, exact: bool) -> String {
+    let s = if exact { format!("{v:?}") } else { format!("{:?}", v as f32) };
     let s = if s.contains('.') || s.contains('e') || s.contains("inf") { s } else { format!("{s}.0") };
     if v < 0.0 {
         format!("({s})")
     } else {
         s
     }
+}
+
+/// Why `v` cannot be a constant of f32 code, if it cannot: NaN and ∞ have no literal in GLSL or WGSL (and a bit
+/// pattern for them is undefined behaviour in WGSL's constant evaluation), a magnitude above f32's largest
+/// rounds to ∞, and a nonzero one below its smallest normal is flushed to 0 by GPUs that do not keep subnormals.
+fn f32_trouble(v: f64) -> Option<&'static str> {
+    if v.is_nan() {
+        Some("is NaN, which f32 shader code has no literal for")
+    } else if v.is_infinite() {
+        Some("is infinite, which f32 shader code has no literal for")
+    } else if v.abs() > f32::MAX as f64 {
+        Some("is beyond f32's range (largest 3.4028235e38): a shader would compute with ∞")
+    } else if v != 0.0 && v.abs() < f32::MIN_POSITIVE as f64 {
+        Some("is below f32's smallest normal number (1.1754944e-38): GPUs may flush it to 0")
+    } else {
+        None
+    }
+}
+
+/// The error for a constant a shader cannot hold, pointing at it in the source.
+fn refuse_constant(v: f64, why: &str, span: crate::base::span::Span) -> Diagnostic {
+    let shown = crate::ir::print::number(v);
+    Diagnostic::error(format!("the constant {shown} cannot be exported: it {why}"))
+        .at(span, "this constant, after simplification")
+        .hint("scale the formula so its constants lie within ±3.4e38 and are 0 or above 1.2e-38 in magnitude, or bake parameters that produce it differently")
 }
 
 /// The group name of a parameter: a colour channel `NAME.r` belongs to `NAME`; every other parameter is its own.
@@ -231,7 +304,7 @@ fn emit(ir: &Ir, roots: &[NodeId], d: Dialect, exact: bool, params: &[String], o
         }
     }
     let ty = match d {
-        Dialect::Glsl => "float",
+        Dialect::Glsl(v) => v.types().0,
         Dialect::Wgsl => "f32",
     };
     let single = (roots.len() == 1).then(|| roots[0]);
@@ -245,7 +318,13 @@ fn emit(ir: &Ir, roots: &[NodeId], d: Dialect, exact: bool, params: &[String], o
         let node = ir.node(id);
         let t = |a: NodeId| text[a.index()].clone();
         let e = match *node {
-            Node::Const(b) => literal(f64::from_bits(b), d, exact),
+            Node::Const(b) => {
+                let v = f64::from_bits(b);
+                if let Some(why) = f32_trouble(v) {
+                    return Err(refuse_constant(v, why, ir.span(id)));
+                }
+                literal(v, exact)
+            }
             Node::Input(i) => i.name().to_string(),
             Node::Param(p) => params[p as usize].clone(),
             // Formulas have no data columns (only shading programs, which are not exported); named for dumps.
@@ -253,9 +332,10 @@ fn emit(ir: &Ir, roots: &[NodeId], d: Dialect, exact: bool, params: &[String], o
             Node::Neg(a) => format!("(-{})", t(a)),
             Node::Binary(op, a, b) => format!("({} {} {})", t(a), op.symbol(), t(b)),
             Node::Call(b, _) if b.is_internal() => return Err(refuse_internal(b)),
+            Node::Call(Builtin::Fma, a) if d.glsl().is_some_and(|v| !v.has_fma()) => format!("({} * {} + {})", t(a[0]), t(a[1]), t(a[2])),
             Node::Call(b, a) => {
                 let mut s = match d {
-                    Dialect::Glsl => b.info().glsl,
+                    Dialect::Glsl(_) => b.info().glsl,
                     Dialect::Wgsl => b.wgsl(),
                 }
                 .to_string();
@@ -275,7 +355,7 @@ fn emit(ir: &Ir, roots: &[NodeId], d: Dialect, exact: bool, params: &[String], o
             let tname = format!("t{ntemps}");
             ntemps += 1;
             let _ = match d {
-                Dialect::Glsl => writeln!(out, "    {ty} {tname} = {e};"),
+                Dialect::Glsl(_) => writeln!(out, "    {ty} {tname} = {e};"),
                 Dialect::Wgsl => writeln!(out, "    let {tname}: {ty} = {e};"),
             };
             text.push(tname);
@@ -338,16 +418,22 @@ pub fn export(f: &Formula, d: Dialect) -> Result<String, Diagnostic> {
     let (inputs, live) = uses_of(&ir, &roots);
     let names = param_names(f);
     let lang = match d {
-        Dialect::Glsl => "GLSL",
+        Dialect::Glsl(GlslVersion::V330) => "GLSL 3.30",
+        Dialect::Glsl(GlslVersion::V450) => "GLSL 4.50",
+        Dialect::Glsl(GlslVersion::Es300) => "GLSL ES 3.00",
         Dialect::Wgsl => "WGSL",
     };
     let mut out = String::new();
-    for line in header(f, inputs, &live, lang) {
+    let mut lines = header(f, inputs, &live, lang);
+    if d.glsl().is_some_and(|v| !v.has_fma()) && ir.nodes().iter().any(|n| matches!(n, Node::Call(Builtin::Fma, _))) {
+        lines.push(format!("{lang} has no fma: fma(a, b, c) is written a * b + c, which need not round once."));
+    }
+    for line in lines {
         let _ = writeln!(out, "// {line}");
     }
     let arg = |name: &str, vec: bool| match (d, vec) {
-        (Dialect::Glsl, false) => format!("float {name}"),
-        (Dialect::Glsl, true) => format!("vec3 {name}"),
+        (Dialect::Glsl(v), false) => format!("{} {name}", v.types().0),
+        (Dialect::Glsl(v), true) => format!("{} {name}", v.types().1),
         (Dialect::Wgsl, false) => format!("{name}: f32"),
         (Dialect::Wgsl, true) => format!("{name}: vec3<f32>"),
     };
@@ -356,7 +442,7 @@ pub fn export(f: &Formula, d: Dialect) -> Result<String, Diagnostic> {
     let rgb = roots.len() == 3;
     let name = function_name(f);
     let _ = match (d, rgb) {
-        (Dialect::Glsl, _) => writeln!(out, "{} {name}({}) {{", if rgb { "vec3" } else { "float" }, args.join(", ")),
+        (Dialect::Glsl(v), _) => writeln!(out, "{} {name}({}) {{", if rgb { v.types().1 } else { v.types().0 }, args.join(", ")),
         (Dialect::Wgsl, _) => writeln!(out, "fn {name}({}) -> {} {{", args.join(", "), if rgb { "vec3<f32>" } else { "f32" }),
     };
     let results = emit(&ir, &roots, d, false, &param_reads(f, &names, false), &mut out)?;
@@ -369,7 +455,7 @@ pub fn export(f: &Formula, d: Dialect) -> Result<String, Diagnostic> {
 fn result(results: &[String], d: Dialect) -> String {
     match (results, d) {
         ([one], _) => one.clone(),
-        (_, Dialect::Glsl) => format!("vec3({})", results.join(", ")),
+        (_, Dialect::Glsl(_)) => format!("vec3({})", results.join(", ")),
         (_, Dialect::Wgsl) => format!("vec3<f32>({})", results.join(", ")),
     }
 }
@@ -461,24 +547,26 @@ pub fn brdf_explorer(f: &Formula) -> Result<String, Diagnostic> {
     for i in inputs.iter() {
         let _ = writeln!(out, "    float {} = {};", i.name(), be_input(i));
     }
-    let results = emit(&ir, &roots, Dialect::Glsl, true, &param_reads(f, &names, true), &mut out)?;
+    // BRDF Explorer compiles GLSL 4.10, which has fma.
+    let glsl = Dialect::Glsl(GlslVersion::V450);
+    let results = emit(&ir, &roots, glsl, true, &param_reads(f, &names, true), &mut out)?;
     let ret = match results.as_slice() {
         [one] => format!("vec3({one})"),
-        _ => result(&results, Dialect::Glsl),
+        _ => result(&results, glsl),
     };
     let _ = writeln!(out, "    return {ret};\n}}\n::end shader");
     Ok(out)
 }
 
-/// A complete fragment shader around the exported GLSL function (for validators and quick previews); an error
-/// as for [`export`].
-pub fn glsl_test_shader(f: &Formula) -> Result<String, Diagnostic> {
-    let func = export(f, Dialect::Glsl)?;
+/// A complete fragment shader in `version` around the exported GLSL function (for validators and quick
+/// previews); an error as for [`export`].
+pub fn glsl_test_shader(f: &Formula, version: GlslVersion) -> Result<String, Diagnostic> {
+    let func = export(f, Dialect::Glsl(version))?;
     let (ir, roots) = f.merged_roots();
     let (inputs, live) = uses_of(&ir, &roots);
     let mut call_args: Vec<String> = inputs.iter().map(|_| "0.5".to_string()).collect();
     for d in live_decls(f, &param_names(f), &live) {
-        let lit = |k: usize| literal(f.params[d.first + k].default, Dialect::Glsl, false);
+        let lit = |k: usize| literal(f.params[d.first + k].default, false);
         call_args.push(match d.kind {
             ParamKind::Color(_) => format!("vec3({}, {}, {})", lit(0), lit(1), lit(2)),
             _ => lit(0),
@@ -486,7 +574,11 @@ pub fn glsl_test_shader(f: &Formula) -> Result<String, Diagnostic> {
     }
     let call = format!("{}({})", function_name(f), call_args.join(", "));
     let value = if roots.len() == 3 { format!("vec4({call}, 1.0)") } else { format!("vec4({call})") };
-    Ok(format!("#version 450\n{func}\nlayout(location = 0) out vec4 color;\nvoid main() {{\n    color = {value};\n}}\n"))
+    let precision = if version == GlslVersion::Es300 { "precision highp float;\n" } else { "" };
+    Ok(format!(
+        "{}\n{precision}{func}\nlayout(location = 0) out vec4 color;\nvoid main() {{\n    color = {value};\n}}\n",
+        version.directive()
+    ))
 }
 
 #[cfg(test)]
@@ -503,7 +595,7 @@ mod tests {
         let f = crate::front::parse("hostile.brdf", &src).unwrap_or_else(|d| panic!("{}", d.render(false)));
         let names = param_names(&f);
         assert_eq!(names, ["n", "p_t0", "p_float_1", "p_gl_Position", "p_alias", "p_float", "p_a_b"]);
-        for d in [Dialect::Glsl, Dialect::Wgsl] {
+        for d in [Dialect::Glsl(GlslVersion::V450), Dialect::Wgsl] {
             let text = export(&f, d).unwrap();
             assert!(text.lines().all(|l| l.starts_with("//") || !l.contains("define")), "{text}");
             assert!(!text.contains(['\r', '\u{2028}', '\x0b']), "{text}");
@@ -525,7 +617,12 @@ mod tests {
             let f = crate::front::parse_internal("internal.brdf", src).unwrap_or_else(|d| panic!("{}", d.render(false)));
             let f = crate::simplify::simplify(&f, &[(0, 50.0)]);
             assert!(f.ir.nodes().iter().any(|n| matches!(n, Node::Call(b, _) if b.is_internal())), "{name}: {}", f.to_program_text());
-            let errors = [export(&f, Dialect::Glsl), export(&f, Dialect::Wgsl), brdf_explorer(&f), glsl_test_shader(&f)];
+            let errors = [
+                export(&f, Dialect::Glsl(GlslVersion::V450)),
+                export(&f, Dialect::Wgsl),
+                brdf_explorer(&f),
+                glsl_test_shader(&f, GlslVersion::Es300),
+            ];
             for e in errors {
                 let e = e.expect_err(name);
                 assert!(e.message.contains(&format!("`{name}` cannot be exported")), "{e}");
@@ -533,7 +630,52 @@ mod tests {
             }
             // The same formula without the internal call exports.
             let plain = crate::front::parse("plain.brdf", "acos(NH) + pow(NH, n)").unwrap();
-            assert!(export(&plain, Dialect::Glsl).is_ok());
+            assert!(export(&plain, Dialect::Glsl(GlslVersion::V330)).is_ok());
         }
+    }
+
+    /// A constant no f32 shader can hold is refused at its place in the source, whatever produced it (written,
+    /// or folded from baked parameters); constants within f32's normal range export.
+    #[test]
+    fn constants_outside_f32_are_refused_where_they_are() {
+        for (src, needle) in [
+            ("NH * 1e300", "beyond f32's range"),
+            ("NH + 1e-300", "below f32's smallest normal"),
+            ("param k = 1e200\nNH * k * k", "beyond f32's range"),
+            ("NH * (0/0)", "NaN"),
+            ("NH * (1/0)", "infinite"),
+        ] {
+            let f = crate::front::parse("c.brdf", src).unwrap_or_else(|d| panic!("{}", d.render(false)));
+            let f = crate::simplify::simplify(&f, &[(0, 50.0), (1, 1e200)]);
+            for d in [Dialect::Glsl(GlslVersion::V330), Dialect::Glsl(GlslVersion::Es300), Dialect::Wgsl] {
+                let e = export(&f, d).expect_err(src);
+                assert!(e.message.contains(needle) && e.primary.is_some(), "{src}: {e}");
+            }
+            assert!(brdf_explorer(&f).is_err(), "{src}");
+        }
+        for src in ["NH * 3e38", "NH + 1.2e-38", "NH * 0 + 1"] {
+            let f = crate::front::parse("c.brdf", src).unwrap();
+            let f = crate::simplify::simplify(&f, &[]);
+            assert!(export(&f, Dialect::Wgsl).is_ok(), "{src}");
+        }
+    }
+
+    /// GLSL 3.30 and ES 3.00 have no fma: the call is written as a multiply-add and the header says so; 4.50
+    /// keeps it. ES declares every float highp.
+    #[test]
+    fn fma_and_precision_follow_the_glsl_version() {
+        let f = crate::front::parse("f.brdf", "fma(NH, NV, NL) * n").unwrap();
+        let f = crate::simplify::simplify(&f, &[]);
+        let v450 = export(&f, Dialect::Glsl(GlslVersion::V450)).unwrap();
+        assert!(v450.contains("= fma(t2, t1, t0);") && !v450.contains("has no fma"), "{v450}");
+        for v in [GlslVersion::V330, GlslVersion::Es300] {
+            let text = export(&f, Dialect::Glsl(v)).unwrap();
+            let code: String = text.lines().filter(|l| !l.starts_with("//")).collect();
+            assert!(!code.contains("fma(") && code.contains("= (t2 * t1 + t0);"), "{text}");
+            assert!(text.contains("has no fma"), "{text}");
+            assert_eq!(code.contains("highp float NH"), v == GlslVersion::Es300, "{text}");
+        }
+        assert_eq!("es300".parse::<GlslVersion>(), Ok(GlslVersion::Es300));
+        assert!("300".parse::<GlslVersion>().unwrap_err().contains("expected `330`, `450` or `es300`"));
     }
 }

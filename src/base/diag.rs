@@ -194,7 +194,7 @@ impl Diagnostics {
         ds
     }
     /// A single error located in `source`.
-    pub(crate) fn single_in(file: impl Into<String>, source: impl Into<String>, d: Diagnostic) -> Diagnostics {
+    pub fn single_in(file: impl Into<String>, source: impl Into<String>, d: Diagnostic) -> Diagnostics {
         let mut ds = Diagnostics::new(file, source);
         ds.push(d);
         ds

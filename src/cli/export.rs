@@ -1,8 +1,8 @@
-//! `lobe export --glsl|--wgsl|--brdf-explorer FILE [--set n=50] [-o out.glsl]`
+//! `lobe export --glsl [--glsl-version 330|450|es300]|--wgsl|--brdf-explorer FILE [--set n=50] [-o out.glsl]`
 
 use super::args::{self, FormulaSource, Output, Params};
 use super::common::CliError;
-use lobe::backend::glsl::{self, Dialect};
+use lobe::backend::glsl::{self, Dialect, GlslVersion};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("set", args::help("Parameters baked as constants, e.g. `n=50`; the others become function arguments")))]
@@ -13,6 +13,10 @@ pub struct ExportArgs {
     /// Emit GLSL (the default).
     #[arg(long, conflicts_with_all = ["wgsl", "brdf_explorer"])]
     pub glsl: bool,
+    /// The GLSL the function is written for: `450` (the default), `330` or `es300` (GLSL ES 3.00, WebGL2). The
+    /// last two have no `fma`: it is written `a * b + c` there.
+    #[arg(long, value_name = "VERSION", default_value = "450", conflicts_with_all = ["wgsl", "brdf_explorer"])]
+    pub glsl_version: GlslVersion,
     /// Emit WGSL.
     #[arg(long, conflicts_with = "brdf_explorer")]
     pub wgsl: bool,
@@ -34,10 +38,11 @@ fn is_ours(bytes: &[u8]) -> bool {
 pub fn run(a: &ExportArgs) -> Result<(), CliError> {
     let f = a.formula.plain(&a.set.list()?)?;
     let text = if a.brdf_explorer {
-        glsl::brdf_explorer(&f)?
+        glsl::brdf_explorer(&f)
     } else {
-        glsl::export(&f, if a.wgsl { Dialect::Wgsl } else { Dialect::Glsl })?
-    };
+        glsl::export(&f, if a.wgsl { Dialect::Wgsl } else { Dialect::Glsl(a.glsl_version) })
+    }
+    .map_err(|d| lobe::Diagnostics::single_in(&f.file, &f.source, d))?;
     match &a.out.path {
         Some(p) => a.out.force.write(p, text.as_bytes(), is_ours),
         None => {

@@ -1,8 +1,10 @@
-//! Shader export: every catalogue formula exports to GLSL that a real validator accepts (glslangValidator from
-//! Debian's glslang-tools, installed by .ci/run when possible), and the text of a few exports is pinned by
-//! golden files (tests/golden/export/, `LOBE_BLESS=1` rewrites them).
+//! Shader export: every catalogue and explorer formula exports to GLSL 3.30, 4.50 and ES 3.00 that a real
+//! validator accepts (glslangValidator from Debian's glslang-tools, installed by .ci/run, which sets
+//! `LOBE_REQUIRE_GLSLANG=1` so a missing validator fails there), to WGSL and GLSL 4.50 that naga's front ends
+//! and validator accept, with no constant outside f32's range; the text of a few exports is pinned by golden
+//! files (tests/golden/export/, `LOBE_BLESS=1` rewrites them).
 
-use lobe::backend::glsl::{self, Dialect};
+use lobe::backend::glsl::{self, Dialect, GlslVersion};
 use lobe::{Backend, Options};
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -33,33 +35,147 @@ fn formula(path: &Path, bake: &[(&str, f64)]) -> lobe::Formula {
 }
 
 fn validator() -> Option<PathBuf> {
-    let out = Command::new("glslangValidator").arg("--version").output().ok()?;
-    out.status.success().then(|| PathBuf::from("glslangValidator"))
+    let out = Command::new("glslangValidator").arg("--version").output().ok();
+    let found = out.is_some_and(|o| o.status.success());
+    if !found && std::env::var_os("LOBE_REQUIRE_GLSLANG").is_some_and(|v| v == "1") {
+        panic!("glslangValidator is not installed and LOBE_REQUIRE_GLSLANG=1: apt-get install glslang-tools");
+    }
+    found.then(|| PathBuf::from("glslangValidator"))
 }
 
-#[test]
-fn every_catalogue_formula_exports_valid_glsl() {
-    let Some(v) = validator() else {
-        eprintln!("glslangValidator not installed: GLSL validity checked by golden files only");
-        return;
-    };
-    let dir = std::env::temp_dir().join(format!("lobe-glsl-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    for path in catalogue() {
-        for bake in [&[][..], &[("n", 50.0)][..]] {
-            let f = formula(&path, bake);
-            let shader = glsl::glsl_test_shader(&f).unwrap();
-            let file = dir.join(format!("{}.frag", glsl::function_name(&f)));
-            std::fs::write(&file, &shader).unwrap();
-            let out = Command::new(&v).arg(&file).output().unwrap();
-            assert!(
-                out.status.success(),
-                "{} (bake {bake:?}) is not valid GLSL:\n{}\n{}",
-                path.display(),
-                String::from_utf8_lossy(&out.stdout),
-                shader
-            );
+/// naga's WGSL front end and validator on `text`: the error as text.
+fn naga_wgsl(text: &str) -> Result<(), String> {
+    let module = naga::front::wgsl::parse_str(text).map_err(|e| e.emit_to_string(text))?;
+    naga_validate(&module)
+}
+
+/// naga's GLSL front end (4.50, fragment stage) and validator on a complete shader.
+fn naga_glsl(shader: &str) -> Result<(), String> {
+    let opts = naga::front::glsl::Options::from(naga::ShaderStage::Fragment);
+    let module = naga::front::glsl::Frontend::default().parse(&opts, shader).map_err(|e| e.emit_to_string(shader))?;
+    naga_validate(&module)
+}
+
+fn naga_validate(module: &naga::Module) -> Result<(), String> {
+    let mut v = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all());
+    v.validate(module).map(|_| ()).map_err(|e| format!("{e:?}"))
+}
+
+/// Every number written in the code lines of a shader (comments skipped): none may lie outside f32's normal
+/// range, and no NaN/∞ may be spelled as a bit pattern.
+fn literals_fit_f32(text: &str) -> Result<(), String> {
+    for line in text.lines().map(str::trim_start).filter(|l| !l.starts_with("//") && !l.starts_with('#')) {
+        if line.contains("BitsToFloat") || line.contains("bitcast") {
+            return Err(format!("a bit-pattern constant: `{line}`"));
         }
+        let mut rest = line;
+        while let Some(i) = rest.find(|c: char| c.is_ascii_digit()) {
+            let before = rest[..i].chars().next_back();
+            let tail = &rest[i..];
+            let len = tail
+                .char_indices()
+                .find(|&(k, c)| !(c.is_ascii_digit() || c == '.' || c == 'e' || ((c == '-' || c == '+') && tail[..k].ends_with('e'))))
+                .map_or(tail.len(), |(k, _)| k);
+            let word = before.is_some_and(|c| c.is_ascii_alphanumeric() || c == '_');
+            if !word {
+                let v: f64 = tail[..len].trim_end_matches(['e', '.']).parse().map_err(|e| format!("`{}` in `{line}`: {e}", &tail[..len]))?;
+                if v != 0.0 && !(f32::MIN_POSITIVE as f64..=f32::MAX as f64).contains(&v) {
+                    return Err(format!("the literal {} is outside f32's normal range: `{line}`", &tail[..len]));
+                }
+            }
+            rest = &tail[len.max(1)..];
+        }
+    }
+    Ok(())
+}
+
+fn examples() -> Vec<PathBuf> {
+    let explorer = std::fs::read_dir(root().join("examples/explorer")).unwrap().map(|e| e.unwrap().path());
+    let mut files: Vec<PathBuf> = catalogue().into_iter().chain(explorer.filter(|p| p.extension().is_some_and(|x| x == "brdf"))).collect();
+    files.sort();
+    assert!(files.len() >= 20, "{} example files", files.len());
+    files
+}
+
+/// Every catalogue and explorer file, live and with n = 50 baked: GLSL 3.30, 4.50 and ES 3.00 test shaders
+/// compile in glslangValidator, 4.50 also in naga's GLSL front end, WGSL in naga's, and no export writes a
+/// constant f32 cannot hold.
+#[test]
+fn every_example_exports_for_every_target_and_validates() {
+    let v = validator();
+    if v.is_none() {
+        eprintln!("glslangValidator not installed: GLSL checked by naga (4.50) and golden files only");
+    }
+    let dir = crate::scratch_dir("export", "targets");
+    let mut checked = 0;
+    for path in examples() {
+        let src = std::fs::read_to_string(&path).unwrap();
+        let rel = path.strip_prefix(root()).unwrap().display().to_string();
+        let f = lobe::front::parse(&rel, &src).unwrap_or_else(|d| panic!("{}", d.render(false)));
+        for bake in [&[][..], &[("n", 50.0)][..]] {
+            let f = simplified(&f, bake);
+            let stem = format!("{}-{}", glsl::function_name(&f), bake.len());
+            for version in GlslVersion::ALL {
+                let text = glsl::export(&f, Dialect::Glsl(version)).unwrap_or_else(|e| panic!("{rel} {bake:?} {}: {e}", version.name()));
+                literals_fit_f32(&text).unwrap_or_else(|e| panic!("{rel} {bake:?} {}: {e}\n{text}", version.name()));
+                let shader = glsl::glsl_test_shader(&f, version).unwrap();
+                if let Some(v) = &v {
+                    validate(v, &dir, &format!("{stem}-{}", version.name()), &shader);
+                }
+                if version == GlslVersion::V450 {
+                    naga_glsl(&shader).unwrap_or_else(|e| panic!("{rel} {bake:?}: naga refuses the GLSL:\n{e}\n{shader}"));
+                }
+            }
+            let wgsl = glsl::export(&f, Dialect::Wgsl).unwrap();
+            literals_fit_f32(&wgsl).unwrap_or_else(|e| panic!("{rel} {bake:?} WGSL: {e}\n{wgsl}"));
+            naga_wgsl(&wgsl).unwrap_or_else(|e| panic!("{rel} {bake:?}: naga refuses the WGSL:\n{e}\n{wgsl}"));
+            let be = glsl::brdf_explorer(&f).unwrap();
+            literals_fit_f32(be.split("::begin shader").nth(1).unwrap()).unwrap_or_else(|e| panic!("{rel} {bake:?} BRDF Explorer: {e}"));
+            checked += 1;
+        }
+    }
+    assert!(checked >= 40, "{checked}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The checks above can fail: a bit-pattern or an out-of-range literal is caught, a broken shader is refused by
+/// naga.
+#[test]
+fn the_export_checks_catch_what_they_look_for() {
+    assert!(literals_fit_f32("    float t0 = (NH * 1e39);").is_err());
+    assert!(literals_fit_f32("    float t0 = (NH * 1e-39);").is_err());
+    assert!(literals_fit_f32("    float t0 = uintBitsToFloat(0x7f800000u);").is_err());
+    assert!(literals_fit_f32("// 1e400 in a comment\n    float t1 = (t0 * 2.5e-3) + 0.0 + 3.4e38;").is_ok());
+    assert!(naga_wgsl("fn f(x: f32) -> f32 { return x * y; }").is_err());
+    assert!(naga_wgsl("fn f(x: f32) -> f32 { return x * 2.0; }").is_ok());
+    assert!(naga_glsl("#version 450\nlayout(location = 0) out vec4 c;\nvoid main() { c = vec4(q); }\n").is_err());
+}
+
+/// `lobe export --glsl-version`: each version's text is the library's, an unknown version is refused naming
+/// the three, and a formula with a constant f32 cannot hold fails with file:line:col and a hint.
+#[test]
+fn export_command_takes_a_glsl_version_and_refuses_what_f32_cannot_hold() {
+    let lobe = env!("CARGO_BIN_EXE_lobe");
+    let path = root().join("examples/brdfs/cook_torrance.brdf");
+    let f = simplified(&lobe::front::parse(&path.display().to_string(), &std::fs::read_to_string(&path).unwrap()).unwrap(), &[]);
+    for version in GlslVersion::ALL {
+        let out = Command::new(lobe).args(["export", "--glsl-version", version.name()]).arg(&path).output().unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let want = glsl::export(&f, Dialect::Glsl(version)).unwrap();
+        assert_eq!(String::from_utf8(out.stdout).unwrap(), want, "--glsl-version {}", version.name());
+    }
+    let out = Command::new(lobe).args(["export", "--glsl-version", "310"]).arg(&path).output().unwrap();
+    assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("`330`, `450` or `es300`"));
+    let dir = crate::scratch_dir("export", "range");
+    let bad = dir.join("huge.brdf");
+    std::fs::write(&bad, "# a constant for f64\nNH * 1e300\n").unwrap();
+    for flag in ["--glsl", "--wgsl", "--brdf-explorer"] {
+        let out = Command::new(lobe).args(["export", flag]).arg(&bad).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{flag}: {err}");
+        assert!(err.contains("huge.brdf:2:") && err.contains("beyond f32's range") && err.contains("help:"), "{flag}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -69,9 +185,9 @@ fn exports_match_golden_files() {
     let bless = std::env::var_os("LOBE_BLESS").is_some();
     let gdir = root().join("tests/golden/export");
     for (name, bake, d, ext) in [
-        ("modified_schlick", &[("n", 50.0)][..], Dialect::Glsl, "glsl"),
-        ("modified_schlick", &[][..], Dialect::Glsl, "live.glsl"),
-        ("cook_torrance", &[][..], Dialect::Glsl, "glsl"),
+        ("modified_schlick", &[("n", 50.0)][..], Dialect::Glsl(GlslVersion::V450), "glsl"),
+        ("modified_schlick", &[][..], Dialect::Glsl(GlslVersion::V450), "live.glsl"),
+        ("cook_torrance", &[][..], Dialect::Glsl(GlslVersion::V450), "glsl"),
         ("kutlog", &[("n", 100.0)][..], Dialect::Wgsl, "wgsl"),
     ] {
         let f = formula(&root().join(format!("examples/brdfs/{name}.brdf")), bake);
@@ -90,10 +206,10 @@ fn exports_match_golden_files() {
 #[test]
 fn export_takes_only_used_inputs_and_live_params() {
     let f = formula(&root().join("examples/brdfs/modified_schlick.brdf"), &[]);
-    let text = glsl::export(&f, Dialect::Glsl).unwrap();
+    let text = glsl::export(&f, Dialect::Glsl(GlslVersion::V450)).unwrap();
     assert!(text.contains("float lobe_modified_schlick(float NH, float n)"), "{text}");
     let baked = formula(&root().join("examples/brdfs/modified_schlick.brdf"), &[("n", 50.0)]);
-    let text = glsl::export(&baked, Dialect::Glsl).unwrap();
+    let text = glsl::export(&baked, Dialect::Glsl(GlslVersion::V450)).unwrap();
     assert!(text.contains("float lobe_modified_schlick(float NH)"), "{text}");
 }
 
@@ -111,7 +227,7 @@ fn hostile_parameter_names_export_valid_glsl() {
     let dir = std::env::temp_dir().join(format!("lobe-glsl-hostile-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let file = dir.join("hostile.frag");
-    let shader = glsl::glsl_test_shader(&f).unwrap();
+    let shader = glsl::glsl_test_shader(&f, GlslVersion::V450).unwrap();
     std::fs::write(&file, &shader).unwrap();
     let out = Command::new(&v).arg(&file).output().unwrap();
     assert!(out.status.success(), "not valid GLSL:\n{}\n{shader}", String::from_utf8_lossy(&out.stdout));
@@ -285,14 +401,14 @@ fn direction_bool_and_colour_formulas_export_everywhere() {
     let shader = red_be.split("::begin shader").nth(1).unwrap();
     assert!(red_be.contains("color base 0.8 0.6 0.2") && shader.contains("base.r") && !shader.contains("base.g"), "{red_be}");
     // --glsl / --wgsl: directions are arguments, a colour is one vec3 argument, the result a vec3.
-    let g = glsl::export(&colour, Dialect::Glsl).unwrap();
+    let g = glsl::export(&colour, Dialect::Glsl(GlslVersion::V450)).unwrap();
     assert!(g.contains("vec3 lobe_aniso_colour(float Lx, float Ly, float Lz, float Vx, float Vy, float Vz, float ax, float ay, float iso, vec3 base, float gain)"), "{g}");
     assert!(g.contains("return vec3("), "{g}");
     let w = glsl::export(&colour, Dialect::Wgsl).unwrap();
     assert!(w.contains("base: vec3<f32>, gain: f32) -> vec3<f32> {") && w.contains("return vec3<f32>("), "{w}");
     let wr = glsl::export(&red, Dialect::Wgsl).unwrap();
     assert!(wr.contains("Lx: f32") && wr.contains("base: vec3<f32>") && wr.contains(") -> f32 {"), "{wr}");
-    let gb = glsl::export(&baked, Dialect::Glsl).unwrap();
+    let gb = glsl::export(&baked, Dialect::Glsl(GlslVersion::V450)).unwrap();
     assert!(!gb.contains("float iso") && gb.contains("vec3 base"), "{gb}");
     let Some(v) = validator() else {
         eprintln!("glslangValidator not installed: direction and colour exports not validated");
@@ -301,7 +417,9 @@ fn direction_bool_and_colour_formulas_export_everywhere() {
     let dir = crate::scratch_dir("export", "directions");
     for (name, f) in [("colour", &colour), ("red", &red), ("baked", &baked)] {
         validate(&v, &dir, &format!("be-{name}"), &brdf_explorer_shader(&glsl::brdf_explorer(f).unwrap()));
-        validate(&v, &dir, &format!("glsl-{name}"), &glsl::glsl_test_shader(f).unwrap());
+        for version in GlslVersion::ALL {
+            validate(&v, &dir, &format!("glsl-{name}-{}", version.name()), &glsl::glsl_test_shader(f, version).unwrap());
+        }
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -366,7 +484,7 @@ const NOT_IN_EXPORTS: [&str; 4] = ["acoslo", "powlo", "expmuldiv", "4.1495155688
 /// `lobe export --glsl|--wgsl|--brdf-explorer` writes the plain simplification with the `--set` values baked,
 /// not the accuracy pass's form: for every catalogue and BRDF Explorer example the text is the library's export
 /// of `lobe::simplified` (no pass), holds no internal builtin nor the pass's 2^600 scaling, and validates
-/// (glslangValidator for GLSL, naga for WGSL, where installed).
+/// (glslangValidator for GLSL, naga for WGSL).
 #[test]
 fn exports_are_the_plain_simplification_without_internal_builtins() {
     let lobe = env!("CARGO_BIN_EXE_lobe");
@@ -375,13 +493,9 @@ fn exports_are_the_plain_simplification_without_internal_builtins() {
         assert!(out.status.success(), "lobe {args:?}: {}", String::from_utf8_lossy(&out.stderr));
         String::from_utf8(out.stdout).unwrap()
     };
-    let naga = Command::new("naga").arg("--version").output().is_ok_and(|o| o.status.success());
     let glslang = validator();
     let dir = crate::scratch_dir("export", "plain");
-    let explorer = std::fs::read_dir(root().join("examples/explorer")).unwrap().map(|e| e.unwrap().path());
-    let files: Vec<PathBuf> = catalogue().into_iter().chain(explorer.filter(|p| p.extension().is_some_and(|x| x == "brdf"))).collect();
-    assert!(files.len() >= 20, "{} example files", files.len());
-    for path in &files {
+    for path in &examples() {
         let rel = path.strip_prefix(root()).unwrap().to_str().unwrap().to_string();
         let src = std::fs::read_to_string(path).unwrap();
         let f = lobe::front::parse(&rel, &src).unwrap_or_else(|d| panic!("{}", d.render(false)));
@@ -394,7 +508,7 @@ fn exports_are_the_plain_simplification_without_internal_builtins() {
             }
             let plain = simplified(&f, &bake);
             for (flag, want) in [
-                ("--glsl", glsl::export(&plain, Dialect::Glsl).unwrap()),
+                ("--glsl", glsl::export(&plain, Dialect::Glsl(GlslVersion::V450)).unwrap()),
                 ("--wgsl", glsl::export(&plain, Dialect::Wgsl).unwrap()),
                 ("--brdf-explorer", glsl::brdf_explorer(&plain).unwrap()),
             ] {
@@ -410,12 +524,7 @@ fn exports_are_the_plain_simplification_without_internal_builtins() {
                             validate(v, &dir, &stem, &format!("#version 450\n{text}\nvoid main() {{}}\n"));
                         }
                     }
-                    "--wgsl" if naga => {
-                        let file = dir.join(format!("{stem}.wgsl"));
-                        std::fs::write(&file, &text).unwrap();
-                        let out = Command::new("naga").arg(&file).output().unwrap();
-                        assert!(out.status.success(), "{rel}: naga refuses the WGSL:\n{}\n{text}", String::from_utf8_lossy(&out.stderr));
-                    }
+                    "--wgsl" => naga_wgsl(&text).unwrap_or_else(|e| panic!("{rel}: naga refuses the WGSL:\n{e}\n{text}")),
                     _ => {}
                 }
             }

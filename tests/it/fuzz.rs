@@ -12,7 +12,7 @@
 //! case and the program, so it reproduces.
 
 use crate::differential::agree;
-use lobe::backend::glsl::{self, Dialect};
+use lobe::backend::glsl::{self, Dialect, GlslVersion};
 use lobe::builtins::Builtin;
 use lobe::{Backend, Columns, Evaluator, Kernel, Options, N_INPUTS};
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -191,13 +191,15 @@ fn run_case(src: &str, r: &mut Rng, t: &mut Tally) -> Result<(), String> {
     };
     let _ = jit.formula.to_program_text();
     // An internal builtin is refused with an error (never a panic, never written); everything else exports.
-    for d in [Dialect::Glsl, Dialect::Wgsl] {
+    for d in [Dialect::Glsl(GlslVersion::V330), Dialect::Glsl(GlslVersion::V450), Dialect::Wgsl] {
         match glsl::export(&jit.formula, d) {
             Ok(text) if Builtin::ALL.iter().any(|b| b.is_internal() && text.contains(&format!("{b}("))) => {
                 return Err(format!("{d:?} export wrote an internal builtin:\n{text}"))
             }
             Ok(_) => {}
             Err(e) if e.message.contains("internal to the accuracy pass") => {}
+            // A folded constant f32 cannot hold (random constants and baked values reach 1e300 and NaN).
+            Err(e) if e.message.contains("cannot be exported") && e.primary.is_some() => {}
             Err(e) => return Err(format!("{d:?} export failed: {e}")),
         }
     }

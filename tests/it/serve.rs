@@ -466,6 +466,9 @@ fn the_scene_folder_is_served_and_scenes_cannot_name_outside_files() {
         assert!(r.json()["error"].as_str().is_some_and(|e| e.contains("outside")), "{f}: {body}");
     }
     assert_eq!(s.get(&format!("/render.png?file={}", served.join("ok.brdf").display())).status, 200);
+    let _ = std::fs::remove_dir_all(&d);
+}
+
 /// `lobe render SCENE --size SIZE` (no `--set`), its PNG bytes.
 pub(crate) fn cli_render_plain(scene: &Path, size: &str, out: &Path) -> Vec<u8> {
     let o = Command::new(env!("CARGO_BIN_EXE_lobe"))

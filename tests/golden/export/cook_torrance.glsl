@@ -1,4 +1,4 @@
-// Cook-Torrance — exported by lobe VERSION as GLSL.
+// Cook-Torrance — exported by lobe VERSION as GLSL 4.50.
 // Source: R. L. Cook, K. E. Torrance, A reflectance model for computer graphics, ACM TOG 1982; Master's thesis “Development of rendering methods and software for computer graphics systems”, VNTU, Vinnytsia, 2022, eq. (1.10)
 // Formula (simplified):
 //   let nh = clamp(NH, 0, 1)

@@ -1,4 +1,4 @@
-// Modified Schlick — exported by lobe VERSION as GLSL.
+// Modified Schlick — exported by lobe VERSION as GLSL 4.50.
 // Source: Master's thesis “Development of rendering methods and software for computer graphics systems”, VNTU, Vinnytsia, 2022, eq. (2.3)
 // Formula (simplified):
 //   let nh = clamp(NH, 0, 1)
