@@ -269,6 +269,18 @@ pub(super) fn formula_field(v: &Value) -> Result<(String, String), ApiError> {
     Ok((name, str_field(v, "text")?.to_string()))
 }
 
+/// `theta_i`, `phi_i` (degrees) of a request: `None` without `theta_i`; θᵢ must be in 0..90, φᵢ any finite angle.
+pub(crate) fn incidence_field(v: &Value) -> Result<Option<(f64, f64)>, ApiError> {
+    let Some(t) = v.get("theta_i") else { return Ok(None) };
+    let t = t.as_f64().filter(|t| (0.0..90.0).contains(t));
+    let t = t.ok_or_else(|| ApiError::bad("`theta_i` must be an angle in degrees in 0..90"))?;
+    let p = match v.get("phi_i") {
+        None => 0.0,
+        Some(p) => p.as_f64().filter(|p| p.is_finite()).ok_or_else(|| ApiError::bad("`phi_i` must be a finite angle in degrees"))?,
+    };
+    Ok(Some((t, p)))
+}
+
 /// `{"params": {"n": 50, …}}` → a list of parameter values.
 pub(super) fn params_field(v: &Value) -> Result<Vec<(String, f64)>, ApiError> {
     let Some(p) = v.get("params") else { return Ok(vec![]) };
@@ -529,7 +541,7 @@ pub(crate) fn compare(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
         let set = scene_set(st, &req, &g)?;
         let c = crate::render::compare::compare_in(&g, (&a.0, &a.1), (&b.0, &b.1), [[1.0; 3]; 2], &set, &Live(st), &ropts(&st.cancel))?;
         let scale = c.metrics.max_gray_diff.max(1.0);
-        let image = super::views::with_colour_bar(&crate::render::compare::side_by_side(&c.a.image, &c.b.image, scale));
+        let image = crate::render::compare::with_colour_bar(&crate::render::compare::side_by_side(&c.a.image, &c.b.image, scale));
         let metrics = serde_json::to_string(&c.metrics).map_err(|e| ApiError::new(500, e.to_string()))?;
         Ok(Reply::bytes("image/png", png(&image)?)
             .header("X-Lobe-Metrics", metrics)
@@ -545,7 +557,7 @@ pub(crate) fn plot(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
     limited(st, move |st| {
         let set = params_field(&req)?;
         let polar = req.get("polar").and_then(Value::as_bool).unwrap_or(false);
-        let incidence = super::views::incidence_field(&req)?;
+        let incidence = incidence_field(&req)?;
         let list = req.get("formulas").and_then(Value::as_array).ok_or_else(|| ApiError::bad("missing `formulas` array"))?;
         if list.is_empty() || list.len() > 4 {
             return Err(ApiError::bad("plot 1 to 4 formulas"));

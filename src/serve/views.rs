@@ -6,7 +6,6 @@
 //!   grid, for the 3D lobe (BRDF Explorer's "3D plot");
 //! - `POST /api/slice`: the BRDF over (θ_h, θ_d) at one φ_d (BRDF Explorer's "Image Slice", the half/difference
 //!   parametrisation of [`crate::measured::dirs_from_angles`], the one MERL tables use);
-//! - the colour bar under the comparison's heat map ([`with_colour_bar`]), drawn with the heat map's own ramp.
 //!
 //! ρ(θᵢ) comes with `/api/analyze` (the energy check's rows), the plane-of-incidence curves with `/api/plot`.
 //! Grid sizes are capped here and priced with [`api::check_cost`] before any evaluation; the work runs under
@@ -18,18 +17,6 @@ use super::http::{ApiError, Reply};
 use crate::Evaluator;
 use serde_json::{json, Value};
 use std::sync::Arc;
-
-/// `theta_i`, `phi_i` (degrees) of a request: `None` without `theta_i`; θᵢ must be in 0..90, φᵢ any finite angle.
-pub(crate) fn incidence_field(v: &Value) -> Result<Option<(f64, f64)>, ApiError> {
-    let Some(t) = v.get("theta_i") else { return Ok(None) };
-    let t = t.as_f64().filter(|t| (0.0..90.0).contains(t));
-    let t = t.ok_or_else(|| ApiError::bad("`theta_i` must be an angle in degrees in 0..90"))?;
-    let p = match v.get("phi_i") {
-        None => 0.0,
-        Some(p) => p.as_f64().filter(|p| p.is_finite()).ok_or_else(|| ApiError::bad("`phi_i` must be a finite angle in degrees"))?,
-    };
-    Ok(Some((t, p)))
-}
 
 /// A whole number field in `lo..=hi`, `default` when absent.
 fn count_field(v: &Value, k: &str, default: usize, lo: usize, hi: usize) -> Result<usize, ApiError> {
@@ -63,7 +50,7 @@ fn summary(values: &[f64]) -> (f64, usize) {
 /// light's direction `light`, the largest finite value `max` and the count of non-finite values `nonfinite`.
 pub(crate) fn lobe(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
     api::limited(st, move |st| {
-        let (ti, pi) = incidence_field(&req)?.unwrap_or((0.0, 0.0));
+        let (ti, pi) = api::incidence_field(&req)?.unwrap_or((0.0, 0.0));
         let nt = count_field(&req, "n_theta", 33, 3, 91)?;
         let np = count_field(&req, "n_phi", 64, 4, 360)?;
         let (k, params) = kernel_and_params(st, &req)?;
@@ -116,60 +103,16 @@ pub(crate) fn slice(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
     })
 }
 
-/// Rows of the colour bar under a comparison image.
-const BAR_ROWS: usize = 14;
-
-/// `A | B | heat map` with a strip below: under the heat map, its colour ramp from 0 (left) to the scale
-/// (right), two-pixel ticks at quarters; black under A and B. The page labels the ends.
-pub(crate) fn with_colour_bar(img: &crate::base::image::Image) -> crate::base::image::Image {
-    let (w, h) = (img.width, img.height);
-    let third = w / 3;
-    let mut out = crate::base::image::Image::new(w, h + BAR_ROWS);
-    out.rgb[..img.rgb.len()].copy_from_slice(&img.rgb);
-    for x in 0..third {
-        let t = x as f64 / (third.max(2) - 1) as f64;
-        let tick = (1..4).any(|q| x.abs_diff(q * third / 4) <= 1);
-        for y in 0..BAR_ROWS {
-            // A black gap under the image, the ramp, grey ticks at its foot.
-            let c = if tick && y >= BAR_ROWS - 4 {
-                [128, 128, 128]
-            } else if y < 2 {
-                [0, 0, 0]
-            } else {
-                crate::render::compare::heat(t)
-            };
-            out.set(w - third + x, h + y, c);
-        }
-    }
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
-    fn the_colour_bar_runs_from_black_to_white_under_the_heat_map() {
-        let img = crate::base::image::Image::new(30, 4);
-        let out = with_colour_bar(&img);
-        assert_eq!((out.width, out.height), (30, 4 + BAR_ROWS));
-        let row = 4 + 5;
-        assert_eq!(out.pixel(20, row), [0, 0, 0]);
-        assert_eq!(out.pixel(29, row), [255, 255, 255]);
-        assert_eq!(out.pixel(5, row), [0, 0, 0], "nothing under A");
-        // Monotone in every channel along the ramp.
-        for x in 21..30 {
-            let (a, b) = (out.pixel(x - 1, row), out.pixel(x, row));
-            assert!((0..3).all(|c| a[c] <= b[c]), "{a:?} {b:?}");
-        }
-    }
-
-    #[test]
     fn incidence_and_counts_are_checked() {
-        assert_eq!(incidence_field(&json!({})).unwrap(), None);
-        assert_eq!(incidence_field(&json!({"theta_i": 30, "phi_i": 45})).unwrap(), Some((30.0, 45.0)));
-        assert_eq!(incidence_field(&json!({"theta_i": 90})).unwrap_err().status, 400);
-        assert_eq!(incidence_field(&json!({"theta_i": 10, "phi_i": "x"})).unwrap_err().status, 400);
+        assert_eq!(api::incidence_field(&json!({})).unwrap(), None);
+        assert_eq!(api::incidence_field(&json!({"theta_i": 30, "phi_i": 45})).unwrap(), Some((30.0, 45.0)));
+        assert_eq!(api::incidence_field(&json!({"theta_i": 90})).unwrap_err().status, 400);
+        assert_eq!(api::incidence_field(&json!({"theta_i": 10, "phi_i": "x"})).unwrap_err().status, 400);
         assert_eq!(count_field(&json!({"res": 1000}), "res", 64, 8, 256).unwrap_err().status, 400);
         assert_eq!(count_field(&json!({}), "res", 64, 8, 256).unwrap(), 64);
     }
