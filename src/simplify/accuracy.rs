@@ -57,11 +57,13 @@
 //!   (BRDF Explorer's GGX: `G·…/(4·NL·NV)`). At grazing c, c² underflows: tan² = 1/0 and G1 = 0, and the
 //!   product meets 0/0. Cheaper than the written form (no division by c², no 4·NL·NV).
 //! - `cancel-min`: a product/quotient tree `z·min(K, c·x, c·y)/(v·x·y)` with K > 0 and x, y, c ≥ 0 (Cook–Torrance's
-//!   `G/(π·NL·NV)`, G = min(1, 2·NH·NV/VH, 2·NH·NL/VH)) → `z·min(K·d/u, n)/(v·d)/w`, c = n/d, u = min(x, y),
-//!   w = max(x, y): with c ≥ 0, min(K, c·x, c·y) = min(K, c·u) and x·y = u·w, so the two are equal wherever
-//!   u, d > 0; at u = 0 (NL or NV exactly 0), where the written form is 0/0, min(K·d/0, n) = n gives the limit
-//!   z·c/(v·w). The min stays ≤ n (2·NH), and d (VH) and w divide one by one after the small factors, so
-//!   nothing overflows where the value does not. Cheaper than written (one `×` and one `/` fewer).
+//!   `G/(π·NL·NV)`, G = min(1, 2·NH·NV/VH, 2·NH·NL/VH)) → `z·g/(v·e)/w` with c = n/d, u = min(x, y),
+//!   w = max(x, y) and (g, e) = (K, u) where K·d < n·u, else (n, d): with c ≥ 0, min(K, c·x, c·y) = min(K, c·u)
+//!   and x·y = u·w, so the two are equal wherever u, d > 0; at u = 0 (NL or NV exactly 0), where the written
+//!   form is 0/0, the test fails and n/(d·w) is the limit. The branch is decided by products, each side scaled
+//!   by a power of two (2⁶⁰⁰ where the ranges allow) so a subnormal d or u compares at full precision: no
+//!   quotient rounds into the subnormals before it is divided again (K·VH/u at VH = 5·10⁻³²⁴ was 26 % low),
+//!   and d (VH) and w divide one by one after the small factors, so nothing overflows where the value does not.
 //! - `scaled-norm`: `x/sqrt(a² + b² + …)`, x one of a, b, …, (a normalize) with the vector scaled by 2^600
 //!   when its largest component is below 2^-500 (exact), so L + V at L ≈ −V (grazing light and view facing each
 //!   other) has a length, not 0. Cost: abs and max per component, a compare, a select, a product each (~+12).
@@ -162,7 +164,7 @@ impl Rule {
             Rule::CompensatedSum => "a + b that may cancel, plus the rounding errors of the sum and the terms below it (fma, 2Sum)",
             Rule::ScaledExp => "exp(a)*b/c as expmuldiv(a, b, c): no underflow of exp(a) before b/c rescales it",
             Rule::SmithG1 => "Smith G1 2/(1 + sqrt(1 + A*tan^2)) as 2c/(c + sqrt(c^2 + A*(1 - c^2))), c/c cancelled: no inf/inf at grazing c",
-            Rule::CancelMin => "min(K, c*x, c*y)/(x*y) as min(K/min(x, y), c)/max(x, y): the limit, not 0/0, at x or y = 0",
+            Rule::CancelMin => "min(K, c*x, c*y)/(x*y) as (K*d < n*min(x, y) ? K/min(x, y) : n/d)/max(x, y), c = n/d: the limit, not 0/0, at x or y = 0",
             Rule::ScaledNorm => "x/sqrt(a^2 + b^2 + ...) with a tiny vector scaled by 2^600 first: no zero length",
             Rule::RationalForm => "a sum rational in one input as (a1*x + a0)/(b1*x + b0), coefficients in double-double: the cancellation moves to the parameters",
             Rule::CompensatedExp => "exp(K*q) as exp(hi)*(1 + t), K's parameter-only factors in double-double and t the product's rounding error: exp no longer amplifies it",
@@ -774,20 +776,36 @@ fn cancel_min(a: &Analysis) -> (Ir, NodeId, bool) {
         let (mx, my) = (map[x.index()], map[y.index()]);
         let u = ir.call(Builtin::Min, &[mx, my], s);
         let w = ir.call(Builtin::Max, &[mx, my], s);
-        // c = cn/cd: its divisors join the tree's, so the min is bounded by cn (VH ~ 10⁻³¹⁰ would overflow c).
-        let kd = product(ir, map, &[&[k][..], &cd].concat(), s)?;
-        let ku = ir.bin(BinOp::Div, kd, u, s);
-        let c = product(ir, map, &cn, s).unwrap_or_else(|| ir.konst(1.0, s));
-        let g = ir.call(Builtin::Min, &[ku, c], s);
+        // min(K, c·u)/u with c = cn/cd is K/u where K·cd < cn·u, else cn/cd: the branch is chosen by products
+        // (no quotient that rounds into the subnormals, as K·VH/u did at VH = 5·10⁻³²⁴: 26 % low), each side
+        // scaled by 2^e (exact) so tiny cd and u compare at full precision, and the value divides by one of
+        // u, cd. At u = 0 the test fails and the limit cn/(cd·w) is taken.
+        let mag = |xs: &[NodeId]| xs.iter().map(|v| ranges[v.index()].lo.abs().max(ranges[v.index()].hi.abs())).product::<f64>();
+        let top = (mag(&[k]) * mag(&cd)).max(mag(&cn) * mag(&[x]).max(mag(&[y])));
+        let e = if top.is_finite() { (1000.0 - top.max(1.0).log2()).floor().min(600.0) } else { 0.0 };
+        let scale = ir.konst(2f64.powi(e.max(0.0) as i32), s);
+        let kd = match product(ir, map, &cd, s) {
+            Some(p) => ir.bin(BinOp::Mul, p, scale, s),
+            None => scale,
+        };
+        let lhs = ir.bin(BinOp::Mul, map[k.index()], kd, s);
+        let us = ir.bin(BinOp::Mul, u, scale, s);
+        let rhs = product(ir, map, &cn, s).map_or(us, |p| ir.bin(BinOp::Mul, p, us, s));
+        let first = ir.call(Builtin::Lt, &[lhs, rhs], s);
+        let one = ir.konst(1.0, s);
+        let cnum = product(ir, map, &cn, s).unwrap_or(one);
+        let cden = product(ir, map, &cd, s).unwrap_or(one);
+        let g = ir.call(Builtin::Select, &[first, map[k.index()], cnum], s);
+        let gd = ir.call(Builtin::Select, &[first, u, cden], s);
         let others: Vec<NodeId> = num.iter().enumerate().filter(|(i, _)| *i != at).map(|(_, v)| *v).collect();
         let mut rest = den.clone();
-        rest.extend(&cd);
         for v in [x, y] {
             rest.remove(rest.iter().position(|d| *d == v)?);
         }
         let (safe_den, unsafe_den): (Vec<NodeId>, Vec<NodeId>) = rest.iter().partition(|d| safe(ranges[d.index()]));
         let v = product(ir, map, &others, s).map_or(g, |p| ir.bin(BinOp::Mul, p, g, s));
         let v = divide_by(ir, map, v, &safe_den, &unsafe_den, s);
+        let v = ir.bin(BinOp::Div, v, gd, s);
         Some(ir.bin(BinOp::Div, v, w, s))
     })
 }
@@ -1164,8 +1182,10 @@ mod tests {
     fn cancel_min_needs_a_positive_bound_and_a_nonnegative_shared_factor() {
         let f = parse("param m = 0.3 in 0.01..1\nlet G = min(1, min(2*NH*NV/VH, 2*NH*NL/VH))\nexp(-NH/m)*G/(3*NL*NV)");
         let t = Rule::CancelMin.apply(&f).unwrap().to_program_text();
-        // min(VH/min(NL, NV), 2·NH)/VH/max(NL, NV): no NL·NV, and no NL or NV alone under a division inside G.
-        assert!(t.contains("min(vh / min(") && t.contains("/ vh / max(") && !t.contains("nl * nv"), "{t}");
+        // (VH·2^e < 2·NH·min(NL, NV)·2^e ? 1/min(NL, NV) : 2·NH/VH)/max(NL, NV): no NL·NV, and the branch is
+        // chosen by products, not by a quotient that may round into the subnormals.
+        assert!(t.contains("vh * 4.149515568880993e180 <") && t.contains("? 1 : t1)") && t.contains("? t") && t.contains("/ max("), "{t}");
+        assert!(!t.contains("nl * nv") && !t.contains("vh / min("), "{t}");
         // A shared factor that may be negative (NH − 0.5) or a bound that may be 0: not rewritten.
         assert!(Rule::CancelMin.apply(&parse("min(1, min((NH - 0.5)*NV, (NH - 0.5)*NL))/(NL*NV)")).is_none());
         assert!(Rule::CancelMin.apply(&parse("min(NH, min(2*NV, 2*NL))/(NL*NV)")).is_none());

@@ -376,6 +376,50 @@ fn cook_torrance_is_within_16_ulp_where_its_value_is_subnormal() {
     }
 }
 
+/// Cook–Torrance where VH is subnormal (L nearly perpendicular to H): G = 1 there, and the pass once chose the
+/// min's branch through the quotient VH/min(NL, NV), which rounds into the subnormals before VH divides it again
+/// (the audit's point: 1.3465·10⁻¹⁵, true 1.8172·10⁻¹⁵, 26 % low). Now the audit's point is within its condition,
+/// and random points with VH anywhere in the subnormals (and m, F0 random, live and baked) are within 4 bits
+/// wherever a 1-ulp move of an input moves the truth by ≤ 16 ulp.
+#[test]
+fn cook_torrance_is_exact_where_vh_is_subnormal() {
+    let f = load("cook_torrance");
+    let (mi, fi) = (f.param_index("m").unwrap(), f.param_index("F0").unwrap());
+    let live = robust_kernel("cook_torrance", &[]);
+    let p = live.default_params();
+    let x = at(0.7359828375025015, 0.9999991871922227, 0.47322972161775645, 5e-324);
+    let t = truth::eval(&f, &x, &p);
+    assert!(ulps(t, 1.8171990412213856e-15) <= 1.0, "lobe's truth {t:e}, the audit's 1.8171990412213856e-15");
+    let pt = robust::Point { x, p: p.clone() };
+    let kappa = robust::condition_ulps(&f, &pt, t);
+    let v = live.eval(&x, &p);
+    assert!(ulps(v, t) <= 16.0f64.max(kappa), "{v:e} vs {t:e} (κ = {kappa})");
+    let mut r = lobe::base::rng::Rng(29);
+    let mut well = 0;
+    for i in 0..4000 {
+        let mut p = live.default_params();
+        p[mi] = 0.3 + 0.7 * r.unit();
+        p[fi] = r.unit();
+        // VH log-uniform over the subnormals (and f64::MIN_POSITIVE's neighbourhood), the rest anywhere.
+        let vh = (5e-324f64).max(f64::MIN_POSITIVE * 2f64.powf(-53.0 * r.unit()));
+        let x = at(r.unit().max(1e-3), r.unit().max(1e-3), 0.4 + 0.6 * r.unit(), vh);
+        let t = truth::eval(&f, &x, &p);
+        let pt = robust::Point { x, p: p.clone() };
+        if !t.is_finite() || robust::condition_ulps(&f, &pt, t) > robust::ILL_CONDITIONED_ULPS {
+            continue;
+        }
+        well += 1;
+        let v = live.eval(&x, &p);
+        assert!(ulps(v, t) <= 16.0, "live at {x:?}, {p:?}: {v:e}, true {t:e}");
+        if i % 400 == 0 {
+            let baked = robust_kernel("cook_torrance", &[("m", p[mi]), ("F0", p[fi])]);
+            let b = baked.eval(&x, &baked.default_params());
+            assert!(ulps(b, t) <= 16.0, "baked at {x:?}, {p:?}: {b:e}, true {t:e}");
+        }
+    }
+    assert!(well > 1000, "only {well} well-conditioned points");
+}
+
 #[test]
 fn energy_has_a_coefficient_for_every_catalogue_file() {
     let dir = format!("{}/examples/brdfs", env!("CARGO_MANIFEST_DIR"));
