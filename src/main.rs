@@ -66,8 +66,9 @@ fn quiet_on_broken_pipe() {
 }
 
 /// Stack reserved for the command's thread. Formulas are trees up to the 1 MiB source cap (a 600 000-node chain
-/// such as `NH+NH+…`), and the passes that recurse over them (lowering, printing, the accuracy pass's rules) need
-/// more than a default 8 MiB main thread: address space only, the pages a command touches are all it uses.
+/// such as `NH+NH+…`); the library's recursive passes continue on stack segments of their own (`base::stack`),
+/// so this is a second guard, for any recursion their tests do not reach: address space only, the pages a
+/// command touches are all it uses.
 const COMMAND_STACK: usize = 1 << 30;
 /// The same for rayon's workers (the pass measures candidates and the renderer shades tiles on them).
 const WORKER_STACK: usize = 256 << 20;

@@ -11,4 +11,5 @@ pub mod output;
 pub mod rng;
 pub mod source;
 pub mod span;
+pub mod stack;
 pub mod watch;

@@ -715,13 +715,15 @@ fn cancel_min(a: &Analysis) -> (Ir, NodeId, bool) {
     let (f, ranges, lists) = (&a.f, a.ranges(), a.lists());
     let ir0 = &f.ir;
     fn leaves(ir: &Ir, x: NodeId, out: &mut Vec<NodeId>) {
-        match *ir.node(x) {
-            Node::Call(Builtin::Min, [a, b, _]) => {
-                leaves(ir, a, out);
-                leaves(ir, b, out);
+        crate::base::stack::deep(|| {
+            match *ir.node(x) {
+                Node::Call(Builtin::Min, [a, b, _]) => {
+                    leaves(ir, a, out);
+                    leaves(ir, b, out);
+                }
+                _ => out.push(x),
             }
-            _ => out.push(x),
-        }
+        })
     }
     let factors = |x: NodeId| match &lists[x.index()] {
         Some(l) => l.clone(),
@@ -816,14 +818,16 @@ fn scaled_norm(a: &Analysis) -> (Ir, NodeId, bool) {
     let f = &a.f;
     let ir0 = &f.ir;
     fn squares(ir: &Ir, x: NodeId, out: &mut Vec<NodeId>) -> bool {
-        match *ir.node(x) {
-            Node::Binary(BinOp::Add, p, q) => squares(ir, p, out) && squares(ir, q, out),
-            Node::Binary(BinOp::Mul, a, b) if a == b => {
-                out.push(a);
-                true
+        crate::base::stack::deep(|| {
+            match *ir.node(x) {
+                Node::Binary(BinOp::Add, p, q) => squares(ir, p, out) && squares(ir, q, out),
+                Node::Binary(BinOp::Mul, a, b) if a == b => {
+                    out.push(a);
+                    true
+                }
+                _ => false,
             }
-            _ => false,
-        }
+        })
     }
     rebuild(f, |ir, map, id, n| {
         let Node::Binary(BinOp::Div, x, d) = n else { return None };
@@ -877,64 +881,66 @@ fn sum_error(ir: &mut Ir, (a, ra): (NodeId, Range), (b, rb): (NodeId, Range), s:
 /// wherever it is used: an error compensated on one side of a cancellation only would break it. `None`: exact.
 /// Valid while no product underflows.
 fn rounding_error(f: &Formula, ranges: &[Range], ir: &mut Ir, map: &[NodeId], (x, s): (NodeId, NodeId), memo: &mut [Option<Option<NodeId>>], sp: Span) -> Option<NodeId> {
-    if let Some(e) = memo[x.index()] {
-        return e;
-    }
-    let mut err = |ir: &mut Ir, y: NodeId| rounding_error(f, ranges, ir, map, (y, map[y.index()]), memo, sp);
-    let e = match *f.ir.node(x) {
-        Node::Neg(a) => err(ir, a).map(|e| ir.neg(e, sp)),
-        // A sum that reads no input is taken as the rounded hi + lo of a double-double (`compensated-params`'s
-        // value): its 2Sum error alone, since the error terms below it are the low part's own (an fma counts as
-        // exact, so recursing would count them twice). Elsewhere it is the sum's own rounding, its operands' left
-        // out. Free: computed once per parameter set.
-        Node::Binary(BinOp::Add, a, b) if f.ir.used_inputs(x).is_empty() => {
-            Some(sum_error(ir, (map[a.index()], ranges[a.index()]), (map[b.index()], ranges[b.index()]), s, sp))
+    crate::base::stack::deep(|| {
+        if let Some(e) = memo[x.index()] {
+            return e;
         }
-        Node::Binary(op @ (BinOp::Add | BinOp::Sub), a, b) => {
-            let (ea, eb) = (err(ir, a), err(ir, b));
-            let (ra, mut rb) = (ranges[a.index()], ranges[b.index()]);
-            let mut bv = map[b.index()];
-            let eb = if op == BinOp::Sub {
-                bv = ir.neg(bv, sp);
-                rb = Range::new(-rb.hi, -rb.lo, rb.nan, false);
-                eb.map(|e| ir.neg(e, sp))
-            } else {
-                eb
-            };
-            let e = sum_error(ir, (map[a.index()], ra), (bv, rb), s, sp);
-            let e2 = add_opt(ir, ea, eb, sp);
-            add_opt(ir, Some(e), e2, sp)
-        }
-        Node::Binary(op @ (BinOp::Mul | BinOp::Div), a, b) => {
-            let (av, bv) = (map[a.index()], map[b.index()]);
-            let (ea, eb) = (err(ir, a), err(ir, b));
-            let ns = ir.neg(s, sp);
-            if op == BinOp::Mul {
-                // (a + ea)(b + eb) − ab ≈ ea·b + a·eb, ab − s exact in one fma.
-                let mut e = dd::two_prod_err(&mut IrEmit::new(ir, sp), av, bv, s);
+        let mut err = |ir: &mut Ir, y: NodeId| rounding_error(f, ranges, ir, map, (y, map[y.index()]), memo, sp);
+        let e = match *f.ir.node(x) {
+            Node::Neg(a) => err(ir, a).map(|e| ir.neg(e, sp)),
+            // A sum that reads no input is taken as the rounded hi + lo of a double-double (`compensated-params`'s
+            // value): its 2Sum error alone, since the error terms below it are the low part's own (an fma counts as
+            // exact, so recursing would count them twice). Elsewhere it is the sum's own rounding, its operands' left
+            // out. Free: computed once per parameter set.
+            Node::Binary(BinOp::Add, a, b) if f.ir.used_inputs(x).is_empty() => {
+                Some(sum_error(ir, (map[a.index()], ranges[a.index()]), (map[b.index()], ranges[b.index()]), s, sp))
+            }
+            Node::Binary(op @ (BinOp::Add | BinOp::Sub), a, b) => {
+                let (ea, eb) = (err(ir, a), err(ir, b));
+                let (ra, mut rb) = (ranges[a.index()], ranges[b.index()]);
+                let mut bv = map[b.index()];
+                let eb = if op == BinOp::Sub {
+                    bv = ir.neg(bv, sp);
+                    rb = Range::new(-rb.hi, -rb.lo, rb.nan, false);
+                    eb.map(|e| ir.neg(e, sp))
+                } else {
+                    eb
+                };
+                let e = sum_error(ir, (map[a.index()], ra), (bv, rb), s, sp);
+                let e2 = add_opt(ir, ea, eb, sp);
+                add_opt(ir, Some(e), e2, sp)
+            }
+            Node::Binary(op @ (BinOp::Mul | BinOp::Div), a, b) => {
+                let (av, bv) = (map[a.index()], map[b.index()]);
+                let (ea, eb) = (err(ir, a), err(ir, b));
+                let ns = ir.neg(s, sp);
+                if op == BinOp::Mul {
+                    // (a + ea)(b + eb) − ab ≈ ea·b + a·eb, ab − s exact in one fma.
+                    let mut e = dd::two_prod_err(&mut IrEmit::new(ir, sp), av, bv, s);
+                    if let Some(ea) = ea {
+                        e = ir.call(Builtin::Fma, &[ea, bv, e], sp);
+                    }
+                    if let Some(eb) = eb {
+                        e = ir.call(Builtin::Fma, &[av, eb, e], sp);
+                    }
+                    return memoize(memo, x, Some(e));
+                }
+                // (a + ea)/(b + eb) − q ≈ (a − q·b + ea − q·eb)/b, a − q·b exact in one fma.
+                let mut r = ir.call(Builtin::Fma, &[ns, bv, av], sp);
                 if let Some(ea) = ea {
-                    e = ir.call(Builtin::Fma, &[ea, bv, e], sp);
+                    r = ir.bin(BinOp::Add, r, ea, sp);
                 }
                 if let Some(eb) = eb {
-                    e = ir.call(Builtin::Fma, &[av, eb, e], sp);
+                    r = ir.call(Builtin::Fma, &[ns, eb, r], sp);
                 }
-                return memoize(memo, x, Some(e));
+                Some(ir.bin(BinOp::Div, r, bv, sp))
             }
-            // (a + ea)/(b + eb) − q ≈ (a − q·b + ea − q·eb)/b, a − q·b exact in one fma.
-            let mut r = ir.call(Builtin::Fma, &[ns, bv, av], sp);
-            if let Some(ea) = ea {
-                r = ir.bin(BinOp::Add, r, ea, sp);
-            }
-            if let Some(eb) = eb {
-                r = ir.call(Builtin::Fma, &[ns, eb, r], sp);
-            }
-            Some(ir.bin(BinOp::Div, r, bv, sp))
-        }
-        // acos's own rounding, ≤ 1 ulp (its tail, `acoslo`, costs ~8 beside it).
-        Node::Call(Builtin::Acos, [z, ..]) => Some(ir.call(Builtin::AcosLo, &[map[z.index()]], sp)),
-        _ => None,
-    };
-    memoize(memo, x, e)
+            // acos's own rounding, ≤ 1 ulp (its tail, `acoslo`, costs ~8 beside it).
+            Node::Call(Builtin::Acos, [z, ..]) => Some(ir.call(Builtin::AcosLo, &[map[z.index()]], sp)),
+            _ => None,
+        };
+        memoize(memo, x, e)
+    })
 }
 
 fn memoize(memo: &mut [Option<Option<NodeId>>], x: NodeId, e: Option<NodeId>) -> Option<NodeId> {

@@ -233,40 +233,42 @@ impl<'a> Builder<'a> {
     /// `x` (an old node of some shape) as numerator and denominator polynomials; a parameter-only node as
     /// `leaf` gives it (its double-double value).
     fn rat(&mut self, ir: &mut Ir, x: NodeId, shapes: &[Option<Shape>], leaf: &mut dyn FnMut(&mut Ir, NodeId) -> Dd) -> (Poly, Poly) {
-        if let Some(r) = self.rats.get(&x) {
-            return r.clone();
-        }
-        let one = self.one(ir);
-        let r = if self.inv[x.index()] {
-            // In double-double (the quadratic model's 1 − 0.786·n at n = 1/0.786 is the low part of 0.786·n):
-            // the live kernel computes it once per parameter set, and a baked one folds the same expression.
-            (vec![Some(leaf(ir, x))], one)
-        } else {
-            match *self.f.ir.node(x) {
-                Node::Neg(a) => {
-                    let (n, d) = self.rat(ir, a, shapes, leaf);
-                    (self.pneg(ir, &n), d)
-                }
-                Node::Binary(op, a, b) if shapes[x.index()].is_some() => {
-                    let (na, da) = self.rat(ir, a, shapes, leaf);
-                    let (nb, db) = self.rat(ir, b, shapes, leaf);
-                    let nb = if op == BinOp::Sub { self.pneg(ir, &nb) } else { nb };
-                    match op {
-                        BinOp::Add | BinOp::Sub => {
-                            let l = self.pmul(ir, &na, &db);
-                            let r = self.pmul(ir, &nb, &da);
-                            (self.padd(ir, &l, &r), self.pmul(ir, &da, &db))
-                        }
-                        BinOp::Mul => (self.pmul(ir, &na, &nb), self.pmul(ir, &da, &db)),
-                        BinOp::Div => (self.pmul(ir, &na, &db), self.pmul(ir, &da, &nb)),
-                    }
-                }
-                // The atom: 0 + 1·x.
-                _ => (vec![None, one[0]], one),
+        crate::base::stack::deep(|| {
+            if let Some(r) = self.rats.get(&x) {
+                return r.clone();
             }
-        };
-        self.rats.insert(x, r.clone());
-        r
+            let one = self.one(ir);
+            let r = if self.inv[x.index()] {
+                // In double-double (the quadratic model's 1 − 0.786·n at n = 1/0.786 is the low part of 0.786·n):
+                // the live kernel computes it once per parameter set, and a baked one folds the same expression.
+                (vec![Some(leaf(ir, x))], one)
+            } else {
+                match *self.f.ir.node(x) {
+                    Node::Neg(a) => {
+                        let (n, d) = self.rat(ir, a, shapes, leaf);
+                        (self.pneg(ir, &n), d)
+                    }
+                    Node::Binary(op, a, b) if shapes[x.index()].is_some() => {
+                        let (na, da) = self.rat(ir, a, shapes, leaf);
+                        let (nb, db) = self.rat(ir, b, shapes, leaf);
+                        let nb = if op == BinOp::Sub { self.pneg(ir, &nb) } else { nb };
+                        match op {
+                            BinOp::Add | BinOp::Sub => {
+                                let l = self.pmul(ir, &na, &db);
+                                let r = self.pmul(ir, &nb, &da);
+                                (self.padd(ir, &l, &r), self.pmul(ir, &da, &db))
+                            }
+                            BinOp::Mul => (self.pmul(ir, &na, &nb), self.pmul(ir, &da, &db)),
+                            BinOp::Div => (self.pmul(ir, &na, &db), self.pmul(ir, &da, &nb)),
+                        }
+                    }
+                    // The atom: 0 + 1·x.
+                    _ => (vec![None, one[0]], one),
+                }
+            };
+            self.rats.insert(x, r.clone());
+            r
+        })
     }
 
     /// A polynomial of degree ≤ 1 at the atom `x`: `fma(c₁ʰ, x, c₀ʰ) + fma(c₁ˡ, x, c₀ˡ)`, terms that are zero or
@@ -291,15 +293,17 @@ impl<'a> Builder<'a> {
 
 /// Signed terms of the sum tree under `x` (through `+`, `−` and negation of live nodes).
 fn terms(f: &Formula, inv: &[bool], x: NodeId, neg: bool, out: &mut Vec<(NodeId, bool)>) {
-    match *f.ir.node(x) {
-        _ if inv[x.index()] => out.push((x, neg)),
-        Node::Neg(a) => terms(f, inv, a, !neg, out),
-        Node::Binary(op @ (BinOp::Add | BinOp::Sub), a, b) => {
-            terms(f, inv, a, neg, out);
-            terms(f, inv, b, neg ^ (op == BinOp::Sub), out);
+    crate::base::stack::deep(|| {
+        match *f.ir.node(x) {
+            _ if inv[x.index()] => out.push((x, neg)),
+            Node::Neg(a) => terms(f, inv, a, !neg, out),
+            Node::Binary(op @ (BinOp::Add | BinOp::Sub), a, b) => {
+                terms(f, inv, a, neg, out);
+                terms(f, inv, b, neg ^ (op == BinOp::Sub), out);
+            }
+            _ => out.push((x, neg)),
         }
-        _ => out.push((x, neg)),
-    }
+    })
 }
 
 // Σ ±tᵢ (tᵢ rational in one atom, of degree ≤ 1 together) → (a₁x + a₀)/(b₁x + b₀)
@@ -392,26 +396,28 @@ pub(super) fn rational_form(a: &Analysis) -> (Ir, NodeId, bool) {
 fn factors(f: &Formula, inv: &[bool], x: NodeId) -> Option<(bool, Vec<NodeId>, Vec<NodeId>)> {
     type Out = (bool, Vec<NodeId>, Vec<NodeId>);
     fn go(f: &Formula, inv: &[bool], x: NodeId, den: bool, out: &mut Out) {
-        match *f.ir.node(x) {
-            _ if inv[x.index()] && f.ir.node(x).as_const() != Some(1.0) => {
-                if den {
-                    out.2.push(x);
-                } else {
-                    out.1.push(x);
+        crate::base::stack::deep(|| {
+            match *f.ir.node(x) {
+                _ if inv[x.index()] && f.ir.node(x).as_const() != Some(1.0) => {
+                    if den {
+                        out.2.push(x);
+                    } else {
+                        out.1.push(x);
+                    }
                 }
+                Node::Neg(a) => {
+                    out.0 = !out.0;
+                    go(f, inv, a, den, out);
+                }
+                Node::Binary(op @ (BinOp::Mul | BinOp::Div), a, b) => {
+                    go(f, inv, a, den, out);
+                    go(f, inv, b, den ^ (op == BinOp::Div), out);
+                }
+                _ if f.ir.node(x).as_const() == Some(1.0) => {}
+                _ if den => out.2.push(x),
+                _ => out.1.push(x),
             }
-            Node::Neg(a) => {
-                out.0 = !out.0;
-                go(f, inv, a, den, out);
-            }
-            Node::Binary(op @ (BinOp::Mul | BinOp::Div), a, b) => {
-                go(f, inv, a, den, out);
-                go(f, inv, b, den ^ (op == BinOp::Div), out);
-            }
-            _ if f.ir.node(x).as_const() == Some(1.0) => {}
-            _ if den => out.2.push(x),
-            _ => out.1.push(x),
-        }
+        })
     }
     let mut out = (false, vec![], vec![]);
     go(f, inv, x, false, &mut out);
@@ -570,19 +576,21 @@ pub(super) fn compensated_exp(a: &Analysis) -> (Ir, NodeId, bool) {
 /// Rounding operations a parameter-only subtree's plain evaluation makes, counting pow and acos twice (their
 /// results are not correctly rounded, and their tails exist); capped at 2, the threshold that matters.
 fn roundings(f: &Formula, x: NodeId, memo: &mut HashMap<NodeId, u8>) -> u8 {
-    if let Some(&c) = memo.get(&x) {
-        return c;
-    }
-    let n = *f.ir.node(x);
-    let mut c: u8 = match n {
-        Node::Const(_) | Node::Param(_) | Node::Input(_) | Node::Column(_) | Node::Neg(_) => 0,
-        Node::Call(Builtin::Pow | Builtin::Acos, _) => 2,
-        _ => 1,
-    };
-    n.for_each_arg(|a| c = c.saturating_add(roundings(f, a, memo)));
-    let c = c.min(2);
-    memo.insert(x, c);
-    c
+    crate::base::stack::deep(|| {
+        if let Some(&c) = memo.get(&x) {
+            return c;
+        }
+        let n = *f.ir.node(x);
+        let mut c: u8 = match n {
+            Node::Const(_) | Node::Param(_) | Node::Input(_) | Node::Column(_) | Node::Neg(_) => 0,
+            Node::Call(Builtin::Pow | Builtin::Acos, _) => 2,
+            _ => 1,
+        };
+        n.for_each_arg(|a| c = c.saturating_add(roundings(f, a, memo)));
+        let c = c.min(2);
+        memo.insert(x, c);
+        c
+    })
 }
 
 /// A parameter-only subtree in double-double (old node → new `Dd`), memoised.
@@ -594,116 +602,118 @@ struct ParamDd<'a> {
 
 impl ParamDd<'_> {
     fn dd(&mut self, ir: &mut Ir, map: &[NodeId], x: NodeId) -> Dd {
-        if let Some(&d) = self.memo.get(&x) {
-            return d;
-        }
-        let f = self.b.f;
-        let sp = self.b.sp;
-        let n = *f.ir.node(x);
-        let pos = |r: super::range::Range| r.lo > 0.0 && !r.nan;
-        let d = match n {
-            Node::Const(_) | Node::Param(_) | Node::Input(_) | Node::Column(_) => Dd { hi: map[x.index()], lo: None },
-            Node::Neg(a) => {
-                let a = self.dd(ir, map, a);
-                self.b.neg(ir, a)
+        crate::base::stack::deep(|| {
+            if let Some(&d) = self.memo.get(&x) {
+                return d;
             }
-            Node::Binary(op, a, c) => {
-                let (a, c) = (self.dd(ir, map, a), self.dd(ir, map, c));
-                match op {
-                    BinOp::Add => self.b.add(ir, a, c),
-                    BinOp::Sub => {
-                        let c = self.b.neg(ir, c);
-                        self.b.add(ir, a, c)
+            let f = self.b.f;
+            let sp = self.b.sp;
+            let n = *f.ir.node(x);
+            let pos = |r: super::range::Range| r.lo > 0.0 && !r.nan;
+            let d = match n {
+                Node::Const(_) | Node::Param(_) | Node::Input(_) | Node::Column(_) => Dd { hi: map[x.index()], lo: None },
+                Node::Neg(a) => {
+                    let a = self.dd(ir, map, a);
+                    self.b.neg(ir, a)
+                }
+                Node::Binary(op, a, c) => {
+                    let (a, c) = (self.dd(ir, map, a), self.dd(ir, map, c));
+                    match op {
+                        BinOp::Add => self.b.add(ir, a, c),
+                        BinOp::Sub => {
+                            let c = self.b.neg(ir, c);
+                            self.b.add(ir, a, c)
+                        }
+                        BinOp::Mul => self.b.mul(ir, a, c),
+                        BinOp::Div => self.b.div(ir, a, c),
                     }
-                    BinOp::Mul => self.b.mul(ir, a, c),
-                    BinOp::Div => self.b.div(ir, a, c),
                 }
-            }
-            // x^y + powlo(x, y), and to first order x^y·(y·xˡ/x + ln(x)·yˡ) for the operands' low parts.
-            Node::Call(Builtin::Pow, [a, c, _]) if pos(self.ranges[a.index()]) && self.ranges[x.index()].hi.is_finite() => {
-                let (a, c) = (self.dd(ir, map, a), self.dd(ir, map, c));
-                let p = ir.call(Builtin::Pow, &[a.hi, c.hi], sp);
-                let mut lo = ir.call(Builtin::PowLo, &[a.hi, c.hi], sp);
-                let mut rel = a.lo.map(|al| {
-                    let q = ir.bin(BinOp::Div, al, a.hi, sp);
-                    ir.bin(BinOp::Mul, c.hi, q, sp)
-                });
-                if let Some(cl) = c.lo {
-                    let l = ir.call(Builtin::Ln, &[a.hi], sp);
-                    rel = Some(match rel {
-                        Some(r) => ir.call(Builtin::Fma, &[l, cl, r], sp),
-                        None => ir.bin(BinOp::Mul, l, cl, sp),
+                // x^y + powlo(x, y), and to first order x^y·(y·xˡ/x + ln(x)·yˡ) for the operands' low parts.
+                Node::Call(Builtin::Pow, [a, c, _]) if pos(self.ranges[a.index()]) && self.ranges[x.index()].hi.is_finite() => {
+                    let (a, c) = (self.dd(ir, map, a), self.dd(ir, map, c));
+                    let p = ir.call(Builtin::Pow, &[a.hi, c.hi], sp);
+                    let mut lo = ir.call(Builtin::PowLo, &[a.hi, c.hi], sp);
+                    let mut rel = a.lo.map(|al| {
+                        let q = ir.bin(BinOp::Div, al, a.hi, sp);
+                        ir.bin(BinOp::Mul, c.hi, q, sp)
                     });
+                    if let Some(cl) = c.lo {
+                        let l = ir.call(Builtin::Ln, &[a.hi], sp);
+                        rel = Some(match rel {
+                            Some(r) => ir.call(Builtin::Fma, &[l, cl, r], sp),
+                            None => ir.bin(BinOp::Mul, l, cl, sp),
+                        });
+                    }
+                    if let Some(r) = rel {
+                        lo = ir.call(Builtin::Fma, &[p, r, lo], sp);
+                    }
+                    self.b.norm(ir, p, Some(lo))
                 }
-                if let Some(r) = rel {
-                    lo = ir.call(Builtin::Fma, &[p, r, lo], sp);
+                // acos + acoslo, and to first order −xˡ/√(1 − x²), kept only while it is small next to acos (near
+                // ±1 the first order fails: acos grows like √(1 − x)); √((1 − x)(1 + x)) avoids 1 − x²'s cancellation.
+                Node::Call(Builtin::Acos, [a, ..]) => {
+                    let a = self.dd(ir, map, a);
+                    let h = ir.call(Builtin::Acos, &[a.hi], sp);
+                    let mut lo = ir.call(Builtin::AcosLo, &[a.hi], sp);
+                    if let Some(al) = a.lo {
+                        let one = ir.konst(1.0, sp);
+                        let (m, p) = (ir.bin(BinOp::Sub, one, a.hi, sp), ir.bin(BinOp::Add, one, a.hi, sp));
+                        let s = ir.bin(BinOp::Mul, m, p, sp);
+                        let s = ir.call(Builtin::Sqrt, &[s], sp);
+                        let t = ir.bin(BinOp::Div, al, s, sp);
+                        let at = ir.call(Builtin::Abs, &[t], sp);
+                        let small = ir.konst(2f64.powi(-20), sp);
+                        let bound = ir.bin(BinOp::Mul, h, small, sp);
+                        let ok = ir.call(Builtin::Lt, &[at, bound], sp);
+                        let zero = ir.konst(0.0, sp);
+                        let t = ir.call(Builtin::Select, &[ok, t, zero], sp);
+                        lo = ir.bin(BinOp::Sub, lo, t, sp);
+                    }
+                    self.b.norm(ir, h, Some(lo))
                 }
-                self.b.norm(ir, p, Some(lo))
-            }
-            // acos + acoslo, and to first order −xˡ/√(1 − x²), kept only while it is small next to acos (near
-            // ±1 the first order fails: acos grows like √(1 − x)); √((1 − x)(1 + x)) avoids 1 − x²'s cancellation.
-            Node::Call(Builtin::Acos, [a, ..]) => {
-                let a = self.dd(ir, map, a);
-                let h = ir.call(Builtin::Acos, &[a.hi], sp);
-                let mut lo = ir.call(Builtin::AcosLo, &[a.hi], sp);
-                if let Some(al) = a.lo {
-                    let one = ir.konst(1.0, sp);
-                    let (m, p) = (ir.bin(BinOp::Sub, one, a.hi, sp), ir.bin(BinOp::Add, one, a.hi, sp));
-                    let s = ir.bin(BinOp::Mul, m, p, sp);
-                    let s = ir.call(Builtin::Sqrt, &[s], sp);
-                    let t = ir.bin(BinOp::Div, al, s, sp);
-                    let at = ir.call(Builtin::Abs, &[t], sp);
-                    let small = ir.konst(2f64.powi(-20), sp);
-                    let bound = ir.bin(BinOp::Mul, h, small, sp);
-                    let ok = ir.call(Builtin::Lt, &[at, bound], sp);
-                    let zero = ir.konst(0.0, sp);
-                    let t = ir.call(Builtin::Select, &[ok, t, zero], sp);
-                    lo = ir.bin(BinOp::Sub, lo, t, sp);
+                // √x + (x − s² + xˡ)/(2s), the remainder exact by fma.
+                Node::Call(Builtin::Sqrt, [a, ..]) if pos(self.ranges[a.index()]) => {
+                    let a = self.dd(ir, map, a);
+                    let s = ir.call(Builtin::Sqrt, &[a.hi], sp);
+                    let ns = ir.neg(s, sp);
+                    let mut r = ir.call(Builtin::Fma, &[ns, s, a.hi], sp);
+                    if let Some(al) = a.lo {
+                        r = ir.bin(BinOp::Add, r, al, sp);
+                    }
+                    let two_s = ir.bin(BinOp::Add, s, s, sp);
+                    let lo = ir.bin(BinOp::Div, r, two_s, sp);
+                    self.b.norm(ir, s, Some(lo))
                 }
-                self.b.norm(ir, h, Some(lo))
-            }
-            // √x + (x − s² + xˡ)/(2s), the remainder exact by fma.
-            Node::Call(Builtin::Sqrt, [a, ..]) if pos(self.ranges[a.index()]) => {
-                let a = self.dd(ir, map, a);
-                let s = ir.call(Builtin::Sqrt, &[a.hi], sp);
-                let ns = ir.neg(s, sp);
-                let mut r = ir.call(Builtin::Fma, &[ns, s, a.hi], sp);
-                if let Some(al) = a.lo {
-                    r = ir.bin(BinOp::Add, r, al, sp);
+                // Other calls: their operands' low parts to first order where the derivative is at hand, else
+                // computed from the rounded operands as the kernel would.
+                _ => {
+                    let mut args = [NodeId(0); 3];
+                    let mut lows = [None; 3];
+                    let mut k = 0;
+                    n.for_each_arg(|a| {
+                        args[k] = a;
+                        k += 1;
+                    });
+                    for i in 0..k {
+                        let d = self.dd(ir, map, args[i]);
+                        args[i] = d.hi;
+                        lows[i] = d.lo;
+                    }
+                    let v = match n {
+                        Node::Call(b, _) => ir.call(b, &args[..b.arity()], sp),
+                        _ => map[x.index()],
+                    };
+                    let lo = match (n, lows[0]) {
+                        (Node::Call(Builtin::Exp, _), Some(al)) if self.ranges[x.index()].hi.is_finite() => Some(ir.bin(BinOp::Mul, v, al, sp)),
+                        (Node::Call(Builtin::Ln, [a, ..]), Some(al)) if pos(self.ranges[a.index()]) => Some(ir.bin(BinOp::Div, al, args[0], sp)),
+                        _ => None,
+                    };
+                    self.b.norm(ir, v, lo)
                 }
-                let two_s = ir.bin(BinOp::Add, s, s, sp);
-                let lo = ir.bin(BinOp::Div, r, two_s, sp);
-                self.b.norm(ir, s, Some(lo))
-            }
-            // Other calls: their operands' low parts to first order where the derivative is at hand, else
-            // computed from the rounded operands as the kernel would.
-            _ => {
-                let mut args = [NodeId(0); 3];
-                let mut lows = [None; 3];
-                let mut k = 0;
-                n.for_each_arg(|a| {
-                    args[k] = a;
-                    k += 1;
-                });
-                for i in 0..k {
-                    let d = self.dd(ir, map, args[i]);
-                    args[i] = d.hi;
-                    lows[i] = d.lo;
-                }
-                let v = match n {
-                    Node::Call(b, _) => ir.call(b, &args[..b.arity()], sp),
-                    _ => map[x.index()],
-                };
-                let lo = match (n, lows[0]) {
-                    (Node::Call(Builtin::Exp, _), Some(al)) if self.ranges[x.index()].hi.is_finite() => Some(ir.bin(BinOp::Mul, v, al, sp)),
-                    (Node::Call(Builtin::Ln, [a, ..]), Some(al)) if pos(self.ranges[a.index()]) => Some(ir.bin(BinOp::Div, al, args[0], sp)),
-                    _ => None,
-                };
-                self.b.norm(ir, v, lo)
-            }
-        };
-        self.memo.insert(x, d);
-        d
+            };
+            self.memo.insert(x, d);
+            d
+        })
     }
 }
 

@@ -95,14 +95,16 @@ pub(crate) fn positive_guards(f: &Formula) -> Vec<Option<Vec<NodeId>>> {
     let ir = &f.ir;
     // Nodes `x` with `x > 0` (or NaN) wherever `cond` is false.
     fn falses(ir: &Ir, cond: NodeId, out: &mut Vec<NodeId>) {
-        match *ir.node(cond) {
-            Node::Call(Builtin::Le, [x, z, _]) if ir.node(z).as_const() == Some(0.0) => out.push(x),
-            Node::Call(Builtin::Select, [p, one, q]) if ir.node(one).as_const().is_some_and(|v| v != 0.0 && !v.is_nan()) => {
-                falses(ir, p, out);
-                falses(ir, q, out);
+        crate::base::stack::deep(|| {
+            match *ir.node(cond) {
+                Node::Call(Builtin::Le, [x, z, _]) if ir.node(z).as_const() == Some(0.0) => out.push(x),
+                Node::Call(Builtin::Select, [p, one, q]) if ir.node(one).as_const().is_some_and(|v| v != 0.0 && !v.is_nan()) => {
+                    falses(ir, p, out);
+                    falses(ir, q, out);
+                }
+                _ => {}
             }
-            _ => {}
-        }
+        })
     }
     let mut g: Vec<Option<Vec<NodeId>>> = vec![None; ir.len()];
     g[f.root.index()] = Some(vec![]);

@@ -4,6 +4,7 @@ mod browser;
 mod cancel;
 mod catalogue;
 mod cli;
+mod deep;
 mod differential;
 mod directions;
 mod explorer;
