@@ -22,7 +22,7 @@ use crate::ir::ParamDecl;
 use crate::render::scene::{self, BrdfCompiler, CompiledBrdf, Geometry, LoadOptions, LobeCompiler};
 use crate::render::RenderOptions;
 use crate::{Backend, Kernel, Options};
-use serde_json::{json, Value};
+use serde_json::Value;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -335,16 +335,51 @@ pub(super) fn png(img: &crate::base::image::Image) -> Result<Vec<u8>, ApiError> 
 /// `GET /api/session`: what the page needs to start.
 pub(crate) fn session(st: &State) -> Reply {
     let scene = st.scene.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "paper_sphere.toml (built in)".into());
-    Reply::ok_json(json!({
-        "files": list_files(&st.roots, "brdf"),
-        "scenes": list_files(&st.roots, "toml"),
-        "open": st.files.first(),
-        "scene": scene,
-        "roots": st.roots.dirs().iter().map(|d| d.display().to_string()).collect::<Vec<_>>(),
-        "jobs_running": st.jobs.load(Ordering::SeqCst),
-        "limits": { "max_size": st.limits.max_size, "formula_bytes": st.limits.formula_bytes, "body_bytes": st.limits.body_bytes,
-                    "deadline_s": st.limits.deadline.as_secs_f64() },
-    }))
+    Reply::ok_report(&SessionReply {
+        files: list_files(&st.roots, "brdf"),
+        scenes: list_files(&st.roots, "toml"),
+        open: st.files.first().cloned(),
+        scene,
+        roots: st.roots.dirs().iter().map(|d| d.display().to_string()).collect(),
+        jobs_running: st.jobs.load(Ordering::SeqCst),
+        limits: LimitsReply {
+            max_size: st.limits.max_size,
+            formula_bytes: st.limits.formula_bytes,
+            body_bytes: st.limits.body_bytes,
+            deadline_s: st.limits.deadline.as_secs_f64(),
+        },
+    })
+}
+
+/// The `/api/session` reply.
+#[derive(serde::Serialize)]
+pub(crate) struct SessionReply {
+    files: Vec<String>,
+    scenes: Vec<String>,
+    /// The file named on the command line first, if any.
+    open: Option<String>,
+    scene: String,
+    roots: Vec<String>,
+    jobs_running: usize,
+    limits: LimitsReply,
+}
+
+/// The server's limits, as `/api/session` reports them.
+#[derive(serde::Serialize)]
+pub(crate) struct LimitsReply {
+    max_size: usize,
+    formula_bytes: usize,
+    body_bytes: usize,
+    deadline_s: f64,
+}
+
+/// The `/api/file` reply (`text` absent) and the `/api/save` reply.
+#[derive(serde::Serialize)]
+pub(crate) struct FileReply {
+    path: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    text: Option<String>,
+    hash: String,
 }
 
 /// Served files with extension `ext` (sorted, at most 2000, four levels deep, hidden and `target` skipped),
@@ -390,7 +425,7 @@ pub(crate) fn file(st: &State, path: &str) -> Result<Reply, ApiError> {
     let bytes = read_limited(&p, crate::base::source::MAX_SOURCE_BYTES as u64)?;
     let hash = content_hash(&bytes);
     let text = String::from_utf8(bytes).map_err(|_| ApiError::new(422, format!("`{path}` is not UTF-8 text")))?;
-    Ok(Reply::ok_json(json!({ "path": path, "text": text, "hash": hash })))
+    Ok(Reply::ok_report(&FileReply { path: path.to_string(), text: Some(text), hash }))
 }
 
 fn read_limited(p: &Path, max: u64) -> Result<Vec<u8>, ApiError> {
@@ -688,7 +723,7 @@ pub(crate) fn save(st: &State, req: &Value) -> Result<Reply, ApiError> {
             .hint("reload it to see the change, or save again to overwrite it"));
     }
     crate::base::output::write_atomic(&p, text.as_bytes()).map_err(|e| ApiError::new(500, e))?;
-    Ok(Reply::ok_json(json!({ "path": path, "hash": content_hash(text.as_bytes()) })))
+    Ok(Reply::ok_report(&FileReply { path: path.to_string(), text: None, hash: content_hash(text.as_bytes()) }))
 }
 
 /// `GET /render.png?file=SCENE&set=n=50&size=256`: exactly what rendering SCENE with n = 50 at size 256 gives (JIT,

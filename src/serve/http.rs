@@ -300,9 +300,6 @@ impl Reply {
     pub(crate) fn json(status: u16, v: &serde_json::Value) -> Reply {
         Reply { status, content_type: "application/json", headers: vec![], body: v.to_string().into_bytes() }
     }
-    pub(crate) fn ok_json(v: serde_json::Value) -> Reply {
-        Reply::json(200, &v)
-    }
     /// A typed report as the JSON body (a serialisation failure, which lobe's report types do not have, is a 500).
     pub(crate) fn ok_report<T: serde::Serialize>(v: &T) -> Reply {
         match serde_json::to_vec(v) {

@@ -15,7 +15,7 @@
 use super::api::{self, State};
 use super::http::{ApiError, Reply};
 use crate::Evaluator;
-use serde_json::{json, Value};
+use serde_json::Value;
 use std::sync::Arc;
 
 /// A whole number field in `lo..=hi`, `default` when absent.
@@ -40,6 +40,29 @@ fn kernel_and_params(st: &State, req: &Value) -> Result<(Arc<crate::Kernel>, Vec
 }
 
 /// The largest finite value (0 if none) and the count of non-finite ones.
+/// The `/api/lobe` reply (non-finite values as `null`).
+#[derive(serde::Serialize)]
+struct LobeReply {
+    theta_i: f64,
+    phi_i: f64,
+    n_theta: usize,
+    n_phi: usize,
+    light: [f64; 3],
+    values: Vec<f64>,
+    max: f64,
+    nonfinite: usize,
+}
+
+/// The `/api/slice` reply (non-finite values as `null`).
+#[derive(serde::Serialize)]
+struct SliceReply {
+    res: usize,
+    phi_d: f64,
+    values: Vec<f64>,
+    max: f64,
+    nonfinite: usize,
+}
+
 fn summary(values: &[f64]) -> (f64, usize) {
     let max = values.iter().copied().filter(|v| v.is_finite()).fold(0.0f64, f64::max);
     (max, values.iter().filter(|v| !v.is_finite()).count())
@@ -65,10 +88,7 @@ pub(crate) fn lobe(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
             })
             .collect();
         let (max, nonfinite) = summary(&values);
-        Ok(Reply::ok_json(json!({
-            "theta_i": ti, "phi_i": pi, "n_theta": nt, "n_phi": np, "light": l,
-            "values": values, "max": max, "nonfinite": nonfinite,
-        })))
+        Ok(Reply::ok_report(&LobeReply { theta_i: ti, phi_i: pi, n_theta: nt, n_phi: np, light: l, values, max, nonfinite }))
     })
 }
 
@@ -99,13 +119,14 @@ pub(crate) fn slice(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
             })
             .collect();
         let (max, nonfinite) = summary(&values);
-        Ok(Reply::ok_json(json!({ "res": res, "phi_d": pd, "values": values, "max": max, "nonfinite": nonfinite })))
+        Ok(Reply::ok_report(&SliceReply { res, phi_d: pd, values, max, nonfinite }))
     })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use serde_json::json;
 
     #[test]
     fn incidence_and_counts_are_checked() {

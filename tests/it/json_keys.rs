@@ -116,3 +116,38 @@ fn every_json_output_keeps_its_keys() {
     let _ = std::fs::remove_dir_all(&dir);
     assert!(failures.is_empty(), "--json keys changed:\n{}", failures.join("\n"));
 }
+
+/// The page's API replies keep their keys too (`lobe serve`: the page and any script that drives it read them).
+#[test]
+fn the_page_api_keeps_its_keys() {
+    let dir = crate::scratch_dir("json-keys", "api");
+    let f = dir.join("model.brdf");
+    std::fs::write(&f, "NH^n\n").unwrap();
+    let s = super::serve::Served::start(&[f.to_str().unwrap()]);
+    let file = s.get(&format!("/api/file?path={}", f.display())).json();
+    let save = serde_json::json!({"path": f, "text": "VR^n\n", "hash": file["hash"]});
+    let lobe = serde_json::json!({"text": "NH^n", "params": {"n": 5}, "theta_i": 30, "n_theta": 5, "n_phi": 8});
+    let cases = [
+        ("api_session", s.get("/api/session")),
+        ("api_file", s.get(&format!("/api/file?path={}", f.display()))),
+        ("api_save", s.post("/api/save", &save)),
+        ("api_lobe", s.post("/api/lobe", &lobe)),
+        ("api_slice", s.post("/api/slice", &serde_json::json!({"text": "NH^n", "res": 8}))),
+    ];
+    let bless = std::env::var("LOBE_BLESS").is_ok_and(|v| v == "1");
+    let mut failures = vec![];
+    for (name, r) in cases {
+        assert_eq!(r.status, 200, "{name}: {}", String::from_utf8_lossy(&r.body));
+        let mut keys = BTreeSet::new();
+        key_paths(&r.json(), "", &mut keys);
+        let text: String = keys.iter().map(|k| format!("{k}\n")).collect();
+        let path = snapshot_dir().join(format!("{name}.keys"));
+        if bless {
+            std::fs::write(&path, &text).unwrap();
+        } else if std::fs::read_to_string(&path).ok().as_deref() != Some(text.as_str()) {
+            failures.push(format!("{name}: now\n{text}"));
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(failures.is_empty(), "API keys changed (LOBE_BLESS=1 rewrites the snapshots):\n{}", failures.join("\n"));
+}
