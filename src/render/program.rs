@@ -36,6 +36,8 @@ use crate::backend::Backend;
 use crate::base::span::Span;
 use crate::builtins::{Builtin, Mode};
 use std::sync::Arc;
+use crate::builtins::dd::Arith;
+use crate::frame::{world_axes, world_light_inputs, world_view, Compare};
 use crate::ir::{BinOp, Formula, Input, Ir, Node, NodeId, N_INPUTS};
 
 /// The data columns a lighting program reads: position, normal, tangent (3 each; the tangent only for
@@ -152,6 +154,47 @@ impl Builder {
     }
 }
 
+/// The frame's input formulas ([`crate::frame`]) written into the program, with the builder's folds.
+impl Arith for Builder {
+    type V = NodeId;
+    fn konst(&mut self, c: f64) -> NodeId {
+        self.k(c)
+    }
+    fn add(&mut self, a: NodeId, b: NodeId) -> NodeId {
+        self.bin(BinOp::Add, a, b)
+    }
+    fn sub(&mut self, a: NodeId, b: NodeId) -> NodeId {
+        self.bin(BinOp::Sub, a, b)
+    }
+    fn mul(&mut self, a: NodeId, b: NodeId) -> NodeId {
+        self.bin(BinOp::Mul, a, b)
+    }
+    fn div(&mut self, a: NodeId, b: NodeId) -> NodeId {
+        self.bin(BinOp::Div, a, b)
+    }
+    fn neg(&mut self, a: NodeId) -> NodeId {
+        self.ir.neg(a, self.s)
+    }
+    fn sqrt(&mut self, a: NodeId) -> NodeId {
+        self.call(Builtin::Sqrt, &[a])
+    }
+    fn fma(&mut self, a: NodeId, b: NodeId, c: NodeId) -> NodeId {
+        self.call(Builtin::Fma, &[a, b, c])
+    }
+    fn positive_select(&mut self, c: NodeId, a: NodeId, b: NodeId) -> NodeId {
+        let zero = self.k(0.0);
+        let m = self.lt(zero, c);
+        self.select(m, a, b)
+    }
+}
+
+impl Compare for Builder {
+    fn less_select(&mut self, a: NodeId, b: NodeId, x: NodeId, y: NodeId) -> NodeId {
+        let m = self.lt(a, b);
+        self.select(m, x, y)
+    }
+}
+
 /// The program shading with `spec` and the formula's channels (one, or red, green, blue): outputs in [`Out`]
 /// order, one guarded region per light where F is evaluated.
 pub fn build(spec: &Spec, channels: &[&Formula]) -> Result<Program, String> {
@@ -163,67 +206,14 @@ pub fn build(spec: &Spec, channels: &[&Formula]) -> Result<Program, String> {
     let (p, n) = ([cols[0], cols[1], cols[2]], [cols[3], cols[4], cols[5]]);
     let zero = b.k(0.0);
     let one = b.k(1.0);
-    let two = b.k(2.0);
     let eye = b.splat(spec.eye);
-    // The view step: v = eye − p, 1/|n|, 1/|v|, NV.
+    // The view step (v = eye − p, 1/|n|, 1/|v|, NV) and, for formulas that read directions, the tangent frame:
+    // the shading frame's definitions ([`crate::frame`]) written as nodes.
     let v = b.sub3(eye, p);
-    let nn = b.dot(n, n);
-    let inv_n = b.inv_len(nn);
-    let vv = b.dot(v, v);
-    let inv_v = b.inv_len(vv);
-    let nvr = b.dot(n, v);
-    let nvn = b.mul(nvr, inv_n);
-    let nv = b.mul(nvn, inv_v);
+    let view = world_view(&mut b, n, v);
     let reads = channels.iter().map(|f| f.used_inputs()).collect::<crate::ir::InputSet>();
     let needs = |i: Input| reads.contains(i);
-    let view_light = needs(Input::NH) || needs(Input::VH) || needs(Input::VR);
-    // The frame step: T̂ = norm(t − N̂(N̂·t)) (Duff et al.'s tangent of N̂ where t ∥ n), B̂ = N̂ × T̂, turned.
-    let frame = spec.tangent_rotation.map(|[c, s]| {
-        let t = [cols[6], cols[7], cols[8]];
-        let nh = [b.mul(n[0], inv_n), b.mul(n[1], inv_n), b.mul(n[2], inv_n)];
-        let kk = b.dot(nh, t);
-        let proj = [b.mul(nh[0], kk), b.mul(nh[1], kk), b.mul(nh[2], kk)];
-        let u = b.sub3(t, proj);
-        let l2 = b.dot(u, u);
-        let eps = b.k(1e-20);
-        let ok = b.lt(eps, l2);
-        let neg = b.lt(nh[2], zero);
-        let m1 = b.k(-1.0);
-        let sign = b.select(neg, m1, one);
-        let sd = b.add(sign, nh[2]);
-        let q = b.bin(BinOp::Div, m1, sd);
-        // Duff's tangent (1 + s·a²·q, s·a·b·q, −s·a), s·a built once.
-        let sa = b.mul(sign, nh[0]);
-        let saa = b.mul(sa, nh[0]);
-        let saq = b.mul(saa, q);
-        let ox = b.add(one, saq);
-        let sab = b.mul(sa, nh[1]);
-        let oy = b.mul(sab, q);
-        let oz = b.ir.neg(sa, Span::default());
-        let il = b.inv_len(l2);
-        let il = b.select(ok, il, one);
-        let un = [b.mul(u[0], il), b.mul(u[1], il), b.mul(u[2], il)];
-        let u = [b.select(ok, un[0], ox), b.select(ok, un[1], oy), b.select(ok, un[2], oz)];
-        let cross = |b: &mut Builder, i: usize, j: usize| {
-            let x = b.mul(nh[i], u[j]);
-            let y = b.mul(nh[j], u[i]);
-            b.sub(x, y)
-        };
-        let w = [cross(&mut b, 1, 2), cross(&mut b, 2, 0), cross(&mut b, 0, 1)];
-        let (ck, sk) = (b.k(c), b.k(s));
-        let rot = |b: &mut Builder, x: NodeId, y: NodeId, sign: f64| {
-            let cx = b.mul(ck, x);
-            let sy = b.mul(sk, y);
-            if sign > 0.0 { b.add(cx, sy) } else { b.sub(cx, sy) }
-        };
-        let tt = [rot(&mut b, u[0], w[0], 1.0), rot(&mut b, u[1], w[1], 1.0), rot(&mut b, u[2], w[2], 1.0)];
-        let bb = [rot(&mut b, w[0], u[0], -1.0), rot(&mut b, w[1], u[1], -1.0), rot(&mut b, w[2], u[2], -1.0)];
-        let vt = b.dot(v, tt);
-        let vx = b.mul(vt, inv_v);
-        let vb = b.dot(v, bb);
-        let vy = b.mul(vb, inv_v);
-        (tt, bb, vx, vy)
-    });
+    let axes = spec.tangent_rotation.map(|rotation| world_axes(&mut b, &view, [cols[6], cols[7], cols[8]], rotation));
     let mut acc = b.splat(spec.ambient);
     let mut counters: [Option<NodeId>; 3] = [None; 3];
     let count = |b: &mut Builder, c: &mut Option<NodeId>, x: NodeId| *c = Some(c.map_or(x, |c| b.add(c, x)));
@@ -237,46 +227,9 @@ pub fn build(spec: &Spec, channels: &[&Formula]) -> Result<Program, String> {
         } else {
             (b.splat(light.at), one)
         };
-        let nlr = b.dot(n, l);
-        let nln = b.mul(nlr, inv_n);
-        let nl = b.mul(nln, il);
+        let x = world_light_inputs(&mut b, &view, axes.as_ref(), l, il, &needs);
+        let nl = x[Input::NL.index()].expect("NL is always computed");
         let lit_nl = b.lt(zero, nl);
-        let mut x: [Option<NodeId>; N_INPUTS] = [None; N_INPUTS];
-        x[Input::NL.index()] = Some(nl);
-        x[Input::Lz.index()] = Some(nl);
-        x[Input::NV.index()] = Some(nv);
-        x[Input::Vz.index()] = Some(nv);
-        if view_light {
-            let vlr = b.dot(v, l);
-            let vln = b.mul(vlr, inv_v);
-            let vl = b.mul(vln, il);
-            if needs(Input::NH) || needs(Input::VH) {
-                // |L̂ + V̂|² = 2 + 2VL; H undefined (0) where L = −V.
-                let tvl = b.mul(two, vl);
-                let h2 = b.add(two, tvl);
-                let tiny = b.k(1e-300);
-                let ok = b.lt(tiny, h2);
-                let ih = b.inv_len(h2);
-                let ih = b.select(ok, ih, zero);
-                let s = b.add(nl, nv);
-                x[Input::NH.index()] = Some(b.mul(s, ih));
-                let s = b.add(one, vl);
-                x[Input::VH.index()] = Some(b.mul(s, ih));
-            }
-            if needs(Input::VR) {
-                let tn = b.mul(two, nl);
-                let tnv = b.mul(tn, nv);
-                x[Input::VR.index()] = Some(b.sub(tnv, vl));
-            }
-        }
-        if let Some((tt, bb, vx, vy)) = frame {
-            x[Input::Vx.index()] = Some(vx);
-            x[Input::Vy.index()] = Some(vy);
-            let lt = b.dot(l, tt);
-            x[Input::Lx.index()] = Some(b.mul(lt, il));
-            let lb = b.dot(l, bb);
-            x[Input::Ly.index()] = Some(b.mul(lb, il));
-        }
         let lit = match spec.cutoff {
             Some((input, cos)) => {
                 let lobe = x[input.index()].ok_or_else(|| format!("the cut-off's cosine {} is not computed", input.name()))?;
