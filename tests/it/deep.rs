@@ -22,7 +22,7 @@ fn huge_formulas_need_no_big_stack_from_the_caller() {
             let f = lobe::front::parse(name, &src).unwrap_or_else(|d| panic!("{d}"));
             // The accuracy pass as every command compiles (no cache), then a value.
             let pass = PassOptions { points: 500, ..Default::default() };
-            let opts = lobe::numerics::robust::with_pass(lobe::Options::default(), pass.clone());
+            let opts = lobe::numerics::robust::with_pass(lobe::Options::default(), pass);
             let k = lobe::compile_formula(f.clone(), &opts).unwrap_or_else(|d| panic!("{d}"));
             let mut x = [0.0; lobe::N_INPUTS];
             x[lobe::Input::NH as usize] = 0.5;
