@@ -1,9 +1,9 @@
 //! Many points from CSV text, evaluated by the batched kernel (the eval command on a points file).
 //!
 //! The CSV has a header naming its columns: inputs and, optionally, parameters of the formula (which then stay
-//! live: no recompilation per row; [`evaluate_varying`] is the same evaluation for parameter columns from
-//! elsewhere, e.g. per-point parameter arrays from Python). The inputs are either the six direction components `Lx,Ly,Lz,Vx,Vy,Vz`
-//! (local frame: N = +z, X = +x, Y = +y), from which every input is computed as the renderer does
+//! live: no recompilation per row; [`evaluate_varying`] is the same evaluation for parameter columns held
+//! elsewhere, such as the Python module's per-point arrays). The inputs are either the six direction components
+//! `Lx,Ly,Lz,Vx,Vy,Vz` (local frame: N = +z, X = +x, Y = +y), from which every input is computed as the renderer does
 //! ([`super::inputs_from_dirs`]; non-unit directions are normalised and counted, a zero vector is an
 //! error), or cosine columns (NL, NV, NH, VR, VH; those not named are 0), which only a formula that reads no
 //! direction can take. Parameters not named take their baked or declared values. Rows of equal parameter values
