@@ -268,8 +268,10 @@ class Kernel:
 
     def accuracy(self, reference: "Kernel", *, q: float = 8.0, n_max: int = 1000, epicenter_from: int = 2, **params: float) -> Dict[str, Any]:
         """The papers' error metrics against ``reference`` (its red channel if coloured) over n = 1..n_max:
-        ``lobe accuracy --json``. ``params`` are the formula's other parameters. A colour formula is measured
-        per channel: the red channel's keys, and ``"channels"`` with all three (red, green, blue)."""
+        ``lobe accuracy --json``. ``params`` are live values of the formula's other parameters (n is swept);
+        the reference runs at its declared values and those baked into it (``lobe.compile(ref, m=0.2)``). A
+        colour formula is measured per channel: the red channel's keys, and ``"channels"`` with all three
+        (red, green, blue)."""
         if not isinstance(reference, Kernel):
             raise TypeError("reference must be a lobe.Kernel (lobe.compile(path))")
         if "n" in params:

@@ -118,6 +118,9 @@ def test_accuracy_honours_live_parameters(lobe_cli):
         assert live["mean_abs_grid"] == pytest.approx(cli["mean_abs_grid"], rel=1e-9)
         assert live["max_abs"] == pytest.approx(cli["max_abs"], rel=1e-9)
         assert live["mean_abs_grid"] != default["mean_abs_grid"]
+    # The reference runs at the values baked into it.
+    soft, sharp = lobe.compile(COOK, m=0.6), lobe.compile(COOK, m=0.1)
+    assert k.accuracy(soft, n_max=20)["mean_abs_grid"] != k.accuracy(sharp, n_max=20)["mean_abs_grid"]
     with pytest.raises(lobe.LobeError, match="accuracy sweeps n, which is baked"):
         lobe.compile(FST, n=5).accuracy(ref)
     with pytest.raises(lobe.LobeError, match="accuracy sweeps n, which is baked"):
