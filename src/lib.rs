@@ -114,6 +114,16 @@ pub fn llvm_missing() -> Diagnostic {
     Diagnostic::error("this build of lobe has no LLVM tier").hint(Hint::BuildWithLlvm)
 }
 
+/// The backend that `backend` with JIT tier `tier` means ([`Tier::resolve`]); the LLVM tier in a build (or on a
+/// host) without it is [`llvm_missing`] here, not a failure at the first compile.
+pub fn resolve_backend(backend: Backend, tier: Tier) -> Result<Backend, Diagnostic> {
+    let b = tier.resolve(backend).map_err(|e| Diagnostic::error(e).hint("leave the tier at `cranelift`, or use the `jit` backend"))?;
+    if b == Backend::Llvm && !Tier::llvm_available() {
+        return Err(llvm_missing());
+    }
+    Ok(b)
+}
+
 /// Checks the names and ranges of parameter values to bake against the formula's declared parameters.
 pub fn resolve_bake(f: &Formula, set: &[(String, f64)]) -> Result<Vec<(usize, f64)>, Diagnostics> {
     let mut out = vec![];

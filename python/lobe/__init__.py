@@ -6,7 +6,8 @@
 
 A :class:`Kernel` evaluates on numpy arrays (broadcast together) of cosines (``NL``, ``NV``, ``NH``, ``VR``,
 ``VH``) or of directions ``L`` and ``V`` of shape ``(..., 3)`` in the local frame (N = +z); parameters are
-given by name and default to the formula's declared values. The values are the ones ``lobe eval --points``
+given by name, as one value or an array broadcast with the inputs, and default to the formula's declared
+values. The values are the ones ``lobe eval --points``
 prints, bit for bit. The checks (:meth:`Kernel.check`, :meth:`Kernel.energy`, :meth:`Kernel.accuracy`,
 :meth:`Kernel.sweep`) return the dicts the command line prints with ``--json``. :func:`fit` fits parameters to
 target values; :func:`render` renders a scene file to an image a notebook shows.
@@ -175,42 +176,47 @@ class Kernel:
         return (_rebuild, self._native.state())
 
     # -- evaluation -------------------------------------------------------------------------------------
-    def _prepare(self, kw: Mapping[str, Any]) -> Tuple[list, Any, Any, list, Tuple[int, ...]]:
-        """Split keywords into input columns (broadcast, contiguous float64, flattened) and the parameter
-        vector; returns (cosines, L, V, params, shape)."""
+    def _prepare(self, kw: Mapping[str, Any]) -> Tuple[list, Any, Any, list, list, Tuple[int, ...]]:
+        """Split keywords into input columns and per-point parameter columns (broadcast together, contiguous
+        float64, flattened) and the parameter vector; returns (cosines, L, V, params, varying, shape)."""
         kinds = self._native.resolve(list(kw))
         params = list(self._defaults)
-        cos, dirs = [], {}
+        cos, dirs, per_point, shapes = [], {}, [], {}
         for (name, value), (kind, i) in zip(kw.items(), kinds):
             a = np.asarray(value, dtype=np.float64)
             if kind == "param":
-                if a.size != 1:
-                    raise _error(
-                        f"parameter `{name}` takes one value, got an array of shape {a.shape}",
-                        "give one value per call (compile once, call once per parameter value)",
-                    )
-                params[i] = float(a.reshape(()))
+                shapes[name] = a.shape
+                if a.size == 1:
+                    params[i] = float(a.reshape(()))
+                else:
+                    per_point.append((i, a))
             elif kind == "input":
+                shapes[name] = a.shape
                 cos.append((i, a))
             else:
                 if a.ndim == 0 or a.shape[-1] != 3:
                     raise _error(f"{name} must have shape (..., 3), not {a.shape}", f"{name} is a direction: x, y, z in the local frame (N = +z)")
+                shapes[name] = a.shape[:-1]
                 dirs[kind] = a
-        shapes = [a.shape for _, a in cos] + [a.shape[:-1] for a in dirs.values()]
         try:
-            shape = np.broadcast_shapes(*shapes) if shapes else ()
+            shape = np.broadcast_shapes(*shapes.values()) if shapes else ()
         except ValueError:
-            names = [n for n in kw if kinds[list(kw).index(n)][0] != "param"]
-            raise _error(f"the inputs' shapes do not broadcast: {dict(zip(names, shapes))}") from None
+            raise _error(f"the shapes of the inputs and parameters do not broadcast: {shapes}", "L and V count without their last axis (of 3)") from None
         flat = [(i, _flat(a, shape)) for i, a in cos]
+        varying = [(i, _flat(a, shape)) for i, a in per_point]
         lv = [_flat(dirs[k], shape, (3,)) if k in dirs else None for k in ("L", "V")]
-        return flat, lv[0], lv[1], params, shape
+        return flat, lv[0], lv[1], params, varying, shape
 
     def __call__(self, **inputs_and_params: Any) -> np.ndarray:
-        """Evaluate at every point: returns float64 of the broadcast shape (``(..., 3)`` for colour)."""
-        cos, L, V, params, shape = self._prepare(inputs_and_params)
+        """Evaluate at every point: returns float64 of the broadcast shape (``(..., 3)`` for colour).
+
+        Inputs and parameters broadcast together by numpy's rules: a parameter may be one value or an array
+        (one value per point, e.g. ``k(NH=nh, n=np.array([[10], [100]]))`` for a table over n and NH); the
+        value at each point is the one evaluating that point alone gives, bit for bit. The work runs without
+        the GIL, split over threads for large arrays."""
+        cos, L, V, params, varying, shape = self._prepare(inputs_and_params)
         n = int(np.prod(shape, dtype=np.int64))
-        out = self._native.eval((cos, L, V, n), params)
+        out = self._native.eval((cos, L, V, n), params, varying)
         if self.channels == 1:
             return out.reshape(shape)
         return np.moveaxis(out.reshape((self.channels,) + shape), 0, -1)
@@ -230,14 +236,42 @@ class Kernel:
         a colour formula)."""
         return self._native.check(int(points), float(budget))
 
-    def energy(self, *, mode: str = "lobe", lobe: Optional[str] = None, **params: float) -> Dict[str, Any]:
-        """The energy check: ``lobe energy --json`` (``mode="lobe"``: the papers' normalisation coefficient
-        along ``lobe`` (``"NH"`` or ``"VR"``, default the one read); ``mode="full"``: the albedo over
-        incidence angles and reciprocity). A colour formula adds ``"channels"``."""
-        return self._native.energy(mode, lobe, self._param_list(params))
+    def energy(
+        self,
+        *,
+        mode: str = "lobe",
+        lobe: Optional[str] = None,
+        range: Optional[Tuple[float, float]] = None,
+        step: float = 1.0,
+        against: Optional["Kernel"] = None,
+        **params: float,
+    ) -> Dict[str, Any]:
+        """The energy check: ``lobe energy --json``.
+
+        ``mode="lobe"``: the papers' normalisation coefficient along ``lobe`` (``"NH"`` or ``"VR"``, default the
+        one read); ``mode="full"``: the albedo over incidence angles and reciprocity. A colour formula adds
+        ``"channels"`` (red, green, blue). ``range=(lo, hi)`` sweeps n over lo, lo + ``step``, … ≤ hi (lobe
+        mode, scalar formulas, n not baked; ``--range``/``--step``): ``"range"`` lists ``{"n", "coef"}``, and
+        ``against``, a kernel of n (and the formula's parameters, by name) giving a fitted coefficient, adds
+        ``"against_max_abs"``, ``"against_worst_n"`` and ``"against_mean_abs"`` (``|coef_fit·2π·Int − 1|``)."""
+        if against is not None and not isinstance(against, Kernel):
+            raise TypeError("against must be a lobe.Kernel (lobe.compile(path_or_text))")
+        rng = None
+        if range is not None:
+            r = tuple(range)
+            if len(r) != 2:
+                raise _error(f"range is (lo, hi), not {range!r}", "e.g. range=(1, 1000)")
+            if "n" in params:
+                raise _error("the range sweeps n", "give only the other parameters")
+            rng = (float(r[0]), float(r[1]))
+        return self._native.energy(mode, lobe, self._param_list(params), rng, float(step), None if against is None else against._native)
 
     def accuracy(self, reference: "Kernel", *, q: float = 8.0, n_max: int = 1000, epicenter_from: int = 2, **params: float) -> Dict[str, Any]:
-        """The papers' error metrics against ``reference`` over n = 1..n_max: ``lobe accuracy --json``."""
+        """The papers' error metrics against ``reference`` (its red channel if coloured) over n = 1..n_max:
+        ``lobe accuracy --json``. ``params`` are live values of the formula's other parameters (n is swept);
+        the reference runs at its declared values and those baked into it (``lobe.compile(ref, m=0.2)``). A
+        colour formula is measured per channel: the red channel's keys, and ``"channels"`` with all three
+        (red, green, blue)."""
         if not isinstance(reference, Kernel):
             raise TypeError("reference must be a lobe.Kernel (lobe.compile(path))")
         if "n" in params:
@@ -278,7 +312,11 @@ def fit(
         raise TypeError("fit() takes a lobe.Kernel first")
     if not params:
         raise _error("nothing to fit", "name at least one parameter with its range: params={'n': (1, 1000)}")
-    cos, L, V, values, shape = kernel._prepare(inputs)
+    cos, L, V, values, varying, shape = kernel._prepare(inputs)
+    if varying:
+        names = list(kernel.params)
+        arrays = ", ".join(names[i] for i, _ in varying)
+        raise _error(f"a fixed parameter takes one value in a fit, not an array ({arrays})", "fit once per value of the fixed parameters")
     n = int(np.prod(shape, dtype=np.int64))
     c = kernel.channels
     tshape = shape if c == 1 else shape + (c,)
@@ -335,13 +373,18 @@ def render(
     aa: Optional[int] = None,
     srgb: bool = False,
     threads: int = 0,
+    math: str = "precise",
+    backend: str = "jit",
+    tier: str = "cranelift",
     **params: float,
 ) -> Image:
     """Render a scene file (.toml, see examples/scenes/) as ``lobe render`` does; ``params`` are given to every
-    material whose formula declares them. ``size`` is N (square) or (width, height). Returns an
-    :class:`Image` (``(H, W, 3)`` uint8)."""
+    material whose formula declares them. ``size`` is N (square) or (width, height). ``math`` (``"precise"``
+    or ``"fast"``), ``backend`` (``"jit"`` or ``"interp"``) and ``tier`` (``"cranelift"``, ``"llvm"`` in a
+    build with that tier, or ``"auto"``) are the command's ``--math``, ``--backend`` and ``--tier``, with its
+    defaults. Returns an :class:`Image` (``(H, W, 3)`` uint8)."""
     if isinstance(size, int):
         size = (size, size)
     wh = None if size is None else (int(size[0]), int(size[1]))
-    rgb, w, h = _lobe.render(os.fspath(scene), wh, [(k, float(v)) for k, v in params.items()], aa, bool(srgb), int(threads))
+    rgb, w, h = _lobe.render(os.fspath(scene), wh, [(k, float(v)) for k, v in params.items()], aa, bool(srgb), int(threads), str(math), str(backend), str(tier))
     return np.frombuffer(rgb, dtype=np.uint8).reshape(h, w, 3).copy().view(Image)

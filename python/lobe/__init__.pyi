@@ -65,10 +65,22 @@ class Kernel:
     def channels(self) -> int: ...
     @property
     def compiled(self) -> Tuple[str, ...]: ...
-    def __call__(self, **inputs_and_params: ArrayLike) -> npt.NDArray[np.float64]: ...
+    def __call__(self, **inputs_and_params: ArrayLike) -> npt.NDArray[np.float64]:
+        """Values at every point; inputs and parameters (one value or one per point) broadcast together."""
     def check(self, *, points: int = 100_000, budget: float = 10.0) -> Dict[str, Any]: ...
-    def energy(self, *, mode: str = "lobe", lobe: Optional[str] = None, **params: float) -> Dict[str, Any]: ...
-    def accuracy(self, reference: Kernel, *, q: float = 8.0, n_max: int = 1000, epicenter_from: int = 2, **params: float) -> Dict[str, Any]: ...
+    def energy(
+        self,
+        *,
+        mode: str = "lobe",
+        lobe: Optional[str] = None,
+        range: Optional[Tuple[float, float]] = None,
+        step: float = 1.0,
+        against: Optional[Kernel] = None,
+        **params: float,
+    ) -> Dict[str, Any]:
+        """``lobe energy --json``; ``range=(lo, hi)`` sweeps n (``--range``, ``--step``), scored ``against`` a fitted coefficient."""
+    def accuracy(self, reference: Kernel, *, q: float = 8.0, n_max: int = 1000, epicenter_from: int = 2, **params: float) -> Dict[str, Any]:
+        """``lobe accuracy --json``, per channel for a colour formula (``"channels"``)."""
     def sweep(self, *, bound: float = 1e6, max_evals: int = 2_000_000, as_written: bool = False) -> Dict[str, Any]: ...
 
 def fit(
@@ -98,6 +110,9 @@ def render(
     aa: Optional[int] = None,
     srgb: bool = False,
     threads: int = 0,
+    math: str = "precise",
+    backend: str = "jit",
+    tier: str = "cranelift",
     **params: float,
 ) -> Image:
-    """Render a scene file as ``lobe render`` does."""
+    """Render a scene file as ``lobe render`` does (``math``, ``backend``, ``tier``: its flags and defaults)."""

@@ -9,8 +9,9 @@
 
 use lobe::base::diag::{Diagnostic, Diagnostics};
 use lobe::ir::{Formula, Input, N_INPUTS};
+use lobe::numerics::points::evaluate_varying;
 use lobe::numerics::robust::PassOptions;
-use lobe::{Backend, Columns, Evaluator, Kernel, Mode};
+use lobe::{Backend, Columns, Evaluator, Kernel, Mode, Tier};
 use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::create_exception;
 use pyo3::exceptions::PyException;
@@ -125,15 +126,19 @@ impl Inputs<'_> {
     }
 }
 
-/// `k`'s batched kernel over every point of `cols`, in `CHUNK`s over rayon's threads when there are many.
-fn eval_into(k: &Kernel, cols: &Columns, params: &[f64], out: &mut [f64]) {
+/// `k`'s batched kernel over every point of `cols` with parameters `params`, except those in `varying` (index,
+/// one value per point), in `CHUNK`s over rayon's threads when there are many. Per-point parameters are
+/// evaluated as `lobe eval --points` evaluates parameter columns ([`evaluate_varying`]): one batched call per
+/// run of equal values, so each value is that point's, bit for bit.
+fn eval_into(k: &Kernel, cols: &Columns, params: &[f64], varying: &[(usize, &[f64])], out: &mut [f64]) {
     if out.len() <= CHUNK {
-        return k.eval_batch(cols, params, out);
+        return evaluate_varying(k, cols, params, varying, out);
     }
     out.par_chunks_mut(CHUNK).enumerate().for_each(|(c, o)| {
-        let s = c * CHUNK;
-        let part = cols.cols.map(|col| if col.is_empty() { col } else { &col[s..s + o.len()] });
-        k.eval_batch(&Columns::new(part), params, o);
+        let r = c * CHUNK..c * CHUNK + o.len();
+        let part = cols.cols.map(|col| if col.is_empty() { col } else { &col[r.clone()] });
+        let vary: Vec<(usize, &[f64])> = varying.iter().map(|(i, v)| (*i, &v[r.clone()])).collect();
+        evaluate_varying(k, &Columns::new(part), params, &vary, o);
     });
 }
 
@@ -248,6 +253,37 @@ impl Native {
         Ok(())
     }
 
+    /// Per-point parameter arrays from Python (index, `len` values): contiguous, one value per point, each
+    /// inside its parameter's declared range.
+    fn varying<'a>(&self, py: Python<'_>, arrays: &'a [(usize, PyReadonlyArray1<'a, f64>)], len: usize) -> PyResult<Vec<(usize, &'a [f64])>> {
+        let f = self.formula();
+        let mut out = vec![];
+        for (i, a) in arrays {
+            let d = f.params.get(*i).ok_or_else(|| self.error(py, Diagnostic::error(format!("no parameter {i}"))))?;
+            let s = a.as_slice().map_err(|_| self.error(py, Diagnostic::error("a parameter array is not contiguous float64 (lobe's Python side makes it so: a bug)")))?;
+            if s.len() != len {
+                return Err(self.error(py, Diagnostic::error(format!("{} has {} values for {len} points", d.name, s.len()))));
+            }
+            if let Some(at) = py.detach(|| s.iter().position(|v| !d.admits(*v))) {
+                let (lo, hi) = (d.lo, d.hi);
+                return Err(self.error(py, Diagnostic::error(format!("{} = {} (at flat index {at}) is outside its declared range {lo}..{hi}", d.name, s[at])).hint(format!("choose values in {lo}..{hi}"))));
+            }
+            out.push((*i, s));
+        }
+        Ok(out)
+    }
+
+    /// Refuses a check that sweeps n (the first parameter) on a kernel with n baked: the sweep would not move it.
+    fn n_live(&self, py: Python<'_>, what: &str) -> PyResult<()> {
+        match self.formula().params.first() {
+            Some(d) if self.baked.iter().any(|(k, _)| *k == d.name) => Err(self.error(
+                py,
+                Diagnostic::error(format!("{what} sweeps {}, which is baked into this kernel", d.name)).hint(format!("compile without baking {}", d.name)),
+            )),
+            _ => Ok(()),
+        }
+    }
+
     /// The declared default of every parameter, baked ones at their baked value.
     fn param_values(&self) -> Vec<f64> {
         let f = self.formula();
@@ -337,16 +373,18 @@ impl Native {
     }
 
     /// Every point through every channel's batched kernel: `len` values per channel, channel after channel.
-    fn eval<'py>(&self, py: Python<'py>, points: Points<'py>, params: Vec<f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    /// `params` is the full parameter vector; `varying` (index, `len` values) overrides some per point.
+    fn eval<'py>(&self, py: Python<'py>, points: Points<'py>, params: Vec<f64>, varying: Vec<(usize, PyReadonlyArray1<'py, f64>)>) -> PyResult<Bound<'py, PyArray1<f64>>> {
         self.check_params(py, &params)?;
         let (cos, l, v, len) = points;
         let inputs = self.batch(py, &cos, l.as_ref(), v.as_ref(), len)?;
+        let varying = self.varying(py, &varying, len)?;
         // Zeroed memory from the allocator (fresh pages for large batches, no memset), handed to numpy as is.
         let mut out = vec![0.0; len * self.kernels.len()];
         detached(py, &self.file, || {
             let cols = inputs.columns();
             for (k, o) in self.kernels.iter().zip(out.chunks_mut(len.max(1))) {
-                eval_into(k, &cols, &params, o);
+                eval_into(k, &cols, &params, &varying, o);
             }
             Ok(())
         })?;
@@ -410,9 +448,11 @@ impl Native {
         report(py, &c.json())
     }
 
-    /// `lobe energy --json` in lobe or full mode, per channel.
-    fn energy(&self, py: Python<'_>, mode: &str, lobe: Option<&str>, params: Vec<f64>) -> PyResult<Py<PyAny>> {
-        use lobe::numerics::energy::{full_energy_for, lobe_integral, EnergyReport, FullReport, LobeReport, PerChannel};
+    /// `lobe energy --json` in lobe or full mode, per channel; with `range` = (lo, hi), coef(n) over n = lo,
+    /// lo + step, … ≤ hi (`--range`, `--step`), scored against the fitted coefficient `against` if given.
+    #[allow(clippy::too_many_arguments)]
+    fn energy(&self, py: Python<'_>, mode: &str, lobe: Option<&str>, params: Vec<f64>, range: Option<(f64, f64)>, step: f64, against: Option<&Native>) -> PyResult<Py<PyAny>> {
+        use lobe::numerics::energy::{coef_range, full_energy_for, lobe_integral, score_fitted, EnergyReport, FullReport, LobeReport, PerChannel, RangeReport};
         self.check_params(py, &params)?;
         let full = match mode {
             "lobe" => false,
@@ -422,16 +462,35 @@ impl Native {
         if full && lobe.is_some() {
             return Err(self.error(py, Diagnostic::error("the lobe variable applies to mode \"lobe\" only")));
         }
-        let shown = lobe::base::json::Named::new(self.formula().params.iter().zip(&params).map(|(d, v)| (d.name.as_str(), *v)));
+        if range.is_none() && against.is_some() {
+            return Err(self.error(py, Diagnostic::error("`against` scores a coefficient over a range of n").hint("give range=(lo, hi) too")));
+        }
+        if range.is_some() {
+            if full {
+                return Err(self.error(py, Diagnostic::error("a range of n works in mode \"lobe\" only").hint("drop mode=\"full\", or drop range")));
+            }
+            if self.kernels.len() > 1 {
+                return Err(self.error(py, Diagnostic::error("a range of n works on scalar formulas only").hint("this formula has a colour result; drop range")));
+            }
+            self.n_live(py, "a range")?;
+        }
+        let f = self.formula();
+        // Under a range, n is the swept variable, not a parameter (the command's `params`).
+        let shown = f.params.iter().zip(&params).enumerate().filter(|(i, _)| range.is_none() || *i != 0).map(|(_, (d, v))| (d.name.as_str(), *v));
+        let shown = lobe::base::json::Named::new(shown);
         let mut reports = vec![];
         for k in &self.kernels {
             let lobe = self.lobe_input(py, k, lobe)?;
             let r = detached(py, &self.file, || {
                 let wrap = |d| plain(&self.file, d);
-                Ok(if full {
-                    EnergyReport::Full(FullReport::new(shown.clone(), &full_energy_for(k, k.used_inputs(), &params).map_err(wrap)?))
-                } else {
-                    EnergyReport::Lobe(LobeReport::new(shown.clone(), lobe, &lobe_integral(k, &params, lobe).map_err(wrap)?))
+                Ok(match range {
+                    _ if full => EnergyReport::Full(FullReport::new(shown.clone(), &full_energy_for(k, k.used_inputs(), &params).map_err(wrap)?)),
+                    None => EnergyReport::Lobe(LobeReport::new(shown.clone(), lobe, &lobe_integral(k, &params, lobe).map_err(wrap)?)),
+                    Some((lo, hi)) => {
+                        let r = coef_range(k, &params, lobe, f.params.first(), lo, hi, step).map_err(wrap)?;
+                        let score = against.map(|a| score_fitted(f, &params, &a.kernels[0], &r.integrals));
+                        EnergyReport::Range(RangeReport::new(shown.clone(), lobe, &r.coefs, score.as_ref()))
+                    }
                 })
             })?;
             reports.push(r);
@@ -439,17 +498,19 @@ impl Native {
         report(py, &PerChannel::new(reports))
     }
 
-    /// `lobe accuracy --json` against `reference` (first channels), n = 1..n_max.
+    /// `lobe accuracy --json` against `reference` (its first channel), n = 1..n_max: every channel of this
+    /// formula, in the lobe variable the formula reads.
     fn accuracy(&self, py: Python<'_>, reference: &Native, params: Vec<f64>, q: f64, n_max: u32, epicenter_from: u32) -> PyResult<Py<PyAny>> {
-        use lobe::numerics::accuracy::{accuracy, AccuracyJson, AccuracyOptions};
+        use lobe::numerics::accuracy::{accuracy_channels, channels_json, AccuracyOptions};
         self.check_params(py, &params)?;
-        let (k, r) = (&self.kernels[0], &reference.kernels[0]);
-        let (lobe, ref_lobe) = (self.lobe_input(py, k, None)?, reference.lobe_input(py, r, None)?);
+        self.n_live(py, "accuracy")?;
+        reference.n_live(py, "accuracy")?;
+        let r = &reference.kernels[0];
+        let (lobe, ref_lobe) = (lobe::numerics::choose_lobe_input(self.used()).0, reference.lobe_input(py, r, None)?);
         let opts = AccuracyOptions { q, n_max, epicenter_from, ..Default::default() };
-        let t = std::time::Instant::now();
-        let mut rep = detached(py, &self.file, || accuracy(k, &params, lobe, r, &reference.param_values(), ref_lobe, &opts).map_err(|d| plain(&self.file, d)))?;
-        rep.mark_undefined();
-        report(py, &AccuracyJson::new(&rep, q, t.elapsed().as_secs_f64()))
+        let chans: Vec<&dyn Evaluator> = self.kernels.iter().map(|k| k as &dyn Evaluator).collect();
+        let reps = detached(py, &self.file, || accuracy_channels(&chans, &params, lobe, r, &reference.param_values(), ref_lobe, &opts).map_err(|d| plain(&self.file, d)))?;
+        report(py, &channels_json(&reps, q))
     }
 
     /// `lobe sweep --json`: the unclamped formula over its domain, as written and as compiled.
@@ -502,9 +563,11 @@ fn read_source(py: Python<'_>, path: &str) -> PyResult<(String, String)> {
     lobe::base::source::read_source(path).map_err(|d| msg_error(py, path, d))
 }
 
-/// Renders a scene file as `lobe render` does; returns the RGB bytes, width and height.
+/// Renders a scene file as `lobe render` does (its `--math`, `--backend` and `--tier` as `math`, `backend`,
+/// `tier`); returns the RGB bytes, width and height.
 #[pyfunction]
-#[pyo3(signature = (scene, size, set, aa, srgb, threads))]
+#[pyo3(signature = (scene, size, set, aa, srgb, threads, math, backend, tier))]
+#[allow(clippy::too_many_arguments)]
 fn render<'py>(
     py: Python<'py>,
     scene: &str,
@@ -513,6 +576,9 @@ fn render<'py>(
     aa: Option<usize>,
     srgb: bool,
     threads: usize,
+    math: &str,
+    backend: &str,
+    tier: &str,
 ) -> PyResult<(Bound<'py, PyBytes>, usize, usize)> {
     use lobe::render::image::Transfer;
     use lobe::render::scene::{load_scene, LoadOptions};
@@ -522,8 +588,13 @@ fn render<'py>(
             return Err(msg_error(py, scene, Diagnostic::error(format!("image size {w}×{h}")).hint("each side is 1..=4096")));
         }
     }
+    let mode = math_mode(py, math)?;
+    let bad = |e: String, hint: &str| msg_error(py, scene, Diagnostic::error(e).hint(hint.to_string()));
+    let backend: Backend = backend.parse().map_err(|e| bad(e, "backend is \"jit\" or \"interp\""))?;
+    let tier: Tier = tier.parse().map_err(|e| bad(e, "tier is \"cranelift\", \"llvm\" or \"auto\""))?;
+    let backend = lobe::resolve_backend(backend, tier).map_err(|d| msg_error(py, scene, d))?;
     let image = detached(py, scene, || {
-        let compiler = lobe::render::scene::LobeCompiler::for_commands(Backend::Jit, Mode::Precise, true);
+        let compiler = lobe::render::scene::LobeCompiler::for_commands(backend, mode, true);
         let sc = load_scene(std::path::Path::new(scene), &LoadOptions { size, set, ..LoadOptions::default() }, &compiler)?;
         let opts = lobe::render::RenderOptions { threads, transfer: if srgb { Transfer::Srgb } else { Transfer::Linear }, aa, ..Default::default() };
         let (frame, _) = lobe::render::render(&sc, &opts).map_err(|e| plain(scene, Diagnostic::error(e)))?;

@@ -78,6 +78,25 @@ def test_bit_identical_to_eval_points(path, lobe_cli, tmp_path):
         write_csv(csv, list(cos) + names, list(cos.values()) + [np.full(n, params[p]) for p in names])
         cli = parse_values(lobe_cli("eval", path, "--points", str(csv)), k.channels)
         np.testing.assert_array_equal(bits(k(**cos, **params)), bits(cli))
+    # Per-point parameters: a random value per row (some rows repeating the one before, as runs), given to
+    # the command as parameter columns and to Python as arrays: the same bits.
+    if names:
+        per_row = {p: random_param_column(k, p, rng, n) for p in names}
+        write_csv(csv, ["Lx", "Ly", "Lz", "Vx", "Vy", "Vz"] + names, [L[:, 0], L[:, 1], L[:, 2], V[:, 0], V[:, 1], V[:, 2]] + [per_row[p] for p in names])
+        cli = parse_values(lobe_cli("eval", path, "--points", str(csv)), k.channels)
+        np.testing.assert_array_equal(bits(k(L=L, V=V, **per_row)), bits(cli))
+
+
+def random_param_column(k, name, rng, n):
+    """n random values in the parameter's declared range, each repeated a random number of times (1 to 20)."""
+    lo, hi = k.param_ranges[name]
+    out = np.empty(n)
+    i = 0
+    while i < n:
+        run = int(rng.integers(1, 21)) if rng.random() < 0.3 else 1
+        out[i : i + run] = rng.uniform(lo, hi) if hi > lo else lo
+        i += run
+    return out
 
 
 def test_baked_values_match_set(lobe_cli, tmp_path):
@@ -183,8 +202,8 @@ def test_bad_calls_raise_lobe_error():
         k(NL=0.5)
     with pytest.raises(lobe.LobeError, match="outside its declared range"):
         k(NH=0.5, n=-5)
-    with pytest.raises(lobe.LobeError, match="one value"):
-        k(NH=0.5, n=[1, 2])
+    with pytest.raises(lobe.LobeError, match="broadcast"):
+        k(NH=np.zeros(3), n=[1, 2])
     with pytest.raises(lobe.LobeError, match="broadcast"):
         k(NH=np.zeros(3), NL=np.zeros(4))
     with pytest.raises(lobe.LobeError, match="baked"):

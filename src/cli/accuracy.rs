@@ -4,7 +4,7 @@
 
 use super::args::{self, AgainstReference, BackendArg, Json, Params};
 use super::common::{self, CliError};
-use lobe::numerics::accuracy::{accuracy, AccuracyJson, AccuracyOptions, Worst};
+use lobe::numerics::accuracy::{accuracy_channels, channels_json, AccuracyOptions, AccuracyReport, Worst};
 use lobe::Kernel;
 
 #[derive(clap::Args, Debug)]
@@ -34,21 +34,28 @@ pub fn run(a: &AccuracyArgs) -> Result<(), CliError> {
         print!("{}", measured(a)?);
         return Ok(());
     }
-    let (k, r) = a.against.kernels(&a.set.list()?, &a.backend)?;
-    print!("{}", report(a, &k, &r)?);
+    let set = a.set.list()?;
+    let f = a.against.formula.load()?;
+    let ks = f.channels().into_iter().map(|c| common::compile_kernel(c, &set, a.backend.backend()?, a.backend.math.mode)).collect::<Result<Vec<Kernel>, _>>()?;
+    let r = a.against.reference(&a.backend)?;
+    print!("{}", report(a, &ks, &r)?);
     Ok(())
 }
 
-/// The command's output for already compiled kernels (formula `k`, reference `r`).
-pub fn report(a: &AccuracyArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
+/// The command's output for already compiled kernels (the formula's channels `ks`, reference `r`): a colour
+/// formula's channels under `channel r/g/b` headings, or in JSON the red channel's keys with `channels` (as
+/// `energy` writes them).
+pub fn report(a: &AccuracyArgs, ks: &[Kernel], r: &Kernel) -> Result<String, CliError> {
     let mut out = String::new();
     let set = a.set.list()?;
     if set.iter().any(|(k, _)| k == "n") {
         return Err(CliError::hint("accuracy sweeps n itself; --set n is not allowed", "set only the other parameters"));
     }
-    let t = std::time::Instant::now();
+    let k = &ks[0];
     let params = common::param_values(&k.formula, &set);
-    let (lobe, ref_lobe) = a.against.lobes(k, r, a.json.on)?;
+    // One lobe variable for every channel: the one the formula reads.
+    let used: lobe::ir::InputSet = ks.iter().map(Kernel::used_inputs).collect();
+    let (lobe, ref_lobe) = (a.against.lobe.resolve(used, a.json.on)?, lobe::numerics::choose_lobe_input(r.used_inputs()).0);
     for (f, what) in [(&k.formula, "formula"), (&r.formula, "reference")] {
         if let Some(d) = f.params.first() {
             if d.lo > 1.0 || d.hi < f64::from(a.n_max) {
@@ -57,13 +64,25 @@ pub fn report(a: &AccuracyArgs, k: &Kernel, r: &Kernel) -> Result<String, CliErr
         }
     }
     let opts = AccuracyOptions { q: a.q, n_max: a.n_max, epicenter_from: a.epicenter_from, ..Default::default() };
-    let mut rep = accuracy(k, &params, lobe, r, &r.default_params(), ref_lobe, &opts)?;
-    let ref_zero = rep.mark_undefined();
-    let secs = t.elapsed().as_secs_f64();
+    let channels: Vec<&dyn lobe::Evaluator> = ks.iter().map(|k| k as &dyn lobe::Evaluator).collect();
+    let reps = accuracy_channels(&channels, &params, lobe, r, &r.default_params(), ref_lobe, &opts)?;
     if a.json.on {
-        outln!(out, "{}", common::to_json(&AccuracyJson::new(&rep, a.q, secs))?);
+        outln!(out, "{}", common::to_json(&channels_json(&reps, a.q))?);
         return Ok(out);
     }
+    for (i, (rep, secs)) in reps.iter().enumerate() {
+        if reps.len() > 1 {
+            outln!(out, "channel {}:", ["r", "g", "b"][i]);
+        }
+        out.push_str(&text(a, &ks[i], r, lobe, rep, *secs));
+    }
+    Ok(out)
+}
+
+/// One channel's report as text.
+fn text(a: &AccuracyArgs, k: &Kernel, r: &Kernel, lobe: lobe::ir::Input, rep: &AccuracyReport, secs: f64) -> String {
+    let mut out = String::new();
+    let ref_zero = rep.reference_is_zero();
     outln!(out, "{} vs {} (n = 1..{}, lobe variable {}):", k.formula.display_name(), r.formula.display_name(), a.n_max, lobe.name());
     outln!(out, "  mean |Δ| on the 91×{} grid (0°..90° step 1°):   {:.6e}", a.n_max, rep.mean_abs_grid);
     // A metric without an n where it is defined reads "undefined", not "NaN % at n = NaN".
@@ -101,7 +120,7 @@ pub fn report(a: &AccuracyArgs, k: &Kernel, r: &Kernel) -> Result<String, CliErr
         outln!(out, "  {} grid points were NaN (counted as the worst error); run `lobe sweep` on the file", rep.nan_points);
     }
     outln!(out, "  ({secs:.2} s, backend {})", k.backend.name());
-    Ok(out)
+    out
 }
 
 /// Accuracy against a measured table: the formula at its parameters (defaults, then `--set`) scored by the
@@ -159,12 +178,12 @@ mod tests {
         let a = parse::<AccuracyArgs>(&["accuracy", "--reference", "blinn.brdf", "--json", "--n-max", "1000"]);
         let k = twin_kernel(twins::modified_schlick(), Input::NH, &[]);
         let r = twin_kernel(twins::blinn(), Input::NH, &[]);
-        let v: serde_json::Value = serde_json::from_str(&report(&a, &k, &r).unwrap()).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&report(&a, std::slice::from_ref(&k), &r).unwrap()).unwrap();
         assert!((v["mean_abs_grid"].as_f64().unwrap() - 0.006554934).abs() < 1e-8, "{v}");
         for key in ["epicenter_max_rel_pct", "inflection_max_rel_pct", "max_abs", "cutoff_max_rel_pct", "lobe_ratio_max"] {
             assert!(v[key].as_f64().is_some(), "missing {key}: {v}");
         }
         let a = parse::<AccuracyArgs>(&["accuracy", "--reference", "b", "--set", "n=3"]);
-        assert!(report(&a, &k, &r).is_err());
+        assert!(report(&a, std::slice::from_ref(&k), &r).is_err());
     }
 }

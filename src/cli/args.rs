@@ -107,11 +107,9 @@ impl BackendArg {
     /// The backend `--backend` with `--tier` means; `llvm` in a build without the LLVM tier is an error with
     /// the rebuild hint (not a failure later, at the first compile).
     pub fn backend(&self) -> Result<Backend, CliError> {
-        let b = self.tier.resolve(self.kind).map_err(|e| CliError::hint(e, "drop --tier, or use --backend jit"))?;
-        if b == Backend::Llvm && !lobe::Tier::llvm_available() {
-            return Err(CliError::Error(lobe::llvm_missing()));
-        }
-        Ok(b)
+        // The contradiction of flags is said in terms of the flags; the rest is the library's.
+        self.tier.resolve(self.kind).map_err(|e| CliError::hint(e, "drop --tier, or use --backend jit"))?;
+        Ok(lobe::resolve_backend(self.kind, self.tier)?)
     }
 
     /// Compile options for this backend and math mode with `bake` baked in.
@@ -214,9 +212,12 @@ impl AgainstReference {
     /// The formula compiled with `set` baked, and the reference with its defaults, both on `backend`.
     /// The formula's kernel in `b`'s backend and math mode, and the reference's (precise: it is the yardstick).
     pub fn kernels(&self, set: &[(String, f64)], b: &BackendArg) -> Result<(Kernel, Kernel), CliError> {
-        let k = self.formula.kernel(set, b.kind, b.math.mode)?;
-        let r = common::load_kernel(Some(&self.reference), None, &[], b.kind, lobe::Mode::Precise)?;
-        Ok((k, r))
+        Ok((self.formula.kernel(set, b.kind, b.math.mode)?, self.reference(b)?))
+    }
+
+    /// The reference's kernel with its defaults (precise: it is the yardstick; its red channel if coloured).
+    pub fn reference(&self, b: &BackendArg) -> Result<Kernel, CliError> {
+        common::load_kernel(Some(&self.reference), None, &[], b.kind, lobe::Mode::Precise)
     }
 
     /// The lobe variables of the formula `k` ([`LobeVar::resolve`]) and of the reference `r` (the one it reads).

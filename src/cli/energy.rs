@@ -11,7 +11,7 @@ use super::args::{self, BackendArg, Force, FormulaSource, Json, LobeVar, Params}
 use super::common::{self, CliError};
 use lobe::base::json::Named;
 use lobe::ir::Input;
-use lobe::numerics::energy::{coef_sweep, full_energy_for, lobe_integral, score_against};
+use lobe::numerics::energy::{coef_range, full_energy_for, lobe_integral, score_fitted, CoefRange};
 use lobe::numerics::energy::{EnergyReport, FullReport, LobeReport, PerChannel, RangeReport};
 use super::args::parse_range;
 use lobe::{Backend, Evaluator, Kernel};
@@ -230,47 +230,8 @@ fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<Out, C
     if !(a.step > 0.0 && a.step.is_finite()) {
         return Err(CliError::hint(format!("--step {} must be positive", a.step), "e.g. --step 1"));
     }
-    if let Some(d) = k.formula.params.first() {
-        if lo < d.lo || hi > d.hi {
-            return Err(CliError::hint(
-                format!("--range {range} leaves the declared range of n ({}..{})", d.lo, d.hi),
-                format!("choose a range inside {}..{}", d.lo, d.hi),
-            ));
-        }
-    }
-    let count = ((hi - lo) / a.step + 1e-9).floor() as usize + 1;
-    if count > 1_000_000 {
-        return Err(CliError::hint(format!("--range with --step {} has {count} points", a.step), "use a larger --step"));
-    }
-    let ns: Vec<f64> = (0..count).map(|i| lo + i as f64 * a.step).collect();
-    let results = coef_sweep(k, &params, lobe, &ns);
-    // (n, Int(n)) to score a fitted coefficient against, and (n, coef(n)) to print.
-    let (mut exact, mut coefs) = (Vec::with_capacity(ns.len()), Vec::with_capacity(ns.len()));
-    for (n, r) in ns.iter().zip(results) {
-        let r = r.map_err(|mut e| {
-            e.message = format!("at n = {n}: {}", e.message);
-            CliError::Error(e)
-        })?;
-        exact.push((*n, r.integral));
-        coefs.push((*n, r.coef()));
-    }
-    let score = against.map(|ak| {
-        // The fitted formula's parameters: n from the sweep, others by name from this formula, else defaults.
-        let mut ap = ak.default_params();
-        let n_idx = ak.formula.param_index("n");
-        for (i, d) in ak.formula.params.iter().enumerate() {
-            if let Some(j) = k.formula.param_index(&d.name) {
-                ap[i] = params[j];
-            }
-        }
-        score_against(&exact, |n| {
-            let mut p = ap.clone();
-            if let Some(i) = n_idx {
-                p[i] = n;
-            }
-            ak.eval(&[0.0; lobe::N_INPUTS], &p)
-        })
-    });
+    let CoefRange { integrals, coefs } = coef_range(k, &params, lobe, k.formula.params.first(), lo, hi, a.step)?;
+    let score = against.map(|ak| score_fitted(&k.formula, &params, ak, &integrals));
     if let Some(path) = &a.plot {
         plot_range(path, &name, &coefs, score.as_ref(), a.force)?;
     }

@@ -282,7 +282,7 @@ impl AccuracyReport {
                 m.value = f64::NAN;
             }
         }
-        let ref_zero = self.reference_peak == 0.0 || self.reference_peak.is_nan();
+        let ref_zero = self.reference_is_zero();
         if ref_zero {
             let undefined = Worst { value: f64::NAN, n: f64::NAN, angle_deg: f64::NAN };
             for m in [&mut self.epicenter, &mut self.inflection, &mut self.cutoff_rel, &mut self.lobe_ratio_min, &mut self.lobe_ratio_max] {
@@ -291,6 +291,41 @@ impl AccuracyReport {
         }
         ref_zero
     }
+
+    /// Whether the reference is 0 (or NaN) at every angle and n: the relative metrics are then undefined.
+    pub fn reference_is_zero(&self) -> bool {
+        self.reference_peak == 0.0 || self.reference_peak.is_nan()
+    }
+}
+
+/// [`accuracy`] of each channel of a formula (one, or red, green, blue) against one reference, in the lobe
+/// variable `lobe`, with the undefined metrics marked ([`AccuracyReport::mark_undefined`]); each report with
+/// the seconds it took. The accuracy command's reports, which [`channels_json`] writes.
+#[allow(clippy::too_many_arguments)]
+pub fn accuracy_channels(
+    channels: &[&dyn Evaluator],
+    params: &[f64],
+    lobe: Input,
+    reference: &dyn Evaluator,
+    ref_params: &[f64],
+    ref_lobe: Input,
+    opts: &AccuracyOptions,
+) -> Result<Vec<(AccuracyReport, f64)>, Diagnostic> {
+    channels
+        .iter()
+        .map(|ev| {
+            let t = std::time::Instant::now();
+            let mut rep = accuracy(*ev, params, lobe, reference, ref_params, ref_lobe, opts)?;
+            rep.mark_undefined();
+            Ok((rep, t.elapsed().as_secs_f64()))
+        })
+        .collect()
+}
+
+/// The JSON of [`accuracy_channels`]' reports: a scalar formula's object, or for a colour formula the red
+/// channel's with `channels` holding all three ([`PerChannel`](super::energy::PerChannel)).
+pub fn channels_json(reports: &[(AccuracyReport, f64)], q: f64) -> super::energy::PerChannel<AccuracyJson> {
+    super::energy::PerChannel::new(reports.iter().map(|(r, secs)| AccuracyJson::new(r, q, *secs)).collect())
 }
 
 /// Compares `ev` (lobe variable `lobe`, parameters `params`, n replaced) with `reference`.

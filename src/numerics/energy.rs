@@ -207,6 +207,70 @@ pub fn coef_sweep(ev: &dyn Evaluator, params: &[f64], lobe: Input, ns: &[f64]) -
         .collect()
 }
 
+/// The most values of n one coefficient sweep ([`coef_range`]) takes.
+pub const MAX_RANGE_POINTS: usize = 1_000_000;
+
+/// A coefficient sweep: `(n, Int(n))` (what a fitted coefficient is scored against) and `(n, coef(n))`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CoefRange {
+    pub integrals: Vec<(f64, f64)>,
+    pub coefs: Vec<(f64, f64)>,
+}
+
+/// `coef(n)` for n = `lo`, `lo + step`, … up to `hi` (parameter 0 replaced; `n` is its declaration, whose
+/// range the sweep must stay inside), in parallel: the energy command's `--range`. The first n whose integral
+/// fails is the error, naming that n.
+pub fn coef_range(ev: &dyn Evaluator, params: &[f64], lobe: Input, n: Option<&crate::ir::ParamDecl>, lo: f64, hi: f64, step: f64) -> Result<CoefRange, Diagnostic> {
+    let show = crate::ir::print::number;
+    if !(lo.is_finite() && hi.is_finite()) || lo > hi {
+        return Err(Diagnostic::error(format!("the range {}..{} of n is not finite lo ≤ hi", show(lo), show(hi))).hint("e.g. 1..1000"));
+    }
+    if !(step > 0.0 && step.is_finite()) {
+        return Err(Diagnostic::error(format!("the step {} of the range of n must be positive", show(step))).hint("e.g. a step of 1"));
+    }
+    if let Some(d) = n {
+        if lo < d.lo || hi > d.hi {
+            return Err(Diagnostic::error(format!("the range {}..{} leaves the declared range of n ({}..{})", show(lo), show(hi), show(d.lo), show(d.hi)))
+                .hint(format!("choose a range inside {}..{}", show(d.lo), show(d.hi))));
+        }
+    }
+    let count = ((hi - lo) / step + 1e-9).floor() as usize + 1;
+    if count > MAX_RANGE_POINTS {
+        return Err(Diagnostic::error(format!("the range {}..{} with step {} has {count} values of n", show(lo), show(hi), show(step))).hint("use a larger step"));
+    }
+    let ns: Vec<f64> = (0..count).map(|i| lo + i as f64 * step).collect();
+    let (mut integrals, mut coefs) = (Vec::with_capacity(count), Vec::with_capacity(count));
+    for (n, r) in ns.iter().zip(coef_sweep(ev, params, lobe, &ns)) {
+        let r = r.map_err(|mut e| {
+            e.message = format!("at n = {n}: {}", e.message);
+            e
+        })?;
+        integrals.push((*n, r.integral));
+        coefs.push((*n, r.coef()));
+    }
+    Ok(CoefRange { integrals, coefs })
+}
+
+/// Scores the fitted coefficient `fitted` (a formula of n and parameters, read at no input) against the exact
+/// integrals of a sweep of formula `f` at `params`: the fitted formula's n is the sweep's, each of its other
+/// parameters takes `f`'s value of the same name, else its own default.
+pub fn score_fitted(f: &crate::ir::Formula, params: &[f64], fitted: &crate::Kernel, integrals: &[(f64, f64)]) -> AgainstScore {
+    let mut ap = fitted.default_params();
+    let n_idx = fitted.formula.param_index("n");
+    for (i, d) in fitted.formula.params.iter().enumerate() {
+        if let Some(j) = f.param_index(&d.name) {
+            ap[i] = params[j];
+        }
+    }
+    score_against(integrals, |n| {
+        let mut p = ap.clone();
+        if let Some(i) = n_idx {
+            p[i] = n;
+        }
+        fitted.eval(&[0.0; crate::N_INPUTS], &p)
+    })
+}
+
 /// How well a fitted normalisation formula does: `|coef_fit(n)·2π·Int(n) − 1|`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AgainstScore {
@@ -724,6 +788,22 @@ mod tests {
     use super::*;
     use crate::numerics::twins;
     use crate::backend::FnEvaluator;
+
+    #[test]
+    fn coef_range_steps_through_n_and_refuses_bad_ranges() {
+        let t = twins::phong();
+        let decl = crate::ir::ParamDecl { name: "n".into(), default: 10.0, lo: 1.0, hi: 1000.0, span: None, kind: crate::ir::ParamKind::Float };
+        let r = coef_range(t.ev.as_ref(), &[1.0], Input::VR, Some(&decl), 3.0, 30.0, 4.5).unwrap();
+        let ns: Vec<f64> = r.coefs.iter().map(|c| c.0).collect();
+        assert_eq!(ns, [3.0, 7.5, 12.0, 16.5, 21.0, 25.5, 30.0]);
+        for (&(n, coef), &(m, int)) in r.coefs.iter().zip(&r.integrals) {
+            assert!(n == m && (coef / ((n + 2.0) / (2.0 * PI)) - 1.0).abs() < 1e-9 && (coef * 2.0 * PI * int - 1.0).abs() < 1e-15, "n = {n}");
+        }
+        for (lo, hi, step, what) in [(0.0, 5.0, 1.0, "declared range"), (5.0, 4.0, 1.0, "lo ≤ hi"), (1.0, 5.0, 0.0, "positive"), (1.0, 1000.0, 1e-4, "values of n")] {
+            let e = coef_range(t.ev.as_ref(), &[1.0], Input::VR, Some(&decl), lo, hi, step).unwrap_err();
+            assert!(e.message.contains(what), "{what}: {}", e.message);
+        }
+    }
 
     #[test]
     fn phong_closed_form_to_1e_9() {

@@ -1,12 +1,15 @@
 //! Many points from CSV text, evaluated by the batched kernel (the eval command on a points file).
 //!
 //! The CSV has a header naming its columns: inputs and, optionally, parameters of the formula (which then stay
-//! live: no recompilation per row). The inputs are either the six direction components `Lx,Ly,Lz,Vx,Vy,Vz`
-//! (local frame: N = +z, X = +x, Y = +y), from which every input is computed as the renderer does
+//! live: no recompilation per row; [`evaluate_varying`] is the same evaluation for parameter columns held
+//! elsewhere, such as the Python module's per-point arrays). The inputs are either the six direction components
+//! `Lx,Ly,Lz,Vx,Vy,Vz` (local frame: N = +z, X = +x, Y = +y), from which every input is computed as the renderer does
 //! ([`super::inputs_from_dirs`]; non-unit directions are normalised and counted, a zero vector is an
 //! error), or cosine columns (NL, NV, NH, VR, VH; those not named are 0), which only a formula that reads no
-//! direction can take. Parameters not named take their baked or declared values. Rows of equal parameter values that follow each other form one batch, so a
-//! file with no parameter columns is a single call of the batched kernel. Errors point at the CSV's line and
+//! direction can take. Parameters not named take their baked or declared values. Rows of equal parameter values
+//! (bit for bit: 0 and −0 differ) that follow each other form one batch, so a file with no parameter columns is
+//! a single call of the batched kernel; the batched kernel's value at a point does not depend on the batch it
+//! is in, so every grouping gives the bits of evaluating point by point. Errors point at the CSV's line and
 //! column with the usual caret diagnostics.
 
 use super::{dot, inputs_from_dirs, V3};
@@ -29,14 +32,14 @@ pub struct Points {
     pub inputs: [Vec<f64>; N_INPUTS],
     /// Parameter indices named by the header.
     pub param_columns: Vec<usize>,
-    /// One row of values per point for `param_columns`.
-    pub params: Vec<Vec<f64>>,
+    /// The values of each of `param_columns`, one per point (column-major: `param_values[c][row]`).
+    pub param_values: Vec<Vec<f64>>,
     pub len: usize,
     /// `len` zeros, read in place of every input column the file does not give (built once at parse, so an
     /// evaluation allocates nothing but its output).
     zeros: Vec<f64>,
     /// The runs of consecutive rows with equal parameter values, each one batch (found once at parse: scanning
-    /// `params` per evaluation cost more than a cheap kernel at 2²⁰ rows).
+    /// `param_values` per evaluation cost more than a cheap kernel at 2²⁰ rows).
     runs: Vec<std::ops::Range<usize>>,
 }
 
@@ -119,13 +122,14 @@ pub fn parse(file: &str, text: &str, f: &Formula, used: InputSet, baked: &[Strin
             .at(header_span, "this header")
             .hint("give the columns Lx,Ly,Lz,Vx,Vy,Vz (unit L and V in the local frame: N = +z, X = +x, Y = +y); cosines follow from them")));
     }
-    let mut pts = Points { normalised: 0, inputs: Default::default(), param_columns, params: vec![], len: 0, zeros: vec![], runs: vec![] };
+    let param_values = vec![vec![]; param_columns.len()];
+    let mut pts = Points { normalised: 0, inputs: Default::default(), param_columns, param_values, len: 0, zeros: vec![], runs: vec![] };
     let mut row_inputs = [0.0; N_INPUTS];
     for (start, line) in lines {
         if line.trim().is_empty() {
             continue;
         }
-        let mut row_params = Vec::with_capacity(pts.param_columns.len());
+        let mut next_param = 0;
         let mut at = start;
         let mut n = 0;
         let mut cells = [Span::default(); N_INPUTS];
@@ -155,7 +159,8 @@ pub fn parse(file: &str, text: &str, f: &Formula, used: InputSet, baked: &[Strin
                         ))
                         .at(s, "out of range")));
                     }
-                    row_params.push(v);
+                    pts.param_values[next_param].push(v);
+                    next_param += 1;
                 }
             }
         }
@@ -189,22 +194,53 @@ pub fn parse(file: &str, text: &str, f: &Formula, used: InputSet, baked: &[Strin
                 }
             }
         }
-        pts.params.push(row_params);
         pts.len += 1;
     }
     if pts.inputs.iter().any(Vec::is_empty) {
         pts.zeros = vec![0.0; pts.len];
     }
+    let cols: Vec<&[f64]> = pts.param_values.iter().map(Vec::as_slice).collect();
+    pts.runs = param_runs(&cols, pts.len);
+    Ok(pts)
+}
+
+/// The runs of consecutive points (of `len`) whose values in every one of `cols` (each `len` long) are equal
+/// bit for bit; one run of all points when `cols` is empty.
+pub fn param_runs(cols: &[&[f64]], len: usize) -> Vec<std::ops::Range<usize>> {
+    let same = |a: usize, b: usize| cols.iter().all(|c| c[a].to_bits() == c[b].to_bits());
+    let mut runs = vec![];
     let mut start = 0;
-    while start < pts.len {
+    while start < len {
         let mut end = start + 1;
-        while end < pts.len && pts.params[end] == pts.params[start] {
+        while end < len && same(end, start) {
             end += 1;
         }
-        pts.runs.push(start..end);
+        runs.push(start..end);
         start = end;
     }
-    Ok(pts)
+    runs
+}
+
+/// `k` at every point of `cols` (each column `out.len()` long or empty, as [`Evaluator::eval_batch`] takes
+/// them) with parameters `base`, except the parameters in `varying` (index, one value per point), which take
+/// each point's value: one batched call per run of equal values ([`param_runs`]), as the eval command
+/// evaluates a CSV's parameter columns. The caller checks the values against the declared ranges.
+pub fn evaluate_varying(k: &dyn Evaluator, cols: &Columns, base: &[f64], varying: &[(usize, &[f64])], out: &mut [f64]) {
+    let values: Vec<&[f64]> = varying.iter().map(|(_, v)| *v).collect();
+    evaluate_runs(k, cols, base, varying, &param_runs(&values, out.len()), out);
+}
+
+/// [`evaluate_varying`] with its runs already found.
+fn evaluate_runs(k: &dyn Evaluator, cols: &Columns, base: &[f64], varying: &[(usize, &[f64])], runs: &[std::ops::Range<usize>], out: &mut [f64]) {
+    assert!(varying.iter().all(|(_, v)| v.len() == out.len()), "one parameter value per point");
+    let mut params = base.to_vec();
+    for run in runs {
+        for (slot, v) in varying {
+            params[*slot] = v[run.start];
+        }
+        let part: [&[f64]; N_INPUTS] = std::array::from_fn(|i| if cols.cols[i].is_empty() { cols.cols[i] } else { &cols.cols[i][run.clone()] });
+        k.eval_batch(&Columns::new(part), &params, &mut out[run.clone()]);
+    }
 }
 
 /// The ground truth ([`super::truth`]) of `f` (the formula as written, baked values folded) at every point, in
@@ -216,8 +252,8 @@ pub fn truth(f: &Formula, pts: &Points, base_params: &[f64]) -> Vec<f64> {
         .map(|i| {
             let x: [f64; N_INPUTS] = std::array::from_fn(|k| pts.inputs[k].get(i).copied().unwrap_or(0.0));
             let mut params = base_params.to_vec();
-            for (slot, v) in pts.param_columns.iter().zip(&pts.params[i]) {
-                params[*slot] = *v;
+            for (slot, v) in pts.param_columns.iter().zip(&pts.param_values) {
+                params[*slot] = v[i];
             }
             super::truth::eval(f, &x, &params)
         })
@@ -231,16 +267,63 @@ pub fn evaluate(k: &Kernel, pts: &Points, base_params: &[f64]) -> Vec<f64> {
     out
 }
 
-/// [`evaluate`] into `out` (`pts.len` long), allocating nothing: the steady state a timing should measure.
+/// [`evaluate`] into `out` (`pts.len` long), allocating only the parameter vector: the steady state a timing
+/// should measure.
 pub fn evaluate_into(k: &Kernel, pts: &Points, base_params: &[f64], out: &mut [f64]) {
     assert_eq!(out.len(), pts.len, "one output per point");
     let cols: [&[f64]; N_INPUTS] = std::array::from_fn(|i| if pts.inputs[i].is_empty() { pts.zeros.as_slice() } else { pts.inputs[i].as_slice() });
-    let mut params = base_params.to_vec();
-    for run in &pts.runs {
-        for (slot, v) in pts.param_columns.iter().zip(&pts.params[run.start]) {
-            params[*slot] = *v;
+    let varying: Vec<(usize, &[f64])> = pts.param_columns.iter().zip(&pts.param_values).map(|(p, v)| (*p, v.as_slice())).collect();
+    evaluate_runs(k, &Columns::new(cols), base_params, &varying, &pts.runs, out);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::base::rng::Rng;
+
+    #[test]
+    fn runs_split_where_any_column_changes_bit_for_bit() {
+        let a = [1.0, 1.0, 2.0, 2.0, 0.0, -0.0];
+        let b = [5.0, 5.0, 5.0, 6.0, 6.0, 6.0];
+        assert_eq!(param_runs(&[&a, &b], 6), vec![0..2, 2..3, 3..4, 4..5, 5..6]);
+        assert_eq!(param_runs(&[], 4), vec![0..4]);
+        assert!(param_runs(&[&[]], 0).is_empty());
+    }
+
+    /// Random per-point parameters, in runs of random lengths (1 to many), on both backends: every value is the
+    /// scalar evaluation's at that point's parameters, bit for bit.
+    #[test]
+    fn varying_parameters_give_each_points_own_value() {
+        let f = crate::front::parse("v.brdf", "param n = 10 in 1..1000\nparam a = 0.5 in 0..1\na * NH^n + (1 - a) * NL / (n + NV)").unwrap();
+        let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+        let len = 3000;
+        let col = |rng: &mut Rng| (0..len).map(|_| rng.unit()).collect::<Vec<f64>>();
+        let (nl, nv, nh) = (col(&mut rng), col(&mut rng), col(&mut rng));
+        let (mut n, mut a) = (vec![], vec![]);
+        while n.len() < len {
+            let run = [1, 1, 2, 7, 300][rng.below(5) as usize].min(len - n.len());
+            let (nv_, av) = (1.0 + 999.0 * rng.unit(), rng.unit());
+            n.extend(std::iter::repeat_n(nv_, run));
+            a.extend(std::iter::repeat_n(if rng.below(3) == 0 { 0.25 } else { av }, run));
         }
-        let part: [&[f64]; N_INPUTS] = std::array::from_fn(|i| &cols[i][run.clone()]);
-        k.eval_batch(&Columns::new(part), &params, &mut out[run.clone()]);
+        for backend in [crate::Backend::Interp, crate::Backend::Jit] {
+            let k = crate::compile_formula(f.clone(), &crate::Options { backend, ..Default::default() }).unwrap();
+            let cols = Columns::new(std::array::from_fn(|i| match Input::ALL[i] {
+                Input::NL => nl.as_slice(),
+                Input::NV => nv.as_slice(),
+                Input::NH => nh.as_slice(),
+                _ => &[],
+            }));
+            let mut out = vec![0.0; len];
+            evaluate_varying(&k, &cols, &[10.0, 0.5], &[(0, &n), (1, &a)], &mut out);
+            for i in 0..len {
+                let x: [f64; N_INPUTS] = std::array::from_fn(|c| cols.cols[c].get(i).copied().unwrap_or(0.0));
+                assert_eq!(out[i].to_bits(), k.eval(&x, &[n[i], a[i]]).to_bits(), "{backend:?} point {i}");
+            }
+            // Only `a` varying: `n` stays at its base value.
+            evaluate_varying(&k, &cols, &[3.0, 0.5], &[(1, &a)], &mut out);
+            let x: [f64; N_INPUTS] = std::array::from_fn(|c| cols.cols[c].get(7).copied().unwrap_or(0.0));
+            assert_eq!(out[7].to_bits(), k.eval(&x, &[3.0, a[7]]).to_bits());
+        }
     }
 }
