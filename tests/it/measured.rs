@@ -99,6 +99,22 @@ fn renders_compares_and_integrates_a_measured_material() {
     // One thread gives the same bytes.
     let (one, _) = lobe::render::render(&s, &lobe::render::RenderOptions { threads: 1, tile: 32, ..Default::default() }).unwrap();
     assert_eq!(one.image.rgb, frame.image.rgb);
+    // `lookup = "nearest"` reads the table MERL's way: the highlight moves a little; a bad value, or the key
+    // on a formula material, is an error at its place.
+    let with = |extra: &str, brdf: &str| {
+        let p = dir.join("lookup.toml");
+        std::fs::write(&p, scene_src.replace("brdf = \"gold.binary\"", &format!("brdf = \"{brdf}\"\n{extra}"))).unwrap();
+        lobe::render::scene::load_scene(&p, &opts, &compiler)
+    };
+    let near = with("lookup = \"nearest\"", "gold.binary").unwrap_or_else(|d| panic!("{}", d.render(false)));
+    let (near, _) = lobe::render::render(&near, &lobe::render::RenderOptions { threads: 2, tile: 32, ..Default::default() }).unwrap();
+    assert_ne!(near.image.rgb, frame.image.rgb);
+    let bad = with("lookup = \"cubic\"", "gold.binary").unwrap_err().render(false);
+    assert!(bad.contains("materials.") && bad.contains("lookup: unknown lookup `cubic`") && bad.contains("lookup.toml:"), "{bad}");
+    let formula = dir.join("blinn.brdf");
+    std::fs::copy("examples/brdfs/blinn.brdf", &formula).unwrap();
+    let bad = with("lookup = \"nearest\"", "blinn.brdf").unwrap_err().render(false);
+    assert!(bad.contains("this material is a formula; `lookup` reads measured tables"), "{bad}");
     // The command line.
     let png = dir.join("gold.png");
     let o = lobe(&["render", &scene.display().to_string(), "--size", "96", "-o", &png.display().to_string()], None);
