@@ -169,6 +169,33 @@ pub struct Json {
     pub on: bool,
 }
 
+/// `--lookup linear|nearest`: how a measured table is read between its entries ([`lobe::measured::Lookup`]).
+#[derive(clap::Args, Clone, Copy, Debug)]
+pub struct LookupArg {
+    /// How a measured table (.binary) is read between its entries: `linear` (multilinear in the table's
+    /// index coordinates, default) or `nearest` (the entry whose bin holds the angles, as MERL's code reads it).
+    #[arg(id = "lookup", long = "lookup", value_name = "HOW", value_parser = parse_lookup)]
+    pub given: Option<lobe::measured::Lookup>,
+}
+
+impl LookupArg {
+    pub fn how(&self) -> lobe::measured::Lookup {
+        self.given.unwrap_or_default()
+    }
+
+    /// Refuses `--lookup` where no measured table is read.
+    pub fn only_for_tables(&self, tables: usize) -> Result<(), CliError> {
+        match self.given {
+            Some(h) if tables == 0 => Err(CliError::hint(format!("--lookup {} reads measured tables, and none is given", h.name()), "drop --lookup, or give a .binary file")),
+            _ => Ok(()),
+        }
+    }
+}
+
+fn parse_lookup(s: &str) -> Result<lobe::measured::Lookup, String> {
+    s.parse()
+}
+
 /// `--lobe NH|VR`: the lobe variable of the formula under a lobe check.
 #[derive(clap::Args, Clone, Debug)]
 pub struct LobeVar {

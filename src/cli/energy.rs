@@ -7,7 +7,7 @@
 //! ([`lobe::numerics::energy::full_energy_for`]): `albedo` then holds max over φᵢ of ρ(θᵢ, φᵢ), and the JSON
 //! adds `phi_i_at_max_deg` and `albedo_phi` (every θᵢ, φᵢ, ρ).
 
-use super::args::{self, BackendArg, Force, FormulaSource, Json, LobeVar, Params};
+use super::args::{self, BackendArg, Force, FormulaSource, Json, LobeVar, LookupArg, Params};
 use super::common::{self, CliError};
 use lobe::base::json::Named;
 use lobe::ir::Input;
@@ -58,6 +58,8 @@ pub struct EnergyArgs {
     pub plot: Option<std::path::PathBuf>,
     #[command(flatten)]
     pub force: Force,
+    #[command(flatten)]
+    pub lookup: LookupArg,
 }
 
 pub fn run(a: &EnergyArgs) -> Result<(), CliError> {
@@ -70,6 +72,7 @@ pub fn run(a: &EnergyArgs) -> Result<(), CliError> {
         print!("{}", measured_report(a, p)?);
         return Ok(());
     }
+    a.lookup.only_for_tables(0)?;
     let f = a.formula.load()?;
     let ks = f
         .channels()
@@ -176,7 +179,7 @@ fn measured_report(a: &EnergyArgs, path: &str) -> Result<String, CliError> {
     }
     let table = std::sync::Arc::new(lobe::measured::Measured::read(path)?);
     let outs = table
-        .channels()
+        .channels_with(a.lookup.how())
         .iter()
         .map(|ev| full_mode(a, path, ev.as_ref(), None, &[], Named::new(std::iter::empty())))
         .collect::<Result<Vec<Out>, CliError>>()?;

@@ -1,6 +1,6 @@
 //! `lobe plot FILES… --set n=50 -o lobes.png [--polar] [--log] [--reference REF [--error]]`
 
-use super::args::{self, Output, Params};
+use super::args::{self, LookupArg, Output, Params};
 use super::common::{self, CliError};
 use lobe::report::plot::{self, Format, LobeOptions, Series};
 use lobe::Backend;
@@ -36,6 +36,8 @@ pub struct PlotArgs {
     /// Image size in pixels, WxH.
     #[arg(long, default_value = "900x600", value_parser = parse_size)]
     pub size: (u32, u32),
+    #[command(flatten)]
+    pub lookup: LookupArg,
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -60,6 +62,7 @@ pub fn run(a: &PlotArgs) -> Result<(), CliError> {
         return Err(CliError::hint(format!("--incidence {t} is outside 0..90 degrees"), "e.g. --incidence 30"));
     }
     let (tables, formula_files): (Vec<&String>, Vec<&String>) = files.iter().partition(|p| lobe::measured::is_measured_path(p));
+    a.lookup.only_for_tables(tables.len())?;
     let formulas = formula_files.iter().map(|p| common::load_formula(Some(p), None)).collect::<Result<Vec<_>, _>>()?;
     common::check_set_names(&formulas.iter().collect::<Vec<_>>(), &set)?;
     let points = |ev: &dyn lobe::Evaluator, used, params: &[f64]| match a.incidence {
@@ -81,7 +84,7 @@ pub fn run(a: &PlotArgs) -> Result<(), CliError> {
     let mut measured = vec![];
     for p in tables {
         let t = std::sync::Arc::new(lobe::measured::Measured::read(p)?);
-        for (ev, c) in t.channels().iter().zip(["r", "g", "b"]) {
+        for (ev, c) in t.channels_with(a.lookup.how()).iter().zip(["r", "g", "b"]) {
             measured.push(Series { name: format!("{p} ({c})"), points: points(ev.as_ref(), lobe::measured::used_inputs(), &[]) });
         }
     }

@@ -508,10 +508,12 @@ pub fn full_energy_cancellable(ev: &dyn Evaluator, used: crate::ir::InputSet, pa
     Ok(r)
 }
 
-/// [`full_energy_for`] of an isotropic, piecewise-constant evaluator — a measured table's channel
-/// ([`crate::measured`]), whose steps would drive the adaptive quadrature to its subdivision limit everywhere:
-/// ρ(θᵢ) by the midpoint rule over 90 θₒ × 360 φₒ cells of the hemisphere (a table's own resolution), L at
-/// azimuth 0 (isotropic by construction, so `albedo_phi` holds φᵢ = 0 only).
+/// [`full_energy_for`] of an isotropic evaluator with kinks or steps everywhere — a measured table's channel
+/// ([`crate::measured`]: piecewise multilinear, or piecewise constant under the nearest lookup), which would
+/// drive the adaptive quadrature to its subdivision limit everywhere: ρ(θᵢ) by the midpoint rule over 90 θₒ ×
+/// 360 φₒ cells of the hemisphere (a table's own resolution), L at azimuth 0 (isotropic by construction, so
+/// `albedo_phi` holds φᵢ = 0 only). Measured on linear-lookup tables of Blinn (n = 10, 60, 500), Phong 60,
+/// Ward 0.1: 4 × 4 times the cells move ρ(θᵢ ≤ 80°) by ≤ 0.2 %, the table's own error against the formula.
 pub fn full_energy_tabulated(ev: &dyn Evaluator, params: &[f64]) -> Result<FullEnergy, Diagnostic> {
     let (nt, np) = (90usize, 360usize);
     let (dt, dp) = (FRAC_PI_2 / nt as f64, 2.0 * PI / np as f64);

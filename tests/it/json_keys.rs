@@ -52,6 +52,16 @@ fn every_json_output_keeps_its_keys() {
     std::fs::write(&cut_scene, scene).unwrap();
     let (points, png, cut_scene) = (points.display().to_string(), png.display().to_string(), cut_scene.display().to_string());
     let blinn = "examples/brdfs/blinn.brdf";
+    // A measured table (MERL .binary) of Blinn, for the commands that read one.
+    let table = dir.join("blinn20.binary").display().to_string();
+    let o = lobe(&["tabulate", blinn, "--set", "n=20", "-o", &table], None);
+    assert!(o.status.success(), "tabulate: {}", String::from_utf8_lossy(&o.stderr));
+    let fit_measured = |more: &[&'static str]| {
+        let mut v = vec!["fit", blinn];
+        v.extend_from_slice(more);
+        v.extend(["--measured", table.as_str(), "--param", "n=1..100", "--stride", "9", "--grid-stride", "9", "--json"]);
+        v
+    };
     #[allow(unused_mut)]
     let mut cases: Vec<(&str, Vec<&str>)> = vec![
         ("eval", vec!["eval", blinn, "--set", "n=2", "--at", "NH=0.5", "--json"]),
@@ -80,6 +90,12 @@ fn every_json_output_keeps_its_keys() {
         ("bench", vec!["bench", "examples/brdfs/gaussian.brdf", "--samples", "3", "--no-albedo", "--tier", "cranelift", "--json"]),
         ("render_stats", vec!["render", "examples/scenes/paper_sphere.toml", "--size", "16", "-q", "-o", &png, "--stats", "--json"]),
         ("render_stats_cutoff", vec!["render", &cut_scene, "--size", "16", "-q", "-o", &png, "--force", "--stats", "--json"]),
+        // Measured tables: one fit, the batch (formulas × tables), the albedo, a comparison and the accuracy.
+        ("fit_measured", fit_measured(&[])),
+        ("fit_measured_batch", fit_measured(&["examples/brdfs/phong.brdf"])),
+        ("energy_measured", vec!["energy", &table, "--mode", "full", "--json"]),
+        ("compare_measured", vec!["compare", blinn, &table, "--set", "n=20", "--size", "16", "--json"]),
+        ("accuracy_measured", vec!["accuracy", blinn, "--reference", &table, "--set", "n=20", "--json"]),
     ];
     // The LLVM tier's keys: bench's side-by-side columns, eval's lanes.
     #[cfg(feature = "llvm")]

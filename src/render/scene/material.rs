@@ -229,7 +229,11 @@ fn measured_material(
         e.message = format!("materials.{mname}.brdf: {}", e.message);
         MatError::Scene(e.at(span_of(span), "this measured file (relative to the scene file)"))
     })?;
-    let [r, g, b] = std::sync::Arc::new(table).channels();
+    let how = match &d.lookup {
+        Some(h) => h.get_ref().parse::<crate::measured::Lookup>().map_err(|e| here(h.span(), format!("materials.{mname}.lookup: {e}"), "lookup"))?,
+        None => crate::measured::Lookup::default(),
+    };
+    let [r, g, b] = std::sync::Arc::new(table).channels_with(how);
     Ok(Material {
         name: mname.to_string(),
         evaluator: r.clone(),
@@ -266,6 +270,10 @@ fn build_material(
     };
     if let Some((path, span)) = measured {
         return measured_material(at, mname, m, &path, span, choice.formula.is_some());
+    }
+    // A formula replacing the scene's (compare, fit images) leaves a `lookup` meant for the scene's table alone.
+    if let Some(h) = d.lookup.as_ref().filter(|_| choice.formula.is_none()) {
+        return Err(here(h.span(), format!("materials.{mname}.lookup: this material is a formula; `lookup` reads measured tables (.binary)"), "remove `lookup`"));
     }
     // Where the formula comes from, and the scene span to blame.
     let (file, src, key_span) = if let Some((f, s)) = choice.formula {

@@ -105,6 +105,9 @@ pub(super) struct MaterialDef {
     /// Multiply F by NL (formulas that are a BRDF without the cosine, as BRDF Explorer's).
     #[serde(default)]
     pub times_nl: bool,
+    /// `lookup = "linear"` or `"nearest"`: how a measured table is read ([`crate::measured::Lookup`]).
+    #[serde(default)]
+    pub lookup: Option<Spanned<String>>,
 }
 
 fn default_ka() -> f64 {
