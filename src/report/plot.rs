@@ -111,7 +111,7 @@ const PALETTE: [RGBColor; 12] = [
     RGBColor(136, 34, 85),
     RGBColor(153, 153, 51),
     RGBColor(51, 34, 136),
-    RGBColor(140, 86, 75),
+    RGBColor(68, 170, 153),
     RGBColor(140, 140, 140),
 ];
 
@@ -285,6 +285,7 @@ struct Layout<'a> {
     legend: Vec<(String, Option<LineStyle>)>,
     legend_cols: usize,
     legend_col_w: f64,
+    legend_px: f64,
 }
 
 /// Draws a [`Figure`] on `root` at scale `k` (drawing pixels per image pixel); `ink_shift` (em) moves text
@@ -363,14 +364,14 @@ fn figure<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, f: &Figure, k: f64,
     text(f.title, FIG_TITLE_PX, (w / 2.0, 12.0 * k + FIG_TITLE_PX * k * 0.6), HPos::Center, ink)?;
 
     // Legend: a column (or several) right of the plot, each sample drawn as its curve is.
-    let row = FIG_LEGEND_PX * k * 1.5;
+    let row = l.legend_px * k * 1.5;
     let rows = l.legend.len().div_ceil(l.legend_cols.max(1));
     for (j, (name, style)) in l.legend.iter().enumerate() {
         let x = p.x1 + 14.0 * k + (j / rows.max(1)) as f64 * l.legend_col_w;
         let y = p.y0 + 4.0 * k + (j % rows.max(1)) as f64 * row + row / 2.0;
         let s = style.unwrap_or(LineStyle { color: RGBColor(150, 150, 150), dash: &[], width: 1.0 });
         stroke(root, &[(x, y), (x + 30.0 * k, y)], s.color, s.width, s.dash, k)?;
-        text(name, FIG_LEGEND_PX, (x + 36.0 * k, y), HPos::Left, ink)?;
+        text(name, l.legend_px, (x + 36.0 * k, y), HPos::Left, ink)?;
     }
     Ok(())
 }
@@ -388,12 +389,33 @@ fn layout<'a>(f: &Figure<'a>, (w, h): (f64, f64), k: f64, measure: &dyn Fn(&str,
     if f.light.is_some() {
         legend.push(("light".into(), None));
     }
-    let legend_col_w = 36.0 * k + legend.iter().map(|e| measure(&e.0, FIG_LEGEND_PX)).fold(0.0, f64::max) + 16.0 * k;
+    // The legend takes at most 45 % of the width: a smaller font (down to 8 px) and more columns if need be,
+    // then names shortened with "…".
     let plot_h = (h - top - bottom).max(10.0 * k);
-    let per_col = ((plot_h - 4.0 * k) / (FIG_LEGEND_PX * k * 1.5)).floor().max(1.0) as usize;
-    let legend_cols = legend.len().div_ceil(per_col);
-    // The legend takes at most half the width; names beyond that are cut by the image edge, not the plot.
-    let legend_w = (legend_cols as f64 * legend_col_w + 14.0 * k).min(w * 0.5);
+    let fit = |px: f64| {
+        let per_col = ((plot_h - 4.0 * k) / (px * k * 1.5)).floor().max(1.0) as usize;
+        let cols = legend.len().div_ceil(per_col).max(1);
+        let col_w = 36.0 * k + legend.iter().map(|e| measure(&e.0, px)).fold(0.0, f64::max) + 16.0 * k;
+        (cols, col_w, cols as f64 * col_w + 14.0 * k)
+    };
+    let max_legend_w = w * 0.45;
+    let legend_px = (8..=FIG_LEGEND_PX as usize).rev().map(|p| p as f64).find(|&p| fit(p).2 <= max_legend_w).unwrap_or(8.0);
+    let (legend_cols, mut legend_col_w, mut legend_w) = fit(legend_px);
+    if legend_w > max_legend_w {
+        legend_col_w = (max_legend_w - 14.0 * k) / legend_cols as f64;
+        let room = legend_col_w - 52.0 * k;
+        for e in &mut legend {
+            while measure(&e.0, legend_px) > room && e.0.chars().count() > 1 {
+                e.0.pop();
+                while e.0.ends_with('…') {
+                    e.0.pop();
+                }
+                e.0.pop();
+                e.0.push('…');
+            }
+        }
+        legend_w = max_legend_w;
+    }
     let (mut x, mut y) = (f.x.clone(), f.y.clone());
     let widest = |t: &[AxisTick]| t.iter().filter_map(|t| t.label.as_deref()).map(|s| measure(s, FIG_TICK_PX)).fold(0.0, f64::max);
     // Two rounds: label widths set the plot's size, which sets the ticks (and, to scale, the ranges).
@@ -418,7 +440,7 @@ fn layout<'a>(f: &Figure<'a>, (w, h): (f64, f64), k: f64, measure: &dyn Fn(&str,
         let last_half = xt.iter().rev().find_map(|t| t.label.as_deref()).map_or(0.0, |s| measure(s, FIG_TICK_PX) / 2.0);
         right = (margin + last_half).max(legend_w);
     }
-    Layout { plot, x, y, xt, yt, legend, legend_cols: legend_cols.max(1), legend_col_w }
+    Layout { plot, x, y, xt, yt, legend, legend_cols, legend_col_w, legend_px }
 }
 
 /// The parts of a polyline inside `r` (Liang–Barsky on each segment), as separate runs.
@@ -1484,6 +1506,185 @@ mod tests {
         assert!(t.iter().any(|t| !t.labelled));
         assert_eq!(tick_label(&Tick { mantissa: 5, exp: -7, labelled: true }), "5×10⁻⁷");
         assert_eq!(tick_label(&Tick { mantissa: 1, exp: 6, labelled: true }), "10⁶");
+    }
+
+    /// `(text-anchor, text)` of every `<text>` element of an SVG.
+    fn svg_anchored_texts(svg: &str) -> Vec<(String, String)> {
+        svg.split("<text")
+            .skip(1)
+            .filter_map(|t| {
+                let (attrs, rest) = t.split_once('>')?;
+                let anchor = attrs.split("text-anchor=\"").nth(1)?.split('"').next()?.to_string();
+                Some((anchor, rest.split("</text>").next()?.trim().to_string()))
+            })
+            .collect()
+    }
+
+    /// A tick label as a number: plain decimals, 10ⁿ or m×10ⁿ, minus written as U+2212.
+    fn parse_label(s: &str) -> Option<f64> {
+        const SUP: [char; 10] = ['⁰', '¹', '²', '³', '⁴', '⁵', '⁶', '⁷', '⁸', '⁹'];
+        let s = s.replace('−', "-");
+        let Some(at) = s.find(|c: char| SUP.contains(&c) || c == '⁻') else { return s.parse().ok() };
+        let (base, exp) = s.split_at(at);
+        let mantissa = base.strip_suffix("10")?.trim_end_matches('×');
+        let m: f64 = if mantissa.is_empty() { 1.0 } else { mantissa.parse().ok()? };
+        let e: String = exp.chars().map(|c| if c == '⁻' { Some('-') } else { SUP.iter().position(|d| *d == c).map(|d| (b'0' + d as u8) as char) }).collect::<Option<_>>()?;
+        Some(m * 10f64.powi(e.parse().ok()?))
+    }
+
+    /// A small deterministic generator for random cases.
+    fn lcg(seed: &mut u64) -> f64 {
+        *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (*seed >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    #[test]
+    fn log_axis_labels_are_clean_1_2_5_numbers_on_random_lobes() {
+        let mut seed = 7u64;
+        for case in 0..30 {
+            let k = 1 + (lcg(&mut seed) * 4.0) as usize;
+            let series: Vec<Series> = (0..k)
+                .map(|j| {
+                    let n = 10f64.powf(lcg(&mut seed) * 3.3);
+                    let scale = 10f64.powf(lcg(&mut seed) * 16.0 - 8.0);
+                    let mut s = cos_n(n);
+                    s.name = format!("s{j}");
+                    s.points.iter_mut().for_each(|p| p.1 *= scale);
+                    s
+                })
+                .collect();
+            let size = (300 + (lcg(&mut seed) * 1100.0) as u32, 200 + (lcg(&mut seed) * 800.0) as u32);
+            let o = LobeOptions { title: "t".into(), polar: false, log: true, size };
+            let svg = String::from_utf8(lobes(&series, &o, Format::Svg).unwrap()).unwrap();
+            let texts = svg_anchored_texts(&svg);
+            // The value axis's labels are the right-aligned texts.
+            let y: Vec<&String> = texts.iter().filter(|t| t.0 == "end").map(|t| &t.1).collect();
+            assert!(y.len() >= 2, "case {case} {size:?}: labels {y:?}");
+            for l in &y {
+                let v = parse_label(l).unwrap_or_else(|| panic!("case {case}: `{l}` is not a number"));
+                let m = v / 10f64.powf(v.log10().floor() + 1e-12);
+                assert!([1.0, 2.0, 5.0].iter().any(|d| (m - d).abs() < 1e-6), "case {case}: `{l}` = {v} is not 1, 2 or 5 × 10ⁿ");
+                assert!(l.chars().count() <= 7, "case {case}: `{l}` is long");
+            }
+            // The angle axis: plain numbers, evenly spaced.
+            let x: Vec<f64> = texts.iter().filter(|t| t.0 == "middle").filter_map(|t| parse_label(&t.1)).collect();
+            assert!(x.len() >= 2 && x.windows(3).all(|w| ((w[2] - w[1]) - (w[1] - w[0])).abs() < 1e-9), "case {case}: {x:?}");
+        }
+    }
+
+    #[test]
+    fn linear_labels_are_short_exact_and_evenly_spaced() {
+        let labels = |lo, hi| -> Vec<String> { linear_ticks(lo, hi, 600.0, 60.0).into_iter().filter_map(|t| t.label).collect() };
+        assert_eq!(labels(0.0, 0.3), ["0", "0.05", "0.1", "0.15", "0.2", "0.25", "0.3"]);
+        assert_eq!(labels(-2e-7, 3e-7)[..3], ["−2×10⁻⁷", "−1.5×10⁻⁷", "−1×10⁻⁷"]);
+        assert_eq!(labels(0.0, 3.2e7)[1], "5×10⁶");
+        let mut seed = 11u64;
+        for case in 0..500 {
+            let span = 10f64.powf(lcg(&mut seed) * 24.0 - 12.0);
+            let mid = (lcg(&mut seed) - 0.5) * 6.0 * span;
+            let (lo, hi) = (mid - span * lcg(&mut seed), mid + span);
+            let len = 100.0 + lcg(&mut seed) * 2000.0;
+            let t = linear_ticks(lo, hi, len, 40.0);
+            // A range shorter than two steps may hold a single tick.
+            assert!(!t.is_empty() && (t.len() as f64) <= len / 40.0 + 1.0, "case {case}: {lo}..{hi}: {} ticks", t.len());
+            let vals: Vec<f64> = t.iter().map(|t| parse_label(t.label.as_deref().unwrap()).unwrap()).collect();
+            let step = if vals.len() > 1 { vals[1] - vals[0] } else { 1.0 };
+            for (i, (t, v)) in t.iter().zip(&vals).enumerate() {
+                let l = t.label.as_deref().unwrap();
+                assert!(l.chars().count() <= if l.contains('×') { 11 } else { 9 }, "case {case}: `{l}`");
+                assert!((v - t.at).abs() <= 1e-9 * step.abs().max(t.at.abs()), "case {case}: `{l}` read {v}, drawn at {}", t.at);
+                assert!(i == 0 || ((v - vals[i - 1]) - step).abs() <= 1e-6 * step, "case {case}: uneven {vals:?}");
+                assert!(lo - 1e-9 * span <= t.at && t.at <= hi + 1e-9 * span);
+            }
+        }
+    }
+
+    #[test]
+    fn twenty_four_series_are_all_told_apart() {
+        let styles: Vec<LineStyle> = (0..24).map(|i| line_style(i, 24)).collect();
+        let keys: std::collections::HashSet<String> = styles.iter().map(|s| format!("{:?} {:?}", s.color, s.dash)).collect();
+        assert_eq!(keys.len(), 24, "(colour, dash) pairs repeat");
+        assert_eq!(styles.iter().map(|s| format!("{:?}", s.color)).collect::<std::collections::HashSet<_>>().len(), 12);
+        // The twelve colours stay apart from each other and from the white page.
+        for (i, a) in PALETTE.iter().enumerate() {
+            let d = |b: &RGBColor| ((a.0 as f64 - b.0 as f64).powi(2) + (a.1 as f64 - b.1 as f64).powi(2) + (a.2 as f64 - b.2 as f64).powi(2)).sqrt();
+            assert!(d(&WHITE) > 100.0, "colour {i} is too pale");
+            for (j, b) in PALETTE.iter().enumerate().skip(i + 1) {
+                assert!(d(b) > 60.0, "colours {i} and {j} are close");
+            }
+        }
+        // Earlier series are wider, so one drawn exactly under a later one shows.
+        assert!(styles.windows(2).all(|w| w[0].width > w[1].width));
+    }
+
+    /// Pixels of `img` left of `x_max` within `tol` of colour `c` in every channel.
+    fn count_near(img: &crate::base::image::Image, c: RGBColor, tol: u8, x_max: usize) -> usize {
+        (0..img.height).flat_map(|y| (0..x_max).map(move |x| (x, y))).filter(|&(x, y)| img.pixel(x, y).iter().zip([c.0, c.1, c.2]).all(|(p, q)| p.abs_diff(q) <= tol)).count()
+    }
+
+    #[test]
+    fn a_curve_exactly_under_another_still_shows() {
+        let (mut a, mut b) = (cos_n(20.0), cos_n(20.0));
+        (a.name, b.name) = ("Phong".into(), "Blinn".into());
+        let o = LobeOptions { title: "t".into(), polar: false, log: false, size: (600, 400) };
+        for polar in [false, true] {
+            let png = lobes(&[a.clone(), b.clone()], &LobeOptions { polar, ..o.clone() }, Format::Png).unwrap();
+            let img = crate::base::image::Image::decode_png(&png).unwrap();
+            // Left of the legend: the curves only.
+            let plot_w = img.width * 3 / 5;
+            let (first, second) = (count_near(&img, color(0), 12, plot_w), count_near(&img, color(1), 12, plot_w));
+            assert!(first >= 100 && second >= 100, "polar {polar}: {first} px of the first curve, {second} of the second");
+        }
+    }
+
+    #[test]
+    fn png_lines_are_anti_aliased_and_svg_coordinates_carry_fractions() {
+        let line = Series { name: "x".into(), points: (0..=90).map(|d| (d as f64, d as f64 * 0.37)).collect() };
+        let png = curves_sized(&[line.clone()], "t", "x", "y", Format::Png, (500, 400)).unwrap();
+        let img = crate::base::image::Image::decode_png(&png).unwrap();
+        // Pixels part way from the page's white to the line's colour: its anti-aliased edge.
+        let c = color(0);
+        let edge = (0..img.height)
+            .flat_map(|y| (0..img.width * 3 / 5).map(move |x| (x, y)))
+            .filter(|&(x, y)| {
+                let p = img.pixel(x, y);
+                let t = (255.0 - p[0] as f64) / (255.0 - c.0 as f64);
+                let on = |ch: usize, q: u8| (p[ch] as f64 - (255.0 - t * (255.0 - q as f64))).abs() <= 4.0;
+                (0.15..0.85).contains(&t) && on(1, c.1) && on(2, c.2)
+            })
+            .count();
+        assert!(edge >= 100, "{edge} edge pixels between white and the line's colour");
+        let svg = String::from_utf8(curves_sized(&[line], "t", "x", "y", Format::Svg, (500, 400)).unwrap()).unwrap();
+        let k = SUPERSAMPLE;
+        assert!(svg.contains(&format!("<svg width=\"500\" height=\"400\" viewBox=\"0 0 {} {}\"", 500 * k, 400 * k)), "{}", &svg[..200]);
+        assert!(svg.starts_with("<!-- made by lobe -->"));
+        let hex = format!("stroke=\"#{:02X}{:02X}{:02X}\"", c.0, c.1, c.2);
+        let coords: Vec<i64> = svg
+            .lines()
+            .filter(|l| l.starts_with("<polyline") && l.contains(&hex))
+            .flat_map(|l| l.split("points=\"").nth(1).unwrap_or("").split(['"', ' ', ',']).filter_map(|v| v.parse::<i64>().ok()).collect::<Vec<_>>())
+            .collect();
+        let fractional = coords.iter().filter(|v| *v % k as i64 != 0).count();
+        assert!(coords.len() > 100 && fractional * 2 > coords.len(), "{fractional} of {} coordinates between whole pixels", coords.len());
+    }
+
+    #[test]
+    fn nothing_is_drawn_to_the_image_edge() {
+        let wide = Series { name: "coef".into(), points: (1..=1000).map(|n| (n as f64, 0.255 * n as f64)).collect() };
+        let many: Vec<Series> = (0..16).map(|i| Series { name: format!("formula number {i}"), ..cos_n(1.0 + i as f64 * 20.0) }).collect();
+        let mut pngs = vec![curves(&[wide], "coefficient", "n", "coef", Format::Png).unwrap()];
+        for (polar, log) in [(false, false), (true, false), (false, true)] {
+            for size in [(900, 600), (400, 300)] {
+                pngs.push(lobes(&many, &LobeOptions { title: "Lobes".into(), polar, log, size }, Format::Png).unwrap());
+            }
+        }
+        for (i, png) in pngs.iter().enumerate() {
+            let img = crate::base::image::Image::decode_png(png).unwrap();
+            let (w, h) = (img.width, img.height);
+            let border = (0..w).flat_map(|x| [(x, 0), (x, 1), (x, h - 2), (x, h - 1)]).chain((0..h).flat_map(|y| [(0, y), (1, y), (w - 2, y), (w - 1, y)]));
+            let inked: Vec<(usize, usize)> = border.filter(|&(x, y)| img.pixel(x, y) != [255, 255, 255]).collect();
+            assert!(inked.is_empty(), "plot {i}: ink at the edge, e.g. {:?}", &inked[..inked.len().min(5)]);
+        }
     }
 
     /// DejaVu Sans 13 px metrics, rounded up (5.7 px per character measured), so placement is tested without a renderer.
