@@ -101,7 +101,7 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
     let scale = rows.iter().map(|c| c.metrics.max_gray_diff).fold(0.0, f64::max).max(1.0);
     if let Some(out) = &a.out.path {
         let labels: Vec<String> = if a.sweep_n.is_empty() { vec![] } else { rows.iter().map(|c| c.n.map(|n| format!("n = {n}")).unwrap_or_default()).collect() };
-        let figure = lobe::report::plot::comparison_figure(&compare::sweep_image(&rows, scale), [&a.a, &a.b, "|Δgray|"], &labels, scale);
+        let figure = lobe::report::plot::comparison_figure(&compare::sweep_image(&rows, scale), [base_name(&a.a), base_name(&a.b), "|Δgray|"], &labels, scale);
         let png = figure.and_then(|f| f.encode_png()).map_err(CliError::msg)?;
         a.out.force.write(out, &png, image::is_lobe_png)?;
     }
@@ -140,4 +140,9 @@ pub fn read_brdf(path: &str) -> Result<(String, String), CliError> {
         return Ok((path.to_string(), String::new()));
     }
     Ok(common::read_source(path)?)
+}
+
+/// A file's name without its directories (the picture's column heading).
+fn base_name(p: &str) -> &str {
+    std::path::Path::new(p).file_name().and_then(|n| n.to_str()).unwrap_or(p)
 }
