@@ -1710,7 +1710,7 @@ mod tests {
     #[test]
     fn png_lines_are_anti_aliased_and_svg_coordinates_carry_fractions() {
         let line = Series { name: "x".into(), points: (0..=90).map(|d| (d as f64, d as f64 * 0.37)).collect() };
-        let png = curves_sized(&[line.clone()], "t", "x", "y", Format::Png, (500, 400)).unwrap();
+        let png = curves_sized(std::slice::from_ref(&line), "t", "x", "y", Format::Png, (500, 400)).unwrap();
         let img = crate::base::image::Image::decode_png(&png).unwrap();
         // Pixels part way from the page's white to the line's colour: its anti-aliased edge.
         let c = color(0);
