@@ -14,7 +14,7 @@ pub use lobe::render::scene::PAPER_SCENE;
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("set", args::help("Parameter values for both formulas, e.g. `n=50`")))]
-#[command(mut_arg("output", args::help("Output PNG: A | B | difference heat map (one row per n when sweeping)")))]
+#[command(mut_arg("output", args::help("Output PNG: A | B | difference heat map with its colour bar (one row per n when sweeping)")))]
 #[command(mut_arg("json", args::help("Print JSON: an object with `manhattan`, `rmse`, `psnr`, … ; with --sweep-n an array of them, one per n")))]
 pub struct CompareArgs {
     /// First formula (.brdf), or a measured table (MERL .binary).
@@ -100,7 +100,9 @@ pub fn run(a: &CompareArgs) -> Result<(), CliError> {
     })?;
     let scale = rows.iter().map(|c| c.metrics.max_gray_diff).fold(0.0, f64::max).max(1.0);
     if let Some(out) = &a.out.path {
-        let png = compare::sweep_image(&rows, scale).encode_png().map_err(CliError::msg)?;
+        let labels: Vec<String> = if a.sweep_n.is_empty() { vec![] } else { rows.iter().map(|c| c.n.map(|n| format!("n = {n}")).unwrap_or_default()).collect() };
+        let figure = lobe::report::plot::comparison_figure(&compare::sweep_image(&rows, scale), [base_name(&a.a), base_name(&a.b), "|Δgray|"], &labels, scale);
+        let png = figure.and_then(|f| f.encode_png()).map_err(CliError::msg)?;
         a.out.force.write(out, &png, image::is_lobe_png)?;
     }
     if a.json.on {
@@ -138,4 +140,9 @@ pub fn read_brdf(path: &str) -> Result<(String, String), CliError> {
         return Ok((path.to_string(), String::new()));
     }
     Ok(common::read_source(path)?)
+}
+
+/// A file's name without its directories (the picture's column heading).
+fn base_name(p: &str) -> &str {
+    std::path::Path::new(p).file_name().and_then(|n| n.to_str()).unwrap_or(p)
 }

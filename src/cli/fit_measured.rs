@@ -247,7 +247,10 @@ fn comparison_png(a: &FitArgs, row: &Row) -> Result<Vec<u8>, CliError> {
     let compiler = common::scene_compiler(a.backend.backend()?, a.backend.math.mode);
     let c = compare_formulas(&job, &set, &compiler, &lobe::render::RenderOptions::default())?;
     let scale = c.metrics.max_gray_diff.max(1.0);
-    sweep_image(std::slice::from_ref(&c), scale).encode_png().map_err(CliError::msg)
+    let headings = [m.file.as_str(), row.table, "|Δgray|"];
+    lobe::report::plot::comparison_figure(&sweep_image(std::slice::from_ref(&c), scale), headings, &[], scale)
+        .and_then(|f| f.encode_png())
+        .map_err(CliError::msg)
 }
 
 /// One fit in `--json` and `--table` JSON (keys in docs/measured.md).

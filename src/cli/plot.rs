@@ -29,7 +29,7 @@ pub struct PlotArgs {
     #[arg(long, requires = "reference")]
     pub error: bool,
     /// Plot in the plane of incidence with the light at this angle from the normal (degrees, 0..90): value
-    /// against the signed view angle, mirror direction at −θᵢ. Measured tables (.binary) plot one curve per
+    /// against the signed view angle, mirror direction at −θᵢ (with --polar: to scale, the light drawn). Measured tables (.binary) plot one curve per
     /// channel.
     #[arg(long)]
     pub incidence: Option<f64>,
@@ -106,11 +106,10 @@ pub fn run(a: &PlotArgs) -> Result<(), CliError> {
     }
     let bytes = match a.incidence {
         Some(t) => {
-            if a.polar || a.log {
-                return Err(CliError::msg("--incidence draws a cartesian plot on a linear scale (drop --polar and --log)"));
+            if a.log {
+                return Err(CliError::msg("--incidence draws a linear scale (drop --log)"));
             }
-            let title = format!("{title}, light at θᵢ = {t}°");
-            plot::curves(&series, &title, "view angle θₒ in the plane of incidence (degrees; mirror at −θᵢ)", "value", format).map_err(CliError::msg)?
+            plot::incidence_lobes(&series, &LobeOptions { title, polar: a.polar, log: false, size: a.size }, t, format).map_err(CliError::msg)?
         }
         None => plot::lobes(&series, &LobeOptions { title, polar: a.polar, log: a.log, size: a.size }, format).map_err(CliError::msg)?,
     };

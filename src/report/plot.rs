@@ -98,41 +98,433 @@ fn register_font() {
     });
 }
 
-const PALETTE: [RGBColor; 8] = [
-    RGBColor(31, 119, 180),
-    RGBColor(214, 39, 40),
-    RGBColor(44, 160, 44),
-    RGBColor(255, 127, 14),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-    RGBColor(227, 119, 194),
-    RGBColor(23, 190, 207),
+/// Line colours: the Okabe–Ito colour-blind-safe set (its yellow left out, too pale on white; its black
+/// softened) and four of Paul Tol's, in an order that keeps neighbours far apart.
+const PALETTE: [RGBColor; 12] = [
+    RGBColor(0, 114, 178),
+    RGBColor(213, 94, 0),
+    RGBColor(0, 158, 115),
+    RGBColor(204, 121, 167),
+    RGBColor(230, 159, 0),
+    RGBColor(86, 180, 233),
+    RGBColor(51, 51, 51),
+    RGBColor(136, 34, 85),
+    RGBColor(153, 153, 51),
+    RGBColor(51, 34, 136),
+    RGBColor(68, 170, 153),
+    RGBColor(140, 140, 140),
 ];
+
+/// Dash patterns (on, off, on, off, … in pixels): solid, dashed, dotted, dash-dot, long dash. Five is prime
+/// to the twelve colours, so series i gets (colour i mod 12, dash i mod 5) and the first 60 are all distinct.
+const DASHES: [&[f64]; 5] = [&[], &[7.0, 4.0], &[1.5, 3.0], &[7.0, 3.0, 1.5, 3.0], &[14.0, 4.0]];
 
 fn color(i: usize) -> RGBColor {
     PALETTE[i % PALETTE.len()]
 }
 
-/// Draws every series as a labelled line with a legend; `points` maps a series to what is drawn.
-macro_rules! draw_lines {
-    ($chart:expr, $series:expr, $points:expr) => {{
-        let points = $points;
-        for (i, s) in $series.iter().enumerate() {
-            let c = color(i);
-            $chart
-                .draw_series(LineSeries::new(points(s), c.stroke_width(2)))
-                .map_err(err)?
-                .label(&s.name)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
-        }
-        $chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(err)?;
-    }};
+/// How series `i` of `n` is drawn: colour, dash pattern and width in pixels. Earlier series are wider (3.5 px
+/// down to 1.5 px) and drawn first, so a curve exactly under a later one still shows along both its edges.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct LineStyle {
+    color: RGBColor,
+    dash: &'static [f64],
+    width: f64,
+}
+
+fn line_style(i: usize, n: usize) -> LineStyle {
+    let width = if n <= 1 { 2.0 } else { 1.5 + 2.0 * (n - 1 - i.min(n - 1)) as f64 / (n - 1) as f64 };
+    LineStyle { color: color(i), dash: DASHES[i % DASHES.len()], width }
 }
 
 type DrawResult<T> = Result<T, String>;
 
 fn err<E: std::fmt::Display>(e: E) -> String {
     format!("plotting failed: {e}")
+}
+
+/// Plots drawn through [`figure`] are drawn at this many times their size: the PNG is then averaged down
+/// k × k (anti-aliased lines and text), the SVG keeps the k× user units under a 1× `width`/`height` with a
+/// `viewBox`, so its coordinates have 1/k-pixel precision.
+const SUPERSAMPLE: u32 = 4;
+/// The PNG drawing buffer is kept under this many pixels: big images are drawn at a smaller factor.
+const MAX_DRAW_PIXELS: u64 = 40_000_000;
+
+const FIG_TITLE_PX: f64 = 20.0;
+const FIG_TICK_PX: f64 = 14.0;
+const FIG_DESC_PX: f64 = 15.0;
+const FIG_LEGEND_PX: f64 = 14.0;
+
+/// An axis in plotted units: log10 of the value on a log axis.
+#[derive(Clone, Debug)]
+struct Axis<'a> {
+    lo: f64,
+    hi: f64,
+    log: bool,
+    desc: &'a str,
+}
+
+/// One tick: position in plotted units, and its label if it has one (an unlabelled tick is a minor grid line).
+#[derive(Clone, Debug, PartialEq)]
+struct AxisTick {
+    at: f64,
+    label: Option<String>,
+}
+
+impl Axis<'_> {
+    /// Ticks whose labels lie at least `min_px` apart on an axis `len_px` long: 1-2-5 steps on a linear axis
+    /// (labels written from integers, so no 0.30000000000000004), [`log_ticks`] on a log axis.
+    fn ticks(&self, len_px: f64, min_px: f64) -> Vec<AxisTick> {
+        if self.log {
+            let ticks = log_ticks(self.lo, self.hi, len_px, min_px);
+            // One style per axis: when some label needs a power of ten, every label is written as one.
+            let powers = ticks.iter().any(|t| t.labelled && !(-4..=4).contains(&t.exp));
+            let label = |t: &Tick| if powers { power_label(t) } else { tick_label(t) };
+            return ticks.iter().map(|t| AxisTick { at: t.value().log10(), label: t.labelled.then(|| label(t)) }).collect();
+        }
+        linear_ticks(self.lo, self.hi, len_px, min_px)
+    }
+}
+
+/// Labelled ticks at multiples of the smallest 1-2-5 step that keeps them `min_px` apart.
+fn linear_ticks(lo: f64, hi: f64, len_px: f64, min_px: f64) -> Vec<AxisTick> {
+    let span = hi - lo;
+    if !(span > 0.0 && span.is_finite() && len_px > 0.0) {
+        return vec![];
+    }
+    let mut e = (span * min_px.max(1.0) / len_px).log10().floor() as i32 - 1;
+    loop {
+        for m in [1i64, 2, 5] {
+            let step = m as f64 * 10f64.powi(e);
+            if step * len_px / span >= min_px || e > 300 {
+                let (i0, i1) = ((lo / step - 1e-9).ceil() as i64, (hi / step + 1e-9).floor() as i64);
+                // One style per axis: when some label needs d.dd×10ⁿ, every label is written so.
+                let sci = (i0..=i1).any(|i| decimal(i * m, e, false).contains('×'));
+                return (i0..=i1).map(|i| AxisTick { at: i as f64 * step, label: Some(decimal(i * m, e, sci)) }).collect();
+            }
+        }
+        e += 1;
+    }
+}
+
+/// q·10^e written exactly: plain decimals while they stay short (at most 6 digits), d.dd×10ⁿ otherwise or
+/// when `sci`; minus as U+2212.
+fn decimal(q: i64, e: i32, sci: bool) -> String {
+    if q == 0 {
+        return "0".into();
+    }
+    let (mut q, mut e) = (q, e);
+    while q % 10 == 0 {
+        q /= 10;
+        e += 1;
+    }
+    let sign = if q < 0 { "−" } else { "" };
+    let digits = q.unsigned_abs().to_string();
+    let n = digits.len() as i32;
+    let plain = if sci {
+        None
+    } else if e >= 0 {
+        (n + e <= 6).then(|| format!("{digits}{}", "0".repeat(e as usize)))
+    } else if n > -e {
+        let (a, b) = digits.split_at((n + e) as usize);
+        Some(format!("{a}.{b}"))
+    } else {
+        (-e <= 6).then(|| format!("0.{}{digits}", "0".repeat((-e - n) as usize)))
+    };
+    plain.map(|p| format!("{sign}{p}")).unwrap_or_else(|| {
+        let mantissa = if n > 1 { format!("{}.{}", &digits[..1], &digits[1..]) } else { digits.clone() };
+        format!("{sign}{mantissa}×10{}", superscript(e + n - 1))
+    })
+}
+
+fn superscript(e: i32) -> String {
+    const SUP: [char; 10] = ['⁰', '¹', '²', '³', '⁴', '⁵', '⁶', '⁷', '⁸', '⁹'];
+    e.to_string().chars().map(|c| c.to_digit(10).map_or('⁻', |d| SUP[d as usize])).collect()
+}
+
+/// One curve in plotted units, broken where a value cannot be drawn (NaN, or ≤ 0 on a log axis).
+struct Curve {
+    name: String,
+    runs: Vec<Vec<(f64, f64)>>,
+}
+
+impl Curve {
+    fn new(name: &str, points: impl Iterator<Item = Option<(f64, f64)>>) -> Curve {
+        let mut runs: Vec<Vec<(f64, f64)>> = vec![vec![]];
+        for p in points {
+            match p.filter(|p| p.0.is_finite() && p.1.is_finite()) {
+                Some(p) => runs.last_mut().expect("one run at least").push(p),
+                None if runs.last().is_some_and(|r| !r.is_empty()) => runs.push(vec![]),
+                None => {}
+            }
+        }
+        runs.retain(|r| !r.is_empty());
+        Curve { name: name.to_string(), runs }
+    }
+}
+
+/// A cartesian figure: title, axes, curves (series i drawn in [`line_style`] i) and a legend to the right of
+/// the plot. `to_scale` (a polar plot): one unit gets as many pixels across as up, the x range widened about
+/// its middle or the y range upwards (y = 0 is the surface) to fill the plot. `light`: a grey ray from the origin, named in the legend.
+struct Figure<'a> {
+    title: &'a str,
+    x: Axis<'a>,
+    y: Axis<'a>,
+    curves: Vec<Curve>,
+    to_scale: bool,
+    light: Option<(f64, f64)>,
+}
+
+/// Where a figure's parts go, in drawing pixels (k× the image's).
+struct Layout<'a> {
+    plot: Rect,
+    x: Axis<'a>,
+    y: Axis<'a>,
+    xt: Vec<AxisTick>,
+    yt: Vec<AxisTick>,
+    legend: Vec<(String, Option<LineStyle>)>,
+    legend_cols: usize,
+    legend_col_w: f64,
+    legend_px: f64,
+}
+
+/// Draws a [`Figure`] on `root` at scale `k` (drawing pixels per image pixel); `ink_shift` (em) moves text
+/// down to centre it on its anchor (the bitmap backend's baseline sits higher than an SVG viewer's).
+fn figure<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, f: &Figure, k: f64, ink_shift: f64) -> DrawResult<()> {
+    let (w, h) = root.dim_in_pixel();
+    let (w, h) = (w as f64, h as f64);
+    let measure = |s: &str, px: f64| -> f64 {
+        root.estimate_text_size(s, &("sans-serif", px * k).into_font().into_text_style(root)).map_or(0.0, |t| t.0 as f64)
+    };
+    let text = |s: &str, px: f64, (x, y): (f64, f64), hpos: HPos, c: RGBColor| -> DrawResult<()> {
+        let style = ("sans-serif", px * k).into_font().color(&c).pos(Pos::new(hpos, VPos::Center));
+        root.draw_text(s, &style, (x.round() as i32, (y + ink_shift * px * k).round() as i32)).map_err(err)
+    };
+    let l = layout(f, (w, h), k, &measure);
+    let ink = RGBColor(30, 30, 30);
+    let p = l.plot;
+    let to_px = |(x, y): (f64, f64)| {
+        (p.x0 + (x - l.x.lo) / (l.x.hi - l.x.lo) * (p.x1 - p.x0), p.y1 - (y - l.y.lo) / (l.y.hi - l.y.lo) * (p.y1 - p.y0))
+    };
+    let ipt = |(x, y): (f64, f64)| (x.round() as i32, y.round() as i32);
+    let line = |a: (f64, f64), b: (f64, f64), c: RGBColor, width: f64| -> DrawResult<()> {
+        root.draw(&PathElement::new(vec![ipt(a), ipt(b)], c.stroke_width((width * k).round().max(1.0) as u32))).map_err(err)
+    };
+
+    // Grid, then curves (clipped to the plot), then the frame, ticks and labels over them.
+    for t in &l.xt {
+        let x = to_px((t.at, l.y.lo)).0;
+        let c = if t.label.is_some() { RGBColor(218, 218, 218) } else { RGBColor(238, 238, 238) };
+        line((x, p.y0), (x, p.y1), c, 1.0)?;
+    }
+    for t in &l.yt {
+        let y = to_px((l.x.lo, t.at)).1;
+        let c = if t.label.is_some() { RGBColor(218, 218, 218) } else { RGBColor(238, 238, 238) };
+        line((p.x0, y), (p.x1, y), c, 1.0)?;
+    }
+    if let Some(dir) = f.light {
+        let grey = RGBColor(150, 150, 150);
+        for run in clip_polyline(&[to_px((0.0, 0.0)), to_px(dir)], &p) {
+            stroke(root, &run, grey, 1.0, &[], k)?;
+        }
+    }
+    let n = f.curves.len();
+    for (i, c) in f.curves.iter().enumerate() {
+        let s = line_style(i, n);
+        for run in &c.runs {
+            let px: Vec<(f64, f64)> = run.iter().map(|&q| to_px(q)).collect();
+            for piece in clip_polyline(&px, &p) {
+                stroke(root, &piece, s.color, s.width, s.dash, k)?;
+            }
+        }
+    }
+    root.draw(&Rectangle::new([ipt((p.x0, p.y0)), ipt((p.x1, p.y1))], ink.stroke_width(k.round() as u32))).map_err(err)?;
+    let tick = 5.0 * k;
+    for t in &l.xt {
+        let x = to_px((t.at, l.y.lo)).0;
+        let len = if t.label.is_some() { tick } else { tick * 0.6 };
+        line((x, p.y1), (x, p.y1 + len), ink, 1.0)?;
+        if let Some(s) = &t.label {
+            text(s, FIG_TICK_PX, (x, p.y1 + tick + 4.0 * k + FIG_TICK_PX * k * 0.5), HPos::Center, ink)?;
+        }
+    }
+    for t in &l.yt {
+        let y = to_px((l.x.lo, t.at)).1;
+        let len = if t.label.is_some() { tick } else { tick * 0.6 };
+        line((p.x0 - len, y), (p.x0, y), ink, 1.0)?;
+        if let Some(s) = &t.label {
+            text(s, FIG_TICK_PX, (p.x0 - tick - 4.0 * k, y), HPos::Right, ink)?;
+        }
+    }
+    let x_desc_y = p.y1 + tick + 4.0 * k + FIG_TICK_PX * k * 1.2 + 6.0 * k + FIG_DESC_PX * k * 0.5;
+    text(l.x.desc, FIG_DESC_PX, ((p.x0 + p.x1) / 2.0, x_desc_y), HPos::Center, ink)?;
+    let rotated = ("sans-serif", FIG_DESC_PX * k).into_font().transform(FontTransform::Rotate270).color(&ink).pos(Pos::new(HPos::Center, VPos::Center));
+    let y_desc_x = 12.0 * k + FIG_DESC_PX * k * (0.6 + ink_shift);
+    root.draw_text(l.y.desc, &rotated, ipt((y_desc_x, (p.y0 + p.y1) / 2.0))).map_err(err)?;
+    text(f.title, FIG_TITLE_PX, (w / 2.0, 12.0 * k + FIG_TITLE_PX * k * 0.6), HPos::Center, ink)?;
+
+    // Legend: a column (or several) right of the plot, each sample drawn as its curve is.
+    let row = l.legend_px * k * 1.5;
+    let rows = l.legend.len().div_ceil(l.legend_cols.max(1));
+    for (j, (name, style)) in l.legend.iter().enumerate() {
+        let x = p.x1 + 14.0 * k + (j / rows.max(1)) as f64 * l.legend_col_w;
+        let y = p.y0 + 4.0 * k + (j % rows.max(1)) as f64 * row + row / 2.0;
+        let s = style.unwrap_or(LineStyle { color: RGBColor(150, 150, 150), dash: &[], width: 1.0 });
+        stroke(root, &[(x, y), (x + 30.0 * k, y)], s.color, s.width, s.dash, k)?;
+        text(name, l.legend_px, (x + 36.0 * k, y), HPos::Left, ink)?;
+    }
+    Ok(())
+}
+
+/// Sizes the plot area from what must fit around it: title above; tick labels, axis descriptions and half the
+/// widest x label (so the last is not cut) around; the legend to the right, in as many columns as its height
+/// needs. With `to_scale`, the ranges are widened to equal units and the ticks measured again.
+fn layout<'a>(f: &Figure<'a>, (w, h): (f64, f64), k: f64, measure: &dyn Fn(&str, f64) -> f64) -> Layout<'a> {
+    let margin = 12.0 * k;
+    let top = margin + FIG_TITLE_PX * k * 1.2 + 8.0 * k;
+    let tick_gap = 5.0 * k + 4.0 * k;
+    let bottom = margin + FIG_DESC_PX * k * 1.2 + 6.0 * k + FIG_TICK_PX * k * 1.2 + tick_gap;
+    let mut legend: Vec<(String, Option<LineStyle>)> =
+        f.curves.iter().enumerate().map(|(i, c)| (c.name.clone(), Some(line_style(i, f.curves.len())))).collect();
+    if f.light.is_some() {
+        legend.push(("light".into(), None));
+    }
+    // The legend takes at most 45 % of the width: a smaller font (down to 8 px) and more columns if need be,
+    // then names shortened with "…".
+    let plot_h = (h - top - bottom).max(10.0 * k);
+    let fit = |px: f64| {
+        let per_col = ((plot_h - 4.0 * k) / (px * k * 1.5)).floor().max(1.0) as usize;
+        let cols = legend.len().div_ceil(per_col).max(1);
+        let col_w = 36.0 * k + legend.iter().map(|e| measure(&e.0, px)).fold(0.0, f64::max) + 16.0 * k;
+        (cols, col_w, cols as f64 * col_w + 14.0 * k)
+    };
+    let max_legend_w = w * 0.45;
+    let legend_px = (8..=FIG_LEGEND_PX as usize).rev().map(|p| p as f64).find(|&p| fit(p).2 <= max_legend_w).unwrap_or(8.0);
+    let (legend_cols, mut legend_col_w, mut legend_w) = fit(legend_px);
+    if legend_w > max_legend_w {
+        legend_col_w = (max_legend_w - 14.0 * k) / legend_cols as f64;
+        let room = legend_col_w - 52.0 * k;
+        for e in &mut legend {
+            while measure(&e.0, legend_px) > room && e.0.chars().count() > 1 {
+                e.0.pop();
+                while e.0.ends_with('…') {
+                    e.0.pop();
+                }
+                e.0.pop();
+                e.0.push('…');
+            }
+        }
+        legend_w = max_legend_w;
+    }
+    let (mut x, mut y) = (f.x.clone(), f.y.clone());
+    let widest = |t: &[AxisTick]| t.iter().filter_map(|t| t.label.as_deref()).map(|s| measure(s, FIG_TICK_PX)).fold(0.0, f64::max);
+    // Two rounds: label widths set the plot's size, which sets the ticks (and, to scale, the ranges).
+    let mut left = margin + FIG_DESC_PX * k * 1.3 + tick_gap + measure("0.0000", FIG_TICK_PX);
+    let mut right = margin.max(legend_w);
+    let mut plot = Rect { x0: left, y0: top, x1: w - right, y1: h - bottom };
+    let (mut xt, mut yt) = (vec![], vec![]);
+    for _ in 0..3 {
+        plot = Rect { x0: left, y0: top, x1: (w - right).max(left + 10.0 * k), y1: (h - bottom).max(top + 10.0 * k) };
+        let (pw, ph) = (plot.x1 - plot.x0, plot.y1 - plot.y0);
+        if f.to_scale {
+            let xc = (f.x.lo + f.x.hi) / 2.0;
+            let unit = ((f.x.hi - f.x.lo) / pw).max((f.y.hi - f.y.lo) / ph);
+            (x.lo, x.hi) = (xc - unit * pw / 2.0, xc + unit * pw / 2.0);
+            y.hi = y.lo + unit * ph;
+        }
+        // x labels need their width: measure a dense set, then space by the widest.
+        let x_min = widest(&x.ticks(pw, 0.0)[..]).min(pw / 3.0) + 16.0 * k;
+        xt = x.ticks(pw, x_min);
+        yt = y.ticks(ph, FIG_TICK_PX * k * 2.2);
+        left = margin + FIG_DESC_PX * k * 1.3 + tick_gap + widest(&yt);
+        let last_half = xt.iter().rev().find_map(|t| t.label.as_deref()).map_or(0.0, |s| measure(s, FIG_TICK_PX) / 2.0);
+        right = (margin + last_half).max(legend_w);
+    }
+    Layout { plot, x, y, xt, yt, legend, legend_cols, legend_col_w, legend_px }
+}
+
+/// The parts of a polyline inside `r` (Liang–Barsky on each segment), as separate runs.
+fn clip_polyline(pts: &[(f64, f64)], r: &Rect) -> Vec<Vec<(f64, f64)>> {
+    let mut runs: Vec<Vec<(f64, f64)>> = vec![];
+    let mut open = false;
+    let inside = |p: (f64, f64)| r.x0 <= p.0 && p.0 <= r.x1 && r.y0 <= p.1 && p.1 <= r.y1;
+    if pts.len() == 1 && inside(pts[0]) {
+        return vec![pts.to_vec()];
+    }
+    for s in pts.windows(2) {
+        let (a, b) = (s[0], s[1]);
+        let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+        let (mut t0, mut t1) = (0.0f64, 1.0f64);
+        let mut visible = true;
+        for (p, q) in [(-dx, a.0 - r.x0), (dx, r.x1 - a.0), (-dy, a.1 - r.y0), (dy, r.y1 - a.1)] {
+            if p == 0.0 {
+                visible &= q >= 0.0;
+            } else if p < 0.0 {
+                t0 = t0.max(q / p);
+            } else {
+                t1 = t1.min(q / p);
+            }
+        }
+        if !visible || t0 > t1 {
+            open = false;
+            continue;
+        }
+        let at = |t: f64| (a.0 + dx * t, a.1 + dy * t);
+        if !(open && t0 == 0.0) {
+            runs.push(vec![at(t0)]);
+        }
+        runs.last_mut().expect("a run was opened").push(at(t1));
+        open = t1 == 1.0;
+    }
+    runs
+}
+
+/// Draws a polyline (drawing pixels) `width` image pixels wide with a dash pattern (image pixels; empty:
+/// solid) that runs on across vertices.
+fn stroke<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, pts: &[(f64, f64)], c: RGBColor, width: f64, dash: &[f64], k: f64) -> DrawResult<()> {
+    let style = c.stroke_width((width * k).round().max(1.0) as u32);
+    let draw = |piece: &[(f64, f64)]| -> DrawResult<()> {
+        let mut v: Vec<(i32, i32)> = piece.iter().map(|p| (p.0.round() as i32, p.1.round() as i32)).collect();
+        v.dedup();
+        if v.len() == 1 {
+            v.push(v[0]);
+        }
+        root.draw(&PathElement::new(v, style)).map_err(err)
+    };
+    if dash.is_empty() {
+        return draw(pts);
+    }
+    let mut piece: Vec<(f64, f64)> = vec![];
+    let (mut j, mut left) = (0usize, dash[0] * k);
+    if let Some(&p) = pts.first() {
+        piece.push(p);
+    }
+    for s in pts.windows(2) {
+        let (mut a, b) = (s[0], s[1]);
+        let mut len = (b.0 - a.0).hypot(b.1 - a.1);
+        while len > left {
+            let t = left / len;
+            a = (a.0 + (b.0 - a.0) * t, a.1 + (b.1 - a.1) * t);
+            len -= left;
+            if j % 2 == 0 {
+                piece.push(a);
+                draw(&piece)?;
+                piece.clear();
+            } else {
+                piece.push(a);
+            }
+            j = (j + 1) % dash.len();
+            left = dash[j] * k;
+        }
+        left -= len;
+        if j % 2 == 0 {
+            piece.push(b);
+        }
+    }
+    if j % 2 == 0 && piece.len() > 1 {
+        draw(&piece)?;
+    }
+    Ok(())
 }
 
 /// Lobes (value against angle in degrees, 0..90). Polar: radius = value, drawn on both sides of the axis.
@@ -150,97 +542,55 @@ pub fn lobes(series: &[Series], o: &LobeOptions, format: Format) -> DrawResult<V
         return Err("nothing to plot on a log scale: no curve has a positive finite value (use a linear scale)".into());
     }
     let ymin_pos = ymin_pos.max(ymax * 1e-12);
-    macro_rules! body {
-        ($root:expr) => {{
-            let root = $root;
-            if o.polar {
-                // Both sides of the axis: θ → −θ mirrored, in the signed-angle form `polar` draws.
-                let signed: Vec<Series> = series
-                    .iter()
-                    .map(|s| Series {
-                        name: s.name.clone(),
-                        points: s.points.iter().rev().map(|&(d, v)| (-d, v)).chain(s.points.iter().copied()).collect(),
-                    })
-                    .collect();
-                polar(root, &o.title, &signed, ymax, None)?;
-            } else if o.log {
-                let mut chart = ChartBuilder::on(root)
-                    .caption(&o.title, ("sans-serif", 22))
-                    .margin(12)
-                    .x_label_area_size(35)
-                    .y_label_area_size(60)
-                    .build_cartesian_2d(0.0..90.0, (ymin_pos..ymax * 1.5).log_scale())
-                    .map_err(err)?;
-                chart.configure_mesh().x_desc("angle (degrees)").y_desc("value (log)").draw().map_err(err)?;
-                draw_lines!(chart, series, |s: &Series| -> Vec<(f64, f64)> { s.points.iter().copied().filter(|p| p.1.is_finite() && p.1 > 0.0).collect() });
-            } else {
-                let ymin = series
-                    .iter()
-                    .flat_map(|s| s.points.iter().map(|p| p.1))
-                    .filter(|v| v.is_finite())
-                    .fold(0.0f64, f64::min);
-                let mut chart = ChartBuilder::on(root)
-                    .caption(&o.title, ("sans-serif", 22))
-                    .margin(12)
-                    .x_label_area_size(35)
-                    .y_label_area_size(60)
-                    .build_cartesian_2d(0.0..90.0, ymin * 1.05..ymax * 1.05)
-                    .map_err(err)?;
-                chart.configure_mesh().x_desc("angle (degrees)").y_desc("value").draw().map_err(err)?;
-                draw_lines!(chart, series, |s: &Series| -> Vec<(f64, f64)> { s.points.iter().copied().filter(|p| p.1.is_finite()).collect() });
-            }
-            Ok(())
-        }};
-    }
-    render_with(format, o.size, |r| body!(r), |r| body!(r))
+    let fig = if o.polar {
+        // Both sides of the axis: θ → −θ mirrored, in the signed-angle form `polar_figure` draws.
+        let signed: Vec<Series> = series
+            .iter()
+            .map(|s| Series { name: s.name.clone(), points: s.points.iter().rev().map(|&(d, v)| (-d, v)).chain(s.points.iter().copied()).collect() })
+            .collect();
+        polar_figure(&o.title, &signed, None)
+    } else if o.log {
+        let curves = series
+            .iter()
+            .map(|s| Curve::new(&s.name, s.points.iter().map(|&(d, v)| (v >= ymin_pos).then(|| (d, v.log10())))))
+            .collect();
+        let y = Axis { lo: ymin_pos.log10(), hi: (ymax * 1.5).log10(), log: true, desc: "value (log)" };
+        Figure { title: &o.title, x: Axis { lo: 0.0, hi: 90.0, log: false, desc: "angle (degrees)" }, y, curves, to_scale: false, light: None }
+    } else {
+        let ymin = values().fold(0.0f64, f64::min);
+        let curves = series.iter().map(|s| Curve::new(&s.name, s.points.iter().map(|&p| Some(p)))).collect();
+        let y = Axis { lo: ymin * 1.05, hi: ymax * 1.05, log: false, desc: "value" };
+        Figure { title: &o.title, x: Axis { lo: 0.0, hi: 90.0, log: false, desc: "angle (degrees)" }, y, curves, to_scale: false, light: None }
+    };
+    render_figure(&fig, format, o.size)
 }
 
-/// A polar plot of signed-angle series (angle from the normal in degrees, −90..90; radius = value, negative
+/// A polar figure of signed-angle series (angle from the normal in degrees, −90..90; radius = value, negative
 /// values drawn at 0), with both axes to the same scale (a circle stays a circle) and, when given, the
 /// direction of the light (`light_deg`, on the opposite side from the mirror direction) as a grey ray.
-fn polar<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
-    title: &str,
-    series: &[Series],
-    ymax: f64,
-    light_deg: Option<f64>,
-) -> DrawResult<()> {
-    let r = ymax * 1.05;
-    let build = |xr: f64, yr: f64| {
-        ChartBuilder::on(root)
-            .caption(title, ("sans-serif", 22))
-            .margin(12)
-            .x_label_area_size(30)
-            .y_label_area_size(50)
-            .build_cartesian_2d(-xr..xr, 0.0..yr)
-            .map_err(err)
-    };
-    // The plotting area's pixels do not depend on the ranges: one unit gets as many pixels across as up,
-    // the larger of the two scales that fit −r..r across and 0..r up (the area is drawn again on a clean
-    // background).
-    let (w, h) = build(r, r)?.plotting_area().dim_in_pixel();
-    let (w, h) = (w.max(1) as f64, h.max(1) as f64);
-    let unit = (2.0 * r / w).max(r / h);
-    root.fill(&WHITE).map_err(err)?;
-    let mut chart = build(unit * w / 2.0, unit * h)?;
-    chart.configure_mesh().x_desc("value · sin θ").y_desc("value · cos θ").draw().map_err(err)?;
-    if let Some(t) = light_deg {
-        let t = t.to_radians();
-        let ray = [(0.0, 0.0), (-r * t.sin(), r * t.cos())];
-        let grey = RGBColor(150, 150, 150).stroke_width(1);
-        chart
-            .draw_series(LineSeries::new(ray, grey))
-            .map_err(err)?
-            .label("light")
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], grey));
+fn polar_figure<'a>(title: &'a str, series: &[Series], light_deg: Option<f64>) -> Figure<'a> {
+    let xy = |&(deg, v): &(f64, f64)| (v.max(0.0) * deg.to_radians().sin(), v.max(0.0) * deg.to_radians().cos());
+    let curves: Vec<Curve> = series.iter().map(|s| Curve::new(&s.name, s.points.iter().map(|p| Some(xy(p))))).collect();
+    // The lobes' own extent with the origin (5 % spare), not the largest value's circle: a narrow lobe fills
+    // the height, a lobe to one side the width.
+    // The light's direction is shown as long as the longest lobe.
+    let radius = curves.iter().flat_map(|c| c.runs.iter().flatten()).fold(0.0f64, |m, p| m.max(p.0.hypot(p.1)));
+    let light_end = light_deg.map(|t| (radius * t.to_radians().sin(), radius * t.to_radians().cos()));
+    let pts = || curves.iter().flat_map(|c| c.runs.iter().flatten()).chain(light_end.iter());
+    let (x0, x1) = pts().fold((0.0f64, 0.0f64), |(a, b), p| (a.min(p.0), b.max(p.0)));
+    let y1 = pts().fold(0.0f64, |m, p| m.max(p.1)).max(1e-12);
+    let pad = (x1 - x0).max(y1) * 0.05;
+    // The light is on the +x side (the mirror direction at −θᵢ), as far out as the plot can reach.
+    let reach = 4.0 * (x1 - x0).max(y1);
+    let light = light_deg.map(|t| (reach * t.to_radians().sin(), reach * t.to_radians().cos()));
+    Figure {
+        title,
+        x: Axis { lo: x0 - pad, hi: x1 + pad, log: false, desc: "value · sin θ" },
+        y: Axis { lo: 0.0, hi: y1 + pad, log: false, desc: "value · cos θ" },
+        curves,
+        to_scale: true,
+        light,
     }
-    draw_lines!(chart, series, |s: &Series| -> Vec<(f64, f64)> { s
-            .points
-            .iter()
-            .map(|&(deg, v)| (v.max(0.0) * deg.to_radians().sin(), v.max(0.0) * deg.to_radians().cos()))
-            .filter(|p| p.0.is_finite() && p.1.is_finite())
-            .collect() });
-    Ok(())
 }
 
 /// Lobes in the plane of incidence ([`incidence_points_at`] series) with the light at `theta_i_deg`: polar (to
@@ -259,9 +609,8 @@ pub fn incidence_lobes(series: &[Series], o: &LobeOptions, theta_i_deg: f64, for
         let x_desc = "view angle θₒ in the plane of incidence (degrees; mirror at −θᵢ)";
         return curves_sized(series, &title, x_desc, "value", format, o.size);
     }
-    let ymax = ymax.max(1e-12);
-    let light = Some(theta_i_deg);
-    render_with(format, o.size, |r| polar(r, &o.title, series, ymax, light), |r| polar(r, &o.title, series, ymax, light))
+    let title = format!("{}, light at θᵢ = {theta_i_deg}°", o.title);
+    render_figure(&polar_figure(&title, series, Some(theta_i_deg)), format, o.size)
 }
 
 /// Curves over any x range (e.g. the normalisation coefficient against n over a range of n).
@@ -286,21 +635,90 @@ pub fn curves_sized(
     }
     let (xmax, ymax) = (if xmax > xmin { xmax } else { xmin + 1.0 }, if ymax > ymin { ymax } else { ymin + 1.0 });
     let pad = (ymax - ymin) * 0.05;
-    macro_rules! body {
-        ($root:expr) => {{
-            let mut chart = ChartBuilder::on($root)
-                .caption(title, ("sans-serif", 22))
-                .margin(12)
-                .x_label_area_size(35)
-                .y_label_area_size(70)
-                .build_cartesian_2d(xmin..xmax, (ymin - pad)..(ymax + pad))
-                .map_err(err)?;
-            chart.configure_mesh().x_desc(x_desc).y_desc(y_desc).draw().map_err(err)?;
-            draw_lines!(chart, series, |s: &Series| -> Vec<(f64, f64)> { s.points.iter().copied().filter(|p| p.0.is_finite() && p.1.is_finite()).collect() });
-            Ok(())
-        }};
+    let curves = series.iter().map(|s| Curve::new(&s.name, s.points.iter().map(|&p| Some(p)))).collect();
+    let fig = Figure {
+        title,
+        x: Axis { lo: xmin, hi: xmax, log: false, desc: x_desc },
+        y: Axis { lo: ymin - pad, hi: ymax + pad, log: false, desc: y_desc },
+        curves,
+        to_scale: false,
+        light: None,
+    };
+    render_figure(&fig, format, size)
+}
+
+fn render_figure(fig: &Figure, format: Format, size: (u32, u32)) -> DrawResult<Vec<u8>> {
+    render_with(format, size, SUPERSAMPLE, |r, k| figure(r, fig, k, 0.17), |r, k| figure(r, fig, k, 0.0))
+}
+
+/// A comparison picture (columns A | B | |Δgray| heat map, `rows.len()` rows stacked, as
+/// [`crate::render::compare::sweep_image`] makes it) with a heading over each column, a label beside each row
+/// (e.g. "n = 50"; none when `rows` is empty or all empty) and to the right a colour bar of the heat map's ramp
+/// from 0 (bottom) to `scale` gray levels (top), labelled. The pictures' pixels are copied as they are.
+pub fn comparison_figure(img: &crate::base::image::Image, headings: [&str; 3], rows: &[String], scale: f64) -> DrawResult<crate::base::image::Image> {
+    register_font();
+    const PX: f64 = 13.0;
+    let mut probe = [0u8; 3];
+    let measure = {
+        let root = BitMapBackend::with_buffer(&mut probe, (1, 1)).into_drawing_area();
+        move |s: &str| root.estimate_text_size(s, &("sans-serif", PX).into_font().into_text_style(&root)).map_or(0, |t| t.0) as usize
+    };
+    let col = img.width / 3;
+    let labelled = rows.iter().any(|r| !r.is_empty());
+    let left = if labelled { rows.iter().map(|r| measure(r)).max().unwrap_or(0) + 16 } else { 8 };
+    let ticks = [0.0, scale / 2.0, scale].map(short);
+    let bar_title = "gray levels";
+    let right = 12 + 14 + 6 + ticks.iter().map(|t| measure(t)).max().unwrap_or(0) + 10;
+    let right = right.max(measure(bar_title) + 14);
+    let (top, bottom) = (26usize, 8usize);
+    let (w, h) = (left + img.width + right, top + img.height + bottom);
+    let mut out = crate::base::image::Image::new(w, h);
+    out.rgb.iter_mut().for_each(|v| *v = 255);
+    for y in 0..img.height {
+        let (src, dst) = (y * img.width * 3, ((top + y) * w + left) * 3);
+        out.rgb[dst..dst + img.width * 3].copy_from_slice(&img.rgb[src..src + img.width * 3]);
     }
-    render_with(format, size, |r| body!(r), |r| body!(r))
+    // The bar: as tall as the picture, 0 at the bottom.
+    let bar_x = left + img.width + 12;
+    let bar_h = img.height.max(2);
+    for y in 0..img.height {
+        let c = crate::render::compare::heat(1.0 - y as f64 / (bar_h - 1) as f64);
+        for x in bar_x..bar_x + 14 {
+            out.set(x, top + y, c);
+        }
+    }
+    {
+        let root = BitMapBackend::with_buffer(&mut out.rgb, (w as u32, h as u32)).into_drawing_area();
+        let ink = RGBColor(30, 30, 30);
+        let text = |s: &str, x: usize, y: usize, hpos: HPos| -> DrawResult<()> {
+            let style = ("sans-serif", PX).into_font().color(&ink).pos(Pos::new(hpos, VPos::Center));
+            root.draw_text(s, &style, (x as i32, (y as f64 + 0.17 * PX).round() as i32)).map_err(err)
+        };
+        for (i, name) in headings.iter().enumerate() {
+            // Shortened with "…" to its column's width.
+            let mut s = name.to_string();
+            while measure(&s) + 4 > col && s.chars().count() > 2 {
+                let mut t = s.trim_end_matches('…').to_string();
+                t.pop();
+                s = format!("{t}…");
+            }
+            text(&s, left + i * col + col / 2, top / 2, HPos::Center)?;
+        }
+        if labelled {
+            let row_h = img.height / rows.len().max(1);
+            for (r, label) in rows.iter().enumerate() {
+                text(label, left - 8, top + r * row_h + row_h / 2, HPos::Right)?;
+            }
+        }
+        text(bar_title, bar_x + 7, top / 2, HPos::Center)?;
+        for (j, t) in ticks.iter().enumerate() {
+            let y = top + (img.height.saturating_sub(1) as f64 * (1.0 - j as f64 / 2.0)).round() as usize;
+            root.draw(&PathElement::new(vec![((bar_x + 14) as i32, y as i32), ((bar_x + 18) as i32, y as i32)], ink.stroke_width(1))).map_err(err)?;
+            text(t, bar_x + 21, y, HPos::Left)?;
+        }
+        root.present().map_err(err)?;
+    }
+    Ok(out)
 }
 
 /// One point of the speed-versus-error scatter.
@@ -340,7 +758,7 @@ pub fn speed_error(points: &[CostError], title: &str, x_desc: &str, y_desc: &str
     let s = Scatter::new(points, title, x_desc, y_desc)?;
     // ab_glyph in the bitmap backend puts the baseline ~0.17 em higher than an SVG viewer does for the same
     // anchor; the shift re-centres bitmap text in the boxes the labels were placed with.
-    render_with(format, SCATTER_SIZE, |r| s.draw(r, 0.17), |r| s.draw(r, 0.0))
+    render_with(format, SCATTER_SIZE, 1, |r, _| s.draw(r, 0.17), |r, _| s.draw(r, 0.0))
 }
 
 /// An axis-aligned box in pixels (y grows downwards).
@@ -585,6 +1003,15 @@ fn tick_label(t: &Tick) -> String {
         } else {
             format!("{}×10{e}", t.mantissa)
         }
+    }
+}
+
+/// m×10ⁿ, or 10ⁿ for m = 1, at any exponent.
+fn power_label(t: &Tick) -> String {
+    if t.mantissa == 1 {
+        format!("10{}", superscript(t.exp))
+    } else {
+        format!("{}×10{}", t.mantissa, superscript(t.exp))
     }
 }
 
@@ -911,37 +1338,73 @@ fn marker<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, shape: usize, (x, y
     Ok(())
 }
 
-/// `render` with two closures (plotters' backends are different types).
-fn render_with<A, B>(format: Format, size: (u32, u32), png: A, svg: B) -> DrawResult<Vec<u8>>
+/// Draws a plot at `supersample`× its `size` and encodes it: the one place PNG and SVG are made (plotters'
+/// backends are different types, hence two closures, each given the drawing area and the scale k). PNG: drawn
+/// at k× (k lowered for big images so the buffer stays under [`MAX_DRAW_PIXELS`]), then each k × k block
+/// averaged into one pixel. SVG: the k× drawing under `width`/`height` of the 1× size and a k× `viewBox`.
+fn render_with<A, B>(format: Format, size: (u32, u32), supersample: u32, png: A, svg: B) -> DrawResult<Vec<u8>>
 where
-    A: FnOnce(&DrawingArea<BitMapBackend, Shift>) -> DrawResult<()>,
-    B: FnOnce(&DrawingArea<SVGBackend, Shift>) -> DrawResult<()>,
+    A: FnOnce(&DrawingArea<BitMapBackend, Shift>, f64) -> DrawResult<()>,
+    B: FnOnce(&DrawingArea<SVGBackend, Shift>, f64) -> DrawResult<()>,
 {
     register_font();
+    let (w, h) = (size.0 as usize, size.1 as usize);
     match format {
         Format::Png => {
-            let mut buf = vec![0u8; (size.0 as usize) * (size.1 as usize) * 3];
+            let k = (1..=supersample.max(1)).rev().find(|&k| (w * h) as u64 * (k * k) as u64 <= MAX_DRAW_PIXELS).unwrap_or(1);
+            let big = (size.0 * k, size.1 * k);
+            let mut buf = vec![0u8; (big.0 as usize) * (big.1 as usize) * 3];
             {
-                let root = BitMapBackend::with_buffer(&mut buf, size).into_drawing_area();
+                let root = BitMapBackend::with_buffer(&mut buf, big).into_drawing_area();
                 root.fill(&WHITE).map_err(err)?;
-                png(&root)?;
+                png(&root, k as f64)?;
                 root.present().map_err(err)?;
             }
+            let rgb = if k == 1 { buf } else { box_down(&buf, w, h, k as usize) };
             // The renderer's encoder: same `Software: lobe` marker, so lobe may later replace its own plot.
-            crate::base::image::Image { width: size.0 as usize, height: size.1 as usize, rgb: buf }.encode_png()
+            crate::base::image::Image { width: w, height: h, rgb }.encode_png()
         }
         Format::Svg => {
+            let k = supersample.max(1);
+            let big = (size.0 * k, size.1 * k);
             let mut s = String::new();
             {
-                let root = SVGBackend::with_string(&mut s, size).into_drawing_area();
+                let root = SVGBackend::with_string(&mut s, big).into_drawing_area();
                 root.fill(&WHITE).map_err(err)?;
-                svg(&root)?;
+                svg(&root, k as f64)?;
                 root.present().map_err(err)?;
             }
+            // Shown at the 1× size; the viewBox keeps the k× user units (1/k-pixel coordinates).
+            let head = format!("<svg width=\"{}\" height=\"{}\"", big.0, big.1);
+            let s = s.replacen(&head, &format!("<svg width=\"{}\" height=\"{}\"", size.0, size.1), 1);
             // The marker lets lobe recognise (and later replace) its own SVGs.
             Ok([b"<!-- made by lobe -->\n".as_slice(), s.as_bytes()].concat())
         }
     }
+}
+
+/// Averages each k × k block of an RGB image of (w·k) × (h·k) pixels into one of w × h.
+fn box_down(big: &[u8], w: usize, h: usize, k: usize) -> Vec<u8> {
+    let bw = w * k;
+    let mut out = vec![0u8; w * h * 3];
+    let mut row = vec![0u32; w * 3];
+    for y in 0..h {
+        row.iter_mut().for_each(|v| *v = 0);
+        for sy in 0..k {
+            let line = &big[(y * k + sy) * bw * 3..(y * k + sy + 1) * bw * 3];
+            for (x, px) in line.chunks_exact(3).enumerate() {
+                let o = (x / k) * 3;
+                row[o] += px[0] as u32;
+                row[o + 1] += px[1] as u32;
+                row[o + 2] += px[2] as u32;
+            }
+        }
+        let n = (k * k) as u32;
+        for (o, v) in out[y * w * 3..(y + 1) * w * 3].iter_mut().zip(&row) {
+            *o = ((v + n / 2) / n) as u8;
+        }
+    }
+    out
 }
 
 #[cfg(test)]
@@ -1113,6 +1576,211 @@ mod tests {
         assert!(t.iter().any(|t| !t.labelled));
         assert_eq!(tick_label(&Tick { mantissa: 5, exp: -7, labelled: true }), "5×10⁻⁷");
         assert_eq!(tick_label(&Tick { mantissa: 1, exp: 6, labelled: true }), "10⁶");
+    }
+
+    /// `(text-anchor, text)` of every `<text>` element of an SVG.
+    fn svg_anchored_texts(svg: &str) -> Vec<(String, String)> {
+        svg.split("<text")
+            .skip(1)
+            .filter_map(|t| {
+                let (attrs, rest) = t.split_once('>')?;
+                let anchor = attrs.split("text-anchor=\"").nth(1)?.split('"').next()?.to_string();
+                Some((anchor, rest.split("</text>").next()?.trim().to_string()))
+            })
+            .collect()
+    }
+
+    /// A tick label as a number: plain decimals, 10ⁿ or m×10ⁿ, minus written as U+2212.
+    fn parse_label(s: &str) -> Option<f64> {
+        const SUP: [char; 10] = ['⁰', '¹', '²', '³', '⁴', '⁵', '⁶', '⁷', '⁸', '⁹'];
+        let s = s.replace('−', "-");
+        let Some(at) = s.find(|c: char| SUP.contains(&c) || c == '⁻') else { return s.parse().ok() };
+        let (base, exp) = s.split_at(at);
+        let mantissa = base.strip_suffix("10")?.trim_end_matches('×');
+        let m: f64 = if mantissa.is_empty() { 1.0 } else { mantissa.parse().ok()? };
+        let e: String = exp.chars().map(|c| if c == '⁻' { Some('-') } else { SUP.iter().position(|d| *d == c).map(|d| (b'0' + d as u8) as char) }).collect::<Option<_>>()?;
+        Some(m * 10f64.powi(e.parse().ok()?))
+    }
+
+    /// A small deterministic generator for random cases.
+    fn lcg(seed: &mut u64) -> f64 {
+        *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (*seed >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    #[test]
+    fn log_axis_labels_are_clean_1_2_5_numbers_on_random_lobes() {
+        let mut seed = 7u64;
+        for case in 0..30 {
+            let k = 1 + (lcg(&mut seed) * 4.0) as usize;
+            let series: Vec<Series> = (0..k)
+                .map(|j| {
+                    let n = 10f64.powf(lcg(&mut seed) * 3.3);
+                    let scale = 10f64.powf(lcg(&mut seed) * 16.0 - 8.0);
+                    let mut s = cos_n(n);
+                    s.name = format!("s{j}");
+                    s.points.iter_mut().for_each(|p| p.1 *= scale);
+                    s
+                })
+                .collect();
+            let size = (300 + (lcg(&mut seed) * 1100.0) as u32, 200 + (lcg(&mut seed) * 800.0) as u32);
+            let o = LobeOptions { title: "t".into(), polar: false, log: true, size };
+            let svg = String::from_utf8(lobes(&series, &o, Format::Svg).unwrap()).unwrap();
+            let texts = svg_anchored_texts(&svg);
+            // The value axis's labels are the right-aligned texts.
+            let y: Vec<&String> = texts.iter().filter(|t| t.0 == "end").map(|t| &t.1).collect();
+            assert!(y.len() >= 2, "case {case} {size:?}: labels {y:?}");
+            for l in &y {
+                let v = parse_label(l).unwrap_or_else(|| panic!("case {case}: `{l}` is not a number"));
+                let m = v / 10f64.powf(v.log10().floor() + 1e-12);
+                assert!([1.0, 2.0, 5.0].iter().any(|d| (m - d).abs() < 1e-6), "case {case}: `{l}` = {v} is not 1, 2 or 5 × 10ⁿ");
+                assert!(l.chars().count() <= 7, "case {case}: `{l}` is long");
+            }
+            // The angle axis: plain numbers, evenly spaced.
+            let x: Vec<f64> = texts.iter().filter(|t| t.0 == "middle").filter_map(|t| parse_label(&t.1)).collect();
+            assert!(x.len() >= 2 && x.windows(3).all(|w| ((w[2] - w[1]) - (w[1] - w[0])).abs() < 1e-9), "case {case}: {x:?}");
+        }
+    }
+
+    #[test]
+    fn linear_labels_are_short_exact_and_evenly_spaced() {
+        let labels = |lo, hi| -> Vec<String> { linear_ticks(lo, hi, 600.0, 60.0).into_iter().filter_map(|t| t.label).collect() };
+        assert_eq!(labels(0.0, 0.3), ["0", "0.05", "0.1", "0.15", "0.2", "0.25", "0.3"]);
+        assert_eq!(labels(-2e-7, 3e-7)[..3], ["−2×10⁻⁷", "−1.5×10⁻⁷", "−1×10⁻⁷"]);
+        assert_eq!(labels(0.0, 3.2e7)[1], "5×10⁶");
+        let mut seed = 11u64;
+        for case in 0..500 {
+            let span = 10f64.powf(lcg(&mut seed) * 24.0 - 12.0);
+            let mid = (lcg(&mut seed) - 0.5) * 6.0 * span;
+            let (lo, hi) = (mid - span * lcg(&mut seed), mid + span);
+            let len = 100.0 + lcg(&mut seed) * 2000.0;
+            let t = linear_ticks(lo, hi, len, 40.0);
+            // A range shorter than two steps may hold a single tick.
+            assert!(!t.is_empty() && (t.len() as f64) <= len / 40.0 + 1.0, "case {case}: {lo}..{hi}: {} ticks", t.len());
+            let vals: Vec<f64> = t.iter().map(|t| parse_label(t.label.as_deref().unwrap()).unwrap()).collect();
+            let step = if vals.len() > 1 { vals[1] - vals[0] } else { 1.0 };
+            for (i, (t, v)) in t.iter().zip(&vals).enumerate() {
+                let l = t.label.as_deref().unwrap();
+                assert!(l.chars().count() <= if l.contains('×') { 11 } else { 9 }, "case {case}: `{l}`");
+                assert!((v - t.at).abs() <= 1e-9 * step.abs().max(t.at.abs()), "case {case}: `{l}` read {v}, drawn at {}", t.at);
+                assert!(i == 0 || ((v - vals[i - 1]) - step).abs() <= 1e-6 * step, "case {case}: uneven {vals:?}");
+                assert!(lo - 1e-9 * span <= t.at && t.at <= hi + 1e-9 * span);
+            }
+        }
+    }
+
+    #[test]
+    fn twenty_four_series_are_all_told_apart() {
+        let styles: Vec<LineStyle> = (0..24).map(|i| line_style(i, 24)).collect();
+        let keys: std::collections::HashSet<String> = styles.iter().map(|s| format!("{:?} {:?}", s.color, s.dash)).collect();
+        assert_eq!(keys.len(), 24, "(colour, dash) pairs repeat");
+        assert_eq!(styles.iter().map(|s| format!("{:?}", s.color)).collect::<std::collections::HashSet<_>>().len(), 12);
+        // The twelve colours stay apart from each other and from the white page.
+        for (i, a) in PALETTE.iter().enumerate() {
+            let d = |b: &RGBColor| ((a.0 as f64 - b.0 as f64).powi(2) + (a.1 as f64 - b.1 as f64).powi(2) + (a.2 as f64 - b.2 as f64).powi(2)).sqrt();
+            assert!(d(&WHITE) > 100.0, "colour {i} is too pale");
+            for (j, b) in PALETTE.iter().enumerate().skip(i + 1) {
+                assert!(d(b) > 60.0, "colours {i} and {j} are close");
+            }
+        }
+        // Earlier series are wider, so one drawn exactly under a later one shows.
+        assert!(styles.windows(2).all(|w| w[0].width > w[1].width));
+    }
+
+    /// Pixels of `img` left of `x_max` within `tol` of colour `c` in every channel.
+    fn count_near(img: &crate::base::image::Image, c: RGBColor, tol: u8, x_max: usize) -> usize {
+        (0..img.height).flat_map(|y| (0..x_max).map(move |x| (x, y))).filter(|&(x, y)| img.pixel(x, y).iter().zip([c.0, c.1, c.2]).all(|(p, q)| p.abs_diff(q) <= tol)).count()
+    }
+
+    #[test]
+    fn a_curve_exactly_under_another_still_shows() {
+        let (mut a, mut b) = (cos_n(20.0), cos_n(20.0));
+        (a.name, b.name) = ("Phong".into(), "Blinn".into());
+        let o = LobeOptions { title: "t".into(), polar: false, log: false, size: (600, 400) };
+        for polar in [false, true] {
+            let png = lobes(&[a.clone(), b.clone()], &LobeOptions { polar, ..o.clone() }, Format::Png).unwrap();
+            let img = crate::base::image::Image::decode_png(&png).unwrap();
+            // Left of the legend: the curves only.
+            let plot_w = img.width * 3 / 5;
+            let (first, second) = (count_near(&img, color(0), 12, plot_w), count_near(&img, color(1), 12, plot_w));
+            assert!(first >= 100 && second >= 100, "polar {polar}: {first} px of the first curve, {second} of the second");
+        }
+    }
+
+    #[test]
+    fn png_lines_are_anti_aliased_and_svg_coordinates_carry_fractions() {
+        let line = Series { name: "x".into(), points: (0..=90).map(|d| (d as f64, d as f64 * 0.37)).collect() };
+        let png = curves_sized(std::slice::from_ref(&line), "t", "x", "y", Format::Png, (500, 400)).unwrap();
+        let img = crate::base::image::Image::decode_png(&png).unwrap();
+        // Pixels part way from the page's white to the line's colour: its anti-aliased edge.
+        let c = color(0);
+        let edge = (0..img.height)
+            .flat_map(|y| (0..img.width * 3 / 5).map(move |x| (x, y)))
+            .filter(|&(x, y)| {
+                let p = img.pixel(x, y);
+                let t = (255.0 - p[0] as f64) / (255.0 - c.0 as f64);
+                let on = |ch: usize, q: u8| (p[ch] as f64 - (255.0 - t * (255.0 - q as f64))).abs() <= 4.0;
+                (0.15..0.85).contains(&t) && on(1, c.1) && on(2, c.2)
+            })
+            .count();
+        assert!(edge >= 100, "{edge} edge pixels between white and the line's colour");
+        let svg = String::from_utf8(curves_sized(&[line], "t", "x", "y", Format::Svg, (500, 400)).unwrap()).unwrap();
+        let k = SUPERSAMPLE;
+        assert!(svg.contains(&format!("<svg width=\"500\" height=\"400\" viewBox=\"0 0 {} {}\"", 500 * k, 400 * k)), "{}", &svg[..200]);
+        assert!(svg.starts_with("<!-- made by lobe -->"));
+        let hex = format!("stroke=\"#{:02X}{:02X}{:02X}\"", c.0, c.1, c.2);
+        let coords: Vec<i64> = svg
+            .lines()
+            .filter(|l| l.starts_with("<polyline") && l.contains(&hex))
+            .flat_map(|l| l.split("points=\"").nth(1).unwrap_or("").split(['"', ' ', ',']).filter_map(|v| v.parse::<i64>().ok()).collect::<Vec<_>>())
+            .collect();
+        let fractional = coords.iter().filter(|v| *v % k as i64 != 0).count();
+        assert!(coords.len() > 100 && fractional * 2 > coords.len(), "{fractional} of {} coordinates between whole pixels", coords.len());
+    }
+
+    #[test]
+    fn nothing_is_drawn_to_the_image_edge() {
+        let wide = Series { name: "coef".into(), points: (1..=1000).map(|n| (n as f64, 0.255 * n as f64)).collect() };
+        let many: Vec<Series> = (0..16).map(|i| Series { name: format!("formula number {i}"), ..cos_n(1.0 + i as f64 * 20.0) }).collect();
+        let mut pngs = vec![curves(&[wide], "coefficient", "n", "coef", Format::Png).unwrap()];
+        for (polar, log) in [(false, false), (true, false), (false, true)] {
+            for size in [(900, 600), (400, 300)] {
+                pngs.push(lobes(&many, &LobeOptions { title: "Lobes".into(), polar, log, size }, Format::Png).unwrap());
+            }
+        }
+        for (i, png) in pngs.iter().enumerate() {
+            let img = crate::base::image::Image::decode_png(png).unwrap();
+            let (w, h) = (img.width, img.height);
+            let border = (0..w).flat_map(|x| [(x, 0), (x, 1), (x, h - 2), (x, h - 1)]).chain((0..h).flat_map(|y| [(0, y), (1, y), (w - 2, y), (w - 1, y)]));
+            let inked: Vec<(usize, usize)> = border.filter(|&(x, y)| img.pixel(x, y) != [255, 255, 255]).collect();
+            assert!(inked.is_empty(), "plot {i}: ink at the edge, e.g. {:?}", &inked[..inked.len().min(5)]);
+        }
+    }
+
+    #[test]
+    fn comparison_figures_have_headings_row_labels_and_a_colour_bar() {
+        let mut img = crate::base::image::Image::new(3 * 40, 2 * 30);
+        img.rgb.iter_mut().enumerate().for_each(|(i, v)| *v = (i * 7 % 251) as u8);
+        let rows = ["n = 5".to_string(), "n = 50".to_string()];
+        let f = comparison_figure(&img, ["a.brdf", "b.brdf", "|Δgray|"], &rows, 42.0).unwrap();
+        let (w, h) = (f.width, f.height);
+        // The picture is copied unchanged; find its offset by its first row.
+        let at = (0..w - img.width).flat_map(|x| (0..h - img.height).map(move |y| (x, y))).find(|&(x, y)| (0..img.width).all(|i| f.pixel(x + i, y) == img.pixel(i, 0))).unwrap();
+        assert!((0..img.height).all(|y| (0..img.width).all(|x| f.pixel(at.0 + x, at.1 + y) == img.pixel(x, y))));
+        let inked = |x0: usize, x1: usize, y0: usize, y1: usize| (y0..y1).flat_map(|y| (x0..x1).map(move |x| (x, y))).filter(|&(x, y)| f.pixel(x, y) != [255, 255, 255]).count();
+        // Headings above each column, labels left of the rows.
+        for c in 0..3 {
+            assert!(inked(at.0 + c * 40, at.0 + (c + 1) * 40, 0, at.1) > 10, "heading {c}");
+        }
+        assert!(inked(0, at.0, at.1, at.1 + 30) > 10 && inked(0, at.0, at.1 + 30, at.1 + 60) > 10, "row labels");
+        // The bar: white at the top (the scale), black at the bottom, brighter upwards; its labels beside it.
+        let bar_x = (at.0 + img.width..w).find(|&x| f.pixel(x, at.1) == [255, 255, 255] && f.pixel(x, at.1 + img.height - 1) == [0, 0, 0]).unwrap();
+        let lum = |y: usize| f.pixel(bar_x, y).iter().map(|&v| v as u32).sum::<u32>();
+        assert!((at.1..at.1 + img.height - 1).all(|y| lum(y) >= lum(y + 1)));
+        assert!(inked(bar_x + 16, w, at.1, at.1 + img.height) > 20, "bar labels");
+        // No rows named: no label column.
+        let plain = comparison_figure(&img, ["a", "b", "c"], &[], 1.0).unwrap();
+        assert!(plain.width < w);
     }
 
     /// DejaVu Sans 13 px metrics, rounded up (5.7 px per character measured), so placement is tested without a renderer.
