@@ -123,7 +123,7 @@ impl Compare for Direct {
 }
 
 /// `1/√x`.
-fn inv_len<A: Arith>(e: &mut A, x: A::V) -> A::V {
+pub fn inv_len<A: Arith>(e: &mut A, x: A::V) -> A::V {
     let one = e.konst(1.0);
     let r = e.sqrt(x);
     e.div(one, r)

@@ -218,7 +218,7 @@ pub struct CoefRange {
 }
 
 /// `coef(n)` for n = `lo`, `lo + step`, … up to `hi` (parameter 0 replaced; `n` is its declaration, whose
-/// range the sweep must stay inside), in parallel: the energy command's `--range`. The first n whose integral
+/// range the sweep must stay inside), in parallel: the energy command's range of n. The first n whose integral
 /// fails is the error, naming that n.
 pub fn coef_range(ev: &dyn Evaluator, params: &[f64], lobe: Input, n: Option<&crate::ir::ParamDecl>, lo: f64, hi: f64, step: f64) -> Result<CoefRange, Diagnostic> {
     let show = crate::ir::print::number;

@@ -37,7 +37,7 @@ use crate::base::span::Span;
 use crate::builtins::{Builtin, Mode};
 use std::sync::Arc;
 use crate::builtins::dd::Arith;
-use crate::frame::{world_axes, world_light_inputs, world_view, Compare};
+use crate::frame::{dot, inv_len, world_axes, world_light_inputs, world_view, Compare};
 use crate::ir::{BinOp, Formula, Input, Ir, Node, NodeId, N_INPUTS};
 
 /// The data columns a lighting program reads: position, normal, tangent (3 each; the tangent only for
@@ -93,30 +93,8 @@ impl Builder {
         }
         self.ir.bin(op, a, b, self.s)
     }
-    fn add(&mut self, a: NodeId, b: NodeId) -> NodeId {
-        self.bin(BinOp::Add, a, b)
-    }
-    fn sub(&mut self, a: NodeId, b: NodeId) -> NodeId {
-        self.bin(BinOp::Sub, a, b)
-    }
-    fn mul(&mut self, a: NodeId, b: NodeId) -> NodeId {
-        self.bin(BinOp::Mul, a, b)
-    }
     fn call(&mut self, f: Builtin, args: &[NodeId]) -> NodeId {
         self.ir.call(f, args, self.s)
-    }
-    fn dot(&mut self, a: [NodeId; 3], b: [NodeId; 3]) -> NodeId {
-        let x = self.mul(a[0], b[0]);
-        let y = self.mul(a[1], b[1]);
-        let z = self.mul(a[2], b[2]);
-        let xy = self.add(x, y);
-        self.add(xy, z)
-    }
-    /// 1/√x.
-    fn inv_len(&mut self, x: NodeId) -> NodeId {
-        let one = self.k(1.0);
-        let r = self.call(Builtin::Sqrt, &[x]);
-        self.bin(BinOp::Div, one, r)
     }
     /// `c ? a : b` with `c` a 0/1 flag.
     fn select(&mut self, c: NodeId, a: NodeId, b: NodeId) -> NodeId {
@@ -222,8 +200,8 @@ pub fn build(spec: &Spec, channels: &[&Formula]) -> Result<Program, String> {
         let (l, il) = if light.point {
             let lp = b.splat(light.at);
             let l = b.sub3(lp, p);
-            let ll = b.dot(l, l);
-            (l, b.inv_len(ll))
+            let ll = dot(&mut b, l, l);
+            (l, inv_len(&mut b, ll))
         } else {
             (b.splat(light.at), one)
         };

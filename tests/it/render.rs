@@ -462,7 +462,8 @@ fn cli_render_and_compare_end_to_end() {
         assert!(row["psnr"].as_f64().unwrap() > 20.0);
     }
     let im = Image::decode_png(&std::fs::read(&cmp).unwrap()).unwrap();
-    assert_eq!((im.width, im.height), (3 * 64, 2 * 64));
+    // Three 64² columns per n, inside a figure with headings, row labels and the colour bar.
+    assert!(im.width >= 3 * 64 + 40 && im.height >= 2 * 64 + 20, "{}×{}", im.width, im.height);
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
