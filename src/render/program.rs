@@ -161,8 +161,7 @@ impl Arith for Builder {
     }
     fn positive_select(&mut self, c: NodeId, a: NodeId, b: NodeId) -> NodeId {
         let zero = self.k(0.0);
-        let m = self.lt(zero, c);
-        self.select(m, a, b)
+        self.less_select(zero, c, a, b)
     }
 }
 

@@ -39,7 +39,6 @@ fn kernel_and_params(st: &State, req: &Value) -> Result<(Arc<crate::Kernel>, Vec
     Ok((k, params))
 }
 
-/// The largest finite value (0 if none) and the count of non-finite ones.
 /// The `/api/lobe` reply (non-finite values as `null`).
 #[derive(serde::Serialize)]
 struct LobeReply {
@@ -63,6 +62,7 @@ struct SliceReply {
     nonfinite: usize,
 }
 
+/// The largest finite value (0 if none) and the count of non-finite ones.
 fn summary(values: &[f64]) -> (f64, usize) {
     let max = values.iter().copied().filter(|v| v.is_finite()).fold(0.0f64, f64::max);
     (max, values.iter().filter(|v| !v.is_finite()).count())

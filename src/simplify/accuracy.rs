@@ -786,19 +786,16 @@ fn cancel_min(a: &Analysis) -> (Ir, NodeId, bool) {
         let top = (mag(&[k]) * mag(&cd)).max(mag(&cn) * mag(&[x]).max(mag(&[y])));
         let e = if top.is_finite() { (1000.0 - top.max(1.0).log2()).floor().min(600.0) } else { 0.0 };
         let scale = ir.konst(2f64.powi(e.max(0.0) as i32), s);
-        let kd = match product(ir, map, &cd, s) {
-            Some(p) => ir.bin(BinOp::Mul, p, scale, s),
-            None => scale,
-        };
+        let cden = product(ir, map, &cd, s);
+        let kd = cden.map_or(scale, |p| ir.bin(BinOp::Mul, p, scale, s));
         let lhs = ir.bin(BinOp::Mul, map[k.index()], kd, s);
         let us = ir.bin(BinOp::Mul, u, scale, s);
-        let rhs = product(ir, map, &cn, s).map_or(us, |p| ir.bin(BinOp::Mul, p, us, s));
+        let cnum = product(ir, map, &cn, s);
+        let rhs = cnum.map_or(us, |p| ir.bin(BinOp::Mul, p, us, s));
         let first = ir.call(Builtin::Lt, &[lhs, rhs], s);
         let one = ir.konst(1.0, s);
-        let cnum = product(ir, map, &cn, s).unwrap_or(one);
-        let cden = product(ir, map, &cd, s).unwrap_or(one);
-        let g = ir.call(Builtin::Select, &[first, map[k.index()], cnum], s);
-        let gd = ir.call(Builtin::Select, &[first, u, cden], s);
+        let g = ir.call(Builtin::Select, &[first, map[k.index()], cnum.unwrap_or(one)], s);
+        let gd = ir.call(Builtin::Select, &[first, u, cden.unwrap_or(one)], s);
         let others: Vec<NodeId> = num.iter().enumerate().filter(|(i, _)| *i != at).map(|(_, v)| *v).collect();
         let mut rest = den.clone();
         for v in [x, y] {
