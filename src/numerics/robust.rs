@@ -53,10 +53,12 @@
 //! ([`super::pass_cache`]) stores.
 //!
 //! Cost: one truth evaluation per point (1–5 µs for a catalogue formula in release; a limit only where it is
-//! NaN), computed once per pass ([`Reference`]), one interpreter evaluation per point and candidate, and the
-//! condition (two truth evaluations per read input) once per point where some candidate is more than
-//! [`TARGET_BITS`] off, or everywhere for the report ([`Conditioning::Everywhere`]); parallel over points
-//! (rayon). On one core: 3–110 ms per catalogue formula, up to ~430 ms for BRDF Explorer's largest files
+//! NaN), computed once per pass ([`Reference`]), one evaluation per point and candidate (compiled by the JIT,
+//! which gives the interpreter's bits, from [`JIT_FROM_POINTS`] points; interpreted below), and the condition
+//! (two truth evaluations per read input, re-evaluating only the nodes that read it) once per point where some
+//! candidate is more than [`TARGET_BITS`] off, or everywhere for the report ([`Conditioning::Everywhere`]);
+//! parallel over points (rayon). On one core: 3–65 ms per catalogue formula, up to ~265 ms for BRDF Explorer's
+//! largest files, and 6 s for `lobe check`'s 10⁵ points on the largest
 //! (BENCHMARKS.md, the `pass` bench).
 
 use crate::base::cancel::Cancel;
@@ -329,14 +331,19 @@ impl ErrorStats {
 /// kernel exactly as given (a baked one is a constant, a live one an argument), so where the formula is
 /// sensitive to it (F_ST's n/a·(c − 1) + 1 at n = a) the kernel must still be accurate.
 pub fn condition_ulps(truth_f: &Formula, pt: &Point, t: f64) -> f64 {
-    let moves: Vec<(usize, f64)> = truth_f
-        .used_inputs()
+    condition_ulps_with(truth_f, &truth::Readers::new(truth_f), pt, t)
+}
+
+/// [`condition_ulps`] with the formula's [`truth::Readers`] built beforehand (once per formula, not per point).
+fn condition_ulps_with(truth_f: &Formula, readers: &truth::Readers, pt: &Point, t: f64) -> f64 {
+    let moves: Vec<(usize, f64)> = readers
+        .used
         .iter()
         .map(|i| (i.index(), pt.x[i.index()]))
         .filter(|&(_, v)| v != 0.0)
         .flat_map(|(i, v)| [(i, v.next_up()), (i, v.next_down())])
         .collect();
-    let values = truth::eval_moves(truth_f, &pt.x, &pt.p, &moves);
+    let values = truth::eval_moves_with(truth_f, readers, &pt.x, &pt.p, &moves);
     let mut worst: f64 = 0.0;
     for (&(i, w), mut u) in moves.iter().zip(values) {
         // At a limit point its neighbours along the other inputs are limits too.
@@ -392,6 +399,7 @@ pub struct Reference<'a> {
     points: Vec<Point>,
     truth: Vec<TruthAt>,
     cond: Vec<std::sync::OnceLock<f64>>,
+    readers: truth::Readers,
 }
 
 impl<'a> Reference<'a> {
@@ -399,7 +407,7 @@ impl<'a> Reference<'a> {
     pub fn new(truth_f: &'a Formula, points: Vec<Point>) -> Reference<'a> {
         let truth = points.par_iter().map(|pt| TruthAt::new(truth_f, pt)).collect();
         let cond = (0..points.len()).map(|_| std::sync::OnceLock::new()).collect();
-        Reference { truth_f, points, truth, cond }
+        Reference { truth_f, points, truth, cond, readers: truth::Readers::new(truth_f) }
     }
 
     pub fn points(&self) -> &[Point] {
@@ -407,7 +415,7 @@ impl<'a> Reference<'a> {
     }
 
     fn cond(&self, i: usize) -> f64 {
-        *self.cond[i].get_or_init(|| condition_ulps(self.truth_f, &self.points[i], self.truth[i].value))
+        *self.cond[i].get_or_init(|| condition_ulps_with(self.truth_f, &self.readers, &self.points[i], self.truth[i].value))
     }
 
     /// Bits of error of `ev` at every point, in parallel.
@@ -903,7 +911,7 @@ pub enum Stage {
 impl Bench<'_> {
     /// A candidate's error and values, its regressions against `base`'s values.
     fn run(&self, f: &Formula, base: Option<&[f64]>) -> (ErrorStats, Vec<f64>) {
-        self.reference.measure_from(&Interp::with_mode(f, self.o.math), Conditioning::WhereInaccurate, base)
+        self.reference.measure_from(&*measurer(f, self.o.math, self.reference.points.len()), Conditioning::WhereInaccurate, base)
     }
 
     fn out_of_time(&self) -> bool {
@@ -915,9 +923,26 @@ impl Bench<'_> {
         (self.observe)(Stage::Report);
         match self.o.conditioning {
             Conditioning::WhereInaccurate => s,
-            Conditioning::Everywhere => self.reference.measure(&Interp::with_mode(f, self.o.math), Conditioning::Everywhere),
+            Conditioning::Everywhere => self.reference.measure(&*measurer(f, self.o.math, self.reference.points.len()), Conditioning::Everywhere),
         }
     }
+}
+
+/// Points from which a measurement compiles the candidate with the JIT rather than interpreting it: the JIT
+/// computes the interpreter's values bit for bit (the differential tests) at a tenth or less of its time per
+/// point, and its compile time (~10 µs per node) is repaid from a few thousand points.
+const JIT_FROM_POINTS: usize = 4096;
+
+/// The evaluator a measurement of `f` on `points` points runs: the JIT from [`JIT_FROM_POINTS`] (uncached: a
+/// candidate is measured once, and must not push the user's kernels out of the cache), the interpreter below
+/// that or if compiling fails.
+fn measurer(f: &Formula, mode: crate::Mode, points: usize) -> Box<dyn Evaluator> {
+    if points >= JIT_FROM_POINTS {
+        if let Ok(k) = crate::backend::jit::jit_kernel_uncached(f, mode) {
+            return Box::new(k);
+        }
+    }
+    Box::new(Interp::with_mode(f, mode))
 }
 
 /// The points a search measures: fewer for a costly kernel, and for a formula whose truth (every node as

@@ -66,12 +66,13 @@ fn ldexp(mut x: f64, mut k: i64) -> f64 {
 fn pow2(k: i64) -> f64 {
     crate::builtins::math::pow2i(k as f64)
 }
-/// 1/i! for i = 0 … 12 in double-double (exp's Taylor terms multiply by these instead of dividing by i).
-fn inverse_factorials() -> &'static [Dd; 13] {
-    static T: std::sync::OnceLock<[Dd; 13]> = std::sync::OnceLock::new();
+/// 1/i! for i = 0 … 33 in double-double (the Taylor terms of exp, sin and cos multiply by these instead of
+/// dividing by i: a double-double division was half of the truth's time on trigonometric formulas).
+fn inverse_factorials() -> &'static [Dd; 34] {
+    static T: std::sync::OnceLock<[Dd; 34]> = std::sync::OnceLock::new();
     T.get_or_init(|| {
-        let mut t = [(1.0, 0.0); 13];
-        for i in 1..13 {
+        let mut t = [(1.0, 0.0); 34];
+        for i in 1..34 {
             t[i] = dd::div(&mut Direct, t[i - 1], (i as f64, 0.0));
         }
         t
@@ -275,7 +276,7 @@ impl Xf {
         let s = (ldexp(r.0, -10), ldexp(r.1, -10));
         let mut power = s;
         let mut y = s;
-        for inv in &inverse_factorials()[2..] {
+        for inv in &inverse_factorials()[2..13] {
             power = dd::mul(&mut Direct, power, s);
             let term = dd::mul(&mut Direct, power, *inv);
             y = dd::add(&mut Direct, y, term);
@@ -367,12 +368,15 @@ impl Xf {
             r = dd::add(&mut Direct, r, dd::neg(&mut Direct, dd::mul(&mut Direct, (k, 0.0), (p / 2.0, 0.0))));
         }
         let r2 = dd::mul(&mut Direct, r, r);
-        let (mut s, mut ts) = (r, r);
-        let (mut c, mut tc) = ((1.0, 0.0), (1.0, 0.0));
-        for i in 1..30 {
-            let a = f64::from(2 * i);
-            ts = dd::neg(&mut Direct, dd::div(&mut Direct, dd::mul(&mut Direct, ts, r2), (a * (a + 1.0), 0.0)));
-            tc = dd::neg(&mut Direct, dd::div(&mut Direct, dd::mul(&mut Direct, tc, r2), ((a - 1.0) * a, 0.0)));
+        // |r| ≤ π/4: the terms r^i/i! fall below 1e-40 (far below 2^-106 of the sums) by i = 33.
+        let inv = inverse_factorials();
+        let (mut s, mut c) = (r, (1.0, 0.0));
+        let mut even = (1.0, 0.0);
+        for i in 1..17 {
+            even = dd::mul(&mut Direct, even, r2);
+            let odd = dd::mul(&mut Direct, even, r);
+            let (tc, ts) = (dd::mul(&mut Direct, even, inv[2 * i]), dd::mul(&mut Direct, odd, inv[2 * i + 1]));
+            let (tc, ts) = if i % 2 == 1 { (dd::neg(&mut Direct, tc), dd::neg(&mut Direct, ts)) } else { (tc, ts) };
             s = dd::add(&mut Direct, s, ts);
             c = dd::add(&mut Direct, c, tc);
             if ts.0.abs() < 1e-40 && tc.0.abs() < 1e-40 {
@@ -531,14 +535,36 @@ fn eval_xs(f: &Formula, x: &[Xf; N_INPUTS], params: &[f64]) -> Xf {
     v[f.root.index()]
 }
 
+/// Per input, the nodes up to the root that read it, in evaluation order: what moving that input evaluates
+/// again ([`eval_moves_with`]); built once per formula.
+pub struct Readers {
+    by_input: [Vec<NodeId>; N_INPUTS],
+    /// The inputs the formula reads.
+    pub used: crate::ir::InputSet,
+}
+
+impl Readers {
+    pub fn new(f: &Formula) -> Readers {
+        let reads = f.ir.input_sets();
+        let by_input = std::array::from_fn(|i| {
+            let input = crate::ir::Input::ALL[i];
+            f.ir.ids().take(f.root.index() + 1).filter(|id| reads[id.index()].contains(input)).collect()
+        });
+        Readers { by_input, used: f.used_inputs() }
+    }
+}
+
 /// The exact values of `f` at `x` with one input moved at a time, for each `(input, value)` of `moves` (rounded
 /// to f64), as [`eval`] gives them; only the nodes that read the moved input are evaluated again (a
 /// finite-difference condition number moves each read input both ways: most of a BRDF's nodes read one or two).
 pub fn eval_moves(f: &Formula, x: &[f64; N_INPUTS], params: &[f64], moves: &[(usize, f64)]) -> Vec<f64> {
+    eval_moves_with(f, &Readers::new(f), x, params, moves)
+}
+
+/// [`eval_moves`] with the formula's [`Readers`] built beforehand (they depend on the formula, not the point).
+pub fn eval_moves_with(f: &Formula, readers: &Readers, x: &[f64; N_INPUTS], params: &[f64], moves: &[(usize, f64)]) -> Vec<f64> {
     let n = f.root.index() + 1;
     let xs = x.map(Xf::from_f64);
-    // Per node, the inputs it reads, and its value at `x`.
-    let reads = f.ir.input_sets();
     let mut base: Vec<Xf> = Vec::with_capacity(n);
     for id in f.ir.ids().take(n) {
         let value = node_value(f, id, &base, &xs, params);
@@ -550,12 +576,15 @@ pub fn eval_moves(f: &Formula, x: &[f64; N_INPUTS], params: &[f64], moves: &[(us
         .map(|&(i, w)| {
             let mut moved = xs;
             moved[i] = Xf::from_f64(w);
-            let input = crate::ir::Input::ALL[i];
-            for id in f.ir.ids().take(n) {
-                let k = id.index();
-                v[k] = if reads[k].contains(input) { node_value(f, id, &v, &moved, params) } else { base[k] };
+            let nodes = &readers.by_input[i];
+            for &id in nodes {
+                v[id.index()] = node_value(f, id, &v, &moved, params);
             }
-            v[n - 1].to_f64()
+            let r = v[n - 1].to_f64();
+            for &id in nodes {
+                v[id.index()] = base[id.index()];
+            }
+            r
         })
         .collect()
 }
@@ -695,11 +724,20 @@ mod tests {
         assert!(close(Xf::from_f64(2.0).ln(), LN2, 1e-31));
         let sqrt2 = (std::f64::consts::SQRT_2, -9.667293313452913451e-17);
         assert!(close(Xf::from_f64(2.0).sqrt(), sqrt2, 1e-31));
-        // sin 1 = 0.8414709848078965066525023216302990, cos 1 = 0.5403023058681397174009366074429766
-        let (s, c) = Xf::ONE.sin_cos();
-        assert!(close(s, (0.8414709848078965, 0.8414709848078965066525023216302990 - 0.8414709848078965), 1e-16));
-        assert_eq!(s.to_f64(), 0.8414709848078965);
-        assert_eq!(c.to_f64(), 0.5403023058681398);
+        // sin and cos as double-doubles (mpmath at 300 bits), at arguments that reduce to every quadrant.
+        let table = [
+            (1.0, (0.8414709848078965, 1.776845092935536e-18), (0.5403023058681398, -4.760954612604417e-17)),
+            (0.7, (0.644217687237691, 2.8740567927338755e-18), (0.7648421872844885, -4.013780434022238e-17)),
+            (2.9, (0.23924932921398243, -1.1267666643498124e-17), (-0.9709581651495905, 4.579633153232696e-17)),
+            (-0.3, (-0.29552020666133955, -1.8315357276792536e-17), (0.955336489125606, 4.1935600297907467e-17)),
+            (1e-05, (9.999999999833334e-06, 6.182336062862823e-22), (0.99999999995, 4.137435208440879e-18)),
+            (100.5, (-0.030959966783271346, 8.320928549434447e-19), (0.9995206253283515, -5.012512561737467e-17)),
+        ];
+        for (v, sin, cos) in table {
+            let (s, c) = Xf::from_f64(v).sin_cos();
+            assert!(close(s, sin, 1e-30), "sin {v}: {s:?}");
+            assert!(close(c, cos, 1e-30), "cos {v}: {c:?}");
+        }
         // Identities at double-double precision.
         for v in [0.1, 0.7, 1.3, 2.9, 10.0, 100.5] {
             let x = Xf::from_f64(v);
