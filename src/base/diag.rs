@@ -41,6 +41,8 @@ pub enum Hint {
     FitSomeParam,
     /// The LLVM tier was asked of a build without it: how to build it in, or use the Cranelift tier.
     BuildWithLlvm,
+    /// A range of n was asked with a step that is not a positive number.
+    PositiveStep,
 }
 
 impl From<String> for Hint {
@@ -85,6 +87,7 @@ impl Wording for Plain {
             Hint::BakeEveryParam => "give every parameter a value before normalising".into(),
             Hint::FitSomeParam => "name at least one parameter to fit, with its range (e.g. a in 1..1000)".into(),
             Hint::BuildWithLlvm => format!("rebuild lobe with the cargo feature `llvm` ({LLVM_PACKAGES}), or use the Cranelift tier"),
+            Hint::PositiveStep => "give the range a positive step, e.g. 1".into(),
         }
     }
     fn setting(&self, s: &Setting) -> String {

@@ -63,6 +63,7 @@ impl Wording for Flags {
             }
             Hint::BakeEveryParam => "give every parameter a value (--set) before normalising".into(),
             Hint::FitSomeParam => "name at least one parameter: --param a=1..1000".into(),
+            Hint::PositiveStep => "e.g. --step 1".into(),
             Hint::BuildWithLlvm => {
                 format!("rebuild with `cargo build --release --features llvm` ({}), or use `--tier cranelift`", lobe::base::diag::LLVM_PACKAGES)
             }

@@ -230,9 +230,6 @@ fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<Out, C
     };
 
     let (lo, hi) = parse_range(range).map_err(|e| CliError::hint(format!("--range: {e}"), "e.g. --range 1..1000"))?;
-    if !(a.step > 0.0 && a.step.is_finite()) {
-        return Err(CliError::hint(format!("--step {} must be positive", a.step), "e.g. --step 1"));
-    }
     let CoefRange { integrals, coefs } = coef_range(k, &params, lobe, k.formula.params.first(), lo, hi, a.step)?;
     let score = against.map(|ak| score_fitted(&k.formula, &params, ak, &integrals));
     if let Some(path) = &a.plot {

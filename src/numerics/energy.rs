@@ -226,7 +226,7 @@ pub fn coef_range(ev: &dyn Evaluator, params: &[f64], lobe: Input, n: Option<&cr
         return Err(Diagnostic::error(format!("the range {}..{} of n is not finite lo ≤ hi", show(lo), show(hi))).hint("e.g. 1..1000"));
     }
     if !(step > 0.0 && step.is_finite()) {
-        return Err(Diagnostic::error(format!("the step {} of the range of n must be positive", show(step))).hint("e.g. a step of 1"));
+        return Err(Diagnostic::error(format!("the step {} of the range of n must be positive", show(step))).hint(crate::base::diag::Hint::PositiveStep));
     }
     if let Some(d) = n {
         if lo < d.lo || hi > d.hi {

@@ -205,7 +205,7 @@ pub fn build(spec: &Spec, channels: &[&Formula]) -> Result<Program, String> {
             (b.splat(light.at), one)
         };
         let x = world_light_inputs(&mut b, &view, axes.as_ref(), l, il, &needs);
-        let nl = x[Input::NL.index()].expect("NL is always computed");
+        let nl = x[Input::NL.index()].ok_or("the frame did not compute NL")?;
         let lit_nl = b.lt(zero, nl);
         let lit = match spec.cutoff {
             Some((input, cos)) => {
@@ -227,12 +227,14 @@ pub fn build(spec: &Spec, channels: &[&Formula]) -> Result<Program, String> {
                 let a = b.call(Builtin::Abs, &[*r]);
                 let fin = b.lt(a, inf);
                 let fz = b.select(fin, *r, zero);
+                // Times NL inside the lit region: an unlit pixel adds 0, even where NL is NaN (a zero normal).
+                let fz = if spec.times_nl { b.mul(fz, nl) } else { fz };
                 let bad = b.sub(one, fin);
                 outs.push(b.select(lit, fz, zero));
                 flags.push(b.select(lit, bad, zero));
             }
             for (c, g) in outs.iter().enumerate() {
-                f[c] = if spec.times_nl { b.mul(*g, nl) } else { *g };
+                f[c] = *g;
             }
             if raw.len() == 1 {
                 f = [f[0]; 3];
@@ -332,7 +334,7 @@ impl ProgramRun {
     pub(crate) fn new(scene: &Scene, m: &Material, plan: &ShadingPlan) -> Result<ProgramRun, String> {
         let src = &m.program;
         if let Some(evs) = &src.evaluated {
-            let shader = EvalShader { spec: spec(scene, plan), channels: evs.clone() };
+            let shader = EvalShader::new(spec(scene, plan), evs.clone());
             return Ok(ProgramRun { code: ProgramCode::Evaluated(Arc::new(shader)), block: vec![], params: m.params.clone(), tangent: true });
         }
         let channels: Vec<&Formula> = src.channels.iter().map(|f| f.as_ref()).collect();
@@ -343,17 +345,22 @@ impl ProgramRun {
     }
 }
 
-/// The lighting model of [`build`] in Rust, for materials whose channels are evaluators without formulas (a
-/// measured table): per pixel the view step, the tangent frame (Duff et al.'s tangent where the interpolated one
-/// is parallel to N, turned by the tangent angle), per light L and V in that frame, each channel's value, and
-/// the same colour sum and counters. Values agree with a compiled program up to rounding (the order of
-/// operations differs), not bit for bit. A material with a cut-off is refused before this is built.
+/// The lighting model of [`build`] on f64, for materials whose channels are evaluators without formulas (a
+/// measured table): per pixel the same frame definitions the program is built from ([`world_view`],
+/// [`world_axes`], [`world_light_inputs`], evaluated on f64 instead of written as nodes), each channel's value,
+/// and the same colour sum and counters, so its colours have the program's bits where the channels do. A
+/// material with a cut-off is refused before this is built.
 pub struct EvalShader {
     spec: Spec,
     channels: [Arc<dyn crate::backend::Evaluator>; 3],
 }
 
 impl EvalShader {
+    /// The shader of `spec` calling `channels` (red, green, blue) for F.
+    pub fn new(spec: Spec, channels: [Arc<dyn crate::backend::Evaluator>; 3]) -> EvalShader {
+        EvalShader { spec, channels }
+    }
+
     /// Shades `len` pixels: columns as [`build`]'s program reads them, outputs in order (r, g, b and the [`N_OUTPUTS`] − 3 counters).
     pub fn run(&self, cols: &[&[f64]], params: &[f64], outs: &mut [&mut [f64]], len: usize) {
         if cols.len() < COLUMNS || outs.len() < N_OUTPUTS || cols.iter().any(|c| c.len() < len) || outs.iter().any(|o| o.len() < len) {
@@ -361,39 +368,29 @@ impl EvalShader {
             return;
         }
         let s = &self.spec;
-        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-        let unit = |a: [f64; 3]| {
-            let l = dot(a, a).sqrt();
-            a.map(|x| x / l)
-        };
+        let e = &mut crate::builtins::math::Direct;
+        let sub3 = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
         for i in 0..len {
             let col = |k: usize| [cols[k][i], cols[k + 1][i], cols[k + 2][i]];
-            let (p, n, t) = (col(0), unit(col(3)), col(6));
-            let v = unit([s.eye[0] - p[0], s.eye[1] - p[1], s.eye[2] - p[2]]);
-            let tn = dot(n, t);
-            let u = [t[0] - n[0] * tn, t[1] - n[1] * tn, t[2] - n[2] * tn];
-            let u = if dot(u, u) > 1e-20 {
-                unit(u)
-            } else {
-                let sign = if n[2] < 0.0 { -1.0 } else { 1.0 };
-                let q = -1.0 / (sign + n[2]);
-                [1.0 + sign * n[0] * n[0] * q, sign * n[0] * n[1] * q, -sign * n[0]]
-            };
-            let w = [n[1] * u[2] - n[2] * u[1], n[2] * u[0] - n[0] * u[2], n[0] * u[1] - n[1] * u[0]];
-            let [c, sn] = s.tangent_rotation.unwrap_or([1.0, 0.0]);
-            let tt: [f64; 3] = std::array::from_fn(|k| c * u[k] + sn * w[k]);
-            let bb: [f64; 3] = std::array::from_fn(|k| c * w[k] - sn * u[k]);
-            let local = |d: [f64; 3]| [dot(d, tt), dot(d, bb), dot(d, n)];
-            let lv = local(v);
+            let (p, n, t) = (col(0), col(3), col(6));
+            let view = world_view(e, n, sub3(s.eye, p));
+            // A table is looked up by its directions: the tangent frame always (unturned without a rotation).
+            let axes = world_axes(e, &view, t, s.tangent_rotation.unwrap_or([1.0, 0.0]));
             let mut acc = s.ambient;
             let mut counts = [0.0; 3];
             for light in &s.lights {
-                let l = if light.point { unit([light.at[0] - p[0], light.at[1] - p[1], light.at[2] - p[2]]) } else { light.at };
-                let nl = dot(n, l);
-                let lit = nl > 0.0;
+                let (l, il) = if light.point {
+                    let l = sub3(light.at, p);
+                    let ll = dot(e, l, l);
+                    (l, inv_len(e, ll))
+                } else {
+                    (light.at, 1.0)
+                };
+                let x = world_light_inputs(e, &view, Some(&axes), l, il, &|_| true).map(|v| v.unwrap_or(0.0));
+                let nl = x[Input::NL.index()];
+                let lit = 0.0 < nl;
                 let mut f = [0.0; 3];
                 if s.specular && lit {
-                    let x = crate::frame::inputs_from_dirs(local(l), lv);
                     for (fc, ev) in f.iter_mut().zip(&self.channels) {
                         let y = ev.eval(&x, params);
                         if y.is_finite() {

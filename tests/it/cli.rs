@@ -411,7 +411,8 @@ fn negative_flag_values_get_lobes_own_errors() {
     let o = lobe(&["sweep", "examples/brdfs/blinn.brdf", "--bound", "-1"], None);
     assert_clean_error(&o, "negative bound", "--bound -1 must be a positive number");
     let o = lobe(&["energy", "examples/brdfs/blinn.brdf", "--range", "1..10", "--step", "-1"], None);
-    assert_clean_error(&o, "negative step", "--step -1 must be positive");
+    assert_clean_error(&o, "negative step", "the step -1 of the range of n must be positive");
+    assert_clean_error(&o, "negative step", "e.g. --step 1");
 }
 
 /// Tiny and huge values print in exponent form (shortest text that reads back exactly), ordinary ones as decimals.
