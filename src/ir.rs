@@ -497,19 +497,54 @@ pub struct Formula {
     pub file: String,
     /// The source text, kept so later stages can quote it.
     pub source: String,
-    /// For a formula with a colour result: its red, green and blue channels, each a whole scalar formula. The
+    /// For a formula with a colour result: its red, green and blue channels over one arena ([`Channels`]). The
     /// formula itself is then the red channel. Every stage below the front end works on scalar formulas; what
     /// shows colour (eval, render, energy) asks for [`Formula::channels`] before it compiles.
-    pub rgb: Option<Box<[Formula; 3]>>,
+    pub rgb: Option<Box<Channels>>,
+}
+
+/// A colour formula's red, green and blue channels as one multi-output arena — the model a shading program's
+/// outputs use ([`crate::backend::program::Program`]): the channels' common nodes are stored once, each
+/// channel's own nodes after the earlier channels' (so printing or emitting them together shares what they
+/// have in common).
+#[derive(Clone, Debug)]
+pub struct Channels {
+    pub ir: Ir,
+    /// Red, green, blue.
+    pub roots: [NodeId; 3],
+}
+
+impl Channels {
+    /// The roots of `formulas` (each a scalar formula) in one arena of live nodes only, channel by channel.
+    fn merge(formulas: &[Formula]) -> (Ir, Vec<NodeId>) {
+        let mut ir = Ir::new();
+        let mut roots = Vec::with_capacity(formulas.len());
+        for c in formulas {
+            let (cir, croot) = c.ir.compact(c.root);
+            let mut map: Vec<NodeId> = Vec::with_capacity(cir.len());
+            for id in cir.ids() {
+                map.push(ir.push(cir.node(id).map_args(|a| map[a.index()]), cir.span(id)));
+            }
+            roots.push(map[croot.index()]);
+        }
+        (ir, roots)
+    }
 }
 
 impl Formula {
-    /// The scalar formulas to compile: the formula itself, or its three colour channels.
+    /// The scalar formulas to compile: the formula itself, or its three colour channels (each compacted out of
+    /// the shared arena).
     pub fn channels(&self) -> Vec<Formula> {
         match &self.rgb {
             None => vec![self.clone()],
-            Some(c) => c.to_vec(),
+            Some(c) => c.roots.iter().map(|&r| self.scalar(&c.ir, r)).collect(),
         }
+    }
+
+    /// The scalar formula of `root` in `ir`, with this formula's declarations.
+    fn scalar(&self, ir: &Ir, root: NodeId) -> Formula {
+        let (ir, root) = ir.compact(root);
+        Formula { meta: self.meta.clone(), params: self.params.clone(), ir, root, file: self.file.clone(), source: self.source.clone(), rgb: None }
     }
 
     /// [`Formula::channels`] for reports per formula: a colour formula's channels are named `NAME (red)`,
@@ -524,31 +559,29 @@ impl Formula {
         chans
     }
 
-    /// A colour formula from one arena with three channel roots: each channel is compacted into a scalar
-    /// formula of its own; the result is the red one, carrying all three in [`Formula::rgb`].
+    /// A colour formula from one arena with three channel roots; the result is the red channel, carrying all
+    /// three in [`Formula::rgb`].
     pub fn from_channels(meta: Meta, params: Vec<ParamDecl>, ir: &Ir, roots: [NodeId; 3], file: String, source: String) -> Formula {
-        let channel = |r: NodeId| {
-            let (ir, root) = ir.compact(r);
-            Formula { meta: meta.clone(), params: params.clone(), ir, root, file: file.clone(), source: source.clone(), rgb: None }
-        };
-        let rgb = Box::new(roots.map(channel));
-        Formula { rgb: Some(rgb.clone()), ..rgb[0].clone() }
+        let red = Formula { meta, params, ir: Ir::new(), root: NodeId(0), file, source, rgb: None };
+        let chans = roots.map(|r| red.scalar(ir, r));
+        red.with_channels(&chans)
+    }
+
+    /// This formula's declarations with `chans` (red, green, blue; each a scalar formula over them) as its
+    /// colour channels: what a stage that works per channel (baking, simplifying) returns for a colour formula.
+    pub fn with_channels(&self, chans: &[Formula; 3]) -> Formula {
+        let (ir, r) = Channels::merge(chans);
+        let rgb = Channels { ir, roots: [r[0], r[1], r[2]] };
+        Formula { rgb: Some(Box::new(rgb)), ..chans[0].clone() }
     }
 
     /// The roots to print or emit together, in one arena of live nodes only: the formula's own, or its three
     /// colour channels' (hash-consing shares what the channels have in common).
     pub(crate) fn merged_roots(&self) -> (Ir, Vec<NodeId>) {
-        let mut ir = Ir::new();
-        let mut roots = Vec::new();
-        for c in self.channels() {
-            let (cir, croot) = c.ir.compact(c.root);
-            let mut map: Vec<NodeId> = Vec::with_capacity(cir.len());
-            for id in cir.ids() {
-                map.push(ir.push(cir.node(id).map_args(|a| map[a.index()]), cir.span(id)));
-            }
-            roots.push(map[croot.index()]);
+        match &self.rgb {
+            Some(c) => (c.ir.clone(), c.roots.to_vec()),
+            None => Channels::merge(std::slice::from_ref(self)),
         }
-        (ir, roots)
     }
 
     pub fn is_rgb(&self) -> bool {

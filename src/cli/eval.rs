@@ -218,11 +218,7 @@ fn emit(note: Option<String>, text: &str) {
 
 /// The truth's formulas (`--truth`): the formula as written with `set` folded, one per colour channel.
 fn truth_channels(f: &lobe::ir::Formula, set: &[(String, f64)]) -> Result<Vec<lobe::ir::Formula>, CliError> {
-    let t = lobe::simplify::bake_only(f, &lobe::resolve_bake(f, set)?);
-    Ok(match t.rgb {
-        Some(c) => c.to_vec(),
-        None => vec![t],
-    })
+    Ok(lobe::simplify::bake_only(f, &lobe::resolve_bake(f, set)?).channels())
 }
 
 /// `--points`: every row through the kernels `ks`, timed in the steady state with `--json`; or, with `truth`,

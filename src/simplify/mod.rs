@@ -221,8 +221,16 @@ pub fn bake_only(f: &Formula, bake: &[(usize, f64)]) -> Formula {
         map.push(ir.push(n, f.ir.span(id)));
     }
     let (ir, root) = ir.compact(map[f.root.index()]);
-    let rgb = f.rgb.as_ref().map(|c| Box::new(c.each_ref().map(|g| bake_only(g, bake))));
-    Formula { ir, root, rgb, ..f.clone() }
+    if f.is_rgb() {
+        return f.with_channels(&per_channel(f, |g| bake_only(g, bake)));
+    }
+    Formula { ir, root, ..f.clone() }
+}
+
+/// `op` on each colour channel of `f` (a colour formula): red, green, blue.
+fn per_channel(f: &Formula, op: impl Fn(&Formula) -> Formula) -> [Formula; 3] {
+    let c = f.channels();
+    [op(&c[0]), op(&c[1]), op(&c[2])]
 }
 
 /// Simplifies with the default [`Policy`]; baked parameters (index, value) become constants first.
@@ -267,16 +275,11 @@ pub fn simplify_with(f: &Formula, bake: &[(usize, f64)], policy: &Policy) -> (Fo
     }
     report.nodes_after = ir.len();
     report.inputs_after = ir.used_inputs(root);
-    let out = Formula {
-        meta: f.meta.clone(),
-        params: f.params.clone(),
-        ir,
-        root,
-        file: f.file.clone(),
-        source: f.source.clone(),
+    let out = Formula { meta: f.meta.clone(), params: f.params.clone(), ir, root, file: f.file.clone(), source: f.source.clone(), rgb: None };
+    if f.is_rgb() {
         // Each channel is simplified on its own; the report is the red channel's (the formula's own root).
-        rgb: f.rgb.as_ref().map(|c| Box::new(c.each_ref().map(|g| simplify_with(g, bake, policy).0))),
-    };
+        return (f.with_channels(&per_channel(f, |g| simplify_with(g, bake, policy).0)), report);
+    }
     (out, report)
 }
 
