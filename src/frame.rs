@@ -62,14 +62,14 @@ pub fn dot<A: Arith>(e: &mut A, a: [A::V; 3], b: [A::V; 3]) -> A::V {
 }
 
 /// World direction `w` in the frame `[X, Y, N]` (each a world vector): `[w·X, w·Y, w·N]`.
-pub fn to_local<A: Arith>(e: &mut A, [x, y, n]: [[A::V; 3]; 3], w: [A::V; 3]) -> [A::V; 3] {
+pub(crate) fn to_local<A: Arith>(e: &mut A, [x, y, n]: [[A::V; 3]; 3], w: [A::V; 3]) -> [A::V; 3] {
     [dot(e, w, x), dot(e, w, y), dot(e, w, n)]
 }
 
 /// Every input from unit L and V given in the local frame (components along X, Y, N): NL = Lz, NV = Vz,
 /// H = norm(L + V), NH = Hz, VH = V·H, R = 2(N·L)N − L, VR = V·R, then the components. When V = −L (H
 /// undefined, |L + V| = 0) NH and VH are 0.
-pub fn local_inputs<A: Arith>(e: &mut A, l: [A::V; 3], v: [A::V; 3]) -> [A::V; N_INPUTS] {
+pub(crate) fn local_inputs<A: Arith>(e: &mut A, l: [A::V; 3], v: [A::V; 3]) -> [A::V; N_INPUTS] {
     let (nl, nv) = (l[2], v[2]);
     let h = [e.add(l[0], v[0]), e.add(l[1], v[1]), e.add(l[2], v[2])];
     let hh = dot(e, h, h);
@@ -104,7 +104,7 @@ pub fn from_cosines(c: [f64; 5]) -> [f64; N_INPUTS] {
 /// additionally set to `c` (a no-op for NH, VR and NV).
 ///
 /// The directions are L = N and V at angle θ = acos c in the x–z plane, so NV = VR = c as the cosines say.
-pub fn lobe_inputs(c: f64, lobe: Input) -> [f64; N_INPUTS] {
+pub(crate) fn lobe_inputs(c: f64, lobe: Input) -> [f64; N_INPUTS] {
     let s = (1.0 - c * c).max(0.0).sqrt();
     let mut x = [1.0, c, c, c, (0.5 * (1.0 + c)).max(0.0).sqrt(), 0.0, 0.0, 1.0, s, 0.0, c];
     x[lobe.index()] = c;
@@ -123,7 +123,7 @@ impl Compare for Direct {
 }
 
 /// `1/√x`.
-pub fn inv_len<A: Arith>(e: &mut A, x: A::V) -> A::V {
+pub(crate) fn inv_len<A: Arith>(e: &mut A, x: A::V) -> A::V {
     let one = e.konst(1.0);
     let r = e.sqrt(x);
     e.div(one, r)
@@ -132,7 +132,7 @@ pub fn inv_len<A: Arith>(e: &mut A, x: A::V) -> A::V {
 /// The view at a surface point in world space (the renderer's entry: interpolated vectors, not unit): the
 /// normal `n` and the view vector `v` (eye − point), their inverse lengths and NV = (n·v)/|n|/|v|.
 #[derive(Clone, Copy, Debug)]
-pub struct WorldView<V> {
+pub(crate) struct WorldView<V> {
     pub n: [V; 3],
     pub inv_n: V,
     pub v: [V; 3],
@@ -141,7 +141,7 @@ pub struct WorldView<V> {
 }
 
 /// [`WorldView`] of normal `n` and view vector `v`.
-pub fn world_view<A: Arith>(e: &mut A, n: [A::V; 3], v: [A::V; 3]) -> WorldView<A::V> {
+pub(crate) fn world_view<A: Arith>(e: &mut A, n: [A::V; 3], v: [A::V; 3]) -> WorldView<A::V> {
     let nn = dot(e, n, n);
     let inv_n = inv_len(e, nn);
     let vv = dot(e, v, v);
@@ -156,7 +156,7 @@ pub fn world_view<A: Arith>(e: &mut A, n: [A::V; 3], v: [A::V; 3]) -> WorldView<
 /// (Duff et al.'s tangent of N̂ where t ∥ n), Ŷ = N̂ × X̂, both turned by the angle whose (cos, sin) is
 /// `rotation`; and V's components along them.
 #[derive(Clone, Copy, Debug)]
-pub struct WorldAxes<V> {
+pub(crate) struct WorldAxes<V> {
     pub x: [V; 3],
     pub y: [V; 3],
     pub vx: V,
@@ -164,7 +164,7 @@ pub struct WorldAxes<V> {
 }
 
 /// [`WorldAxes`] of the view `w` and the interpolated tangent `t`.
-pub fn world_axes<A: Compare>(e: &mut A, w: &WorldView<A::V>, t: [A::V; 3], [c, s]: [f64; 2]) -> WorldAxes<A::V> {
+pub(crate) fn world_axes<A: Compare>(e: &mut A, w: &WorldView<A::V>, t: [A::V; 3], [c, s]: [f64; 2]) -> WorldAxes<A::V> {
     let (n, inv_n) = (w.n, w.inv_n);
     let (zero, one) = (e.konst(0.0), e.konst(1.0));
     let nh = [e.mul(n[0], inv_n), e.mul(n[1], inv_n), e.mul(n[2], inv_n)];
@@ -214,7 +214,7 @@ pub fn world_axes<A: Compare>(e: &mut A, w: &WorldView<A::V>, t: [A::V; 3], [c, 
 /// `il` its inverse length; only what `needs` asks for (and NL, NV, which lighting always reads) is computed,
 /// the rest is `None`. The same definitions as [`local_inputs`] (H = norm(L̂ + V̂) through |L̂ + V̂|² = 2 + 2V̂·L̂,
 /// NH and VH 0 where L = −V; VR = 2·NL·NV − V̂·L̂), in the form the renderer's program computes per pixel.
-pub fn world_light_inputs<A: Compare>(
+pub(crate) fn world_light_inputs<A: Compare>(
     e: &mut A,
     w: &WorldView<A::V>,
     axes: Option<&WorldAxes<A::V>>,

@@ -24,6 +24,14 @@
 //!
 //! The front end knows nothing of Cranelift; every backend consumes only [`ir::Formula`]; builtins come from
 //! the one table in [`builtins`]. Numerical checks consume kernels ([`backend::Evaluator`]), never text.
+//!
+//! # Start here
+//! The root re-exports what a caller needs to compile and run a formula: [`compile_source`] (text → [`Kernel`])
+//! or [`front::parse`] then [`compile_formula`] with [`Options`] ([`Backend`], [`Tier`], [`Mode`], baked
+//! values, the accuracy pass from [`numerics::robust::with_pass`]); a [`Kernel`] is an [`Evaluator`] of the
+//! inputs ([`Input`], [`N_INPUTS`]; from directions through [`Frame`]), one point or [`Columns`] at a time;
+//! errors are [`Diagnostics`] with [`Hint`]s. The layer modules below are public for the `lobe` binary, the
+//! Python module and the benchmarks; items no caller outside the crate uses are `pub(crate)`.
 #![deny(unsafe_code)]
 
 pub mod base;

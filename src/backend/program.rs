@@ -20,7 +20,7 @@ use crate::ir::{Ir, Node, NodeId};
 pub(crate) const MAX_COLUMNS: usize = 16;
 
 /// Most outputs a program may have.
-pub const MAX_OUTPUTS: usize = 16;
+pub(crate) const MAX_OUTPUTS: usize = 16;
 
 /// A region of nodes evaluated only when `lit` is non-zero (module doc).
 #[derive(Clone, Debug, PartialEq)]

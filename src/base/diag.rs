@@ -16,7 +16,7 @@ use codespan_reporting::term::{self, termcolor::Buffer};
 use std::fmt;
 
 /// Longest source line a diagnostic quotes; longer ones are referred to by line and column.
-pub const MAX_ECHOED_LINE: usize = 1000;
+pub(crate) const MAX_ECHOED_LINE: usize = 1000;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Severity {

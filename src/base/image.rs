@@ -14,7 +14,7 @@ pub struct Image {
 }
 
 /// The tEXt key/value lobe writes into every PNG, so it can recognise its own files before overwriting.
-pub const PNG_SOFTWARE: (&str, &str) = ("Software", "lobe");
+pub(crate) const PNG_SOFTWARE: (&str, &str) = ("Software", "lobe");
 
 impl Image {
     pub fn new(width: usize, height: usize) -> Image {

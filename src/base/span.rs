@@ -22,7 +22,7 @@ impl Span {
 
 /// Whether byte `i` of `b` ends a line: a `\n`, or a `\r` not followed by `\n` (a lone CR, as old Mac files
 /// break lines; the `\r` of a CRLF pair does not end the line, its `\n` does).
-pub fn is_line_break(b: &[u8], i: usize) -> bool {
+pub(crate) fn is_line_break(b: &[u8], i: usize) -> bool {
     match b.get(i) {
         Some(b'\n') => true,
         Some(b'\r') => b.get(i + 1) != Some(&b'\n'),
@@ -47,7 +47,7 @@ pub fn line_col(src: &str, offset: usize) -> (usize, usize) {
 
 /// `src` with every lone `\r` replaced by `\n` (the same length, so byte spans stay valid), for tools that
 /// only know `\n` and `\r\n` line ends (the caret renderer).
-pub fn lone_cr_as_lf(src: &str) -> std::borrow::Cow<'_, str> {
+pub(crate) fn lone_cr_as_lf(src: &str) -> std::borrow::Cow<'_, str> {
     let b = src.as_bytes();
     if !(0..b.len()).any(|i| b[i] == b'\r' && is_line_break(b, i)) {
         return std::borrow::Cow::Borrowed(src);

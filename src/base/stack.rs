@@ -7,9 +7,9 @@
 //! calls it — Python, a server's worker thread, rayon's default pool — and a shallow formula pays one compare.
 
 /// Stack one recursive step may use before the next check (the deepest non-recursive callee included).
-pub const RED_ZONE: usize = 256 * 1024;
+pub(crate) const RED_ZONE: usize = 256 * 1024;
 /// Size of each new segment (address space; only the pages touched are used).
-pub const SEGMENT: usize = 16 << 20;
+pub(crate) const SEGMENT: usize = 16 << 20;
 
 /// Runs `f`, on a new stack segment if this one is nearly used up.
 #[inline]

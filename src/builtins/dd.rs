@@ -82,7 +82,7 @@ pub(crate) fn split<E: Arith>(e: &mut E, a: E::V) -> (E::V, E::V) {
 }
 
 /// `a·b` as `(p, err)` exactly (Dekker's product, no FMA), for operands whose product does not underflow.
-pub fn dekker_two_prod<E: Arith>(e: &mut E, a: E::V, b: E::V) -> (E::V, E::V) {
+pub(crate) fn dekker_two_prod<E: Arith>(e: &mut E, a: E::V, b: E::V) -> (E::V, E::V) {
     let p = e.mul(a, b);
     let (ah, al) = split(e, a);
     let (bh, bl) = split(e, b);

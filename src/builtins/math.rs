@@ -39,7 +39,7 @@
 use super::Builtin;
 use super::dd::{fast_two_sum, two_sum, Arith};
 /// Dekker's product, for targets without an FMA (the JIT's [`Arith::two_prod`]).
-pub use super::dd::dekker_two_prod;
+pub(crate) use super::dd::dekker_two_prod;
 
 /// The two math modes: which definition of each builtin a kernel runs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, PartialOrd, Ord)]

@@ -41,17 +41,17 @@ use std::path::Path;
 use std::sync::Arc;
 
 /// θ_h, θ_d and φ_d entries.
-pub const DIMS: [usize; 3] = [90, 90, 180];
+pub(crate) const DIMS: [usize; 3] = [90, 90, 180];
 /// Entries per channel block.
 pub const ENTRIES: usize = DIMS[0] * DIMS[1] * DIMS[2];
 /// What a stored value is multiplied by, per channel (red, green, blue).
-pub const SCALE: [f64; 3] = [1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0];
+pub(crate) const SCALE: [f64; 3] = [1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0];
 /// Header bytes (three i32).
 const HEADER: usize = 12;
 /// The size of a MERL file.
 pub const FILE_BYTES: usize = HEADER + 3 * ENTRIES * 8;
 /// How close to a bin's lower edge (in bins) an angle still counts as that bin.
-pub const EDGE: f64 = 1e-6;
+pub(crate) const EDGE: f64 = 1e-6;
 const CHANNEL: [&str; 3] = ["red", "green", "blue"];
 
 /// A MERL table: the stored values (as the file holds them, before [`SCALE`]) of the three channels.
@@ -80,14 +80,14 @@ pub fn index(i: usize, j: usize, k: usize) -> usize {
 }
 
 /// The angles (θ_h, θ_d, φ_d) entry `(i, j, k)` stands for (module docs).
-pub fn entry_angles(i: usize, j: usize, k: usize) -> [f64; 3] {
+pub(crate) fn entry_angles(i: usize, j: usize, k: usize) -> [f64; 3] {
     let u = i as f64 / DIMS[0] as f64;
     [u * u * FRAC_PI_2, j as f64 / DIMS[1] as f64 * FRAC_PI_2, k as f64 / DIMS[2] as f64 * PI]
 }
 
 /// L and V in the local frame for half/difference angles (φ_h = 0): D = (sinθ_d cosφ_d, sinθ_d sinφ_d,
 /// cosθ_d) in H's frame turned by θ_h about the bitangent is L; V is L mirrored about H.
-pub fn dirs_from_angles([th, td, pd]: [f64; 3]) -> (V3, V3) {
+pub(crate) fn dirs_from_angles([th, td, pd]: [f64; 3]) -> (V3, V3) {
     let d = [td.sin() * pd.cos(), td.sin() * pd.sin(), td.cos()];
     let (s, c) = th.sin_cos();
     let l = [c * d[0] + s * d[2], d[1], -s * d[0] + c * d[2]];
@@ -98,12 +98,12 @@ pub fn dirs_from_angles([th, td, pd]: [f64; 3]) -> (V3, V3) {
 }
 
 /// L and V of entry `(i, j, k)` under the convention.
-pub fn entry_dirs(i: usize, j: usize, k: usize) -> (V3, V3) {
+pub(crate) fn entry_dirs(i: usize, j: usize, k: usize) -> (V3, V3) {
     dirs_from_angles(entry_angles(i, j, k))
 }
 
 /// (θ_h, θ_d, φ_d ∈ (−π, π]) of unit L and V in the local frame; `None` where L + V = 0.
-pub fn half_diff(l: V3, v: V3) -> Option<[f64; 3]> {
+pub(crate) fn half_diff(l: V3, v: V3) -> Option<[f64; 3]> {
     let h = [l[0] + v[0], l[1] + v[1], l[2] + v[2]];
     let len = (h[0] * h[0] + h[1] * h[1] + h[2] * h[2]).sqrt();
     if len.is_nan() || len <= 0.0 {
@@ -152,7 +152,7 @@ impl std::str::FromStr for Lookup {
 
 /// The index coordinates (x_i, x_j, x_k) of half/difference angles (module docs): φ_d folded into [0, π),
 /// negative or NaN coordinates taken as 0; not clamped.
-pub fn angles_coords([th, td, pd]: [f64; 3]) -> [f64; 3] {
+pub(crate) fn angles_coords([th, td, pd]: [f64; 3]) -> [f64; 3] {
     let pd = if pd < 0.0 { pd + PI } else { pd };
     let x = [(th / FRAC_PI_2).max(0.0).sqrt() * DIMS[0] as f64, td / FRAC_PI_2 * DIMS[1] as f64, pd / PI * DIMS[2] as f64];
     // `max` takes the number over NaN.
@@ -160,7 +160,7 @@ pub fn angles_coords([th, td, pd]: [f64; 3]) -> [f64; 3] {
 }
 
 /// The entry indices of half/difference angles (module docs: nearest entry, φ_d folded).
-pub fn angles_index(a: [f64; 3]) -> (usize, usize, usize) {
+pub(crate) fn angles_index(a: [f64; 3]) -> (usize, usize, usize) {
     let [xi, xj, xk] = angles_coords(a);
     let bin = |x: f64, n: usize| ((x + EDGE).floor() as usize).min(n - 1);
     // φ_d on π is 0 again (the fold's period is π).
@@ -404,7 +404,7 @@ pub fn used_inputs() -> InputSet {
 }
 
 /// One channel of a table as an evaluator of the kernel inputs (it reads L and V, ignores parameters).
-pub struct Channel {
+pub(crate) struct Channel {
     pub table: Arc<Measured>,
     pub c: usize,
     pub how: Lookup,

@@ -208,7 +208,7 @@ pub fn coef_sweep(ev: &dyn Evaluator, params: &[f64], lobe: Input, ns: &[f64]) -
 }
 
 /// The most values of n one coefficient sweep ([`coef_range`]) takes.
-pub const MAX_RANGE_POINTS: usize = 1_000_000;
+pub(crate) const MAX_RANGE_POINTS: usize = 1_000_000;
 
 /// A coefficient sweep: `(n, Int(n))` (what a fitted coefficient is scored against) and `(n, coef(n))`.
 #[derive(Clone, Debug, PartialEq)]
@@ -480,7 +480,7 @@ pub fn full_energy_for(ev: &dyn Evaluator, used: crate::ir::InputSet, params: &[
 }
 
 /// [`full_energy_for`], polling `cancel` inside each albedo integral: fails with the cancellation once it trips.
-pub fn full_energy_cancellable(ev: &dyn Evaluator, used: crate::ir::InputSet, params: &[f64], cancel: &Cancel) -> Result<FullEnergy, Diagnostic> {
+pub(crate) fn full_energy_cancellable(ev: &dyn Evaluator, used: crate::ir::InputSet, params: &[f64], cancel: &Cancel) -> Result<FullEnergy, Diagnostic> {
     if !used.reads_directions() {
         return full_energy_in(ev, params, cancel);
     }

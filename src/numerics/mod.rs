@@ -89,7 +89,8 @@ pub fn choose_lobe_input(used: InputSet) -> (Input, Option<String>) {
     }
 }
 
-pub use crate::frame::{inputs_from_dirs, lobe_inputs, V3};
+pub use crate::frame::{inputs_from_dirs, V3};
+pub(crate) use crate::frame::lobe_inputs;
 
 pub(crate) fn dot(a: V3, b: V3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]

@@ -16,7 +16,7 @@ use crate::simplify::accuracy::Rule;
 use std::path::PathBuf;
 
 /// Bumped whenever the pass's choices change for the same inputs.
-pub const PASS_VERSION: u32 = 1;
+pub(crate) const PASS_VERSION: u32 = 1;
 
 /// A cache directory.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -83,7 +83,7 @@ pub fn command_pass(opts: crate::Options, pass: PassOptions, cached: bool) -> cr
 }
 
 /// [`command_pass`] whose searches also stop when `cancel` trips (the server's request deadline).
-pub fn command_pass_until(opts: crate::Options, pass: PassOptions, cached: bool, cancel: crate::base::cancel::Cancel) -> crate::Options {
+pub(crate) fn command_pass_until(opts: crate::Options, pass: PassOptions, cached: bool, cancel: crate::base::cancel::Cancel) -> crate::Options {
     let pass = PassOptions { budget: super::robust::COMMAND_BUDGET, ..pass };
     let store = cached.then(Cache::platform).flatten().map(|c| std::sync::Arc::new(c) as std::sync::Arc<dyn DecisionStore>);
     super::robust::with_pass_until(opts, pass, store, cancel)

@@ -206,7 +206,7 @@ pub fn parse(file: &str, text: &str, f: &Formula, used: InputSet, baked: &[Strin
 
 /// The runs of consecutive points (of `len`) whose values in every one of `cols` (each `len` long) are equal
 /// bit for bit; one run of all points when `cols` is empty.
-pub fn param_runs(cols: &[&[f64]], len: usize) -> Vec<std::ops::Range<usize>> {
+pub(crate) fn param_runs(cols: &[&[f64]], len: usize) -> Vec<std::ops::Range<usize>> {
     let same = |a: usize, b: usize| cols.iter().all(|c| c[a].to_bits() == c[b].to_bits());
     let mut runs = vec![];
     let mut start = 0;

@@ -571,7 +571,7 @@ impl std::str::FromStr for Prefer {
 
 /// The search budget of commands that compile a formula to use it (`eval`, `render`, `energy`, the page's
 /// renders): small, so the first command on a new file answers quickly; the decision cache makes the second free.
-pub const COMMAND_BUDGET: std::time::Duration = std::time::Duration::from_secs(2);
+pub(crate) const COMMAND_BUDGET: std::time::Duration = std::time::Duration::from_secs(2);
 
 /// Settings of the accuracy pass.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -960,13 +960,13 @@ pub fn improve(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Outcom
 }
 
 /// [`improve`], telling `observe` each [`Stage`] as it starts.
-pub fn improve_observed(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions, observe: &dyn Fn(Stage)) -> Outcome {
+pub(crate) fn improve_observed(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions, observe: &dyn Fn(Stage)) -> Outcome {
     improve_cancellable(orig, bake, o, &Cancel::never(), observe)
 }
 
 /// [`improve_observed`], also stopping (with the best form so far, [`Outcome::truncated`]) once `cancel` trips:
 /// the time budget is a child of the caller's token, so one mechanism stops the search either way.
-pub fn improve_cancellable(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions, cancel: &Cancel, observe: &dyn Fn(Stage)) -> Outcome {
+pub(crate) fn improve_cancellable(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions, cancel: &Cancel, observe: &dyn Fn(Stage)) -> Outcome {
     let stop = cancel.child(o.budget);
     let bake = read_bake(orig, bake);
     let live = live_pass(orig, o, &stop, observe);
@@ -1233,7 +1233,7 @@ pub fn with_pass_cached(opts: crate::Options, pass: PassOptions, cache: Option<s
 }
 
 /// [`with_pass_cached`] whose searches also stop when `cancel` trips.
-pub fn with_pass_until(mut opts: crate::Options, pass: PassOptions, cache: Option<std::sync::Arc<dyn DecisionStore>>, cancel: Cancel) -> crate::Options {
+pub(crate) fn with_pass_until(mut opts: crate::Options, pass: PassOptions, cache: Option<std::sync::Arc<dyn DecisionStore>>, cancel: Cancel) -> crate::Options {
     let pass = PassOptions { math: opts.math, ..pass };
     opts.accuracy = Some(std::sync::Arc::new(Chooser { pass, cache, cancel }));
     opts

@@ -537,7 +537,7 @@ fn eval_xs(f: &Formula, x: &[Xf; N_INPUTS], params: &[f64]) -> Xf {
 
 /// Per input, the nodes up to the root that read it, in evaluation order: what moving that input evaluates
 /// again ([`eval_moves_with`]); built once per formula.
-pub struct Readers {
+pub(crate) struct Readers {
     by_input: [Vec<NodeId>; N_INPUTS],
     /// The inputs the formula reads.
     pub used: crate::ir::InputSet,
@@ -556,13 +556,9 @@ impl Readers {
 
 /// The exact values of `f` at `x` with one input moved at a time, for each `(input, value)` of `moves` (rounded
 /// to f64), as [`eval`] gives them; only the nodes that read the moved input are evaluated again (a
-/// finite-difference condition number moves each read input both ways: most of a BRDF's nodes read one or two).
-pub fn eval_moves(f: &Formula, x: &[f64; N_INPUTS], params: &[f64], moves: &[(usize, f64)]) -> Vec<f64> {
-    eval_moves_with(f, &Readers::new(f), x, params, moves)
-}
-
-/// [`eval_moves`] with the formula's [`Readers`] built beforehand (they depend on the formula, not the point).
-pub fn eval_moves_with(f: &Formula, readers: &Readers, x: &[f64; N_INPUTS], params: &[f64], moves: &[(usize, f64)]) -> Vec<f64> {
+/// finite-difference condition number moves each read input both ways: most of a BRDF's nodes read one or two),
+/// from the formula's [`Readers`] built beforehand (they depend on the formula, not the point).
+pub(crate) fn eval_moves_with(f: &Formula, readers: &Readers, x: &[f64; N_INPUTS], params: &[f64], moves: &[(usize, f64)]) -> Vec<f64> {
     let n = f.root.index() + 1;
     let xs = x.map(Xf::from_f64);
     let mut base: Vec<Xf> = Vec::with_capacity(n);
@@ -696,7 +692,7 @@ mod tests {
             }
             let p = [0.01 + r.unit()];
             let moves: Vec<(usize, f64)> = (0..N_INPUTS).flat_map(|i| [(i, x[i].next_up()), (i, -x[i])]).collect();
-            let got = eval_moves(&f, &x, &p, &moves);
+            let got = eval_moves_with(&f, &Readers::new(&f), &x, &p, &moves);
             for (&(i, w), g) in moves.iter().zip(got) {
                 let mut y = x;
                 y[i] = w;

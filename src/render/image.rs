@@ -6,7 +6,7 @@
 //! are computed on; [`Transfer::Srgb`] applies the sRGB transfer curve instead, which is what a physically based
 //! pipeline would display. NaN channels become 0.
 
-pub use crate::base::image::{is_lobe_png, Image, PNG_SOFTWARE};
+pub use crate::base::image::{is_lobe_png, Image};
 
 /// How linear radiance becomes an 8-bit value.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

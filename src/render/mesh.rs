@@ -205,7 +205,7 @@ pub fn load_obj(path: &std::path::Path) -> Result<Mesh, ObjError> {
 }
 
 /// [`load_obj`], the file read through `files` (a scene's file-access policy).
-pub fn load_obj_through(path: &std::path::Path, files: &crate::base::source::Files) -> Result<Mesh, ObjError> {
+pub(crate) fn load_obj_through(path: &std::path::Path, files: &crate::base::source::Files) -> Result<Mesh, ObjError> {
     use crate::base::source::ReadError;
     let text = files.read(path, MAX_OBJ_BYTES).map_err(|e| ObjError {
         message: match e {

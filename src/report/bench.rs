@@ -130,7 +130,7 @@ pub fn tiers_table(rows: &[BenchRow]) -> String {
 
 /// The smallest relative noise a speed difference must exceed: two runs of `lobe bench` on the same machine
 /// move single medians by a few per cent even where a run's own quartiles are tighter.
-pub const MIN_NOISE: f64 = 0.05;
+pub(crate) const MIN_NOISE: f64 = 0.05;
 
 /// Marks `pareto` on every row (by `jit_ns` and `mean_abs_grid`). Row j dominates row i when it is not
 /// measurably slower, no less accurate, and measurably faster or more accurate; "measurably" means by more than

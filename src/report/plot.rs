@@ -61,7 +61,7 @@ pub fn incidence_points(ev: &dyn crate::Evaluator, params: &[f64], theta_i_deg: 
 
 /// [`incidence_points`] with the plane of incidence turned by `phi_i_deg` about N (L at azimuth φᵢ, V in the
 /// same plane): the same curve for an isotropic formula, another for one that reads the tangent frame.
-pub fn incidence_points_at(ev: &dyn crate::Evaluator, params: &[f64], theta_i_deg: f64, phi_i_deg: f64) -> Vec<(f64, f64)> {
+pub(crate) fn incidence_points_at(ev: &dyn crate::Evaluator, params: &[f64], theta_i_deg: f64, phi_i_deg: f64) -> Vec<(f64, f64)> {
     let ti = theta_i_deg.to_radians();
     let (sp, cp) = phi_i_deg.to_radians().sin_cos();
     // At φᵢ = 0 the y components are +0 exactly (no −0 from a negative sine times 0).
@@ -619,7 +619,7 @@ pub fn curves(series: &[Series], title: &str, x_desc: &str, y_desc: &str, format
 }
 
 /// [`curves`] in an image of `size` pixels.
-pub fn curves_sized(
+pub(crate) fn curves_sized(
     series: &[Series],
     title: &str,
     x_desc: &str,

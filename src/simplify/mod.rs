@@ -96,7 +96,7 @@ use std::fmt;
 pub use powi::MAX_EXPONENT as MAX_POW_CHAIN;
 
 /// Upper bound on rewrite passes; every pass so far converges in two (one that rewrites, one that confirms).
-pub const MAX_PASSES: usize = 16;
+pub(crate) const MAX_PASSES: usize = 16;
 
 /// What the simplifier may assume about run-time values, and whether it may change rounding.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -285,7 +285,7 @@ pub fn simplify_with(f: &Formula, bake: &[(usize, f64)], policy: &Policy) -> (Fo
 
 /// The sign of a formula's value by range analysis: what the accuracy pass must keep ([`keep_sign`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Sign {
+pub(crate) enum Sign {
     /// ≥ 0 (or NaN) everywhere.
     NonNeg,
     /// ≤ 0 (or NaN) everywhere.
@@ -295,7 +295,7 @@ pub enum Sign {
 
 /// The sign of `f` as written with `bake` folded (range analysis of the unsimplified formula: a clamp, a
 /// square or a pow of a clamped base bound it even where the simplifier later drops the clamp as redundant).
-pub fn sign_of(f: &Formula, bake: &[(usize, f64)]) -> Sign {
+pub(crate) fn sign_of(f: &Formula, bake: &[(usize, f64)]) -> Sign {
     let g = bake_only(f, bake);
     let r = node_ranges(&g, &Policy::default())[g.root.index()];
     if r.lo >= 0.0 {
@@ -310,7 +310,7 @@ pub fn sign_of(f: &Formula, bake: &[(usize, f64)]) -> Sign {
 /// `g` with its result clamped at 0 (`max`/`min`, which keep NaN) where `sign` bounds it and `g`'s own range
 /// analysis does not: a rewrite moves roundings, never the sign (a compensated correction below a cut-off once
 /// went below 0). Costs one node where it applies; nothing where the range already shows the sign.
-pub fn keep_sign(sign: &Sign, g: Formula) -> Formula {
+pub(crate) fn keep_sign(sign: &Sign, g: Formula) -> Formula {
     let r = node_ranges(&g, &Policy::default())[g.root.index()];
     let (b, bad) = match sign {
         Sign::NonNeg => (Builtin::Max, r.lo < 0.0),
