@@ -16,7 +16,7 @@ use crate::simplify::accuracy::Rule;
 use std::path::PathBuf;
 
 /// Bumped whenever the pass's choices change for the same inputs.
-pub(crate) const PASS_VERSION: u32 = 1;
+pub(crate) const PASS_VERSION: u32 = 2;
 
 /// A cache directory.
 #[derive(Clone, Debug, PartialEq, Eq)]

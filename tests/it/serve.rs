@@ -304,8 +304,9 @@ fn live_render_compare_plot_and_analysis_answer() {
 #[test]
 fn a_slow_request_does_not_hold_up_the_page() {
     let s = Served::start(&["examples/brdfs"]);
-    // ~800 IR nodes at 2048² (a comparison): just under the cost budget, about a second of work.
-    let heavy: String = (0..200).map(|i| format!("sin(NH*{i}.5) + ")).collect::<String>() + "0";
+    // ~600 IR nodes at 2048² (a comparison): under the cost budget even when the accuracy pass's choice grows
+    // the kernel by its budget (1.3×), most of a second of work.
+    let heavy: String = (0..150).map(|i| format!("sin(NH*{i}.5) + ")).collect::<String>() + "0";
     let addr = s.addr;
     let body = json!({"a": {"text": heavy}, "b": {"text": "NH^n"}, "size": 2048}).to_string();
     let slow = std::thread::spawn(move || http(addr, "POST", "/api/compare", &[("X-Lobe-Client", "t")], Some(body.as_bytes())).status);
