@@ -27,12 +27,15 @@
 //!
 //! # Start here
 //! The root re-exports what a caller needs to compile and run a formula: [`compile_source`] (text → [`Kernel`])
-//! or [`front::parse`] then [`compile_formula`] with [`Options`] ([`Backend`], [`Tier`], [`Mode`], baked
+//! or [`front::parse()`] then [`compile_formula`] with [`Options`] ([`Backend`], [`Tier`], [`Mode`], baked
 //! values, the accuracy pass from [`numerics::robust::with_pass`]); a [`Kernel`] is an [`Evaluator`] of the
 //! inputs ([`Input`], [`N_INPUTS`]; from directions through [`Frame`]), one point or [`Columns`] at a time;
 //! errors are [`Diagnostics`] with [`Hint`]s. The layer modules below are public for the `lobe` binary, the
 //! Python module and the benchmarks; items no caller outside the crate uses are `pub(crate)`.
 #![deny(unsafe_code)]
+// Module docs say why the code is as it is, naming crate-private items; `cargo doc --document-private-items`
+// resolves those links.
+#![allow(rustdoc::private_intra_doc_links)]
 
 pub mod base;
 pub mod builtins;

@@ -2,7 +2,7 @@
 //! them a check produced, so a finite value is written as a number and a non-finite one as the string `"NaN"`,
 //! `"inf"` or `"-inf"`. Result types apply it per field with
 //! `#[serde(serialize_with = "crate::base::json::num")]` (or [`opt_num`]); a name → number object is a
-//! [`Named`]; the few values built as `serde_json::Value` wrap their numbers in [`value`].
+//! [`Named`].
 
 use serde::Serializer;
 

@@ -1,7 +1,7 @@
-//! The front end: .brdf text → [`Formula`](crate::ir::Formula), or diagnostics. Knows nothing of backends.
+//! The front end: .brdf text → [`crate::ir::Formula`], or diagnostics. Knows nothing of backends.
 //!
 //! Pipeline: [`lex`] (logos DFA + an adapter that decides statement-ending newlines and repairs bad
-//! spellings) → [`parse`] (lalrpop LR(1), table-driven, builds the arena [`ast`] with a span on every node,
+//! spellings) → [`parse()`] (lalrpop LR(1), table-driven, builds the arena [`ast`] with a span on every node,
 //! recovers at each statement) → [`lower`] (names, types, arity, function inlining, `n` as parameter 0, domain
 //! policy → `ir::Formula`).
 //! Every stage reports into one list, so a file with several mistakes gets all of them, sorted by position.
@@ -59,9 +59,9 @@ pub fn parse_with_warnings(file: &str, src: &str) -> Result<(Formula, Diagnostic
     read(file, src, false)
 }
 
-/// [`parse`] that also accepts the accuracy pass's internal builtins (`expmuldiv`, `acoslo`, `powlo`:
+/// [`parse()`] that also accepts the accuracy pass's internal builtins (`expmuldiv`, `acoslo`, `powlo`:
 /// [`Builtin::is_internal`]); for tests and for reading back the pass's own output. Their names are then
-/// reserved, as every builtin's is. A BRDF Explorer file is read as [`parse`] reads it.
+/// reserved, as every builtin's is. A BRDF Explorer file is read as [`parse()`] reads it.
 pub fn parse_internal(file: &str, src: &str) -> Result<Formula, Diagnostics> {
     read(file, src, true).map(|(f, _)| f)
 }

@@ -12,7 +12,7 @@
 //! I = ka·Ia·C + Σ Il·(kd·NL⁺·C + ks·coef·F·Cs). Lights, colours and coefficients are constants; the formula's
 //! parameters stay `Param` nodes, so changing them needs no recompilation.
 //!
-//! Outputs ([`Out`]): r, g, b, and three per-pixel counters (non-finite F, evaluations, cut-off skips), small
+//! Outputs ([`N_OUTPUTS`]): r, g, b, and three per-pixel counters (non-finite F, evaluations, cut-off skips), small
 //! integers in f64 that the renderer sums exactly.
 //!
 //! Guarded regions. F of light k is computed only where some pixel is lit by k: light k's guarded values
@@ -172,8 +172,8 @@ impl Compare for Builder {
     }
 }
 
-/// The program shading with `spec` and the formula's channels (one, or red, green, blue): outputs in [`Out`]
-/// order, one guarded region per light where F is evaluated.
+/// The program shading with `spec` and the formula's channels (one, or red, green, blue): outputs in the order of the
+/// module docs, one guarded region per light where F is evaluated.
 pub fn build(spec: &Spec, channels: &[&Formula]) -> Result<Program, String> {
     if !(channels.len() == 1 || channels.len() == 3) {
         return Err(format!("a shading program takes 1 or 3 channels, not {}", channels.len()));

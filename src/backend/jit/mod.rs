@@ -16,7 +16,7 @@
 //! - one `JITModule` per compiled formula: the scalar kernel and the prepare function are compiled at once,
 //!   the batched kernel is added to the same module on the first batch call; its memory is freed when the
 //!   last kernel using it is dropped;
-//! - a bounded LRU [`cache`] keyed by the simplified IR's structure, so compiling a formula twice is free;
+//! - a bounded LRU cache keyed by the simplified IR's structure, so compiling a formula twice is free;
 //! - live parameters are loads from the `params` slice, so changing them needs no recompilation; baked ones
 //!   are already constants in the IR.
 //!
@@ -666,7 +666,7 @@ pub struct ShadeCode {
     params_read: usize,
     /// The compiler's time for the program (when it was compiled; a cache hit costs nothing).
     pub compile_time: std::time::Duration,
-    /// The tier that compiled it ([`Backend::Jit`] or [`Backend::Llvm`]).
+    /// The tier that compiled it ([`crate::Backend::Jit`] or [`crate::Backend::Llvm`]).
     pub backend: crate::backend::Backend,
     /// The memory `run` and `prepare` point into, freed when this is dropped.
     _owner: Box<dyn Send + Sync>,
