@@ -539,8 +539,7 @@ async function comparePanel() {
     const r = await api("/api/compare", { a: formula(), b, path: s.path, params: s.params, moved: s.moved, size: s.size, scene: s.scene });
     const m = JSON.parse(r.headers.get("X-Lobe-Metrics"));
     $("cmp-img").src = URL.createObjectURL(await r.blob());
-    $("bar-hi").textContent = `${fmt(+r.headers.get("X-Lobe-Heat-Scale"), 1)} gray levels`;
-    $("cmp-info").textContent = `A | B (${b.name}) | |Δgray| (colour bar: 0 → the largest difference) · Manhattan ${fmt(m.manhattan)} (covered px ${fmt(m.manhattan_covered)}) · RMSE ${fmt(m.rmse)} · PSNR ${fmt(m.psnr, 2)} dB`;
+    $("cmp-info").textContent = `A | B (${b.name}) | |Δgray| · Manhattan ${fmt(m.manhattan)} (covered px ${fmt(m.manhattan_covered)}) · RMSE ${fmt(m.rmse)} · PSNR ${fmt(m.psnr, 2)} dB`;
   } catch (e) {
     showError(e.error ? e : { error: String(e) });
   }

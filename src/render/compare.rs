@@ -93,34 +93,6 @@ pub(crate) fn side_by_side(a: &Image, b: &Image, scale: f64) -> Image {
     out
 }
 
-/// Rows of the colour bar under a comparison image.
-const BAR_ROWS: usize = 14;
-
-/// `A | B | heat map` with a strip below: under the heat map, its colour ramp from 0 (left) to the scale
-/// (right), two-pixel ticks at quarters; black under A and B. The page labels the ends.
-pub(crate) fn with_colour_bar(img: &crate::base::image::Image) -> crate::base::image::Image {
-    let (w, h) = (img.width, img.height);
-    let third = w / 3;
-    let mut out = crate::base::image::Image::new(w, h + BAR_ROWS);
-    out.rgb[..img.rgb.len()].copy_from_slice(&img.rgb);
-    for x in 0..third {
-        let t = x as f64 / (third.max(2) - 1) as f64;
-        let tick = (1..4).any(|q| x.abs_diff(q * third / 4) <= 1);
-        for y in 0..BAR_ROWS {
-            // A black gap under the image, the ramp, grey ticks at its foot.
-            let c = if tick && y >= BAR_ROWS - 4 {
-                [128, 128, 128]
-            } else if y < 2 {
-                [0, 0, 0]
-            } else {
-                heat(t)
-            };
-            out.set(w - third + x, h + y, c);
-        }
-    }
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -150,21 +122,6 @@ mod tests {
         assert_eq!(heat(1.0 / 3.0), [255, 0, 0]);
     }
 
-    #[test]
-    fn the_colour_bar_runs_from_black_to_white_under_the_heat_map() {
-        let img = crate::base::image::Image::new(30, 4);
-        let out = with_colour_bar(&img);
-        assert_eq!((out.width, out.height), (30, 4 + BAR_ROWS));
-        let row = 4 + 5;
-        assert_eq!(out.pixel(20, row), [0, 0, 0]);
-        assert_eq!(out.pixel(29, row), [255, 255, 255]);
-        assert_eq!(out.pixel(5, row), [0, 0, 0], "nothing under A");
-        // Monotone in every channel along the ramp.
-        for x in 21..30 {
-            let (a, b) = (out.pixel(x - 1, row), out.pixel(x, row));
-            assert!((0..3).all(|c| a[c] <= b[c]), "{a:?} {b:?}");
-        }
-    }
 }
 
 /// One comparison of two formulas in one scene.

@@ -559,8 +559,9 @@ fn scene_set(st: &State, req: &Value, g: &Geometry) -> Result<Vec<(String, f64)>
     Ok(set.into_iter().filter(|(k, _)| moved.contains(&k.as_str())).collect())
 }
 
-/// `POST /api/compare {a: {name, text}, b: {name, text}, path, params, moved, size, scene}`: A | B | heat map as PNG, the
-/// heat map's colour bar (0 → the largest difference) in a strip below it; the metrics (`manhattan`,
+/// `POST /api/compare {a: {name, text}, b: {name, text}, path, params, moved, size, scene}`: A | B | heat map as PNG,
+/// the figure `lobe compare` draws (headings, the heat map's labelled colour bar from 0 to the largest
+/// difference); the metrics (`manhattan`,
 /// `manhattan_covered`, `max_gray_diff`, `rmse`, `psnr`) as JSON in `X-Lobe-Metrics`, the gray difference
 /// the bar's right end stands for in `X-Lobe-Heat-Scale`.
 pub(crate) fn compare(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
@@ -576,7 +577,8 @@ pub(crate) fn compare(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
         let set = scene_set(st, &req, &g)?;
         let c = crate::render::compare::compare_in(&g, (&a.0, &a.1), (&b.0, &b.1), [[1.0; 3]; 2], &set, &Live(st), &ropts(&st.cancel))?;
         let scale = c.metrics.max_gray_diff.max(1.0);
-        let image = crate::render::compare::with_colour_bar(&crate::render::compare::side_by_side(&c.a.image, &c.b.image, scale));
+        let pair = crate::render::compare::side_by_side(&c.a.image, &c.b.image, scale);
+        let image = crate::report::plot::comparison_figure(&pair, ["A", "B", "|Δgray|"], &[], scale).map_err(|e| ApiError::new(500, e))?;
         let metrics = serde_json::to_string(&c.metrics).map_err(|e| ApiError::new(500, e.to_string()))?;
         Ok(Reply::bytes("image/png", png(&image)?)
             .header("X-Lobe-Metrics", metrics)

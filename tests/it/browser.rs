@@ -373,7 +373,7 @@ fn browser_views_and_state_follow_the_file() {
     // The comparison with its colour bar, for the screenshot.
     b.slide("theta_i", 35.0);
     b.js("document.getElementById('compare-on').click()");
-    b.wait("document.getElementById('cmp-info').textContent.includes('Manhattan') && document.getElementById('bar-hi').textContent.includes('gray')", 90, "the comparison");
+    b.wait("document.getElementById('cmp-info').textContent.includes('Manhattan') && document.getElementById('cmp-img').naturalWidth > 0", 90, "the comparison");
     b.wait("lobe.idle", 30, "the page at rest");
     assert_eq!(b.js("return lobe.errors"), json!(0), "the page showed errors: {}", b.js("return lobe.error_log"));
     if let Ok(path) = std::env::var("LOBE_SCREENSHOT") {
