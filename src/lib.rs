@@ -33,8 +33,8 @@
 //! errors are [`Diagnostics`] with [`Hint`]s. The layer modules below are public for the `lobe` binary, the
 //! Python module and the benchmarks; items no caller outside the crate uses are `pub(crate)`.
 #![deny(unsafe_code)]
-// Module docs say why the code is as it is, naming crate-private items; `cargo doc --document-private-items`
-// resolves those links.
+// Module docs say why the code is as it is, naming crate-private items; rustdoc resolves those links when it
+// documents private items.
 #![allow(rustdoc::private_intra_doc_links)]
 
 pub mod base;
