@@ -349,7 +349,14 @@ fn is_int<E: Emit>(e: &mut E, x: E::V) -> E::M {
 const LN2_HI: f64 = 6.93147180369123816490e-01; // 0x3fe62e42_fee00000: k·LN2_HI is exact for |k| < 2^21
 const LN2_LO: f64 = 1.90821492927058770002e-10;
 const INV_LN2: f64 = 1.44269504088896338700e+00;
-/// `y·2^k` for an integer-valued k in [−1100, 1100], rounding once (two exact scalings, the second rounding).
+/// `y·2^k` for an integer-valued k in [−1100, 1100]: two scalings by 2^⌊k/2⌉ and the rest, exact unless the
+/// result is subnormal or overflows. It rounds once where y·2^⌊k/2⌉ is normal (always for y in [0.5, 4), exp's
+/// and pow's mantissas); a smaller y can round twice into the subnormals, off by at most 2^-1074.
+///
+/// Underflowing lanes are multiplications with a subnormal result, which x86 cores run as a microcode assist.
+/// Forming tiny results from the bits instead (an integer rounding, no subnormal arithmetic) made Beckmann's
+/// kernel 1.5× faster on the LLVM tier at uniform random cosines (12 % of its exps underflow) but 1.2–1.5×
+/// slower where nothing underflows, on both tiers (BENCHMARKS.md, 2026-12-05): not worth it.
 fn scale2<E: Emit>(e: &mut E, y: E::V, k: E::V) -> E::V {
     let half = mulk(e, k, 0.5);
     let k1 = round_int(e, half);
@@ -1418,4 +1425,73 @@ pub(crate) fn pow_lo<E: Emit>(e: &mut E, x: E::V, y: E::V, mode: Mode) -> E::V {
     let ok = e.and(ok, ok_fin);
     let bad = e.not(ok);
     e.zero_where(bad, lo)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::base::rng::Rng;
+
+    /// y·2^k correctly rounded, from the integers: the significand shifted into units of the result's ulp
+    /// (2^-1074 below 2^-1022), rounded to nearest with ties to even by hand.
+    fn reference(y: f64, k: i64) -> f64 {
+        if y == 0.0 || !y.is_finite() {
+            return y; // ±0, ±∞ and NaN scale to themselves
+        }
+        let bits = y.to_bits();
+        let (f, frac) = (((bits >> 52) & 0x7ff) as i64, bits & MANTISSA);
+        // |y| = sig·2^(e − 1075) with sig an integer.
+        let (sig, e) = if f == 0 { (frac, 1) } else { (frac | 1 << 52, f) };
+        let e = e + k; // |y·2^k| = sig·2^(e − 1075): in units of 2^-1074, sig·2^(e − 1)
+        let mag = if e >= 1 {
+            // Exact (sig < 2^53) unless it overflows, which the last product rounds to ∞ as IEEE does.
+            let p = e - 1023;
+            sig as f64 / 2f64.powi(52) * 2f64.powi((p / 2) as i32) * 2f64.powi((p - p / 2) as i32)
+        } else {
+            // Units of 2^-1074: sig·2^(e − 1), shifted right by 1 − e bits with round-to-nearest-even.
+            let shift = (1 - e) as u32;
+            let q = if shift >= 64 { 0 } else { sig >> shift };
+            let rem = if shift >= 64 { sig as u128 } else { (sig & ((1u64 << shift) - 1)) as u128 };
+            let half = if shift >= 64 { u128::MAX } else { 1u128 << (shift - 1) };
+            let q = if rem > half || (rem == half && q & 1 == 1) { q + 1 } else { q };
+            f64::from_bits(q) // q ≤ 2^52: a subnormal, or 2^-1022 when it rounded up to 2^52
+        };
+        if y < 0.0 { -mag } else { mag }
+    }
+
+    #[test]
+    fn scale2_rounds_like_ieee_once_near_1_and_within_one_subnormal_unit_elsewhere() {
+        let mut rng = Rng(0x5ca1e2);
+        let mut cases: Vec<(f64, i64)> = Vec::new();
+        // Random significands at exponents that put the result anywhere from overflow to far below 2^-1074.
+        for _ in 0..200_000 {
+            let sig = 1.0 + rng.unit();
+            // Half the cases near 1 (scale2_near1's domain), half anywhere.
+            let ey = if rng.below(2) == 0 { rng.below(3) as i32 - 1 } else { rng.below(2000) as i32 - 1000 };
+            let y = if rng.below(2) == 0 { sig } else { -sig } * 2f64.powi(ey);
+            let k = rng.below(2201) as i64 - 1100;
+            cases.push((y, k));
+        }
+        // Ties and near-ties at every subnormal exponent, the rounding up to 2^-1022, zeros and specials.
+        for shift in 1..60i64 {
+            for sig in [1u64 << 52, (1 << 52) | 1, (1 << 52) | (1 << 51), (3 << 51) | 1, (1 << 53) - 1] {
+                let y = f64::from_bits((1023 << 52) | (sig & MANTISSA));
+                cases.push((y, -1022 - shift));
+                cases.push((-y, -1022 - shift + 1));
+            }
+        }
+        cases.extend([(0.0, -1100), (-0.0, 5), (f64::INFINITY, -1100), (f64::NAN, 3), (f64::MIN_POSITIVE / 8.0, 3), (1.5, 1023), (1.0, 1024), (0.99, 1024)]);
+        let mut tiny = 0;
+        for (y, k) in cases {
+            let want = reference(y, k);
+            let got = scale2(&mut Direct, y, k as f64);
+            let same = got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan());
+            // Outside [0.5, 4) a subnormal result may round twice: one unit of 2^-1074 at most.
+            let near1 = (0.5..4.0).contains(&y.abs());
+            let twice = !near1 && want.abs() <= f64::MIN_POSITIVE && (got - want).abs() <= f64::from_bits(1);
+            assert!(same || twice, "{y:e}·2^{k}: {got:e} ({:#x}), want {want:e} ({:#x})", got.to_bits(), want.to_bits());
+            tiny += usize::from(want != 0.0 && want.abs() < f64::MIN_POSITIVE);
+        }
+        assert!(tiny > 1000, "subnormal results tested: {tiny}");
+    }
 }
