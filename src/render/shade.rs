@@ -12,6 +12,10 @@
 //! running the same program — and the span ends in the 8-bit conversion. Nothing here allocates in the steady
 //! state ([`Scratch`] is per thread).
 //!
+//! The per-pixel loops here ([`surface`], [`encode`]) are also compiled for AVX-512 and AVX2 and chosen at run
+//! time: at the release build's baseline (SSE2, two lanes) they cost more than the shading program itself.
+//! Same operations, no contraction into FMA, so the same bytes on every host.
+//!
 //! Cost model: see [`super::plan`] and [`super::program`]; measured numbers: BENCHMARKS.md.
 
 use super::image::Transfer;
@@ -200,22 +204,26 @@ fn run_program(g: &mut Group, pr: &ProgramRun, counts: &mut ShadeCounts) -> u64 
     pr.code.run(&cols, &pr.params, &pr.block, &mut outs, m);
     let ns = t.elapsed().as_nanos() as u64;
     counts.kernel_calls += 1;
-    // Small non-negative integers in f64, so the f64 sums are exact (two partial sums per counter, one pass:
-    // LLVM vectorises it); a NaN, from a failed call, counts 0.
-    let (c0, c1, c2) = (&g.cnt[0][..m], &g.cnt[1][..m], &g.cnt[2][..m]);
+    let [nan, evals, cut] = sum_counters([&g.cnt[0][..m], &g.cnt[1][..m], &g.cnt[2][..m]]);
+    counts.nan += nan;
+    counts.evals += evals;
+    counts.cut += cut;
+    ns
+}
+
+/// The three counter columns' sums. Small non-negative integers in f64, so the f64 sums are exact (two
+/// partial sums per counter, one pass: LLVM vectorises it); a NaN, from a failed call, counts 0.
+fn sum_counters(c: [&[f64]; 3]) -> [u64; 3] {
+    let m = c[0].len();
     let mut acc = [[0.0f64; 2]; 3];
     let pairs = m / 2;
     for i in 0..pairs {
-        for (a, c) in acc.iter_mut().zip([c0, c1, c2]) {
+        for (a, c) in acc.iter_mut().zip(c) {
             a[0] += c[2 * i];
             a[1] += c[2 * i + 1];
         }
     }
-    let total = |a: [f64; 2], c: &[f64]| (a[0] + a[1] + c[2 * pairs..].iter().sum::<f64>()) as u64;
-    counts.nan += total(acc[0], c0);
-    counts.evals += total(acc[1], c1);
-    counts.cut += total(acc[2], c2);
-    ns
+    std::array::from_fn(|k| (acc[k][0] + acc[k][1] + c[k][2 * pairs..].iter().sum::<f64>()) as u64)
 }
 
 fn fit<T: Copy + Default>(v: &mut Vec<T>, m: usize) -> &mut [T] {
@@ -226,6 +234,7 @@ fn fit<T: Copy + Default>(v: &mut Vec<T>, m: usize) -> &mut [T] {
 /// The surface step for one piece of a run of triangle `tri`: p and n (and with `TAN` the tangent) at span
 /// positions `k..`, interpolated from the pixels' barycentrics with the triangle's vertices as loop constants:
 /// a = v2 + b0·(v0 − v2) + b1·(v1 − v2). Two-sided triangles turn n towards the viewer.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512dq+avx2+fma", "x86_64+avx2+fma"))]
 fn surface<const TAN: bool>(g: &mut Group, k: usize, tri: &ScreenTri, bary: &[[f64; 2]], eye: [f64; 3]) {
     let e = k + bary.len();
     let (a, d0, d1) = (tri.pos[2], tri.pos[0] - tri.pos[2], tri.pos[1] - tri.pos[2]);
@@ -265,6 +274,7 @@ fn surface<const TAN: bool>(g: &mut Group, k: usize, tri: &ScreenTri, bary: &[[f
 /// Converts the span's colours to 8 bits into the tile: first every pixel's three levels packed in a u32
 /// (one branch-free pass over the columns, which LLVM vectorises for the linear transfer; sRGB through
 /// [`Transfer::encode`]), then each piece of a run stored to its contiguous pixels.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512dq+avx2+fma", "x86_64+avx2+fma"))]
 fn encode(g: &mut Group, rgb: &mut [u8], transfer: Transfer) {
     let m = g.len;
     let [r, gg, b] = &g.acc;
@@ -283,11 +293,15 @@ fn encode(g: &mut Group, rgb: &mut [u8], transfer: Transfer) {
             }
         }
     }
+    // Each pixel but the last is one 4-byte store whose high byte (0) the next pixel's store overwrites.
     for &(k, o, len) in &g.segs {
         let (k, o, len) = (k as usize, o as usize, len as usize);
-        for (px, v) in rgb[o * 3..(o + len) * 3].chunks_exact_mut(3).zip(&lv[k..k + len]) {
-            px.copy_from_slice(&v.to_le_bytes()[..3]);
+        let (px, lv) = (&mut rgb[o * 3..(o + len) * 3], &lv[k..k + len]);
+        let Some((last, head)) = lv.split_last() else { continue };
+        for (i, v) in head.iter().enumerate() {
+            px[3 * i..3 * i + 4].copy_from_slice(&v.to_le_bytes());
         }
+        px[3 * head.len()..].copy_from_slice(&last.to_le_bytes()[..3]);
     }
 }
 
