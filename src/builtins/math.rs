@@ -131,6 +131,9 @@ pub(crate) trait Emit: Arith {
     }
     /// `m ? libm(x) : r` lane by lane, `libm` being the C library's version of `f` ([`Builtin::libm1`]).
     fn fallback(&mut self, m: Self::M, x: Self::V, r: Self::V, f: Builtin) -> Self::V;
+    /// Elements per value: 1 for scalars, else the vector's lanes. Only a choice between two codings of the
+    /// same bits depends on it ([`scale2`]).
+    fn lanes(&self) -> u32;
 }
 
 /// 1.5·2^52: adding and subtracting it rounds |x| < 2^51 to the nearest integer (ties to even), and the integer
@@ -229,6 +232,9 @@ impl Emit for Direct {
     }
     fn exponent_field(&mut self, x: f64) -> f64 {
         exponent_field(x)
+    }
+    fn lanes(&self) -> u32 {
+        1
     }
     fn rare(&mut self, m: bool, r: f64, slow: &mut dyn FnMut(&mut Self) -> f64) -> f64 {
         if m {
@@ -349,15 +355,31 @@ fn is_int<E: Emit>(e: &mut E, x: E::V) -> E::M {
 const LN2_HI: f64 = 6.93147180369123816490e-01; // 0x3fe62e42_fee00000: k·LN2_HI is exact for |k| < 2^21
 const LN2_LO: f64 = 1.90821492927058770002e-10;
 const INV_LN2: f64 = 1.44269504088896338700e+00;
-/// `y·2^k` for an integer-valued k in [−1100, 1100]: two scalings by 2^⌊k/2⌉ and the rest, exact unless the
-/// result is subnormal or overflows. It rounds once where y·2^⌊k/2⌉ is normal (always for y in [0.5, 4), exp's
-/// and pow's mantissas); a smaller y can round twice into the subnormals, off by at most 2^-1074.
+/// `y·2^k` for an integer-valued k, rounding once (to nearest, ties to even), subnormal results included, where
+/// (y, k) lies in either range its callers use: k in [−1100, 1100] and |y| in [2^-400, 2^400], or k in
+/// [−2043, 2043] and |y| in [2^-961, 2^969] (and y = 0, ±∞ or NaN).
 ///
-/// Underflowing lanes are multiplications with a subnormal result, which x86 cores run as a microcode assist.
-/// Forming tiny results from the bits instead (an integer rounding, no subnormal arithmetic) made Beckmann's
-/// kernel 1.5× faster on the LLVM tier at uniform random cosines (12 % of its exps underflow) but 1.2–1.5×
-/// slower where nothing underflows, on both tiers (BENCHMARKS.md, 2026-12-05): not worth it.
+/// Two codings of the same bits. In 1 or 2 lanes, two scalings ([`scale2_normal`]), whose first product is
+/// normal in those ranges wherever the result is not 0, so only the second rounds. But a result below 2^-1022
+/// is then a multiplication with a subnormal result, which x86 cores run as a microcode assist (~100 cycles for
+/// the whole vector), and Beckmann's exp underflows at 12 % of uniform random cosines: in vectors of 4 or more
+/// lanes, where such a lane is then in most vectors, every lane takes [`scale2_exact`] (straight-line, no
+/// subnormal arithmetic).
+/// Measured on Beckmann's kernel (BENCHMARKS.md, 2026-12-05): LLVM's 8 lanes 5.09 → 3.39 ns/element at uniform
+/// cosines, 2.95 → 3.46 where nothing underflows; on Cranelift's 2 lanes the straight-line coding was up to
+/// 1.5× slower, and a rare block for the tiny lanes 1.1–1.25×.
 fn scale2<E: Emit>(e: &mut E, y: E::V, k: E::V) -> E::V {
+    if e.lanes() >= 4 {
+        scale2_exact(e, y, k)
+    } else {
+        scale2_normal(e, y, k)
+    }
+}
+
+/// `y·2^k` as two scalings by 2^⌊k/2⌉ and the rest: exact unless the result is subnormal or overflows, and
+/// then rounding once where y·2^⌊k/2⌉ is normal ([`scale2`]'s range); a smaller y can round twice into the
+/// subnormals.
+fn scale2_normal<E: Emit>(e: &mut E, y: E::V, k: E::V) -> E::V {
     let half = mulk(e, k, 0.5);
     let k1 = round_int(e, half);
     let k2 = e.sub(k, k1);
@@ -365,6 +387,41 @@ fn scale2<E: Emit>(e: &mut E, y: E::V, k: E::V) -> E::V {
     let s2 = e.pow2i(k2);
     let y1 = e.mul(y, s1);
     e.mul(y1, s2)
+}
+
+/// `y·2^k` rounding once for any normal `y` (and 0, ±∞, NaN; k in [−2043, 2043]), without arithmetic on a
+/// subnormal or underflowing value.
+///
+/// A result of at least 2^-1022 (or a subnormal `y`, 0, ±inf, NaN) is [`scale2_normal`]. A smaller one comes
+/// from the bits: y's significand m (±[1, 2)) times 2^(t + 52), t the result's biased exponent (< 1), is the
+/// result in units of 2^-1075, below 2^53 in magnitude; adding ±2^53 rounds it to an even number of units
+/// exactly as IEEE rounds the subnormal (to nearest, ties to even), and the sum's sign and mantissa bits are
+/// the subnormal's encoding. A sum of ±2^54 (the rounding up to 2^-1022) has an odd exponent field where every
+/// other sum has an even one, so its lowest exponent bit is the subnormal's carry into the exponent.
+fn scale2_exact<E: Emit>(e: &mut E, y: E::V, k: E::V) -> E::V {
+    let f = e.exponent_field(y);
+    let t = e.add(f, k);
+    let one = e.konst(1.0);
+    let below = e.lt(t, one);
+    let normal = e.le(one, f);
+    let tiny = e.and(below, normal);
+    // In tiny lanes the scalings use 1 − f instead of k, so none of their products is tiny (the lane's value
+    // comes from the bits).
+    let k_min = e.sub(one, f);
+    let k = e.select(tiny, k_min, k);
+    let scaled = scale2_normal(e, y, k);
+    // Below t + 52 = −2 the result rounds to 0 either way. In other lanes the exponent is unbounded: pow2i
+    // then wraps to ±0, a power of two or ±inf, never a subnormal, so these products stay cheap too.
+    let m = e.mask_bits(y, SIGN | MANTISSA, EXP_ONE);
+    let ts = addk(e, t, 52.0);
+    let low = ltk(e, ts, -2.0);
+    let ts = select_k(e, low, -2.0, ts);
+    let p = e.pow2i(ts);
+    let units = e.mul(m, p);
+    let magic = e.mask_bits(y, SIGN, (2.0 * TWO52).to_bits());
+    let u = e.add(units, magic);
+    let sub = e.mask_bits(u, SIGN | 1 << 52 | MANTISSA, 0);
+    e.select(tiny, sub, scaled)
 }
 
 /// `x` clamped to [lo, hi] by two compares; NaN passes through (both compares are false).
@@ -387,8 +444,7 @@ const INV_L2N: f64 = 184.6649652337873; // 128/ln 2
 /// k = round(x·128/ln 2), j = k mod 128, x = k·ln2/128 + r with |r| ≤ ln2/256 (+ xl): e^x = 2^(k div 128)
 /// ·2^(j/128)·e^r. 2^(j/128) is the table's `T_HI·(1 + T_TAIL)`, e^r − 1 a degree-5 Taylor polynomial
 /// (truncation < 2^-60), and the result `T_HI + T_HI·(T_TAIL + (e^r − 1))` rounds once in an FMA, then
-/// [`scale2`] (exact unless the result is subnormal or overflows). No division. Scaling by two products in
-/// every lane measured faster than one product plus a rare block: Beckmann's exp underflows in many lanes.
+/// [`scale2`] (exact unless the result overflows, correctly rounded in the subnormals). No division.
 fn exp_dd<E: Emit>(e: &mut E, xh: E::V, xl: E::V) -> E::V {
     let (y, q) = exp_parts(e, xh, xl, -760.0, 720.0);
     scale2(e, y, q)
@@ -1226,7 +1282,7 @@ pub(crate) mod logic {
 /// Beckmann or Ward value near 1e-311 comes out as a denormal with few bits, or 0. The common case costs what
 /// the product as written does plus a range test on b/c: e^a = y·2^q ([`exp_parts`] with a clamped to ±1416,
 /// y in [0.99, 2.01)), s = y·(b/c) (two roundings), and [`scale2`] applies 2^q last (|q| ≤ 2043; exact unless
-/// the result is subnormal, whose only rounding it then is). Where |b/c| lies in [2^-1000, 2^967] that is the
+/// the result is subnormal, whose only rounding it then is). Where |b/c| lies in [2^-960, 2^967] that is the
 /// answer for every a, the clamped ones included: a < −1416 gives 0, as the truth rounds, and a > 1416 ∞
 /// (Beckmann's small-NH lanes, where e^a alone is 0, stay on this path). Other lanes (b or c tiny, huge, 0, ∞ or
 /// NaN) take [`Emit::rare_call`]'s branch to [`exp_mul_div_scaled`], which the JIT calls out of line, so its
@@ -1249,10 +1305,10 @@ pub(crate) fn exp_mul_div<E: Emit>(e: &mut E, a: E::V, b: E::V, c: E::V, mode: M
     let bc = e.div(b, c);
     let s = e.mul(y, bc);
     let r = scale2(e, s, q);
-    // One compare: |b/c|·2^1000 ≥ 1 and |b/c|·2^-967 ≤ 1, as min(…, 2 − …) ≥ 1; the select is a min
+    // One compare: |b/c|·2^960 ≥ 1 and |b/c|·2^-967 ≤ 1, as min(…, 2 − …) ≥ 1; the select is a min
     // instruction that returns its second operand on NaN, so a NaN b/c reaches the compare.
     let abc = e.abs(bc);
-    let lo = mulk(e, abc, 2f64.powi(1000));
+    let lo = mulk(e, abc, 2f64.powi(960));
     let hi = mulk(e, abc, 2f64.powi(-967));
     let u = ksub(e, 2.0, hi);
     let lt = e.lt(lo, u);
@@ -1460,16 +1516,19 @@ mod tests {
     }
 
     #[test]
-    fn scale2_rounds_like_ieee_once_near_1_and_within_one_subnormal_unit_elsewhere() {
+    fn scale2_rounds_once_like_ieee_including_subnormal_results() {
         let mut rng = Rng(0x5ca1e2);
         let mut cases: Vec<(f64, i64)> = Vec::new();
         // Random significands at exponents that put the result anywhere from overflow to far below 2^-1074.
-        for _ in 0..200_000 {
+        for i in 0..300_000 {
             let sig = 1.0 + rng.unit();
-            // Half the cases near 1 (scale2_near1's domain), half anywhere.
-            let ey = if rng.below(2) == 0 { rng.below(3) as i32 - 1 } else { rng.below(2000) as i32 - 1000 };
+            // A third in each of scale2's ranges, a third anywhere (scale2_exact only).
+            let (ey, k) = match i % 3 {
+                0 => (rng.below(801) as i32 - 400, rng.below(2201) as i64 - 1100),
+                1 => (rng.below(1931) as i32 - 961, rng.below(4087) as i64 - 2043),
+                _ => (rng.below(2000) as i32 - 1000, rng.below(2201) as i64 - 1100),
+            };
             let y = if rng.below(2) == 0 { sig } else { -sig } * 2f64.powi(ey);
-            let k = rng.below(2201) as i64 - 1100;
             cases.push((y, k));
         }
         // Ties and near-ties at every subnormal exponent, the rounding up to 2^-1022, zeros and specials.
@@ -1480,16 +1539,32 @@ mod tests {
                 cases.push((-y, -1022 - shift + 1));
             }
         }
+        // Double-rounding traps: y·2^k just below a tie between two subnormals, the lower one odd, so a first
+        // rounding into the subnormals would make it a tie and round up.
+        for k in (-2043..=-40i64).step_by(3) {
+            for n in [(1u64 << 20) + 1, (1 << 40) + 3, 12345] {
+                let v = (n as f64 + 0.5).next_down();
+                let e = (-1074 - k) as i32;
+                let y = v * 2f64.powi(e / 2) * 2f64.powi(e - e / 2);
+                cases.push((y, k));
+                cases.push((-y, k));
+            }
+        }
         cases.extend([(0.0, -1100), (-0.0, 5), (f64::INFINITY, -1100), (f64::NAN, 3), (f64::MIN_POSITIVE / 8.0, 3), (1.5, 1023), (1.0, 1024), (0.99, 1024)]);
         let mut tiny = 0;
         for (y, k) in cases {
             let want = reference(y, k);
-            let got = scale2(&mut Direct, y, k as f64);
-            let same = got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan());
-            // Outside [0.5, 4) a subnormal result may round twice: one unit of 2^-1074 at most.
-            let near1 = (0.5..4.0).contains(&y.abs());
-            let twice = !near1 && want.abs() <= f64::MIN_POSITIVE && (got - want).abs() <= f64::from_bits(1);
-            assert!(same || twice, "{y:e}·2^{k}: {got:e} ({:#x}), want {want:e} ({:#x})", got.to_bits(), want.to_bits());
+            let check = |name: &str, got: f64| {
+                assert!(got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()), "{name}: {y:e}·2^{k}: {got:e} ({:#x}), want {want:e} ({:#x})", got.to_bits(), want.to_bits());
+            };
+            check("scale2_exact", scale2_exact(&mut Direct, y, k as f64));
+            // The two-scalings coding, in scale2's ranges.
+            let a = y.abs();
+            let near = (2f64.powi(-400)..=2f64.powi(400)).contains(&a) && k.abs() <= 1100;
+            let wide = (2f64.powi(-961)..2f64.powi(970)).contains(&a) && k.abs() <= 2043;
+            if y == 0.0 || !y.is_finite() || near || wide {
+                check("scale2_normal", scale2_normal(&mut Direct, y, k as f64));
+            }
             tiny += usize::from(want != 0.0 && want.abs() < f64::MIN_POSITIVE);
         }
         assert!(tiny > 1000, "subnormal results tested: {tiny}");

@@ -653,6 +653,9 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
         (heads, tails)
     }
     /// `any(m) ? slow() : r`, the slow code in a block of its own.
+    fn lanes(&self) -> u32 {
+        u32::from(L::LANES)
+    }
     fn rare(&mut self, m: Value, r: Value, slow: &mut dyn FnMut(&mut Self) -> Value) -> Value {
         let cold = self.b.create_block();
         let join = self.b.create_block();

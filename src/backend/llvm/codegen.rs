@@ -612,6 +612,9 @@ impl<'ctx> Emit for Gen<'_, 'ctx> {
         (h, t)
     }
     /// `any(m) ? slow() : r`, the slow code in a block of its own (weighted as rarely taken).
+    fn lanes(&self) -> u32 {
+        self.w
+    }
     fn rare(&mut self, m: Self::M, r: Self::V, slow: &mut dyn FnMut(&mut Self) -> Self::V) -> Self::V {
         let any = self.any(m);
         let from = self.current();
