@@ -13,7 +13,7 @@
 //!
 //! Precise mode: the algorithms and minimax coefficients of fdlibm (Sun Microsystems, freely redistributable),
 //! rewritten with selects, except exp; `tan` is the quotient of the sine and cosine kernels. exp is
-//! table-driven (2^(j/128) in head and tail, `math_tables.rs`; a degree-5 polynomial; one FMA rounding; no
+//! table-driven (2^(j/16) in head and tail, `math_tables.rs`; a degree-7 polynomial; one FMA rounding; no
 //! division). `pow` computes ln|x| and y·ln|x| in double-double (a 47-entry table of ln(j/64), exact products
 //! by FMA), then that exp on the double-double argument, so exp's argument is exact far below an ulp even when
 //! |y·ln x| is near 745. Measured over 10^5 points per function (edge classes included) every function is
@@ -37,7 +37,7 @@
 #![allow(clippy::excessive_precision, clippy::approx_constant)]
 
 use super::Builtin;
-use super::dd::{fast_two_sum, two_sum, Arith};
+use super::dd::{fast_two_sum, two_sum, two_sum_err, Arith};
 /// Dekker's product, for targets without an FMA (the JIT's [`Arith::two_prod`]).
 pub(crate) use super::dd::dekker_two_prod;
 
@@ -434,17 +434,19 @@ fn clamp_to<E: Emit>(e: &mut E, x: E::V, lo: f64, hi: f64) -> E::V {
     e.select(above, h, x)
 }
 
-/// ln2/128 split so that k·`L2N_HI` is exact for |k| < 2^18 (35 significant bits), and the remainder.
-const L2N_HI: f64 = 0.0054152123482253955;
-const L2N_LO: f64 = -1.0082281460997769e-13;
-const INV_L2N: f64 = 184.6649652337873; // 128/ln 2
+/// ln2/16 split so that k·`L2N_HI` is exact for |k| < 2^18 (35 significant bits), and the remainder.
+const L2N_HI: f64 = 8.0 * 0.0054152123482253955;
+const L2N_LO: f64 = 8.0 * -1.0082281460997769e-13;
+const INV_L2N: f64 = 184.6649652337873 / 8.0; // 16/ln 2
 
-/// e^(xh + xl) (xl a small correction to xh), < 0.51 ulp before subnormal rounding.
+/// e^(xh + xl) (xl a small correction to xh), < 0.52 ulp before subnormal rounding.
 ///
-/// k = round(x·128/ln 2), j = k mod 128, x = k·ln2/128 + r with |r| ≤ ln2/256 (+ xl): e^x = 2^(k div 128)
-/// ·2^(j/128)·e^r. 2^(j/128) is the table's `T_HI·(1 + T_TAIL)`, e^r − 1 a degree-5 Taylor polynomial
-/// (truncation < 2^-60), and the result `T_HI + T_HI·(T_TAIL + (e^r − 1))` rounds once in an FMA, then
+/// k = round(x·16/ln 2), j = k mod 16, x = k·ln2/16 + r with |r| ≤ ln2/32 (+ xl): e^x = 2^(k div 16)
+/// ·2^(j/16)·e^r. 2^(j/16) is the table's `T_HI·(1 + T_TAIL)`, e^r − 1 a degree-7 Taylor polynomial
+/// (truncation < 2^-59), and the result `T_HI + T_HI·(T_TAIL + (e^r − 1))` rounds once in an FMA, then
 /// [`scale2`] (exact unless the result overflows, correctly rounded in the subnormals). No division.
+/// Sixteen rows rather than 128 and two more polynomial terms: on AVX-512 the rows are two registers, looked
+/// up by permutation; 128 rows took two gathers per vector, a quarter of exp's time (BENCHMARKS.md).
 fn exp_dd<E: Emit>(e: &mut E, xh: E::V, xl: E::V) -> E::V {
     let (y, q) = exp_parts(e, xh, xl, -760.0, 720.0);
     scale2(e, y, q)
@@ -463,6 +465,15 @@ struct ExpParts<V> {
     q: V,
     t_hi: V,
     tmp: V,
+    /// The operands of the roundings below `tmp`, for [`pow_lo`]: r = rh + rl, em1 = fma(r2, p, r) (e^r − 1),
+    /// tmp = t_tail + em1.
+    rh: V,
+    rl: V,
+    r: V,
+    r2: V,
+    p: V,
+    em1: V,
+    t_tail: V,
 }
 
 /// [`exp_parts`] and the final FMA's operands, from which [`pow_lo`] recovers that rounding.
@@ -476,23 +487,23 @@ fn exp_parts_tail<E: Emit>(e: &mut E, xh: E::V, xl: E::V, lo: f64, hi: f64) -> E
     let kx = mulk(e, x, INV_L2N);
     let k = round_int(e, kx);
     let kh = mulk(e, k, L2N_HI); // exact
-    let rh = e.sub(x, kh); // exact: x and k·ln2/128 are within a factor 2 (or k = 0)
+    let rh = e.sub(x, kh); // exact: x and k·ln2/16 are within a factor 2 (or k = 0)
     let nl = e.konst(-L2N_LO);
     let rl = e.fma(k, nl, xl);
     let r = e.add(rh, rl);
-    // k = 128·q + j with q = floor(k/128): k/128 − 127/256 lies within 0.5 of q.
-    let k128 = mulk(e, k, 1.0 / 128.0);
-    let qh = addk(e, k128, -127.0 / 256.0);
+    // k = 16·q + j with q = floor(k/16): k/16 − 15/32 lies within 0.5 of q.
+    let k16 = mulk(e, k, 1.0 / 16.0);
+    let qh = addk(e, k16, -15.0 / 32.0);
     let q = round_int(e, qh);
-    // The row j = k − 128q = k mod 128: the lookup rounds kx itself (the addition `round_int` made) and keeps
-    // the low 7 bits, so j costs no instruction.
+    // The row j = k − 16q = k mod 16: the lookup rounds kx itself (the addition `round_int` made) and keeps
+    // the low 4 bits, so j costs no instruction.
     let (t_hi, t_tail) = e.lookup_pair(&EXP_T, kx);
-    let p = horner(e, r, &[1.0 / 2.0, 1.0 / 6.0, 1.0 / 24.0, 1.0 / 120.0]);
+    let p = horner(e, r, &[1.0 / 2.0, 1.0 / 6.0, 1.0 / 24.0, 1.0 / 120.0, 1.0 / 720.0, 1.0 / 5040.0]);
     let r2 = e.mul(r, r);
     let em1 = e.fma(r2, p, r);
     let tmp = e.add(t_tail, em1);
     let y = e.fma(t_hi, tmp, t_hi);
-    ExpParts { y, q, t_hi, tmp }
+    ExpParts { y, q, t_hi, tmp, rh, rl, r, r2, p, em1, t_tail }
 }
 
 pub(crate) fn exp<E: Emit>(e: &mut E, x: E::V) -> E::V {
@@ -1458,11 +1469,23 @@ pub(crate) fn pow_lo<E: Emit>(e: &mut E, x: E::V, y: E::V, mode: Mode) -> E::V {
         return e.konst(0.0);
     }
     let (ph, pl) = pow_exponent(e, x, y);
-    let ExpParts { y: m, q, t_hi, tmp } = exp_parts_tail(e, ph, pl, -760.0, 720.0);
+    let ExpParts { y: m, q, t_hi, tmp, rh, rl, r, r2, p, em1, t_tail } = exp_parts_tail(e, ph, pl, -760.0, 720.0);
     // m = T_HI + T_HI·tmp rounded once; T_HI − m is exact (Sterbenz: m in [0.99, 2.01), T_HI in [1, 2)), so
-    // this is the rounding up to tmp's own (~1/100 ulp of m).
+    // this is that rounding.
     let d = e.sub(t_hi, m);
     let m_lo = e.fma(t_hi, tmp, d);
+    // And the roundings below tmp, each up to 2^-59 of m (|r| ≤ ln2/32): r = rh + rl, em1 = r + r²·p (r − em1
+    // is exact, em1 being within 1.2 % of r), tmp = t_tail + em1, and the product t_tail·em1 exp leaves out.
+    // What remains is ~1/100 ulp of m (the polynomial's truncation and the roundings of r², p and these terms).
+    let e_r = two_sum_err(e, rh, rl, r);
+    let rd = e.sub(r, em1);
+    let e_em1 = e.fma(r2, p, rd);
+    let e_tmp = two_sum_err(e, t_tail, em1, tmp);
+    let cross = e.mul(t_tail, em1);
+    let s = e.add(e_r, e_em1);
+    let s = e.add(s, e_tmp);
+    let s = e.add(s, cross);
+    let m_lo = e.fma(t_hi, s, m_lo);
     let mag = scale2(e, m, q);
     let lo = scale2(e, m_lo, q);
     // Only for positive finite x, |y| < 2^64 and a value in [2^-969, ∞): elsewhere pow's value is exact, a

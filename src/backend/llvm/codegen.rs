@@ -229,6 +229,22 @@ impl<'a, 'ctx> Gen<'a, 'ctx> {
         }
     }
 
+    /// [`Emit::lookup_pair`] of a 16-row table in eight AVX-512 lanes: each column is two registers of constants
+    /// and one `vpermi2pd` per column picks every lane's row by the low four bits of `index` (the bits above
+    /// are ignored, as the masked index of the gathers ignores them): no memory access, where two gathers took
+    /// a quarter of exp's time.
+    fn permute_pair(&mut self, table: &[[f64; 2]], index: VectorValue<'ctx>) -> (VectorValue<'ctx>, VectorValue<'ctx>) {
+        let f64t = self.u.cx.f64_type();
+        let half = |col: usize, rows: std::ops::Range<usize>| VectorType::const_vector(&rows.map(|j| f64t.const_float(table[j][col])).collect::<Vec<_>>());
+        let column = |g: &mut Self, col: usize| {
+            let (lo, hi) = (half(col, 0..8), half(col, 8..16));
+            g.call_intrinsic("llvm.x86.avx512.vpermi2var.pd.512", &[], &[lo.into(), index.into(), hi.into()], g.fty)
+        };
+        let heads = column(self, 0);
+        let tails = column(self, 1);
+        (heads, tails)
+    }
+
     /// A lane-wise floating-point intrinsic (`llvm.sqrt`, `llvm.fma`, `llvm.minimum`, …).
     fn fop(&mut self, name: &str, args: &[VectorValue<'ctx>]) -> VectorValue<'ctx> {
         let args: Vec<BasicMetadataValueEnum> = args.iter().map(|a| (*a).into()).collect();
@@ -591,6 +607,9 @@ impl<'ctx> Emit for Gen<'_, 'ctx> {
         let t = Arith::add(self, x, magic);
         let i = self.b.build_bit_cast(t, self.ity, "");
         let i = self.vec_of(i, self.ity);
+        if table.len() == 16 && self.w == 8 && self.u.features.split(',').any(|f| f == "+avx512f") {
+            return self.permute_pair(table, i);
+        }
         let r = self.b.build_and(i, self.iconst(table.len() as u64 - 1), "");
         let i = self.i(r);
         let r = self.b.build_left_shift(i, self.iconst(4), "");

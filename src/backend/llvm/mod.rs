@@ -406,6 +406,13 @@ mod tests {
         }
         let pow = assembly(&formula("param n = 20 in 1..100\npow(NH, n) * exp(NL) / acos(NV)"), Mode::Precise).expect("listing");
         assert!(!pow.contains("rcp") && !pow.contains("rsqrt"), "estimate in the library's code");
+        // exp's 16-row table: permutations of registers in eight AVX-512 lanes, no gather (pow's ln table,
+        // 64 rows, still gathers).
+        let exp = assembly(&formula("exp(-50 * NH)"), Mode::Precise).expect("listing");
+        if host().expect("host").features.split(',').any(|f| f == "+avx512f") {
+            assert!(exp.contains("vpermi2pd") || exp.contains("vpermt2pd"), "no permutation:\n{exp}");
+            assert!(!exp.contains("gather"), "a gather:\n{exp}");
+        }
     }
 
     #[test]
