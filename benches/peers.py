@@ -11,7 +11,8 @@ at the formula's declared parameter values, baked as constants everywhere (as `l
 thread:
 - lobe: `lobe eval FILE --set P=V,… --points CSV --json --tier cranelift|llvm` (the accuracy pass's kernel, what
   every command compiles), its `eval_cpu_ns_per_point`: the steady state of the batched kernel into a written
-  output;
+  output; and `llvm-speed`, the same with `--prefer speed` (the plain simplification the peers run, with lobe's
+  precise math library): what the accuracy pass costs, and what the arithmetic alone costs;
 - the peers evaluate lobe's own plain simplification at the same values (`lobe check --set … --json`, its
   `simplified`), translated to each dialect: numpy (whole-array operations), numba (an `@njit` loop into a preallocated output), Dr.Jit (its LLVM
   backend, `drjit.set_thread_count(1)`: every kernel on the calling thread; each timed call traces the
@@ -208,11 +209,11 @@ def values(report):
 class Lobe:
     """One tier of the command line's batched kernel: a subprocess per sample (it reads the CSV each time)."""
 
-    def __init__(self, binary, tier):
-        self.binary, self.tier, self.name = binary, tier, tier
+    def __init__(self, binary, tier, name=None, extra=()):
+        self.binary, self.tier, self.name, self.extra = binary, tier, name or tier, list(extra)
 
     def prepare(self, f):
-        args = [self.binary, "eval", f.path, *f.set, "--points", f.csv, "--json", "--tier", self.tier]
+        args = [self.binary, "eval", f.path, *f.set, "--points", f.csv, "--json", "--tier", self.tier, *self.extra]
         r = run_json(args)
         f.meta[self.name] = {"compile_ms": r["compile_us"] / 1e3, "lanes": r.get("lanes")}
         def sample():
@@ -375,6 +376,7 @@ def main():
     try:
         run_json([binary, "eval", "--expr", "NH", "--at", "NH=0.5", "--json", "--tier", "llvm"])
         systems.append(Lobe(binary, "llvm"))
+        systems.append(Lobe(binary, "llvm", "llvm-speed", ["--prefer", "speed"]))
     except RuntimeError as e:
         skipped["llvm"] = f"this lobe has no LLVM tier (cargo build --release --features llvm): {str(e)[-200:]}"
     systems += found

@@ -498,8 +498,15 @@ fn exp_parts_tail<E: Emit>(e: &mut E, xh: E::V, xl: E::V, lo: f64, hi: f64) -> E
     // The row j = k − 16q = k mod 16: the lookup rounds kx itself (the addition `round_int` made) and keeps
     // the low 4 bits, so j costs no instruction.
     let (t_hi, t_tail) = e.lookup_pair(&EXP_T, kx);
-    let p = horner(e, r, &[1.0 / 2.0, 1.0 / 6.0, 1.0 / 24.0, 1.0 / 120.0, 1.0 / 720.0, 1.0 / 5040.0]);
+    // (e^r − 1 − r)/r² as three independent pairs c₂ᵢ + c₂ᵢ₊₁·r, then Horner in r²: the operations of Horner's
+    // scheme in r, a dependency chain of three instead of five.
     let r2 = e.mul(r, r);
+    let [c0, c1, c2, c3, c4, c5] = [1.0 / 2.0, 1.0 / 6.0, 1.0 / 24.0, 1.0 / 120.0, 1.0 / 720.0, 1.0 / 5040.0].map(|c| e.konst(c));
+    let p01 = e.fma(r, c1, c0);
+    let p23 = e.fma(r, c3, c2);
+    let p45 = e.fma(r, c5, c4);
+    let hi = e.fma(r2, p45, p23);
+    let p = e.fma(r2, hi, p01);
     let em1 = e.fma(r2, p, r);
     let tmp = e.add(t_tail, em1);
     let y = e.fma(t_hi, tmp, t_hi);
