@@ -449,7 +449,25 @@ const INV_L2N: f64 = 184.6649652337873 / 8.0; // 16/ln 2
 /// up by permutation; 128 rows took two gathers per vector, a quarter of exp's time (BENCHMARKS.md).
 fn exp_dd<E: Emit>(e: &mut E, xh: E::V, xl: E::V) -> E::V {
     let (y, q) = exp_parts(e, xh, xl, -760.0, 720.0);
-    scale2(e, y, q)
+    scale2_exp(e, y, q)
+}
+
+/// [`scale2`] of exp's `y` (in [0.97, 1.96], or NaN): in vectors of 4+ lanes, where [`scale2`] forms subnormal
+/// results from the bits in every lane, one product `y·2^q` (exact for q in [−1021, 1023]: the result is normal)
+/// unless some lane's q is outside, and then [`scale2`] for the whole vector in a rare block (the same bits).
+/// exp and pow rarely underflow (x < −708), unlike the accuracy pass's scaled exponential of Beckmann or Ward,
+/// which keeps [`scale2`]. In 1 or 2 lanes [`scale2`] is already two products.
+fn scale2_exp<E: Emit>(e: &mut E, y: E::V, q: E::V) -> E::V {
+    if e.lanes() < 4 {
+        return scale2(e, y, q);
+    }
+    let low = ltk(e, q, -1021.0);
+    let top = e.konst(1023.0);
+    let high = e.lt(top, q);
+    let out = e.or(low, high);
+    let s = e.pow2i(q);
+    let r = e.mul(y, s);
+    e.rare(out, r, &mut |e| scale2(e, y, q))
 }
 
 /// [`exp_dd`] before its scaling: `(y, q)` with e^(xh + xl) = y·2^q, y in [0.99, 2.01) rounded once, xh
