@@ -444,7 +444,7 @@ const INV_L2N: f64 = 184.6649652337873 / 8.0; // 16/ln 2
 /// k = round(x·16/ln 2), j = k mod 16, x = k·ln2/16 + r with |r| ≤ ln2/32 (+ xl): e^x = 2^(k div 16)
 /// ·2^(j/16)·e^r. 2^(j/16) is the table's `T_HI·(1 + T_TAIL)`, e^r − 1 a degree-7 Taylor polynomial
 /// (truncation < 2^-59), and the result `T_HI + T_HI·(T_TAIL + (e^r − 1))` rounds once in an FMA, then
-/// [`scale2`] (exact unless the result overflows, correctly rounded in the subnormals). No division.
+/// [`scale2_exp`] (exact unless the result overflows, correctly rounded in the subnormals). No division.
 /// Sixteen rows rather than 128 and two more polynomial terms: on AVX-512 the rows are two registers, looked
 /// up by permutation; 128 rows took two gathers per vector, a quarter of exp's time (BENCHMARKS.md).
 fn exp_dd<E: Emit>(e: &mut E, xh: E::V, xl: E::V) -> E::V {
@@ -470,7 +470,7 @@ fn scale2_exp<E: Emit>(e: &mut E, y: E::V, q: E::V) -> E::V {
     e.rare(out, r, &mut |e| scale2(e, y, q))
 }
 
-/// [`exp_dd`] before its scaling: `(y, q)` with e^(xh + xl) = y·2^q, y in [0.99, 2.01) rounded once, xh
+/// [`exp_dd`] before its scaling: `(y, q)` with e^(xh + xl) = y·2^q, y in [0.97, 1.96] rounded once, xh
 /// clamped to [lo, hi] (|lo|, |hi| ≤ 1416, so k·`L2N_HI` stays exact and q within [`scale2`]'s range).
 fn exp_parts<E: Emit>(e: &mut E, xh: E::V, xl: E::V, lo: f64, hi: f64) -> (E::V, E::V) {
     let p = exp_parts_tail(e, xh, xl, lo, hi);
@@ -1317,7 +1317,7 @@ pub(crate) mod logic {
 /// Why: in `exp(a)·b/c` written out, e^a underflows (a < −708) or overflows before b/c rescales it, so a
 /// Beckmann or Ward value near 1e-311 comes out as a denormal with few bits, or 0. The common case costs what
 /// the product as written does plus a range test on b/c: e^a = y·2^q ([`exp_parts`] with a clamped to ±1416,
-/// y in [0.99, 2.01)), s = y·(b/c) (two roundings), and [`scale2`] applies 2^q last (|q| ≤ 2043; exact unless
+/// y in [0.97, 1.96]), s = y·(b/c) (two roundings), and [`scale2`] applies 2^q last (|q| ≤ 2043; exact unless
 /// the result is subnormal, whose only rounding it then is). Where |b/c| lies in [2^-960, 2^967] that is the
 /// answer for every a, the clamped ones included: a < −1416 gives 0, as the truth rounds, and a > 1416 ∞
 /// (Beckmann's small-NH lanes, where e^a alone is 0, stay on this path). Other lanes (b or c tiny, huge, 0, ∞ or
@@ -1495,7 +1495,7 @@ pub(crate) fn pow_lo<E: Emit>(e: &mut E, x: E::V, y: E::V, mode: Mode) -> E::V {
     }
     let (ph, pl) = pow_exponent(e, x, y);
     let ExpParts { y: m, q, t_hi, tmp, rh, rl, r, r2, p, em1, t_tail } = exp_parts_tail(e, ph, pl, -760.0, 720.0);
-    // m = T_HI + T_HI·tmp rounded once; T_HI − m is exact (Sterbenz: m in [0.99, 2.01), T_HI in [1, 2)), so
+    // m = T_HI + T_HI·tmp rounded once; T_HI − m is exact (Sterbenz: m in [0.97, 1.96], T_HI in [1, 2)), so
     // this is that rounding.
     let d = e.sub(t_hi, m);
     let m_lo = e.fma(t_hi, tmp, d);
