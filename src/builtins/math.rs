@@ -494,7 +494,7 @@ struct ExpParts<V> {
     t_tail: V,
 }
 
-/// [`exp_parts`] and the final FMA's operands, from which [`pow_lo`] recovers that rounding.
+/// [`exp_parts`] with the operands of its roundings, from which [`pow_lo`] recovers them.
 fn exp_parts_tail<E: Emit>(e: &mut E, xh: E::V, xl: E::V, lo: f64, hi: f64) -> ExpParts<E::V> {
     use super::math_tables::EXP_T;
     // Clamp so k stays small; a clamped (or NaN) lane drops xl, which is only meaningful beside its xh.

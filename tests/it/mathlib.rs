@@ -16,7 +16,7 @@ use lobe::base::span::Span;
 use lobe::builtins::{Builtin, Mode};
 use lobe::ir::{Formula, Input, Ir, Meta, ParamDecl, ParamKind};
 use lobe::{Backend, Columns, Evaluator};
-use crate::differential::ulps;
+use crate::differential::{jit_backends, ulps};
 use std::sync::Arc;
 
 const S: Span = Span { start: 0, end: 0 };
@@ -296,8 +296,7 @@ fn jit_returns_the_interpreters_bits_in_both_modes() {
         let x: Vec<f64> = pts.iter().map(|a| a[0]).collect();
         let y: Vec<f64> = pts.iter().map(|a| a.get(1).copied().unwrap_or(0.0)).collect();
         // Both JIT tiers: the LLVM tier's lanes take other codings of the same bits (exp's scaling, its table).
-        let tiers: &[Backend] = if cfg!(feature = "llvm") { &[Backend::Jit, Backend::Llvm] } else { &[Backend::Jit] };
-        for (&backend, mode) in tiers.iter().flat_map(|b| Mode::ALL.map(move |m| (b, m))) {
+        for (backend, mode) in jit_backends().into_iter().flat_map(|b| Mode::ALL.map(move |m| (b, m))) {
             let jit = lobe::build_kernel(formula.clone(), backend, mode).expect("compiles");
             let interp = lobe::build_kernel(formula.clone(), Backend::Interp, mode).expect("builds");
             let cols = Columns::new(std::array::from_fn(|k| match k { 1 => y.as_slice(), 2 => x.as_slice(), _ => &[] }));

@@ -49,6 +49,8 @@ pub(super) struct Unit<'a, 'ctx> {
     pub mode: Mode,
     /// The host has a fused multiply-add (exact two-products in two instructions, as the Cranelift tier).
     pub fma: bool,
+    /// The host has AVX-512 ([`super::Host::avx512`]).
+    pub avx512: bool,
     /// Math builtins are calls to the compiled library ([`crate::backend::jit::OUTLINE_AT`]), not inline code.
     pub outline: bool,
     /// `target-cpu` and `target-features` of every function: the host's.
@@ -607,7 +609,7 @@ impl<'ctx> Emit for Gen<'_, 'ctx> {
         let t = Arith::add(self, x, magic);
         let i = self.b.build_bit_cast(t, self.ity, "");
         let i = self.vec_of(i, self.ity);
-        if table.len() == 16 && self.w == 8 && self.u.features.split(',').any(|f| f == "+avx512f") {
+        if table.len() == 16 && self.w == 8 && self.u.avx512 {
             return self.permute_pair(table, i);
         }
         let r = self.b.build_and(i, self.iconst(table.len() as u64 - 1), "");
