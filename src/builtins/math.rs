@@ -1123,7 +1123,11 @@ const COS_C: [f64; 6] = [
     -1.13596475577881948265e-11,
 ];
 
-/// x = k·π/2 + (y0 + y1), |y0 + y1| ≤ ~π/4; returns (j = k mod 4, y0, y1). Exact products: k < 2^20 and the
+/// Per quadrant k mod 4 of sin's reduced argument: (sign, 1 where the value is the cosine kernel's):
+/// sin(y + kπ/2) is sin y, cos y, −sin y, −cos y.
+const SIN_QUADRANT: [[f64; 2]; 4] = [[1.0, 0.0], [1.0, 1.0], [-1.0, 0.0], [-1.0, 1.0]];
+
+/// x = k·π/2 + (y0 + y1), |y0 + y1| ≤ ~π/4; returns (k, y0, y1), k an integer, |k| < 2^20. Exact products: the
 /// three parts of π/2 have 33 bits each.
 fn trig_reduce<E: Emit>(e: &mut E, x: E::V, precise: bool) -> (E::V, E::V, E::V) {
     let kx = mulk(e, x, INV_PIO2);
@@ -1145,12 +1149,7 @@ fn trig_reduce<E: Emit>(e: &mut E, x: E::V, precise: bool) -> (E::V, E::V, E::V)
         let r = e.sub(t1, w2);
         (r, e.konst(0.0))
     };
-    // j = k − 4·floor(k/4), floor(k/4) = round((k − 1.5)/4) (never a tie).
-    let q = addk(e, k, -1.5);
-    let q = mulk(e, q, 0.25);
-    let q = round_int(e, q);
-    let q4 = mulk(e, q, 4.0);
-    (e.sub(k, q4), y0, y1)
+    (k, y0, y1)
 }
 
 /// sin(x + y) for |x| ≤ π/4, y a tail (fdlibm's __kernel_sin).
@@ -1193,8 +1192,8 @@ fn kernel_cos<E: Emit>(e: &mut E, x: E::V, y: E::V, precise: bool) -> E::V {
     e.add(w, a)
 }
 
-/// Whether the small integer `j` (0..=4, the quadrant) is odd: j/2 is then not an integer (NaN: odd).
-fn is_odd_small<E: Emit>(e: &mut E, j: E::V) -> E::M {
+/// Whether the integer `j` (|j| < 2^52) is odd: j/2 is then not an integer (NaN: odd).
+fn is_odd<E: Emit>(e: &mut E, j: E::V) -> E::M {
     let h = mulk(e, j, 0.5);
     let r = round_int(e, h);
     let same = e.eq(r, h);
@@ -1209,22 +1208,20 @@ fn trig_far<E: Emit>(e: &mut E, x: E::V) -> E::M {
     e.not(near)
 }
 
-/// sin (`cos_phase` = 0) or cos (1): quadrant j + phase selects ±sin or ±cos of the reduced argument.
+/// sin (`phase` = 0) or cos (1): the quadrant k + phase selects ±sin or ±cos of the reduced argument.
 fn sin_cos<E: Emit>(e: &mut E, x: E::V, phase: f64, mode: Mode, f: Builtin) -> E::V {
     let precise = mode == Mode::Precise;
-    let (j, y0, y1) = trig_reduce(e, x, precise);
+    let (k, y0, y1) = trig_reduce(e, x, precise);
     let s = kernel_sin(e, y0, y1, precise);
     let c = kernel_cos(e, y0, y1, precise);
-    let j = addk(e, j, phase);
-    // j in 0..=4: 0 sin, 1 cos, 2 −sin, 3 −cos, 4 sin.
-    let odd = is_odd_small(e, j);
-    let v = e.select(odd, c, s);
-    let nv = e.neg(v);
-    let two = e.konst(2.0);
-    let ge2 = e.le(two, j);
-    let lt4 = ltk(e, j, 4.0);
-    let flip = e.and(ge2, lt4);
-    let res = e.select(flip, nv, v);
+    // The quadrant (k + phase) mod 4 picks the kernel and the sign from a four-row table (exact: k is an
+    // integer, and a product by ±1 is a sign).
+    let j = addk(e, k, phase);
+    let (sign, cosine) = e.lookup_pair(&SIN_QUADRANT, j);
+    let zero = e.konst(0.0);
+    let pick = e.lt(zero, cosine);
+    let v = e.select(pick, c, s);
+    let res = e.mul(v, sign);
     // sin(±0) = ±0.
     let res = if phase == 0.0 {
         let zero = e.konst(0.0);
@@ -1249,10 +1246,10 @@ pub(crate) fn cos<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
 /// near a pole tan ≈ −1/y, so the reduced argument's absolute error becomes relative error in the result.
 pub(crate) fn tan<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
     let precise = mode == Mode::Precise;
-    let (j, y0, y1) = trig_reduce(e, x, true);
+    let (k, y0, y1) = trig_reduce(e, x, true);
     let s = kernel_sin(e, y0, y1, precise);
     let c = kernel_cos(e, y0, y1, precise);
-    let odd = is_odd_small(e, j);
+    let odd = is_odd(e, k);
     let even = e.not(odd);
     let t_even = e.div(s, c);
     let nc = e.neg(c);

@@ -247,6 +247,39 @@ impl<'a, 'ctx> Gen<'a, 'ctx> {
         (heads, tails)
     }
 
+    /// [`Emit::lookup_pair`] in a table of at most four rows, `index`'s low bits choosing: on AVX-512 with
+    /// eight lanes one `vpermpd` per column (the rows repeated to eight, so the index's third bit is moot),
+    /// else a tree of selects on the index's two low bits (no memory access; a gather per column costs more).
+    fn select_pair(&mut self, table: &[[f64; 2]], index: VectorValue<'ctx>) -> (VectorValue<'ctx>, VectorValue<'ctx>) {
+        let n = table.len();
+        let row = |j: usize| table[j % n];
+        if self.w == 8 && self.u.avx512 {
+            let f64t = self.u.cx.f64_type();
+            let column = |g: &mut Self, col: usize| {
+                let t = VectorType::const_vector(&(0..8).map(|j| f64t.const_float(row(j)[col])).collect::<Vec<_>>());
+                g.call_intrinsic("llvm.x86.avx512.permvar.df.512", &[], &[t.into(), index.into()], g.fty)
+            };
+            let heads = column(self, 0);
+            return (heads, column(self, 1));
+        }
+        let bit = |g: &mut Self, b: u64| {
+            let r = g.b.build_and(index, g.iconst(b), "");
+            let set = g.i(r);
+            let r = g.b.build_int_compare(IntPredicate::NE, set, g.iconst(0), "");
+            g.m(r)
+        };
+        let (b0, b1) = (bit(self, 1), bit(self, 2));
+        let column = |g: &mut Self, col: usize| {
+            let c = |g: &mut Self, j: usize| g.fconst(row(j)[col].to_bits());
+            let (r0, r1, r2, r3) = (c(g, 0), c(g, 1), c(g, 2), c(g, 3));
+            let lo = Emit::select(g, b0, r1, r0);
+            let hi = Emit::select(g, b0, r3, r2);
+            Emit::select(g, b1, hi, lo)
+        };
+        let heads = column(self, 0);
+        (heads, column(self, 1))
+    }
+
     /// A lane-wise floating-point intrinsic (`llvm.sqrt`, `llvm.fma`, `llvm.minimum`, …).
     fn fop(&mut self, name: &str, args: &[VectorValue<'ctx>]) -> VectorValue<'ctx> {
         let args: Vec<BasicMetadataValueEnum> = args.iter().map(|a| (*a).into()).collect();
@@ -611,6 +644,9 @@ impl<'ctx> Emit for Gen<'_, 'ctx> {
         let i = self.vec_of(i, self.ity);
         if table.len() == 16 && self.w == 8 && self.u.avx512 {
             return self.permute_pair(table, i);
+        }
+        if table.len() <= 4 {
+            return self.select_pair(table, i);
         }
         let r = self.b.build_and(i, self.iconst(table.len() as u64 - 1), "");
         let i = self.i(r);
