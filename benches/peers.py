@@ -111,12 +111,14 @@ class Dialect(ast.NodeTransformer):
         return ast.parse(self.names.get(node.id, node.id), mode="eval").body
 
 
-FUNCS = ["exp", "sqrt", "sin", "cos", "abs", "log", "ln", "acos"]
+# sinnear is lobe's sin on an argument range analysis bounds (its simplifier's coding): the peers' sin.
+FUNCS = ["exp", "sqrt", "sin", "sinnear", "cos", "abs", "log", "ln", "acos"]
 
 
 def dialect(clamp, minimum, maximum, power, prefix, **rename):
     """A dialect's calls: format strings of the four forms that differ, then `prefix + name(x)` for the
     one-argument functions (`rename`: a lobe builtin's name in the dialect, where it differs)."""
+    rename = {"sinnear": "sin", **rename}
     forms = {"clamp": clamp, "min": minimum, "max": maximum, "pow": power}
     out = {f: (lambda t: lambda *a: t.format(*a))(t) for f, t in forms.items()}
     out.update({f: (lambda g: lambda x: f"{prefix}{g}({x})")(rename.get(f, f)) for f in FUNCS})

@@ -588,6 +588,27 @@ impl Formula {
         self.rgb.is_some()
     }
 
+    /// This formula with each builtin that only recodes a language function written as that function
+    /// ([`Builtin::language_form`]: the simplifier's `sinnear` as `sin`): what text and shaders for people and
+    /// other tools show.
+    pub fn in_language(&self) -> Formula {
+        if self.is_rgb() {
+            let c = self.channels();
+            return self.with_channels(&[c[0].in_language(), c[1].in_language(), c[2].in_language()]);
+        }
+        let mut ir = Ir::new();
+        let mut map: Vec<NodeId> = Vec::with_capacity(self.ir.len());
+        for id in self.ir.ids() {
+            let n = match *self.ir.node(id) {
+                Node::Call(b, a) => Node::Call(b.language_form(), a),
+                n => n,
+            };
+            let n = n.map_args(|a| map[a.index()]);
+            map.push(ir.push(n, self.ir.span(id)));
+        }
+        Formula { ir, root: map[self.root.index()], ..self.clone() }
+    }
+
     /// Default parameter values, in declaration order.
     pub fn default_params(&self) -> Vec<f64> {
         self.params.iter().map(|p| p.default).collect()

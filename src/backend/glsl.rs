@@ -414,6 +414,7 @@ fn header(f: &Formula, inputs: InputSet, live: &[u16], lang: &str) -> Vec<String
 /// colour parameter as one `vec3`), returning `float` (`f32`) or, for a colour formula, `vec3` (`vec3<f32>`).
 /// An error when the formula holds an internal builtin (see the module documentation).
 pub fn export(f: &Formula, d: Dialect) -> Result<String, Diagnostic> {
+    let f = &f.in_language();
     let (ir, roots) = f.merged_roots();
     let (inputs, live) = uses_of(&ir, &roots);
     let names = param_names(f);
@@ -502,6 +503,7 @@ fn be_input(i: Input) -> &'static str {
 /// read as `float(NAME)` and a colour channel as `NAME.r`; a scalar formula returns `vec3(F)`. An error when
 /// the formula holds an internal builtin, as for [`export`].
 pub fn brdf_explorer(f: &Formula) -> Result<String, Diagnostic> {
+    let f = &f.in_language();
     let (ir, roots) = f.merged_roots();
     let (inputs, live) = uses_of(&ir, &roots);
     let names = param_names(f);
@@ -561,6 +563,7 @@ pub fn brdf_explorer(f: &Formula) -> Result<String, Diagnostic> {
 /// A complete fragment shader in `version` around the exported GLSL function (for validators and quick
 /// previews); an error as for [`export`].
 pub fn glsl_test_shader(f: &Formula, version: GlslVersion) -> Result<String, Diagnostic> {
+    let f = &f.in_language();
     let func = export(f, Dialect::Glsl(version))?;
     let (ir, roots) = f.merged_roots();
     let (inputs, live) = uses_of(&ir, &roots);

@@ -1242,6 +1242,76 @@ pub(crate) fn cos<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
     sin_cos(e, x, 1.0, mode, Builtin::Cos)
 }
 
+/// Above this |x| [`sin_near`] is [`sin`]: up to it the polynomial's tail stays below 0.14 of the result.
+pub(crate) const SIN_NEAR_MAX: f64 = 1.75;
+/// −1/6 as a double-double: sin's first correction term carried exactly.
+const SIN_S1_HI: f64 = -0.16666666666666666;
+const SIN_S1_LO: f64 = -9.25185853854297e-18;
+/// (−1)^k/(2k+1)! for k = 2..=11: sin's Taylor series after −x³/6 (truncation < 2^-63 relative for
+/// |x| ≤ [`SIN_NEAR_MAX`]).
+const SIN_TAYLOR: [f64; 10] = [
+    0.008333333333333333,
+    -0.0001984126984126984,
+    2.7557319223985893e-06,
+    -2.505210838544172e-08,
+    1.6059043836821613e-10,
+    -7.647163731819816e-13,
+    2.8114572543455206e-15,
+    -8.22063524662433e-18,
+    1.9572941063391263e-20,
+    -3.868170170630684e-23,
+];
+/// Fast mode: k = 1..=5 (truncation < 2.4e-7 relative for |x| ≤ [`SIN_NEAR_MAX`]).
+const SIN_TAYLOR_FAST: [f64; 5] = [-0.16666666666666666, 0.008333333333333333, -0.0001984126984126984, 2.7557319223985893e-06, -2.505210838544172e-08];
+
+/// sin(x) for an argument the simplifier's range analysis bounds by [`SIN_NEAR_MAX`]: no reduction, one
+/// kernel. Lanes beyond the bound (and NaN, ±inf) are [`sin`]'s, in a rare block, so the function is sin with
+/// the same bound everywhere; what it saves is the reduction by π/2 and the second kernel [`sin_cos`] needs
+/// when a vector's lanes fall in different quadrants (half of sin's operations).
+///
+/// Precise: x + (−x³/6 + x⁵·R(x²)) with x³ = p + c exactly (two error-free products), −x³/6 in double-double,
+/// the rest rounded: the tail's few roundings are on a term below 0.14 of the result, the sum x + hi is
+/// error-free, so the result is within ~0.6 ulp (measured in the math library's tests, against the truth).
+pub(crate) fn sin_near<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
+    let ax = e.abs(x);
+    let lim = e.konst(SIN_NEAR_MAX);
+    let near = e.le(ax, lim);
+    let far = e.not(near);
+    let z = e.mul(x, x);
+    let p = e.mul(x, z);
+    let r = if mode == Mode::Precise {
+        let nz = e.neg(z);
+        let ez = e.fma(x, x, nz);
+        let np = e.neg(p);
+        let ep = e.fma(x, z, np);
+        let c = e.fma(x, ez, ep);
+        let s1 = e.konst(SIN_S1_HI);
+        let bh = e.mul(p, s1);
+        let nbh = e.neg(bh);
+        let eb = e.fma(p, s1, nbh);
+        let s1l = e.konst(SIN_S1_LO);
+        let lo = e.fma(p, s1l, eb);
+        let lo = e.fma(c, s1, lo);
+        let rz = horner(e, z, &SIN_TAYLOR);
+        let zr = e.mul(z, rz);
+        let tail = e.fma(p, zr, lo);
+        let (sh, sl) = fast_two_sum(e, x, bh);
+        let t = e.add(sl, tail);
+        e.add(sh, t)
+    } else {
+        let q = horner(e, z, &SIN_TAYLOR_FAST);
+        e.fma(p, q, x)
+    };
+    // sin(±0) = ±0 (x + (−0·z·…) would turn −0 into +0).
+    let zero = e.konst(0.0);
+    let is_zero = e.eq(x, zero);
+    let r = e.select(is_zero, x, r);
+    e.rare_call(far, r, Builtin::SinNear, &[x], &mut |e| {
+        let s = sin(e, x, mode);
+        e.select(far, s, r)
+    })
+}
+
 /// tan = sin/cos of the reduced argument (−cos/sin in odd quadrants). Fast mode keeps the precise reduction:
 /// near a pole tan ≈ −1/y, so the reduced argument's absolute error becomes relative error in the result.
 pub(crate) fn tan<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {

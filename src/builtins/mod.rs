@@ -48,6 +48,7 @@ pub enum Builtin {
     ExpMulDiv,
     AcosLo,
     PowLo,
+    SinNear,
 }
 
 /// How the JIT lowers a builtin.
@@ -215,6 +216,8 @@ lib1!(lobe_cos_precise, Cos, Precise);
 lib1!(lobe_cos_fast, Cos, Fast);
 lib1!(lobe_sin_precise, Sin, Precise);
 lib1!(lobe_sin_fast, Sin, Fast);
+lib1!(lobe_sinnear_precise, SinNear, Precise);
+lib1!(lobe_sinnear_fast, SinNear, Fast);
 lib1!(lobe_tan_precise, Tan, Precise);
 lib1!(lobe_tan_fast, Tan, Fast);
 lib1!(lobe_acos_precise, Acos, Precise);
@@ -268,7 +271,7 @@ pub(crate) fn clamp(x: f64, lo: f64, hi: f64) -> f64 {
     fmin(fmax(x, lo), hi)
 }
 
-const TABLE: [BuiltinInfo; 24] = [
+const TABLE: [BuiltinInfo; 25] = [
     BuiltinInfo {
         builtin: Builtin::Pow,
         name: "pow",
@@ -581,10 +584,23 @@ const TABLE: [BuiltinInfo; 24] = [
         doc: "powlo(x, y) = pow(x, y) minus lobe's pow(x, y): its rounding error, 0 in fast math (the accuracy pass forms it)",
         internal: Some("write `pow(x, y)`; the accuracy pass adds pow's rounding error (powlo) itself where that pays"),
     },
+    BuiltinInfo {
+        builtin: Builtin::SinNear,
+        name: "sinnear",
+        arity: 1,
+        lowering: Lowering::Math,
+        libm: Libm::F1(lobe_sin),
+        symbol: "",
+        bound: Bound::math(2.0),
+        glsl: "",
+        wgsl: "",
+        doc: "sinnear(x) = sin(x), computed without range reduction where |x| ≤ 1.75 (the simplifier forms it where range analysis bounds x)",
+        internal: Some("write `sin(x)`; the simplifier uses sinnear itself where range analysis bounds the argument"),
+    },
 ];
 
 impl Builtin {
-    pub const ALL: [Builtin; 24] = [
+    pub const ALL: [Builtin; 25] = [
         Builtin::Pow,
         Builtin::Cos,
         Builtin::Sin,
@@ -609,6 +625,7 @@ impl Builtin {
         Builtin::ExpMulDiv,
         Builtin::AcosLo,
         Builtin::PowLo,
+        Builtin::SinNear,
     ];
 
     pub fn info(self) -> &'static BuiltinInfo {
@@ -640,10 +657,19 @@ impl Builtin {
         TABLE.iter().filter(|r| r.internal.is_none())
     }
 
-    /// Only the accuracy pass forms it ([`BuiltinInfo::internal`]): not a function of the language, and never
-    /// written by a shader export.
+    /// Only the accuracy pass or the simplifier forms it ([`BuiltinInfo::internal`]): not a function of the
+    /// language, and never written by a shader export.
     pub fn is_internal(self) -> bool {
         self.info().internal.is_some()
+    }
+
+    /// The language's function this builtin computes, where it is only another coding of one: sinnear is sin
+    /// (what text and shaders for people write); every other builtin is itself.
+    pub fn language_form(self) -> Builtin {
+        match self {
+            Builtin::SinNear => Builtin::Sin,
+            b => b,
+        }
     }
 
     /// Reference semantics in precise mode; `args` has exactly `arity()` values.
@@ -679,6 +705,7 @@ impl Builtin {
             Builtin::Ln => ln(e, x),
             Builtin::Cos => cos(e, x, mode),
             Builtin::Sin => sin(e, x, mode),
+            Builtin::SinNear => sin_near(e, x, mode),
             Builtin::Tan => tan(e, x, mode),
             Builtin::Acos => acos(e, x, mode),
             Builtin::Asin => asin(e, x, mode),
@@ -719,6 +746,8 @@ impl Builtin {
             (Builtin::Cos, Mode::Fast) => ("lobe_cos_fast", Libm::F1(lobe_cos_fast)),
             (Builtin::Sin, Mode::Precise) => ("lobe_sin_precise", Libm::F1(lobe_sin_precise)),
             (Builtin::Sin, Mode::Fast) => ("lobe_sin_fast", Libm::F1(lobe_sin_fast)),
+            (Builtin::SinNear, Mode::Precise) => ("lobe_sinnear_precise", Libm::F1(lobe_sinnear_precise)),
+            (Builtin::SinNear, Mode::Fast) => ("lobe_sinnear_fast", Libm::F1(lobe_sinnear_fast)),
             (Builtin::Tan, Mode::Precise) => ("lobe_tan_precise", Libm::F1(lobe_tan_precise)),
             (Builtin::Tan, Mode::Fast) => ("lobe_tan_fast", Libm::F1(lobe_tan_fast)),
             (Builtin::Acos, Mode::Precise) => ("lobe_acos_precise", Libm::F1(lobe_acos_precise)),
@@ -782,10 +811,12 @@ mod tests {
             // Only the trigonometric functions fall back to the C library (for huge arguments).
             let trig = matches!(b, Builtin::Sin | Builtin::Cos | Builtin::Tan);
             assert_eq!(!r.symbol.is_empty(), trig, "{}", r.name);
-            // Exactly the accuracy pass's own builtins are internal, and only they have no shader spelling.
-            let internal = matches!(b, Builtin::ExpMulDiv | Builtin::AcosLo | Builtin::PowLo);
+            // Exactly the passes' own builtins are internal, and only they have no shader spelling (an export
+            // writes sinnear as sin: `language_form`).
+            let internal = matches!(b, Builtin::ExpMulDiv | Builtin::AcosLo | Builtin::PowLo | Builtin::SinNear);
             assert_eq!(b.is_internal(), internal, "{}", r.name);
             assert_eq!(r.glsl.is_empty(), internal, "{}", r.name);
+            assert_eq!(b.language_form() != *b, *b == Builtin::SinNear, "{}", r.name);
             assert_eq!(Builtin::language().any(|l| l.builtin == *b), !internal, "{}", r.name);
         }
     }

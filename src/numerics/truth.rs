@@ -484,7 +484,7 @@ fn call(f: Builtin, a: &[Xf]) -> Xf {
     match f {
         Builtin::Pow => a[0].pow(a[1]),
         Builtin::Cos => a[0].sin_cos().1,
-        Builtin::Sin => a[0].sin_cos().0,
+        Builtin::Sin | Builtin::SinNear => a[0].sin_cos().0,
         Builtin::Tan => {
             let (s, c) = a[0].sin_cos();
             s.div(c)

@@ -406,6 +406,8 @@ pub(crate) fn cost(f: &Formula) -> f64 {
             Builtin::ExpMulDiv => 28.0,
             // Beside acos of the same argument (its only use), whose work the JIT shares: measured (robust7).
             Builtin::AcosLo => 8.0,
+            // No reduction and one kernel: about half of sin's operations.
+            Builtin::SinNear => 10.0,
             _ => 20.0,
         },
     };

@@ -78,6 +78,10 @@
 //!   | 1000 | [1 − 10⁻⁹, 1) | 2.7·10¹¹ / 1.4·10⁹ | 0 / 0 |
 //!
 //!   (a = 1 is exact either way.) The one value it changes beyond rounding is the sign of a zero when a = −0.
+//! - `sin(x) → sinnear(x)` where range analysis bounds |x| by 1.75 (F_kutlog's `sin(max(π/2 − arg, 0))`):
+//!   one Taylor polynomial with −x³/6 in double-double instead of the reduction by π/2 and both kernels,
+//!   within sin's bound (≤ 1 ulp of the truth measured, against sin's ≤ 1; 3.8 % of points 1 ulp off where sin
+//!   has 2.0 %), 2.3× faster on the LLVM tier and on Cranelift.
 
 pub mod accuracy;
 mod cancel;
@@ -86,7 +90,7 @@ pub(crate) mod emit;
 mod powi;
 pub(crate) mod range;
 
-use crate::builtins::Builtin;
+use crate::builtins::{math, Builtin};
 use crate::base::span::Span;
 use crate::ir::{BinOp, Formula, InputSet, Ir, Node, NodeId, ParamDecl};
 use range::Range;
@@ -107,7 +111,8 @@ pub struct Policy {
     /// Run-time parameter values lie in their declared `lo..hi` ranges (finite, never NaN).
     pub params_in_range: bool,
     /// Allow rewrites that may change the last bits of a value: integer `pow` as a multiplication chain,
-    /// `pow(x, 0.5) → sqrt(x)`, and `a − a·x → a·(1 − x)`. Each one that fires is listed in the [`Report`].
+    /// `pow(x, 0.5) → sqrt(x)`, `a − a·x → a·(1 − x)`, and sin of an argument range analysis bounds by 1.75
+    /// without its reduction (`sinnear`). Each one that fires is listed in the [`Report`].
     pub rounding: bool,
     /// Largest |k| for which `pow(x, k)` becomes a multiplication chain (at most [`MAX_POW_CHAIN`]); the chain's
     /// error grows with k (≈ 0.1·k ulp mean, 0.7·k max, against libm's 0.5), so a caller that needs accuracy
@@ -650,6 +655,18 @@ impl<'a> Rewriter<'a> {
         let [a, b, c] = args;
         match f {
             Builtin::Pow => self.rewrite_pow(a, b, span),
+            // sin(x) → sinnear(x)   when range analysis bounds |x| by 1.75: no reduction by π/2 and one
+            // kernel instead of two (the same stated bound; lanes beyond it, which the range excludes, would be
+            // sin's anyway)
+            Builtin::Sin => {
+                let r = self.range(a);
+                if !self.policy.rounding || r.lo < -math::SIN_NEAR_MAX || r.hi > math::SIN_NEAR_MAX {
+                    return None;
+                }
+                self.fire("sin-near");
+                self.note("sin-near", span, format!("sin(x) for |x| ≤ {}: one polynomial without reduction (within sin's bound)", math::SIN_NEAR_MAX));
+                Some(self.call(Builtin::SinNear, &[a], span))
+            }
             Builtin::Abs => {
                 // abs(-x) → abs(x)
                 if let Some(x) = as_neg(&self.ir, a) {

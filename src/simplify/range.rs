@@ -210,11 +210,11 @@ impl Range {
                 let r = Range::widened(a.hi.cos(), a.lo.cos(), a.nan, false);
                 Range::new(r.lo.max(-1.0), r.hi.min(1.0), a.nan, false)
             }
-            Builtin::Sin if a.lo >= -FRAC_PI_2 && a.hi <= FRAC_PI_2 => {
+            Builtin::Sin | Builtin::SinNear if a.lo >= -FRAC_PI_2 && a.hi <= FRAC_PI_2 => {
                 let r = Range::widened(a.lo.sin(), a.hi.sin(), a.nan, true);
                 Range::new(r.lo.max(-1.0), r.hi.min(1.0), a.nan, a.negz)
             }
-            Builtin::Cos | Builtin::Sin => Range::new(-1.0, 1.0, a.nan || inf, true),
+            Builtin::Cos | Builtin::Sin | Builtin::SinNear => Range::new(-1.0, 1.0, a.nan || inf, true),
             Builtin::Tan => Range { nan: a.nan || inf, ..Range::TOP },
             Builtin::Acos => {
                 // The builtin clamps its argument to [−1, 1]; acos is decreasing.

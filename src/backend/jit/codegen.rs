@@ -63,8 +63,9 @@ fn symbols(ir: &Ir, mode: Mode, outline: bool) -> Vec<(Builtin, &'static str, *c
         if b.info().lowering != Lowering::Math || std::mem::replace(&mut seen[*b as usize], true) {
             continue;
         }
-        // With the library inlined, expmuldiv's rare lanes call its compiled function (`Emit::rare_call`).
-        let (symbol, f) = if outline || *b == Builtin::ExpMulDiv {
+        // With the library inlined, expmuldiv's and sinnear's rare lanes call their compiled functions
+        // (`Emit::rare_call`).
+        let (symbol, f) = if outline || matches!(b, Builtin::ExpMulDiv | Builtin::SinNear) {
             match b.outlined(mode) {
                 Some(s) => s,
                 None => continue,
