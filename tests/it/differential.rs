@@ -291,6 +291,32 @@ fn random_formulas(cases: u32, backend: Backend) {
     }
 }
 
+/// min, max and clamp against every special constant in either operand position, on raw inputs that take the
+/// signed zeros, NaN and the infinities: the one-instruction forms the JIT tiers use against a non-NaN constant
+/// (and LLVM's IEEE-2019 intrinsics elsewhere) give the interpreter's bits.
+#[test]
+fn min_max_clamp_against_constants_agree_on_every_tier() {
+    let mut pts = points(&[]);
+    for v in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, -0.0, 0.0, -1.0, 0.5, 2.0, -5e-324] {
+        pts.push([v; N_INPUTS]);
+    }
+    let x = || E::In(Input::NH, false);
+    let mut forms = vec![];
+    for c in SPECIAL {
+        forms.push(E::Call(Builtin::Min, vec![x(), E::C(c)]));
+        forms.push(E::Call(Builtin::Min, vec![E::C(c), x()]));
+        forms.push(E::Call(Builtin::Max, vec![x(), E::C(c)]));
+        forms.push(E::Call(Builtin::Max, vec![E::C(c), x()]));
+        for d in [0.0, -0.0, 1.0, f64::NAN, f64::INFINITY] {
+            forms.push(E::Call(Builtin::Clamp, vec![x(), E::C(c), E::C(d)]));
+        }
+    }
+    for e in &forms {
+        let (jits, interp) = tiers(formula(e, false), Mode::Precise);
+        check_tiers(&jits, &interp, &pts, &[vec![1.0, 2.0, 3.0]]).unwrap_or_else(|m| panic!("{m}"));
+    }
+}
+
 /// n = 1 and n = 1000 over 1000 points (batched length 1000 and 1), every builtin of one input.
 #[test]
 fn every_builtin_on_dense_inputs() {

@@ -280,6 +280,27 @@ impl<'a, 'ctx> Gen<'a, 'ctx> {
         (heads, column(self, 1))
     }
 
+    /// IEEE-2019 `maximum(v, c)` for a non-NaN constant `c` (value `cv`): `v < c ? c : v` (one `maxpd`, a NaN `v`
+    /// returned) equals it for every `v` but `v = −0, c = +0`, which `+ 0.0` repairs (the identity on
+    /// everything else, NaN included). The Cranelift tier's coding, so the same bits.
+    fn max_const(&mut self, v: VectorValue<'ctx>, cv: VectorValue<'ctx>, c: f64) -> VectorValue<'ctx> {
+        let lt = Emit::lt(self, v, cv);
+        let m = Emit::select(self, lt, cv, v);
+        if c.to_bits() == 0 {
+            let zero = self.fconst(0);
+            Arith::add(self, m, zero)
+        } else {
+            m
+        }
+    }
+
+    /// IEEE-2019 `minimum(v, c)` for a non-NaN constant `c ≠ −0` (value `cv`): `c < v ? c : v` (one `minpd`, a
+    /// NaN `v` returned) is exact.
+    fn min_const(&mut self, v: VectorValue<'ctx>, cv: VectorValue<'ctx>) -> VectorValue<'ctx> {
+        let lt = Emit::lt(self, cv, v);
+        Emit::select(self, lt, cv, v)
+    }
+
     /// A lane-wise floating-point intrinsic (`llvm.sqrt`, `llvm.fma`, `llvm.minimum`, …).
     fn fop(&mut self, name: &str, args: &[VectorValue<'ctx>]) -> VectorValue<'ctx> {
         let args: Vec<BasicMetadataValueEnum> = args.iter().map(|a| (*a).into()).collect();
@@ -448,7 +469,10 @@ impl<'a, 'ctx> Gen<'a, 'ctx> {
         let vals: Vec<_> = args[..f.arity()].iter().map(|a| self.arg(*a)).collect();
         let lowering = f.info().lowering;
         if lowering == Lowering::Inline {
-            return self.inline(f, &vals);
+            // A non-NaN constant operand of min, max or clamp (the lowering's `clamp(INPUT, 0, 1)` and root
+            // `max(raw, 0)`), for the one-instruction forms in `inline`.
+            let consts: Vec<Option<f64>> = args[..f.arity()].iter().map(|a| self.u.ir.node(*a).as_const().filter(|c| !c.is_nan())).collect();
+            return self.inline(f, &vals, &consts);
         }
         if self.u.outline && lowering == Lowering::Math {
             return match f.outlined(self.u.mode) {
@@ -469,18 +493,30 @@ impl<'a, 'ctx> Gen<'a, 'ctx> {
     }
 
     /// sqrt, abs, min, max, clamp, fma: LLVM's intrinsics with exactly the table's semantics (`llvm.minimum` and
-    /// `llvm.maximum` are IEEE 754-2019's: NaN-propagating, −0 < +0, as [`crate::builtins::fmin`]).
-    fn inline(&mut self, f: Builtin, v: &[VectorValue<'ctx>]) -> VectorValue<'ctx> {
-        match (f, v) {
-            (Builtin::Sqrt, [x]) => self.fop("llvm.sqrt", &[*x]),
-            (Builtin::Abs, [x]) => self.fop("llvm.fabs", &[*x]),
-            (Builtin::Min, [a, b]) => self.fop("llvm.minimum", &[*a, *b]),
-            (Builtin::Max, [a, b]) => self.fop("llvm.maximum", &[*a, *b]),
-            (Builtin::Clamp, [x, lo, hi]) => {
-                let m = self.fop("llvm.maximum", &[*x, *lo]);
-                self.fop("llvm.minimum", &[m, *hi])
+    /// `llvm.maximum` are IEEE 754-2019's: NaN-propagating, −0 < +0, as [`crate::builtins::fmin`]), which x86
+    /// runs as a compare, a blend and a repair of the zeros' signs; against a non-NaN constant (`consts`, per
+    /// operand) the Cranelift tier's single-instruction forms instead ([`Self::max_const`], [`Self::min_const`]).
+    fn inline(&mut self, f: Builtin, v: &[VectorValue<'ctx>], consts: &[Option<f64>]) -> VectorValue<'ctx> {
+        match (f, v, consts) {
+            (Builtin::Sqrt, [x], _) => self.fop("llvm.sqrt", &[*x]),
+            (Builtin::Abs, [x], _) => self.fop("llvm.fabs", &[*x]),
+            (Builtin::Max, [a, b], [_, Some(c)]) => self.max_const(*a, *b, *c),
+            (Builtin::Max, [a, b], [Some(c), _]) => self.max_const(*b, *a, *c),
+            (Builtin::Min, [a, b], [_, Some(c)]) if c.to_bits() != (-0.0f64).to_bits() => self.min_const(*a, *b),
+            (Builtin::Min, [a, b], [Some(c), _]) if c.to_bits() != (-0.0f64).to_bits() => self.min_const(*b, *a),
+            (Builtin::Min, [a, b], _) => self.fop("llvm.minimum", &[*a, *b]),
+            (Builtin::Max, [a, b], _) => self.fop("llvm.maximum", &[*a, *b]),
+            (Builtin::Clamp, [x, lo, hi], [_, l, h]) => {
+                let m = match l {
+                    Some(c) => self.max_const(*x, *lo, *c),
+                    None => self.fop("llvm.maximum", &[*x, *lo]),
+                };
+                match h {
+                    Some(c) if c.to_bits() != (-0.0f64).to_bits() => self.min_const(m, *hi),
+                    _ => self.fop("llvm.minimum", &[m, *hi]),
+                }
             }
-            (Builtin::Fma, [a, b, c]) => self.fop("llvm.fma", &[*a, *b, *c]),
+            (Builtin::Fma, [a, b, c], _) => self.fop("llvm.fma", &[*a, *b, *c]),
             _ => {
                 self.fail(format!("builtin `{}` is not an inline lowering", f.name()));
                 self.fty.get_poison()
