@@ -775,6 +775,24 @@ mod rewrites {
     }
 
     #[test]
+    fn sin_of_a_bounded_argument_is_sinnear() {
+        // |x| ≤ 1.75 by range analysis (1.5·NL, NL clamped to [0, 1]): sinnear, whose values stay within sin's.
+        let (g, r) = check("(sin (* 1.5 NL))", 2.0);
+        assert!(g.to_text().contains("sinnear("), "{}", g.to_text());
+        assert_eq!(r.fired.get("sin-near"), Some(&1), "{:?}", r.fired);
+        assert!(r.rounding.iter().any(|c| c.rule == "sin-near"), "listed as a rounding change");
+        // Beyond 1.75 (2·NL reaches 2), or through a parameter's range (a in 1..1000): sin stays.
+        for src in ["(sin (* 2 NL))", "(sin (* a NL))"] {
+            let (g, _) = check(src, 0.0);
+            assert!(!g.to_text().contains("sinnear"), "{src}: {}", g.to_text());
+        }
+        // The exact policy changes no rounding.
+        let f = formula("(sin (* 1.5 NL))", &[]).unwrap();
+        let (g, _) = simplify_with(&f, &[], &Policy::exact());
+        assert!(!g.to_text().contains("sinnear"), "{}", g.to_text());
+    }
+
+    #[test]
     fn clamp_with_bounds_out_of_order_is_not_a_max() {
         // clamp(x, lo, hi) = min(max(x, lo), hi): with lo > hi the result is hi, so "x ≤ hi" alone does not make
         // it max(x, lo) (two bugs the differential property test found).
