@@ -663,6 +663,14 @@ impl Builtin {
         self.info().internal.is_some()
     }
 
+    /// Which of lobe's passes forms this [internal](Self::is_internal) builtin (for messages).
+    pub fn formed_by(self) -> &'static str {
+        match self {
+            Builtin::SinNear => "the simplifier",
+            _ => "the accuracy pass",
+        }
+    }
+
     /// The language's function this builtin computes, where it is only another coding of one: sinnear is sin
     /// (what text and shaders for people write); every other builtin is itself.
     pub fn language_form(self) -> Builtin {

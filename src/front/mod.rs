@@ -59,7 +59,7 @@ pub fn parse_with_warnings(file: &str, src: &str) -> Result<(Formula, Diagnostic
     read(file, src, false)
 }
 
-/// [`parse()`] that also accepts the accuracy pass's internal builtins (`expmuldiv`, `acoslo`, `powlo`:
+/// [`parse()`] that also accepts the passes' internal builtins (`expmuldiv`, `acoslo`, `powlo`, `sinnear`:
 /// [`Builtin::is_internal`]); for tests and for reading back the pass's own output. Their names are then
 /// reserved, as every builtin's is. A BRDF Explorer file is read as [`parse()`] reads it.
 pub fn parse_internal(file: &str, src: &str) -> Result<Formula, Diagnostics> {
@@ -69,8 +69,8 @@ pub fn parse_internal(file: &str, src: &str) -> Result<Formula, Diagnostics> {
 /// The error for user text that calls (or names) an internal builtin, at `span`, with the table's hint of what
 /// to write instead.
 pub(crate) fn internal_builtin(b: Builtin, span: Span) -> Diagnostic {
-    Diagnostic::error(format!("`{}` is internal to the accuracy pass, not a function of the language", b.name()))
-        .at(span, "only the accuracy pass forms this")
+    Diagnostic::error(format!("`{}` is internal to {}, not a function of the language", b.name(), b.formed_by()))
+        .at(span, format!("only {} forms this", b.formed_by()))
         .hint(b.info().internal.unwrap_or("write the formula with the language's functions"))
 }
 
