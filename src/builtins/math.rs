@@ -1224,7 +1224,6 @@ fn sin_cos<E: Emit>(e: &mut E, x: E::V, phase: f64, mode: Mode, f: Builtin) -> E
     let res = e.mul(v, sign);
     // sin(±0) = ±0.
     let res = if phase == 0.0 {
-        let zero = e.konst(0.0);
         let is_zero = e.eq(x, zero);
         e.select(is_zero, x, res)
     } else {
@@ -1270,8 +1269,9 @@ const SIN_TAYLOR_FAST: [f64; 5] = [-0.16666666666666666, 0.008333333333333333, -
 /// when a vector's lanes fall in different quadrants (half of sin's operations).
 ///
 /// Precise: x + (−x³/6 + x⁵·R(x²)) with x³ = p + c exactly (two error-free products), −x³/6 in double-double,
-/// the rest rounded: the tail's few roundings are on a term below 0.14 of the result, the sum x + hi is
-/// error-free, so the result is within ~0.6 ulp (measured in the math library's tests, against the truth).
+/// the rest rounded: the tail's few roundings are on a term below 0.14 of the result and the sum x + hi is
+/// error-free, so the result is within 1 ulp of the truth (measured: 3.8 % of arguments in [0, 1.75] 1 ulp off,
+/// sin's own 2.0 %; the math library's tests hold it to sin's bound).
 pub(crate) fn sin_near<E: Emit>(e: &mut E, x: E::V, mode: Mode) -> E::V {
     let ax = e.abs(x);
     let lim = e.konst(SIN_NEAR_MAX);
