@@ -563,7 +563,6 @@ pub fn brdf_explorer(f: &Formula) -> Result<String, Diagnostic> {
 /// A complete fragment shader in `version` around the exported GLSL function (for validators and quick
 /// previews); an error as for [`export`].
 pub fn glsl_test_shader(f: &Formula, version: GlslVersion) -> Result<String, Diagnostic> {
-    let f = &f.in_language();
     let func = export(f, Dialect::Glsl(version))?;
     let (ir, roots) = f.merged_roots();
     let (inputs, live) = uses_of(&ir, &roots);

@@ -231,37 +231,31 @@ impl<'a, 'ctx> Gen<'a, 'ctx> {
         }
     }
 
-    /// [`Emit::lookup_pair`] of a 16-row table in eight AVX-512 lanes: each column is two registers of constants
-    /// and one `vpermi2pd` per column picks every lane's row by the low four bits of `index` (the bits above
-    /// are ignored, as the masked index of the gathers ignores them): no memory access, where two gathers took
-    /// a quarter of exp's time.
+    /// [`Emit::lookup_pair`] of a table of at most 16 rows in eight AVX-512 lanes, by the low bits of `index`
+    /// (the bits above are ignored, as the masked index of the gathers ignores them): each column is one
+    /// register of constants and one `vpermpd` (up to 8 rows, repeated to fill the register, so the index bits
+    /// above the table's are moot), or two registers and one `vpermi2pd` (16 rows). No memory access, where two
+    /// gathers took a quarter of exp's time.
     fn permute_pair(&mut self, table: &[[f64; 2]], index: VectorValue<'ctx>) -> (VectorValue<'ctx>, VectorValue<'ctx>) {
         let f64t = self.u.cx.f64_type();
-        let half = |col: usize, rows: std::ops::Range<usize>| VectorType::const_vector(&rows.map(|j| f64t.const_float(table[j][col])).collect::<Vec<_>>());
+        let n = table.len();
+        let reg = |col: usize, first: usize| VectorType::const_vector(&(first..first + 8).map(|j| f64t.const_float(table[j % n][col])).collect::<Vec<_>>());
         let column = |g: &mut Self, col: usize| {
-            let (lo, hi) = (half(col, 0..8), half(col, 8..16));
-            g.call_intrinsic("llvm.x86.avx512.vpermi2var.pd.512", &[], &[lo.into(), index.into(), hi.into()], g.fty)
+            if n <= 8 {
+                g.call_intrinsic("llvm.x86.avx512.permvar.df.512", &[], &[reg(col, 0).into(), index.into()], g.fty)
+            } else {
+                g.call_intrinsic("llvm.x86.avx512.vpermi2var.pd.512", &[], &[reg(col, 0).into(), index.into(), reg(col, 8).into()], g.fty)
+            }
         };
         let heads = column(self, 0);
-        let tails = column(self, 1);
-        (heads, tails)
+        (heads, column(self, 1))
     }
 
-    /// [`Emit::lookup_pair`] in a table of at most four rows, `index`'s low bits choosing: on AVX-512 with
-    /// eight lanes one `vpermpd` per column (the rows repeated to eight, so the index's third bit is moot),
-    /// else a tree of selects on the index's two low bits (no memory access; a gather per column costs more).
+    /// [`Emit::lookup_pair`] in a table of at most four rows without AVX-512's permutation: a tree of selects on
+    /// `index`'s two low bits (no memory access; a gather per column costs more).
     fn select_pair(&mut self, table: &[[f64; 2]], index: VectorValue<'ctx>) -> (VectorValue<'ctx>, VectorValue<'ctx>) {
         let n = table.len();
         let row = |j: usize| table[j % n];
-        if self.w == 8 && self.u.avx512 {
-            let f64t = self.u.cx.f64_type();
-            let column = |g: &mut Self, col: usize| {
-                let t = VectorType::const_vector(&(0..8).map(|j| f64t.const_float(row(j)[col])).collect::<Vec<_>>());
-                g.call_intrinsic("llvm.x86.avx512.permvar.df.512", &[], &[t.into(), index.into()], g.fty)
-            };
-            let heads = column(self, 0);
-            return (heads, column(self, 1));
-        }
         let bit = |g: &mut Self, b: u64| {
             let r = g.b.build_and(index, g.iconst(b), "");
             let set = g.i(r);
@@ -294,9 +288,12 @@ impl<'a, 'ctx> Gen<'a, 'ctx> {
         }
     }
 
-    /// IEEE-2019 `minimum(v, c)` for a non-NaN constant `c ≠ −0` (value `cv`): `c < v ? c : v` (one `minpd`, a
-    /// NaN `v` returned) is exact.
-    fn min_const(&mut self, v: VectorValue<'ctx>, cv: VectorValue<'ctx>) -> VectorValue<'ctx> {
+    /// IEEE-2019 `minimum(v, c)` for a non-NaN constant `c` (value `cv`): `c < v ? c : v` (one `minpd`, a NaN
+    /// `v` returned) is exact for `c ≠ −0`; `c = −0` keeps the intrinsic (`v = +0` would give +0).
+    fn min_const(&mut self, v: VectorValue<'ctx>, cv: VectorValue<'ctx>, c: f64) -> VectorValue<'ctx> {
+        if c.to_bits() == (-0.0f64).to_bits() {
+            return self.fop("llvm.minimum", &[v, cv]);
+        }
         let lt = Emit::lt(self, cv, v);
         Emit::select(self, lt, cv, v)
     }
@@ -502,8 +499,8 @@ impl<'a, 'ctx> Gen<'a, 'ctx> {
             (Builtin::Abs, [x], _) => self.fop("llvm.fabs", &[*x]),
             (Builtin::Max, [a, b], [_, Some(c)]) => self.max_const(*a, *b, *c),
             (Builtin::Max, [a, b], [Some(c), _]) => self.max_const(*b, *a, *c),
-            (Builtin::Min, [a, b], [_, Some(c)]) if c.to_bits() != (-0.0f64).to_bits() => self.min_const(*a, *b),
-            (Builtin::Min, [a, b], [Some(c), _]) if c.to_bits() != (-0.0f64).to_bits() => self.min_const(*b, *a),
+            (Builtin::Min, [a, b], [_, Some(c)]) => self.min_const(*a, *b, *c),
+            (Builtin::Min, [a, b], [Some(c), _]) => self.min_const(*b, *a, *c),
             (Builtin::Min, [a, b], _) => self.fop("llvm.minimum", &[*a, *b]),
             (Builtin::Max, [a, b], _) => self.fop("llvm.maximum", &[*a, *b]),
             (Builtin::Clamp, [x, lo, hi], [_, l, h]) => {
@@ -512,8 +509,8 @@ impl<'a, 'ctx> Gen<'a, 'ctx> {
                     None => self.fop("llvm.maximum", &[*x, *lo]),
                 };
                 match h {
-                    Some(c) if c.to_bits() != (-0.0f64).to_bits() => self.min_const(m, *hi),
-                    _ => self.fop("llvm.minimum", &[m, *hi]),
+                    Some(c) => self.min_const(m, *hi, *c),
+                    None => self.fop("llvm.minimum", &[m, *hi]),
                 }
             }
             (Builtin::Fma, [a, b, c], _) => self.fop("llvm.fma", &[*a, *b, *c]),
@@ -678,7 +675,7 @@ impl<'ctx> Emit for Gen<'_, 'ctx> {
         let t = Arith::add(self, x, magic);
         let i = self.b.build_bit_cast(t, self.ity, "");
         let i = self.vec_of(i, self.ity);
-        if table.len() == 16 && self.w == 8 && self.u.avx512 {
+        if table.len() <= 16 && self.w == 8 && self.u.avx512 {
             return self.permute_pair(table, i);
         }
         if table.len() <= 4 {

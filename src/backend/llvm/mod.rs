@@ -51,7 +51,8 @@ pub struct Host {
     pub lanes: u32,
     /// A native fused multiply-add.
     pub fma: bool,
-    /// AVX-512 (`+avx512f`): exp's table is looked up by register permutation instead of gathers.
+    /// AVX-512 (`+avx512f`): tables of up to 16 rows (exp's, sin's quadrants) are looked up by register
+    /// permutation instead of gathers.
     pub avx512: bool,
 }
 
