@@ -19,8 +19,14 @@ struct Run {
 /// Runs lobe with `args`, killing it (and failing the test) after `limit`. Output is read on threads so a
 /// large stream cannot block the child.
 fn lobe_within(limit: Duration, args: &[&str]) -> Run {
+    lobe_within_env(limit, args, &[])
+}
+
+/// [`lobe_within`] with environment variables set for the run.
+fn lobe_within_env(limit: Duration, args: &[&str], env: &[(&str, &str)]) -> Run {
     let mut child = Command::new(env!("CARGO_BIN_EXE_lobe"))
         .args(args)
+        .envs(env.iter().copied())
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .env("NO_COLOR", "1")
         .stdin(Stdio::null())
@@ -567,4 +573,57 @@ fn thousands_of_lights_render_in_bounded_time_and_memory() {
     let r = lobe_bounded(&["render", &s(&scene), "-o", &s(&out), "--stats"]);
     assert_eq!(r.code, Some(0), "{}", r.stderr);
     assert!(out.exists());
+}
+
+/// An accuracy-cache entry replaced by a FIFO, a link to /dev/zero or a 3 GB (sparse) file is a miss: the command
+/// searches again and answers, instead of blocking forever or reading the whole file.
+#[cfg(unix)]
+#[test]
+fn a_cache_entry_that_is_not_a_small_regular_file_is_a_miss() {
+    let dir = scratch("cache-entries");
+    let cache = dir.join("cache");
+    let cache_s = s(&cache);
+    let env = [("LOBE_CACHE_DIR", cache_s.as_str())];
+    let args = ["eval", "examples/brdfs/beckmann.brdf", "--at", "NH=0.7"];
+    let first = lobe_within_env(Duration::from_secs(60), &args, &env);
+    assert_eq!(first.code, Some(0), "{}", first.stderr);
+    let entries: Vec<PathBuf> = std::fs::read_dir(&cache).unwrap().flatten().map(|e| e.path()).filter(|p| p.extension().is_some_and(|x| x == "pass")).collect();
+    assert!(!entries.is_empty(), "the first run stored no decision");
+    let replace: [(&str, &dyn Fn(&Path) -> bool); 3] = [
+        ("FIFO", &|p| mkfifo(p)),
+        ("link to /dev/zero", &|p| std::os::unix::fs::symlink("/dev/zero", p).is_ok()),
+        ("3 GB file", &|p| std::fs::File::create(p).and_then(|f| f.set_len(3 << 30)).is_ok()),
+    ];
+    for (what, make) in replace {
+        for e in &entries {
+            let _ = std::fs::remove_file(e);
+            assert!(make(e), "{what}: could not create it");
+        }
+        let t = Instant::now();
+        let r = lobe_within_env(Duration::from_secs(10), &args, &env);
+        assert_eq!((r.code, r.stdout.clone()), (Some(0), first.stdout.clone()), "{what}: {} after {:?}", r.stderr, t.elapsed());
+        assert!(r.peak_kib < 1 << 20, "{what}: {} MiB", r.peak_kib >> 10);
+    }
+}
+
+/// Output to a full device (Linux's /dev/full) is an error line and exit code 1, not a panic (exit 101).
+#[cfg(target_os = "linux")]
+#[test]
+fn output_to_a_full_device_is_an_error() {
+    let cases: [&[&str]; 3] = [
+        &["eval", "examples/brdfs/phong.brdf", "--at", "VR=0.9"],
+        &["export", "examples/brdfs/phong.brdf", "--glsl"],
+        &["check", "examples/brdfs/phong.brdf", "--json"],
+    ];
+    for args in cases {
+        let out = Command::new(env!("CARGO_BIN_EXE_lobe"))
+            .args(args)
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .env("NO_COLOR", "1")
+            .stdout(std::fs::File::create("/dev/full").unwrap())
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        refused(&Run { code: out.status.code(), stdout: vec![], stderr: err.into_owned(), peak_kib: 0 }, args[0], "No space left on device");
+    }
 }
