@@ -94,6 +94,19 @@ fn main() {
     }
 }
 
+/// The command line, with negative numbers taken as values in every subcommand: `--aa -2` is then refused by its
+/// range ("-2 is not in 1..=8") instead of clap's "unexpected argument '-2'" and its tip to write `-- -2`.
+fn parse(args: Vec<std::ffi::OsString>) -> Cli {
+    use clap::{CommandFactory, FromArgMatches};
+    let mut cmd = Cli::command();
+    let names: Vec<String> = cmd.get_subcommands().map(|s| s.get_name().to_string()).collect();
+    for n in names {
+        cmd = cmd.mut_subcommand(n, |s| s.allow_negative_numbers(true));
+    }
+    let matches = cmd.get_matches_from(args);
+    Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit())
+}
+
 fn command() {
     // A killed write must not leave `.NAME.lobe-tmp-PID` files behind.
     lobe::base::output::clean_up_on_signals();
@@ -104,7 +117,7 @@ fn command() {
         args[1] = "sweep".into();
         args.retain(|a| a != "--sweep");
     }
-    let cli = Cli::parse_from(args);
+    let cli = parse(args);
     cli::common::use_cache(!cli.no_cache);
     let result = match &cli.cmd {
         Cmd::Eval(a) => cli::eval::run(a),

@@ -627,3 +627,22 @@ fn output_to_a_full_device_is_an_error() {
         refused(&Run { code: out.status.code(), stdout: vec![], stderr: err.into_owned(), peak_kib: 0 }, args[0], "No space left on device");
     }
 }
+
+/// A negative number where a positive one belongs is refused for its value, not met with clap's tip to write
+/// `-- -2` (which would not help).
+#[test]
+fn negative_values_are_refused_for_their_value() {
+    let dir = scratch("negative-values");
+    let out = dir.join("x.png");
+    let table = dir.join("x.binary");
+    let cases: [(&[&str], &str); 3] = [
+        (&["render", "examples/scenes/paper_sphere.toml", "--aa", "-2", "-o", &s(&out)], "-2 is not in 1..=8"),
+        (&["tabulate", "examples/brdfs/phong.brdf", "--color", "-1,1,1", "-o", &s(&table)], "--color takes three finite factors"),
+        (&["render", "examples/scenes/paper_sphere.toml", "--tile", "-64", "-o", &s(&out)], "-64 is not in"),
+    ];
+    for (args, needle) in cases {
+        let r = lobe(args);
+        assert!(r.code.is_some_and(|c| c != 0) && r.stderr.contains(needle) && !r.stderr.contains("tip:"), "{args:?}: {}", r.stderr);
+        assert!(!out.exists() && !table.exists());
+    }
+}
