@@ -50,16 +50,24 @@ enum Cmd {
     Serve(cli::serve::ServeArgs),
 }
 
-/// A reader that stops early (`lobe check … | head -1`) closes the pipe, and the next write to it fails with
-/// EPIPE, which `print!` reports by panicking. The command did nothing wrong: end quietly with the shell's status
-/// for a broken pipe (128 + SIGPIPE), as a C program killed by SIGPIPE would.
-fn quiet_on_broken_pipe() {
+/// Writing the command's output can fail after the work is done: `print!` then panics with "failed printing to
+/// stdout: …". A reader that stops early (`lobe check … | head -1`) closes the pipe (EPIPE): the command did
+/// nothing wrong, so it ends quietly with the shell's status for a broken pipe (128 + SIGPIPE), as a C program
+/// killed by SIGPIPE would. Any other failure (a full device, an I/O error) is the user's to know: an error line
+/// and exit code 1, not a panic.
+fn output_failures_are_errors() {
     let default = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
         let p = info.payload();
         let msg = p.downcast_ref::<String>().map(String::as_str).or_else(|| p.downcast_ref::<&str>().copied()).unwrap_or("");
-        if msg.contains("failed printing to std") && msg.contains("os error 32") {
-            std::process::exit(141);
+        if let Some(why) = msg.strip_prefix("failed printing to ") {
+            if msg.contains("os error 32") {
+                std::process::exit(141);
+            }
+            let (stream, why) = why.split_once(": ").unwrap_or(("stdout", why));
+            let stream = if stream == "stderr" { "standard error" } else { "standard output" };
+            eprintln!("error: cannot write the output to {stream}: {why}\n  = help: the output goes to a full or failing device: send it elsewhere");
+            std::process::exit(1);
         }
         default(info);
     }));
@@ -86,17 +94,30 @@ fn main() {
     }
 }
 
+/// The command line, with negative numbers taken as values in every subcommand: `--aa -2` is then refused by its
+/// range ("-2 is not in 1..=8") instead of clap's "unexpected argument '-2'" and its tip to write `-- -2`.
+fn parse(args: Vec<std::ffi::OsString>) -> Cli {
+    use clap::{CommandFactory, FromArgMatches};
+    let mut cmd = Cli::command();
+    let names: Vec<String> = cmd.get_subcommands().map(|s| s.get_name().to_string()).collect();
+    for n in names {
+        cmd = cmd.mut_subcommand(n, |s| s.allow_negative_numbers(true));
+    }
+    let matches = cmd.get_matches_from(args);
+    Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit())
+}
+
 fn command() {
     // A killed write must not leave `.NAME.lobe-tmp-PID` files behind.
     lobe::base::output::clean_up_on_signals();
-    quiet_on_broken_pipe();
+    output_failures_are_errors();
     // `lobe check --sweep FILE` is the issue's spelling of `lobe sweep FILE`.
     let mut args: Vec<std::ffi::OsString> = std::env::args_os().collect();
     if args.get(1).is_some_and(|a| a == "check") && args.iter().any(|a| a == "--sweep") {
         args[1] = "sweep".into();
         args.retain(|a| a != "--sweep");
     }
-    let cli = Cli::parse_from(args);
+    let cli = parse(args);
     cli::common::use_cache(!cli.no_cache);
     let result = match &cli.cmd {
         Cmd::Eval(a) => cli::eval::run(a),

@@ -71,7 +71,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), String> {
     let dir = parent_dir(&target);
     let name = target.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
     remove_stale_temporaries(&dir);
-    let tmp = dir.join(format!(".{name}.lobe-tmp-{}", std::process::id()));
+    let tmp = dir.join(temporary_name(&name, std::process::id()));
     lock_in_flight().push(tmp.clone());
     let result = (|| -> std::io::Result<()> {
         let mut f = std::fs::OpenOptions::new().write(true).create_new(true).open(&tmp)?;
@@ -157,6 +157,22 @@ fn remove_stale_temporaries(dir: &Path) {
     }
 }
 
+/// The longest file name the common file systems take (ext4, XFS, btrfs, APFS, NTFS: 255 bytes or UTF-16 units).
+const MAX_NAME_BYTES: usize = 255;
+
+/// The temporary file's name for a write to `name` by process `pid`: `.NAME.lobe-tmp-PID`, NAME shortened (at a
+/// character boundary) so the whole stays within [`MAX_NAME_BYTES`] — a legal 254-byte output name must not fail
+/// because its temporary's name is too long.
+fn temporary_name(name: &str, pid: u32) -> String {
+    let suffix = format!(".lobe-tmp-{pid}");
+    let room = MAX_NAME_BYTES - 1 - suffix.len();
+    let mut end = name.len().min(room);
+    while !name.is_char_boundary(end) {
+        end -= 1;
+    }
+    format!(".{}{suffix}", &name[..end])
+}
+
 /// The writer's PID of a temporary file name `.NAME.lobe-tmp-PID` (NAME not empty), or `None` for any other
 /// name.
 fn temporary_pid(file: &str) -> Option<u32> {
@@ -228,6 +244,25 @@ mod tests {
     fn ours(b: &[u8]) -> bool {
         b.starts_with(b"LOBE")
     }
+    #[test]
+    fn the_longest_legal_names_can_be_written_and_replaced() {
+        let d = scratch("long");
+        // 254 and 255 bytes, and a name of 2-byte characters cut by the shortening inside a character.
+        for name in ["a".repeat(250) + ".png", "b".repeat(251) + ".png", "é".repeat(125) + "x.png"] {
+            assert!(name.len() <= MAX_NAME_BYTES);
+            let p = d.join(&name);
+            write_atomic(&p, b"LOBE one").unwrap_or_else(|e| panic!("{} bytes: {e}", name.len()));
+            write_atomic(&p, b"LOBE two").unwrap();
+            assert_eq!(std::fs::read(&p).unwrap(), b"LOBE two");
+        }
+        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 3, "no temporaries left");
+        for pid in [1, u32::MAX] {
+            let t = temporary_name(&"é".repeat(200), pid);
+            assert!(t.len() <= MAX_NAME_BYTES && temporary_pid(&t) == Some(pid), "{t}");
+        }
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
     /// What a command does: check, then write.
     fn write(path: &Path, bytes: &[u8], force: bool, is_ours: fn(&[u8]) -> bool) -> Result<(), String> {
         check(path, force, is_ours).map_err(|d| d.message)?;

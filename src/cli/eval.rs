@@ -20,7 +20,7 @@ pub struct EvalArgs {
     pub formula: FormulaSource,
     #[command(flatten)]
     pub set: Params,
-    /// Inputs: cosines, e.g. `NH=0.95,NL=0.7` (unset ones are 0), or the directions `L=x,y,z,V=x,y,z` (or
+    /// Inputs: cosines, e.g. `NH=0.95,NL=0.7` (every cosine the formula reads), or the directions `L=x,y,z,V=x,y,z` (or
     /// `Lx=…` singly) in the local frame, normalised, from which every cosine is computed.
     #[arg(long, value_parser = parse_at, action = clap::ArgAction::Append)]
     pub at: Vec<Vec<(String, Vec<f64>)>>,
@@ -83,6 +83,7 @@ fn at_inputs(at: &[(String, Vec<f64>)], used: InputSet) -> Result<([f64; N_INPUT
     let mut x = [0.0; N_INPUTS];
     let mut dirs = [[0.0; 3]; 2];
     let (mut cosines, mut directions) = (false, false);
+    let mut given_cosines = InputSet::default();
     // Which item (its index in `at`) gave each direction component: `L=…` and `Lx=…` both give Lx.
     let item = |k: usize| format!("{}={}", at[k].0, at[k].1.iter().map(|x| number(*x)).collect::<Vec<_>>().join(","));
     let mut given: [[Option<(usize, f64)>; 3]; 2] = Default::default();
@@ -122,6 +123,7 @@ fn at_inputs(at: &[(String, Vec<f64>)], used: InputSet) -> Result<([f64; N_INPUT
             directions = true;
         } else {
             x[slot.index()] = v[0];
+            given_cosines.insert(slot);
             cosines = true;
         }
     }
@@ -133,6 +135,15 @@ fn at_inputs(at: &[(String, Vec<f64>)], used: InputSet) -> Result<([f64; N_INPUT
             return Err(CliError::hint(
                 format!("the formula reads directions ({}); --at gives none", used.iter().filter(|i| i.is_direction()).map(Input::name).collect::<Vec<_>>().join(", ")),
                 "give --at L=x,y,z,V=x,y,z (local frame: N = +z, X = +x, Y = +y)",
+            ));
+        }
+        // A cosine the formula reads and --at does not give would be taken as 0: a wrong value with no word.
+        let missing: Vec<&str> = used.iter().filter(|i| !given_cosines.contains(*i)).map(Input::name).collect();
+        if !missing.is_empty() {
+            let reads: Vec<&str> = used.iter().map(Input::name).collect();
+            return Err(CliError::hint(
+                format!("--at gives no value for {} (the formula reads {})", missing.join(", "), reads.join(", ")),
+                format!("give {}, or the directions L=x,y,z,V=x,y,z from which every cosine is computed", missing.iter().map(|m| format!("{m}=…")).collect::<Vec<_>>().join(",")),
             ));
         }
         return Ok((x, None));

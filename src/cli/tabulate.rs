@@ -15,7 +15,7 @@ pub struct TabulateArgs {
     #[command(flatten)]
     pub set: Params,
     /// Multiply the red, green and blue channels by these factors (a scalar formula's colour).
-    #[arg(long, value_delimiter = ',', default_values_t = [1.0, 1.0, 1.0])]
+    #[arg(long, value_delimiter = ',', default_values_t = [1.0, 1.0, 1.0], allow_hyphen_values = true)]
     pub color: Vec<f64>,
     #[command(flatten)]
     pub out: Output,

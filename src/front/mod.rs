@@ -126,16 +126,28 @@ pub fn did_you_mean(name: &str, known: &[&str], intro: &str) -> String {
     }
 }
 
-/// The closest candidate by edit distance, if close enough to be a plausible typo.
+/// Names longer than this get no suggestion: no typo makes one, and comparing them costs time in their length.
+const MAX_SUGGESTED_NAME: usize = 64;
+
+/// The closest candidate by edit distance, if close enough to be a plausible typo. Linear in the length of `name`
+/// and of the candidates: a candidate whose length differs by more than the accepted distance is skipped unmeasured,
+/// and names longer than [`MAX_SUGGESTED_NAME`] are not compared at all.
 pub(crate) fn suggest<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
+    let len = name.chars().count();
+    if len > MAX_SUGGESTED_NAME {
+        return None;
+    }
     let lname = name.to_lowercase();
+    // Close enough to be a typo, and not a rewrite of the whole name (`c` → `d` is no suggestion).
+    let bound = |c: &str| (c.len().max(name.len()) / 3).max(1);
     candidates
         .into_iter()
+        // The edit distance is at least the difference in length.
+        .filter(|c| c.chars().count().abs_diff(len) <= bound(c))
         .map(|c| (levenshtein(&lname, &c.to_lowercase()), c))
-        // Close enough to be a typo, and not a rewrite of the whole name (`c` → `d` is no suggestion).
-        .filter(|(d, c)| *d <= (c.len().max(name.len()) / 3).max(1) && (*d == 0 || *d < name.chars().count()))
+        .filter(|(d, c)| *d <= bound(c) && (*d == 0 || *d < len))
         // Ties go to the candidate as long as the name (`NX` → `NH`, not `n`), then to the earlier one.
-        .min_by_key(|(d, c)| (*d, c.chars().count().abs_diff(name.chars().count())))
+        .min_by_key(|(d, c)| (*d, c.chars().count().abs_diff(len)))
         .map(|(_, c)| c)
 }
 
@@ -197,6 +209,11 @@ mod tests {
         assert_eq!(super::suggest("c", ["d", "n"]), None);
         assert_eq!(super::suggest("acoss", ["acos", "cos"]), Some("acos"));
         assert_eq!(super::suggest("zzzzzz", ["acos", "cos"]), None);
+        // A name no typo makes gets no suggestion, even against itself misspelt (that comparison was quadratic).
+        let long = "a".repeat(500_000);
+        assert_eq!(super::suggest(&long, [long[1..].to_string().as_str(), "acos"]), None);
+        // A candidate whose length alone rules it out is not measured, and does not change the answer.
+        assert_eq!(super::suggest("acoss", ["acos", &"x".repeat(100)]), Some("acos"));
     }
 
     #[test]

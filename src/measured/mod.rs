@@ -260,8 +260,9 @@ impl Measured {
     }
 
     /// A table of `f(L, V)` (red, green, blue; physical values, stored ÷ [`SCALE`]) at every entry's
-    /// convention directions; an entry whose L or V is below the surface or whose value is not finite is
-    /// stored as −1 (not measured). `f` is called from several threads.
+    /// convention directions; an entry whose L or V is below the surface, whose value is not finite, or whose
+    /// stored value would not be (beyond f64's range after the division by [`SCALE`]) is stored as −1 (not
+    /// measured). `f` is called from several threads.
     pub fn tabulate(name: &str, f: &(dyn Fn(V3, V3) -> [f64; 3] + Sync)) -> Measured {
         use rayon::prelude::*;
         let rows: Vec<Vec<[f64; 3]>> = (0..DIMS[0] * DIMS[1])
@@ -274,7 +275,9 @@ impl Measured {
                             return [-1.0; 3];
                         }
                         let x = f(l, v);
-                        std::array::from_fn(|c| if x[c].is_finite() { x[c] / SCALE[c] } else { -1.0 })
+                        // A finite value beyond the format's range (|x| > f64::MAX · SCALE) would store ±inf,
+                        // which no reader (lobe's included) takes: not measured, like a non-finite one.
+                        std::array::from_fn(|c| Some(x[c] / SCALE[c]).filter(|s| s.is_finite()).unwrap_or(-1.0))
                     })
                     .collect()
             })

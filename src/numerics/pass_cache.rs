@@ -106,11 +106,17 @@ pub fn command_channels(
     f.channels().into_iter().map(|c| crate::compile_formula(c, &opts)).collect()
 }
 
+/// Largest cache entry read: a key (the formula's text and options) and a decision are far smaller.
+const MAX_ENTRY_BYTES: u64 = 16 << 20;
+
 impl DecisionStore for Cache {
     /// The stored decision for this formula, baked values and options, if any.
     fn load(&self, f: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Option<Decision> {
         let key = Cache::key(f, bake, o);
-        let text = std::fs::read_to_string(self.path(&key)).ok()?;
+        // Only a regular file of bounded size, opened without blocking: a FIFO, a device or a huge file at an
+        // entry's path is a miss, not a hang or a read of gigabytes.
+        let bytes = crate::base::source::read_regular_file(&self.path(&key), MAX_ENTRY_BYTES).ok()?;
+        let text = String::from_utf8(bytes).ok()?;
         let (head, body) = text.split_once("\n--\n")?;
         (head == key).then(|| parse(body)).flatten()
     }

@@ -121,6 +121,15 @@ pub fn parse(file: &str, text: &str, f: &Formula, used: InputSet, baked: &[Strin
         return Err(fail(Diagnostic::error(format!("the formula reads directions ({}), but the CSV has no direction columns", reads.join(", ")))
             .at(header_span, "this header")
             .hint("give the columns Lx,Ly,Lz,Vx,Vy,Vz (unit L and V in the local frame: N = +z, X = +x, Y = +y); cosines follow from them")));
+    } else {
+        // A cosine the formula reads and the CSV does not give would be taken as 0: a wrong value with no word.
+        let missing: Vec<&str> = used.iter().filter(|i| !named(*i)).map(Input::name).collect();
+        if !missing.is_empty() {
+            let reads: Vec<&str> = used.iter().map(Input::name).collect();
+            return Err(fail(Diagnostic::error(format!("the CSV has no column for {} (the formula reads {})", missing.join(", "), reads.join(", ")))
+                .at(header_span, "this header")
+                .hint(format!("add the column{} {}, or give the directions Lx,Ly,Lz,Vx,Vy,Vz instead", if missing.len() > 1 { "s" } else { "" }, missing.join(",")))));
+        }
     }
     let param_values = vec![vec![]; param_columns.len()];
     let mut pts = Points { normalised: 0, inputs: Default::default(), param_columns, param_values, len: 0, zeros: vec![], runs: vec![] };

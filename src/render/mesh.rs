@@ -216,11 +216,14 @@ pub(crate) fn load_obj_through(path: &std::path::Path, files: &crate::base::sour
         },
         line: None,
     })?;
-    if let Some((line, message)) = obj_fault(&String::from_utf8_lossy(&text)) {
+    // A byte-order mark (editors on Windows write one) is not part of the first line: tobj would read `\u{feff}v`
+    // as an unknown keyword and drop the first vertex, shifting every face.
+    let text = text.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(&text);
+    if let Some((line, message)) = obj_fault(&String::from_utf8_lossy(text)) {
         return Err(ObjError { message, line: Some(line) });
     }
     let opts = tobj::LoadOptions { single_index: true, triangulate: true, ignore_points: true, ignore_lines: true };
-    let mut reader = std::io::BufReader::new(&text[..]);
+    let mut reader = std::io::BufReader::new(text);
     let loaded = tobj::load_obj_buf(&mut reader, &opts, |_| Err(tobj::LoadError::OpenFileFailed));
     let models = match loaded {
         Ok((models, _materials)) => models,
@@ -460,6 +463,21 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
         assert_orthonormal(&p, "uv_roof without UVs");
         assert!(p.tangents.iter().zip(&p.normals).all(|(t, n)| *t == onb_tangent(*n)));
+    }
+
+    #[test]
+    fn a_byte_order_mark_does_not_drop_the_first_vertex() {
+        let dir = std::env::temp_dir().join(format!("lobe-mesh-bom-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let text = std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/meshes/uv_roof.obj")).unwrap();
+        let (plain, bom) = (dir.join("plain.obj"), dir.join("bom.obj"));
+        std::fs::write(&plain, &text).unwrap();
+        std::fs::write(&bom, [&b"\xEF\xBB\xBF"[..], &text].concat()).unwrap();
+        let (a, b) = (load_obj(&plain).unwrap(), load_obj(&bom).unwrap());
+        let _ = std::fs::remove_dir_all(&dir);
+        assert_eq!(a.positions, b.positions);
+        assert_eq!(a.triangles, b.triangles);
+        assert_eq!(a.normals, b.normals);
     }
 
     #[test]

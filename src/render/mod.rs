@@ -210,11 +210,23 @@ pub struct RenderOptions {
     pub aa: Option<usize>,
     /// Stops the render between tiles once it trips ([`render`] then fails); the default never does.
     pub cancel: crate::base::cancel::Cancel,
+    /// The largest shading program compiled as one function, in estimated IR nodes
+    /// ([`program::MAX_PROGRAM_NODES`] by default); a material past it is shaded per light by
+    /// [`program::EvalShader`] with its compiled kernels (the same colours).
+    pub program_budget: usize,
 }
 
 impl Default for RenderOptions {
     fn default() -> RenderOptions {
-        RenderOptions { threads: 0, tile: 64, transfer: Transfer::Linear, cutoff: true, aa: None, cancel: Default::default() }
+        RenderOptions {
+            threads: 0,
+            tile: 64,
+            transfer: Transfer::Linear,
+            cutoff: true,
+            aa: None,
+            cancel: Default::default(),
+            program_budget: program::MAX_PROGRAM_NODES,
+        }
     }
 }
 
@@ -330,7 +342,7 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64, u
     let programs: Vec<program::ProgramRun> = scene
         .materials
         .iter()
-        .map(|m| program::ProgramRun::new(scene, m, &plan::ShadingPlan::new(m, scene.ambient, opts.cutoff)))
+        .map(|m| program::ProgramRun::new(scene, m, &plan::ShadingPlan::new(m, scene.ambient, opts.cutoff), opts.program_budget))
         .collect::<Result<_, _>>()?;
     let program_compile = tc.elapsed();
     let timers = Timers::default();

@@ -14,9 +14,10 @@
 //!   header read timer, which also runs while a keep-alive connection idles, so it is the idle timeout too;
 //!   the body within [`BODY_TIMEOUT`]; a client that trickles bytes is dropped;
 //! - at most [`PER_CLIENT`] connections per client address and [`MAX_CONNECTIONS`] in all. A new connection
-//!   is always accepted: over a cap, the oldest connection that is not inside a request (idle, or still
-//!   sending its head) is shed to make room, so slow clients cannot lock out a new one even when every client
-//!   is 127.0.0.1. Only when every connection is inside a request is the new one refused (503).
+//!   is always accepted: over a cap, the oldest connection whose request is not being answered (idle, or still
+//!   sending its head or its body) is shed to make room, so slow clients cannot lock out a new one even when
+//!   every client is 127.0.0.1. Only when every connection's request is being answered is the new one refused
+//!   (503); the computations among those are capped by the API's job slots and deadline.
 //!
 //! Protocol subset: request bodies with `Content-Length` (at most the caller's cap, else 413 after draining a
 //! bounded amount so the client reads the answer; chunked bodies are refused with 411), keep-alive per
@@ -98,7 +99,8 @@ pub(crate) fn listen(addr: SocketAddr, body_cap: usize, handler: Handler) -> std
 struct Slot {
     id: u64,
     ip: IpAddr,
-    /// Requests of this connection being answered now (a connection inside a request is never shed).
+    /// Requests of this connection being answered now, their head and body read (such a connection is never
+    /// shed).
     busy: Arc<AtomicUsize>,
     task: Option<tokio::task::AbortHandle>,
 }
@@ -208,13 +210,15 @@ impl Drop for Busy {
 }
 
 async fn answer(rq: hyper::Request<Incoming>, busy: &Arc<AtomicUsize>, body_cap: usize, handler: Handler) -> hyper::Response<Full<Bytes>> {
-    busy.fetch_add(1, Ordering::SeqCst);
-    let _busy = Busy(busy.clone());
     let rq = match read_request(rq, body_cap).await {
         Ok(rq) => rq,
         // A refused request ends its connection: what the client sends next is not known to be a request.
         Err(e) => return response(e.reply().header("Connection", "close".into())),
     };
+    // Busy (never shed) only from here: a connection still sending its head or body costs the server nothing
+    // but a socket, so over a cap it goes first — a client trickling bodies cannot lock its own address out.
+    busy.fetch_add(1, Ordering::SeqCst);
+    let _busy = Busy(busy.clone());
     let reply = tokio::task::spawn_blocking(move || handler(&rq)).await;
     response(reply.unwrap_or_else(|_| ApiError::new(500, "internal error while answering the request").reply()))
 }
@@ -445,16 +449,43 @@ impl Roots {
 
     /// The canonical path of `p` if it exists and lies under a served directory once `..` and symbolic links
     /// are resolved (404 if it does not exist, 403 outside). For paths inside files (a scene's `../brdfs/…`).
+    /// A path whose own text already leaves every served directory (absolute elsewhere, or `..` past the top,
+    /// resolved lexically) is 403 before the file system is asked, whether or not it exists: the answer must not
+    /// tell which files outside exist.
     pub(crate) fn contains(&self, p: &Path) -> Result<PathBuf, ApiError> {
+        let outside = || {
+            ApiError::new(403, format!("`{}` is outside the served directories", p.display()))
+                .hint("lobe serve reads and writes only under the directories it was started with")
+        };
+        let lexical = lexically_absolute(p).ok_or_else(outside)?;
+        if !self.dirs.iter().any(|d| lexical.starts_with(d)) {
+            return Err(outside());
+        }
         let c = std::fs::canonicalize(p).map_err(|e| {
             ApiError::new(404, format!("`{}`: {e}", p.display())).hint("the file list on the page shows what is served")
         })?;
         if !self.dirs.iter().any(|d| c.starts_with(d)) {
-            return Err(ApiError::new(403, format!("`{}` is outside the served directories", p.display()))
-                .hint("lobe serve reads and writes only under the directories it was started with"));
+            return Err(outside());
         }
         Ok(c)
     }
+}
+
+/// `p` made absolute against the working directory with `.` and `..` resolved on the text alone (no symbolic
+/// links followed); `None` without a working directory.
+fn lexically_absolute(p: &Path) -> Option<PathBuf> {
+    let joined = if p.is_absolute() { p.to_path_buf() } else { std::env::current_dir().ok()?.join(p) };
+    let mut out = PathBuf::new();
+    for c in joined.components() {
+        match c {
+            Component::ParentDir => {
+                out.pop();
+            }
+            Component::CurDir => {}
+            c => out.push(c),
+        }
+    }
+    Some(out)
 }
 
 /// The server's [`FileAccess`] policy for everything a scene names: regular files under the [`Roots`] only.

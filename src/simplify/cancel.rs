@@ -291,17 +291,28 @@ impl<'a> Builder<'a> {
     }
 }
 
-/// Signed terms of the sum tree under `x` (through `+`, `−` and negation of live nodes).
-fn terms(f: &Formula, inv: &[bool], x: NodeId, neg: bool, out: &mut Vec<(NodeId, bool)>) {
-    crate::base::stack::deep(|| {
-        match *f.ir.node(x) {
-            _ if inv[x.index()] => out.push((x, neg)),
-            Node::Neg(a) => terms(f, inv, a, !neg, out),
-            Node::Binary(op @ (BinOp::Add | BinOp::Sub), a, b) => {
-                terms(f, inv, a, neg, out);
-                terms(f, inv, b, neg ^ (op == BinOp::Sub), out);
-            }
-            _ => out.push((x, neg)),
+/// Most terms [`terms`] lists for one sum. A sum is a DAG: `s₁ = x + x`, `s₂ = s₁ + s₁`, … lists 2ᵏ terms
+/// from k nodes, so a sum with more terms than this is left as written rather than flattened.
+const MAX_TERMS: usize = 4096;
+
+/// Signed terms of the sum tree under `x` (through `+`, `−` and negation of live nodes); `false` (and `out`
+/// incomplete) when there are more than [`MAX_TERMS`].
+fn terms(f: &Formula, inv: &[bool], x: NodeId, neg: bool, out: &mut Vec<(NodeId, bool)>) -> bool {
+    if out.len() >= MAX_TERMS {
+        return false;
+    }
+    crate::base::stack::deep(|| match *f.ir.node(x) {
+        _ if inv[x.index()] => {
+            out.push((x, neg));
+            true
+        }
+        Node::Neg(a) => terms(f, inv, a, !neg, out),
+        Node::Binary(op @ (BinOp::Add | BinOp::Sub), a, b) => {
+            terms(f, inv, a, neg, out) && terms(f, inv, b, neg ^ (op == BinOp::Sub), out)
+        }
+        _ => {
+            out.push((x, neg));
+            true
         }
     })
 }
@@ -326,7 +337,9 @@ pub(super) fn rational_form(a: &Analysis) -> (Ir, NodeId, bool) {
             return None;
         }
         let mut all = vec![];
-        terms(f, inv, id, false, &mut all);
+        if !terms(f, inv, id, false, &mut all) {
+            return None;
+        }
         // The terms that are rational in one atom and of degree ≤ 1 together join, in order (F_dsh's
         // c/(n − n·c + c) and −0.25); the others (its c⁸ term) are added to the joined quotient as written.
         let mut acc: Option<Shape> = None;

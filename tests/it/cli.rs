@@ -283,10 +283,16 @@ fn eval_points_reads_csv_and_agrees_with_single_evaluations() {
     }
     let o = lobe(&["eval", &file, "--points", "-"], Some(b"NH,q\n0.5,1\n"));
     assert_clean_error(&o, "unknown column", "<stdin>:1:4");
-    let o = lobe(&["eval", &file, "--points", "-"], Some(b"NH,k\n0.5,1\n0.5,x\n"));
-    assert_clean_error(&o, "bad number", "<stdin>:3:5");
-    let o = lobe(&["eval", &file, "--points", "-"], Some(b"NH,k\n0.5,9\n"));
+    let o = lobe(&["eval", &file, "--points", "-"], Some(b"NH,NL,k\n0.5,0,1\n0.5,0,x\n"));
+    assert_clean_error(&o, "bad number", "<stdin>:3:7");
+    let o = lobe(&["eval", &file, "--points", "-"], Some(b"NH,NL,k\n0.5,0,9\n"));
     assert_clean_error(&o, "parameter out of range", "outside its declared range");
+    // A cosine the formula reads is never silently 0: a missing column or --at item is an error naming it.
+    let o = lobe(&["eval", &file, "--points", "-"], Some(b"NH,k\n0.5,1\n"));
+    assert_clean_error(&o, "missing column", "the CSV has no column for NL (the formula reads NL, NH)");
+    assert_clean_error(&o, "missing column", "<stdin>:1:1");
+    let o = lobe(&["eval", &file, "--at", "NL=0.5"], None);
+    assert_clean_error(&o, "missing --at input", "--at gives no value for NH (the formula reads NL, NH)");
     let o = lobe(&["eval", &file, "--points", "-", "--set", "k=2"], Some(b"NH,k\n0.5,1\n"));
     assert_clean_error(&o, "baked and a column", "--set k: parameter `k` is both baked and a column");
     let o = lobe(&["eval", &file, "--points", "/nonexistent/p.csv"], None);

@@ -12,13 +12,21 @@ struct Run {
     code: Option<i32>,
     stdout: Vec<u8>,
     stderr: String,
+    /// The largest resident set seen while it ran, KiB (0 where /proc is not available).
+    peak_kib: u64,
 }
 
 /// Runs lobe with `args`, killing it (and failing the test) after `limit`. Output is read on threads so a
 /// large stream cannot block the child.
 fn lobe_within(limit: Duration, args: &[&str]) -> Run {
+    lobe_within_env(limit, args, &[])
+}
+
+/// [`lobe_within`] with environment variables set for the run.
+fn lobe_within_env(limit: Duration, args: &[&str], env: &[(&str, &str)]) -> Run {
     let mut child = Command::new(env!("CARGO_BIN_EXE_lobe"))
         .args(args)
+        .envs(env.iter().copied())
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .env("NO_COLOR", "1")
         .stdin(Stdio::null())
@@ -39,7 +47,12 @@ fn lobe_within(limit: Duration, args: &[&str]) -> Run {
         b
     });
     let start = Instant::now();
+    let pid = child.id();
+    let mut peak_kib = 0u64;
     let status = loop {
+        if let Some(kib) = peak_rss_kib(pid) {
+            peak_kib = peak_kib.max(kib);
+        }
         if let Some(s) = child.try_wait().unwrap() {
             break s;
         }
@@ -50,7 +63,23 @@ fn lobe_within(limit: Duration, args: &[&str]) -> Run {
         }
         std::thread::sleep(Duration::from_millis(10));
     };
-    Run { code: status.code(), stdout: t_out.join().unwrap(), stderr: String::from_utf8_lossy(&t_err.join().unwrap()).into_owned() }
+    Run { code: status.code(), stdout: t_out.join().unwrap(), stderr: String::from_utf8_lossy(&t_err.join().unwrap()).into_owned(), peak_kib }
+}
+
+/// The resident-set high-water mark of a running process (Linux's VmHWM), KiB; `None` elsewhere or once it ended.
+fn peak_rss_kib(pid: u32) -> Option<u64> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    line.split_whitespace().nth(1)?.parse().ok()
+}
+
+/// The bound every case of the work-budget set answers within: 10 s and 1 GiB of resident memory (sampled every
+/// 10 ms while it runs, so a peak in the last moments can be missed; the bound is far above what a bounded run
+/// uses).
+fn lobe_bounded(args: &[&str]) -> Run {
+    let r = lobe_within(Duration::from_secs(10), args);
+    assert!(r.peak_kib < 1 << 20, "`lobe {}` used {} MiB", args.join(" "), r.peak_kib >> 10);
+    r
 }
 
 fn lobe(args: &[&str]) -> Run {
@@ -493,4 +522,127 @@ fn supersampling_averages_samples_and_one_sample_is_the_plain_render() {
     refused(&lobe(&["render", &s(&d.join("flat9.toml")), "-o", &s(&d.join("bad.png"))]), "aa = 9", "`aa` = 9 is outside 1..=8");
     assert!(!d.join("bad.png").exists());
     let _ = std::fs::remove_dir_all(&d);
+}
+
+/// Functions that each call the previous one twice with the same argument, 40 deep: the lowering shares the calls
+/// (hash-consing), and the simplifier's sum flattening used to list 2⁴⁰ terms of the resulting DAG.
+#[test]
+fn self_doubling_functions_stay_small() {
+    let dir = scratch("fn-chain");
+    for (name, body) in [("same", "f{j}(x) + f{j}(x)"), ("shifted", "f{j}(x) + f{j}(x + 1)"), ("product", "f{j}(x) * f{j}(x)")] {
+        let mut src = String::from("fn f0(x) = x*NH + NV\n");
+        for i in 1..=40 {
+            src += &format!("fn f{i}(x) = {}\n", body.replace("{j}", &(i - 1).to_string()));
+        }
+        src += "f40(NH)\n";
+        let path = dir.join(format!("{name}.brdf"));
+        std::fs::write(&path, &src).unwrap();
+        let r = lobe_bounded(&["eval", &s(&path), "--at", "NH=0.5,NV=0.25", "--no-cache"]);
+        assert_eq!(r.code, Some(0), "{name}: {}", r.stderr);
+        let v: f64 = String::from_utf8_lossy(&r.stdout).trim().parse().unwrap_or_else(|_| panic!("{name}: {:?}", r.stdout));
+        // 0.5^(2^40) underflows to 0 for the product; the sums are large and finite.
+        assert!(v.is_finite() && v >= 0.0, "{name}: {v}");
+    }
+}
+
+/// "Did you mean" on a misspelt name of 500 000 characters: no suggestion, and no quadratic comparison.
+#[test]
+fn a_huge_misspelt_name_is_answered_at_once() {
+    let dir = scratch("long-name");
+    let path = dir.join("long.brdf");
+    std::fs::write(&path, format!("let {} = NH\n{} * 2\n", "a".repeat(500_000), "a".repeat(499_999))).unwrap();
+    let r = lobe_bounded(&["eval", &s(&path), "--at", "NH=0.5"]);
+    refused(&r, "a huge misspelt name", "unknown");
+}
+
+/// A scene's shading program grew with its light count (100 lights 1 s of compilation, 250 lights 40 s, 4 000
+/// lights 8.7 GB): past a budget the lights are looped over around the compiled kernel.
+#[test]
+fn thousands_of_lights_render_in_bounded_time_and_memory() {
+    let dir = scratch("lights");
+    let mut src = String::from("width = 64\nheight = 64\n[camera]\nposition = [0, 0, 6]\nlook_at = [0, 0, 0]\nup = [0, 1, 0]\nfov = 45\n");
+    for k in 0..4000 {
+        let a = k as f64 * std::f64::consts::TAU / 4000.0;
+        src += &format!("[[light]]\nkind = \"point\"\nposition = [{}, {}, 10]\ncolor = [0.0005, 0.0005, 0.0005]\n", 10.0 * a.cos(), 10.0 * a.sin());
+    }
+    let brdf = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/brdfs/modified_schlick_vr.brdf");
+    src += &format!("[materials.m]\nbrdf = {:?}\nka = 0.4\nkd = 0.5\nks = 0.5\n[[object]]\nshape = \"sphere\"\nmaterial = \"m\"\nradius = 1\n", s(&brdf));
+    let scene = dir.join("lights.toml");
+    std::fs::write(&scene, src).unwrap();
+    let out = dir.join("lights.png");
+    let r = lobe_bounded(&["render", &s(&scene), "-o", &s(&out), "--stats"]);
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert!(out.exists());
+}
+
+/// An accuracy-cache entry replaced by a FIFO, a link to /dev/zero or a 3 GB (sparse) file is a miss: the command
+/// searches again and answers, instead of blocking forever or reading the whole file.
+#[cfg(unix)]
+#[test]
+fn a_cache_entry_that_is_not_a_small_regular_file_is_a_miss() {
+    let dir = scratch("cache-entries");
+    let cache = dir.join("cache");
+    let cache_s = s(&cache);
+    let env = [("LOBE_CACHE_DIR", cache_s.as_str())];
+    let args = ["eval", "examples/brdfs/beckmann.brdf", "--at", "NH=0.7"];
+    let first = lobe_within_env(Duration::from_secs(60), &args, &env);
+    assert_eq!(first.code, Some(0), "{}", first.stderr);
+    let entries: Vec<PathBuf> = std::fs::read_dir(&cache).unwrap().flatten().map(|e| e.path()).filter(|p| p.extension().is_some_and(|x| x == "pass")).collect();
+    assert!(!entries.is_empty(), "the first run stored no decision");
+    let replace: [(&str, &dyn Fn(&Path) -> bool); 3] = [
+        ("FIFO", &|p| mkfifo(p)),
+        ("link to /dev/zero", &|p| std::os::unix::fs::symlink("/dev/zero", p).is_ok()),
+        ("3 GB file", &|p| std::fs::File::create(p).and_then(|f| f.set_len(3 << 30)).is_ok()),
+    ];
+    for (what, make) in replace {
+        for e in &entries {
+            let _ = std::fs::remove_file(e);
+            assert!(make(e), "{what}: could not create it");
+        }
+        let t = Instant::now();
+        let r = lobe_within_env(Duration::from_secs(10), &args, &env);
+        assert_eq!((r.code, r.stdout.clone()), (Some(0), first.stdout.clone()), "{what}: {} after {:?}", r.stderr, t.elapsed());
+        assert!(r.peak_kib < 1 << 20, "{what}: {} MiB", r.peak_kib >> 10);
+    }
+}
+
+/// Output to a full device (Linux's /dev/full) is an error line and exit code 1, not a panic (exit 101).
+#[cfg(target_os = "linux")]
+#[test]
+fn output_to_a_full_device_is_an_error() {
+    let cases: [&[&str]; 3] = [
+        &["eval", "examples/brdfs/phong.brdf", "--at", "VR=0.9"],
+        &["export", "examples/brdfs/phong.brdf", "--glsl"],
+        &["check", "examples/brdfs/phong.brdf", "--json"],
+    ];
+    for args in cases {
+        let out = Command::new(env!("CARGO_BIN_EXE_lobe"))
+            .args(args)
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .env("NO_COLOR", "1")
+            .stdout(std::fs::File::create("/dev/full").unwrap())
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        refused(&Run { code: out.status.code(), stdout: vec![], stderr: err.into_owned(), peak_kib: 0 }, args[0], "No space left on device");
+    }
+}
+
+/// A negative number where a positive one belongs is refused for its value, not met with clap's tip to write
+/// `-- -2` (which would not help).
+#[test]
+fn negative_values_are_refused_for_their_value() {
+    let dir = scratch("negative-values");
+    let out = dir.join("x.png");
+    let table = dir.join("x.binary");
+    let cases: [(&[&str], &str); 3] = [
+        (&["render", "examples/scenes/paper_sphere.toml", "--aa", "-2", "-o", &s(&out)], "-2 is not in 1..=8"),
+        (&["tabulate", "examples/brdfs/phong.brdf", "--color", "-1,1,1", "-o", &s(&table)], "--color takes three finite factors"),
+        (&["render", "examples/scenes/paper_sphere.toml", "--tile", "-64", "-o", &s(&out)], "-64 is not in"),
+    ];
+    for (args, needle) in cases {
+        let r = lobe(args);
+        assert!(r.code.is_some_and(|c| c != 0) && r.stderr.contains(needle) && !r.stderr.contains("tip:"), "{args:?}: {}", r.stderr);
+        assert!(!out.exists() && !table.exists());
+    }
 }

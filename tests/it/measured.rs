@@ -275,3 +275,23 @@ fn table_albedo_is_the_formulas() {
     }
     assert!(failed.is_empty(), "{failed:#?}");
 }
+
+/// A formula whose values are finite but beyond the format's range (stored = value ÷ SCALE overflows): those
+/// entries are not measured, and lobe reads back the table it wrote (it used to store +inf and then refuse it).
+#[test]
+fn values_beyond_the_formats_range_are_not_measured_and_the_table_reads_back() {
+    let t = Measured::tabulate("huge", &|l, v| {
+        let x = lobe::frame::inputs_from_dirs(l, v);
+        [1e308 * x[2], 1e300, 1e308]
+    });
+    let back = Measured::from_bytes("huge", &t.to_bytes()).unwrap_or_else(|d| panic!("{}", d.message));
+    for e in (0..ENTRIES).step_by(997) {
+        for c in 0..3 {
+            let s = back.stored(c, e);
+            assert!(s.is_finite(), "entry {e} channel {c}: {s}");
+        }
+    }
+    // The green channel (1e300 ÷ (1.15/1500)) fits; the blue (1e308 ÷ (1.66/1500)) never does.
+    assert!((0..ENTRIES).any(|e| back.value(1, e).is_some()));
+    assert!((0..ENTRIES).all(|e| back.value(2, e).is_none()));
+}

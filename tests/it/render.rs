@@ -579,3 +579,27 @@ fn fast_math_materials_render_within_one_level_of_precise() {
     let sc = scene::parse_scene("m.toml", &src, Path::new("."), &LoadOptions::default(), &JIT).map_err(|d| d.render(false)).unwrap();
     assert_eq!(sc.materials[0].math, lobe::Mode::Fast);
 }
+
+#[test]
+fn past_the_program_budget_materials_shade_per_light_with_the_programs_colours() {
+    // The per-light shader (every material forced past a budget of 0 nodes) against the compiled programs: the
+    // same bytes and counters on scalar, colour, direction-reading and anisotropic materials, with a cut-off.
+    let phong = std::fs::read_to_string(scene_file("paper_sphere.toml")).unwrap().replace("modified_schlick_vr.brdf", "phong.brdf");
+    let lights = "[[light]]\nkind = \"directional\"\ndirection = [-1, 0.5, 1]\ncolor = [0.3, 0.6, 0.2]\n\n[[light]]\nkind = \"point\"\nposition = [-3, -4, 5]\ncolor = [0.5, 0.2, 0.9]\n\n[materials.glossy]";
+    let cases = [
+        ("cut-off", phong.replace("\nks = 0.5\n", "\nks = 0.5\ncutoff = 8\n").replace("[materials.glossy]", lights)),
+        ("aniso_ward", std::fs::read_to_string(scene_file("aniso_ward.toml")).unwrap()),
+        ("principled", std::fs::read_to_string(scene_file("principled.toml")).unwrap()),
+        ("torus", std::fs::read_to_string(scene_file("torus.toml")).unwrap()),
+    ];
+    for (name, src) in cases {
+        let s = scene::parse_scene(&format!("{name}.toml"), &src, &scene_file(""), &sized(96, 96), &JIT).unwrap_or_else(|d| panic!("{}", d.render(false)));
+        let ropts = RenderOptions { threads: 2, tile: 32, ..RenderOptions::default() };
+        let (fp, sp) = r::render(&s, &ropts).unwrap();
+        let (fe, se) = r::render(&s, &RenderOptions { program_budget: 0, ..ropts }).unwrap();
+        assert!(sp.evals > 0, "{name}: nothing evaluated");
+        assert_eq!((sp.evals, sp.cut, sp.nan), (se.evals, se.cut, se.nan), "{name}: counters");
+        let differing = fp.image.rgb.iter().zip(&fe.image.rgb).filter(|(a, b)| a != b).count();
+        assert_eq!(differing, 0, "{name}: {differing} channel values differ between the program and the per-light shader");
+    }
+}

@@ -652,3 +652,72 @@ fn scenes_on_the_page_render_as_the_cli_renders_them() {
     assert_eq!(r.status, 400);
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// Whether a file outside the served folders exists is not told: a scene naming an outside file that exists and
+/// one naming a file that does not are both 403, with the same words (but for the path).
+#[test]
+fn outside_paths_get_one_answer_whether_or_not_they_exist() {
+    let d = scratch("outside-oracle");
+    let (served, outside) = (d.join("served"), d.join("outside"));
+    std::fs::create_dir_all(&served).unwrap();
+    std::fs::create_dir_all(&outside).unwrap();
+    std::fs::write(outside.join("real.brdf"), "NH^20\n").unwrap();
+    let sphere = "shape = \"sphere\"";
+    let mut answers = vec![];
+    for (scene, named) in [
+        ("exists.brdf", outside.join("real.brdf").display().to_string()),
+        ("missing.brdf", outside.join("missing.brdf").display().to_string()),
+        ("exists_rel.brdf", "../outside/real.brdf".to_string()),
+        ("missing_rel.brdf", "../outside/missing.brdf".to_string()),
+    ] {
+        std::fs::write(served.join(scene), scene_text(&format!("brdf = \"{named}\""), sphere)).unwrap();
+        answers.push((scene, named));
+    }
+    let s = Served::start(&[served.to_str().unwrap()]);
+    let mut words = vec![];
+    for (scene, named) in &answers {
+        let r = s.get(&format!("/render.png?file={}", served.join(scene).display()));
+        assert_eq!(r.status, 403, "{scene}: {}", String::from_utf8_lossy(&r.body));
+        let e = r.json();
+        words.push(format!("{} / {}", e["error"], e["hint"]).replace(named.as_str(), "PATH"));
+    }
+    // Existing and missing, named absolutely (0, 1) and relatively (2, 3).
+    assert!(words[0] == words[1] && words[2] == words[3], "the answers differ: {words:#?}");
+    // And a file the page asks for directly: the same status for a missing and an existing outside path.
+    for named in [outside.join("real.brdf"), outside.join("missing.brdf")] {
+        assert_eq!(s.get(&format!("/api/file?path={}", named.display())).status, 403, "{}", named.display());
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// 40 connections from one address, each trickling a request body, do not lock that address out: a normal
+/// request from it is answered (the connections still sending are shed first).
+#[test]
+fn slow_bodies_from_one_address_do_not_lock_it_out() {
+    let s = Served::start(&["examples/brdfs"]);
+    let head = format!(
+        "POST /api/compile HTTP/1.1\r\nHost: {}\r\nX-Lobe-Client: test\r\nContent-Type: application/json\r\nContent-Length: 4096\r\n\r\n{{",
+        s.addr
+    );
+    let mut slow: Vec<TcpStream> = (0..40)
+        .map(|_| {
+            let mut c = TcpStream::connect(s.addr).unwrap();
+            c.write_all(head.as_bytes()).unwrap();
+            c
+        })
+        .collect();
+    std::thread::sleep(Duration::from_millis(300));
+    let mut worst = Duration::ZERO;
+    for round in 0..5 {
+        for c in &mut slow {
+            let _ = c.write_all(b" ");
+        }
+        let t0 = Instant::now();
+        let r = s.post("/api/compile", &json!({"text": "NH^n", "params": {"n": 20}}));
+        worst = worst.max(t0.elapsed());
+        assert_eq!(r.status, 200, "round {round}: {}", String::from_utf8_lossy(&r.body));
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    eprintln!("slowest normal request beside 40 slow bodies: {worst:?}");
+    assert!(worst < PROMPT, "a normal request took {worst:?}");
+}
