@@ -48,6 +48,7 @@ pub mod measured;
 pub mod numerics;
 pub mod render;
 pub mod report;
+#[cfg(feature = "serve")]
 pub mod serve;
 
 pub use builtins::Mode;
