@@ -285,9 +285,8 @@ impl Force {
     /// recognised by `is_ours` nor `--force`d ([`output::check`]). Commands call this before doing the work, so
     /// a bad path costs nothing.
     pub fn check(&self, path: &Path, is_ours: fn(&[u8]) -> bool) -> Result<(), CliError> {
-        use lobe::base::diag::Hint;
         output::check(path, self.on, is_ours)
-            .map_err(|d| if d.hints.is_empty() { d.hint(Hint::AllowOverwrite) } else { d }.into())
+            .map_err(|d| if d.hints.is_empty() { d.hint(lobe::base::output::AllowOverwrite) } else { d }.into())
     }
 
     /// Checks `path` as [`Force::check`] does, then writes `bytes` to a temporary file in the same directory

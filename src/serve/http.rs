@@ -451,7 +451,7 @@ impl Roots {
         })?;
         if !self.dirs.iter().any(|d| c.starts_with(d)) {
             return Err(ApiError::new(403, format!("`{}` is outside the served directories", p.display()))
-                .hint("lobe serve reads and writes only under the directories it was started with"));
+                .hint("the server reads and writes only under the directories it was started with"));
         }
         Ok(c)
     }
@@ -483,7 +483,7 @@ impl FileAccess for ServedFiles {
                 return ReadError::Io(std::io::Error::from(std::io::ErrorKind::NotFound));
             }
             self.refused.store(true, Ordering::SeqCst);
-            ReadError::Refused("outside the directories lobe serve was started with (name its directory there to serve it)".into())
+            ReadError::Refused("outside the directories the server was started with (name its directory there to serve it)".into())
         })?;
         read_regular_file(&c, max)
     }
