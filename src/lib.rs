@@ -17,10 +17,16 @@
 //! numerics   energy and normalisation, accuracy against a reference, the domain sweep, fits, twins; the
 //!            higher-precision truth and the accuracy pass's measured choice (passed down as a FormulaChooser)
 //! render     scenes, shapes, camera, rasteriser, shading, images, image comparison
-//! report     bench measurement and tables, plots
-//! serve      `lobe serve`: the interactive page's HTTP server (page assets embedded)
-//! main.rs    the `lobe` binary: its cli modules hold the clap subcommands over the layers above
+//! report     bench rows (measured) and tables, plots (cargo feature `plot`)
+//! serve      the interactive page's HTTP server, page assets embedded (cargo feature `serve`)
+//! main.rs    the `lobe` binary (cargo feature `cli`): its cli modules hold the clap subcommands over the layers
+//!            above
 //! ```
+//!
+//! Cargo enforces the top of that list: the argument parser and progress bars (clap, indicatif) are optional
+//! dependencies of the `cli` feature, which the binary requires; the HTTP stack (tokio, hyper) is the `serve`
+//! feature's and plotters the `plot` feature's. All three are on by default, so `cargo run` builds the whole
+//! command; the Python module depends on the library with `default-features = false` and compiles none of them.
 //!
 //! The front end knows nothing of Cranelift; every backend consumes only [`ir::Formula`]; builtins come from
 //! the one table in [`builtins`]. Numerical checks consume kernels ([`backend::Evaluator`]), never text.
