@@ -365,7 +365,7 @@ const INV_LN2: f64 = 1.44269504088896338700e+00;
 /// the whole vector), and Beckmann's exp underflows at 12 % of uniform random cosines: in vectors of 4 or more
 /// lanes, where such a lane is then in most vectors, every lane takes [`scale2_exact`] (straight-line, no
 /// subnormal arithmetic).
-/// Measured on Beckmann's kernel (2026-12-05, `lobe eval … --points`, 2²⁰ rows): LLVM's 8 lanes 5.09 → 3.39 ns/element at uniform
+/// Measured on Beckmann's kernel (2026-12-05, 2²⁰ points): LLVM's 8 lanes 5.09 → 3.39 ns/element at uniform
 /// cosines, 2.95 → 3.46 where nothing underflows; on Cranelift's 2 lanes the straight-line coding was up to
 /// 1.5× slower, and a rare block for the tiny lanes 1.1–1.25×.
 fn scale2<E: Emit>(e: &mut E, y: E::V, k: E::V) -> E::V {
