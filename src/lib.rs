@@ -17,10 +17,16 @@
 //! numerics   energy and normalisation, accuracy against a reference, the domain sweep, fits, twins; the
 //!            higher-precision truth and the accuracy pass's measured choice (passed down as a FormulaChooser)
 //! render     scenes, shapes, camera, rasteriser, shading, images, image comparison
-//! report     bench measurement and tables, plots
-//! serve      `lobe serve`: the interactive page's HTTP server (page assets embedded)
-//! main.rs    the `lobe` binary: its cli modules hold the clap subcommands over the layers above
+//! report     bench rows (measured) and tables, plots (cargo feature `plot`)
+//! serve      the interactive page's HTTP server, page assets embedded (cargo feature `serve`)
+//! main.rs    the `lobe` binary (cargo feature `cli`): its cli modules hold the clap subcommands over the layers
+//!            above
 //! ```
+//!
+//! Cargo enforces the top of that list: the argument parser and progress bars (clap, indicatif) are optional
+//! dependencies of the `cli` feature, which the binary requires; the HTTP stack (tokio, hyper) is the `serve`
+//! feature's and plotters the `plot` feature's. All three are on by default, so `cargo run` builds the whole
+//! command; the Python module depends on the library with `default-features = false` and compiles none of them.
 //!
 //! The front end knows nothing of Cranelift; every backend consumes only [`ir::Formula`]; builtins come from
 //! the one table in [`builtins`]. Numerical checks consume kernels ([`backend::Evaluator`]), never text.
@@ -48,6 +54,7 @@ pub mod measured;
 pub mod numerics;
 pub mod render;
 pub mod report;
+#[cfg(feature = "serve")]
 pub mod serve;
 
 pub use builtins::Mode;
@@ -122,7 +129,29 @@ pub fn build_kernel(f: Arc<Formula>, backend: Backend, math: Mode) -> Result<Ker
 
 /// Why a build without the cargo feature `llvm` cannot give an LLVM kernel, and how to get one.
 pub fn llvm_missing() -> Diagnostic {
-    Diagnostic::error("this build of lobe has no LLVM tier").hint(Hint::BuildWithLlvm)
+    Diagnostic::error("this build of lobe has no LLVM tier").hint(CompileAdvice::BuildWithLlvm)
+}
+
+/// Debian's packages the cargo feature `llvm` builds against.
+pub const LLVM_PACKAGES: &str = "needs LLVM 19: apt-get install llvm-19-dev libpolly-19-dev libzstd-dev";
+
+/// What to change when compiling a formula with these options fails, worded by each front end
+/// ([`base::diag::Advice`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum CompileAdvice {
+    /// `name` is an input (a cosine), given where a parameter value was expected.
+    InputNotParam { name: String },
+    /// The LLVM tier was asked of a build without it: how to build it in, or use the Cranelift tier.
+    BuildWithLlvm,
+}
+
+impl base::diag::Advice for CompileAdvice {
+    fn plain(&self) -> String {
+        match self {
+            CompileAdvice::InputNotParam { name } => format!("`{name}` is an input (a cosine), not a parameter; give it as an input value"),
+            CompileAdvice::BuildWithLlvm => format!("rebuild lobe with the cargo feature `llvm` ({LLVM_PACKAGES}), or use the Cranelift tier"),
+        }
+    }
 }
 
 /// The backend that `backend` with JIT tier `tier` means ([`Tier::resolve`]); the LLVM tier in a build (or on a
@@ -164,8 +193,8 @@ pub fn resolve_bake(f: &Formula, set: &[(String, f64)]) -> Result<Vec<(usize, f6
             }
             None => {
                 let names: Vec<&str> = f.params.iter().map(|p| p.name.as_str()).collect();
-                let hint = if Input::from_name(name).is_some() {
-                    base::diag::Hint::InputNotParam { name: name.clone() }
+                let hint: Hint = if Input::from_name(name).is_some() {
+                    CompileAdvice::InputNotParam { name: name.clone() }.into()
                 } else {
                     front::did_you_mean(name, &names, "its parameters are: ").into()
                 };

@@ -111,13 +111,7 @@ fn command() {
     // A killed write must not leave `.NAME.lobe-tmp-PID` files behind.
     lobe::base::output::clean_up_on_signals();
     output_failures_are_errors();
-    // `lobe check --sweep FILE` is the spelling of `lobe sweep FILE`.
-    let mut args: Vec<std::ffi::OsString> = std::env::args_os().collect();
-    if args.get(1).is_some_and(|a| a == "check") && args.iter().any(|a| a == "--sweep") {
-        args[1] = "sweep".into();
-        args.retain(|a| a != "--sweep");
-    }
-    let cli = parse(args);
+    let cli = parse(std::env::args_os().collect());
     cli::common::use_cache(!cli.no_cache);
     let result = match &cli.cmd {
         Cmd::Eval(a) => cli::eval::run(a),

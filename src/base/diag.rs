@@ -13,7 +13,9 @@ use super::span::{is_line_break, line_col, lone_cr_as_lf, Span};
 use codespan_reporting::diagnostic::{Diagnostic as CsDiag, Label};
 use codespan_reporting::files::SimpleFile;
 use codespan_reporting::term::{self, termcolor::Buffer};
+use std::any::Any;
 use std::fmt;
+use std::sync::Arc;
 
 /// Longest source line a diagnostic quotes; longer ones are referred to by line and column.
 pub(crate) const MAX_ECHOED_LINE: usize = 1000;
@@ -24,25 +26,54 @@ pub enum Severity {
     Warning,
 }
 
-/// What to change to get past an error. Advice that every front end words alike is [`Hint::Text`]; the rest
-/// name a setting, which each front end spells its own way ([`Wording::hint`]).
-#[derive(Clone, Debug, PartialEq)]
+/// What to change to get past an error. Advice that every front end words alike is [`Hint::Text`]; advice
+/// that names a setting or an action of some front end is [`Hint::Advice`], a value of the layer the advice is
+/// about (`lobe::CompileAdvice`, `lobe::numerics::NumericsAdvice`, …), which each front end words its own way
+/// ([`Wording::hint`]).
+#[derive(Clone, Debug)]
 pub enum Hint {
     Text(String),
-    /// The JIT failed; the interpreter computes the same values.
+    /// The JIT failed; the interpreter computes the same values. (The backend's own advice: it moves to the
+    /// backend layer as an [`Advice`] with the backend's error style.)
     UseInterpreter,
-    /// An existing file lobe did not write is kept unless the user explicitly allows replacing it.
-    AllowOverwrite,
-    /// `name` is an input (a cosine), given where a parameter value was expected.
-    InputNotParam { name: String },
-    /// Normalising needs every parameter given a fixed value.
-    BakeEveryParam,
-    /// A fit needs at least one parameter to vary, with its range.
-    FitSomeParam,
-    /// The LLVM tier was asked of a build without it: how to build it in, or use the Cranelift tier.
-    BuildWithLlvm,
-    /// A range of n was asked with a step that is not a positive number.
-    PositiveStep,
+    /// Structured advice a layer above defines.
+    Advice(Arc<dyn Advice>),
+}
+
+/// Structured advice: what to change, as a value of the layer it is about. [`Advice::plain`] words it
+/// naming no front end's controls; a front end with controls for it finds it with [`Hint::advice`] and
+/// names them.
+pub trait Advice: Any + fmt::Debug + Send + Sync {
+    /// The advice in words that name no front end's flags, commands or controls.
+    fn plain(&self) -> String;
+}
+
+impl Hint {
+    /// The advice of type `T` this hint holds, if it holds one.
+    pub fn advice<T: Advice>(&self) -> Option<&T> {
+        match self {
+            Hint::Advice(a) => (a.as_ref() as &dyn Any).downcast_ref(),
+            _ => None,
+        }
+    }
+}
+
+/// Same kind and same words: advice of the same type that words itself alike.
+impl PartialEq for Hint {
+    fn eq(&self, other: &Hint) -> bool {
+        match (self, other) {
+            (Hint::Text(a), Hint::Text(b)) => a == b,
+            (Hint::UseInterpreter, Hint::UseInterpreter) => true,
+            (Hint::Advice(a), Hint::Advice(b)) => (a.as_ref() as &dyn Any).type_id() == (b.as_ref() as &dyn Any).type_id() && a.plain() == b.plain(),
+            _ => false,
+        }
+    }
+}
+
+impl<T: Advice> From<T> for Hint {
+    fn from(a: T) -> Hint {
+        Hint::Advice(Arc::new(a))
+    }
 }
 
 impl From<String> for Hint {
@@ -74,20 +105,12 @@ pub trait Wording {
 /// web page).
 pub(crate) struct Plain;
 
-/// Debian's packages the cargo feature `llvm` builds against.
-pub const LLVM_PACKAGES: &str = "needs LLVM 19: apt-get install llvm-19-dev libpolly-19-dev libzstd-dev";
-
 impl Wording for Plain {
     fn hint(&self, h: &Hint) -> String {
         match h {
             Hint::Text(t) => t.clone(),
             Hint::UseInterpreter => "the interpreter computes the same values: use the interpreter backend".into(),
-            Hint::AllowOverwrite => "choose another output path, or allow replacing the file".into(),
-            Hint::InputNotParam { name } => format!("`{name}` is an input (a cosine), not a parameter; give it as an input value"),
-            Hint::BakeEveryParam => "give every parameter a value before normalising".into(),
-            Hint::FitSomeParam => "name at least one parameter to fit, with its range (e.g. a in 1..1000)".into(),
-            Hint::BuildWithLlvm => format!("rebuild lobe with the cargo feature `llvm` ({LLVM_PACKAGES}), or use the Cranelift tier"),
-            Hint::PositiveStep => "give the range a positive step, e.g. 1".into(),
+            Hint::Advice(a) => a.plain(),
         }
     }
     fn setting(&self, s: &Setting) -> String {
@@ -311,3 +334,56 @@ impl fmt::Display for Diagnostics {
 }
 
 impl std::error::Error for Diagnostics {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, PartialEq)]
+    enum Pick {
+        This,
+        That(u8),
+    }
+
+    impl Advice for Pick {
+        fn plain(&self) -> String {
+            match self {
+                Pick::This => "pick this".into(),
+                Pick::That(n) => format!("pick that {n}"),
+            }
+        }
+    }
+
+    /// A front end finds the advice it has words for by its type; any other words itself plainly.
+    struct Front;
+
+    impl Wording for Front {
+        fn hint(&self, h: &Hint) -> String {
+            match h.advice::<Pick>() {
+                Some(Pick::This) => "press T".into(),
+                _ => Plain.hint(h),
+            }
+        }
+        fn setting(&self, s: &Setting) -> String {
+            Plain.setting(s)
+        }
+    }
+
+    #[test]
+    fn advice_is_worded_by_the_front_end_that_knows_it() {
+        let d = Diagnostic::error("no").hint(Pick::This).hint(Pick::That(2)).hint("as text");
+        assert_eq!(d.hint_texts(&Front), ["press T", "pick that 2", "as text"]);
+        assert_eq!(d.hint_texts(&Plain), ["pick this", "pick that 2", "as text"]);
+        assert_eq!(d.to_string(), "no (help: pick this) (help: pick that 2) (help: as text)");
+        assert_eq!(d.hints[1].advice::<Pick>(), Some(&Pick::That(2)));
+        assert_eq!(d.hints[2].advice::<Pick>(), None);
+    }
+
+    #[test]
+    fn hints_compare_by_kind_and_words() {
+        assert_eq!(Hint::from(Pick::That(1)), Hint::from(Pick::That(1)));
+        assert_ne!(Hint::from(Pick::That(1)), Hint::from(Pick::That(2)));
+        // The same words as text are not the advice.
+        assert_ne!(Hint::from(Pick::This), Hint::from("pick this"));
+    }
+}

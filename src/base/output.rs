@@ -19,10 +19,20 @@
 //! [`write_atomic`], so a file another program put there in between (e.g. during `lobe watch`) is not
 //! clobbered.
 
-use super::diag::{Diagnostic, Hint};
+use super::diag::{Advice, Diagnostic};
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
+
+/// An existing file lobe did not write is kept unless the user explicitly allows replacing it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct AllowOverwrite;
+
+impl Advice for AllowOverwrite {
+    fn plain(&self) -> String {
+        "choose another output path, or allow replacing the file".into()
+    }
+}
 
 /// How much of an existing file is read to decide whether lobe wrote it.
 pub(crate) const PREFIX_BYTES: u64 = 64 * 1024;
@@ -32,7 +42,7 @@ static IN_FLIGHT: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
 /// Checks that `path` may be (over)written: its directory exists; if something is there it is a regular file
 /// (after following symlinks), and, unless `force`, one that `is_ours` recognises from its first
-/// [`PREFIX_BYTES`]. A foreign file is refused with [`Hint::AllowOverwrite`].
+/// [`PREFIX_BYTES`]. A foreign file is refused with [`AllowOverwrite`].
 pub fn check(path: &Path, force: bool, is_ours: fn(&[u8]) -> bool) -> Result<(), Diagnostic> {
     let target = resolve(path)?;
     let dir = parent_dir(&target);
@@ -52,7 +62,7 @@ pub fn check(path: &Path, force: bool, is_ours: fn(&[u8]) -> bool) -> Result<(),
             .map_err(|e| format!("cannot read existing `{}`: {e}", path.display()))?;
         if !is_ours(&prefix) {
             return Err(Diagnostic::error(format!("`{}` exists and was not written by lobe; not overwriting it (refusing to overwrite unless allowed)", path.display()))
-                .hint(Hint::AllowOverwrite));
+                .hint(AllowOverwrite));
         }
     }
     Ok(())

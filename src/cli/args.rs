@@ -92,6 +92,27 @@ pub fn merge_repeated<T: Clone + PartialEq>(flag: &str, groups: &[Vec<(String, T
 /// `--backend jit|interp`, `--tier cranelift|llvm|auto` and `--math precise|fast`.
 #[derive(clap::Args, Clone, Copy, Debug)]
 pub struct BackendArg {
+    #[command(flatten)]
+    pub engine: EngineArg,
+    #[command(flatten)]
+    pub math: MathArg,
+}
+
+impl BackendArg {
+    /// The backend `--backend` with `--tier` means ([`EngineArg::backend`]).
+    pub fn backend(&self) -> Result<Backend, CliError> {
+        self.engine.backend()
+    }
+
+    /// Compile options for this backend and math mode with `bake` baked in.
+    pub fn options(&self, bake: Vec<(String, f64)>) -> Result<lobe::Options, CliError> {
+        self.engine.options(bake, self.math.mode)
+    }
+}
+
+/// `--backend jit|interp` and `--tier cranelift|llvm|auto`, without `--math` (for a command that has its own).
+#[derive(clap::Args, Clone, Copy, Debug)]
+pub struct EngineArg {
     /// Evaluation backend: `jit` (compiled by the `--tier`) or `interp` (the reference interpreter).
     #[arg(id = "backend", long = "backend", value_name = "BACKEND", default_value = "jit")]
     kind: Backend,
@@ -99,11 +120,9 @@ pub struct BackendArg {
     /// `--features llvm`), or `auto` (LLVM when this build has it, else Cranelift).
     #[arg(id = "tier", long = "tier", value_name = "TIER", default_value = "cranelift")]
     tier: lobe::Tier,
-    #[command(flatten)]
-    pub math: MathArg,
 }
 
-impl BackendArg {
+impl EngineArg {
     /// The backend `--backend` with `--tier` means; `llvm` in a build without the LLVM tier is an error with
     /// the rebuild hint (not a failure later, at the first compile).
     pub fn backend(&self) -> Result<Backend, CliError> {
@@ -112,13 +131,13 @@ impl BackendArg {
         Ok(lobe::resolve_backend(self.kind, self.tier)?)
     }
 
-    /// Compile options for this backend and math mode with `bake` baked in.
-    pub fn options(&self, bake: Vec<(String, f64)>) -> Result<lobe::Options, CliError> {
-        Ok(lobe::Options { backend: self.backend()?, bake, math: self.math.mode, ..lobe::Options::default() })
+    /// Compile options for this backend and `math` with `bake` baked in.
+    pub fn options(&self, bake: Vec<(String, f64)>, math: lobe::Mode) -> Result<lobe::Options, CliError> {
+        Ok(lobe::Options { backend: self.backend()?, bake, math, ..lobe::Options::default() })
     }
 }
 
-/// `--math precise|fast`: which definition of the transcendental builtins kernels run.
+/// `--math precise|fast`.
 #[derive(clap::Args, Clone, Copy, Debug)]
 pub struct MathArg {
     /// Math mode: `precise` (every builtin within a few ulp, the default) or `fast` (within 1e-6, fewer
@@ -239,12 +258,12 @@ impl AgainstReference {
     /// The formula compiled with `set` baked, and the reference with its defaults, both on `backend`.
     /// The formula's kernel in `b`'s backend and math mode, and the reference's (precise: it is the yardstick).
     pub fn kernels(&self, set: &[(String, f64)], b: &BackendArg) -> Result<(Kernel, Kernel), CliError> {
-        Ok((self.formula.kernel(set, b.kind, b.math.mode)?, self.reference(b)?))
+        Ok((self.formula.kernel(set, b.engine.kind, b.math.mode)?, self.reference(b)?))
     }
 
     /// The reference's kernel with its defaults (precise: it is the yardstick; its red channel if coloured).
     pub fn reference(&self, b: &BackendArg) -> Result<Kernel, CliError> {
-        common::load_kernel(Some(&self.reference), None, &[], b.kind, lobe::Mode::Precise)
+        common::load_kernel(Some(&self.reference), None, &[], b.engine.kind, lobe::Mode::Precise)
     }
 
     /// The lobe variables of the formula `k` ([`LobeVar::resolve`]) and of the reference `r` (the one it reads).
@@ -266,9 +285,8 @@ impl Force {
     /// recognised by `is_ours` nor `--force`d ([`output::check`]). Commands call this before doing the work, so
     /// a bad path costs nothing.
     pub fn check(&self, path: &Path, is_ours: fn(&[u8]) -> bool) -> Result<(), CliError> {
-        use lobe::base::diag::Hint;
         output::check(path, self.on, is_ours)
-            .map_err(|d| if d.hints.is_empty() { d.hint(Hint::AllowOverwrite) } else { d }.into())
+            .map_err(|d| if d.hints.is_empty() { d.hint(lobe::base::output::AllowOverwrite) } else { d }.into())
     }
 
     /// Checks `path` as [`Force::check`] does, then writes `bytes` to a temporary file in the same directory

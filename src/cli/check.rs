@@ -2,7 +2,8 @@
 //! rewrites that fired, the inputs it reads (and so the ones a renderer skips), parameters baked or live, and
 //! the compile time on each backend; and the accuracy pass's report (`numerics::robust`): bits of error
 //! against the higher-precision truth over the formula's domain before and after the pass, with the worst
-//! input, which rewrite bought what, and where the formula is ill-conditioned by nature.
+//! input, which rewrite bought what, and where the formula is ill-conditioned by nature. `--sweep` runs the
+//! stability sweep instead, with `lobe sweep`'s flags ([`super::sweep`]).
 
 use super::args::{self, FormulaSource, Json, Params, PreferArg};
 use super::common::{self, CliError};
@@ -11,6 +12,9 @@ use lobe::numerics::robust::{self, ErrorStats, Worst};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("set", args::help("Parameters to bake as constants, e.g. `n=50`")))]
+#[command(mut_arg("bound", |a| a.requires("sweep")), mut_arg("max_evals", |a| a.requires("sweep")))]
+#[command(mut_arg("deny", |a| a.requires("sweep")), mut_arg("as_written", |a| a.requires("sweep")))]
+#[command(mut_arg("backend", |a| a.requires("sweep")), mut_arg("tier", |a| a.requires("sweep")))]
 pub struct CheckArgs {
     #[command(flatten)]
     pub formula: FormulaSource,
@@ -20,15 +24,21 @@ pub struct CheckArgs {
     pub prefer: PreferArg,
     /// Domain points the accuracy report measures (inputs in [0, 1] with edge classes, parameters over
     /// their ranges).
-    #[arg(long, default_value_t = 100_000, value_parser = clap::value_parser!(u64).range(1..=100_000_000))]
+    #[arg(long, default_value_t = 100_000, value_parser = clap::value_parser!(u64).range(1..=100_000_000), conflicts_with = "sweep")]
     pub points: u64,
     /// Seconds the accuracy pass may search before it keeps the best form found so far (the report says so).
-    #[arg(long, value_name = "SECONDS", default_value_t = 10.0, value_parser = args::parse_seconds, allow_negative_numbers = true)]
+    #[arg(long, value_name = "SECONDS", default_value_t = 10.0, value_parser = args::parse_seconds, allow_negative_numbers = true, conflicts_with = "sweep")]
     pub budget: f64,
     #[command(flatten)]
     pub json: Json,
     #[command(flatten)]
     pub math: super::args::MathArg,
+    /// Run the stability sweep instead (`lobe sweep`, with its flags below): NaN, ±inf, negative and huge
+    /// values over the whole domain.
+    #[arg(long)]
+    pub sweep: bool,
+    #[command(flatten, next_help_heading = "With --sweep")]
+    pub sweeping: super::sweep::SweepFlags,
 }
 
 /// A point as `NH=…, NL=… (n=…)`: the inputs the formula reads and its live parameters.
@@ -64,6 +74,10 @@ fn stats_line(f: &Formula, s: &ErrorStats) -> String {
 }
 
 pub fn run(a: &CheckArgs) -> Result<(), CliError> {
+    if a.sweep {
+        let sweep = super::sweep::Sweep { formula: &a.formula, set: &a.set, flags: &a.sweeping, prefer: &a.prefer, math: a.math.mode, json: a.json.on };
+        return super::sweep::run_sweep(&sweep);
+    }
     let set = a.set.list()?;
     let whole = a.formula.load()?;
     // A colour formula: the red channel is checked and shown, and the output says so (`lobe check --sweep`

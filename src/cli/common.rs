@@ -54,19 +54,34 @@ pub struct Flags;
 
 impl Wording for Flags {
     fn hint(&self, h: &Hint) -> String {
+        use lobe::numerics::NumericsAdvice as N;
+        use lobe::CompileAdvice as C;
+        if let Some(a) = h.advice::<N>() {
+            return match a {
+                N::BakeEveryParam => "give every parameter a value (--set) before normalising".into(),
+                N::FitSomeParam => "name at least one parameter: --param a=1..1000".into(),
+                N::PositiveStep => "e.g. --step 1".into(),
+                N::SweepForUndefined => "run `lobe sweep` on the file to see where it is undefined".into(),
+                N::RunAccuracyPass => "run `lobe check` on the file: the accuracy pass may remove the NaN".into(),
+            };
+        }
+        if let Some(a) = h.advice::<C>() {
+            return match a {
+                C::InputNotParam { name } => format!("`{name}` is an input (a cosine), not a parameter; `lobe eval` takes inputs with --at {name}=…"),
+                C::BuildWithLlvm => format!("rebuild with `cargo build --release --features llvm` ({}), or use `--tier cranelift`", lobe::LLVM_PACKAGES),
+            };
+        }
+        if let Some(lobe::measured::MeasuredAdvice::GiveMerlTable) = h.advice() {
+            return "give a MERL BRDF database .binary file (90×90×180 entries), or write one with `lobe tabulate`".into();
+        }
+        if h.advice::<lobe::base::output::AllowOverwrite>().is_some() {
+            return "choose another output path, or pass --force to replace it".into();
+        }
         match h {
             Hint::Text(t) => t.clone(),
             Hint::UseInterpreter => "the interpreter computes the same values: rerun with `--backend interp`".into(),
-            Hint::AllowOverwrite => "choose another output path, or pass --force to replace it".into(),
-            Hint::InputNotParam { name } => {
-                format!("`{name}` is an input (a cosine), not a parameter; `lobe eval` takes inputs with --at {name}=…")
-            }
-            Hint::BakeEveryParam => "give every parameter a value (--set) before normalising".into(),
-            Hint::FitSomeParam => "name at least one parameter: --param a=1..1000".into(),
-            Hint::PositiveStep => "e.g. --step 1".into(),
-            Hint::BuildWithLlvm => {
-                format!("rebuild with `cargo build --release --features llvm` ({}), or use `--tier cranelift`", lobe::base::diag::LLVM_PACKAGES)
-            }
+            // Advice this CLI has no words of its own for.
+            Hint::Advice(a) => a.plain(),
         }
     }
     fn setting(&self, s: &Setting) -> String {

@@ -7,7 +7,7 @@
 //! has it. Exits with status 1 when a kind listed in `--deny` occurs in the compiled formula (in the formula as
 //! written with `--as-written`), after printing the report.
 
-use super::args::{self, BackendArg, FormulaSource, Json, Params, PreferArg};
+use super::args::{self, EngineArg, FormulaSource, Json, MathArg, Params, PreferArg};
 use super::common::{self, CliError};
 use lobe::ir::Formula;
 use lobe::numerics::sweep::{example_extents, kinds, ChannelsJson, Example, RegionStats, SweepJson, SweepOptions, SweepReport};
@@ -19,6 +19,19 @@ pub struct SweepArgs {
     pub formula: FormulaSource,
     #[command(flatten)]
     pub set: Params,
+    #[command(flatten)]
+    pub sweep: SweepFlags,
+    #[command(flatten)]
+    pub prefer: PreferArg,
+    #[command(flatten)]
+    pub math: MathArg,
+    #[command(flatten)]
+    pub json: Json,
+}
+
+/// The sweep's own flags, which `lobe check --sweep` takes as well.
+#[derive(clap::Args, Debug)]
+pub struct SweepFlags {
     /// Values above this are counted as over the bound.
     #[arg(long, default_value_t = 1e6, allow_negative_numbers = true)]
     pub bound: f64,
@@ -33,11 +46,23 @@ pub struct SweepArgs {
     #[arg(long)]
     pub as_written: bool,
     #[command(flatten)]
-    pub prefer: PreferArg,
-    #[command(flatten)]
-    pub backend: BackendArg,
-    #[command(flatten)]
-    pub json: Json,
+    pub engine: EngineArg,
+}
+
+/// What one sweep run reads: the command's arguments, or `lobe check --sweep`'s.
+pub struct Sweep<'a> {
+    pub formula: &'a FormulaSource,
+    pub set: &'a Params,
+    pub flags: &'a SweepFlags,
+    pub prefer: &'a PreferArg,
+    pub math: lobe::Mode,
+    pub json: bool,
+}
+
+impl<'a> From<&'a SweepArgs> for Sweep<'a> {
+    fn from(a: &'a SweepArgs) -> Sweep<'a> {
+        Sweep { formula: &a.formula, set: &a.set, flags: &a.sweep, prefer: &a.prefer, math: a.math.mode, json: a.json.on }
+    }
 }
 
 /// The kinds `--deny` takes.
@@ -59,13 +84,19 @@ fn example_text(e: &Example, used: lobe::ir::InputSet, names: &[String]) -> Stri
 }
 
 pub fn run(a: &SweepArgs) -> Result<(), CliError> {
-    for d in &a.deny {
+    run_sweep(&a.into())
+}
+
+/// Runs the sweep `a` describes and prints its report.
+pub fn run_sweep(a: &Sweep) -> Result<(), CliError> {
+    let flags = a.flags;
+    for d in &flags.deny {
         if !KINDS.contains(&d.as_str()) {
             return Err(CliError::hint(format!("--deny: unknown kind `{d}`"), "kinds are nan, inf, negative, bound"));
         }
     }
-    if a.bound.is_nan() || a.bound <= 0.0 {
-        return Err(CliError::hint(format!("--bound {} must be a positive number", a.bound), "e.g. --bound 1e6 (values above it are counted)"));
+    if flags.bound.is_nan() || flags.bound <= 0.0 {
+        return Err(CliError::hint(format!("--bound {} must be a positive number", flags.bound), "e.g. --bound 1e6 (values above it are counted)"));
     }
     let f = a.formula.load()?;
     // A colour formula is swept channel by channel (each a scalar formula); --json then gives
@@ -84,7 +115,7 @@ pub fn run(a: &SweepArgs) -> Result<(), CliError> {
             Out::Text(t) => print!("{t}"),
         }
     }
-    if f.is_rgb() && a.json.on {
+    if f.is_rgb() && a.json {
         println!("{}", common::to_json(&channels)?);
     }
     if !denied.is_empty() {
@@ -123,34 +154,34 @@ pub enum Out {
 }
 
 /// The command's output for a lowered formula, and the `--deny` kinds that occurred.
-pub fn report(a: &SweepArgs, f: &Formula) -> Result<(Out, Vec<String>), CliError> {
-    let mut out = String::new();
+pub fn report(a: &Sweep, f: &Formula) -> Result<(Out, Vec<String>), CliError> {
+    let (mut out, flags) = (String::new(), a.flags);
     let set = a.set.list()?;
     let decls = lobe::numerics::sweep::swept_decls(f, &set);
     let used = f.used_inputs();
     // Every parameter combination gets its share of points: a smaller budget cannot be kept.
     let (combos, per) = lobe::numerics::sweep::min_evals(used, &decls);
     let least = combos.saturating_mul(per);
-    if a.max_evals < least {
+    if flags.max_evals < least {
         return Err(CliError::hint(
             format!(
                 "--max-evals {} is below this sweep's minimum of {least} evaluations ({combos} parameter combinations × {per} input points each)",
-                a.max_evals
+                flags.max_evals
             ),
             format!("give --max-evals {least} or more, or fix parameters with --set so fewer combinations are swept"),
         ));
     }
-    let plain = a.backend.options(set.clone())?;
-    let pass = (!a.as_written).then(|| super::common::with_pass(plain.clone(), a.prefer.pass(lobe::numerics::robust::PassOptions::default().points)));
-    let run = lobe::numerics::sweep::sweep_formula(f, &set, &plain, pass.as_ref(), &SweepOptions { bound: a.bound, max_evals: a.max_evals })?;
+    let plain = flags.engine.options(set.clone(), a.math)?;
+    let pass = (!flags.as_written).then(|| super::common::with_pass(plain.clone(), a.prefer.pass(lobe::numerics::robust::PassOptions::default().points)));
+    let run = lobe::numerics::sweep::sweep_formula(f, &set, &plain, pass.as_ref(), &SweepOptions { bound: flags.bound, max_evals: flags.max_evals })?;
     let (k, rep, compiled, crep_changed, names) = (&run.k, &run.rep, &run.compiled, &run.crep_changed, &run.names);
     let text = lobe::numerics::sweep::Run::text;
     let changed = run.changed();
     let crep = run.crep();
     let t = &rep.total;
     let judged = crep.map_or(t, |cr| &cr.total);
-    let denied: Vec<String> = a.deny.iter().filter(|d| judged.count(d) > 0).cloned().collect();
-    if a.json.on {
+    let denied: Vec<String> = flags.deny.iter().filter(|d| judged.count(d) > 0).cloned().collect();
+    if a.json {
         return Ok((Out::Json(Box::new(run.json())), denied));
     }
     {

@@ -33,7 +33,7 @@
 //! "not measured" where L or V is below the surface or the value is not finite, as MERL's files do.
 
 use crate::backend::Evaluator;
-use crate::base::diag::Diagnostic;
+use crate::base::diag::{Diagnostic, Hint};
 use crate::frame::V3;
 use crate::ir::{Input, InputSet, N_INPUTS};
 use std::f64::consts::{FRAC_PI_2, PI};
@@ -185,11 +185,27 @@ fn corners(x: f64, n: usize, wrap: bool) -> [(usize, f64); 2] {
 }
 
 /// A read failure: the file, what is wrong, and a hint.
-fn bad(path: &str, what: impl std::fmt::Display, hint: &str) -> Diagnostic {
-    Diagnostic::error(format!("`{path}`: {what}")).hint(hint.to_string())
+fn bad(path: &str, what: impl std::fmt::Display, hint: impl Into<Hint>) -> Diagnostic {
+    Diagnostic::error(format!("`{path}`: {what}")).hint(hint)
 }
 
-const NOT_MERL: &str = "give a MERL BRDF database .binary file (90×90×180 entries), or write one with `lobe tabulate`";
+/// What to give instead of a file that is not a MERL table, worded by each front end
+/// ([`crate::base::diag::Advice`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum MeasuredAdvice {
+    /// A MERL table is wanted: one from the database, or one tabulated from a formula ([`Measured::tabulate`]).
+    GiveMerlTable,
+}
+
+impl crate::base::diag::Advice for MeasuredAdvice {
+    fn plain(&self) -> String {
+        match self {
+            MeasuredAdvice::GiveMerlTable => "give a MERL BRDF database .binary file (90×90×180 entries), or tabulate a formula into one".into(),
+        }
+    }
+}
+
+const NOT_MERL: MeasuredAdvice = MeasuredAdvice::GiveMerlTable;
 
 impl Measured {
     /// Reads a MERL file (module docs); every failure names the file and what is wrong.

@@ -114,7 +114,7 @@ pub fn lobe_integral(ev: &dyn Evaluator, params: &[f64], lobe: Input) -> Result<
     }
     if let Some(i) = ys.iter().enumerate().position(|(i, y)| y.is_nan() && (i >= lead || lead == xs.len())) {
         return Err(Diagnostic::error(format!("the formula is NaN at {}", describe(lobe, xs[i])))
-            .hint("run `lobe sweep` on the file to see where it is undefined"));
+            .hint(super::NumericsAdvice::SweepForUndefined));
     }
     // Breakpoints at every switch; only switches next to a non-negligible value are reported as cut-offs
     // (c^1000 underflowing to 0 near 62° is not a clamp).
@@ -166,7 +166,7 @@ pub fn lobe_integral(ev: &dyn Evaluator, params: &[f64], lobe: Input) -> Result<
     evals += r.evals;
     if let Some(c) = nan_at {
         return Err(Diagnostic::error(format!("the formula is NaN at {}", describe(lobe, c)))
-            .hint("run `lobe sweep` on the file to see where it is undefined"));
+            .hint(super::NumericsAdvice::SweepForUndefined));
     }
     if !r.value.is_finite() || !r.converged && r.error > 1e-7 * r.value.abs() {
         return Err(Diagnostic::error(format!(
@@ -182,7 +182,7 @@ pub fn lobe_integral(ev: &dyn Evaluator, params: &[f64], lobe: Input) -> Result<
     if let Some((c, bound)) = skipped {
         if c > SKIP_MAX || bound.is_nan() || bound > REL_TOL * r.value {
             return Err(Diagnostic::error(format!("the formula is NaN for {} ≤ {c:e} and that piece is not negligible", lobe.name()))
-                .hint("run `lobe check` on the file: the accuracy pass may remove the NaN"));
+                .hint(super::NumericsAdvice::RunAccuracyPass));
         }
     }
     Ok(LobeIntegral { integral: r.value, error: r.error, evals, kinks, skipped })
@@ -226,7 +226,7 @@ pub fn coef_range(ev: &dyn Evaluator, params: &[f64], lobe: Input, n: Option<&cr
         return Err(Diagnostic::error(format!("the range {}..{} of n is not finite lo ≤ hi", show(lo), show(hi))).hint("e.g. 1..1000"));
     }
     if !(step > 0.0 && step.is_finite()) {
-        return Err(Diagnostic::error(format!("the step {} of the range of n must be positive", show(step))).hint(crate::base::diag::Hint::PositiveStep));
+        return Err(Diagnostic::error(format!("the step {} of the range of n must be positive", show(step))).hint(super::NumericsAdvice::PositiveStep));
     }
     if let Some(d) = n {
         if lo < d.lo || hi > d.hi {
@@ -388,7 +388,7 @@ fn albedo_until(ev: &dyn Evaluator, params: &[f64], theta_i: f64, phi_i: Option<
             x[3],
             x[4]
         ))
-            .hint("run `lobe sweep` on the file to see where it is undefined"));
+            .hint(super::NumericsAdvice::SweepForUndefined));
     }
     if !q.value.is_finite() || (!q.converged && q.error > 1e-5 * q.value.abs()) {
         return Err(Diagnostic::error(format!("the albedo integral at θᵢ = {:.3}° does not converge (estimate {:e})", t.to_degrees(), q.value))

@@ -220,7 +220,7 @@ pub fn search(
     progress: &(dyn Fn() + Sync),
 ) -> Result<FitReport, Diagnostic> {
     if free.is_empty() {
-        return Err(Diagnostic::error("nothing to fit").hint(crate::base::diag::Hint::FitSomeParam));
+        return Err(Diagnostic::error("nothing to fit").hint(super::NumericsAdvice::FitSomeParam));
     }
     let grids: Vec<Vec<f64>> = free.iter().map(FreeParam::grid).collect::<Result<_, _>>()?;
     let total: usize = grids.iter().map(Vec::len).product();

@@ -72,6 +72,34 @@ pub mod twins;
 use crate::base::diag::Diagnostic;
 use crate::ir::{Input, InputSet};
 
+/// What to change after a numerical check fails, worded by each front end ([`crate::base::diag::Advice`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum NumericsAdvice {
+    /// Normalising needs every parameter given a fixed value.
+    BakeEveryParam,
+    /// A fit needs at least one parameter to vary, with its range.
+    FitSomeParam,
+    /// A range of n was asked with a step that is not a positive number.
+    PositiveStep,
+    /// The formula is NaN somewhere: the stability sweep ([`sweep`]) shows where.
+    SweepForUndefined,
+    /// The formula as written is NaN on a piece that matters: the accuracy pass ([`robust`]) may remove it.
+    RunAccuracyPass,
+}
+
+impl crate::base::diag::Advice for NumericsAdvice {
+    fn plain(&self) -> String {
+        match self {
+            NumericsAdvice::BakeEveryParam => "give every parameter a value before normalising",
+            NumericsAdvice::FitSomeParam => "name at least one parameter to fit, with its range (e.g. a in 1..1000)",
+            NumericsAdvice::PositiveStep => "give the range a positive step, e.g. 1",
+            NumericsAdvice::SweepForUndefined => "sweep the formula over its domain to see where it is undefined",
+            NumericsAdvice::RunAccuracyPass => "check the formula's accuracy: the accuracy pass may remove the NaN",
+        }
+        .into()
+    }
+}
+
 /// The lobe variable of a formula reading `used`: NH or VR, whichever it reads. If it reads both or neither,
 /// NH, with a note saying so (the value is the same under the lobe convention).
 pub fn choose_lobe_input(used: InputSet) -> (Input, Option<String>) {

@@ -27,7 +27,7 @@ pub fn bake_coefficient(f: Formula) -> Result<Formula, Diagnostic> {
     let live: Vec<&str> = f.ir.used_params(f.root).iter().map(|&i| f.params[i as usize].name.as_str()).collect();
     if !live.is_empty() {
         return Err(Diagnostic::error(format!("cannot normalise {}: parameter(s) {} are not baked", f.display_name(), live.join(", ")))
-            .hint(crate::base::diag::Hint::BakeEveryParam));
+            .hint(super::NumericsAdvice::BakeEveryParam));
     }
     let coef = coefficient(&Interp::new(&f), f.used_inputs(), &f.default_params())
         .map_err(|e| Diagnostic { message: format!("cannot normalise {}: {}", f.display_name(), e.message), ..e })?;

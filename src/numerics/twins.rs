@@ -1,5 +1,6 @@
-//! Hand-written Rust twins of the catalogue formulas (../shared/models.md), as evaluators: the one place they
-//! are written (unit tests, integration tests, `lobe bench` and the benches all take them from here).
+//! Hand-written Rust twins of the catalogue formulas (`examples/brdfs`, as the papers publish them), as
+//! evaluators: the one place they are written (unit tests, integration tests, `lobe bench` and the benches all
+//! take them from here).
 //!
 //! Each twin computes the same function as its catalogue file `examples/brdfs/<stem>.brdf` compiled by lobe
 //! (`tests/it/differential.rs` checks JIT = interpreter = twin): the lowering's domain policy — inputs

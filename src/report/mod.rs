@@ -4,5 +4,6 @@
 pub mod bench;
 pub mod eval;
 pub mod measure;
+#[cfg(feature = "plot")]
 pub mod plot;
 pub mod render;

@@ -103,7 +103,7 @@ impl State {
         } else {
             warnings.push(
                 crate::Diagnostic::warning("the accuracy pass was skipped: the formula is too large for the server's budget")
-                    .hint("the page shows the plain simplification; `lobe render` and `lobe eval` run the pass"),
+                    .hint("the page shows the plain simplification; rendering and evaluating outside the page run the pass"),
             );
             plain
         };
@@ -227,7 +227,7 @@ fn scene_error(files: &ServedFiles) -> impl Fn(Diagnostics) -> ApiError + '_ {
         let mut e = ApiError::from(ds);
         if files.refused() {
             e.status = 403;
-            e.error.hints.push("lobe serve reads only files under the directories it was started with".to_string().into());
+            e.error.hints.push("the server reads only files under the directories it was started with".to_string().into());
         }
         e
     }
@@ -613,7 +613,7 @@ pub(crate) fn plot(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
         }
         if let Some(s) = series.iter().find(|s| !s.points.iter().any(|p| p.1.is_finite())) {
             return Err(ApiError::new(422, format!("nothing to plot: `{}` is NaN or infinite at every sampled angle", s.name))
-                .hint("0/0 and ∞−∞ are NaN; `lobe sweep FILE` shows where a formula is undefined"));
+                .hint("0/0 and ∞−∞ are NaN; a sweep of the formula over its domain shows where it is undefined"));
         }
         let n = set.iter().find(|(k, _)| k == "n").map(|(_, v)| format!("n = {v}")).unwrap_or_default();
         let opts = crate::report::plot::LobeOptions { title: format!("Lobes {n}"), polar, log: false, size: (560, 400) };
@@ -747,7 +747,7 @@ pub(crate) fn render_png(st: &Arc<State>, query: &str) -> Result<Reply, ApiError
     let max = st.limits.max_size;
     if let Some((w, h)) = size {
         if w > max || h > max {
-            return Err(ApiError::bad(format!("size {w}×{h} is over the server's {max}×{max}")).hint("lobe render has no such cap"));
+            return Err(ApiError::bad(format!("size {w}×{h} is over the server's {max}×{max}")).hint("rendering outside the page has no such cap"));
         }
     }
     limited(st, move |st| {

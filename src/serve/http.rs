@@ -455,7 +455,7 @@ impl Roots {
     pub(crate) fn contains(&self, p: &Path) -> Result<PathBuf, ApiError> {
         let outside = || {
             ApiError::new(403, format!("`{}` is outside the served directories", p.display()))
-                .hint("lobe serve reads and writes only under the directories it was started with")
+                .hint("the server reads and writes only under the directories it was started with")
         };
         let lexical = lexically_absolute(p).ok_or_else(outside)?;
         if !self.dirs.iter().any(|d| lexical.starts_with(d)) {
@@ -514,7 +514,7 @@ impl FileAccess for ServedFiles {
                 return ReadError::Io(std::io::Error::from(std::io::ErrorKind::NotFound));
             }
             self.refused.store(true, Ordering::SeqCst);
-            ReadError::Refused("outside the directories lobe serve was started with (name its directory there to serve it)".into())
+            ReadError::Refused("outside the directories the server was started with (name its directory there to serve it)".into())
         })?;
         read_regular_file(&c, max)
     }

@@ -186,7 +186,7 @@ fn host_ok(rq: &http::Request, addr: Option<SocketAddr>) -> bool {
 
 fn route(state: &Arc<api::State>, addr: Option<SocketAddr>, rq: &http::Request) -> Result<Reply, ApiError> {
     if !host_ok(rq, addr) {
-        return Err(ApiError::new(403, "the Host header does not name this loopback server").hint("open the address lobe serve printed"));
+        return Err(ApiError::new(403, "the Host header does not name this loopback server").hint("open the address the server printed"));
     }
     let (method, path, query) = (rq.method.as_str(), rq.path.as_str(), rq.query.as_str());
     match (method, path) {

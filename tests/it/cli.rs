@@ -125,6 +125,18 @@ fn check_sweep_is_an_alias_of_sweep() {
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!(v["nan"].as_u64().unwrap() > 0, "Beckmann is NaN at NH = 0: {v}");
+    // A flag of `check` like any other: the sweep's flags with it, the accuracy report's refused beside it,
+    // and the sweep's flags refused without it.
+    let o = lobe(&["check", "examples/brdfs/beckmann.brdf", "--sweep", "--as-written", "--deny", "nan"], None);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    for (args, says) in [
+        (&["check", "--sweep", "--points", "10", "examples/brdfs/beckmann.brdf"][..], "cannot be used with"),
+        (&["check", "--deny", "nan", "examples/brdfs/beckmann.brdf"][..], "--sweep"),
+    ] {
+        let o = lobe(args, None);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));
+        assert!(stderr(&o).contains(says), "{args:?}: {}", stderr(&o));
+    }
 }
 
 /// The sweep reports the formula as written and as compiled: Beckmann as published is NaN wherever NH⁴·m²

@@ -504,8 +504,7 @@ fn expmuldiv_keeps_the_bits_exp_loses_to_underflow() {
 
 /// The denormal-result class: exp underflows before the divisions rescale it (the points were the pass's worst
 /// well-conditioned ones before `scaled-exp`: Beckmann 18.9 bits, Ward 42.4 bits (→ 0)). Within 16 ulp at the
-/// default budget: expmuldiv's common case is one range test (~1.15× these kernels, BENCHMARKS.md 2026-12-01,
-/// robust4), so the default 1.3× keeps it; with its cost model back at 40 this fails.
+/// default budget: expmuldiv's common case is one range test (~1.15× these kernels, measured 2026-12-01), so the default 1.3× keeps it; with its cost model back at 40 this fails.
 #[test]
 fn scaled_exp_keeps_denormal_results() {
     for (stem, nl, nv, nh, m) in [

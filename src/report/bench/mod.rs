@@ -6,8 +6,12 @@
 //! at least as accurate with one of the two strictly better. Speed is the scalar JIT's median ns/eval, error
 //! the mean |Δ| against the reference on the papers' 91 × 1000 grid; the reference itself (error 0) is on the
 //! front by definition, which is the honest answer: nothing beats it on accuracy. A speed difference counts
-//! only past the measured noise (see [`mark_pareto`]), so two runs draw the same front.
+//! only past the measured noise (see [`mark_pareto`]), so two runs draw the same front. A row is measured by
+//! [`bench_row`] ([`row`]).
 
+mod row;
+
+pub use row::{bench_row, RowOptions};
 use serde::Serialize;
 
 /// One formula's measurements. Times are medians over repeated runs in this process; `*_spread` is the

@@ -1,0 +1,233 @@
+//! Plots: lobes against angle (cartesian or polar, like the papers' figures 2.2/3.3 and BRDF Explorer), error
+//! curves against a reference, and the speed-versus-error scatter of `lobe bench`.
+//!
+//! Design: plotters draws into memory (an RGB buffer for PNG, a string for SVG), the bytes are encoded here
+//! and handed to the caller, which writes them atomically — a failed plot never leaves a broken file. The font
+//! (DejaVu Sans, assets/fonts, free licence) is compiled in, so plots look the same on a machine with no fonts.
+//!
+//! The speed-versus-error scatter is laid out by hand in pixels rather than through plotters' chart mesh: its
+//! 1-2-5 log ticks, the "0" band for exact rows and the label placement all need to know where every point and
+//! text box lands. Text is measured with the backend's own font metrics, placement ([`place_labels`]) is a pure
+//! function of those boxes (tested without rendering), and whatever cannot be shown is named in a footnote.
+//!
+//! One file per concern: [`style`] (font, palette, PNG/SVG encoding), [`axis`] (ticks and their labels),
+//! [`figure`] (the cartesian figure the lobe and curve plots draw), [`scatter`] (the bench scatter), [`rect`] and
+//! [`labels`] (boxes and label placement), [`comparison`] (the render comparison picture); the plots a caller
+//! asks for are here.
+
+mod axis;
+mod comparison;
+mod figure;
+mod labels;
+mod rect;
+mod scatter;
+mod style;
+#[cfg(test)]
+mod tests;
+
+pub use comparison::comparison_figure;
+pub use scatter::{speed_error, CostError};
+
+use axis::*;
+use figure::*;
+use labels::*;
+use rect::*;
+use style::*;
+// Names plotters' prelude has too: these are ours.
+use rect::Rect;
+use style::DrawResult;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+use std::sync::Once;
+
+/// One curve: a label and (x, y) points.
+#[derive(Clone, Debug)]
+pub struct Series {
+    pub name: String,
+    pub points: Vec<(f64, f64)>,
+}
+
+/// Output format, chosen from the file extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    Png,
+    Svg,
+}
+
+impl Format {
+    pub fn from_path(p: &std::path::Path) -> Result<Format, String> {
+        match p.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
+            Some("png") => Ok(Format::Png),
+            Some("svg") => Ok(Format::Svg),
+            _ => Err(format!("`{}`: plots are written as .png or .svg", p.display())),
+        }
+    }
+}
+
+/// Samples a kernel as a one-dimensional lobe: value against the angle (degrees, 0..90 in steps of 0.25) from
+/// the lobe axis, under the lobe convention of [`crate::numerics::lobe_inputs`].
+pub fn lobe_points(ev: &dyn crate::Evaluator, used: crate::ir::InputSet, params: &[f64]) -> Vec<(f64, f64)> {
+    let (lobe, _) = crate::numerics::choose_lobe_input(used);
+    (0..=360)
+        .map(|i| {
+            let deg = i as f64 * 0.25;
+            (deg, ev.eval(&crate::numerics::lobe_inputs(deg.to_radians().cos(), lobe), params))
+        })
+        .collect()
+}
+
+/// Samples a kernel in the plane of incidence: L at `theta_i_deg` from N (azimuth 0), V at the signed angle
+/// θₒ ∈ [−90°, 90°] from N in the same plane (V = (sin θₒ, 0, cos θₒ); the mirror direction is θₒ = −θᵢ), in
+/// steps of 0.25°, through [`crate::frame::inputs_from_dirs`] (so a formula and a measured table see the same
+/// geometry).
+pub fn incidence_points(ev: &dyn crate::Evaluator, params: &[f64], theta_i_deg: f64) -> Vec<(f64, f64)> {
+    incidence_points_at(ev, params, theta_i_deg, 0.0)
+}
+
+/// [`incidence_points`] with the plane of incidence turned by `phi_i_deg` about N (L at azimuth φᵢ, V in the
+/// same plane): the same curve for an isotropic formula, another for one that reads the tangent frame.
+pub(crate) fn incidence_points_at(ev: &dyn crate::Evaluator, params: &[f64], theta_i_deg: f64, phi_i_deg: f64) -> Vec<(f64, f64)> {
+    let ti = theta_i_deg.to_radians();
+    let (sp, cp) = phi_i_deg.to_radians().sin_cos();
+    // At φᵢ = 0 the y components are +0 exactly (no −0 from a negative sine times 0).
+    let turn = |x: f64, z: f64| if phi_i_deg == 0.0 { [x, 0.0, z] } else { [x * cp, x * sp, z] };
+    let l = turn(ti.sin(), ti.cos());
+    (0..=720)
+        .map(|i| {
+            let deg = -90.0 + i as f64 * 0.25;
+            let t = deg.to_radians();
+            (deg, ev.eval(&crate::frame::inputs_from_dirs(l, turn(t.sin(), t.cos())), params))
+        })
+        .collect()
+}
+
+/// How to draw lobes.
+#[derive(Clone, Debug)]
+pub struct LobeOptions {
+    pub title: String,
+    pub polar: bool,
+    pub log: bool,
+    pub size: (u32, u32),
+}
+
+/// Lobes (value against angle in degrees, 0..90). Polar: radius = value, drawn on both sides of the axis.
+pub fn lobes(series: &[Series], o: &LobeOptions, format: Format) -> DrawResult<Vec<u8>> {
+    if o.polar && o.log {
+        return Err("a log scale applies to cartesian plots only (a log radius has no zero)".into());
+    }
+    let values = || series.iter().flat_map(|s| s.points.iter().map(|p| p.1)).filter(|v| v.is_finite());
+    if values().next().is_none() {
+        return Err("nothing to plot: no curve has a finite value (is the formula NaN or infinite everywhere?)".into());
+    }
+    let ymax = values().fold(0.0f64, f64::max).max(1e-12);
+    let ymin_pos = values().filter(|v| *v > 0.0).fold(f64::INFINITY, f64::min);
+    if o.log && !ymin_pos.is_finite() {
+        return Err("nothing to plot on a log scale: no curve has a positive finite value (use a linear scale)".into());
+    }
+    let ymin_pos = ymin_pos.max(ymax * 1e-12);
+    let fig = if o.polar {
+        // Both sides of the axis: θ → −θ mirrored, in the signed-angle form `polar_figure` draws.
+        let signed: Vec<Series> = series
+            .iter()
+            .map(|s| Series { name: s.name.clone(), points: s.points.iter().rev().map(|&(d, v)| (-d, v)).chain(s.points.iter().copied()).collect() })
+            .collect();
+        polar_figure(&o.title, &signed, None)
+    } else if o.log {
+        let curves = series
+            .iter()
+            .map(|s| Curve::new(&s.name, s.points.iter().map(|&(d, v)| (v >= ymin_pos).then(|| (d, v.log10())))))
+            .collect();
+        let y = Axis { lo: ymin_pos.log10(), hi: (ymax * 1.5).log10(), log: true, desc: "value (log)" };
+        Figure { title: &o.title, x: Axis { lo: 0.0, hi: 90.0, log: false, desc: "angle (degrees)" }, y, curves, to_scale: false, light: None }
+    } else {
+        let ymin = values().fold(0.0f64, f64::min);
+        let curves = series.iter().map(|s| Curve::new(&s.name, s.points.iter().map(|&p| Some(p)))).collect();
+        let y = Axis { lo: ymin * 1.05, hi: ymax * 1.05, log: false, desc: "value" };
+        Figure { title: &o.title, x: Axis { lo: 0.0, hi: 90.0, log: false, desc: "angle (degrees)" }, y, curves, to_scale: false, light: None }
+    };
+    render_figure(&fig, format, o.size)
+}
+
+/// A polar figure of signed-angle series (angle from the normal in degrees, −90..90; radius = value, negative
+/// values drawn at 0), with both axes to the same scale (a circle stays a circle) and, when given, the
+/// direction of the light (`light_deg`, on the opposite side from the mirror direction) as a grey ray.
+fn polar_figure<'a>(title: &'a str, series: &[Series], light_deg: Option<f64>) -> Figure<'a> {
+    let xy = |&(deg, v): &(f64, f64)| (v.max(0.0) * deg.to_radians().sin(), v.max(0.0) * deg.to_radians().cos());
+    let curves: Vec<Curve> = series.iter().map(|s| Curve::new(&s.name, s.points.iter().map(|p| Some(xy(p))))).collect();
+    // The lobes' own extent with the origin (5 % spare), not the largest value's circle: a narrow lobe fills
+    // the height, a lobe to one side the width.
+    // The light's direction is shown as long as the longest lobe.
+    let radius = curves.iter().flat_map(|c| c.runs.iter().flatten()).fold(0.0f64, |m, p| m.max(p.0.hypot(p.1)));
+    let light_end = light_deg.map(|t| (radius * t.to_radians().sin(), radius * t.to_radians().cos()));
+    let pts = || curves.iter().flat_map(|c| c.runs.iter().flatten()).chain(light_end.iter());
+    let (x0, x1) = pts().fold((0.0f64, 0.0f64), |(a, b), p| (a.min(p.0), b.max(p.0)));
+    let y1 = pts().fold(0.0f64, |m, p| m.max(p.1)).max(1e-12);
+    let pad = (x1 - x0).max(y1) * 0.05;
+    // The light is on the +x side (the mirror direction at −θᵢ), as far out as the plot can reach.
+    let reach = 4.0 * (x1 - x0).max(y1);
+    let light = light_deg.map(|t| (reach * t.to_radians().sin(), reach * t.to_radians().cos()));
+    Figure {
+        title,
+        x: Axis { lo: x0 - pad, hi: x1 + pad, log: false, desc: "value · sin θ" },
+        y: Axis { lo: 0.0, hi: y1 + pad, log: false, desc: "value · cos θ" },
+        curves,
+        to_scale: true,
+        light,
+    }
+}
+
+/// Lobes in the plane of incidence ([`incidence_points_at`] series) with the light at `theta_i_deg`: polar (to
+/// scale, the light drawn) or cartesian against the signed view angle.
+pub fn incidence_lobes(series: &[Series], o: &LobeOptions, theta_i_deg: f64, format: Format) -> DrawResult<Vec<u8>> {
+    if o.log {
+        return Err("the plane-of-incidence plot has a linear scale".into());
+    }
+    let finite = series.iter().flat_map(|s| s.points.iter().map(|p| p.1)).filter(|v| v.is_finite());
+    let ymax = finite.fold(f64::NEG_INFINITY, f64::max);
+    if ymax == f64::NEG_INFINITY {
+        return Err("nothing to plot: no curve has a finite value (is the formula NaN or infinite everywhere?)".into());
+    }
+    if !o.polar {
+        let title = format!("{}, light at θᵢ = {theta_i_deg}°", o.title);
+        let x_desc = "view angle θₒ in the plane of incidence (degrees; mirror at −θᵢ)";
+        return curves_sized(series, &title, x_desc, "value", format, o.size);
+    }
+    let title = format!("{}, light at θᵢ = {theta_i_deg}°", o.title);
+    render_figure(&polar_figure(&title, series, Some(theta_i_deg)), format, o.size)
+}
+
+/// Curves over any x range (e.g. the normalisation coefficient against n over a range of n).
+pub fn curves(series: &[Series], title: &str, x_desc: &str, y_desc: &str, format: Format) -> DrawResult<Vec<u8>> {
+    curves_sized(series, title, x_desc, y_desc, format, (900, 600))
+}
+
+/// [`curves`] in an image of `size` pixels.
+pub(crate) fn curves_sized(
+    series: &[Series],
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    format: Format,
+    size: (u32, u32),
+) -> DrawResult<Vec<u8>> {
+    let pts = || series.iter().flat_map(|s| s.points.iter()).filter(|p| p.0.is_finite() && p.1.is_finite());
+    let (xmin, xmax) = pts().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.0), b.max(p.0)));
+    let (ymin, ymax) = pts().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.1), b.max(p.1)));
+    if !(xmin.is_finite() && ymin.is_finite()) {
+        return Err("nothing to plot: no finite points".into());
+    }
+    let (xmax, ymax) = (if xmax > xmin { xmax } else { xmin + 1.0 }, if ymax > ymin { ymax } else { ymin + 1.0 });
+    let pad = (ymax - ymin) * 0.05;
+    let curves = series.iter().map(|s| Curve::new(&s.name, s.points.iter().map(|&p| Some(p)))).collect();
+    let fig = Figure {
+        title,
+        x: Axis { lo: xmin, hi: xmax, log: false, desc: x_desc },
+        y: Axis { lo: ymin - pad, hi: ymax + pad, log: false, desc: y_desc },
+        curves,
+        to_scale: false,
+        light: None,
+    };
+    render_figure(&fig, format, size)
+}
