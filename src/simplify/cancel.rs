@@ -107,11 +107,7 @@ fn shapes(f: &Formula, inv: &[bool]) -> Vec<Option<Shape>> {
 }
 
 /// A double-double `hi + lo` of new-arena nodes (`lo: None` when hi is exact).
-#[derive(Clone, Copy, Debug)]
-struct Dd {
-    hi: NodeId,
-    lo: Option<NodeId>,
-}
+type Dd = dd::partial::Dd<NodeId>;
 
 /// A polynomial in the atom, lowest degree first; `None` is an exact zero coefficient.
 type Poly = Vec<Option<Dd>>;
@@ -132,70 +128,24 @@ impl<'a> Builder<'a> {
         ir.node(x).as_const() == Some(v)
     }
 
-    /// hi + lo renormalised (Fast2Sum: |hi| ≥ |lo| up to the coefficient arithmetic's own cancellations, where
-    /// the sum is exact anyway).
     fn norm(&self, ir: &mut Ir, hi: NodeId, lo: Option<NodeId>) -> Dd {
-        let Some(lo) = lo else { return Dd { hi, lo: None } };
-        let (hi, lo) = dd::fast_two_sum(&mut IrEmit::new(ir, self.sp), hi, lo);
-        Dd { hi, lo: Some(lo) }
+        dd::partial::norm(&mut IrEmit::new(ir, self.sp), hi, lo)
     }
 
     fn neg(&self, ir: &mut Ir, a: Dd) -> Dd {
-        Dd { hi: ir.neg(a.hi, self.sp), lo: a.lo.map(|l| ir.neg(l, self.sp)) }
+        dd::partial::neg(&mut IrEmit::new(ir, self.sp), a)
     }
 
     fn add(&self, ir: &mut Ir, a: Dd, b: Dd) -> Dd {
-        let sp = self.sp;
-        // s + e = a.hi + b.hi exactly.
-        let s = ir.bin(BinOp::Add, a.hi, b.hi, sp);
-        let e = dd::two_sum_err(&mut IrEmit::new(ir, sp), a.hi, b.hi, s);
-        let lo = add_opt(ir, a.lo, b.lo, sp);
-        let lo = add_opt(ir, Some(e), lo, sp);
-        self.norm(ir, s, lo)
+        dd::partial::add(&mut IrEmit::new(ir, self.sp), a, b)
     }
 
     fn mul(&self, ir: &mut Ir, a: Dd, b: Dd) -> Dd {
-        let sp = self.sp;
-        if self.is(ir, a.hi, 1.0) && a.lo.is_none() {
-            return b;
-        }
-        if self.is(ir, b.hi, 1.0) && b.lo.is_none() {
-            return a;
-        }
-        // By a power of two: exact (no underflow in a parameter's coefficient), the low part scaled alike.
-        let pow2 = |ir: &Ir, x: Dd| x.lo.is_none() && ir.node(x.hi).as_const().is_some_and(|c| c != 0.0 && c.abs().log2().fract() == 0.0);
-        if pow2(ir, a) || pow2(ir, b) {
-            let (a, b) = if pow2(ir, b) { (a, b) } else { (b, a) };
-            let hi = ir.bin(BinOp::Mul, a.hi, b.hi, sp);
-            return Dd { hi, lo: a.lo.map(|l| ir.bin(BinOp::Mul, l, b.hi, sp)) };
-        }
-        let (p, mut e) = IrEmit::new(ir, sp).two_prod(a.hi, b.hi);
-        if let Some(bl) = b.lo {
-            e = ir.call(Builtin::Fma, &[a.hi, bl, e], sp);
-        }
-        if let Some(al) = a.lo {
-            e = ir.call(Builtin::Fma, &[al, b.hi, e], sp);
-        }
-        self.norm(ir, p, Some(e))
+        dd::partial::mul(&mut IrEmit::new(ir, self.sp), a, b)
     }
 
-    /// a/b: the quotient's exact remainder (fma) and the operands' low parts, over b.
     fn div(&self, ir: &mut Ir, a: Dd, b: Dd) -> Dd {
-        let sp = self.sp;
-        if self.is(ir, b.hi, 1.0) && b.lo.is_none() {
-            return a;
-        }
-        let q = ir.bin(BinOp::Div, a.hi, b.hi, sp);
-        let nq = ir.neg(q, sp);
-        let mut r = ir.call(Builtin::Fma, &[nq, b.hi, a.hi], sp);
-        if let Some(al) = a.lo {
-            r = ir.bin(BinOp::Add, r, al, sp);
-        }
-        if let Some(bl) = b.lo {
-            r = ir.call(Builtin::Fma, &[nq, bl, r], sp);
-        }
-        let lo = ir.bin(BinOp::Div, r, b.hi, sp);
-        self.norm(ir, q, Some(lo))
+        dd::partial::div(&mut IrEmit::new(ir, self.sp), a, b)
     }
 
     fn padd(&self, ir: &mut Ir, p: &Poly, q: &Poly) -> Poly {
