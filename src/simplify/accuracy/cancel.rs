@@ -44,7 +44,7 @@
 //! expression through the same builtins the live kernel's prepared block runs, so the two agree bit for bit.
 //!
 //! # Cost model
-//! Coefficients read no input: free ([`super::accuracy::cost`]). Per point: two fmas and an addition per
+//! Coefficients read no input: free ([`super::cost`]). Per point: two fmas and an addition per
 //! polynomial (fewer where a coefficient is exact or zero), one division when the denominator is not constant
 //! — usually cheaper than the written chain of products, quotients and sums it replaces. `compensated-exp`: 2–4
 //! fmas, one max per floored divisor, one fma applying the tail, acoslo (8) per acos factor; b's parameter-only
@@ -52,14 +52,92 @@
 //! measured (BENCHMARKS.md, robust7). `compensated-params`: nothing per point (the prepared block grows; compile
 //! time with it, e.g. F_kutlog's JIT from ~6 to ~30 ms).
 
-use super::rewrite::{add_opt, divide_apart, product, rebuild, Analysis};
-use super::emit::IrEmit;
+use crate::simplify::rewrite::{add_opt, divide_apart, product, rebuild, Analysis};
+use crate::simplify::emit::IrEmit;
 use crate::builtins::dd;
 use crate::builtins::dd::Arith;
 use crate::base::span::Span;
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Ir, Node, NodeId};
 use std::collections::HashMap;
+use super::rule::{Example, Rule, Sites, Source};
+use super::finish;
+
+/// `rational-form` (module docs).
+pub(crate) struct RationalForm;
+
+impl Rule for RationalForm {
+    fn name(&self) -> &'static str {
+        "rational-form"
+    }
+    fn doc(&self) -> &'static str {
+        "a sum rational in one input as (a1*x + a0)/(b1*x + b0), coefficients in double-double: the cancellation moves to the parameters"
+    }
+    fn sites(&self) -> Sites {
+        Sites::Everywhere
+    }
+    fn apply(&self, _: &Source, a: &Analysis, _: Option<usize>) -> Option<Formula> {
+        finish(a, rational_form(a))
+    }
+    fn example(&self) -> Example {
+        Example { before: "let c = NH\nc/(n - n*c + c) - 0.25", bake: &[], site: None, shows: "fma(" }
+    }
+}
+
+/// `compensated-exp` (module docs).
+pub(crate) struct CompensatedExp;
+
+impl Rule for CompensatedExp {
+    fn name(&self) -> &'static str {
+        "compensated-exp"
+    }
+    fn doc(&self) -> &'static str {
+        "exp(K*q) as exp(hi)*(1 + t), K's parameter-only factors in double-double and t the product's rounding error: exp no longer amplifies it"
+    }
+    fn sites(&self) -> Sites {
+        Sites::Everywhere
+    }
+    fn apply(&self, _: &Source, a: &Analysis, _: Option<usize>) -> Option<Formula> {
+        finish(a, compensated_exp(a))
+    }
+    fn example(&self) -> Example {
+        Example { before: "exp(-n * NH * NH)", bake: &[], site: None, shows: "fma(" }
+    }
+}
+
+/// `compensated-params` (module docs): the current formula (live) with each parameter-only subtree the kernel
+/// reads in double-double and rounded once, then simplified with the source's baked values: baking the pass's
+/// decision folds the same expression the live kernel's prepared block computes. Free per point: the block is
+/// computed once per parameter set.
+pub(crate) struct CompensatedParams;
+
+impl Rule for CompensatedParams {
+    fn name(&self) -> &'static str {
+        "compensated-params"
+    }
+    fn doc(&self) -> &'static str {
+        "parameter-only subexpressions in double-double, rounded once where the kernel reads them"
+    }
+    fn sites(&self) -> Sites {
+        Sites::Whole
+    }
+    fn apply(&self, src: &Source, a: &Analysis, _: Option<usize>) -> Option<Formula> {
+        let (ir, root, fired) = compensated_params(a);
+        fired.then(|| crate::simplify::simplify(&Formula { ir, root, ..a.f.clone() }, src.bake()))
+    }
+    fn example(&self) -> Example {
+        Example { before: "param k = 2 in 1..5\nparam Q = 0.5 in 0.1..0.9\nacos(pow(Q, 1/k)) * NH", bake: &[], site: None, shows: "acoslo(" }
+    }
+    /// First where a parameter-only part calls a transcendental builtin (F_kutlog's C = acos(Q^(1/k))/acos(Q^(1/n))):
+    /// the rules after it carry those parts' residuals, which exist only once they are double-double. Otherwise
+    /// last: the rules' patterns read rational parameter parts as written (the quadratic model's 1 − A beside A).
+    fn early(&self, a: &Analysis) -> bool {
+        let (f, inv) = (&a.f, a.invariant());
+        f.ir.ids().any(|id| {
+            inv[id.index()] && matches!(f.ir.node(id), Node::Call(b, _) if !matches!(b, Builtin::Min | Builtin::Max | Builtin::Abs | Builtin::Clamp | Builtin::Sqrt | Builtin::Fma | Builtin::Select))
+        })
+    }
+}
 
 /// Largest degree in x of a rewritten numerator or denominator: linear-fractional forms, whose evaluation by
 /// one fma per part keeps the bound above (a Horner chain would round at each step).
@@ -546,7 +624,7 @@ fn roundings(f: &Formula, x: NodeId, memo: &mut HashMap<NodeId, u8>) -> u8 {
 /// A parameter-only subtree in double-double (old node → new `Dd`), memoised.
 struct ParamDd<'a> {
     b: Builder<'a>,
-    ranges: &'a [super::range::Range],
+    ranges: &'a [crate::simplify::range::Range],
     memo: HashMap<NodeId, Dd>,
 }
 
@@ -559,7 +637,7 @@ impl ParamDd<'_> {
             let f = self.b.f;
             let sp = self.b.sp;
             let n = *f.ir.node(x);
-            let pos = |r: super::range::Range| r.lo > 0.0 && !r.nan;
+            let pos = |r: crate::simplify::range::Range| r.lo > 0.0 && !r.nan;
             let d = match n {
                 Node::Const(_) | Node::Param(_) | Node::Input(_) | Node::Column(_) => Dd { hi: map[x.index()], lo: None },
                 Node::Neg(a) => {
@@ -698,13 +776,13 @@ mod tests {
 
     fn parse(src: &str) -> Formula {
         let f = crate::front::parse_internal("t.brdf", src).unwrap();
-        super::super::simplify(&f, &[])
+        crate::simplify::simplify(&f, &[])
     }
 
     fn apply(src: &str) -> Option<String> {
         let f = parse(src);
         let (ir, root, fired) = rational_form(&Analysis::new(f.clone()));
-        fired.then(|| super::super::simplify_with(&Formula { ir, root, ..f }, &[], &super::super::Policy::default()).0.to_program_text())
+        fired.then(|| crate::simplify::simplify_with(&Formula { ir, root, ..f }, &[], &crate::simplify::Policy::default()).0.to_program_text())
     }
 
     #[test]
@@ -750,7 +828,7 @@ mod tests {
         let f = parse("param k = 2 in 1..5\nparam Q = 0.5 in 0.1..0.9\nacos(pow(Q, 1/k)) * NH");
         let (ir, root, fired) = compensated_params(&Analysis::new(f.clone()));
         assert!(fired);
-        let t = super::super::simplify_with(&Formula { ir, root, ..f }, &[], &super::super::Policy::default()).0.to_program_text();
+        let t = crate::simplify::simplify_with(&Formula { ir, root, ..f }, &[], &crate::simplify::Policy::default()).0.to_program_text();
         // pow's and acos's own roundings through their tails, rounded once where NH reads the product.
         assert!(t.contains("powlo(") && t.contains("acoslo("), "{t}");
         // A parameter part that rounds once (n·2) or none (n) is left as the kernel computes it.
@@ -763,7 +841,7 @@ mod tests {
         let apply = |src: &str| {
             let f = parse(src);
             let (ir, root, fired) = compensated_exp(&Analysis::new(f.clone()));
-            fired.then(|| super::super::simplify_with(&Formula { ir, root, ..f }, &[], &super::super::Policy::default()).0.to_program_text())
+            fired.then(|| crate::simplify::simplify_with(&Formula { ir, root, ..f }, &[], &crate::simplify::Policy::default()).0.to_program_text())
         };
         // Beckmann after scaled-exp: K = 1/m² in double-double, the tail on b's parameter-only factor, the
         // vanishing divisor floored so the tail stays a number.
