@@ -25,6 +25,11 @@ pub trait Arith {
     fn fma(&mut self, a: Self::V, b: Self::V, c: Self::V) -> Self::V;
     /// `c > 0 ? a : b` (`b` for a NaN `c`); both values are computed.
     fn positive_select(&mut self, c: Self::V, a: Self::V, b: Self::V) -> Self::V;
+    /// The value of `v` when the emitter knows it before run time (an IR constant); `None` by default. Lets
+    /// [`partial`] arithmetic skip a product by 1 and scale by a power of two exactly.
+    fn known(&self, _v: Self::V) -> Option<f64> {
+        None
+    }
     /// `a·b` as `(p, err)`, exactly (`err = fma(a, b, −p)`; a target without a hardware FMA may use Dekker's product instead, the same exact value).
     fn two_prod(&mut self, a: Self::V, b: Self::V) -> (Self::V, Self::V)
     where
@@ -151,4 +156,122 @@ pub(crate) fn sqrt<E: Arith>(e: &mut E, a: Dd<E::V>) -> Dd<E::V> {
     let two_s = e.mul(two, s);
     let lo = e.div(r, two_s);
     fast_two_sum(e, s, lo)
+}
+
+/// Double-doubles whose low part may be absent (an exact head): the accuracy pass's coefficient arithmetic on IR
+/// nodes, where a missing part saves the nodes that would carry a zero. Cheaper than the accurate operations
+/// above (one 2Sum or 2Prod per operation, the low parts added in plainly, then one Fast2Sum renormalisation):
+/// what parameter-only coefficients need, where the low parts are already ~2⁻⁵³ of the heads.
+pub(crate) mod partial {
+    use super::{fast_two_sum, two_sum_err, Arith};
+
+    /// `hi + lo` (`lo: None` when `hi` is exact).
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub(crate) struct Dd<V> {
+        pub(crate) hi: V,
+        pub(crate) lo: Option<V>,
+    }
+
+    impl<V> Dd<V> {
+        /// An exact value.
+        pub(crate) fn exact(hi: V) -> Dd<V> {
+            Dd { hi, lo: None }
+        }
+    }
+
+    fn add_opt<E: Arith>(e: &mut E, a: Option<E::V>, b: Option<E::V>) -> Option<E::V> {
+        match (a, b) {
+            (Some(a), Some(b)) => Some(e.add(a, b)),
+            (a, b) => a.or(b),
+        }
+    }
+
+    /// `hi + lo` renormalised (Fast2Sum: |hi| ≥ |lo| up to the coefficient arithmetic's own cancellations,
+    /// where the sum is exact anyway).
+    pub(crate) fn norm<E: Arith>(e: &mut E, hi: E::V, lo: Option<E::V>) -> Dd<E::V> {
+        let Some(lo) = lo else { return Dd::exact(hi) };
+        let (hi, lo) = fast_two_sum(e, hi, lo);
+        Dd { hi, lo: Some(lo) }
+    }
+
+    pub(crate) fn neg<E: Arith>(e: &mut E, a: Dd<E::V>) -> Dd<E::V> {
+        Dd { hi: e.neg(a.hi), lo: a.lo.map(|l| e.neg(l)) }
+    }
+
+    /// `a + b`: the heads' 2Sum, its error and the low parts added, renormalised.
+    pub(crate) fn add<E: Arith>(e: &mut E, a: Dd<E::V>, b: Dd<E::V>) -> Dd<E::V> {
+        let s = e.add(a.hi, b.hi);
+        let err = two_sum_err(e, a.hi, b.hi, s);
+        let lo = add_opt(e, a.lo, b.lo);
+        let lo = add_opt(e, Some(err), lo);
+        norm(e, s, lo)
+    }
+
+    fn is_one<E: Arith>(e: &E, a: Dd<E::V>) -> bool {
+        a.lo.is_none() && e.known(a.hi) == Some(1.0)
+    }
+
+    /// `a·b`: the heads' 2Prod and the cross terms by fma; by an exact 1 nothing, by an exact power of two the
+    /// parts scaled (exact: no underflow in a parameter's coefficient).
+    pub(crate) fn mul<E: Arith>(e: &mut E, a: Dd<E::V>, b: Dd<E::V>) -> Dd<E::V> {
+        if is_one(e, a) {
+            return b;
+        }
+        if is_one(e, b) {
+            return a;
+        }
+        let pow2 = |e: &E, x: Dd<E::V>| x.lo.is_none() && e.known(x.hi).is_some_and(|c| c != 0.0 && c.abs().log2().fract() == 0.0);
+        if pow2(e, a) || pow2(e, b) {
+            let (a, b) = if pow2(e, b) { (a, b) } else { (b, a) };
+            let hi = e.mul(a.hi, b.hi);
+            return Dd { hi, lo: a.lo.map(|l| e.mul(l, b.hi)) };
+        }
+        let (p, mut err) = e.two_prod(a.hi, b.hi);
+        if let Some(bl) = b.lo {
+            err = e.fma(a.hi, bl, err);
+        }
+        if let Some(al) = a.lo {
+            err = e.fma(al, b.hi, err);
+        }
+        norm(e, p, Some(err))
+    }
+
+    /// `a/b`: the quotient's exact remainder (fma) and the operands' low parts, over `b`.
+    pub(crate) fn div<E: Arith>(e: &mut E, a: Dd<E::V>, b: Dd<E::V>) -> Dd<E::V> {
+        if is_one(e, b) {
+            return a;
+        }
+        let q = e.div(a.hi, b.hi);
+        let nq = e.neg(q);
+        let mut r = e.fma(nq, b.hi, a.hi);
+        if let Some(al) = a.lo {
+            r = e.add(r, al);
+        }
+        if let Some(bl) = b.lo {
+            r = e.fma(nq, bl, r);
+        }
+        let lo = e.div(r, b.hi);
+        norm(e, q, Some(lo))
+    }
+
+    #[cfg(test)]
+    mod tests {
+        use super::*;
+        use crate::builtins::math::Direct;
+
+        /// On plain f64 the partial operations carry what the heads lose: 1/3·3 and 0.1 + 0.2 within 2⁻¹⁰⁰.
+        #[test]
+        fn partial_double_doubles_carry_the_rounding() {
+            let e = &mut Direct;
+            let third = div(e, Dd::exact(1.0), Dd::exact(3.0));
+            let one = mul(e, third, Dd::exact(3.0));
+            assert_eq!(one.hi, 1.0);
+            assert!(one.lo.unwrap().abs() < 2f64.powi(-100), "{one:?}");
+            let s = add(e, Dd::exact(0.1), Dd::exact(0.2));
+            // 0.1 + 0.2 in f64 is 0.30000000000000004; the exact sum of the two doubles is below it by 2.8e-17.
+            assert_eq!(s.hi, 0.30000000000000004);
+            assert!((s.lo.unwrap() + 2.7755575615628914e-17).abs() < 1e-32, "{s:?}");
+            assert_eq!(neg(e, s).hi, -s.hi);
+        }
+    }
 }

@@ -145,7 +145,7 @@ fn print_accuracy(f: &Formula, pass: &robust::Outcome, asked: usize, ms: f64, co
             "    {:<9} {} — {}: {}; avg {:.2} → {:.2}, max {:.2} → {:.2} bits{}",
             if t.kept { "kept" } else { "dropped" },
             t.rule,
-            t.describe,
+            t.rule.doc(),
             t.reason,
             pass.before.avg_bits,
             t.stats.avg_bits,

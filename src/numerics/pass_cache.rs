@@ -10,9 +10,9 @@
 //! to a temporary file renamed into place, so concurrent commands never read half a file. Any I/O error is a
 //! miss or a skipped store: the cache never makes a command fail.
 
-use super::robust::{Cand, Decision, DecisionStore, PassOptions, Step};
+use super::robust::{Decision, DecisionStore, PassOptions, Step};
 use crate::ir::Formula;
-use crate::simplify::accuracy::Rule;
+use crate::simplify::accuracy::rule;
 use std::path::PathBuf;
 
 /// Bumped whenever the pass's choices may change for the same inputs (its rules, or the bits of the math library
@@ -142,17 +142,14 @@ fn fnv1a128(bytes: &[u8]) -> u128 {
     h
 }
 
-fn cand_of(name: &str) -> Option<Cand> {
-    [Cand::Params, Cand::PowCall, Cand::CompensatedPower].into_iter().chain(Rule::ALL.iter().map(|&r| Cand::Rule(r))).find(|c| c.name() == name)
-}
 
 fn render(d: &Decision) -> String {
     let mut s = String::new();
     for st in &d.live {
-        s += &format!("live {} {}\n", st.cand.name(), st.site.map_or("-".to_string(), |k| k.to_string()));
+        s += &format!("live {} {}\n", st.rule.name(), st.site.map_or("-".to_string(), |k| k.to_string()));
     }
     s += &format!("baked-live-choice {}\n", u8::from(d.baked_live_choice));
-    s += &format!("baked-power {}\n", d.baked_power.map_or("-", Cand::name));
+    s += &format!("baked-power {}\n", d.baked_power.map_or("-", |r| r.name()));
     s
 }
 
@@ -164,14 +161,14 @@ fn parse(body: &str) -> Option<Decision> {
         match w.as_slice() {
             ["live", c, site] => {
                 let site = if *site == "-" { None } else { Some(site.parse().ok()?) };
-                d.live.push(Step { cand: cand_of(c)?, site });
+                d.live.push(Step { rule: rule(c)?, site });
             }
             ["baked-live-choice", v] => {
                 d.baked_live_choice = *v == "1";
                 choice = true;
             }
             ["baked-power", c] => {
-                d.baked_power = if *c == "-" { None } else { Some(cand_of(c)?) };
+                d.baked_power = if *c == "-" { None } else { Some(rule(c)?) };
                 power = true;
             }
             _ => return None,
@@ -187,9 +184,9 @@ mod tests {
     #[test]
     fn decisions_round_trip_and_bad_files_are_misses() {
         let d = Decision {
-            live: vec![Step { cand: Cand::Params, site: None }, Step { cand: Cand::Rule(Rule::QuotientChain), site: Some(2) }],
+            live: vec![Step { rule: rule("compensated-params").unwrap(), site: None }, Step { rule: rule("quotient-chain").unwrap(), site: Some(2) }],
             baked_live_choice: true,
-            baked_power: Some(Cand::CompensatedPower),
+            baked_power: rule("compensated-power"),
         };
         assert_eq!(parse(&render(&d)), Some(d));
         assert_eq!(parse("live no-such-rule -\nbaked-live-choice 0\nbaked-power -\n"), None);
@@ -203,7 +200,7 @@ mod tests {
         let c = Cache::at(&dir);
         let f = crate::front::parse("t.brdf", "param a = 2 in 1..10\nNH^a").unwrap();
         let o = PassOptions::default();
-        let d = Decision { live: vec![Step { cand: Cand::PowCall, site: None }], ..Decision::default() };
+        let d = Decision { live: vec![Step { rule: rule("pow-call").unwrap(), site: None }], ..Decision::default() };
         assert_eq!(c.load(&f, &[], &o), None);
         c.store(&f, &[], &o, &d);
         assert_eq!(c.load(&f, &[], &o), Some(d.clone()));

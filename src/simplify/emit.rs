@@ -47,6 +47,9 @@ impl Arith for IrEmit<'_> {
     fn fma(&mut self, a: NodeId, b: NodeId, c: NodeId) -> NodeId {
         self.ir.call(Builtin::Fma, &[a, b, c], self.sp)
     }
+    fn known(&self, v: NodeId) -> Option<f64> {
+        self.ir.node(v).as_const()
+    }
     fn positive_select(&mut self, c: NodeId, a: NodeId, b: NodeId) -> NodeId {
         let zero = self.ir.konst(0.0, self.sp);
         let m = self.ir.call(Builtin::Lt, &[zero, c], self.sp);

@@ -84,7 +84,6 @@
 //!   has 2.0 %), 2.3× faster on the LLVM tier and on Cranelift.
 
 pub mod accuracy;
-mod cancel;
 pub(crate) mod rewrite;
 pub(crate) mod emit;
 mod powi;

@@ -44,7 +44,7 @@
 //! expression through the same builtins the live kernel's prepared block runs, so the two agree bit for bit.
 //!
 //! # Cost model
-//! Coefficients read no input: free ([`super::accuracy::cost`]). Per point: two fmas and an addition per
+//! Coefficients read no input: free ([`super::cost`]). Per point: two fmas and an addition per
 //! polynomial (fewer where a coefficient is exact or zero), one division when the denominator is not constant
 //! — usually cheaper than the written chain of products, quotients and sums it replaces. `compensated-exp`: 2–4
 //! fmas, one max per floored divisor, one fma applying the tail, acoslo (8) per acos factor; b's parameter-only
@@ -52,14 +52,92 @@
 //! measured (BENCHMARKS.md, robust7). `compensated-params`: nothing per point (the prepared block grows; compile
 //! time with it, e.g. F_kutlog's JIT from ~6 to ~30 ms).
 
-use super::rewrite::{add_opt, divide_apart, product, rebuild, Analysis};
-use super::emit::IrEmit;
+use crate::simplify::rewrite::{add_opt, divide_apart, product, rebuild, Analysis};
+use crate::simplify::emit::IrEmit;
 use crate::builtins::dd;
 use crate::builtins::dd::Arith;
 use crate::base::span::Span;
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Ir, Node, NodeId};
 use std::collections::HashMap;
+use super::rule::{Example, Rule, Sites, Source};
+use super::finish;
+
+/// `rational-form` (module docs).
+pub(crate) struct RationalForm;
+
+impl Rule for RationalForm {
+    fn name(&self) -> &'static str {
+        "rational-form"
+    }
+    fn doc(&self) -> &'static str {
+        "a sum rational in one input as (a1*x + a0)/(b1*x + b0), coefficients in double-double: the cancellation moves to the parameters"
+    }
+    fn sites(&self) -> Sites {
+        Sites::Everywhere
+    }
+    fn apply(&self, _: &Source, a: &Analysis, _: Option<usize>) -> Option<Formula> {
+        finish(a, rational_form(a))
+    }
+    fn example(&self) -> Example {
+        Example { before: "let c = NH\nc/(n - n*c + c) - 0.25", bake: &[], site: None, shows: "fma(" }
+    }
+}
+
+/// `compensated-exp` (module docs).
+pub(crate) struct CompensatedExp;
+
+impl Rule for CompensatedExp {
+    fn name(&self) -> &'static str {
+        "compensated-exp"
+    }
+    fn doc(&self) -> &'static str {
+        "exp(K*q) as exp(hi)*(1 + t), K's parameter-only factors in double-double and t the product's rounding error: exp no longer amplifies it"
+    }
+    fn sites(&self) -> Sites {
+        Sites::Everywhere
+    }
+    fn apply(&self, _: &Source, a: &Analysis, _: Option<usize>) -> Option<Formula> {
+        finish(a, compensated_exp(a))
+    }
+    fn example(&self) -> Example {
+        Example { before: "exp(-n * NH * NH)", bake: &[], site: None, shows: "fma(" }
+    }
+}
+
+/// `compensated-params` (module docs): the current formula (live) with each parameter-only subtree the kernel
+/// reads in double-double and rounded once, then simplified with the source's baked values: baking the pass's
+/// decision folds the same expression the live kernel's prepared block computes. Free per point: the block is
+/// computed once per parameter set.
+pub(crate) struct CompensatedParams;
+
+impl Rule for CompensatedParams {
+    fn name(&self) -> &'static str {
+        "compensated-params"
+    }
+    fn doc(&self) -> &'static str {
+        "parameter-only subexpressions in double-double, rounded once where the kernel reads them"
+    }
+    fn sites(&self) -> Sites {
+        Sites::Whole
+    }
+    fn apply(&self, src: &Source, a: &Analysis, _: Option<usize>) -> Option<Formula> {
+        let (ir, root, fired) = compensated_params(a);
+        fired.then(|| crate::simplify::simplify(&Formula { ir, root, ..a.f.clone() }, src.bake()))
+    }
+    fn example(&self) -> Example {
+        Example { before: "param k = 2 in 1..5\nparam Q = 0.5 in 0.1..0.9\nacos(pow(Q, 1/k)) * NH", bake: &[], site: None, shows: "acoslo(" }
+    }
+    /// First where a parameter-only part calls a transcendental builtin (F_kutlog's C = acos(Q^(1/k))/acos(Q^(1/n))):
+    /// the rules after it carry those parts' residuals, which exist only once they are double-double. Otherwise
+    /// last: the rules' patterns read rational parameter parts as written (the quadratic model's 1 − A beside A).
+    fn early(&self, a: &Analysis) -> bool {
+        let (f, inv) = (&a.f, a.invariant());
+        f.ir.ids().any(|id| {
+            inv[id.index()] && matches!(f.ir.node(id), Node::Call(b, _) if !matches!(b, Builtin::Min | Builtin::Max | Builtin::Abs | Builtin::Clamp | Builtin::Sqrt | Builtin::Fma | Builtin::Select))
+        })
+    }
+}
 
 /// Largest degree in x of a rewritten numerator or denominator: linear-fractional forms, whose evaluation by
 /// one fma per part keeps the bound above (a Horner chain would round at each step).
@@ -107,11 +185,7 @@ fn shapes(f: &Formula, inv: &[bool]) -> Vec<Option<Shape>> {
 }
 
 /// A double-double `hi + lo` of new-arena nodes (`lo: None` when hi is exact).
-#[derive(Clone, Copy, Debug)]
-struct Dd {
-    hi: NodeId,
-    lo: Option<NodeId>,
-}
+type Dd = dd::partial::Dd<NodeId>;
 
 /// A polynomial in the atom, lowest degree first; `None` is an exact zero coefficient.
 type Poly = Vec<Option<Dd>>;
@@ -132,70 +206,24 @@ impl<'a> Builder<'a> {
         ir.node(x).as_const() == Some(v)
     }
 
-    /// hi + lo renormalised (Fast2Sum: |hi| ≥ |lo| up to the coefficient arithmetic's own cancellations, where
-    /// the sum is exact anyway).
     fn norm(&self, ir: &mut Ir, hi: NodeId, lo: Option<NodeId>) -> Dd {
-        let Some(lo) = lo else { return Dd { hi, lo: None } };
-        let (hi, lo) = dd::fast_two_sum(&mut IrEmit::new(ir, self.sp), hi, lo);
-        Dd { hi, lo: Some(lo) }
+        dd::partial::norm(&mut IrEmit::new(ir, self.sp), hi, lo)
     }
 
     fn neg(&self, ir: &mut Ir, a: Dd) -> Dd {
-        Dd { hi: ir.neg(a.hi, self.sp), lo: a.lo.map(|l| ir.neg(l, self.sp)) }
+        dd::partial::neg(&mut IrEmit::new(ir, self.sp), a)
     }
 
     fn add(&self, ir: &mut Ir, a: Dd, b: Dd) -> Dd {
-        let sp = self.sp;
-        // s + e = a.hi + b.hi exactly.
-        let s = ir.bin(BinOp::Add, a.hi, b.hi, sp);
-        let e = dd::two_sum_err(&mut IrEmit::new(ir, sp), a.hi, b.hi, s);
-        let lo = add_opt(ir, a.lo, b.lo, sp);
-        let lo = add_opt(ir, Some(e), lo, sp);
-        self.norm(ir, s, lo)
+        dd::partial::add(&mut IrEmit::new(ir, self.sp), a, b)
     }
 
     fn mul(&self, ir: &mut Ir, a: Dd, b: Dd) -> Dd {
-        let sp = self.sp;
-        if self.is(ir, a.hi, 1.0) && a.lo.is_none() {
-            return b;
-        }
-        if self.is(ir, b.hi, 1.0) && b.lo.is_none() {
-            return a;
-        }
-        // By a power of two: exact (no underflow in a parameter's coefficient), the low part scaled alike.
-        let pow2 = |ir: &Ir, x: Dd| x.lo.is_none() && ir.node(x.hi).as_const().is_some_and(|c| c != 0.0 && c.abs().log2().fract() == 0.0);
-        if pow2(ir, a) || pow2(ir, b) {
-            let (a, b) = if pow2(ir, b) { (a, b) } else { (b, a) };
-            let hi = ir.bin(BinOp::Mul, a.hi, b.hi, sp);
-            return Dd { hi, lo: a.lo.map(|l| ir.bin(BinOp::Mul, l, b.hi, sp)) };
-        }
-        let (p, mut e) = IrEmit::new(ir, sp).two_prod(a.hi, b.hi);
-        if let Some(bl) = b.lo {
-            e = ir.call(Builtin::Fma, &[a.hi, bl, e], sp);
-        }
-        if let Some(al) = a.lo {
-            e = ir.call(Builtin::Fma, &[al, b.hi, e], sp);
-        }
-        self.norm(ir, p, Some(e))
+        dd::partial::mul(&mut IrEmit::new(ir, self.sp), a, b)
     }
 
-    /// a/b: the quotient's exact remainder (fma) and the operands' low parts, over b.
     fn div(&self, ir: &mut Ir, a: Dd, b: Dd) -> Dd {
-        let sp = self.sp;
-        if self.is(ir, b.hi, 1.0) && b.lo.is_none() {
-            return a;
-        }
-        let q = ir.bin(BinOp::Div, a.hi, b.hi, sp);
-        let nq = ir.neg(q, sp);
-        let mut r = ir.call(Builtin::Fma, &[nq, b.hi, a.hi], sp);
-        if let Some(al) = a.lo {
-            r = ir.bin(BinOp::Add, r, al, sp);
-        }
-        if let Some(bl) = b.lo {
-            r = ir.call(Builtin::Fma, &[nq, bl, r], sp);
-        }
-        let lo = ir.bin(BinOp::Div, r, b.hi, sp);
-        self.norm(ir, q, Some(lo))
+        dd::partial::div(&mut IrEmit::new(ir, self.sp), a, b)
     }
 
     fn padd(&self, ir: &mut Ir, p: &Poly, q: &Poly) -> Poly {
@@ -609,7 +637,7 @@ fn roundings(f: &Formula, x: NodeId, memo: &mut HashMap<NodeId, u8>) -> u8 {
 /// A parameter-only subtree in double-double (old node → new `Dd`), memoised.
 struct ParamDd<'a> {
     b: Builder<'a>,
-    ranges: &'a [super::range::Range],
+    ranges: &'a [crate::simplify::range::Range],
     memo: HashMap<NodeId, Dd>,
 }
 
@@ -622,7 +650,7 @@ impl ParamDd<'_> {
             let f = self.b.f;
             let sp = self.b.sp;
             let n = *f.ir.node(x);
-            let pos = |r: super::range::Range| r.lo > 0.0 && !r.nan;
+            let pos = |r: crate::simplify::range::Range| r.lo > 0.0 && !r.nan;
             let d = match n {
                 Node::Const(_) | Node::Param(_) | Node::Input(_) | Node::Column(_) => Dd { hi: map[x.index()], lo: None },
                 Node::Neg(a) => {
@@ -761,13 +789,13 @@ mod tests {
 
     fn parse(src: &str) -> Formula {
         let f = crate::front::parse_internal("t.brdf", src).unwrap();
-        super::super::simplify(&f, &[])
+        crate::simplify::simplify(&f, &[])
     }
 
     fn apply(src: &str) -> Option<String> {
         let f = parse(src);
         let (ir, root, fired) = rational_form(&Analysis::new(f.clone()));
-        fired.then(|| super::super::simplify_with(&Formula { ir, root, ..f }, &[], &super::super::Policy::default()).0.to_program_text())
+        fired.then(|| crate::simplify::simplify_with(&Formula { ir, root, ..f }, &[], &crate::simplify::Policy::default()).0.to_program_text())
     }
 
     #[test]
@@ -813,7 +841,7 @@ mod tests {
         let f = parse("param k = 2 in 1..5\nparam Q = 0.5 in 0.1..0.9\nacos(pow(Q, 1/k)) * NH");
         let (ir, root, fired) = compensated_params(&Analysis::new(f.clone()));
         assert!(fired);
-        let t = super::super::simplify_with(&Formula { ir, root, ..f }, &[], &super::super::Policy::default()).0.to_program_text();
+        let t = crate::simplify::simplify_with(&Formula { ir, root, ..f }, &[], &crate::simplify::Policy::default()).0.to_program_text();
         // pow's and acos's own roundings through their tails, rounded once where NH reads the product.
         assert!(t.contains("powlo(") && t.contains("acoslo("), "{t}");
         // A parameter part that rounds once (n·2) or none (n) is left as the kernel computes it.
@@ -826,7 +854,7 @@ mod tests {
         let apply = |src: &str| {
             let f = parse(src);
             let (ir, root, fired) = compensated_exp(&Analysis::new(f.clone()));
-            fired.then(|| super::super::simplify_with(&Formula { ir, root, ..f }, &[], &super::super::Policy::default()).0.to_program_text())
+            fired.then(|| crate::simplify::simplify_with(&Formula { ir, root, ..f }, &[], &crate::simplify::Policy::default()).0.to_program_text())
         };
         // Beckmann after scaled-exp: K = 1/m² in double-double, the tail on b's parameter-only factor, the
         // vanishing divisor floored so the tail stays a number.
