@@ -357,10 +357,10 @@ mod tests {
             .unwrap();
         assert_eq!(a.formula.file.as_deref(), Some("f.brdf"));
         assert_eq!(a.set.list().unwrap(), vec![("n".into(), 2.0), ("a".into(), 3.0), ("k".into(), 1.0)]);
-        assert_eq!((a.backend.kind, a.json.on, a.out.force.on), (Backend::Interp, true, true));
+        assert_eq!((a.backend.engine.kind, a.json.on, a.out.force.on), (Backend::Interp, true, true));
         assert_eq!(a.out.path.as_deref(), Some(Path::new("x")));
         let d = parse(&["t"]).unwrap();
-        assert_eq!((d.backend.kind, d.json.on, d.out.path, d.set.list().unwrap()), (Backend::Jit, false, None, vec![]));
+        assert_eq!((d.backend.engine.kind, d.json.on, d.out.path, d.set.list().unwrap()), (Backend::Jit, false, None, vec![]));
         // The same name in two flags: once with the same value, an error naming both with different ones.
         let a = parse(&["t", "--set", "n=5", "--set", "a=3,n=5"]).unwrap();
         assert_eq!(a.set.list().unwrap(), vec![("n".into(), 5.0), ("a".into(), 3.0)]);

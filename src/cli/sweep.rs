@@ -232,13 +232,13 @@ mod tests {
     fn clean_formula_passes_deny_and_reports_json() {
         let f = power_formula(Input::NH, &[]);
         let a = parse::<SweepArgs>(&["sweep", "--json", "--deny", "nan,inf", "--backend", "interp"]);
-        let (Out::Json(j), denied) = report(&a, &f).unwrap() else { panic!("--json gives the report") };
+        let (Out::Json(j), denied) = report(&Sweep::from(&a), &f).unwrap() else { panic!("--json gives the report") };
         assert!(denied.is_empty());
         let v = serde_json::to_value(&j).unwrap();
         assert_eq!((v["nan"].as_u64(), v["inf"].as_u64(), v["negative"].as_u64()), (Some(0), Some(0), Some(0)));
         // pow(c, n) with n ≥ 1 is ≤ 1: a bound of 0.5 is exceeded, and `--deny bound` says so.
         let a = parse::<SweepArgs>(&["sweep", "--bound", "0.5", "--deny", "bound", "--backend", "interp"]);
-        let (Out::Text(text), denied) = report(&a, &f).unwrap() else { panic!("text without --json") };
+        let (Out::Text(text), denied) = report(&Sweep::from(&a), &f).unwrap() else { panic!("text without --json") };
         assert_eq!(denied, vec!["bound".to_string()]);
         assert!(text.contains("first over bound"), "{text}");
     }
