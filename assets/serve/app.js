@@ -159,6 +159,8 @@ async function compile(fresh) {
   } catch (e) {
     if (seq !== compileSeq) return;
     lobe.ok = false;
+    analyzeSeq++;
+    clearNumbers(e.error ? `not analysed: ${e.error}` : "not analysed");
     showDiagnostics(e.diagnostics || []);
     if (!e.diagnostics) showError(e); else status(e.error, true);
   }
@@ -479,6 +481,13 @@ async function fileText(path) {
 const fmt = (x, d = 4) => (typeof x === "number" ? (Math.abs(x) >= 1e4 || (x !== 0 && Math.abs(x) < 1e-3) ? x.toExponential(3) : x.toFixed(d)) : String(x));
 
 let analyzeSeq = 0, albedoRows = [];
+// A failed analysis leaves no number of the previous formula on the page: every cell says the error instead.
+function clearNumbers(error) {
+  for (const id of ["num-compile", "num-ns", "num-coef", "num-albedo"]) $(id).textContent = "–";
+  $("num-error").textContent = error;
+  albedoRows = [];
+  drawAlbedo(error);
+}
 async function analyze() {
   if (!lobe.ok) return;
   const seq = ++analyzeSeq;
@@ -494,7 +503,7 @@ async function analyze() {
     albedoRows = r.albedo || [];
     drawAlbedo(r.albedo_error);
   } catch (e) {
-    if (seq === analyzeSeq) $("num-error").textContent = e.error || String(e);
+    if (seq === analyzeSeq) clearNumbers(e.error || String(e));
   }
 }
 

@@ -17,7 +17,9 @@ Errors are :class:`LobeError`, whose ``diagnostics`` list says where (file, line
 
 from __future__ import annotations
 
+import errno
 import os
+import re
 from typing import Any, Dict, Mapping, Optional, Tuple, Union
 
 import numpy as np
@@ -29,6 +31,14 @@ __all__ = ["compile", "Kernel", "LobeError", "fit", "render", "Image", "__versio
 __version__: str = _lobe.__version__
 
 _NAMES = ("NL", "NV", "NH", "VR", "VH")
+# One line of path characters ending in a file extension that starts with a letter (`.brdf`, `.txt`): no formula
+# has that shape (`NH/2.5` ends in digits; calls and operators other than `/` and `-` are not path characters).
+_PATH_LIKE = re.compile(r"[\w~./\\\-]*\.[A-Za-z]\w*")
+
+
+def __dir__() -> list:
+    """The public names only (not the modules and types the implementation imports)."""
+    return sorted(__all__ + ["__version__"])
 
 
 def _error(message: str, hint: Optional[str] = None) -> LobeError:
@@ -53,6 +63,12 @@ def _error(message: str, hint: Optional[str] = None) -> LobeError:
     return e
 
 
+def _not_none(name: str, value: Any) -> None:
+    """None is no number: numpy would read it as NaN."""
+    if value is None:
+        raise _error(f"`{name}` is None", f"give {name} a number or an array, or leave a parameter out for its default")
+
+
 def _flat(a: Any, shape: Tuple[int, ...], tail: Tuple[int, ...] = ()) -> np.ndarray:
     """``a`` broadcast to ``shape + tail`` as C-contiguous, aligned float64, flattened to ``(-1,) + tail``: no
     copy when it already is (arrays unpickled from out-of-band buffers may be unaligned: those are copied)."""
@@ -68,6 +84,9 @@ def _read(path_or_text: Union[str, "os.PathLike[str]"]) -> Tuple[str, str]:
     s = path_or_text
     if "\n" not in s and len(s) < 4096 and os.path.isfile(s):
         return _lobe.read_source(s)
+    if _PATH_LIKE.fullmatch(s.strip()):
+        # `examples/brdfs/blin.brdf` is a mistyped path, not formula text ("unknown variable `examples`").
+        raise FileNotFoundError(errno.ENOENT, "file not found (text shaped like a path is not read as a formula)", s)
     return "<text>", s
 
 
@@ -183,6 +202,7 @@ class Kernel:
         params = list(self._defaults)
         cos, dirs, per_point, shapes = [], {}, [], {}
         for (name, value), (kind, i) in zip(kw.items(), kinds):
+            _not_none(name, value)
             a = np.asarray(value, dtype=np.float64)
             if kind == "param":
                 shapes[name] = a.shape
@@ -226,6 +246,7 @@ class Kernel:
         kinds = self._native.resolve(list(params))
         values = list(self._defaults)
         for (name, v), (kind, i) in zip(params.items(), kinds):
+            _not_none(name, v)
             if kind != "param":
                 raise _error(f"`{name}` is an input, not a parameter", "the checks choose their own inputs")
             values[i] = float(v)
@@ -234,6 +255,8 @@ class Kernel:
     def check(self, *, points: int = 100_000, budget: float = 10.0) -> Dict[str, Any]:
         """What lobe made of the formula and its accuracy report: ``lobe check --json`` (the red channel of
         a colour formula)."""
+        if isinstance(points, bool) or not isinstance(points, (int, np.integer)) or points < 1:
+            raise _error(f"points = {points!r}: a whole number ≥ 1", "e.g. points=100_000 (the default)")
         return self._native.check(int(points), float(budget))
 
     def energy(
@@ -297,8 +320,9 @@ def fit(
 ) -> Dict[str, Any]:
     """Fit ``kernel``'s parameters to ``target`` values at the points given by ``inputs``.
 
-    ``params`` names the parameters to search, each with its range ``(lo, hi)`` (integers when both ends are:
-    every integer is tried) or ``(lo, hi, step)``; other parameters may be fixed among ``inputs`` by name.
+    ``params`` names the parameters to search, each with its range ``(lo, hi)`` (the interval [lo, hi]: a grid
+    of 41 values, every integer when both ends are integers at least 40 apart, then continuous refinement) or
+    ``(lo, hi, step)``; other parameters may be fixed among ``inputs`` by name.
     ``target`` (and ``weights``, ≥ 0) broadcast against the inputs (with a trailing axis of 3 for a colour
     formula). ``loss`` is ``"mse"`` (weighted least squares), ``"mae"`` or ``"max"``. The search scores every
     grid point (in parallel), then refines the best continuously (golden section for one parameter,

@@ -14,14 +14,14 @@ use lobe::numerics::robust::PassOptions;
 use lobe::{Backend, Columns, Evaluator, Kernel, Mode, Tier};
 use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::create_exception;
-use pyo3::exceptions::PyException;
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyList};
 use rayon::prelude::*;
 use std::borrow::Cow;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
-create_exception!(lobe, LobeError, PyException, "A formula, a scene or an argument lobe cannot take: `.diagnostics` says where and why.");
+create_exception!(lobe, LobeError, PyValueError, "A formula, a scene or an argument lobe cannot take: `.diagnostics` says where and why.");
 
 /// Points per batched call when a batch is split over threads.
 const CHUNK: usize = 1 << 14;

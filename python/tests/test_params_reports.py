@@ -220,3 +220,25 @@ def test_render_math_shows_and_bad_options_are_errors(amplifier):
     with pytest.raises(lobe.LobeError, match="no LLVM tier") as e:
         lobe.render(SPHERE, size=8, tier="llvm")
     assert e.value.diagnostics[0]["hint"]
+
+
+# -- fits: a range is an interval ----------------------------------------------------------------------------
+
+
+def test_a_two_parameter_fit_over_unit_ranges_recovers_ggx():
+    """`(0.0, 1.0)` is the interval [0, 1], not the integers {0, 1}: GGX's alpha and f0 come back from its own
+    values at random directions (the issue's pair and one drawn at random)."""
+    k = lobe.compile(os.path.join(ROOT, "examples", "explorer", "ggx.brdf"))
+    rng = np.random.default_rng(11)
+
+    def hemisphere(m):
+        v = rng.normal(size=(m, 3))
+        v[:, 2] = np.abs(v[:, 2]) + 0.05
+        return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+    L, V = hemisphere(4000), hemisphere(4000)
+    for alpha, f0 in [(0.35, 0.6), (rng.uniform(0.15, 0.8), rng.uniform(0.1, 0.9))]:
+        target = k(L=L, V=V, alpha=alpha, f0=f0)
+        r = lobe.fit(k, target, {"alpha": (0.01, 1.0), "f0": (0.0, 1.0)}, L=L, V=V)
+        assert abs(r["params"]["alpha"] - alpha) < 0.01 * alpha, r
+        assert abs(r["params"]["f0"] - f0) < 0.01, r

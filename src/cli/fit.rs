@@ -26,7 +26,8 @@ pub struct FitArgs {
     pub measured: Vec<String>,
     #[command(flatten)]
     pub lobe: LobeVar,
-    /// A parameter to search: `name=lo..hi` (integers when lo and hi are) or `name=lo..hi:step`.
+    /// A parameter to search over the interval [lo, hi]: `name=lo..hi` (a grid of 41 values, or the integers when
+    /// lo and hi are integers at least 40 apart, then continuous refinement) or `name=lo..hi:step`.
     #[arg(long, required = true)]
     pub param: Vec<String>,
     #[command(flatten)]

@@ -6,7 +6,7 @@
 //! ([`RowError`], [`papers_mean`]) — so a candidate's score is bit for bit what `accuracy` reports for it. The
 //! reference is evaluated once ([`PapersReference`]); each candidate is then scored with batched evaluations
 //! of the formula only (91 points per n), in parallel over candidates (rayon). Stage 1 is exhaustive over a
-//! grid (integers for integer ranges, or `lo..hi:step`); stage 2 refines the best grid point continuously —
+//! grid (41 values over [lo, hi], the integers for integer ranges wider than that, or `lo..hi:step`); stage 2 refines the best grid point continuously —
 //! golden-section search for one free parameter, Nelder–Mead (clamped to the ranges) for several — within
 //! one grid step of it.
 //!
@@ -57,8 +57,12 @@ impl Metric {
     }
 }
 
-/// A parameter to search: its index in the parameter vector, its range, and the grid step (None: integers
-/// when the ends are integers, else 40 intervals).
+/// Intervals of a parameter's default grid (stage 1) when no step is given.
+pub const GRID_INTERVALS: f64 = 40.0;
+
+/// A parameter to search: its index in the parameter vector, its range — the interval [lo, hi] — and the
+/// grid step of stage 1 (None: [`GRID_INTERVALS`] intervals, or the integers when lo and hi are integers at
+/// least that many apart). The refinement is continuous over [lo, hi] either way.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FreeParam {
     pub index: usize,
@@ -77,14 +81,23 @@ impl FreeParam {
         let step = match self.step {
             Some(s) if s > 0.0 && s.is_finite() => s,
             Some(s) => return Err(Diagnostic::error(format!("step {s} for `{}` must be positive", self.name))),
-            None if self.lo.fract() == 0.0 && self.hi.fract() == 0.0 => 1.0,
-            None => (self.hi - self.lo) / 40.0,
+            // The integers only where they are at least as fine as the default grid (n = 1..1000, as the
+            // papers searched it): `0..1` is the interval [0, 1], not the two values {0, 1}.
+            None if self.lo.fract() == 0.0 && self.hi.fract() == 0.0 && self.hi - self.lo >= GRID_INTERVALS => 1.0,
+            None => (self.hi - self.lo) / GRID_INTERVALS,
         };
         let count = ((self.hi - self.lo) / step + 1e-9).floor() + 1.0;
         if count > 1e6 || step == 0.0 && self.hi > self.lo {
             return Err(Diagnostic::error(format!("`{}` would take {count} grid values", self.name)).hint("give a coarser step: a=lo..hi:step"));
         }
-        Ok((0..count.max(1.0) as usize).map(|i| (self.lo + i as f64 * step).min(self.hi)).collect())
+        let mut g: Vec<f64> = (0..count.max(1.0) as usize).map(|i| (self.lo + i as f64 * step).min(self.hi)).collect();
+        // A last value short of hi by rounding alone is hi: the grid spans the whole interval.
+        if let Some(last) = g.last_mut() {
+            if self.hi - *last <= 1e-9 * step {
+                *last = self.hi;
+            }
+        }
+        Ok(g)
     }
 
     fn step_size(&self) -> f64 {
@@ -353,6 +366,13 @@ pub fn fit_points(
     if points.weights.is_some_and(|w| w.iter().any(|w| !(*w >= 0.0 && w.is_finite()))) {
         return Err(Diagnostic::error("a weight is negative or not finite").hint("weights are finite numbers ≥ 0"));
     }
+    // A NaN or infinite target makes every candidate's loss NaN or inf: a fit of nothing, not a result.
+    if let Some(i) = points.target.iter().position(|t| !t.is_finite()) {
+        let (channel, point) = (i / points.len.max(1), i % points.len.max(1));
+        let which = if channels.len() > 1 { format!("point {point}, channel {channel}") } else { format!("point {point}") };
+        return Err(Diagnostic::error(format!("the target is {} at {which}", points.target[i]))
+            .hint("targets are finite numbers: leave that point out"));
+    }
     search(base_params, free, top, refine_best, &|p| points.score(channels, p, loss), &|| {})
 }
 
@@ -558,5 +578,28 @@ mod tests {
         let e = fit(b.ev.as_ref(), &[1.0], Input::NH, b.ev.as_ref(), &[1.0], Input::NH, &free, &FitOptions::default(), &|| {});
         assert!(e.is_err());
         assert!(FreeParam { index: 1, name: "a".into(), lo: 0.0, hi: 1e9, step: Some(1.0) }.grid().is_err());
+    }
+
+    #[test]
+    fn a_range_is_an_interval_whatever_its_ends_look_like() {
+        let grid = |lo: f64, hi: f64| FreeParam { index: 0, name: "p".into(), lo, hi, step: None }.grid().unwrap();
+        // Integer-looking ends narrower than the default grid: 41 values over [lo, hi], not the integers.
+        for (lo, hi) in [(0.0, 1.0), (1.0, 4.0), (0.0, 39.0), (-2.0, 2.0)] {
+            let g = grid(lo, hi);
+            assert_eq!(g.len(), 41, "{lo}..{hi}");
+            assert_eq!((g[0], g[40]), (lo, hi));
+            assert!(g.windows(2).all(|w| w[1] > w[0]));
+        }
+        assert!(grid(0.0, 1.0).iter().any(|v| (v - 0.6).abs() < 1e-12));
+        // Wide integer ranges keep the papers' integer grid; random real ranges get 41 values.
+        assert_eq!(grid(1.0, 1000.0), (1..=1000).map(f64::from).collect::<Vec<_>>());
+        let mut seed = 0x9e37_79b9_7f4a_7c15_u64;
+        for _ in 0..100 {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            let lo = (seed >> 11) as f64 / (1u64 << 53) as f64 * 10.0 - 5.0;
+            let hi = lo + 1e-3 + ((seed >> 20) & 0xffff) as f64 / 6553.6;
+            let g = grid(lo, hi);
+            assert_eq!((g.len(), g[0], g[40]), (41, lo, hi), "{lo}..{hi}");
+        }
     }
 }

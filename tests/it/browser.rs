@@ -252,6 +252,14 @@ fn browser_types_drags_and_matches_the_cli() {
     println!("compare: {}", b.js("return document.getElementById('cmp-info').textContent"));
     println!("numbers: ns/eval {}; coef {}", b.js("return document.getElementById('num-ns').textContent"), b.js("return document.getElementById('num-coef').textContent"));
     assert_eq!(b.js("return lobe.errors"), json!(0), "the page showed errors: {}", b.js("return lobe.error_log"));
+
+    // A formula that stops compiling leaves none of the previous formula's numbers on the page.
+    b.cmd("POST", &format!("/element/{editor}/value"), Some(json!({"text": " +"})));
+    b.wait("document.getElementById('num-ns').textContent === '–'", 30, "the numbers cleared");
+    for id in ["num-compile", "num-coef", "num-albedo"] {
+        assert_eq!(b.js(&format!("return document.getElementById('{id}').textContent")), json!("–"), "{id} kept a stale number");
+    }
+    assert!(b.js("return document.getElementById('num-error').textContent").as_str().unwrap().starts_with("not analysed"));
     let _ = std::fs::remove_dir_all(&d);
 }
 

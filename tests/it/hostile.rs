@@ -589,7 +589,8 @@ fn a_cache_entry_that_is_not_a_small_regular_file_is_a_miss() {
     assert_eq!(first.code, Some(0), "{}", first.stderr);
     let entries: Vec<PathBuf> = std::fs::read_dir(&cache).unwrap().flatten().map(|e| e.path()).filter(|p| p.extension().is_some_and(|x| x == "pass")).collect();
     assert!(!entries.is_empty(), "the first run stored no decision");
-    let replace: [(&str, &dyn Fn(&Path) -> bool); 3] = [
+    type Make<'a> = &'a dyn Fn(&Path) -> bool;
+    let replace: [(&str, Make); 3] = [
         ("FIFO", &|p| mkfifo(p)),
         ("link to /dev/zero", &|p| std::os::unix::fs::symlink("/dev/zero", p).is_ok()),
         ("3 GB file", &|p| std::fs::File::create(p).and_then(|f| f.set_len(3 << 30)).is_ok()),

@@ -156,21 +156,15 @@ fn cites(rest: &str) -> Cites {
     let word: String = t.trim_start_matches(',').trim_start().chars().take_while(|c| c.is_alphanumeric() || *c == '-').collect();
     let dated = word.len() >= 10 && word.as_bytes()[4] == b'-' && word[..4].chars().all(|c| c.is_ascii_digit());
     let labelled = word.chars().any(|c| c.is_ascii_digit()) && word.chars().next().is_some_and(|c| c.is_ascii_lowercase());
-    if (t.starts_with(',') || dated) && (dated || labelled) {
+    if dated || t.starts_with(',') && labelled {
         return Cites::Entry(word);
     }
     Cites::File
 }
 
-/// Citations in other work of issue 53 (the accuracy-pass registry in src/simplify, the native-backend layer in
-/// src/backend) that name journal entries BENCHMARKS.md no longer has: they go when that work lands, and an
+/// Citations in work still on a branch (the native-backend layer in src/backend) that name journal entries BENCHMARKS.md no longer has: they go when that work lands, and an
 /// entry that no longer matches a line fails this test, so the list cannot outlive them.
-const PENDING: [(&str, &str); 4] = [
-    ("src/simplify/accuracy.rs", "BENCHMARKS.md, 2026-11-30"),
-    ("src/simplify/accuracy.rs", "BENCHMARKS.md, 2026-12-01, powchain"),
-    ("src/simplify/cancel.rs", "BENCHMARKS.md, robust7"),
-    ("src/backend/jit/shade.rs", "BENCHMARKS.md, 2026-11-30 issue 11"),
-];
+const PENDING: [(&str, &str); 1] = [("src/backend/jit/shade.rs", "BENCHMARKS.md, 2026-11-30 issue 11")];
 
 #[test]
 fn every_benchmarks_section_a_comment_names_exists() {

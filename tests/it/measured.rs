@@ -36,6 +36,31 @@ fn fitted(formula: &str, table: &str, param: &str, range: &str) -> (f64, serde_j
     (v["params"][param].as_f64().unwrap(), v)
 }
 
+/// `0..1` is the interval [0, 1]: a two-parameter fit of GGX to its own table recovers alpha and f0 (the
+/// issue's values and two pairs drawn at random), with both ranges written as integers.
+#[test]
+fn integer_looking_ranges_are_intervals_and_a_two_parameter_fit_recovers_ggx() {
+    let dir = crate::scratch_dir("measured", "ggx");
+    let mut seed = 0x2545_f491_4f6c_dd1d_u64;
+    let mut draw = |lo: f64, hi: f64| {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        lo + (hi - lo) * ((seed >> 11) as f64 / (1u64 << 53) as f64)
+    };
+    let mut truths = vec![(0.35, 0.6)];
+    truths.extend((0..2).map(|_| (draw(0.15, 0.8), draw(0.1, 0.9))));
+    for (k, (alpha, f0)) in truths.into_iter().enumerate() {
+        let table = tabulate(&dir, &format!("ggx{k}.binary"), "examples/explorer/ggx.brdf", &format!("alpha={alpha},f0={f0}"), "1,1,1");
+        let args = ["fit", "examples/explorer/ggx.brdf", "--measured", &table, "--param", "alpha=0.01..1", "--param", "f0=0..1", "--stride", "3", "--grid-stride", "6", "--json"];
+        let o = lobe(&args, None);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        let (a, f) = (v["params"]["alpha"].as_f64().unwrap(), v["params"]["f0"].as_f64().unwrap());
+        assert!((a - alpha).abs() < 0.01 * alpha && (f - f0).abs() < 0.01, "alpha {alpha} f0 {f0}: {v}");
+    }
+}
+
 #[test]
 fn fits_recover_blinns_n_and_beckmanns_m() {
     let dir = crate::scratch_dir("measured", "fit");

@@ -88,9 +88,6 @@ pub(super) fn superscript(e: i32) -> String {
     e.to_string().chars().map(|c| c.to_digit(10).map_or('⁻', |d| SUP[d as usize])).collect()
 }
 
-/// One curve in plotted units, broken where a value cannot be drawn (NaN, or ≤ 0 on a log axis).
-
-
 /// A tick of a log axis: mantissa·10^exp, labelled or a minor (unlabelled) grid line.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Tick {

@@ -49,7 +49,7 @@
 //! — usually cheaper than the written chain of products, quotients and sums it replaces. `compensated-exp`: 2–4
 //! fmas, one max per floored divisor, one fma applying the tail, acoslo (8) per acos factor; b's parameter-only
 //! factor no longer multiplies per point. Both catalogue uses sit just within the 1.3× budget, statically and as
-//! measured (BENCHMARKS.md, robust7). `compensated-params`: nothing per point (the prepared block grows; compile
+//! measured (BENCHMARKS.md §2). `compensated-params`: nothing per point (the prepared block grows; compile
 //! time with it, e.g. F_kutlog's JIT from ~6 to ~30 ms).
 
 use crate::simplify::rewrite::{add_opt, divide_apart, product, rebuild, Analysis};

@@ -90,7 +90,7 @@
 //! operations and below pow's cost.
 //!
 //! # Cost model
-//! [`cost`] counts live nodes with weights fitted to JIT timings on x86-64 (BENCHMARKS.md, 2026-11-30: five
+//! [`cost`] counts live nodes with weights fitted to JIT timings on x86-64 (measured when they were fitted: five
 //! extra divisions add ~3.4 ns to Beckmann's 8.5 ns, a libm exp ~5 ns): `+ − ×`, abs, min, max 1; clamp 2;
 //! `/` and sqrt 3; fma 1; math-library calls (exp, ln, trig) 20, expmuldiv 28 (it replaces an exp, a `×` and
 //! a `/` (24) and adds a range test: Beckmann's kernel takes ~1.15× the unrewritten one with it, on `lobe

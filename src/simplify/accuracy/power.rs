@@ -106,7 +106,7 @@ pub fn pow_call_policy() -> Policy {
 /// fully compensated chain's is 0.5u: measured against the truth on 10⁵ points, ≤ 2 ulp at k ∈ {9 … 1024}
 /// (live `pow` ≤ 0.51), so baked and live agree within 4 ulp. It saves the last steps' tails, the error fma
 /// of the fold and the final `h + l`: 13 operations over the plain chain's 7 at k = 50 where carrying every
-/// step took 17, 31 over 14 at k = 1000 (BENCHMARKS.md, 2026-12-01, powchain).
+/// step took 17, 31 over 14 at k = 1000 (BENCHMARKS.md §2).
 ///
 /// Why a special budget ([`crate::numerics::robust`]) remains: the tails cannot be much cheaper. Within
 /// 3u, every step but the last two needs its rounding error, one fma each, and carrying it one step further
