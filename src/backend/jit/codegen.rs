@@ -314,13 +314,8 @@ impl<L: Lanes> Lower for Translator<'_, '_, L> {
     fn outline(&self) -> bool {
         self.cx.outline
     }
-    fn value(&mut self, id: NodeId) -> Result<Value, NativeError> {
-        self.vals.get(id.index()).copied().flatten().ok_or_else(|| NativeError::Internal(format!("operand t{} used before it was translated", id.0)))
-    }
-    fn set(&mut self, id: NodeId, v: Value) -> Result<(), NativeError> {
-        let slot = self.vals.get_mut(id.index()).ok_or_else(|| NativeError::Internal(format!("node t{} outside the arena", id.0)))?;
-        *slot = Some(v);
-        Ok(())
+    fn table(&mut self) -> &mut [Option<Value>] {
+        &mut self.vals
     }
     fn input(&mut self, i: Input) -> Result<Value, NativeError> {
         Ok(match self.source {

@@ -431,13 +431,8 @@ impl<'ctx> Lower for Gen<'_, 'ctx> {
     fn outline(&self) -> bool {
         self.u.outline
     }
-    fn value(&mut self, id: NodeId) -> Result<VectorValue<'ctx>, NativeError> {
-        self.vals.get(id.index()).copied().flatten().ok_or_else(|| NativeError::Internal(format!("operand t{} used before it was translated", id.0)))
-    }
-    fn set(&mut self, id: NodeId, v: VectorValue<'ctx>) -> Result<(), NativeError> {
-        let slot = self.vals.get_mut(id.index()).ok_or_else(|| NativeError::Internal(format!("node t{} outside the arena", id.0)))?;
-        *slot = Some(v);
-        Ok(())
+    fn table(&mut self) -> &mut [Option<VectorValue<'ctx>>] {
+        &mut self.vals
     }
     fn input(&mut self, i: Input) -> Result<VectorValue<'ctx>, NativeError> {
         self.inputs[i.index()].ok_or_else(|| NativeError::Internal(format!("input {} has no column", i.name())))

@@ -22,10 +22,18 @@ pub(crate) trait Lower: Emit + Sized {
     fn mode(&self) -> Mode;
     /// Whether math builtins are calls of the compiled library rather than inline code ([`super::outlines`]).
     fn outline(&self) -> bool;
+    /// The value of each translated node, indexed by node.
+    fn table(&mut self) -> &mut [Option<Self::V>];
     /// The value of an already translated node.
-    fn value(&mut self, id: NodeId) -> Result<Self::V, NativeError>;
+    fn value(&mut self, id: NodeId) -> Result<Self::V, NativeError> {
+        self.table().get(id.index()).copied().flatten().ok_or_else(|| NativeError::Internal(format!("operand t{} used before it was translated", id.0)))
+    }
     /// Records the value of node `id`.
-    fn set(&mut self, id: NodeId, v: Self::V) -> Result<(), NativeError>;
+    fn set(&mut self, id: NodeId, v: Self::V) -> Result<(), NativeError> {
+        let slot = self.table().get_mut(id.index()).ok_or_else(|| NativeError::Internal(format!("node t{} outside the arena", id.0)))?;
+        *slot = Some(v);
+        Ok(())
+    }
     /// Input `i` of the current element(s).
     fn input(&mut self, i: Input) -> Result<Self::V, NativeError>;
     /// Parameter slot `p` in every lane.
