@@ -27,7 +27,7 @@ use crate::backend::program::{Program, Region, MAX_COLUMNS};
 use crate::builtins::dd::Arith;
 use crate::builtins::math::{self, Emit};
 use crate::builtins::{Builtin, Libm, Mode};
-use crate::ir::{Input, Ir, Node, NodeId, N_INPUTS};
+use crate::ir::{Input, Ir, Node, N_INPUTS};
 use inkwell::attributes::AttributeLoc;
 use inkwell::basic_block::BasicBlock;
 use inkwell::builder::{Builder, BuilderError};
@@ -105,15 +105,6 @@ impl<'a, 'ctx> Gen<'a, 'ctx> {
     fn fail(&mut self, e: impl std::fmt::Display) {
         if self.error.is_none() {
             self.error = Some(NativeError::internal(e));
-        }
-    }
-
-    /// Records the error of a lowering step.
-    fn check(&mut self, r: Result<(), NativeError>) {
-        if let Err(e) = r {
-            if self.error.is_none() {
-                self.error = Some(e);
-            }
         }
     }
 
@@ -383,29 +374,6 @@ impl<'a, 'ctx> Gen<'a, 'ctx> {
                 self.block("lost")
             }
         }
-    }
-
-    /// The value of a translated node (poison after recording the error).
-    fn arg(&mut self, id: NodeId) -> VectorValue<'ctx> {
-        match self.value(id) {
-            Ok(v) => v,
-            Err(e) => {
-                self.check(Err(e));
-                self.fty.get_poison()
-            }
-        }
-    }
-
-    /// Translates node `id` ([`lower::node`]), recording an error.
-    fn node(&mut self, id: NodeId) {
-        let r = lower::node(self, id).map(drop);
-        self.check(r);
-    }
-
-    /// Translates, in order, every node up to the root for which `pick` holds.
-    fn nodes(&mut self, pick: impl Fn(NodeId) -> bool) {
-        let r = lower::nodes(self, self.u.plan.len(), pick);
-        self.check(r);
     }
 
     /// `any(m) ? (m ? callee(args) : r) : r`, one call per lane in a rare block.
@@ -721,9 +689,9 @@ pub(super) fn build_prepare(u: &Unit) -> Result<(), NativeError> {
     let mut g = Gen::new(u, f, 1, params);
     let entry = g.block("entry");
     g.b.position_at_end(entry);
-    g.nodes(|id| u.plan.in_prepare(id));
+    lower::nodes(&mut g, u.plan.len(), |id| u.plan.in_prepare(id))?;
     for (k, id) in u.plan.carried.iter().enumerate() {
-        let v = g.arg(*id);
+        let v = g.value(*id)?;
         let s = g.b.build_extract_element(v, g.i32c(0), "");
         let s = g.scalar(s, u.cx.f64_type().get_poison().into());
         let p = g.offset(block, g.i64c(8 * k as u64));
@@ -748,8 +716,8 @@ pub(super) fn build_scalar(u: &Unit) -> Result<(), NativeError> {
         let s = g.load_f64(x, i.index() as u64);
         g.inputs[i.index()] = Some(g.splat(s, g.fty));
     }
-    g.nodes(|id| u.plan.in_scalar(id));
-    let r = g.arg(u.plan.root);
+    lower::nodes(&mut g, u.plan.len(), |id| u.plan.in_scalar(id))?;
+    let r = g.value(u.plan.root)?;
     let s = g.b.build_extract_element(r, g.i32c(0), "");
     let s = g.scalar(s, u.cx.f64_type().get_poison().into());
     let ret = g.b.build_return(Some(&s));
@@ -781,8 +749,8 @@ pub(super) fn build_batch(u: &Unit, w: u32) -> Result<(), NativeError> {
         for (k, v) in loaded {
             g.inputs[*k] = Some(*v);
         }
-        g.nodes(|id| u.plan.variant(id));
-        vec![g.arg(u.plan.root)]
+        lower::nodes(g, u.plan.len(), |id| u.plan.variant(id))?;
+        Ok(vec![g.value(u.plan.root)?])
     })
 }
 
@@ -818,11 +786,11 @@ pub(super) fn build_program(u: &Unit, w: u32, p: &Program) -> Result<(), NativeE
         }
         for w in lower::program_step(p) {
             match w {
-                Walk::Outer(id) => g.node(id),
-                Walk::Region(_, r) => region(g, r),
+                Walk::Outer(id) => lower::node(g, id).map(drop)?,
+                Walk::Region(_, r) => region(g, r)?,
             }
         }
-        p.outputs.iter().map(|o| g.arg(*o)).collect()
+        p.outputs.iter().map(|o| g.value(*o)).collect()
     })
 }
 
@@ -846,7 +814,7 @@ fn batch_loop<'ctx>(
     block: PointerValue<'ctx>,
     cols: &[(usize, PointerValue<'ctx>)],
     outs: &[PointerValue<'ctx>],
-    step: impl FnOnce(&mut Gen<'_, 'ctx>, &[(usize, VectorValue<'ctx>)]) -> Vec<VectorValue<'ctx>>,
+    step: impl FnOnce(&mut Gen<'_, 'ctx>, &[(usize, VectorValue<'ctx>)]) -> Result<Vec<VectorValue<'ctx>>, NativeError>,
 ) -> Result<(), NativeError> {
     let u = g.u;
     let len = match f.get_nth_param(4) {
@@ -856,7 +824,7 @@ fn batch_loop<'ctx>(
     let ptr = u.cx.ptr_type(Default::default());
     let i64t = u.cx.i64_type();
     load_carried(g, block);
-    g.nodes(|id| u.plan.in_entry(id));
+    lower::nodes(g, u.plan.len(), |id| u.plan.in_entry(id))?;
 
     let (head, load, load_part, body, store, store_part, latch, exit) =
         (g.block("loop"), g.block("load"), g.block("load_part"), g.block("step"), g.block("store"), g.block("store_part"), g.block("latch"), g.block("exit"));
@@ -913,7 +881,7 @@ fn batch_loop<'ctx>(
         phi.add_incoming(&[(&v, load), (&pv, load_part)]);
         loaded.push((k, g.vec_of(Ok(phi.as_basic_value()), g.fty)));
     }
-    let results = step(g, &loaded);
+    let results = step(g, &loaded)?;
     if results.len() != outs.len() {
         return Err(NativeError::Internal(format!("{} results for {} outputs", results.len(), outs.len())));
     }
@@ -965,8 +933,8 @@ fn load_ptr<'ctx>(g: &mut Gen<'_, 'ctx>, base: PointerValue<'ctx>, k: usize) -> 
 }
 
 /// One guarded region: `any(lit ≠ 0) ? its nodes : +0` for its outputs (see [`build_program`]).
-fn region(g: &mut Gen<'_, '_>, r: &Region) {
-    let lit = g.arg(r.lit);
+fn region(g: &mut Gen<'_, '_>, r: &Region) -> Result<(), NativeError> {
+    let lit = g.value(r.lit)?;
     let zero = g.fconst(0);
     // Not equal or unordered: a NaN lit runs the region, as the interpreter's `lit != 0`.
     let m = g.b.build_float_compare(FloatPredicate::UNE, lit, zero, "");
@@ -980,9 +948,9 @@ fn region(g: &mut Gen<'_, '_>, r: &Region) {
     g.b.position_at_end(inside);
     let saved = g.vals.clone();
     for id in &r.nodes {
-        g.node(*id);
+        lower::node(g, *id)?;
     }
-    let outs: Vec<VectorValue> = r.outputs.iter().map(|o| g.arg(*o)).collect();
+    let outs = r.outputs.iter().map(|o| g.value(*o)).collect::<Result<Vec<VectorValue>, _>>()?;
     let end = g.current();
     let br = g.b.build_unconditional_branch(join);
     g.done(br);
@@ -997,4 +965,5 @@ fn region(g: &mut Gen<'_, '_>, r: &Region) {
             Err(e) => g.fail(e),
         }
     }
+    Ok(())
 }
