@@ -696,7 +696,6 @@ pub(super) fn build_batch(
     let ptr = module.target_config().pointer_type();
     let (ir, plan, root) = (w.ir, w.plan, w.plan.root);
     let used = ir.used_inputs(root);
-    let n = root.index() + 1;
     let (mut b, callees, args) = begin(module, ctx, fctx, batch_signature(module), w.imports);
     let [cols, params, block, out, len] = args[..] else { return Err(NativeError::internal("batch signature")) };
 
@@ -707,21 +706,30 @@ pub(super) fn build_batch(
     }
     let zero = b.ins().iconst(ptr, 0);
     let mut cx = Shared { ir, params, callees, invariants: vec![], mode: w.mode, fma: w.fma, outline: w.outline };
-    let vals = load_carried(plan, &mut b, block, ir.len());
-    let mut t = cx.translator::<F64>(&mut b, vals, Source::Cols { bases, off: zero });
-    lower::nodes(&mut t, n, |id| plan.in_entry(id))?;
-    cx.invariants = std::mem::take(&mut t.vals);
-    let mut splats = vec![None; ir.len()];
-    for id in ir.ids().take(n) {
-        if let (false, Some(s)) = (plan.variant(id), cx.invariants[id.index()]) {
-            splats[id.index()] = Some(V::splat(&mut b, s));
-        }
-    }
+    let splats = entry(&mut b, &mut cx, plan, block, Source::Cols { bases, off: zero })?;
     // The loop-variant nodes of one step, translated in each lane type over the shared invariants.
     let step = LoopStep { cx: &cx, plan, bases, out };
     batch_loop(&mut b, ptr, len, zero, splats, cx.invariants.clone(), &step, 1)?;
     b.finalize(module.target_config());
     Ok(())
+}
+
+/// The entry of a batched function (kernel or program): the carried nodes loaded from the block and the
+/// plan's entry nodes (invariant constants and parameters) computed in `F64`, kept in `cx.invariants` for the
+/// tail; returned: their splats to [`V`], which the loop reads.
+fn entry(b: &mut FunctionBuilder, cx: &mut Shared, plan: &Plan, block: Value, source: Source) -> Result<Vec<Option<Value>>, NativeError> {
+    let len = cx.ir.len();
+    let vals = load_carried(plan, b, block, len);
+    let mut t = cx.translator::<F64>(b, vals, source);
+    lower::nodes(&mut t, plan.len(), |id| plan.in_entry(id))?;
+    cx.invariants = std::mem::take(&mut t.vals);
+    let mut splats = vec![None; len];
+    for id in cx.ir.ids().take(plan.len()) {
+        if let (false, Some(s)) = (plan.variant(id), cx.invariants[id.index()]) {
+            splats[id.index()] = Some(V::splat(b, s));
+        }
+    }
+    Ok(splats)
 }
 
 /// One step of a batched function's loop, emitted in each lane type: `at.len()` copies, copy `c` for the

@@ -43,7 +43,6 @@ pub(in crate::backend::jit) fn build(
 ) -> Result<(), NativeError> {
     let ptr = module.target_config().pointer_type();
     let (ir, plan) = (w.ir, w.plan);
-    let n = ir.len();
     let (mut b, callees, args) = begin(module, ctx, fctx, signature(module), w.imports);
     let [cols, params, block, outs, len] = args[..] else { return Err(NativeError::internal("program signature")) };
 
@@ -54,16 +53,7 @@ pub(in crate::backend::jit) fn build(
     let out_bases: Vec<Value> = (0..p.outputs.len()).map(|k| b.ins().load(ptr, mem(), outs, (k * 8) as i32)).collect();
     let zero = b.ins().iconst(ptr, 0);
     let mut cx = Shared { ir, params, callees, invariants: vec![], mode: w.mode, fma: w.fma, outline: w.outline };
-    let vals = load_carried(plan, &mut b, block, n);
-    let mut t = cx.translator::<F64>(&mut b, vals, Source::Data { bases, off: zero });
-    lower::nodes(&mut t, n, |id| plan.in_entry(id))?;
-    cx.invariants = std::mem::take(&mut t.vals);
-    let mut splats = vec![None; n];
-    for id in ir.ids() {
-        if let (false, Some(s)) = (plan.variant(id), cx.invariants[id.index()]) {
-            splats[id.index()] = Some(V::splat(&mut b, s));
-        }
-    }
+    let splats = entry(&mut b, &mut cx, plan, block, Source::Data { bases, off: zero })?;
     let (first, count) = anchors(p);
     let slot = b.create_sized_stack_slot(StackSlotData::new(StackSlotKind::ExplicitSlot, (16 * STEP * count.max(1)) as u32, 4));
     let anchor = b.ins().stack_addr(ptr, slot, 0);
