@@ -200,3 +200,209 @@ pub(crate) fn program_step(p: &Program) -> impl Iterator<Item = Walk<'_>> {
         outer.into_iter().chain(p.regions[first..next].iter().enumerate().map(move |(k, r)| Walk::Region(first + k, r)))
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::base::span::Span;
+    use crate::builtins::dd::Arith;
+    use crate::builtins::math::Direct;
+    use crate::builtins::{clamp, fmax, fmin};
+
+    /// A one-lane tier on plain `f64` (the math library's [`Direct`] primitives), so the shared lowering's own
+    /// choices — the constant-operand forms of min/max/clamp and their repairs — are checked apart from any
+    /// compiler: `select(lt(..))` here is exactly the `maxsd`/`minsd` semantics the tiers emit.
+    struct Scalar {
+        ir: Ir,
+        table: Vec<Option<f64>>,
+        x: f64,
+    }
+
+    impl Arith for Scalar {
+        type V = f64;
+        fn konst(&mut self, c: f64) -> f64 {
+            c
+        }
+        fn add(&mut self, a: f64, b: f64) -> f64 {
+            Direct.add(a, b)
+        }
+        fn sub(&mut self, a: f64, b: f64) -> f64 {
+            Direct.sub(a, b)
+        }
+        fn mul(&mut self, a: f64, b: f64) -> f64 {
+            Direct.mul(a, b)
+        }
+        fn div(&mut self, a: f64, b: f64) -> f64 {
+            Direct.div(a, b)
+        }
+        fn neg(&mut self, a: f64) -> f64 {
+            Direct.neg(a)
+        }
+        fn sqrt(&mut self, a: f64) -> f64 {
+            Direct.sqrt(a)
+        }
+        fn fma(&mut self, a: f64, b: f64, c: f64) -> f64 {
+            Direct.fma(a, b, c)
+        }
+        fn positive_select(&mut self, c: f64, a: f64, b: f64) -> f64 {
+            Direct.positive_select(c, a, b)
+        }
+    }
+
+    impl Emit for Scalar {
+        type M = bool;
+        fn abs(&mut self, a: f64) -> f64 {
+            Direct.abs(a)
+        }
+        fn lt(&mut self, a: f64, b: f64) -> bool {
+            Direct.lt(a, b)
+        }
+        fn le(&mut self, a: f64, b: f64) -> bool {
+            Direct.le(a, b)
+        }
+        fn eq(&mut self, a: f64, b: f64) -> bool {
+            Direct.eq(a, b)
+        }
+        fn and(&mut self, a: bool, b: bool) -> bool {
+            a & b
+        }
+        fn or(&mut self, a: bool, b: bool) -> bool {
+            a | b
+        }
+        fn not(&mut self, a: bool) -> bool {
+            !a
+        }
+        fn select(&mut self, m: bool, a: f64, b: f64) -> f64 {
+            Direct.select(m, a, b)
+        }
+        fn mask_bits(&mut self, x: f64, and: u64, or: u64) -> f64 {
+            Direct.mask_bits(x, and, or)
+        }
+        fn pow2i(&mut self, k: f64) -> f64 {
+            Direct.pow2i(k)
+        }
+        fn exponent_field(&mut self, x: f64) -> f64 {
+            Direct.exponent_field(x)
+        }
+        fn lookup_pair(&mut self, table: &'static [[f64; 2]], x: f64) -> (f64, f64) {
+            Direct.lookup_pair(table, x)
+        }
+        fn rare(&mut self, m: bool, r: f64, slow: &mut dyn FnMut(&mut Self) -> f64) -> f64 {
+            if m {
+                slow(self)
+            } else {
+                r
+            }
+        }
+        fn fallback(&mut self, m: bool, x: f64, r: f64, f: Builtin) -> f64 {
+            Direct.fallback(m, x, r, f)
+        }
+        fn lanes(&self) -> u32 {
+            1
+        }
+    }
+
+    impl Lower for Scalar {
+        fn ir(&self) -> &Ir {
+            &self.ir
+        }
+        fn mode(&self) -> Mode {
+            Mode::Precise
+        }
+        fn outline(&self) -> bool {
+            false
+        }
+        fn table(&mut self) -> &mut [Option<f64>] {
+            &mut self.table
+        }
+        fn input(&mut self, _: Input) -> Result<f64, NativeError> {
+            Ok(self.x)
+        }
+        fn param(&mut self, p: u16) -> Result<f64, NativeError> {
+            Err(NativeError::internal(format!("no parameter {p} here")))
+        }
+        fn column(&mut self, k: u16) -> Result<f64, NativeError> {
+            Err(NativeError::internal(format!("no column {k} here")))
+        }
+        fn minimum(&mut self, a: f64, b: f64) -> f64 {
+            fmin(a, b)
+        }
+        fn maximum(&mut self, a: f64, b: f64) -> f64 {
+            fmax(a, b)
+        }
+        fn library(&mut self, f: Builtin, _: &[f64]) -> Result<f64, NativeError> {
+            Err(NativeError::internal(format!("`{}` is not outlined here", f.name())))
+        }
+        fn take_error(&mut self) -> Option<NativeError> {
+            None
+        }
+    }
+
+    /// `f(NH, consts…)` lowered and run on `x`, with the constants in the order given (`None`: the input).
+    fn run(f: Builtin, args: &[Option<f64>], x: f64) -> f64 {
+        let s = Span::default();
+        let mut ir = Ir::new();
+        let mut ids = vec![];
+        for a in args {
+            ids.push(match *a {
+                Some(c) => ir.konst(c, s),
+                None => ir.input(Input::NH, s),
+            });
+        }
+        let root = ir.call(f, &ids, s);
+        let mut t = Scalar { table: vec![None; ir.len()], ir, x };
+        nodes(&mut t, root.index() + 1, |_| true).expect("lowers");
+        t.value(root).expect("translated")
+    }
+
+    fn same(got: f64, want: f64) -> bool {
+        got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan())
+    }
+
+    const XS: [f64; 9] = [0.0, -0.0, f64::NAN, 0.5, -1.0, 2.0, 1.0, f64::INFINITY, f64::NEG_INFINITY];
+    const CS: [f64; 6] = [0.0, -0.0, 1.0, -1.0, 0.5, f64::INFINITY];
+
+    /// min/max against a constant on either side take the one-instruction forms; with the −0 repair (max
+    /// against +0) and the general sequence kept for min against −0, every signed zero and NaN is IEEE
+    /// `minimum`/`maximum`'s, as the interpreter computes them.
+    #[test]
+    fn min_and_max_against_constants_are_ieee_minimum_and_maximum() {
+        for x in XS {
+            for c in CS {
+                for (f, want) in [(Builtin::Max, fmax(x, c)), (Builtin::Min, fmin(x, c))] {
+                    for args in [[None, Some(c)], [Some(c), None]] {
+                        let got = run(f, &args, x);
+                        assert!(same(got, want), "{}({args:?}) at x = {x:?}: {got:?}, want {want:?}", f.name());
+                    }
+                }
+            }
+        }
+    }
+
+    /// `clamp(x, lo, hi)` against constant bounds (the lowering's `clamp(INPUT, 0, 1)` among them) is the
+    /// interpreter's `min(max(x, lo), hi)`, signed zeros and NaN included.
+    #[test]
+    fn clamp_against_constants_is_the_interpreters() {
+        for x in XS {
+            for (lo, hi) in [(0.0, 1.0), (-0.0, 1.0), (-1.0, 0.0), (-1.0, -0.0), (0.5, 0.5)] {
+                let got = run(Builtin::Clamp, &[None, Some(lo), Some(hi)], x);
+                assert!(same(got, clamp(x, lo, hi)), "clamp({x:?}, {lo:?}, {hi:?}) = {got:?}");
+            }
+        }
+    }
+
+    /// A node outside the arena, or an operand used before it was translated, is an internal error, not a
+    /// panic.
+    #[test]
+    fn broken_arenas_are_errors() {
+        let s = Span::default();
+        let mut ir = Ir::new();
+        let x = ir.input(Input::NH, s);
+        let y = ir.neg(x, s);
+        let mut t = Scalar { table: vec![None; ir.len()], ir, x: 1.0 };
+        assert!(matches!(node(&mut t, NodeId(9)), Err(NativeError::Internal(m)) if m.contains("outside the arena")));
+        assert!(matches!(node(&mut t, y), Err(NativeError::Internal(m)) if m.contains("before it was translated")));
+        assert_eq!(node(&mut t, x).ok(), Some(1.0));
+        assert_eq!(node(&mut t, y).ok(), Some(-1.0));
+    }
+}
