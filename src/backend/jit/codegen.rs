@@ -10,7 +10,7 @@
 //! the translator's lanes; what differs between lane types (splatting, lanes, masks and bit casts, the select
 //! that becomes `maxpd`/`minpd`) is the [`Lanes`] trait.
 //!
-//! Neither checks anything at run time; the safe wrappers in `native::abi` validate lengths before calling.
+//! None of them checks anything at run time; the safe wrappers in `native::abi` validate lengths before calling.
 //!
 //! Parameter-only nodes (e.g. `pow(Q, 1/k)`) are computed by the prepare function and loaded from the block;
 //! constants and parameters are splatted in the batched function's entry, so the loop body holds only work

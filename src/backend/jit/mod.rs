@@ -16,7 +16,8 @@
 //! - one `JITModule` per compiled formula: the scalar kernel and the prepare function are compiled at once,
 //!   the batched kernel is added to the same module on the first batch call ([`KernelCode::batch`]); its
 //!   memory is freed when the last kernel using it is dropped;
-//! - a bounded LRU cache keyed by the simplified IR's structure, so compiling a formula twice is free;
+//! - the native layer's bounded LRU cache ([`crate::backend::native::cache`]) keyed by the simplified IR's
+//!   structure, so compiling a formula twice is free;
 //! - live parameters are loads from the `params` slice, so changing them needs no recompilation; baked ones
 //!   are already constants in the IR.
 //!
