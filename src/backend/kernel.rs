@@ -6,12 +6,14 @@
 //! are ignored, so callers can always pass the full parameter vector.
 //!
 //! Loops over many points with one parameter set bind the parameters first ([`Evaluator::prepare`] →
-//! [`Prepared`]): the per-call length check, the JIT's block lookup and the `dyn` hop are then paid once.
+//! [`Prepared`]): the per-call length check, the native code's block lookup and the `dyn` hop are then paid
+//! once.
 //!
 //! The checks are written against [`Evaluator`], not `Kernel`, so they can also run on a plain Rust closure
 //! (the hand-written twins used in tests and benches).
 
 use crate::builtins::Mode;
+use super::Backend;
 use crate::ir::{Formula, Input, InputSet, N_INPUTS};
 use std::sync::Arc;
 use std::time::Duration;
@@ -72,14 +74,12 @@ pub trait Evaluator: AsEvaluator + Send + Sync {
 }
 
 /// An evaluator bound to one parameter vector (from [`Evaluator::prepare`]), for loops over many points with
-/// the same parameters. Dispatch is a `match` on the backend, not a `dyn` call; the JIT arm calls the
-/// generated code directly with its block (no per-call cache lookup). Not `Sync` (the interpreter's scratch):
-/// prepare one per thread.
+/// the same parameters. Dispatch is a `match` on three shapes, not a `dyn` call: native code (either JIT tier:
+/// the generated code called directly with its prepared block, no per-call cache lookup), the interpreter, or
+/// any other evaluator. Not `Sync` (the interpreter's scratch): prepare one per thread.
 pub enum Prepared<'a> {
-    Jit(super::jit::PreparedJit<'a>),
+    Native(super::native::NativeCall<'a>),
     Interp(super::interp::PreparedInterp<'a>),
-    #[cfg(feature = "llvm")]
-    Llvm(super::llvm::PreparedLlvm<'a>),
     /// Any other evaluator (closures, wrappers): its `eval` with the kept parameters.
     Other(&'a dyn Evaluator, Vec<f64>),
 }
@@ -90,10 +90,8 @@ impl Prepared<'_> {
     #[inline(always)]
     pub fn eval(&self, x: &[f64; N_INPUTS]) -> f64 {
         match self {
-            Prepared::Jit(j) => j.eval(x),
+            Prepared::Native(n) => n.eval(x),
             Prepared::Interp(i) => i.eval(x),
-            #[cfg(feature = "llvm")]
-            Prepared::Llvm(l) => l.eval(x),
             Prepared::Other(ev, params) => ev.eval(x, params),
         }
     }
@@ -105,115 +103,6 @@ pub struct FnEvaluator<F>(pub F);
 impl<F: Fn(&[f64; N_INPUTS], &[f64]) -> f64 + Send + Sync> Evaluator for FnEvaluator<F> {
     fn eval(&self, x: &[f64; N_INPUTS], params: &[f64]) -> f64 {
         (self.0)(x, params)
-    }
-}
-
-/// Which backend evaluates a kernel.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-pub enum Backend {
-    Interp,
-    /// The Cranelift JIT.
-    #[default]
-    Jit,
-    /// The LLVM tier (kernels only; a build without the cargo feature `llvm` refuses it with a diagnostic).
-    Llvm,
-}
-
-impl Backend {
-    pub fn name(self) -> &'static str {
-        match self {
-            Backend::Interp => "interp",
-            Backend::Jit => "jit",
-            Backend::Llvm => "llvm",
-        }
-    }
-
-    /// The JIT tier of this backend (`None` for the interpreter).
-    pub fn tier(self) -> Option<Tier> {
-        match self {
-            Backend::Interp => None,
-            Backend::Jit => Some(Tier::Cranelift),
-            Backend::Llvm => Some(Tier::Llvm),
-        }
-    }
-}
-
-/// Which compiler a JIT kernel is built with: `cranelift` (fast to compile, two lanes), `llvm` (LLVM 19, the
-/// host's widest lanes; cargo feature `llvm`), or `auto` (LLVM when this build has it, else Cranelift).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-pub enum Tier {
-    #[default]
-    Cranelift,
-    Llvm,
-    Auto,
-}
-
-impl Tier {
-    pub fn name(self) -> &'static str {
-        match self {
-            Tier::Cranelift => "cranelift",
-            Tier::Llvm => "llvm",
-            Tier::Auto => "auto",
-        }
-    }
-
-    /// The backend that `backend` with this tier means: the tier picks the JIT; the interpreter has none
-    /// (the interpreter with the LLVM tier is a contradiction, reported as such).
-    pub fn resolve(self, backend: Backend) -> Result<Backend, String> {
-        match (backend, self) {
-            (Backend::Interp, Tier::Cranelift | Tier::Auto) => Ok(Backend::Interp),
-            (Backend::Interp, Tier::Llvm) => Err("the LLVM tier is a JIT; it does not apply to the interpreter backend".into()),
-            (_, Tier::Cranelift) => Ok(Backend::Jit),
-            (_, Tier::Llvm) => Ok(Backend::Llvm),
-            (_, Tier::Auto) => Ok(if Tier::llvm_available() { Backend::Llvm } else { Backend::Jit }),
-        }
-    }
-
-    /// The LLVM tier's lanes on this host (`None` in a build without it).
-    pub fn llvm_lanes() -> Option<u32> {
-        #[cfg(feature = "llvm")]
-        {
-            super::llvm::host().ok().map(|h| h.lanes)
-        }
-        #[cfg(not(feature = "llvm"))]
-        {
-            None
-        }
-    }
-
-    /// Whether this build has the LLVM tier and it can target the host.
-    pub fn llvm_available() -> bool {
-        #[cfg(feature = "llvm")]
-        {
-            super::llvm::available()
-        }
-        #[cfg(not(feature = "llvm"))]
-        {
-            false
-        }
-    }
-}
-
-impl std::str::FromStr for Tier {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Tier, String> {
-        match s {
-            "cranelift" => Ok(Tier::Cranelift),
-            "llvm" => Ok(Tier::Llvm),
-            "auto" => Ok(Tier::Auto),
-            _ => Err(format!("unknown tier `{s}`; expected `cranelift`, `llvm` or `auto`")),
-        }
-    }
-}
-
-impl std::str::FromStr for Backend {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Backend, String> {
-        match s {
-            "interp" | "interpreter" => Ok(Backend::Interp),
-            "jit" => Ok(Backend::Jit),
-            _ => Err(format!("unknown backend `{s}`; expected `jit` or `interp`")),
-        }
     }
 }
 

@@ -1,6 +1,7 @@
 //! Multi-output programs: one compacted lobe IR over per-element data columns (`Node::Column` leaves) with
 //! several outputs, some of them computed only inside guarded regions. Run by the interpreter
-//! ([`super::interp::ProgramInterp`]) and compiled by the JIT (`jit::shade`) to one batched function.
+//! ([`super::interp::ProgramInterp`]) and compiled by either native tier (Cranelift: `jit::codegen::shade`;
+//! LLVM: `llvm::codegen::build_program`) to one batched function, planned and called by [`super::native`].
 //!
 //! The backends know nothing of what a program computes (the renderer's lighting model writes one per
 //! material: `render::program`); they see the IR, its outputs and its regions.

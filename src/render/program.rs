@@ -31,7 +31,7 @@
 use super::plan::ShadingPlan;
 use super::{LightKind, Material, Scene};
 use crate::backend::interp::ProgramInterp;
-use crate::backend::jit::{JitError, ShadeCode};
+use crate::backend::native::{NativeError, ShadeCode};
 use crate::backend::program::Program;
 use crate::backend::Backend;
 use crate::base::span::Span;
@@ -285,14 +285,14 @@ pub enum ProgramCode {
 
 impl ProgramCode {
     /// Compiles `p` for `backend` in math mode `mode` (the JIT through its code cache).
-    pub fn new(p: &Program, backend: Backend, mode: Mode) -> Result<ProgramCode, JitError> {
+    pub fn new(p: &Program, backend: Backend, mode: Mode) -> Result<ProgramCode, NativeError> {
         Ok(match backend {
             Backend::Interp => ProgramCode::Interp(Arc::new(ProgramInterp::new(p, mode))),
             Backend::Jit => ProgramCode::Jit(crate::backend::jit::shade_code(p, mode)?),
             #[cfg(feature = "llvm")]
             Backend::Llvm => ProgramCode::Jit(crate::backend::llvm::program_code(p, mode)?),
             #[cfg(not(feature = "llvm"))]
-            Backend::Llvm => return Err(JitError::Host("this build has no LLVM tier (cargo feature `llvm`)".into())),
+            Backend::Llvm => return Err(NativeError::Host("this build has no LLVM tier (cargo feature `llvm`)".into())),
         })
     }
 

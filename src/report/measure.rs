@@ -7,7 +7,7 @@
 //! Results go through `black_box` so nothing is optimised away. Numbers are only comparable within one run on
 //! one machine; tests never assert on them.
 
-use crate::backend::jit::JitError;
+use crate::backend::native::NativeError;
 use crate::backend::interp::Interp;
 use crate::ir::N_INPUTS;
 use crate::backend::{Columns, Evaluator, Kernel, Prepared};
@@ -155,7 +155,7 @@ pub fn steady_state(evals: usize, mut pass: impl FnMut()) -> Steady {
 }
 
 /// Measures scalar JIT, batched JIT and interpreter ns/eval for `k`'s formula with `params`.
-pub fn measure_kernel(k: &Kernel, params: &[f64], opts: MeasureOptions) -> Result<Measurement, JitError> {
+pub fn measure_kernel(k: &Kernel, params: &[f64], opts: MeasureOptions) -> Result<Measurement, NativeError> {
     let f = &k.formula;
     let mut compiles: Vec<Duration> = (0..5)
         .map(|_| {

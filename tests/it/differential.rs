@@ -500,9 +500,8 @@ fn prepared_eval_matches_eval_on_the_catalogue() {
                 for ps in &sets {
                     let prepared = k.prepare(ps);
                     let kind_ok = match (&prepared, k.backend) {
-                        (lobe::backend::Prepared::Jit(_), Backend::Jit) | (lobe::backend::Prepared::Interp(_), Backend::Interp) => true,
-                        #[cfg(feature = "llvm")]
-                        (lobe::backend::Prepared::Llvm(_), Backend::Llvm) => true,
+                        (lobe::backend::Prepared::Native(n), Backend::Jit | Backend::Llvm) => n.backend() == k.backend,
+                        (lobe::backend::Prepared::Interp(_), Backend::Interp) => true,
                         _ => false,
                     };
                     assert!(kind_ok, "{stem}: {} kernel prepared as another backend", k.backend.name());

@@ -378,7 +378,7 @@ fn outlined_library_calls_return_the_interpreters_bits() {
     let x = ir.input(Input::NH, S);
     let y = ir.input(Input::NV, S);
     let mut sum = ir.konst(0.0, S);
-    let n = lobe::backend::jit::OUTLINE_AT + 8;
+    let n = lobe::backend::native::OUTLINE_AT + 8;
     for i in 0..n {
         let f = TRANSCENDENTAL[i % TRANSCENDENTAL.len()];
         let k = ir.konst(1.0 + i as f64 / 8.0, S);

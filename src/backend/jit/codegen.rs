@@ -1,29 +1,30 @@
-//! IR → Cranelift IR: one translator, generic over the lane type, with one method per IR node kind; two
-//! function shapes.
+//! IR → Cranelift IR: the tier's primitives over one translator, generic over the lane type, and its
+//! function shapes ([`crate::backend::native::abi`]'s signatures):
 //!
-//! * prepare: `extern "C" fn(params: *const f64, block: *mut f64)`: the carried parameter-only nodes ([`Plan`]);
-//! * scalar: `extern "C" fn(x: *const f64 /* NL NV NH VR VH */, params, block: *const f64) -> f64`, in `F64`;
-//! * batched: `extern "C" fn(cols: *const *const f64 /* 5 column pointers */, params, block, out: *mut f64,
-//!   len: usize)`; the loop in `F64X2` lanes, the remaining element (odd `len`) in `F64`.
+//! * prepare: the carried parameter-only nodes of the [`Plan`], in `F64`;
+//! * scalar: in `F64`;
+//! * batched: the loop in `F64X2` lanes, the remaining element (odd `len`) in `F64`.
 //!
-//! All translate with the same [`Translator`], which also implements the math library's [`Emit`] so the
-//! builtins' code is emitted in the translator's lanes; what differs between lane types (splatting, lanes,
-//! masks and bit casts, the select that becomes `maxpd`/`minpd`) is the [`Lanes`] trait.
+//! The translator implements the math library's [`Emit`] and the native layer's [`Lower`], so the node
+//! dispatch, the inline builtins and the builtins' code ([`crate::backend::native::lower`]) are emitted in
+//! the translator's lanes; what differs between lane types (splatting, lanes, masks and bit casts, the select
+//! that becomes `maxpd`/`minpd`) is the [`Lanes`] trait.
 //!
-//! Neither checks anything at run time; the safe wrapper in `mod.rs` validates lengths before calling.
+//! None of them checks anything at run time; the safe wrappers in `native::abi` validate lengths before calling.
 //!
 //! Parameter-only nodes (e.g. `pow(Q, 1/k)`) are computed by the prepare function and loaded from the block;
 //! constants and parameters are splatted in the batched function's entry, so the loop body holds only work
 //! that depends on the inputs (Cranelift may still rematerialise a cheap constant next to its use).
 //!
 //! Codegen never sees text from the user: the only names are the builtins table's symbols, and every error
-//! is a [`JitError`] rather than a panic.
+//! is a [`NativeError`] rather than a panic.
 
-use super::JitError;
+use crate::backend::native::lower::{self, Lower};
+use crate::backend::native::{NativeError, Plan};
 use crate::builtins::dd::Arith;
 use crate::builtins::math::{self, Emit};
 use crate::builtins::{Builtin, Libm, Lowering, Mode};
-use crate::ir::{BinOp, Input, Ir, Node, NodeId, N_INPUTS};
+use crate::ir::{Input, Ir, Node, NodeId, N_INPUTS};
 use cranelift_codegen::ir::condcodes::{FloatCC, IntCC};
 use cranelift_codegen::ir::immediates::Ieee64;
 use cranelift_codegen::ir::{
@@ -43,16 +44,6 @@ pub(super) mod shade;
 /// C-library fallback of each trigonometric builtin (huge arguments); with it outlined, each math builtin's
 /// compiled library function ([`Builtin::outlined`]), which includes its fallback.
 pub(super) type Imports = [Option<FuncId>; Builtin::ALL.len()];
-
-/// Above this many math-library call sites a formula calls the library instead of inlining it: inlined, each
-/// site is 20–200 instructions and Cranelift's time grows with them (~5 ms per `sin`), so a 3 000-term formula
-/// would take seconds to compile; called, each site is one call per lane, and the results are the same bits.
-pub const OUTLINE_AT: usize = 24;
-
-/// Whether `ir`'s math builtins are called rather than inlined ([`OUTLINE_AT`]).
-pub(crate) fn outlines(ir: &Ir) -> bool {
-    ir.nodes().iter().filter(|n| matches!(n, Node::Call(b, _) if b.info().lowering == Lowering::Math)).count() > OUTLINE_AT
-}
 
 /// Each distinct builtin of `ir` that imports a function: its symbol, pointer and arity.
 fn symbols(ir: &Ir, mode: Mode, outline: bool) -> Vec<(Builtin, &'static str, *const u8, usize)> {
@@ -89,7 +80,7 @@ fn symbols(ir: &Ir, mode: Mode, outline: bool) -> Vec<(Builtin, &'static str, *c
 
 /// Declares (as imports) the functions the formula may call. The caller registered each symbol with the
 /// `JITBuilder` ([`used_symbols`]), so `finalize_definitions` can resolve every import.
-pub(super) fn declare_imports(module: &mut JITModule, ir: &Ir, mode: Mode, outline: bool) -> Result<Imports, JitError> {
+pub(super) fn declare_imports(module: &mut JITModule, ir: &Ir, mode: Mode, outline: bool) -> Result<Imports, NativeError> {
     let mut imports: Imports = [None; Builtin::ALL.len()];
     for (b, symbol, _, arity) in symbols(ir, mode, outline) {
         let mut sig = module.make_signature();
@@ -252,7 +243,7 @@ struct Shared<'a> {
     mode: Mode,
     /// Whether the host has a fused multiply-add (exact two-products in two instructions).
     fma: bool,
-    /// Whether math builtins are calls to the compiled library ([`OUTLINE_AT`]) rather than inline code.
+    /// Whether math builtins are calls to the compiled library ([`crate::backend::native::OUTLINE_AT`]) rather than inline code.
     outline: bool,
 }
 
@@ -276,7 +267,7 @@ struct Translator<'a, 'b, L> {
     vals: Vec<Option<Value>>,
     source: Source,
     /// An error raised inside an [`Emit`] method (which cannot return one), reported after the builtin.
-    error: Option<JitError>,
+    error: Option<NativeError>,
     lanes: PhantomData<L>,
 }
 
@@ -286,122 +277,14 @@ fn mem() -> MemFlagsData {
 }
 
 impl<L: Lanes> Translator<'_, '_, L> {
-    /// The value of an already translated operand.
-    fn arg(&self, id: NodeId) -> Result<Value, JitError> {
-        self.vals
-            .get(id.index())
-            .copied()
-            .flatten()
-            .ok_or_else(|| JitError::Internal(format!("operand t{} used before it was translated", id.0)))
-    }
-
-    /// Translates node `id` and records the result.
-    fn node(&mut self, id: NodeId) -> Result<Value, JitError> {
-        let v = match *self.cx.ir.node(id) {
-            Node::Const(bits) => self.konst(bits),
-            Node::Input(i) => self.input(i)?,
-            Node::Param(p) => self.param(p),
-            Node::Column(k) => self.column(k)?,
-            Node::Neg(a) => self.neg(a)?,
-            Node::Binary(op, a, b) => self.binary(op, a, b)?,
-            Node::Call(f, args) => self.call(f, args)?,
-        };
-        match self.vals.get_mut(id.index()) {
-            Some(slot) => *slot = Some(v),
-            None => return Err(JitError::Internal(format!("node t{} outside the arena", id.0))),
-        }
-        Ok(v)
-    }
-
-    /// Translates, in order, every node among the first `n` for which `pick` holds.
-    fn nodes(&mut self, n: usize, pick: impl Fn(NodeId) -> bool) -> Result<(), JitError> {
-        for id in self.cx.ir.ids().take(n) {
-            if pick(id) {
-                self.node(id)?;
-            }
-        }
-        Ok(())
-    }
-
-    fn konst(&mut self, bits: u64) -> Value {
-        L::konst(self.b, bits)
-    }
-
-    fn input(&mut self, i: Input) -> Result<Value, JitError> {
-        Ok(match self.source {
-            Source::Ptr(x) => self.b.ins().load(L::TY, mem(), x, (i.index() * 8) as i32),
-            Source::Cols { bases, off } => {
-                let base =
-                    bases[i.index()].ok_or_else(|| JitError::Internal(format!("input {} has no column", i.name())))?;
-                let addr = self.b.ins().iadd(base, off);
-                self.b.ins().load(L::TY, mem(), addr, 0)
-            }
-            Source::Data { .. } => return Err(JitError::Internal(format!("input {} in a shading program", i.name()))),
-        })
-    }
-
-    /// `data_k[off]`: a shading program's column ([`shade`]).
-    fn column(&mut self, k: u16) -> Result<Value, JitError> {
-        let Source::Data { bases, off } = self.source else {
-            return Err(JitError::Internal(format!("data column {k} outside a shading program")));
-        };
-        let base = bases.get(usize::from(k)).copied().flatten().ok_or_else(|| JitError::Internal(format!("data column {k} has no base")))?;
-        let addr = self.b.ins().iadd(base, off);
-        Ok(self.b.ins().load(L::TY, mem(), addr, 0))
-    }
-
-    fn param(&mut self, p: u16) -> Value {
-        let v = self.b.ins().load(types::F64, mem(), self.cx.params, i32::from(p) * 8);
-        L::splat(self.b, v)
-    }
-
-    fn neg(&mut self, a: NodeId) -> Result<Value, JitError> {
-        let a = self.arg(a)?;
-        Ok(self.b.ins().fneg(a))
-    }
-
-    fn binary(&mut self, op: BinOp, a: NodeId, b: NodeId) -> Result<Value, JitError> {
-        let (a, b) = (self.arg(a)?, self.arg(b)?);
-        let ins = self.b.ins();
-        Ok(match op {
-            BinOp::Add => ins.fadd(a, b),
-            BinOp::Sub => ins.fsub(a, b),
-            BinOp::Mul => ins.fmul(a, b),
-            BinOp::Div => ins.fdiv(a, b),
-        })
-    }
-
-    fn call(&mut self, f: Builtin, args: [NodeId; 3]) -> Result<Value, JitError> {
-        if f.info().lowering == Lowering::Inline {
-            return self.inline(f, args);
-        }
-        let vals = args[..f.arity()].iter().map(|a| self.arg(*a)).collect::<Result<Vec<_>, _>>()?;
-        if self.cx.outline && f.info().lowering == Lowering::Math {
-            return self.library_call(f, &vals);
-        }
-        let mode = self.cx.mode;
-        let v = f.emit(self, mode, &vals);
-        if let Some(e) = self.error.take() {
-            return Err(e);
-        }
-        v.ok_or_else(|| JitError::Internal(format!("builtin `{}` has no library code", f.name())))
-    }
-
-    /// The compiled library function of `f`, called once per lane.
-    fn library_call(&mut self, f: Builtin, args: &[Value]) -> Result<Value, JitError> {
-        let callee = self.cx.callees[f as usize]
-            .ok_or_else(|| JitError::Internal(format!("library function of `{}` was not imported", f.name())))?;
-        self.call_lanes(callee, args)
-    }
-
     /// `callee` called on each lane of `args` (`F64` scalars), the results gathered into one value.
-    fn call_lanes(&mut self, callee: FuncRef, args: &[Value]) -> Result<Value, JitError> {
+    fn call_lanes(&mut self, callee: FuncRef, args: &[Value]) -> Result<Value, NativeError> {
         let mut lanes = Vec::with_capacity(usize::from(L::LANES));
         for lane in 0..L::LANES {
             let vals: Vec<Value> = args.iter().map(|a| L::lane(self.b, *a, lane)).collect();
             let inst = self.b.ins().call(callee, &vals);
             let r = self.b.inst_results(inst).first().copied();
-            lanes.push(r.ok_or(JitError::Internal("call without result".into()))?);
+            lanes.push(r.ok_or(NativeError::internal("call without result"))?);
         }
         Ok(L::from_lanes(self.b, &lanes))
     }
@@ -417,80 +300,60 @@ impl<L: Lanes> Translator<'_, '_, L> {
             }
         })
     }
+}
 
-    /// sqrt, abs, min, max, clamp, fma: native instructions with exactly the table's semantics.
-    fn inline(&mut self, f: Builtin, args: [NodeId; 3]) -> Result<Value, JitError> {
-        let x = self.arg(args[0])?;
-        Ok(match f {
-            Builtin::Sqrt => self.b.ins().sqrt(x),
-            Builtin::Abs => self.b.ins().fabs(x),
-            Builtin::Min => self.min(args[0], args[1])?,
-            Builtin::Max => self.max(args[0], args[1])?,
-            // clamp(x, lo, hi) = min(max(x, lo), hi)
-            Builtin::Clamp => {
-                let m = self.max(args[0], args[1])?;
-                self.min_value(m, args[2])?
+/// Where the native lowering's values come from in Cranelift: the translator's table, the input pointer or
+/// columns, the parameters, `fmin`/`fmax`, and the imported library functions.
+impl<L: Lanes> Lower for Translator<'_, '_, L> {
+    fn ir(&self) -> &Ir {
+        self.cx.ir
+    }
+    fn mode(&self) -> Mode {
+        self.cx.mode
+    }
+    fn outline(&self) -> bool {
+        self.cx.outline
+    }
+    fn table(&mut self) -> &mut [Option<Value>] {
+        &mut self.vals
+    }
+    fn input(&mut self, i: Input) -> Result<Value, NativeError> {
+        Ok(match self.source {
+            Source::Ptr(x) => self.b.ins().load(L::TY, mem(), x, (i.index() * 8) as i32),
+            Source::Cols { bases, off } => {
+                let base = bases[i.index()].ok_or_else(|| NativeError::Internal(format!("input {} has no column", i.name())))?;
+                let addr = self.b.ins().iadd(base, off);
+                self.b.ins().load(L::TY, mem(), addr, 0)
             }
-            // One rounding, as Rust's `mul_add` (the interpreter's); a libm call on a target without FMA.
-            Builtin::Fma => {
-                let (y, z) = (self.arg(args[1])?, self.arg(args[2])?);
-                Arith::fma(self, x, y, z)
-            }
-            other => return Err(JitError::Internal(format!("builtin `{}` is not an inline lowering", other.name()))),
+            Source::Data { .. } => return Err(NativeError::Internal(format!("input {} in a shading program", i.name()))),
         })
     }
-
-    /// A non-NaN constant operand, if `id` is one (for the min/max specialisations below).
-    fn ordered_const(&self, id: NodeId) -> Option<f64> {
-        self.cx.ir.node(id).as_const().filter(|c| !c.is_nan())
-    }
-
-    /// IEEE-2019 `maximum(a, b)`. Against a non-NaN constant `c` (the lowering's `clamp(INPUT, 0, 1)` and
-    /// `max(raw, 0)`), a single `maxsd`/`maxpd` replaces Cranelift's general sequence (branches in scalar
-    /// code, eight instructions in vector code):
-    /// `v < c ? c : v` (x86 pseudo-max, operands ordered so that a NaN `v` is returned) equals `maximum(v, c)`
-    /// for every `v` except `v = −0, c = +0`, which `+ 0.0` repairs (−0 + 0 = +0, and it is the identity on
-    /// everything else, NaN included).
-    fn max(&mut self, a: NodeId, b: NodeId) -> Result<Value, JitError> {
-        let (va, vb) = (self.arg(a)?, self.arg(b)?);
-        let (v, c, cv) = match (self.ordered_const(b), self.ordered_const(a)) {
-            (Some(c), _) => (va, c, vb),
-            (None, Some(c)) => (vb, c, va),
-            (None, None) => return Ok(self.b.ins().fmax(va, vb)),
+    /// `data_k[off]`: a shading program's column ([`shade`]).
+    fn column(&mut self, k: u16) -> Result<Value, NativeError> {
+        let Source::Data { bases, off } = self.source else {
+            return Err(NativeError::Internal(format!("data column {k} outside a shading program")));
         };
-        // pmax(c, v) = v < c ? c : v  (lowered to one maxsd / maxpd)
-        let lt = self.b.ins().fcmp(FloatCC::LessThan, v, cv);
-        let m = L::select(self.b, lt, cv, v);
-        Ok(if c == 0.0 && c.is_sign_positive() {
-            let z = self.konst(0);
-            self.b.ins().fadd(m, z)
-        } else {
-            m
-        })
+        let base = bases.get(usize::from(k)).copied().flatten().ok_or_else(|| NativeError::Internal(format!("data column {k} has no base")))?;
+        let addr = self.b.ins().iadd(base, off);
+        Ok(self.b.ins().load(L::TY, mem(), addr, 0))
     }
-
-    /// IEEE-2019 `minimum(a, b)`; against a non-NaN constant `c ≠ −0`, `c < v ? c : v` (one `minsd`, a NaN
-    /// `v` returned) is exact; `c = −0` keeps the general sequence (`v = +0` would give +0).
-    fn min(&mut self, a: NodeId, b: NodeId) -> Result<Value, JitError> {
-        if self.ordered_const(a).is_some() && self.ordered_const(b).is_none() {
-            let vb = self.arg(b)?;
-            return self.min_value(vb, a);
-        }
-        let va = self.arg(a)?;
-        self.min_value(va, b)
+    fn param(&mut self, p: u16) -> Result<Value, NativeError> {
+        let v = self.b.ins().load(types::F64, mem(), self.cx.params, i32::from(p) * 8);
+        Ok(L::splat(self.b, v))
     }
-
-    /// `minimum(v, b)` with `v` already translated.
-    fn min_value(&mut self, v: Value, b: NodeId) -> Result<Value, JitError> {
-        let vb = self.arg(b)?;
-        match self.ordered_const(b) {
-            Some(c) if c.to_bits() != (-0.0f64).to_bits() => {
-                // pmin(c, v) = c < v ? c : v  (lowered to one minsd / minpd)
-                let lt = self.b.ins().fcmp(FloatCC::LessThan, vb, v);
-                Ok(L::select(self.b, lt, vb, v))
-            }
-            _ => Ok(self.b.ins().fmin(v, vb)),
-        }
+    fn minimum(&mut self, a: Value, b: Value) -> Value {
+        self.b.ins().fmin(a, b)
+    }
+    fn maximum(&mut self, a: Value, b: Value) -> Value {
+        self.b.ins().fmax(a, b)
+    }
+    /// The compiled library function of `f`, called once per lane.
+    fn library(&mut self, f: Builtin, args: &[Value]) -> Result<Value, NativeError> {
+        let callee = self.cx.callees[f as usize].ok_or_else(|| NativeError::Internal(format!("library function of `{}` was not imported", f.name())))?;
+        self.call_lanes(callee, args)
+    }
+    fn take_error(&mut self) -> Option<NativeError> {
+        self.error.take()
     }
 }
 
@@ -614,7 +477,7 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
     /// and tails gathered by two shuffles (`punpcklqdq`/`punpckhqdq`); in `F64`, two scalar loads.
     fn lookup_pair(&mut self, table: &'static [[f64; 2]], x: Value) -> (Value, Value) {
         if !table.len().is_power_of_two() {
-            self.error = Some(JitError::Internal("lookup in a table whose length is not a power of two".into()));
+            self.error = Some(NativeError::internal("lookup in a table whose length is not a power of two"));
             return (x, x);
         }
         let magic = L::konst(self.b, math::MAGIC.to_bits());
@@ -635,7 +498,7 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
             return (head, self.b.ins().load(types::F64, flags, rows[0], 8));
         }
         if L::LANES != 2 {
-            self.error = Some(JitError::Internal("lookup_pair handles one or two lanes".into()));
+            self.error = Some(NativeError::internal("lookup_pair handles one or two lanes"));
             return (x, x);
         }
         let le = MemFlagsData::new().with_endianness(Endianness::Little);
@@ -681,56 +544,20 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
     /// `any(m) ? (m ? libm(x) : r) : r`: the per-lane calls are in a [`Emit::rare`] block.
     fn fallback(&mut self, m: Value, x: Value, r: Value, f: Builtin) -> Value {
         let Some(callee) = self.cx.callees[f as usize] else {
-            self.error = Some(JitError::Internal(format!("fallback of `{}` was not imported", f.name())));
+            self.error = Some(NativeError::Internal(format!("fallback of `{}` was not imported", f.name())));
             return r;
         };
         self.rare_lanes(m, r, callee, &[x])
     }
 }
 
-/// Where each node of a compacted IR is computed: the prepared parameter block or the kernels.
-///
-/// Nodes that read no input are *invariant*. The non-trivial ones a kernel needs (read by an input-dependent
-/// node, or the root itself when the formula reads no input) are *carried*: the prepare function computes them
-/// once per parameter set into a block of `f64`s, and both kernels load them from there, so per-call and
-/// per-element work is only what depends on the inputs. Constants and bare parameters are not carried (a
-/// constant is an immediate, a parameter one load).
-pub(crate) struct Plan {
-    inv: Vec<bool>,
-    /// Block slot of each carried node, in block order.
-    pub(crate) carried: Vec<NodeId>,
-    pub(crate) root: NodeId,
-}
-
-impl Plan {
-    pub(crate) fn new(ir: &Ir, root: NodeId) -> Plan {
-        let n = root.index() + 1;
-        let inv = ir.invariant();
-        let mut needed = vec![false; ir.len()];
-        for id in ir.ids().take(n) {
-            if !inv[id.index()] {
-                ir.node(id).for_each_arg(|a| needed[a.index()] |= inv[a.index()]);
-            }
-        }
-        needed[root.index()] |= inv[root.index()];
-        let trivial = |id: NodeId| matches!(ir.node(id), Node::Const(_) | Node::Param(_));
-        let carried = ir.ids().take(n).filter(|id| needed[id.index()] && !trivial(*id)).collect();
-        Plan { inv, carried, root }
+/// Node values loaded from the block (`block[k]` for the plan's k-th carried node) as `F64`, indexed by node.
+fn load_carried(plan: &Plan, b: &mut FunctionBuilder, block: Value, len: usize) -> Vec<Option<Value>> {
+    let mut vals = vec![None; len];
+    for (k, id) in plan.carried.iter().enumerate() {
+        vals[id.index()] = Some(b.ins().load(types::F64, mem(), block, (k * 8) as i32));
     }
-
-    /// Whether node `id` is computed per call / per element (reads an input).
-    pub(crate) fn variant(&self, id: NodeId) -> bool {
-        !self.inv[id.index()]
-    }
-
-    /// Node values loaded from the block (`block[k]` for the k-th carried node) as `F64`, indexed by node.
-    fn load_carried(&self, b: &mut FunctionBuilder, block: Value, len: usize) -> Vec<Option<Value>> {
-        let mut vals = vec![None; len];
-        for (k, id) in self.carried.iter().enumerate() {
-            vals[id.index()] = Some(b.ins().load(types::F64, mem(), block, (k * 8) as i32));
-        }
-        vals
-    }
+    vals
 }
 
 fn import_callees(
@@ -780,7 +607,7 @@ pub(super) struct Build<'a> {
     pub mode: Mode,
     /// The host has a native fused multiply-add.
     pub fma: bool,
-    /// Math builtins are called, not inlined ([`outlines`]).
+    /// Math builtins are called, not inlined ([`crate::backend::native::outlines`]).
     pub outline: bool,
 }
 
@@ -809,16 +636,16 @@ pub(super) fn build_prepare(
     ctx: &mut Context,
     fctx: &mut FunctionBuilderContext,
     w: &Build,
-) -> Result<(), JitError> {
+) -> Result<(), NativeError> {
     let (mut b, callees, args) = begin(module, ctx, fctx, prepare_signature(module), w.imports);
-    let [params, block] = args[..] else { return Err(JitError::Internal("prepare signature".into())) };
+    let [params, block] = args[..] else { return Err(NativeError::internal("prepare signature")) };
     let cx = Shared { ir: w.ir, params, callees, invariants: vec![], mode: w.mode, fma: w.fma, outline: w.outline };
     // Invariant nodes read no input: the source is never used.
     let mut t = cx.translator::<F64>(&mut b, vec![None; w.ir.len()], Source::Ptr(params));
-    t.nodes(w.plan.root.index() + 1, |id| !w.plan.variant(id))?;
+    lower::nodes(&mut t, w.plan.len(), |id| w.plan.in_prepare(id))?;
     let vals = std::mem::take(&mut t.vals);
     for (k, id) in w.plan.carried.iter().enumerate() {
-        let v = vals[id.index()].ok_or_else(|| JitError::Internal(format!("carried t{} not translated", id.0)))?;
+        let v = vals[id.index()].ok_or_else(|| NativeError::Internal(format!("carried t{} not translated", id.0)))?;
         b.ins().store(mem(), v, block, (k * 8) as i32);
     }
     b.ins().return_(&[]);
@@ -832,15 +659,15 @@ pub(super) fn build_scalar(
     ctx: &mut Context,
     fctx: &mut FunctionBuilderContext,
     w: &Build,
-) -> Result<(), JitError> {
+) -> Result<(), NativeError> {
     let (mut b, callees, args) = begin(module, ctx, fctx, scalar_signature(module), w.imports);
-    let [x, params, block] = args[..] else { return Err(JitError::Internal("scalar signature".into())) };
+    let [x, params, block] = args[..] else { return Err(NativeError::internal("scalar signature")) };
     let cx = Shared { ir: w.ir, params, callees, invariants: vec![], mode: w.mode, fma: w.fma, outline: w.outline };
-    let vals = w.plan.load_carried(&mut b, block, w.ir.len());
+    let vals = load_carried(w.plan, &mut b, block, w.ir.len());
     let mut t = cx.translator::<F64>(&mut b, vals, Source::Ptr(x));
     let root = w.plan.root;
-    t.nodes(root.index() + 1, |id| w.plan.variant(id) || matches!(w.ir.node(id), Node::Const(_) | Node::Param(_)))?;
-    let r = t.arg(root)?;
+    lower::nodes(&mut t, w.plan.len(), |id| w.plan.in_scalar(id))?;
+    let r = t.value(root)?;
     b.ins().return_(&[r]);
     b.finalize(module.target_config());
     Ok(())
@@ -865,13 +692,12 @@ pub(super) fn build_batch(
     ctx: &mut Context,
     fctx: &mut FunctionBuilderContext,
     w: &Build,
-) -> Result<(), JitError> {
+) -> Result<(), NativeError> {
     let ptr = module.target_config().pointer_type();
     let (ir, plan, root) = (w.ir, w.plan, w.plan.root);
     let used = ir.used_inputs(root);
-    let n = root.index() + 1;
     let (mut b, callees, args) = begin(module, ctx, fctx, batch_signature(module), w.imports);
-    let [cols, params, block, out, len] = args[..] else { return Err(JitError::Internal("batch signature".into())) };
+    let [cols, params, block, out, len] = args[..] else { return Err(NativeError::internal("batch signature")) };
 
     // Entry: column bases, the invariants the loop reads (F64), their splats, the length of the vector part.
     let mut bases = [None; N_INPUTS];
@@ -880,16 +706,7 @@ pub(super) fn build_batch(
     }
     let zero = b.ins().iconst(ptr, 0);
     let mut cx = Shared { ir, params, callees, invariants: vec![], mode: w.mode, fma: w.fma, outline: w.outline };
-    let vals = plan.load_carried(&mut b, block, ir.len());
-    let mut t = cx.translator::<F64>(&mut b, vals, Source::Cols { bases, off: zero });
-    t.nodes(n, |id| !plan.variant(id) && matches!(ir.node(id), Node::Const(_) | Node::Param(_)))?;
-    cx.invariants = std::mem::take(&mut t.vals);
-    let mut splats = vec![None; ir.len()];
-    for id in ir.ids().take(n) {
-        if let (false, Some(s)) = (plan.variant(id), cx.invariants[id.index()]) {
-            splats[id.index()] = Some(V::splat(&mut b, s));
-        }
-    }
+    let splats = entry(&mut b, &mut cx, plan, block, Source::Cols { bases, off: zero })?;
     // The loop-variant nodes of one step, translated in each lane type over the shared invariants.
     let step = LoopStep { cx: &cx, plan, bases, out };
     batch_loop(&mut b, ptr, len, zero, splats, cx.invariants.clone(), &step, 1)?;
@@ -897,11 +714,29 @@ pub(super) fn build_batch(
     Ok(())
 }
 
+/// The entry of a batched function (kernel or program): the carried nodes loaded from the block and the
+/// plan's entry nodes (invariant constants and parameters) computed in `F64`, kept in `cx.invariants` for the
+/// tail; returned: their splats to [`V`], which the loop reads.
+fn entry(b: &mut FunctionBuilder, cx: &mut Shared, plan: &Plan, block: Value, source: Source) -> Result<Vec<Option<Value>>, NativeError> {
+    let len = cx.ir.len();
+    let vals = load_carried(plan, b, block, len);
+    let mut t = cx.translator::<F64>(b, vals, source);
+    lower::nodes(&mut t, plan.len(), |id| plan.in_entry(id))?;
+    cx.invariants = std::mem::take(&mut t.vals);
+    let mut splats = vec![None; len];
+    for id in cx.ir.ids().take(plan.len()) {
+        if let (false, Some(s)) = (plan.variant(id), cx.invariants[id.index()]) {
+            splats[id.index()] = Some(V::splat(b, s));
+        }
+    }
+    Ok(splats)
+}
+
 /// One step of a batched function's loop, emitted in each lane type: `at.len()` copies, copy `c` for the
 /// `L::LANES` elements at index `at[c]` over the invariants `vals[c]` (as `L` values). Copies may interleave
 /// their instructions (the shading programs' wide step) or follow one another.
 trait LoopBody {
-    fn emit<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Vec<Option<Value>>>, at: &[Value]) -> Result<(), JitError>;
+    fn emit<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Vec<Option<Value>>>, at: &[Value]) -> Result<(), NativeError>;
 }
 
 /// The loop of every batched function (kernels and multi-output programs), continuing from the entry block
@@ -927,11 +762,11 @@ fn batch_loop<S: LoopBody>(
     invariants: Vec<Option<Value>>,
     step: &S,
     wide: usize,
-) -> Result<(), JitError> {
+) -> Result<(), NativeError> {
     // A wider lane type leaves up to LANES − 1 elements and needs a tail loop instead of one tail element.
     const { assert!(V::LANES == 1 || V::LANES == 2, "the batch tail handles one element") };
     if !wide.is_power_of_two() {
-        return Err(JitError::Internal(format!("a loop step of {wide} vectors")));
+        return Err(NativeError::Internal(format!("a loop step of {wide} vectors")));
     }
     let start = if wide > 1 {
         let (header, body, rest) = (b.create_block(), b.create_block(), b.create_block());
@@ -1004,14 +839,14 @@ struct LoopStep<'a> {
 impl LoopBody for LoopStep<'_> {
     /// Per copy: translates the loop-variant nodes for the `L::LANES` elements at index `i` and stores the
     /// root to `out[i..]`.
-    fn emit<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Vec<Option<Value>>>, at: &[Value]) -> Result<(), JitError> {
+    fn emit<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Vec<Option<Value>>>, at: &[Value]) -> Result<(), NativeError> {
         for (vals, &i) in vals.into_iter().zip(at) {
             let off = b.ins().ishl_imm_u(i, 3);
             let source = Source::Cols { bases: self.bases, off };
             let mut t = self.cx.translator::<L>(b, vals, source);
             let root = self.plan.root;
-            t.nodes(root.index() + 1, |id| self.plan.variant(id))?;
-            let r = t.arg(root)?;
+            lower::nodes(&mut t, self.plan.len(), |id| self.plan.variant(id))?;
+            let r = t.value(root)?;
             let dst = b.ins().iadd(self.out, off);
             b.ins().store(mem(), r, dst, 0);
         }

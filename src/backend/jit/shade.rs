@@ -17,33 +17,15 @@
 //! anchored value; the interleaved loop costs spills (16 vector registers for four vectors' live values) and wins
 //! where latency dominates (measured: BENCHMARKS.md).
 //!
-//! A child of `codegen`, so it uses the translator's private parts and its one loop builder as they are;
-//! codegen only gained the `Source::Data` variant and the `Node::Column` arm.
+//! A child of `codegen`, so it uses the translator's private parts and its one loop builder as they are. The
+//! program's plan and the order of a step's nodes and regions are the native layer's, shared with the LLVM
+//! tier ([`Plan::of_program`], [`lower::program_step`]).
 
 use super::*;
 use crate::backend::program::{Class, Program, Region, MAX_COLUMNS};
+use crate::backend::native::lower::Walk;
+use crate::backend::native::plan::calls_math;
 use cranelift_codegen::ir::{StackSlotData, StackSlotKind};
-
-/// The carried-node plan of a program: the kernel's plan over the whole arena, plus every output that reads
-/// no column and is not a bare constant or parameter (the loop stores it from the block).
-pub(crate) fn plan(p: &Program) -> Result<Plan, JitError> {
-    let last = NodeId(p.ir.len().checked_sub(1).ok_or(JitError::Internal("empty program".into()))? as u32);
-    let mut plan = Plan::new(&p.ir, last);
-    for &o in &p.outputs {
-        let trivial = matches!(p.ir.node(o), Node::Const(_) | Node::Param(_));
-        if !plan.variant(o) && !trivial && !plan.carried.contains(&o) {
-            plan.carried.push(o);
-        }
-    }
-    Ok(plan)
-}
-
-/// Whether the program calls the math library instead of inlining it: [`OUTLINE_AT`] applies per copy of
-/// the formula (one per region: a light in the renderer's programs), so more regions do not switch a formula to calls.
-pub(crate) fn outlines(p: &Program) -> bool {
-    let calls = p.ir.nodes().iter().filter(|n| matches!(n, Node::Call(b, _) if b.info().lowering == Lowering::Math)).count();
-    calls / p.regions.len().max(1) > OUTLINE_AT
-}
 
 /// `fn(cols: *const *const f64, params: *const f64, block: *const f64, outs: *const *mut f64, len: usize)`.
 pub(in crate::backend::jit) fn signature(module: &JITModule) -> Signature {
@@ -58,12 +40,11 @@ pub(in crate::backend::jit) fn build(
     fctx: &mut FunctionBuilderContext,
     w: &Build,
     p: &Program,
-) -> Result<(), JitError> {
+) -> Result<(), NativeError> {
     let ptr = module.target_config().pointer_type();
     let (ir, plan) = (w.ir, w.plan);
-    let n = ir.len();
     let (mut b, callees, args) = begin(module, ctx, fctx, signature(module), w.imports);
-    let [cols, params, block, outs, len] = args[..] else { return Err(JitError::Internal("program signature".into())) };
+    let [cols, params, block, outs, len] = args[..] else { return Err(NativeError::internal("program signature")) };
 
     let mut bases = [None; MAX_COLUMNS];
     for (k, base) in bases.iter_mut().enumerate().take(p.columns.min(MAX_COLUMNS)) {
@@ -72,16 +53,7 @@ pub(in crate::backend::jit) fn build(
     let out_bases: Vec<Value> = (0..p.outputs.len()).map(|k| b.ins().load(ptr, mem(), outs, (k * 8) as i32)).collect();
     let zero = b.ins().iconst(ptr, 0);
     let mut cx = Shared { ir, params, callees, invariants: vec![], mode: w.mode, fma: w.fma, outline: w.outline };
-    let vals = plan.load_carried(&mut b, block, n);
-    let mut t = cx.translator::<F64>(&mut b, vals, Source::Data { bases, off: zero });
-    t.nodes(n, |id| !plan.variant(id) && matches!(ir.node(id), Node::Const(_) | Node::Param(_)))?;
-    cx.invariants = std::mem::take(&mut t.vals);
-    let mut splats = vec![None; n];
-    for id in ir.ids() {
-        if let (false, Some(s)) = (plan.variant(id), cx.invariants[id.index()]) {
-            splats[id.index()] = Some(V::splat(&mut b, s));
-        }
-    }
+    let splats = entry(&mut b, &mut cx, plan, block, Source::Data { bases, off: zero })?;
     let (first, count) = anchors(p);
     let slot = b.create_sized_stack_slot(StackSlotData::new(StackSlotKind::ExplicitSlot, (16 * STEP * count.max(1)) as u32, 4));
     let anchor = b.ins().stack_addr(ptr, slot, 0);
@@ -105,7 +77,7 @@ const STEP: usize = 4;
 /// costs registers (more spills), which one region of cheap arithmetic does not win back (measured:
 /// BENCHMARKS.md, 2026-11-30 issue 11 third pass).
 fn interleaves(p: &Program) -> bool {
-    p.regions.len() > 1 || p.ir.nodes().iter().any(|n| matches!(n, Node::Call(b, _) if b.info().lowering == Lowering::Math))
+    p.regions.len() > 1 || calls_math(p)
 }
 
 /// One step of the program's loop, whatever its lane type.
@@ -122,35 +94,29 @@ struct Step<'a> {
 }
 
 impl LoopBody for Step<'_> {
-    fn emit<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Vec<Option<Value>>>, at: &[Value]) -> Result<(), JitError> {
+    fn emit<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Vec<Option<Value>>>, at: &[Value]) -> Result<(), NativeError> {
         self.emit_copies::<L>(b, vals, at)
     }
 }
 
 impl Step<'_> {
     /// Node `id` translated in copy `c` (the copies' tables are swapped in and out of one translator).
-    fn on<L: Lanes>(&self, b: &mut FunctionBuilder, k: &mut Copies, c: usize, id: NodeId) -> Result<Value, JitError> {
+    fn on<L: Lanes>(&self, b: &mut FunctionBuilder, k: &mut Copies, c: usize, id: NodeId) -> Result<Value, NativeError> {
         let mut t = self.cx.translator::<L>(b, std::mem::take(&mut k.vals[c]), k.src[c]);
-        let v = t.node(id);
+        let v = lower::node(&mut t, id);
         k.vals[c] = std::mem::take(&mut t.vals);
         v
     }
 
     /// The step for the vectors at indices `at` (one copy each, their instructions interleaved node by
     /// node): the outer nodes in order, each region where the walk reaches its last output, then the stores.
-    fn emit_copies<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Vec<Option<Value>>>, at: &[Value]) -> Result<(), JitError> {
+    fn emit_copies<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Vec<Option<Value>>>, at: &[Value]) -> Result<(), NativeError> {
         let offs: Vec<Value> = at.iter().map(|i| b.ins().ishl_imm_u(*i, 3)).collect();
         let mut k = Copies { vals, src: offs.iter().map(|&off| Source::Data { bases: self.bases, off }).collect() };
-        let mut next = 0;
-        for id in self.p.ir.ids() {
-            if self.p.class[id.index()] == Class::Outer {
-                for c in 0..at.len() {
-                    self.on::<L>(b, &mut k, c, id)?;
-                }
-            }
-            while let Some(r) = self.p.regions.get(next).filter(|r| r.at == id) {
-                self.region::<L>(b, &mut k, r, &self.first[next])?;
-                next += 1;
+        for w in lower::program_step(self.p) {
+            match w {
+                Walk::Outer(id) => (0..at.len()).try_for_each(|c| self.on::<L>(b, &mut k, c, id).map(drop))?,
+                Walk::Region(r, region) => self.region::<L>(b, &mut k, region, &self.first[r])?,
             }
         }
         for (c, off) in offs.iter().enumerate() {
@@ -166,7 +132,7 @@ impl Step<'_> {
     /// `any(lit ≠ 0 in some copy) ? region's outputs : +0`, the region's nodes (every copy's, interleaved) in a
     /// block of their own; first the outer values it is the first to read are stored to the anchor slot
     /// ([`anchors`]). A copy with no lit lane may run the region too: its outputs are then the selects' +0.
-    fn region<L: Lanes>(&self, b: &mut FunctionBuilder, k: &mut Copies, r: &Region, first: &[(NodeId, i32)]) -> Result<(), JitError> {
+    fn region<L: Lanes>(&self, b: &mut FunctionBuilder, k: &mut Copies, r: &Region, first: &[(NodeId, i32)]) -> Result<(), NativeError> {
         let copies = k.vals.len();
         for (c, vals) in k.vals.iter().enumerate() {
             for &(a, off) in first {
@@ -179,7 +145,7 @@ impl Step<'_> {
             let m = b.ins().fcmp(FloatCC::NotEqual, arg(vals, r.lit)?, z);
             any_mask = Some(any_mask.map_or(m, |a| b.ins().bor(a, m)));
         }
-        let any = L::any(b, any_mask.ok_or(JitError::Internal("a step of no vectors".into()))?);
+        let any = L::any(b, any_mask.ok_or(NativeError::internal("a step of no vectors"))?);
         let inside = b.create_block();
         let join = b.create_block();
         let params: Vec<Value> = (0..copies * r.outputs.len()).map(|_| b.append_block_param(join, L::TY)).collect();
@@ -220,8 +186,8 @@ struct Copies {
 }
 
 /// The value of an already translated node in one copy's table.
-fn arg(vals: &[Option<Value>], id: NodeId) -> Result<Value, JitError> {
-    vals.get(id.index()).copied().flatten().ok_or_else(|| JitError::Internal(format!("operand t{} used before it was translated", id.0)))
+fn arg(vals: &[Option<Value>], id: NodeId) -> Result<Value, NativeError> {
+    vals.get(id.index()).copied().flatten().ok_or_else(|| NativeError::Internal(format!("operand t{} used before it was translated", id.0)))
 }
 
 /// The outer values guarded regions read, each with its own offset in the anchor slot, listed under the

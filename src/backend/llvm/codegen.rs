@@ -1,9 +1,11 @@
-//! IR → LLVM IR: one generator over `<W x double>` lanes (W = 1 for the prepare function, the host's lane count
-//! for the batch loop), with one method per IR node kind, implementing the math library's [`Emit`] so every
-//! builtin is the library's code (the definition the interpreter runs on `f64`), emitted in the kernel's lanes.
+//! IR → LLVM IR: the tier's primitives over one generator of `<W x double>` lanes (W = 1 for the prepare and
+//! scalar functions, the host's lane count for the batch loop), implementing the math library's [`Emit`] and
+//! the native layer's [`Lower`], so the node dispatch, the inline builtins and every builtin's code (the
+//! definition the interpreter runs on `f64`) are [`crate::backend::native::lower`]'s, emitted in these lanes.
 //!
-//! The Cranelift tier's function shapes:
+//! The native layer's function shapes ([`crate::backend::native::abi`]):
 //! * `lobe_prepare(params: *const f64, block: *mut f64)`: the carried parameter-only nodes ([`Plan`]);
+//! * `lobe_scalar(x: *const f64, params, block) -> f64`: a kernel on one point;
 //! * `lobe_batch(cols: *const *const f64, params, block, out: *mut f64, len: usize)`: a kernel;
 //! * `lobe_program(cols, params, block, outs: *const *mut f64, len: usize)`: a multi-output program;
 //!
@@ -16,14 +18,16 @@
 //!
 //! Where the Cranelift tier calls a Rust function (the library compiled by rustc for outlined call sites and
 //! the rare lanes of `expmuldiv`, the C library's trigonometric fallbacks), this calls the same `extern "C"`
-//! function, once per lane, through its address as a constant. Errors are collected, never panicked on.
+//! function, once per lane, through its address as a constant. Errors are collected (the first one, as a
+//! [`NativeError`]), never panicked on.
 
-use crate::backend::jit::Plan;
-use crate::backend::program::{Class, Program, Region, MAX_COLUMNS};
+use crate::backend::native::lower::{self, Lower, Walk};
+use crate::backend::native::{NativeError, Plan};
+use crate::backend::program::{Program, Region, MAX_COLUMNS};
 use crate::builtins::dd::Arith;
 use crate::builtins::math::{self, Emit};
-use crate::builtins::{Builtin, Libm, Lowering, Mode};
-use crate::ir::{BinOp, Input, Ir, Node, NodeId, N_INPUTS};
+use crate::builtins::{Builtin, Libm, Mode};
+use crate::ir::{Input, Ir, Node, N_INPUTS};
 use inkwell::attributes::AttributeLoc;
 use inkwell::basic_block::BasicBlock;
 use inkwell::builder::{Builder, BuilderError};
@@ -34,11 +38,12 @@ use inkwell::types::{BasicTypeEnum, VectorType};
 use inkwell::values::{BasicMetadataValueEnum, BasicValue, BasicValueEnum, FunctionValue, IntValue, PointerValue, VectorValue};
 use inkwell::{FloatPredicate, IntPredicate};
 
-/// Names of the functions: a kernel's module has the batch loop, a program's the program loop; both may have
-/// the prepare function.
+/// Names of the functions: a kernel's module has the scalar function and the batch loop, a program's the
+/// program loop; both may have the prepare function.
 pub(super) const BATCH: &str = "lobe_batch";
 pub(super) const PREPARE: &str = "lobe_prepare";
 pub(super) const PROGRAM: &str = "lobe_program";
+pub(super) const SCALAR: &str = "lobe_scalar";
 
 /// What every function of one module shares.
 pub(super) struct Unit<'a, 'ctx> {
@@ -51,7 +56,7 @@ pub(super) struct Unit<'a, 'ctx> {
     pub fma: bool,
     /// The host has AVX-512 ([`super::Host::avx512`]).
     pub avx512: bool,
-    /// Math builtins are calls to the compiled library ([`crate::backend::jit::OUTLINE_AT`]), not inline code.
+    /// Math builtins are calls to the compiled library ([`crate::backend::native::OUTLINE_AT`]), not inline code.
     pub outline: bool,
     /// `target-cpu` and `target-features` of every function: the host's.
     pub cpu: &'a str,
@@ -76,7 +81,7 @@ struct Gen<'a, 'ctx> {
     /// A program's data columns in the loop step (`Node::Column(k)`).
     columns: Vec<Option<VectorValue<'ctx>>>,
     /// The first error raised (inside an [`Emit`] method, which cannot return one).
-    error: Option<String>,
+    error: Option<NativeError>,
 }
 
 impl<'a, 'ctx> Gen<'a, 'ctx> {
@@ -99,7 +104,7 @@ impl<'a, 'ctx> Gen<'a, 'ctx> {
 
     fn fail(&mut self, e: impl std::fmt::Display) {
         if self.error.is_none() {
-            self.error = Some(e.to_string());
+            self.error = Some(NativeError::internal(e));
         }
     }
 
@@ -274,30 +279,6 @@ impl<'a, 'ctx> Gen<'a, 'ctx> {
         (heads, column(self, 1))
     }
 
-    /// IEEE-2019 `maximum(v, c)` for a non-NaN constant `c` (value `cv`): `v < c ? c : v` (one `maxpd`, a NaN `v`
-    /// returned) equals it for every `v` but `v = −0, c = +0`, which `+ 0.0` repairs (the identity on
-    /// everything else, NaN included). The Cranelift tier's coding, so the same bits.
-    fn max_const(&mut self, v: VectorValue<'ctx>, cv: VectorValue<'ctx>, c: f64) -> VectorValue<'ctx> {
-        let lt = Emit::lt(self, v, cv);
-        let m = Emit::select(self, lt, cv, v);
-        if c.to_bits() == 0 {
-            let zero = self.fconst(0);
-            Arith::add(self, m, zero)
-        } else {
-            m
-        }
-    }
-
-    /// IEEE-2019 `minimum(v, c)` for a non-NaN constant `c` (value `cv`): `c < v ? c : v` (one `minpd`, a NaN
-    /// `v` returned) is exact for `c ≠ −0`; `c = −0` keeps the intrinsic (`v = +0` would give +0).
-    fn min_const(&mut self, v: VectorValue<'ctx>, cv: VectorValue<'ctx>, c: f64) -> VectorValue<'ctx> {
-        if c.to_bits() == (-0.0f64).to_bits() {
-            return self.fop("llvm.minimum", &[v, cv]);
-        }
-        let lt = Emit::lt(self, cv, v);
-        Emit::select(self, lt, cv, v)
-    }
-
     /// A lane-wise floating-point intrinsic (`llvm.sqrt`, `llvm.fma`, `llvm.minimum`, …).
     fn fop(&mut self, name: &str, args: &[VectorValue<'ctx>]) -> VectorValue<'ctx> {
         let args: Vec<BasicMetadataValueEnum> = args.iter().map(|a| (*a).into()).collect();
@@ -395,132 +376,6 @@ impl<'a, 'ctx> Gen<'a, 'ctx> {
         }
     }
 
-    // ---- IR nodes ---------------------------------------------------------------------------------------------
-
-    fn arg(&mut self, id: NodeId) -> VectorValue<'ctx> {
-        match self.vals.get(id.index()).copied().flatten() {
-            Some(v) => v,
-            None => {
-                self.fail(format!("operand t{} used before it was translated", id.0));
-                self.fty.get_poison()
-            }
-        }
-    }
-
-    fn node(&mut self, id: NodeId) {
-        let v = match *self.u.ir.node(id) {
-            Node::Const(bits) => self.fconst(bits),
-            Node::Input(i) => self.input(i),
-            Node::Param(p) => {
-                let s = self.load_f64(self.params, u64::from(p));
-                self.splat(s, self.fty)
-            }
-            Node::Column(k) => match self.columns.get(usize::from(k)).copied().flatten() {
-                Some(v) => v,
-                None => {
-                    self.fail(format!("data column {k} is not loaded"));
-                    self.fty.get_poison()
-                }
-            },
-            Node::Neg(a) => {
-                let a = self.arg(a);
-                Arith::neg(self, a)
-            }
-            Node::Binary(op, a, b) => {
-                let (a, b) = (self.arg(a), self.arg(b));
-                match op {
-                    BinOp::Add => Arith::add(self, a, b),
-                    BinOp::Sub => Arith::sub(self, a, b),
-                    BinOp::Mul => Arith::mul(self, a, b),
-                    BinOp::Div => Arith::div(self, a, b),
-                }
-            }
-            Node::Call(f, args) => self.call(f, args),
-        };
-        match self.vals.get_mut(id.index()) {
-            Some(slot) => *slot = Some(v),
-            None => self.fail(format!("node t{} outside the arena", id.0)),
-        }
-    }
-
-    /// Translates, in order, every node up to the root for which `pick` holds.
-    fn nodes(&mut self, pick: impl Fn(NodeId) -> bool) {
-        for id in self.u.ir.ids().take(self.u.plan.root.index() + 1) {
-            if pick(id) {
-                self.node(id);
-            }
-        }
-    }
-
-    fn input(&mut self, i: Input) -> VectorValue<'ctx> {
-        match self.inputs[i.index()] {
-            Some(v) => v,
-            None => {
-                self.fail(format!("input {} has no column", i.name()));
-                self.fty.get_poison()
-            }
-        }
-    }
-
-    fn call(&mut self, f: Builtin, args: [NodeId; 3]) -> VectorValue<'ctx> {
-        let vals: Vec<_> = args[..f.arity()].iter().map(|a| self.arg(*a)).collect();
-        let lowering = f.info().lowering;
-        if lowering == Lowering::Inline {
-            // A non-NaN constant operand of min, max or clamp (the lowering's `clamp(INPUT, 0, 1)` and root
-            // `max(raw, 0)`), for the one-instruction forms in `inline`.
-            let consts: Vec<Option<f64>> = args[..f.arity()].iter().map(|a| self.u.ir.node(*a).as_const().filter(|c| !c.is_nan())).collect();
-            return self.inline(f, &vals, &consts);
-        }
-        if self.u.outline && lowering == Lowering::Math {
-            return match f.outlined(self.u.mode) {
-                Some((_, lib)) => self.call_lanes(libm_addr(lib), &vals),
-                None => {
-                    self.fail(format!("builtin `{}` has no library function", f.name()));
-                    self.fty.get_poison()
-                }
-            };
-        }
-        match f.emit(self, self.u.mode, &vals) {
-            Some(v) => v,
-            None => {
-                self.fail(format!("builtin `{}` has no library code", f.name()));
-                self.fty.get_poison()
-            }
-        }
-    }
-
-    /// sqrt, abs, min, max, clamp, fma: LLVM's intrinsics with exactly the table's semantics (`llvm.minimum` and
-    /// `llvm.maximum` are IEEE 754-2019's: NaN-propagating, −0 < +0, as [`crate::builtins::fmin`]), which x86
-    /// runs as a compare, a blend and a repair of the zeros' signs; against a non-NaN constant (`consts`, per
-    /// operand) the Cranelift tier's single-instruction forms instead ([`Self::max_const`], [`Self::min_const`]).
-    fn inline(&mut self, f: Builtin, v: &[VectorValue<'ctx>], consts: &[Option<f64>]) -> VectorValue<'ctx> {
-        match (f, v, consts) {
-            (Builtin::Sqrt, [x], _) => self.fop("llvm.sqrt", &[*x]),
-            (Builtin::Abs, [x], _) => self.fop("llvm.fabs", &[*x]),
-            (Builtin::Max, [a, b], [_, Some(c)]) => self.max_const(*a, *b, *c),
-            (Builtin::Max, [a, b], [Some(c), _]) => self.max_const(*b, *a, *c),
-            (Builtin::Min, [a, b], [_, Some(c)]) => self.min_const(*a, *b, *c),
-            (Builtin::Min, [a, b], [Some(c), _]) => self.min_const(*b, *a, *c),
-            (Builtin::Min, [a, b], _) => self.fop("llvm.minimum", &[*a, *b]),
-            (Builtin::Max, [a, b], _) => self.fop("llvm.maximum", &[*a, *b]),
-            (Builtin::Clamp, [x, lo, hi], [_, l, h]) => {
-                let m = match l {
-                    Some(c) => self.max_const(*x, *lo, *c),
-                    None => self.fop("llvm.maximum", &[*x, *lo]),
-                };
-                match h {
-                    Some(c) => self.min_const(m, *hi, *c),
-                    None => self.fop("llvm.minimum", &[m, *hi]),
-                }
-            }
-            (Builtin::Fma, [a, b, c], _) => self.fop("llvm.fma", &[*a, *b, *c]),
-            _ => {
-                self.fail(format!("builtin `{}` is not an inline lowering", f.name()));
-                self.fty.get_poison()
-            }
-        }
-    }
-
     /// `any(m) ? (m ? callee(args) : r) : r`, one call per lane in a rare block.
     fn rare_lanes(&mut self, m: VectorValue<'ctx>, r: VectorValue<'ctx>, addr: usize, args: &[VectorValue<'ctx>]) -> VectorValue<'ctx> {
         let args = args.to_vec();
@@ -528,6 +383,49 @@ impl<'a, 'ctx> Gen<'a, 'ctx> {
             let y = g.call_lanes(addr, &args);
             g.select(m, y, r)
         })
+    }
+}
+
+/// Where the native lowering's values come from in LLVM: the generator's table, the loaded inputs and
+/// columns, the parameters, `llvm.minimum`/`llvm.maximum` (IEEE 754-2019's: NaN-propagating, −0 < +0, which x86
+/// runs as a compare, a blend and a repair of the zeros' signs), and the library's functions by address.
+impl<'ctx> Lower for Gen<'_, 'ctx> {
+    fn ir(&self) -> &Ir {
+        self.u.ir
+    }
+    fn mode(&self) -> Mode {
+        self.u.mode
+    }
+    fn outline(&self) -> bool {
+        self.u.outline
+    }
+    fn table(&mut self) -> &mut [Option<VectorValue<'ctx>>] {
+        &mut self.vals
+    }
+    fn input(&mut self, i: Input) -> Result<VectorValue<'ctx>, NativeError> {
+        self.inputs[i.index()].ok_or_else(|| NativeError::Internal(format!("input {} has no column", i.name())))
+    }
+    fn param(&mut self, p: u16) -> Result<VectorValue<'ctx>, NativeError> {
+        let s = self.load_f64(self.params, u64::from(p));
+        Ok(self.splat(s, self.fty))
+    }
+    fn column(&mut self, k: u16) -> Result<VectorValue<'ctx>, NativeError> {
+        self.columns.get(usize::from(k)).copied().flatten().ok_or_else(|| NativeError::Internal(format!("data column {k} is not loaded")))
+    }
+    fn minimum(&mut self, a: VectorValue<'ctx>, b: VectorValue<'ctx>) -> VectorValue<'ctx> {
+        self.fop("llvm.minimum", &[a, b])
+    }
+    fn maximum(&mut self, a: VectorValue<'ctx>, b: VectorValue<'ctx>) -> VectorValue<'ctx> {
+        self.fop("llvm.maximum", &[a, b])
+    }
+    fn library(&mut self, f: Builtin, args: &[VectorValue<'ctx>]) -> Result<VectorValue<'ctx>, NativeError> {
+        match f.outlined(self.u.mode) {
+            Some((_, lib)) => Ok(self.call_lanes(libm_addr(lib), args)),
+            None => Err(NativeError::Internal(format!("builtin `{}` has no library function", f.name()))),
+        }
+    }
+    fn take_error(&mut self) -> Option<NativeError> {
+        self.error.take()
     }
 }
 
@@ -759,14 +657,15 @@ impl<'ctx> Emit for Gen<'_, 'ctx> {
     }
 }
 
-/// Declares a function `void name(ptr × pointers[, i64])` with the host's CPU and features.
+/// Declares a function `void name(ptr × pointers[, i64])` (`double name(ptr × pointers)` for the scalar
+/// function) with the host's CPU and features.
 fn declare<'ctx>(u: &Unit<'_, 'ctx>, name: &str, pointers: usize, len: bool) -> FunctionValue<'ctx> {
     let ptr = u.cx.ptr_type(Default::default());
     let mut params: Vec<inkwell::types::BasicMetadataTypeEnum> = vec![ptr.into(); pointers];
     if len {
         params.push(u.cx.i64_type().into());
     }
-    let fty = u.cx.void_type().fn_type(&params, false);
+    let fty = if name == SCALAR { u.cx.f64_type().fn_type(&params, false) } else { u.cx.void_type().fn_type(&params, false) };
     let f = u.module.add_function(name, fty, None);
     for (k, v) in [("target-cpu", u.cpu), ("target-features", u.features)] {
         f.add_attribute(AttributeLoc::Function, u.cx.create_string_attribute(k, v));
@@ -776,23 +675,23 @@ fn declare<'ctx>(u: &Unit<'_, 'ctx>, name: &str, pointers: usize, len: bool) -> 
     f
 }
 
-fn param(f: FunctionValue<'_>, k: u32) -> Result<PointerValue<'_>, String> {
+fn param(f: FunctionValue<'_>, k: u32) -> Result<PointerValue<'_>, NativeError> {
     match f.get_nth_param(k) {
         Some(BasicValueEnum::PointerValue(p)) => Ok(p),
-        _ => Err(format!("parameter {k} is not a pointer")),
+        _ => Err(NativeError::Internal(format!("parameter {k} is not a pointer"))),
     }
 }
 
 /// `lobe_prepare`: every carried node computed (one lane) and stored to the block.
-pub(super) fn build_prepare(u: &Unit) -> Result<(), String> {
+pub(super) fn build_prepare(u: &Unit) -> Result<(), NativeError> {
     let f = declare(u, PREPARE, 2, false);
     let (params, block) = (param(f, 0)?, param(f, 1)?);
     let mut g = Gen::new(u, f, 1, params);
     let entry = g.block("entry");
     g.b.position_at_end(entry);
-    g.nodes(|id| !u.plan.variant(id));
+    lower::nodes(&mut g, u.plan.len(), |id| u.plan.in_prepare(id))?;
     for (k, id) in u.plan.carried.iter().enumerate() {
-        let v = g.arg(*id);
+        let v = g.value(*id)?;
         let s = g.b.build_extract_element(v, g.i32c(0), "");
         let s = g.scalar(s, u.cx.f64_type().get_poison().into());
         let p = g.offset(block, g.i64c(8 * k as u64));
@@ -804,9 +703,39 @@ pub(super) fn build_prepare(u: &Unit) -> Result<(), String> {
     g.error.map_or(Ok(()), Err)
 }
 
+/// `lobe_scalar(x, params, block) -> f64` in one lane: the carried nodes loaded from the block, the inputs
+/// from `x`, then what the plan computes per call.
+pub(super) fn build_scalar(u: &Unit) -> Result<(), NativeError> {
+    let f = declare(u, SCALAR, 3, false);
+    let (x, block) = (param(f, 0)?, param(f, 2)?);
+    let mut g = Gen::new(u, f, 1, param(f, 1)?);
+    let entry = g.block("entry");
+    g.b.position_at_end(entry);
+    load_carried(&mut g, block);
+    for i in u.ir.used_inputs(u.plan.root).iter() {
+        let s = g.load_f64(x, i.index() as u64);
+        g.inputs[i.index()] = Some(g.splat(s, g.fty));
+    }
+    lower::nodes(&mut g, u.plan.len(), |id| u.plan.in_scalar(id))?;
+    let r = g.value(u.plan.root)?;
+    let s = g.b.build_extract_element(r, g.i32c(0), "");
+    let s = g.scalar(s, u.cx.f64_type().get_poison().into());
+    let ret = g.b.build_return(Some(&s));
+    g.done(ret);
+    g.error.map_or(Ok(()), Err)
+}
+
+/// The carried nodes loaded from the block, splatted to `g`'s lanes.
+fn load_carried<'ctx>(g: &mut Gen<'_, 'ctx>, block: PointerValue<'ctx>) {
+    for (k, id) in g.u.plan.carried.iter().enumerate() {
+        let s = g.load_f64(block, k as u64);
+        g.vals[id.index()] = Some(g.splat(s, g.fty));
+    }
+}
+
 /// `lobe_batch(cols, params, block, out: *mut f64, len)` in `w` lanes: the formula's inputs read from `cols`,
 /// its root stored to `out`, in [`batch_loop`]'s loop.
-pub(super) fn build_batch(u: &Unit, w: u32) -> Result<(), String> {
+pub(super) fn build_batch(u: &Unit, w: u32) -> Result<(), NativeError> {
     let f = declare(u, BATCH, 4, true);
     let (cols, out) = (param(f, 0)?, param(f, 3)?);
     let mut g = Gen::new(u, f, w, param(f, 1)?);
@@ -820,8 +749,8 @@ pub(super) fn build_batch(u: &Unit, w: u32) -> Result<(), String> {
         for (k, v) in loaded {
             g.inputs[*k] = Some(*v);
         }
-        g.nodes(|id| u.plan.variant(id));
-        vec![g.arg(u.plan.root)]
+        lower::nodes(g, u.plan.len(), |id| u.plan.variant(id))?;
+        Ok(vec![g.value(u.plan.root)?])
     })
 }
 
@@ -831,7 +760,7 @@ pub(super) fn build_batch(u: &Unit, w: u32) -> Result<(), String> {
 /// each region's last output, the region: `any(lit ≠ 0) ? region : join`, its outputs joined by phis (+0 from
 /// the skipping edge). The region's nodes are translated in its own block, and their values are forgotten
 /// after it (only its outputs, through the phis, reach what follows), as the Cranelift tier does.
-pub(super) fn build_program(u: &Unit, w: u32, p: &Program) -> Result<(), String> {
+pub(super) fn build_program(u: &Unit, w: u32, p: &Program) -> Result<(), NativeError> {
     let f = declare(u, PROGRAM, 4, true);
     let (cols, outs) = (param(f, 0)?, param(f, 3)?);
     let mut g = Gen::new(u, f, w, param(f, 1)?);
@@ -842,7 +771,7 @@ pub(super) fn build_program(u: &Unit, w: u32, p: &Program) -> Result<(), String>
         if let Node::Column(k) = n {
             match read.get_mut(usize::from(*k)) {
                 Some(r) => *r = true,
-                None => return Err(format!("data column {k} beyond the {MAX_COLUMNS} a program may read")),
+                None => return Err(NativeError::Internal(format!("data column {k} beyond the {MAX_COLUMNS} a program may read"))),
             }
         }
     }
@@ -855,17 +784,13 @@ pub(super) fn build_program(u: &Unit, w: u32, p: &Program) -> Result<(), String>
         for (k, v) in loaded {
             g.columns[*k] = Some(*v);
         }
-        let mut next = 0;
-        for id in p.ir.ids() {
-            if p.class[id.index()] == Class::Outer {
-                g.node(id);
-            }
-            while let Some(r) = p.regions.get(next).filter(|r| r.at == id) {
-                region(g, r);
-                next += 1;
+        for w in lower::program_step(p) {
+            match w {
+                Walk::Outer(id) => lower::node(g, id).map(drop)?,
+                Walk::Region(_, r) => region(g, r)?,
             }
         }
-        p.outputs.iter().map(|o| g.arg(*o)).collect()
+        p.outputs.iter().map(|o| g.value(*o)).collect()
     })
 }
 
@@ -889,20 +814,17 @@ fn batch_loop<'ctx>(
     block: PointerValue<'ctx>,
     cols: &[(usize, PointerValue<'ctx>)],
     outs: &[PointerValue<'ctx>],
-    step: impl FnOnce(&mut Gen<'_, 'ctx>, &[(usize, VectorValue<'ctx>)]) -> Vec<VectorValue<'ctx>>,
-) -> Result<(), String> {
+    step: impl FnOnce(&mut Gen<'_, 'ctx>, &[(usize, VectorValue<'ctx>)]) -> Result<Vec<VectorValue<'ctx>>, NativeError>,
+) -> Result<(), NativeError> {
     let u = g.u;
     let len = match f.get_nth_param(4) {
         Some(BasicValueEnum::IntValue(l)) => l,
-        _ => return Err("len parameter".into()),
+        _ => return Err(NativeError::internal("len parameter")),
     };
     let ptr = u.cx.ptr_type(Default::default());
     let i64t = u.cx.i64_type();
-    for (k, id) in u.plan.carried.iter().enumerate() {
-        let s = g.load_f64(block, k as u64);
-        g.vals[id.index()] = Some(g.splat(s, g.fty));
-    }
-    g.nodes(|id| !u.plan.variant(id) && matches!(u.ir.node(id), Node::Const(_) | Node::Param(_)));
+    load_carried(g, block);
+    lower::nodes(g, u.plan.len(), |id| u.plan.in_entry(id))?;
 
     let (head, load, load_part, body, store, store_part, latch, exit) =
         (g.block("loop"), g.block("load"), g.block("load_part"), g.block("step"), g.block("store"), g.block("store_part"), g.block("latch"), g.block("exit"));
@@ -914,7 +836,7 @@ fn batch_loop<'ctx>(
 
     // loop(i)
     g.b.position_at_end(head);
-    let i = g.b.build_phi(i64t, "i").map_err(|e| e.to_string())?;
+    let i = g.b.build_phi(i64t, "i").map_err(NativeError::internal)?;
     let iv = i.as_basic_value().into_int_value();
     let rem = g.b.build_int_sub(len, iv, "");
     let rem = g.scalar(rem, i64t.get_poison());
@@ -955,13 +877,13 @@ fn batch_loop<'ctx>(
     g.b.position_at_end(body);
     let mut loaded = vec![];
     for (k, v, pv) in parts {
-        let phi = g.b.build_phi(g.fty, &format!("c{k}")).map_err(|e| e.to_string())?;
+        let phi = g.b.build_phi(g.fty, &format!("c{k}")).map_err(NativeError::internal)?;
         phi.add_incoming(&[(&v, load), (&pv, load_part)]);
         loaded.push((k, g.vec_of(Ok(phi.as_basic_value()), g.fty)));
     }
-    let results = step(g, &loaded);
+    let results = step(g, &loaded)?;
     if results.len() != outs.len() {
-        return Err(format!("{} results for {} outputs", results.len(), outs.len()));
+        return Err(NativeError::Internal(format!("{} results for {} outputs", results.len(), outs.len())));
     }
     let br = g.b.build_conditional_branch(full, store, store_part);
     g.done(br);
@@ -977,7 +899,7 @@ fn batch_loop<'ctx>(
 
     g.b.position_at_end(store_part);
     let m = g.part_mask(rem);
-    let Some(ms) = g.intrinsic("llvm.masked.store", &[g.fty.into(), ptr.into()]) else { return Err(g.error.take().unwrap_or_default()) };
+    let Some(ms) = g.intrinsic("llvm.masked.store", &[g.fty.into(), ptr.into()]) else { return Err(g.error.take().unwrap_or(NativeError::internal("llvm.masked.store"))) };
     for (r, base) in results.iter().zip(outs) {
         let at = g.offset(*base, byte_off);
         let c = g.b.build_call(ms, &[(*r).into(), at.into(), g.i32c(8).into(), m.into()], "");
@@ -1002,17 +924,17 @@ fn batch_loop<'ctx>(
 }
 
 /// The pointer at `base[k]`.
-fn load_ptr<'ctx>(g: &mut Gen<'_, 'ctx>, base: PointerValue<'ctx>, k: usize) -> Result<PointerValue<'ctx>, String> {
+fn load_ptr<'ctx>(g: &mut Gen<'_, 'ctx>, base: PointerValue<'ctx>, k: usize) -> Result<PointerValue<'ctx>, NativeError> {
     let at = g.offset(base, g.i64c(8 * k as u64));
     match g.b.build_load(g.u.cx.ptr_type(Default::default()), at, "") {
         Ok(BasicValueEnum::PointerValue(p)) => Ok(p),
-        _ => Err("pointer load".into()),
+        _ => Err(NativeError::internal("pointer load")),
     }
 }
 
 /// One guarded region: `any(lit ≠ 0) ? its nodes : +0` for its outputs (see [`build_program`]).
-fn region(g: &mut Gen<'_, '_>, r: &Region) {
-    let lit = g.arg(r.lit);
+fn region(g: &mut Gen<'_, '_>, r: &Region) -> Result<(), NativeError> {
+    let lit = g.value(r.lit)?;
     let zero = g.fconst(0);
     // Not equal or unordered: a NaN lit runs the region, as the interpreter's `lit != 0`.
     let m = g.b.build_float_compare(FloatPredicate::UNE, lit, zero, "");
@@ -1026,9 +948,9 @@ fn region(g: &mut Gen<'_, '_>, r: &Region) {
     g.b.position_at_end(inside);
     let saved = g.vals.clone();
     for id in &r.nodes {
-        g.node(*id);
+        lower::node(g, *id)?;
     }
-    let outs: Vec<VectorValue> = r.outputs.iter().map(|o| g.arg(*o)).collect();
+    let outs = r.outputs.iter().map(|o| g.value(*o)).collect::<Result<Vec<VectorValue>, _>>()?;
     let end = g.current();
     let br = g.b.build_unconditional_branch(join);
     g.done(br);
@@ -1043,4 +965,5 @@ fn region(g: &mut Gen<'_, '_>, r: &Region) {
             Err(e) => g.fail(e),
         }
     }
+    Ok(())
 }

@@ -1,43 +1,46 @@
-//! The LLVM tier (cargo feature `llvm`): a simplified [`Formula`] → a batched kernel compiled by LLVM 19
-//! (through inkwell), 8 `f64` lanes per step where the host has 256-bit vectors or wider (one AVX-512 register, or
-//! two AVX2 ones), 2 otherwise.
+//! The LLVM tier (cargo feature `llvm`): a simplified [`Formula`] → kernels and multi-output programs compiled
+//! by LLVM 19 (through inkwell), the batch loop 8 `f64` lanes per step where the host has 256-bit vectors or
+//! wider (one AVX-512 register, or two AVX2 ones), 2 otherwise.
 //!
-//! Same IR, same math, same bits as the interpreter and the Cranelift tier ([`crate::backend::jit`]): the
-//! generator ([`codegen`]) implements the math library's `Emit`, so every builtin is the library's own code; it
-//! shares the Cranelift tier's [`Plan`] (parameter-only work in a prepared block, computed once per batch by a
-//! prepare function) and its rule for calling the library instead of inlining it (`outlines`). The module
-//! is optimised with LLVM's `default<O2>` pipeline; no instruction carries fast-math flags and none is
-//! `llvm.fmuladd`, so nothing is reassociated, contracted into an FMA or replaced by an estimate (the tests
-//! read the machine code to check).
+//! Same IR, same math, same bits as the interpreter and the Cranelift tier ([`crate::backend::jit`]): only the
+//! primitives are this tier's. The generator ([`codegen`]) implements the math library's `Emit` and the native
+//! layer's `Lower`, so the node dispatch, the inline builtins and every builtin are the code both tiers share
+//! ([`crate::backend::native::lower`]); the plan (parameter-only work in a prepared block, computed by a
+//! prepare function), the rule for calling the library instead of inlining it, the four function signatures,
+//! the safe wrappers that call them ([`NativeKernel`], [`ShadeCode`]), the caches and the errors are the
+//! native layer's. The module is optimised with LLVM's `default<O2>` pipeline; no instruction carries
+//! fast-math flags and none is `llvm.fmuladd`, so nothing is reassociated, contracted into an FMA or replaced
+//! by an estimate (the tests read the machine code to check).
 //!
-//! Kernels and multi-output programs (the renderer's shading: [`program_code`], the Cranelift tier's ABI and
-//! `ShadeCode`, so the renderer runs either tier's code the same way). A kernel's scalar call
-//! ([`Evaluator::eval`]) runs the batched kernel on one element (its masked tail). Programs are cached in
-//! process; kernels are compiled on every call of [`llvm_kernel`].
+//! A kernel's module holds the scalar function (one lane), the batched loop and the prepare function, compiled
+//! at once; kernels are compiled on every call of [`llvm_kernel`] (the `auto` tier asks for them for big
+//! work), programs through an in-process cache.
 //!
-//! Ownership: one [`Code`] per compiled formula holds the LLVM context and the MCJIT execution engine that
-//! owns the machine code; dropping it frees both. `unsafe` is confined to this file: turning the engine's
-//! addresses into function pointers, calling them, and the lifetime and `Send`/`Sync` of [`Code`] (each with
-//! its `# Safety` note).
+//! Ownership: one [`Code`] per compiled module holds the LLVM context and the MCJIT execution engine that owns
+//! the machine code; dropping it frees both. `unsafe` here: turning the engine's addresses into the native
+//! layer's function-pointer types, and the lifetime and `Send`/`Sync` of [`Code`] (each with its `# Safety`
+//! note); calling the code is [`crate::backend::native::abi`]'s.
 
-// Calling and owning generated code (each block has its `# Safety` note).
+// Owning generated code and turning its addresses into function pointers (each block has its `# Safety` note).
 #![allow(unsafe_code)]
 
 mod codegen;
 
-use super::jit::cache::{Key, Lru};
-use super::jit::{outlines, program_outlines, program_plan, JitError, Plan, PrepareFn, ProgramFn, ShadeCode, DEFAULT_CACHE_CAPACITY};
+use super::native::abi::{BatchFn, KernelCode, NativeCode, PrepareFn, ProgramFn, ScalarFn, Shape};
+use super::native::cache::{Cache, Key};
+use super::native::plan::program_outlines;
+use super::native::{outlines, NativeError, NativeKernel, Plan, ShadeCode};
 use super::program::Program;
-use super::{Backend, Columns, Evaluator, Prepared};
+use super::{Backend, Evaluator};
 use crate::base::diag::Diagnostic;
 use crate::builtins::Mode;
-use crate::ir::{Formula, InputSet, Ir, NodeId, N_INPUTS};
+use crate::ir::{Formula, Ir, NodeId};
 use inkwell::context::Context;
 use inkwell::execution_engine::ExecutionEngine;
 use inkwell::passes::PassBuilderOptions;
 use inkwell::targets::{CodeModel, FileType, InitializationConfig, RelocMode, Target, TargetMachine};
 use inkwell::OptimizationLevel;
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
 /// The host as LLVM sees it.
@@ -57,7 +60,7 @@ pub struct Host {
 }
 
 /// The host, detected once (and LLVM's native target initialised).
-pub fn host() -> Result<&'static Host, JitError> {
+pub fn host() -> Result<&'static Host, NativeError> {
     static HOST: OnceLock<Result<Host, String>> = OnceLock::new();
     HOST.get_or_init(|| {
         Target::initialize_native(&InitializationConfig::default())?;
@@ -73,7 +76,7 @@ pub fn host() -> Result<&'static Host, JitError> {
         Ok(Host { cpu, features, lanes, fma, avx512 })
     })
     .as_ref()
-    .map_err(|e| JitError::Host(e.clone()))
+    .map_err(|e| NativeError::Host(e.clone()))
 }
 
 /// Whether the LLVM tier can compile for this host (what the `auto` tier asks).
@@ -82,50 +85,49 @@ pub fn available() -> bool {
 }
 
 /// A target machine for the host (the optimiser's cost model, and the listing in tests).
-fn target_machine(h: &Host) -> Result<TargetMachine, JitError> {
+fn target_machine(h: &Host) -> Result<TargetMachine, NativeError> {
     let triple = TargetMachine::get_default_triple();
-    let target = Target::from_triple(&triple).map_err(|e| JitError::Host(e.to_string()))?;
+    let target = Target::from_triple(&triple).map_err(|e| NativeError::Host(e.to_string()))?;
     target
         .create_target_machine(&triple, &h.cpu, &h.features, OptimizationLevel::Aggressive, RelocMode::Default, CodeModel::JITDefault)
-        .ok_or_else(|| JitError::Host(format!("LLVM has no target machine for {}", h.cpu)))
+        .ok_or_else(|| NativeError::Host(format!("LLVM has no target machine for {}", h.cpu)))
 }
 
-type BatchFn = unsafe extern "C" fn(*const *const f64, *const f64, *const f64, *mut f64, usize);
-
-/// One compiled formula's LLVM context and execution engine (which owns the module and its machine code).
+/// One compiled module's LLVM context and execution engine (which owns the module and its machine code).
 /// Dropping it frees the code, then the context (fields drop in declaration order).
 ///
-/// Function pointers into the engine's memory are handed out only to the [`Compiled`] that holds this `Code`.
+/// Function pointers into the engine's memory are handed out only to the struct that holds this `Code`.
 pub(crate) struct Code {
     _engine: ExecutionEngine<'static>,
     _context: Context,
 }
 
-// Safety: after `compile` returns, nothing reads or changes the engine or the context: they are only kept to
-// be dropped, which takes `&mut self` (so never concurrently with anything). The generated code they own is
-// pure (it reads its arguments, writes its output) and may run on any thread at once.
+// Safety: after `compile_module` returns, nothing reads or changes the engine or the context: they are only
+// kept to be dropped, which takes `&mut self` (so never concurrently with anything). The generated code they
+// own is pure (it reads its arguments, writes its output) and may run on any thread at once.
 unsafe impl Send for Code {}
 // Safety: as above, `&Code` gives access to nothing.
 unsafe impl Sync for Code {}
 
-/// Machine code for one formula: the batched kernel, the prepare function, and what the wrapper checks.
-pub(crate) struct Compiled {
+/// A kernel's code: the batched loop compiled with the scalar function, and what owns both.
+struct KernelEngine {
     batch: BatchFn,
-    /// Computes the prepared parameter block (`None` when nothing is carried).
-    prepare: Option<PrepareFn>,
-    block_len: usize,
-    /// Parameter slots the code reads (`max index + 1`).
-    params_read: usize,
-    /// Inputs the code reads (their columns must be full length).
-    inputs: InputSet,
-    /// The memory `batch` and `prepare` point into: after them, so it is dropped last.
     _code: Code,
 }
 
+// Safety: `batch` is `lobe_batch` of the module `_code` owns (codegen::build_batch: `BatchFn`'s signature,
+// reading `len` elements of the used inputs' columns by full or masked loads, the parameters and the block,
+// writing `len` elements of `out`), valid while `_code` lives.
+unsafe impl KernelCode for KernelEngine {
+    fn batch(&self) -> Result<BatchFn, NativeError> {
+        Ok(self.batch)
+    }
+}
+
 /// The function-pointer types are exactly the C signatures `codegen` declares.
-fn address(engine: &ExecutionEngine, name: &str) -> Result<usize, JitError> {
+fn address(engine: &ExecutionEngine, name: &str) -> Result<usize, NativeError> {
     match engine.get_function_address(name) {
-        Ok(0) | Err(_) => Err(JitError::Internal(format!("no address for {name}"))),
+        Ok(0) | Err(_) => Err(NativeError::Internal(format!("no address for {name}"))),
         Ok(a) => Ok(a),
     }
 }
@@ -138,20 +140,20 @@ pub struct Stats {
     pub listing: Option<String>,
 }
 
-/// A module compiled and loaded: what owns its code, the address of its main function and of its prepare
-/// function (when something is carried), and the compile's statistics.
+/// A module compiled and loaded: what owns its code, the addresses of the functions `build` named and of the
+/// prepare function (when something is carried), and the compile's statistics.
 struct Loaded {
     code: Code,
-    main: usize,
+    main: Vec<usize>,
     prepare: Option<usize>,
     stats: Stats,
 }
 
 /// Builds one module over `ir` with `plan` (the prepare function when something is carried, then `build`'s
-/// main function, whose name it returns), optimises it with `default<O2>` and loads it.
-fn compile_module(ir: &Ir, plan: &Plan, mode: Mode, outline: bool, lanes: u32, listing: bool, build: impl FnOnce(&codegen::Unit) -> Result<&'static str, String>) -> Result<Loaded, JitError> {
+/// functions, whose names it returns), optimises it with `default<O2>` and loads it.
+fn compile_module(ir: &Ir, plan: &Plan, mode: Mode, outline: bool, lanes: u32, listing: bool, build: impl FnOnce(&codegen::Unit) -> Result<Vec<&'static str>, NativeError>) -> Result<Loaded, NativeError> {
     if !lanes.is_power_of_two() || lanes > 16 {
-        return Err(JitError::Internal(format!("{lanes} lanes")));
+        return Err(NativeError::Internal(format!("{lanes} lanes")));
     }
     let t = Instant::now();
     let h = host()?;
@@ -162,19 +164,19 @@ fn compile_module(ir: &Ir, plan: &Plan, mode: Mode, outline: bool, lanes: u32, l
     module.set_data_layout(&tm.get_target_data().get_data_layout());
     let u = codegen::Unit { cx: &context, module: &module, ir, plan, mode, fma: h.fma, avx512: h.avx512, outline, cpu: &h.cpu, features: &h.features };
     if !plan.carried.is_empty() {
-        codegen::build_prepare(&u).map_err(JitError::Internal)?;
+        codegen::build_prepare(&u)?;
     }
-    let main = build(&u).map_err(JitError::Internal)?;
-    module.verify().map_err(|e| JitError::Internal(format!("LLVM rejected the module: {e}")))?;
-    module.run_passes("default<O2>", &tm, PassBuilderOptions::create()).map_err(|e| JitError::Module(e.to_string()))?;
+    let names = build(&u)?;
+    module.verify().map_err(|e| NativeError::Internal(format!("LLVM rejected the module: {e}")))?;
+    module.run_passes("default<O2>", &tm, PassBuilderOptions::create()).map_err(|e| NativeError::Module(e.to_string()))?;
     let listing = if listing {
-        let buf = tm.write_to_memory_buffer(&module, FileType::Assembly).map_err(|e| JitError::Module(e.to_string()))?;
+        let buf = tm.write_to_memory_buffer(&module, FileType::Assembly).map_err(|e| NativeError::Module(e.to_string()))?;
         Some(String::from_utf8_lossy(buf.as_slice()).into_owned())
     } else {
         None
     };
-    let engine = module.create_jit_execution_engine(OptimizationLevel::Aggressive).map_err(|e| JitError::Module(e.to_string()))?;
-    let main = address(&engine, main)?;
+    let engine = module.create_jit_execution_engine(OptimizationLevel::Aggressive).map_err(|e| NativeError::Module(e.to_string()))?;
+    let main = names.iter().map(|n| address(&engine, n)).collect::<Result<Vec<_>, _>>()?;
     let prepare = if plan.carried.is_empty() { None } else { Some(address(&engine, codegen::PREPARE)?) };
     // The module is owned by the engine from here on; dropping the handle only releases its share.
     drop(module);
@@ -184,84 +186,71 @@ fn compile_module(ir: &Ir, plan: &Plan, mode: Mode, outline: bool, lanes: u32, l
     Ok(Loaded { code: Code { _engine: engine, _context: context }, main, prepare, stats: Stats { lanes, compile_time: t.elapsed(), listing } })
 }
 
-/// Compiles a compacted IR (root last) to a batched kernel of `lanes` lanes.
-fn compile(ir: &Ir, root: NodeId, mode: Mode, lanes: u32, listing: bool) -> Result<(Compiled, Stats), JitError> {
+/// Compiles a compacted IR (root last) to a kernel whose batch loop has `lanes` lanes.
+fn compile(ir: &Ir, root: NodeId, mode: Mode, lanes: u32, listing: bool) -> Result<(NativeCode, Stats), NativeError> {
     if root.index() >= ir.len() {
-        return Err(JitError::Internal("root outside the arena".into()));
+        return Err(NativeError::internal("root outside the arena"));
     }
     let plan = Plan::new(ir, root);
-    let l = compile_module(ir, &plan, mode, outlines(ir), lanes, listing, |u| codegen::build_batch(u, lanes).map(|()| codegen::BATCH))?;
-    // Safety: each address is the entry of a function `codegen` just defined with exactly the C signature of the
-    // type it becomes; it stays valid while `l.code` (the engine that owns the machine code) lives, and the
-    // returned `Compiled` owns it.
-    let (batch, prepare) = unsafe {
-        (std::mem::transmute::<usize, BatchFn>(l.main), l.prepare.map(|p| std::mem::transmute::<usize, PrepareFn>(p)))
+    let l = compile_module(ir, &plan, mode, outlines(ir), lanes, listing, |u| {
+        codegen::build_scalar(u)?;
+        codegen::build_batch(u, lanes)?;
+        Ok(vec![codegen::SCALAR, codegen::BATCH])
+    })?;
+    let [scalar, batch] = l.main[..] else { return Err(NativeError::internal("a kernel module has two entries")) };
+    // Safety: each address is the entry of a function `codegen` just defined from `ir` and `plan` with exactly
+    // the C signature of the type it becomes; it stays valid while `l.code` (the engine that owns the machine
+    // code) lives, which the returned `NativeCode` owns.
+    let code = unsafe {
+        let (scalar, batch) = (std::mem::transmute::<usize, ScalarFn>(scalar), std::mem::transmute::<usize, BatchFn>(batch));
+        let prepare = l.prepare.map(|p| std::mem::transmute::<usize, PrepareFn>(p));
+        NativeCode::new(scalar, prepare, Shape::of(ir, &plan), (Backend::Llvm, lanes), l.stats.compile_time, Box::new(KernelEngine { batch, _code: l.code }))
     };
-    let params_read = ir.used_params(root).last().map_or(0, |p| *p as usize + 1);
-    let compiled = Compiled { batch, prepare, block_len: plan.carried.len(), params_read, inputs: ir.used_inputs(root), _code: l.code };
-    Ok((compiled, l.stats))
+    Ok((code, l.stats))
 }
+
+/// The compiled programs, by the IR's structure (the host's lanes).
+static PROGRAMS: Cache<ShadeCode> = Cache::new();
 
 /// Compiles a multi-output program ([`crate::backend::program`]) in the host's lanes, through an in-process
 /// cache keyed as the Cranelift tier's (the IR's structure, its roots, the math mode).
-pub(crate) fn program_code(p: &Program, mode: Mode) -> Result<Arc<ShadeCode>, JitError> {
-    static CACHE: OnceLock<Mutex<Lru<ShadeCode>>> = OnceLock::new();
-    let cache = CACHE.get_or_init(|| Mutex::new(Lru::new(DEFAULT_CACHE_CAPACITY)));
-    let key = Key::of_program(p, mode);
-    let lock = || cache.lock().unwrap_or_else(|e| e.into_inner());
-    if let Some(c) = lock().get(&key) {
-        return Ok(c);
-    }
-    let c = Arc::new(program_uncached(p, mode, host()?.lanes)?);
-    lock().insert(key, c.clone());
-    Ok(c)
+pub(crate) fn program_code(p: &Program, mode: Mode) -> Result<Arc<ShadeCode>, NativeError> {
+    let lanes = host()?.lanes;
+    PROGRAMS.get_or_compile(Key::of_program(p, mode), || program_uncached(p, mode, lanes)).map(|(c, _)| c)
 }
 
 /// [`program_code`] without the cache, in `lanes` lanes.
-pub(crate) fn program_uncached(p: &Program, mode: Mode, lanes: u32) -> Result<ShadeCode, JitError> {
-    let plan = program_plan(p)?;
-    let l = compile_module(&p.ir, &plan, mode, program_outlines(p), lanes, false, |u| codegen::build_program(u, lanes, p).map(|()| codegen::PROGRAM))?;
+pub(crate) fn program_uncached(p: &Program, mode: Mode, lanes: u32) -> Result<ShadeCode, NativeError> {
+    let plan = Plan::of_program(p)?;
+    let l = compile_module(&p.ir, &plan, mode, program_outlines(p), lanes, false, |u| codegen::build_program(u, lanes, p).map(|()| vec![codegen::PROGRAM]))?;
+    let [run] = l.main[..] else { return Err(NativeError::internal("a program module has one entry")) };
     // Safety: `codegen::build_program` and `build_prepare` defined these functions with exactly the C
     // signatures of `ProgramFn` and `PrepareFn`; the loop reads at most `p.columns` columns, the parameters
     // the program reads and the block's `carried.len()` slots, and writes every output, `len` elements each
     // (masked on the last partial vector); the prepare function writes exactly the block. The addresses stay
     // valid while `l.code` lives, which the `ShadeCode` owns.
-    let mut c = unsafe {
-        let run = std::mem::transmute::<usize, ProgramFn>(l.main);
+    unsafe {
+        let run = std::mem::transmute::<usize, ProgramFn>(run);
         let prepare = l.prepare.map(|q| std::mem::transmute::<usize, PrepareFn>(q));
-        ShadeCode::from_parts(run, prepare, plan.carried.len(), p, Backend::Llvm, Box::new(l.code))
-    };
-    c.compile_time = l.stats.compile_time;
-    Ok(c)
-}
-
-/// An LLVM-compiled formula behind the [`Evaluator`] interface.
-#[derive(Clone)]
-pub struct LlvmKernel {
-    code: Arc<Compiled>,
-    /// Parameter slots the caller must supply: max(declared, read by the code).
-    n_params: usize,
-    /// Lanes of the batch loop.
-    pub lanes: u32,
-    /// LLVM's time for this formula (IR generation, optimisation, machine code).
-    pub compile_time: Duration,
+        Ok(ShadeCode::new(run, prepare, p, &plan, Backend::Llvm, l.stats.compile_time, Box::new(l.code)))
+    }
 }
 
 /// Compiles a simplified formula with the host's lane count.
-pub fn llvm_kernel(f: &Formula, mode: Mode) -> Result<LlvmKernel, JitError> {
+pub fn llvm_kernel(f: &Formula, mode: Mode) -> Result<NativeKernel, NativeError> {
     llvm_kernel_with_lanes(f, mode, host()?.lanes)
 }
 
 /// Compiles a simplified formula with `lanes` lanes (a power of two ≤ 16; LLVM splits a vector wider than the
 /// host's registers), for tests of every lane shape on one host.
-pub fn llvm_kernel_with_lanes(f: &Formula, mode: Mode, lanes: u32) -> Result<LlvmKernel, JitError> {
+pub fn llvm_kernel_with_lanes(f: &Formula, mode: Mode, lanes: u32) -> Result<NativeKernel, NativeError> {
     let (ir, root) = f.ir.compact(f.root);
-    let (code, stats) = compile(&ir, root, mode, lanes, false)?;
-    Ok(LlvmKernel { n_params: f.params.len().max(code.params_read), code: Arc::new(code), lanes, compile_time: stats.compile_time })
+    let (code, _) = compile(&ir, root, mode, lanes, false)?;
+    Ok(NativeKernel::new(Arc::new(code), f.params.len(), false))
 }
 
 /// The machine code LLVM emits for `f`'s kernel (host lanes), for checking what it compiles to.
-pub fn assembly(f: &Formula, mode: Mode) -> Result<String, JitError> {
+pub fn assembly(f: &Formula, mode: Mode) -> Result<String, NativeError> {
     let (ir, root) = f.ir.compact(f.root);
     let (_, stats) = compile(&ir, root, mode, host()?.lanes, true)?;
     Ok(stats.listing.unwrap_or_default())
@@ -272,100 +261,11 @@ pub(crate) fn kernel_evaluator(f: &Formula, mode: Mode) -> Result<Arc<dyn Evalua
     llvm_kernel(f, mode).map(|k| Arc::new(k) as Arc<dyn Evaluator>).map_err(|e| e.to_diagnostic())
 }
 
-impl Compiled {
-    /// The prepared block for `params` (every slot the code reads present).
-    fn block(&self, params: &[f64]) -> Vec<f64> {
-        let mut block = vec![0.0; self.block_len];
-        if let (Some(prepare), true) = (self.prepare, params.len() >= self.params_read) {
-            // Safety: `params` has every slot the code reads (checked just above); `block` has exactly the
-            // `block_len` slots the prepare function writes. The code lives as long as `self`.
-            unsafe { prepare(params.as_ptr(), block.as_mut_ptr()) }
-        }
-        block
-    }
-
-    /// One element: the batched kernel on `len = 1` (its masked tail), `x` as five one-element columns.
-    fn one(&self, x: &[f64; N_INPUTS], params: &[f64], block: &[f64]) -> f64 {
-        let ptrs: [*const f64; N_INPUTS] = std::array::from_fn(|i| &x[i] as *const f64);
-        let mut out = [0.0f64];
-        if params.len() >= self.params_read && block.len() == self.block_len {
-            // Safety: each column pointer addresses one element of `x` (len = 1); `params` has every slot the
-            // code reads and `block` its `block_len` slots (checked just above); `out` has the one element
-            // written. The code lives as long as `self`.
-            unsafe { (self.batch)(ptrs.as_ptr(), params.as_ptr(), block.as_ptr(), out.as_mut_ptr(), 1) }
-        }
-        out[0]
-    }
-}
-
-impl LlvmKernel {
-    /// `params` padded with NaN to the declared count: a missing parameter is NaN, as in the interpreter.
-    fn padded(&self, params: &[f64]) -> Vec<f64> {
-        let mut p = params.to_vec();
-        p.resize(p.len().max(self.n_params), f64::NAN);
-        p
-    }
-}
-
-/// An LLVM kernel bound to one parameter vector: the parameters padded and the prepared block computed once.
-pub struct PreparedLlvm<'a> {
-    params: Vec<f64>,
-    block: Vec<f64>,
-    kernel: &'a LlvmKernel,
-}
-
-impl PreparedLlvm<'_> {
-    #[inline]
-    pub(crate) fn eval(&self, x: &[f64; N_INPUTS]) -> f64 {
-        self.kernel.code.one(x, &self.params, &self.block)
-    }
-}
-
-impl Evaluator for LlvmKernel {
-    fn eval(&self, x: &[f64; N_INPUTS], params: &[f64]) -> f64 {
-        let p = self.padded(params);
-        self.code.one(x, &p, &self.code.block(&p))
-    }
-
-    /// Runs the kernel once, so a timed first batch does not pay for the first touch of the code pages.
-    fn warm_up(&self) {
-        std::hint::black_box(self.eval(&[0.5; N_INPUTS], &[]));
-    }
-
-    fn prepare(&self, params: &[f64]) -> Prepared<'_> {
-        let params = self.padded(params);
-        let block = self.code.block(&params);
-        Prepared::Llvm(PreparedLlvm { params, block, kernel: self })
-    }
-
-    fn eval_batch(&self, cols: &Columns, params: &[f64], out: &mut [f64]) {
-        let c = &self.code;
-        if !c.inputs.iter().all(|i| cols.col(i).len() == out.len()) {
-            // Ragged columns: interpreter semantics, a missing element reads as 0.
-            let mut x = [0.0; N_INPUTS];
-            for (i, o) in out.iter_mut().enumerate() {
-                for (k, col) in cols.cols.iter().enumerate() {
-                    x[k] = col.get(i).copied().unwrap_or(0.0);
-                }
-                *o = self.eval(&x, params);
-            }
-            return;
-        }
-        let p = self.padded(params);
-        let block = c.block(&p);
-        let ptrs: [*const f64; N_INPUTS] = std::array::from_fn(|i| cols.cols[i].as_ptr());
-        // Safety: `p` has every slot the code reads (padded to `n_params` ≥ `params_read`), `block` the
-        // `block_len` slots, every column the code reads has exactly `out.len()` elements (checked above) and
-        // unread columns are never dereferenced; the code reads `len` elements of those columns (the last
-        // partial vector by masked loads) and writes `len` elements of `out`, which is exclusively borrowed.
-        // The code lives as long as `self.code`.
-        unsafe { (c.batch)(ptrs.as_ptr(), p.as_ptr(), block.as_ptr(), out.as_mut_ptr(), out.len()) }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::backend::Columns;
+    use crate::ir::N_INPUTS;
 
     fn formula(src: &str) -> Formula {
         let f = crate::front::parse("t.brdf", src).unwrap_or_else(|d| panic!("{}", d.render(false)));

@@ -1,4 +1,5 @@
-//! A bounded cache of compiled code keyed by the simplified IR's structure.
+//! A bounded cache of compiled code keyed by the simplified IR's structure, for either tier's kernels and
+//! programs.
 //!
 //! Key: the nodes reachable from the root, in topological order (what [`Ir::compact`] produces), plus the root
 //! index and the math mode. Spans and names are not part of the key, so the same formula from two files, or compiled twice,
@@ -8,10 +9,57 @@
 //! (an O(capacity) scan, negligible next to a compile). Entries hold `Arc`s, so evicted code lives on until
 //! the last kernel using it is dropped, then its JIT memory is freed.
 
+use super::NativeError;
 use crate::builtins::Mode;
 use crate::ir::{Ir, Node};
 use std::collections::HashMap;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
+
+/// Default bound of each compiled-code cache (entries; each is a few KiB of code).
+pub(crate) const DEFAULT_CAPACITY: usize = 128;
+
+/// A process-wide cache of compiled code (a `static` per tier and kind): a bounded [`Lru`] behind a lock, so
+/// compiling the same structure twice is free.
+pub(crate) struct Cache<V> {
+    lru: OnceLock<Mutex<Lru<V>>>,
+}
+
+impl<V> Cache<V> {
+    pub(crate) const fn new() -> Cache<V> {
+        Cache { lru: OnceLock::new() }
+    }
+
+    fn lock(&self) -> MutexGuard<'_, Lru<V>> {
+        // A panic while holding the lock cannot leave the map inconsistent (each operation is one map call).
+        self.lru.get_or_init(|| Mutex::new(Lru::new(DEFAULT_CAPACITY))).lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// The code under `key`, or `compile`'s (then kept); whether it came from the cache. The lock is not held
+    /// while compiling: two threads compiling the same structure at once both compile, and one result is kept.
+    pub(crate) fn get_or_compile(&self, key: Key, compile: impl FnOnce() -> Result<V, NativeError>) -> Result<(Arc<V>, bool), NativeError> {
+        let hit = self.lock().get(&key);
+        if let Some(v) = hit {
+            return Ok((v, true));
+        }
+        let v = Arc::new(compile()?);
+        self.lock().insert(key, v.clone());
+        Ok((v, false))
+    }
+
+    /// Changes the bound (0 disables the cache); returns the previous bound.
+    pub(crate) fn set_capacity(&self, capacity: usize) -> usize {
+        let mut c = self.lock();
+        let old = c.capacity();
+        c.set_capacity(capacity);
+        old
+    }
+
+    /// (hits, misses, entries) since the process started.
+    pub(crate) fn stats(&self) -> (u64, u64, usize) {
+        let c = self.lock();
+        (c.hits, c.misses, c.len())
+    }
+}
 
 /// Structural key of a compacted IR.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
@@ -145,6 +193,19 @@ mod tests {
     fn signed_zero_constants_are_distinct_keys() {
         assert_ne!(key(0.0), key(-0.0));
         assert_eq!(key(0.5), key(0.5));
+    }
+
+    #[test]
+    fn a_cache_compiles_once_per_key_and_reports_errors() {
+        let c: Cache<u32> = Cache::new();
+        let (a, hit) = c.get_or_compile(key(1.0), || Ok(7)).expect("compiles");
+        assert_eq!((*a, hit), (7, false));
+        let (b, hit) = c.get_or_compile(key(1.0), || Err(NativeError::internal("not called"))).expect("cached");
+        assert!(hit && Arc::ptr_eq(&a, &b));
+        assert!(c.get_or_compile(key(2.0), || Err(NativeError::internal("no"))).is_err());
+        assert_eq!(c.stats(), (1, 2, 1));
+        assert_eq!(c.set_capacity(0), DEFAULT_CAPACITY);
+        assert_eq!(c.stats().2, 0);
     }
 
     #[test]
