@@ -162,10 +162,6 @@ fn cites(rest: &str) -> Cites {
     Cites::File
 }
 
-/// Citations in work still on a branch (the native-backend layer in src/backend) that name journal entries BENCHMARKS.md no longer has: they go when that work lands, and an
-/// entry that no longer matches a line fails this test, so the list cannot outlive them.
-const PENDING: [(&str, &str); 1] = [("src/backend/jit/shade.rs", "BENCHMARKS.md, 2026-11-30 issue 11")];
-
 #[test]
 fn every_benchmarks_section_a_comment_names_exists() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -173,7 +169,6 @@ fn every_benchmarks_section_a_comment_names_exists() {
     let sections: Vec<u32> = bench.lines().filter_map(|l| l.strip_prefix("## ")?.split_once(". ")?.0.parse().ok()).collect();
     assert!(sections.len() > 10, "BENCHMARKS.md has only sections {sections:?}");
     let mut bad = vec![];
-    let mut pending_seen = [false; PENDING.len()];
     let mut cited = 0;
     for f in citing_files() {
         let rel = f.strip_prefix(root).unwrap().to_string_lossy().into_owned();
@@ -191,18 +186,11 @@ fn every_benchmarks_section_a_comment_names_exists() {
                     _ => None,
                 };
                 let Some(wrong) = wrong else { continue };
-                if let Some(k) = PENDING.iter().position(|(p, s)| *p == rel && line[at..].starts_with(s)) {
-                    pending_seen[k] = true;
-                    continue;
-                }
                 bad.push(format!("{rel}:{}: {wrong}: {}", i + 1, line.trim()));
             }
         }
     }
     assert!(cited > 20, "found only {cited} citations of BENCHMARKS.md");
-    for (k, seen) in pending_seen.iter().enumerate() {
-        assert!(seen, "PENDING entry {:?} matches no citation any more: remove it", PENDING[k]);
-    }
     assert!(bad.is_empty(), "citations of BENCHMARKS.md that name no section it has:\n{}", bad.join("\n"));
 }
 

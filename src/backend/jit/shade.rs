@@ -74,8 +74,7 @@ const STEP: usize = 4;
 /// regions (lights, in the renderer's programs). Cranelift schedules no instructions, so one vector's long
 /// chains (roots, divisions, the library's polynomials: hundreds of cycles from the loads to the outputs) leave
 /// the core idle unless an independent vector's instructions sit beside them in program order; interleaving
-/// costs registers (more spills), which one region of cheap arithmetic does not win back (measured:
-/// BENCHMARKS.md, 2026-11-30 issue 11 third pass).
+/// costs registers (more spills), which one region of cheap arithmetic does not win back (measured: BENCHMARKS.md §7).
 fn interleaves(p: &Program) -> bool {
     p.regions.len() > 1 || calls_math(p)
 }
