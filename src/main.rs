@@ -103,8 +103,20 @@ fn parse(args: Vec<std::ffi::OsString>) -> Cli {
     for n in names {
         cmd = cmd.mut_subcommand(n, |s| s.allow_negative_numbers(true));
     }
-    let matches = cmd.get_matches_from(args);
-    Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit())
+    let json = args.iter().any(|a| a == "--json");
+    let usage = |e: clap::Error| -> ! {
+        // A usage error under --json is an error object too (help and --version are not errors).
+        if json && e.use_stderr() {
+            let text = e.render().to_string();
+            let first = text.lines().next().unwrap_or_default();
+            let message = first.strip_prefix("error: ").unwrap_or(first);
+            let hint = text.lines().find_map(|l| l.trim().strip_prefix("tip: ")).map(str::to_string);
+            println!("{}", serde_json::json!({"error": message, "file": null, "line": null, "column": null, "hint": hint, "diagnostics": [], "usage": text}));
+        }
+        e.exit()
+    };
+    let matches = cmd.try_get_matches_from(args).unwrap_or_else(|e| usage(e));
+    Cli::from_arg_matches(&matches).unwrap_or_else(|e| usage(e))
 }
 
 fn command() {
@@ -132,8 +144,35 @@ fn command() {
         Cmd::Serve(a) => cli::serve::run(a),
     };
     if let Err(e) = result {
+        // Under --json the error is a JSON object on standard output too, where the report would have been.
+        if let Some(j) = e.to_json().filter(|_| cli.cmd.json()) {
+            println!("{j}");
+        }
         let color = std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none();
         eprint!("{}", e.render(color));
         std::process::exit(e.exit_code());
+    }
+}
+
+impl Cmd {
+    /// Whether the command was asked for JSON (`--json`).
+    fn json(&self) -> bool {
+        match self {
+            Cmd::Eval(a) => a.json.on,
+            Cmd::Watch(a) => a.json.on,
+            Cmd::Bench(a) => a.json.on,
+            Cmd::Plot(a) => a.json.on,
+            Cmd::Check(a) => a.json.on,
+            Cmd::Export(a) => a.json.on,
+            Cmd::Import(a) => a.json.on,
+            Cmd::Energy(a) => a.json.on,
+            Cmd::Accuracy(a) => a.json.on,
+            Cmd::Fit(a) => a.json.on,
+            Cmd::Tabulate(a) => a.json.on,
+            Cmd::Sweep(a) => a.json.on,
+            Cmd::Render(a) => a.json.on,
+            Cmd::Compare(a) => a.json.on,
+            Cmd::Serve(a) => a.json.on,
+        }
     }
 }

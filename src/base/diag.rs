@@ -303,12 +303,17 @@ impl Diagnostics {
     /// item has no place), its `label`, `hints`, and `rendered`, the caret text [`Diagnostics::render`] prints;
     /// all in [`Plain`] words.
     pub fn to_json(&self) -> serde_json::Value {
+        self.to_json_with(&Plain)
+    }
+
+    /// [`Diagnostics::to_json`] with messages and hints in `w`'s words (the command line names its flags).
+    pub fn to_json_with(&self, w: &dyn Wording) -> serde_json::Value {
         let items = self.items.iter().map(|d| {
             let mut o = serde_json::json!({
                 "severity": match d.severity { Severity::Error => "error", Severity::Warning => "warning" },
-                "message": d.text(&Plain),
+                "message": d.text(w),
                 "file": self.file,
-                "hints": d.hint_texts(&Plain),
+                "hints": d.hint_texts(w),
             });
             if let Some((s, label)) = &d.primary {
                 let (line, col) = line_col(&self.source, s.start as usize);
@@ -320,7 +325,7 @@ impl Diagnostics {
                 o["label"] = label.as_str().into();
             }
             let one = Diagnostics { file: self.file.clone(), source: self.source.clone(), items: vec![d.clone()] };
-            o["rendered"] = one.render(false).into();
+            o["rendered"] = one.render_with(false, w).into();
             o
         });
         serde_json::Value::Array(items.collect())

@@ -61,7 +61,7 @@ pub fn check(path: &Path, force: bool, is_ours: fn(&[u8]) -> bool) -> Result<(),
             .and_then(|f| f.take(PREFIX_BYTES).read_to_end(&mut prefix))
             .map_err(|e| format!("cannot read existing `{}`: {e}", path.display()))?;
         if !is_ours(&prefix) {
-            return Err(Diagnostic::error(format!("`{}` exists and was not written by lobe; not overwriting it (refusing to overwrite unless allowed)", path.display()))
+            return Err(Diagnostic::error(format!("`{}` exists and nothing in it shows lobe wrote it; not overwriting it (refusing to overwrite unless allowed)", path.display()))
                 .hint(AllowOverwrite));
         }
     }

@@ -43,6 +43,37 @@ impl CliError {
     }
 }
 
+impl CliError {
+    /// The error as the one JSON object a `--json` run prints instead of its report: `error` (the message),
+    /// `file`, `line`, `column` (1-based; null without a place), `hint` (null without one) of the first error,
+    /// and `diagnostics`, every item as `lobe serve` and Python give them. None for [`CliError::Failed`], whose
+    /// report was printed.
+    pub fn to_json(&self) -> Option<serde_json::Value> {
+        let items = match self {
+            CliError::Diagnostics(d) => d.to_json_with(&Flags),
+            CliError::Error(d) => Diagnostics::single("", d.clone()).to_json_with(&Flags),
+            CliError::Failed => return None,
+        };
+        let empty = serde_json::Value::Null;
+        let list = items.as_array().map(Vec::as_slice).unwrap_or_default();
+        let first = list.iter().find(|d| d["severity"] == "error").or(list.first()).unwrap_or(&empty);
+        let or_null = |v: &serde_json::Value| if v.is_null() { serde_json::Value::Null } else { v.clone() };
+        let file = match &first["file"] {
+            serde_json::Value::String(f) if !f.is_empty() => serde_json::Value::String(f.clone()),
+            _ => serde_json::Value::Null,
+        };
+        let hints: Vec<&str> = first["hints"].as_array().map(|h| h.iter().filter_map(|x| x.as_str()).collect()).unwrap_or_default();
+        Some(serde_json::json!({
+            "error": or_null(&first["message"]),
+            "file": file,
+            "line": or_null(&first["line"]),
+            "column": or_null(&first["col"]),
+            "hint": if hints.is_empty() { serde_json::Value::Null } else { hints.join("; ").into() },
+            "diagnostics": items,
+        }))
+    }
+}
+
 impl fmt::Display for CliError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(&self.render(false))
@@ -256,4 +287,23 @@ mod tests {
         assert!(parse_assignments("n=5,n=6").unwrap_err().contains("twice"));
     }
 
+}
+
+/// A command's text output (an export, an import): written to `-o` (refusing a file lobe did not write unless
+/// `--force`) or printed; with `json` (the object's other keys), one object with `output` (the path or null)
+/// and `text` is printed instead of the text.
+pub fn emit_text(out: &super::args::Output, text: &str, is_ours: fn(&[u8]) -> bool, json: Option<serde_json::Value>) -> Result<(), CliError> {
+    if let Some(p) = &out.path {
+        out.force.write(p, text.as_bytes(), is_ours)?;
+    }
+    match json {
+        Some(mut j) => {
+            j["output"] = out.path.as_ref().map(|p| p.display().to_string()).into();
+            j["text"] = text.into();
+            println!("{j}");
+        }
+        None if out.path.is_none() => print!("{text}"),
+        None => {}
+    }
+    Ok(())
 }

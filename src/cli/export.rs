@@ -1,6 +1,6 @@
 //! `lobe export --glsl [--glsl-version 330|450|es300]|--wgsl|--brdf-explorer FILE [--set n=50] [-o out.glsl]`
 
-use super::args::{self, FormulaSource, Output, Params};
+use super::args::{self, FormulaSource, Json, Output, Params};
 use super::common::CliError;
 use lobe::backend::glsl::{self, Dialect, GlslVersion};
 
@@ -27,6 +27,9 @@ pub struct ExportArgs {
     pub set: Params,
     #[command(flatten)]
     pub out: Output,
+    /// Print `{"formula", "language", "output", "text"}` (the text also with -o, which still writes it).
+    #[command(flatten)]
+    pub json: Json,
 }
 
 fn is_ours(bytes: &[u8]) -> bool {
@@ -43,11 +46,12 @@ pub fn run(a: &ExportArgs) -> Result<(), CliError> {
         glsl::export(&f, if a.wgsl { Dialect::Wgsl } else { Dialect::Glsl(a.glsl_version) })
     }
     .map_err(|d| lobe::Diagnostics::single_in(&f.file, &f.source, d))?;
-    match &a.out.path {
-        Some(p) => a.out.force.write(p, text.as_bytes(), is_ours),
-        None => {
-            print!("{text}");
-            Ok(())
-        }
-    }
+    let language = if a.brdf_explorer {
+        "brdf-explorer".to_string()
+    } else if a.wgsl {
+        "wgsl".to_string()
+    } else {
+        format!("glsl {}", a.glsl_version.name())
+    };
+    super::common::emit_text(&a.out, &text, is_ours, a.json.on.then(|| serde_json::json!({"formula": f.display_name(), "language": language})))
 }

@@ -2,7 +2,7 @@
 //! own language, for people to read and edit. The text is [`lobe::ir::print::source`] of the lowered,
 //! unsimplified formula, so reading it back gives the same IR and the same values.
 
-use super::args::{self, FormulaSource, Output};
+use super::args::{self, FormulaSource, Json, Output};
 use super::common::CliError;
 
 #[derive(clap::Args, Debug)]
@@ -12,6 +12,9 @@ pub struct ImportArgs {
     pub formula: FormulaSource,
     #[command(flatten)]
     pub out: Output,
+    /// Print `{"file", "output", "text"}` (the text also with -o, which still writes it).
+    #[command(flatten)]
+    pub json: Json,
 }
 
 /// The first line of every imported file: how `--force`-less overwriting recognises lobe's own output.
@@ -28,11 +31,5 @@ pub fn run(a: &ImportArgs) -> Result<(), CliError> {
     let f = a.formula.load()?;
     let from = a.formula.file.as_deref().unwrap_or("<expr>");
     let text = lobe::ir::print::source(&f, &format!("{from}, {MARK}: the same function in lobe's language"));
-    match &a.out.path {
-        Some(p) => a.out.force.write(p, text.as_bytes(), is_ours),
-        None => {
-            print!("{text}");
-            Ok(())
-        }
-    }
+    super::common::emit_text(&a.out, &text, is_ours, a.json.on.then(|| serde_json::json!({"file": from})))
 }

@@ -1,6 +1,6 @@
 //! `lobe plot FILES… --set n=50 -o lobes.png [--polar] [--log] [--reference REF [--error]]`
 
-use super::args::{self, LookupArg, Output, Params};
+use super::args::{self, Json, LookupArg, Output, Params};
 use super::common::{self, CliError};
 use lobe::report::plot::{self, Format, LobeOptions, Series};
 use lobe::Backend;
@@ -38,6 +38,9 @@ pub struct PlotArgs {
     pub size: (u32, u32),
     #[command(flatten)]
     pub lookup: LookupArg,
+    /// Print `{"output", "format", "title", "x", "series": [{"name", "x", "y"}]}`: the plotted numbers.
+    #[command(flatten)]
+    pub json: Json,
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -73,8 +76,10 @@ pub fn run(a: &PlotArgs) -> Result<(), CliError> {
     for f in &formulas {
         let s = common::set_for(f, &set);
         let params = common::param_values(f, &s);
+        // The legend names the values set on this formula (the title says which were set at all).
+        let name = if s.is_empty() { f.display_name() } else { format!("{} ({})", f.display_name(), values(&s)) };
         let k = lobe::compile_formula(f.clone(), &lobe::Options { backend: Backend::Jit, bake: s, ..Default::default() })?;
-        series.push(Series { name: f.display_name(), points: points(&k, k.used_inputs(), &params) });
+        series.push(Series { name, points: points(&k, k.used_inputs(), &params) });
     }
     if a.reference.as_ref().is_some_and(|r| lobe::measured::is_measured_path(r)) {
         return Err(CliError::hint("--reference takes a formula here", "plot the measured table beside the formulas: list it with them"));
@@ -89,7 +94,7 @@ pub fn run(a: &PlotArgs) -> Result<(), CliError> {
         }
     }
     series.splice(at..at, measured);
-    let n_label = set.iter().find(|(k, _)| k == "n").map(|(_, v)| format!("n = {v}")).unwrap_or_else(|| "default parameters".into());
+    let n_label = if set.is_empty() { "default parameters".to_string() } else { values(&set) };
     let mut title = format!("Lobes, {n_label}");
     if a.error {
         let reference = series.pop().unwrap_or(Series { name: String::new(), points: vec![] });
@@ -109,11 +114,26 @@ pub fn run(a: &PlotArgs) -> Result<(), CliError> {
             if a.log {
                 return Err(CliError::msg("--incidence draws a linear scale (drop --log)"));
             }
-            plot::incidence_lobes(&series, &LobeOptions { title, polar: a.polar, log: false, size: a.size }, t, format).map_err(CliError::msg)?
+            plot::incidence_lobes(&series, &LobeOptions { title: title.clone(), polar: a.polar, log: false, size: a.size }, t, format).map_err(CliError::msg)?
         }
-        None => plot::lobes(&series, &LobeOptions { title, polar: a.polar, log: a.log, size: a.size }, format).map_err(CliError::msg)?,
+        None => plot::lobes(&series, &LobeOptions { title: title.clone(), polar: a.polar, log: a.log, size: a.size }, format).map_err(CliError::msg)?,
     };
     a.out.force.write(output, &bytes, common::is_lobe_output)?;
-    eprintln!("wrote {}", output.display());
+    if a.json.on {
+        let x = if a.incidence.is_some() { "view angle (degrees, signed; mirror at −θᵢ)" } else { "angle from the lobe axis (degrees)" };
+        let series: Vec<serde_json::Value> = series
+            .iter()
+            .map(|s| serde_json::json!({"name": s.name, "x": s.points.iter().map(|p| p.0).collect::<Vec<_>>(), "y": s.points.iter().map(|p| p.1).collect::<Vec<_>>()}))
+            .collect();
+        let format = if matches!(format, Format::Svg) { "svg" } else { "png" };
+        println!("{}", serde_json::json!({"output": output.display().to_string(), "format": format, "title": title, "x": x, "series": series}));
+    } else {
+        eprintln!("wrote {}", output.display());
+    }
     Ok(())
+}
+
+/// `name = value` pairs as a title or a legend shows them.
+fn values(set: &[(String, f64)]) -> String {
+    set.iter().map(|(k, v)| format!("{k} = {v}")).collect::<Vec<_>>().join(", ")
 }

@@ -1,6 +1,7 @@
 //! `lobe serve [FILES…] [--scene SCENE] [--port 8080] [--bind 127.0.0.1] [--deadline 10]`: the interactive page
 //! ([`lobe::serve`]). Prints the address and serves until stopped.
 
+use super::args::Json;
 use super::common::CliError;
 use std::path::PathBuf;
 
@@ -21,6 +22,9 @@ pub struct ServeArgs {
     /// Seconds a computation (a render, an analysis) may run before it is stopped and answered 503.
     #[arg(long, default_value_t = 10.0, value_parser = positive_seconds)]
     pub deadline: f64,
+    /// Print the address as one JSON line (`url`, `address`, `port`, `loopback`) once the server listens.
+    #[command(flatten)]
+    pub json: Json,
 }
 
 fn positive_seconds(s: &str) -> Result<f64, String> {
@@ -42,7 +46,12 @@ pub fn run(a: &ServeArgs) -> Result<(), CliError> {
         lobe::serve::StartError::Scene(d) => CliError::Diagnostics(d),
         lobe::serve::StartError::Other(m) => CliError::hint(m, "check the paths and that the port is free (--port 0 picks one)"),
     })?;
-    println!("lobe serve: http://{}/", server.addr);
+    if a.json.on {
+        let j = serde_json::json!({"url": format!("http://{}/", server.addr), "address": server.addr.ip().to_string(), "port": server.addr.port(), "loopback": a.bind.is_loopback()});
+        println!("{j}");
+    } else {
+        println!("lobe serve: http://{}/", server.addr);
+    }
     if !a.bind.is_loopback() {
         eprintln!("warning: listening on {} — anyone who can reach this address can edit the served .brdf files", a.bind);
     }

@@ -1,7 +1,7 @@
 //! `lobe tabulate FILE [--set n=120] [--color R,G,B] -o out.binary`: a formula tabulated into a MERL table
 //! ([`lobe::measured::Measured::tabulate`]: the convention's angles, values stored as MERL stores them).
 
-use super::args::{self, BackendArg, FormulaSource, Output, Params};
+use super::args::{self, BackendArg, FormulaSource, Json, Output, Params};
 use super::common::CliError;
 use lobe::measured::Measured;
 use lobe::Evaluator;
@@ -21,6 +21,9 @@ pub struct TabulateArgs {
     pub out: Output,
     #[command(flatten)]
     pub backend: BackendArg,
+    /// Print `{"output", "formula", "measured_entries", "entries", "color"}` instead of the line on stderr.
+    #[command(flatten)]
+    pub json: Json,
 }
 
 /// MERL tables carry no mark of who wrote them: an existing file is replaced only with `--force`.
@@ -47,6 +50,11 @@ pub fn run(a: &TabulateArgs) -> Result<(), CliError> {
         std::array::from_fn(|c| ks[c.min(ks.len() - 1)].eval(&x, &params) * a.color[c])
     });
     a.out.force.write(path, &t.to_bytes(), never_ours)?;
-    eprintln!("wrote {} ({name}: {} of {} entries measured)", path.display(), t.measured_entries(), lobe::measured::ENTRIES);
+    if a.json.on {
+        let j = serde_json::json!({"output": path.display().to_string(), "formula": name, "measured_entries": t.measured_entries(), "entries": lobe::measured::ENTRIES, "color": a.color});
+        println!("{j}");
+    } else {
+        eprintln!("wrote {} ({name}: {} of {} entries measured)", path.display(), t.measured_entries(), lobe::measured::ENTRIES);
+    }
     Ok(())
 }

@@ -2,7 +2,7 @@
 //! the .brdf file changes. On an error the diagnostics are printed and the last good image is kept (before the
 //! first good one, the message says there is no image yet).
 
-use super::args::{Output, Params};
+use super::args::{Json, Output, Params};
 use super::common::{self, CliError};
 use lobe::render::image;
 use lobe::render::scene::{self, LoadOptions};
@@ -32,10 +32,22 @@ pub struct WatchArgs {
     /// Stop after this many reloads (for scripts; default: run until interrupted).
     #[arg(long)]
     pub count: Option<usize>,
+    /// One JSON object per reload on standard output, a line each: `reload`, `ok`, and `ms`, `compile_ms`,
+    /// `render_ms`, `nan`, `output` after a render, or the error object `--json` errors carry.
+    #[command(flatten)]
+    pub json: Json,
+}
+
+/// One successful reload's numbers.
+struct Reloaded {
+    total_ms: f64,
+    compile_ms: f64,
+    render_ms: f64,
+    nan: u64,
 }
 
 /// One reload: compile the formula into the scene, render, write. Returns a one-line summary.
-fn reload(a: &WatchArgs, src: String) -> Result<String, CliError> {
+fn reload(a: &WatchArgs, src: String) -> Result<Reloaded, CliError> {
     let t0 = Instant::now();
     let name = a.file.display().to_string();
     let opts = LoadOptions { size: Some(a.size), set: a.set.list()?, formula_override: Some((name, src)), ..LoadOptions::default() };
@@ -45,14 +57,23 @@ fn reload(a: &WatchArgs, src: String) -> Result<String, CliError> {
     let (frame, stats) = r::render(&sc, &ropts).map_err(CliError::msg)?;
     let png = frame.image.encode_png().map_err(CliError::msg)?;
     a.out.force.write(a.out.required(), &png, image::is_lobe_png)?;
-    let nan = if stats.nan > 0 { format!(", {} NaN/inf shaded as no light", stats.nan) } else { String::new() };
-    Ok(format!(
-        "reloaded in {:.1} ms (scene + compile {:.1} ms, render {:.1} ms){nan} → {}",
-        t0.elapsed().as_secs_f64() * 1e3,
-        compile.as_secs_f64() * 1e3,
-        stats.render_wall.as_secs_f64() * 1e3,
-        a.out.required().display()
-    ))
+    Ok(Reloaded {
+        total_ms: t0.elapsed().as_secs_f64() * 1e3,
+        compile_ms: compile.as_secs_f64() * 1e3,
+        render_ms: stats.render_wall.as_secs_f64() * 1e3,
+        nan: stats.nan as u64,
+    })
+}
+
+impl Reloaded {
+    fn line(&self, out: &std::path::Path) -> String {
+        let nan = if self.nan > 0 { format!(", {} NaN/inf shaded as no light", self.nan) } else { String::new() };
+        format!("reloaded in {:.1} ms (scene + compile {:.1} ms, render {:.1} ms){nan} → {}", self.total_ms, self.compile_ms, self.render_ms, out.display())
+    }
+
+    fn json(&self, reload: usize, out: &std::path::Path) -> serde_json::Value {
+        serde_json::json!({"reload": reload, "ok": true, "ms": self.total_ms, "compile_ms": self.compile_ms, "render_ms": self.render_ms, "nan": self.nan, "output": out.display().to_string()})
+    }
 }
 
 /// What a failed reload leaves at the output: the last image this session rendered; before the first success,
@@ -86,12 +107,21 @@ pub fn run(a: &WatchArgs) -> Result<(), CliError> {
                 reloads += 1;
                 let name = a.file.display().to_string();
                 match common::source_from_bytes(&name, b).map_err(CliError::from).and_then(|src| reload(a, src)) {
-                    Ok(line) => {
+                    Ok(r) => {
                         (last_failed, rendered) = (false, true);
-                        eprintln!("{line}")
+                        if a.json.on {
+                            json_line(&r.json(reloads, a.out.required()));
+                        } else {
+                            eprintln!("{}", r.line(a.out.required()));
+                        }
                     }
                     Err(e) => {
                         last_failed = true;
+                        if let Some(mut j) = e.to_json().filter(|_| a.json.on) {
+                            j["reload"] = reloads.into();
+                            j["ok"] = false.into();
+                            json_line(&j);
+                        }
                         let color = std::io::IsTerminal::is_terminal(&std::io::stderr());
                         eprint!("{}", e.render(color));
                         eprintln!("{}", failed_note(rendered, a.out.required()));
@@ -110,4 +140,12 @@ pub fn run(a: &WatchArgs) -> Result<(), CliError> {
         return Err(CliError::Failed);
     }
     Ok(())
+}
+
+/// One JSON line, flushed at once: a reader of the pipe sees each reload as it happens.
+fn json_line(j: &serde_json::Value) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(out, "{j}");
+    let _ = out.flush();
 }

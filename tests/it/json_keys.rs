@@ -51,6 +51,14 @@ fn every_json_output_keeps_its_keys() {
         .replace("\nks = 0.5\n", "\nks = 0.5\ncutoff = 8\n");
     std::fs::write(&cut_scene, scene).unwrap();
     let (points, png, cut_scene) = (points.display().to_string(), png.display().to_string(), cut_scene.display().to_string());
+    let bad = dir.join("bad.brdf");
+    std::fs::write(&bad, "param k = 2 in 1..5\nNH^k +\n").unwrap();
+    let (bad, table2, plot, watched) = (
+        bad.display().to_string(),
+        dir.join("tabulated.binary").display().to_string(),
+        dir.join("plot.png").display().to_string(),
+        dir.join("watched.png").display().to_string(),
+    );
     let blinn = "examples/brdfs/blinn.brdf";
     // A measured table (MERL .binary) of Blinn, for the commands that read one.
     let table = dir.join("blinn20.binary").display().to_string();
@@ -96,6 +104,19 @@ fn every_json_output_keeps_its_keys() {
         ("energy_measured", vec!["energy", &table, "--mode", "full", "--json"]),
         ("compare_measured", vec!["compare", blinn, &table, "--set", "n=20", "--size", "16", "--json"]),
         ("accuracy_measured", vec!["accuracy", blinn, "--reference", &table, "--set", "n=20", "--json"]),
+        ("tabulate", vec!["tabulate", blinn, "--set", "n=20", "-o", &table2, "--json"]),
+        ("export", vec!["export", blinn, "--set", "n=20", "--json"]),
+        ("import", vec!["import", "examples/explorer/ggx.brdf", "--json"]),
+        ("plot", vec!["plot", blinn, "examples/brdfs/phong.brdf", "--set", "n=20", "-o", &plot, "--json"]),
+        ("watch", vec!["watch", blinn, "--scene", "examples/scenes/paper_sphere.toml", "--size", "16", "-o", &watched, "--count", "1", "--json"]),
+    ];
+    // Errors under --json: the error object on standard output (a usage error, a message, a located diagnostic),
+    // and a watch whose reload failed (its line carries the same object).
+    let errors: Vec<(&str, Vec<&str>)> = vec![
+        ("error_usage", vec!["eval", blinn, "--at", "NH=0.5", "--no-such-flag", "--json"]),
+        ("error_message", vec!["eval", blinn, "--json"]),
+        ("error_located", vec!["check", &bad, "--json"]),
+        ("watch_error", vec!["watch", &bad, "--scene", "examples/scenes/paper_sphere.toml", "--size", "16", "-o", &watched, "--count", "1", "--json"]),
     ];
     // The LLVM tier's keys: bench's side-by-side columns, eval's lanes.
     #[cfg(feature = "llvm")]
@@ -105,9 +126,9 @@ fn every_json_output_keeps_its_keys() {
     ]);
     let bless = std::env::var("LOBE_BLESS").is_ok_and(|v| v == "1");
     let mut failures = vec![];
-    for (name, args) in &cases {
+    for ((name, args), ok) in cases.iter().map(|c| (c, true)).chain(errors.iter().map(|c| (c, false))) {
         let o = lobe(args, None);
-        assert!(o.status.success(), "{name}: {}", String::from_utf8_lossy(&o.stderr));
+        assert_eq!(o.status.success(), ok, "{name}: {}", String::from_utf8_lossy(&o.stderr));
         let v: serde_json::Value = serde_json::from_slice(&o.stdout)
             .unwrap_or_else(|e| panic!("{name}: not JSON ({e}):\n{}", String::from_utf8_lossy(&o.stdout)));
         let mut keys = BTreeSet::new();
@@ -167,4 +188,24 @@ fn the_page_api_keeps_its_keys() {
     }
     let _ = std::fs::remove_dir_all(&dir);
     assert!(failures.is_empty(), "API keys changed (LOBE_BLESS=1 rewrites the snapshots):\n{}", failures.join("\n"));
+}
+
+/// `lobe serve --json`: its first line is one JSON object with the address (scripts start it on port 0).
+#[test]
+fn serve_prints_its_address_as_json() {
+    use std::io::BufRead;
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_lobe"))
+        .args(["serve", "examples/brdfs", "--port", "0", "--json"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::inherit())
+        .spawn()
+        .expect("start lobe serve");
+    let mut line = String::new();
+    std::io::BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+    let _ = child.kill();
+    let _ = child.wait();
+    let v: serde_json::Value = serde_json::from_str(&line).unwrap_or_else(|e| panic!("not JSON ({e}): {line:?}"));
+    let port = v["port"].as_u64().unwrap();
+    assert!(port > 0 && v["loopback"] == true, "{v}");
+    assert_eq!(v["url"].as_str().unwrap(), format!("http://{}:{port}/", v["address"].as_str().unwrap()));
 }

@@ -25,8 +25,8 @@ fn names_a_flag(line: &str) -> bool {
     b.windows(4).any(|w| w[0] == b'-' && w[1] == b'-' && w[2].is_ascii_lowercase() && w[3].is_ascii_lowercase())
 }
 
-#[test]
-fn nothing_below_the_cli_names_a_flag() {
+/// Lines of the library (src/ outside the CLI: src/cli and main.rs) that `hit` matches, as `src/FILE:LINE: text`.
+fn library_lines(hit: impl Fn(&str) -> bool) -> Vec<String> {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     let mut files = vec![];
     rust_files(&src, &mut files);
@@ -38,11 +38,17 @@ fn nothing_below_the_cli_names_a_flag() {
             continue;
         }
         for (i, line) in std::fs::read_to_string(f).unwrap().lines().enumerate() {
-            if names_a_flag(line) {
+            if hit(line) {
                 found.push(format!("src/{}:{}: {}", rel.display(), i + 1, line.trim()));
             }
         }
     }
+    found
+}
+
+#[test]
+fn nothing_below_the_cli_names_a_flag() {
+    let found = library_lines(names_a_flag);
     assert!(found.is_empty(), "CLI flags named below src/cli (word them as a lobe::Hint the CLI spells):\n{}", found.join("\n"));
 }
 
@@ -66,21 +72,7 @@ fn names_a_subcommand(line: &str) -> bool {
 
 #[test]
 fn nothing_below_the_cli_names_a_subcommand() {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let mut files = vec![];
-    rust_files(&src, &mut files);
-    let mut found = vec![];
-    for f in &files {
-        let rel = f.strip_prefix(&src).unwrap();
-        if rel.starts_with("cli") || rel == Path::new("main.rs") {
-            continue;
-        }
-        for (i, line) in std::fs::read_to_string(f).unwrap().lines().enumerate() {
-            if names_a_subcommand(line) {
-                found.push(format!("src/{}:{}: {}", rel.display(), i + 1, line.trim()));
-            }
-        }
-    }
+    let found = library_lines(names_a_subcommand);
     assert!(found.is_empty(), "subcommands named in messages below src/cli (word them as a lobe::Hint the CLI spells):\n{}", found.join("\n"));
 }
 

@@ -299,12 +299,8 @@ fn factor_quadratic(a: &Analysis) -> (Ir, NodeId, bool) {
 
 #[cfg(test)]
 mod tests {
+    use super::super::tests::parse;
     use super::*;
-
-    fn parse(src: &str) -> Formula {
-        let f = crate::front::parse("t.brdf", src).unwrap();
-        crate::simplify::simplify(&f, &[])
-    }
 
     #[test]
     fn compensated_sum_carries_the_errors_below_a_cancelling_sum() {

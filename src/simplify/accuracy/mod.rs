@@ -102,12 +102,13 @@
 //! It ranks candidates; the kernel's run time, measured in `lobe bench`, is what BENCHMARKS.md reports.
 
 mod cancel;
+mod chain;
 mod compensated;
 mod power;
 mod rule;
 mod scale;
 
-pub use power::{compensated_powers, pow_call_policy};
+pub use chain::{compensated_powers, pow_call_policy};
 pub use rule::{identity, Example, Rule, Sites};
 pub(crate) use rule::Source;
 
@@ -189,7 +190,8 @@ pub(crate) fn cost(f: &Formula) -> f64 {
 mod tests {
     use super::*;
 
-    fn parse(src: &str) -> Formula {
+    /// `src` parsed and simplified (nothing baked): the rules' unit tests start from it.
+    pub(super) fn parse(src: &str) -> Formula {
         let f = crate::front::parse("t.brdf", src).unwrap();
         crate::simplify::simplify(&f, &[])
     }

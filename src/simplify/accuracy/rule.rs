@@ -105,8 +105,8 @@ pub(crate) struct Source {
 
 impl Source {
     pub(crate) fn new(src: &Formula, bake: &[(usize, f64)], sign: Sign, pow_calls: bool) -> Source {
-        let pow_call = simplify_with(src, bake, &super::power::pow_call_policy()).0;
-        let compensated = super::power::compensated_powers(&pow_call);
+        let pow_call = simplify_with(src, bake, &super::chain::pow_call_policy()).0;
+        let compensated = super::chain::compensated_powers(&pow_call);
         Source { src: src.clone(), bake: bake.to_vec(), sign, pow_calls, pow_call, compensated }
     }
 

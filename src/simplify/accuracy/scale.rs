@@ -577,12 +577,8 @@ fn scaled_norm(a: &Analysis) -> (Ir, NodeId, bool) {
 
 #[cfg(test)]
 mod tests {
+    use super::super::tests::parse;
     use super::*;
-
-    fn parse(src: &str) -> Formula {
-        let f = crate::front::parse("t.brdf", src).unwrap();
-        crate::simplify::simplify(&f, &[])
-    }
 
     #[test]
     fn split_sqrt_needs_nonnegative_factors() {
