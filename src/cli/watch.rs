@@ -61,7 +61,7 @@ fn reload(a: &WatchArgs, src: String) -> Result<Reloaded, CliError> {
         total_ms: t0.elapsed().as_secs_f64() * 1e3,
         compile_ms: compile.as_secs_f64() * 1e3,
         render_ms: stats.render_wall.as_secs_f64() * 1e3,
-        nan: stats.nan as u64,
+        nan: stats.nan,
     })
 }
 
