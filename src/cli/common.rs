@@ -274,21 +274,6 @@ pub fn check_set_names(formulas: &[&Formula], set: &[(String, f64)]) -> Result<(
 
 pub use lobe::front::did_you_mean;
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn assignments_parse_and_reject() {
-        assert_eq!(parse_assignments("n=200, a=16").unwrap(), vec![("n".into(), 200.0), ("a".into(), 16.0)]);
-        assert!(parse_assignments("n").is_err());
-        assert!(parse_assignments("n=abc").is_err());
-        assert!(parse_assignments("n=inf").is_err());
-        assert!(parse_assignments("n=5,n=6").unwrap_err().contains("twice"));
-    }
-
-}
-
 /// A command's text output (an export, an import): written to `-o` (refusing a file lobe did not write unless
 /// `--force`) or printed; with `json` (the object's other keys), one object with `output` (the path or null)
 /// and `text` is printed instead of the text.
@@ -306,4 +291,19 @@ pub fn emit_text(out: &super::args::Output, text: &str, is_ours: fn(&[u8]) -> bo
         None => {}
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn assignments_parse_and_reject() {
+        assert_eq!(parse_assignments("n=200, a=16").unwrap(), vec![("n".into(), 200.0), ("a".into(), 16.0)]);
+        assert!(parse_assignments("n").is_err());
+        assert!(parse_assignments("n=abc").is_err());
+        assert!(parse_assignments("n=inf").is_err());
+        assert!(parse_assignments("n=5,n=6").unwrap_err().contains("twice"));
+    }
+
 }
