@@ -633,8 +633,20 @@ impl Formula {
             .unwrap_or_else(|| self.file.clone())
     }
 
-    /// The expression as text with the usual precedence (shared nodes are printed inline).
+    /// The expression as text with the usual precedence, shared nodes printed inline — unless inlining would
+    /// print more than [`MAX_INLINE_NODES`] nodes (a DAG that shares much, such as repeated `fn` calls, can
+    /// stand for a tree of 2^40 nodes): then as [`Formula::to_program_text`]'s `let` lines, whose size is
+    /// the formula's own.
     pub fn to_text(&self) -> String {
+        let mut tree: Vec<u64> = Vec::with_capacity(self.ir.len());
+        for id in self.ir.ids() {
+            let mut n = 1u64;
+            self.ir.node(id).for_each_arg(|a| n = n.saturating_add(tree[a.index()]));
+            tree.push(n);
+        }
+        if tree.get(self.root.index()).is_some_and(|&n| n > MAX_INLINE_NODES) {
+            return self.to_program_text();
+        }
         crate::ir::print::expr(self, self.root)
     }
 
@@ -644,6 +656,9 @@ impl Formula {
         crate::ir::print::with_lets(self)
     }
 }
+
+/// The largest tree [`Formula::to_text`] prints inline.
+pub const MAX_INLINE_NODES: u64 = 100_000;
 
 pub mod print {
     //! Pretty printer: the simplified formula as `lobe check` shows it.

@@ -69,6 +69,8 @@ pub(crate) struct State {
     geometry: Mutex<HashMap<SceneKey, Arc<Geometry>>>,
     /// Compute jobs running now, including ones whose request already timed out.
     jobs: AtomicUsize,
+    /// Of those, the heavy ones ([`check_cost`] over [`Limits::light_cost`]).
+    heavy: AtomicUsize,
 }
 
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
@@ -77,7 +79,7 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 
 impl State {
     pub(crate) fn new(roots: Roots, scene: Option<PathBuf>, files: Vec<String>, limits: Limits) -> State {
-        State { roots, scene, files, limits, kernels: Mutex::default(), geometry: Mutex::default(), jobs: AtomicUsize::new(0) }
+        State { roots, scene, files, limits, kernels: Mutex::default(), geometry: Mutex::default(), jobs: AtomicUsize::new(0), heavy: AtomicUsize::new(0) }
     }
 
     pub(super) fn compiled(&self, name: &str, text: &str) -> Result<Arc<Compiled>, ApiError> {
@@ -177,6 +179,8 @@ fn diagnostics_of(file: &str, src: &str, e: ApiError) -> Diagnostics {
 pub(crate) struct Job<'a> {
     st: &'a State,
     pub cancel: Cancel,
+    /// The heavy slot the job took when its cost was known to be over the light cost.
+    heavy: std::sync::OnceLock<Slot<'a>>,
 }
 
 impl std::ops::Deref for Job<'_> {
@@ -195,21 +199,39 @@ impl Drop for Slot<'_> {
     }
 }
 
-/// Runs `work` (on the calling thread: the HTTP layer's blocking pool) with a token that trips at the
-/// request deadline; refuses new work with 503 while `max_jobs` jobs run. A job past its deadline stops at
-/// its next poll — the renderer between tiles, the integrals between incidence angles, the accuracy metrics
-/// between n, the accuracy pass between candidates — and is answered 503; its slot is free again as soon as
-/// it has stopped. With the cost budget checked before each job, a hostile request costs at most one slot for
-/// about the deadline, and the page's other requests keep being served.
-pub(crate) fn limited<T>(st: &Arc<State>, work: impl FnOnce(&Job) -> Result<T, ApiError>) -> Result<T, ApiError> {
-    let max = st.limits.max_jobs;
-    if st.jobs.fetch_add(1, Ordering::SeqCst) >= max {
-        st.jobs.fetch_sub(1, Ordering::SeqCst);
-        return Err(ApiError::new(503, format!("the server is busy ({max} computations running)")).hint("try again in a moment"));
+/// Takes a slot of `count` if fewer than `max` are taken.
+fn take(count: &AtomicUsize, max: usize) -> Option<Slot<'_>> {
+    if count.fetch_add(1, Ordering::SeqCst) >= max {
+        count.fetch_sub(1, Ordering::SeqCst);
+        return None;
     }
-    let _slot = Slot(&st.jobs);
-    let job = Job { st, cancel: Cancel::with_timeout(st.limits.deadline) };
-    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| work(&job)))
+    Some(Slot(count))
+}
+
+fn busy(running: usize, what: &str) -> ApiError {
+    ApiError::new(503, format!("the server is busy ({running} {what} running)")).hint("try again in a moment")
+}
+
+/// Runs `work` (from the calling thread: the HTTP layer's blocking pool) with a token that trips at the
+/// request deadline; refuses new work with 503 while `max_jobs + light_jobs` jobs run, and a job whose cost
+/// [`check_cost`] finds heavy while `max_jobs` heavy ones run. A job past its deadline stops at its next poll
+/// — the renderer between tiles, the integrals between incidence angles, the accuracy metrics between n, the
+/// accuracy pass between candidates — and is answered 503; its slots are free again as soon as it has stopped.
+/// The job's parallel work runs on worker threads of its own (as many as the machine has cores): a shared pool
+/// would run each request's tiles after those of the requests before it, so a light render would wait for
+/// every heavy one. With the cost budget checked before each job, a hostile request costs at most one slot for
+/// about the deadline, and the page's other requests keep being served.
+pub(crate) fn limited<T: Send>(st: &Arc<State>, work: impl FnOnce(&Job) -> Result<T, ApiError> + Send) -> Result<T, ApiError> {
+    let max = st.limits.max_jobs + st.limits.light_jobs;
+    let Some(_slot) = take(&st.jobs, max) else { return Err(busy(max, "computations")) };
+    let job = Job { st, cancel: Cancel::with_timeout(st.limits.deadline), heavy: std::sync::OnceLock::new() };
+    let threads = std::thread::available_parallelism().map_or(2, usize::from);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .stack_size(JOB_WORKER_STACK)
+        .build()
+        .map_err(|e| ApiError::new(503, format!("cannot start worker threads: {e}")).hint("try again in a moment"))?;
+    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| pool.install(|| work(&job))))
         .unwrap_or_else(|_| Err(ApiError::new(500, "internal error in the computation")));
     // A job stopped by its token fails with whatever error its loop gave; the deadline is the reason.
     if job.cancel.is_cancelled() {
@@ -233,8 +255,14 @@ fn scene_error(files: &ServedFiles) -> impl Fn(Diagnostics) -> ApiError + '_ {
     }
 }
 
-/// Refuses work whose estimated cost (IR nodes × evaluations) is over the budget, before it starts.
-pub(super) fn check_cost(st: &State, k: &Kernel, evals: f64, what: &str) -> Result<(), ApiError> {
+/// Stack of a job's worker threads: address space only, as the command line's workers (the library's recursive
+/// passes continue on stack segments of their own).
+const JOB_WORKER_STACK: usize = 256 << 20;
+
+/// Refuses work whose estimated cost (IR nodes × evaluations) is over the budget, before it starts; work over
+/// the light cost takes one of the `max_jobs` heavy slots for the rest of the job, or is refused as busy.
+pub(super) fn check_cost(job: &Job, k: &Kernel, evals: f64, what: &str) -> Result<(), ApiError> {
+    let st = job.st;
     let cost = k.formula.ir.len().max(1) as f64 * evals;
     if cost > st.limits.cost_budget {
         return Err(ApiError::new(422, format!(
@@ -244,6 +272,10 @@ pub(super) fn check_cost(st: &State, k: &Kernel, evals: f64, what: &str) -> Resu
             evals
         ))
         .hint("use a smaller size or a simpler formula"));
+    }
+    if cost > st.limits.light_cost && job.heavy.get().is_none() {
+        let slot = take(&st.heavy, st.limits.max_jobs).ok_or_else(|| busy(st.limits.max_jobs, "heavy computations"))?;
+        let _ = job.heavy.set(slot);
     }
     Ok(())
 }
@@ -774,14 +806,14 @@ mod tests {
     use super::*;
     use std::time::Duration;
 
-    fn state(deadline_ms: u64, max_jobs: usize) -> Arc<State> {
-        let limits = Limits { deadline: Duration::from_millis(deadline_ms), max_jobs, ..Limits::default() };
+    fn state(deadline_ms: u64, max_jobs: usize, light_jobs: usize) -> Arc<State> {
+        let limits = Limits { deadline: Duration::from_millis(deadline_ms), max_jobs, light_jobs, ..Limits::default() };
         Arc::new(State::new(Roots::new(&[std::env::temp_dir()]).unwrap(), None, vec![], limits))
     }
 
     #[test]
     fn late_jobs_are_stopped_and_free_their_slots() {
-        let st = state(50, 1);
+        let st = state(50, 1, 0);
         // A job that polls its token until it trips: stopped at the deadline, 503, and its slot is free at once.
         let t = std::time::Instant::now();
         let e = limited(&st, |job| {
@@ -797,7 +829,7 @@ mod tests {
         assert_eq!(st.jobs.load(Ordering::SeqCst), 0);
         assert_eq!(limited(&st, |_| Ok(8)).unwrap(), 8, "the slot is free again");
         // While a job runs, a second one is refused as busy.
-        let st = state(30_000, 1);
+        let st = state(30_000, 1, 0);
         let busy = limited(&st, |_| Ok(limited(&st, |_| Ok(())).unwrap_err())).unwrap();
         assert!(busy.status == 503 && busy.error.message.contains("busy"), "{}", busy.error);
         // A panicking job (the panic message below in the test output is expected) is a 500 and frees its slot.
@@ -807,16 +839,38 @@ mod tests {
 
     #[test]
     fn formulas_over_the_cost_budget_are_refused_before_running() {
-        let st = state(10_000, 2);
+        let st = state(10_000, 2, 2);
         let heavy: String = (0..400).map(|i| format!("sin(NH*{i}.5) + ")).collect::<String>() + "0";
         let c = st.compiled("h.brdf", &heavy).unwrap();
         assert!(c.warnings.items.iter().any(|d| d.message.contains("accuracy pass was skipped")), "the pass is priced too");
         let k = c.kernel().clone();
-        assert!(check_cost(&st, &k, 64.0 * 64.0, "a small render").is_ok());
-        let e = check_cost(&st, &k, 2048.0 * 2048.0, "this render").unwrap_err();
+        assert!(limited(&st, |job| check_cost(job, &k, 64.0 * 64.0, "a small render")).is_ok());
+        let e = limited(&st, |job| check_cost(job, &k, 2048.0 * 2048.0, "this render")).unwrap_err();
         assert_eq!(e.status, 422);
         assert_eq!(st.compiled("big.brdf", &"1+".repeat(40 << 10)).err().map(|e| e.status), Some(413));
         assert_eq!(content_hash(b"NH^n"), content_hash(b"NH^n"));
         assert_ne!(content_hash(b"NH^n"), content_hash(b"NH^m"));
+    }
+
+    #[test]
+    fn heavy_jobs_leave_the_light_lane_free() {
+        // One heavy slot and one light one: a heavy job holds its slot; a second heavy job is refused as busy, a
+        // light job beside it runs; with both lanes full, any job is refused; slots are free after.
+        let st = state(30_000, 1, 1);
+        let k = st.compiled("h.brdf", &((0..300).map(|i| format!("sin(NH*{i}.5) + ")).collect::<String>() + "0")).unwrap().kernel().clone();
+        let heavy_evals = st.limits.light_cost / k.formula.ir.len() as f64 * 2.0;
+        let inner = limited(&st, |job| {
+            check_cost(job, &k, heavy_evals, "a heavy render")?;
+            let second = limited(&st, |j2| check_cost(j2, &k, heavy_evals, "another heavy render")).unwrap_err();
+            let light = limited(&st, |j2| check_cost(j2, &k, 16.0, "a light render").map(|()| 7));
+            Ok((second, light))
+        })
+        .unwrap();
+        assert!(inner.0.status == 503 && inner.0.error.message.contains("heavy"), "{}", inner.0.error);
+        assert_eq!(inner.1.unwrap(), 7);
+        let full = limited(&st, |_| Ok(limited(&st, |_| Ok(limited(&st, |_| Ok(())).unwrap_err())).unwrap())).unwrap();
+        assert_eq!(full.status, 503);
+        assert_eq!((st.jobs.load(Ordering::SeqCst), st.heavy.load(Ordering::SeqCst)), (0, 0));
+        assert!(limited(&st, |job| check_cost(job, &k, heavy_evals, "a heavy render")).is_ok(), "the heavy slot is free again");
     }
 }

@@ -16,8 +16,10 @@
 //!   500).
 //! - **Limits** ([`Limits`]): request bodies, formula size, image side, an estimated cost budget (IR nodes ×
 //!   evaluations) checked before work starts, a per-request deadline at which the computation is stopped
-//!   ([`crate::base::cancel`], polled by the renderer and the numerics; [`api::limited`]), and a cap on
-//!   computations in flight.
+//!   ([`crate::base::cancel`], polled by the renderer and the numerics; [`api::limited`]), and caps on
+//!   computations in flight: heavy ones (over a light cost) take slots of their own, so that they cannot
+//!   starve light ones, and each computation runs on worker threads of its own, so that the cores are shared
+//!   among requests by the operating system instead of one queue serving them in order.
 //! - **Files**: only regular files under the directories the server was started with — the formula files'
 //!   and the scene's ([`http::Roots`]: no `..` in a request, symbolic links resolved before the check;
 //!   FIFOs and devices refused without blocking). Everything a scene names (meshes, formula files, measured
@@ -58,8 +60,14 @@ pub struct Limits {
     pub max_size: usize,
     /// Longest a computation runs: then it is stopped and the request answered 503.
     pub deadline: Duration,
-    /// Computations running at once (a stopped one counts until it has stopped, milliseconds after its deadline).
+    /// Heavy computations running at once (a stopped one counts until it has stopped, milliseconds after its
+    /// deadline): those whose estimated cost is over `light_cost`.
     pub max_jobs: usize,
+    /// Computations beyond `max_jobs` kept for light work (a compile, a small render, a save), so that heavy
+    /// requests — one client's or many — leave the page answering.
+    pub light_jobs: usize,
+    /// The estimated cost (IR nodes × evaluations) up to which a computation is light.
+    pub light_cost: f64,
     /// Largest estimated cost, in IR nodes × kernel evaluations (~1 ns each on the JIT).
     pub cost_budget: f64,
 }
@@ -72,6 +80,8 @@ impl Default for Limits {
             max_size: 2048,
             deadline: Duration::from_secs(10),
             max_jobs: 8,
+            light_jobs: 8,
+            light_cost: 2.0e8,
             cost_budget: 4.0e9,
         }
     }

@@ -860,3 +860,21 @@ fn deep_selects_and_bool_chains_do_not_overflow() {
     // Calls with equal arguments expand once (memoised): sixty levels of doubling are accepted.
     check(&chain(60, &|g| format!("{g}(x) + {g}(x)"), "f59(NH) / 2^60"), 0.9);
 }
+
+/// A formula that shares much (forty functions, each calling the one before twice: a tree of 2^40 nodes) prints
+/// in the size of its DAG: `let` lines instead of the inlined tree; a small formula still prints inline.
+#[test]
+fn text_of_a_self_doubling_formula_stays_small() {
+    let mut src = String::from("fn f0(x) = x*NH + NV\n");
+    for i in 1..=40 {
+        src += &format!("fn f{i}(x) = f{j}(x) * f{j}(x + 1)\n", j = i - 1);
+    }
+    src += "f40(NH)\n";
+    let f = parse("chain.brdf", &src).unwrap();
+    let t0 = std::time::Instant::now();
+    let text = f.to_text();
+    assert!(text.len() < 1 << 20 && text.contains("let "), "{} bytes", text.len());
+    assert!(t0.elapsed() < std::time::Duration::from_secs(10));
+    let small = parse("p.brdf", "NH * NV + NH").unwrap().to_text();
+    assert!(!small.contains("let ") && small.matches("NH").count() == 2, "{small}");
+}

@@ -721,3 +721,69 @@ fn slow_bodies_from_one_address_do_not_lock_it_out() {
     eprintln!("slowest normal request beside 40 slow bodies: {worst:?}");
     assert!(worst < PROMPT, "a normal request took {worst:?}");
 }
+
+/// The server's peak resident memory (VmHWM), in KiB.
+fn peak_kib(s: &Served) -> u64 {
+    let status = std::fs::read_to_string(format!("/proc/{}/status", s.child.id())).unwrap_or_default();
+    status.lines().find_map(|l| l.strip_prefix("VmHWM:")).and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok()).unwrap_or(0)
+}
+
+/// Eight heavy renders (each under the cost budget but running to the deadline) do not keep the page's normal
+/// render waiting: it is answered within a second while they run, every time.
+#[test]
+fn eight_heavy_renders_leave_a_normal_render_answered() {
+    let s = Served::start(&["examples/brdfs", "--deadline", "6"]);
+    // About half the cost budget at 1024²: seconds of work each, so all eight run to the deadline.
+    let heavy: String = (0..500).map(|i| format!("sin(NH*{i}.5) + ")).collect::<String>() + "0";
+    let addr = s.addr;
+    // Compiled once first, so the eight below start rendering at once.
+    let warm = s.post("/api/compile", &json!({"name": "heavy.brdf", "text": heavy}));
+    assert_eq!(warm.status, 200, "{}", String::from_utf8_lossy(&warm.body));
+    let started = Instant::now();
+    let runs: Vec<_> = (0..8)
+        .map(|_| {
+            let body = json!({"name": "heavy.brdf", "text": heavy, "size": 1024}).to_string();
+            std::thread::spawn(move || {
+                let r = http(addr, "POST", "/api/render", &[("X-Lobe-Client", "test"), ("Content-Type", "application/json")], Some(body.as_bytes()));
+                (r.status, Instant::now())
+            })
+        })
+        .collect();
+    std::thread::sleep(Duration::from_millis(1500));
+    let mut worst = Duration::ZERO;
+    for k in 0..4 {
+        let t0 = Instant::now();
+        let r = s.post("/api/render", &json!({"text": "VR^n", "params": {"n": 20 + k}, "size": 128}));
+        worst = worst.max(t0.elapsed());
+        assert_eq!(r.status, 200, "normal render {k}: {}", String::from_utf8_lossy(&r.body));
+    }
+    let measured_at = Instant::now();
+    let ends: Vec<(u16, Instant)> = runs.into_iter().map(|h| h.join().unwrap()).collect();
+    let running = ends.iter().filter(|(_, end)| *end > measured_at).count();
+    eprintln!("normal render beside eight heavy ones: slowest {worst:?}; {running} heavy still running after; statuses {:?}; heavy ran {:?}", ends.iter().map(|e| e.0).collect::<Vec<_>>(), started.elapsed());
+    assert!(running >= 6, "the heavy renders had ended before the measurement ({running} running)");
+    assert!(ends.iter().all(|(st, _)| *st == 200 || *st == 503), "{:?}", ends.iter().map(|e| e.0).collect::<Vec<_>>());
+    assert!(worst < PROMPT, "a normal render took {worst:?} beside eight heavy ones");
+}
+
+/// The hostile corpus's 722-byte formula (forty functions, each calling the one before twice) compiles on the
+/// server within its deadline and a gibibyte.
+#[test]
+fn a_self_doubling_formula_request_ends_within_its_deadline_and_memory() {
+    let s = Served::start(&["examples/brdfs"]);
+    let mut text = String::from("fn f0(x) = x*NH + NV\n");
+    for i in 1..=40 {
+        text += &format!("fn f{i}(x) = f{j}(x) + f{j}(x + 1)\n", j = i - 1);
+    }
+    text += "f40(NH)\n";
+    let t0 = Instant::now();
+    let r = s.post("/api/compile", &json!({"name": "chain.brdf", "text": text}));
+    let took = t0.elapsed();
+    assert!(r.status == 200 || r.status == 422 || r.status == 503, "{}: {}", r.status, String::from_utf8_lossy(&r.body));
+    let kib = peak_kib(&s);
+    eprintln!("fn chain on the server: {} in {took:?}, peak {} MiB", r.status, kib / 1024);
+    assert!(took < Duration::from_secs(11), "{took:?}");
+    assert!(kib < 1 << 20, "peak {} MiB", kib / 1024);
+    let after = s.post("/api/render", &json!({"text": "VR^n", "size": 64}));
+    assert_eq!(after.status, 200);
+}
