@@ -46,6 +46,9 @@ pub(crate) const DIMS: [usize; 3] = [90, 90, 180];
 pub const ENTRIES: usize = DIMS[0] * DIMS[1] * DIMS[2];
 /// What a stored value is multiplied by, per channel (red, green, blue).
 pub(crate) const SCALE: [f64; 3] = [1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0];
+/// The largest physical value a table may hold: the metrics square values (RMSE, the closed-form colour scale's
+/// Σ w·a²), and past √(f64::MAX) ≈ 1.3·10¹⁵⁴ those overflow. Measured BRDFs stay below about 10⁴.
+pub const MAX_VALUE: f64 = 1e150;
 /// Header bytes (three i32).
 const HEADER: usize = 12;
 /// The size of a MERL file.
@@ -260,6 +263,22 @@ impl Measured {
                 ));
             }
         }
+        for (c, block) in stored.chunks_exact(ENTRIES).enumerate() {
+            let over = |v: &f64| v * SCALE[c] > MAX_VALUE;
+            if let Some(e) = block.iter().position(over) {
+                let (i, j, k) = (e / (DIMS[1] * DIMS[2]), e / DIMS[2] % DIMS[1], e % DIMS[2]);
+                let top = block.iter().fold(0.0f64, |m, v| m.max(v * SCALE[c]));
+                return Err(bad(
+                    name,
+                    format!(
+                        "the {} block holds {} values over {MAX_VALUE:e} (up to {top:e}), the first at entry (θ_h {i}, θ_d {j}, φ_d {k}): every metric squares them past f64's range",
+                        CHANNEL[c],
+                        block.iter().filter(|v| over(v)).count()
+                    ),
+                    "a measured BRDF's values are below about 10⁴ per steradian (MERL's reach ~10³): rescale the table",
+                ));
+            }
+        }
         Ok(Measured { name: name.to_string(), stored })
     }
 
@@ -276,9 +295,8 @@ impl Measured {
     }
 
     /// A table of `f(L, V)` (red, green, blue; physical values, stored ÷ [`SCALE`]) at every entry's
-    /// convention directions; an entry whose L or V is below the surface, whose value is not finite, or whose
-    /// stored value would not be (beyond f64's range after the division by [`SCALE`]) is stored as −1 (not
-    /// measured). `f` is called from several threads.
+    /// convention directions; an entry whose L or V is below the surface, or whose value is not finite or over
+    /// [`MAX_VALUE`], is stored as −1 (not measured). `f` is called from several threads.
     pub fn tabulate(name: &str, f: &(dyn Fn(V3, V3) -> [f64; 3] + Sync)) -> Measured {
         use rayon::prelude::*;
         let rows: Vec<Vec<[f64; 3]>> = (0..DIMS[0] * DIMS[1])
@@ -291,9 +309,9 @@ impl Measured {
                             return [-1.0; 3];
                         }
                         let x = f(l, v);
-                        // A finite value beyond the format's range (|x| > f64::MAX · SCALE) would store ±inf,
-                        // which no reader (lobe's included) takes: not measured, like a non-finite one.
-                        std::array::from_fn(|c| Some(x[c] / SCALE[c]).filter(|s| s.is_finite()).unwrap_or(-1.0))
+                        // A value over MAX_VALUE (or beyond the format's range, which would store ±inf) is one
+                        // no reader (lobe's included) takes: not measured, like a non-finite one.
+                        std::array::from_fn(|c| Some(x[c] / SCALE[c]).filter(|s| s.is_finite() && s * SCALE[c] <= MAX_VALUE).unwrap_or(-1.0))
                     })
                     .collect()
             })

@@ -301,13 +301,15 @@ fn table_albedo_is_the_formulas() {
     assert!(failed.is_empty(), "{failed:#?}");
 }
 
-/// A formula whose values are finite but beyond the format's range (stored = value ÷ SCALE overflows): those
-/// entries are not measured, and lobe reads back the table it wrote (it used to store +inf and then refuse it).
+/// A formula whose values are finite but over the metrics' range (`MAX_VALUE`) or beyond the format's (stored =
+/// value ÷ SCALE overflows): those entries are not measured, and lobe reads back the table it wrote (it used to
+/// store +inf and then refuse it). A table file that holds such values is refused with the value and the entry,
+/// not fitted to silently wrong numbers.
 #[test]
 fn values_beyond_the_formats_range_are_not_measured_and_the_table_reads_back() {
     let t = Measured::tabulate("huge", &|l, v| {
         let x = lobe::frame::inputs_from_dirs(l, v);
-        [1e308 * x[2], 1e300, 1e308]
+        [1e151 * x[2], 1e149, 1e308]
     });
     let back = Measured::from_bytes("huge", &t.to_bytes()).unwrap_or_else(|d| panic!("{}", d.message));
     for e in (0..ENTRIES).step_by(997) {
@@ -316,7 +318,14 @@ fn values_beyond_the_formats_range_are_not_measured_and_the_table_reads_back() {
             assert!(s.is_finite(), "entry {e} channel {c}: {s}");
         }
     }
-    // The green channel (1e300 ÷ (1.15/1500)) fits; the blue (1e308 ÷ (1.66/1500)) never does.
-    assert!((0..ENTRIES).any(|e| back.value(1, e).is_some()));
-    assert!((0..ENTRIES).all(|e| back.value(2, e).is_none()));
+    // Red is measured where 1e151·NH ≤ 1e150 only; green (1e149) fits; blue (1e308) never does.
+    let measured = |c: usize| (0..ENTRIES).filter(|&e| back.value(c, e).is_some()).count();
+    assert!(measured(0) > 0 && measured(0) < measured(1), "{} {}", measured(0), measured(1));
+    assert_eq!(measured(2), 0);
+    // A file whose values reach 1e300 (written by hand: lobe does not write them) is refused, naming them.
+    let mut bytes = t.to_bytes();
+    let at = 12 + 8 * (ENTRIES + 4321);
+    bytes[at..at + 8].copy_from_slice(&1e300f64.to_le_bytes());
+    let e = Measured::from_bytes("hand.binary", &bytes).err().expect("refused");
+    assert!(e.message.contains("green block holds 1 values over 1e150") && e.message.contains("(θ_h 0, θ_d 24, φ_d 1)"), "{}", e.message);
 }
