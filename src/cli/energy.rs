@@ -32,9 +32,12 @@ pub struct EnergyArgs {
     pub formula: FormulaSource,
     #[command(flatten)]
     pub set: Params,
-    /// `lobe` (1/(2π∫f cosθ sinθ dθ)) or `full` (albedo ρ(θᵢ) from real geometry).
-    #[arg(long, value_enum, default_value = "lobe")]
-    pub mode: Mode,
+    /// `lobe` (1/(2π∫f cosθ sinθ dθ), the papers' coefficient of a one-cosine lobe) or `full` (albedo ρ(θᵢ)
+    /// from real geometry). Default: `lobe` for a formula that reads one lobe cosine (NH or VR) and nothing
+    /// else, or with --range, --lobe or --against; `full` for any other formula (a microfacet model, a
+    /// direction formula) and for measured tables.
+    #[arg(long, value_enum)]
+    pub mode: Option<Mode>,
     /// Sweep n over `lo..hi` (lobe mode) and print coef(n).
     #[arg(long)]
     pub range: Option<String>,
@@ -97,12 +100,26 @@ enum Out {
     Text(String),
 }
 
+impl EnergyArgs {
+    /// The mode asked for, or the one that means something for a formula reading `used` (module docs).
+    fn mode_for(&self, used: lobe::ir::InputSet) -> Mode {
+        let lobe_flags = self.range.is_some() || self.lobe.name.is_some() || self.against.is_some() || self.against_expr.is_some();
+        let one_cosine = [Input::NH, Input::VR].iter().any(|c| used.iter().all(|i| i == *c));
+        self.mode.unwrap_or(if lobe_flags || one_cosine { Mode::Lobe } else { Mode::Full })
+    }
+}
+
 /// The output for a formula's channel kernels (one, or red, green, blue; see the module docs).
 fn report_channels(a: &EnergyArgs, ks: &[Kernel], against: Option<&Kernel>) -> Result<String, CliError> {
     if ks.len() > 1 && a.range.is_some() {
         return Err(CliError::hint("--range works on scalar formulas only", "this formula has a colour result; drop --range"));
     }
-    let outs = ks.iter().map(|k| report(a, k, against)).collect::<Result<Vec<Out>, CliError>>()?;
+    let used: lobe::ir::InputSet = ks.iter().map(Kernel::used_inputs).collect();
+    let mode = a.mode_for(used);
+    if a.mode.is_none() && mode == Mode::Full && !a.json.on {
+        eprintln!("note: the formula reads {used}, not one lobe cosine: its albedo over incidence (--mode lobe gives the papers' one-angle coefficient)");
+    }
+    let outs = ks.iter().map(|k| report(a, k, against, mode)).collect::<Result<Vec<Out>, CliError>>()?;
     join_channels(a, outs)
 }
 
@@ -171,7 +188,7 @@ fn full_mode(a: &EnergyArgs, name: &str, ev: &dyn Evaluator, used: Option<lobe::
 
 /// `energy --mode full` of a measured table (`lobe::measured`): each channel's albedo, as a colour formula's.
 fn measured_report(a: &EnergyArgs, path: &str) -> Result<String, CliError> {
-    if a.mode != Mode::Full || a.range.is_some() || a.lobe.name.is_some() || a.against.is_some() || a.against_expr.is_some() || !a.set.list()?.is_empty() {
+    if a.mode == Some(Mode::Lobe) || a.range.is_some() || a.lobe.name.is_some() || a.against.is_some() || a.against_expr.is_some() || !a.set.list()?.is_empty() {
         return Err(CliError::hint(
             format!("`{path}` is a measured table: it has no parameters and no one-angle lobe"),
             "its albedo is `lobe energy FILE.binary --mode full` (no --range, --lobe, --against or --set)",
@@ -187,7 +204,7 @@ fn measured_report(a: &EnergyArgs, path: &str) -> Result<String, CliError> {
 }
 
 /// The command's output for one already compiled kernel (the formula, and the fitted coefficient if any).
-fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<Out, CliError> {
+fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>, mode: Mode) -> Result<Out, CliError> {
     let mut out = String::new();
     let params = common::param_values(&k.formula, &a.set.list()?);
     let name = k.formula.display_name();
@@ -195,7 +212,7 @@ fn report(a: &EnergyArgs, k: &Kernel, against: Option<&Kernel>) -> Result<Out, C
     let shown = k.formula.params.iter().zip(&params).filter(|(d, _)| a.range.is_none() || d.name != "n");
     let shown = Named::new(shown.map(|(d, v)| (d.name.as_str(), *v)));
 
-    if a.mode == Mode::Full {
+    if mode == Mode::Full {
         if a.range.is_some() {
             return Err(CliError::hint("--range works in lobe mode only", "drop --mode full, or drop --range"));
         }

@@ -29,8 +29,8 @@ pub struct EvalArgs {
     /// formula (or `{"values": […]}` with --json).
     #[arg(long, value_name = "PATH", conflicts_with = "at")]
     pub points: Option<String>,
-    /// Multiply by the exact energy normalisation coefficient 1/(2π·Int), computed at compile time (bakes
-    /// every parameter).
+    /// Multiply by the exact energy normalisation coefficient 1/(2π·Int) of a one-cosine lobe, computed at
+    /// compile time (bakes every parameter); for other formulas a note says it is not their energy.
     #[arg(long)]
     pub normalize: bool,
     /// Print the ground truth instead of a kernel's value: the formula as written (--set values folded)
@@ -190,6 +190,12 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
                 "--normalize: the formula has a colour result; one coefficient per channel would change its colour",
                 "evaluate without --normalize, or check the albedo per channel with `lobe energy --mode full`",
             ));
+        }
+        let used = f.used_inputs();
+        if ![Input::NH, Input::VR].iter().any(|c| used.iter().all(|i| i == *c)) {
+            eprintln!(
+                "note: --normalize multiplies by the one-lobe coefficient 1/(2π∫₀¹ f(c)·c dc) (lobe variable = cos θ, light at the normal); this formula reads {used}, so that is not its energy: `lobe energy --mode full` gives its albedo"
+            );
         }
         // The coefficient depends on every parameter: bake them all (--set values, declared defaults for the rest).
         let mut bake = set.clone();

@@ -479,8 +479,13 @@ fn energy_prints_only_the_notes_of_its_mode() {
     let r = lobe(&["energy", "--expr", "NH^n * VR", "--mode", "full"]);
     assert_eq!(r.code, Some(0), "{}", r.stderr);
     assert!(!r.stderr.contains("note:"), "{}", r.stderr);
-    let r = lobe(&["energy", "--expr", "NH^n * VR"]);
+    let r = lobe(&["energy", "--expr", "NH^n * VR", "--mode", "lobe"]);
     assert!(r.code == Some(0) && r.stderr.contains("note: the formula reads both NH and VR"), "{}", r.stderr);
+    // Without --mode, a formula that is not one lobe cosine gets its albedo, and a note says why.
+    let r = lobe(&["energy", "--expr", "NH^n * VR"]);
+    assert!(r.code == Some(0) && r.stderr.contains("not one lobe cosine") && String::from_utf8_lossy(&r.stdout).contains("albedo"), "{}", r.stderr);
+    let r = lobe(&["energy", "--expr", "NH^n"]);
+    assert!(r.code == Some(0) && String::from_utf8_lossy(&r.stdout).contains("coef = 1/(2π·Int)"), "{}", r.stderr);
     refused(&lobe(&["energy", "--expr", "NH^n", "--mode", "full", "--lobe", "NH"]), "--lobe in full mode", "lobe mode only");
 }
 
