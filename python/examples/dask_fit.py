@@ -57,10 +57,12 @@ def main(address=None):
         client = Client(cluster)
     with client:
         distributed = run_dask(client, js)
+    free = {name: f for name, _, _, f, _ in js}
     for name in serial:
         s, d = serial[name], distributed[name]
         mark = "same" if s == d else "DIFFERENT"
-        shown = ", ".join(f"{p}={s['params'][p]:.6g}" for p in js[0][3] if p in s["params"]) or s["params"]
+        # The parameters this job fitted (F_ST's `a`, the others' `n`), not the first job's.
+        shown = ", ".join(f"{p}={s['params'][p]:.6g}" for p in free[name])
         print(f"{name:40s} score {s['score']:.3e}  {shown}  ({mark} on Dask)")
     assert serial == distributed, "the cluster's fits differ from the serial ones"
 
