@@ -6,7 +6,7 @@
 //! stability sweep instead, with `lobe sweep`'s flags ([`super::sweep`]).
 
 use super::args::{self, FormulaSource, Json, Params, PreferArg};
-use super::common::{self, CliError};
+use super::common::{self, CliError, Spinner};
 use lobe::ir::Formula;
 use lobe::numerics::robust::{self, ErrorStats, Worst};
 
@@ -83,8 +83,14 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
     // A colour formula: the red channel is checked and shown, and the output says so (`lobe check --sweep`
     // and `lobe bench` report every channel).
     let opts = robust::PassOptions { math: a.math.mode, budget: std::time::Duration::from_secs_f64(a.budget), ..a.prefer.pass(a.points as usize) };
-    let spinner = Spinner::new(!a.json.on && std::io::IsTerminal::is_terminal(&std::io::stderr()));
-    let c = lobe::numerics::check::check(&whole, &set, &opts, &|stage| spinner.show(stage));
+    let spinner = Spinner::new(!a.json.on && std::io::IsTerminal::is_terminal(&std::io::stderr()), "accuracy pass");
+    let c = lobe::numerics::check::check(&whole, &set, &opts, &|stage| {
+        spinner.show(match stage {
+            robust::Stage::Truth { points } => format!("the truth at {points} points"),
+            robust::Stage::Candidate { name, tried } => format!("candidate {tried} ({name})"),
+            robust::Stage::Report => "the report (conditioning at every point)".to_string(),
+        })
+    });
     spinner.finish();
     let c = c?;
     if a.json.on {
@@ -199,53 +205,3 @@ fn print_accuracy(f: &Formula, pass: &robust::Outcome, asked: usize, ms: f64, co
     }
 }
 
-/// What the accuracy pass is doing, on stderr, once it has run for a second (a quick check prints nothing):
-/// a spinner with the stage and the elapsed time, cleared before the report.
-struct Spinner {
-    bar: Option<indicatif::ProgressBar>,
-    done: std::sync::Arc<(std::sync::Mutex<bool>, std::sync::Condvar)>,
-}
-
-impl Spinner {
-    fn new(enabled: bool) -> Spinner {
-        let done = std::sync::Arc::new((std::sync::Mutex::new(false), std::sync::Condvar::new()));
-        let bar = enabled.then(|| {
-            let b = indicatif::ProgressBar::with_draw_target(None, indicatif::ProgressDrawTarget::hidden());
-            if let Ok(style) = indicatif::ProgressStyle::with_template("{spinner} accuracy pass: {msg} {elapsed}") {
-                b.set_style(style);
-            }
-            let (b2, done2) = (b.clone(), done.clone());
-            std::thread::spawn(move || {
-                let (lock, cv) = &*done2;
-                let Ok(guard) = lock.lock() else { return };
-                let Ok((finished, _)) = cv.wait_timeout_while(guard, std::time::Duration::from_secs(1), |d| !*d) else { return };
-                if !*finished {
-                    b2.set_draw_target(indicatif::ProgressDrawTarget::stderr());
-                    b2.enable_steady_tick(std::time::Duration::from_millis(120));
-                }
-            });
-            b
-        });
-        Spinner { bar, done }
-    }
-
-    fn show(&self, stage: robust::Stage) {
-        let Some(b) = &self.bar else { return };
-        b.set_message(match stage {
-            robust::Stage::Truth { points } => format!("the truth at {points} points"),
-            robust::Stage::Candidate { name, tried } => format!("candidate {tried} ({name})"),
-            robust::Stage::Report => "the report (conditioning at every point)".to_string(),
-        });
-    }
-
-    fn finish(&self) {
-        let (lock, cv) = &*self.done;
-        if let Ok(mut d) = lock.lock() {
-            *d = true;
-        }
-        cv.notify_all();
-        if let Some(b) = &self.bar {
-            b.finish_and_clear();
-        }
-    }
-}

@@ -293,6 +293,54 @@ pub fn emit_text(out: &super::args::Output, text: &str, is_ours: fn(&[u8]) -> bo
     Ok(())
 }
 
+/// What a long run is doing, on stderr, once it has run for a second (a quick run prints nothing): a spinner
+/// with a label, the stage and the elapsed time, cleared before the report.
+pub struct Spinner {
+    bar: Option<indicatif::ProgressBar>,
+    done: std::sync::Arc<(std::sync::Mutex<bool>, std::sync::Condvar)>,
+}
+
+impl Spinner {
+    pub fn new(enabled: bool, label: &str) -> Spinner {
+        let done = std::sync::Arc::new((std::sync::Mutex::new(false), std::sync::Condvar::new()));
+        let bar = enabled.then(|| {
+            let b = indicatif::ProgressBar::with_draw_target(None, indicatif::ProgressDrawTarget::hidden());
+            if let Ok(style) = indicatif::ProgressStyle::with_template(&format!("{{spinner}} {label}: {{msg}} {{elapsed}}")) {
+                b.set_style(style);
+            }
+            let (b2, done2) = (b.clone(), done.clone());
+            std::thread::spawn(move || {
+                let (lock, cv) = &*done2;
+                let Ok(guard) = lock.lock() else { return };
+                let Ok((finished, _)) = cv.wait_timeout_while(guard, std::time::Duration::from_secs(1), |d| !*d) else { return };
+                if !*finished {
+                    b2.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+                    b2.enable_steady_tick(std::time::Duration::from_millis(120));
+                }
+            });
+            b
+        });
+        Spinner { bar, done }
+    }
+
+    pub fn show(&self, stage: String) {
+        if let Some(b) = &self.bar {
+            b.set_message(stage);
+        }
+    }
+
+    pub fn finish(&self) {
+        let (lock, cv) = &*self.done;
+        if let Ok(mut d) = lock.lock() {
+            *d = true;
+        }
+        cv.notify_all();
+        if let Some(b) = &self.bar {
+            b.finish_and_clear();
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

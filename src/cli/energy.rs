@@ -145,10 +145,14 @@ fn join_channels(a: &EnergyArgs, outs: Vec<Out>) -> Result<String, CliError> {
 fn full_mode(a: &EnergyArgs, name: &str, ev: &dyn Evaluator, used: Option<lobe::ir::InputSet>, params: &[f64], shown: Named) -> Result<Out, CliError> {
     let mut out = String::new();
     // `None`: a measured table's channel (its own quadrature, lobe::numerics::energy::full_energy_tabulated).
+    let spinner = common::Spinner::new(!a.json.on && std::io::IsTerminal::is_terminal(&std::io::stderr()), name);
+    spinner.show("the albedo over incidence (a direction formula integrates over the azimuth of L too)".to_string());
     let r = match used {
-        Some(used) => full_energy_for(ev, used, params)?,
-        None => lobe::numerics::energy::full_energy_tabulated(ev, params)?,
+        Some(used) => full_energy_for(ev, used, params),
+        None => lobe::numerics::energy::full_energy_tabulated(ev, params),
     };
+    spinner.finish();
+    let r = r?;
     if a.json.on {
         return Ok(Out::Json(EnergyReport::Full(FullReport::new(shown, &r))));
     }

@@ -3,7 +3,7 @@
 //! parallel into a table (Ngan et al.'s experiment). The format, metrics and keys: docs/measured.md.
 
 use super::args::Output;
-use super::common::{self, CliError};
+use super::common::{self, CliError, Spinner};
 use super::fit::{free_specs, FitArgs};
 use lobe::base::json::{self, Named};
 use lobe::ir::Formula;
@@ -136,10 +136,28 @@ pub fn run(a: &FitArgs) -> Result<(), CliError> {
     let loaded: Vec<Arc<Measured>> = tables.iter().map(|t| Measured::read(t).map(Arc::new)).collect::<Result<_, _>>()?;
     let opts = MeasuredFitOptions { metric, stride: usize::from(a.stride), grid_stride: usize::from(a.grid_stride), top: usize::from(a.top), refine: !a.no_refine };
     let pairs: Vec<(usize, usize)> = (0..models.len()).flat_map(|m| (0..loaded.len()).map(move |t| (m, t))).collect();
-    let rows: Vec<Row> = pairs
+    // After a second on a terminal: pairs done (a batch) or candidates scored (one fit).
+    let spinner = Spinner::new(!a.json.on && !a.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr()), "fitting");
+    let (done, scored) = (std::sync::atomic::AtomicUsize::new(0), std::sync::atomic::AtomicUsize::new(0));
+    let tick = || {
+        let k = scored.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        if pairs.len() == 1 && k % 16 == 0 {
+            spinner.show(format!("{k} candidates scored"));
+        }
+    };
+    let rows: Result<Vec<Row>, CliError> = pairs
         .par_iter()
-        .map(|&(m, t)| fit_one(&models[m], &tables[t], &loaded[t], &opts))
-        .collect::<Result<_, CliError>>()?;
+        .map(|&(m, t)| {
+            let row = fit_one(&models[m], &tables[t], &loaded[t], &opts, &tick);
+            let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            if pairs.len() > 1 {
+                spinner.show(format!("{d}/{} formula × table pairs", pairs.len()));
+            }
+            row
+        })
+        .collect();
+    spinner.finish();
+    let rows = rows?;
     if !batch {
         return single(a, &rows[0], metric);
     }
@@ -159,7 +177,7 @@ pub fn run(a: &FitArgs) -> Result<(), CliError> {
     Ok(())
 }
 
-fn fit_one<'a>(model: &'a Model, path: &'a str, t: &Measured, opts: &MeasuredFitOptions) -> Result<Row<'a>, CliError> {
+fn fit_one<'a>(model: &'a Model, path: &'a str, t: &Measured, opts: &MeasuredFitOptions, progress: &(dyn Fn() + Sync)) -> Result<Row<'a>, CliError> {
     let start = std::time::Instant::now();
     let channels: Vec<&dyn Evaluator> = model.kernels.iter().map(|k| k as &dyn Evaluator).collect();
     let params = common::param_values(&model.formula, &model.set);
@@ -170,7 +188,7 @@ fn fit_one<'a>(model: &'a Model, path: &'a str, t: &Measured, opts: &MeasuredFit
         let best = vec![lobe::numerics::measured::MeasuredCandidate { params: params.clone(), residual: r, refined: false }];
         MeasuredFit { best, evaluated: 1, entries: s.len(), grid_entries: s.len() }
     } else {
-        fit_measured(&channels, &params, &model.free, t, opts, &|| {})?
+        fit_measured(&channels, &params, &model.free, t, opts, progress)?
     };
     let best = &fit.best[0].params;
     let s = Samples::new(t, opts.stride);
