@@ -308,6 +308,25 @@ pub struct Output {
 }
 
 impl Output {
+    /// A command's text output (an export, an import): written to `-o` (refusing a file lobe did not write
+    /// unless `--force`) or printed; with `json` (the object's other keys), one object with `output` (the path or
+    /// null) and `text` is printed instead of the text.
+    pub fn emit_text(&self, text: &str, is_ours: fn(&[u8]) -> bool, json: Option<serde_json::Value>) -> Result<(), CliError> {
+        if let Some(p) = &self.path {
+            self.force.write(p, text.as_bytes(), is_ours)?;
+        }
+        match json {
+            Some(mut j) => {
+                j["output"] = self.path.as_ref().map(|p| p.display().to_string()).into();
+                j["text"] = text.into();
+                println!("{j}");
+            }
+            None if self.path.is_none() => print!("{text}"),
+            None => {}
+        }
+        Ok(())
+    }
+
     /// Refuses a name whose extension says another format than the PNG lobe writes (`x.jpg`, `x.svg`).
     pub fn png_only(path: &Path) -> Result<(), CliError> {
         match path.extension().and_then(|e| e.to_str()) {

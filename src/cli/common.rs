@@ -274,25 +274,6 @@ pub fn check_set_names(formulas: &[&Formula], set: &[(String, f64)]) -> Result<(
 
 pub use lobe::front::did_you_mean;
 
-/// A command's text output (an export, an import): written to `-o` (refusing a file lobe did not write unless
-/// `--force`) or printed; with `json` (the object's other keys), one object with `output` (the path or null)
-/// and `text` is printed instead of the text.
-pub fn emit_text(out: &super::args::Output, text: &str, is_ours: fn(&[u8]) -> bool, json: Option<serde_json::Value>) -> Result<(), CliError> {
-    if let Some(p) = &out.path {
-        out.force.write(p, text.as_bytes(), is_ours)?;
-    }
-    match json {
-        Some(mut j) => {
-            j["output"] = out.path.as_ref().map(|p| p.display().to_string()).into();
-            j["text"] = text.into();
-            println!("{j}");
-        }
-        None if out.path.is_none() => print!("{text}"),
-        None => {}
-    }
-    Ok(())
-}
-
 /// What a long run is doing, on stderr, once it has run for a second (a quick run prints nothing): a spinner
 /// with a label, the stage and the elapsed time, cleared before the report.
 pub struct Spinner {

@@ -53,5 +53,5 @@ pub fn run(a: &ExportArgs) -> Result<(), CliError> {
     } else {
         format!("glsl {}", a.glsl_version.name())
     };
-    super::common::emit_text(&a.out, &text, is_ours, a.json.on.then(|| serde_json::json!({"formula": f.display_name(), "language": language})))
+    a.out.emit_text(&text, is_ours, a.json.on.then(|| serde_json::json!({"formula": f.display_name(), "language": language})))
 }

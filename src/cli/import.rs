@@ -31,5 +31,5 @@ pub fn run(a: &ImportArgs) -> Result<(), CliError> {
     let f = a.formula.load()?;
     let from = a.formula.file.as_deref().unwrap_or("<expr>");
     let text = lobe::ir::print::source(&f, &format!("{from}, {MARK}: the same function in lobe's language"));
-    super::common::emit_text(&a.out, &text, is_ours, a.json.on.then(|| serde_json::json!({"file": from})))
+    a.out.emit_text(&text, is_ours, a.json.on.then(|| serde_json::json!({"file": from})))
 }
