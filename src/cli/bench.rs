@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 #[command(mut_arg("set", args::help("Parameter values for the timing and energy columns (the error columns sweep n over 1..1000)")))]
 #[command(mut_arg("json", args::help("Print a JSON list of objects instead of the table")))]
 pub struct BenchArgs {
-    /// Formula files (default: every examples/brdfs/*.brdf).
+    /// Formula files (default: every examples/brdfs/*.brdf, the built-in catalogue outside a checkout).
     pub files: Vec<String>,
     /// The reference lobe for the error columns.
     #[arg(long, default_value = "examples/brdfs/blinn.brdf")]
@@ -70,11 +70,10 @@ impl BenchArgs {
     }
 }
 
+/// The files of `examples/brdfs` under the working directory, or the built-in catalogue elsewhere.
 fn catalogue() -> Result<Vec<String>, CliError> {
     let dir = Path::new("examples/brdfs");
-    let rd = std::fs::read_dir(dir).map_err(|e| {
-        CliError::hint(format!("cannot list {}: {e}", dir.display()), "run from the lobe checkout, or name the files to benchmark")
-    })?;
+    let Ok(rd) = std::fs::read_dir(dir) else { return Ok(super::catalogue::paths()) };
     let mut v: Vec<String> = rd
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| x == "brdf"))

@@ -149,7 +149,7 @@ pub fn load_formula(path: Option<&str>, expr: Option<&str>) -> Result<Formula, C
 pub fn load_formula_with(path: Option<&str>, expr: Option<&str>, show_warnings: bool) -> Result<Formula, CliError> {
     let (name, src) = match (path, expr) {
         (_, Some(e)) => ("<expr>".to_string(), source_from_bytes("<expr>", e.as_bytes().to_vec())?),
-        (Some(p), None) => read_source(p)?,
+        (Some(p), None) => super::catalogue::read(p)?,
         (None, None) => {
             return Err(CliError::hint("no formula given", "pass a .brdf file, `-` for standard input, or --expr '…'"))
         }

@@ -15,6 +15,7 @@ macro_rules! outln {
 
 pub mod args;
 pub mod bench;
+pub mod catalogue;
 pub mod check;
 pub mod common;
 pub mod compare;

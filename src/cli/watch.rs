@@ -11,13 +11,17 @@ use lobe::base::watch::{watch, Next};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
+/// `--scene`'s default, built in as [`scene::PAPER_SCENE`] for runs outside a checkout.
+const DEFAULT_SCENE: &str = "examples/scenes/paper_sphere.toml";
+
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("output", |a| a.required(true).help("Output PNG, rewritten after every successful reload")))]
 pub struct WatchArgs {
     /// The formula file to watch.
     pub file: PathBuf,
     /// The scene to render it in (every material's formula is replaced by FILE).
-    #[arg(long, default_value = "examples/scenes/paper_sphere.toml")]
+    /// The scene (default: the papers' sphere, from the checkout or built in).
+    #[arg(long, default_value = DEFAULT_SCENE)]
     pub scene: PathBuf,
     #[command(flatten)]
     pub out: Output,
@@ -51,7 +55,13 @@ fn reload(a: &WatchArgs, src: String) -> Result<Reloaded, CliError> {
     let t0 = Instant::now();
     let name = a.file.display().to_string();
     let opts = LoadOptions { size: Some(a.size), set: a.set.list()?, formula_override: Some((name, src)), ..LoadOptions::default() };
-    let sc = scene::load_scene(&a.scene, &opts, &super::common::scene_compiler(lobe::Backend::Jit, lobe::Mode::Precise))?;
+    let compiler = super::common::scene_compiler(lobe::Backend::Jit, lobe::Mode::Precise);
+    let sc = if a.scene.is_file() {
+        scene::load_scene(&a.scene, &opts, &compiler)?
+    } else {
+        // The default scene outside a checkout: the built-in copy (the watched file replaces its formula).
+        scene::parse_scene("<builtin paper_sphere.toml>", scene::PAPER_SCENE, std::path::Path::new("."), &opts, &compiler)?
+    };
     let compile = t0.elapsed();
     let ropts = RenderOptions::default();
     let (frame, stats) = r::render(&sc, &ropts).map_err(CliError::msg)?;
@@ -92,7 +102,7 @@ pub fn run(a: &WatchArgs) -> Result<(), CliError> {
     a.set.list()?;
     a.out.force.check(a.out.required(), image::is_lobe_png)?;
     Output::png_only(a.out.required())?;
-    if !a.scene.is_file() {
+    if !a.scene.is_file() && a.scene != std::path::Path::new(DEFAULT_SCENE) {
         return Err(CliError::hint(format!("scene `{}` not found", a.scene.display()), "examples are in examples/scenes/"));
     }
     eprintln!("watching {} (scene {}); Ctrl-C to stop", a.file.display(), a.scene.display());

@@ -559,3 +559,22 @@ fn formulas_at_the_size_cap_go_through_every_command() {
     assert!(png.exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Outside a checkout, `bench` measures the built-in catalogue against the built-in Blinn, and `watch` renders
+/// into the built-in paper scene: their defaults name files of the repository.
+#[test]
+fn bench_and_watch_defaults_work_outside_the_checkout() {
+    let dir = crate::scratch_dir("cli", "elsewhere");
+    let run = |args: &[&str]| Command::new(env!("CARGO_BIN_EXE_lobe")).args(args).current_dir(&dir).env("NO_COLOR", "1").output().unwrap();
+    let o = run(&["bench", "--samples", "3", "--no-albedo", "--timing-points", "256", "--tier", "cranelift", "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let rows = v.as_array().map_or(0, Vec::len);
+    assert_eq!(rows, std::fs::read_dir("examples/brdfs").unwrap().filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "brdf")).count(), "{}", String::from_utf8_lossy(&o.stdout));
+    std::fs::write(dir.join("w.brdf"), "VR^n\n").unwrap();
+    let o = run(&["watch", "w.brdf", "-o", "w.png", "--count", "1", "--size", "32"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let png = lobe::base::image::Image::decode_png(&std::fs::read(dir.join("w.png")).unwrap()).unwrap();
+    assert!(png.width == 32 && png.rgb.iter().any(|&c| c > 0));
+    let _ = std::fs::remove_dir_all(&dir);
+}
