@@ -199,6 +199,9 @@ fn measured_report(a: &EnergyArgs, path: &str) -> Result<String, CliError> {
         ));
     }
     let table = std::sync::Arc::new(lobe::measured::Measured::read(path)?);
+    if table.measured_entries() == 0 {
+        return Err(CliError::hint(format!("`{path}` has no measured entry: it has no albedo to integrate"), "check the file: every entry is negative (not measured)"));
+    }
     let outs = table
         .channels_with(a.lookup.how())
         .iter()

@@ -329,3 +329,24 @@ fn values_beyond_the_formats_range_are_not_measured_and_the_table_reads_back() {
     let Err(e) = Measured::from_bytes("hand.binary", &bytes) else { panic!("a table of 1e300 was read") };
     assert!(e.message.contains("green block holds 1 values over 1e150") && e.message.contains("(θ_h 0, θ_d 24, φ_d 1)"), "{}", e.message);
 }
+
+/// A table with no measured entry is named as such by every command that scores or integrates it (the formula
+/// is not blamed, and no inf or NaN is printed as a result).
+#[test]
+fn an_all_unmeasured_table_is_said_to_be_one() {
+    let dir = crate::scratch_dir("measured", "none");
+    let table = dir.join("none.binary").display().to_string();
+    let o = lobe(&["tabulate", "--expr", "0/0 + NH", "-o", &table], None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for args in [
+        vec!["fit", "examples/brdfs/blinn.brdf", "--measured", table.as_str(), "--param", "n=1..100"],
+        vec!["accuracy", "examples/brdfs/blinn.brdf", "--reference", table.as_str()],
+        vec!["energy", table.as_str()],
+    ] {
+        let o = lobe(&args, None);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {e}");
+        assert!(e.contains("measured") && e.contains("every entry is negative") && !e.contains("formula is"), "{args:?}: {e}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
