@@ -136,7 +136,7 @@ fn measured(a: &AccuracyArgs) -> Result<String, CliError> {
     let ks = f.channels().into_iter().map(|c| common::compile_kernel(c, &set, a.backend.backend()?, a.backend.math.mode)).collect::<Result<Vec<_>, _>>()?;
     let channels: Vec<&dyn lobe::Evaluator> = ks.iter().map(|k| k as &dyn lobe::Evaluator).collect();
     let s = Samples::new(&table, 1);
-    if s.len() == 0 {
+    if s.is_empty() {
         return Err(CliError::hint(
             format!("`{path}` has no entry measured in all three channels: there is nothing to score {} against", f.display_name()),
             "check the file: every entry is negative (not measured)",
