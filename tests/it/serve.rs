@@ -787,3 +787,36 @@ fn a_self_doubling_formula_request_ends_within_its_deadline_and_memory() {
     let after = s.post("/api/render", &json!({"text": "VR^n", "size": 64}));
     assert_eq!(after.status, 200);
 }
+
+/// Seven renders of a 200-light scene at once (the hostile corpus held job slots with them for 88–98 s): each
+/// answered within its deadline, and a normal render right after them within a second.
+#[test]
+fn seven_renders_of_a_two_hundred_light_scene_end_promptly() {
+    let d = scratch("lights");
+    let mut scene = String::from("width = 256\nheight = 256\n[camera]\nposition = [0, 0, 6]\nfov = 30\n");
+    for i in 0..200 {
+        let a = f64::from(i) * 0.1;
+        scene += &format!("[[light]]\nkind = \"point\"\nposition = [{:.3}, {:.3}, 10]\ncolor = [0.01, 0.01, 0.01]\n", 10.0 * a.cos(), 10.0 * a.sin());
+    }
+    scene += "[materials.m]\nformula = \"VR^n\"\nparams = { n = 50 }\n[[object]]\nshape = \"sphere\"\nmaterial = \"m\"\n";
+    std::fs::write(d.join("lights.toml"), scene).unwrap();
+    let s = Served::start(&[d.to_str().unwrap()]);
+    let (addr, path) = (s.addr, d.join("lights.toml").display().to_string());
+    let t0 = Instant::now();
+    let runs: Vec<_> = (0..7)
+        .map(|_| {
+            let url = format!("/render.png?file={path}&size=256");
+            std::thread::spawn(move || {
+                let r = http(addr, "GET", &url, &[], None);
+                (r.status, t0.elapsed())
+            })
+        })
+        .collect();
+    let ends: Vec<(u16, Duration)> = runs.into_iter().map(|h| h.join().unwrap()).collect();
+    eprintln!("seven 200-light renders: {ends:?}");
+    assert!(ends.iter().all(|(st, took)| *st == 200 && *took < Duration::from_secs(10)), "{ends:?}");
+    let t1 = Instant::now();
+    assert_eq!(s.post("/api/render", &json!({"text": "VR^n", "size": 128})).status, 200);
+    assert!(t1.elapsed() < PROMPT, "{:?}", t1.elapsed());
+    let _ = std::fs::remove_dir_all(&d);
+}
