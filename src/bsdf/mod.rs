@@ -24,7 +24,7 @@
 //! - **Cosine**: cosθₒ/π, for formulas neither of the above beats (and for a formula that is 0 everywhere).
 //!
 //! [`Choice::Auto`] (the default) builds every mechanism the formula admits and keeps the one of highest mean
-//! efficiency E[w]²/E[w²] over θᵢ = 0°, 30°, 60°, 85° (4096 samples each, a fixed seed); [`Report`] says which
+//! efficiency E[w]²/E[w²] over θᵢ = 0°, 30°, 60°, 85° (1024 samples each, a fixed seed); [`Report`] says which
 //! and what each measured.
 //!
 //! # The mixture rule (why sample and pdf agree exactly)
@@ -61,6 +61,7 @@
 
 pub mod chi2;
 mod dist;
+pub mod validate;
 
 use crate::backend::{Columns, Evaluator, Kernel};
 use crate::base::diag::Diagnostic;
@@ -91,7 +92,7 @@ pub const LAST_NODE_DEG: f64 = 89.5;
 /// Cells of the exact path's 1-D table.
 pub const EXACT_CELLS: usize = 4096;
 /// Samples per incidence of the automatic choice's efficiency probe.
-const PROBE_SAMPLES: usize = 4096;
+const PROBE_SAMPLES: usize = 1024;
 /// Points evaluated per kernel batch.
 const BATCH: usize = 4096;
 
@@ -714,6 +715,13 @@ impl Sampler {
             .enumerate()
             .map(|(i, &o)| Ok(self.density(wis[if wis.len() == 1 { 0 } else { i }], unit(o, "the outgoing direction wo")?)))
             .collect()
+    }
+
+    /// The density as a function of unit wo for one incident `wi` (checked once): what a quadrature over wo calls.
+    /// wo is taken as given (unit; [`Sampler::pdf_many`] normalises).
+    pub fn pdf_at(&self, wi: V3) -> Result<impl Fn(V3) -> f64 + Sync + '_, Diagnostic> {
+        let wi = incident(wi)?;
+        Ok(move |wo: V3| self.density(wi, wo))
     }
 
     /// The formula's channel values f(wi, wo) (`out[i·channels + c]`), the weights' f.
