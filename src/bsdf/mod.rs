@@ -320,7 +320,8 @@ fn table_coords(wi: V3, wo: V3, phi0: f64) -> Option<(f64, f64, f64)> {
     if x2 >= 1.0 {
         x2 = 0.0;
     }
-    let jac = th.sin() * PI * x1 * 2.0 * PI * 4.0 * dot(wi, h).abs();
+    // sinθₕ = st: h is unit.
+    let jac = st * PI * x1 * 2.0 * PI * 4.0 * dot(wi, h).abs();
     Some((x1, x2, jac))
 }
 

@@ -363,3 +363,65 @@ fn the_command_prints_its_summary_and_writes_csv() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(std::fs::read_to_string(dir.join("c.csv")).unwrap().starts_with("ox,oy,oz,pdf,weight_r,weight_g,weight_b\n"));
 }
+
+/// The table of BENCHMARKS.md ("Sampling"): per catalogue file, the efficiency of each mechanism it admits at
+/// θᵢ = 0°, 30°, 60°, 85° (10⁵ samples each), the automatic choice, its build time and the thread CPU time per
+/// sample() and pdf() call in batches of 4096. `cargo test --release --test it sample::efficiency_table --
+/// --ignored --nocapture`.
+#[test]
+#[ignore = "a measurement for BENCHMARKS.md"]
+fn efficiency_table() {
+    println!("| file | chosen | build ms | sample ns | pdf ns | tabulated 0/30/60/85° | exact | cosine |");
+    println!("|---|---|---|---|---|---|---|---|");
+    for file in catalogue() {
+        let (ks, p, _) = load(&file);
+        let auto = Sampler::build_channels(&ks, &p, &Options::default()).unwrap();
+        let effs = |m: Mechanism| -> String {
+            let Ok(s) = Sampler::build_channels(&ks, &p, &Options { choice: Choice::Force(m), ..Options::default() }) else { return "—".into() };
+            [0.0, 30.0, 60.0, 85.0]
+                .iter()
+                .map(|&t| {
+                    let smp = sample_seeded(&s, dir(t, 0.0), 21, 100_000).unwrap();
+                    format!("{:.2}", lobe::bsdf::efficiency((0..smp.pdf.len()).map(|i| smp.luminance(i))))
+                })
+                .collect::<Vec<_>>()
+                .join(" / ")
+        };
+        let v = validate(&auto, dir(30.0, 0.0), 1 << 17, 3).unwrap();
+        let ns = |x: Option<f64>| x.map(|v| format!("{v:.0}")).unwrap_or_default();
+        println!(
+            "| {} | {} | {:.1} | {} | {} | {} | {} | {} |",
+            file.trim_start_matches("examples/"),
+            auto.report.mechanism.name(),
+            auto.report.build.as_secs_f64() * 1e3,
+            ns(v.ns_per_sample),
+            ns(v.ns_per_pdf),
+            effs(Mechanism::Tabulated),
+            effs(Mechanism::Exact),
+            effs(Mechanism::Cosine)
+        );
+    }
+}
+
+/// The cosine fraction's measurement (docs/sampling.md): mean efficiency over the catalogue at θᵢ = 0°, 30°, 60°,
+/// 85° and the largest luminance weight relative to the albedo, for fractions 0.05, 0.1 and 0.2.
+#[test]
+#[ignore = "a measurement for docs/sampling.md"]
+fn cosine_fraction_measurement() {
+    for frac in [0.05, 0.1, 0.2] {
+        let (mut eff, mut worst, mut n) = (0.0, 0.0f64, 0);
+        for file in catalogue() {
+            let (ks, p, _) = load(&file);
+            let s = Sampler::build_channels(&ks, &p, &Options { choice: Choice::Force(Mechanism::Tabulated), cosine_fraction: frac }).unwrap();
+            for t in [0.0, 30.0, 60.0, 85.0] {
+                let smp = sample_seeded(&s, dir(t, 0.0), 21, 100_000).unwrap();
+                let w: Vec<f64> = (0..smp.pdf.len()).map(|i| smp.luminance(i)).collect();
+                let mean = w.iter().sum::<f64>() / w.len() as f64;
+                eff += lobe::bsdf::efficiency(w.iter().copied());
+                worst = worst.max(w.iter().cloned().fold(0.0, f64::max) / mean);
+                n += 1;
+            }
+        }
+        println!("cosine fraction {frac}: mean efficiency {:.4}, largest weight / mean {:.1}", eff / n as f64, worst);
+    }
+}
