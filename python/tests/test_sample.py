@@ -38,17 +38,12 @@ def test_sample_agrees_with_pdf_and_eval(path):
     np.testing.assert_allclose(w, want, rtol=1e-12, atol=0)
 
 
-def test_albedo_from_samples_matches_the_command():
+def test_albedo_from_samples_matches_the_command(lobe_cli):
     """The mean weight of 4·10⁵ samples at 30° is the albedo `lobe sample --json` integrates (3 stderr, 0.5 %)."""
-    from cli import lobe_bin
-    import subprocess
-
     k = lobe.compile(BLINN)
     rng = np.random.default_rng(1)
     _, _, w = k.sample(direction(30.0), rng.random((400_000, 2)), n=40)
-    b = lobe_bin()
-    out = subprocess.run([b, "sample", BLINN, "--set", "n=40", "--incidence", "30", "--count", "1000", "--json"], capture_output=True, text=True, cwd=ROOT, check=True)
-    q = json.loads(out.stdout)["albedo_quadrature"]
+    q = json.loads(lobe_cli("sample", BLINN, "--set", "n=40", "--incidence", "30", "--count", "1000", "--json"))["albedo_quadrature"]
     err = w.std() / np.sqrt(w.size)
     assert abs(w.mean() - q) < 3 * err and abs(w.mean() - q) < 0.005 * q, (w.mean(), err, q)
     assert k.sampler_mechanism in ("tabulated", "exact", "cosine")
