@@ -11,7 +11,9 @@
 //! from 4 × 4 rectangles; a rectangle whose one-point and four-point estimates differ by more than its share of
 //! the cell's tolerance is split in four, to depth [`MAX_DEPTH`]. The tolerance is a tenth of the sampling noise
 //! the cell's count has (0.1·√(expected count)): the quadrature error then moves χ² by ~1 % of its spread. The
-//! samplers' pdfs are piecewise smooth with jumps along table cell edges, which the splitting follows.
+//! samplers' pdfs are piecewise smooth with jumps along table cell edges, which the splitting follows. A cell that
+//! received samples but integrates to 0 is integrated again on a dense grid ([`resolve_empty_cells`]) before the
+//! test calls it a failure.
 
 use crate::frame::V3;
 use std::f64::consts::PI;
@@ -74,16 +76,8 @@ pub fn cell_probabilities(pdf: &(dyn Fn(V3) -> f64 + Sync), res: usize, samples:
     (0..res * cols)
         .into_par_iter()
         .map(|cell| {
-            let (r, c) = (cell / cols, cell % cols);
-            let (z0, z1) = (-1.0 + 2.0 * r as f64 / res as f64, -1.0 + 2.0 * (r + 1) as f64 / res as f64);
-            // θ decreases as z grows.
-            let (t0, t1) = (z1.clamp(-1.0, 1.0).acos(), z0.clamp(-1.0, 1.0).acos());
-            let (p0, p1) = (-PI + 2.0 * PI * c as f64 / cols as f64, -PI + 2.0 * PI * (c + 1) as f64 / cols as f64);
-            let f = |p: f64, t: f64| {
-                let (st, ct) = t.sin_cos();
-                let (sp, cp) = p.sin_cos();
-                pdf([st * cp, st * sp, ct]) * st
-            };
+            let (p0, p1, t0, t1) = cell_bounds(cell, res);
+            let f = |p: f64, t: f64| integrand(pdf, p, t);
             let k = 4;
             let (dp, dt) = ((p1 - p0) / k as f64, (t1 - t0) / k as f64);
             let mut coarse = 0.0;
@@ -104,6 +98,55 @@ pub fn cell_probabilities(pdf: &(dyn Fn(V3) -> f64 + Sync), res: usize, samples:
             sum
         })
         .collect()
+}
+
+/// The (φ, θ) bounds (p0, p1, t0, t1) of a cell of the grid of `res` rows.
+fn cell_bounds(cell: usize, res: usize) -> (f64, f64, f64, f64) {
+    let cols = 2 * res;
+    let (r, c) = (cell / cols, cell % cols);
+    let (z0, z1) = (-1.0 + 2.0 * r as f64 / res as f64, -1.0 + 2.0 * (r + 1) as f64 / res as f64);
+    // θ decreases as z grows.
+    let (t0, t1) = (z1.clamp(-1.0, 1.0).acos(), z0.clamp(-1.0, 1.0).acos());
+    (-PI + 2.0 * PI * c as f64 / cols as f64, -PI + 2.0 * PI * (c + 1) as f64 / cols as f64, t0, t1)
+}
+
+/// pdf·sinθ at (φ, θ): the density over the cell's (φ, θ) rectangle.
+#[inline]
+fn integrand(pdf: &(dyn Fn(V3) -> f64 + Sync), p: f64, t: f64) -> f64 {
+    let (st, ct) = t.sin_cos();
+    let (sp, cp) = p.sin_cos();
+    pdf([st * cp, st * sp, ct]) * st
+}
+
+/// Points per side of the dense grid of [`resolve_empty_cells`].
+pub const DENSE: usize = 256;
+
+/// Cells that received samples but whose probability came out 0: integrated again by the midpoint rule on a
+/// [`DENSE`] × [`DENSE`] grid. The adaptive rule starts from 4 × 4 points per cell and splits only where they
+/// differ, so a density whose support covers a thin sliver of a cell between those points — a tabulated
+/// sampler's table cell straddling the horizon sends a few directions just below it — integrates to 0 there,
+/// and one sample in it would fail the test outright. A cell the dense grid also finds empty stays 0 (and
+/// fails). Only the cells' probabilities are recomputed, from the pdf alone; the counts choose which.
+pub fn resolve_empty_cells(pdf: &(dyn Fn(V3) -> f64 + Sync), res: usize, observed: &[f64], probabilities: &mut [f64]) {
+    use rayon::prelude::*;
+    let cells: Vec<usize> = (0..probabilities.len()).filter(|&i| observed[i] > 0.0 && !(probabilities[i] > 0.0)).collect();
+    let found: Vec<(usize, f64)> = cells
+        .into_par_iter()
+        .map(|cell| {
+            let (p0, p1, t0, t1) = cell_bounds(cell, res);
+            let (dp, dt) = ((p1 - p0) / DENSE as f64, (t1 - t0) / DENSE as f64);
+            let mut sum = 0.0;
+            for a in 0..DENSE {
+                for b in 0..DENSE {
+                    sum += integrand(pdf, p0 + (a as f64 + 0.5) * dp, t0 + (b as f64 + 0.5) * dt);
+                }
+            }
+            (cell, sum * dp * dt)
+        })
+        .collect();
+    for (cell, p) in found {
+        probabilities[cell] = p;
+    }
 }
 
 /// ∫∫ f over [p0, p1] × [t0, t1] by the adaptive midpoint rule (module docs).
@@ -307,7 +350,33 @@ mod tests {
         let wrong = chi2(&h, &cell_probabilities(&|w: V3| (1.0 + 0.2 * w[2]) / (4.0 * PI), 21, n), n);
         assert!(!wrong.passes(1e-6), "{wrong:?}");
         // Samples where the pdf has no mass: an outright failure.
-        let half = chi2(&h, &cell_probabilities(&|w: V3| if w[2] > 0.0 { 1.0 / (2.0 * PI) } else { 0.0 }, 21, n), n);
+        let upper = |w: V3| if w[2] > 0.0 { 1.0 / (2.0 * PI) } else { 0.0 };
+        let mut probs = cell_probabilities(&upper, 21, n);
+        resolve_empty_cells(&upper, 21, &h, &mut probs);
+        let half = chi2(&h, &probs, n);
         assert!(half.failure.is_some(), "{half:?}");
+    }
+
+    /// A density on a thin strip of one cell, between the adaptive rule's starting points: the rule finds 0 there,
+    /// the dense grid finds the strip's mass, and a cell with no density stays 0.
+    #[test]
+    fn empty_cells_with_samples_are_integrated_densely() {
+        let res = 21;
+        let (p0, p1, t0, t1) = cell_bounds(5 * 42 + 7, res);
+        // θ in the strip [t0 + 0.02·(t1 − t0), t0 + 0.06·(t1 − t0)]: below the first midpoint row (at 1/8).
+        let (s0, s1) = (t0 + 0.02 * (t1 - t0), t0 + 0.06 * (t1 - t0));
+        let strip = move |w: V3| {
+            let (t, p) = (w[2].clamp(-1.0, 1.0).acos(), w[1].atan2(w[0]));
+            if t > s0 && t < s1 && p > p0 && p < p1 { 1.0 } else { 0.0 }
+        };
+        let mut probs = cell_probabilities(&strip, res, 1000);
+        assert_eq!(probs[5 * 42 + 7], 0.0);
+        let mut observed = vec![0.0; probs.len()];
+        observed[5 * 42 + 7] = 1.0;
+        observed[3] = 1.0;
+        resolve_empty_cells(&strip, res, &observed, &mut probs);
+        let want = (p1 - p0) * (s0.cos() - s1.cos());
+        assert!((probs[5 * 42 + 7] - want).abs() < 0.02 * want, "{} vs {want}", probs[5 * 42 + 7]);
+        assert_eq!(probs[3], 0.0);
     }
 }

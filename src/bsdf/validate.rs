@@ -65,8 +65,10 @@ pub fn validate(s: &Sampler, wi: V3, count: u64, seed: u64) -> Result<Validation
     let (mean, var) = mean_var(&lum);
     let albedo_channels = (0..samples.channels).map(|c| mean_var(&samples.weight.iter().skip(c).step_by(samples.channels).copied().collect::<Vec<_>>()).0).collect();
     let pdf = s.pdf_at(wi)?;
-    let probs = chi2::cell_probabilities(&pdf, CHI2_RES, n);
-    let chi2 = chi2::chi2(&chi2::histogram(&samples.wo, CHI2_RES), &probs, n);
+    let mut probs = chi2::cell_probabilities(&pdf, CHI2_RES, n);
+    let hist = chi2::histogram(&samples.wo, CHI2_RES);
+    chi2::resolve_empty_cells(&pdf, CHI2_RES, &hist, &mut probs);
+    let chi2 = chi2::chi2(&hist, &probs, n);
     // Timing: one thread, batches of 4096, up to 2¹⁷ calls.
     let m = (count.min(1 << 17)) as usize;
     let us = uniforms(seed ^ 0x7105, 0..m as u64);

@@ -365,14 +365,15 @@ fn the_command_prints_its_summary_and_writes_csv() {
 }
 
 /// The table of BENCHMARKS.md ("Sampling"): per catalogue file, the efficiency of each mechanism it admits at
-/// θᵢ = 0°, 30°, 60°, 85° (10⁵ samples each), the automatic choice, its build time and the thread CPU time per
+/// θᵢ = 0°, 30°, 60°, 85° (10⁵ samples each), the automatic choice, its build time (every candidate and the probe)
+/// beside the tabulated mechanism's alone, and the thread CPU time per
 /// sample() and pdf() call in batches of 4096. `cargo test --release --test it sample::efficiency_table --
 /// --ignored --nocapture`.
 #[test]
 #[ignore = "a measurement for BENCHMARKS.md"]
 fn efficiency_table() {
-    println!("| file | chosen | build ms | sample ns | pdf ns | tabulated 0/30/60/85° | exact | cosine |");
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("| file | iso | chosen | build ms (auto / tabulated) | sample ns | pdf ns | tabulated 0/30/60/85° | exact | cosine |");
+    println!("|---|---|---|---|---|---|---|---|---|");
     for file in catalogue() {
         let (ks, p, _) = load(&file);
         let auto = Sampler::build_channels(&ks, &p, &Options::default()).unwrap();
@@ -387,13 +388,16 @@ fn efficiency_table() {
                 .collect::<Vec<_>>()
                 .join(" / ")
         };
+        let tab = Sampler::build_channels(&ks, &p, &Options { choice: Choice::Force(Mechanism::Tabulated), ..Options::default() }).unwrap();
         let v = validate(&auto, dir(30.0, 0.0), 1 << 17, 3).unwrap();
         let ns = |x: Option<f64>| x.map(|v| format!("{v:.0}")).unwrap_or_default();
         println!(
-            "| {} | {} | {:.1} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {:.1} / {:.1} | {} | {} | {} | {} | {} |",
             file.trim_start_matches("examples/"),
+            if auto.report.isotropic { "yes" } else { "no" },
             auto.report.mechanism.name(),
             auto.report.build.as_secs_f64() * 1e3,
+            tab.report.build.as_secs_f64() * 1e3,
             ns(v.ns_per_sample),
             ns(v.ns_per_pdf),
             effs(Mechanism::Tabulated),
