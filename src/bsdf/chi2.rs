@@ -376,7 +376,8 @@ mod tests {
         observed[3] = 1.0;
         resolve_empty_cells(&strip, res, &observed, &mut probs);
         let want = (p1 - p0) * (s0.cos() - s1.cos());
-        assert!((probs[5 * 42 + 7] - want).abs() < 0.02 * want, "{} vs {want}", probs[5 * 42 + 7]);
+        // The strip spans ~10 of the dense grid's 256 rows: its edges cost up to a tenth of a row each.
+        assert!((probs[5 * 42 + 7] - want).abs() < 0.05 * want, "{} vs {want}", probs[5 * 42 + 7]);
         assert_eq!(probs[3], 0.0);
     }
 }
