@@ -125,6 +125,9 @@ const SAMPLER_CACHE: usize = 4;
 /// Points from Python: cosine columns (index in `Input::ALL`, values), L and V (`len` × 3), and `len`.
 type Points<'py> = (Vec<(usize, PyReadonlyArray1<'py, f64>)>, Option<PyReadonlyArray2<'py, f64>>, Option<PyReadonlyArray2<'py, f64>>, usize);
 
+/// `sample`'s result: wo (`len` × 3), pdf, weights (`len` × channels) and the sampler's mechanism.
+type Drawn<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>, &'static str);
+
 /// One fit candidate for Python: the full parameter vector, its score, and whether the refinement found it.
 type FitCandidate = (Vec<f64>, f64, bool);
 
@@ -479,7 +482,7 @@ impl Native {
         wi: PyReadonlyArray2<'py, f64>,
         u: PyReadonlyArray2<'py, f64>,
         params: Vec<f64>,
-    ) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>, &'static str)> {
+    ) -> PyResult<Drawn<'py>> {
         let s = self.sampler(py, &params)?;
         let len = wi.shape()[0];
         if wi.shape() != [len, 3] || u.shape() != [len, 2] {

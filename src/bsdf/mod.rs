@@ -210,7 +210,7 @@ impl Target {
         let nch = self.channels();
         out.clear();
         out.resize(n * nch, 0.0);
-        let mut cols: Vec<Vec<f64>> = vec![Vec::with_capacity(BATCH.min(n)); N_INPUTS];
+        let mut cols: Vec<Vec<f64>> = (0..N_INPUTS).map(|_| Vec::with_capacity(BATCH.min(n))).collect();
         let mut tmp = vec![0.0; BATCH.min(n)];
         for start in (0..n).step_by(BATCH) {
             let end = (start + BATCH).min(n);
@@ -308,7 +308,7 @@ fn half_from(x1: f64, x2: f64, phi0: f64) -> (V3, f64) {
 fn table_coords(wi: V3, wo: V3, phi0: f64) -> Option<(f64, f64, f64)> {
     let s = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
     let len = dot(s, s).sqrt();
-    if !(len > 0.0) {
+    if len.is_nan() || len <= 0.0 {
         return None;
     }
     let sign = if s[2] < 0.0 { -1.0 / len } else { 1.0 / len };
@@ -472,7 +472,7 @@ impl Exact {
         let (d, a, jac) = if self.lobe == Input::NH {
             let s = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
             let len = dot(s, s).sqrt();
-            if !(len > 0.0) {
+            if len.is_nan() || len <= 0.0 {
                 return 0.0;
             }
             let sign = if s[2] < 0.0 { -1.0 / len } else { 1.0 / len };
@@ -485,7 +485,7 @@ impl Exact {
         let th = dot(x, x).sqrt().atan2(dot(d, a));
         let s = th.sin();
         let den = self.theta_max * s * 2.0 * PI * jac;
-        if !(den > 0.0) {
+        if den.is_nan() || den <= 0.0 {
             return 0.0;
         }
         self.dist.pdf(th / self.theta_max) / den
@@ -541,7 +541,7 @@ fn unit(w: V3, what: &str) -> Result<V3, Diagnostic> {
 /// wi as the sampler takes it: finite, non-zero, normalised, above the horizon.
 fn incident(wi: V3) -> Result<V3, Diagnostic> {
     let w = unit(wi, "the incident direction wi")?;
-    if !(w[2] > 0.0) {
+    if w[2].is_nan() || w[2] <= 0.0 {
         return Err(Diagnostic::error(format!(
             "the incident direction wi = ({}, {}, {}) is not above the horizon (wi.z ≤ 0)",
             wi[0], wi[1], wi[2]
