@@ -144,7 +144,7 @@ fn integrand(pdf: &(dyn Fn(V3) -> f64 + Sync), p: f64, t: f64) -> f64 {
 pub const DENSE: usize = 256;
 
 /// Cells that received samples but whose probability came out 0: integrated again by the midpoint rule on a
-/// [`DENSE`] × [`DENSE`] grid. The adaptive rule starts from 4 × 4 points per cell and splits only where they
+/// [`DENSE`] × [`DENSE`] grid. The adaptive rule starts from 16 × 16 points per cell and splits only where they
 /// differ, so a density whose support covers a thin sliver of a cell between those points — a tabulated
 /// sampler's table cell straddling the horizon sends a few directions just below it — integrates to 0 there,
 /// and one sample in it would fail the test outright. A cell the dense grid also finds empty stays 0 (and
