@@ -16,6 +16,8 @@
 //! lib.rs     the compile entry points: compile_source, compile_formula, build_kernel
 //! numerics   energy and normalisation, accuracy against a reference, the domain sweep, fits, twins; the
 //!            higher-precision truth and the accuracy pass's measured choice (passed down as a FormulaChooser)
+//! bsdf       every formula a full BSDF: sample() and pdf() that agree with eval(), built from kernels (tabulated
+//!            half-vector distributions, an exact path for one-cosine lobes); the χ² validation
 //! render     scenes, shapes, camera, rasteriser, shading, images, image comparison
 //! report     bench rows (measured) and tables, plots (cargo feature `plot`)
 //! serve      the interactive page's HTTP server, page assets embedded (cargo feature `serve`)
@@ -52,6 +54,7 @@ pub mod simplify;
 pub mod backend;
 pub mod measured;
 pub mod numerics;
+pub mod bsdf;
 pub mod render;
 pub mod report;
 #[cfg(feature = "serve")]

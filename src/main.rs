@@ -34,6 +34,8 @@ enum Cmd {
     Import(cli::import::ImportArgs),
     /// Energy: the exact normalisation coefficient (lobe mode) or the albedo over incidence angles (full mode).
     Energy(cli::energy::EnergyArgs),
+    /// Importance sampling: draw wo for an incidence, test the samples against the pdf (χ²), efficiency, albedo.
+    Sample(cli::sample::SampleArgs),
     /// Accuracy against a reference lobe (mean |Δ|, epicentre, inflection, cut-off metrics).
     Accuracy(cli::accuracy::AccuracyArgs),
     /// Fit parameters to a reference lobe or to measured tables (exhaustive grid + continuous refinement).
@@ -134,6 +136,7 @@ fn command() {
         Cmd::Import(a) => cli::import::run(a),
         Cmd::Check(a) => cli::check::run(a),
         Cmd::Energy(a) => cli::energy::run(a),
+        Cmd::Sample(a) => cli::sample::run(a),
         Cmd::Accuracy(a) => cli::accuracy::run(a),
         Cmd::Fit(a) if !a.measured.is_empty() => cli::fit_measured::run(a),
         Cmd::Fit(a) => cli::fit::run(a),
@@ -173,6 +176,7 @@ impl Cmd {
             Cmd::Render(a) => a.json.on,
             Cmd::Compare(a) => a.json.on,
             Cmd::Serve(a) => a.json.on,
+            Cmd::Sample(a) => a.json.on,
         }
     }
 }

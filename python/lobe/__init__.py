@@ -124,7 +124,7 @@ class Kernel:
     unpickled (a Dask or Ray worker, a multiprocessing pool).
     """
 
-    __slots__ = ("_native", "_defaults")
+    __slots__ = ("_native", "_defaults", "_mechanism")
 
     def __init__(self, *_: Any, **__: Any) -> None:
         raise TypeError("use lobe.compile(path_or_text) to make a Kernel")
@@ -134,6 +134,7 @@ class Kernel:
         k = object.__new__(cls)
         k._native = native
         k._defaults = [p[1] for p in native.params]
+        k._mechanism = None
         return k
 
     # -- what it is -------------------------------------------------------------------------------------
@@ -240,6 +241,50 @@ class Kernel:
         if self.channels == 1:
             return out.reshape(shape)
         return np.moveaxis(out.reshape((self.channels,) + shape), 0, -1)
+
+    # -- sampling (docs/sampling.md) ---------------------------------------------------------------------
+    def sample(self, wi: Any, u: Any, **params: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Importance sampling of the outgoing direction: ``wo, pdf, weight = k.sample(wi, u)``.
+
+        ``wi`` (shape ``(..., 3)``, the formula's L in the local frame, N = +z; normalised; above the horizon)
+        and ``u`` (shape ``(..., 2)``, uniforms in [0, 1)) broadcast together over ``...``. Returns ``wo`` of
+        shape ``(..., 3)``, ``pdf`` of shape ``(...)`` (the density per solid angle, equal to
+        :meth:`pdf` at (wi, wo)) and ``weight`` = f(wi, wo)·cosθₒ/pdf of shape ``(...)`` (``(..., 3)`` for
+        colour; 0 for a wo below the horizon). The sampler (``lobe sample``'s, built from this kernel at
+        ``params``) is kept for the next calls at the same parameters; :attr:`sampler_mechanism` names its
+        mechanism after a call."""
+        wi_a, u_a = np.asarray(wi, dtype=np.float64), np.asarray(u, dtype=np.float64)
+        if wi_a.ndim == 0 or wi_a.shape[-1] != 3:
+            raise _error(f"wi must have shape (..., 3), not {wi_a.shape}", "wi is a direction: x, y, z in the local frame (N = +z)")
+        if u_a.ndim == 0 or u_a.shape[-1] != 2:
+            raise _error(f"u must have shape (..., 2), not {u_a.shape}", "u holds two uniforms in [0, 1) per sample")
+        try:
+            shape = np.broadcast_shapes(wi_a.shape[:-1], u_a.shape[:-1])
+        except ValueError:
+            raise _error(f"the shapes of wi {wi_a.shape} and u {u_a.shape} do not broadcast", "they count without their last axis (3 and 2)") from None
+        wo, pdf, weight, mech = self._native.sample(_flat(wi_a, shape, (3,)), _flat(u_a, shape, (2,)), self._param_list(params))
+        self._mechanism = mech
+        weight = weight.reshape(shape + ((self.channels,) if self.channels > 1 else ()))
+        return wo.reshape(shape + (3,)), pdf.reshape(shape), weight
+
+    def pdf(self, wi: Any, wo: Any, **params: float) -> np.ndarray:
+        """The sampler's density (per solid angle) of ``wo`` given ``wi``, both of shape ``(..., 3)`` broadcast
+        together (normalised; wi above the horizon): the pdf :meth:`sample` reports, bit for bit."""
+        wi_a, wo_a = np.asarray(wi, dtype=np.float64), np.asarray(wo, dtype=np.float64)
+        for name, a in (("wi", wi_a), ("wo", wo_a)):
+            if a.ndim == 0 or a.shape[-1] != 3:
+                raise _error(f"{name} must have shape (..., 3), not {a.shape}", f"{name} is a direction: x, y, z in the local frame (N = +z)")
+        try:
+            shape = np.broadcast_shapes(wi_a.shape[:-1], wo_a.shape[:-1])
+        except ValueError:
+            raise _error(f"the shapes of wi {wi_a.shape} and wo {wo_a.shape} do not broadcast", "they count without their last axis (3)") from None
+        return self._native.pdf(_flat(wi_a, shape, (3,)), _flat(wo_a, shape, (3,)), self._param_list(params)).reshape(shape)
+
+    @property
+    def sampler_mechanism(self) -> Optional[str]:
+        """The mechanism of the sampler the last :meth:`sample` used (``"tabulated"``, ``"exact"`` or
+        ``"cosine"``; docs/sampling.md), None before the first."""
+        return self._mechanism
 
     # -- the checks (the CLI's --json reports) ----------------------------------------------------------
     def _param_list(self, params: Mapping[str, float]) -> list:

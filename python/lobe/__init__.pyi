@@ -82,6 +82,12 @@ class Kernel:
     def accuracy(self, reference: Kernel, *, q: float = 8.0, n_max: int = 1000, epicenter_from: int = 2, **params: float) -> Dict[str, Any]:
         """``lobe accuracy --json``, per channel for a colour formula (``"channels"``)."""
     def sweep(self, *, bound: float = 1e6, max_evals: int = 2_000_000, as_written: bool = False) -> Dict[str, Any]: ...
+    def sample(self, wi: ArrayLike, u: ArrayLike, **params: float) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """(wo, pdf, weight) for incident ``wi`` (..., 3) and uniforms ``u`` (..., 2), broadcast together; weight = f·cosθₒ/pdf."""
+    def pdf(self, wi: ArrayLike, wo: ArrayLike, **params: float) -> npt.NDArray[np.float64]:
+        """The sampler's density of ``wo`` given ``wi`` (both (..., 3)): the pdf ``sample`` reports."""
+    @property
+    def sampler_mechanism(self) -> Optional[str]: ...
 
 def fit(
     kernel: Kernel,

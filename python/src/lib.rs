@@ -18,7 +18,9 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyList};
 use rayon::prelude::*;
+use lobe::bsdf::Sampler;
 use std::borrow::Cow;
+use std::sync::{Arc, Mutex};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
 create_exception!(lobe, LobeError, PyValueError, "A formula, a scene or an argument lobe cannot take: `.diagnostics` says where and why.");
@@ -55,6 +57,12 @@ fn lobe_error(py: Python<'_>, ds: &Diagnostics) -> PyErr {
     // Setting an attribute on a fresh exception does not fail; if it did, the message still says it all.
     let _ = err.value(py).setattr("diagnostics", diags);
     err
+}
+
+/// `d` naming the flat index of the point it is about.
+fn at_index(mut d: Diagnostic, at: usize) -> Diagnostic {
+    d.message = format!("{} (at flat index {at})", d.message);
+    d
 }
 
 /// A `LobeError` for a message without a place.
@@ -106,10 +114,19 @@ pub struct Native {
     source: String,
     math: Mode,
     baked: Vec<(String, f64)>,
+    /// Samplers built for `sample`/`pdf` (parameter vector, sampler), the most recent last; building one takes
+    /// milliseconds, so calls at the same parameters reuse it.
+    samplers: Mutex<Vec<(Vec<f64>, Arc<Sampler>)>>,
 }
+
+/// Samplers a kernel keeps (per parameter vector).
+const SAMPLER_CACHE: usize = 4;
 
 /// Points from Python: cosine columns (index in `Input::ALL`, values), L and V (`len` × 3), and `len`.
 type Points<'py> = (Vec<(usize, PyReadonlyArray1<'py, f64>)>, Option<PyReadonlyArray2<'py, f64>>, Option<PyReadonlyArray2<'py, f64>>, usize);
+
+/// `sample`'s result: wo (`len` × 3), pdf, weights (`len` × channels) and the sampler's mechanism.
+type Drawn<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>, &'static str);
 
 /// One fit candidate for Python: the full parameter vector, its score, and whether the refinement found it.
 type FitCandidate = (Vec<f64>, f64, bool);
@@ -284,6 +301,24 @@ impl Native {
         }
     }
 
+    /// The sampler at `params` (checked), from the cache or built ([`Sampler::build_channels`]).
+    fn sampler(&self, py: Python<'_>, params: &[f64]) -> PyResult<Arc<Sampler>> {
+        self.check_params(py, params)?;
+        let cached = self.samplers.lock().unwrap_or_else(|e| e.into_inner()).iter().find(|(p, _)| p == params).map(|(_, s)| s.clone());
+        if let Some(s) = cached {
+            return Ok(s);
+        }
+        let s = Arc::new(detached(py, &self.file, || {
+            Sampler::build_channels(&self.kernels, params, &lobe::bsdf::Options::default()).map_err(|d| plain(&self.file, d))
+        })?);
+        let mut cache = self.samplers.lock().unwrap_or_else(|e| e.into_inner());
+        if cache.len() == SAMPLER_CACHE {
+            cache.remove(0);
+        }
+        cache.push((params.to_vec(), s.clone()));
+        Ok(s)
+    }
+
     /// The declared default of every parameter, baked ones at their baked value.
     fn param_values(&self) -> Vec<f64> {
         let f = self.formula();
@@ -438,6 +473,73 @@ impl Native {
         Ok((rep.best.into_iter().map(|c| (c.params, c.score, c.refined)).collect(), rep.evaluated))
     }
 
+    /// `len` samples of wo ([`Sampler::sample_many`]): `wi` and `u` are `len` × 3 and `len` × 2 (row-major,
+    /// one incident direction per sample); returns wo (`len` × 3), pdf (`len`) and the weights (`len` ×
+    /// channels), split over rayon's threads for large batches, and the sampler's mechanism.
+    fn sample<'py>(
+        &self,
+        py: Python<'py>,
+        wi: PyReadonlyArray2<'py, f64>,
+        u: PyReadonlyArray2<'py, f64>,
+        params: Vec<f64>,
+    ) -> PyResult<Drawn<'py>> {
+        let s = self.sampler(py, &params)?;
+        let len = wi.shape()[0];
+        if wi.shape() != [len, 3] || u.shape() != [len, 2] {
+            return Err(self.error(py, Diagnostic::error("wi must have shape (len, 3) and u (len, 2) (lobe's Python side makes them so: a bug)")));
+        }
+        let contiguous = || self.error(py, Diagnostic::error("wi and u must be contiguous float64 (lobe's Python side makes them so: a bug)"));
+        let (wi, u) = (wi.as_slice().map_err(|_| contiguous())?, u.as_slice().map_err(|_| contiguous())?);
+        let nch = s.channels();
+        let (mut wo, mut pdf, mut weight) = (vec![0.0; 3 * len], vec![0.0; len], vec![0.0; nch * len]);
+        detached(py, &self.file, || {
+            let parts = wo.par_chunks_mut(3 * CHUNK).zip(pdf.par_chunks_mut(CHUNK)).zip(weight.par_chunks_mut(nch * CHUNK)).enumerate();
+            parts.try_for_each(|(c, ((wo, pdf), weight))| {
+                let r = c * CHUNK..c * CHUNK + pdf.len();
+                let wis: Vec<[f64; 3]> = r.clone().map(|i| [wi[3 * i], wi[3 * i + 1], wi[3 * i + 2]]).collect();
+                let us: Vec<[f64; 2]> = r.clone().map(|i| [u[2 * i], u[2 * i + 1]]).collect();
+                let smp = s.sample_many(&wis, &us).map_err(|d| {
+                    let at = wis.iter().position(|w| s.sample_many(&[*w], &[[0.5, 0.5]]).is_err()).map_or(0, |k| r.start + k);
+                    plain(&self.file, at_index(d, at))
+                })?;
+                for (o, v) in wo.chunks_mut(3).zip(&smp.wo) {
+                    o.copy_from_slice(v);
+                }
+                pdf.copy_from_slice(&smp.pdf);
+                weight.copy_from_slice(&smp.weight);
+                Ok(())
+            })
+        })?;
+        Ok((wo.into_pyarray(py), pdf.into_pyarray(py), weight.into_pyarray(py), s.report.mechanism.name()))
+    }
+
+    /// The sampler's density of each wo given wi ([`Sampler::pdf_many`]): both `len` × 3, row-major.
+    fn pdf<'py>(&self, py: Python<'py>, wi: PyReadonlyArray2<'py, f64>, wo: PyReadonlyArray2<'py, f64>, params: Vec<f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let s = self.sampler(py, &params)?;
+        let len = wi.shape()[0];
+        if wi.shape() != [len, 3] || wo.shape() != [len, 3] {
+            return Err(self.error(py, Diagnostic::error("wi and wo must have shape (len, 3) (lobe's Python side makes them so: a bug)")));
+        }
+        let contiguous = || self.error(py, Diagnostic::error("wi and wo must be contiguous float64 (lobe's Python side makes them so: a bug)"));
+        let (wi, wo) = (wi.as_slice().map_err(|_| contiguous())?, wo.as_slice().map_err(|_| contiguous())?);
+        let mut out = vec![0.0; len];
+        detached(py, &self.file, || {
+            out.par_chunks_mut(CHUNK).enumerate().try_for_each(|(c, o)| {
+                let r = c * CHUNK..c * CHUNK + o.len();
+                let row = |a: &[f64], i: usize| [a[3 * i], a[3 * i + 1], a[3 * i + 2]];
+                let wis: Vec<[f64; 3]> = r.clone().map(|i| row(wi, i)).collect();
+                let wos: Vec<[f64; 3]> = r.clone().map(|i| row(wo, i)).collect();
+                let p = s.pdf_many(&wis, &wos).map_err(|d| {
+                    let at = (0..wis.len()).position(|k| s.pdf_many(&[wis[k]], &[wos[k]]).is_err()).map_or(0, |k| r.start + k);
+                    plain(&self.file, at_index(d, at))
+                })?;
+                o.copy_from_slice(&p);
+                Ok(())
+            })
+        })?;
+        Ok(out.into_pyarray(py))
+    }
+
     /// `lobe check --json` ([`lobe::numerics::check`]).
     fn check(&self, py: Python<'_>, points: usize, budget: f64) -> PyResult<Py<PyAny>> {
         if !(budget > 0.0 && budget.is_finite()) || points == 0 {
@@ -554,7 +656,7 @@ fn compile(py: Python<'_>, file: String, source: String, math: &str, baked: Vec<
         ks.iter().for_each(Kernel::warm_up);
         Ok(ks)
     })?;
-    Ok((Native { whole, kernels, file, source, math: mode, baked }, warn))
+    Ok((Native { whole, kernels, file, source, math: mode, baked, samplers: Mutex::default() }, warn))
 }
 
 /// A formula file's name and text, read as the command line reads it (size limit, UTF-8 checked).

@@ -32,4 +32,5 @@ pub mod tabulate;
 pub mod sweep;
 pub mod watch;
 pub mod render;
+pub mod sample;
 pub mod serve;

@@ -89,6 +89,7 @@ fn every_json_output_keeps_its_keys() {
         ("energy_range", vec!["energy", blinn, "--range", "1..5", "--json"]),
         ("energy_range_against", vec!["energy", blinn, "--range", "1..5", "--against-expr", "(n+2)/(2*pi)", "--json"]),
         ("energy_colour", vec!["energy", "--expr", COLOUR, "--json"]),
+        ("sample", vec!["sample", blinn, "--set", "n=10", "--incidence", "30", "--count", "2000", "--json"]),
         ("accuracy", vec!["accuracy", "examples/brdfs/phong.brdf", "--reference", blinn, "--n-max", "20", "--json"]),
         ("accuracy_colour", vec!["accuracy", "examples/vector/gold_blinn.brdf", "--reference", blinn, "--n-max", "20", "--json"]),
         ("fit", vec!["fit", "--expr", FIT_FORMULA, "--reference", blinn, "--param", "a=1..4", "--n-max", "20", "--quiet", "--json"]),

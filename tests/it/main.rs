@@ -27,6 +27,7 @@ mod fixtures;
 mod render;
 mod robust;
 mod serve;
+mod sample;
 mod shading;
 
 /// A fresh, empty scratch directory `lobe-AREA-TAG-PID` under the system's temporary directory.

@@ -1,0 +1,162 @@
+//! Piecewise-constant distributions on [0, 1) and [0, 1)²: the tables the samplers draw from.
+//!
+//! Built from non-negative cell values (the sampler passes each cell's maximum of the target over a sub-grid,
+//! as pbrt-v4's `PiecewiseConstant2D::FromFuncLInfinity` does, so a cell is never 0 where the target is positive
+//! at one of its sub-grid points). Sampling inverts the cumulative sums by binary search (a marginal over the first
+//! coordinate, a conditional per row over the second); the density is the cell's value over the mean value, read
+//! by direct indexing (the grid is uniform), so evaluating it costs no search.
+
+/// A piecewise-constant density on [0, 1) with `n` equal cells.
+#[derive(Clone, Debug)]
+pub(crate) struct Dist1D {
+    /// Cell densities (∫₀¹ = 1).
+    pdf: Vec<f64>,
+    /// Running sums of the cell values, `cdf[0] = 0`, `cdf[n]` = the total; length n + 1.
+    cdf: Vec<f64>,
+}
+
+impl Dist1D {
+    /// `None` when every value is 0 (nothing to sample). Values must be finite and ≥ 0.
+    pub fn new(values: &[f64]) -> Option<Dist1D> {
+        let n = values.len();
+        let mut cdf = Vec::with_capacity(n + 1);
+        cdf.push(0.0);
+        let mut s = 0.0;
+        for &v in values {
+            s += v;
+            cdf.push(s);
+        }
+        if s <= 0.0 || !s.is_finite() {
+            return None;
+        }
+        let scale = n as f64 / s;
+        Some(Dist1D { pdf: values.iter().map(|v| v * scale).collect(), cdf })
+    }
+
+    /// The total of the cell values it was built from.
+    pub fn total(&self) -> f64 {
+        self.cdf[self.pdf.len()]
+    }
+
+    /// A point of [0, 1) for `u` in [0, 1), and the cell it fell in. Only cells of positive mass are chosen.
+    pub fn sample(&self, u: f64) -> (f64, usize) {
+        let n = self.pdf.len();
+        let target = u * self.total();
+        // The last i with cdf[i] ≤ target: then cdf[i + 1] > target, so cell i has mass.
+        let i = (self.cdf.partition_point(|&c| c <= target).max(1) - 1).min(n - 1);
+        let i = self.skip_empty(i);
+        let (lo, hi) = (self.cdf[i], self.cdf[i + 1]);
+        let frac = ((target - lo) / (hi - lo)).clamp(0.0, 1.0);
+        // Kept inside cell i (the rounding of i + frac can reach the next cell's edge).
+        (((i as f64 + frac) / n as f64).min(((i + 1) as f64 / n as f64).next_down()), i)
+    }
+
+    /// Rounding can leave `target` on a cell of zero mass at the end; step back to the last cell with mass.
+    fn skip_empty(&self, mut i: usize) -> usize {
+        while i > 0 && self.cdf[i + 1] <= self.cdf[i] {
+            i -= 1;
+        }
+        while self.cdf[i + 1] <= self.cdf[i] {
+            i += 1;
+        }
+        i
+    }
+
+    /// The density at `x` (0 outside [0, 1)).
+    pub fn pdf(&self, x: f64) -> f64 {
+        if !(0.0..1.0).contains(&x) {
+            return 0.0;
+        }
+        let n = self.pdf.len();
+        self.pdf[((x * n as f64) as usize).min(n - 1)]
+    }
+}
+
+/// A piecewise-constant density on [0, 1)² with `n` rows (first coordinate) × `m` columns (second).
+#[derive(Clone, Debug)]
+pub(crate) struct Dist2D {
+    n: usize,
+    m: usize,
+    /// Cell densities, row-major (∫∫ = 1).
+    pdf: Vec<f64>,
+    /// The marginal over rows.
+    rows: Dist1D,
+    /// Each row's conditional over columns (`None` for a row of zero mass, never chosen).
+    cols: Vec<Option<Dist1D>>,
+}
+
+impl Dist2D {
+    /// `None` when every value is 0. `values` row-major, n × m, finite and ≥ 0.
+    pub fn new(values: &[f64], n: usize, m: usize) -> Option<Dist2D> {
+        debug_assert_eq!(values.len(), n * m);
+        let sums: Vec<f64> = values.chunks(m).map(|r| r.iter().sum()).collect();
+        let rows = Dist1D::new(&sums)?;
+        let scale = (n * m) as f64 / rows.total();
+        let cols = values.chunks(m).map(Dist1D::new).collect();
+        Some(Dist2D { n, m, pdf: values.iter().map(|v| v * scale).collect(), rows, cols })
+    }
+
+    /// A point of [0, 1)² for `u` in [0, 1)².
+    pub fn sample(&self, u1: f64, u2: f64) -> (f64, f64) {
+        let (x1, i) = self.rows.sample(u1);
+        // The row was chosen for its mass, so its conditional exists.
+        match &self.cols[i] {
+            Some(c) => (x1, c.sample(u2).0),
+            None => (x1, u2),
+        }
+    }
+
+    /// The density at (x1, x2) (0 outside [0, 1)²).
+    #[inline]
+    pub fn pdf(&self, x1: f64, x2: f64) -> f64 {
+        if !(0.0..1.0).contains(&x1) || !(0.0..1.0).contains(&x2) {
+            return 0.0;
+        }
+        let i = ((x1 * self.n as f64) as usize).min(self.n - 1);
+        let j = ((x2 * self.m as f64) as usize).min(self.m - 1);
+        self.pdf[i * self.m + j]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn one_dimension_samples_its_cells_and_integrates_to_one() {
+        let d = Dist1D::new(&[0.0, 1.0, 3.0, 0.0]).unwrap();
+        assert_eq!(d.pdf(0.1), 0.0);
+        assert_eq!(d.pdf(0.3), 1.0);
+        assert_eq!(d.pdf(0.6), 3.0);
+        // u below a quarter of the mass lands in cell 1, the rest in cell 2; the end points map into the cells.
+        assert_eq!(d.sample(0.0), (0.25, 1));
+        assert_eq!(d.sample(0.125).1, 1);
+        assert!((d.sample(0.125).0 - 0.375).abs() < 1e-15);
+        assert_eq!(d.sample(0.5).1, 2);
+        let (x, i) = d.sample(1.0f64.next_down());
+        assert_eq!(i, 2);
+        assert!(x < 0.75);
+        assert!(Dist1D::new(&[0.0, 0.0]).is_none());
+    }
+
+    #[test]
+    fn two_dimensions_match_their_density() {
+        let vals = [1.0, 0.0, 2.0, 5.0, 0.0, 0.0];
+        let d = Dist2D::new(&vals, 3, 2).unwrap();
+        // Mean value 8/6: cell (0,0) has density 0.75.
+        assert!((d.pdf(0.1, 0.2) - 0.75).abs() < 1e-15);
+        assert_eq!(d.pdf(0.9, 0.2), 0.0);
+        let mut hits = [0usize; 6];
+        let n = 64;
+        for a in 0..n {
+            for b in 0..n {
+                let (x1, x2) = d.sample((a as f64 + 0.5) / n as f64, (b as f64 + 0.5) / n as f64);
+                hits[(x1 * 3.0) as usize * 2 + (x2 * 2.0) as usize] += 1;
+            }
+        }
+        let total = (n * n) as f64;
+        for (h, v) in hits.iter().zip(vals) {
+            assert!((*h as f64 / total - v / 8.0).abs() < 0.01, "{hits:?}");
+        }
+    }
+}

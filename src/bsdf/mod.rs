@@ -1,0 +1,906 @@
+//! Every formula a full BSDF: `sample()` and `pdf()` that agree with `eval()`, built from the compiled kernel.
+//!
+//! A [`Sampler`] draws the outgoing direction `wo` for an incident `wi` (the formula's L; `wo` is its V; the local
+//! frame N = +z, X = +x) with a density that follows f(wi, wo)·cosθₒ (for a colour formula, the luminance
+//! 0.2126 r + 0.7152 g + 0.0722 b of the channels), and returns `(wo, pdf, weight)` with weight = f·cosθₒ/pdf
+//! from the same kernels ([`Sampler::sample_many`]); [`Sampler::pdf_many`] is the density of any `wo`. It
+//! consumes [`Kernel`]s (batched evaluation over [`Columns`], inputs from directions through
+//! [`crate::frame::inputs_from_dirs`]), never source text.
+//!
+//! # Mechanisms ([`Mechanism`])
+//! - **Tabulated** (any formula): the half-vector parameterisation. For `wi` and a half vector h with
+//!   θₕ = (π/2)·x₁² (Dupuy and Jakob's warp, as Mitsuba's `measured` plugin) and φₕ = 2π·x₂ (+ wi's azimuth for an
+//!   isotropic formula), wo = 2(wi·h)h − wi; the map h ↔ wo is a bijection (h = ±norm(wi + wo), the sign making
+//!   h.z ≥ 0) with dωₒ = 4|wi·h| dωₕ and dωₕ = sinθₕ·πx₁·2π dx₁dx₂. Per incidence node a [`ROWS`] × [`COLS`]
+//!   table over (x₁, x₂) holds, per cell, the maximum over a 3 × 3 sub-grid (corners and centre, shared between
+//!   neighbours) of g = lum(f)·max(cosθₒ, 0)·|dωₒ/dx| — pbrt-v4's `FromFuncLInfinity` rule, so a cell is never 0
+//!   where g > 0 at one of its points — sampled by a marginal and conditional inverse CDF. Every catalogue lobe
+//!   peaks at h = N, which the x₁² warp resolves.
+//! - **Exact** (a formula whose only input is NH, or only VR — one cosine, nothing else): a 1-D table of
+//!   lum(f(cos θ))·sinθ over θ ∈ [0, θmax] (θmax = π for VR, π/2 for NH) in [`EXACT_CELLS`] cells, each cell the
+//!   maximum at its ends and middle: the CDF is piecewise linear in θ and the density piecewise constant, inverted
+//!   by binary search. φ is uniform about the lobe axis: R, the mirror of wi, for VR; N for NH, whose sampled h
+//!   gives wo = 2(wi·h)h − wi with the Jacobian 1/(4 wo·h).
+//! - **Cosine**: cosθₒ/π, for formulas neither of the above beats (and for a formula that is 0 everywhere).
+//!
+//! [`Choice::Auto`] (the default) builds every mechanism the formula admits and keeps the one of highest mean
+//! efficiency E[w]²/E[w²] over θᵢ = 0°, 30°, 60°, 85° (1024 samples each, a fixed seed); [`Report`] says which
+//! and what each measured.
+//!
+//! # The mixture rule (why sample and pdf agree exactly)
+//! Every sampler is a mixture: with probability [`COSINE_FRACTION`] the cosine density, else the mechanism's.
+//! Tabulated incidence nodes: an isotropic formula (one that reads only cosines, or whose values pass
+//! [`turns_with_the_frame`]) has [`ISO_NODES`] nodes over θᵢ, θₖ = 89.5°·(1 − (1 − k/23)²) — dense toward grazing,
+//! where the horizon cuts the lobe and its shape changes fastest (spacing 7.8° at the normal, 0.17° at the last
+//! node) — with φₕ measured from wi's azimuth; an anisotropic one a grid of [`ANISO_THETA_NODES`] θᵢ (the same
+//! rule) × [`ANISO_PHI_NODES`] φᵢ with φₕ absolute. Between nodes the sampler picks a node with probability equal
+//! to its linear (bilinear) interpolation weight, re-using x₁ (rescaled), and pdf(wi, wo) = Σₖ wₖ·pdfₖ(wo) over
+//! the same nodes and weights. Each node's table is applied with the actual wi (the h-map uses the real wi), so
+//! each pdfₖ is an exact density of the directions it produces and so is the mixture, wherever wi falls between
+//! nodes (beyond the last node, its table alone). A node whose table is empty (the formula is 0 for every wo at
+//! that incidence) samples the cosine density in its place: its pdfₖ is cosθₒ/π.
+//!
+//! `sample` draws wo and then computes its density with the very function `pdf` runs, so the pdf a sample
+//! reports equals pdf(wi, wo) bit for bit; the weight is f·cosθₒ/pdf with f from the kernels, a batch at a time.
+//!
+//! # The horizon and bad input
+//! - A sampled wo below the horizon (wo.z ≤ 0: a table cell that straddles the horizon, or an exact lobe about R
+//!   cut by it) keeps its direction and density and has weight 0; the cosine fraction keeps pdf > 0 wherever
+//!   cosθₒ > 0, so f·cos > 0 implies pdf > 0.
+//! - wi zero or not finite is an error; wi is normalised; wi below or on the horizon (wi.z ≤ 0) is an error (the
+//!   formula's L is an incident direction of the upper hemisphere). A wo given to `pdf` must be finite and
+//!   non-zero; it is normalised unless already unit to 10⁻⁹.
+//! - While building, a negative value of a channel at a table point (with cosθₒ > 0) refuses the formula, naming
+//!   the directions and the input values there; so does a NaN or an infinite value. A formula 0 at every table
+//!   point of an incidence node gives that node an empty table ([`Report::empty_nodes`]); 0 everywhere gives
+//!   the cosine mechanism and weight 0 for every sample, never NaN.
+//!
+//! # Cost
+//! Measured numbers are in BENCHMARKS.md ("Sampling"): build time, ns per sample and per pdf, efficiency per
+//! catalogue formula beside cosine sampling's.
+
+pub mod chi2;
+mod dist;
+pub mod validate;
+
+use crate::backend::{Columns, Evaluator, Kernel};
+use crate::base::diag::Diagnostic;
+use crate::frame::{inputs_from_dirs, V3};
+use crate::ir::{Input, InputSet, N_INPUTS};
+use crate::numerics::energy::turns_with_the_frame;
+use dist::{Dist1D, Dist2D};
+use std::f64::consts::{FRAC_PI_2, PI};
+use std::time::{Duration, Instant};
+
+/// Rec. 709 luminance of (r, g, b): the target density of a colour formula.
+pub const LUMINANCE: [f64; 3] = [0.2126, 0.7152, 0.0722];
+/// The probability of the cosine part of every mixture, chosen by measurement (docs/sampling.md,
+/// `sample::cosine_fraction_measurement`): over the catalogue at θᵢ = 0°, 30°, 60°, 85°, 5 % gives mean efficiency
+/// 0.956 and largest weight 2.5× the mean, 10 % 0.931 and 2.7×, 20 % 0.875 and 3.2×.
+pub const COSINE_FRACTION: f64 = 0.05;
+/// Rows of a node's table (x₁, the warped θₕ).
+pub const ROWS: usize = 64;
+/// Columns of a node's table (x₂, φₕ).
+pub const COLS: usize = 32;
+/// Incidence nodes over θᵢ for an isotropic formula.
+pub const ISO_NODES: usize = 24;
+/// Incidence nodes over θᵢ for an anisotropic formula.
+pub const ANISO_THETA_NODES: usize = 12;
+/// Incidence nodes over φᵢ for an anisotropic formula.
+pub const ANISO_PHI_NODES: usize = 16;
+/// The last node's θᵢ (degrees); wi beyond it uses that node's table.
+pub const LAST_NODE_DEG: f64 = 89.5;
+/// Cells of the exact path's 1-D table.
+pub const EXACT_CELLS: usize = 4096;
+/// Samples per incidence of the automatic choice's efficiency probe.
+const PROBE_SAMPLES: usize = 1024;
+/// Points evaluated per kernel batch.
+const BATCH: usize = 4096;
+
+/// How a sampler draws wo.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mechanism {
+    Tabulated,
+    Exact,
+    Cosine,
+}
+
+impl Mechanism {
+    pub fn name(self) -> &'static str {
+        match self {
+            Mechanism::Tabulated => "tabulated",
+            Mechanism::Exact => "exact",
+            Mechanism::Cosine => "cosine",
+        }
+    }
+}
+
+impl std::str::FromStr for Mechanism {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Mechanism, String> {
+        match s {
+            "tabulated" => Ok(Mechanism::Tabulated),
+            "exact" => Ok(Mechanism::Exact),
+            "cosine" => Ok(Mechanism::Cosine),
+            _ => Err(format!("unknown mechanism `{s}`; expected `auto`, `tabulated`, `exact` or `cosine`")),
+        }
+    }
+}
+
+/// Which mechanism to build.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Choice {
+    /// The best measured of those the formula admits (module docs).
+    #[default]
+    Auto,
+    /// This one (`Exact` on a formula that is not one cosine is an error).
+    Force(Mechanism),
+}
+
+/// How to build a sampler.
+#[derive(Clone, Copy, Debug)]
+pub struct Options {
+    pub choice: Choice,
+    /// The cosine part of the mixture, in (0, 1).
+    pub cosine_fraction: f64,
+}
+
+impl Default for Options {
+    fn default() -> Options {
+        Options { choice: Choice::Auto, cosine_fraction: COSINE_FRACTION }
+    }
+}
+
+/// What a build did.
+#[derive(Clone, Debug)]
+pub struct Report {
+    pub mechanism: Mechanism,
+    /// Whether the formula was taken as isotropic (nodes over θᵢ only).
+    pub isotropic: bool,
+    /// Wall time of the build, the automatic choice included.
+    pub build: Duration,
+    /// Incidence nodes (θᵢ, φᵢ in radians) whose tables are empty: the formula is 0 there for every wo.
+    pub empty_nodes: Vec<(f64, f64)>,
+    /// The mean probe efficiency of each mechanism built (automatic choice only).
+    pub candidates: Vec<(Mechanism, f64)>,
+}
+
+/// A batch of samples: `wo[i]`, `pdf[i]`, and `weight[i·channels + c]` for channel c.
+#[derive(Clone, Debug, Default)]
+pub struct Samples {
+    pub wo: Vec<V3>,
+    pub pdf: Vec<f64>,
+    pub weight: Vec<f64>,
+    pub channels: usize,
+}
+
+impl Samples {
+    /// Sample i's weight as luminance (the weight itself for a scalar formula).
+    pub fn luminance(&self, i: usize) -> f64 {
+        let w = &self.weight[i * self.channels..(i + 1) * self.channels];
+        if self.channels == 1 {
+            w[0]
+        } else {
+            w.iter().zip(LUMINANCE).map(|(a, b)| a * b).sum()
+        }
+    }
+}
+
+/// The formula's channels as one target: kernels, their luminance weights, the parameters.
+#[derive(Clone)]
+struct Target {
+    kernels: Vec<Kernel>,
+    lum: Vec<f64>,
+    params: Vec<f64>,
+    used: InputSet,
+}
+
+impl Target {
+    fn channels(&self) -> usize {
+        self.kernels.len()
+    }
+
+    /// Channel values at each (wi, wo), `out[i·channels + c]`, evaluated in batches.
+    fn eval_pairs(&self, pairs: &[(V3, V3)], out: &mut Vec<f64>) {
+        self.eval_inputs(pairs.len(), |i| inputs_from_dirs(pairs[i].0, pairs[i].1), out)
+    }
+
+    /// Channel values at `n` input points given by `at`.
+    fn eval_inputs(&self, n: usize, at: impl Fn(usize) -> [f64; N_INPUTS], out: &mut Vec<f64>) {
+        let nch = self.channels();
+        out.clear();
+        out.resize(n * nch, 0.0);
+        let mut cols: Vec<Vec<f64>> = (0..N_INPUTS).map(|_| Vec::with_capacity(BATCH.min(n))).collect();
+        let mut tmp = vec![0.0; BATCH.min(n)];
+        for start in (0..n).step_by(BATCH) {
+            let end = (start + BATCH).min(n);
+            for c in cols.iter_mut() {
+                c.clear();
+            }
+            for i in start..end {
+                let x = at(i);
+                for (k, c) in cols.iter_mut().enumerate() {
+                    if self.used.contains(Input::ALL[k]) {
+                        c.push(x[k]);
+                    }
+                }
+            }
+            let refs: [&[f64]; N_INPUTS] = std::array::from_fn(|k| cols[k].as_slice());
+            let t = &mut tmp[..end - start];
+            for (ch, k) in self.kernels.iter().enumerate() {
+                k.eval_batch(&Columns::new(refs), &self.params, t);
+                for (i, v) in t.iter().enumerate() {
+                    out[(start + i) * nch + ch] = *v;
+                }
+            }
+        }
+    }
+
+    fn luminance(&self, vals: &[f64]) -> f64 {
+        vals.iter().zip(&self.lum).map(|(a, b)| a * b).sum()
+    }
+}
+
+/// Checks one point's channel values; the error names the point.
+fn check_point(vals: &[f64], at: impl Fn() -> String) -> Result<(), Diagnostic> {
+    for (c, &v) in vals.iter().enumerate() {
+        let ch = if vals.len() > 1 { format!(" (channel {})", ["r", "g", "b"][c.min(2)]) } else { String::new() };
+        if v.is_nan() {
+            return Err(Diagnostic::error(format!("the formula is NaN{ch} at {}", at()))
+                .hint("a sampler needs a value everywhere on the hemisphere: run `lobe sweep` on the file to see where it is undefined"));
+        }
+        if v.is_infinite() {
+            return Err(Diagnostic::error(format!("the formula is infinite{ch} at {}", at()))
+                .hint("a sampler tabulates f·cosθₒ: a pole on the hemisphere has no finite table; choose parameters without it"));
+        }
+        if v < 0.0 {
+            return Err(Diagnostic::error(format!("the formula is negative{ch} ({}) at {}", v, at()))
+                .hint("a BSDF is ≥ 0: clamp the formula with max(…, 0), or choose parameters where it is non-negative"));
+        }
+    }
+    Ok(())
+}
+
+/// "wi = (θ, φ), wo = (θ, φ): NL=… NV=… NH=… VR=… VH=…" for an error.
+fn describe_pair(wi: V3, wo: V3) -> String {
+    let x = inputs_from_dirs(wi, wo);
+    let polar = |w: V3| format!("(θ {:.3}°, φ {:.3}°)", w[2].clamp(-1.0, 1.0).acos().to_degrees(), w[1].atan2(w[0]).to_degrees());
+    format!(
+        "wi = {}, wo = {}: NL={:.6} NV={:.6} NH={:.6} VR={:.6} VH={:.6}",
+        polar(wi),
+        polar(wo),
+        x[0],
+        x[1],
+        x[2],
+        x[3],
+        x[4]
+    )
+}
+
+#[inline]
+fn dot(a: V3, b: V3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+#[inline]
+fn reflect(wi: V3, h: V3) -> V3 {
+    let d = 2.0 * dot(wi, h);
+    [d * h[0] - wi[0], d * h[1] - wi[1], d * h[2] - wi[2]]
+}
+
+fn dir(theta: f64, phi: f64) -> V3 {
+    let (st, ct) = theta.sin_cos();
+    let (sp, cp) = phi.sin_cos();
+    [st * cp, st * sp, ct]
+}
+
+/// The half vector of table coordinates (x₁, x₂) with φₕ offset by `phi0`, and dωₕ/dx.
+#[inline]
+fn half_from(x1: f64, x2: f64, phi0: f64) -> (V3, f64) {
+    let th = FRAC_PI_2 * x1 * x1;
+    let st = th.sin();
+    (dir(th, 2.0 * PI * x2 + phi0), st * PI * x1 * 2.0 * PI)
+}
+
+/// Table coordinates of the half vector of (wi, wo) (azimuth from `phi0`) and |dωₒ/dx| = 4|wi·h|·dωₕ/dx; `None`
+/// when wo = −wi (no half vector).
+#[inline]
+fn table_coords(wi: V3, wo: V3, phi0: f64) -> Option<(f64, f64, f64)> {
+    let s = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
+    let len = dot(s, s).sqrt();
+    if len.is_nan() || len <= 0.0 {
+        return None;
+    }
+    let sign = if s[2] < 0.0 { -1.0 / len } else { 1.0 / len };
+    let h = [s[0] * sign, s[1] * sign, s[2] * sign];
+    // θₕ by atan2 (acos loses digits near the normal, where the lobes are).
+    let st = (h[0] * h[0] + h[1] * h[1]).sqrt();
+    let th = st.atan2(h[2]);
+    let x1 = (th / FRAC_PI_2).sqrt();
+    let mut x2 = ((h[1].atan2(h[0]) - phi0) / (2.0 * PI)).rem_euclid(1.0);
+    if x2 >= 1.0 {
+        x2 = 0.0;
+    }
+    // sinθₕ = st: h is unit.
+    let jac = st * PI * x1 * 2.0 * PI * 4.0 * dot(wi, h).abs();
+    Some((x1, x2, jac))
+}
+
+/// θᵢ of incidence node k of `count`: 89.5°·(1 − (1 − k/(count − 1))²).
+fn node_theta(k: usize, count: usize) -> f64 {
+    let s = k as f64 / (count - 1) as f64;
+    LAST_NODE_DEG.to_radians() * (1.0 - (1.0 - s) * (1.0 - s))
+}
+
+/// The nodes around θ among `thetas` (ascending) with linear weights: one node outside the range.
+fn theta_weights(thetas: &[f64], t: f64) -> [(usize, f64); 2] {
+    let last = thetas.len() - 1;
+    if t <= thetas[0] {
+        return [(0, 1.0), (0, 0.0)];
+    }
+    if t >= thetas[last] {
+        return [(last, 1.0), (last, 0.0)];
+    }
+    let k = thetas.partition_point(|&x| x <= t) - 1;
+    let f = (t - thetas[k]) / (thetas[k + 1] - thetas[k]);
+    [(k, 1.0 - f), (k + 1, f)]
+}
+
+/// The tabulated mechanism: a table per incidence node.
+#[derive(Clone, Debug)]
+struct Tabulated {
+    isotropic: bool,
+    thetas: Vec<f64>,
+    /// φᵢ nodes (anisotropic only; one node at 0 for an isotropic formula).
+    phis: usize,
+    /// Node (θ index t, φ index p) at t·phis + p; `None`: an empty table.
+    nodes: Vec<Option<Dist2D>>,
+}
+
+impl Tabulated {
+    /// The nodes wi mixes, their weights, and the azimuth offset of φₕ.
+    #[inline]
+    fn weights(&self, wi: V3) -> ([(usize, f64); 4], f64) {
+        let t = wi[2].clamp(-1.0, 1.0).acos();
+        let phi = wi[1].atan2(wi[0]);
+        let tw = theta_weights(&self.thetas, t);
+        if self.isotropic {
+            return ([tw[0], tw[1], (0, 0.0), (0, 0.0)], phi);
+        }
+        let np = self.phis;
+        let p = phi.rem_euclid(2.0 * PI) / (2.0 * PI) * np as f64;
+        let k = (p as usize).min(np - 1);
+        let f = (p - k as f64).clamp(0.0, 1.0);
+        let k1 = (k + 1) % np;
+        let at = |t: usize, q: usize| t * np + q;
+        (
+            [
+                (at(tw[0].0, k), tw[0].1 * (1.0 - f)),
+                (at(tw[0].0, k1), tw[0].1 * f),
+                (at(tw[1].0, k), tw[1].1 * (1.0 - f)),
+                (at(tw[1].0, k1), tw[1].1 * f),
+            ],
+            0.0,
+        )
+    }
+
+    fn sample(&self, wi: V3, u1: f64, u2: f64) -> V3 {
+        let (ws, phi0) = self.weights(wi);
+        let mut acc = 0.0;
+        let mut pick = None;
+        for &(k, w) in &ws {
+            if w > 0.0 {
+                if u1 < acc + w {
+                    pick = Some((k, ((u1 - acc) / w).clamp(0.0, ONE_MINUS)));
+                    break;
+                }
+                acc += w;
+                pick = Some((k, ONE_MINUS));
+            }
+        }
+        let (k, u) = pick.unwrap_or((0, u1));
+        match &self.nodes[k] {
+            None => cosine_sample(u, u2),
+            Some(d) => {
+                let (x1, x2) = d.sample(u, u2);
+                let (h, _) = half_from(x1, x2, phi0);
+                reflect(wi, h)
+            }
+        }
+    }
+
+    #[inline]
+    fn pdf(&self, wi: V3, wo: V3, cos_pdf: f64) -> f64 {
+        let (ws, phi0) = self.weights(wi);
+        let tc = table_coords(wi, wo, phi0);
+        let mut p = 0.0;
+        for &(k, w) in &ws {
+            if w > 0.0 {
+                p += w * match (&self.nodes[k], tc) {
+                    (None, _) => cos_pdf,
+                    (Some(d), Some((x1, x2, jac))) if jac > 0.0 => d.pdf(x1, x2) / jac,
+                    _ => 0.0,
+                };
+            }
+        }
+        p
+    }
+}
+
+/// The largest f64 below 1.
+const ONE_MINUS: f64 = 1.0 - f64::EPSILON / 2.0;
+
+/// The exact mechanism: a 1-D table in the lobe angle about the lobe axis.
+#[derive(Clone, Debug)]
+struct Exact {
+    lobe: Input,
+    theta_max: f64,
+    dist: Dist1D,
+}
+
+/// An orthonormal basis with `n` its third axis (Duff et al. 2017).
+fn basis(n: V3) -> [V3; 3] {
+    let sign = 1f64.copysign(n[2]);
+    let a = -1.0 / (sign + n[2]);
+    let b = n[0] * n[1] * a;
+    [[1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]], [b, sign + n[1] * n[1] * a, -n[1]], n]
+}
+
+impl Exact {
+    #[inline]
+    fn axis(&self, wi: V3) -> V3 {
+        if self.lobe == Input::VR {
+            [-wi[0], -wi[1], wi[2]]
+        } else {
+            [0.0, 0.0, 1.0]
+        }
+    }
+
+    fn sample(&self, wi: V3, u1: f64, u2: f64) -> V3 {
+        let (v, _) = self.dist.sample(u1);
+        let d = dir(self.theta_max * v, 2.0 * PI * u2);
+        if self.lobe == Input::NH {
+            return reflect(wi, d);
+        }
+        let [t, b, n] = basis(self.axis(wi));
+        std::array::from_fn(|k| t[k] * d[0] + b[k] * d[1] + n[k] * d[2])
+    }
+
+    #[inline]
+    fn pdf(&self, wi: V3, wo: V3) -> f64 {
+        // The angle to the axis by atan2(|d × a|, d·a): acos loses digits near the axis, where the lobe is.
+        let (d, a, jac) = if self.lobe == Input::NH {
+            let s = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
+            let len = dot(s, s).sqrt();
+            if len.is_nan() || len <= 0.0 {
+                return 0.0;
+            }
+            let sign = if s[2] < 0.0 { -1.0 / len } else { 1.0 / len };
+            let h = [s[0] * sign, s[1] * sign, s[2] * sign];
+            (h, [0.0, 0.0, 1.0], 4.0 * dot(wi, h).abs())
+        } else {
+            (wo, self.axis(wi), 1.0)
+        };
+        let x = [d[1] * a[2] - d[2] * a[1], d[2] * a[0] - d[0] * a[2], d[0] * a[1] - d[1] * a[0]];
+        let th = dot(x, x).sqrt().atan2(dot(d, a));
+        let s = th.sin();
+        let den = self.theta_max * s * 2.0 * PI * jac;
+        if den.is_nan() || den <= 0.0 {
+            return 0.0;
+        }
+        self.dist.pdf(th / self.theta_max) / den
+    }
+}
+
+#[derive(Clone, Debug)]
+enum Body {
+    Cosine,
+    Tabulated(Tabulated),
+    Exact(Exact),
+}
+
+/// wo with density cosθ/π.
+#[inline]
+fn cosine_sample(u1: f64, u2: f64) -> V3 {
+    let r = u1.sqrt();
+    let (s, c) = (2.0 * PI * u2).sin_cos();
+    [r * c, r * s, (1.0 - u1).max(0.0).sqrt()]
+}
+
+/// A sampler of wo given wi for one formula at one parameter vector (module docs).
+#[derive(Clone)]
+pub struct Sampler {
+    target: Target,
+    cos_frac: f64,
+    body: Body,
+    pub report: Report,
+}
+
+impl std::fmt::Debug for Sampler {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Sampler").field("report", &self.report).field("cosine_fraction", &self.cos_frac).finish()
+    }
+}
+
+/// A direction given to the sampler as a unit vector, or the error for it.
+fn unit(w: V3, what: &str) -> Result<V3, Diagnostic> {
+    if !w.iter().all(|x| x.is_finite()) {
+        return Err(Diagnostic::error(format!("{what} ({}, {}, {}) is not finite", w[0], w[1], w[2])).hint("give a finite direction"));
+    }
+    let l2 = dot(w, w);
+    if l2 == 0.0 {
+        return Err(Diagnostic::error(format!("{what} is the zero vector")).hint("give a non-zero direction"));
+    }
+    if (l2 - 1.0).abs() <= 1e-9 {
+        return Ok(w);
+    }
+    let l = l2.sqrt();
+    Ok([w[0] / l, w[1] / l, w[2] / l])
+}
+
+/// wi as the sampler takes it: finite, non-zero, normalised, above the horizon.
+fn incident(wi: V3) -> Result<V3, Diagnostic> {
+    let w = unit(wi, "the incident direction wi")?;
+    if w[2].is_nan() || w[2] <= 0.0 {
+        return Err(Diagnostic::error(format!(
+            "the incident direction wi = ({}, {}, {}) is not above the horizon (wi.z ≤ 0)",
+            wi[0], wi[1], wi[2]
+        ))
+        .hint("wi is the formula's L, a direction of the upper hemisphere (z > 0 in the local frame)"));
+    }
+    Ok(w)
+}
+
+impl Sampler {
+    /// A sampler for a scalar formula's kernel at `params` (the full parameter vector, declaration order).
+    pub fn build(kernel: &Kernel, params: &[f64], opts: &Options) -> Result<Sampler, Diagnostic> {
+        Sampler::build_channels(std::slice::from_ref(kernel), params, opts)
+    }
+
+    /// A sampler for a formula's channel kernels (one, or red, green, blue: `Formula::channels`).
+    pub fn build_channels(kernels: &[Kernel], params: &[f64], opts: &Options) -> Result<Sampler, Diagnostic> {
+        let t0 = Instant::now();
+        if !(opts.cosine_fraction > 0.0 && opts.cosine_fraction < 1.0) {
+            return Err(Diagnostic::error(format!("the cosine fraction {} is not in (0, 1)", opts.cosine_fraction))
+                .hint("a small fraction such as 0.05 keeps pdf > 0 wherever cosθₒ > 0"));
+        }
+        let lum = match kernels.len() {
+            1 => vec![1.0],
+            3 => LUMINANCE.to_vec(),
+            n => return Err(Diagnostic::error(format!("a sampler takes 1 or 3 channel kernels, not {n}"))),
+        };
+        let used: InputSet = kernels.iter().map(|k| k.used_inputs()).collect();
+        let target = Target { kernels: kernels.to_vec(), lum, params: params.to_vec(), used };
+        let isotropic = !used.reads_directions() || kernels.iter().all(|k| turns_with_the_frame(k, params));
+        let one_cosine = [Input::NH, Input::VR].into_iter().find(|&i| {
+            let mut only = InputSet::default();
+            only.insert(i);
+            used == only
+        });
+        let make = |body: Body, empty: Vec<(f64, f64)>, mechanism: Mechanism| Sampler {
+            target: target.clone(),
+            cos_frac: opts.cosine_fraction,
+            body,
+            report: Report { mechanism, isotropic, build: Duration::ZERO, empty_nodes: empty, candidates: vec![] },
+        };
+        let tabulated = |target: &Target| -> Result<Sampler, Diagnostic> {
+            let (t, empty) = build_tabulated(target, isotropic)?;
+            Ok(if t.nodes.iter().all(Option::is_none) {
+                make(Body::Cosine, empty, Mechanism::Cosine)
+            } else {
+                make(Body::Tabulated(t), empty, Mechanism::Tabulated)
+            })
+        };
+        let exact = |target: &Target, lobe: Input| -> Result<Sampler, Diagnostic> {
+            Ok(match build_exact(target, lobe)? {
+                Some(e) => make(Body::Exact(e), vec![], Mechanism::Exact),
+                None => make(Body::Cosine, vec![], Mechanism::Cosine),
+            })
+        };
+        let mut s = match opts.choice {
+            Choice::Force(Mechanism::Cosine) => make(Body::Cosine, vec![], Mechanism::Cosine),
+            Choice::Force(Mechanism::Tabulated) => tabulated(&target)?,
+            Choice::Force(Mechanism::Exact) => match one_cosine {
+                Some(lobe) => exact(&target, lobe)?,
+                None => {
+                    return Err(Diagnostic::error("the exact mechanism needs a formula of one cosine (it reads NH alone, or VR alone)")
+                        .hint("use the tabulated mechanism, which takes any formula"))
+                }
+            },
+            Choice::Auto => {
+                let mut cands = vec![tabulated(&target)?];
+                if let Some(lobe) = one_cosine {
+                    cands.push(exact(&target, lobe)?);
+                }
+                cands.push(make(Body::Cosine, vec![], Mechanism::Cosine));
+                let scores: Vec<f64> = cands.iter().map(Sampler::probe_efficiency).collect();
+                let best = (0..cands.len()).max_by(|&a, &b| scores[a].total_cmp(&scores[b])).unwrap_or(0);
+                let candidates = cands.iter().zip(&scores).map(|(c, e)| (c.report.mechanism, *e)).collect();
+                let empty = cands[0].report.empty_nodes.clone();
+                let mut s = cands.swap_remove(best);
+                s.report.candidates = candidates;
+                s.report.empty_nodes = empty;
+                s
+            }
+        };
+        s.report.build = t0.elapsed();
+        Ok(s)
+    }
+
+    /// The channels of the weights (1 or 3).
+    pub fn channels(&self) -> usize {
+        self.target.channels()
+    }
+
+    /// The cosine part of the mixture.
+    pub fn cosine_fraction(&self) -> f64 {
+        self.cos_frac
+    }
+
+    /// Mean efficiency E[w]²/E[w²] over θᵢ = 0°, 30°, 60°, 85° (φᵢ = 0°), [`PROBE_SAMPLES`] each, seed fixed.
+    fn probe_efficiency(&self) -> f64 {
+        let incs = [0.0f64, 30.0, 60.0, 85.0];
+        let mut total = 0.0;
+        for (j, deg) in incs.iter().enumerate() {
+            let wi = dir(deg.to_radians(), 0.0);
+            let u: Vec<[f64; 2]> = (0..PROBE_SAMPLES as u64)
+                .map(|i| {
+                    let c = (j as u64) << 32 | i;
+                    [crate::base::rng::counter_unit(0x5A3F, 2 * c), crate::base::rng::counter_unit(0x5A3F, 2 * c + 1)]
+                })
+                .collect();
+            let Ok(s) = self.sample_many(&[wi], &u) else { return 0.0 };
+            total += efficiency((0..s.pdf.len()).map(|i| s.luminance(i)));
+        }
+        total / incs.len() as f64
+    }
+
+    /// wo for one (wi, u), wi already checked.
+    #[inline]
+    fn draw(&self, wi: V3, u: [f64; 2]) -> V3 {
+        let (u1, u2) = (u[0].clamp(0.0, ONE_MINUS), u[1].clamp(0.0, ONE_MINUS));
+        let c = self.cos_frac;
+        if u1 < c {
+            return cosine_sample((u1 / c).min(ONE_MINUS), u2);
+        }
+        let v = ((u1 - c) / (1.0 - c)).clamp(0.0, ONE_MINUS);
+        match &self.body {
+            Body::Cosine => cosine_sample(v, u2),
+            Body::Tabulated(t) => t.sample(wi, v, u2),
+            Body::Exact(e) => e.sample(wi, v, u2),
+        }
+    }
+
+    /// The mixture density of wo at wi (both unit, wi checked): the one function `sample` and `pdf` share.
+    #[inline]
+    fn density(&self, wi: V3, wo: V3) -> f64 {
+        let cos_pdf = wo[2].max(0.0) / PI;
+        let body = match &self.body {
+            Body::Cosine => cos_pdf,
+            Body::Tabulated(t) => t.pdf(wi, wo, cos_pdf),
+            Body::Exact(e) => e.pdf(wi, wo),
+        };
+        self.cos_frac * cos_pdf + (1.0 - self.cos_frac) * body
+    }
+
+    /// One sample per `u` (uniforms in [0, 1)²); `wi` holds one direction for all, or one per sample.
+    pub fn sample_many(&self, wi: &[V3], u: &[[f64; 2]]) -> Result<Samples, Diagnostic> {
+        let wis = incidents(wi, u.len())?;
+        let n = u.len();
+        let mut wo = Vec::with_capacity(n);
+        let mut pdf = Vec::with_capacity(n);
+        for (i, ui) in u.iter().enumerate() {
+            let w = wis[if wis.len() == 1 { 0 } else { i }];
+            let o = self.draw(w, *ui);
+            wo.push(o);
+            pdf.push(self.density(w, o));
+        }
+        let nch = self.channels();
+        let mut vals = vec![];
+        self.target.eval_inputs(n, |i| inputs_from_dirs(wis[if wis.len() == 1 { 0 } else { i }], wo[i]), &mut vals);
+        let mut weight = vec![0.0; n * nch];
+        for i in 0..n {
+            if wo[i][2] > 0.0 && pdf[i] > 0.0 {
+                // f·cosθₒ/pdf in that order: a per-sample 1/pdf factor would round subnormal weights differently.
+                for c in 0..nch {
+                    weight[i * nch + c] = vals[i * nch + c] * wo[i][2] / pdf[i];
+                }
+            }
+        }
+        Ok(Samples { wo, pdf, weight, channels: nch })
+    }
+
+    /// The density of each `wo` (normalised unless unit to 10⁻⁹) given `wi` (one for all, or one per `wo`).
+    pub fn pdf_many(&self, wi: &[V3], wo: &[V3]) -> Result<Vec<f64>, Diagnostic> {
+        let wis = incidents(wi, wo.len())?;
+        wo.iter()
+            .enumerate()
+            .map(|(i, &o)| Ok(self.density(wis[if wis.len() == 1 { 0 } else { i }], unit(o, "the outgoing direction wo")?)))
+            .collect()
+    }
+
+    /// The density as a function of unit wo for one incident `wi` (checked once): what a quadrature over wo calls.
+    /// wo is taken as given (unit; [`Sampler::pdf_many`] normalises).
+    pub fn pdf_at(&self, wi: V3) -> Result<impl Fn(V3) -> f64 + Sync + '_, Diagnostic> {
+        let wi = incident(wi)?;
+        Ok(move |wo: V3| self.density(wi, wo))
+    }
+
+    /// The formula's channel values f(wi, wo) (`out[i·channels + c]`), the weights' f.
+    pub fn eval_many(&self, wi: &[V3], wo: &[V3]) -> Result<Vec<f64>, Diagnostic> {
+        let wis = incidents(wi, wo.len())?;
+        let mut out = vec![];
+        self.target.eval_inputs(wo.len(), |i| inputs_from_dirs(wis[if wis.len() == 1 { 0 } else { i }], wo[i]), &mut out);
+        Ok(out)
+    }
+}
+
+/// Checked incident directions: one, or `n`.
+fn incidents(wi: &[V3], n: usize) -> Result<Vec<V3>, Diagnostic> {
+    if wi.len() != 1 && wi.len() != n {
+        return Err(Diagnostic::error(format!("{} incident directions for {n} samples", wi.len())).hint("give one wi for all, or one per sample"));
+    }
+    wi.iter().map(|&w| incident(w)).collect()
+}
+
+/// E[w]²/E[w²] of weights (0 when every weight is 0).
+pub fn efficiency(w: impl Iterator<Item = f64>) -> f64 {
+    let (mut n, mut s, mut s2) = (0usize, 0.0, 0.0);
+    for x in w {
+        n += 1;
+        s += x;
+        s2 += x * x;
+    }
+    if s2 > 0.0 {
+        s * s / (n as f64 * s2)
+    } else {
+        0.0
+    }
+}
+
+/// Every incidence node's table (module docs), and the nodes left empty.
+fn build_tabulated(target: &Target, isotropic: bool) -> Result<(Tabulated, Vec<(f64, f64)>), Diagnostic> {
+    let (nt, np) = if isotropic { (ISO_NODES, 1) } else { (ANISO_THETA_NODES, ANISO_PHI_NODES) };
+    let thetas: Vec<f64> = (0..nt).map(|k| node_theta(k, nt)).collect();
+    let mut nodes = Vec::with_capacity(nt * np);
+    let mut empty = vec![];
+    let mut scratch = NodeScratch::default();
+    for &t in &thetas {
+        let mut at_normal: Option<Option<Dist2D>> = None;
+        for p in 0..np {
+            let phi = 2.0 * PI * p as f64 / np as f64;
+            // At θᵢ = 0 every azimuth is the same wi: one table.
+            let d = match (&at_normal, t == 0.0) {
+                (Some(d), true) => d.clone(),
+                _ => node_table(target, dir(t, phi), &mut scratch)?,
+            };
+            if t == 0.0 {
+                at_normal = Some(d.clone());
+            }
+            if d.is_none() {
+                empty.push((t, if isotropic { 0.0 } else { phi }));
+            }
+            nodes.push(d);
+        }
+    }
+    Ok((Tabulated { isotropic, thetas, phis: np, nodes }, empty))
+}
+
+#[derive(Default)]
+struct NodeScratch {
+    pairs: Vec<(V3, V3)>,
+    slots: Vec<usize>,
+    g: Vec<f64>,
+    vals: Vec<f64>,
+}
+
+/// One node's table at incidence `wi`. φₕ is measured from azimuth 0: an isotropic formula's nodes lie at
+/// azimuth 0 (so this is φₕ from wi's azimuth, as [`Tabulated::weights`] applies it), an anisotropic one's φₕ is
+/// absolute.
+fn node_table(target: &Target, wi: V3, s: &mut NodeScratch) -> Result<Option<Dist2D>, Diagnostic> {
+    let (pr, pc) = (2 * ROWS + 1, 2 * COLS + 1);
+    let phi0 = 0.0;
+    s.pairs.clear();
+    s.slots.clear();
+    s.g.clear();
+    s.g.resize(pr * pc, 0.0);
+    let mut jacs = Vec::with_capacity(pr * pc);
+    for a in 0..pr {
+        let x1 = a as f64 / (2 * ROWS) as f64;
+        for b in 0..pc {
+            let x2 = b as f64 / (2 * COLS) as f64;
+            let (h, jh) = half_from(x1, x2, phi0);
+            let wo = reflect(wi, h);
+            if wo[2] > 0.0 && jh > 0.0 {
+                s.pairs.push((wi, wo));
+                s.slots.push(a * pc + b);
+                jacs.push(jh * 4.0 * dot(wi, h) * wo[2]);
+            }
+        }
+    }
+    target.eval_pairs(&s.pairs, &mut s.vals);
+    let nch = target.channels();
+    for (i, &slot) in s.slots.iter().enumerate() {
+        let v = &s.vals[i * nch..(i + 1) * nch];
+        check_point(v, || describe_pair(s.pairs[i].0, s.pairs[i].1))?;
+        s.g[slot] = target.luminance(v) * jacs[i];
+    }
+    let mut cells = vec![0.0; ROWS * COLS];
+    for i in 0..ROWS {
+        for j in 0..COLS {
+            let mut m = 0.0f64;
+            for a in 2 * i..=2 * i + 2 {
+                for b in 2 * j..=2 * j + 2 {
+                    m = m.max(s.g[a * pc + b]);
+                }
+            }
+            cells[i * COLS + j] = m;
+        }
+    }
+    Ok(Dist2D::new(&cells, ROWS, COLS))
+}
+
+/// The exact path's table for a formula of the one input `lobe` (NH or VR); `None` when it is 0 everywhere.
+fn build_exact(target: &Target, lobe: Input) -> Result<Option<Exact>, Diagnostic> {
+    let theta_max = if lobe == Input::VR { PI } else { FRAC_PI_2 };
+    let np = 2 * EXACT_CELLS + 1;
+    let theta = |a: usize| theta_max * a as f64 / (2 * EXACT_CELLS) as f64;
+    let mut vals = vec![];
+    target.eval_inputs(
+        np,
+        |a| {
+            let mut x = [0.0; N_INPUTS];
+            x[lobe.index()] = theta(a).cos();
+            x
+        },
+        &mut vals,
+    );
+    let nch = target.channels();
+    let mut q = vec![0.0; np];
+    for a in 0..np {
+        let v = &vals[a * nch..(a + 1) * nch];
+        let c = theta(a).cos();
+        check_point(v, || format!("{} = {c:.9} (the formula's only input)", lobe.name()))?;
+        q[a] = target.luminance(v) * theta(a).sin();
+    }
+    let cells: Vec<f64> = (0..EXACT_CELLS).map(|i| q[2 * i].max(q[2 * i + 1]).max(q[2 * i + 2])).collect();
+    Ok(Dist1D::new(&cells).map(|dist| Exact { lobe, theta_max, dist }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn half_vector_map_round_trips() {
+        let wi = dir(0.7, 0.3);
+        for &(x1, x2) in &[(0.1, 0.2), (0.5, 0.9), (0.8, 0.45), (0.03, 0.6)] {
+            let (h, jh) = half_from(x1, x2, 0.3);
+            let wo = reflect(wi, h);
+            let (y1, y2, jac) = table_coords(wi, wo, 0.3).unwrap();
+            assert!((x1 - y1).abs() < 1e-12 && (x2 - y2).abs() < 1e-12, "{x1} {x2} → {y1} {y2}");
+            assert!((jac - 4.0 * dot(wi, h).abs() * jh).abs() < 1e-12 * jac);
+        }
+    }
+
+    #[test]
+    fn node_thetas_start_at_the_normal_and_crowd_toward_grazing() {
+        let t: Vec<f64> = (0..ISO_NODES).map(|k| node_theta(k, ISO_NODES).to_degrees()).collect();
+        assert_eq!(t[0], 0.0);
+        assert!((t[ISO_NODES - 1] - LAST_NODE_DEG).abs() < 1e-12);
+        assert!(t[1] - t[0] > 10.0 * (t[ISO_NODES - 1] - t[ISO_NODES - 2]));
+        let w = theta_weights(&[0.0, 1.0, 2.0], 1.25);
+        assert_eq!(w, [(1, 0.75), (2, 0.25)]);
+        assert_eq!(theta_weights(&[0.0, 1.0], 3.0)[0], (1, 1.0));
+    }
+
+    #[test]
+    fn basis_is_orthonormal() {
+        for n in [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], dir(1.0, 2.0), dir(2.5, -1.0)] {
+            let [t, b, nn] = basis(n);
+            for (x, y, want) in [(t, t, 1.0), (b, b, 1.0), (t, b, 0.0), (t, nn, 0.0), (b, nn, 0.0)] {
+                assert!((dot(x, y) - want).abs() < 1e-14);
+            }
+        }
+    }
+}
