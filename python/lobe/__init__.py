@@ -124,7 +124,7 @@ class Kernel:
     unpickled (a Dask or Ray worker, a multiprocessing pool).
     """
 
-    __slots__ = ("_native", "_defaults", "_mechanism")
+    __slots__ = ("_native", "_defaults", "_mechanism", "_scalar")
 
     def __init__(self, *_: Any, **__: Any) -> None:
         raise TypeError("use lobe.compile(path_or_text) to make a Kernel")
@@ -135,6 +135,14 @@ class Kernel:
         k._native = native
         k._defaults = [p[1] for p in native.params]
         k._mechanism = None
+        # The per-call path of calls with plain numbers: keyword → ("input" | "param", index) for the cosines
+        # and the live parameters, and the inputs the kernels read (each must be given).
+        baked = {b[0] for b in native.baked}
+        names = [n for n in _NAMES] + [p[0] for p in native.params if p[0] not in baked]
+        kinds = dict(zip(names, native.resolve(names)))
+        read = tuple(i for i in native.inputs if i in _NAMES)
+        direction = any(i not in _NAMES for i in native.inputs)
+        k._scalar = None if direction else (kinds, read)
         return k
 
     # -- what it is -------------------------------------------------------------------------------------
@@ -235,6 +243,22 @@ class Kernel:
         (one value per point, e.g. ``k(NH=nh, n=np.array([[10], [100]]))`` for a table over n and NH); the
         value at each point is the one evaluating that point alone gives, bit for bit. The work runs without
         the GIL, split over threads for large arrays."""
+        fast = self._scalar
+        if fast is not None:
+            kinds, read = fast
+            kw = inputs_and_params
+            # Plain numbers naming cosines and live parameters, every read cosine given: one point, no arrays.
+            if all(type(v) in (float, int) and k in kinds for k, v in kw.items()) and all(r in kw for r in read):
+                params = list(self._defaults)
+                x = []
+                for k, v in kw.items():
+                    kind, i = kinds[k]
+                    if kind == "param":
+                        params[i] = float(v)
+                    else:
+                        x.append((i, float(v)))
+                out = self._native.eval_one(x, params)
+                return np.array(out[0]) if len(out) == 1 else np.array(out)
         cos, L, V, params, varying, shape = self._prepare(inputs_and_params)
         n = int(np.prod(shape, dtype=np.int64))
         out = self._native.eval((cos, L, V, n), params, varying)

@@ -382,6 +382,20 @@ impl Native {
         self.kernels.iter().map(|k| k.formula.to_program_text()).collect()
     }
 
+    /// One point through every channel's kernel: `x` the cosine inputs by index in `Input::ALL` (those not read
+    /// are ignored), `params` the full vector. The per-call path of a call with numbers only: the same bits as
+    /// the batched kernel (the scalar and batched entries of one compiled formula agree bit for bit).
+    fn eval_one(&self, py: Python<'_>, x: Vec<(usize, f64)>, params: Vec<f64>) -> PyResult<Vec<f64>> {
+        self.check_params(py, &params)?;
+        let mut xs = [0.0; N_INPUTS];
+        for (i, v) in x {
+            if let Some(slot) = xs.get_mut(i) {
+                *slot = v;
+            }
+        }
+        Ok(self.kernels.iter().map(|k| k.eval(&xs, &params)).collect())
+    }
+
     /// What each keyword names: ("input", index), ("L", 0), ("V", 0) or ("param", index).
     fn resolve(&self, py: Python<'_>, names: Vec<String>) -> PyResult<Vec<(&'static str, usize)>> {
         let f = self.formula();

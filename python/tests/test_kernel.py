@@ -294,3 +294,38 @@ def test_a_panic_is_a_lobe_error():
         lobe._lobe._panic_for_tests()
     assert e.value.diagnostics and "deliberate panic" in e.value.diagnostics[0]["message"]
     assert lobe.compile(BLINN)(NH=0.5, n=2) == 0.25
+
+
+@pytest.mark.parametrize("path", CATALOGUE)
+def test_calls_with_plain_numbers_are_the_array_calls_bit_for_bit(path):
+    """The per-call path (plain numbers: no arrays built) gives the values of the batched path, per point, at
+    random inputs and parameters inside their ranges."""
+    k = lobe.compile(path)
+    rng = np.random.default_rng(7)
+    live = {n: r for n, r in k.param_ranges.items()}
+    directions = any(i not in ("NL", "NV", "NH", "VR", "VH") for i in k.inputs)
+    for _ in range(20):
+        params = {n: float(rng.uniform(lo, hi)) for n, (lo, hi) in live.items()}
+        if directions:
+            continue
+        cos = {i: float(rng.uniform(0, 1)) for i in k.inputs}
+        one = k(**cos, **params)
+        arrays = k(**{i: np.array([v]) for i, v in cos.items()}, **params)
+        a, b = np.asarray(one, dtype=np.float64).reshape(arrays.shape), np.asarray(arrays, dtype=np.float64)
+        np.testing.assert_array_equal(np.isnan(a), np.isnan(b))
+        np.testing.assert_array_equal(a[~np.isnan(a)].view(np.uint64), b[~np.isnan(b)].view(np.uint64))
+        assert isinstance(one, np.ndarray) and one.shape == (() if k.channels == 1 else (3,))
+
+
+def test_the_per_call_path_keeps_the_errors():
+    k = lobe.compile(BLINN)
+    with pytest.raises(lobe.LobeError, match="outside its declared range"):
+        k(NH=0.5, n=5000)
+    with pytest.raises(lobe.LobeError, match="NH"):
+        k(NL=0.5)
+    with pytest.raises(lobe.LobeError, match="neither an input nor a parameter"):
+        k(NH=0.5, q=1)
+    baked = lobe.compile(BLINN, n=20)
+    with pytest.raises(lobe.LobeError, match="baked"):
+        baked(NH=0.5, n=30)
+    assert float(baked(NH=0.5)) == pytest.approx(float(k(NH=0.5, n=20)), rel=1e-12)

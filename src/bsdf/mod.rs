@@ -247,7 +247,8 @@ fn check_point(vals: &[f64], at: impl Fn() -> String) -> Result<(), Diagnostic> 
         let ch = if vals.len() > 1 { format!(" (channel {})", ["r", "g", "b"][c.min(2)]) } else { String::new() };
         if v.is_nan() {
             return Err(Diagnostic::error(format!("the formula is NaN{ch} at {}", at()))
-                .hint("a sampler needs a value everywhere on the hemisphere: run `lobe sweep` on the file to see where it is undefined"));
+                .hint("a sampler needs a value everywhere on the hemisphere")
+                .hint(crate::numerics::NumericsAdvice::SweepForUndefined));
         }
         if v.is_infinite() {
             return Err(Diagnostic::error(format!("the formula is infinite{ch} at {}", at()))
