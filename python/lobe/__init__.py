@@ -245,20 +245,25 @@ class Kernel:
         the GIL, split over threads for large arrays."""
         fast = self._scalar
         if fast is not None:
-            kinds, read = fast
-            kw = inputs_and_params
             # Plain numbers naming cosines and live parameters, every read cosine given: one point, no arrays.
-            if all(type(v) in (float, int) and k in kinds for k, v in kw.items()) and all(r in kw for r in read):
-                params = list(self._defaults)
-                x = []
-                for k, v in kw.items():
-                    kind, i = kinds[k]
-                    if kind == "param":
-                        params[i] = float(v)
-                    else:
-                        x.append((i, float(v)))
-                out = self._native.eval_one(x, params)
-                return np.array(out[0]) if len(out) == 1 else np.array(out)
+            kinds, read = fast
+            params = None
+            x = []
+            for name, v in inputs_and_params.items():
+                t = type(v)
+                entry = kinds.get(name)
+                if (t is not float and t is not int) or entry is None:
+                    break
+                if entry[0] == "param":
+                    if params is None:
+                        params = list(self._defaults)
+                    params[entry[1]] = float(v)
+                else:
+                    x.append((entry[1], float(v)))
+            else:
+                if all(r in inputs_and_params for r in read):
+                    out = self._native.eval_one(x, self._defaults if params is None else params)
+                    return np.array(out[0]) if len(out) == 1 else np.array(out)
         cos, L, V, params, varying, shape = self._prepare(inputs_and_params)
         n = int(np.prod(shape, dtype=np.int64))
         out = self._native.eval((cos, L, V, n), params, varying)
