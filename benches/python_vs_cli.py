@@ -3,7 +3,8 @@
     RAYON_NUM_THREADS=1 python benches/python_vs_cli.py [--lobe target/release/lobe] [--rounds 5]
 
 Both sides on one thread. Python: the best of ROUNDS calls `k(**columns)` on contiguous float64 columns, the
-output allocated and returned (memory traffic included). The command line: `eval_ns_per_point` of
+output allocated and returned, and `k(**columns, out=buffer)` into one reused buffer (the command line's kernel
+also writes a reused buffer). The command line: `eval_ns_per_point` of
 `lobe eval FILE --points CSV --json`, the kernel's steady state over the same points (the CSV's parsing is
 not counted). Prints one row per formula and the ratio Python / CLI.
 """
@@ -30,7 +31,7 @@ def main():
     ap.add_argument("--points", type=int, default=1 << 20)
     a = ap.parse_args()
     rng = np.random.default_rng(1)
-    print(f"{'formula':<26} {'python ns/pt':>13} {'cli ns/pt':>10} {'ratio':>6}")
+    print(f"{'formula':<26} {'python ns/pt':>13} {'out= ns/pt':>11} {'cli ns/pt':>10} {'ratio':>6} {'out= ratio':>10}")
     with tempfile.TemporaryDirectory() as d:
         for path in sorted(glob.glob(os.path.join(ROOT, "examples", "brdfs", "*.brdf"))):
             k = lobe.compile(path)
@@ -40,10 +41,13 @@ def main():
             np.savetxt(csv, np.column_stack([cols[n] for n in names]), delimiter=",", header=",".join(names), comments="", fmt="%.17g")
             k(**cols)
             best = min(_timed(lambda: k(**cols)) for _ in range(a.rounds))
+            buf = np.empty(a.points)
+            k(**cols, out=buf)
+            best_out = min(_timed(lambda: k(**cols, out=buf)) for _ in range(a.rounds))
             r = subprocess.run([a.lobe, "eval", path, "--points", csv, "--json"], capture_output=True, text=True, check=True)
             cli = json.loads(r.stdout)["eval_ns_per_point"]
-            py = best / a.points * 1e9
-            print(f"{os.path.basename(path):<26} {py:>13.2f} {cli:>10.2f} {py / cli:>6.2f}")
+            py, po = best / a.points * 1e9, best_out / a.points * 1e9
+            print(f"{os.path.basename(path):<26} {py:>13.2f} {po:>11.2f} {cli:>10.2f} {py / cli:>6.2f} {po / cli:>10.2f}")
 
 
 def _timed(f):

@@ -236,15 +236,17 @@ class Kernel:
         lv = [_flat(dirs[k], shape, (3,)) if k in dirs else None for k in ("L", "V")]
         return flat, lv[0], lv[1], params, varying, shape
 
-    def __call__(self, **inputs_and_params: Any) -> np.ndarray:
+    def __call__(self, *, out: Optional[np.ndarray] = None, **inputs_and_params: Any) -> np.ndarray:
         """Evaluate at every point: returns float64 of the broadcast shape (``(..., 3)`` for colour).
 
         Inputs and parameters broadcast together by numpy's rules: a parameter may be one value or an array
         (one value per point, e.g. ``k(NH=nh, n=np.array([[10], [100]]))`` for a table over n and NH); the
         value at each point is the one evaluating that point alone gives, bit for bit. The work runs without
-        the GIL, split over threads for large arrays."""
+        the GIL, split over threads for large arrays. ``out=`` (a writable C-contiguous float64 array of the
+        result's shape) receives the values instead of a new array, and is returned: repeated calls on large
+        arrays then allocate nothing."""
         fast = self._scalar
-        if fast is not None:
+        if fast is not None and out is None:
             # Plain numbers naming cosines and live parameters, every read cosine given: one point, no arrays.
             kinds, read = fast
             params = None
@@ -266,10 +268,21 @@ class Kernel:
                     return np.array(out[0]) if len(out) == 1 else np.array(out)
         cos, L, V, params, varying, shape = self._prepare(inputs_and_params)
         n = int(np.prod(shape, dtype=np.int64))
-        out = self._native.eval((cos, L, V, n), params, varying)
+        if out is not None:
+            want = shape if self.channels == 1 else shape + (self.channels,)
+            ok = isinstance(out, np.ndarray) and out.dtype == np.float64 and out.flags.c_contiguous and out.flags.writeable
+            if not ok or out.shape != want:
+                raise _error(f"out must be a writable C-contiguous float64 array of shape {want}", "e.g. out=np.empty(shape) once, reused across calls")
+            if self.channels == 1:
+                self._native.eval_out((cos, L, V, n), params, varying, out.reshape(-1))
+            else:
+                values = self._native.eval((cos, L, V, n), params, varying)
+                out[...] = np.moveaxis(values.reshape((self.channels,) + shape), 0, -1)
+            return out
+        values = self._native.eval((cos, L, V, n), params, varying)
         if self.channels == 1:
-            return out.reshape(shape)
-        return np.moveaxis(out.reshape((self.channels,) + shape), 0, -1)
+            return values.reshape(shape)
+        return np.moveaxis(values.reshape((self.channels,) + shape), 0, -1)
 
     # -- sampling (docs/sampling.md) ---------------------------------------------------------------------
     def sample(self, wi: Any, u: Any, **params: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:

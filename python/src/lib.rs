@@ -12,7 +12,7 @@ use lobe::ir::{Formula, Input, N_INPUTS};
 use lobe::numerics::points::evaluate_varying;
 use lobe::numerics::robust::PassOptions;
 use lobe::{Backend, Columns, Evaluator, Kernel, Mode, Tier};
-use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray2, PyReadwriteArray1, PyUntypedArrayMethods};
 use pyo3::create_exception;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -380,6 +380,23 @@ impl Native {
     #[getter]
     fn compiled(&self) -> Vec<String> {
         self.kernels.iter().map(|k| k.formula.to_program_text()).collect()
+    }
+
+    /// [`Native::eval`] of a scalar formula into `out` (`len` values, contiguous), which the caller reuses:
+    /// no allocation, and pages already touched.
+    fn eval_out<'py>(&self, py: Python<'py>, points: Points<'py>, params: Vec<f64>, varying: Vec<(usize, PyReadonlyArray1<'py, f64>)>, mut out: PyReadwriteArray1<'py, f64>) -> PyResult<()> {
+        self.check_params(py, &params)?;
+        let (cos, l, v, len) = points;
+        if self.kernels.len() != 1 || out.len() != len {
+            return Err(self.error(py, Diagnostic::error(format!("out holds {} values for {len} points of {} channel(s)", out.len(), self.kernels.len()))));
+        }
+        let inputs = self.batch(py, &cos, l.as_ref(), v.as_ref(), len)?;
+        let varying = self.varying(py, &varying, len)?;
+        let o = out.as_slice_mut().map_err(|_| self.error(py, Diagnostic::error("out is not contiguous").hint("pass a C-contiguous float64 array")))?;
+        detached(py, &self.file, || {
+            eval_into(&self.kernels[0], &inputs.columns(), &params, &varying, o);
+            Ok(())
+        })
     }
 
     /// One point through every channel's kernel: `x` the cosine inputs by index in `Input::ALL` (those not read

@@ -329,3 +329,19 @@ def test_the_per_call_path_keeps_the_errors():
     with pytest.raises(lobe.LobeError, match="baked"):
         baked(NH=0.5, n=30)
     assert float(baked(NH=0.5)) == pytest.approx(float(k(NH=0.5, n=20)), rel=1e-12)
+
+
+def test_out_receives_the_values_and_is_reused():
+    k = lobe.compile(BLINN)
+    nh = np.linspace(0, 1, 5000).reshape(50, 100)
+    want = k(NH=nh, n=30.0)
+    buf = np.full((50, 100), np.nan)
+    got = k(NH=nh, n=30.0, out=buf)
+    assert got is buf
+    np.testing.assert_array_equal(buf.view(np.uint64), want.view(np.uint64))
+    colour = lobe.compile("vec3(NH, NH^2, 1 - NH)")
+    cbuf = np.empty((50, 100, 3))
+    np.testing.assert_array_equal(colour(NH=nh, out=cbuf), colour(NH=nh))
+    for bad in (np.empty((50, 99)), np.empty((50, 100), dtype=np.float32), np.empty((100, 50)).T, [0.0] * 5000):
+        with pytest.raises(lobe.LobeError, match="out must be"):
+            k(NH=nh, out=bad)

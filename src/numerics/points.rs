@@ -216,6 +216,10 @@ pub fn parse(file: &str, text: &str, f: &Formula, used: InputSet, baked: &[Strin
 /// The runs of consecutive points (of `len`) whose values in every one of `cols` (each `len` long) are equal
 /// bit for bit; one run of all points when `cols` is empty.
 pub(crate) fn param_runs(cols: &[&[f64]], len: usize) -> Vec<std::ops::Range<usize>> {
+    // No varying column: one run, found without looking at every point.
+    if cols.is_empty() {
+        return if len > 0 { vec![0..len] } else { vec![] };
+    }
     let same = |a: usize, b: usize| cols.iter().all(|c| c[a].to_bits() == c[b].to_bits());
     let mut runs = vec![];
     let mut start = 0;
