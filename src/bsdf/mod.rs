@@ -24,7 +24,7 @@
 //! - **Cosine**: cosθₒ/π, for formulas neither of the above beats (and for a formula that is 0 everywhere).
 //!
 //! [`Choice::Auto`] (the default) builds every mechanism the formula admits and keeps the one of highest mean
-//! efficiency E[w]²/E[w²] over θᵢ = 0°, 30°, 60°, 85° (1024 samples each, a fixed seed); [`Report`] says which
+//! efficiency E\[w\]²/E\[w²\] over θᵢ = 0°, 30°, 60°, 85° (1024 samples each, a fixed seed); [`Report`] says which
 //! and what each measured.
 //!
 //! # The mixture rule (why sample and pdf agree exactly)
@@ -638,7 +638,7 @@ impl Sampler {
         self.cos_frac
     }
 
-    /// Mean efficiency E[w]²/E[w²] over θᵢ = 0°, 30°, 60°, 85° (φᵢ = 0°), [`PROBE_SAMPLES`] each, seed fixed.
+    /// Mean efficiency E\[w\]²/E\[w²\] over θᵢ = 0°, 30°, 60°, 85° (φᵢ = 0°), [`PROBE_SAMPLES`] each, seed fixed.
     fn probe_efficiency(&self) -> f64 {
         let incs = [0.0f64, 30.0, 60.0, 85.0];
         let mut total = 0.0;
@@ -744,7 +744,7 @@ fn incidents(wi: &[V3], n: usize) -> Result<Vec<V3>, Diagnostic> {
     wi.iter().map(|&w| incident(w)).collect()
 }
 
-/// E[w]²/E[w²] of weights (0 when every weight is 0).
+/// E\[w\]²/E\[w²\] of weights (0 when every weight is 0).
 pub fn efficiency(w: impl Iterator<Item = f64>) -> f64 {
     let (mut n, mut s, mut s2) = (0usize, 0.0, 0.0);
     for x in w {

@@ -1,6 +1,6 @@
 //! One run of a sampler at one incidence, as `lobe sample` reports it: seeded samples (the counter-based
 //! [`counter_unit`] stream, so any split over threads draws the same samples), the χ² test of the samples
-//! against the sampler's own pdf ([`super::chi2`]), the efficiency E[w]²/E[w²], the Monte-Carlo albedo ∫f·cos
+//! against the sampler's own pdf ([`super::chi2`]), the efficiency E\[w\]²/E\[w²\], the Monte-Carlo albedo ∫f·cos
 //! and its standard error (luminance for a colour formula; per channel too), and the cost of `sample` and `pdf`
 //! per call in batches, as thread CPU time (wall time on a shared machine counts other processes' work).
 

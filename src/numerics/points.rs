@@ -218,7 +218,7 @@ pub fn parse(file: &str, text: &str, f: &Formula, used: InputSet, baked: &[Strin
 pub(crate) fn param_runs(cols: &[&[f64]], len: usize) -> Vec<std::ops::Range<usize>> {
     // No varying column: one run, found without looking at every point.
     if cols.is_empty() {
-        return if len > 0 { vec![0..len] } else { vec![] };
+        return (len > 0).then_some(0..len).into_iter().collect();
     }
     let same = |a: usize, b: usize| cols.iter().all(|c| c[a].to_bits() == c[b].to_bits());
     let mut runs = vec![];

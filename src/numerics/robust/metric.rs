@@ -47,9 +47,9 @@ pub struct ErrorStats {
     pub nonfinite: usize,
     pub first_nonfinite: Option<Worst>,
     /// The truth itself is NaN (0/0, ∞·0, ∞−∞ in exact arithmetic) and has no limit along an edge input
-    /// ([`truth::limit`]): left out of the averages, as Herbie samples only points with a defined truth.
+    /// ([`truth::limit`](crate::numerics::truth::limit)): left out of the averages, as Herbie samples only points with a defined truth.
     pub undefined: usize,
-    /// The exact value is not finite but its limit along an input exactly on an edge is ([`truth::limit`]):
+    /// The exact value is not finite but its limit along an input exactly on an edge is ([`truth::limit`](crate::numerics::truth::limit)):
     /// counted like any point, with the limit as the truth (Cook–Torrance's G/(NL·NV) at NL = 0).
     pub limits: usize,
     /// The exact value is +∞ or −∞ (a pole: Ward's 1/√(NL·NV) at NL = 0 with a finite numerator): left out of
@@ -62,7 +62,7 @@ pub struct ErrorStats {
     pub wrong_sign: usize,
     pub first_wrong_sign: Option<Worst>,
     /// Points where the formula is ill-conditioned by nature (module docs). Exact when the conditioning was
-    /// measured everywhere ([`Conditioning::Everywhere`]); otherwise only points with more than
+    /// measured everywhere ([`Conditioning::Everywhere`](super::measure::Conditioning::Everywhere)); otherwise only points with more than
     /// [`TARGET_BITS`] of error are examined, and the others count as well conditioned.
     pub ill_conditioned: usize,
     /// Well-conditioned points with more than [`TARGET_BITS`] of error.
@@ -76,7 +76,7 @@ pub struct ErrorStats {
     /// Largest bits of error at a well-conditioned point, and the point.
     pub max_bits_well: f64,
     pub worst_well: Option<Worst>,
-    /// The condition (ulps, [`condition_ulps`]) at `worst_well`, when it was measured there.
+    /// The condition (ulps, [`condition_ulps`](super::measure::condition_ulps)) at `worst_well`, when it was measured there.
     pub condition_at_worst_well: Option<f64>,
 }
 

@@ -10,7 +10,7 @@
 //! correctly rounded, 64 bits is NaN or ∞ where the truth is finite. [`measure`] reports the average and the
 //! maximum over a sample of the domain with the worst input, counts the points where the result is NaN/∞ but the
 //! truth is finite, the points where the formula is undefined even in exact arithmetic (0/0, ∞·0 at e.g. NH = 0
-//! exactly, with no limit along an input on its edge, [`truth::limit`]; left out of the averages; where the
+//! exactly, with no limit along an input on its edge, [`truth::limit`](crate::numerics::truth::limit); left out of the averages; where the
 //! limit exists it is the truth, and the report counts those points), poles (the exact value ±∞, which the
 //! result must be), and the points where the formula is *ill-conditioned by nature*: a 1-ulp
 //! change of one input moves the true value by more than [`ILL_CONDITIONED_ULPS`] ulps, so no

@@ -155,7 +155,7 @@ impl ErrorStatsJson {
     }
 }
 
-/// One [`Trial`] of the pass: its cost relative to the plain simplification's and its error.
+/// One [`Trial`](super::search::Trial) of the pass: its cost relative to the plain simplification's and its error.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct TrialJson {
     pub rule: &'static str,

@@ -11,7 +11,7 @@
 //! function of those boxes (tested without rendering), and whatever cannot be shown is named in a footnote.
 //!
 //! One file per concern: [`style`] (font, palette, PNG/SVG encoding), [`axis`] (ticks and their labels),
-//! [`figure`] (the cartesian figure the lobe and curve plots draw), [`scatter`] (the bench scatter), [`rect`] and
+//! `figure` (the cartesian figure the lobe and curve plots draw), [`scatter`] (the bench scatter), [`rect`] and
 //! [`labels`] (boxes and label placement), [`comparison`] (the render comparison picture); the plots a caller
 //! asks for are here.
 

@@ -31,7 +31,7 @@
 //!   The same cost (three multiplications and two additions either way).
 //!
 //! - `compensated-base`: `pow(a + b, y)` (y live) → `p + p·y·(e'/s')` with (s', e') the renormalised pair of
-//!   s = a + b and e, the rounding error of the sum and of the `+ − × /` below it ([`rounding_error`]), and
+//!   s = a + b and e, the rounding error of the sum and of the `+ − × /` below it ([`rounding_error`](compensated)), and
 //!   p = pow(s', y): |e'/s'| ≤ 2⁻⁵³ even where s cancels to nothing (F_ST at n = a). pow amplifies its base's
 //!   relative error y times, so F_ST's `(n/a·(c − 1) + 1)^a` at a = 1000 lost 500 ulp where its condition is
 //!   1, and at a = 640 still 16 ulp with the sum's error alone (n/a and c − 1 round too). Cost ~12–20.
@@ -48,14 +48,14 @@
 //!   tried in turn: the other divisors as one product; the safe ones and the exponent's own (NH, whose tininess
 //!   makes e^E vanish first) as one product, each other that may be tiny or huge on its own, and two such
 //!   (Cook–Torrance's VH and max(NL, NV)) taken apart at run time inside the one builtin: b/VH where VH ≥ 2⁻¹⁰⁰⁰,
-//!   else c scaled by 2¹⁵³⁶ and E by 1536·ln 2 (exact there; [`two_divisors`]; a compare, three selects and four
+//!   else c scaled by 2¹⁵³⁶ and E by 1536·ln 2 (exact there; [`two_divisors`](scale); a compare, three selects and four
 //!   operations, ~+14, where nesting costs a second exp);
 //!   and the exponent halved over two nested builtins so two tiny divisors (Cook–Torrance's NL, NV ~1e-224)
 //!   each meet one half (twice the cost). One division by a product rather than a chain: dependent divisions
 //!   add latency the static cost does not see (Cook–Torrance's `/nh/nh/nh/nh`: 1.36× measured at 1.23× static).
 //!   A divisor that may be exactly 0 and reads inputs no other factor reads (Ward's √NL) makes a pole there, which
 //!   the builtin (an infinite b/c taken for an overflowed factor) would turn into 0 where e^E underflows: such
-//!   a product is guarded, `d == 0 ? rest/d : expmuldiv(…)` ([`pole_guard`], +6 per product).
+//!   a product is guarded, `d == 0 ? rest/d : expmuldiv(…)` ([`pole_guard`](scale), +6 per product).
 //!
 //! - `smith-g1`: Smith's G1 for GGX written with tan², `K/(1 + sqrt(1 + A·(1 − c²)/c²))`, → `K·c/(c + sqrt(c² +
 //!   A·(1 − c²)))` for c > 0 (range or guard), then c cancelled against a divisor c of the products around it
