@@ -36,8 +36,12 @@ pub fn run(a: &AccuracyArgs) -> Result<(), CliError> {
     }
     let set = a.set.list()?;
     let f = a.against.formula.load()?;
-    let ks = f.channels().into_iter().map(|c| common::compile_kernel(c, &set, a.backend.backend()?, a.backend.math.mode)).collect::<Result<Vec<Kernel>, _>>()?;
-    let r = a.against.reference(&a.backend)?;
+    // Each side takes the --set values of the parameters it declares.
+    let rf = common::load_formula(Some(&a.against.reference), None)?;
+    common::check_set_names(&[&f, &rf], &set)?;
+    let own = common::set_for(&f, &set);
+    let ks = f.channels().into_iter().map(|c| common::compile_kernel(c, &own, a.backend.backend()?, a.backend.math.mode)).collect::<Result<Vec<Kernel>, _>>()?;
+    let r = common::compile_kernel(rf.clone(), &common::set_for(&rf, &set), a.backend.backend()?, lobe::Mode::Precise)?;
     print!("{}", report(a, &ks, &r)?);
     Ok(())
 }
@@ -52,7 +56,7 @@ pub fn report(a: &AccuracyArgs, ks: &[Kernel], r: &Kernel) -> Result<String, Cli
         return Err(CliError::hint("accuracy sweeps n itself; --set n is not allowed", "set only the other parameters"));
     }
     let k = &ks[0];
-    let params = common::param_values(&k.formula, &set);
+    let params = common::param_values(&k.formula, &common::set_for(&k.formula, &set));
     // One lobe variable for every channel: the one the formula reads.
     let used: lobe::ir::InputSet = ks.iter().map(Kernel::used_inputs).collect();
     let (lobe, ref_lobe) = (a.against.lobe.resolve(used, a.json.on)?, lobe::numerics::choose_lobe_input(r.used_inputs()).0);

@@ -41,11 +41,6 @@ impl FormulaSource {
         common::load_formula(self.file.as_deref(), self.expr.as_deref())
     }
 
-    /// Loads the formula and compiles it with `set` baked in (the accuracy pass at its defaults).
-    pub fn kernel(&self, set: &[(String, f64)], backend: Backend, math: lobe::Mode) -> Result<Kernel, CliError> {
-        common::load_kernel(self.file.as_deref(), self.expr.as_deref(), set, backend, math)
-    }
-
     /// Loads the formula and simplifies it with `set` baked in, without the accuracy pass (what exports write).
     pub fn plain(&self, set: &[(String, f64)]) -> Result<Formula, CliError> {
         common::load_plain(self.file.as_deref(), self.expr.as_deref(), set)
@@ -255,16 +250,24 @@ pub struct AgainstReference {
 }
 
 impl AgainstReference {
-    /// The formula compiled with `set` baked, and the reference with its defaults, both on `backend`.
-    /// The formula's kernel in `b`'s backend and math mode, and the reference's (precise: it is the yardstick).
+    /// The formula's kernel in `b`'s backend and math mode and the reference's (precise: it is the yardstick),
+    /// each with the `--set` values of the parameters it declares baked (a name neither declares is an error).
+    /// `n` cannot be set: the papers' metrics sweep it over 1..n_max in both.
     pub fn kernels(&self, set: &[(String, f64)], b: &BackendArg) -> Result<(Kernel, Kernel), CliError> {
-        Ok((self.formula.kernel(set, b.engine.kind, b.math.mode)?, self.reference(b)?))
+        if set.iter().any(|(k, _)| k == "n") {
+            return Err(CliError::hint(
+                "--set n: the papers' metrics sweep n over 1..n_max in the formula and the reference, so a value of n would be ignored",
+                "drop n from --set (--n-max sets the sweep's end)",
+            ));
+        }
+        let f = common::load_formula(self.formula.file.as_deref(), self.formula.expr.as_deref())?;
+        let rf = common::load_formula(Some(&self.reference), None)?;
+        common::check_set_names(&[&f, &rf], set)?;
+        let k = common::compile_kernel(f.clone(), &common::set_for(&f, set), b.engine.kind, b.math.mode)?;
+        let r = common::compile_kernel(rf.clone(), &common::set_for(&rf, set), b.engine.kind, lobe::Mode::Precise)?;
+        Ok((k, r))
     }
 
-    /// The reference's kernel with its defaults (precise: it is the yardstick; its red channel if coloured).
-    pub fn reference(&self, b: &BackendArg) -> Result<Kernel, CliError> {
-        common::load_kernel(Some(&self.reference), None, &[], b.engine.kind, lobe::Mode::Precise)
-    }
 
     /// The lobe variables of the formula `k` ([`LobeVar::resolve`]) and of the reference `r` (the one it reads).
     pub fn lobes(&self, k: &Kernel, r: &Kernel, quiet: bool) -> Result<(Input, Input), CliError> {

@@ -137,7 +137,7 @@ pub fn report(a: &FitArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
         }
         free.push(FreeParam { index, name, lo, hi, step });
     }
-    let params = common::param_values(&k.formula, &set);
+    let params = common::param_values(&k.formula, &common::set_for(&k.formula, &set));
     let metric = a.lobe_metric()?;
     let (lobe, ref_lobe) = a.against()?.lobes(k, r, a.json.on)?;
     let mut total = 1usize;
