@@ -110,12 +110,7 @@ pub fn run(a: &PlotArgs) -> Result<(), CliError> {
         return Err(CliError::msg("--log applies to cartesian plots only (a log radius has no zero)"));
     }
     let bytes = match a.incidence {
-        Some(t) => {
-            if a.log {
-                return Err(CliError::msg("--incidence draws a linear scale (drop --log)"));
-            }
-            plot::incidence_lobes(&series, &LobeOptions { title: title.clone(), polar: a.polar, log: false, size: a.size }, t, format).map_err(CliError::msg)?
-        }
+        Some(t) => plot::incidence_lobes(&series, &LobeOptions { title: title.clone(), polar: a.polar, log: a.log, size: a.size }, t, format).map_err(CliError::msg)?,
         None => plot::lobes(&series, &LobeOptions { title: title.clone(), polar: a.polar, log: a.log, size: a.size }, format).map_err(CliError::msg)?,
     };
     a.out.force.write(output, &bytes, common::is_lobe_output)?;

@@ -598,3 +598,19 @@ fn set_values_reach_the_reference_and_n_is_refused() {
     let o = lobe(&["accuracy", "examples/brdfs/phong.brdf", "--reference", "examples/brdfs/beckmann.brdf", "--set", "q=1"], None);
     assert_clean_error(&o, "a name neither declares", "no formula has a parameter `q`");
 }
+
+/// `plot --incidence --log`: a log value axis in the plane of incidence (it was refused); polar stays linear.
+#[test]
+fn plots_at_incidence_take_a_log_axis() {
+    let dir = crate::scratch_dir("cli", "plot-log");
+    let png = dir.join("p.png").display().to_string();
+    let o = lobe(&["plot", "examples/brdfs/blinn.brdf", "examples/brdfs/phong.brdf", "--incidence", "60", "--log", "-o", &png, "--json"], None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["series"].as_array().map(Vec::len), Some(2), "{v}");
+    let img = lobe::base::image::Image::decode_png(&std::fs::read(&png).unwrap()).unwrap();
+    assert!(img.width > 100 && img.rgb.iter().any(|&c| c < 128));
+    let o = lobe(&["plot", "examples/brdfs/blinn.brdf", "--incidence", "60", "--log", "--polar", "-o", &png, "--force"], None);
+    assert_clean_error(&o, "a log radius", "cartesian plots only");
+    let _ = std::fs::remove_dir_all(&dir);
+}

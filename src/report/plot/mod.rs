@@ -181,17 +181,40 @@ fn polar_figure<'a>(title: &'a str, series: &[Series], light_deg: Option<f64>) -
 /// Lobes in the plane of incidence ([`incidence_points_at`] series) with the light at `theta_i_deg`: polar (to
 /// scale, the light drawn) or cartesian against the signed view angle.
 pub fn incidence_lobes(series: &[Series], o: &LobeOptions, theta_i_deg: f64, format: Format) -> DrawResult<Vec<u8>> {
-    if o.log {
-        return Err("the plane-of-incidence plot has a linear scale".into());
+    if o.polar && o.log {
+        return Err("a log scale applies to cartesian plots only (a log radius has no zero)".into());
     }
-    let finite = series.iter().flat_map(|s| s.points.iter().map(|p| p.1)).filter(|v| v.is_finite());
-    let ymax = finite.fold(f64::NEG_INFINITY, f64::max);
+    let finite = || series.iter().flat_map(|s| s.points.iter().map(|p| p.1)).filter(|v| v.is_finite());
+    let ymax = finite().fold(f64::NEG_INFINITY, f64::max);
     if ymax == f64::NEG_INFINITY {
         return Err("nothing to plot: no curve has a finite value (is the formula NaN or infinite everywhere?)".into());
     }
+    let x_desc = "view angle θₒ in the plane of incidence (degrees; mirror at −θᵢ)";
+    if o.log {
+        let ymin_pos = finite().filter(|v| *v > 0.0).fold(f64::INFINITY, f64::min);
+        if !ymin_pos.is_finite() {
+            return Err("nothing to plot on a log scale: no curve has a positive finite value (use a linear scale)".into());
+        }
+        let ymin_pos = ymin_pos.max(ymax * 1e-12);
+        let xs = || series.iter().flat_map(|s| s.points.iter().map(|p| p.0)).filter(|x| x.is_finite());
+        let (xmin, xmax) = (xs().fold(f64::INFINITY, f64::min), xs().fold(f64::NEG_INFINITY, f64::max));
+        let curves = series
+            .iter()
+            .map(|s| Curve::new(&s.name, s.points.iter().map(|&(d, v)| (v >= ymin_pos).then(|| (d, v.log10())))))
+            .collect();
+        let title = format!("{}, light at θᵢ = {theta_i_deg}°", o.title);
+        let fig = Figure {
+            title: &title,
+            x: Axis { lo: xmin, hi: if xmax > xmin { xmax } else { xmin + 1.0 }, log: false, desc: x_desc },
+            y: Axis { lo: ymin_pos.log10(), hi: (ymax * 1.5).log10(), log: true, desc: "value (log)" },
+            curves,
+            to_scale: false,
+            light: None,
+        };
+        return render_figure(&fig, format, o.size);
+    }
     if !o.polar {
         let title = format!("{}, light at θᵢ = {theta_i_deg}°", o.title);
-        let x_desc = "view angle θₒ in the plane of incidence (degrees; mirror at −θᵢ)";
         return curves_sized(series, &title, x_desc, "value", format, o.size);
     }
     let title = format!("{}, light at θᵢ = {theta_i_deg}°", o.title);
