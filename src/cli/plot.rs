@@ -33,6 +33,10 @@ pub struct PlotArgs {
     /// channel.
     #[arg(long)]
     pub incidence: Option<f64>,
+    /// The value axis's range `lo,hi` (cartesian plots; positive on a log axis), instead of one fitted to the
+    /// curves (a pole, e.g. Ward at grazing, otherwise flattens the others); curves are clipped to it.
+    #[arg(long, value_name = "LO,HI", value_delimiter = ',', num_args = 1, allow_hyphen_values = true)]
+    pub ylim: Vec<f64>,
     /// Image size in pixels, WxH.
     #[arg(long, default_value = "900x600", value_parser = parse_size)]
     pub size: (u32, u32),
@@ -109,9 +113,14 @@ pub fn run(a: &PlotArgs) -> Result<(), CliError> {
     if a.polar && a.log {
         return Err(CliError::msg("--log applies to cartesian plots only (a log radius has no zero)"));
     }
+    let ylim = match a.ylim.as_slice() {
+        [] => None,
+        [lo, hi] => Some((*lo, *hi)),
+        _ => return Err(CliError::hint("--ylim takes two values, lo,hi", "e.g. --ylim 0,2")),
+    };
     let bytes = match a.incidence {
-        Some(t) => plot::incidence_lobes(&series, &LobeOptions { title: title.clone(), polar: a.polar, log: a.log, size: a.size }, t, format).map_err(CliError::msg)?,
-        None => plot::lobes(&series, &LobeOptions { title: title.clone(), polar: a.polar, log: a.log, size: a.size }, format).map_err(CliError::msg)?,
+        Some(t) => plot::incidence_lobes(&series, &LobeOptions { title: title.clone(), polar: a.polar, log: a.log, size: a.size, ylim }, t, format).map_err(CliError::msg)?,
+        None => plot::lobes(&series, &LobeOptions { title: title.clone(), polar: a.polar, log: a.log, size: a.size, ylim }, format).map_err(CliError::msg)?,
     };
     a.out.force.write(output, &bytes, common::is_lobe_output)?;
     if a.json.on {

@@ -614,3 +614,29 @@ fn plots_at_incidence_take_a_log_axis() {
     assert_clean_error(&o, "a log radius", "cartesian plots only");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `plot --ylim lo,hi`: the value axis a paper asks for (curves clipped to it); bad ranges are clear errors.
+#[test]
+fn plot_takes_a_value_range() {
+    let dir = crate::scratch_dir("cli", "plot-ylim");
+    let png = |n: &str| dir.join(n).display().to_string();
+    let (a, b) = (png("a.png"), png("b.png"));
+    for (out, lim) in [(&a, "0,2"), (&b, "0,0.5")] {
+        let o = lobe(&["plot", "examples/brdfs/ward.brdf", "examples/brdfs/blinn.brdf", "--ylim", lim, "-o", out], None);
+        assert!(o.status.success(), "{lim}: {}", stderr(&o));
+    }
+    assert_ne!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap(), "the range changes the figure");
+    let o = lobe(&["plot", "examples/brdfs/blinn.brdf", "--incidence", "30", "--log", "--ylim", "1e-6,2", "-o", &a, "--force"], None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for (args, needle) in [
+        (vec!["--ylim", "2,1"], "not an interval"),
+        (vec!["--ylim", "0,1", "--log"], "positive values"),
+        (vec!["--ylim", "0,1", "--polar"], "cartesian plots only"),
+        (vec!["--ylim", "0"], "two values"),
+    ] {
+        let mut v = vec!["plot", "examples/brdfs/blinn.brdf", "-o", &a, "--force"];
+        v.extend(args.iter().copied());
+        assert_clean_error(&lobe(&v, None), needle, needle);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

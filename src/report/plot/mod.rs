@@ -110,6 +110,22 @@ pub struct LobeOptions {
     pub polar: bool,
     pub log: bool,
     pub size: (u32, u32),
+    /// The value axis's range (cartesian plots), instead of one fitted to the curves; curves are clipped to it.
+    pub ylim: Option<(f64, f64)>,
+}
+
+impl LobeOptions {
+    /// `ylim` checked against the plot's kind: cartesian only, lo < hi, finite, lo > 0 on a log axis.
+    fn checked_ylim(&self) -> DrawResult<Option<(f64, f64)>> {
+        let Some((lo, hi)) = self.ylim else { return Ok(None) };
+        if self.polar {
+            return Err("a value range applies to cartesian plots only".into());
+        }
+        if !(lo.is_finite() && hi.is_finite() && lo < hi) || (self.log && lo <= 0.0) {
+            return Err(format!("the value range {lo}..{hi} is not an interval{}", if self.log { " of positive values (log axis)" } else { "" }));
+        }
+        Ok(Some((lo, hi)))
+    }
 }
 
 /// Lobes (value against angle in degrees, 0..90). Polar: radius = value, drawn on both sides of the axis.
@@ -117,6 +133,7 @@ pub fn lobes(series: &[Series], o: &LobeOptions, format: Format) -> DrawResult<V
     if o.polar && o.log {
         return Err("a log scale applies to cartesian plots only (a log radius has no zero)".into());
     }
+    let ylim = o.checked_ylim()?;
     let values = || series.iter().flat_map(|s| s.points.iter().map(|p| p.1)).filter(|v| v.is_finite());
     if values().next().is_none() {
         return Err("nothing to plot: no curve has a finite value (is the formula NaN or infinite everywhere?)".into());
@@ -139,12 +156,14 @@ pub fn lobes(series: &[Series], o: &LobeOptions, format: Format) -> DrawResult<V
             .iter()
             .map(|s| Curve::new(&s.name, s.points.iter().map(|&(d, v)| (v >= ymin_pos).then(|| (d, v.log10())))))
             .collect();
-        let y = Axis { lo: ymin_pos.log10(), hi: (ymax * 1.5).log10(), log: true, desc: "value (log)" };
+        let (lo, hi) = ylim.map_or((ymin_pos.log10(), (ymax * 1.5).log10()), |(a, b)| (a.log10(), b.log10()));
+        let y = Axis { lo, hi, log: true, desc: "value (log)" };
         Figure { title: &o.title, x: Axis { lo: 0.0, hi: 90.0, log: false, desc: "angle (degrees)" }, y, curves, to_scale: false, light: None }
     } else {
         let ymin = values().fold(0.0f64, f64::min);
         let curves = series.iter().map(|s| Curve::new(&s.name, s.points.iter().map(|&p| Some(p)))).collect();
-        let y = Axis { lo: ymin * 1.05, hi: ymax * 1.05, log: false, desc: "value" };
+        let (lo, hi) = ylim.unwrap_or((ymin * 1.05, ymax * 1.05));
+        let y = Axis { lo, hi, log: false, desc: "value" };
         Figure { title: &o.title, x: Axis { lo: 0.0, hi: 90.0, log: false, desc: "angle (degrees)" }, y, curves, to_scale: false, light: None }
     };
     render_figure(&fig, format, o.size)
@@ -184,6 +203,7 @@ pub fn incidence_lobes(series: &[Series], o: &LobeOptions, theta_i_deg: f64, for
     if o.polar && o.log {
         return Err("a log scale applies to cartesian plots only (a log radius has no zero)".into());
     }
+    let ylim = o.checked_ylim()?;
     let finite = || series.iter().flat_map(|s| s.points.iter().map(|p| p.1)).filter(|v| v.is_finite());
     let ymax = finite().fold(f64::NEG_INFINITY, f64::max);
     if ymax == f64::NEG_INFINITY {
@@ -206,7 +226,12 @@ pub fn incidence_lobes(series: &[Series], o: &LobeOptions, theta_i_deg: f64, for
         let fig = Figure {
             title: &title,
             x: Axis { lo: xmin, hi: if xmax > xmin { xmax } else { xmin + 1.0 }, log: false, desc: x_desc },
-            y: Axis { lo: ymin_pos.log10(), hi: (ymax * 1.5).log10(), log: true, desc: "value (log)" },
+            y: ylim.map_or(Axis { lo: ymin_pos.log10(), hi: (ymax * 1.5).log10(), log: true, desc: "value (log)" }, |(a, b)| Axis {
+                lo: a.log10(),
+                hi: b.log10(),
+                log: true,
+                desc: "value (log)",
+            }),
             curves,
             to_scale: false,
             light: None,
@@ -215,7 +240,7 @@ pub fn incidence_lobes(series: &[Series], o: &LobeOptions, theta_i_deg: f64, for
     }
     if !o.polar {
         let title = format!("{}, light at θᵢ = {theta_i_deg}°", o.title);
-        return curves_sized(series, &title, x_desc, "value", format, o.size);
+        return curves_sized(series, &title, x_desc, "value", format, o.size, ylim);
     }
     let title = format!("{}, light at θᵢ = {theta_i_deg}°", o.title);
     render_figure(&polar_figure(&title, series, Some(theta_i_deg)), format, o.size)
@@ -223,7 +248,7 @@ pub fn incidence_lobes(series: &[Series], o: &LobeOptions, theta_i_deg: f64, for
 
 /// Curves over any x range (e.g. the normalisation coefficient against n over a range of n).
 pub fn curves(series: &[Series], title: &str, x_desc: &str, y_desc: &str, format: Format) -> DrawResult<Vec<u8>> {
-    curves_sized(series, title, x_desc, y_desc, format, (900, 600))
+    curves_sized(series, title, x_desc, y_desc, format, (900, 600), None)
 }
 
 /// [`curves`] in an image of `size` pixels.
@@ -234,6 +259,7 @@ pub(crate) fn curves_sized(
     y_desc: &str,
     format: Format,
     size: (u32, u32),
+    ylim: Option<(f64, f64)>,
 ) -> DrawResult<Vec<u8>> {
     let pts = || series.iter().flat_map(|s| s.points.iter()).filter(|p| p.0.is_finite() && p.1.is_finite());
     let (xmin, xmax) = pts().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.0), b.max(p.0)));
@@ -247,7 +273,7 @@ pub(crate) fn curves_sized(
     let fig = Figure {
         title,
         x: Axis { lo: xmin, hi: xmax, log: false, desc: x_desc },
-        y: Axis { lo: ymin - pad, hi: ymax + pad, log: false, desc: y_desc },
+        y: ylim.map_or(Axis { lo: ymin - pad, hi: ymax + pad, log: false, desc: y_desc }, |(lo, hi)| Axis { lo, hi, log: false, desc: y_desc }),
         curves,
         to_scale: false,
         light: None,

@@ -10,13 +10,13 @@ fn cos_n(n: f64) -> Series {
 #[test]
 fn lobe_plots_render_in_every_mode() {
     for (polar, log) in [(false, false), (true, false), (false, true)] {
-        let o = LobeOptions { title: "t".into(), polar, log, size: (320, 240) };
+        let o = LobeOptions { title: "t".into(), polar, log, size: (320, 240), ylim: None };
         let png = lobes(&[cos_n(5.0), cos_n(50.0)], &o, Format::Png).unwrap();
         assert_eq!(&png[1..4], b"PNG");
         let svg = lobes(&[cos_n(5.0)], &o, Format::Svg).unwrap();
         assert!(String::from_utf8(svg).unwrap().contains("<svg"));
     }
-    let o = LobeOptions { title: "t".into(), polar: true, log: true, size: (320, 240) };
+    let o = LobeOptions { title: "t".into(), polar: true, log: true, size: (320, 240), ylim: None };
     assert!(lobes(&[cos_n(5.0)], &o, Format::Png).is_err());
 }
 
@@ -27,7 +27,7 @@ fn polar_plots_are_to_scale() {
     let half: Vec<(f64, f64)> = (0..=360).map(|i| (i as f64 * 0.25, 1.0)).collect();
     let signed: Vec<(f64, f64)> = (0..=720).map(|i| (-90.0 + i as f64 * 0.25, 1.0)).collect();
     for size in [(560, 400), (400, 500)] {
-        let o = LobeOptions { title: "t".into(), polar: true, log: false, size };
+        let o = LobeOptions { title: "t".into(), polar: true, log: false, size, ylim: None };
         let one = |points: &[(f64, f64)]| [Series { name: "1".into(), points: points.to_vec() }];
         let pngs = [lobes(&one(&half), &o, Format::Png), incidence_lobes(&one(&signed), &o, 30.0, Format::Png)];
         for png in pngs.map(Result::unwrap) {
@@ -53,7 +53,7 @@ fn polar_plots_are_to_scale() {
 fn curves_with_nothing_to_show_are_refused_not_looped_on() {
     let zero = Series { name: "0".into(), points: (0..=90).map(|d| (d as f64, 0.0)).collect() };
     let nan = Series { name: "nan".into(), points: (0..=90).map(|d| (d as f64, f64::NAN)).collect() };
-    let log = LobeOptions { title: "t".into(), polar: false, log: true, size: (320, 240) };
+    let log = LobeOptions { title: "t".into(), polar: false, log: true, size: (320, 240), ylim: None };
     assert!(lobes(&[zero.clone(), nan.clone()], &log, Format::Png).unwrap_err().contains("log"));
     let lin = LobeOptions { log: false, ..log };
     assert!(lobes(&[nan], &lin, Format::Png).unwrap_err().contains("finite"));
@@ -216,7 +216,7 @@ fn log_axis_labels_are_clean_1_2_5_numbers_on_random_lobes() {
             })
             .collect();
         let size = (300 + (lcg(&mut seed) * 1100.0) as u32, 200 + (lcg(&mut seed) * 800.0) as u32);
-        let o = LobeOptions { title: "t".into(), polar: false, log: true, size };
+        let o = LobeOptions { title: "t".into(), polar: false, log: true, size, ylim: None };
         let svg = String::from_utf8(lobes(&series, &o, Format::Svg).unwrap()).unwrap();
         let texts = svg_anchored_texts(&svg);
         // The value axis's labels are the right-aligned texts.
@@ -288,7 +288,7 @@ fn count_near(img: &crate::base::image::Image, c: RGBColor, tol: u8, x_max: usiz
 fn a_curve_exactly_under_another_still_shows() {
     let (mut a, mut b) = (cos_n(20.0), cos_n(20.0));
     (a.name, b.name) = ("Phong".into(), "Blinn".into());
-    let o = LobeOptions { title: "t".into(), polar: false, log: false, size: (600, 400) };
+    let o = LobeOptions { title: "t".into(), polar: false, log: false, size: (600, 400), ylim: None };
     for polar in [false, true] {
         let png = lobes(&[a.clone(), b.clone()], &LobeOptions { polar, ..o.clone() }, Format::Png).unwrap();
         let img = crate::base::image::Image::decode_png(&png).unwrap();
@@ -302,7 +302,7 @@ fn a_curve_exactly_under_another_still_shows() {
 #[test]
 fn png_lines_are_anti_aliased_and_svg_coordinates_carry_fractions() {
     let line = Series { name: "x".into(), points: (0..=90).map(|d| (d as f64, d as f64 * 0.37)).collect() };
-    let png = curves_sized(std::slice::from_ref(&line), "t", "x", "y", Format::Png, (500, 400)).unwrap();
+    let png = curves_sized(std::slice::from_ref(&line), "t", "x", "y", Format::Png, (500, 400), None).unwrap();
     let img = crate::base::image::Image::decode_png(&png).unwrap();
     // Pixels part way from the page's white to the line's colour: its anti-aliased edge.
     let c = color(0);
@@ -316,7 +316,7 @@ fn png_lines_are_anti_aliased_and_svg_coordinates_carry_fractions() {
         })
         .count();
     assert!(edge >= 100, "{edge} edge pixels between white and the line's colour");
-    let svg = String::from_utf8(curves_sized(&[line], "t", "x", "y", Format::Svg, (500, 400)).unwrap()).unwrap();
+    let svg = String::from_utf8(curves_sized(&[line], "t", "x", "y", Format::Svg, (500, 400), None).unwrap()).unwrap();
     let k = SUPERSAMPLE;
     assert!(svg.contains(&format!("<svg width=\"500\" height=\"400\" viewBox=\"0 0 {} {}\"", 500 * k, 400 * k)), "{}", &svg[..200]);
     assert!(svg.starts_with("<!-- made by lobe -->"));
@@ -337,7 +337,7 @@ fn nothing_is_drawn_to_the_image_edge() {
     let mut pngs = vec![curves(&[wide], "coefficient", "n", "coef", Format::Png).unwrap()];
     for (polar, log) in [(false, false), (true, false), (false, true)] {
         for size in [(900, 600), (400, 300)] {
-            pngs.push(lobes(&many, &LobeOptions { title: "Lobes".into(), polar, log, size }, Format::Png).unwrap());
+            pngs.push(lobes(&many, &LobeOptions { title: "Lobes".into(), polar, log, size, ylim: None }, Format::Png).unwrap());
         }
     }
     for (i, png) in pngs.iter().enumerate() {
