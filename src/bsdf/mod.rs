@@ -573,11 +573,7 @@ impl Sampler {
         let used: InputSet = kernels.iter().map(|k| k.used_inputs()).collect();
         let target = Target { kernels: kernels.to_vec(), lum, params: params.to_vec(), used };
         let isotropic = !used.reads_directions() || kernels.iter().all(|k| turns_with_the_frame(k, params));
-        let one_cosine = [Input::NH, Input::VR].into_iter().find(|&i| {
-            let mut only = InputSet::default();
-            only.insert(i);
-            used == only
-        });
+        let one_cosine = crate::numerics::one_lobe_cosine(used);
         let make = |body: Body, empty: Vec<(f64, f64)>, mechanism: Mechanism| Sampler {
             target: target.clone(),
             cos_frac: opts.cosine_fraction,

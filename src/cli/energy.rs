@@ -104,7 +104,7 @@ impl EnergyArgs {
     /// The mode asked for, or the one that means something for a formula reading `used` (module docs).
     fn mode_for(&self, used: lobe::ir::InputSet) -> Mode {
         let lobe_flags = self.range.is_some() || self.lobe.name.is_some() || self.against.is_some() || self.against_expr.is_some();
-        let one_cosine = [Input::NH, Input::VR].iter().any(|c| used.iter().all(|i| i == *c));
+        let one_cosine = used.is_empty() || lobe::numerics::one_lobe_cosine(used).is_some();
         self.mode.unwrap_or(if lobe_flags || one_cosine { Mode::Lobe } else { Mode::Full })
     }
 }

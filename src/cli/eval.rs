@@ -192,7 +192,7 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
             ));
         }
         let used = f.used_inputs();
-        if ![Input::NH, Input::VR].iter().any(|c| used.iter().all(|i| i == *c)) {
+        if !(used.is_empty() || lobe::numerics::one_lobe_cosine(used).is_some()) {
             eprintln!(
                 "note: --normalize multiplies by the one-lobe coefficient 1/(2π∫₀¹ f(c)·c dc) (lobe variable = cos θ, light at the normal); this formula reads {used}, so that is not its energy: `lobe energy --mode full` gives its albedo"
             );

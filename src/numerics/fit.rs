@@ -593,11 +593,10 @@ mod tests {
         assert!(grid(0.0, 1.0).iter().any(|v| (v - 0.6).abs() < 1e-12));
         // Wide integer ranges keep the papers' integer grid; random real ranges get 41 values.
         assert_eq!(grid(1.0, 1000.0), (1..=1000).map(f64::from).collect::<Vec<_>>());
-        let mut seed = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut rng = crate::base::rng::Rng(0x9e37_79b9_7f4a_7c15);
         for _ in 0..100 {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            let lo = (seed >> 11) as f64 / (1u64 << 53) as f64 * 10.0 - 5.0;
-            let hi = lo + 1e-3 + ((seed >> 20) & 0xffff) as f64 / 6553.6;
+            let lo = rng.unit() * 10.0 - 5.0;
+            let hi = lo + 1e-3 + rng.unit() * 10.0;
             let g = grid(lo, hi);
             assert_eq!((g.len(), g[0], g[40]), (41, lo, hi), "{lo}..{hi}");
         }

@@ -102,6 +102,12 @@ impl crate::base::diag::Advice for NumericsAdvice {
 
 /// The lobe variable of a formula reading `used`: NH or VR, whichever it reads. If it reads both or neither,
 /// NH, with a note saying so (the value is the same under the lobe convention).
+/// The lobe cosine of a formula that reads exactly one of NH and VR and nothing else (the papers' one-cosine
+/// lobes): what lobe mode integrates, and what the sampler's exact path inverts.
+pub fn one_lobe_cosine(used: InputSet) -> Option<Input> {
+    [Input::NH, Input::VR].into_iter().find(|&c| used.len() == 1 && used.contains(c))
+}
+
 pub fn choose_lobe_input(used: InputSet) -> (Input, Option<String>) {
     match (used.contains(Input::NH), used.contains(Input::VR)) {
         (true, false) => (Input::NH, None),

@@ -67,7 +67,7 @@ fn lobe_within_env(limit: Duration, args: &[&str], env: &[(&str, &str)]) -> Run 
 }
 
 /// The resident-set high-water mark of a running process (Linux's VmHWM), KiB; `None` elsewhere or once it ended.
-fn peak_rss_kib(pid: u32) -> Option<u64> {
+pub(crate) fn peak_rss_kib(pid: u32) -> Option<u64> {
     let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
     line.split_whitespace().nth(1)?.parse().ok()

@@ -41,13 +41,8 @@ fn fitted(formula: &str, table: &str, param: &str, range: &str) -> (f64, serde_j
 #[test]
 fn integer_looking_ranges_are_intervals_and_a_two_parameter_fit_recovers_ggx() {
     let dir = crate::scratch_dir("measured", "ggx");
-    let mut seed = 0x2545_f491_4f6c_dd1d_u64;
-    let mut draw = |lo: f64, hi: f64| {
-        seed ^= seed << 13;
-        seed ^= seed >> 7;
-        seed ^= seed << 17;
-        lo + (hi - lo) * ((seed >> 11) as f64 / (1u64 << 53) as f64)
-    };
+    let mut rng = lobe::base::rng::Rng(0x2545_f491_4f6c_dd1d);
+    let mut draw = |lo: f64, hi: f64| lo + (hi - lo) * rng.unit();
     let mut truths = vec![(0.35, 0.6)];
     truths.extend((0..2).map(|_| (draw(0.15, 0.8), draw(0.1, 0.9))));
     for (k, (alpha, f0)) in truths.into_iter().enumerate() {

@@ -722,11 +722,6 @@ fn slow_bodies_from_one_address_do_not_lock_it_out() {
     assert!(worst < PROMPT, "a normal request took {worst:?}");
 }
 
-/// The server's peak resident memory (VmHWM), in KiB.
-fn peak_kib(s: &Served) -> u64 {
-    let status = std::fs::read_to_string(format!("/proc/{}/status", s.child.id())).unwrap_or_default();
-    status.lines().find_map(|l| l.strip_prefix("VmHWM:")).and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok()).unwrap_or(0)
-}
 
 /// Eight heavy renders (each under the cost budget but running to the deadline) do not keep the page's normal
 /// render waiting: it is answered within a second while they run, every time.
@@ -780,7 +775,7 @@ fn a_self_doubling_formula_request_ends_within_its_deadline_and_memory() {
     let r = s.post("/api/compile", &json!({"name": "chain.brdf", "text": text}));
     let took = t0.elapsed();
     assert!(r.status == 200 || r.status == 422 || r.status == 503, "{}: {}", r.status, String::from_utf8_lossy(&r.body));
-    let kib = peak_kib(&s);
+    let kib = super::hostile::peak_rss_kib(s.child.id()).unwrap_or(0);
     eprintln!("fn chain on the server: {} in {took:?}, peak {} MiB", r.status, kib / 1024);
     assert!(took < Duration::from_secs(11), "{took:?}");
     assert!(kib < 1 << 20, "peak {} MiB", kib / 1024);
