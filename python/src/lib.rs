@@ -189,6 +189,22 @@ fn from_directions(l: &[f64], v: &[f64], len: usize, used: lobe::ir::InputSet) -
 }
 
 impl Native {
+    /// Every point through every channel's batched kernel into `out` (`len` values per channel, channel after
+    /// channel): what `eval` and `eval_out` share.
+    fn fill<'py>(&self, py: Python<'py>, points: Points<'py>, params: Vec<f64>, varying: Vec<(usize, PyReadonlyArray1<'py, f64>)>, out: &mut [f64]) -> PyResult<()> {
+        self.check_params(py, &params)?;
+        let (cos, l, v, len) = points;
+        let inputs = self.batch(py, &cos, l.as_ref(), v.as_ref(), len)?;
+        let varying = self.varying(py, &varying, len)?;
+        detached(py, &self.file, || {
+            let cols = inputs.columns();
+            for (k, o) in self.kernels.iter().zip(out.chunks_mut(len.max(1))) {
+                eval_into(k, &cols, &params, &varying, o);
+            }
+            Ok(())
+        })
+    }
+
     fn formula(&self) -> &Formula {
         &self.kernels[0].formula
     }
@@ -385,18 +401,12 @@ impl Native {
     /// [`Native::eval`] of a scalar formula into `out` (`len` values, contiguous), which the caller reuses:
     /// no allocation, and pages already touched.
     fn eval_out<'py>(&self, py: Python<'py>, points: Points<'py>, params: Vec<f64>, varying: Vec<(usize, PyReadonlyArray1<'py, f64>)>, mut out: PyReadwriteArray1<'py, f64>) -> PyResult<()> {
-        self.check_params(py, &params)?;
-        let (cos, l, v, len) = points;
+        let len = points.3;
         if self.kernels.len() != 1 || out.len() != len {
             return Err(self.error(py, Diagnostic::error(format!("out holds {} values for {len} points of {} channel(s)", out.len(), self.kernels.len()))));
         }
-        let inputs = self.batch(py, &cos, l.as_ref(), v.as_ref(), len)?;
-        let varying = self.varying(py, &varying, len)?;
         let o = out.as_slice_mut().map_err(|_| self.error(py, Diagnostic::error("out is not contiguous").hint("pass a C-contiguous float64 array")))?;
-        detached(py, &self.file, || {
-            eval_into(&self.kernels[0], &inputs.columns(), &params, &varying, o);
-            Ok(())
-        })
+        self.fill(py, points, params, varying, o)
     }
 
     /// One point through every channel's kernel: `x` the cosine inputs by index in `Input::ALL` (those not read
@@ -441,19 +451,9 @@ impl Native {
     /// Every point through every channel's batched kernel: `len` values per channel, channel after channel.
     /// `params` is the full parameter vector; `varying` (index, `len` values) overrides some per point.
     fn eval<'py>(&self, py: Python<'py>, points: Points<'py>, params: Vec<f64>, varying: Vec<(usize, PyReadonlyArray1<'py, f64>)>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        self.check_params(py, &params)?;
-        let (cos, l, v, len) = points;
-        let inputs = self.batch(py, &cos, l.as_ref(), v.as_ref(), len)?;
-        let varying = self.varying(py, &varying, len)?;
         // Zeroed memory from the allocator (fresh pages for large batches, no memset), handed to numpy as is.
-        let mut out = vec![0.0; len * self.kernels.len()];
-        detached(py, &self.file, || {
-            let cols = inputs.columns();
-            for (k, o) in self.kernels.iter().zip(out.chunks_mut(len.max(1))) {
-                eval_into(k, &cols, &params, &varying, o);
-            }
-            Ok(())
-        })?;
+        let mut out = vec![0.0; points.3 * self.kernels.len()];
+        self.fill(py, points, params, varying, &mut out)?;
         Ok(out.into_pyarray(py))
     }
 
