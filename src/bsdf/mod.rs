@@ -295,36 +295,88 @@ fn dir(theta: f64, phi: f64) -> V3 {
     [st * cp, st * sp, ct]
 }
 
-/// The half vector of table coordinates (x₁, x₂) with φₕ offset by `phi0`, and dωₕ/dx.
+/// An azimuth as its (cos, sin): the frame a table's φₕ is measured in (wi's azimuth for an isotropic formula,
+/// 0 for an anisotropic one).
+type Turn = (f64, f64);
+
+/// No turn: φₕ absolute.
+const NO_TURN: Turn = (1.0, 0.0);
+
+/// wi's azimuth as a [`Turn`] ((1, 0) at the normal, where every azimuth is the same wi).
 #[inline]
-fn half_from(x1: f64, x2: f64, phi0: f64) -> (V3, f64) {
-    let th = FRAC_PI_2 * x1 * x1;
-    let st = th.sin();
-    (dir(th, 2.0 * PI * x2 + phi0), st * PI * x1 * 2.0 * PI)
+fn azimuth_of(wi: V3) -> Turn {
+    let r = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
+    if r > 0.0 {
+        (wi[0] / r, wi[1] / r)
+    } else {
+        NO_TURN
+    }
 }
 
-/// Table coordinates of the half vector of (wi, wo) (azimuth from `phi0`) and |dωₒ/dx| = 4|wi·h|·dωₕ/dx; `None`
-/// when wo = −wi (no half vector).
+/// The half vector of table coordinates (x₁, x₂), its azimuth φₕ = 2πx₂ measured in the frame turned by `turn`,
+/// and dωₕ/dx.
 #[inline]
-fn table_coords(wi: V3, wo: V3, phi0: f64) -> Option<(f64, f64, f64)> {
+fn half_from(x1: f64, x2: f64, turn: Turn) -> (V3, f64) {
+    let th = FRAC_PI_2 * x1 * x1;
+    let (st, ct) = th.sin_cos();
+    let (sp, cp) = (2.0 * PI * x2).sin_cos();
+    let (c, s) = turn;
+    ([st * (cp * c - sp * s), st * (sp * c + cp * s), ct], st * PI * x1 * 2.0 * PI)
+}
+
+/// Table coordinates of the half vector of (wi, wo) (azimuth in the frame turned by `turn`): x₁, the column of
+/// x₂ among [`COLS`], and |dωₒ/dx| = 4|wi·h|·dωₕ/dx; `None` when wo = −wi (no half vector).
+///
+/// θₕ comes from atan2 of the unnormalised sum s = wi + wo (turned into the table's frame, sign chosen so
+/// h.z ≥ 0): atan2 is scale-free, and the Jacobian's sinθₕ·|wi·h| is |s_xy|·|wi·s|/|s|², so no square root of |s|²
+/// is taken. θₕ by atan2, not acos, which loses digits near the normal where the lobes are. The density is
+/// constant over a column, so φₕ is never computed: its column is counted from the quadrant and seven
+/// comparisons against the column edges ([`column_of`]).
+#[inline]
+fn table_coords(wi: V3, wo: V3, turn: Turn) -> Option<(f64, usize, f64)> {
     let s = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
-    let len = dot(s, s).sqrt();
-    if len.is_nan() || len <= 0.0 {
+    let len2 = dot(s, s);
+    if len2.is_nan() || len2 <= 0.0 {
         return None;
     }
-    let sign = if s[2] < 0.0 { -1.0 / len } else { 1.0 / len };
-    let h = [s[0] * sign, s[1] * sign, s[2] * sign];
-    // θₕ by atan2 (acos loses digits near the normal, where the lobes are).
-    let st = (h[0] * h[0] + h[1] * h[1]).sqrt();
-    let th = st.atan2(h[2]);
+    let (c, sn) = turn;
+    let sign = if s[2] < 0.0 { -1.0 } else { 1.0 };
+    let (hx, hy) = (sign * (s[0] * c + s[1] * sn), sign * (s[1] * c - s[0] * sn));
+    let sxy = (hx * hx + hy * hy).sqrt();
+    let th = sxy.atan2(s[2].abs());
     let x1 = (th / FRAC_PI_2).sqrt();
-    let mut x2 = ((h[1].atan2(h[0]) - phi0) / (2.0 * PI)).rem_euclid(1.0);
-    if x2 >= 1.0 {
-        x2 = 0.0;
-    }
-    // sinθₕ = st: h is unit.
-    let jac = st * PI * x1 * 2.0 * PI * 4.0 * dot(wi, h).abs();
-    Some((x1, x2, jac))
+    let jac = sxy * dot(wi, s).abs() / len2 * PI * x1 * 2.0 * PI * 4.0;
+    Some((x1, column_of(hx, hy), jac))
+}
+
+/// (cos, sin) of the column edges k·2π/[`COLS`] inside the first quadrant, k = 1 … COLS/4 − 1.
+const EDGES: [(f64, f64); COLS / 4 - 1] = {
+    // cos and sin of kπ/16 (COLS = 32), to 17 digits.
+    [
+        (0.980_785_280_403_230_4, 0.195_090_322_016_128_26),
+        (0.923_879_532_511_286_7, 0.382_683_432_365_089_8),
+        (0.831_469_612_302_545_2, 0.555_570_233_019_602_2),
+        (0.707_106_781_186_547_6, 0.707_106_781_186_547_5),
+        (0.555_570_233_019_602_2, 0.831_469_612_302_545_2),
+        (0.382_683_432_365_089_8, 0.923_879_532_511_286_7),
+        (0.195_090_322_016_128_26, 0.980_785_280_403_230_4),
+    ]
+};
+
+/// The column of azimuth atan2(y, x) among [`COLS`] equal sectors of [0, 2π): the quadrant, then the number of
+/// column edges inside it that the direction lies beyond (0 for the zero vector).
+#[inline]
+fn column_of(x: f64, y: f64) -> usize {
+    // (a, b): (x, y) turned back by the quadrant's multiple of 90°, so a > 0, b ≥ 0.
+    let (q, a, b) = if y >= 0.0 {
+        if x > 0.0 { (0, x, y) } else { (1, y, -x) }
+    } else if x <= 0.0 {
+        (2, -x, -y)
+    } else {
+        (3, -y, x)
+    };
+    let beyond: usize = EDGES.iter().map(|&(ce, se)| usize::from(b * ce > a * se)).sum();
+    q * (COLS / 4) + beyond
 }
 
 /// θᵢ of incidence node k of `count`: 89.5°·(1 − (1 − k/(count − 1))²).
@@ -358,38 +410,44 @@ struct Tabulated {
     nodes: Vec<Option<Dist2D>>,
 }
 
+/// What a tabulated sampler needs of one wi, computed once per wi: the nodes it mixes with their weights, and the
+/// frame φₕ is measured in.
+#[derive(Clone, Copy, Debug)]
+struct TabAt {
+    ws: [(usize, f64); 4],
+    turn: Turn,
+}
+
 impl Tabulated {
-    /// The nodes wi mixes, their weights, and the azimuth offset of φₕ.
-    #[inline]
-    fn weights(&self, wi: V3) -> ([(usize, f64); 4], f64) {
+    /// The nodes wi mixes, their weights, and the frame of φₕ.
+    fn at(&self, wi: V3) -> TabAt {
         let t = wi[2].clamp(-1.0, 1.0).acos();
-        let phi = wi[1].atan2(wi[0]);
         let tw = theta_weights(&self.thetas, t);
         if self.isotropic {
-            return ([tw[0], tw[1], (0, 0.0), (0, 0.0)], phi);
+            return TabAt { ws: [tw[0], tw[1], (0, 0.0), (0, 0.0)], turn: azimuth_of(wi) };
         }
         let np = self.phis;
+        let phi = wi[1].atan2(wi[0]);
         let p = phi.rem_euclid(2.0 * PI) / (2.0 * PI) * np as f64;
         let k = (p as usize).min(np - 1);
         let f = (p - k as f64).clamp(0.0, 1.0);
         let k1 = (k + 1) % np;
         let at = |t: usize, q: usize| t * np + q;
-        (
-            [
+        TabAt {
+            ws: [
                 (at(tw[0].0, k), tw[0].1 * (1.0 - f)),
                 (at(tw[0].0, k1), tw[0].1 * f),
                 (at(tw[1].0, k), tw[1].1 * (1.0 - f)),
                 (at(tw[1].0, k1), tw[1].1 * f),
             ],
-            0.0,
-        )
+            turn: NO_TURN,
+        }
     }
 
-    fn sample(&self, wi: V3, u1: f64, u2: f64) -> V3 {
-        let (ws, phi0) = self.weights(wi);
+    fn sample(&self, at: &TabAt, wi: V3, u1: f64, u2: f64) -> V3 {
         let mut acc = 0.0;
         let mut pick = None;
-        for &(k, w) in &ws {
+        for &(k, w) in &at.ws {
             if w > 0.0 {
                 if u1 < acc + w {
                     pick = Some((k, ((u1 - acc) / w).clamp(0.0, ONE_MINUS)));
@@ -404,22 +462,21 @@ impl Tabulated {
             None => cosine_sample(u, u2),
             Some(d) => {
                 let (x1, x2) = d.sample(u, u2);
-                let (h, _) = half_from(x1, x2, phi0);
+                let (h, _) = half_from(x1, x2, at.turn);
                 reflect(wi, h)
             }
         }
     }
 
     #[inline]
-    fn pdf(&self, wi: V3, wo: V3, cos_pdf: f64) -> f64 {
-        let (ws, phi0) = self.weights(wi);
-        let tc = table_coords(wi, wo, phi0);
+    fn pdf(&self, at: &TabAt, wi: V3, wo: V3, cos_pdf: f64) -> f64 {
+        let tc = table_coords(wi, wo, at.turn);
         let mut p = 0.0;
-        for &(k, w) in &ws {
+        for &(k, w) in &at.ws {
             if w > 0.0 {
                 p += w * match (&self.nodes[k], tc) {
                     (None, _) => cos_pdf,
-                    (Some(d), Some((x1, x2, jac))) if jac > 0.0 => d.pdf(x1, x2) / jac,
+                    (Some(d), Some((x1, col, jac))) if jac > 0.0 => d.pdf_cell(x1, col) / jac,
                     _ => 0.0,
                 };
             }
@@ -491,6 +548,13 @@ impl Exact {
         }
         self.dist.pdf(th / self.theta_max) / den
     }
+}
+
+/// One checked wi and what the mechanism computed of it ([`Sampler::at`]).
+#[derive(Clone, Copy, Debug)]
+struct At {
+    wi: V3,
+    tab: Option<TabAt>,
 }
 
 #[derive(Clone, Debug)]
@@ -652,30 +716,36 @@ impl Sampler {
         total / incs.len() as f64
     }
 
-    /// wo for one (wi, u), wi already checked.
+    /// What the mechanism needs of one (checked) wi, computed once for every wo at that wi.
     #[inline]
-    fn draw(&self, wi: V3, u: [f64; 2]) -> V3 {
+    fn at(&self, wi: V3) -> At {
+        At { wi, tab: if let Body::Tabulated(t) = &self.body { Some(t.at(wi)) } else { None } }
+    }
+
+    /// wo for one (wi, u).
+    #[inline]
+    fn draw(&self, at: &At, u: [f64; 2]) -> V3 {
         let (u1, u2) = (u[0].clamp(0.0, ONE_MINUS), u[1].clamp(0.0, ONE_MINUS));
         let c = self.cos_frac;
         if u1 < c {
             return cosine_sample((u1 / c).min(ONE_MINUS), u2);
         }
         let v = ((u1 - c) / (1.0 - c)).clamp(0.0, ONE_MINUS);
-        match &self.body {
-            Body::Cosine => cosine_sample(v, u2),
-            Body::Tabulated(t) => t.sample(wi, v, u2),
-            Body::Exact(e) => e.sample(wi, v, u2),
+        match (&self.body, &at.tab) {
+            (Body::Tabulated(t), Some(ta)) => t.sample(ta, at.wi, v, u2),
+            (Body::Exact(e), _) => e.sample(at.wi, v, u2),
+            _ => cosine_sample(v, u2),
         }
     }
 
     /// The mixture density of wo at wi (both unit, wi checked): the one function `sample` and `pdf` share.
     #[inline]
-    fn density(&self, wi: V3, wo: V3) -> f64 {
+    fn density(&self, at: &At, wo: V3) -> f64 {
         let cos_pdf = wo[2].max(0.0) / PI;
-        let body = match &self.body {
-            Body::Cosine => cos_pdf,
-            Body::Tabulated(t) => t.pdf(wi, wo, cos_pdf),
-            Body::Exact(e) => e.pdf(wi, wo),
+        let body = match (&self.body, &at.tab) {
+            (Body::Tabulated(t), Some(ta)) => t.pdf(ta, at.wi, wo, cos_pdf),
+            (Body::Exact(e), _) => e.pdf(at.wi, wo),
+            _ => cos_pdf,
         };
         self.cos_frac * cos_pdf + (1.0 - self.cos_frac) * body
     }
@@ -686,11 +756,15 @@ impl Sampler {
         let n = u.len();
         let mut wo = Vec::with_capacity(n);
         let mut pdf = Vec::with_capacity(n);
+        let one = wis.first().map(|&w| self.at(w));
         for (i, ui) in u.iter().enumerate() {
-            let w = wis[if wis.len() == 1 { 0 } else { i }];
-            let o = self.draw(w, *ui);
+            let at = match one {
+                Some(a) if wis.len() == 1 => a,
+                _ => self.at(wis[i]),
+            };
+            let o = self.draw(&at, *ui);
             wo.push(o);
-            pdf.push(self.density(w, o));
+            pdf.push(self.density(&at, o));
         }
         let nch = self.channels();
         let mut vals = vec![];
@@ -710,17 +784,24 @@ impl Sampler {
     /// The density of each `wo` (normalised unless unit to 10⁻⁹) given `wi` (one for all, or one per `wo`).
     pub fn pdf_many(&self, wi: &[V3], wo: &[V3]) -> Result<Vec<f64>, Diagnostic> {
         let wis = incidents(wi, wo.len())?;
+        let one = wis.first().map(|&w| self.at(w));
         wo.iter()
             .enumerate()
-            .map(|(i, &o)| Ok(self.density(wis[if wis.len() == 1 { 0 } else { i }], unit(o, "the outgoing direction wo")?)))
+            .map(|(i, &o)| {
+                let at = match one {
+                    Some(a) if wis.len() == 1 => a,
+                    _ => self.at(wis[i]),
+                };
+                Ok(self.density(&at, unit(o, "the outgoing direction wo")?))
+            })
             .collect()
     }
 
     /// The density as a function of unit wo for one incident `wi` (checked once): what a quadrature over wo calls.
     /// wo is taken as given (unit; [`Sampler::pdf_many`] normalises).
     pub fn pdf_at(&self, wi: V3) -> Result<impl Fn(V3) -> f64 + Sync + '_, Diagnostic> {
-        let wi = incident(wi)?;
-        Ok(move |wo: V3| self.density(wi, wo))
+        let at = self.at(incident(wi)?);
+        Ok(move |wo: V3| self.density(&at, wo))
     }
 
     /// The formula's channel values f(wi, wo) (`out[i·channels + c]`), the weights' f.
@@ -792,11 +873,10 @@ struct NodeScratch {
 }
 
 /// One node's table at incidence `wi`. φₕ is measured from azimuth 0: an isotropic formula's nodes lie at
-/// azimuth 0 (so this is φₕ from wi's azimuth, as [`Tabulated::weights`] applies it), an anisotropic one's φₕ is
+/// azimuth 0 (so this is φₕ from wi's azimuth, as [`Tabulated::at`] turns it), an anisotropic one's φₕ is
 /// absolute.
 fn node_table(target: &Target, wi: V3, s: &mut NodeScratch) -> Result<Option<Dist2D>, Diagnostic> {
     let (pr, pc) = (2 * ROWS + 1, 2 * COLS + 1);
-    let phi0 = 0.0;
     s.pairs.clear();
     s.slots.clear();
     s.g.clear();
@@ -806,7 +886,7 @@ fn node_table(target: &Target, wi: V3, s: &mut NodeScratch) -> Result<Option<Dis
         let x1 = a as f64 / (2 * ROWS) as f64;
         for b in 0..pc {
             let x2 = b as f64 / (2 * COLS) as f64;
-            let (h, jh) = half_from(x1, x2, phi0);
+            let (h, jh) = half_from(x1, x2, NO_TURN);
             let wo = reflect(wi, h);
             if wo[2] > 0.0 && jh > 0.0 {
                 s.pairs.push((wi, wo));
@@ -872,11 +952,31 @@ mod tests {
     fn half_vector_map_round_trips() {
         let wi = dir(0.7, 0.3);
         for &(x1, x2) in &[(0.1, 0.2), (0.5, 0.9), (0.8, 0.45), (0.03, 0.6)] {
-            let (h, jh) = half_from(x1, x2, 0.3);
+            let turn = (0.3f64.cos(), 0.3f64.sin());
+            let (h, jh) = half_from(x1, x2, turn);
             let wo = reflect(wi, h);
-            let (y1, y2, jac) = table_coords(wi, wo, 0.3).unwrap();
-            assert!((x1 - y1).abs() < 1e-12 && (x2 - y2).abs() < 1e-12, "{x1} {x2} → {y1} {y2}");
+            let (y1, col, jac) = table_coords(wi, wo, turn).unwrap();
+            assert!((x1 - y1).abs() < 1e-12, "{x1} → {y1}");
+            assert_eq!(col, (x2 * COLS as f64) as usize);
             assert!((jac - 4.0 * dot(wi, h).abs() * jh).abs() < 1e-12 * jac);
+        }
+    }
+
+    #[test]
+    fn columns_are_the_azimuth_sectors() {
+        assert_eq!(EDGES.len(), COLS / 4 - 1);
+        for (k, &(c, s)) in EDGES.iter().enumerate() {
+            let a = 2.0 * PI * (k + 1) as f64 / COLS as f64;
+            assert!((c - a.cos()).abs() < 4e-16 && (s - a.sin()).abs() < 4e-16, "edge {k}");
+        }
+        let mut rng = crate::base::rng::Rng(0xC015);
+        for _ in 0..100_000 {
+            let (x, y) = (2.0 * rng.unit() - 1.0, 2.0 * rng.unit() - 1.0);
+            let p = (y.atan2(x) / (2.0 * PI)).rem_euclid(1.0) * COLS as f64;
+            // Away from an edge (within 1e-9 of one the two may round apart), the sector atan2 names.
+            if (p - p.round()).abs() > 1e-9 {
+                assert_eq!(column_of(x, y), (p as usize) % COLS, "({x}, {y})");
+            }
         }
     }
 
