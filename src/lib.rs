@@ -124,6 +124,14 @@ pub fn build_kernel(f: Arc<Formula>, backend: Backend, math: Mode) -> Result<Ker
         Backend::Jit => backend::jit::kernel_evaluator(&f, math).map_err(|d| Diagnostics::single(&f.file, d))?,
         #[cfg(feature = "llvm")]
         Backend::Llvm => backend::llvm::kernel_evaluator(&f, math).map_err(|d| Diagnostics::single(&f.file, d))?,
+        #[cfg(feature = "llvm")]
+        Backend::Auto => {
+            let first = backend::jit::kernel_evaluator(&f, math).map_err(|d| Diagnostics::single(&f.file, d))?;
+            Arc::new(backend::tiered::Tiered::new(first, f.clone(), math))
+        }
+        // Without the LLVM tier, automatic tiering is Cranelift ([`Tier::resolve`] never gives `Auto` there).
+        #[cfg(not(feature = "llvm"))]
+        Backend::Auto => backend::jit::kernel_evaluator(&f, math).map_err(|d| Diagnostics::single(&f.file, d))?,
         #[cfg(not(feature = "llvm"))]
         Backend::Llvm => return Err(Diagnostics::single(&f.file, llvm_missing())),
     };

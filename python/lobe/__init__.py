@@ -486,7 +486,7 @@ def render(
     threads: int = 0,
     math: str = "precise",
     backend: str = "jit",
-    tier: str = "cranelift",
+    tier: str = "auto",
     **params: float,
 ) -> Image:
     """Render a scene file (.toml, see examples/scenes/) as ``lobe render`` does; ``params`` are given to every

@@ -118,7 +118,7 @@ def render(
     threads: int = 0,
     math: str = "precise",
     backend: str = "jit",
-    tier: str = "cranelift",
+    tier: str = "auto",
     **params: float,
 ) -> Image:
     """Render a scene file as ``lobe render`` does (``math``, ``backend``, ``tier``: its flags and defaults)."""

@@ -683,7 +683,9 @@ fn compile(py: Python<'_>, file: String, source: String, math: &str, baked: Vec<
     let warn = if warnings.items.is_empty() { String::new() } else { warnings.render(false) };
     let pass = PassOptions::default();
     let kernels = detached(py, &file, || {
-        let ks = lobe::numerics::pass_cache::command_channels(&whole, &baked, Backend::Jit, mode, pass, true)?;
+        // Automatic tiering: Cranelift, and LLVM for big arrays in a module built with the LLVM tier.
+        let backend = Tier::Auto.resolve(Backend::Jit).unwrap_or(Backend::Jit);
+        let ks = lobe::numerics::pass_cache::command_channels(&whole, &baked, backend, mode, pass, true)?;
         ks.iter().for_each(Kernel::warm_up);
         Ok(ks)
     })?;

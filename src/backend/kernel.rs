@@ -61,6 +61,12 @@ pub trait Evaluator: AsEvaluator + Send + Sync {
     /// batch measures evaluation only. The default does nothing.
     fn warm_up(&self) {}
 
+    /// The JIT tier that ran this evaluator's batches so far when it chooses one itself (automatic tiering);
+    /// `None` for every other evaluator (its kernel's backend says).
+    fn ran_on(&self) -> Option<super::Backend> {
+        None
+    }
+
     /// A batch: `out[i] = f(cols[..][i])`. The default loops over [`Evaluator::eval`].
     fn eval_batch(&self, cols: &Columns, params: &[f64], out: &mut [f64]) {
         let mut x = [0.0; N_INPUTS];
@@ -142,6 +148,12 @@ impl Kernel {
     pub fn evaluator(&self) -> &Arc<dyn Evaluator> {
         &self.evaluator
     }
+
+    /// The backend that evaluates it now: its `backend`, except under automatic tiering, where it is the tier
+    /// the kernel has reached (Cranelift, then LLVM once it has evaluated enough points).
+    pub fn backend_used(&self) -> Backend {
+        self.evaluator.ran_on().unwrap_or(self.backend)
+    }
 }
 
 impl Evaluator for Kernel {
@@ -156,6 +168,9 @@ impl Evaluator for Kernel {
     }
     fn warm_up(&self) {
         self.evaluator.warm_up()
+    }
+    fn ran_on(&self) -> Option<Backend> {
+        self.evaluator.ran_on()
     }
 }
 

@@ -20,6 +20,10 @@ pub mod jit;
 pub mod llvm;
 pub mod native;
 pub mod program;
+#[cfg(feature = "llvm")]
+pub(crate) mod tiered;
+#[cfg(feature = "llvm")]
+pub use tiered::AUTO_LLVM_POINTS;
 
 pub use kernel::{AsEvaluator, Columns, Evaluator, FnEvaluator, Kernel, Prepared};
 
@@ -32,6 +36,10 @@ pub enum Backend {
     Jit,
     /// The LLVM tier (kernels only; a build without the cargo feature `llvm` refuses it with a diagnostic).
     Llvm,
+    /// Automatic tiering (`--tier auto` in a build with the LLVM tier): kernels start on Cranelift and move to
+    /// LLVM once they have evaluated a few thousand points in batches (`backend::tiered`); shading programs,
+    /// which run for a whole render, are LLVM's from the start.
+    Auto,
 }
 
 impl Backend {
@@ -40,6 +48,7 @@ impl Backend {
             Backend::Interp => "interp",
             Backend::Jit => "jit",
             Backend::Llvm => "llvm",
+            Backend::Auto => "auto",
         }
     }
 
@@ -49,12 +58,14 @@ impl Backend {
             Backend::Interp => None,
             Backend::Jit => Some(Tier::Cranelift),
             Backend::Llvm => Some(Tier::Llvm),
+            Backend::Auto => Some(Tier::Auto),
         }
     }
 }
 
 /// Which compiler a JIT kernel is built with: `cranelift` (fast to compile, two lanes), `llvm` (LLVM 19, the
-/// host's widest lanes; cargo feature `llvm`), or `auto` (LLVM when this build has it, else Cranelift).
+/// host's widest lanes; cargo feature `llvm`), or `auto` (Cranelift first and LLVM for big work when this build
+/// has it — [`Backend::Auto`] — else Cranelift).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum Tier {
     #[default]
@@ -80,7 +91,7 @@ impl Tier {
             (Backend::Interp, Tier::Llvm) => Err("the LLVM tier is a JIT; it does not apply to the interpreter backend".into()),
             (_, Tier::Cranelift) => Ok(Backend::Jit),
             (_, Tier::Llvm) => Ok(Backend::Llvm),
-            (_, Tier::Auto) => Ok(if Tier::llvm_available() { Backend::Llvm } else { Backend::Jit }),
+            (_, Tier::Auto) => Ok(if Tier::llvm_available() { Backend::Auto } else { Backend::Jit }),
         }
     }
 

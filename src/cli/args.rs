@@ -111,9 +111,9 @@ pub struct EngineArg {
     /// Evaluation backend: `jit` (compiled by the `--tier`) or `interp` (the reference interpreter).
     #[arg(id = "backend", long = "backend", value_name = "BACKEND", default_value = "jit")]
     kind: Backend,
-    /// JIT tier: `cranelift` (the default), `llvm` (LLVM 19 in the host's widest f64 lanes: a build with
-    /// `--features llvm`), or `auto` (LLVM when this build has it, else Cranelift).
-    #[arg(id = "tier", long = "tier", value_name = "TIER", default_value = "cranelift")]
+    /// JIT tier: `auto` (the default: Cranelift, and in a build with `--features llvm` LLVM for renders and
+    /// for batches of 4096 points or more), `cranelift`, or `llvm` (LLVM 19 in the host's widest f64 lanes).
+    #[arg(id = "tier", long = "tier", value_name = "TIER", default_value = "auto")]
     tier: lobe::Tier,
 }
 

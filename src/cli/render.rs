@@ -99,7 +99,9 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
         let cut = r::cutoff_effect(&sc, &ropts, &frame, &stats).map_err(CliError::msg)?;
         if a.json.on {
             let t = report::Times { encode, wall };
-            let j = report::StatsReport::new(&stats, &t, backend.name(), &sc.materials, cut.as_ref());
+            let samples = sc.width * sc.height * ropts.aa.unwrap_or(sc.aa).pow(2);
+            let tier = lobe::render::program::program_backend(backend, samples);
+            let j = report::StatsReport::new(&stats, &t, tier.name(), &sc.materials, cut.as_ref());
             println!("{}", common::to_json(&j)?);
         } else {
             eprint!("{}", report::stats_text(&stats, encode));

@@ -342,7 +342,7 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64, u
     let programs: Vec<program::ProgramRun> = scene
         .materials
         .iter()
-        .map(|m| program::ProgramRun::new(scene, m, &plan::ShadingPlan::new(m, scene.ambient, opts.cutoff), opts.program_budget))
+        .map(|m| program::ProgramRun::new(scene, m, &plan::ShadingPlan::new(m, scene.ambient, opts.cutoff), opts.program_budget, w * h * aa * aa))
         .collect::<Result<_, _>>()?;
     let program_compile = tc.elapsed();
     let timers = Timers::default();

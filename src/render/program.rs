@@ -293,6 +293,9 @@ impl ProgramCode {
             Backend::Llvm => ProgramCode::Jit(crate::backend::llvm::program_code(p, mode)?),
             #[cfg(not(feature = "llvm"))]
             Backend::Llvm => return Err(NativeError::Host("this build has no LLVM tier (cargo feature `llvm`)".into())),
+            // Automatic tiering decides per render ([`program_backend`]); a program compiled outside a render
+            // starts where kernels do, on Cranelift.
+            Backend::Auto => ProgramCode::Jit(crate::backend::jit::shade_code(p, mode)?),
         })
     }
 
@@ -331,9 +334,10 @@ pub(crate) struct ProgramRun {
 
 impl ProgramRun {
     /// The program `plan` describes for `m` under `scene`'s eye and lights, compiled with the material's
-    /// backend and math mode; a material without formulas, or whose program would pass `budget` nodes
+    /// backend (for automatic tiering, by the render's `samples`: [`program_backend`]) and math mode; a material
+    /// without formulas, or whose program would pass `budget` nodes
     /// ([`program_nodes`]), is shaded by [`EvalShader`] with its kernels instead.
-    pub(crate) fn new(scene: &Scene, m: &Material, plan: &ShadingPlan, budget: usize) -> Result<ProgramRun, String> {
+    pub(crate) fn new(scene: &Scene, m: &Material, plan: &ShadingPlan, budget: usize, samples: usize) -> Result<ProgramRun, String> {
         let src = &m.program;
         let spec = spec(scene, plan);
         let channels: Vec<&Formula> = src.channels.iter().map(|f| f.as_ref()).collect();
@@ -349,9 +353,28 @@ impl ProgramRun {
             return Ok(ProgramRun { code: ProgramCode::Evaluated(Arc::new(shader)), block: vec![], params: m.params.clone(), tangent: true });
         }
         let program = build(&spec, &channels).map_err(|e| format!("material `{}`: {e}", m.name))?;
-        let code = ProgramCode::new(&program, src.backend, src.math).map_err(|e| format!("material `{}`: {e}", m.name))?;
+        let backend = program_backend(src.backend, samples);
+        let code = ProgramCode::new(&program, backend, src.math).map_err(|e| format!("material `{}`: {e}", m.name))?;
         let block = code.prepare(&m.params);
         Ok(ProgramRun { code, block, params: m.params.clone(), tangent: program.columns > 6 })
+    }
+}
+
+/// Shaded samples (pixels × supersamples) from which automatic tiering compiles a render's shading programs with
+/// LLVM. Measured on the papers' sphere (LLVM build, 2 threads, a shared 2-core host): LLVM compiles the program
+/// in 35–120 ms where Cranelift takes ~1 ms, and shades ~4.6 ns per pixel faster on one thread (BENCHMARKS.md,
+/// the LLVM tier against Cranelift), so a 4096² render (16.8 million samples) took 289 ms on LLVM against 198 ms
+/// on Cranelift. The compile is repaid from ~30 million samples (a 5500² image, or 2048² at 3×3 supersampling);
+/// below that the render stays on Cranelift.
+pub const AUTO_LLVM_SAMPLES: usize = 32 << 20;
+
+/// The tier a render of `samples` shaded samples compiles its programs with: `backend`, except that automatic
+/// tiering ([`Backend::Auto`]) is LLVM from [`AUTO_LLVM_SAMPLES`] and Cranelift below.
+pub fn program_backend(backend: Backend, samples: usize) -> Backend {
+    match backend {
+        Backend::Auto if samples >= AUTO_LLVM_SAMPLES => Backend::Llvm,
+        Backend::Auto => Backend::Jit,
+        b => b,
     }
 }
 

@@ -39,9 +39,9 @@ fn compile_us(ks: &[Kernel]) -> f64 {
     ks.iter().map(|k| k.compile_time.as_secs_f64()).sum::<f64>() * 1e6
 }
 
-/// The LLVM tier's lanes when `ks` are LLVM kernels.
+/// The LLVM tier's lanes when `ks` ran on LLVM.
 fn lanes(ks: &[Kernel]) -> Option<u32> {
-    if ks[0].backend == crate::Backend::Llvm {
+    if ks[0].backend_used() == crate::Backend::Llvm {
         crate::Tier::llvm_lanes()
     } else {
         None
@@ -66,7 +66,7 @@ pub struct EvalReport {
 impl EvalReport {
     /// `value` from the channel kernels `ks`.
     pub fn new(ks: &[Kernel], value: Vec<f64>, note: Option<String>) -> EvalReport {
-        EvalReport { value: PointValue(value), backend: ks[0].backend.name(), lanes: lanes(ks), compile_us: compile_us(ks), note }
+        EvalReport { value: PointValue(value), backend: ks[0].backend_used().name(), lanes: lanes(ks), compile_us: compile_us(ks), note }
     }
 
     /// The report of a value that is the ground truth: backend `truth`, nothing compiled.
@@ -123,7 +123,7 @@ impl PointsReport {
         PointsReport {
             values,
             points,
-            backend: ks[0].backend.name(),
+            backend: ks[0].backend_used().name(),
             lanes: lanes(ks),
             math: ks[0].math.name(),
             compile_us: compile_us(ks),

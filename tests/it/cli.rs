@@ -352,10 +352,25 @@ fn tier_picks_the_jit_or_says_how_to_get_llvm() {
     };
     let (ok, cranelift, e) = text("cranelift");
     assert!(ok, "{e}");
-    let o = lobe(&["eval", file, "--points", "-", "--tier", "auto", "--json"], Some(csv));
-    assert!(o.status.success(), "{}", stderr(&o));
-    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    // `auto` (the default): five rows stay on Cranelift; 4096 rows move to LLVM in a build with it.
+    for args in [&["eval", file, "--points", "-", "--json"][..], &["eval", file, "--points", "-", "--tier", "auto", "--json"]] {
+        let o = lobe(args, Some(csv));
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(v["backend"].as_str(), Some("jit"), "{v}");
+    }
+    let mut many = String::from("NH,NL,VH,NV\n");
+    for i in 0..4096 {
+        let t = i as f64 / 4096.0;
+        many.push_str(&format!("{},{},{},{}\n", 0.1 + 0.9 * t, 0.05 + 0.9 * t, 0.2 + 0.7 * t, 0.9 - 0.8 * t));
+    }
+    let auto = lobe(&["eval", file, "--points", "-", "--json"], Some(many.as_bytes()));
+    assert!(auto.status.success(), "{}", stderr(&auto));
+    let v: serde_json::Value = serde_json::from_slice(&auto.stdout).unwrap();
     assert_eq!(v["backend"].as_str(), Some(if cfg!(feature = "llvm") { "llvm" } else { "jit" }), "{v}");
+    let crane = lobe(&["eval", file, "--points", "-", "--tier", "cranelift", "--json"], Some(many.as_bytes()));
+    let w: serde_json::Value = serde_json::from_slice(&crane.stdout).unwrap();
+    assert_eq!(v["values"], w["values"], "automatic tiering changed a value");
     if cfg!(feature = "llvm") {
         let (ok, llvm, e) = text("llvm");
         assert!(ok, "{e}");
