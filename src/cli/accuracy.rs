@@ -40,8 +40,8 @@ pub fn run(a: &AccuracyArgs) -> Result<(), CliError> {
     let rf = common::load_formula(Some(&a.against.reference), None)?;
     common::check_set_names(&[&f, &rf], &set)?;
     let own = common::set_for(&f, &set);
-    let ks = f.channels().into_iter().map(|c| common::compile_kernel(c, &own, a.backend.backend()?, a.backend.math.mode)).collect::<Result<Vec<Kernel>, _>>()?;
-    let r = common::compile_kernel(rf.clone(), &common::set_for(&rf, &set), a.backend.backend()?, lobe::Mode::Precise)?;
+    let ks = f.channels().into_iter().map(|c| common::compile_kernel(c, &own, a.backend.bulk_backend()?, a.backend.math.mode)).collect::<Result<Vec<Kernel>, _>>()?;
+    let r = common::compile_kernel(rf.clone(), &common::set_for(&rf, &set), a.backend.bulk_backend()?, lobe::Mode::Precise)?;
     print!("{}", report(a, &ks, &r)?);
     Ok(())
 }
@@ -123,7 +123,7 @@ fn text(a: &AccuracyArgs, k: &Kernel, r: &Kernel, lobe: lobe::ir::Input, rep: &A
     if rep.nan_points > 0 {
         outln!(out, "  {} grid points were NaN (counted as the worst error); run `lobe sweep` on the file", rep.nan_points);
     }
-    outln!(out, "  ({secs:.2} s, backend {})", k.backend.name());
+    outln!(out, "  ({secs:.2} s, backend {})", k.backend_used().name());
     out
 }
 
@@ -137,7 +137,7 @@ fn measured(a: &AccuracyArgs) -> Result<String, CliError> {
     let set = a.set.list()?;
     let f = a.against.formula.load()?;
     let params = common::param_values(&f, &set);
-    let ks = f.channels().into_iter().map(|c| common::compile_kernel(c, &set, a.backend.backend()?, a.backend.math.mode)).collect::<Result<Vec<_>, _>>()?;
+    let ks = f.channels().into_iter().map(|c| common::compile_kernel(c, &set, a.backend.bulk_backend()?, a.backend.math.mode)).collect::<Result<Vec<_>, _>>()?;
     let channels: Vec<&dyn lobe::Evaluator> = ks.iter().map(|k| k as &dyn lobe::Evaluator).collect();
     let s = Samples::new(&table, 1);
     if s.is_empty() {

@@ -103,6 +103,11 @@ impl BackendArg {
     pub fn options(&self, bake: Vec<(String, f64)>) -> Result<lobe::Options, CliError> {
         self.engine.options(bake, self.math.mode)
     }
+
+    /// The backend of a command whose work is large whatever its input ([`EngineArg::bulk_backend`]).
+    pub fn bulk_backend(&self) -> Result<Backend, CliError> {
+        self.engine.bulk_backend()
+    }
 }
 
 /// `--backend jit|interp` and `--tier cranelift|llvm|auto`, without `--math` (for a command that has its own).
@@ -129,6 +134,21 @@ impl EngineArg {
     /// Compile options for this backend and `math` with `bake` baked in.
     pub fn options(&self, bake: Vec<(String, f64)>, math: lobe::Mode) -> Result<lobe::Options, CliError> {
         Ok(lobe::Options { backend: self.backend()?, bake, math, ..lobe::Options::default() })
+    }
+
+    /// The backend of a command whose work is large whatever its input (a fit, a sweep, a table, a quadrature:
+    /// millions of evaluations in batches of any size): automatic tiering's LLVM from the start when the build
+    /// has it (docs/performance.md, "Automatic tiering"), else what [`EngineArg::backend`] says.
+    pub fn bulk_backend(&self) -> Result<Backend, CliError> {
+        Ok(match self.backend()? {
+            Backend::Auto => Backend::Llvm,
+            b => b,
+        })
+    }
+
+    /// [`EngineArg::options`] with [`EngineArg::bulk_backend`].
+    pub fn bulk_options(&self, bake: Vec<(String, f64)>, math: lobe::Mode) -> Result<lobe::Options, CliError> {
+        Ok(lobe::Options { backend: self.bulk_backend()?, bake, math, ..lobe::Options::default() })
     }
 }
 
@@ -263,8 +283,8 @@ impl AgainstReference {
         let f = common::load_formula(self.formula.file.as_deref(), self.formula.expr.as_deref())?;
         let rf = common::load_formula(Some(&self.reference), None)?;
         common::check_set_names(&[&f, &rf], set)?;
-        let k = common::compile_kernel(f.clone(), &common::set_for(&f, set), b.engine.kind, b.math.mode)?;
-        let r = common::compile_kernel(rf.clone(), &common::set_for(&rf, set), b.engine.kind, lobe::Mode::Precise)?;
+        let k = common::compile_kernel(f.clone(), &common::set_for(&f, set), b.bulk_backend()?, b.math.mode)?;
+        let r = common::compile_kernel(rf.clone(), &common::set_for(&rf, set), b.bulk_backend()?, lobe::Mode::Precise)?;
         Ok((k, r))
     }
 

@@ -70,7 +70,7 @@ pub fn run(a: &EnergyArgs) -> Result<(), CliError> {
     if a.range.is_some() && set.iter().any(|(k, _)| k == "n") {
         return Err(CliError::hint("--set n conflicts with --range", "--range sweeps n; drop n from --set"));
     }
-    let backend: Backend = a.backend.backend()?;
+    let backend: Backend = a.backend.bulk_backend()?;
     if let Some(p) = a.formula.file.as_deref().filter(|p| lobe::measured::is_measured_path(p)) {
         print!("{}", measured_report(a, p)?);
         return Ok(());

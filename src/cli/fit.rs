@@ -177,7 +177,7 @@ pub fn report(a: &FitArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
         names.join(", "),
         total,
         rep.evaluated,
-        k.backend.name()
+        k.backend_used().name()
     );
     for (i, c) in rep.best.iter().enumerate() {
         let shown: Vec<String> = free.iter().map(|f| format!("{}={}", f.name, c.params[f.index])).collect();

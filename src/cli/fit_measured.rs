@@ -128,7 +128,7 @@ pub fn run(a: &FitArgs) -> Result<(), CliError> {
         .map(|(file, src, formula)| {
             let own = common::set_for(&formula, &set);
             let free = free_of(a, &formula, batch)?;
-            let kernels = formula.channels().into_iter().map(|c| common::compile_kernel(c, &own, a.backend.backend()?, a.backend.math.mode)).collect::<Result<Vec<_>, _>>()?;
+            let kernels = formula.channels().into_iter().map(|c| common::compile_kernel(c, &own, a.backend.bulk_backend()?, a.backend.math.mode)).collect::<Result<Vec<_>, _>>()?;
             Ok(Model { file, src, formula, kernels, set: own, free })
         })
         .collect::<Result<_, CliError>>()?;
@@ -227,7 +227,7 @@ fn single(a: &FitArgs, row: &Row, metric: MeasuredMetric) -> Result<(), CliError
         fit.grid_entries,
         fit.evaluated,
         row.seconds,
-        m.kernels[0].backend.name()
+        m.kernels[0].backend_used().name()
     );
     for (i, c) in fit.best.iter().enumerate() {
         let [r, g, b] = c.residual.scale;

@@ -171,7 +171,7 @@ pub fn report(a: &Sweep, f: &Formula) -> Result<(Out, Vec<String>), CliError> {
             format!("give --max-evals {least} or more, or fix parameters with --set so fewer combinations are swept"),
         ));
     }
-    let plain = flags.engine.options(set.clone(), a.math)?;
+    let plain = flags.engine.bulk_options(set.clone(), a.math)?;
     let pass = (!flags.as_written).then(|| super::common::with_pass(plain.clone(), a.prefer.pass(lobe::numerics::robust::PassOptions::default().points)));
     let run = lobe::numerics::sweep::sweep_formula(f, &set, &plain, pass.as_ref(), &SweepOptions { bound: flags.bound, max_evals: flags.max_evals })?;
     let (k, rep, compiled, crep_changed, names) = (&run.k, &run.rep, &run.compiled, &run.crep_changed, &run.names);

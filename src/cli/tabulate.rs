@@ -43,7 +43,7 @@ pub fn run(a: &TabulateArgs) -> Result<(), CliError> {
     let set = a.set.list()?;
     let f = a.formula.load()?;
     let params = super::common::param_values(&f, &set);
-    let ks = f.channels().into_iter().map(|c| super::common::compile_kernel(c, &set, a.backend.backend()?, a.backend.math.mode)).collect::<Result<Vec<_>, _>>()?;
+    let ks = f.channels().into_iter().map(|c| super::common::compile_kernel(c, &set, a.backend.bulk_backend()?, a.backend.math.mode)).collect::<Result<Vec<_>, _>>()?;
     let name = f.display_name();
     let t = Measured::tabulate(&name, &|l, v| {
         let x = lobe::frame::inputs_from_dirs(l, v);
