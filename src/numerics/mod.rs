@@ -58,6 +58,7 @@
 pub mod accuracy;
 pub mod check;
 pub mod energy;
+pub mod grad;
 pub mod fit;
 pub mod measured;
 pub mod normalize;
