@@ -130,11 +130,20 @@ pub fn mul<B: Build>(b: &mut B, x: B::V, y: B::V, dx: T<B>, dy: T<B>) -> T<B> {
     sum(b, t1, t2)
 }
 
-/// r = a/b: (da − r·db)/b.
+/// r = a/b: (da − r·db)/b. A divisor that is not a non-zero constant may be 0 (a pole: r = ±∞ and the
+/// tangent ±∞), which a later division can turn back into a finite value (x/(c/0) = 0): so the quotient and
+/// the tangent count as wild there, r·db is 0 where db is, and a zero numerator gives a zero tangent (not 0/0).
 pub fn div<B: Build>(b: &mut B, y: B::V, r: B::V, dx: T<B>, dy: T<B>) -> T<B> {
-    let rdy = scale_opt(b, r, false, dy);
+    let pole = b.as_const(y).is_none_or(|c| c == 0.0);
+    let rdy = scale_opt(b, r, pole, dy);
     let num = sub(b, dx, rdy)?;
-    Some(Tangent { v: b.div(num.v, y), wild: num.wild })
+    let q = b.div(num.v, y);
+    if !pole {
+        return Some(Tangent { v: q, wild: num.wild });
+    }
+    let zero = b.konst(0.0);
+    let nz = b.call(Builtin::Ne, &[num.v, zero]);
+    Some(Tangent { v: b.call(Builtin::Select, &[nz, q, zero]), wild: true })
 }
 
 /// The tangent of `f(args) = r` given the arguments' tangents `d` (module doc; the kink choices are listed
@@ -446,6 +455,18 @@ mod tests {
         let ds = tangent(Builtin::Sqrt, &mut Num, &[0.0], s, &[Some(Tangent::tame(1.0))]);
         let d = mul(&mut Num, 0.0, s, Some(Tangent::tame(1.0)), ds).unwrap();
         assert_eq!(d.v, 0.0);
+        // x/(c/u) at u = 0 where u does not move (a clamp holds it): c/u = −∞, the value −0, the derivative 0.
+        let u = 0.0;
+        let w = -7.5 / u;
+        let dw = div(&mut Num, u, w, None, Some(Tangent::tame(0.0)));
+        assert_eq!(dw.map(|t| t.v), Some(0.0));
+        let d = div(&mut Num, w, 0.3 / w, Some(Tangent::tame(1.0)), dw).unwrap();
+        assert_eq!(d.v, 0.0);
+        // t/(v/0) with v moving: the inner tangent is ∞, times the quotient 0 is 0.
+        let dw = div(&mut Num, u, 1.0 / u, Some(Tangent::tame(1.0)), Some(Tangent::tame(0.0))).unwrap();
+        assert_eq!((dw.v, dw.wild), (f64::INFINITY, true));
+        let r = 0.3 / (1.0 / u);
+        assert_eq!(div(&mut Num, 1.0 / u, r, None, Some(dw)).unwrap().v, 0.0);
         // exp(sqrt x) at 0 moves infinitely fast: +∞, not NaN.
         let e = Builtin::Exp.eval(&[s]);
         assert_eq!(tangent(Builtin::Exp, &mut Num, &[s], e, &[ds]).unwrap().v, f64::INFINITY);

@@ -141,6 +141,74 @@ impl Gradient {
     }
 }
 
+/// The truth's partial derivative of `f` by `v` at (`x`, `params`), what derivatives are measured against:
+/// central differences of the truth ([`crate::numerics::truth`], ~104 bits, unbounded exponent, nothing
+/// rounded until the end) at steps h = 2⁻²⁰·max(|v|, 2⁻¹⁰), h/2 and h/4, each pair Richardson-extrapolated
+/// ((4·D(h/2) − D(h))/3: truncation O(h⁴) ≈ 2⁻⁸⁰ relative, rounding ≈ 2⁻⁸⁴·|f|/|v·∂f/∂v|). `None` where the two
+/// extrapolations differ by more than 2⁻⁵⁸ relative (a kink, a step or a pole within the steps, or a derivative
+/// so small against the value that the truth cannot resolve it), or where the one-sided differences disagree
+/// (a kink exactly at the point), or where the change over the step is below the truth's resolution of f
+/// (2⁻⁹⁰·|f|): the derivative is not established there. A variable f does not read has derivative 0.
+pub fn truth_partial(f: &Formula, v: Var, x: &[f64; N_INPUTS], params: &[f64]) -> Option<f64> {
+    use crate::numerics::truth::{eval_x, Xf};
+    let at = |d: f64| -> (Xf, f64) {
+        let (mut x, mut p) = (*x, params.to_vec());
+        let moved = match v {
+            Var::Input(i) => &mut x[i.index()],
+            Var::Param(k) => &mut p[usize::from(k)],
+        };
+        *moved += d;
+        let m = *moved;
+        (eval_x(f, &x, &p), m)
+    };
+    let base = match v {
+        Var::Input(i) => x[i.index()],
+        Var::Param(k) => params[usize::from(k)],
+    };
+    let read = match v {
+        Var::Input(i) => f.used_inputs().contains(i),
+        Var::Param(k) => f.ir.used_params(f.root).contains(&k),
+    };
+    if !read {
+        return Some(0.0);
+    }
+    let h = base.abs().max(2f64.powi(-10)) * 2f64.powi(-20);
+    let diff = |h: f64| {
+        let ((fp, xp), (fm, xm)) = (at(h), at(-h));
+        (fp - fm) / (Xf::from_f64(xp) - Xf::from_f64(xm))
+    };
+    let (d1, d2, d4) = (diff(h), diff(h / 2.0), diff(h / 4.0));
+    let (four, three) = (Xf::from_f64(4.0), Xf::from_f64(3.0));
+    let r1 = ((four * d2) - d1) / three;
+    let r2 = ((four * d4) - d2) / three;
+    let (a, b) = (r1.to_f64(), r2.to_f64());
+    if !(a.is_finite() && b.is_finite()) {
+        return None;
+    }
+    let gap = (r1 - r2).to_f64().abs();
+    if gap > 2f64.powi(-58) * a.abs().max(b.abs()) {
+        return None;
+    }
+    // A kink exactly at the point (min(n, a) at n = a) passes the central test with the mean of the two slopes:
+    // the one-sided differences (extrapolated: 2·D(h/2) − D(h), O(h²)) must agree too.
+    let (f0, x0) = at(0.0);
+    let side = |s: f64| {
+        let one = |h: f64| {
+            let (fh, xh) = at(s * h);
+            (fh - f0) / (Xf::from_f64(xh) - Xf::from_f64(x0))
+        };
+        ((Xf::from_f64(2.0) * one(h / 2.0)) - one(h)).to_f64()
+    };
+    let (right, left) = (side(1.0), side(-1.0));
+    if (right - left).abs() > 2f64.powi(-30) * right.abs().max(left.abs()).max(b.abs()) {
+        return None;
+    }
+    // The truth's ~104 bits resolve a change of f only above ~2⁻¹⁰⁰·|f|: a smaller one (a term absorbed by a
+    // much larger one, −m + 10²⁹⁹) reads as no change at all.
+    let resolvable = 2f64.powi(-90) * f0.to_f64().abs();
+    (b.abs() * h >= resolvable).then_some(b)
+}
+
 /// The outputs' formulas in one arena whose inputs are data columns (column k = input k), and their roots.
 fn merge(outputs: &[Formula]) -> (Ir, Vec<NodeId>) {
     let mut ir = Ir::new();

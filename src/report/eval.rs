@@ -154,7 +154,7 @@ impl<T: Serialize> Serialize for Named<T> {
     }
 }
 
-/// `lobe eval --grad` at one point: the value and each partial derivative (name → value; `[r, g, b]` for a
+/// The eval command's gradient at one point: the value and each partial derivative (name → value; `[r, g, b]` for a
 /// colour formula).
 #[derive(Clone, Debug, Serialize)]
 pub struct GradReport {
@@ -169,7 +169,7 @@ pub struct GradReport {
     pub note: Option<String>,
 }
 
-/// `lobe eval --grad --points`: the values and, per partial, the list of its values (name → list).
+/// The eval command's gradient at many points: the values and, per partial, the list of its values (name → list).
 #[derive(Clone, Debug, Serialize)]
 pub struct GradPointsReport {
     pub values: Vec<PointValue>,

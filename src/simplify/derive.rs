@@ -9,8 +9,8 @@
 //! run the accuracy pass on it and compile it exactly as they do the value (`numerics::grad` compiles the
 //! value and every partial as one multi-output program).
 //!
-//! Derive the *lowered* formula, before baking: the derivative with respect to a parameter that `--set`
-//! bakes is then still there, and baking folds it afterwards. The lowering's clamps of the inputs to [0, 1]
+//! Derive the *lowered* formula, before baking: the derivative with respect to a parameter a run bakes is
+//! then still there, and baking folds it afterwards. The lowering's clamps of the inputs to [0, 1]
 //! are differentiated like any clamp (inside-closed: ∂/∂NH = 1 on 0 ≤ NH ≤ 1).
 //!
 //! Cost: one walk per variable, linear in the arena; each tangent node is a handful of nodes (a product rule
