@@ -214,3 +214,38 @@ fn random_formula_derivatives_match_the_truth() {
     }
     report("200 random formulas", &t);
 }
+
+/// `lobe eval --grad`: the value and each partial as text, JSON and a CSV column per partial; the gradient's
+/// value is `eval`'s; refused with --normalize or --truth, and a missing input is an error naming it.
+#[test]
+fn eval_grad_prints_value_and_partials() {
+    use crate::cli::lobe;
+    let args = ["eval", "--expr", "NH^n", "--set", "n=3", "--at", "NH=0.5"];
+    let plain = lobe(&args, None);
+    let o = lobe(&[&args[..], &["--grad"]].concat(), None);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8_lossy(&o.stdout).into_owned();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines[0], String::from_utf8_lossy(&plain.stdout).trim(), "the value line is eval's");
+    assert_eq!(lines[1..].iter().map(|l| l.split_whitespace().next().unwrap()).collect::<Vec<_>>(), ["d_n", "d_NH"]);
+    let o = lobe(&[&args[..], &["--grad", "--json"]].concat(), None);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["value"], serde_json::json!(0.125));
+    let dn = v["grad"]["n"].as_f64().unwrap();
+    assert!((dn - 0.125 * 0.5f64.ln()).abs() < 1e-16, "d_n = {dn}");
+    assert_eq!(v["grad"]["NH"], serde_json::json!(0.75));
+    let csv = b"NH,n\n0.5,3\n0.25,2\n";
+    let o = lobe(&["eval", "--expr", "NH^n", "--points", "-", "--grad"], Some(csv));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8_lossy(&o.stdout).into_owned();
+    let rows: Vec<Vec<f64>> = text.lines().skip(1).map(|l| l.split(',').map(|x| x.parse().unwrap()).collect()).collect();
+    assert_eq!(text.lines().next(), Some("value,d_n,d_NH"));
+    assert_eq!(rows[1][0], 0.0625);
+    assert_eq!(rows[1][2], 0.5);
+    for extra in [["--normalize"], ["--truth"]] {
+        let o = lobe(&[&args[..], &["--grad"], &extra[..]].concat(), None);
+        assert_eq!(o.status.code(), Some(2), "--grad {extra:?}: {}", String::from_utf8_lossy(&o.stderr));
+    }
+    let o = lobe(&["eval", "--expr", "NH*NL", "--at", "NH=0.5", "--grad"], None);
+    crate::cli::assert_clean_exit(o.status.code(), &String::from_utf8_lossy(&o.stderr), "--grad without NL", "NL");
+}
