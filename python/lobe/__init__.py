@@ -20,7 +20,7 @@ from __future__ import annotations
 import errno
 import os
 import re
-from typing import Any, Dict, Mapping, Optional, Tuple, Union
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -283,6 +283,46 @@ class Kernel:
         if self.channels == 1:
             return values.reshape(shape)
         return np.moveaxis(values.reshape((self.channels,) + shape), 0, -1)
+
+    # -- derivatives (docs/derivatives.md) ------------------------------------------------------------------
+    def _grad(self, kw: Mapping[str, Any]) -> Tuple[List[str], np.ndarray, np.ndarray, Tuple[int, ...]]:
+        """(names, values (channels, n), partials (variables, channels, n), shape) at the keywords' points."""
+        cos, L, V, params, varying, shape = self._prepare(kw)
+        if varying:
+            raise _error("a gradient takes one value per parameter", "give each parameter one number (evaluate several parameter sets with several calls)")
+        n = int(np.prod(shape, dtype=np.int64))
+        names, values, grads = self._native.grad((cos, L, V, n), params)
+        ch = self.channels
+        return list(names), values.reshape((ch, n)), grads.reshape((len(names), ch, n)), shape
+
+    def _shaped(self, a: np.ndarray, shape: Tuple[int, ...]) -> np.ndarray:
+        """One output (channels, n) in the broadcast shape (``(..., 3)`` for colour)."""
+        if self.channels == 1:
+            return a.reshape(shape)
+        return np.moveaxis(a.reshape((self.channels,) + shape), 0, -1)
+
+    def grad(self, **inputs_and_params: Any) -> Dict[str, np.ndarray]:
+        """The partial derivatives at every point: name → array of the broadcast shape (``(..., 3)`` for colour),
+        for every declared parameter (``n`` first; baked ones too) and every input the formula reads (cosines, or
+        ``Lx`` … ``Vz`` for a formula that reads directions). The numbers of ``lobe eval --grad``, bit for bit: one
+        compiled value-and-gradient kernel, exact derivatives with the kink rules of docs/derivatives.md (never
+        NaN where the derivative is finite). Inputs broadcast as for a call; each parameter takes one value."""
+        names, _, grads, shape = self._grad(inputs_and_params)
+        return {name: self._shaped(g, shape) for name, g in zip(names, grads)}
+
+    def jacobian(self, params: Optional[Sequence[str]] = None, **inputs_and_params: Any) -> np.ndarray:
+        """The Jacobian of the values with respect to ``params`` (default: every parameter that is not baked, in
+        declaration order), shaped for ``scipy.optimize.least_squares``: one row per value (the points in the
+        order ``np.ravel`` gives the values, the channels of a colour formula fastest), one column per parameter."""
+        baked = set(self.baked)
+        wanted = [p for p in self.params if p not in baked] if params is None else list(params)
+        names, _, grads, shape = self._grad(inputs_and_params)
+        for p in wanted:
+            if p not in self.params:
+                raise _error(f"`{p}` is not a parameter of the formula", f"parameters are: {', '.join(self.params)}")
+        cols = [self._shaped(grads[names.index(p)], shape).reshape(-1) for p in wanted]
+        n = int(np.prod(shape, dtype=np.int64)) * self.channels
+        return np.stack(cols, axis=1) if cols else np.zeros((n, 0))
 
     # -- sampling (docs/sampling.md) ---------------------------------------------------------------------
     def sample(self, wi: Any, u: Any, **params: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -1,5 +1,5 @@
 import os
-from typing import Any, Dict, List, Mapping, Optional, Tuple, TypedDict, Union
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, TypedDict, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -82,6 +82,10 @@ class Kernel:
     def accuracy(self, reference: Kernel, *, q: float = 8.0, n_max: int = 1000, epicenter_from: int = 2, **params: float) -> Dict[str, Any]:
         """``lobe accuracy --json``, per channel for a colour formula (``"channels"``)."""
     def sweep(self, *, bound: float = 1e6, max_evals: int = 2_000_000, as_written: bool = False) -> Dict[str, Any]: ...
+    def grad(self, **inputs_and_params: ArrayLike) -> Dict[str, npt.NDArray[np.float64]]:
+        """Partial derivative by every parameter and every input read, name → array (``lobe eval --grad``'s bits)."""
+    def jacobian(self, params: Optional[Sequence[str]] = None, **inputs_and_params: ArrayLike) -> npt.NDArray[np.float64]:
+        """(values, parameters) Jacobian for ``scipy.optimize.least_squares``; rows in ``np.ravel`` order of the values."""
     def sample(self, wi: ArrayLike, u: ArrayLike, **params: float) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
         """(wo, pdf, weight) for incident ``wi`` (..., 3) and uniforms ``u`` (..., 2), broadcast together; weight = f·cosθₒ/pdf."""
     def pdf(self, wi: ArrayLike, wo: ArrayLike, **params: float) -> npt.NDArray[np.float64]:

@@ -117,6 +117,9 @@ pub struct Native {
     /// Samplers built for `sample`/`pdf` (parameter vector, sampler), the most recent last; building one takes
     /// milliseconds, so calls at the same parameters reuse it.
     samplers: Mutex<Vec<(Vec<f64>, Arc<Sampler>)>>,
+    /// The value-and-gradient kernel ([`lobe::numerics::grad::Gradient`]), compiled on the first `grad` call as
+    /// `lobe eval --grad` compiles it.
+    gradient: std::sync::OnceLock<Arc<lobe::numerics::grad::Gradient>>,
 }
 
 /// Samplers a kernel keeps (per parameter vector).
@@ -124,6 +127,9 @@ const SAMPLER_CACHE: usize = 4;
 
 /// Points from Python: cosine columns (index in `Input::ALL`, values), L and V (`len` × 3), and `len`.
 type Points<'py> = (Vec<(usize, PyReadonlyArray1<'py, f64>)>, Option<PyReadonlyArray2<'py, f64>>, Option<PyReadonlyArray2<'py, f64>>, usize);
+
+/// `grad`'s result: the variables' names, the values and the partials (flat; see `Native::grad`).
+type Gradients<'py> = (Vec<String>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>);
 
 /// `sample`'s result: wo (`len` × 3), pdf, weights (`len` × channels) and the sampler's mechanism.
 type Drawn<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>, &'static str);
@@ -207,6 +213,19 @@ impl Native {
 
     fn formula(&self) -> &Formula {
         &self.kernels[0].formula
+    }
+
+    /// The value-and-gradient kernel, compiled the first time (the accuracy pass and its cache as `compile`).
+    fn gradient(&self, py: Python<'_>) -> PyResult<Arc<lobe::numerics::grad::Gradient>> {
+        if let Some(g) = self.gradient.get() {
+            return Ok(g.clone());
+        }
+        let g = detached(py, &self.file, || {
+            let opts = lobe::Options { backend: Backend::Jit, bake: self.baked.clone(), math: self.math, ..lobe::Options::default() };
+            let opts = lobe::numerics::pass_cache::command_pass(opts, PassOptions::default(), true);
+            lobe::numerics::grad::Gradient::compile(&self.whole, &opts).map(Arc::new)
+        })?;
+        Ok(self.gradient.get_or_init(|| g).clone())
     }
 
     fn used(&self) -> lobe::ir::InputSet {
@@ -446,6 +465,26 @@ impl Native {
                 }
             })
             .collect()
+    }
+
+    /// The value and gradient at every point (`lobe eval --grad`'s bits): the variables' names (every declared
+    /// parameter, then every input read), the values (`len` per channel, channel after channel) and the partials
+    /// (`len` per channel, channel after channel, variable after variable). `params` is the full vector.
+    fn grad<'py>(&self, py: Python<'py>, points: Points<'py>, params: Vec<f64>) -> PyResult<Gradients<'py>> {
+        self.check_params(py, &params)?;
+        let g = self.gradient(py)?;
+        let (cos, l, v, len) = points;
+        let inputs = self.batch(py, &cos, l.as_ref(), v.as_ref(), len)?;
+        if let Some(i) = g.used.iter().find(|i| inputs.cols[i.index()].is_empty() && len > 0) {
+            return Err(self.error(py, Diagnostic::error(format!("the gradient reads {}, which was not given", i.name())).hint("give every input the formula reads (or L and V)")));
+        }
+        let r = detached(py, &self.file, || {
+            let cols: [&[f64]; N_INPUTS] = std::array::from_fn(|i| &*inputs.cols[i]);
+            Ok(g.run(&cols, &params, len))
+        })?;
+        let values: Vec<f64> = r.value.concat();
+        let grads: Vec<f64> = r.grad.iter().flat_map(|d| d.concat()).collect();
+        Ok((g.names(), values.into_pyarray(py), grads.into_pyarray(py)))
     }
 
     /// Every point through every channel's batched kernel: `len` values per channel, channel after channel.
@@ -689,7 +728,7 @@ fn compile(py: Python<'_>, file: String, source: String, math: &str, baked: Vec<
         ks.iter().for_each(Kernel::warm_up);
         Ok(ks)
     })?;
-    Ok((Native { whole, kernels, file, source, math: mode, baked, samplers: Mutex::default() }, warn))
+    Ok((Native { whole, kernels, file, source, math: mode, baked, samplers: Mutex::default(), gradient: std::sync::OnceLock::new() }, warn))
 }
 
 /// A formula file's name and text, read as the command line reads it (size limit, UTF-8 checked).

@@ -10,11 +10,17 @@
 //! verify; the C library's version ([`BuiltinInfo::libm`]) is kept as the reference the bounds are measured
 //! against and as the fallback for huge trigonometric arguments.
 //!
+//! Derivatives: every row, internal ones and the comparisons included, has one tangent rule in [`derive`]
+//! (the partials with respect to each argument, written with other builtins), and the choice at each kink
+//! (abs, min, max, clamp, select, acos/asin at ±1, sqrt and ln at 0, pow at x = 0) is stated once in that
+//! module's doc.
+//!
 //! Domain policy: `acos` and `asin` clamp their argument to [−1, 1] (a cosine computed from rounded vectors can
 //! be 1 + 1 ulp, and acos of it must not be NaN). Everything else follows IEEE 754 and C99 (pow's special cases,
 //! NaN in → NaN out).
 
 pub mod dd;
+pub mod derive;
 pub(crate) mod math;
 pub mod math_tables;
 

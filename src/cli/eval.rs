@@ -38,6 +38,10 @@ pub struct EvalArgs {
     /// measures errors against (µs per point, all threads)
     #[arg(long, conflicts_with = "normalize")]
     pub truth: bool,
+    /// Also the gradient: the partial derivative by every parameter and every input the formula reads, from one
+    /// compiled value-and-gradient kernel (docs/derivatives.md); with --points, a CSV column `d_NAME` per partial
+    #[arg(long, conflicts_with_all = ["normalize", "truth"])]
+    pub grad: bool,
     #[command(flatten)]
     pub backend: BackendArg,
     #[command(flatten)]
@@ -184,6 +188,12 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
     let f = a.formula.load()?;
     let backend = a.backend.backend()?;
     let pass = |opts| super::common::with_pass(opts, a.prefer.pass(lobe::numerics::robust::PassOptions::default().points));
+    if a.grad {
+        let opts = pass(lobe::Options { backend, bake: set.clone(), math: a.backend.math.mode, ..Default::default() });
+        let started = std::time::Instant::now();
+        let g = lobe::numerics::grad::Gradient::compile(&f, &opts)?;
+        return run_grad(a, &g, &set, &at, started.elapsed().as_secs_f64() * 1e6);
+    }
     let ks: Vec<Kernel> = if a.normalize {
         if f.is_rgb() {
             return Err(CliError::hint(
@@ -222,6 +232,61 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
     } else {
         emit(note, &format!("{}\n", show(&v)));
     }
+    Ok(())
+}
+
+/// `--grad`: the value and every partial derivative at `--at`'s point or at every row of `--points`.
+fn run_grad(a: &EvalArgs, g: &lobe::numerics::grad::Gradient, set: &[(String, f64)], at: &[(String, Vec<f64>)], compile_us: f64) -> Result<(), CliError> {
+    use lobe::report::eval::{GradPointsReport, GradReport, Named};
+    let params = common::param_values(&g.formula, set);
+    let names = g.names();
+    let (backend, math) = (g.backend.name(), g.mode.name());
+    if let Some(path) = &a.points {
+        let text = super::points::read(path)?;
+        let name = if path == "-" { "<stdin>" } else { path };
+        let baked: Vec<String> = set.iter().map(|(n, _)| n.clone()).collect();
+        let pts = lobe::numerics::points::parse(name, &text, &g.formula, g.used, &baked)?;
+        let r = lobe::numerics::points::evaluate_grad(g, &pts, &params);
+        let note = (pts.normalised > 0).then(|| format!("{} of {} rows had a non-unit L or V; they were normalised", pts.normalised, pts.len));
+        let at = |ch: &[Vec<f64>], i: usize| -> Vec<f64> { ch.iter().map(|c| c[i]).collect() };
+        if a.json.on {
+            let values = (0..pts.len).map(|i| PointValue(at(&r.value, i))).collect();
+            let grad = Named(names.iter().zip(&r.grad).map(|(n, d)| (n.clone(), (0..pts.len).map(|i| PointValue(at(d, i))).collect())).collect());
+            let rep = GradPointsReport { values, grad, points: pts.len, backend, math, compile_us, note };
+            println!("{}", common::to_json(&rep)?);
+            return Ok(());
+        }
+        let suffixes: &[&str] = if g.channels == 3 { &[".r", ".g", ".b"] } else { &[""] };
+        let mut header: Vec<String> = suffixes.iter().map(|s| format!("value{s}")).collect();
+        for n in &names {
+            header.extend(suffixes.iter().map(|s| format!("d_{n}{s}")));
+        }
+        let mut text = header.join(",") + "\n";
+        for i in 0..pts.len {
+            let mut row: Vec<String> = r.value.iter().map(|c| number(c[i])).collect();
+            for d in &r.grad {
+                row.extend(d.iter().map(|c| number(c[i])));
+            }
+            text.push_str(&row.join(","));
+            text.push('\n');
+        }
+        emit(note, &text);
+        return Ok(());
+    }
+    let (x, note) = at_inputs(at, g.used)?;
+    let (v, d) = g.eval(&x, &params);
+    if a.json.on {
+        let grad = Named(names.iter().zip(&d).map(|(n, d)| (n.clone(), PointValue(d.clone()))).collect());
+        let rep = GradReport { value: PointValue(v), grad, backend, math, compile_us, note };
+        println!("{}", common::to_json(&rep)?);
+        return Ok(());
+    }
+    let width = names.iter().map(|n| n.chars().count()).max().unwrap_or(0) + 2;
+    let mut text = format!("{}\n", show(&v));
+    for (n, d) in names.iter().zip(&d) {
+        text.push_str(&format!("{:<width$} {}\n", format!("d_{n}"), show(d)));
+    }
+    emit(note, &text);
     Ok(())
 }
 

@@ -1,6 +1,7 @@
 //! Numerical checks of a BRDF kernel: energy (normalisation and albedo), accuracy against a reference lobe,
 //! a stability sweep over the whole domain, and a parameter fit; the ground truth ([`truth`]: any formula in
-//! ~104-bit precision with an unbounded exponent) and the accuracy pass's measurement and choice ([`robust`]).
+//! ~104-bit precision with an unbounded exponent) and the accuracy pass's measurement and choice ([`robust`]);
+//! a formula's value and gradient as one compiled multi-output kernel ([`grad`]).
 //!
 //! Design: every check takes a `&dyn Evaluator` plus a parameter slice (and, where needed, the formula's
 //! parameter declarations or used-input set) — never source text — so the same code runs on the JIT, the
@@ -58,6 +59,7 @@
 pub mod accuracy;
 pub mod check;
 pub mod energy;
+pub mod grad;
 pub mod fit;
 pub mod measured;
 pub mod normalize;

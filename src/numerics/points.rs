@@ -256,6 +256,28 @@ fn evaluate_runs(k: &dyn Evaluator, cols: &Columns, base: &[f64], varying: &[(us
     }
 }
 
+/// The value and gradient ([`super::grad::Gradient`]) at every point: one run of the program per run of rows with
+/// equal parameter values, as [`evaluate`] does for a kernel.
+pub fn evaluate_grad(g: &super::grad::Gradient, pts: &Points, base_params: &[f64]) -> super::grad::GradValues {
+    let m = g.vars.len();
+    let mut out = super::grad::GradValues { value: vec![vec![0.0; pts.len]; g.channels], grad: vec![vec![vec![0.0; pts.len]; g.channels]; m] };
+    let mut params = base_params.to_vec();
+    for run in &pts.runs {
+        for (slot, v) in pts.param_columns.iter().zip(&pts.param_values) {
+            params[*slot] = v[run.start];
+        }
+        let cols: [&[f64]; N_INPUTS] = std::array::from_fn(|i| if pts.inputs[i].is_empty() { &[][..] } else { &pts.inputs[i][run.clone()] });
+        let r = g.run(&cols, &params, run.len());
+        for c in 0..g.channels {
+            out.value[c][run.clone()].copy_from_slice(&r.value[c]);
+            for v in 0..m {
+                out.grad[v][c][run.clone()].copy_from_slice(&r.grad[v][c]);
+            }
+        }
+    }
+    out
+}
+
 /// The ground truth ([`super::truth`]) of `f` (the formula as written, baked values folded) at every point, in
 /// parallel: what a kernel's values at these points are measured against. An input the file does not give is 0.
 pub fn truth(f: &Formula, pts: &Points, base_params: &[f64]) -> Vec<f64> {

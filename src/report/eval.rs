@@ -139,6 +139,50 @@ impl PointsReport {
     }
 }
 
+/// Entries in order, serialised as a JSON object (name → value).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Named<T>(pub Vec<(String, T)>);
+
+impl<T: Serialize> Serialize for Named<T> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let mut m = s.serialize_map(Some(self.0.len()))?;
+        for (k, v) in &self.0 {
+            m.serialize_entry(k, v)?;
+        }
+        m.end()
+    }
+}
+
+/// The eval command's gradient at one point: the value and each partial derivative (name → value; `[r, g, b]` for a
+/// colour formula).
+#[derive(Clone, Debug, Serialize)]
+pub struct GradReport {
+    pub value: PointValue,
+    pub grad: Named<PointValue>,
+    pub backend: &'static str,
+    pub math: &'static str,
+    /// Compiling the value-and-gradient programs (accuracy pass included), µs.
+    #[serde(serialize_with = "json::num")]
+    pub compile_us: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
+}
+
+/// The eval command's gradient at many points: the values and, per partial, the list of its values (name → list).
+#[derive(Clone, Debug, Serialize)]
+pub struct GradPointsReport {
+    pub values: Vec<PointValue>,
+    pub grad: Named<Vec<PointValue>>,
+    pub points: usize,
+    pub backend: &'static str,
+    pub math: &'static str,
+    #[serde(serialize_with = "json::num")]
+    pub compile_us: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -148,5 +192,7 @@ mod tests {
         assert_eq!(serde_json::to_string(&PointValue(vec![0.25])).unwrap(), "0.25");
         assert_eq!(serde_json::to_string(&PointValue(vec![f64::INFINITY])).unwrap(), r#""inf""#);
         assert_eq!(serde_json::to_string(&PointValue(vec![0.5, 1.0, f64::NAN])).unwrap(), r#"[0.5,1.0,"NaN"]"#);
+        let g = Named(vec![("n".to_string(), PointValue(vec![1.0])), ("NH".to_string(), PointValue(vec![-0.5]))]);
+        assert_eq!(serde_json::to_string(&g).unwrap(), r#"{"n":1.0,"NH":-0.5}"#);
     }
 }

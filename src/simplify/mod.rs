@@ -84,6 +84,7 @@
 //!   has 2.0 %), 2.3× faster on the LLVM tier and on Cranelift.
 
 pub mod accuracy;
+pub mod derive;
 pub(crate) mod rewrite;
 pub(crate) mod emit;
 mod powi;

@@ -529,3 +529,66 @@ fn prepared_falls_back_to_eval_for_other_evaluators() {
     assert_eq!(prepared.eval(&x).to_bits(), twin.eval(&x, &[3.0, 7.0]).to_bits());
     assert_eq!(prepared.eval(&x), 0.9f64.powf(3.0) + 2.0);
 }
+
+/// The value-and-gradient programs (`lobe::numerics::grad`): every output (value and each partial, per channel)
+/// the same bits on the interpreter and every JIT tier, at `pts` and `sets`.
+fn gradients_agree(f: &Formula, math: Mode, pts: &[[f64; N_INPUTS]], sets: &[Vec<f64>]) -> Result<(), String> {
+    use lobe::numerics::grad::Gradient;
+    let opts = |backend| Options { backend, math, ..Options::default() };
+    let interp = Gradient::compile(f, &opts(Backend::Interp)).map_err(|d| d.render(false))?;
+    let cols: Vec<Vec<f64>> = (0..N_INPUTS).map(|i| pts.iter().map(|p| p[i]).collect()).collect();
+    let cols: [&[f64]; N_INPUTS] = std::array::from_fn(|i| cols[i].as_slice());
+    for backend in jit_backends() {
+        let jit = Gradient::compile(f, &opts(backend)).map_err(|d| format!("{}: {}", backend.name(), d.render(false)))?;
+        for ps in sets {
+            let (want, got) = (interp.run(&cols, ps, pts.len()), jit.run(&cols, ps, pts.len()));
+            let outputs = |r: &lobe::numerics::grad::GradValues| std::iter::once(&r.value).chain(&r.grad).flatten().flatten().copied().collect::<Vec<f64>>();
+            for (k, (a, b)) in outputs(&want).into_iter().zip(outputs(&got)).enumerate() {
+                if !identical(a, b) {
+                    let (out, point) = (k / pts.len(), k % pts.len());
+                    return Err(format!(
+                        "{} ({math} math) output {out} at x = {:?}, params = {ps:?}: interp {a:e}, {} {b:e}",
+                        f.to_text(),
+                        pts[point],
+                        backend.name()
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Gradients: every catalogue and explorer file, both math modes, at the defaults and the random formulas' sets.
+#[test]
+fn gradients_of_the_catalogue_agree_on_every_tier() {
+    let pts = points(&lobe::report::measure::sample_points(8, 21));
+    let files: Vec<_> = catalogue_files("brdfs").into_iter().chain(catalogue_files("explorer")).collect();
+    for path in &files {
+        let name = path.display().to_string();
+        let src = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let f = lobe::front::parse(&name, &src).unwrap_or_else(|d| panic!("{name}: {}", d.render(false)));
+        let mut sets = vec![f.default_params()];
+        if f.params.len() == 3 {
+            sets.extend(param_sets());
+        }
+        for math in Mode::ALL {
+            gradients_agree(&f, math, &pts, &sets).unwrap_or_else(|e| panic!("{name}: {e}"));
+        }
+    }
+}
+
+/// Gradients of random formulas (every builtin, internal ones included; raw and clamped inputs): 300 cases
+/// (a tenth of LOBE_DIFF_CASES when that is set lower).
+#[test]
+fn gradients_of_random_formulas_agree_on_every_tier() {
+    let pts = points(&lobe::report::measure::sample_points(8, 42));
+    let mut runner = TestRunner::new(Config { cases: cases().div_ceil(10).min(300), failure_persistence: None, ..Config::default() });
+    let modes = prop::sample::select(Mode::ALL.to_vec());
+    let result = runner.run(&(expr(), any::<bool>(), modes), |(e, policy, math)| {
+        gradients_agree(&formula(&e, policy), math, &pts, &param_sets()).map_err(TestCaseError::fail)
+    });
+    if let Err(e) = result {
+        panic!("{e}");
+    }
+}

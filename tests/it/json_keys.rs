@@ -76,6 +76,8 @@ fn every_json_output_keeps_its_keys() {
         ("eval_note", vec!["eval", "--expr", "dot(N, L)", "--at", "L=0,0,2,V=0,0,1", "--json"]),
         ("eval_points", vec!["eval", blinn, "--points", &points, "--json"]),
         ("eval_points_truth", vec!["eval", blinn, "--points", &points, "--truth", "--json"]),
+        ("eval_grad", vec!["eval", blinn, "--set", "n=2", "--at", "NH=0.5", "--grad", "--json"]),
+        ("eval_grad_points", vec!["eval", blinn, "--points", &points, "--grad", "--json"]),
         ("eval_colour", vec!["eval", "--expr", COLOUR, "--at", "NH=0.5", "--json"]),
         ("eval_colour_points", vec!["eval", "--expr", COLOUR, "--points", &points, "--json"]),
         ("check", vec!["check", "examples/brdfs/beckmann.brdf", "--points", "200", "--json"]),

@@ -11,6 +11,7 @@ mod explorer;
 mod export;
 mod front;
 mod fuzz;
+mod grad;
 mod hostile;
 mod jit;
 mod json_keys;
