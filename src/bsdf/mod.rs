@@ -61,6 +61,7 @@
 
 pub mod chi2;
 mod dist;
+pub mod mitsuba;
 pub mod validate;
 
 use crate::backend::{Columns, Evaluator, Kernel};
