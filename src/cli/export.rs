@@ -84,7 +84,7 @@ fn mitsuba(a: &ExportArgs) -> Result<(), CliError> {
     let s = Sampler::build_channels(&ks, &values, &Options::default())?;
     let text = lobe::bsdf::mitsuba::module(&plain, &s, &all).map_err(|d| lobe::Diagnostics::single_in(&plain.file, &plain.source, d))?;
     let json = a.json.on.then(|| {
-        serde_json::json!({"formula": plain.display_name(), "language": "mitsuba", "plugin": lobe::bsdf::mitsuba::plugin_name(&plain), "mechanism": s.report.mechanism.name()})
+        serde_json::json!({"formula": plain.display_name(), "language": "mitsuba", "plugin": lobe::bsdf::mitsuba::plugin_name(&plain), "mechanism": s.report.mechanism.name(), "isotropic": s.report.isotropic})
     });
     a.out.emit_text(&text, is_ours, json)
 }

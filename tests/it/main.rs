@@ -13,6 +13,7 @@ mod front;
 mod fuzz;
 mod hostile;
 mod jit;
+mod mitsuba;
 mod json_keys;
 mod measured;
 mod layers;
