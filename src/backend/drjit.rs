@@ -129,7 +129,7 @@ mod tests {
         let baked = crate::simplify::simplify(&f, &[(0, 20.0)]);
         let text = function(&baked, "lobe_g").unwrap();
         assert!(text.starts_with("def lobe_g(NL, NV, NH, VR, VH, Lx, Ly, Lz, Vx, Vy, Vz):\n"), "{text}");
-        assert!(text.contains("_acos(VH)") && text.trim_end().ends_with(",)"), "{text}");
+        assert!(text.contains("_acos(t0)") && text.trim_end().ends_with(",)"), "{text}");
         let live = crate::simplify::simplify(&f, &[]);
         let e = function(&live, "lobe_g").unwrap_err();
         assert!(e.message.contains("`n` is live") && !e.hints.is_empty(), "{e}");
