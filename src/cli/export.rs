@@ -6,7 +6,7 @@
 
 use super::args::{self, FormulaSource, Json, Output, Params};
 use super::common::{self, CliError};
-use lobe::bsdf::{Options, Sampler};
+use lobe::bsdf::{Choice, Mechanism, Options, Sampler};
 use lobe::backend::glsl::{self, Dialect, GlslVersion};
 
 #[derive(clap::Args, Debug)]
@@ -32,6 +32,10 @@ pub struct ExportArgs {
     /// the sampler's tables embedded; every parameter baked). docs/mitsuba.md.
     #[arg(long)]
     pub mitsuba: bool,
+    /// With --mitsuba: the sampler's mechanism, `auto` (the best measured, as `lobe sample`), `tabulated`,
+    /// `exact` (formulas of NH alone or VR alone) or `cosine`.
+    #[arg(long, value_name = "MECHANISM", default_value = "auto", requires = "mitsuba")]
+    pub mechanism: String,
     #[command(flatten)]
     pub set: Params,
     #[command(flatten)]
@@ -81,7 +85,11 @@ fn mitsuba(a: &ExportArgs) -> Result<(), CliError> {
     let values = common::param_values(&ks[0].formula, &set);
     let all: Vec<(String, f64)> = f.params.iter().zip(&values).map(|(p, v)| (p.name.clone(), *v)).collect();
     let plain = a.formula.plain(&all)?;
-    let s = Sampler::build_channels(&ks, &values, &Options::default())?;
+    let choice = match a.mechanism.as_str() {
+        "auto" => Choice::Auto,
+        m => Choice::Force(m.parse::<Mechanism>().map_err(|e| CliError::hint(e, "--mechanism auto picks the best measured"))?),
+    };
+    let s = Sampler::build_channels(&ks, &values, &Options { choice, ..Options::default() })?;
     let text = lobe::bsdf::mitsuba::module(&plain, &s, &all).map_err(|d| lobe::Diagnostics::single_in(&plain.file, &plain.source, d))?;
     let json = a.json.on.then(|| {
         serde_json::json!({"formula": plain.display_name(), "language": "mitsuba", "plugin": lobe::bsdf::mitsuba::plugin_name(&plain), "mechanism": s.report.mechanism.name(), "isotropic": s.report.isotropic})
