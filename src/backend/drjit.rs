@@ -69,7 +69,7 @@ pub fn function(f: &Formula, name: &str) -> Result<String, Diagnostic> {
                 let name = f.params.get(p as usize).map_or("?", |d| d.name.as_str());
                 return Err(Diagnostic::error(format!("the parameter `{name}` is live: a Mitsuba export bakes every parameter"))
                     .at(ir.span(id), "this parameter")
-                    .hint("the sampling tables are built at fixed parameter values: give them with --set (the defaults are used otherwise)"));
+                    .hint("the sampling tables are built at fixed parameter values: bake every parameter (its default, or the value wanted)"));
             }
             Node::Column(k) => format!("column{k}"),
             Node::Neg(a) => format!("(-{})", t(a)),
