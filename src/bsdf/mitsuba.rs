@@ -170,4 +170,23 @@ mod tests {
     fn comments_cannot_end_early() {
         assert_eq!(comment("a\rb\nc\u{2028}d"), "a b c d");
     }
+
+    /// Metadata cannot inject code: a name with a vertical tab, a form feed or a Unicode line separator stays in
+    /// its comment; the module's code lines are the generated ones.
+    #[test]
+    fn hostile_metadata_stays_in_comments() {
+        let src = "@name \"x\u{2028}import os\x0b\x0cos.system('true')\"\nparam k = 2\nNH^k\n";
+        let src = src.replace("\\u{2028}", "\u{2028}").replace("\\x0b", "\x0b").replace("\\x0c", "\x0c");
+        let f = crate::front::parse("hostile.brdf", &src).unwrap_or_else(|d| panic!("{}", d.render(false)));
+        let k = crate::compile_formula(f.clone(), &crate::Options::default()).unwrap();
+        let s = Sampler::build(&k, &vec![2.0; f.params.len()], &super::super::Options { choice: super::super::Choice::Force(Mechanism::Cosine), ..Default::default() }).unwrap();
+        let bake: Vec<(usize, f64)> = (0..f.params.len()).map(|i| (i, 2.0)).collect();
+        let plain = crate::simplify::simplify(&f, &bake);
+        let text = module(&plain, &s, &[("k".into(), 2.0)]).unwrap();
+        assert!(!text.contains(['\u{2028}', '\x0b', '\x0c', '\r']));
+        for line in text.lines().filter(|l| l.contains("os.system")) {
+            assert!(line.starts_with("# "), "{line}");
+        }
+        assert!(text.contains("_MECHANISM = 'cosine'") && text.contains("_TABLE = ''"), "{}", &text[..1500]);
+    }
 }
