@@ -13,6 +13,7 @@
 
 mod kernel;
 
+pub mod drjit;
 pub mod glsl;
 pub mod interp;
 pub mod jit;

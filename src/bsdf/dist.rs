@@ -62,6 +62,11 @@ impl Dist1D {
         i
     }
 
+    /// The cell densities (∫₀¹ = 1), for exports that rebuild the distribution.
+    pub fn densities(&self) -> &[f64] {
+        &self.pdf
+    }
+
     /// The density at `x` (0 outside [0, 1)).
     pub fn pdf(&self, x: f64) -> f64 {
         if !(0.0..1.0).contains(&x) {
@@ -104,6 +109,11 @@ impl Dist2D {
             Some(c) => (x1, c.sample(u2).0),
             None => (x1, u2),
         }
+    }
+
+    /// The cell densities, row-major (∫∫ = 1), for exports that rebuild the distribution.
+    pub fn densities(&self) -> &[f64] {
+        &self.pdf
     }
 
     /// The density at (x1, x2) (0 outside [0, 1)²).

@@ -55,12 +55,17 @@
 //!   point of an incidence node gives that node an empty table ([`Report::empty_nodes`]); 0 everywhere gives
 //!   the cosine mechanism and weight 0 for every sample, never NaN.
 //!
+//! # Export
+//! [`mitsuba`] writes a sampler and its formula as a Mitsuba 3 BSDF plugin (Python, Dr.Jit), the tables
+//! embedded; docs/mitsuba.md.
+//!
 //! # Cost
 //! Measured numbers are in BENCHMARKS.md ("Sampling"): build time, ns per sample and per pdf, efficiency per
 //! catalogue formula beside cosine sampling's.
 
 pub mod chi2;
 mod dist;
+pub mod mitsuba;
 pub mod validate;
 
 use crate::backend::{Columns, Evaluator, Kernel};

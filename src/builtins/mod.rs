@@ -4,7 +4,7 @@
 //! interpreter and constant folding call [`Builtin::eval_in`]; the JIT emits sqrt/abs/min/max/clamp as native
 //! instructions ([`Lowering::Inline`], modelled exactly by the functions here) and every transcendental
 //! builtin ([`Lowering::Math`]) as the straight-line code of [`math`], the same definition the interpreter runs,
-//! so the two agree bit for bit in each [`Mode`]; the GLSL export prints [`BuiltinInfo::glsl`]. Three rows are
+//! so the two agree bit for bit in each [`Mode`]; the GLSL export prints [`BuiltinInfo::glsl`] and the Mitsuba export [`BuiltinInfo::drjit`]. Three rows are
 //! [internal](BuiltinInfo::internal): formed only by the accuracy pass, not callable from user text, never
 //! exported. Each row states its error bound in each mode ([`Bound`]), which `lobe check` prints and the tests
 //! verify; the C library's version ([`BuiltinInfo::libm`]) is kept as the reference the bounds are measured
@@ -126,6 +126,10 @@ pub struct BuiltinInfo {
     pub glsl: &'static str,
     /// WGSL spelling where it differs from GLSL's (empty: the same).
     pub wgsl: &'static str,
+    /// Dr.Jit (Python) spelling for the Mitsuba 3 export ([`crate::backend::drjit`]); `_pow`, `_acos`, `_lt`, …
+    /// are the exported module's helpers (IEEE pow, clamped acos, comparisons as 0/1). Empty for an internal
+    /// builtin, as [`Self::glsl`].
+    pub drjit: &'static str,
     /// One line for `lobe help` and hints.
     pub doc: &'static str,
     /// `Some(what to write instead)` for a builtin only the accuracy pass forms (rewrites for f64: double-double
@@ -288,6 +292,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::math(2.0),
         glsl: "pow({0}, {1})",
         wgsl: "",
+        drjit: "_pow({0}, {1})",
         doc: "pow(x, y) = x^y; integer constant exponents become multiplications",
         internal: None,
     },
@@ -301,6 +306,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::math(2.0),
         glsl: "cos({0})",
         wgsl: "",
+        drjit: "dr.cos({0})",
         doc: "cosine of an angle in radians",
         internal: None,
     },
@@ -314,6 +320,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::math(2.0),
         glsl: "sin({0})",
         wgsl: "",
+        drjit: "dr.sin({0})",
         doc: "sine of an angle in radians",
         internal: None,
     },
@@ -327,6 +334,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::math(3.0),
         glsl: "tan({0})",
         wgsl: "",
+        drjit: "dr.tan({0})",
         doc: "tangent of an angle in radians",
         internal: None,
     },
@@ -340,6 +348,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::math(2.0),
         glsl: "acos(clamp({0}, -1.0, 1.0))",
         wgsl: "",
+        drjit: "_acos({0})",
         doc: "arc cosine in radians; the argument is clamped to [-1, 1]",
         internal: None,
     },
@@ -353,6 +362,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::math(2.0),
         glsl: "asin(clamp({0}, -1.0, 1.0))",
         wgsl: "",
+        drjit: "_asin({0})",
         doc: "arc sine in radians; the argument is clamped to [-1, 1]",
         internal: None,
     },
@@ -366,6 +376,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::math(2.0),
         glsl: "atan({0})",
         wgsl: "",
+        drjit: "dr.atan({0})",
         doc: "arc tangent in radians",
         internal: None,
     },
@@ -379,6 +390,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::math(2.0),
         glsl: "exp({0})",
         wgsl: "",
+        drjit: "dr.exp({0})",
         doc: "e^x",
         internal: None,
     },
@@ -392,6 +404,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::math(2.0),
         glsl: "log({0})",
         wgsl: "",
+        drjit: "dr.log({0})",
         doc: "natural logarithm",
         internal: None,
     },
@@ -405,6 +418,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::ROUNDED,
         glsl: "sqrt({0})",
         wgsl: "",
+        drjit: "dr.sqrt({0})",
         doc: "square root (NaN below 0)",
         internal: None,
     },
@@ -418,6 +432,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::EXACT,
         glsl: "abs({0})",
         wgsl: "",
+        drjit: "dr.abs({0})",
         doc: "absolute value",
         internal: None,
     },
@@ -431,6 +446,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::EXACT,
         glsl: "min({0}, {1})",
         wgsl: "",
+        drjit: "dr.minimum({0}, {1})",
         doc: "smaller of two values (NaN if either is NaN)",
         internal: None,
     },
@@ -444,6 +460,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::EXACT,
         glsl: "max({0}, {1})",
         wgsl: "",
+        drjit: "dr.maximum({0}, {1})",
         doc: "larger of two values (NaN if either is NaN)",
         internal: None,
     },
@@ -457,6 +474,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::EXACT,
         glsl: "clamp({0}, {1}, {2})",
         wgsl: "",
+        drjit: "dr.minimum(dr.maximum({0}, {1}), {2})",
         doc: "clamp(x, lo, hi) = min(max(x, lo), hi)",
         internal: None,
     },
@@ -470,6 +488,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::EXACT,
         glsl: "floor({0})",
         wgsl: "",
+        drjit: "dr.floor({0})",
         doc: "largest integer not above x",
         internal: None,
     },
@@ -483,6 +502,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::EXACT,
         glsl: "float({0} < {1})",
         wgsl: "f32({0} < {1})",
+        drjit: "_lt({0}, {1})",
         doc: "1 if a < b, else 0 (0 when either is NaN); what `a < b` and `b > a` mean",
         internal: None,
     },
@@ -496,6 +516,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::EXACT,
         glsl: "float({0} <= {1})",
         wgsl: "f32({0} <= {1})",
+        drjit: "_le({0}, {1})",
         doc: "1 if a <= b, else 0 (0 when either is NaN); what `a <= b` and `b >= a` mean",
         internal: None,
     },
@@ -509,6 +530,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::EXACT,
         glsl: "float({0} == {1})",
         wgsl: "f32({0} == {1})",
+        drjit: "_eq({0}, {1})",
         doc: "1 if a == b, else 0 (0 when either is NaN)",
         internal: None,
     },
@@ -522,6 +544,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::EXACT,
         glsl: "float({0} != {1})",
         wgsl: "f32({0} != {1})",
+        drjit: "_ne({0}, {1})",
         doc: "1 if a != b, else 0 (1 when either is NaN)",
         internal: None,
     },
@@ -535,6 +558,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::EXACT,
         glsl: "({0} != 0.0 ? {1} : {2})",
         wgsl: "select({2}, {1}, {0} != 0.0)",
+        drjit: "_select({0}, {1}, {2})",
         doc: "select(c, a, b) = a if c is true (not 0), else b; the untaken value never reaches the result",
         internal: None,
     },
@@ -548,6 +572,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::ROUNDED,
         glsl: "fma({0}, {1}, {2})",
         wgsl: "",
+        drjit: "dr.fma({0}, {1}, {2})",
         doc: "fma(a, b, c) = a*b + c rounded once (the accuracy pass's compensated power chains use it)",
         internal: None,
     },
@@ -561,6 +586,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::math(2.0),
         glsl: "",
         wgsl: "",
+        drjit: "",
         doc: "expmuldiv(a, b, c) = exp(a)*b/c with no intermediate underflow or overflow (the accuracy pass forms it)",
         internal: Some("write `exp(a) * b / c`; the accuracy pass forms expmuldiv itself where exp(a) alone would under- or overflow"),
     },
@@ -574,6 +600,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::math(1.0),
         glsl: "",
         wgsl: "",
+        drjit: "",
         doc: "acoslo(x) = acos(x) minus lobe's acos(x): its rounding error, 0 in fast math (the accuracy pass forms it)",
         internal: Some("write `acos(x)`; the accuracy pass adds acos's rounding error (acoslo) itself where that pays"),
     },
@@ -587,6 +614,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::math(1.0),
         glsl: "",
         wgsl: "",
+        drjit: "",
         doc: "powlo(x, y) = pow(x, y) minus lobe's pow(x, y): its rounding error, 0 in fast math (the accuracy pass forms it)",
         internal: Some("write `pow(x, y)`; the accuracy pass adds pow's rounding error (powlo) itself where that pays"),
     },
@@ -600,6 +628,7 @@ const TABLE: [BuiltinInfo; 25] = [
         bound: Bound::math(2.0),
         glsl: "",
         wgsl: "",
+        drjit: "",
         doc: "sinnear(x) = sin(x), computed without range reduction where |x| ≤ 1.75 (the simplifier forms it where range analysis bounds x)",
         internal: Some("write `sin(x)`; the simplifier uses sinnear itself where range analysis bounds the argument"),
     },
@@ -830,6 +859,7 @@ mod tests {
             let internal = matches!(b, Builtin::ExpMulDiv | Builtin::AcosLo | Builtin::PowLo | Builtin::SinNear);
             assert_eq!(b.is_internal(), internal, "{}", r.name);
             assert_eq!(r.glsl.is_empty(), internal, "{}", r.name);
+            assert_eq!(r.drjit.is_empty(), internal, "{}", r.name);
             assert_eq!(b.language_form() != *b, *b == Builtin::SinNear, "{}", r.name);
             assert_eq!(Builtin::language().any(|l| l.builtin == *b), !internal, "{}", r.name);
         }

@@ -109,6 +109,7 @@ fn every_json_output_keeps_its_keys() {
         ("accuracy_measured", vec!["accuracy", blinn, "--reference", &table, "--set", "n=20", "--json"]),
         ("tabulate", vec!["tabulate", blinn, "--set", "n=20", "-o", &table2, "--json"]),
         ("export", vec!["export", blinn, "--set", "n=20", "--json"]),
+        ("export_mitsuba", vec!["export", "--mitsuba", blinn, "--set", "n=20", "--json"]),
         ("import", vec!["import", "examples/explorer/ggx.brdf", "--json"]),
         ("plot", vec!["plot", blinn, "examples/brdfs/phong.brdf", "--set", "n=20", "-o", &plot, "--json"]),
         ("watch", vec!["watch", blinn, "--scene", "examples/scenes/paper_sphere.toml", "--size", "16", "-o", &watched, "--count", "1", "--json"]),

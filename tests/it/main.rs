@@ -14,6 +14,7 @@ mod fuzz;
 mod grad;
 mod hostile;
 mod jit;
+mod mitsuba;
 mod json_keys;
 mod measured;
 mod layers;

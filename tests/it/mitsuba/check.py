@@ -1,0 +1,169 @@
+"""Checks one module `lobe export --mitsuba` wrote, with Mitsuba's own tools (tests/it/mitsuba.rs runs it).
+
+    check.py MODULE [--csv THETA,PHI=FILE ...] [--chi2 THETA,PHI ...] [--tests N] [--samples N]
+
+--csv: samples `lobe sample` wrote at that incidence (wo, pdf, weights): the module's pdf_f64 and its weight
+f·cosθo/pdf must equal lobe's to 1e-9 relative, and the plugin's f32 eval/pdf/eval_pdf (scalar_rgb and
+llvm_ad_rgb) lobe's to 1e-4. --chi2: mi.chi2.ChiSquareTest through a BSDFAdapter on the registered plugin at
+that incidence (α = 0.01 Šidák-corrected over --tests; `adapter` says how it differs from BSDFAdapter). Prints one line per check; exits 1 on any failure.
+"""
+import importlib.util
+import csv
+import math
+import sys
+
+import drjit as dr
+import mitsuba as mi
+
+failures = []
+
+
+def check(ok, what):
+    print(('ok   ' if ok else 'FAIL ') + what, flush=True)
+    if not ok:
+        failures.append(what)
+
+
+def load(path, variant):
+    mi.set_variant(variant)
+    spec = importlib.util.spec_from_file_location('lobe_export', path)
+    m = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(m)
+    return m
+
+
+def num(x):
+    """A Python float from a width-1 Dr.Jit array or a scalar variant's float."""
+    return float(x[0]) if dr.is_array_v(x) else float(x)
+
+
+def incidence(text):
+    t, p = (float(x) for x in text.split(','))
+    t, p = math.radians(t), math.radians(p)
+    return [math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)]
+
+
+def adapter(name, wi):
+    """mi.chi2.BSDFAdapter with one change: a sample counts when its pdf is > 0, not when its weight is. lobe's
+    sampler mixes in cosine sampling, so it also draws directions where the formula is 0 (a clamped lobe, a
+    shadowing term): valid samples of weight 0, which BSDFAdapter would drop from the histogram while its pdf
+    still counts them."""
+    ctx = mi.BSDFContext()
+
+    def context(n):
+        si = dr.zeros(mi.SurfaceInteraction3f, n)
+        si.wi = wi
+        return si
+
+    def sample_functor(sample, *args):
+        plugin = mi.load_dict({'type': name})
+        bs, _ = plugin.sample(ctx, context(dr.width(sample)), sample[0], mi.Vector2f([sample[1], sample[2]]))
+        return bs.wo, dr.select(bs.pdf > 0.0, mi.Float(1.0), mi.Float(0.0))
+
+    def pdf_functor(wo, *args):
+        plugin = mi.load_dict({'type': name})
+        return plugin.pdf(ctx, context(dr.width(wo)), wo)
+
+    return sample_functor, pdf_functor
+
+
+def main(argv):
+    path, csvs, chi2s, tests, samples, ires = argv[0], [], [], 1, 1_000_000, 4
+    i = 1
+    while i < len(argv):
+        if argv[i] == '--csv':
+            inc, f = argv[i + 1].split('=', 1)
+            csvs.append((inc, f))
+        elif argv[i] == '--chi2':
+            chi2s.append(argv[i + 1])
+        elif argv[i] == '--tests':
+            tests = int(argv[i + 1])
+        elif argv[i] == '--ires':
+            ires = int(argv[i + 1])
+        elif argv[i] == '--samples':
+            samples = int(argv[i + 1])
+        else:
+            raise SystemExit('unknown argument ' + argv[i])
+        i += 2
+    m = load(path, 'llvm_ad_rgb')
+    name = m._NAME
+    for inc, f in csvs:
+        rows = list(csv.DictReader(open(f)))
+        wi_l = incidence(inc)
+        wi = tuple(mi.Float64(c) for c in wi_l)
+        wo = tuple(mi.Float64([float(r[k]) for r in rows]) for k in ('ox', 'oy', 'oz'))
+        ref = mi.Float64([float(r['pdf']) for r in rows])
+        p = m.pdf_f64(wi, wo)
+        rel = dr.max(dr.abs(p - ref) / ref)[0]
+        check(rel <= 1e-9, f'{name} at {inc}: pdf_f64 = lobe pdf over {len(rows)} samples (max rel {rel:.2e})')
+        keys = [k for k in rows[0] if k.startswith('weight')]
+        vals = m.eval_f64(wi, wo)
+        worst = 0.0
+        for c, k in zip(vals, keys):
+            w = dr.select(wo[2] > 0.0, c * wo[2] / p, 0.0)
+            refw = mi.Float64([float(r[k]) for r in rows])
+            scale = dr.maximum(dr.abs(refw), 1e-300)
+            worst = max(worst, dr.max(dr.abs(w - refw) / scale)[0])
+        check(worst <= 1e-9, f'{name} at {inc}: eval_f64·cos/pdf = lobe weight (max rel {worst:.2e})')
+        # The plugin itself, in f32, at the first samples above the horizon; both variants.
+        up = [r for r in rows if float(r['oz']) > 1e-3][:64]
+        for variant in ('llvm_ad_rgb', 'scalar_rgb'):
+            mi.set_variant(variant)
+            m.register()
+            bsdf = mi.load_dict({'type': name})
+            ctx = mi.BSDFContext()
+            worst_v, worst_p = 0.0, 0.0
+            for r in up:
+                si = dr.zeros(mi.SurfaceInteraction3f)
+                si.wi = mi.Vector3f(*wi_l)
+                o = mi.Vector3f(float(r['ox']), float(r['oy']), float(r['oz']))
+                v, pd = bsdf.eval_pdf(ctx, si, o)
+                pd2 = bsdf.pdf(ctx, si, o)
+                v2 = bsdf.eval(ctx, si, o)
+                lp = float(r['pdf'])
+                lw = [float(r[k]) for k in keys]
+                got = [num(v[c]) for c in range(3)]
+                got2 = [num(v2[c]) for c in range(3)]
+                pf = num(pd)
+                pf2 = num(pd2)
+                want = lw if len(lw) == 3 else lw * 3
+                for c in range(3):
+                    # eval = f·cos = weight·pdf
+                    e = want[c] * lp
+                    worst_v = max(worst_v, abs(got[c] - e) / max(abs(e), 1e-30), abs(got2[c] - e) / max(abs(e), 1e-30))
+                worst_p = max(worst_p, abs(pf - lp) / lp, abs(pf2 - lp) / lp)
+            check(worst_v <= 1e-4 and worst_p <= 1e-4,
+                  f'{name} at {inc}, {variant}: plugin eval/pdf/eval_pdf = lobe in f32 at {len(up)} samples '
+                  f'(max rel {worst_v:.1e}, {worst_p:.1e})')
+            # sample(): its pdf is pdf(wo) and its weight eval/pdf.
+            si = dr.zeros(mi.SurfaceInteraction3f)
+            si.wi = mi.Vector3f(*wi_l)
+            worst_s = 0.0
+            for k in range(16):
+                u = mi.Point2f((k + 0.5) / 16, ((k * 7) % 16 + 0.25) / 16)
+                bs, w = bsdf.sample(ctx, si, 0.5, u)
+                spdf = num(bs.pdf)
+                if spdf > 0:
+                    v, pd = bsdf.eval_pdf(ctx, si, bs.wo)
+                    pf = num(pd)
+                    vv = [num(v[c]) for c in range(3)]
+                    ww = [num(w[c]) for c in range(3)]
+                    worst_s = max(worst_s, abs(spdf - pf) / pf)
+                    for c in range(3):
+                        worst_s = max(worst_s, abs(ww[c] - vv[c] / pf) / max(abs(vv[c] / pf), 1e-30))
+            check(worst_s <= 1e-4, f'{name} at {inc}, {variant}: sample() pdf and weight = pdf(), eval/pdf (max rel {worst_s:.1e})')
+    mi.set_variant('llvm_ad_rgb')
+    m.register()
+    for inc in chi2s:
+        sample_func, pdf_func = adapter(name, incidence(inc))
+        chi2 = mi.chi2.ChiSquareTest(domain=mi.chi2.SphericalDomain(), sample_func=sample_func,
+                                     pdf_func=pdf_func, sample_dim=3, sample_count=samples, ires=ires)
+        ok = chi2.run(0.01, tests)
+        p = chi2.p_value
+        check(ok, f'{name} at {inc}: mi.chi2.ChiSquareTest p = {num(p):.4f}'
+              + ('' if ok else '\n' + chi2.messages))
+    if failures:
+        sys.exit(1)
+
+
+main(sys.argv[1:])
