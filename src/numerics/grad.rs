@@ -83,7 +83,8 @@ impl Gradient {
             let p = Program::new(&ir, chunk, &[], f.params.len()).map_err(fail)?;
             let code = match opts.backend {
                 Backend::Interp => Code::Interp(ProgramInterp::new(&p, opts.math)),
-                Backend::Jit => Code::Native(crate::backend::jit::shade_code(&p, opts.math).map_err(|e| Diagnostics::single(&f.file, e.to_diagnostic()))?),
+                // Automatic tiering: a gradient's program starts where kernels do, on Cranelift.
+                Backend::Jit | Backend::Auto => Code::Native(crate::backend::jit::shade_code(&p, opts.math).map_err(|e| Diagnostics::single(&f.file, e.to_diagnostic()))?),
                 #[cfg(feature = "llvm")]
                 Backend::Llvm => Code::Native(crate::backend::llvm::program_code(&p, opts.math).map_err(|e| Diagnostics::single(&f.file, e.to_diagnostic()))?),
                 #[cfg(not(feature = "llvm"))]
