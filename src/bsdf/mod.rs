@@ -60,7 +60,7 @@
 //! catalogue formula beside cosine sampling's.
 
 pub mod chi2;
-mod dist;
+pub(crate) mod dist;
 pub mod validate;
 
 use crate::backend::{Columns, Evaluator, Kernel};

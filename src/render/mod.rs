@@ -38,6 +38,7 @@
 
 pub(crate) mod camera;
 pub mod compare;
+pub mod envmap;
 pub mod image;
 pub mod mesh;
 pub mod plan;
