@@ -21,6 +21,8 @@
 //! # Bad input
 //! Missing or unreadable files, files over [`MAX_MAP_BYTES`], dimensions over [`MAX_WIDTH`] × [`MAX_HEIGHT`],
 //! truncated data, and NaN, infinite or negative values are errors naming the file (and the first bad pixel).
+//! Negative values no larger than 10⁻³ of the map's largest value are lossy compression's ringing (DWAB
+//! maps have them next to dark pixels) and are read as 0.
 //!
 //! Cost: building is one pass over the pixels plus the distribution's cumulative sums (O(W·H)); a sample is two
 //! binary searches, a density one table read.
@@ -88,6 +90,16 @@ impl EnvMap {
         check_size(pixels.width, pixels.height)?;
         if pixels.rgb.len() != pixels.width * pixels.height {
             return Err(format!("{} pixels for a {}×{} map", pixels.rgb.len(), pixels.width, pixels.height));
+        }
+        // Lossy compression (DWAA/DWAB: Blender's maps) rings slightly below 0 next to dark pixels: values down to
+        // −10⁻³ of the map's largest value are taken as 0; anything more negative is an error.
+        let max = pixels.rgb.iter().flatten().filter(|c| c.is_finite()).fold(0.0f32, |m, c| m.max(*c));
+        let floor = -1e-3 * max;
+        let mut pixels = pixels;
+        for c in pixels.rgb.iter_mut().flatten() {
+            if *c < 0.0 && *c >= floor {
+                *c = 0.0;
+            }
         }
         if let Some(i) = pixels.rgb.iter().position(|p| p.iter().any(|c| !c.is_finite() || *c < 0.0)) {
             let p = pixels.rgb[i];

@@ -36,6 +36,7 @@
 //! CPU/wall ratio — inside a fused program F's own time is not separable, so benches report the batched
 //! kernel's ns/element measured beside it. Measured numbers: BENCHMARKS.md.
 
+pub mod bvh;
 pub(crate) mod camera;
 pub mod compare;
 pub mod envmap;
@@ -46,6 +47,7 @@ pub mod program;
 pub mod raster;
 pub mod scene;
 pub mod shade;
+pub mod trace;
 
 use crate::ir::InputSet;
 use crate::backend::Evaluator;
@@ -192,6 +194,12 @@ pub struct Scene {
     pub lights: Vec<Light>,
     pub materials: Vec<Material>,
     pub objects: Vec<Object>,
+    /// The scene's `[environment]`: the scene then renders through the ray tracer ([`trace`]).
+    pub environment: Option<Arc<envmap::EnvMap>>,
+    /// Samples per pixel of the ray tracer (scene key `spp`; [`RenderOptions::spp`] overrides it).
+    pub spp: usize,
+    /// Shadow rays for point and directional lights (scene key `shadows`; renders through [`trace`]).
+    pub shadows: bool,
 }
 
 /// How to render.
@@ -215,6 +223,10 @@ pub struct RenderOptions {
     /// ([`program::MAX_PROGRAM_NODES`] by default); a material past it is shaded per light by
     /// [`program::EvalShader`] with its compiled kernels (the same colours).
     pub program_budget: usize,
+    /// Samples per pixel for the ray tracer, 1..=[`trace::MAX_SPP`]; `None` takes the scene's [`Scene::spp`].
+    pub spp: Option<usize>,
+    /// Which directions the ray tracer's environment estimator draws.
+    pub strategy: trace::Strategy,
 }
 
 impl Default for RenderOptions {
@@ -227,6 +239,8 @@ impl Default for RenderOptions {
             aa: None,
             cancel: Default::default(),
             program_budget: program::MAX_PROGRAM_NODES,
+            spp: None,
+            strategy: trace::Strategy::Mis,
         }
     }
 }
@@ -307,6 +321,12 @@ pub fn render_observed(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u
     let aa = opts.aa.unwrap_or(scene.aa);
     if !(1..=MAX_AA).contains(&aa) {
         return Err(format!("supersampling {aa}×{aa} is outside 1..={MAX_AA} samples per pixel side"));
+    }
+    if trace::traced(scene) {
+        // The ray tracer: supersampling is its samples per pixel, so `aa` does not apply.
+        let (hdr, stats) = trace::render_hdr(scene, opts)?;
+        let image = trace::to_image(&hdr, opts.transfer);
+        return Ok((Frame { image, covered: hdr.covered }, stats));
     }
     if opts.threads == 0 {
         render_in_pool(scene, opts, progress)
