@@ -6,6 +6,14 @@
 //! aa = 1                         # supersampling: aa×aa samples per pixel, averaged, 1..=8 (default 1: none)
 //! background = [0, 0, 0]         # linear RGB, 0..1
 //! ambient = [1, 0, 0]            # Ia
+//! spp = 16                       # samples per pixel of the ray tracer, 1..=65536 (default 16)
+//! shadows = false                # shadow rays for the lights (renders through the ray tracer)
+//!
+//! [environment]                  # optional: environment light, rendered by the ray tracer (`super::trace`)
+//! path = "sky.exr"               # a latitude-longitude .exr or .hdr, relative to this file; or
+//! # color = [1, 1, 1]            #  a constant sky (exactly one of the two)
+//! rotate = 0                     # degrees about +y (the map's centre looks along +z; `super::envmap`)
+//! intensity = 1                  # multiplies the map
 //!
 //! [camera]
 //! position = [0, 0, 6]
@@ -382,10 +390,11 @@ fn check(name: &str, src: &str, base: &Path, size: Option<(usize, usize)>, files
             _ => Err(Diagnostic::error("[environment] needs exactly one of `path` (a map) and `color` (a constant sky)")
                 .at(span_of(e.span()), "this environment")),
         };
+        let intensity_ok = intensity.is_finite() && intensity >= 0.0;
         match made {
             // A bad intensity or rotation is blamed on its own key when it has one.
-            Err(mut diag) if !(intensity.is_finite() && intensity >= 0.0) || !rotate.is_finite() => {
-                let span = if !(intensity.is_finite() && intensity >= 0.0) { d.intensity.span() } else { d.rotate.span() };
+            Err(mut diag) if !(intensity_ok && rotate.is_finite()) => {
+                let span = if intensity_ok { d.rotate.span() } else { d.intensity.span() };
                 diag.primary = Some((at(span), "here".into()));
                 before.push(diag)
             }
