@@ -214,4 +214,15 @@ mod tests {
         assert!(parse_size("0").is_err());
         assert!(parse_size("axb").is_err());
     }
+
+    #[test]
+    fn spp_is_bounded_with_a_hint_and_strategies_parse() {
+        assert_eq!(parse_spp("64").unwrap(), 64);
+        assert!(parse_spp("0").unwrap_err().contains("outside 1..=65536"));
+        assert!(parse_spp("1000000000").unwrap_err().contains("a few hundred"));
+        assert!(parse_spp("x").is_err());
+        assert_eq!(parse_strategy("env").unwrap(), r::trace::Strategy::Env);
+        assert!(parse_strategy("light").unwrap_err().contains("mis"));
+        assert!(is_exr_path(Path::new("a/b.EXR")) && !is_exr_path(Path::new("b.png")));
+    }
 }

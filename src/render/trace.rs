@@ -382,8 +382,8 @@ fn pixel(scene: &Scene, bvh: &Bvh, shading: &[Shading], cam: &CameraRays, strate
                 if let (Some(smp), false) = (&sh.sampler, from_sampler.is_empty()) {
                     let wi: Vec<[f64; 3]> = from_sampler.iter().map(|&gi| group[gi].1.v).collect();
                     let u: Vec<[f64; 2]> = from_sampler.iter().map(|&gi| [uni(group[gi].0, 3), uni(group[gi].0, 4)]).collect();
-                    let s = smp.sample_many(&wi, &u).map_err(|e| e.to_string());
-                    if let Ok(s) = s {
+                    // Every V here is above the horizon (`surface`), so the sampler accepts it.
+                    if let Ok(s) = smp.sample_many(&wi, &u) {
                         for (j, &gi) in from_sampler.iter().enumerate() {
                             bsdf_dirs[gi] = s.wo[j];
                         }
@@ -547,4 +547,27 @@ pub fn is_lobe_exr(bytes: &[u8]) -> bool {
     let head = &bytes[..bytes.len().min(4096)];
     head.starts_with(&[0x76, 0x2f, 0x31, 0x01])
         && head.windows(NAME.len()).position(|w| w == NAME).is_some_and(|i| head[i + NAME.len()..].get(..8) == Some(b"\x04\0\0\0lobe"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lobes_exr_files_are_recognised_and_others_are_not() {
+        let f = HdrFrame { width: 3, height: 2, rgb: vec![[0.5, 1.0, 2.0]; 6], covered: vec![true; 6] };
+        let bytes = encode_exr(&f).unwrap();
+        assert!(is_lobe_exr(&bytes));
+        let other = crate::render::envmap::encode_exr(3, 2, &f.rgb).unwrap().iter().map(|&b| if b == b'l' { b'x' } else { b }).collect::<Vec<u8>>();
+        assert!(!is_lobe_exr(&other));
+        assert!(!is_lobe_exr(b"\x89PNG"));
+    }
+
+    #[test]
+    fn cosine_directions_are_unit_and_above_the_horizon() {
+        for k in 0..100 {
+            let l = cosine((k as f64 + 0.5) / 100.0, (k * 37 % 100) as f64 / 100.0);
+            assert!((l[0] * l[0] + l[1] * l[1] + l[2] * l[2] - 1.0).abs() < 1e-12 && l[2] > 0.0);
+        }
+    }
 }

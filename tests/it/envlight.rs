@@ -340,3 +340,69 @@ fn blenders_forest_map_loads() {
         assert!((pdf - m.pdf(d)).abs() <= 1e-9 * pdf);
     }
 }
+
+/// BENCHMARKS.md's environment-light numbers (a report, not a check: `cargo test --release --test it
+/// envlight::report -- --ignored --nocapture`; needs blender-data's forest.exr). Equal-time RMSE of MIS,
+/// BSDF-only and environment-only against a 4096-spp MIS reference for a shiny and a rough GGX sphere; camera
+/// samples per second on 2 threads for the papers' sphere under forest.exr; BVH build times.
+#[test]
+#[ignore = "report, not a check: prints timings"]
+fn report() {
+    let forest = "/usr/share/blender/datafiles/studiolights/world/forest.exr";
+    assert!(Path::new(forest).is_file(), "install blender-data");
+    let root = env!("CARGO_MANIFEST_DIR");
+    let dir = crate::scratch_dir("envlight", "report");
+    let cpu = |s: &r::RenderStats| s.shade_cpu.as_secs_f64();
+    for (name, alpha) in [("shiny", 0.05), ("rough", 0.5)] {
+        let src = format!(
+            "width = 64\nheight = 64\n[environment]\npath = \"{forest}\"\n[camera]\nposition = [0, 0, 4]\nfov = 32\n\
+             [materials.m]\nbrdf = \"{root}/examples/explorer/ggx.brdf\"\nparams = {{ alpha = {alpha}, f0 = 0.5 }}\nka = 0\nkd = 0.2\nks = 0.8\ntimes_nl = true\n\
+             [[object]]\nshape = \"sphere\"\nmaterial = \"m\"\ntessellation = 40\n"
+        );
+        let s = parse(&dir, &src).unwrap();
+        let go = |spp: usize, strategy: Strategy| trace::render_hdr(&s, &RenderOptions { threads: 2, spp: Some(spp), strategy, ..RenderOptions::default() }).unwrap();
+        let (reference, _) = go(4096, Strategy::Mis);
+        let rmse = |f: &HdrFrame| {
+            let (mut e, mut n) = (0.0, 0);
+            for ((p, q), c) in f.rgb.iter().zip(&reference.rgb).zip(&reference.covered) {
+                if *c {
+                    e += (0..3).map(|k| (f64::from(p[k]) - f64::from(q[k])).powi(2)).sum::<f64>() / 3.0;
+                    n += 1;
+                }
+            }
+            (e / n as f64).sqrt()
+        };
+        // Equal time: RMSE scales as 1/√time, so RMSE·√(CPU seconds) is the RMSE one CPU-second buys.
+        for strategy in [Strategy::Bsdf, Strategy::Env, Strategy::Mis] {
+            let (f, st) = go(64, strategy);
+            let (e, t) = (rmse(&f), cpu(&st));
+            println!("{name} (GGX α = {alpha}) {strategy:?}: 64 spp RMSE {e:.5} in {t:.3} s CPU → RMSE at 1 CPU-s {:.5}", e * t.sqrt());
+        }
+    }
+    // The papers' sphere under forest.exr.
+    let paper = std::fs::read_to_string(format!("{root}/examples/scenes/paper_sphere.toml"))
+        .unwrap()
+        .replace("../brdfs/", &format!("{root}/examples/brdfs/"))
+        .replace("[camera]", &format!("spp = 16\n[environment]\npath = \"{forest}\"\n[camera]"));
+    let s = parse(&dir, &paper).unwrap();
+    let t = std::time::Instant::now();
+    let (_, st) = trace::render_hdr(&s, &RenderOptions { threads: 2, ..RenderOptions::default() }).unwrap();
+    let wall = t.elapsed().as_secs_f64();
+    let samples = (s.width * s.height * 16) as f64;
+    println!(
+        "paper sphere under forest.exr, {}×{} at 16 spp, 2 threads: {:.2} s wall, {:.2} M camera samples/s ({:.2} M/s per CPU-second; {} of them hit the sphere)",
+        s.width,
+        s.height,
+        wall,
+        samples / wall / 1e6,
+        samples / cpu(&st) / 1e6,
+        st.visible_pixels
+    );
+    for tess in [20u32, 200] {
+        let mesh = std::sync::Arc::new(lobe::render::mesh::Mesh::sphere(1.0, tess, 2 * tess));
+        let objects = vec![r::Object { mesh: mesh.clone(), material: 0, cull_backfaces: true }];
+        let t = std::time::Instant::now();
+        let bvh = lobe::render::bvh::Bvh::build(&objects);
+        println!("BVH build: {} triangles in {:.2} ms", bvh.len(), t.elapsed().as_secs_f64() * 1e3);
+    }
+}
