@@ -406,3 +406,39 @@ fn report() {
         println!("BVH build: {} triangles in {:.2} ms", bvh.len(), t.elapsed().as_secs_f64() * 1e3);
     }
 }
+
+fn lobe_cmd(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_lobe")).args(args).current_dir(env!("CARGO_MANIFEST_DIR")).output().unwrap()
+}
+
+#[test]
+fn render_writes_linear_exr_and_refuses_what_it_cannot_do() {
+    let dir = crate::scratch_dir("envlight", "cli");
+    let out = dir.join("env.exr");
+    let o = out.to_str().unwrap();
+    for _ in 0..2 {
+        // The second run replaces the file without --force: lobe wrote it.
+        let r = lobe_cmd(&["render", "examples/scenes/environment.toml", "--size", "24", "--spp", "2", "-q", "-o", o]);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    }
+    let bytes = std::fs::read(&out).unwrap();
+    assert!(trace::is_lobe_exr(&bytes));
+    let px = envmap::decode(&bytes).unwrap();
+    assert_eq!((px.width, px.height), (24, 24));
+    // Linear, unclamped radiance: the sky's sun is far above 1 somewhere only if seen; the sphere's pixels are > 0.
+    assert!(px.rgb.iter().all(|p| p.iter().all(|c| c.is_finite() && *c >= 0.0)) && px.rgb[12 * 24 + 12][0] > 0.0);
+    // A rasterised scene has no float image to write.
+    let r = lobe_cmd(&["render", "examples/scenes/paper_sphere.toml", "--size", "8", "-o", dir.join("p.exr").to_str().unwrap()]);
+    let e = String::from_utf8_lossy(&r.stderr);
+    assert!(!r.status.success() && e.contains("OpenEXR output needs the ray tracer") && e.contains("[environment]"), "{e}");
+    assert!(!dir.join("p.exr").exists());
+    for bad in ["0", "1000000000"] {
+        let r = lobe_cmd(&["render", "examples/scenes/environment.toml", "--spp", bad, "-o", dir.join("x.png").to_str().unwrap()]);
+        let e = String::from_utf8_lossy(&r.stderr);
+        assert!(!r.status.success() && e.contains("outside 1..=65536"), "{e}");
+    }
+    // A foreign .exr is not overwritten without --force.
+    std::fs::write(dir.join("theirs.exr"), envmap::encode_exr(2, 2, &[[1.0; 3]; 4]).unwrap().iter().map(|&b| if b == b'l' { b'L' } else { b }).collect::<Vec<u8>>()).unwrap();
+    let r = lobe_cmd(&["render", "examples/scenes/environment.toml", "--size", "8", "--spp", "1", "-o", dir.join("theirs.exr").to_str().unwrap()]);
+    assert!(!r.status.success(), "overwrote a foreign file");
+}
