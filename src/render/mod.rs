@@ -12,6 +12,10 @@
 //!    frame; tiles no triangle touches are filled with the background and cost nothing else;
 //! 3. PNG encoding and atomic output ([`image`]).
 //!
+//! A scene with an `[environment]` (or `shadows = true`) renders through the ray tracer instead ([`trace`]:
+//! camera rays and occlusion through a BVH, [`envmap`]'s importance sampling combined with the formulas'
+//! samplers by MIS), into linear float RGB; [`render`] converts it with the same transfer.
+//!
 //! A measured material (a MERL table, [`crate::measured`]) has no formula: its three channels are evaluators
 //! that [`program::EvalShader`] calls per lit pixel and light, with the same lighting model in Rust.
 //!
@@ -324,7 +328,7 @@ pub fn render_observed(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u
     }
     if trace::traced(scene) {
         // The ray tracer: supersampling is its samples per pixel, so `aa` does not apply.
-        let (hdr, stats) = trace::render_hdr(scene, opts)?;
+        let (hdr, stats) = trace::render_hdr_observed(scene, opts, progress)?;
         let image = trace::to_image(&hdr, opts.transfer);
         return Ok((Frame { image, covered: hdr.covered }, stats));
     }
@@ -583,7 +587,8 @@ pub struct CutoffEffect {
 /// Renders `scene` again with every cut-off off and compares with `frame` (rendered with them); `None` if no
 /// material has a cut-off. Costs one more render.
 pub fn cutoff_effect(scene: &Scene, opts: &RenderOptions, frame: &Frame, stats: &RenderStats) -> Result<Option<CutoffEffect>, String> {
-    if !opts.cutoff || scene.materials.iter().all(|m| m.cutoff.is_none()) {
+    // The ray tracer applies no cut-off.
+    if !opts.cutoff || trace::traced(scene) || scene.materials.iter().all(|m| m.cutoff.is_none()) {
         return Ok(None);
     }
     let (full, _) = render(scene, &RenderOptions { cutoff: false, ..opts.clone() })?;
