@@ -109,7 +109,6 @@ fn prepare(m: &Material) -> Result<Shading, String> {
             m.name
         ));
     }
-    let evs: Vec<_> = m.kernels().collect();
     let kernels: Vec<Kernel> = m
         .program
         .channels
@@ -117,7 +116,6 @@ fn prepare(m: &Material) -> Result<Shading, String> {
         .zip(std::iter::once(m.evaluator.clone()).chain(m.green_blue.iter().flat_map(|gb| gb.iter().cloned())))
         .map(|(f, ev)| Kernel::new(f.clone(), m.program.backend, m.program.math, ev, Duration::ZERO))
         .collect();
-    debug_assert_eq!(kernels.len(), evs.len());
     let diffuse = m.kd * m.color;
     let spec = m.ks * m.coef * m.specular;
     let sampler = if lum(spec) > 0.0 {
