@@ -64,7 +64,7 @@
 //! catalogue formula beside cosine sampling's.
 
 pub mod chi2;
-mod dist;
+pub(crate) mod dist;
 pub mod mitsuba;
 pub mod validate;
 

@@ -1,4 +1,8 @@
-//! `lobe render SCENE [-o out.png] [--size 1024] [--aa 2] [--set n=200] [--backend jit|interp] [--threads N] [--stats [--json]]`
+//! `lobe render SCENE [-o out.png|out.exr] [--size 1024] [--aa 2] [--spp N] [--strategy mis|bsdf|env] [--set n=200]
+//! [--backend jit|interp] [--threads N] [--stats [--json]]`
+//!
+//! A scene with an `[environment]` or `shadows = true` renders through the ray tracer (`lobe::render::trace`);
+//! its image can be written as linear float OpenEXR (`-o x.exr`).
 
 use super::args::{self, BackendArg, Json, Output, Params};
 use super::common::{self, CliError};
@@ -10,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 #[derive(clap::Args, Debug)]
-#[command(mut_arg("output", args::help("Output PNG (default: the scene's name with .png, in the current directory)")))]
+#[command(mut_arg("output", args::help("Output PNG, or .exr (linear float RGB; ray-traced scenes) (default: the scene's name with .png, in the current directory)")))]
 #[command(mut_arg("set", args::help("Parameter values for every material that declares them, e.g. `n=200`")))]
 pub struct RenderArgs {
     /// Scene file (.toml); see examples/scenes/.
@@ -33,6 +37,14 @@ pub struct RenderArgs {
     /// Supersampling: N×N samples per pixel, averaged (1..=8; default: the scene's `aa`, else 1).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(1..=lobe::render::MAX_AA as i64))]
     pub aa: Option<u8>,
+    /// Samples per pixel of the ray tracer (scenes with an [environment] or shadows), 1..=65536 (default: the
+    /// scene's `spp`, else 16).
+    #[arg(long, value_name = "N", value_parser = parse_spp)]
+    pub spp: Option<usize>,
+    /// Which directions the ray tracer's environment estimator draws: `mis` (both, power heuristic), `bsdf`
+    /// (the material's only) or `env` (the environment's only) — the last two for measurements.
+    #[arg(long, default_value = "mis", value_parser = parse_strategy)]
+    pub strategy: r::trace::Strategy,
     /// Encode with the sRGB curve instead of the papers' linear clamp to 0..255.
     #[arg(long)]
     pub srgb: bool,
@@ -59,6 +71,24 @@ pub enum Shading {
 
 pub use lobe::render::parse_size;
 
+fn parse_spp(s: &str) -> Result<usize, String> {
+    let max = lobe::render::trace::MAX_SPP;
+    match s.trim().parse::<usize>() {
+        Ok(v) if (1..=max).contains(&v) => Ok(v),
+        Ok(v) => Err(format!("{v} samples per pixel is outside 1..={max}; a few hundred give a clean image")),
+        Err(_) => Err(format!("`{s}` is not a whole number")),
+    }
+}
+
+fn parse_strategy(s: &str) -> Result<r::trace::Strategy, String> {
+    s.parse()
+}
+
+/// Whether `path` names an OpenEXR output.
+fn is_exr_path(path: &Path) -> bool {
+    path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+}
+
 /// The default output path: `<scene stem>.png` in the current directory.
 pub fn default_output(scene: &Path) -> PathBuf {
     let stem = scene.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "render".into());
@@ -68,8 +98,12 @@ pub fn default_output(scene: &Path) -> PathBuf {
 pub fn run(a: &RenderArgs) -> Result<(), CliError> {
     let out = a.out.path.clone().unwrap_or_else(|| default_output(&a.scene));
     // Refuse a bad output path before doing any work, and write nothing unless everything succeeds.
-    a.out.force.check(&out, image::is_lobe_png)?;
-    Output::png_only(&out)?;
+    let exr = is_exr_path(&out);
+    let is_ours = if exr { r::trace::is_lobe_exr } else { image::is_lobe_png };
+    a.out.force.check(&out, is_ours)?;
+    if !exr {
+        Output::png_only(&out)?;
+    }
     let opts = LoadOptions { size: a.size, set: a.set.list()?, ..LoadOptions::default() };
     let backend = a.backend.backend()?;
     let sc = scene::load_scene(&a.scene, &opts, &super::common::scene_compiler(backend, a.backend.math.mode))?;
@@ -79,18 +113,36 @@ pub fn run(a: &RenderArgs) -> Result<(), CliError> {
         transfer: if a.srgb { Transfer::Srgb } else { Transfer::Linear },
         cutoff: true,
         aa: a.aa.map(usize::from),
+        spp: a.spp,
+        strategy: a.strategy,
         ..RenderOptions::default()
     };
+    if exr && !r::trace::traced(&sc) {
+        return Err(CliError::hint(
+            format!("`{}`: OpenEXR output needs the ray tracer, and `{}` renders through the rasteriser", out.display(), a.scene.display()),
+            "add an [environment] or `shadows = true` to the scene, or name the output .png",
+        ));
+    }
     let t0 = Instant::now();
     common::check_threads(a.threads)?;
     let bar = TileBar::new(!a.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr()));
-    let rendered = r::render_observed(&sc, &ropts, &|_, total| bar.tick(total));
-    bar.finish();
-    let (frame, stats) = rendered.map_err(CliError::msg)?;
-    let t = Instant::now();
-    let png = frame.image.encode_png().map_err(CliError::msg)?;
-    let encode = t.elapsed();
-    a.out.force.write(&out, &png, image::is_lobe_png)?;
+    let (frame, stats, bytes, encode) = if exr {
+        let rendered = r::trace::render_hdr_observed(&sc, &ropts, &|_, total| bar.tick(total));
+        bar.finish();
+        let (hdr, stats) = rendered.map_err(CliError::msg)?;
+        let t = Instant::now();
+        let bytes = r::trace::encode_exr(&hdr).map_err(CliError::msg)?;
+        let frame = r::Frame { image: r::trace::to_image(&hdr, ropts.transfer), covered: hdr.covered };
+        (frame, stats, bytes, t.elapsed())
+    } else {
+        let rendered = r::render_observed(&sc, &ropts, &|_, total| bar.tick(total));
+        bar.finish();
+        let (frame, stats) = rendered.map_err(CliError::msg)?;
+        let t = Instant::now();
+        let png = frame.image.encode_png().map_err(CliError::msg)?;
+        (frame, stats, png, t.elapsed())
+    };
+    a.out.force.write(&out, &bytes, is_ours)?;
     let wall = t0.elapsed();
     if stats.nan > 0 {
         eprintln!("warning: {} kernel evaluations returned NaN or ±inf and were shaded as no light", stats.nan);
@@ -163,5 +215,16 @@ mod tests {
         assert!(parse_size("5000").is_err());
         assert!(parse_size("0").is_err());
         assert!(parse_size("axb").is_err());
+    }
+
+    #[test]
+    fn spp_is_bounded_with_a_hint_and_strategies_parse() {
+        assert_eq!(parse_spp("64").unwrap(), 64);
+        assert!(parse_spp("0").unwrap_err().contains("outside 1..=65536"));
+        assert!(parse_spp("1000000000").unwrap_err().contains("a few hundred"));
+        assert!(parse_spp("x").is_err());
+        assert_eq!(parse_strategy("env").unwrap(), r::trace::Strategy::Env);
+        assert!(parse_strategy("light").unwrap_err().contains("mis"));
+        assert!(is_exr_path(Path::new("a/b.EXR")) && !is_exr_path(Path::new("b.png")));
     }
 }

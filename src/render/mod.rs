@@ -12,6 +12,10 @@
 //!    frame; tiles no triangle touches are filled with the background and cost nothing else;
 //! 3. PNG encoding and atomic output ([`image`]).
 //!
+//! A scene with an `[environment]` (or `shadows = true`) renders through the ray tracer instead ([`trace`]:
+//! camera rays and occlusion through a BVH, [`envmap`]'s importance sampling combined with the formulas'
+//! samplers by MIS), into linear float RGB; [`render`] converts it with the same transfer.
+//!
 //! A measured material (a MERL table, [`crate::measured`]) has no formula: its three channels are evaluators
 //! that [`program::EvalShader`] calls per lit pixel and light, with the same lighting model in Rust.
 //!
@@ -36,8 +40,10 @@
 //! CPU/wall ratio — inside a fused program F's own time is not separable, so benches report the batched
 //! kernel's ns/element measured beside it. Measured numbers: BENCHMARKS.md.
 
+pub mod bvh;
 pub(crate) mod camera;
 pub mod compare;
+pub mod envmap;
 pub mod image;
 pub mod mesh;
 pub mod plan;
@@ -45,6 +51,7 @@ pub mod program;
 pub mod raster;
 pub mod scene;
 pub mod shade;
+pub mod trace;
 
 use crate::ir::InputSet;
 use crate::backend::Evaluator;
@@ -191,6 +198,12 @@ pub struct Scene {
     pub lights: Vec<Light>,
     pub materials: Vec<Material>,
     pub objects: Vec<Object>,
+    /// The scene's `[environment]`: the scene then renders through the ray tracer ([`trace`]).
+    pub environment: Option<Arc<envmap::EnvMap>>,
+    /// Samples per pixel of the ray tracer (scene key `spp`; [`RenderOptions::spp`] overrides it).
+    pub spp: usize,
+    /// Shadow rays for point and directional lights (scene key `shadows`; renders through [`trace`]).
+    pub shadows: bool,
 }
 
 /// How to render.
@@ -214,6 +227,10 @@ pub struct RenderOptions {
     /// ([`program::MAX_PROGRAM_NODES`] by default); a material past it is shaded per light by
     /// [`program::EvalShader`] with its compiled kernels (the same colours).
     pub program_budget: usize,
+    /// Samples per pixel for the ray tracer, 1..=[`trace::MAX_SPP`]; `None` takes the scene's [`Scene::spp`].
+    pub spp: Option<usize>,
+    /// Which directions the ray tracer's environment estimator draws.
+    pub strategy: trace::Strategy,
 }
 
 impl Default for RenderOptions {
@@ -226,6 +243,8 @@ impl Default for RenderOptions {
             aa: None,
             cancel: Default::default(),
             program_budget: program::MAX_PROGRAM_NODES,
+            spp: None,
+            strategy: trace::Strategy::Mis,
         }
     }
 }
@@ -306,6 +325,12 @@ pub fn render_observed(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u
     let aa = opts.aa.unwrap_or(scene.aa);
     if !(1..=MAX_AA).contains(&aa) {
         return Err(format!("supersampling {aa}×{aa} is outside 1..={MAX_AA} samples per pixel side"));
+    }
+    if trace::traced(scene) {
+        // The ray tracer: supersampling is its samples per pixel, so `aa` does not apply.
+        let (hdr, stats) = trace::render_hdr_observed(scene, opts, progress)?;
+        let image = trace::to_image(&hdr, opts.transfer);
+        return Ok((Frame { image, covered: hdr.covered }, stats));
     }
     if opts.threads == 0 {
         render_in_pool(scene, opts, progress)
@@ -562,7 +587,8 @@ pub struct CutoffEffect {
 /// Renders `scene` again with every cut-off off and compares with `frame` (rendered with them); `None` if no
 /// material has a cut-off. Costs one more render.
 pub fn cutoff_effect(scene: &Scene, opts: &RenderOptions, frame: &Frame, stats: &RenderStats) -> Result<Option<CutoffEffect>, String> {
-    if !opts.cutoff || scene.materials.iter().all(|m| m.cutoff.is_none()) {
+    // The ray tracer applies no cut-off.
+    if !opts.cutoff || trace::traced(scene) || scene.materials.iter().all(|m| m.cutoff.is_none()) {
         return Ok(None);
     }
     let (full, _) = render(scene, &RenderOptions { cutoff: false, ..opts.clone() })?;

@@ -6,6 +6,14 @@
 //! aa = 1                         # supersampling: aa×aa samples per pixel, averaged, 1..=8 (default 1: none)
 //! background = [0, 0, 0]         # linear RGB, 0..1
 //! ambient = [1, 0, 0]            # Ia
+//! spp = 16                       # samples per pixel of the ray tracer, 1..=65536 (default 16)
+//! shadows = false                # shadow rays for the lights (renders through the ray tracer)
+//!
+//! [environment]                  # optional: environment light, rendered by the ray tracer (`super::trace`)
+//! path = "sky.exr"               # a latitude-longitude .exr or .hdr, relative to this file; or
+//! # color = [1, 1, 1]            #  a constant sky (exactly one of the two)
+//! rotate = 0                     # degrees about +y (the map's centre looks along +z; `super::envmap`)
+//! intensity = 1                  # multiplies the map
 //!
 //! [camera]
 //! position = [0, 0, 6]
@@ -76,6 +84,8 @@ mod shapes;
 pub use material::{compile_channels, BrdfCompiler, CompiledBrdf, LobeCompiler};
 
 use super::camera::Camera;
+use super::envmap::EnvMap;
+use super::trace::MAX_SPP;
 use super::{Light, LightKind, Object, Scene, MAX_AA, MAX_SIZE};
 use crate::base::diag::{Diagnostic, Diagnostics};
 use crate::base::source::Files;
@@ -211,6 +221,9 @@ pub fn parse_geometry(name: &str, src: &str, base: &Path, size: Option<(usize, u
 pub(in crate::render) fn parse_geometry_deferred(name: &str, src: &str, base: &Path, size: Option<(usize, usize)>) -> Result<Geometry, Diagnostics> {
     check(name, src, base, size, &Files::any())
 }
+
+/// Samples per pixel of the ray tracer when the scene does not say.
+pub const DEFAULT_SPP: usize = 16;
 
 /// Largest scene file read: a scene is a page of TOML (meshes live in their own files).
 pub(crate) const MAX_SCENE_BYTES: u64 = 4 << 20;
@@ -348,6 +361,49 @@ fn check(name: &str, src: &str, base: &Path, size: Option<(usize, usize)>, files
         }
     }
 
+    // Samples per pixel and the environment (read here, so a bad map is reported with the other scene errors).
+    let spp = match &file.spp {
+        None => DEFAULT_SPP,
+        Some(s) if (1..=MAX_SPP as i64).contains(s.get_ref()) => *s.get_ref() as usize,
+        Some(s) => {
+            before.push(
+                Diagnostic::error(format!("`spp` = {} is outside 1..={MAX_SPP}", s.get_ref()))
+                    .at(span_of(s.span()), "samples per pixel")
+                    .hint("a few hundred samples per pixel give a clean image; a reference a few thousand"),
+            );
+            1
+        }
+    };
+    let mut environment = None;
+    if let Some(e) = &file.environment {
+        let d = e.get_ref();
+        let (intensity, rotate) = (*d.intensity.get_ref(), *d.rotate.get_ref());
+        let at = |s: std::ops::Range<usize>| if s.is_empty() { span_of(e.span()) } else { span_of(s) };
+        let made = match (&d.path, &d.color) {
+            (Some(p), None) => EnvMap::load(&base.join(p.get_ref()), files, intensity, rotate).map_err(|m| {
+                Diagnostic::error(format!("[environment]: {m}"))
+                    .at(span_of(p.span()), "this map")
+                    .hint("a latitude-longitude OpenEXR (.exr) or Radiance (.hdr) file, relative to the scene file")
+            }),
+            (None, Some(c)) => EnvMap::constant(DVec3::from(*c.get_ref()), intensity, rotate)
+                .map_err(|m| Diagnostic::error(format!("[environment]: {m}")).at(span_of(c.span()), "linear RGB")),
+            _ => Err(Diagnostic::error("[environment] needs exactly one of `path` (a map) and `color` (a constant sky)")
+                .at(span_of(e.span()), "this environment")),
+        };
+        let intensity_ok = intensity.is_finite() && intensity >= 0.0;
+        match made {
+            // A bad intensity or rotation is blamed on its own key when it has one.
+            Err(mut diag) if !(intensity_ok && rotate.is_finite()) => {
+                let span = if intensity_ok { d.rotate.span() } else { d.intensity.span() };
+                diag.primary = Some((at(span), "here".into()));
+                before.push(diag)
+            }
+            Err(diag) => before.push(diag),
+            Ok(m) => environment = Some(Arc::new(m)),
+        }
+    }
+    let shadows = file.shadows;
+
     // Objects: a material by name (an index into the tables, compiled in stage 2), and a mesh.
     let mat_names: Vec<&String> = file.materials.keys().collect();
     let mut objects = vec![];
@@ -368,7 +424,7 @@ fn check(name: &str, src: &str, base: &Path, size: Option<(usize, usize)>, files
         }
     }
     Ok(Geometry {
-        scene: Scene { width, height, aa, camera, background, ambient, lights, materials: vec![], objects },
+        scene: Scene { width, height, aa, camera, background, ambient, lights, materials: vec![], objects, environment, spp, shadows },
         name: name.to_string(),
         src: src.to_string(),
         base: base.to_path_buf(),

@@ -33,6 +33,34 @@ pub(super) struct SceneFile {
     pub materials: BTreeMap<String, Spanned<MaterialDef>>,
     #[serde(default, rename = "object")]
     pub objects: Vec<Spanned<ObjectDef>>,
+    /// Environment light (the scene then renders through the ray tracer).
+    pub environment: Option<Spanned<EnvironmentDef>>,
+    /// Samples per pixel of the ray tracer.
+    pub spp: Option<Spanned<i64>>,
+    /// Shadow rays for the point and directional lights (ray tracer).
+    #[serde(default)]
+    pub shadows: bool,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct EnvironmentDef {
+    /// A latitude–longitude map (.exr or .hdr), relative to the scene file.
+    pub path: Option<Spanned<String>>,
+    /// A constant sky.
+    pub color: Option<Spanned<V3>>,
+    /// Degrees about +y.
+    #[serde(default = "zero")]
+    pub rotate: Spanned<f64>,
+    #[serde(default = "one")]
+    pub intensity: Spanned<f64>,
+}
+
+fn zero() -> Spanned<f64> {
+    Spanned::new(0..0, 0.0)
+}
+fn one() -> Spanned<f64> {
+    Spanned::new(0..0, 1.0)
 }
 
 #[derive(Deserialize)]

@@ -1,0 +1,571 @@
+//! The ray-traced renderer: environment light with multiple importance sampling, and shadows.
+//!
+//! A scene with an `[environment]` (or `shadows = true`) renders here instead of through the rasteriser: per
+//! pixel, `spp` camera rays jittered over the pixel (a box filter) find the nearest triangle through the
+//! [`Bvh`]; at the hit the interpolated normal and tangent give the shading frame (two-sided: a back face turns
+//! to the viewer), and the outgoing radiance is estimated by Monte Carlo.
+//!
+//! # Lighting model (docs/scenes.md states it for users)
+//! Under an environment of radiance Le(ω), with V the direction to the camera and cos = N·ω:
+//!
+//! Lo = ∫ Le(ω) · [kd·C·cos⁺/π + ks·coef·Cs·F(ω, V)·(cos if `times_nl`)] dω  +  Σ_lights Il·(kd·NL·C + ks·coef·F·Cs)
+//!
+//! — the point-light model's two terms with the diffuse term a Lambertian BRDF of albedo kd·C (so a white
+//! `kd = 1` surface under a white sky is 1), F as in the point-light model (the papers' formulas include their
+//! cosine; a BRDF proper sets `times_nl`), the ambient term off, and the cut-off not applied (it is a shortcut
+//! for point lights). A ray that misses everything sees the environment. Without an environment (a scene that
+//! only asks for `shadows`) misses see `background` and the ambient term ka·Ia·C is added, as in the rasteriser.
+//! Point and directional lights are evaluated at every camera sample, with a shadow ray when `shadows = true`.
+//!
+//! # Estimator
+//! Each camera sample draws one direction from the material and one from the environment and combines them with
+//! the power heuristic (Veach 1997; pbrt-v4's `PathIntegrator` direct lighting). The material's density is a
+//! mixture: cosine with probability α = kd·lum(C) / (kd·lum(C) + ks·lum(coef·Cs)), else the formula's
+//! [`Sampler`] (which samples the incident direction given V as its `wi`: exact for reciprocal formulas,
+//! still unbiased for the others since every weight uses that sampler's own `pdf`). [`Strategy::Bsdf`] and
+//! [`Strategy::Env`] keep one of the two (for measurements). Occlusion: a shadow ray per direction against the
+//! same BVH.
+//!
+//! Determinism: sample k of pixel p draws the uniforms `counter_unit(seed(p), 8k + j)`, whoever computes it,
+//! and each pixel is summed in sample order by one thread, so 1 and N threads give the same bytes.
+//!
+//! Cost: per camera sample one ray through the BVH, two or three shadow rays, ~3 evaluations of F and two
+//! sampler densities; measured numbers in BENCHMARKS.md.
+
+use super::bvh::Bvh;
+use super::mesh::onb_tangent;
+use super::{LightKind, Material, RenderOptions, RenderStats, Scene};
+use crate::backend::Kernel;
+use crate::base::rng::counter_unit;
+use crate::bsdf::{Options as SamplerOptions, Sampler, LUMINANCE};
+use glam::DVec3;
+use rayon::prelude::*;
+use std::f64::consts::PI;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+/// Most samples per pixel ([`Scene::spp`], `lobe render --spp`).
+pub const MAX_SPP: usize = 1 << 16;
+
+/// Which directions the environment estimator draws.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Strategy {
+    /// Both, combined by the power heuristic.
+    #[default]
+    Mis,
+    /// The material's density only.
+    Bsdf,
+    /// The environment's density only.
+    Env,
+}
+
+impl std::str::FromStr for Strategy {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Strategy, String> {
+        match s {
+            "mis" => Ok(Strategy::Mis),
+            "bsdf" => Ok(Strategy::Bsdf),
+            "env" => Ok(Strategy::Env),
+            _ => Err(format!("unknown strategy `{s}`; expected `mis`, `bsdf` or `env`")),
+        }
+    }
+}
+
+/// A linear-light frame: RGB per pixel (row-major, row 0 at the top) and which pixel centres see a surface.
+#[derive(Clone, Debug)]
+pub struct HdrFrame {
+    pub width: usize,
+    pub height: usize,
+    pub rgb: Vec<[f32; 3]>,
+    pub covered: Vec<bool>,
+}
+
+/// Whether `scene` renders through this module (an environment, or shadows).
+pub fn traced(scene: &Scene) -> bool {
+    scene.environment.is_some() || scene.shadows
+}
+
+/// A material prepared for tracing.
+struct Shading {
+    sampler: Option<Sampler>,
+    diffuse: DVec3,
+    spec: DVec3,
+    times_nl: bool,
+    /// cos and sin of the tangent angle.
+    rot: (f64, f64),
+    /// Probability of the cosine part of the material's density.
+    alpha: f64,
+    channels: usize,
+}
+
+fn lum(c: DVec3) -> f64 {
+    c.x * LUMINANCE[0] + c.y * LUMINANCE[1] + c.z * LUMINANCE[2]
+}
+
+fn prepare(m: &Material) -> Result<Shading, String> {
+    if m.program.channels.is_empty() {
+        return Err(format!(
+            "material `{}`: a measured table cannot be rendered under an environment or with shadows yet",
+            m.name
+        ));
+    }
+    let kernels: Vec<Kernel> = m
+        .program
+        .channels
+        .iter()
+        .zip(std::iter::once(m.evaluator.clone()).chain(m.green_blue.iter().flat_map(|gb| gb.iter().cloned())))
+        .map(|(f, ev)| Kernel::new(f.clone(), m.program.backend, m.program.math, ev, Duration::ZERO))
+        .collect();
+    let diffuse = m.kd * m.color;
+    let spec = m.ks * m.coef * m.specular;
+    let sampler = if lum(spec) > 0.0 {
+        Some(Sampler::build_channels(&kernels, &m.params, &SamplerOptions::default()).map_err(|d| format!("material `{}`: {d}", m.name))?)
+    } else {
+        None
+    };
+    let (wd, ws) = (lum(diffuse).max(0.0), if sampler.is_some() { lum(spec).max(0.0) } else { 0.0 });
+    let alpha = if wd + ws > 0.0 { wd / (wd + ws) } else { 1.0 };
+    let (s, c) = m.tangent_angle_deg.to_radians().sin_cos();
+    Ok(Shading { sampler, diffuse, spec, times_nl: m.times_nl, rot: (c, s), alpha, channels: kernels.len() })
+}
+
+/// A camera sample's surface point.
+#[derive(Clone, Copy)]
+struct Surface {
+    material: usize,
+    /// Offset origin for rays leaving the surface.
+    origin: DVec3,
+    ng: DVec3,
+    /// The shading frame: X, Y, N.
+    x: DVec3,
+    y: DVec3,
+    n: DVec3,
+    /// V in the local frame.
+    v: [f64; 3],
+}
+
+impl Surface {
+    fn local(&self, w: DVec3) -> [f64; 3] {
+        [w.dot(self.x), w.dot(self.y), w.dot(self.n)]
+    }
+    fn world(&self, l: [f64; 3]) -> DVec3 {
+        self.x * l[0] + self.y * l[1] + self.n * l[2]
+    }
+}
+
+/// One direction to evaluate at a surface: local L, its world direction, what to multiply f·Li by.
+struct Job {
+    sample: usize,
+    l: [f64; 3],
+    world: DVec3,
+    /// Incident radiance times the estimator's weight (MIS weight / pdf, or 1 for a light).
+    scale: DVec3,
+    /// Needs a shadow ray, up to this distance (a point light's).
+    shadow: bool,
+    tmax: f64,
+    /// A light's direct term: also kd·NL·C without the 1/π of the environment's Lambertian term.
+    light: bool,
+}
+
+/// Renders `scene` with the ray tracer into linear RGB.
+pub fn render_hdr(scene: &Scene, opts: &RenderOptions) -> Result<(HdrFrame, RenderStats), String> {
+    render_hdr_observed(scene, opts, &|_, _| {})
+}
+
+/// [`render_hdr`], calling `progress(done, total)` (rows) from the worker threads after each row.
+pub fn render_hdr_observed(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64, u64) + Sync)) -> Result<(HdrFrame, RenderStats), String> {
+    if opts.threads > super::MAX_THREADS {
+        return Err(format!("{} worker threads is more than {}; 0 uses one per core", opts.threads, super::MAX_THREADS));
+    }
+    let spp = opts.spp.unwrap_or(scene.spp);
+    if !(1..=MAX_SPP).contains(&spp) {
+        return Err(format!("{spp} samples per pixel is outside 1..={MAX_SPP}"));
+    }
+    let run = || render_in_pool(scene, opts, spp, progress);
+    if opts.threads == 0 {
+        run()
+    } else {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(opts.threads)
+            .build()
+            .map_err(|e| format!("cannot start {} threads: {e}", opts.threads))?
+            .install(run)
+    }
+}
+
+fn render_in_pool(scene: &Scene, opts: &RenderOptions, spp: usize, progress: &(dyn Fn(u64, u64) + Sync)) -> Result<(HdrFrame, RenderStats), String> {
+    let t0 = Instant::now();
+    let bvh = Bvh::build(&scene.objects);
+    let setup = t0.elapsed();
+    let tc = Instant::now();
+    let shading: Vec<Shading> = scene.materials.iter().map(prepare).collect::<Result<_, _>>()?;
+    let program_compile = tc.elapsed();
+    let (w, h) = (scene.width, scene.height);
+    let cam = CameraRays::new(scene);
+    let evals = AtomicU64::new(0);
+    let nan = AtomicU64::new(0);
+    let visible = AtomicU64::new(0);
+    let shade_cpu = AtomicU64::new(0);
+    let rows_done = AtomicU64::new(0);
+    let mut rgb = vec![[0f32; 3]; w * h];
+    let mut covered = vec![false; w * h];
+    rgb.par_chunks_mut(w).zip(covered.par_chunks_mut(w)).enumerate().try_for_each(|(y, (row, cov))| {
+        if opts.cancel.is_cancelled() {
+            return Err(());
+        }
+        let c0 = super::thread_cpu();
+        let mut counts = Counts::default();
+        for x in 0..w {
+            let (c, hit) = pixel(scene, &bvh, &shading, &cam, opts.strategy, x, y, spp, &mut counts);
+            row[x] = [c.x as f32, c.y as f32, c.z as f32];
+            cov[x] = hit;
+        }
+        evals.fetch_add(counts.evals, Ordering::Relaxed);
+        nan.fetch_add(counts.nan, Ordering::Relaxed);
+        visible.fetch_add(counts.visible, Ordering::Relaxed);
+        shade_cpu.fetch_add(super::thread_cpu().saturating_sub(c0), Ordering::Relaxed);
+        progress(rows_done.fetch_add(1, Ordering::Relaxed) + 1, h as u64);
+        Ok(())
+    })
+    .map_err(|_| format!("the render stopped: {}", opts.cancel.check().err().map(|c| c.to_string()).unwrap_or_default()))?;
+    opts.cancel.check().map_err(|c| format!("the render stopped: {c}"))?;
+    let stats = RenderStats {
+        width: w,
+        height: h,
+        threads: rayon::current_num_threads(),
+        triangles: bvh.len(),
+        visible_pixels: visible.into_inner(),
+        evals: evals.into_inner(),
+        nan: nan.into_inner(),
+        setup,
+        shade_cpu: Duration::from_nanos(shade_cpu.into_inner()),
+        program_compile,
+        render_wall: t0.elapsed(),
+        ..RenderStats::default()
+    };
+    Ok((HdrFrame { width: w, height: h, rgb, covered }, stats))
+}
+
+#[derive(Default)]
+struct Counts {
+    evals: u64,
+    nan: u64,
+    /// Camera samples that hit a surface.
+    visible: u64,
+}
+
+/// Camera rays: the pinhole of [`super::camera::Camera`] (the rasteriser's projection).
+struct CameraRays {
+    eye: DVec3,
+    f: DVec3,
+    s: DVec3,
+    u: DVec3,
+    tan_y: f64,
+    aspect: f64,
+    w: f64,
+    h: f64,
+}
+
+impl CameraRays {
+    fn new(scene: &Scene) -> CameraRays {
+        let c = &scene.camera;
+        let f = (c.look_at - c.position).normalize();
+        let s = f.cross(c.up).normalize();
+        let u = s.cross(f);
+        let (w, h) = (scene.width as f64, scene.height as f64);
+        CameraRays { eye: c.position, f, s, u, tan_y: (c.fov_deg.to_radians() / 2.0).tan(), aspect: w / h, w, h }
+    }
+    /// The ray through image point (px, py) in pixels from the top-left corner.
+    fn dir(&self, px: f64, py: f64) -> DVec3 {
+        let sx = (2.0 * px / self.w - 1.0) * self.tan_y * self.aspect;
+        let sy = (1.0 - 2.0 * py / self.h) * self.tan_y;
+        (self.f + self.s * sx + self.u * sy).normalize()
+    }
+}
+
+fn pixel_seed(x: usize, y: usize, w: usize) -> u64 {
+    (y * w + x) as u64 ^ 0x6C6F_6265_656E_7600
+}
+
+/// The surface a camera ray hits, with its shading frame; `None` on a miss.
+fn surface(scene: &Scene, bvh: &Bvh, shading: &[Shading], o: DVec3, d: DVec3) -> Option<Option<Surface>> {
+    let hit = bvh.intersect(o, d, f64::INFINITY)?;
+    let obj = &scene.objects[hit.tri.object as usize];
+    let mesh = &obj.mesh;
+    let t = mesh.triangles[hit.tri.tri as usize].map(|i| i as usize);
+    let b = [1.0 - hit.b1 - hit.b2, hit.b1, hit.b2];
+    let p = o + d * hit.t;
+    let mut ng = (mesh.positions[t[1]] - mesh.positions[t[0]]).cross(mesh.positions[t[2]] - mesh.positions[t[0]]).normalize_or_zero();
+    let mut n = (mesh.normals[t[0]] * b[0] + mesh.normals[t[1]] * b[1] + mesh.normals[t[2]] * b[2]).normalize_or_zero();
+    if n == DVec3::ZERO {
+        n = ng;
+    }
+    let v = -d;
+    if ng.dot(v) < 0.0 {
+        ng = -ng;
+        n = -n;
+    }
+    // V below the interpolated normal's horizon (a silhouette of a tessellated surface): shade with the
+    // geometric normal there, which faces the viewer.
+    if n.dot(v) <= 1e-6 {
+        n = ng;
+    }
+    if n.dot(v) <= 1e-9 {
+        return Some(None);
+    }
+    let sh = &shading[obj.material];
+    let tan = if mesh.tangents.len() == mesh.positions.len() {
+        mesh.tangents[t[0]] * b[0] + mesh.tangents[t[1]] * b[1] + mesh.tangents[t[2]] * b[2]
+    } else {
+        onb_tangent(n)
+    };
+    let u = (tan - n * n.dot(tan)).try_normalize().unwrap_or_else(|| onb_tangent(n));
+    let bt = n.cross(u);
+    let (c, s) = sh.rot;
+    let (x, y) = (u * c + bt * s, bt * c - u * s);
+    let eps = 1e-9 * bvh.extent.max(1.0) + 1e-9 * p.abs().max_element();
+    let mut surf = Surface { material: obj.material, origin: p + ng * eps, ng, x, y, n, v: [0.0; 3] };
+    surf.v = surf.local(v);
+    Some(Some(surf))
+}
+
+/// Estimates pixel (x, y): its colour and whether its centre sees a surface.
+#[allow(clippy::too_many_arguments)]
+fn pixel(scene: &Scene, bvh: &Bvh, shading: &[Shading], cam: &CameraRays, strategy: Strategy, x: usize, y: usize, spp: usize, counts: &mut Counts) -> (DVec3, bool) {
+    let seed = pixel_seed(x, y, scene.width);
+    let uni = |k: usize, j: usize| counter_unit(seed, (8 * k + j) as u64);
+    let env = scene.environment.as_deref().filter(|e| e.emits());
+    let miss = |d: DVec3| match scene.environment.as_deref() {
+        Some(e) => e.radiance(d),
+        None => scene.background,
+    };
+    let covered = bvh.intersect(cam.eye, cam.dir(x as f64 + 0.5, y as f64 + 0.5), f64::INFINITY).is_some();
+    let mut sum = DVec3::ZERO;
+    let mut surfs: Vec<(usize, Surface)> = Vec::with_capacity(spp);
+    for k in 0..spp {
+        let d = cam.dir(x as f64 + uni(k, 0), y as f64 + uni(k, 1));
+        match surface(scene, bvh, shading, cam.eye, d) {
+            None => sum += miss(d),
+            Some(None) => counts.visible += 1,
+            Some(Some(s)) => {
+                counts.visible += 1;
+                if scene.environment.is_none() {
+                    let m = &scene.materials[s.material];
+                    sum += m.ka * scene.ambient * m.color;
+                }
+                surfs.push((k, s));
+            }
+        }
+    }
+    // One batch per material present in this pixel (usually one).
+    let mut mats: Vec<usize> = surfs.iter().map(|(_, s)| s.material).collect();
+    mats.sort_unstable();
+    mats.dedup();
+    for mi in mats {
+        let sh = &shading[mi];
+        let group: Vec<&(usize, Surface)> = surfs.iter().filter(|(_, s)| s.material == mi).collect();
+        let mut jobs: Vec<Job> = vec![];
+        if let Some(env) = env {
+            // The material's directions: the cosine part or the sampler, by the third uniform.
+            let mut from_sampler: Vec<usize> = vec![];
+            let mut bsdf_dirs: Vec<[f64; 3]> = vec![[0.0; 3]; group.len()];
+            if strategy != Strategy::Env {
+                for (gi, (k, _)) in group.iter().enumerate() {
+                    if uni(*k, 2) < sh.alpha || sh.sampler.is_none() {
+                        bsdf_dirs[gi] = cosine(uni(*k, 3), uni(*k, 4));
+                    } else {
+                        from_sampler.push(gi);
+                    }
+                }
+                if let (Some(smp), false) = (&sh.sampler, from_sampler.is_empty()) {
+                    let wi: Vec<[f64; 3]> = from_sampler.iter().map(|&gi| group[gi].1.v).collect();
+                    let u: Vec<[f64; 2]> = from_sampler.iter().map(|&gi| [uni(group[gi].0, 3), uni(group[gi].0, 4)]).collect();
+                    // Every V here is above the horizon (`surface`), so the sampler accepts it.
+                    if let Ok(s) = smp.sample_many(&wi, &u) {
+                        for (j, &gi) in from_sampler.iter().enumerate() {
+                            bsdf_dirs[gi] = s.wo[j];
+                        }
+                    }
+                }
+            }
+            let env_dirs: Vec<Option<(DVec3, f64)>> = if strategy != Strategy::Bsdf {
+                group.iter().map(|(k, _)| env.sample([uni(*k, 5), uni(*k, 6)])).collect()
+            } else {
+                vec![None; group.len()]
+            };
+            // The material's density of every direction that needs it.
+            let mut need: Vec<(usize, [f64; 3], bool)> = vec![];
+            for (gi, (_, s)) in group.iter().enumerate() {
+                let l = bsdf_dirs[gi];
+                if strategy != Strategy::Env && l[2] > 0.0 {
+                    need.push((gi, l, true));
+                }
+                if let Some((wd, _)) = env_dirs[gi] {
+                    let l = s.local(wd);
+                    if strategy == Strategy::Mis && l[2] > 0.0 {
+                        need.push((gi, l, false));
+                    }
+                }
+            }
+            let dens = material_pdfs(sh, &group, &need);
+            for ((gi, l, from_bsdf), pb) in need.iter().zip(&dens) {
+                let s = &group[*gi].1;
+                if *from_bsdf {
+                    let world = s.world(*l);
+                    let weight = match strategy {
+                        Strategy::Bsdf => 1.0 / pb,
+                        _ => {
+                            let pe = env.pdf(world);
+                            pb / (pb * pb + pe * pe)
+                        }
+                    };
+                    jobs.push(Job { sample: *gi, l: *l, world, scale: env.radiance(world) * weight, shadow: true, tmax: f64::INFINITY, light: false });
+                }
+            }
+            for (gi, (_, s)) in group.iter().enumerate() {
+                let Some((wd, pe)) = env_dirs[gi] else { continue };
+                let l = s.local(wd);
+                if l[2] <= 0.0 {
+                    continue;
+                }
+                let weight = match strategy {
+                    Strategy::Env => 1.0 / pe,
+                    _ => {
+                        let pb = need.iter().zip(&dens).find(|((g, _, b), _)| *g == gi && !*b).map_or(0.0, |(_, p)| *p);
+                        pe / (pb * pb + pe * pe)
+                    }
+                };
+                jobs.push(Job { sample: gi, l, world: wd, scale: env.radiance(wd) * weight, shadow: true, tmax: f64::INFINITY, light: false });
+            }
+        }
+        for (gi, (_, s)) in group.iter().enumerate() {
+            for light in &scene.lights {
+                let (world, dist) = match light.kind {
+                    LightKind::Point(p) => {
+                        let d = p - s.origin;
+                        (d.normalize_or_zero(), d.length())
+                    }
+                    LightKind::Directional(d) => (-d, f64::INFINITY),
+                };
+                let l = s.local(world);
+                if l[2] > 0.0 {
+                    jobs.push(Job { sample: gi, l, world, scale: light.color, shadow: scene.shadows, tmax: dist, light: true });
+                }
+            }
+        }
+        sum += shade_jobs(bvh, sh, &group, &mut jobs, counts);
+    }
+    ((sum / spp as f64), covered)
+}
+
+/// Shades the jobs of one material: visibility, F, the lighting model; returns the summed contribution.
+fn shade_jobs(bvh: &Bvh, sh: &Shading, group: &[&(usize, Surface)], jobs: &mut [Job], counts: &mut Counts) -> DVec3 {
+    // Drop directions under the geometric surface (the shading normal's hemisphere can reach below it) and
+    // occluded ones; for a point light the shadow ray stops at the light.
+    let mut live: Vec<&Job> = vec![];
+    for j in jobs.iter_mut() {
+        let s = &group[j.sample].1;
+        if j.world.dot(s.ng) <= 0.0 {
+            continue;
+        }
+        if j.shadow && bvh.occluded(s.origin, j.world, j.tmax) {
+            continue;
+        }
+        live.push(j);
+    }
+    let mut f = vec![];
+    if let Some(smp) = &sh.sampler {
+        if !live.is_empty() {
+            let wi: Vec<[f64; 3]> = live.iter().map(|j| j.l).collect();
+            let wo: Vec<[f64; 3]> = live.iter().map(|j| group[j.sample].1.v).collect();
+            f = smp.eval_many(&wi, &wo).unwrap_or_default();
+            counts.evals += live.len() as u64;
+        }
+    }
+    let mut sum = DVec3::ZERO;
+    for (i, j) in live.iter().enumerate() {
+        let cos = j.l[2];
+        let mut fv = DVec3::ZERO;
+        if !f.is_empty() {
+            let c = sh.channels;
+            let ch = |k: usize| f[i * c + if c == 1 { 0 } else { k }];
+            fv = DVec3::new(ch(0), ch(1), ch(2));
+            if !fv.is_finite() {
+                counts.nan += 1;
+                fv = DVec3::ZERO;
+            }
+            if sh.times_nl {
+                fv *= cos;
+            }
+        }
+        let diffuse = if j.light { sh.diffuse * cos } else { sh.diffuse * (cos / PI) };
+        sum += (diffuse + sh.spec * fv) * j.scale;
+    }
+    sum
+}
+
+/// The material's density (cosine mixture and sampler) of each needed direction.
+fn material_pdfs(sh: &Shading, group: &[&(usize, Surface)], need: &[(usize, [f64; 3], bool)]) -> Vec<f64> {
+    let cos: Vec<f64> = need.iter().map(|(_, l, _)| l[2].max(0.0) / PI).collect();
+    match &sh.sampler {
+        Some(smp) if sh.alpha < 1.0 && !need.is_empty() => {
+            let wi: Vec<[f64; 3]> = need.iter().map(|(gi, _, _)| group[*gi].1.v).collect();
+            let wo: Vec<[f64; 3]> = need.iter().map(|(_, l, _)| *l).collect();
+            match smp.pdf_many(&wi, &wo) {
+                Ok(p) => cos.iter().zip(p).map(|(c, p)| sh.alpha * c + (1.0 - sh.alpha) * p).collect(),
+                Err(_) => cos,
+            }
+        }
+        _ => cos,
+    }
+}
+
+/// A cosine-distributed local direction.
+fn cosine(u1: f64, u2: f64) -> [f64; 3] {
+    let r = u1.sqrt();
+    let phi = 2.0 * PI * u2;
+    [r * phi.cos(), r * phi.sin(), (1.0 - u1).max(0.0).sqrt()]
+}
+
+/// The HDR frame as 8-bit pixels through `transfer` (the PNG path).
+pub fn to_image(f: &HdrFrame, transfer: super::image::Transfer) -> super::image::Image {
+    let rgb = f.rgb.iter().flat_map(|p| p.map(|c| transfer.encode(f64::from(c)))).collect();
+    super::image::Image { width: f.width, height: f.height, rgb }
+}
+
+/// An OpenEXR file of the frame (linear 32-bit float RGB, its layer named `lobe`).
+pub fn encode_exr(f: &HdrFrame) -> Result<Vec<u8>, String> {
+    super::envmap::encode_exr(f.width, f.height, &f.rgb)
+}
+
+/// Whether the first bytes of a file are an OpenEXR image lobe wrote (its header names the layer `lobe`), so
+/// `-o` may replace it without `--force`.
+pub fn is_lobe_exr(bytes: &[u8]) -> bool {
+    const NAME: &[u8] = b"name\0string\0";
+    let head = &bytes[..bytes.len().min(4096)];
+    head.starts_with(&[0x76, 0x2f, 0x31, 0x01])
+        && head.windows(NAME.len()).position(|w| w == NAME).is_some_and(|i| head[i + NAME.len()..].get(..8) == Some(b"\x04\0\0\0lobe"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lobes_exr_files_are_recognised_and_others_are_not() {
+        let f = HdrFrame { width: 3, height: 2, rgb: vec![[0.5, 1.0, 2.0]; 6], covered: vec![true; 6] };
+        let bytes = encode_exr(&f).unwrap();
+        assert!(is_lobe_exr(&bytes));
+        let other = crate::render::envmap::encode_exr(3, 2, &f.rgb).unwrap().iter().map(|&b| if b == b'l' { b'x' } else { b }).collect::<Vec<u8>>();
+        assert!(!is_lobe_exr(&other));
+        assert!(!is_lobe_exr(b"\x89PNG"));
+    }
+
+    #[test]
+    fn cosine_directions_are_unit_and_above_the_horizon() {
+        for k in 0..100 {
+            let l = cosine((k as f64 + 0.5) / 100.0, (k * 37 % 100) as f64 / 100.0);
+            assert!((l[0] * l[0] + l[1] * l[1] + l[2] * l[2] - 1.0).abs() < 1e-12 && l[2] > 0.0);
+        }
+    }
+}
