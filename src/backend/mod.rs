@@ -37,7 +37,7 @@ pub enum Backend {
     Jit,
     /// The LLVM tier (kernels only; a build without the cargo feature `llvm` refuses it with a diagnostic).
     Llvm,
-    /// Automatic tiering (`--tier auto` in a build with the LLVM tier): kernels start on Cranelift and move to
+    /// Automatic tiering (the `auto` tier in a build with the LLVM tier): kernels start on Cranelift and move to
     /// LLVM once they have evaluated a few thousand points in batches (`backend::tiered`); shading programs,
     /// which run for a whole render, are LLVM's from the start.
     Auto,

@@ -1,4 +1,4 @@
-//! Automatic tiering (an LLVM build's default, `--tier auto`): a kernel compiled by Cranelift first, which LLVM
+//! Automatic tiering (the `auto` tier, an LLVM build's default): a kernel compiled by Cranelift first, which LLVM
 //! takes over from at the first batch of [`AUTO_LLVM_POINTS`] points or more, as JVMs and Julia promote hot code
 //! to their optimising compiler. The decision is the batch's size, not a running count, so the tier a command
 //! runs on does not depend on how often it was timed.

@@ -118,7 +118,6 @@ impl Dist2D {
 
     /// The density at (x1, x2) (0 outside [0, 1)²).
     #[inline]
-    #[cfg(test)]
     pub fn pdf(&self, x1: f64, x2: f64) -> f64 {
         if !(0.0..1.0).contains(&x1) || !(0.0..1.0).contains(&x2) {
             return 0.0;

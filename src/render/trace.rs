@@ -44,7 +44,7 @@ use std::f64::consts::PI;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-/// Most samples per pixel ([`Scene::spp`], `lobe render --spp`).
+/// Most samples per pixel ([`Scene::spp`], or the command line's samples per pixel).
 pub const MAX_SPP: usize = 1 << 16;
 
 /// Which directions the environment estimator draws.
@@ -539,7 +539,7 @@ pub fn encode_exr(f: &HdrFrame) -> Result<Vec<u8>, String> {
 }
 
 /// Whether the first bytes of a file are an OpenEXR image lobe wrote (its header names the layer `lobe`), so
-/// `-o` may replace it without `--force`.
+/// an output may replace it without being forced.
 pub fn is_lobe_exr(bytes: &[u8]) -> bool {
     const NAME: &[u8] = b"name\0string\0";
     let head = &bytes[..bytes.len().min(4096)];
