@@ -5,7 +5,7 @@
 
 use super::args::{self, AgainstReference, BackendArg, FormulaSource, Json, LobeVar, Output, Params};
 use super::common::{self, CliError};
-use lobe::numerics::fit::{fit, FitJson, FitOptions, FreeParam, Metric};
+use lobe::numerics::fit::{fit, FitJson, FitOptions, FreeParam, Metric, Refinement};
 use super::args::parse_range;
 use lobe::Kernel;
 use std::io::IsTerminal;
@@ -54,6 +54,10 @@ pub struct FitArgs {
     /// Skip the continuous refinement after the grid.
     #[arg(long)]
     pub no_refine: bool,
+    /// Refine as before the exact Jacobian: the fine grid, then golden section or Nelder–Mead around its best
+    /// point (the default is Levenberg–Marquardt from the best points of a coarse grid, for comparison).
+    #[arg(long, conflicts_with = "no_refine")]
+    pub derivative_free: bool,
     /// Largest n of the metric.
     #[arg(long, default_value_t = 1000)]
     pub n_max: u32,
@@ -89,6 +93,15 @@ pub fn free_specs(a: &FitArgs) -> Result<Vec<FreeSpec>, CliError> {
 }
 
 impl FitArgs {
+    /// The refinement `--derivative-free` selects.
+    pub fn refinement(&self) -> Refinement {
+        if self.derivative_free {
+            Refinement::DerivativeFree
+        } else {
+            Refinement::Lm
+        }
+    }
+
     /// The one formula measured against `--reference`.
     fn against(&self) -> Result<AgainstReference, CliError> {
         if self.files.len() > 1 {

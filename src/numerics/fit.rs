@@ -60,6 +60,63 @@ impl Metric {
 /// Intervals of a parameter's default grid (stage 1) when no step is given.
 pub const GRID_INTERVALS: f64 = 40.0;
 
+/// Intervals of a parameter's coarse grid before a Levenberg–Marquardt refinement (no step given): the grid
+/// only has to put a start in the right basin; the exact Jacobian does the rest.
+pub const LM_GRID_INTERVALS: f64 = 8.0;
+
+/// How many of the grid's best points a Levenberg–Marquardt refinement starts from.
+pub const LM_STARTS: usize = 4;
+
+/// The most Levenberg–Marquardt iterations per start.
+pub const LM_MAX_ITERATIONS: usize = 200;
+
+/// How a fit refines the best points of its grid.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Refinement {
+    /// Levenberg–Marquardt on the metric's least-squares form with the exact Jacobian
+    /// ([`super::grad::Gradient`], [`super::lm`]) from the [`LM_STARTS`] best points of a coarse grid
+    /// ([`LM_GRID_INTERVALS`]).
+    #[default]
+    Lm,
+    /// The fine grid ([`GRID_INTERVALS`]) and golden section or Nelder–Mead around its best point.
+    DerivativeFree,
+}
+
+impl Refinement {
+    pub fn name(self) -> &'static str {
+        match self {
+            Refinement::Lm => "levenberg-marquardt",
+            Refinement::DerivativeFree => "derivative-free",
+        }
+    }
+}
+
+/// Levenberg–Marquardt's statistics, summed over its starts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct LmStats {
+    pub starts: usize,
+    pub iterations: usize,
+    /// Evaluations of the value and Jacobian at every point.
+    pub evaluations: usize,
+}
+
+/// The parameters of `free` that move (lo < hi), with the coarse grid of [`LM_GRID_INTERVALS`] where no step
+/// was given; a parameter whose range is one value (lo == hi) is fixed there in `base` and named in the second
+/// list instead.
+pub fn lm_grid(free: &[FreeParam], base: &mut [f64]) -> (Vec<FreeParam>, Vec<String>) {
+    let (mut moving, mut fixed) = (vec![], vec![]);
+    for f in free {
+        if f.lo == f.hi {
+            base[f.index] = f.lo;
+            fixed.push(f.name.clone());
+        } else {
+            let step = f.step.or(Some((f.hi - f.lo) / LM_GRID_INTERVALS));
+            moving.push(FreeParam { step, ..f.clone() });
+        }
+    }
+    (moving, fixed)
+}
+
 /// A parameter to search: its index in the parameter vector, its range — the interval [lo, hi] — and the
 /// grid step of stage 1 (None: [`GRID_INTERVALS`] intervals, or the integers when lo and hi are integers at
 /// least that many apart). The refinement is continuous over [lo, hi] either way.

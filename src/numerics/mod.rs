@@ -60,6 +60,7 @@ pub mod accuracy;
 pub mod check;
 pub mod energy;
 pub mod grad;
+pub mod lm;
 pub mod fit;
 pub mod measured;
 pub mod normalize;
