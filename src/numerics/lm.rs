@@ -15,8 +15,9 @@
 //!
 //! # Stopping
 //! Σ r² = 0; or the scaled gradient max |Jᵀr|ₐ / √((JᵀJ)ₐₐ·Σr²) (the cosine between the residual and each
-//! column) below 10⁻¹²; or a relative decrease below 10⁻¹⁵ with a step below 10⁻¹² of t; or λ past 10¹⁶ (no
-//! decrease possible in floating point); or `max_iterations`.
+//! column) below 10⁻¹²; or an accepted step below 10⁻¹⁰·(1 + |t|) in every variable (Levenberg–Marquardt
+//! converges quadratically near a minimum, so the next step would be far below the 10⁻⁶ a fit must reach); or λ
+//! past 10¹⁶ (no decrease possible in floating point); or `max_iterations`.
 
 /// The normal equations of a least-squares problem at one point: `cost` = Σ r², `jtj` = JᵀJ (row-major k×k)
 /// and `jtr` = Jᵀr, over the derivatives by the problem's k variables.
@@ -184,11 +185,10 @@ pub fn minimize(eval: &(dyn Fn(&[f64]) -> Option<Normal> + Sync), x0: &[f64], bo
                 let rho = (cur.cost - next.cost) / predicted;
                 lambda *= if rho.is_finite() { (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0) } else { 1.0 / 3.0 };
                 nu = 2.0;
-                let small_step = delta.iter().zip(&t).all(|(d, t)| d.abs() <= 1e-12 * (1.0 + t.abs()));
-                let small_gain = cur.cost - next.cost <= 1e-15 * cur.cost;
+                let tiny_step = delta.iter().zip(&t).all(|(d, t)| d.abs() <= 1e-10 * (1.0 + t.abs()));
                 t = tn;
                 cur = next;
-                if small_step && small_gain {
+                if tiny_step {
                     break;
                 }
             }

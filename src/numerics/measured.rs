@@ -265,9 +265,15 @@ pub fn fit_measured(
     let mut lm_best = None;
     if let Some(g) = lm_grad {
         let starts: Vec<&[f64]> = best.iter().take(LM_STARTS).map(|c| c.params.as_slice()).collect();
-        let (cand, stats) = lm_refine(channels, g, &fine, &free, &starts, metric)?;
+        // Every start on the grid's entries (cheap), then the best result polished on the fine ones.
+        let (coarse_best, mut stats) = lm_refine(channels, g, coarse_ref, &free, &starts, None, metric)?;
+        if let Some(c) = coarse_best {
+            let (cand, polish) = lm_refine(channels, g, &fine, &free, &[&c.params], Some(c.residual.scale), metric)?;
+            stats.iterations += polish.iterations;
+            stats.evaluations += polish.evaluations;
+            lm_best = cand;
+        }
         lm = stats;
-        lm_best = cand;
     } else if opts.refine {
         if let Some(b) = best.first() {
             let (cand, used) = super::fit::refine(&|p| residual(channels, p, &fine, metric).error, &b.params, &free);
@@ -292,7 +298,7 @@ const CHUNK: usize = 4096;
 
 /// Levenberg–Marquardt ([`super::lm`]) on the metric's residuals over the entries of `s`, from each of
 /// `starts` (full parameter vectors); the variables are the `free` parameters (bounded by their ranges) and
-/// the three colour scales (unbounded, started at the closed-form ones). The residuals, per channel c and
+/// the three colour scales (unbounded, started at `scale`, or else at the closed-form ones). The residuals, per channel c and
 /// entry i, with cos θ_i = N·L:
 /// - `rmse`: r = s_c·f − m, so ∂r/∂p = s_c·∂f/∂p and ∂r/∂s_c = f;
 /// - `log`: r = ln(1 + s_c·f·cos θ_i) − ln(1 + m·cos θ_i), so ∂r/∂p = s_c·cos θ_i·∂f/∂p / (1 + s_c·f·cos θ_i)
@@ -307,6 +313,7 @@ pub fn lm_refine(
     s: &Samples,
     free: &[FreeParam],
     starts: &[&[f64]],
+    scale: Option<[f64; 3]>,
     metric: MeasuredMetric,
 ) -> Result<(Option<MeasuredCandidate>, LmStats), Diagnostic> {
     let var_of: Vec<usize> = free
@@ -375,7 +382,7 @@ pub fn lm_refine(
         if !closed.error.is_finite() {
             continue;
         }
-        let x0: Vec<f64> = free.iter().map(|f| start[f.index]).chain(closed.scale).collect();
+        let x0: Vec<f64> = free.iter().map(|f| start[f.index]).chain(scale.unwrap_or(closed.scale)).collect();
         let bounds: Vec<Option<(f64, f64)>> = free.iter().map(|f| Some((f.lo, f.hi))).chain([None; 3]).collect();
         let Some(r) = minimize(&eval, &x0, &bounds, LM_MAX_ITERATIONS) else { continue };
         stats.starts += 1;
