@@ -26,6 +26,7 @@ mod energy;
 mod everywhere;
 mod explorer_render;
 mod fixtures;
+mod fit_grad;
 mod render;
 mod robust;
 mod serve;
