@@ -206,7 +206,7 @@ mod tests {
     use super::*;
 
     /// Residuals r_i = y_i − a·exp(−b·x_i) (+ c): the problem's normal equations from its exact Jacobian.
-    fn exp_fit(xs: &[f64], ys: &[f64]) -> impl Fn(&[f64]) -> Option<Normal> + Sync + '_ {
+    fn exp_fit<'a>(xs: &'a [f64], ys: &'a [f64]) -> impl Fn(&[f64]) -> Option<Normal> + Sync + 'a {
         move |p: &[f64]| {
             let mut n = Normal::zeros(p.len());
             for (x, y) in xs.iter().zip(ys) {
