@@ -113,7 +113,7 @@ fn solve(a: &[f64], g: &[f64], lambda: f64) -> Option<Vec<f64>> {
                 s -= l[i * k + m] * l[j * k + m];
             }
             if i == j {
-                if !(s > 0.0) {
+                if s.is_nan() || s <= 0.0 {
                     return None;
                 }
                 l[i * k + i] = s.sqrt();

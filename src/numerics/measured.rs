@@ -346,7 +346,7 @@ pub fn lm_refine(
                     let gv = grad.run(&cols, &p, b - a);
                     let mut n = Normal::zeros(k);
                     let mut g = vec![0.0; k];
-                    for c in 0..3 {
+                    for (c, &sc) in scale.iter().enumerate() {
                         let ch = c.min(grad.channels - 1);
                         for i in 0..b - a {
                             let f = gv.value[ch][i];
@@ -354,12 +354,12 @@ pub fn lm_refine(
                                 return None;
                             }
                             let (r, dr_df, dr_ds) = match metric {
-                                MeasuredMetric::Rmse => (scale[c] * f - s.m[c][a + i], scale[c], f),
+                                MeasuredMetric::Rmse => (sc * f - s.m[c][a + i], sc, f),
                                 MeasuredMetric::Log => {
                                     let cos = s.cos[a + i];
-                                    let arg = scale[c] * f * cos;
+                                    let arg = sc * f * cos;
                                     if arg >= 0.0 {
-                                        (arg.ln_1p() - s.log_m[c][a + i], scale[c] * cos / (1.0 + arg), f * cos / (1.0 + arg))
+                                        (arg.ln_1p() - s.log_m[c][a + i], sc * cos / (1.0 + arg), f * cos / (1.0 + arg))
                                     } else {
                                         (-s.log_m[c][a + i], 0.0, 0.0)
                                     }

@@ -22,8 +22,11 @@ fn fit(file: &str, table: &str, params: &[String], extra: &[&str]) -> serde_json
     serde_json::from_slice(&o.stdout).unwrap()
 }
 
-/// Each model with the parameters to recover and their declared ranges.
-const MODELS: [(&str, &[(&str, f64, f64)]); 4] = [
+/// A parameter to recover: its name and declared range.
+type Range = (&'static str, f64, f64);
+
+/// Each model with the parameters to recover.
+const MODELS: [(&str, &[Range]); 4] = [
     ("examples/explorer/ggx.brdf", &[("alpha", 0.001, 1.0), ("f0", 0.0, 1.0)]),
     ("examples/explorer/cook_torrance.brdf", &[("m", 0.01, 1.0), ("ior", 1.0, 3.0)]),
     ("examples/explorer/ward_anisotropic.brdf", &[("alpha_x", 0.01, 1.0), ("alpha_y", 0.01, 1.0)]),
