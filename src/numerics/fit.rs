@@ -8,7 +8,8 @@
 //! of the formula only (91 points per n), in parallel over candidates (rayon). Stage 1 is exhaustive over a
 //! grid (41 values over [lo, hi], the integers for integer ranges wider than that, or `lo..hi:step`); stage 2 refines the best grid point continuously —
 //! golden-section search for one free parameter, Nelder–Mead (clamped to the ranges) for several — within
-//! one grid step of it.
+//! one grid step of it; or, with the formula's [`Gradient`] ([`fit_with`]), Levenberg–Marquardt
+//! ([`super::lm`]) on the metric's least-squares form from the grid's [`LM_STARTS`] best points.
 //!
 //! Cost: one mean-|Δ| score is 91 000 formula evaluations; a = 1..1000 for F_ST is 91 M evaluations plus ~60
 //! scores for the refinement, so the evaluator's speed decides (measured times: BENCHMARKS.md).

@@ -1,6 +1,7 @@
 //! A formula against a measurement ([`crate::measured`]): the residual under a named metric with the best
-//! per-channel colour scale, and the fit of the formula's parameters to the table ([`fit_measured`], through
-//! [`super::fit::search`], the same grid + refinement as the papers' fits).
+//! per-channel colour scale, and the fit of the formula's parameters to the table ([`fit_measured`]: a coarse
+//! grid through [`super::fit::search`], then Levenberg–Marquardt with the exact Jacobian ([`lm_refine`]), or
+//! the papers' fits' fine grid + derivative-free refinement).
 //!
 //! # Where it is measured
 //! At the table's own entries, at the convention's angles ([`crate::measured::entry_dirs`]), every entry
