@@ -5,7 +5,8 @@
 
 use super::args::{self, AgainstReference, BackendArg, FormulaSource, Json, LobeVar, Output, Params};
 use super::common::{self, CliError};
-use lobe::numerics::fit::{fit, FitJson, FitOptions, FreeParam, Metric};
+use lobe::numerics::fit::{fit_with, FitJson, FitOptions, FreeParam, Metric, Refinement};
+use lobe::numerics::grad::{Gradient, Var};
 use super::args::parse_range;
 use lobe::Kernel;
 use std::io::IsTerminal;
@@ -54,6 +55,10 @@ pub struct FitArgs {
     /// Skip the continuous refinement after the grid.
     #[arg(long)]
     pub no_refine: bool,
+    /// Refine as before the exact Jacobian: the fine grid, then golden section or Nelder–Mead around its best
+    /// point (the default is Levenberg–Marquardt from the best points of a coarse grid, for comparison).
+    #[arg(long, conflicts_with = "no_refine")]
+    pub derivative_free: bool,
     /// Largest n of the metric.
     #[arg(long, default_value_t = 1000)]
     pub n_max: u32,
@@ -89,6 +94,15 @@ pub fn free_specs(a: &FitArgs) -> Result<Vec<FreeSpec>, CliError> {
 }
 
 impl FitArgs {
+    /// The refinement `--derivative-free` selects.
+    pub fn refinement(&self) -> Refinement {
+        if self.derivative_free {
+            Refinement::DerivativeFree
+        } else {
+            Refinement::Lm
+        }
+    }
+
     /// The one formula measured against `--reference`.
     fn against(&self) -> Result<AgainstReference, CliError> {
         if self.files.len() > 1 {
@@ -155,7 +169,16 @@ pub fn report(a: &FitArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
     };
     let opts = FitOptions { metric, top: usize::from(a.top), refine: !a.no_refine, n_max: a.n_max };
     let t = std::time::Instant::now();
-    let rep = fit(k, &params, lobe, r, &r.default_params(), ref_lobe, &free, &opts, &|| bar.inc(1))?;
+    // The value and the partials by the free parameters, for Levenberg–Marquardt (the derivative-free
+    // refinement where they do not compile).
+    let grad = if a.refinement() == Refinement::Lm && !a.no_refine {
+        let vars: Vec<Var> = free.iter().map(|f| Var::Param(f.index as u16)).collect();
+        let gopts = lobe::Options { backend: a.backend.bulk_backend()?, math: a.backend.math.mode, ..lobe::Options::default() };
+        Gradient::compile_vars(&k.formula, &gopts, Some(&vars)).ok()
+    } else {
+        None
+    };
+    let rep = fit_with(k, grad.as_ref(), &params, lobe, r, &r.default_params(), ref_lobe, &free, &opts, &|| bar.inc(1))?;
     bar.finish_and_clear();
     if !rep.best.first().is_some_and(|c| c.score.is_finite()) {
         return Err(CliError::hint(
@@ -179,6 +202,17 @@ pub fn report(a: &FitArgs, k: &Kernel, r: &Kernel) -> Result<String, CliError> {
         rep.evaluated,
         k.backend_used().name()
     );
+    match rep.refinement {
+        Refinement::Lm => outln!(
+            out,
+            "refinement: Levenberg–Marquardt with the exact Jacobian from {} grid points, {} iterations, {} evaluations",
+            rep.lm.starts,
+            rep.lm.iterations,
+            rep.lm.evaluations
+        ),
+        Refinement::DerivativeFree if !a.no_refine => outln!(out, "refinement: derivative-free (golden section or Nelder–Mead)"),
+        Refinement::DerivativeFree => {}
+    }
     for (i, c) in rep.best.iter().enumerate() {
         let shown: Vec<String> = free.iter().map(|f| format!("{}={}", f.name, c.params[f.index])).collect();
         outln!(out, "  {}. {:<40} score {:.6e}{}", i + 1, shown.join(", "), c.score, if c.refined { "  (continuous refinement)" } else { "" });

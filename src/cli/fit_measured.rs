@@ -8,7 +8,8 @@ use super::fit::{free_specs, FitArgs};
 use lobe::base::json::{self, Named};
 use lobe::ir::Formula;
 use lobe::measured::{is_measured_path, Measured};
-use lobe::numerics::fit::FreeParam;
+use lobe::numerics::fit::{FreeParam, LmStats, Refinement};
+use lobe::numerics::grad::{Gradient, Var};
 use lobe::numerics::measured::{fit_measured, residual, MeasuredFit, MeasuredFitOptions, MeasuredMetric, Samples};
 use lobe::{Evaluator, Kernel};
 use rayon::prelude::*;
@@ -21,6 +22,9 @@ struct Model {
     src: String,
     formula: Formula,
     kernels: Vec<Kernel>,
+    /// The value and the partials by the free parameters, for Levenberg–Marquardt (`None`: the derivative-free
+    /// refinement, by `--derivative-free` or because the formula's gradient did not compile).
+    grad: Option<Gradient>,
     set: Vec<(String, f64)>,
     free: Vec<FreeParam>,
 }
@@ -129,12 +133,26 @@ pub fn run(a: &FitArgs) -> Result<(), CliError> {
             let own = common::set_for(&formula, &set);
             let free = free_of(a, &formula, batch)?;
             let kernels = formula.channels().into_iter().map(|c| common::compile_kernel(c, &own, a.backend.bulk_backend()?, a.backend.math.mode)).collect::<Result<Vec<_>, _>>()?;
-            Ok(Model { file, src, formula, kernels, set: own, free })
+            let grad = if a.refinement() == Refinement::Lm && !a.no_refine && !free.is_empty() {
+                let vars: Vec<Var> = free.iter().map(|f| Var::Param(f.index as u16)).collect();
+                let opts = lobe::Options { backend: a.backend.bulk_backend()?, bake: own.clone(), math: a.backend.math.mode, ..lobe::Options::default() };
+                Gradient::compile_vars(&formula, &opts, Some(&vars)).ok()
+            } else {
+                None
+            };
+            Ok(Model { file, src, formula, kernels, grad, set: own, free })
         })
         .collect::<Result<_, CliError>>()?;
     // Every table is read (and checked) before any fit runs.
     let loaded: Vec<Arc<Measured>> = tables.iter().map(|t| Measured::read(t).map(Arc::new)).collect::<Result<_, _>>()?;
-    let opts = MeasuredFitOptions { metric, stride: usize::from(a.stride), grid_stride: usize::from(a.grid_stride), top: usize::from(a.top), refine: !a.no_refine };
+    let opts = MeasuredFitOptions {
+        metric,
+        stride: usize::from(a.stride),
+        grid_stride: usize::from(a.grid_stride),
+        top: usize::from(a.top),
+        refine: !a.no_refine,
+        refinement: a.refinement(),
+    };
     let pairs: Vec<(usize, usize)> = (0..models.len()).flat_map(|m| (0..loaded.len()).map(move |t| (m, t))).collect();
     // After a second on a terminal: pairs done (a batch) or candidates scored (one fit).
     let spinner = Spinner::new(!a.json.on && !a.quiet && std::io::IsTerminal::is_terminal(&std::io::stderr()), "fitting");
@@ -186,9 +204,9 @@ fn fit_one<'a>(model: &'a Model, path: &'a str, t: &Measured, opts: &MeasuredFit
         let s = Samples::new(t, opts.stride);
         let r = residual(&channels, &params, &s, opts.metric);
         let best = vec![lobe::numerics::measured::MeasuredCandidate { params: params.clone(), residual: r, refined: false }];
-        MeasuredFit { best, evaluated: 1, entries: s.len(), grid_entries: s.len() }
+        MeasuredFit { best, evaluated: 1, entries: s.len(), grid_entries: s.len(), refinement: opts.refinement, lm: LmStats::default(), fixed: vec![] }
     } else {
-        fit_measured(&channels, &params, &model.free, t, opts, progress)?
+        fit_measured(&channels, model.grad.as_ref(), &params, &model.free, t, opts, progress)?
     };
     let best = &fit.best[0].params;
     let s = Samples::new(t, opts.stride);
@@ -229,6 +247,16 @@ fn single(a: &FitArgs, row: &Row, metric: MeasuredMetric) -> Result<(), CliError
         row.seconds,
         m.kernels[0].backend_used().name()
     );
+    match fit.refinement {
+        Refinement::Lm => println!(
+            "refinement: Levenberg–Marquardt with the exact Jacobian from {} grid points, {} iterations, {} evaluations",
+            fit.lm.starts, fit.lm.iterations, fit.lm.evaluations
+        ),
+        Refinement::DerivativeFree => println!("refinement: derivative-free (golden section or Nelder–Mead)"),
+    }
+    for name in &fit.fixed {
+        println!("fixed: {name} (its range is one value)");
+    }
     for (i, c) in fit.best.iter().enumerate() {
         let [r, g, b] = c.residual.scale;
         println!(
@@ -289,6 +317,9 @@ struct RowJson<'a> {
     entries: usize,
     grid_entries: usize,
     evaluated: usize,
+    refinement: &'static str,
+    lm: LmStats,
+    fixed: &'a [String],
     #[serde(serialize_with = "json::num")]
     seconds: f64,
 }
@@ -309,6 +340,9 @@ impl<'a> RowJson<'a> {
             entries: r.fit.entries,
             grid_entries: r.fit.grid_entries,
             evaluated: r.fit.evaluated,
+            refinement: r.fit.refinement.name(),
+            lm: r.fit.lm,
+            fixed: &r.fit.fixed,
             seconds: r.seconds,
         }
     }

@@ -84,6 +84,11 @@ impl AngleGrid {
         AngleGrid::new((0..=1800).map(|i| i as f64 * 0.05).collect(), lobe)
     }
 
+    /// Input column `k` ([`Input::ALL`](crate::ir::Input::ALL) order), one value per angle.
+    pub(crate) fn col(&self, k: usize) -> &[f64] {
+        &self.cols[k]
+    }
+
     /// The angles in degrees.
     pub(crate) fn deg(&self) -> &[f64] {
         &self.deg

@@ -64,10 +64,19 @@ pub struct GradValues {
 impl Gradient {
     /// Compiles the value and gradient of `f` with `opts` (backend, math mode, baked values, accuracy pass).
     pub fn compile(f: &Formula, opts: &Options) -> Result<Gradient, Diagnostics> {
+        Gradient::compile_vars(f, opts, None)
+    }
+
+    /// [`Gradient::compile`] with the partials by `only` these variables (in this order), or by every
+    /// variable (`None`): a fit needs the free parameters' partials only.
+    pub fn compile_vars(f: &Formula, opts: &Options, only: Option<&[Var]>) -> Result<Gradient, Diagnostics> {
         let chans = f.channels();
         let values: Vec<Formula> = chans.iter().map(|c| crate::simplified(c, opts)).collect::<Result<_, _>>()?;
         let reads: InputSet = values.iter().map(Formula::used_inputs).collect();
-        let vars: Vec<Var> = (0..f.params.len() as u16).map(Var::Param).chain(reads.iter().map(Var::Input)).collect();
+        let vars: Vec<Var> = match only {
+            Some(v) => v.to_vec(),
+            None => (0..f.params.len() as u16).map(Var::Param).chain(reads.iter().map(Var::Input)).collect(),
+        };
         let mut outputs = Vec::with_capacity(chans.len() * (1 + vars.len()));
         for (c, v) in chans.iter().zip(values) {
             outputs.push(v);

@@ -1,6 +1,7 @@
 //! A formula against a measurement ([`crate::measured`]): the residual under a named metric with the best
-//! per-channel colour scale, and the fit of the formula's parameters to the table ([`fit_measured`], through
-//! [`super::fit::search`], the same grid + refinement as the papers' fits).
+//! per-channel colour scale, and the fit of the formula's parameters to the table ([`fit_measured`]: a coarse
+//! grid through [`super::fit::search`], then Levenberg–Marquardt with the exact Jacobian ([`lm_refine`]), or
+//! the papers' fits' fine grid + derivative-free refinement).
 //!
 //! # Where it is measured
 //! At the table's own entries, at the convention's angles ([`crate::measured::entry_dirs`]), every entry
@@ -26,7 +27,9 @@
 //! Cost: one candidate is one batched kernel call over the entries plus ~4 flops and (log) one `ln` per
 //! entry and channel; the grid stage runs on a coarser stride than the refinement (the caller's choice).
 
-use super::fit::{search, Candidate, FreeParam};
+use super::fit::{lm_grid, search, Candidate, FreeParam, LmStats, Refinement, LM_MAX_ITERATIONS, LM_STARTS};
+use super::grad::{Gradient, Var};
+use super::lm::{minimize, Normal};
 use super::Diagnostic;
 use crate::backend::{Columns, Evaluator};
 use crate::ir::N_INPUTS;
@@ -180,11 +183,13 @@ pub struct MeasuredFitOptions {
     pub grid_stride: usize,
     pub top: usize,
     pub refine: bool,
+    /// Levenberg–Marquardt where a [`Gradient`] is given, else the derivative-free refinement.
+    pub refinement: Refinement,
 }
 
 impl Default for MeasuredFitOptions {
     fn default() -> Self {
-        MeasuredFitOptions { metric: MeasuredMetric::Log, stride: 1, grid_stride: 4, top: 5, refine: true }
+        MeasuredFitOptions { metric: MeasuredMetric::Log, stride: 1, grid_stride: 4, top: 5, refine: true, refinement: Refinement::Lm }
     }
 }
 
@@ -206,13 +211,24 @@ pub struct MeasuredFit {
     pub entries: usize,
     /// Entries of the grid stage.
     pub grid_entries: usize,
+    /// The refinement that ran ([`Refinement::DerivativeFree`] also when no gradient was given).
+    pub refinement: Refinement,
+    /// Levenberg–Marquardt's iterations and evaluations (zero for the derivative-free refinement).
+    pub lm: LmStats,
+    /// Parameters whose range was one value (lo == hi): fixed there, not searched.
+    pub fixed: Vec<String>,
 }
 
 /// Fits `free` parameters of the formula (`channels`: one kernel, or red, green, blue) to table `t`: the
 /// grid on the `grid_stride` entries, the refinement of the best grid point on the `stride` entries, each
 /// candidate under `metric` with its closed-form colour scale (module docs).
+///
+/// With `opts.refinement` [`Refinement::Lm`] and `grad` (the formula's [`Gradient`] by the free parameters),
+/// the grid is coarse ([`super::fit::LM_GRID_INTERVALS`]) and Levenberg–Marquardt refines its best
+/// [`LM_STARTS`] points on the fine entries ([`lm_refine`]).
 pub fn fit_measured(
     channels: &[&dyn Evaluator],
+    grad: Option<&Gradient>,
     base_params: &[f64],
     free: &[FreeParam],
     t: &Measured,
@@ -230,13 +246,38 @@ pub fn fit_measured(
             .hint("use a smaller stride, or check the file: every entry is negative (not measured)"));
     }
     let metric = opts.metric;
+    let lm_grad = grad.filter(|_| opts.refine && opts.refinement == Refinement::Lm);
+    let mut base = base_params.to_vec();
+    let (free, fixed) = match lm_grad {
+        Some(_) => lm_grid(free, &mut base),
+        None => (free.to_vec(), vec![]),
+    };
+    if free.is_empty() {
+        let r = residual(channels, &base, &fine, metric);
+        let best = vec![MeasuredCandidate { params: base, residual: r, refined: false }];
+        return Ok(MeasuredFit { best, evaluated: 1, entries: fine.len(), grid_entries: fine.len(), refinement: opts.refinement, lm: LmStats::default(), fixed });
+    }
     // The grid on the coarse entries, without the search's own refinement (which must run on the fine ones).
-    let grid = search(base_params, free, opts.top, false, &|p| residual(channels, p, coarse_ref, metric).error, progress)?;
+    let top = if lm_grad.is_some() { opts.top.max(LM_STARTS) } else { opts.top };
+    let grid = search(&base, &free, top, false, &|p| residual(channels, p, coarse_ref, metric).error, progress)?;
     let mut evaluated = grid.evaluated;
     let mut best: Vec<Candidate> = grid.best;
-    if opts.refine {
+    let mut lm = LmStats::default();
+    let mut lm_best = None;
+    if let Some(g) = lm_grad {
+        let starts: Vec<&[f64]> = best.iter().take(LM_STARTS).map(|c| c.params.as_slice()).collect();
+        // Every start on the grid's entries (cheap), then the best result polished on the fine ones.
+        let (coarse_best, mut stats) = lm_refine(channels, g, coarse_ref, &free, &starts, None, metric)?;
+        if let Some(c) = coarse_best {
+            let (cand, polish) = lm_refine(channels, g, &fine, &free, &[&c.params], Some(c.residual.scale), metric)?;
+            stats.iterations += polish.iterations;
+            stats.evaluations += polish.evaluations;
+            lm_best = cand;
+        }
+        lm = stats;
+    } else if opts.refine {
         if let Some(b) = best.first() {
-            let (cand, used) = super::fit::refine(&|p| residual(channels, p, &fine, metric).error, &b.params, free);
+            let (cand, used) = super::fit::refine(&|p| residual(channels, p, &fine, metric).error, &b.params, &free);
             evaluated += used;
             best.insert(0, cand);
         }
@@ -245,10 +286,118 @@ pub fn fit_measured(
         .par_iter()
         .map(|c| MeasuredCandidate { params: c.params.clone(), residual: residual(channels, &c.params, &fine, metric), refined: c.refined })
         .collect();
+    out.extend(lm_best);
     out.sort_by(|a, b| a.residual.error.total_cmp(&b.residual.error));
     out.dedup_by(|a, b| a.params == b.params);
     out.truncate(opts.top.max(1));
-    Ok(MeasuredFit { best: out, evaluated, entries: fine.len(), grid_entries: coarse_ref.len() })
+    let refinement = if lm_grad.is_some() { Refinement::Lm } else { Refinement::DerivativeFree };
+    Ok(MeasuredFit { best: out, evaluated, entries: fine.len(), grid_entries: coarse_ref.len(), refinement, lm, fixed })
+}
+
+/// Entries per chunk of a Jacobian evaluation (the chunks run in parallel).
+const CHUNK: usize = 4096;
+
+/// Levenberg–Marquardt ([`super::lm`]) on the metric's residuals over the entries of `s`, from each of
+/// `starts` (full parameter vectors); the variables are the `free` parameters (bounded by their ranges) and
+/// the three colour scales (unbounded, started at `scale`, or else at the closed-form ones). The residuals, per channel c and
+/// entry i, with cos θ_i = N·L:
+/// - `rmse`: r = s_c·f − m, so ∂r/∂p = s_c·∂f/∂p and ∂r/∂s_c = f;
+/// - `log`: r = ln(1 + s_c·f·cos θ_i) − ln(1 + m·cos θ_i), so ∂r/∂p = s_c·cos θ_i·∂f/∂p / (1 + s_c·f·cos θ_i)
+///   and ∂r/∂s_c = f·cos θ_i / (1 + s_c·f·cos θ_i) (a negative s_c·f counts as 0, as in [`residual`]: r is
+///   then constant).
+///
+/// The best result is a candidate whose residual is the metric at the scales Levenberg–Marquardt found, or at
+/// the closed-form scales if those score lower (`None` when no start could be evaluated).
+pub fn lm_refine(
+    channels: &[&dyn Evaluator],
+    grad: &Gradient,
+    s: &Samples,
+    free: &[FreeParam],
+    starts: &[&[f64]],
+    scale: Option<[f64; 3]>,
+    metric: MeasuredMetric,
+) -> Result<(Option<MeasuredCandidate>, LmStats), Diagnostic> {
+    let var_of: Vec<usize> = free
+        .iter()
+        .map(|f| grad.vars.iter().position(|v| *v == Var::Param(f.index as u16)))
+        .collect::<Option<_>>()
+        .ok_or_else(|| Diagnostic::error("the gradient lacks a searched parameter's partial"))?;
+    let nf = free.len();
+    let k = nf + 3;
+    let len = s.len();
+    let chunks = len.div_ceil(CHUNK);
+    let mut stats = LmStats::default();
+    let mut best: Option<MeasuredCandidate> = None;
+    for start in starts {
+        let params_of = |x: &[f64]| {
+            let mut p = start.to_vec();
+            for (f, v) in free.iter().zip(x) {
+                p[f.index] = *v;
+            }
+            p
+        };
+        let eval = |x: &[f64]| -> Option<Normal> {
+            let p = params_of(x);
+            let scale = &x[nf..];
+            (0..chunks)
+                .into_par_iter()
+                .map(|ci| {
+                    let (a, b) = (ci * CHUNK, ((ci + 1) * CHUNK).min(len));
+                    let cols: [&[f64]; N_INPUTS] = std::array::from_fn(|i| &s.cols[i][a..b]);
+                    let gv = grad.run(&cols, &p, b - a);
+                    let mut n = Normal::zeros(k);
+                    let mut g = vec![0.0; k];
+                    for (c, &sc) in scale.iter().enumerate() {
+                        let ch = c.min(grad.channels - 1);
+                        for i in 0..b - a {
+                            let f = gv.value[ch][i];
+                            if !f.is_finite() {
+                                return None;
+                            }
+                            let (r, dr_df, dr_ds) = match metric {
+                                MeasuredMetric::Rmse => (sc * f - s.m[c][a + i], sc, f),
+                                MeasuredMetric::Log => {
+                                    let cos = s.cos[a + i];
+                                    let arg = sc * f * cos;
+                                    if arg >= 0.0 {
+                                        (arg.ln_1p() - s.log_m[c][a + i], sc * cos / (1.0 + arg), f * cos / (1.0 + arg))
+                                    } else {
+                                        (-s.log_m[c][a + i], 0.0, 0.0)
+                                    }
+                                }
+                            };
+                            for (j, v) in var_of.iter().enumerate() {
+                                g[j] = dr_df * gv.grad[*v][ch][i];
+                            }
+                            for (q, gq) in g[nf..].iter_mut().enumerate() {
+                                *gq = if q == c { dr_ds } else { 0.0 };
+                            }
+                            n.add(r, &g);
+                        }
+                    }
+                    Some(n)
+                })
+                .try_reduce(|| Normal::zeros(k), |x, y| Some(x.merge(y)))
+        };
+        let closed = residual(channels, start, s, metric);
+        if !closed.error.is_finite() {
+            continue;
+        }
+        let x0: Vec<f64> = free.iter().map(|f| start[f.index]).chain(scale.unwrap_or(closed.scale)).collect();
+        let bounds: Vec<Option<(f64, f64)>> = free.iter().map(|f| Some((f.lo, f.hi))).chain([None; 3]).collect();
+        let Some(r) = minimize(&eval, &x0, &bounds, LM_MAX_ITERATIONS) else { continue };
+        stats.starts += 1;
+        stats.iterations += r.iterations;
+        stats.evaluations += r.evaluations;
+        let params = params_of(&r.x[..nf]);
+        let own = Residual { error: (r.cost / (3 * len) as f64).sqrt(), scale: [r.x[nf], r.x[nf + 1], r.x[nf + 2]] };
+        let closed = residual(channels, &params, s, metric);
+        let residual = if own.error <= closed.error { own } else { closed };
+        if residual.error.is_finite() && best.as_ref().is_none_or(|b| residual.error < b.residual.error) {
+            best = Some(MeasuredCandidate { params, residual, refined: true });
+        }
+    }
+    Ok((best, stats))
 }
 
 #[cfg(test)]
@@ -277,7 +426,7 @@ mod tests {
         for metric in [MeasuredMetric::Log, MeasuredMetric::Rmse] {
             // Strides that keep a debug-build test fast: 1/27 of the entries for the refinement, 1/216 for the grid.
             let opts = MeasuredFitOptions { metric, stride: 3, grid_stride: 6, ..Default::default() };
-            let r = fit_measured(&[&blinn], &[1.0], &free, &t, &opts, &|| {}).unwrap();
+            let r = fit_measured(&[&blinn], None, &[1.0], &free, &t, &opts, &|| {}).unwrap();
             let b = &r.best[0];
             assert!((b.params[0] - 120.0).abs() < 1.2, "{metric:?}: {b:?}");
             assert!(b.residual.error < 1e-3, "{metric:?}: {b:?}");
@@ -297,7 +446,7 @@ mod tests {
             let blinn = FnEvaluator(|x: &[f64; N_INPUTS], p: &[f64]| nh(x).powf(p[0]));
             let free = [FreeParam { index: 0, name: "n".into(), lo: 1.0, hi: 1000.0, step: None }];
             let opts = MeasuredFitOptions { stride: 4, grid_stride: 8, top: 3, ..Default::default() };
-            let r = fit_measured(&[&blinn], &[1.0], &free, &t, &opts, &|| {}).unwrap();
+            let r = fit_measured(&[&blinn], None, &[1.0], &free, &t, &opts, &|| {}).unwrap();
             assert!((r.best[0].params[0] - n).abs() < 0.01 * n, "{n}: {:?}", r.best[0]);
             // A flat lobe cannot match a sharp one: its best error is larger.
             let s = Samples::new(&t, 4);
@@ -315,7 +464,7 @@ mod tests {
         let none = Measured::tabulate("none", &|_, _| [f64::NAN; 3]);
         assert_eq!(none.measured_entries(), 0);
         let free = [FreeParam { index: 0, name: "n".into(), lo: 1.0, hi: 2.0, step: None }];
-        let e = fit_measured(&[&nan], &[1.0], &free, &none, &MeasuredFitOptions::default(), &|| {}).unwrap_err();
+        let e = fit_measured(&[&nan], None, &[1.0], &free, &none, &MeasuredFitOptions::default(), &|| {}).unwrap_err();
         assert!(e.message.contains("no entry measured"), "{}", e.message);
         assert!("lg".parse::<MeasuredMetric>().is_err());
     }

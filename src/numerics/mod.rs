@@ -30,7 +30,8 @@
 //!   (+ `cutoff_worst_n`, `cutoff_worst_angle_deg`), `lobe_ratio_min`, `lobe_ratio_max` (+ `_n`), `nan_points`,
 //!   `q`, `seconds`.
 //! - `fit`: `best` = list of {`params` (object name → value), `score`, `refined`}, best first; `metric`,
-//!   `evaluated`, `seconds`.
+//!   `evaluated`, `refinement` (`levenberg-marquardt` or `derivative-free`), `lm` ({`starts`, `iterations`,
+//!   `evaluations`}), `seconds`.
 //! - `check` (accuracy report, [`robust`]): `bits_error_avg`, `bits_error_max`, `bits_error_worst` ({`inputs`,
 //!   `params`, `value`, `truth`, `bits`}), `bits_error_max_well_conditioned`, `nonfinite_where_finite`,
 //!   `ill_conditioned`, `undefined`, `limit_points` (points whose truth is a limit along an edge input), `before` (the same keys for the plain simplification), `accuracy_rewrites`
@@ -60,6 +61,7 @@ pub mod accuracy;
 pub mod check;
 pub mod energy;
 pub mod grad;
+pub mod lm;
 pub mod fit;
 pub mod measured;
 pub mod normalize;

@@ -27,6 +27,7 @@ mod envlight;
 mod everywhere;
 mod explorer_render;
 mod fixtures;
+mod fit_grad;
 mod render;
 mod robust;
 mod serve;

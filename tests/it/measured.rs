@@ -87,7 +87,9 @@ fn fits_recover_blinns_n_and_beckmanns_m() {
     assert_eq!(rows.len(), 5, "{text}");
     assert!(rows[0].starts_with("formula,file,measured,params,error"), "{text}");
     let blinn_row = rows.iter().find(|r| r.starts_with("Blinn,") && r.contains("blinn120")).unwrap();
-    assert!(blinn_row.contains("n=120"), "{blinn_row}");
+    // n = 120 up to rounding (Levenberg–Marquardt lands within an ulp of it, not on the grid point).
+    let n: f64 = blinn_row.split(",n=").nth(1).and_then(|r| r.split(',').next()).and_then(|v| v.parse().ok()).unwrap();
+    assert!((n - 120.0).abs() < 1e-9, "{blinn_row}");
     assert!(stdout(&o).contains("Phong"), "{}", stdout(&o));
     // A second run replaces the table lobe wrote.
     let o = lobe(&["fit", "examples/brdfs/blinn.brdf", "--measured", &blinn, "--param", "n=1..1000", "--stride", "9", "--grid-stride", "9", "--table", &csv.display().to_string()], None);
