@@ -10,7 +10,7 @@
 //! verify; the C library's version ([`BuiltinInfo::libm`]) is kept as the reference the bounds are measured
 //! against and as the fallback for huge trigonometric arguments.
 //!
-//! Derivatives: every row, internal ones and the comparisons included, has one tangent rule in [`derive`]
+//! Derivatives: every row, internal ones and the comparisons included, has one tangent rule in [`derive`](mod@derive)
 //! (the partials with respect to each argument, written with other builtins), and the choice at each kink
 //! (abs, min, max, clamp, select, acos/asin at ±1, sqrt and ln at 0, pow at x = 0) is stated once in that
 //! module's doc.
