@@ -141,11 +141,11 @@ fn chi2_subset() {
     run_chi2(&cases);
 }
 
-/// The whole sweep (module docs). With `LOBE_CHI2_SCOPE=ci` (what `.ci/run` sets, to keep CI within its time)
-/// it runs every file at its default parameters and 20 random formulas — about 180 of the 492 tests — at the
-/// Šidák level of the tests it runs; run without it for the whole sweep.
+/// The whole sweep (module docs; ~9 minutes on 2 cores, run by `.ci/run`). With `LOBE_CHI2_SCOPE=ci` it runs
+/// every file at its default parameters and 20 random formulas — about 180 of the 492 tests — at the Šidák
+/// level of the tests it runs: a quicker check while working on a sampler.
 #[test]
-#[ignore = "the full χ² sweep (minutes on 2 cores): .ci/run runs its CI scope"]
+#[ignore = "the full χ² sweep (minutes on 2 cores): .ci/run runs it"]
 fn chi2_everywhere() {
     let ci = std::env::var("LOBE_CHI2_SCOPE").is_ok_and(|v| v == "ci");
     let mut cases: Vec<Case> = catalogue().iter().flat_map(|f| file_cases(f, !ci)).collect();
