@@ -45,12 +45,7 @@ pub const ARGUMENTS: [Input; 11] = Input::ALL;
 pub fn function(f: &Formula, name: &str) -> Result<String, Diagnostic> {
     let f = &f.in_language();
     let (ir, roots) = f.merged_roots();
-    let mut uses = vec![0u32; ir.len()];
-    for r in &roots {
-        for (u, c) in uses.iter_mut().zip(ir.use_counts(*r)) {
-            *u += c;
-        }
-    }
+    let uses = ir.use_counts_of(&roots);
     let args: Vec<&str> = ARGUMENTS.iter().map(|i| i.name()).collect();
     let mut out = format!("def {name}({}):\n", args.join(", "));
     let mut text: Vec<String> = Vec::with_capacity(ir.len());

@@ -301,6 +301,15 @@ impl<'a> Scorer<'a> {
     }
 }
 
+/// Refuses a fit of `n` (the metric sweeps it), of an index past the formula's parameters, or of a bad `n_max`.
+fn check_request(base_params: &[f64], free: &[FreeParam], opts: &FitOptions) -> Result<(), Diagnostic> {
+    if let Some(f) = free.iter().find(|f| f.index == 0 || f.index >= base_params.len()) {
+        return Err(Diagnostic::error(format!("cannot fit `{}`", f.name))
+            .hint(if f.index == 0 { "n is swept by the metric itself; fit the other parameters" } else { "not a parameter of the formula" }));
+    }
+    check_n_max(opts.n_max)
+}
+
 /// Fits `free` parameters of `ev` to `reference` (see module docs). `progress` is called once per scored
 /// grid candidate (from worker threads).
 #[allow(clippy::too_many_arguments)]
@@ -315,11 +324,7 @@ pub fn fit(
     opts: &FitOptions,
     progress: &(dyn Fn() + Sync),
 ) -> Result<FitReport, Diagnostic> {
-    if let Some(f) = free.iter().find(|f| f.index == 0 || f.index >= base_params.len()) {
-        return Err(Diagnostic::error(format!("cannot fit `{}`", f.name))
-            .hint(if f.index == 0 { "n is swept by the metric itself; fit the other parameters" } else { "not a parameter of the formula" }));
-    }
-    check_n_max(opts.n_max)?;
+    check_request(base_params, free, opts)?;
     let scorer = Scorer::new(ev, lobe, reference, ref_params, ref_lobe, opts.metric, opts.n_max);
     search(base_params, free, opts.top, opts.refine, &|p| scorer.score(p), progress)
 }
@@ -346,11 +351,7 @@ pub fn fit_with(
     let Some(grad) = grad.filter(|_| opts.refine) else {
         return fit(ev, base_params, lobe, reference, ref_params, ref_lobe, free, opts, progress);
     };
-    if let Some(f) = free.iter().find(|f| f.index == 0 || f.index >= base_params.len()) {
-        return Err(Diagnostic::error(format!("cannot fit `{}`", f.name))
-            .hint(if f.index == 0 { "n is swept by the metric itself; fit the other parameters" } else { "not a parameter of the formula" }));
-    }
-    check_n_max(opts.n_max)?;
+    check_request(base_params, free, opts)?;
     let scorer = Scorer::new(ev, lobe, reference, ref_params, ref_lobe, opts.metric, opts.n_max);
     let top = opts.top.max(1);
     let mut rep = search(base_params, free, top.max(LM_STARTS), false, &|p| scorer.score(p), progress)?;
