@@ -615,8 +615,10 @@ impl Native {
         if !(budget > 0.0 && budget.is_finite()) || points == 0 {
             return Err(self.error(py, Diagnostic::error("points must be ≥ 1 and budget a positive number of seconds")));
         }
-        let opts = PassOptions { math: self.math, budget: std::time::Duration::from_secs_f64(budget), points, ..PassOptions::default() };
-        let c = detached(py, &self.file, || lobe::numerics::check::check(&self.whole, &self.baked, &opts, &|_| {}))?;
+        // The search as the kernels were compiled (the same points and options), its report on `points`.
+        let opts = PassOptions { math: self.math, budget: std::time::Duration::from_secs_f64(budget), ..PassOptions::default() };
+        let store = lobe::numerics::pass_cache::platform_store(true);
+        let c = detached(py, &self.file, || lobe::numerics::check::check(&self.whole, &self.baked, &opts, points, store.as_deref(), &|_| {}))?;
         report(py, &c.json())
     }
 

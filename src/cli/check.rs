@@ -82,9 +82,12 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
     let whole = a.formula.load()?;
     // A colour formula: the red channel is checked and shown, and the output says so (`lobe check --sweep`
     // and `lobe bench` report every channel).
-    let opts = robust::PassOptions { math: a.math.mode, budget: std::time::Duration::from_secs_f64(a.budget), ..a.prefer.pass(a.points as usize) };
+    // The search as the commands run it (their points, seed and options; a longer budget), so the form shown
+    // is the one they compile; the report is measured on --points.
+    let opts = robust::PassOptions { math: a.math.mode, budget: std::time::Duration::from_secs_f64(a.budget), ..a.prefer.pass(robust::PassOptions::default().points) };
+    let store = lobe::numerics::pass_cache::platform_store(common::cache_on());
     let spinner = Spinner::new(!a.json.on && std::io::IsTerminal::is_terminal(&std::io::stderr()), "accuracy pass");
-    let c = lobe::numerics::check::check(&whole, &set, &opts, &|stage| {
+    let c = lobe::numerics::check::check(&whole, &set, &opts, a.points as usize, store.as_deref(), &|stage| {
         spinner.show(match stage {
             robust::Stage::Truth { points } => format!("the truth at {points} points"),
             robust::Stage::Candidate { name, tried } => format!("candidate {tried} ({name})"),

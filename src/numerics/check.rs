@@ -44,9 +44,18 @@ fn builtin_bounds(f: &Formula, mode: Mode) -> Vec<(&'static str, String)> {
     used.into_iter().map(|b| (b.name(), b.info().bound.describe(mode))).collect()
 }
 
-/// Checks `whole` (its red channel if it is a colour formula) with `set` baked, the accuracy pass at `pass`
-/// with the truth's condition measured everywhere; `observe` hears the pass's stages.
-pub fn check(whole: &Formula, set: &[(String, f64)], pass: &PassOptions, observe: &dyn Fn(Stage)) -> Result<Check, Diagnostics> {
+/// Checks `whole` (its red channel if it is a colour formula) with `set` baked: the accuracy pass searches at
+/// `pass` (the commands' points and options, so the form it chooses is the one they compile; its decision goes
+/// to `store` unless the budget cut it short), then the written and the chosen form are measured on
+/// `report_points` points with the truth's condition everywhere; `observe` hears the stages.
+pub fn check(
+    whole: &Formula,
+    set: &[(String, f64)],
+    pass: &PassOptions,
+    report_points: usize,
+    store: Option<&dyn robust::DecisionStore>,
+    observe: &dyn Fn(Stage),
+) -> Result<Check, Diagnostics> {
     let channel = whole.is_rgb().then_some("red");
     let f = whole.named_channels().remove(0);
     let bake = crate::resolve_bake(&f, set)?;
@@ -55,8 +64,18 @@ pub fn check(whole: &Formula, set: &[(String, f64)], pass: &PassOptions, observe
     let unused = Input::ALL.iter().filter(|i| !used.contains(**i)).map(|i| i.name()).collect();
     let live = simplified.ir.used_params(simplified.root).into_iter().collect();
     let t = std::time::Instant::now();
-    let opts = PassOptions { conditioning: robust::Conditioning::Everywhere, ..*pass };
+    let opts = PassOptions { conditioning: robust::Conditioning::WhereInaccurate, ..*pass };
     let outcome = robust::improve_observed(&f, &bake, &opts, observe);
+    if let Some(s) = store.filter(|_| !outcome.truncated) {
+        s.store(&f, &bake, &opts, &outcome.decision);
+    }
+    let mut outcome = outcome;
+    if outcome.decision == robust::Decision::default() {
+        // A decision that keeps nothing compiles the plain simplification (the search's base may carry a sign
+        // clamp the compile step's does not): show that kernel.
+        outcome.formula = simplified.clone();
+    }
+    let outcome = outcome.measured_on(&f, &bake, &opts, report_points, observe);
     let pass_ms = t.elapsed().as_secs_f64() * 1e3;
     let cond_well = outcome.after.condition_at_worst_well;
     let compile = |backend| Options { backend, bake: set.to_vec(), math: pass.math, ..Options::default() };

@@ -16,8 +16,9 @@ use crate::simplify::accuracy::rule;
 use std::path::PathBuf;
 
 /// Bumped whenever the pass's choices may change for the same inputs (its rules, or the bits of the math library
-/// it measures with: 3, exp's 16-row table; 4, sin of a bounded argument without reduction).
-pub(crate) const PASS_VERSION: u32 = 4;
+/// it measures with: 3, exp's 16-row table; 4, sin of a bounded argument without reduction; 5, the baked pass
+/// always keeps the live choice).
+pub(crate) const PASS_VERSION: u32 = 5;
 
 /// A cache directory.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -86,8 +87,12 @@ pub fn command_pass(opts: crate::Options, pass: PassOptions, cached: bool) -> cr
 /// [`command_pass`] whose searches also stop when `cancel` trips (the server's request deadline).
 pub(crate) fn command_pass_until(opts: crate::Options, pass: PassOptions, cached: bool, cancel: crate::base::cancel::Cancel) -> crate::Options {
     let pass = PassOptions { budget: super::robust::COMMAND_BUDGET, ..pass };
-    let store = cached.then(Cache::platform).flatten().map(|c| std::sync::Arc::new(c) as std::sync::Arc<dyn DecisionStore>);
-    super::robust::with_pass_until(opts, pass, store, cancel)
+    super::robust::with_pass_until(opts, pass, platform_store(cached), cancel)
+}
+
+/// The platform cache ([`Cache::platform`]) as a decision store, when `cached` and there is a cache directory.
+pub fn platform_store(cached: bool) -> Option<std::sync::Arc<dyn DecisionStore>> {
+    cached.then(Cache::platform).flatten().map(|c| std::sync::Arc::new(c) as std::sync::Arc<dyn DecisionStore>)
 }
 
 /// A formula's kernels as the commands compile them (`eval`, and the Python binding, which must give the same

@@ -28,7 +28,7 @@ fn huge_formulas_need_no_big_stack_from_the_caller() {
             x[lobe::Input::NH as usize] = 0.5;
             assert_eq!(k.evaluator().eval(&x, &k.default_params()), at_half, "{name}");
             // `lobe check`'s report.
-            lobe::numerics::check::check(&f, &[], &pass, &|_| {}).unwrap_or_else(|d| panic!("{d}"));
+            lobe::numerics::check::check(&f, &[], &pass, pass.points, None, &|_| {}).unwrap_or_else(|d| panic!("{d}"));
             // The exports and the printer.
             let plain = lobe::simplified(&f, &lobe::Options::default()).unwrap();
             assert!(lobe::backend::glsl::export(&plain, lobe::backend::glsl::Dialect::Wgsl).unwrap().contains("fn lobe_"));

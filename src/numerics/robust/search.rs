@@ -133,6 +133,8 @@ pub struct Decision {
 #[derive(Clone, Debug)]
 pub struct Outcome {
     pub formula: Formula,
+    /// The form `before` measures: the plain simplification the search started from.
+    pub base: Formula,
     pub before: ErrorStats,
     pub after: ErrorStats,
     pub cost_before: f64,
@@ -363,13 +365,13 @@ fn live_pass(orig: &Formula, o: &PassOptions, stop: &Cancel, observe: &dyn Fn(St
     let before = bench.report(&base, before);
     let after = bench.report(&cur.f, cur_stats);
     let decision = Decision { live: steps, ..Decision::default() };
-    Outcome { formula: cur.f, before, after, cost_before, cost_after: cur_cost, trials, points: n, truncated, decision }
+    Outcome { formula: cur.f, base, before, after, cost_before, cost_after: cur_cost, trials, points: n, truncated, decision }
 }
 
 /// With baked values (module docs: bake-consistent choices): what the live kernel computes, the values folded
 /// in — the live choice (or the formula as written when the live pass kept nothing) simplified with integer
-/// powers above 8 kept as pow calls, as the live kernel calls pow ([`LIVE_CHOICE`]) — kept unless the plain
-/// baked form keeps lobe's promise at more points; then the compensated chains of those powers where they are
+/// powers above 8 kept as pow calls, as the live kernel calls pow ([`LIVE_CHOICE`]) — always kept, so a baked
+/// kernel computes what the live one does; then the compensated chains of those powers where they are
 /// no less accurate and cheaper (within 3 ulp of pow). No other rule is tried, so the baked kernel agrees with
 /// the live one. `Prefer::Speed` bakes with the simplifier's own chains (the fastest form).
 fn baked_pass(orig: &Formula, bake: &[(usize, f64)], live: &Outcome, o: &PassOptions, stop: &Cancel, observe: &dyn Fn(Stage)) -> Outcome {
@@ -396,16 +398,14 @@ fn baked_pass(orig: &Formula, bake: &[(usize, f64)], live: &Outcome, o: &PassOpt
         let c = cost(&cand);
         let rules: Vec<&str> = live.decision.live.iter().map(|s| s.rule.name()).collect();
         let rules = if rules.is_empty() { "the formula as written".to_string() } else { rules.join(", ") };
-        // Dropped only where the plain baked form keeps the promise at more points (an average or a tail a
-        // little better is not worth baked ≠ live), or where it costs more than the live kernel.
-        let budget = base_budget.max(live.cost_after).max(lc.pow_cost());
-        let v = verdict(!keeps_promise(&before, &stats), c, budget);
-        let why = ["less accurate than the plain form with these values baked".to_string(), format!("costs {:.2}× the fastest form (budget {:.2}×)", c / cost_before, budget / cost_before)];
-        let t = Trial::new(LIVE_CHOICE, None, v, &format!("{rules}: "), why, stats, c, cost_before);
-        if t.kept {
-            (cur, cur_stats, cur_cost, cur_got) = (cand, t.stats.clone(), c, got);
-            decision.baked_live_choice = true;
-        }
+        // Always kept: a baked kernel computes what the live one does, whatever the sample of these values
+        // says (a form better here belongs in the live search, which judges every value). The report says when
+        // the plain baked form would have kept the promise at more points.
+        let note = if keeps_promise(&before, &stats) { "" } else { " (the plain form with these values baked keeps the promise at more points of this sample)" };
+        let mut t = Trial::new(LIVE_CHOICE, None, Verdict::Kept, &format!("{rules}: "), [String::new(), String::new()], stats, c, cost_before);
+        t.reason += note;
+        (cur, cur_stats, cur_cost, cur_got) = (cand, t.stats.clone(), c, got);
+        decision.baked_live_choice = true;
         trials.push(t);
     }
     let mut truncated = false;
@@ -437,7 +437,26 @@ fn baked_pass(orig: &Formula, bake: &[(usize, f64)], live: &Outcome, o: &PassOpt
     }
     let before = bench.report(&base, before);
     let after = bench.report(&cur, cur_stats);
-    Outcome { formula: cur, before, after, cost_before, cost_after: cur_cost, trials, points: n, truncated: truncated || live.truncated, decision }
+    Outcome { formula: cur, base, before, after, cost_before, cost_after: cur_cost, trials, points: n, truncated: truncated || live.truncated, decision }
+}
+
+impl Outcome {
+    /// `before` and `after` measured again on `points` domain points of `orig` with `bake` (the search's seed
+    /// and math, the condition everywhere): the report of a search made on the commands' sample, so that what it
+    /// describes is the kernel they compile (`lobe check`). The trials keep the search's own measurements.
+    pub fn measured_on(mut self, orig: &Formula, bake: &[(usize, f64)], o: &PassOptions, points: usize, observe: &dyn Fn(Stage)) -> Outcome {
+        let bake = read_bake(orig, bake);
+        let truth_f = crate::simplify::bake_only(orig, &bake);
+        let n = points_for(&self.base, &truth_f, &PassOptions { points, ..*o });
+        observe(Stage::Truth { points: n });
+        let reference = Reference::new(&truth_f, sample(orig, &bake, n, o.seed));
+        observe(Stage::Report);
+        let measure = |f: &Formula| reference.measure(&*measurer(f, o.math, n), Conditioning::Everywhere);
+        self.before = measure(&self.base);
+        self.after = if identity(&self.formula) == identity(&self.base) { self.before.clone() } else { measure(&self.formula) };
+        self.points = n;
+        self
+    }
 }
 
 /// The rules applied everywhere dropped as no more accurate before the last trial that was kept, in the order
@@ -454,7 +473,8 @@ fn retries(trials: &[Trial]) -> Vec<&'static dyn Rule> {
 pub(crate) struct Chooser {
     pass: PassOptions,
     cache: Option<std::sync::Arc<dyn DecisionStore>>,
-    /// Stops the search early (the compile then uses the best form so far and stores nothing).
+    /// Stops the search early (the compile then uses the best form so far and stores nothing, as after a search
+    /// its own budget cut short).
     cancel: Cancel,
 }
 
@@ -473,8 +493,9 @@ impl crate::FormulaChooser for Chooser {
             return if d == Decision::default() { simplified } else { replay(original, bake, &d, self.pass.prefer) };
         }
         let out = improve_cancellable(original, bake, &self.pass, &self.cancel, &|_| {});
-        // A search cut short by the caller is not this formula's decision: the next compile searches again.
-        if let Some(c) = self.cache.as_ref().filter(|_| !self.cancel.is_cancelled()) {
+        // A search cut short — by the caller, or by its own budget on a loaded machine — is not this formula's
+        // decision: it compiles now, and the next compile searches again rather than replaying a worse choice.
+        if let Some(c) = self.cache.as_ref().filter(|_| !self.cancel.is_cancelled() && !out.truncated) {
             c.store(original, bake, &self.pass, &out.decision);
         }
         if out.decision == Decision::default() {
@@ -540,6 +561,36 @@ mod tests {
                 assert!((a - b).abs() <= 1e-9 * a.abs(), "{r}: {a} vs {b} at {pt:?}\n{}", g.to_text());
             }
             assert!(compared > 500, "{r}: {compared} points compared");
+        }
+    }
+
+    /// A decision store in memory that counts what it is given.
+    #[derive(Debug, Default)]
+    struct Recorder(std::sync::Mutex<Vec<Decision>>);
+    impl DecisionStore for Recorder {
+        fn load(&self, _: &Formula, _: &[(usize, f64)], _: &PassOptions) -> Option<Decision> {
+            None
+        }
+        fn store(&self, _: &Formula, _: &[(usize, f64)], _: &PassOptions, d: &Decision) {
+            self.0.lock().unwrap().push(d.clone());
+        }
+    }
+
+    /// A search its budget cut short compiles its best form so far but is never stored: a loaded first run must
+    /// not fix a worse decision for every later command. A search that finished is stored.
+    #[test]
+    fn a_search_cut_short_by_its_budget_is_not_cached() {
+        use crate::FormulaChooser;
+        let f = crate::front::parse("b.brdf", "param m = 0.3 in 0.01..1\n1/(m^2 * NH^4) * exp((NH^2 - 1) / (m^2 * NH^2))").unwrap();
+        let simplified = crate::simplify::simplify(&f, &[]);
+        for (budget, stored) in [(std::time::Duration::ZERO, 0), (std::time::Duration::from_secs(600), 1)] {
+            let rec = std::sync::Arc::new(Recorder::default());
+            let pass = PassOptions { points: 512, budget, ..PassOptions::default() };
+            let chooser = Chooser { pass, cache: Some(rec.clone()), cancel: Cancel::never() };
+            let out = improve_cancellable(&f, &[], &pass, &Cancel::never(), &|_| {});
+            assert_eq!(out.truncated, budget.is_zero());
+            chooser.choose(&f, &[], simplified.clone());
+            assert_eq!(rec.0.lock().unwrap().len(), stored, "budget {budget:?}");
         }
     }
 
