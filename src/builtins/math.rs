@@ -1392,9 +1392,11 @@ pub(crate) mod logic {
 /// constants stay out of the common path. Cost: exp + a division, a multiplication and ~6 operations
 /// (~1.15× the kernels that use it, measured 2026-12-01).
 ///
-/// Special values follow `exp(a)*b/c`, except that a zero exponential (a < −745.2) times an infinite b/c is 0:
-/// an infinite b/c stands for an overflowed finite factor, and the accuracy pass forms this builtin only from
-/// products whose exp factor is what vanishes there.
+/// Special values follow `exp(a)*b/c`, except that a zero exponential (a < −745.2) times an infinite b/c, or
+/// times 0/0 or ∞/∞, is 0: an infinite b/c stands for an overflowed finite factor, 0/0 and ∞/∞ for factors that
+/// vanish or grow polynomially where e^a vanishes faster than any power (Cook–Torrance at NH = 0), and the
+/// accuracy pass forms this builtin only from products whose exp factor is what vanishes there. A NaN a, b or c
+/// gives NaN.
 ///
 /// Fast mode takes e^a = y·2^q from fast exp's reduction and polynomial ([`exp_fast_parts`]: no table, no
 /// double-double; ≤ 1e-8 relative) and keeps the rest, rare branch included: the same range in both modes.
@@ -1489,7 +1491,12 @@ fn exp_mul_div_scaled<E: Emit>(e: &mut E, a: E::V, b: E::V, c: E::V) -> E::V {
     let f = e.zero_where(low, f);
     let f = e.select(nan, a, f);
     let s = e.mul(bc, f);
-    let bc_ok = e.eq(bc, bc);
+    // A zero exponential wins over any b/c not made of a NaN: an infinite one (see above), and 0/0 or ∞/∞,
+    // which stand for factors vanishing (or growing) polynomially where e^a vanishes faster than any power
+    // (Cook–Torrance at NH = 0, where m²·NH² = 0 makes a = −∞ and G·F/(NL·NV) is 0/0: the limit is 0).
+    let b_ok = e.eq(b, b);
+    let c_ok = e.eq(c, c);
+    let bc_ok = e.and(b_ok, c_ok);
     let z = e.and(low, bc_ok);
     let s = e.zero_where(z, s);
     e.select(normal, r, s)

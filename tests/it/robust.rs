@@ -65,6 +65,19 @@ fn beckmann_and_cook_torrance_are_zero_not_nan_at_tiny_nh() {
     let p = k.default_params();
     assert!(plain.eval(&at(0.5, 0.5, 0.0, 0.7), &p).is_nan(), "the unrewritten Beckmann is no longer NaN at NH = 0");
     assert_eq!(k.eval(&at(0.5, 0.5, 0.0, 0.7), &p), 0.0, "Beckmann at NH = 0");
+    // Cook–Torrance at NH = 0 exactly, whatever VH, NL and NV (0 included: G·F/(NL·NV) is then 0/0 as well): the
+    // exponential vanishes faster than any power, so the limit is 0, on every tier and at random parameters.
+    let f = load("cook_torrance");
+    let mut r = lobe::base::rng::Rng(0xc7);
+    for backend in [Backend::Interp, Backend::Jit] {
+        let k = lobe::compile_formula(f.clone(), &robust::with_pass(Options { backend, ..Default::default() }, PassOptions::default())).unwrap();
+        for _ in 0..200 {
+            let mut pick = || [0.0, 5e-324, 1e-300, r.unit(), 1.0][r.below(5) as usize];
+            let x = at(pick(), pick(), 0.0, pick());
+            let p = [k.default_params()[0], 0.01 + r.unit() * 0.99, r.unit()];
+            assert_eq!(k.eval(&x, &p), 0.0, "Cook–Torrance on {backend:?} at NH = 0, {x:?}, {p:?}");
+        }
+    }
 }
 
 /// Ward (1/√(NL·NV)) and Cook–Torrance (/(π·NL·NV)) where NL·NV underflows but the true value is finite;
