@@ -137,6 +137,22 @@ pub fn run(a: &CheckArgs) -> Result<(), CliError> {
         println!("  builtins    {} ({} math)", b.join(", "), a.math.mode);
     }
     print_accuracy(f, pass, a.points as usize, c.pass_ms, c.cond_well);
+    if let Some(d) = &c.fast_vs_precise {
+        let at = d.at.as_ref().map_or(String::new(), |(pt, fast, precise)| {
+            let w = robust::Worst { point: pt.clone(), got: *fast, truth: *precise, bits: 0.0 };
+            format!(" at {}", point_text(f, &w).replace("(true ", "(precise "))
+        });
+        println!(
+            "  fast math   vs precise over {} points (parameters over their declared ranges): max {:.2e} relative where |precise| ≥ {:e}{at}; max {:.2e} of the largest value absolute",
+            d.points,
+            d.max_rel,
+            lobe::numerics::check::FastVsPrecise::REL_FLOOR,
+            d.max_abs_vs_peak
+        );
+        if d.nonfinite > 0 {
+            println!("              NaN/∞ in one mode and finite in the other at {} points", d.nonfinite);
+        }
+    }
     println!("  compile     jit {:.0} µs, interpreter {:.0} µs", c.jit_us, c.interp_us);
     Ok(())
 }

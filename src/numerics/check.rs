@@ -29,6 +29,57 @@ pub struct Check {
     pub cond_well: Option<f64>,
     pub jit_us: f64,
     pub interp_us: f64,
+    /// With `--math fast`: the chosen form in fast math against the same form in precise math, over the report's
+    /// points (every parameter over its declared range).
+    pub fast_vs_precise: Option<FastVsPrecise>,
+}
+
+/// How far fast math moves a formula from precise math over a sample: the largest relative difference where the
+/// precise value is at least [`FastVsPrecise::REL_FLOOR`] (below it fast exp flushes to 0, and a relative
+/// difference to a value that is 0 in one mode says nothing), the largest absolute difference relative to the
+/// sample's largest precise value (fast acos and sin are absolute-error functions), and the points where one mode
+/// is finite and the other is not.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FastVsPrecise {
+    pub max_rel: f64,
+    /// The point of `max_rel`, its fast and precise values.
+    pub at: Option<(robust::Point, f64, f64)>,
+    pub max_abs_vs_peak: f64,
+    pub nonfinite: usize,
+    pub points: usize,
+}
+
+impl FastVsPrecise {
+    /// Where relative differences are counted: well above fast exp's flush to 0 below e⁻⁷⁰⁸ ≈ 3.3e-308.
+    pub const REL_FLOOR: f64 = 1e-290;
+
+    /// `f` compiled in both modes (interpreted: the tiers give its bits) over `points`.
+    pub fn measure(f: &Formula, points: &[robust::Point]) -> Result<FastVsPrecise, Diagnostics> {
+        use rayon::prelude::*;
+        let k = |mode| crate::build_kernel(std::sync::Arc::new(f.clone()), Backend::Interp, mode);
+        let (fast, precise) = (k(Mode::Fast)?, k(Mode::Precise)?);
+        let rows: Vec<(f64, f64)> = points.par_iter().map(|pt| (fast.evaluator().eval(&pt.x, &pt.p), precise.evaluator().eval(&pt.x, &pt.p))).collect();
+        let peak = rows.iter().filter(|r| r.1.is_finite()).fold(0.0f64, |m, r| m.max(r.1.abs()));
+        let mut out = FastVsPrecise { max_rel: 0.0, at: None, max_abs_vs_peak: 0.0, nonfinite: 0, points: points.len() };
+        for (pt, &(a, b)) in points.iter().zip(&rows) {
+            if a.is_finite() != b.is_finite() {
+                out.nonfinite += 1;
+                continue;
+            }
+            if !b.is_finite() || a == b {
+                continue;
+            }
+            if peak > 0.0 {
+                out.max_abs_vs_peak = out.max_abs_vs_peak.max((a - b).abs() / peak);
+            }
+            let rel = (a - b).abs() / b.abs();
+            if b.abs() >= Self::REL_FLOOR && rel > out.max_rel {
+                out.max_rel = rel;
+                out.at = Some((pt.clone(), a, b));
+            }
+        }
+        Ok(out)
+    }
 }
 
 /// The builtins `f` calls, each with its stated bound in `mode` (sorted by table order).
@@ -79,6 +130,12 @@ pub fn check(
     let pass_ms = t.elapsed().as_secs_f64() * 1e3;
     let cond_well = outcome.after.condition_at_worst_well;
     let compile = |backend| Options { backend, bake: set.to_vec(), math: pass.math, ..Options::default() };
+    let fast_vs_precise = if pass.math == Mode::Fast {
+        let points = robust::sample(&f, &bake, outcome.points, pass.seed);
+        Some(FastVsPrecise::measure(&outcome.formula, &points)?)
+    } else {
+        None
+    };
     let jit = crate::compile_formula(f.clone(), &compile(Backend::Jit))?;
     let interp = crate::compile_formula(f.clone(), &compile(Backend::Interp))?;
     Ok(Check {
@@ -97,6 +154,7 @@ pub fn check(
         cond_well,
         jit_us: jit.compile_time.as_secs_f64() * 1e6,
         interp_us: interp.compile_time.as_secs_f64() * 1e6,
+        fast_vs_precise,
     })
 }
 
@@ -154,6 +212,18 @@ impl Check {
             compiled: pass.formula.to_program_text(),
             cost_ratio: pass.cost_after / pass.cost_before,
             compile_us: robust::CompileUs { jit: self.jit_us, interp: self.interp_us },
+            fast_vs_precise: self.fast_vs_precise.as_ref().map(|d| robust::FastJson {
+                max_rel: d.max_rel,
+                at: d.at.as_ref().map(|(pt, fast, precise)| robust::FastAtJson {
+                    inputs: crate::base::json::Named::new(f.used_inputs().iter().map(|i| (i.name(), pt.x[i.index()]))),
+                    params: crate::base::json::Named::new(f.params.iter().zip(&pt.p).map(|(d, v)| (d.name.as_str(), *v))),
+                    fast: *fast,
+                    precise: *precise,
+                }),
+                max_abs_vs_peak: d.max_abs_vs_peak,
+                nonfinite: d.nonfinite,
+                points: d.points,
+            }),
         }
     }
 }

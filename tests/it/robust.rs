@@ -711,3 +711,21 @@ fn baked_equals_live_at_random_values() {
         }
     }
 }
+
+/// `lobe check --math fast` states fast math's error per formula over the declared parameter ranges, not at the
+/// defaults only: Gaussian's exp(−n·acos²/2) amplifies fast acos's error with n, so over n ∈ 1..1000 it exceeds
+/// what n = 50 gives; precise math reports nothing; an arithmetic formula differs nowhere.
+#[test]
+fn fast_math_error_is_measured_over_the_declared_ranges() {
+    let fast = PassOptions { math: lobe::Mode::Fast, ..PassOptions::default() };
+    let gauss = load("gaussian");
+    let over_ranges = lobe::numerics::check::check(&gauss, &[], &fast, 20_000, None, &|_| {}).unwrap().fast_vs_precise.unwrap();
+    let at_50 = lobe::numerics::check::check(&gauss, &[("n".into(), 50.0)], &fast, 20_000, None, &|_| {}).unwrap().fast_vs_precise.unwrap();
+    assert!(over_ranges.max_rel > 4.0 * at_50.max_rel && over_ranges.max_rel < 1e-4, "{over_ranges:?} vs {at_50:?}");
+    let (pt, _, _) = over_ranges.at.clone().unwrap();
+    assert!(pt.p[0] > 100.0, "the worst point is at a large n: {pt:?}");
+    assert_eq!(over_ranges.nonfinite, 0);
+    assert!(lobe::numerics::check::check(&gauss, &[], &PassOptions::default(), 2000, None, &|_| {}).unwrap().fast_vs_precise.is_none());
+    let arith = lobe::numerics::check::check(&load("schlick"), &[], &fast, 5000, None, &|_| {}).unwrap().fast_vs_precise.unwrap();
+    assert_eq!((arith.max_rel, arith.max_abs_vs_peak), (0.0, 0.0));
+}

@@ -74,7 +74,7 @@ mod search;
 
 pub use measure::{condition_ulps, measure, Conditioning, Reference};
 pub use metric::{ulps, ErrorStats, Worst, ILL_CONDITIONED_ULPS, TARGET_BITS};
-pub use report::{BuiltinBound, CheckReport, CompileUs, ErrorStatsJson, ParamJson, RewriteCount, RoundingJson, TrialJson, WorstJson};
+pub use report::{BuiltinBound, CheckReport, CompileUs, FastAtJson, FastJson, ErrorStatsJson, ParamJson, RewriteCount, RoundingJson, TrialJson, WorstJson};
 pub use sample::{sample, special_values, Point};
 pub use search::{
     improve, replay, with_pass, with_pass_cached, Decision, DecisionStore, Outcome, PassOptions, Prefer, Stage, Step, Trial, Verdict,

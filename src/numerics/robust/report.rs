@@ -41,6 +41,9 @@ pub struct CheckReport {
     #[serde(serialize_with = "json::num")]
     pub cost_ratio: f64,
     pub compile_us: CompileUs,
+    /// `--math fast` only: fast against precise math over the report's points.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fast_vs_precise: Option<FastJson>,
 }
 
 /// A declared parameter: its range, its baked value (`null` when live or unused) and whether code reads it.
@@ -107,6 +110,29 @@ pub struct ErrorStatsJson {
     pub pole_misses: usize,
     pub wrong_sign: usize,
     pub over_target_well_conditioned: usize,
+}
+
+/// `fast_vs_precise` of the check report (`--math fast`): the chosen form in fast math against precise math.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct FastJson {
+    #[serde(serialize_with = "json::num")]
+    pub max_rel: f64,
+    pub at: Option<FastAtJson>,
+    #[serde(serialize_with = "json::num")]
+    pub max_abs_vs_peak: f64,
+    pub nonfinite: usize,
+    pub points: usize,
+}
+
+/// Where fast math is furthest from precise math.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct FastAtJson {
+    pub inputs: Named,
+    pub params: Named,
+    #[serde(serialize_with = "json::num")]
+    pub fast: f64,
+    #[serde(serialize_with = "json::num")]
+    pub precise: f64,
 }
 
 /// A [`Worst`] point: the inputs `f` reads and every parameter, by name.
