@@ -104,7 +104,7 @@ pub fn from_cosines(c: [f64; 5]) -> [f64; N_INPUTS] {
 /// additionally set to `c` (a no-op for NH, VR and NV).
 ///
 /// The directions are L = N and V at angle θ = acos c in the x–z plane, so NV = VR = c as the cosines say.
-pub(crate) fn lobe_inputs(c: f64, lobe: Input) -> [f64; N_INPUTS] {
+pub fn lobe_inputs(c: f64, lobe: Input) -> [f64; N_INPUTS] {
     let s = (1.0 - c * c).max(0.0).sqrt();
     let mut x = [1.0, c, c, c, (0.5 * (1.0 + c)).max(0.0).sqrt(), 0.0, 0.0, 1.0, s, 0.0, c];
     x[lobe.index()] = c;

@@ -28,7 +28,7 @@
 //! (`benches/energy.rs` reproduces them).
 
 use crate::base::cancel::Cancel;
-use super::quad::integrate;
+use super::quad::{integrate, integrate_with};
 use super::{dir, Diagnostic, V3};
 use crate::base::json::{self, Named};
 use crate::frame::{inputs_from_dirs, lobe_inputs};
@@ -317,21 +317,6 @@ pub fn albedo_at(ev: &dyn Evaluator, params: &[f64], theta_i: f64, phi_i: Option
 /// [`albedo_at`], polling `cancel` before each inner integral (over φₒ at one θₒ): fails with the
 /// cancellation once it trips.
 fn albedo_until(ev: &dyn Evaluator, params: &[f64], theta_i: f64, phi_i: Option<f64>, cancel: &Cancel) -> Result<f64, Diagnostic> {
-    albedo_tol(ev, params, theta_i, phi_i, cancel, ALBEDO_TOL)
-}
-
-/// Relative tolerances (inner over φₒ, outer over θₒ) and panel budgets of the albedo's nested quadrature.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct AlbedoTol {
-    pub inner: f64,
-    pub outer: f64,
-    pub inner_panels: usize,
-    pub outer_panels: usize,
-}
-
-pub(crate) const ALBEDO_TOL: AlbedoTol = AlbedoTol { inner: 1e-9, outer: 1e-8, inner_panels: 400, outer_panels: 2000 };
-
-pub(crate) fn albedo_tol(ev: &dyn Evaluator, params: &[f64], theta_i: f64, phi_i: Option<f64>, cancel: &Cancel, tol: AlbedoTol) -> Result<f64, Diagnostic> {
     let t = theta_i;
     let (st, ct) = t.sin_cos();
     let (sp, cp) = phi_i.unwrap_or(0.0).sin_cos();
@@ -372,9 +357,9 @@ pub(crate) fn albedo_tol(ev: &dyn Evaluator, params: &[f64], theta_i: f64, phi_i
             crate::builtins::fmax(y, 0.0) * v[2]
         };
         let (q, twice) = if full_circle {
-            (integrate(g, &[-phi_max, -0.5 * phi_max, 0.0, 0.5 * phi_max, phi_max], tol.inner, 1e-15, 2 * tol.inner_panels), 1.0)
+            (integrate_with(g, &[-phi_max, -0.5 * phi_max, 0.0, 0.5 * phi_max, phi_max], 1e-9, 1e-15, 800, 0), 1.0)
         } else {
-            (integrate(g, &[0.0, 0.5 * phi_max, phi_max], tol.inner, 1e-15, tol.inner_panels), 2.0)
+            (integrate_with(g, &[0.0, 0.5 * phi_max, phi_max], 1e-9, 1e-15, 400, 0), 2.0)
         };
         if !q.converged {
             nonconv += 1;
@@ -389,7 +374,7 @@ pub(crate) fn albedo_tol(ev: &dyn Evaluator, params: &[f64], theta_i: f64, phi_i
     }
     breaks.sort_by(f64::total_cmp);
     breaks.dedup();
-    let q = integrate(&mut inner, &breaks, tol.outer, 1e-14, tol.outer_panels);
+    let q = integrate_with(&mut inner, &breaks, 1e-8, 1e-14, 2000, 0);
     cancel.check()?;
     if let Some((a, p)) = nan {
         let v: V3 = std::array::from_fn(|k| a.cos() * r[k] + a.sin() * (p.cos() * t1[k] + p.sin() * t2[k]));
@@ -941,31 +926,5 @@ mod tests {
         // NL·VR^n is not reciprocal.
         let nonrec = FnEvaluator(|x: &[f64; crate::N_INPUTS], p: &[f64]| x[0] * x[3].max(0.0).powf(p[0]));
         assert!(reciprocity(&nonrec, &[20.0]).max_rel > 0.5);
-    }
-}
-
-#[cfg(test)]
-mod experiment {
-    use super::*;
-    #[test]
-    #[ignore]
-    fn ct_tolerance_experiment() {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/brdfs/cook_torrance.brdf");
-        let f = crate::front::parse(path, &std::fs::read_to_string(path).unwrap()).unwrap();
-        let k = crate::compile_formula(f, &crate::Options::default()).unwrap();
-        let p = k.default_params();
-        let ev = k.evaluator().as_ref();
-        let tight = AlbedoTol { inner: 1e-14, outer: 1e-14, inner_panels: 4000, outer_panels: 20000 };
-        for tol in [ALBEDO_TOL, AlbedoTol { inner: 1e-12, outer: 1e-12, inner_panels: 1000, outer_panels: 4000 }, AlbedoTol { inner: 1e-13, outer: 1e-12, inner_panels: 1000, outer_panels: 4000 }] {
-            let t0 = std::time::Instant::now();
-            let mut worst: (f64, f64) = (0.0, 0.0);
-            for d in full_mode_angles() {
-                let a = albedo_tol(ev, &p, d.to_radians(), None, &Cancel::never(), tol).unwrap();
-                let b = albedo_tol(ev, &p, d.to_radians(), None, &Cancel::never(), tight).unwrap();
-                let r = ((a - b) / b).abs();
-                if r > worst.0 { worst = (r, d); }
-            }
-            eprintln!("{tol:?}: worst rel {:e} at {}°, {:?}", worst.0, worst.1, t0.elapsed());
-        }
     }
 }

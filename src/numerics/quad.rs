@@ -5,7 +5,10 @@
 //! clamped to zero at its cut-off) and narrow peaks (n = 1000) are found by the error estimate and bisected.
 //! Callers pass known breakpoints (kinks, the geometric ladder towards a peak) so bisection rarely has to find
 //! them. The error estimate is the raw |K15 − G7|, which overestimates the true error of K15 by orders of
-//! magnitude on smooth pieces — deliberately conservative.
+//! magnitude on smooth pieces — deliberately conservative, except on a panel holding a kink the breakpoints
+//! miss at a place where the two rules' errors happen to cross (Cook–Torrance's G switching inside the lobe: the
+//! estimate said 1e-14 where the panel was 2e-10 off). So a converged result is checked on every panel's halves
+//! ([`integrate`]; nested inner integrals skip it, [`integrate_with`]).
 
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
@@ -86,10 +89,20 @@ impl Ord for Panel {
     }
 }
 
+/// Verification rounds of [`integrate`] (each evaluates every panel's halves once).
+const MAX_VERIFY: usize = 3;
+
 /// Integrates `f` over `[breaks[0], breaks.last()]` (breaks sorted ascending; duplicates are skipped) until the
-/// estimated error is at most `max(abs_tol, rel_tol·|I|)` or `max_panels` panels exist. A NaN anywhere makes the
+/// estimated error is at most `max(abs_tol, rel_tol·|I|)` — checked once more on every panel's halves, up to
+/// [`MAX_VERIFY`] times (a kink can fool one panel's estimate) — or `max_panels` panels exist. A NaN anywhere makes the
 /// result NaN (the caller reports it; quadrature never hides a NaN).
-pub(crate) fn integrate(mut f: impl FnMut(f64) -> f64, breaks: &[f64], rel_tol: f64, abs_tol: f64, max_panels: usize) -> QuadResult {
+pub(crate) fn integrate(f: impl FnMut(f64) -> f64, breaks: &[f64], rel_tol: f64, abs_tol: f64, max_panels: usize) -> QuadResult {
+    integrate_with(f, breaks, rel_tol, abs_tol, max_panels, MAX_VERIFY)
+}
+
+/// [`integrate`] with `verify` rounds of the halves' check (0: the plain QAG strategy, for inner integrals of a
+/// nested quadrature, whose cost it would multiply).
+pub(crate) fn integrate_with(mut f: impl FnMut(f64) -> f64, breaks: &[f64], rel_tol: f64, abs_tol: f64, max_panels: usize, verify: usize) -> QuadResult {
     let mut heap = BinaryHeap::new();
     let mut evals = 0;
     let (mut total, mut err) = (0.0, 0.0);
@@ -108,9 +121,50 @@ pub(crate) fn integrate(mut f: impl FnMut(f64) -> f64, breaks: &[f64], rel_tol: 
         return QuadResult { value: total, error: err, evals, converged: false };
     }
     let mut converged = true;
+    let mut verified = 0;
     loop {
         if err <= abs_tol.max(rel_tol * total.abs()) {
-            break;
+            // |K15 − G7| can vanish by accident on a panel with a kink the breakpoints miss (both rules' errors
+            // are ~h² times functions of where the kink sits, and they cross): a second opinion from each
+            // panel's halves, which moves the kink's relative position. Where the halves disagree with the panel
+            // by more than its estimate, they replace it with that disagreement as their error, and the
+            // bisection goes on.
+            if verified == verify || heap.len() * 2 > max_panels {
+                break;
+            }
+            verified += 1;
+            let mut next = BinaryHeap::with_capacity(heap.len() * 2);
+            let mut moved = false;
+            for p in heap.drain() {
+                let m = 0.5 * (p.a + p.b);
+                if !(m > p.a && m < p.b) {
+                    next.push(p);
+                    continue;
+                }
+                let (v1, e1) = gk15(&mut f, p.a, m);
+                let (v2, e2) = gk15(&mut f, m, p.b);
+                evals += 30;
+                let diff = (v1 + v2 - p.value).abs();
+                // Beyond the panel's estimate and beyond rounding noise (a panel where f is 0 or a polynomial
+                // estimates 0).
+                if diff > p.error.max(64.0 * f64::EPSILON * (v1.abs() + v2.abs())) {
+                    moved = true;
+                    total += v1 + v2 - p.value;
+                    err += e1.max(0.5 * diff) + e2.max(0.5 * diff) - p.error;
+                    next.push(Panel { a: p.a, b: m, value: v1, error: e1.max(0.5 * diff) });
+                    next.push(Panel { a: m, b: p.b, value: v2, error: e2.max(0.5 * diff) });
+                } else {
+                    next.push(p);
+                }
+            }
+            heap = next;
+            if !total.is_finite() || !err.is_finite() {
+                return QuadResult { value: total, error: err, evals, converged: false };
+            }
+            if !moved || err <= abs_tol.max(rel_tol * total.abs()) {
+                break;
+            }
+            continue;
         }
         if heap.len() >= max_panels {
             converged = false;
@@ -161,6 +215,27 @@ mod tests {
         // A narrow peak: ∫ x^1000 = 1/1001.
         let r = integrate(|x| x.powi(1000), &[0.0, 1.0], 1e-12, 0.0, 2000);
         assert!((r.value * 1001.0 - 1.0).abs() < 1e-10, "{r:?}");
+    }
+
+    /// A kink placed where one panel's K15 and G7 errors cancel (found by scanning its position): the estimate
+    /// of the panel says converged, the verification on its halves does not, and the result is right.
+    #[test]
+    fn a_kink_that_fools_one_panels_estimate_is_found() {
+        let exact = |t: f64| (t * t + (1.0 - t) * (1.0 - t)) / 2.0;
+        let mut worst = (0.0, 0.5);
+        for i in 1..20000 {
+            let t = i as f64 / 20000.0;
+            let (k, e) = gk15(&mut |x: f64| (x - t).abs(), 0.0, 1.0);
+            let ratio = (k - exact(t)).abs() / e.max(1e-300);
+            if ratio > worst.0 {
+                worst = (ratio, t);
+            }
+        }
+        assert!(worst.0 > 100.0, "no kink position fools the estimate: {worst:?}");
+        let t = worst.1;
+        let r = integrate(|x| (x - t).abs(), &[0.0, 1.0], 1e-6, 0.0, 2000);
+        assert!((r.value - exact(t)).abs() <= 1e-6 * exact(t), "t = {t}: {r:?} vs {}", exact(t));
+        assert!((r.value - exact(t)).abs() <= r.error, "the stated error holds: {r:?}");
     }
 
     #[test]
