@@ -107,6 +107,7 @@ mod compensated;
 mod power;
 mod rule;
 mod scale;
+mod vector;
 
 pub use chain::{compensated_powers, pow_call_policy};
 pub use rule::{identity, Example, Rule, Sites};
@@ -126,6 +127,11 @@ pub static RULES: &[&dyn Rule] = &[
     &scale::CancelMin,
     // Before quotient-chain, which flattens (x/√s)·(x/√s) into x·x/√s/√s, where scaled-norm cannot see it.
     &scale::ScaledNorm,
+    // After scaled-norm and before quotient-chain: they read c = x/sqrt(S) and c·c as the formula has them.
+    &vector::CancelTan,
+    &vector::SineSquare,
+    &vector::HalfComplement,
+    &vector::CancelCommon,
     &scale::QuotientChain,
     &scale::ScaledExp,
     &compensated::FactorQuadratic,

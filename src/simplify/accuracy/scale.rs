@@ -353,26 +353,26 @@ fn two_divisors(ir: &mut Ir, map: &[NodeId], (arg, rest): (NodeId, &[NodeId]), d
     ir.call(Builtin::ExpMulDiv, &[a, b, c], s)
 }
 
-// K/(1 + sqrt(1 + A·((1 − c·c)/(c·c)))) → K·c/(c + sqrt(c·c + A·(1 − c·c)))   for c > 0, then c/c cancelled
-// in the products around it
+// K/(1 + sqrt(1 + A·(1 − c·c)/(c·c))) → K·|c|/(|c| + sqrt(c·c + A·(1 − c·c)))   (A any product, however the
+// tan² is spelt: ((1 − c·c)/(c·c)), (1 − c·c)/c/c), c for |c| where c > 0 (range or guard), then c/c
+// cancelled in the products around it
 fn smith_g1(a: &Analysis) -> (Ir, NodeId, bool) {
-    let (f, ranges, guards) = (&a.f, a.ranges(), a.guards());
+    let (f, ranges, guards, lists) = (&a.f, a.ranges(), a.guards(), a.lists());
     let ir0 = &f.ir;
     let is_one = |x: NodeId| ir0.node(x).as_const() == Some(1.0);
-    // (A, c, c·c) when `x` is 1 + A·((1 − c·c)/(c·c)) (either operand order of + and ·).
-    let inner = |x: NodeId| -> Option<(NodeId, NodeId, NodeId)> {
+    // (A's factors, c, c·c) when `x` is 1 + A·(1 − c·c)/(c·c) (either operand order of +, any of · and /).
+    let inner = |x: NodeId| -> Option<(Vec<NodeId>, NodeId, NodeId)> {
         let Node::Binary(BinOp::Add, p, q) = *ir0.node(x) else { return None };
         let m = if is_one(p) { q } else if is_one(q) { p } else { return None };
-        let Node::Binary(BinOp::Mul, u, v) = *ir0.node(m) else { return None };
-        for (a, d) in [(u, v), (v, u)] {
-            let Node::Binary(BinOp::Div, t, sq) = *ir0.node(d) else { continue };
-            let Node::Binary(BinOp::Sub, one, sq2) = *ir0.node(t) else { continue };
-            let Node::Binary(BinOp::Mul, c, c2) = *ir0.node(sq) else { continue };
-            if is_one(one) && sq2 == sq && c == c2 {
-                return Some((a, c, sq));
-            }
-        }
-        None
+        let (num, den) = lists[m.index()].as_ref()?;
+        let [c, c2] = den[..] else { return None };
+        let at = num.iter().position(|&t| {
+            matches!(*ir0.node(t), Node::Binary(BinOp::Sub, one, sq)
+                if is_one(one) && matches!(*ir0.node(sq), Node::Binary(BinOp::Mul, u, v) if u == c && v == c))
+        })?;
+        let Node::Binary(BinOp::Sub, _, sq) = *ir0.node(num[at]) else { return None };
+        let rest: Vec<NodeId> = num.iter().enumerate().filter(|(i, _)| *i != at).map(|(_, t)| *t).collect();
+        (c == c2).then_some((rest, c, sq))
     };
     let (ir, root, fired) = rebuild(f, |ir, map, id, n| {
         let Node::Binary(BinOp::Div, k, den) = n else { return None };
@@ -381,11 +381,11 @@ fn smith_g1(a: &Analysis) -> (Ir, NodeId, bool) {
         let Node::Call(Builtin::Sqrt, [x, ..]) = *ir0.node(r) else { return None };
         let (a, c, sq) = inner(x)?;
         let positive = ranges[c.index()].lo > 0.0 || guards[id.index()].as_ref().is_some_and(|g| g.contains(&c));
-        if !positive {
-            return None;
-        }
         let s = f.ir.span(id);
-        let (a, c, sq) = (map[a.index()], map[c.index()], map[sq.index()]);
+        let a = product(ir, map, &a, s).unwrap_or_else(|| ir.konst(1.0, s));
+        let (c, sq) = (map[c.index()], map[sq.index()]);
+        // K/(1 + sqrt(1 + A·t²)) times |c|/|c|: |c|·sqrt(1 + A·(1 − c²)/c²) = sqrt(c² + A·(1 − c²)).
+        let c = if positive { c } else { ir.call(Builtin::Abs, &[c], s) };
         let one = ir.konst(1.0, s);
         let om = ir.bin(BinOp::Sub, one, sq, s);
         let am = ir.bin(BinOp::Mul, a, om, s);
