@@ -81,7 +81,7 @@ impl Rule for SmithG1 {
         "smith-g1"
     }
     fn doc(&self) -> &'static str {
-        "Smith G1 2/(1 + sqrt(1 + A*tan^2)) as 2c/(c + sqrt(c^2 + A*(1 - c^2))), c/c cancelled: no inf/inf at grazing c"
+        "Smith G1 2/(1 + sqrt(1 + A*tan^2)) as 2|c|/(|c| + sqrt(c^2 + A*(1 - c^2))), c/c cancelled where c > 0: no inf/inf at grazing c"
     }
     fn sites(&self) -> Sites {
         Sites::Everywhere
@@ -657,8 +657,17 @@ mod tests {
         let t = SmithG1.apply_to(&parse(&src), None).unwrap().to_program_text();
         // G1·…/(4·NL) with G1 = 2·NL/(NL + …): NL cancelled, so nothing is ∞/∞ or 0/0 at tiny NL.
         assert!(!t.contains("/ nl") && !t.contains("* nl /") && t.contains("sqrt("), "{t}");
-        // Without the guard NL may be 0 or negative: not rewritten.
-        assert!(SmithG1.apply_to(&parse(&format!("param a = 0.2 in 0.01..1\n{g1}\ng * NH / (4*NL)")), None).is_none());
+        // Without the guard NL may be 0: nothing cancelled. (Of a clamped NL, |NL| simplifies to NL; of a
+        // direction's component, Lz, it stays: G1 is even in c.)
+        let t = SmithG1.apply_to(&parse(&format!("param a = 0.2 in 0.01..1\n{g1}\ng * NH / (4*NL)")), None).unwrap().to_program_text();
+        assert!(t.contains("(nl + sqrt(") && t.contains("/ (4 * nl)"), "{t}");
+        let lz = format!("param a = 0.2 in 0.01..1\n{}\ng * NH / (4*Lz)", g1.replace("NL", "Lz"));
+        let t = SmithG1.apply_to(&parse(&lz), None).unwrap().to_program_text();
+        assert!(t.contains("abs(Lz)") && t.contains("Lz)"), "{t}");
+        // tan² spelt (1 − c²)/c/c, as BRDF Explorer's Walter file has it.
+        let walter = "param a = 0.2 in 0.01..1\nlet g = 2/(1 + sqrt(1 + a*a*(1 - NV*NV)/NV/NV))\nNV <= 0 ? 0 : g / NV";
+        let t = SmithG1.apply_to(&parse(walter), None).unwrap().to_program_text();
+        assert!(t.contains("(nv + sqrt(") && !t.contains("/ nv"), "{t}");
     }
 
     #[test]
