@@ -92,6 +92,9 @@
 //!   where they may be tiny or huge. BRDF Explorer's G files write `G·(1/(NL·NV))` with G = NL·NV·…: 0·∞ where
 //!   NL·NV underflows. Where x = 0 the written form is 0/0 and the rewrite is its continuous extension (the
 //!   truth's limit there).
+//! - `interleave-quotient` (in `vector.rs`): `x·y·…/(d·…) → (x/d)·y·…/…` where x, y (the first two numerator
+//!   factors that may be tiny or huge) and d may leave the f64 range: BRDF Explorer's AP07 and Neumann G terms,
+//!   `NL·NV/(NL + NV − NL·NV)`, where NL·NV underflows to 0 and the value is ~min(NL, NV).
 //! - `rational-form` (in `cancel.rs`): a cancelling sum rational in one input, as one linear-fractional form
 //!   with double-double parameter-only coefficients.
 //! - `compensated-exp` (in `cancel.rs`): exp's (or expmuldiv's) argument K·q, K its parameter-only factors in
@@ -152,6 +155,7 @@ pub static RULES: &[&dyn Rule] = &[
     &vector::SineSquare,
     &vector::HalfComplement,
     &vector::CancelCommon,
+    &vector::InterleaveQuotient,
     &scale::QuotientChain,
     &scale::ScaledExp,
     &compensated::FactorQuadratic,

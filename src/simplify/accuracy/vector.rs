@@ -1,7 +1,7 @@
 //! The vector family: forms that use what a formula's own directions make exact in real arithmetic —
 //! 1 − c² of a component the formula normalised is the sum of the other squares over the length, a common
 //! factor cancels, `c²·(A + B/c²)` is `A·c² + B` (`sine-square`, `cancel-tan`, `cancel-common`,
-//! `half-complement`; each described in [`super`]). Inputs are never taken as unit vectors: their f64
+//! `half-complement`, `interleave-quotient`; each described in [`super`]). Inputs are never taken as unit vectors: their f64
 //! components are not; only a vector the formula itself divides by its length is.
 
 use super::finish;
@@ -11,7 +11,7 @@ use crate::builtins::dd::{self, Arith};
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Input, Ir, Node, NodeId};
 use crate::simplify::emit::IrEmit;
-use crate::simplify::rewrite::{divide_apart, rebuild, safe, Analysis};
+use crate::simplify::rewrite::{divide_apart, divide_by, rebuild, safe, Analysis};
 
 /// `sine-square` (module docs).
 pub(crate) struct SineSquare;
@@ -78,6 +78,27 @@ impl Rule for CancelCommon {
     }
     fn example(&self) -> Example {
         Example { before: "let g = NL*NV/(1 + NH)\ng * (2/(NL*NV))", bake: &[], site: None, shows: "2 / (1 + clamp(NH, 0, 1))" }
+    }
+}
+
+/// `interleave-quotient` (module docs).
+pub(crate) struct InterleaveQuotient;
+
+impl Rule for InterleaveQuotient {
+    fn name(&self) -> &'static str {
+        "interleave-quotient"
+    }
+    fn doc(&self) -> &'static str {
+        "x*y*.../(d*...) as (x/d)*y*...: two tiny factors meet a divisor before each other, no underflow of x*y"
+    }
+    fn sites(&self) -> Sites {
+        Sites::Everywhere
+    }
+    fn apply(&self, _: &Source, a: &Analysis, _: Option<usize>) -> Option<Formula> {
+        finish(a, interleave_quotient(a))
+    }
+    fn example(&self) -> Example {
+        Example { before: "NL*NV/(NL + NV - NL*NV)", bake: &[], site: None, shows: "nl / (nl + nv - nl * nv) * nv" }
     }
 }
 
@@ -295,6 +316,37 @@ fn cancel_common(a: &Analysis) -> (Ir, NodeId, bool) {
             let sg = ir.call(Builtin::Select, &[neg, m1, p1], s);
             ir.bin(BinOp::Mul, sg, v, s)
         }))
+    })
+}
+
+// x·y·n…/(d·e…) → (x/d)·y·n…/e…   over whole product/quotient trees with at least two numerator factors and
+// one divisor that may be tiny or huge (x, y, d the first such): a product of two tiny factors (NL·NV ~ 10⁻⁴⁰⁰,
+// 0 in f64) meets the divisor that scales it back (NL + NV − NL·NV) one factor at a time
+fn interleave_quotient(a: &Analysis) -> (Ir, NodeId, bool) {
+    let (f, lists, ranges) = (&a.f, a.wide_lists(), a.ranges());
+    let ir0 = &f.ir;
+    let mut inner = vec![false; ir0.len()];
+    for id in ir0.ids() {
+        if let (Some(_), Node::Binary(BinOp::Mul | BinOp::Div, p, q)) = (&lists[id.index()], ir0.node(id)) {
+            inner[p.index()] = true;
+            inner[q.index()] = true;
+        }
+    }
+    rebuild(f, |ir, map, id, _| {
+        let (num, den) = lists[id.index()].as_ref().filter(|_| !inner[id.index()])?;
+        let risky = |x: &NodeId| !safe(ranges[x.index()]);
+        let tiny_num: Vec<usize> = (0..num.len()).filter(|&i| risky(&num[i])).collect();
+        let j = den.iter().position(risky)?;
+        if tiny_num.len() < 2 {
+            return None;
+        }
+        let s = ir0.span(id);
+        let first = ir.bin(BinOp::Div, map[num[tiny_num[0]].index()], map[den[j].index()], s);
+        let rest: Vec<NodeId> = num.iter().enumerate().filter(|(i, _)| *i != tiny_num[0]).map(|(_, x)| *x).collect();
+        let v = rest.iter().fold(first, |v, x| ir.bin(BinOp::Mul, v, map[x.index()], s));
+        let others: Vec<NodeId> = den.iter().enumerate().filter(|(i, _)| *i != j).map(|(_, x)| *x).collect();
+        let (safe_den, unsafe_den): (Vec<NodeId>, Vec<NodeId>) = others.iter().partition(|d| safe(ranges[d.index()]));
+        Some(divide_by(ir, map, v, &safe_den, &unsafe_den, s))
     })
 }
 
@@ -523,6 +575,18 @@ mod tests {
         let t = g.to_program_text();
         assert!(t.contains("< 0 ? -1 : 1") && !t.contains("abs("), "{t}");
         assert!(CancelCommon.apply_to(&parse("NL*NV/(NH*VH)"), None).is_none());
+    }
+
+    #[test]
+    fn interleave_quotient_divides_between_two_tiny_factors() {
+        let f = parse(InterleaveQuotient.example().before);
+        let g = InterleaveQuotient.apply_to(&f, None).unwrap();
+        // NL = NV = 1e-200: NL·NV = 0 where the value is 5e-201.
+        let (before, n) = exact_and_error(&f, &f, 13);
+        let (after, _) = exact_and_error(&f, &g, 13);
+        assert!(n > 1000 && before > 50.0 && after < 4.0, "{before} → {after} bits at {n} points");
+        assert!(InterleaveQuotient.apply_to(&parse("NL*NV/2"), None).is_none());
+        assert!(InterleaveQuotient.apply_to(&parse("NL/(NV*NH)"), None).is_none());
     }
 
     #[test]
