@@ -85,7 +85,7 @@
 //!   else as written. Exact for directions that are not unit (Lagrange's identity |u|²|w|² − (u·w)² = |u × w|²
 //!   and u × w = u × o); the cross product by Kahan's fma differences of products, 1 − |u|² from the squares'
 //!   exact pairs (2Sum, fma), since where 1 − VH is ~10⁻¹² the few-ulp deviation of an f64 direction from unit
-//!   length is most of it. Cost ~+55: kept where the formula around it pays for it (GGX, principled), not in
+//!   length is most of it. Cost ~+60: kept where the formula around it pays for it (GGX, principled), not in
 //!   Schlick's Fresnel alone.
 //! - `cancel-common` (in `vector.rs`): a product/quotient tree with a factor x in both numerator and
 //!   denominator, x cancelled (`|x|` over x: the sign of x, as a select); the divisors left divide one by one

@@ -359,7 +359,7 @@ fn direction_input(ir: &Ir, x: NodeId) -> Option<(usize, usize)> {
     (0..2).find_map(|d| AXES[d].iter().position(|&j| j == i).map(|k| (d, k)))
 }
 
-/// The terms of a sum tree of `+` (false: another node on the way).
+/// The terms of a sum tree of `+`.
 fn addends(ir: &Ir, x: NodeId, out: &mut Vec<NodeId>) {
     crate::base::stack::deep(|| match *ir.node(x) {
         Node::Binary(BinOp::Add, p, q) => {
