@@ -8,7 +8,7 @@
 //! registry's test all read the list. A new rule is its own code in its family's file and one line there.
 //! Families: `scale.rs` (overflow and underflow), `compensated.rs` (rounding carried through sums and
 //! powers), `power.rs` (integer powers and the baked live choice), `cancel.rs` (cancellation moved to the
-//! parameters).
+//! parameters), `vector.rs` (what a formula's own normalised vectors make exact: half-vector BRDFs).
 //! Every rule reads the formula through one [`Analysis`] (ranges, guards, product lists), built once for all
 //! the rules and sites tried on a formula; the builders they share are in `rewrite.rs`, below this module.
 //! Which candidates are kept is decided above the backends (`numerics::robust`), by measured bits of error
@@ -57,10 +57,11 @@
 //!   the builtin (an infinite b/c taken for an overflowed factor) would turn into 0 where e^E underflows: such
 //!   a product is guarded, `d == 0 ? rest/d : expmuldiv(…)` ([`pole_guard`](scale), +6 per product).
 //!
-//! - `smith-g1`: Smith's G1 for GGX written with tan², `K/(1 + sqrt(1 + A·(1 − c²)/c²))`, → `K·c/(c + sqrt(c² +
-//!   A·(1 − c²)))` for c > 0 (range or guard), then c cancelled against a divisor c of the products around it
-//!   (BRDF Explorer's GGX: `G·…/(4·NL·NV)`). At grazing c, c² underflows: tan² = 1/0 and G1 = 0, and the
-//!   product meets 0/0. Cheaper than the written form (no division by c², no 4·NL·NV).
+//! - `smith-g1`: Smith's G1 for GGX written with tan², `K/(1 + sqrt(1 + A·(1 − c²)/c²))` (tan² spelt
+//!   `(1 − c²)/(c²)` or `(1 − c²)/c/c`, A any product), → `K·|c|/(|c| + sqrt(c² + A·(1 − c²)))`, c itself where
+//!   c > 0 (range or guard), then c cancelled against a divisor c of the products around it (BRDF Explorer's
+//!   GGX: `G·…/(4·NL·NV)`). At grazing c, c² underflows: tan² = 1/0 and G1 = 0, and the product meets 0/0.
+//!   Cheaper than the written form (no division by c², no 4·NL·NV).
 //! - `cancel-min`: a product/quotient tree `z·min(K, c·x, c·y)/(v·x·y)` with K > 0 and x, y, c ≥ 0 (Cook–Torrance's
 //!   `G/(π·NL·NV)`, G = min(1, 2·NH·NV/VH, 2·NH·NL/VH)) → `z·g/(v·e)/w` with c = n/d, u = min(x, y),
 //!   w = max(x, y) and (g, e) = (K, u) where K·d < n·u, else (n, d): with c ≥ 0, min(K, c·x, c·y) = min(K, c·u)
@@ -72,6 +73,28 @@
 //! - `scaled-norm`: `x/sqrt(a² + b² + …)`, x one of a, b, …, (a normalize) with the vector scaled by 2^600
 //!   when its largest component is below 2^-500 (exact), so L + V at L ≈ −V (grazing light and view facing each
 //!   other) has a length, not 0. Cost: abs and max per component, a compare, a select, a product each (~+12).
+//! - `sine-square` (in `vector.rs`): `1 − c²`, `c² − 1` and `c²·(A − 1) + 1` where c = x/sqrt(x² + R) is a
+//!   component of a vector the formula normalises (R the other squares; `scaled-norm`'s scaled form included)
+//!   → `R/(x² + R)`, `−R/(x² + R)`, `R/(x² + R) + A·c²`: exact in real arithmetic, and free of the
+//!   cancellation near c = 1 (GGX's D at α = 0.001 near the normal lost ~20 bits in NH²(α² − 1) + 1; Beckmann's
+//!   exponent (NH² − 1)/(m²NH²) at small m). Of any other c (an input: NL), `fma(−c, c, 1)`, one rounding.
+//! - `cancel-tan` (in `vector.rs`): `x·(a ± b/x) → x·a ± b` (and `b/x ± a`): BRDF Explorer's GGX D writes
+//!   `c²·(α² + tan²)` with tan² = (1 − c²)/c², ∞·0 where c² underflows.
+//! - `half-complement` (in `vector.rs`): `1 − u·h` with h = (L + V)/|L + V| (u = V or L: Schlick's 1 − VH) →
+//!   `(|u × o|² + (1 − |u|²)·|w|²)/(|w|·(|w| + u·w))` (w = L + V, o the other direction) where u·h > 1/2,
+//!   else as written. Exact for directions that are not unit (Lagrange's identity |u|²|w|² − (u·w)² = |u × w|²
+//!   and u × w = u × o); the cross product by Kahan's fma differences of products, 1 − |u|² from the squares'
+//!   exact pairs (2Sum, fma), since where 1 − VH is ~10⁻¹² the few-ulp deviation of an f64 direction from unit
+//!   length is most of it. Cost ~+60: kept where the formula around it pays for it (GGX, principled), not in
+//!   Schlick's Fresnel alone.
+//! - `cancel-common` (in `vector.rs`): a product/quotient tree with a factor x in both numerator and
+//!   denominator, x cancelled (`|x|` over x: the sign of x, as a select); the divisors left divide one by one
+//!   where they may be tiny or huge. BRDF Explorer's G files write `G·(1/(NL·NV))` with G = NL·NV·…: 0·∞ where
+//!   NL·NV underflows. Where x = 0 the written form is 0/0 and the rewrite is its continuous extension (the
+//!   truth's limit there).
+//! - `interleave-quotient` (in `vector.rs`): `x·y·…/(d·…) → (x/d)·y·…/…` where x, y (the first two numerator
+//!   factors that may be tiny or huge) and d may leave the f64 range: BRDF Explorer's AP07 and Neumann G terms,
+//!   `NL·NV/(NL + NV − NL·NV)`, where NL·NV underflows to 0 and the value is ~min(NL, NV).
 //! - `rational-form` (in `cancel.rs`): a cancelling sum rational in one input, as one linear-fractional form
 //!   with double-double parameter-only coefficients.
 //! - `compensated-exp` (in `cancel.rs`): exp's (or expmuldiv's) argument K·q, K its parameter-only factors in
@@ -107,6 +130,7 @@ mod compensated;
 mod power;
 mod rule;
 mod scale;
+mod vector;
 
 pub use chain::{compensated_powers, pow_call_policy};
 pub use rule::{identity, Example, Rule, Sites};
@@ -126,6 +150,12 @@ pub static RULES: &[&dyn Rule] = &[
     &scale::CancelMin,
     // Before quotient-chain, which flattens (x/√s)·(x/√s) into x·x/√s/√s, where scaled-norm cannot see it.
     &scale::ScaledNorm,
+    // After scaled-norm and before quotient-chain: they read c = x/sqrt(S) and c·c as the formula has them.
+    &vector::CancelTan,
+    &vector::SineSquare,
+    &vector::HalfComplement,
+    &vector::CancelCommon,
+    &vector::InterleaveQuotient,
     &scale::QuotientChain,
     &scale::ScaledExp,
     &compensated::FactorQuadratic,

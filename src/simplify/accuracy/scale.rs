@@ -81,7 +81,7 @@ impl Rule for SmithG1 {
         "smith-g1"
     }
     fn doc(&self) -> &'static str {
-        "Smith G1 2/(1 + sqrt(1 + A*tan^2)) as 2c/(c + sqrt(c^2 + A*(1 - c^2))), c/c cancelled: no inf/inf at grazing c"
+        "Smith G1 2/(1 + sqrt(1 + A*tan^2)) as 2|c|/(|c| + sqrt(c^2 + A*(1 - c^2))), c/c cancelled where c > 0: no inf/inf at grazing c"
     }
     fn sites(&self) -> Sites {
         Sites::Everywhere
@@ -353,26 +353,26 @@ fn two_divisors(ir: &mut Ir, map: &[NodeId], (arg, rest): (NodeId, &[NodeId]), d
     ir.call(Builtin::ExpMulDiv, &[a, b, c], s)
 }
 
-// K/(1 + sqrt(1 + A·((1 − c·c)/(c·c)))) → K·c/(c + sqrt(c·c + A·(1 − c·c)))   for c > 0, then c/c cancelled
-// in the products around it
+// K/(1 + sqrt(1 + A·(1 − c·c)/(c·c))) → K·|c|/(|c| + sqrt(c·c + A·(1 − c·c)))   (A any product, however the
+// tan² is spelt: ((1 − c·c)/(c·c)), (1 − c·c)/c/c), c for |c| where c > 0 (range or guard), then c/c
+// cancelled in the products around it
 fn smith_g1(a: &Analysis) -> (Ir, NodeId, bool) {
-    let (f, ranges, guards) = (&a.f, a.ranges(), a.guards());
+    let (f, ranges, guards, lists) = (&a.f, a.ranges(), a.guards(), a.lists());
     let ir0 = &f.ir;
     let is_one = |x: NodeId| ir0.node(x).as_const() == Some(1.0);
-    // (A, c, c·c) when `x` is 1 + A·((1 − c·c)/(c·c)) (either operand order of + and ·).
-    let inner = |x: NodeId| -> Option<(NodeId, NodeId, NodeId)> {
+    // (A's factors, c, c·c) when `x` is 1 + A·(1 − c·c)/(c·c) (either operand order of +, any of · and /).
+    let inner = |x: NodeId| -> Option<(Vec<NodeId>, NodeId, NodeId)> {
         let Node::Binary(BinOp::Add, p, q) = *ir0.node(x) else { return None };
         let m = if is_one(p) { q } else if is_one(q) { p } else { return None };
-        let Node::Binary(BinOp::Mul, u, v) = *ir0.node(m) else { return None };
-        for (a, d) in [(u, v), (v, u)] {
-            let Node::Binary(BinOp::Div, t, sq) = *ir0.node(d) else { continue };
-            let Node::Binary(BinOp::Sub, one, sq2) = *ir0.node(t) else { continue };
-            let Node::Binary(BinOp::Mul, c, c2) = *ir0.node(sq) else { continue };
-            if is_one(one) && sq2 == sq && c == c2 {
-                return Some((a, c, sq));
-            }
-        }
-        None
+        let (num, den) = lists[m.index()].as_ref()?;
+        let [c, c2] = den[..] else { return None };
+        let at = num.iter().position(|&t| {
+            matches!(*ir0.node(t), Node::Binary(BinOp::Sub, one, sq)
+                if is_one(one) && matches!(*ir0.node(sq), Node::Binary(BinOp::Mul, u, v) if u == c && v == c))
+        })?;
+        let Node::Binary(BinOp::Sub, _, sq) = *ir0.node(num[at]) else { return None };
+        let rest: Vec<NodeId> = num.iter().enumerate().filter(|(i, _)| *i != at).map(|(_, t)| *t).collect();
+        (c == c2).then_some((rest, c, sq))
     };
     let (ir, root, fired) = rebuild(f, |ir, map, id, n| {
         let Node::Binary(BinOp::Div, k, den) = n else { return None };
@@ -381,11 +381,11 @@ fn smith_g1(a: &Analysis) -> (Ir, NodeId, bool) {
         let Node::Call(Builtin::Sqrt, [x, ..]) = *ir0.node(r) else { return None };
         let (a, c, sq) = inner(x)?;
         let positive = ranges[c.index()].lo > 0.0 || guards[id.index()].as_ref().is_some_and(|g| g.contains(&c));
-        if !positive {
-            return None;
-        }
         let s = f.ir.span(id);
-        let (a, c, sq) = (map[a.index()], map[c.index()], map[sq.index()]);
+        let a = product(ir, map, &a, s).unwrap_or_else(|| ir.konst(1.0, s));
+        let (c, sq) = (map[c.index()], map[sq.index()]);
+        // K/(1 + sqrt(1 + A·t²)) times |c|/|c|: |c|·sqrt(1 + A·(1 − c²)/c²) = sqrt(c² + A·(1 − c²)).
+        let c = if positive { c } else { ir.call(Builtin::Abs, &[c], s) };
         let one = ir.konst(1.0, s);
         let om = ir.bin(BinOp::Sub, one, sq, s);
         let am = ir.bin(BinOp::Mul, a, om, s);
@@ -657,8 +657,17 @@ mod tests {
         let t = SmithG1.apply_to(&parse(&src), None).unwrap().to_program_text();
         // G1·…/(4·NL) with G1 = 2·NL/(NL + …): NL cancelled, so nothing is ∞/∞ or 0/0 at tiny NL.
         assert!(!t.contains("/ nl") && !t.contains("* nl /") && t.contains("sqrt("), "{t}");
-        // Without the guard NL may be 0 or negative: not rewritten.
-        assert!(SmithG1.apply_to(&parse(&format!("param a = 0.2 in 0.01..1\n{g1}\ng * NH / (4*NL)")), None).is_none());
+        // Without the guard NL may be 0: nothing cancelled. (Of a clamped NL, |NL| simplifies to NL; of a
+        // direction's component, Lz, it stays: G1 is even in c.)
+        let t = SmithG1.apply_to(&parse(&format!("param a = 0.2 in 0.01..1\n{g1}\ng * NH / (4*NL)")), None).unwrap().to_program_text();
+        assert!(t.contains("(nl + sqrt(") && t.contains("/ (4 * nl)"), "{t}");
+        let lz = format!("param a = 0.2 in 0.01..1\n{}\ng * NH / (4*Lz)", g1.replace("NL", "Lz"));
+        let t = SmithG1.apply_to(&parse(&lz), None).unwrap().to_program_text();
+        assert!(t.contains("abs(Lz)") && t.contains("Lz)"), "{t}");
+        // tan² spelt (1 − c²)/c/c, as BRDF Explorer's Walter file has it.
+        let walter = "param a = 0.2 in 0.01..1\nlet g = 2/(1 + sqrt(1 + a*a*(1 - NV*NV)/NV/NV))\nNV <= 0 ? 0 : g / NV";
+        let t = SmithG1.apply_to(&parse(walter), None).unwrap().to_program_text();
+        assert!(t.contains("(nv + sqrt(") && !t.contains("/ nv"), "{t}");
     }
 
     #[test]
