@@ -8,7 +8,7 @@
 //! registry's test all read the list. A new rule is its own code in its family's file and one line there.
 //! Families: `scale.rs` (overflow and underflow), `compensated.rs` (rounding carried through sums and
 //! powers), `power.rs` (integer powers and the baked live choice), `cancel.rs` (cancellation moved to the
-//! parameters).
+//! parameters), `angle.rs` (direction-based formulas: normalised vectors, powers of cosines).
 //! Every rule reads the formula through one [`Analysis`] (ranges, guards, product lists), built once for all
 //! the rules and sites tried on a formula; the builders they share are in `rewrite.rs`, below this module.
 //! Which candidates are kept is decided above the backends (`numerics::robust`), by measured bits of error
@@ -72,6 +72,21 @@
 //! - `scaled-norm`: `x/sqrt(a² + b² + …)`, x one of a, b, …, (a normalize) with the vector scaled by 2^600
 //!   when its largest component is below 2^-500 (exact), so L + V at L ≈ −V (grazing light and view facing each
 //!   other) has a length, not 0. Cost: abs and max per component, a compare, a select, a product each (~+12).
+//! - `norm-cancel` (in `angle.rs`): a quotient `n/d` whose numerator and denominator have the same degree k
+//!   in a vector's length s = √(a² + b² + …) (each is s^k times an expression without s: products and quotients
+//!   of the components w/s, sums of equal degrees) → the same quotient with s replaced by m = max(|a|, |b|, …):
+//!   Ward's `(hx²/αx² + hy²/αy²)/hz²` of H = w/|w| as `((wx/m)²/αx² + (wy/m)²/αy²)/(wz/m)²`. Exact wherever
+//!   s > 0 (m^k cancels as s^k did); the squares, their sum, the sqrt and its rounding no longer reach the
+//!   quotient, and w/m is as far from underflow as w/s (the largest component is ±1). Placed after
+//!   `scaled-norm`, whose scaled components it keeps.
+//! - `one-minus-power` (in `angle.rs`): `1 − m^k` (a multiplication chain or pow with k ≤ 16) →
+//!   `d·(1 + m·(1 + m·(…(1 + m))))` with d = x where m = 1 − x, else d = 1 − m (exact near m = 1, Sterbenz):
+//!   Ashikhmin–Shirley's `1 − (1 − c/2)⁵` at small c was 1 minus a rounded 1 (62 bits); the Horner sum of
+//!   positive terms rounds a few times. Cost k − 1 multiply-adds for the chain's ~log₂ k products.
+//! - `compensated-exponent` (in `angle.rs`): `exp(E)` → `exp(E) + exp(E)·e`, or expmuldiv's b as `b + b·e`, e the
+//!   first-order rounding error of E's `+ − × /` tree (as `compensated-sum` carries it; e taken as 0 where |e| ≥ ½,
+//!   an overflowed exponent): exp turns E's absolute error into a relative one, so Ward's
+//!   `(hx²/αx² + hy²/αy²)/hz²` of a few units lost its ~6 roundings times that size. Cost ~3 per operation of E.
 //! - `rational-form` (in `cancel.rs`): a cancelling sum rational in one input, as one linear-fractional form
 //!   with double-double parameter-only coefficients.
 //! - `compensated-exp` (in `cancel.rs`): exp's (or expmuldiv's) argument K·q, K its parameter-only factors in
@@ -101,6 +116,7 @@
 //! (the prepared block, hoisted out of batch loops).
 //! It ranks candidates; the kernel's run time, measured in `lobe bench`, is what BENCHMARKS.md reports.
 
+mod angle;
 mod cancel;
 mod chain;
 mod compensated;
@@ -126,13 +142,18 @@ pub static RULES: &[&dyn Rule] = &[
     &scale::CancelMin,
     // Before quotient-chain, which flattens (x/√s)·(x/√s) into x·x/√s/√s, where scaled-norm cannot see it.
     &scale::ScaledNorm,
+    // After scaled-norm, whose scaled components it keeps; before quotient-chain flattens the quotients.
+    &angle::NormCancel,
     &scale::QuotientChain,
     &scale::ScaledExp,
     &compensated::FactorQuadratic,
+    // Before compensated-sum, which would carry the errors of the same cancellation at a higher cost.
+    &angle::OneMinusPower,
     &compensated::CompensatedBase,
     &compensated::CompensatedSum,
     &cancel::RationalForm,
     &cancel::CompensatedExp,
+    &angle::CompensatedExponent,
     &cancel::CompensatedParams,
     &power::LiveChoice,
 ];
