@@ -244,6 +244,61 @@ fn compensated_exponent(a: &Analysis) -> (Ir, NodeId, bool) {
     })
 }
 
+/// `one-minus-exp` (module docs of [`super`]).
+pub(crate) struct OneMinusExp;
+
+impl Rule for OneMinusExp {
+    fn name(&self) -> &'static str {
+        "one-minus-exp"
+    }
+    fn doc(&self) -> &'static str {
+        "1 - exp(E) as (1 - u)*E/ln(u), u = exp(E), for |E| < 1/2 (Kahan's expm1; -E*(1 + E/2) where u rounds to 1): no cancellation at small E"
+    }
+    fn sites(&self) -> Sites {
+        Sites::Everywhere
+    }
+    fn apply(&self, _: &Source, a: &Analysis, _: Option<usize>) -> Option<Formula> {
+        finish(a, one_minus_exp(a))
+    }
+    fn example(&self) -> Example {
+        // E in [−0.26, −0.01], where the truth of 1 − exp(E) (double-double) holds it to ~2⁻¹⁰⁶ relative.
+        Example { before: "1 - exp(-NH/4 - 0.01)", bake: &[], site: None, shows: "ln(" }
+    }
+}
+
+// 1 − exp(E) → |E| < ½ ? (u == 1 ? −E·(1 + E/2) : (1 − u)·E/ln(u)) : 1 − u,  u = exp(E): Kahan's expm1 through
+// exp and ln, exact in reals ((1 − e^E)·E/E; the series where u rounds to 1 is within 2⁻¹⁰⁷), where 1 − u
+// cancels to the rounding of u (Nishino's 1 − exp(−k·NH^n))
+fn one_minus_exp(a: &Analysis) -> (Ir, NodeId, bool) {
+    let f = &a.f;
+    let inv = a.invariant();
+    rebuild(f, |ir, map, id, n| {
+        let Node::Binary(BinOp::Sub, one, ex) = n else { return None };
+        let Node::Call(Builtin::Exp, [e, ..]) = *f.ir.node(ex) else { return None };
+        if f.ir.node(one).as_const() != Some(1.0) || inv[id.index()] {
+            return None;
+        }
+        let sp = f.ir.span(id);
+        let (ev, c1) = (map[e.index()], map[one.index()]);
+        let u = map[ex.index()];
+        let plain = ir.bin(BinOp::Sub, c1, u, sp);
+        let half = ir.konst(0.5, sp);
+        let lnu = ir.call(Builtin::Ln, &[u], sp);
+        let q = ir.bin(BinOp::Mul, plain, ev, sp);
+        let kahan = ir.bin(BinOp::Div, q, lnu, sp);
+        // u rounds to 1 where |E| < 2⁻⁵³: there −E·(1 + E/2), off by E²/6 relative (< 2⁻¹⁰⁷).
+        let at_one = ir.call(Builtin::Eq, &[u, c1], sp);
+        let ne = ir.neg(ev, sp);
+        let h = ir.bin(BinOp::Mul, ev, half, sp);
+        let h1 = ir.bin(BinOp::Add, c1, h, sp);
+        let series = ir.bin(BinOp::Mul, ne, h1, sp);
+        let small_e = ir.call(Builtin::Select, &[at_one, series, kahan], sp);
+        let mag = ir.call(Builtin::Abs, &[ev], sp);
+        let small = ir.call(Builtin::Lt, &[mag, half], sp);
+        Some(ir.call(Builtin::Select, &[small, small_e, plain], sp))
+    })
+}
+
 /// `tan-pole` (module docs of [`super`]).
 pub(crate) struct TanPole;
 
@@ -428,6 +483,22 @@ mod tests {
         let not = "let x = Lx + Vx\nlet z = Lz + Vz\nlet s = sqrt(x*x + z*z)\n(x/s)*(x/s)/(1 - (z/s)*(z/s))";
         assert!(NormCancel.apply_to(&parse(not), None).is_none());
         assert!(NormCancel.apply_to(&parse("let x = Lx + Vx\nlet s = sqrt(x*x)\n(x/s)/(Lz/s)"), None).is_none());
+    }
+
+    #[test]
+    fn one_minus_exp_is_exact_and_has_no_cancellation() {
+        // Nishino's 1 − exp(−k·NH^n) where k·NH^n is small.
+        let f = parse("param k = 2 in 0.1..10\n1 - exp(-k * NH * NH)");
+        let g = OneMinusExp.apply_to(&f, None).unwrap();
+        let t = g.to_program_text();
+        assert!(t.contains("ln(") && t.matches("exp(").count() == 1, "{t}");
+        // The truth of the written form holds e^E to ~2⁻¹⁰⁶ absolute: compared where that is far below |E|.
+        let pts: Vec<_> = points(4000).into_iter().filter(|x| x[2] > 1e-4).collect();
+        assert!(pts.len() > 1000);
+        let (rel, uf, ug) = compare(&f, &g, &[50.0, 2.0], &pts);
+        assert!(rel < 1e-20, "not exact in reals: {rel:e}");
+        assert!(uf > 1e6 && ug <= 4.0, "written {uf} ulp, rewritten {ug} ulp");
+        assert!(OneMinusExp.apply_to(&parse("2 - exp(-NH)"), None).is_none());
     }
 
     #[test]

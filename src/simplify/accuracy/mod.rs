@@ -88,6 +88,10 @@
 //!   an overflowed exponent), after `norm-cancel` (fewer roundings to carry, and cheaper): exp turns E's absolute
 //!   error into a relative one, so Ward's `(hx²/αx² + hy²/αy²)/hz²` of a few units lost its ~6 roundings times
 //!   that size (5.1 bits at 130 of 10⁵ points; none over 4 with it). Cost ~3 per operation of E.
+//! - `one-minus-exp` (in `angle.rs`): `1 − exp(E)` → `|E| < ½ ? (u == 1 ? −E·(1 + E/2) : (1 − u)·E/ln(u)) : 1 − u`,
+//!   u = exp(E) (Kahan's expm1 through exp and ln; exact in reals, the series where u rounds to 1 within 2⁻¹⁰⁷):
+//!   at small E, 1 − u was the rounding of u (Nishino's
+//!   `1 − exp(−k·NH^n)`). Cost: one ln (20) and a few operations.
 //! - `tan-pole` (in `angle.rs`): `tan(x)` with x built from acos calls by min, max, sums and halvings (Oren–Nayar's
 //!   tan(β), tan((α + β)/2)) → `t = tan(c ? d : x)`, `c ? 1/t : t`, c = π/4 < x, d = (π/2ʰ − x) + (π/2ˡ − xˡ) with
 //!   xˡ x's low part (acos's `acoslo`, 2Sum errors of the sums, the tail of the operand a min or max picks):
@@ -155,6 +159,7 @@ pub static RULES: &[&dyn Rule] = &[
     &compensated::FactorQuadratic,
     // Before compensated-sum, which would carry the errors of the same cancellation at a higher cost.
     &angle::OneMinusPower,
+    &angle::OneMinusExp,
     &compensated::CompensatedBase,
     &compensated::CompensatedSum,
     &angle::TanPole,
