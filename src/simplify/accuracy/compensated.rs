@@ -103,7 +103,7 @@ fn sum_error(ir: &mut Ir, (a, ra): (NodeId, Range), (b, rb): (NodeId, Range), s:
 /// to leaves and calls (which count as exact). Once per node (`memo`), so a shared term carries the same error
 /// wherever it is used: an error compensated on one side of a cancellation only would break it. `None`: exact.
 /// Valid while no product underflows.
-fn rounding_error(f: &Formula, ranges: &[Range], ir: &mut Ir, map: &[NodeId], (x, s): (NodeId, NodeId), memo: &mut [Option<Option<NodeId>>], sp: Span) -> Option<NodeId> {
+pub(super) fn rounding_error(f: &Formula, ranges: &[Range], ir: &mut Ir, map: &[NodeId], (x, s): (NodeId, NodeId), memo: &mut [Option<Option<NodeId>>], sp: Span) -> Option<NodeId> {
     crate::base::stack::deep(|| {
         if let Some(e) = memo[x.index()] {
             return e;

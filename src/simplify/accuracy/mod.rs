@@ -8,7 +8,8 @@
 //! registry's test all read the list. A new rule is its own code in its family's file and one line there.
 //! Families: `scale.rs` (overflow and underflow), `compensated.rs` (rounding carried through sums and
 //! powers), `power.rs` (integer powers and the baked live choice), `cancel.rs` (cancellation moved to the
-//! parameters), `vector.rs` (what a formula's own normalised vectors make exact: half-vector BRDFs).
+//! parameters), `vector.rs` (what a formula's own normalised vectors make exact: half-vector BRDFs),
+//! `angle.rs` (direction-based formulas: normalised vectors, powers of cosines, angles from acos).
 //! Every rule reads the formula through one [`Analysis`] (ranges, guards, product lists), built once for all
 //! the rules and sites tried on a formula; the builders they share are in `rewrite.rs`, below this module.
 //! Which candidates are kept is decided above the backends (`numerics::robust`), by measured bits of error
@@ -95,6 +96,31 @@
 //! - `interleave-quotient` (in `vector.rs`): `x·y·…/(d·…) → (x/d)·y·…/…` where x, y (the first two numerator
 //!   factors that may be tiny or huge) and d may leave the f64 range: BRDF Explorer's AP07 and Neumann G terms,
 //!   `NL·NV/(NL + NV − NL·NV)`, where NL·NV underflows to 0 and the value is ~min(NL, NV).
+//! - `norm-cancel` (in `angle.rs`): a quotient `n/d` whose numerator and denominator have the same degree k
+//!   in a vector's length s = √(a² + b² + …) (each is s^k times an expression without s: products and quotients
+//!   of the components w/s, sums of equal degrees) → the same quotient with s replaced by m = max(|a|, |b|, …):
+//!   Ward's `(hx²/αx² + hy²/αy²)/hz²` of H = w/|w| as `((wx/m)²/αx² + (wy/m)²/αy²)/(wz/m)²`. Exact wherever
+//!   s > 0 (m^k cancels as s^k did); the squares, their sum, the sqrt and its rounding no longer reach the
+//!   quotient, and w/m is as far from underflow as w/s (the largest component is ±1). Placed after
+//!   `scaled-norm`, whose scaled components it keeps.
+//! - `one-minus-power` (in `angle.rs`): `1 − m^k` (a multiplication chain or pow with k ≤ 16) →
+//!   `d·(1 + m·(1 + m·(…(1 + m))))` with d = x where m = 1 − x, else d = 1 − m (exact near m = 1, Sterbenz):
+//!   Ashikhmin–Shirley's `1 − (1 − c/2)⁵` at small c was 1 minus a rounded 1 (62 bits); the Horner sum of
+//!   positive terms rounds a few times. Cost k − 1 multiply-adds for the chain's ~log₂ k products.
+//! - `compensated-exponent` (in `angle.rs`): `exp(E)` → `exp(E) + exp(E)·e`, or expmuldiv's b as `b + b·e`, e the
+//!   first-order rounding error of E's `+ − × /` tree (as `compensated-sum` carries it; e taken as 0 where |e| ≥ ½,
+//!   an overflowed exponent), after `norm-cancel` (fewer roundings to carry, and cheaper): exp turns E's absolute
+//!   error into a relative one, so Ward's `(hx²/αx² + hy²/αy²)/hz²` of a few units lost its ~6 roundings times
+//!   that size (5.1 bits at 130 of 10⁵ points; none over 4 with it). Cost ~3 per operation of E.
+//! - `one-minus-exp` (in `angle.rs`): `1 − exp(E)` → `|E| < ½ ? (u == 1 ? −E·(1 + E/2) : (1 − u)·E/ln(u)) : 1 − u`,
+//!   u = exp(E) (Kahan's expm1 through exp and ln; exact in reals, the series where u rounds to 1 within 2⁻¹⁰⁷):
+//!   at small E, 1 − u was the rounding of u (Nishino's
+//!   `1 − exp(−k·NH^n)`). Cost: one ln (20) and a few operations.
+//! - `tan-pole` (in `angle.rs`): `tan(x)` with x built from acos calls by min, max, sums and halvings (Oren–Nayar's
+//!   tan(β), tan((α + β)/2)) → `t = tan(c ? d : x)`, `c ? 1/t : t`, c = π/4 < x, d = (π/2ʰ − x) + (π/2ˡ − xˡ) with
+//!   xˡ x's low part (acos's `acoslo`, 2Sum errors of the sums, the tail of the operand a min or max picks):
+//!   π/2ʰ − x is exact there (Sterbenz), so tan near its pole is computed from the distance to it. At z = 1e-20
+//!   acos(z) rounds to π/2ʰ and tan gave 1.6e16 for 1e20. Cost: acoslo per acos (8), a compare and two selects.
 //! - `rational-form` (in `cancel.rs`): a cancelling sum rational in one input, as one linear-fractional form
 //!   with double-double parameter-only coefficients.
 //! - `compensated-exp` (in `cancel.rs`): exp's (or expmuldiv's) argument K·q, K its parameter-only factors in
@@ -124,6 +150,7 @@
 //! (the prepared block, hoisted out of batch loops).
 //! It ranks candidates; the kernel's run time, measured in `lobe bench`, is what BENCHMARKS.md reports.
 
+mod angle;
 mod cancel;
 mod chain;
 mod compensated;
@@ -156,13 +183,20 @@ pub static RULES: &[&dyn Rule] = &[
     &vector::HalfComplement,
     &vector::CancelCommon,
     &vector::InterleaveQuotient,
+    // After scaled-norm, whose scaled components it keeps; before quotient-chain flattens the quotients.
+    &angle::NormCancel,
     &scale::QuotientChain,
     &scale::ScaledExp,
     &compensated::FactorQuadratic,
+    // Before compensated-sum, which would carry the errors of the same cancellation at a higher cost.
+    &angle::OneMinusPower,
+    &angle::OneMinusExp,
     &compensated::CompensatedBase,
     &compensated::CompensatedSum,
+    &angle::TanPole,
     &cancel::RationalForm,
     &cancel::CompensatedExp,
+    &angle::CompensatedExponent,
     &cancel::CompensatedParams,
     &power::LiveChoice,
 ];
