@@ -58,7 +58,8 @@ pub struct ErrorStats {
     /// Poles where the result is not the exact infinity (0 or a finite number or NaN).
     pub pole_misses: usize,
     pub first_pole_miss: Option<Worst>,
-    /// The result is below 0 where the truth is ≥ +0, or above 0 where it is ≤ −0.
+    /// The result is below 0 where the truth is ≥ +0, or above 0 where it is ≤ −0, at a well-conditioned point
+    /// (near a zero crossing an ill-conditioned value may take either sign).
     pub wrong_sign: usize,
     pub first_wrong_sign: Option<Worst>,
     /// Points where the formula is ill-conditioned by nature (module docs). Exact when the conditioning was
