@@ -29,7 +29,7 @@ pub struct Check {
     pub cond_well: Option<f64>,
     pub jit_us: f64,
     pub interp_us: f64,
-    /// With `--math fast`: the chosen form in fast math against the same form in precise math, over the report's
+    /// In fast math: the chosen form in fast math against the same form in precise math, over the report's
     /// points (every parameter over its declared range).
     pub fast_vs_precise: Option<FastVsPrecise>,
 }

@@ -41,7 +41,7 @@ pub struct CheckReport {
     #[serde(serialize_with = "json::num")]
     pub cost_ratio: f64,
     pub compile_us: CompileUs,
-    /// `--math fast` only: fast against precise math over the report's points.
+    /// Fast math only: fast against precise math over the report's points.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fast_vs_precise: Option<FastJson>,
 }
@@ -112,7 +112,7 @@ pub struct ErrorStatsJson {
     pub over_target_well_conditioned: usize,
 }
 
-/// `fast_vs_precise` of the check report (`--math fast`): the chosen form in fast math against precise math.
+/// `fast_vs_precise` of the check report (fast math): the chosen form in fast math against precise math.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct FastJson {
     #[serde(serialize_with = "json::num")]
