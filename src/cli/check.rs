@@ -165,6 +165,9 @@ fn print_accuracy(f: &Formula, pass: &robust::Outcome, asked: usize, ms: f64, co
         pass.points
     );
     println!("    before    {}", stats_line(f, &pass.before));
+    if !pass.trials.is_empty() {
+        println!("    search    on the commands' {} points (the trials' numbers are there)", pass.searched.points);
+    }
     for t in &pass.trials {
         println!(
             "    {:<9} {} — {}: {}; avg {:.2} → {:.2}, max {:.2} → {:.2} bits{}",
@@ -172,12 +175,12 @@ fn print_accuracy(f: &Formula, pass: &robust::Outcome, asked: usize, ms: f64, co
             t.rule,
             t.rule.doc(),
             t.reason,
-            pass.before.avg_bits,
+            pass.searched.avg_bits,
             t.stats.avg_bits,
-            pass.before.max_bits,
+            pass.searched.max_bits,
             t.stats.max_bits,
-            if t.stats.nonfinite != pass.before.nonfinite {
-                format!(", NaN/inf where finite {} → {}", pass.before.nonfinite, t.stats.nonfinite)
+            if t.stats.nonfinite != pass.searched.nonfinite {
+                format!(", NaN/inf where finite {} → {}", pass.searched.nonfinite, t.stats.nonfinite)
             } else {
                 String::new()
             }

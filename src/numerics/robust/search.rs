@@ -137,6 +137,9 @@ pub struct Outcome {
     pub base: Formula,
     pub before: ErrorStats,
     pub after: ErrorStats,
+    /// The written form on the search's own points, what each trial's statistics compare with (`before` once
+    /// [`Outcome::measured_on`] has measured it again on a report's points).
+    pub searched: ErrorStats,
     pub cost_before: f64,
     pub cost_after: f64,
     pub trials: Vec<Trial>,
@@ -365,7 +368,7 @@ fn live_pass(orig: &Formula, o: &PassOptions, stop: &Cancel, observe: &dyn Fn(St
     let before = bench.report(&base, before);
     let after = bench.report(&cur.f, cur_stats);
     let decision = Decision { live: steps, ..Decision::default() };
-    Outcome { formula: cur.f, base, before, after, cost_before, cost_after: cur_cost, trials, points: n, truncated, decision }
+    Outcome { formula: cur.f, base, searched: before.clone(), before, after, cost_before, cost_after: cur_cost, trials, points: n, truncated, decision }
 }
 
 /// With baked values (module docs: bake-consistent choices): what the live kernel computes, the values folded
@@ -437,7 +440,7 @@ fn baked_pass(orig: &Formula, bake: &[(usize, f64)], live: &Outcome, o: &PassOpt
     }
     let before = bench.report(&base, before);
     let after = bench.report(&cur, cur_stats);
-    Outcome { formula: cur, base, before, after, cost_before, cost_after: cur_cost, trials, points: n, truncated: truncated || live.truncated, decision }
+    Outcome { formula: cur, base, searched: before.clone(), before, after, cost_before, cost_after: cur_cost, trials, points: n, truncated: truncated || live.truncated, decision }
 }
 
 impl Outcome {
