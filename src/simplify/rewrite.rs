@@ -146,6 +146,19 @@ pub(crate) fn safe(r: Range) -> bool {
 /// Per node, its (numerator, denominator) factor lists of atomic nodes when it is a short tree of `*` and `/`.
 pub(crate) type Lists = Vec<Option<(Vec<NodeId>, Vec<NodeId>)>>;
 
+/// The nodes that are an operand of a flattened product/quotient (`lists`' `*` or `/` node): a rule that rewrites
+/// whole product trees skips them, since the tree above rebuilds them with it.
+pub(crate) fn list_operands(ir: &Ir, lists: &Lists) -> Vec<bool> {
+    let mut inner = vec![false; ir.len()];
+    for id in ir.ids() {
+        if let (Some(_), Node::Binary(BinOp::Mul | BinOp::Div, a, b)) = (&lists[id.index()], ir.node(id)) {
+            inner[a.index()] = true;
+            inner[b.index()] = true;
+        }
+    }
+    inner
+}
+
 pub(crate) fn product_lists(f: &Formula, max: usize) -> Lists {
     let mut lists: Lists = Vec::with_capacity(f.ir.len());
     for id in f.ir.ids() {

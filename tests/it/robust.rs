@@ -13,6 +13,20 @@ fn load(stem: &str) -> Formula {
     lobe::front::parse(&path, &src).unwrap()
 }
 
+/// The catalogue's file stems (`examples/brdfs/*.brdf`), sorted.
+fn catalogue_stems() -> Vec<String> {
+    let dir = format!("{}/examples/brdfs", env!("CARGO_MANIFEST_DIR"));
+    let mut stems: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .filter_map(|e| {
+            let p = e.ok()?.path();
+            (p.extension()? == "brdf").then(|| p.file_stem().unwrap().to_string_lossy().into_owned())
+        })
+        .collect();
+    stems.sort();
+    stems
+}
+
 fn jit_options(set: &[(&str, f64)]) -> Options {
     Options { backend: Backend::Jit, bake: set.iter().map(|(k, v)| (k.to_string(), *v)).collect(), ..Default::default() }
 }
@@ -283,15 +297,7 @@ fn catalogue_must_show_on_100k_points() {
 /// `compensated-exp` at m = 0.3, Ward's second quotient chain), so the kernels differed by the correction.
 #[test]
 fn catalogue_baked_at_defaults_agrees_with_live() {
-    let dir = format!("{}/examples/brdfs", env!("CARGO_MANIFEST_DIR"));
-    let mut stems: Vec<String> = std::fs::read_dir(&dir)
-        .unwrap()
-        .filter_map(|e| {
-            let p = e.ok()?.path();
-            (p.extension()? == "brdf").then(|| p.file_stem().unwrap().to_string_lossy().into_owned())
-        })
-        .collect();
-    stems.sort();
+    let stems = catalogue_stems();
     assert!(stems.len() >= 16, "{stems:?}");
     for stem in &stems {
         let f = load(stem);
@@ -672,15 +678,7 @@ fn check_and_eval_describe_the_same_kernel() {
 /// audit found the baked pass dropping the live choice at (n = 44.157180060974795, 5.6e14 ulp apart).
 #[test]
 fn baked_equals_live_at_random_values() {
-    let dir = format!("{}/examples/brdfs", env!("CARGO_MANIFEST_DIR"));
-    let mut stems: Vec<String> = std::fs::read_dir(&dir)
-        .unwrap()
-        .filter_map(|e| {
-            let p = e.ok()?.path();
-            (p.extension()? == "brdf").then(|| p.file_stem().unwrap().to_string_lossy().into_owned())
-        })
-        .collect();
-    stems.sort();
+    let stems = catalogue_stems();
     let mut r = lobe::base::rng::Rng(0xba4ed);
     let mut sets: Vec<(String, Vec<(usize, f64)>)> = vec![("dsh".into(), vec![(0, 44.157180060974795)])];
     for stem in &stems {

@@ -5,7 +5,7 @@
 use super::rule::{Example, Rule, Sites, Source};
 use super::finish;
 use crate::simplify::range::Range;
-use crate::simplify::rewrite::{balanced_product, divide_apart, divide_by, product, rebuild, safe, Analysis};
+use crate::simplify::rewrite::{list_operands, balanced_product, divide_apart, divide_by, product, rebuild, safe, Analysis};
 use crate::base::span::Span;
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Ir, Node, NodeId};
@@ -483,13 +483,7 @@ fn cancel_min(a: &Analysis) -> (Ir, NodeId, bool) {
         None
     };
     // Only whole trees: an operand of a flattened product would not have x and y among its divisors.
-    let mut inner = vec![false; ir0.len()];
-    for id in ir0.ids() {
-        if let (Some(_), Node::Binary(BinOp::Mul | BinOp::Div, a, b)) = (&lists[id.index()], ir0.node(id)) {
-            inner[a.index()] = true;
-            inner[b.index()] = true;
-        }
-    }
+    let inner = list_operands(ir0, lists);
     rebuild(f, |ir, map, id, _| {
         let (num, den) = lists[id.index()].as_ref().filter(|_| !inner[id.index()])?;
         let at = num.iter().position(|x| matches!(ir0.node(*x), Node::Call(Builtin::Min, _)))?;

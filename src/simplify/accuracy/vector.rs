@@ -11,7 +11,7 @@ use crate::builtins::dd::{self, Arith};
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Input, Ir, Node, NodeId};
 use crate::simplify::emit::IrEmit;
-use crate::simplify::rewrite::{divide_apart, divide_by, rebuild, safe, Analysis};
+use crate::simplify::rewrite::{list_operands, divide_apart, divide_by, rebuild, safe, Analysis};
 
 /// `sine-square` (module docs).
 pub(crate) struct SineSquare;
@@ -273,13 +273,7 @@ fn cancel_common(a: &Analysis) -> (Ir, NodeId, bool) {
     let (f, lists, ranges) = (&a.f, a.wide_lists(), a.ranges());
     let ir0 = &f.ir;
     // Only whole trees: an operand of a flattened product is rebuilt with it.
-    let mut inner = vec![false; ir0.len()];
-    for id in ir0.ids() {
-        if let (Some(_), Node::Binary(BinOp::Mul | BinOp::Div, p, q)) = (&lists[id.index()], ir0.node(id)) {
-            inner[p.index()] = true;
-            inner[q.index()] = true;
-        }
-    }
+    let inner = list_operands(ir0, lists);
     rebuild(f, |ir, map, id, _| {
         let (num, den) = lists[id.index()].as_ref().filter(|_| !inner[id.index()])?;
         let (mut num, mut den) = (num.clone(), den.clone());
@@ -325,13 +319,7 @@ fn cancel_common(a: &Analysis) -> (Ir, NodeId, bool) {
 fn interleave_quotient(a: &Analysis) -> (Ir, NodeId, bool) {
     let (f, lists, ranges) = (&a.f, a.wide_lists(), a.ranges());
     let ir0 = &f.ir;
-    let mut inner = vec![false; ir0.len()];
-    for id in ir0.ids() {
-        if let (Some(_), Node::Binary(BinOp::Mul | BinOp::Div, p, q)) = (&lists[id.index()], ir0.node(id)) {
-            inner[p.index()] = true;
-            inner[q.index()] = true;
-        }
-    }
+    let inner = list_operands(ir0, lists);
     rebuild(f, |ir, map, id, _| {
         let (num, den) = lists[id.index()].as_ref().filter(|_| !inner[id.index()])?;
         let risky = |x: &NodeId| !safe(ranges[x.index()]);
