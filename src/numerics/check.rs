@@ -117,8 +117,8 @@ pub fn check(
     let t = std::time::Instant::now();
     let opts = PassOptions { conditioning: robust::Conditioning::WhereInaccurate, ..*pass };
     let outcome = robust::improve_observed(&f, &bake, &opts, observe);
-    if let Some(s) = store.filter(|_| !outcome.truncated) {
-        s.store(&f, &bake, &opts, &outcome.decision);
+    if let Some(s) = store {
+        s.store_finished(&f, &bake, &opts, &outcome);
     }
     let mut outcome = outcome;
     if outcome.decision == robust::Decision::default() {

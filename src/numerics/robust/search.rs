@@ -486,6 +486,14 @@ pub(crate) struct Chooser {
 pub trait DecisionStore: Send + Sync + std::fmt::Debug {
     fn load(&self, f: &Formula, bake: &[(usize, f64)], o: &PassOptions) -> Option<Decision>;
     fn store(&self, f: &Formula, bake: &[(usize, f64)], o: &PassOptions, d: &Decision);
+
+    /// Stores a search's decision unless the search was cut short (by its budget: a loaded run must not fix a
+    /// worse choice for later commands).
+    fn store_finished(&self, f: &Formula, bake: &[(usize, f64)], o: &PassOptions, out: &Outcome) {
+        if !out.truncated {
+            self.store(f, bake, o, &out.decision);
+        }
+    }
 }
 
 impl crate::FormulaChooser for Chooser {
@@ -498,8 +506,8 @@ impl crate::FormulaChooser for Chooser {
         let out = improve_cancellable(original, bake, &self.pass, &self.cancel, &|_| {});
         // A search cut short — by the caller, or by its own budget on a loaded machine — is not this formula's
         // decision: it compiles now, and the next compile searches again rather than replaying a worse choice.
-        if let Some(c) = self.cache.as_ref().filter(|_| !self.cancel.is_cancelled() && !out.truncated) {
-            c.store(original, bake, &self.pass, &out.decision);
+        if let Some(c) = self.cache.as_ref().filter(|_| !self.cancel.is_cancelled()) {
+            c.store_finished(original, bake, &self.pass, &out);
         }
         if out.decision == Decision::default() {
             simplified
