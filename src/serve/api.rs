@@ -82,7 +82,12 @@ impl State {
         State { roots, scene, files, limits, kernels: Mutex::default(), geometry: Mutex::default(), jobs: AtomicUsize::new(0), heavy: AtomicUsize::new(0) }
     }
 
-    pub(super) fn compiled(&self, name: &str, text: &str) -> Result<Arc<Compiled>, ApiError> {
+    /// The formula `text` (file name `name`) compiled with every parameter live, from the cache or now. `cancel`
+    /// (the request's deadline) reaches every stage: it is checked between parsing, each channel's compile and
+    /// caching, and the accuracy pass's search polls it between candidates; the stages between the polls are
+    /// bounded by the size budgets (formula bytes, term and program budgets), so a compile past its deadline
+    /// stops within milliseconds of it. A compile that was stopped is not cached.
+    pub(super) fn compiled(&self, name: &str, text: &str, cancel: &Cancel) -> Result<Arc<Compiled>, ApiError> {
         if text.len() > self.limits.formula_bytes {
             return Err(ApiError::new(413, format!("the formula is larger than {} KiB", self.limits.formula_bytes / 1024))
                 .hint("a formula is a few lines"));
@@ -91,9 +96,12 @@ impl State {
         if let Some(c) = lock(&self.kernels).get(&key) {
             return Ok(c.clone());
         }
+        let stopped = |_| ApiError::new(503, crate::base::cancel::Cancelled.to_string());
+        cancel.check().map_err(stopped)?;
         let t = Instant::now();
         let (f, warnings) = crate::front::parse_with_warnings(name, text)?;
         let parse_us = t.elapsed().as_secs_f64() * 1e6;
+        cancel.check().map_err(stopped)?;
         // Through the accuracy pass as the commands compile (`LobeCompiler::for_commands`), parameters live: the
         // page shades and measures the form the CLI would, and the pass's decision is cached on disk. The pass
         // measures against the high-precision truth, so it is priced like any work, before it starts.
@@ -101,7 +109,7 @@ impl State {
         let plain = Options { backend: Backend::Jit, ..Options::default() };
         let points = crate::numerics::robust::PassOptions::default().points as f64;
         let opts = if f.ir.len() as f64 * points * PASS_COST_PER_NODE_POINT <= self.limits.cost_budget {
-            live_options()
+            live_options(cancel)
         } else {
             warnings.push(
                 crate::Diagnostic::warning("the accuracy pass was skipped: the formula is too large for the server's budget")
@@ -109,7 +117,12 @@ impl State {
             );
             plain
         };
-        let kernels = f.channels().into_iter().map(|c| crate::compile_formula(c, &opts).map(Arc::new)).collect::<Result<Vec<_>, _>>()?;
+        let mut kernels = Vec::new();
+        for c in f.channels() {
+            kernels.push(Arc::new(crate::compile_formula(c, &opts)?));
+            // A search the deadline cut short compiled its best form so far: not the page's form, and not cached.
+            cancel.check().map_err(stopped)?;
+        }
         // The CLI's note about the lobe variable (plots, energy and accuracy use it), shown as a warning.
         if let Some(note) = crate::numerics::choose_lobe_input(kernels.iter().map(|k| k.used_inputs()).collect()).1 {
             let hint = "the energy coefficient and the error against the reference use this lobe variable";
@@ -147,16 +160,25 @@ impl State {
 }
 
 /// The page's compile options: the JIT through the accuracy pass as [`LobeCompiler::for_commands`] runs it
-/// (its search budgeted, its decisions read from and stored in the platform cache), nothing baked.
-fn live_options() -> Options {
+/// (its search budgeted and stopped by `cancel`, its finished decisions read from and stored in the platform
+/// cache), nothing baked.
+fn live_options(cancel: &Cancel) -> Options {
     let pass = crate::numerics::robust::PassOptions::default();
-    crate::numerics::pass_cache::command_pass(Options { backend: Backend::Jit, ..Options::default() }, pass, true)
+    crate::numerics::pass_cache::command_pass_until(Options { backend: Backend::Jit, ..Options::default() }, pass, true, cancel.clone())
+}
+
+/// `lobe render`'s scene compiler ([`LobeCompiler::for_commands`]: values baked, through the accuracy pass and
+/// its decision cache, so the bytes are the CLI's), its search also stopped by `cancel` (the request's deadline).
+fn commands_compiler(cancel: &Cancel) -> LobeCompiler {
+    let pass = crate::numerics::robust::PassOptions::default();
+    let accuracy = crate::numerics::pass_cache::command_pass_until(Options::default(), pass, true, cancel.clone()).accuracy;
+    LobeCompiler { backend: Backend::Jit, math: crate::Mode::Precise, accuracy }
 }
 
 /// A [`BrdfCompiler`] over the live-parameter cache: parameter values are not baked but passed at render time.
-pub(crate) struct Live<'a>(&'a State);
+pub(crate) struct Live<'a, 'b>(&'a Job<'b>);
 
-impl BrdfCompiler for Live<'_> {
+impl BrdfCompiler for Live<'_, '_> {
     fn declare(&self, file: &str, src: &str) -> Result<Vec<ParamDecl>, Diagnostics> {
         self.0.compiled(file, src).map(|c| c.kernel().formula.params.clone()).map_err(|e| diagnostics_of(file, src, e))
     }
@@ -181,6 +203,13 @@ pub(crate) struct Job<'a> {
     pub cancel: Cancel,
     /// The heavy slot the job took when its cost was known to be over the light cost.
     heavy: std::sync::OnceLock<Slot<'a>>,
+}
+
+impl Job<'_> {
+    /// [`State::compiled`] stopped by the job's deadline.
+    pub(super) fn compiled(&self, name: &str, text: &str) -> Result<Arc<Compiled>, ApiError> {
+        self.st.compiled(name, text, &self.cancel)
+    }
 }
 
 impl std::ops::Deref for Job<'_> {
@@ -545,7 +574,7 @@ pub(crate) fn render(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
         let g = st.geometry(scene.as_deref(), size)?;
         let set = scene_set(st, &req, &g)?;
         let sc = if exact {
-            g.with_materials(&set, Some((&name, &text)), &LobeCompiler::for_commands(Backend::Jit, crate::Mode::Precise, true))?
+            g.with_materials(&set, Some((&name, &text)), &commands_compiler(&st.cancel))?
         } else {
             g.with_materials(&set, Some((&name, &text)), &Live(st))?
         };
@@ -792,10 +821,7 @@ pub(crate) fn render_png(st: &Arc<State>, query: &str) -> Result<Reply, ApiError
             return Err(ApiError::bad(format!("the scene is {w}×{h}, over the server's {max}×{max}")).hint("pass a smaller size="));
         }
         let opts = LoadOptions { size, set, formula_override: None, files: Files::new(files.clone()) };
-        // Through the accuracy pass and its decision cache, as `lobe render` compiles, so the bytes are the CLI's.
-        let accuracy = crate::numerics::pass_cache::command_pass_until(Options::default(), Default::default(), true, st.cancel.clone()).accuracy;
-        let sc = scene::load_scene(&path, &opts, &LobeCompiler { backend: Backend::Jit, math: crate::Mode::Precise, accuracy })
-            .map_err(scene_error(&files))?;
+        let sc = scene::load_scene(&path, &opts, &commands_compiler(&st.cancel)).map_err(scene_error(&files))?;
         let (frame, _) = crate::render::render(&sc, &ropts(&st.cancel)).map_err(|e| ApiError::new(500, e))?;
         Ok(Reply::bytes("image/png", png(&frame.image)?))
     })
@@ -841,13 +867,13 @@ mod tests {
     fn formulas_over_the_cost_budget_are_refused_before_running() {
         let st = state(10_000, 2, 2);
         let heavy: String = (0..400).map(|i| format!("sin(NH*{i}.5) + ")).collect::<String>() + "0";
-        let c = st.compiled("h.brdf", &heavy).unwrap();
+        let c = st.compiled("h.brdf", &heavy, &Cancel::never()).unwrap();
         assert!(c.warnings.items.iter().any(|d| d.message.contains("accuracy pass was skipped")), "the pass is priced too");
         let k = c.kernel().clone();
         assert!(limited(&st, |job| check_cost(job, &k, 64.0 * 64.0, "a small render")).is_ok());
         let e = limited(&st, |job| check_cost(job, &k, 2048.0 * 2048.0, "this render")).unwrap_err();
         assert_eq!(e.status, 422);
-        assert_eq!(st.compiled("big.brdf", &"1+".repeat(40 << 10)).err().map(|e| e.status), Some(413));
+        assert_eq!(st.compiled("big.brdf", &"1+".repeat(40 << 10), &Cancel::never()).err().map(|e| e.status), Some(413));
         assert_eq!(content_hash(b"NH^n"), content_hash(b"NH^n"));
         assert_ne!(content_hash(b"NH^n"), content_hash(b"NH^m"));
     }
@@ -857,7 +883,7 @@ mod tests {
         // One heavy slot and one light one: a heavy job holds its slot; a second heavy job is refused as busy, a
         // light job beside it runs; with both lanes full, any job is refused; slots are free after.
         let st = state(30_000, 1, 1);
-        let k = st.compiled("h.brdf", &((0..300).map(|i| format!("sin(NH*{i}.5) + ")).collect::<String>() + "0")).unwrap().kernel().clone();
+        let k = st.compiled("h.brdf", &((0..300).map(|i| format!("sin(NH*{i}.5) + ")).collect::<String>() + "0"), &Cancel::never()).unwrap().kernel().clone();
         let heavy_evals = st.limits.light_cost / k.formula.ir.len() as f64 * 2.0;
         let inner = limited(&st, |job| {
             check_cost(job, &k, heavy_evals, "a heavy render")?;

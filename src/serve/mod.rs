@@ -16,7 +16,8 @@
 //!   500).
 //! - **Limits** ([`Limits`]): request bodies, formula size, image side, an estimated cost budget (IR nodes ×
 //!   evaluations) checked before work starts, a per-request deadline at which the computation is stopped
-//!   ([`crate::base::cancel`], polled by the renderer and the numerics; [`api::limited`]), and caps on
+//!   ([`crate::base::cancel`], polled between a compile's stages and by its accuracy pass, the renderer and the
+//!   numerics; the stages between polls are bounded by the size limits; [`api::limited`]), and caps on
 //!   computations in flight: heavy ones (over a light cost) take slots of their own, so that they cannot
 //!   starve light ones, and each computation runs on worker threads of its own, so that the cores are shared
 //!   among requests by the operating system instead of one queue serving them in order.

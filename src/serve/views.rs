@@ -31,7 +31,7 @@ fn count_field(v: &Value, k: &str, default: usize, lo: usize, hi: usize) -> Resu
 }
 
 /// The formula's first kernel (a colour formula's red channel, as the plots show) and its parameter values.
-fn kernel_and_params(st: &State, req: &Value) -> Result<(Arc<crate::Kernel>, Vec<f64>), ApiError> {
+fn kernel_and_params(st: &api::Job, req: &Value) -> Result<(Arc<crate::Kernel>, Vec<f64>), ApiError> {
     let (name, text) = api::formula_field(req)?;
     let set = api::params_field(req)?;
     let k = st.compiled(&name, &text)?.kernel().clone();

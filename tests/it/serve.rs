@@ -434,6 +434,26 @@ fn computations_past_the_deadline_are_stopped_and_free_their_slots() {
     assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
 }
 
+/// A compile whose accuracy pass would outlast the request's deadline is stopped at the deadline (the pass's
+/// search polls the job's token; before, it ran to its own 2 s budget and the request was answered after it),
+/// answered 503, its slot free, and a normal request answered right after. The formula (~700 IR nodes, under
+/// the cost budget; its search takes seconds) carries this run's own constants so that no decision cached by an earlier run answers it.
+#[test]
+fn a_compile_past_its_deadline_stops_within_a_second() {
+    let s = Served::start(&["examples/brdfs", "--deadline", "0.3"]);
+    let salt = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().subsec_nanos();
+    let text: String = (0..60).map(|i| format!("exp(-(1-NH*NH)/(NH*NH*{i}.{salt}))*pow(1-NV*NV, n*{i}.5)/(NL+NV*{i}.5) + ")).collect::<String>() + "0";
+    let t0 = Instant::now();
+    let r = s.post("/api/compile", &json!({"name": "slow.brdf", "text": text}));
+    let took = t0.elapsed();
+    assert_eq!(r.status, 503, "{}", String::from_utf8_lossy(&r.body));
+    assert!(r.json()["error"].as_str().unwrap().contains("stopped"), "{}", r.json());
+    assert!(took < Duration::from_millis(1300), "answered {took:?} after the request, the deadline being 0.3 s");
+    assert_eq!(s.get("/api/session").json()["jobs_running"], json!(0));
+    let r = s.post("/api/compile", &json!({"name": "ok.brdf", "text": "NH^n"}));
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+}
+
 /// `lobe serve FILE --scene SCENE` serves the scene's folder: `/render.png` of that scene is `lobe render`'s
 /// PNG byte for byte. A scene naming a file outside the served folders is 403, and the outside file's text is
 /// not in the answer.
