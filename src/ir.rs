@@ -618,6 +618,12 @@ impl Formula {
         self.params.iter().position(|p| p.name == name)
     }
 
+    /// Whether any channel reads the parameter `name` (a declared parameter may go unread: every formula
+    /// declares the papers' `n`).
+    pub fn reads_param(&self, name: &str) -> bool {
+        self.param_index(name).is_some_and(|i| self.channels().iter().any(|c| c.ir.used_params(c.root).contains(&(i as u16))))
+    }
+
     pub fn used_inputs(&self) -> InputSet {
         self.ir.used_inputs(self.root)
     }

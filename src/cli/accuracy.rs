@@ -31,7 +31,7 @@ pub struct AccuracyArgs {
 
 pub fn run(a: &AccuracyArgs) -> Result<(), CliError> {
     if lobe::measured::is_measured_path(&a.against.reference) {
-        print!("{}", measured(a)?);
+        print!("{}", measured(a, None)?);
         return Ok(());
     }
     let set = a.set.list()?;
@@ -39,6 +39,14 @@ pub fn run(a: &AccuracyArgs) -> Result<(), CliError> {
     // Each side takes the --set values of the parameters it declares.
     let rf = common::load_formula(Some(&a.against.reference), None)?;
     common::check_set_names(&[&f, &rf], &set)?;
+    // The papers' metrics sweep n in both: where one reads no n, the comparison is over the whole hemisphere.
+    if !(common::reads_n(&f) && common::reads_n(&rf)) {
+        if !a.json.on {
+            eprintln!("note: {}, so the papers' n-sweep does not apply: compared over the whole hemisphere (every incidence, at the measured tables' angles)", common::which_reads_no_n(&f, &rf));
+        }
+        print!("{}", measured(a, Some(&rf))?);
+        return Ok(());
+    }
     let own = common::set_for(&f, &set);
     let ks = f.channels().into_iter().map(|c| common::compile_kernel(c, &own, a.backend.bulk_backend()?, a.backend.math.mode)).collect::<Result<Vec<Kernel>, _>>()?;
     let r = common::compile_kernel(rf.clone(), &common::set_for(&rf, &set), a.backend.bulk_backend()?, lobe::Mode::Precise)?;
@@ -127,26 +135,34 @@ fn text(a: &AccuracyArgs, k: &Kernel, r: &Kernel, lobe: lobe::ir::Input, rep: &A
     out
 }
 
-/// Accuracy against a measured table: the formula at its parameters (defaults, then `--set`) scored by the
-/// measured fit's metrics over every measured entry, each with its closed-form colour scale
-/// ([`lobe::numerics::measured`]).
-fn measured(a: &AccuracyArgs) -> Result<String, CliError> {
-    use lobe::numerics::measured::{residual, MeasuredMetric, Samples};
+/// Accuracy against a measured table, or against the reference formula `rf` over the whole hemisphere at the
+/// tables' angles: the formula at its parameters (defaults, then `--set`; each side the values it declares)
+/// scored by the measured fit's metrics over every entry, each with its closed-form colour scale against a
+/// table, at scale 1 against a formula ([`lobe::numerics::measured`]).
+fn measured(a: &AccuracyArgs, rf: Option<&lobe::ir::Formula>) -> Result<String, CliError> {
+    use lobe::numerics::measured::{residual, MeasuredMetric, Reference};
     let path = &a.against.reference;
-    let table = lobe::measured::Measured::read(path)?;
     let set = a.set.list()?;
     let f = a.against.formula.load()?;
-    let params = common::param_values(&f, &set);
-    let ks = f.channels().into_iter().map(|c| common::compile_kernel(c, &set, a.backend.bulk_backend()?, a.backend.math.mode)).collect::<Result<Vec<_>, _>>()?;
+    let own = common::set_for(&f, &set);
+    let params = common::param_values(&f, &own);
+    let ks = f.channels().into_iter().map(|c| common::compile_kernel(c, &own, a.backend.bulk_backend()?, a.backend.math.mode)).collect::<Result<Vec<_>, _>>()?;
     let channels: Vec<&dyn lobe::Evaluator> = ks.iter().map(|k| k as &dyn lobe::Evaluator).collect();
-    let s = Samples::new(&table, 1);
+    let reference: Box<dyn Reference> = match rf {
+        None => Box::new(lobe::measured::Measured::read(path)?),
+        Some(rf) => {
+            let others: Vec<(&dyn lobe::Evaluator, Vec<f64>)> = channels.iter().map(|k| (*k, params.clone())).collect();
+            Box::new(super::fit_measured::formula_reference(path, rf, &set, (a.backend.bulk_backend()?, lobe::Mode::Precise), false, &others)?)
+        }
+    };
+    let s = reference.samples(1);
     if s.is_empty() {
         return Err(CliError::hint(
             format!("`{path}` has no entry measured in all three channels: there is nothing to score {} against", f.display_name()),
             "check the file: every entry is negative (not measured)",
         ));
     }
-    let [log, rmse] = [MeasuredMetric::Log, MeasuredMetric::Rmse].map(|m| residual(&channels, &params, &s, m));
+    let [log, rmse, cosine] = MeasuredMetric::ALL.map(|m| residual(&channels, &params, &s, m));
     let mut out = String::new();
     if a.json.on {
         #[derive(serde::Serialize)]
@@ -160,16 +176,43 @@ fn measured(a: &AccuracyArgs) -> Result<String, CliError> {
             #[serde(serialize_with = "lobe::base::json::num")]
             rmse: f64,
             rmse_scale: [f64; 3],
+            #[serde(serialize_with = "lobe::base::json::num")]
+            cosine: f64,
+            cosine_scale: [f64; 3],
         }
-        let j = Json { formula: f.display_name(), measured: path, entries: s.len(), log: log.error, log_scale: log.scale, rmse: rmse.error, rmse_scale: rmse.scale };
+        let j = Json {
+            formula: f.display_name(),
+            measured: path,
+            entries: s.len(),
+            log: log.error,
+            log_scale: log.scale,
+            rmse: rmse.error,
+            rmse_scale: rmse.scale,
+            cosine: cosine.error,
+            cosine_scale: cosine.scale,
+        };
         outln!(out, "{}", common::to_json(&j)?);
         return Ok(out);
     }
-    let shown: Vec<String> = f.params.iter().zip(&params).map(|(d, v)| format!("{}={}", d.name, common::short_number(*v))).collect();
-    outln!(out, "{} ({}) vs {path}: {} measured entries at the table's angles", f.display_name(), shown.join(", "), s.len());
-    for (name, r) in [("cosine-weighted log error", log), ("RMSE", rmse)] {
+    // The values of the parameters the formula reads (every formula declares the papers' n).
+    let reads = f.channels().iter().flat_map(|c| c.ir.used_params(c.root)).collect::<Vec<u16>>();
+    let shown: Vec<String> = f
+        .params
+        .iter()
+        .zip(&params)
+        .enumerate()
+        .filter(|(i, _)| reads.contains(&(*i as u16)))
+        .map(|(_, (d, v))| format!("{}={}", d.name, common::short_number(*v)))
+        .collect();
+    let what = if rf.is_some() { "entries (pairs of directions)" } else { "measured entries" };
+    outln!(out, "{} ({}) vs {path}: {} {what} at the table's angles", f.display_name(), shown.join(", "), s.len());
+    for (name, r) in [("cosine-weighted log error", log), ("RMSE", rmse), ("cosine-weighted L2", cosine)] {
         let [x, y, z] = r.scale;
-        outln!(out, "  {name:<26} {:.6e}  with colour scale ({x:.4}, {y:.4}, {z:.4})", r.error);
+        if s.fit_scale {
+            outln!(out, "  {name:<26} {:.6e}  with colour scale ({x:.4}, {y:.4}, {z:.4})", r.error);
+        } else {
+            outln!(out, "  {name:<26} {:.6e}", r.error);
+        }
     }
     outln!(out, "  (fit the parameters: `lobe fit FILE --measured {path} --param …`)");
     Ok(out)

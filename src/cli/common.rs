@@ -274,6 +274,21 @@ pub fn check_set_names(formulas: &[&Formula], set: &[(String, f64)]) -> Result<(
 
 pub use lobe::front::did_you_mean;
 
+/// Whether `f` reads the parameter `n` (the papers' metrics sweep it) in any channel.
+pub fn reads_n(f: &Formula) -> bool {
+    f.reads_param("n")
+}
+
+/// Which of a formula and its reference reads no `n`, as a clause: "A reads no n", "the reference B reads no
+/// n", "A and the reference B read no n".
+pub fn which_reads_no_n(f: &Formula, r: &Formula) -> String {
+    match (reads_n(f), reads_n(r)) {
+        (true, _) => format!("the reference {} reads no n", r.display_name()),
+        (false, true) => format!("{} reads no n", f.display_name()),
+        (false, false) => format!("{} and the reference {} read no n", f.display_name(), r.display_name()),
+    }
+}
+
 /// What a long run is doing, on stderr, once it has run for a second (a quick run prints nothing): a spinner
 /// with a label, the stage and the elapsed time, cleared before the report.
 pub struct Spinner {

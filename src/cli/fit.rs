@@ -1,5 +1,5 @@
 //! `lobe fit FILE --reference REF --param a=1..1000[:step] [--param …] [--metric mean-abs] [--json]`
-//! `lobe fit FILES… --measured TABLES|DIR… --param n=1..1000 [--metric log|rmse] [-o cmp.png] [--table t.csv]`
+//! `lobe fit FILES… --measured TABLES|DIR|REF.brdf… --param n=1..1000 [--metric log|rmse|cosine] [-o cmp.png] [--table t.csv]`
 //!
 //! JSON keys are documented in [`lobe::numerics`] and, for measured fits, in docs/measured.md.
 
@@ -22,7 +22,9 @@ pub struct FitArgs {
     /// The reference lobe (normally Blinn, cos^n).
     #[arg(long, required_unless_present = "measured", conflicts_with = "measured")]
     pub reference: Option<String>,
-    /// Measured tables (MERL .binary), or folders of them: fit to the measurement instead of a reference lobe.
+    /// Measured tables (MERL .binary), or folders of them: fit to the measurement instead of a reference lobe. A
+    /// formula file (.brdf) here is a reference over the whole hemisphere: its values (at the `--set` values of the
+    /// parameters it declares) at the tables' angles, for every incidence.
     #[arg(long, num_args = 1..)]
     pub measured: Vec<String>,
     #[command(flatten)]
@@ -34,7 +36,7 @@ pub struct FitArgs {
     #[command(flatten)]
     pub set: Params,
     /// What to minimise: mean-abs (the papers', the default), max-abs, epicenter; against --measured: log
-    /// (cosine-weighted log error, the default) or rmse.
+    /// (cosine-weighted log error, the default), rmse or cosine (cosine-weighted L2).
     #[arg(long)]
     pub metric: Option<String>,
     /// --measured: use every STRIDE-th table index along each axis for the refinement and the residual.
@@ -43,6 +45,9 @@ pub struct FitArgs {
     /// --measured: the (coarser) stride of the grid stage.
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u16).range(1..=90))]
     pub grid_stride: u16,
+    /// --measured against a formula: fit a colour scale too (by default a formula's values are absolute).
+    #[arg(long)]
+    pub fit_scale: bool,
     /// --measured: write the table of every formula × measurement fit (.csv or .json).
     #[arg(long)]
     pub table: Option<std::path::PathBuf>,
@@ -120,6 +125,34 @@ impl FitArgs {
 
 /// A fit against `--reference` (`--measured` fits are [`super::fit_measured::run`]).
 pub fn run(a: &FitArgs) -> Result<(), CliError> {
+    // The papers' metrics sweep n in both formulas: where one of them reads no n, the sweep would compare one
+    // fixed lobe with a thousand, so the comparison is over the whole hemisphere instead.
+    // (A formula on standard input is read once, by the fit itself.)
+    let reference = a.reference.clone().unwrap_or_default();
+    let source = a.against()?.formula;
+    let on_stdin = source.file.as_deref() == Some("-") || reference == "-";
+    let f = if on_stdin { None } else { Some(common::load_formula_with(source.file.as_deref(), source.expr.as_deref(), false)?) };
+    let rf = if on_stdin { None } else { Some(common::load_formula_with(Some(&reference), None, false)?) };
+    if let (Some(f), Some(rf)) = (f, rf) {
+        if common::reads_n(&f) && common::reads_n(&rf) {
+            return lobe_fit(a);
+        }
+        if a.metric.as_deref().is_some_and(|m| m.parse::<Metric>().is_ok()) {
+            return Err(CliError::hint(
+                format!("--metric {}: the papers' metrics sweep n, and {}", a.metric.as_deref().unwrap_or(""), common::which_reads_no_n(&f, &rf)),
+                "compare over the whole hemisphere with --metric log, rmse or cosine",
+            ));
+        }
+        if !a.json.on && !a.quiet {
+            eprintln!("note: {}, so the papers' n-sweep does not apply: fitted over the whole hemisphere (every incidence, at the measured tables' angles)", common::which_reads_no_n(&f, &rf));
+        }
+        return super::fit_measured::run_against(a, std::slice::from_ref(&reference));
+    }
+    lobe_fit(a)
+}
+
+/// The papers' fit: the metric over n = 1..n_max of the formula against the reference lobe.
+fn lobe_fit(a: &FitArgs) -> Result<(), CliError> {
     let set = a.set.list()?;
     for (name, ..) in free_specs(a)? {
         if set.iter().any(|(k, _)| *k == name) {

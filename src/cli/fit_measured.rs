@@ -1,6 +1,7 @@
-//! `lobe fit FILES… --measured TABLES|DIR… --param n=1..1000 [--metric log|rmse] [-o cmp.png] [--table t.csv]`:
-//! formulas fitted to measured tables ([`lobe::numerics::measured`]), one fit or every formula × table in
-//! parallel into a table (Ngan et al.'s experiment). The format, metrics and keys: docs/measured.md.
+//! `lobe fit FILES… --measured TABLES|DIR|REF.brdf… --param n=1..1000 [--metric log|rmse|cosine] [-o cmp.png]
+//! [--table t.csv]`: formulas fitted to measured tables ([`lobe::numerics::measured`]), or to another formula
+//! over the whole hemisphere at the same angles, one fit or every formula × reference in parallel into a table
+//! (Ngan et al.'s experiment). The format, metrics and keys: docs/measured.md.
 
 use super::args::Output;
 use super::common::{self, CliError, Spinner};
@@ -10,7 +11,7 @@ use lobe::ir::Formula;
 use lobe::measured::{is_measured_path, Measured};
 use lobe::numerics::fit::{FreeParam, LmStats, Refinement};
 use lobe::numerics::grad::{Gradient, Var};
-use lobe::numerics::measured::{fit_measured, residual, MeasuredFit, MeasuredFitOptions, MeasuredMetric, Samples};
+use lobe::numerics::measured::{fit_measured, residual, FormulaReference, MeasuredFit, MeasuredFitOptions, MeasuredMetric, Reference};
 use lobe::{Evaluator, Kernel};
 use rayon::prelude::*;
 use std::path::Path;
@@ -29,17 +30,27 @@ struct Model {
     free: Vec<FreeParam>,
 }
 
-/// One formula × table fit.
+/// What a formula is fitted to: a measured table, or a formula (`src` its text, `set` its own values).
+struct Against {
+    path: String,
+    src: String,
+    set: Vec<(String, f64)>,
+    reference: Arc<dyn Reference>,
+}
+
+/// One formula × reference fit.
 struct Row<'a> {
     model: &'a Model,
+    against: &'a Against,
     table: &'a str,
     fit: MeasuredFit,
-    /// The best candidate's error under the other metric too: (log, rmse).
-    both: (f64, f64),
+    /// The best candidate's error under every metric ([`MeasuredMetric::ALL`]'s order).
+    all: [f64; 3],
     seconds: f64,
 }
 
-/// The measured files named by `--measured`: files as given, folders as their `.binary` files (sorted).
+/// The references named by `--measured`: files as given (tables, or formula files), folders as their
+/// `.binary` files (sorted).
 fn table_paths(args: &[String]) -> Result<Vec<String>, CliError> {
     let mut out = vec![];
     for a in args {
@@ -96,8 +107,14 @@ fn free_of(a: &FitArgs, f: &Formula, batch: bool) -> Result<Vec<FreeParam>, CliE
 }
 
 pub fn run(a: &FitArgs) -> Result<(), CliError> {
-    let metric: MeasuredMetric = a.metric.as_deref().unwrap_or("log").parse().map_err(|e: String| CliError::hint(format!("--metric: {e}"), "--measured fits take --metric log or --metric rmse"))?;
-    let tables = table_paths(&a.measured)?;
+    run_against(a, &a.measured)
+}
+
+/// [`run`] against the references `against` (tables, folders of them, formula files).
+pub fn run_against(a: &FitArgs, against: &[String]) -> Result<(), CliError> {
+    let metric: MeasuredMetric =
+        a.metric.as_deref().unwrap_or("log").parse().map_err(|e: String| CliError::hint(format!("--metric: {e}"), "--measured fits take --metric log, rmse or cosine"))?;
+    let tables = table_paths(against)?;
     if let Some(o) = &a.out.path {
         a.out.force.check(o, lobe::render::image::is_lobe_png)?;
         Output::png_only(o)?;
@@ -110,11 +127,7 @@ pub fn run(a: &FitArgs) -> Result<(), CliError> {
         a.out.force.check(t, common::is_lobe_output)?;
     }
     let set = a.set.list()?;
-    for (name, ..) in free_specs(a)? {
-        if set.iter().any(|(k, _)| *k == name) {
-            return Err(CliError::hint(format!("`{name}` is both searched (--param) and fixed (--set)"), "drop one of them"));
-        }
-    }
+    let searched: Vec<String> = free_specs(a)?.into_iter().map(|s| s.0).collect();
     let sources: Vec<(String, String)> = match &a.expr {
         Some(e) => vec![("<expr>".to_string(), e.clone())],
         None if a.files.is_empty() => return Err(CliError::hint("no formula given", "pass .brdf files, or --expr '…'")),
@@ -126,11 +139,28 @@ pub fn run(a: &FitArgs) -> Result<(), CliError> {
         let formula = common::load_formula(if file == "<expr>" { None } else { Some(&file) }, if file == "<expr>" { Some(&src) } else { None })?;
         models.push((file, src, formula));
     }
-    common::check_set_names(&models.iter().map(|m| &m.2).collect::<Vec<_>>(), &set)?;
+    // A formula reference declares its own parameters; `--set` gives each side the values of those it declares.
+    let ref_formulas: Vec<(String, String, Formula)> = tables
+        .iter()
+        .filter(|t| !lobe::measured::is_measured_path(t))
+        .map(|t| {
+            let (file, src) = common::read_source(t)?;
+            let f = common::load_formula(Some(&file), None)?;
+            Ok((file, src, f))
+        })
+        .collect::<Result<_, CliError>>()?;
+    common::check_set_names(&models.iter().map(|m| &m.2).chain(ref_formulas.iter().map(|r| &r.2)).collect::<Vec<_>>(), &set)?;
+    // A name both searched and set is the fitted formula's search and a reference formula's value (fitting a
+    // formula to itself at other values); without a reference formula declaring it, a contradiction.
+    for name in &searched {
+        if set.iter().any(|(k, _)| k == name) && !ref_formulas.iter().any(|r| r.2.param_index(name).is_some()) {
+            return Err(CliError::hint(format!("`{name}` is both searched (--param) and fixed (--set)"), "drop one of them"));
+        }
+    }
     let models: Vec<Model> = models
         .into_iter()
         .map(|(file, src, formula)| {
-            let own = common::set_for(&formula, &set);
+            let own: Vec<(String, f64)> = common::set_for(&formula, &set).into_iter().filter(|(k, _)| !searched.contains(k)).collect();
             let free = free_of(a, &formula, batch)?;
             let kernels = formula.channels().into_iter().map(|c| common::compile_kernel(c, &own, a.backend.bulk_backend()?, a.backend.math.mode)).collect::<Result<Vec<_>, _>>()?;
             let grad = if a.refinement() == Refinement::Lm && !a.no_refine && !free.is_empty() {
@@ -143,8 +173,19 @@ pub fn run(a: &FitArgs) -> Result<(), CliError> {
             Ok(Model { file, src, formula, kernels, grad, set: own, free })
         })
         .collect::<Result<_, CliError>>()?;
-    // Every table is read (and checked) before any fit runs.
-    let loaded: Vec<Arc<Measured>> = tables.iter().map(|t| Measured::read(t).map(Arc::new)).collect::<Result<_, _>>()?;
+    // Every table is read (and checked), every reference formula compiled, before any fit runs.
+    let mut refs = ref_formulas.into_iter();
+    let loaded: Vec<Against> = tables
+        .iter()
+        .map(|t| {
+            if lobe::measured::is_measured_path(t) {
+                let table: Arc<dyn Reference> = Arc::new(Measured::read(t)?);
+                return Ok(Against { path: t.clone(), src: String::new(), set: vec![], reference: table });
+            }
+            let (path, src, f) = refs.next().expect("a formula per formula path");
+            fit_reference(a, path, src, f, &set, &models)
+        })
+        .collect::<Result<_, CliError>>()?;
     let opts = MeasuredFitOptions {
         metric,
         stride: usize::from(a.stride),
@@ -166,7 +207,7 @@ pub fn run(a: &FitArgs) -> Result<(), CliError> {
     let rows: Result<Vec<Row>, CliError> = pairs
         .par_iter()
         .map(|&(m, t)| {
-            let row = fit_one(&models[m], &tables[t], &loaded[t], &opts, &tick);
+            let row = fit_one(&models[m], &loaded[t], &opts, &tick);
             let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             if pairs.len() > 1 {
                 spinner.show(format!("{d}/{} formula × table pairs", pairs.len()));
@@ -195,13 +236,45 @@ pub fn run(a: &FitArgs) -> Result<(), CliError> {
     Ok(())
 }
 
-fn fit_one<'a>(model: &'a Model, path: &'a str, t: &Measured, opts: &MeasuredFitOptions, progress: &(dyn Fn() + Sync)) -> Result<Row<'a>, CliError> {
+/// The formula `f` (file `path`) as a reference at the `--set` values it declares, compiled on `backend` in
+/// `math`: compared at φ_h turns too unless it and every formula compared with it (`others`: kernels and their
+/// parameter values) are isotropic; a colour scale fitted only when `fit_scale`.
+pub fn formula_reference(
+    path: &str,
+    f: &Formula,
+    set: &[(String, f64)],
+    (backend, math): (lobe::Backend, lobe::Mode),
+    fit_scale: bool,
+    others: &[(&dyn Evaluator, Vec<f64>)],
+) -> Result<FormulaReference, CliError> {
+    let own = common::set_for(f, set);
+    let params = common::param_values(f, &own);
+    let kernels = f
+        .channels()
+        .into_iter()
+        .map(|c| common::compile_kernel(c, &own, backend, math).map(|k| Arc::new(k) as Arc<dyn Evaluator>))
+        .collect::<Result<Vec<_>, _>>()?;
+    let isotropic = |k: &dyn Evaluator, p: &[f64]| lobe::numerics::measured::turns_with_the_frame(k, p);
+    let azimuths = !(kernels.iter().all(|k| isotropic(k.as_ref(), &params)) && others.iter().all(|(k, p)| isotropic(*k, p)));
+    Ok(FormulaReference { name: path.to_string(), channels: kernels, params, azimuths, fit_scale })
+}
+
+/// [`formula_reference`] for a fit: against every fitted formula at its fixed values.
+fn fit_reference(a: &FitArgs, path: String, src: String, f: Formula, set: &[(String, f64)], models: &[Model]) -> Result<Against, CliError> {
+    let others: Vec<(&dyn Evaluator, Vec<f64>)> =
+        models.iter().flat_map(|m| m.kernels.iter().map(|k| (k as &dyn Evaluator, common::param_values(&m.formula, &m.set)))).collect();
+    let reference = formula_reference(&path, &f, set, (a.backend.bulk_backend()?, a.backend.math.mode), a.fit_scale, &others)?;
+    Ok(Against { path, src, set: common::set_for(&f, set), reference: Arc::new(reference) })
+}
+
+fn fit_one<'a>(model: &'a Model, against: &'a Against, opts: &MeasuredFitOptions, progress: &(dyn Fn() + Sync)) -> Result<Row<'a>, CliError> {
     let start = std::time::Instant::now();
+    let t = against.reference.as_ref();
     let channels: Vec<&dyn Evaluator> = model.kernels.iter().map(|k| k as &dyn Evaluator).collect();
     let params = common::param_values(&model.formula, &model.set);
     let fit = if model.free.is_empty() {
         // Nothing to search: the formula as it is, with its colour scale.
-        let s = Samples::new(t, opts.stride);
+        let s = t.samples(opts.stride);
         let r = residual(&channels, &params, &s, opts.metric);
         let best = vec![lobe::numerics::measured::MeasuredCandidate { params: params.clone(), residual: r, refined: false }];
         MeasuredFit { best, evaluated: 1, entries: s.len(), grid_entries: s.len(), refinement: opts.refinement, lm: LmStats::default(), fixed: vec![] }
@@ -209,9 +282,9 @@ fn fit_one<'a>(model: &'a Model, path: &'a str, t: &Measured, opts: &MeasuredFit
         fit_measured(&channels, model.grad.as_ref(), &params, &model.free, t, opts, progress)?
     };
     let best = &fit.best[0].params;
-    let s = Samples::new(t, opts.stride);
-    let both = (residual(&channels, best, &s, MeasuredMetric::Log).error, residual(&channels, best, &s, MeasuredMetric::Rmse).error);
-    Ok(Row { model, table: path, fit, both, seconds: start.elapsed().as_secs_f64() })
+    let s = t.samples(opts.stride);
+    let all = MeasuredMetric::ALL.map(|m| residual(&channels, best, &s, m).error);
+    Ok(Row { model, against, table: &against.path, fit, all, seconds: start.elapsed().as_secs_f64() })
 }
 
 /// The searched parameters of a candidate, `name=value` joined by `sep`.
@@ -267,7 +340,8 @@ fn single(a: &FitArgs, row: &Row, metric: MeasuredMetric) -> Result<(), CliError
             if c.refined { "  (continuous refinement)" } else { "" }
         );
     }
-    println!("best: {}; log error {:.6e}, rmse {:.6e}", shown(m, &best.params, ", "), row.both.0, row.both.1);
+    let [log, rmse, cosine] = row.all;
+    println!("best: {}; log error {log:.6e}, rmse {rmse:.6e}, cosine {cosine:.6e}", shown(m, &best.params, ", "));
     if let Some(o) = &a.out.path {
         println!("wrote {} (fitted formula | measurement | |Δgray| heat map)", o.display());
     }
@@ -280,13 +354,14 @@ fn comparison_png(a: &FitArgs, row: &Row) -> Result<Vec<u8>, CliError> {
     let (m, best) = (row.model, &row.fit.best[0]);
     let mut set = m.set.clone();
     set.extend(m.free.iter().map(|f| (f.name.clone(), best.params[f.index])));
+    set.extend(row.against.set.iter().filter(|(k, _)| !set.iter().any(|(s, _)| s == k)).cloned().collect::<Vec<_>>());
     let scene = lobe::render::scene::PAPER_SCENE;
     let job = CompareJob {
         scene_name: "<builtin paper_sphere.toml>",
         scene_src: scene,
         base: Path::new("."),
         a: (&m.file, &m.src),
-        b: (row.table, ""),
+        b: (row.table, &row.against.src),
         size: None,
         tint: [best.residual.scale, [1.0; 3]],
     };
@@ -313,6 +388,8 @@ struct RowJson<'a> {
     log: f64,
     #[serde(serialize_with = "json::num")]
     rmse: f64,
+    #[serde(serialize_with = "json::num")]
+    cosine: f64,
     scale: [f64; 3],
     entries: usize,
     grid_entries: usize,
@@ -334,8 +411,9 @@ impl<'a> RowJson<'a> {
             metric: metric.name(),
             params: Named::new(r.model.free.iter().map(|f| (f.name.as_str(), b.params[f.index]))),
             error: b.residual.error,
-            log: r.both.0,
-            rmse: r.both.1,
+            log: r.all[0],
+            rmse: r.all[1],
+            cosine: r.all[2],
             scale: b.residual.scale,
             entries: r.fit.entries,
             grid_entries: r.fit.grid_entries,
@@ -361,19 +439,20 @@ fn table_json(rows: &[Row], metric: MeasuredMetric) -> Result<String, CliError> 
 fn table_csv(rows: &[Row], metric: MeasuredMetric) -> String {
     let q = |s: &str| if s.contains([',', '"', '\n']) { format!("\"{}\"", s.replace('"', "\"\"")) } else { s.to_string() };
     let mut out = format!("# made by lobe fit --measured (metric {})\n", metric.name());
-    out.push_str("formula,file,measured,params,error,log,rmse,scale_r,scale_g,scale_b,entries,seconds\n");
+    out.push_str("formula,file,measured,params,error,log,rmse,cosine,scale_r,scale_g,scale_b,entries,seconds\n");
     for r in rows {
         let b = &r.fit.best[0];
         let [sr, sg, sb] = b.residual.scale;
         out.push_str(&format!(
-            "{},{},{},{},{:e},{:e},{:e},{sr},{sg},{sb},{},{:.3}\n",
+            "{},{},{},{},{:e},{:e},{:e},{:e},{sr},{sg},{sb},{},{:.3}\n",
             q(&r.model.formula.display_name()),
             q(&r.model.file),
             q(r.table),
             q(&shown(r.model, &b.params, ";")),
             b.residual.error,
-            r.both.0,
-            r.both.1,
+            r.all[0],
+            r.all[1],
+            r.all[2],
             r.fit.entries,
             r.seconds
         ));

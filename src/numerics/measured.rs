@@ -16,10 +16,20 @@
 //!   the fit weighs the lobe's shape, not only its peak; the cosine weights the entries as light reaching the
 //!   eye does. A negative s·f counts as 0 here.
 //! - `rmse`: plain E = √( Σ (s_c·f − m)² / (3N) ).
+//! - `cosine` (the cosine-weighted L2 of Ngan et al. 2005, after Lafortune et al. 1997): the error of the
+//!   reflected radiance per unit irradiance, E = √( Σ (s_c·f − m)²·cos²θ_i / (3N) ).
+//!
+//! # Against a formula
+//! The reference can be another formula instead of a table ([`FormulaReference`]): its values at the same
+//! entries (the table convention's angles, every `stride`-th index), and for a pair of formulas that is not
+//! isotropic also with the half vector turned about the normal ([`AZIMUTHS`] values of φ_h), so that the
+//! metric covers the whole hemisphere of both directions. A formula's values are absolute, so no colour scale
+//! is fitted against one (s_c = 1) unless asked ([`Samples::fit_scale`]); a table's calibration is unknown,
+//! so the scale is fitted against it.
 //!
 //! # The colour scale
 //! The scale s_c ≥ 0 is solved in closed form per channel for each candidate: for `rmse` the least-squares
-//! s_c = Σ f·m / Σ f²; for `log` the weighted least squares of the metric linearised about the measured
+//! s_c = Σ f·m / Σ f², for `cosine` the same with the weight cos²θ_i; for `log` the weighted least squares of the metric linearised about the measured
 //! values (Gauss–Newton's first step from the data: residual ≈ (s·a − y)/(1 + y), a = f·cosθ_i, y = m·cosθ_i),
 //! s_c = Σ w·a·y / Σ w·a², w = 1/(1 + y)². Exact when the formula can match the data (a synthetic table of the
 //! formula itself), and close to the metric's own optimum otherwise.
@@ -32,6 +42,7 @@ use super::grad::{Gradient, Var};
 use super::lm::{minimize, Normal};
 use super::Diagnostic;
 use crate::backend::{Columns, Evaluator};
+use crate::frame::V3;
 use crate::ir::N_INPUTS;
 use crate::measured::{self, Measured, DIMS};
 use rayon::prelude::*;
@@ -44,6 +55,8 @@ pub enum MeasuredMetric {
     Log,
     /// Plain RMSE.
     Rmse,
+    /// Cosine-weighted L2 (Ngan et al. 2005).
+    Cosine,
 }
 
 impl std::str::FromStr for MeasuredMetric {
@@ -52,7 +65,8 @@ impl std::str::FromStr for MeasuredMetric {
         match s {
             "log" => Ok(MeasuredMetric::Log),
             "rmse" => Ok(MeasuredMetric::Rmse),
-            _ => Err(format!("unknown metric `{s}` for a measured fit; expected log or rmse")),
+            "cosine" => Ok(MeasuredMetric::Cosine),
+            _ => Err(format!("unknown metric `{s}` for a measured fit; expected log, rmse or cosine")),
         }
     }
 }
@@ -62,8 +76,12 @@ impl MeasuredMetric {
         match self {
             MeasuredMetric::Log => "log",
             MeasuredMetric::Rmse => "rmse",
+            MeasuredMetric::Cosine => "cosine",
         }
     }
+
+    /// Every metric, in the order reports list them.
+    pub const ALL: [MeasuredMetric; 3] = [MeasuredMetric::Log, MeasuredMetric::Rmse, MeasuredMetric::Cosine];
 }
 
 /// A table's measured entries at the convention's angles: the kernel inputs (columns) and the values.
@@ -76,6 +94,108 @@ pub struct Samples {
     cos: Vec<f64>,
     /// ln(1 + m·cos θ_i) per channel.
     log_m: [Vec<f64>; 3],
+    /// Whether a colour scale is fitted (a table's unknown calibration) or s_c = 1 (a formula's absolute values).
+    pub fit_scale: bool,
+}
+
+/// Where a fit's reference values come from: a measured table, or a formula at the same angles.
+pub trait Reference: Send + Sync {
+    /// The name reports use (the file).
+    fn name(&self) -> &str;
+    /// The entries at every `stride`-th index per axis.
+    fn samples(&self, stride: usize) -> Samples;
+}
+
+impl Reference for Measured {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn samples(&self, stride: usize) -> Samples {
+        Samples::new(self, stride)
+    }
+}
+
+/// Values of φ_h at which a pair of formulas that is not isotropic is compared (k·360°/AZIMUTHS).
+pub const AZIMUTHS: usize = 8;
+
+/// A formula as a fit's reference (module docs): its kernel (or red, green, blue ones) at `params`.
+pub struct FormulaReference {
+    pub name: String,
+    pub channels: Vec<std::sync::Arc<dyn Evaluator>>,
+    pub params: Vec<f64>,
+    /// Whether to compare at [`AZIMUTHS`] values of φ_h (else at φ_h = 0 only, enough when both formulas are
+    /// isotropic: [`turns_with_the_frame`]).
+    pub azimuths: bool,
+    /// Fit a colour scale against it (default: its values are absolute, s_c = 1).
+    pub fit_scale: bool,
+}
+
+impl Reference for FormulaReference {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn samples(&self, stride: usize) -> Samples {
+        let stride = stride.max(1);
+        let turns = if self.azimuths { AZIMUTHS } else { 1 };
+        let mut cols = vec![vec![]; N_INPUTS];
+        let mut cos = vec![];
+        for i in (0..DIMS[0]).step_by(stride) {
+            for j in (0..DIMS[1]).step_by(stride) {
+                for k in (0..DIMS[2]).step_by(stride) {
+                    let (l, w) = measured::entry_dirs(i, j, k);
+                    for t in 0..turns {
+                        let (l, w) = (turn(l, t), turn(w, t));
+                        if !(l[2] > 0.0 && w[2] > 0.0) {
+                            continue;
+                        }
+                        for (c, xv) in cols.iter_mut().zip(crate::frame::inputs_from_dirs(l, w)) {
+                            c.push(xv);
+                        }
+                        cos.push(l[2]);
+                    }
+                }
+            }
+        }
+        let all = Samples { stride, cols, m: Default::default(), cos, log_m: Default::default(), fit_scale: self.fit_scale };
+        let values: Vec<Vec<f64>> = self.channels.iter().map(|ev| all.eval(ev.as_ref(), &self.params)).collect();
+        // An entry where the reference is not finite is not a reference value: left out, as a table leaves out
+        // what it did not measure.
+        let keep: Vec<bool> = (0..all.len()).map(|e| values.iter().all(|v| v[e].is_finite())).collect();
+        let pick = |v: &[f64]| v.iter().zip(&keep).filter(|(_, k)| **k).map(|(x, _)| *x).collect::<Vec<f64>>();
+        let m: [Vec<f64>; 3] = std::array::from_fn(|c| pick(&values[c.min(values.len() - 1)]));
+        let cos = pick(&all.cos);
+        let log_m = std::array::from_fn(|c| m[c].iter().zip(&cos).map(|(v, k)| (v * k).max(0.0).ln_1p()).collect());
+        Samples { stride, cols: all.cols.iter().map(|c| pick(c)).collect(), m, cos, log_m, fit_scale: self.fit_scale }
+    }
+}
+
+/// `d` turned about the normal by the `t`-th of [`AZIMUTHS`] angles.
+fn turn(d: V3, t: usize) -> V3 {
+    if t == 0 {
+        return d;
+    }
+    let (s, c) = (std::f64::consts::TAU * t as f64 / AZIMUTHS as f64).sin_cos();
+    [c * d[0] - s * d[1], s * d[0] + c * d[1], d[2]]
+}
+
+/// Whether `ev` at `params` gives the same values (within 1e-9 relative) with both directions turned about the
+/// normal, at every [`AZIMUTHS`] angle and 500 random pairs: an isotropic formula, which a comparison at
+/// φ_h = 0 covers.
+pub fn turns_with_the_frame(ev: &dyn Evaluator, params: &[f64]) -> bool {
+    let mut rng = crate::base::rng::Rng(0x150);
+    let mut hemi = || {
+        let (u, v) = (rng.unit(), rng.unit());
+        let (r, phi) = ((1.0 - u * u).sqrt(), std::f64::consts::TAU * v);
+        [r * phi.cos(), r * phi.sin(), u.max(1e-3)]
+    };
+    (0..500).all(|_| {
+        let (l, w) = (hemi(), hemi());
+        let a = ev.eval(&crate::frame::inputs_from_dirs(l, w), params);
+        (1..AZIMUTHS).all(|t| {
+            let b = ev.eval(&crate::frame::inputs_from_dirs(turn(l, t), turn(w, t)), params);
+            a == b || (a - b).abs() <= 1e-9 * a.abs().max(b.abs()) || (a.is_nan() && b.is_nan())
+        })
+    })
 }
 
 impl Samples {
@@ -105,7 +225,7 @@ impl Samples {
             }
         }
         let log_m = std::array::from_fn(|c| m[c].iter().zip(&cos).map(|(v, k)| (v * k).ln_1p()).collect());
-        Samples { stride, cols, m, cos, log_m }
+        Samples { stride, cols, m, cos, log_m, fit_scale: true }
     }
 
     pub fn len(&self) -> usize {
@@ -148,11 +268,20 @@ pub fn residual(channels: &[&dyn Evaluator], params: &[f64], s: &Samples, metric
     for c in 0..3 {
         let f = &values[c.min(values.len() - 1)];
         let m = &s.m[c];
+        // The least-squares scale of a weighted quadratic metric, or 1 against absolute values.
+        let fitted = |fm: f64, ff: f64| if !s.fit_scale { 1.0 } else if ff > 0.0 { (fm / ff).max(0.0) } else { 0.0 };
         match metric {
             MeasuredMetric::Rmse => {
                 let (fm, ff) = f.iter().zip(m).fold((0.0, 0.0), |(a, b), (f, m)| (a + f * m, b + f * f));
-                let k = if ff > 0.0 { (fm / ff).max(0.0) } else { 0.0 };
+                let k = fitted(fm, ff);
                 sum += f.iter().zip(m).map(|(f, m)| (k * f - m).powi(2)).sum::<f64>();
+                scale[c] = k;
+            }
+            MeasuredMetric::Cosine => {
+                let w = |cos: &f64| cos * cos;
+                let (fm, ff) = f.iter().zip(m).zip(&s.cos).fold((0.0, 0.0), |(a, b), ((f, m), cos)| (a + w(cos) * f * m, b + w(cos) * f * f));
+                let k = fitted(fm, ff);
+                sum += f.iter().zip(m).zip(&s.cos).map(|((f, m), cos)| w(cos) * (k * f - m).powi(2)).sum::<f64>();
                 scale[c] = k;
             }
             MeasuredMetric::Log => {
@@ -163,7 +292,7 @@ pub fn residual(channels: &[&dyn Evaluator], params: &[f64], s: &Samples, metric
                     ay += w * a * y;
                     aa += w * a * a;
                 }
-                let k = if aa > 0.0 { (ay / aa).max(0.0) } else { 0.0 };
+                let k = fitted(ay, aa);
                 sum += f.iter().zip(&s.cos).zip(&s.log_m[c]).map(|((f, cos), lm)| ((k * f * cos).max(0.0).ln_1p() - lm).powi(2)).sum::<f64>();
                 scale[c] = k;
             }
@@ -231,18 +360,18 @@ pub fn fit_measured(
     grad: Option<&Gradient>,
     base_params: &[f64],
     free: &[FreeParam],
-    t: &Measured,
+    t: &dyn Reference,
     opts: &MeasuredFitOptions,
     progress: &(dyn Fn() + Sync),
 ) -> Result<MeasuredFit, Diagnostic> {
     if let Some(f) = free.iter().find(|f| f.index >= base_params.len()) {
         return Err(Diagnostic::error(format!("cannot fit `{}`", f.name)).hint("not a parameter of the formula"));
     }
-    let fine = Samples::new(t, opts.stride);
-    let coarse = if opts.grid_stride == fine.stride { None } else { Some(Samples::new(t, opts.grid_stride)) };
+    let fine = t.samples(opts.stride);
+    let coarse = if opts.grid_stride == fine.stride { None } else { Some(t.samples(opts.grid_stride)) };
     let coarse_ref = coarse.as_ref().unwrap_or(&fine);
     if fine.is_empty() || coarse_ref.is_empty() {
-        return Err(Diagnostic::error(format!("`{}` has no entry measured in all three channels at stride {}", t.name, opts.stride.max(opts.grid_stride)))
+        return Err(Diagnostic::error(format!("`{}` has no entry measured in all three channels at stride {}", t.name(), opts.stride.max(opts.grid_stride)))
             .hint("use a smaller stride, or check the file: every entry is negative (not measured)"));
     }
     let metric = opts.metric;
@@ -298,10 +427,11 @@ pub fn fit_measured(
 const CHUNK: usize = 4096;
 
 /// Levenberg–Marquardt ([`super::lm`]) on the metric's residuals over the entries of `s`, from each of
-/// `starts` (full parameter vectors); the variables are the `free` parameters (bounded by their ranges) and
-/// the three colour scales (unbounded, started at `scale`, or else at the closed-form ones). The residuals, per channel c and
-/// entry i, with cos θ_i = N·L:
+/// `starts` (full parameter vectors); the variables are the `free` parameters (bounded by their ranges) and,
+/// where `s` fits one ([`Samples::fit_scale`]), the three colour scales (unbounded, started at `scale`, or else
+/// at the closed-form ones). The residuals, per channel c and entry i, with cos θ_i = N·L:
 /// - `rmse`: r = s_c·f − m, so ∂r/∂p = s_c·∂f/∂p and ∂r/∂s_c = f;
+/// - `cosine`: r = (s_c·f − m)·cos θ_i, so ∂r/∂p = s_c·cos θ_i·∂f/∂p and ∂r/∂s_c = f·cos θ_i;
 /// - `log`: r = ln(1 + s_c·f·cos θ_i) − ln(1 + m·cos θ_i), so ∂r/∂p = s_c·cos θ_i·∂f/∂p / (1 + s_c·f·cos θ_i)
 ///   and ∂r/∂s_c = f·cos θ_i / (1 + s_c·f·cos θ_i) (a negative s_c·f counts as 0, as in [`residual`]: r is
 ///   then constant).
@@ -323,7 +453,7 @@ pub fn lm_refine(
         .collect::<Option<_>>()
         .ok_or_else(|| Diagnostic::error("the gradient lacks a searched parameter's partial"))?;
     let nf = free.len();
-    let k = nf + 3;
+    let k = if s.fit_scale { nf + 3 } else { nf };
     let len = s.len();
     let chunks = len.div_ceil(CHUNK);
     let mut stats = LmStats::default();
@@ -338,7 +468,7 @@ pub fn lm_refine(
         };
         let eval = |x: &[f64]| -> Option<Normal> {
             let p = params_of(x);
-            let scale = &x[nf..];
+            let scale: [f64; 3] = if s.fit_scale { [x[nf], x[nf + 1], x[nf + 2]] } else { [1.0; 3] };
             (0..chunks)
                 .into_par_iter()
                 .map(|ci| {
@@ -356,6 +486,10 @@ pub fn lm_refine(
                             }
                             let (r, dr_df, dr_ds) = match metric {
                                 MeasuredMetric::Rmse => (sc * f - s.m[c][a + i], sc, f),
+                                MeasuredMetric::Cosine => {
+                                    let cos = s.cos[a + i];
+                                    ((sc * f - s.m[c][a + i]) * cos, sc * cos, f * cos)
+                                }
                                 MeasuredMetric::Log => {
                                     let cos = s.cos[a + i];
                                     let arg = sc * f * cos;
@@ -383,14 +517,15 @@ pub fn lm_refine(
         if !closed.error.is_finite() {
             continue;
         }
-        let x0: Vec<f64> = free.iter().map(|f| start[f.index]).chain(scale.unwrap_or(closed.scale)).collect();
-        let bounds: Vec<Option<(f64, f64)>> = free.iter().map(|f| Some((f.lo, f.hi))).chain([None; 3]).collect();
+        let scales = if s.fit_scale { scale.unwrap_or(closed.scale).to_vec() } else { vec![] };
+        let x0: Vec<f64> = free.iter().map(|f| start[f.index]).chain(scales).collect();
+        let bounds: Vec<Option<(f64, f64)>> = free.iter().map(|f| Some((f.lo, f.hi))).chain(vec![None; k - nf]).collect();
         let Some(r) = minimize(&eval, &x0, &bounds, LM_MAX_ITERATIONS) else { continue };
         stats.starts += 1;
         stats.iterations += r.iterations;
         stats.evaluations += r.evaluations;
         let params = params_of(&r.x[..nf]);
-        let own = Residual { error: (r.cost / (3 * len) as f64).sqrt(), scale: [r.x[nf], r.x[nf + 1], r.x[nf + 2]] };
+        let own = Residual { error: (r.cost / (3 * len) as f64).sqrt(), scale: if s.fit_scale { [r.x[nf], r.x[nf + 1], r.x[nf + 2]] } else { [1.0; 3] } };
         let closed = residual(channels, &params, s, metric);
         let residual = if own.error <= closed.error { own } else { closed };
         if residual.error.is_finite() && best.as_ref().is_none_or(|b| residual.error < b.residual.error) {
@@ -453,6 +588,49 @@ mod tests {
             let flat = FnEvaluator(|_: &[f64; N_INPUTS], _: &[f64]| 1.0);
             assert!(residual(&[&flat], &[], &s, MeasuredMetric::Log).error > 10.0 * r.best[0].residual.error);
         }
+    }
+
+    /// Against a formula (no colour scale) the cosine metric recovers a random exponent and colour-free values;
+    /// with the scale fitted, an overall factor is absorbed by it instead.
+    #[test]
+    fn a_formula_reference_is_absolute_and_every_metric_recovers_its_parameter() {
+        let mut rng = crate::base::rng::Rng(0xc05);
+        let blinn = FnEvaluator(|x: &[f64; N_INPUTS], p: &[f64]| nh(x).powf(p[0]));
+        let free = [FreeParam { index: 0, name: "n".into(), lo: 1.0, hi: 1000.0, step: None }];
+        for _ in 0..2 {
+            let n = 5.0 + rng.unit() * 300.0;
+            for (fit_scale, factor) in [(false, 1.0), (true, 2.0)] {
+                let want = factor;
+                let r = FormulaReference {
+                    name: "ref".into(),
+                    channels: vec![std::sync::Arc::new(FnEvaluator(move |x: &[f64; N_INPUTS], _: &[f64]| factor * nh(x).powf(n)))],
+                    params: vec![],
+                    azimuths: false,
+                    fit_scale,
+                };
+                for metric in MeasuredMetric::ALL {
+                    let opts = MeasuredFitOptions { metric, stride: 4, grid_stride: 8, top: 3, ..Default::default() };
+                    let f = fit_measured(&[&blinn], None, &[1.0], &free, &r, &opts, &|| {}).unwrap();
+                    let b = &f.best[0];
+                    assert!((b.params[0] - n).abs() < 0.01 * n, "{metric:?} scale fitted {fit_scale}: n {n}: {b:?}");
+                    assert!(b.residual.scale.iter().all(|s| (s - want).abs() < 0.01 * want), "{metric:?}: {b:?}");
+                }
+            }
+        }
+    }
+
+    /// An anisotropic formula is compared at every φ_h turn (AZIMUTHS times the entries); the isotropy test
+    /// tells them apart.
+    #[test]
+    fn anisotropic_formulas_are_compared_at_every_azimuth() {
+        let aniso = FnEvaluator(|x: &[f64; N_INPUTS], p: &[f64]| {
+            let (hx, hy, hz) = (x[Input::Lx.index()] + x[Input::Vx.index()], x[Input::Ly.index()] + x[Input::Vy.index()], x[Input::Lz.index()] + x[Input::Vz.index()]);
+            (-(hx * hx / (p[0] * p[0]) + hy * hy) / (hz * hz)).exp()
+        });
+        assert!(!turns_with_the_frame(&aniso, &[0.3]));
+        assert!(turns_with_the_frame(&FnEvaluator(|x: &[f64; N_INPUTS], _: &[f64]| nh(x).powi(7)), &[]));
+        let one = |azimuths| FormulaReference { name: "a".into(), channels: vec![std::sync::Arc::new(FnEvaluator(|_: &[f64; N_INPUTS], _: &[f64]| 1.0))], params: vec![], azimuths, fit_scale: false };
+        assert_eq!(one(true).samples(9).len(), AZIMUTHS * one(false).samples(9).len());
     }
 
     #[test]

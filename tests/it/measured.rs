@@ -56,6 +56,59 @@ fn integer_looking_ranges_are_intervals_and_a_two_parameter_fit_recovers_ggx() {
     }
 }
 
+/// A formula against another over the whole hemisphere (`--measured REF.brdf`, no table written): GGX fitted to
+/// itself at random values (a name searched in the fitted formula is set in the reference) and the anisotropic
+/// Ward to itself at random alphas (compared at every azimuth), under each metric, with no colour scale unless
+/// `--fit-scale`. Where a formula reads no n, `fit --reference` and `accuracy` compare over the hemisphere
+/// instead of sweeping the papers' n at NL = 1 (they swept a fixed GGX against a thousand Blinn lobes), and
+/// `bench` leaves the sweep's columns empty.
+#[test]
+fn formulas_are_compared_over_the_whole_hemisphere() {
+    let mut rng = lobe::base::rng::Rng(0x4e6a_0b1d);
+    let mut draw = |lo: f64, hi: f64| lo + (hi - lo) * rng.unit();
+    let fit = |args: &[&str]| -> serde_json::Value {
+        let mut all = vec!["fit"];
+        all.extend_from_slice(args);
+        all.extend_from_slice(&["--stride", "3", "--grid-stride", "6", "--json"]);
+        let o = lobe(&all, None);
+        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+        serde_json::from_str(&stdout(&o)).unwrap()
+    };
+    for metric in ["log", "rmse", "cosine"] {
+        let (alpha, f0) = (draw(0.1, 0.8), draw(0.05, 0.9));
+        let (sa, sf) = (format!("alpha={alpha}"), format!("f0={f0}"));
+        let v = fit(&["examples/explorer/ggx.brdf", "--measured", "examples/explorer/ggx.brdf", "--param", "alpha=0.01..1", "--param", "f0=0..1", "--set", &sa, "--set", &sf, "--metric", metric]);
+        let (a, f) = (v["params"]["alpha"].as_f64().unwrap(), v["params"]["f0"].as_f64().unwrap());
+        assert!((a - alpha).abs() < 1e-3 * alpha && (f - f0).abs() < 1e-3, "{metric}: alpha {alpha} f0 {f0}: {v}");
+        assert_eq!(v["scale"], serde_json::json!([1.0, 1.0, 1.0]), "{v}");
+        let (ax, ay) = (draw(0.05, 0.5), draw(0.05, 0.5));
+        let (sx, sy) = (format!("alpha_x={ax}"), format!("alpha_y={ay}"));
+        let w = "examples/explorer/ward_anisotropic.brdf";
+        let v = fit(&[w, "--measured", w, "--param", "alpha_x=0.01..1", "--param", "alpha_y=0.01..1", "--set", &sx, "--set", &sy, "--metric", metric]);
+        let (x, y) = (v["params"]["alpha_x"].as_f64().unwrap(), v["params"]["alpha_y"].as_f64().unwrap());
+        assert!((x - ax).abs() < 1e-3 * ax && (y - ay).abs() < 1e-3 * ay, "{metric}: {ax} {ay}: {v}");
+    }
+    // With --fit-scale a reference at twice the value is matched by a scale of 2 (Blinn's own n recovered).
+    let v = fit(&["examples/brdfs/blinn.brdf", "--measured", "examples/brdfs/blinn.brdf", "--param", "n=1..1000", "--set", "n=64", "--fit-scale"]);
+    assert!((v["params"]["n"].as_f64().unwrap() - 64.0).abs() < 0.1 && v["error"].as_f64().unwrap() < 1e-9, "{v}");
+    // GGX reads no n: against Blinn, over the hemisphere (Blinn at the --set n), not the papers' sweep.
+    let o = lobe(&["fit", "examples/explorer/ggx.brdf", "--reference", "examples/brdfs/blinn.brdf", "--param", "alpha=0.01..1", "--set", "n=200", "--stride", "6", "--grid-stride", "9"], None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("ggx reads no n") && stdout(&o).contains("log error over"), "{}{}", stderr(&o), stdout(&o));
+    let o = lobe(&["fit", "examples/explorer/ggx.brdf", "--reference", "examples/brdfs/blinn.brdf", "--param", "alpha=0.01..1", "--metric", "mean-abs"], None);
+    assert!(!o.status.success() && stderr(&o).contains("reads no n") && stderr(&o).contains("--metric log"), "{}", stderr(&o));
+    let o = lobe(&["accuracy", "examples/explorer/ggx.brdf", "--reference", "examples/brdfs/blinn.brdf", "--set", "n=200", "--json"], None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert!(v["cosine"].as_f64().unwrap() > 0.0 && v["log"].as_f64().unwrap() > 0.0 && v["entries"].as_u64().unwrap() > 1_000_000, "{v}");
+    assert!(v.get("mean_abs_grid").is_none(), "{v}");
+    let o = lobe(&["bench", "examples/explorer/ggx.brdf", "--json"], None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let row = &v[0];
+    assert!(!row["mean_abs_grid"].is_number() && !row["coef_n50"].is_number(), "{row}");
+}
+
 #[test]
 fn fits_recover_blinns_n_and_beckmanns_m() {
     let dir = crate::scratch_dir("measured", "fit");

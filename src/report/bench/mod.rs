@@ -165,6 +165,11 @@ pub fn machine() -> String {
     format!("{cpu}, {threads} hardware threads, {} {}", std::env::consts::OS, std::env::consts::ARCH)
 }
 
+/// A metric of the papers' n-sweep, or — where it does not apply (a formula or reference that reads no n).
+fn swept(v: f64, f: impl Fn(f64) -> String) -> String {
+    if v.is_nan() { "—".into() } else { f(v) }
+}
+
 fn fmt_opt(v: Option<f64>, prec: usize) -> String {
     match v {
         Some(x) if x.is_finite() => format!("{x:.prec$}"),
@@ -175,6 +180,7 @@ fn fmt_opt(v: Option<f64>, prec: usize) -> String {
 
 /// The table, sorted by cost, Pareto rows marked with `*`.
 pub fn table(rows: &[BenchRow]) -> String {
+    let unswept = rows.iter().any(|r| r.mean_abs_grid.is_nan());
     let mut rows: Vec<&BenchRow> = rows.iter().collect();
     rows.sort_by(|a, b| a.jit_ns.total_cmp(&b.jit_ns));
     let mut out = String::new();
@@ -188,7 +194,7 @@ pub fn table(rows: &[BenchRow]) -> String {
     ));
     for r in rows {
         out.push_str(&format!(
-            "{:<2}{:<28} {:<7} {:>9.1} {:>6.2} ±{:>2.0}% {:>9.2} {:>9.1} {:>9} {:>7.1}× {:>9} {:>11.3e} {:>9.2} {:>9.3e} {:>8} {:>8} {:>5.2}/{:<6.2} {:>6.2}/{:<5.2}\n",
+            "{:<2}{:<28} {:<7} {:>9.1} {:>6.2} ±{:>2.0}% {:>9.2} {:>9.1} {:>9} {:>7.1}× {:>9} {:>11} {:>9} {:>9} {:>8} {:>8} {:>5.2}/{:<6.2} {:>6.2}/{:<5.2}\n",
             if r.pareto { "*" } else { "" },
             truncate(&r.name, 28),
             r.math,
@@ -200,9 +206,9 @@ pub fn table(rows: &[BenchRow]) -> String {
             fmt_opt(r.native_ns, 2),
             r.interp_ns / r.jit_ns,
             fmt_ulps(r.max_ulp_vs_precise),
-            r.mean_abs_grid,
-            r.epicenter_max_rel_pct,
-            r.max_abs,
+            swept(r.mean_abs_grid, |x| format!("{x:.3e}")),
+            swept(r.epicenter_max_rel_pct, |x| format!("{x:.2}")),
+            swept(r.max_abs, |x| format!("{x:.3e}")),
             fmt_opt(r.coef_n50, 3),
             fmt_opt(r.albedo_max, 3),
             r.bits_error_avg,
@@ -212,6 +218,9 @@ pub fn table(rows: &[BenchRow]) -> String {
         ));
     }
     out.push_str("* = Pareto front: no other formula is both faster (beyond the measured noise) and more accurate.\n");
+    if unswept {
+        out.push_str("— vs ref: the formula or the reference reads no n, so the papers' n-sweep does not apply (`lobe accuracy FILE --reference REF` compares them over the whole hemisphere); coef: only a one-cosine lobe has a lobe coefficient.\n");
+    }
     out.push_str("Each row is the kernel the commands compile (the accuracy pass's choice); bits error: its numerical error vs the higher-precision truth (log2(ulps + 1)); plain: the plain simplification's jit ns and max bits.\n");
     out
 }

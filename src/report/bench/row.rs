@@ -60,16 +60,20 @@ pub fn bench_row(f: &Formula, path: &str, set: &[(String, f64)], reference: &Ker
     let tiers = if o.tiers { Some(tier_columns(&kernel, &params, o.measure, path)?) } else { None };
     let stem = Path::new(path).file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
     let native_ns = crate::numerics::twins::by_stem(&stem).map(|t| time_twin(t.ev.as_ref(), &params, o.measure.samples));
-    // The model's distance from the reference lobe over n = 1..1000 (live n): a property of the formula.
+    // The model's distance from the reference lobe over n = 1..1000 (live n): a property of the formula, and
+    // one only where both read n (a formula that reads none would be one fixed lobe against a thousand): NaN
+    // (shown as —) otherwise, and where the sweep fails.
     let live = crate::compile_formula(f.clone(), &Options { backend: Backend::Jit, math, ..Options::default() })?;
     let (lobe, _) = choose_lobe_input(live.used_inputs());
     let (ref_lobe, _) = choose_lobe_input(reference.used_inputs());
-    let acc = accuracy(&live, &params, lobe, reference, &reference.default_params(), ref_lobe, &AccuracyOptions::default());
+    let swept = f.reads_param("n") && reference.formula.reads_param("n");
+    let acc = swept.then(|| accuracy(&live, &params, lobe, reference, &reference.default_params(), ref_lobe, &AccuracyOptions::default()).ok()).flatten();
     let (mean_abs_grid, epi, max_abs) = match &acc {
-        Ok(r) => (r.mean_abs_grid, r.epicenter.value * 100.0, r.max_abs.value),
-        Err(_) => (f64::NAN, f64::NAN, f64::NAN),
+        Some(r) => (r.mean_abs_grid, r.epicenter.value * 100.0, r.max_abs.value),
+        None => (f64::NAN, f64::NAN, f64::NAN),
     };
-    let coef_n50 = energy::normalization_coef(&kernel, &params, lobe).ok();
+    // The lobe normalisation coefficient: a one-cosine lobe's only (of anything else it is not the energy).
+    let coef_n50 = crate::numerics::one_lobe_cosine(kernel.used_inputs()).and_then(|c| energy::normalization_coef(&kernel, &params, c).ok());
     let albedo_max = if o.albedo { energy::full_energy_for(&kernel, kernel.used_inputs(), &params).ok().map(|e| e.albedo_max) } else { None };
     let (max_ulp_vs_precise, max_rel_vs_precise) = error_vs_precise(&kernel, &params);
     Ok(BenchRow {
