@@ -118,19 +118,21 @@ pub fn run(a: &PlotArgs) -> Result<(), CliError> {
         [lo, hi] => Some((*lo, *hi)),
         _ => return Err(CliError::hint("--ylim takes two values, lo,hi", "e.g. --ylim 0,2")),
     };
+    let value = if a.error { plot::DIFFERENCE } else { plot::VALUE };
+    let opts = LobeOptions { title: title.clone(), polar: a.polar, log: a.log, size: a.size, ylim, value };
     let bytes = match a.incidence {
-        Some(t) => plot::incidence_lobes(&series, &LobeOptions { title: title.clone(), polar: a.polar, log: a.log, size: a.size, ylim }, t, format).map_err(CliError::msg)?,
-        None => plot::lobes(&series, &LobeOptions { title: title.clone(), polar: a.polar, log: a.log, size: a.size, ylim }, format).map_err(CliError::msg)?,
+        Some(t) => plot::incidence_lobes(&series, &opts, t, format).map_err(CliError::msg)?,
+        None => plot::lobes(&series, &opts, format).map_err(CliError::msg)?,
     };
     a.out.force.write(output, &bytes, common::is_lobe_output)?;
     if a.json.on {
-        let x = if a.incidence.is_some() { "view angle (degrees, signed; mirror at −θᵢ)" } else { "angle from the lobe axis (degrees)" };
+        let x = if a.incidence.is_some() { plot::INCIDENCE_ANGLE } else { plot::LOBE_ANGLE };
         let series: Vec<serde_json::Value> = series
             .iter()
             .map(|s| serde_json::json!({"name": s.name, "x": s.points.iter().map(|p| p.0).collect::<Vec<_>>(), "y": s.points.iter().map(|p| p.1).collect::<Vec<_>>()}))
             .collect();
         let format = if matches!(format, Format::Svg) { "svg" } else { "png" };
-        println!("{}", serde_json::json!({"output": output.display().to_string(), "format": format, "title": title, "x": x, "series": series}));
+        println!("{}", serde_json::json!({"output": output.display().to_string(), "format": format, "title": title, "x": x, "y": value, "series": series}));
     } else {
         eprintln!("wrote {}", output.display());
     }
