@@ -499,7 +499,11 @@ async function analyze() {
     $("num-ns").textContent = `${fmt(r.jit_ns, 2)} / ${fmt(r.jit_batch_ns, 2)} / ${fmt(r.interp_ns, 2)}`;
     $("num-coef").textContent = r.coef !== undefined ? fmt(r.coef) : r.coef_error;
     $("num-albedo").textContent = r.albedo_max !== undefined ? `${fmt(r.albedo_max)} at θᵢ = ${r.theta_i_at_max_deg}°` : r.albedo_error;
-    $("num-error").textContent = `mean |Δ| ${fmt(r.mean_abs_grid, 6)} · epicentre ${fmt(r.epicenter_max_rel_pct, 2)} % · max ${fmt(r.max_abs)}`;
+    // The papers' n-sweep where both read n; else the hemisphere metrics (log, RMSE, cosine-weighted L2).
+    const h = r.hemisphere;
+    $("num-error").textContent = h
+      ? `over the hemisphere (no n to sweep): log ${fmt(h.log, 4)} · RMSE ${fmt(h.rmse, 4)} · cosine ${fmt(h.cosine, 4)}`
+      : `mean |Δ| ${fmt(r.mean_abs_grid, 6)} · epicentre ${fmt(r.epicenter_max_rel_pct, 2)} % · max ${fmt(r.max_abs)}`;
     albedoRows = r.albedo || [];
     drawAlbedo(r.albedo_error);
   } catch (e) {

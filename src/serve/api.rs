@@ -698,9 +698,11 @@ pub(crate) fn analyze(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
         check_cost(st, &k, 2.0e6, "this analysis")?;
         let params = values(&k, &set)?;
         let mut out = AnalyzeReply::default();
-        match crate::numerics::normalize::coefficient(k.as_ref(), k.used_inputs(), &params) {
-            Ok(c) => out.coef = Some(c),
-            Err(e) => out.coef_error = Some(e.message),
+        // The lobe coefficient is a one-cosine lobe's energy; of anything else it means nothing.
+        match crate::numerics::one_lobe_cosine(k.used_inputs()).map(|_| crate::numerics::normalize::coefficient(k.as_ref(), k.used_inputs(), &params)) {
+            Some(Ok(c)) => out.coef = Some(c),
+            Some(Err(e)) => out.coef_error = Some(e.message),
+            None => out.coef_error = Some("only a lobe of one cosine (NH or VR) has a lobe coefficient: see the albedo".into()),
         }
         match crate::numerics::energy::full_energy_cancellable(k.as_ref(), k.used_inputs(), &params, &st.cancel) {
             Ok(e) => {
@@ -714,14 +716,26 @@ pub(crate) fn analyze(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
             let (rn, rt) = formula_field(r)?;
             let rk = st.compiled(&rn, &rt)?.kernel().clone();
             let rp = rk.default_params();
-            let lobe = crate::numerics::choose_lobe_input(k.used_inputs()).0;
-            let rlobe = crate::numerics::choose_lobe_input(rk.used_inputs()).0;
-            let opts = crate::numerics::accuracy::AccuracyOptions { cancel: st.cancel.clone(), ..Default::default() };
-            let a = crate::numerics::accuracy::accuracy(k.as_ref(), &params, lobe, rk.as_ref(), &rp, rlobe, &opts)?;
             out.reference = Some(rk.formula.display_name().to_string());
-            out.mean_abs_grid = Some(a.mean_abs_grid);
-            out.epicenter_max_rel_pct = Some(a.epicenter.value * 100.0);
-            out.max_abs = Some(a.max_abs.value);
+            if k.formula.reads_param("n") && rk.formula.reads_param("n") {
+                let lobe = crate::numerics::choose_lobe_input(k.used_inputs()).0;
+                let rlobe = crate::numerics::choose_lobe_input(rk.used_inputs()).0;
+                let opts = crate::numerics::accuracy::AccuracyOptions { cancel: st.cancel.clone(), ..Default::default() };
+                let a = crate::numerics::accuracy::accuracy(k.as_ref(), &params, lobe, rk.as_ref(), &rp, rlobe, &opts)?;
+                out.mean_abs_grid = Some(a.mean_abs_grid);
+                out.epicenter_max_rel_pct = Some(a.epicenter.value * 100.0);
+                out.max_abs = Some(a.max_abs.value);
+            } else {
+                // The papers' metrics sweep n in both: without it, the measured fits' metrics over the whole
+                // hemisphere (every fourth table index per axis, both formulas at their values).
+                use crate::numerics::measured::{residual, turns_with_the_frame, FormulaReference, MeasuredMetric, Reference};
+                let channels: Vec<Arc<dyn crate::Evaluator>> = vec![rk.clone()];
+                let azimuths = !(turns_with_the_frame(k.as_ref(), &params) && turns_with_the_frame(rk.as_ref(), &rp));
+                let samples = FormulaReference { name: rn, channels, params: rp, azimuths, fit_scale: false }.samples(4);
+                st.cancel.check().map_err(|c| ApiError::new(503, c.to_string()))?;
+                let [log, rmse, cosine] = MeasuredMetric::ALL.map(|m| residual(&[k.as_ref()], &params, &samples, m).error);
+                out.hemisphere = Some(HemisphereError { entries: samples.len(), log, rmse, cosine });
+            }
         }
         let m = crate::report::measure::measure_kernel(&k, &params, crate::report::measure::MeasureOptions { points: 2048, samples: 9 })
             .map_err(|e| ApiError::new(422, e.to_string()))?;
@@ -757,6 +771,9 @@ struct AnalyzeReply {
     epicenter_max_rel_pct: Option<f64>,
     #[serde(serialize_with = "crate::base::json::opt_num", skip_serializing_if = "Option::is_none")]
     max_abs: Option<f64>,
+    /// Against a reference where the formula or the reference reads no n (the papers' metrics sweep it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    hemisphere: Option<HemisphereError>,
     #[serde(serialize_with = "crate::base::json::num")]
     jit_ns: f64,
     #[serde(serialize_with = "crate::base::json::num")]
@@ -765,6 +782,18 @@ struct AnalyzeReply {
     interp_ns: f64,
     #[serde(serialize_with = "crate::base::json::num")]
     compile_us: f64,
+}
+
+/// The measured fits' metrics of a formula against its reference over the whole hemisphere (no colour scale).
+#[derive(serde::Serialize)]
+struct HemisphereError {
+    entries: usize,
+    #[serde(serialize_with = "crate::base::json::num")]
+    log: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
+    rmse: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
+    cosine: f64,
 }
 
 /// `POST /api/save {path, text, hash, force}`: writes a served `.brdf` file atomically. Refused with 409 when

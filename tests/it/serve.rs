@@ -299,6 +299,13 @@ fn live_render_compare_plot_and_analysis_answer() {
     // Phong's coefficient is (n+2)/(2π) exactly.
     assert!((a["coef"].as_f64().unwrap() - 12.0 / (2.0 * std::f64::consts::PI)).abs() < 1e-6, "{a}");
     assert!(a["jit_ns"].as_f64().unwrap() > 0.0 && a["mean_abs_grid"].as_f64().is_some(), "{a}");
+    // A formula that reads no n: no papers' sweep and no lobe coefficient, the hemisphere's metrics instead.
+    let ggx = "param alpha = 0.3 in 0.01..1\nalpha^2 / (3.14159265 * (NH*NH*(alpha^2 - 1) + 1)^2) / (4*NL*NV)\n";
+    let r = s.post("/api/analyze", &json!({"text": ggx, "reference": {"text": "NH^n"}}));
+    let a = r.json();
+    assert!(a.get("mean_abs_grid").is_none() && a["coef_error"].as_str().is_some_and(|e| e.contains("one cosine")), "{a}");
+    let h = &a["hemisphere"];
+    assert!(h["entries"].as_u64().unwrap() > 10_000 && h["log"].as_f64().unwrap() > 0.0 && h["cosine"].as_f64().unwrap() > 0.0, "{a}");
 }
 
 #[test]

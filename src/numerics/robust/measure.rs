@@ -7,6 +7,7 @@ use super::sample::Point;
 use crate::backend::interp::Interp;
 use crate::backend::Evaluator;
 use crate::ir::Formula;
+use crate::base::cancel::Cancel;
 use crate::numerics::truth;
 use rayon::prelude::*;
 
@@ -89,7 +90,21 @@ pub struct Reference<'a> {
 impl<'a> Reference<'a> {
     /// The truth of `truth_f` (the formula as written, baked values folded) at `points`, in parallel.
     pub fn new(truth_f: &'a Formula, points: Vec<Point>) -> Reference<'a> {
-        let truth = points.par_iter().map(|pt| TruthAt::new(truth_f, pt)).collect();
+        Reference::new_until(truth_f, points, &Cancel::never())
+    }
+
+    /// [`Reference::new`], polling `stop` between chunks of points: once it trips, the points not yet reached
+    /// hold NaN (the caller, whose search is over, reads nothing from them but that it stopped). The truth in
+    /// high precision of a large formula at thousands of points is the longest stretch of a search.
+    pub(crate) fn new_until(truth_f: &'a Formula, points: Vec<Point>, stop: &Cancel) -> Reference<'a> {
+        let not_reached = TruthAt { value: f64::NAN, limit: false };
+        let truth = points
+            .par_chunks(16)
+            .flat_map_iter(|ch| {
+                let stopped = stop.is_cancelled();
+                ch.iter().map(move |pt| if stopped { not_reached } else { TruthAt::new(truth_f, pt) })
+            })
+            .collect();
         let cond = (0..points.len()).map(|_| std::sync::OnceLock::new()).collect();
         Reference { truth_f, points, truth, cond, readers: truth::Readers::new(truth_f) }
     }

@@ -301,7 +301,7 @@ fn live_pass(orig: &Formula, o: &PassOptions, stop: &Cancel, observe: &dyn Fn(St
     let truth_f = crate::simplify::bake_only(orig, &[]);
     let n = points_for(&base, &truth_f, o);
     observe(Stage::Truth { points: n });
-    let bench = Bench { reference: Reference::new(&truth_f, sample(orig, &[], n, o.seed)), o, stop, observe };
+    let bench = Bench { reference: Reference::new_until(&truth_f, sample(orig, &[], n, o.seed), stop), o, stop, observe };
     let (before, mut cur_got) = bench.run(&base, None);
     let cost_before = cost(&base);
     let base_budget = o.budget_for(cost_before);
@@ -385,7 +385,7 @@ fn baked_pass(orig: &Formula, bake: &[(usize, f64)], live: &Outcome, o: &PassOpt
     let truth_f = crate::simplify::bake_only(orig, bake);
     let n = points_for(&base, &truth_f, o);
     observe(Stage::Truth { points: n });
-    let bench = Bench { reference: Reference::new(&truth_f, sample(orig, bake, n, o.seed)), o, stop, observe };
+    let bench = Bench { reference: Reference::new_until(&truth_f, sample(orig, bake, n, o.seed), stop), o, stop, observe };
     let (before, mut cur_got) = bench.run(&base, None);
     let cost_before = cost(&base);
     let base_budget = o.budget_for(cost_before);
