@@ -535,30 +535,61 @@ fn eval_xs(f: &Formula, x: &[Xf; N_INPUTS], params: &[f64]) -> Xf {
     v[f.root.index()]
 }
 
-/// Per input, the nodes up to the root that read it, in evaluation order: what moving that input evaluates
-/// again ([`eval_moves_with`]); built once per formula.
+/// Per input and per parameter, the nodes up to the root that read it, in evaluation order: what moving that
+/// input or parameter evaluates again ([`eval_moves_with`]); built once per formula.
 pub(crate) struct Readers {
     by_input: [Vec<NodeId>; N_INPUTS],
+    /// Per parameter the formula reads (index, its readers).
+    by_param: Vec<(usize, Vec<NodeId>)>,
     /// The inputs the formula reads.
     pub used: crate::ir::InputSet,
 }
 
 impl Readers {
     pub fn new(f: &Formula) -> Readers {
+        let n = f.root.index() + 1;
         let reads = f.ir.input_sets();
         let by_input = std::array::from_fn(|i| {
             let input = crate::ir::Input::ALL[i];
-            f.ir.ids().take(f.root.index() + 1).filter(|id| reads[id.index()].contains(input)).collect()
+            f.ir.ids().take(n).filter(|id| reads[id.index()].contains(input)).collect()
         });
-        Readers { by_input, used: f.used_inputs() }
+        let by_param = f
+            .ir
+            .used_params(f.root)
+            .into_iter()
+            .map(|p| {
+                // Whether each node reads parameter p, in arena order (operands come first).
+                let mut r: Vec<bool> = Vec::with_capacity(n);
+                for id in f.ir.ids().take(n) {
+                    let node = f.ir.node(id);
+                    let mut reads = matches!(node, Node::Param(q) if *q == p);
+                    node.for_each_arg(|a| reads |= r[a.index()]);
+                    r.push(reads);
+                }
+                (usize::from(p), f.ir.ids().take(n).filter(|id| r[id.index()]).collect())
+            })
+            .collect();
+        Readers { by_input, by_param, used: f.used_inputs() }
+    }
+
+    /// The parameters the formula reads (indices into its parameter list).
+    pub fn params(&self) -> impl Iterator<Item = usize> + '_ {
+        self.by_param.iter().map(|(p, _)| *p)
     }
 }
 
-/// The exact values of `f` at `x` with one input moved at a time, for each `(input, value)` of `moves` (rounded
-/// to f64), as [`eval`] gives them; only the nodes that read the moved input are evaluated again (a
-/// finite-difference condition number moves each read input both ways: most of a BRDF's nodes read one or two),
-/// from the formula's [`Readers`] built beforehand (they depend on the formula, not the point).
-pub(crate) fn eval_moves_with(f: &Formula, readers: &Readers, x: &[f64; N_INPUTS], params: &[f64], moves: &[(usize, f64)]) -> Vec<f64> {
+/// What a condition estimate moves: an input (by index) or a parameter (by index) to a new value.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Move {
+    Input(usize, f64),
+    Param(usize, f64),
+}
+
+/// The exact values of `f` at `x` with one input or parameter moved at a time, for each of `moves` (rounded to
+/// f64), as [`eval`] gives them; only the nodes that read the moved one are evaluated again (a
+/// finite-difference condition number moves each read input and parameter both ways: most of a BRDF's nodes
+/// read one or two), from the formula's [`Readers`] built beforehand (they depend on the formula, not the point).
+pub(crate) fn eval_moves_with(f: &Formula, readers: &Readers, x: &[f64; N_INPUTS], params: &[f64], moves: &[Move]) -> Vec<f64> {
     let n = f.root.index() + 1;
     let xs = x.map(Xf::from_f64);
     let mut base: Vec<Xf> = Vec::with_capacity(n);
@@ -567,14 +598,26 @@ pub(crate) fn eval_moves_with(f: &Formula, readers: &Readers, x: &[f64; N_INPUTS
         base.push(value);
     }
     let mut v = base.clone();
+    let no_nodes = Vec::new();
     moves
         .iter()
-        .map(|&(i, w)| {
+        .map(|&m| {
             let mut moved = xs;
-            moved[i] = Xf::from_f64(w);
-            let nodes = &readers.by_input[i];
+            let mut moved_params = std::borrow::Cow::Borrowed(params);
+            let nodes = match m {
+                Move::Input(i, w) => {
+                    moved[i] = Xf::from_f64(w);
+                    &readers.by_input[i]
+                }
+                Move::Param(p, w) => {
+                    if let Some(slot) = moved_params.to_mut().get_mut(p) {
+                        *slot = w;
+                    }
+                    readers.by_param.iter().find(|(q, _)| *q == p).map_or(&no_nodes, |(_, ids)| ids)
+                }
+            };
             for &id in nodes {
-                v[id.index()] = node_value(f, id, &v, &moved, params);
+                v[id.index()] = node_value(f, id, &v, &moved, &moved_params);
             }
             let r = v[n - 1].to_f64();
             for &id in nodes {
@@ -679,8 +722,8 @@ pub fn limit(f: &Formula, x: &[f64; N_INPUTS], params: &[f64]) -> Option<f64> {
 mod tests {
     use super::*;
 
-    /// Moving one input at a time with the other nodes shared gives what evaluating from scratch gives, on a
-    /// formula whose nodes read different inputs (and a select, an exp, a parameter).
+    /// Moving one input or the parameter at a time with the other nodes shared gives what evaluating from
+    /// scratch gives, on a formula whose nodes read different inputs (and a select, an exp, a parameter).
     #[test]
     fn moved_inputs_share_the_nodes_that_do_not_read_them() {
         let f = crate::front::parse("m.brdf", "param m = 0.3 in 0.01..1\nlet d = exp((NH^2 - 1)/(m*m*NH^2))\nNL <= 0 ? 0 : d*VH/(NL*NV + m) + NV^3").unwrap();
@@ -691,12 +734,16 @@ mod tests {
                 *v = r.unit() * 2.0 - 0.5;
             }
             let p = [0.01 + r.unit()];
-            let moves: Vec<(usize, f64)> = (0..N_INPUTS).flat_map(|i| [(i, x[i].next_up()), (i, -x[i])]).collect();
+            let mut moves: Vec<Move> = (0..N_INPUTS).flat_map(|i| [Move::Input(i, x[i].next_up()), Move::Input(i, -x[i])]).collect();
+            moves.extend([Move::Param(0, p[0].next_up()), Move::Param(0, 0.5 * p[0])]);
             let got = eval_moves_with(&f, &Readers::new(&f), &x, &p, &moves);
-            for (&(i, w), g) in moves.iter().zip(got) {
-                let mut y = x;
-                y[i] = w;
-                assert_eq!(g.to_bits(), eval(&f, &y, &p).to_bits(), "input {i} at {w}, x = {x:?}");
+            for (&m, g) in moves.iter().zip(got) {
+                let (mut y, mut q) = (x, p);
+                match m {
+                    Move::Input(i, w) => y[i] = w,
+                    Move::Param(i, w) => q[i] = w,
+                }
+                assert_eq!(g.to_bits(), eval(&f, &y, &q).to_bits(), "{m:?}, x = {x:?}");
             }
         }
     }

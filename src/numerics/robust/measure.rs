@@ -21,21 +21,28 @@ pub fn condition_ulps(truth_f: &Formula, pt: &Point, t: f64) -> f64 {
 
 /// [`condition_ulps`] with the formula's [`truth::Readers`] built beforehand (once per formula, not per point).
 fn condition_ulps_with(truth_f: &Formula, readers: &truth::Readers, pt: &Point, t: f64) -> f64 {
-    let moves: Vec<(usize, f64)> = readers
-        .used
-        .iter()
-        .map(|i| (i.index(), pt.x[i.index()]))
-        .filter(|&(_, v)| v != 0.0)
-        .flat_map(|(i, v)| [(i, v.next_up()), (i, v.next_down())])
-        .collect();
+    use truth::Move;
+    // Each read input and each live parameter the formula reads, one ulp either way (a parameter is an input
+    // of the function too: where a 1-ulp change of n moves the value by millions of ulps, so does the rounding
+    // of any expression of n).
+    let inputs = readers.used.iter().map(|i| (i.index(), pt.x[i.index()])).filter(|&(_, v)| v != 0.0).flat_map(|(i, v)| [Move::Input(i, v.next_up()), Move::Input(i, v.next_down())]);
+    let params = readers
+        .params()
+        .filter_map(|p| pt.p.get(p).map(|&v| (p, v)))
+        .filter(|&(_, v)| v != 0.0 && v.is_finite())
+        .flat_map(|(p, v)| [Move::Param(p, v.next_up()), Move::Param(p, v.next_down())]);
+    let moves: Vec<Move> = inputs.chain(params).collect();
     let values = truth::eval_moves_with(truth_f, readers, &pt.x, &pt.p, &moves);
     let mut worst: f64 = 0.0;
-    for (&(i, w), mut u) in moves.iter().zip(values) {
+    for (&m, mut u) in moves.iter().zip(values) {
         // At a limit point its neighbours along the other inputs are limits too.
         if u.is_nan() {
-            let mut x = pt.x;
-            x[i] = w;
-            u = truth::limit(truth_f, &x, &pt.p).unwrap_or(u);
+            let (mut x, mut p) = (pt.x, pt.p.clone());
+            match m {
+                Move::Input(i, w) => x[i] = w,
+                Move::Param(i, w) => p[i] = w,
+            }
+            u = truth::limit(truth_f, &x, &p).unwrap_or(u);
         }
         if !u.is_nan() {
             worst = worst.max(ulps(u, t));
