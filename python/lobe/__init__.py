@@ -811,7 +811,8 @@ def compare(
     ``params`` (and the kernels' baked values) go to both formulas, each taking those it declares (``--set``);
     ``size`` is N or (width, height); ``threads``, ``srgb``, ``math`` and ``backend`` are the command's flags.
     Returns the command's ``--json`` dict (``manhattan``, ``manhattan_covered``, ``max_gray_diff``, ``rmse``,
-    ``psnr``, ``width``, ``height``, ``nan``, …) with the images as :class:`Image`: ``"a"``, ``"b"``,
+    ``psnr``, ``width``, ``height``, ``nan``, …; its ``a`` and ``b``, the files, as ``a_name`` and ``b_name``)
+    with the images as :class:`Image`: ``"a"``, ``"b"``,
     ``"difference"`` (the |Δgray| heat map, white at ``max(max_gray_diff, 1)``) and ``"figure"`` (A | B | heat
     map with headings and colour bar: the picture ``-o`` writes)."""
     if isinstance(size, int):
@@ -819,6 +820,8 @@ def compare(
     wh = None if size is None else (int(size[0]), int(size[1]))
     sa, sb = _side(a, "a"), _side(b, "b")
     ia, ib, diff, fig, r = _lobe.compare(sa, sb, None if scene is None else os.fspath(scene), wh, _baked_set([a, b], params), int(threads), bool(srgb), str(math), str(backend))
+    # The command's "a" and "b" name the files; here they are the images, the names "a_name" and "b_name".
+    r["a_name"], r["b_name"] = r.pop("a"), r.pop("b")
     r.update(a=_image(*ia), b=_image(*ib), difference=_image(*diff), figure=_image(*fig))
     return r
 
