@@ -665,6 +665,9 @@ def _fit_against(
             raise _error(f"set: no formula has a parameter `{name}`", "the formulas' parameters are: " + ", ".join(known))
         if name in params and name not in ref_names:
             raise _error(f"`{name}` is both searched (params) and fixed (set)", "drop one of them")
+    for what, v, lo in (("stride", stride, 1), ("grid_stride", grid_stride, 1), ("top", top, 1), ("n_max", n_max, 1)):
+        if int(v) < lo:
+            raise _error(f"{what} = {v} is below {lo}", "stride and grid_stride are 1..90; top and n_max at least 1")
     own = {k: v for k, v in fixed.items() if k in names and k not in params}
     values = kernel._param_list(own)
     ref_values = ref._param_list({k: v for k, v in fixed.items() if k in ref_names}) if ref is not None else []
@@ -675,14 +678,16 @@ def _fit_against(
         ref_values,
         values,
         _free(kernel, params),
-        metric,
-        bool(fit_scale),
-        int(stride),
-        int(grid_stride),
-        int(top),
-        bool(refine),
-        bool(derivative_free),
-        int(n_max),
+        {
+            "metric": metric,
+            "fit_scale": bool(fit_scale),
+            "stride": int(stride),
+            "grid_stride": int(grid_stride),
+            "top": int(top),
+            "refine": bool(refine),
+            "derivative_free": bool(derivative_free),
+            "n_max": int(n_max),
+        },
     )
     if "params" not in r:
         r["params"] = dict(r["best"][0]["params"])

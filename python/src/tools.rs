@@ -136,7 +136,9 @@ fn which_reads_no_n(f: &Formula, r: &Formula) -> String {
     }
 }
 
-/// How a fit against a table or a formula runs (the command's flags).
+/// How a fit against a table or a formula runs (the command's flags), from a dict of these keys.
+#[derive(FromPyObject)]
+#[pyo3(from_item_all)]
 pub struct FitHow {
     metric: Option<String>,
     fit_scale: bool,
@@ -153,8 +155,6 @@ pub struct FitHow {
 /// (`lobe fit --measured`). `params` is `k`'s full parameter vector, `free` the searched ones. Returns the
 /// command's `--json` dict.
 #[pyfunction]
-#[pyo3(signature = (k, table, reference, ref_params, params, free, metric, fit_scale, stride, grid_stride, top, refine, derivative_free, n_max))]
-#[allow(clippy::too_many_arguments)]
 pub fn fit_against(
     py: Python<'_>,
     k: &Native,
@@ -163,18 +163,10 @@ pub fn fit_against(
     ref_params: Vec<f64>,
     params: Vec<f64>,
     free: Vec<(usize, f64, f64, Option<f64>)>,
-    metric: Option<String>,
-    fit_scale: bool,
-    stride: usize,
-    grid_stride: usize,
-    top: usize,
-    refine: bool,
-    derivative_free: bool,
-    n_max: u32,
+    how: FitHow,
 ) -> PyResult<Py<PyAny>> {
     k.check_params(py, &params)?;
     let free = free_params(py, k, free)?;
-    let how = FitHow { metric, fit_scale, stride, grid_stride, top, refine, derivative_free, n_max };
     if !(1..=90).contains(&how.stride) || !(1..=90).contains(&how.grid_stride) || how.top == 0 {
         return Err(k.error(py, Diagnostic::error("stride and grid_stride are 1..=90, top at least 1")));
     }

@@ -97,6 +97,10 @@ def test_fits_against_tables_and_formulas_refuse_bad_arguments(tmp_path):
         lobe.fit(ggx, table, {"alpha": (0.01, 2)})
     with pytest.raises(lobe.LobeError, match="stride"):
         lobe.fit(ggx, table, {"alpha": (0.01, 1)}, stride=0)
+    with pytest.raises(lobe.LobeError, match="stride"):
+        lobe.fit(ggx, table, {"alpha": (0.01, 1)}, stride=91)
+    with pytest.raises(lobe.LobeError, match="top"):
+        lobe.fit(ggx, table, {"alpha": (0.01, 1)}, top=-1)
     with pytest.raises(lobe.LobeError, match="reads none of the parameters"):
         lobe.fit(ggx, table, {"n": (1, 100)})
     with pytest.raises(lobe.LobeError, match="apply to fits against"):
