@@ -68,7 +68,7 @@ pub struct Export {
     pub isotropic: bool,
 }
 
-/// `lobe export --mitsuba`: the module of `f` with every parameter baked (the `set` values, else the
+/// The Mitsuba export of the command line and of Python: the module of `f` with every parameter baked (the `set` values, else the
 /// defaults), its sampler (mechanism `choice`) built from the formula's kernels with the accuracy pass on (its
 /// decisions cached when `cache`), as `lobe sample` builds it, and the plain simplification at the same values.
 pub fn export(f: &Formula, set: &[(String, f64)], choice: super::Choice, cache: bool) -> Result<Export, crate::base::diag::Diagnostics> {

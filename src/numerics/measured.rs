@@ -312,7 +312,7 @@ pub fn residual(channels: &[&dyn Evaluator], params: &[f64], s: &Samples, metric
     if error.is_finite() { Residual { error, scale } } else { fail }
 }
 
-/// One formula fitted to one reference, as `lobe fit --measured` reports it: the fit, and the best candidate's
+/// One formula fitted to one reference, as the fit command reports it: the fit, and the best candidate's
 /// error under every metric ([`MeasuredMetric::ALL`]'s order).
 pub struct MeasuredRow {
     pub fit: MeasuredFit,
@@ -343,7 +343,7 @@ pub fn fit_row(
     Ok(MeasuredRow { fit, all })
 }
 
-/// One fit in `lobe fit --measured --json` (keys in docs/measured.md).
+/// One fit as the fit command's JSON gives it (keys in docs/measured.md).
 #[derive(serde::Serialize)]
 pub struct MeasuredRowJson<'a> {
     pub formula: String,
