@@ -849,8 +849,8 @@ def plot(
     (degrees from the normal) against the signed view angle in the plane of incidence; ``polar``, ``log``,
     ``ylim=(lo, hi)``, ``size=(width, height)`` and ``lookup`` are the command's flags.
 
-    Returns the picture (an :class:`Image`) and the plotted numbers: ``{"title", "x_label", "x": array (every
-    curve shares it), "y": {legend name: array}}``."""
+    Returns the picture (an :class:`Image`) and the plotted numbers: ``{"title", "x_label", "y_label" (the axes'
+    meanings), "x": array (every curve shares it), "y": {legend name: array}}``."""
     kernels = [k for k in items if isinstance(k, Kernel)]
     tables = []
     for t in items:
@@ -870,9 +870,9 @@ def plot(
         lim = (float(y[0]), float(y[1]))
     w, h = (int(size), int(size)) if isinstance(size, int) else (int(size[0]), int(size[1]))
     sets = _baked_set(kernels + ([reference] if reference is not None else []), params)
-    (rgb, pw, ph), title, x, series = _lobe.plot(
+    (rgb, pw, ph), title, x, y, series = _lobe.plot(
         [k._native for k in kernels], tables, None if reference is None else reference._native, bool(error), sets,
         None if incidence is None else float(incidence), str(lookup), bool(polar), bool(log), lim, (w, h),
     )
-    data: Dict[str, Any] = {"title": title, "x_label": x, "x": np.array(series[0][1]) if series else np.empty(0), "y": {n: np.array(ys) for n, _, ys in series}}
+    data: Dict[str, Any] = {"title": title, "x_label": x, "y_label": y, "x": np.array(series[0][1]) if series else np.empty(0), "y": {n: np.array(ys) for n, _, ys in series}}
     return _image(rgb, pw, ph), data

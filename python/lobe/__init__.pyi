@@ -206,4 +206,4 @@ def plot(
     lookup: str = "linear",
     **params: float,
 ) -> Tuple[Image, Dict[str, Any]]:
-    """``lobe plot``: the picture and ``{"title", "x_label", "x", "y": {name: array}}``."""
+    """``lobe plot``: the picture and ``{"title", "x_label", "y_label", "x", "y": {name: array}}``."""

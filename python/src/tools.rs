@@ -390,8 +390,8 @@ pub fn compare<'py>(
     Ok((pixels(py, &c.a.image), pixels(py, &c.b.image), pixels(py, &heat), pixels(py, &figure), json))
 }
 
-/// What `plot` hands back: the picture, the title, the x axis's meaning and each series (name, x, y).
-type Plot<'py> = (Pixels<'py>, String, &'static str, Vec<(String, Vec<f64>, Vec<f64>)>);
+/// What `plot` hands back: the picture, the title, the x and y axes' meanings and each series (name, x, y).
+type Plot<'py> = (Pixels<'py>, String, &'static str, &'static str, Vec<(String, Vec<f64>, Vec<f64>)>);
 
 /// `lobe plot`: `formulas` (each with its baked values), then `tables` (legend name, table), and a
 /// `reference` formula last (or each curve minus it with `error`).
@@ -427,7 +427,7 @@ pub fn plot<'py>(
         Ok((p, image))
     })?;
     let series = p.series.iter().map(|s| (s.name.clone(), s.points.iter().map(|q| q.0).collect(), s.points.iter().map(|q| q.1).collect())).collect();
-    Ok((pixels(py, &image), p.title, p.x, series))
+    Ok((pixels(py, &image), p.title, p.x, p.y, series))
 }
 
 /// `lobe bench`'s rows of `k` (one per channel; the error columns against `reference`, default the

@@ -73,7 +73,7 @@ def test_plot_is_the_commands(lobe_cli, tmp_path):
         items = [table if f.endswith(".binary") else lobe.compile(f) for f in files]
         j, png = plotted(lobe_cli, tmp_path, *files, "--set", f"n={n}", *flags)
         image, data = lobe.plot(*items, n=n, **kw)
-        assert data["title"] == j["title"] and data["x_label"] == j["x"]
+        assert data["title"] == j["title"] and data["x_label"] == j["x"] and data["y_label"] == j["y"]
         assert list(data["y"]) == [s["name"] for s in j["series"]]
         for s in j["series"]:
             np.testing.assert_array_equal(data["x"], s["x"])
@@ -83,7 +83,7 @@ def test_plot_is_the_commands(lobe_cli, tmp_path):
     # The error against a reference.
     j, png = plotted(lobe_cli, tmp_path, SCHLICK, "--reference", BLINN, "--error", "--set", f"n={n}")
     image, data = lobe.plot(lobe.compile(SCHLICK), reference=lobe.compile(BLINN), error=True, n=n)
-    assert data["title"] == j["title"] and image.png() == png
+    assert data["title"] == j["title"] and data["y_label"] == j["y"] and image.png() == png
 
 
 def test_a_table_in_a_plot_is_its_lookup(lobe_cli, tmp_path):

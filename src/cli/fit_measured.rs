@@ -280,7 +280,7 @@ fn single(a: &FitArgs, row: &Row, metric: MeasuredMetric) -> Result<(), CliError
     let (m, fit) = (row.model, &row.row.fit);
     let Some(best) = fit.best.first().filter(|b| b.residual.error.is_finite()) else {
         return Err(CliError::hint(
-            format!("no candidate has a finite error: {} is NaN or infinite at some measured entry", m.formula.display_name()),
+            format!("no candidate has a finite error: {} is NaN or infinite at some entry of {}", m.formula.display_name(), row.table),
             "run `lobe sweep` on the formula to see where",
         ));
     };

@@ -104,7 +104,7 @@ pub fn run(a: &PlotArgs) -> Result<(), CliError> {
             .map(|s| serde_json::json!({"name": s.name, "x": s.points.iter().map(|p| p.0).collect::<Vec<_>>(), "y": s.points.iter().map(|p| p.1).collect::<Vec<_>>()}))
             .collect();
         let format = if matches!(format, Format::Svg) { "svg" } else { "png" };
-        println!("{}", serde_json::json!({"output": output.display().to_string(), "format": format, "title": p.title, "x": p.x, "series": series}));
+        println!("{}", serde_json::json!({"output": output.display().to_string(), "format": format, "title": p.title, "x": p.x, "y": p.y, "series": series}));
     } else {
         eprintln!("wrote {}", output.display());
     }

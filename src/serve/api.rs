@@ -677,7 +677,7 @@ pub(crate) fn plot(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
                 .hint("0/0 and ∞−∞ are NaN; a sweep of the formula over its domain shows where it is undefined"));
         }
         let n = set.iter().find(|(k, _)| k == "n").map(|(_, v)| format!("n = {v}")).unwrap_or_default();
-        let opts = crate::report::plot::LobeOptions { title: format!("Lobes {n}"), polar, log: false, size: (560, 400), ylim: None };
+        let opts = crate::report::plot::LobeOptions { title: format!("Lobes {n}"), polar, log: false, size: (560, 400), ylim: None, value: crate::report::plot::VALUE };
         let bytes = match incidence {
             Some((ti, _)) => crate::report::plot::incidence_lobes(&series, &opts, ti, crate::report::plot::Format::Png),
             None => crate::report::plot::lobes(&series, &opts, crate::report::plot::Format::Png),

@@ -631,6 +631,37 @@ fn plots_at_incidence_take_a_log_axis() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Plots name their axes (which angle, which value) in the image and in `--json`, and a pole at grazing (Ward's
+/// 1/√(NL·NV) at θₒ = ±90°) does not flatten the other curves: the value axis ends below it and the legend says so.
+#[test]
+fn plots_name_their_axes_and_a_pole_does_not_flatten_the_others() {
+    let dir = crate::scratch_dir("cli", "plot-axes");
+    let ward = dir.join("ward_pole.brdf");
+    std::fs::write(&ward, "param a = 0.3 in 0.01..1\nexp(-(1-NH*NH)/(NH*NH*a*a))/(4*3.14159265*a*a*sqrt(NL*NV))\n").unwrap();
+    let png = dir.join("p.png").display().to_string();
+    let run = |extra: &[&str]| -> serde_json::Value {
+        let mut args = vec!["plot", ward.to_str().unwrap(), "examples/brdfs/blinn.brdf", "-o", &png, "--force", "--json"];
+        args.extend_from_slice(extra);
+        let o = lobe(&args, None);
+        assert!(o.status.success(), "{}", stderr(&o));
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let v = run(&[]);
+    assert!(v["x"].as_str().unwrap().contains("lobe angle θ") && v["y"] == "formula value f", "{v}");
+    let v = run(&["--incidence", "60"]);
+    assert!(v["x"].as_str().unwrap().contains("plane of incidence"), "{v}");
+    let ys: Vec<f64> = v["series"][0]["y"].as_array().unwrap().iter().filter_map(|y| y.as_f64()).collect();
+    assert!(ys.iter().cloned().fold(0.0, f64::max) > 1e6, "the formula has its pole at grazing");
+    // The image: Blinn's curve (the second colour) spans a good part of the plot's height, not a line at 0.
+    let img = lobe::base::image::Image::decode_png(&std::fs::read(&png).unwrap()).unwrap();
+    let orange: Vec<usize> = (0..img.height).filter(|&y| (0..img.width * 2 / 3).any(|x| { let [r, g, b] = img.pixel(x, y); r > 180 && g > 60 && g < 140 && b < 60 })).collect();
+    let span = orange.iter().max().unwrap() - orange.iter().min().unwrap();
+    assert!(span > img.height / 20, "Blinn's curve spans {span} of {} rows", img.height);
+    let v = run(&["--error", "--reference", "examples/brdfs/phong.brdf"]);
+    assert_eq!(v["y"], "f − reference", "{v}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// `plot --ylim lo,hi`: the value axis a paper asks for (curves clipped to it); bad ranges are clear errors.
 #[test]
 fn plot_takes_a_value_range() {

@@ -240,7 +240,7 @@ pub fn table(rows: &[BenchRow]) -> String {
     }
     out.push_str("* = Pareto front: no other formula is both faster (beyond the measured noise) and more accurate.\n");
     if unswept {
-        out.push_str("— vs ref: the formula or the reference reads no n, so the papers' n-sweep does not apply (`lobe accuracy FILE --reference REF` compares them over the whole hemisphere); coef: only a one-cosine lobe has a lobe coefficient.\n");
+        out.push_str("— vs ref: the formula or the reference reads no n, so the papers' n-sweep does not apply (an accuracy run compares the two over the whole hemisphere instead); coef: only a one-cosine lobe has a lobe coefficient.\n");
     }
     out.push_str("Each row is the kernel the commands compile (the accuracy pass's choice); bits error: its numerical error vs the higher-precision truth (log2(ulps + 1)); plain: the plain simplification's jit ns and max bits.\n");
     out

@@ -124,7 +124,14 @@ pub(super) fn figure<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, f: &Figu
         }
     }
     let x_desc_y = p.y1 + tick + 4.0 * k + FIG_TICK_PX * k * 1.2 + 6.0 * k + FIG_DESC_PX * k * 0.5;
-    text(l.x.desc, FIG_DESC_PX, ((p.x0 + p.x1) / 2.0, x_desc_y), HPos::Center, ink)?;
+    // Centred under the plot, in a smaller size where it is wider than the image (a long axis description on
+    // a small plot), never past the image's edges.
+    let room = w - 16.0 * k;
+    let wide = measure(l.x.desc, FIG_DESC_PX);
+    let desc_px = if wide > room { FIG_DESC_PX * room / wide } else { FIG_DESC_PX };
+    let half = measure(l.x.desc, desc_px) / 2.0;
+    let centre = ((p.x0 + p.x1) / 2.0).clamp(8.0 * k + half, (w - 8.0 * k - half).max(8.0 * k + half));
+    text(l.x.desc, desc_px, (centre, x_desc_y), HPos::Center, ink)?;
     let rotated = ("sans-serif", FIG_DESC_PX * k).into_font().transform(FontTransform::Rotate270).color(&ink).pos(Pos::new(HPos::Center, VPos::Center));
     let y_desc_x = 12.0 * k + FIG_DESC_PX * k * (0.6 + ink_shift);
     root.draw_text(l.y.desc, &rotated, ipt((y_desc_x, (p.y0 + p.y1) / 2.0))).map_err(err)?;

@@ -115,6 +115,45 @@ pub struct LobeOptions {
     pub size: (u32, u32),
     /// The value axis's range (cartesian plots), instead of one fitted to the curves; curves are clipped to it.
     pub ylim: Option<(f64, f64)>,
+    /// What the values are (the value axis's description): [`VALUE`], or [`DIFFERENCE`] for error curves.
+    pub value: &'static str,
+}
+
+/// The value axis of lobes.
+pub const VALUE: &str = "formula value f";
+/// The value axis of error curves (each formula minus the reference).
+pub const DIFFERENCE: &str = "f − reference";
+/// The angle axis of [`lobe_points`] curves.
+pub const LOBE_ANGLE: &str = "lobe angle θ (degrees): lobe variable NH or VR = cos θ; L = N, V at θ";
+/// The angle axis of [`incidence_points`] curves.
+pub const INCIDENCE_ANGLE: &str = "view angle θₒ in the plane of incidence (degrees; mirror at −θᵢ)";
+
+/// A curve's values are poles, not a lobe, beyond this many times the largest value of every curve away from
+/// grazing (|angle| ≤ 90 % of the axis's extent): the value axis then ends below them ([`value_range`]).
+const POLE_RATIO: f64 = 20.0;
+
+/// The value axis for `series` on an angle axis: the finite values' extent, except that values beyond
+/// [`POLE_RATIO`] times the largest magnitude away from grazing are left off the axis (a pole at grazing, as
+/// Ward's 1/√(NL·NV), would otherwise flatten every curve to a line at 0). Also each curve's legend name, with
+/// what was left off ("max 1.3e8 off the axis").
+fn value_range(series: &[Series]) -> ((f64, f64), Vec<String>) {
+    let finite = || series.iter().flat_map(|s| s.points.iter()).filter(|p| p.0.is_finite() && p.1.is_finite());
+    let reach = finite().fold(0.0f64, |m, p| m.max(p.0.abs()));
+    let core = finite().filter(|p| p.0.abs() <= 0.9 * reach).fold(0.0f64, |m, p| m.max(p.1.abs()));
+    let limit = if core > 0.0 { POLE_RATIO * core } else { f64::INFINITY };
+    let shown = || finite().map(|p| p.1).filter(|v| v.abs() <= limit);
+    let (lo, hi) = shown().fold((0.0f64, 0.0f64), |(a, b), v| (a.min(v), b.max(v)));
+    let names = series
+        .iter()
+        .map(|s| {
+            let off = s.points.iter().filter(|p| p.1.is_finite() && p.1.abs() > limit).max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()));
+            match off {
+                Some(&(_, v)) => format!("{} (max {v:.1e} off the axis)", s.name),
+                None => s.name.clone(),
+            }
+        })
+        .collect();
+    ((lo, hi), names)
 }
 
 impl LobeOptions {
@@ -141,6 +180,7 @@ pub fn lobes(series: &[Series], o: &LobeOptions, format: Format) -> DrawResult<V
     if values().next().is_none() {
         return Err("nothing to plot: no curve has a finite value (is the formula NaN or infinite everywhere?)".into());
     }
+    let log_desc = format!("{} (log)", o.value);
     let ymax = values().fold(0.0f64, f64::max).max(1e-12);
     let ymin_pos = values().filter(|v| *v > 0.0).fold(f64::INFINITY, f64::min);
     if o.log && !ymin_pos.is_finite() {
@@ -160,14 +200,14 @@ pub fn lobes(series: &[Series], o: &LobeOptions, format: Format) -> DrawResult<V
             .map(|s| Curve::new(&s.name, s.points.iter().map(|&(d, v)| (v >= ymin_pos).then(|| (d, v.log10())))))
             .collect();
         let (lo, hi) = ylim.map_or((ymin_pos.log10(), (ymax * 1.5).log10()), |(a, b)| (a.log10(), b.log10()));
-        let y = Axis { lo, hi, log: true, desc: "value (log)" };
-        Figure { title: &o.title, x: Axis { lo: 0.0, hi: 90.0, log: false, desc: "angle (degrees)" }, y, curves, to_scale: false, light: None }
+        let y = Axis { lo, hi, log: true, desc: &log_desc };
+        Figure { title: &o.title, x: Axis { lo: 0.0, hi: 90.0, log: false, desc: LOBE_ANGLE }, y, curves, to_scale: false, light: None }
     } else {
-        let ymin = values().fold(0.0f64, f64::min);
-        let curves = series.iter().map(|s| Curve::new(&s.name, s.points.iter().map(|&p| Some(p)))).collect();
-        let (lo, hi) = ylim.unwrap_or((ymin * 1.05, ymax * 1.05));
-        let y = Axis { lo, hi, log: false, desc: "value" };
-        Figure { title: &o.title, x: Axis { lo: 0.0, hi: 90.0, log: false, desc: "angle (degrees)" }, y, curves, to_scale: false, light: None }
+        let ((ymin, ymax), names) = value_range(series);
+        let curves = series.iter().zip(&names).map(|(s, name)| Curve::new(name, s.points.iter().map(|&p| Some(p)))).collect();
+        let (lo, hi) = ylim.unwrap_or((ymin * 1.05, ymax.max(1e-12) * 1.05));
+        let y = Axis { lo, hi, log: false, desc: o.value };
+        Figure { title: &o.title, x: Axis { lo: 0.0, hi: 90.0, log: false, desc: LOBE_ANGLE }, y, curves, to_scale: false, light: None }
     };
     render_figure(&fig, format, o.size)
 }
@@ -175,9 +215,15 @@ pub fn lobes(series: &[Series], o: &LobeOptions, format: Format) -> DrawResult<V
 /// A polar figure of signed-angle series (angle from the normal in degrees, −90..90; radius = value, negative
 /// values drawn at 0), with both axes to the same scale (a circle stays a circle) and, when given, the
 /// direction of the light (`light_deg`, on the opposite side from the mirror direction) as a grey ray.
+///
+/// A pole at grazing ([`value_range`]) is drawn at the largest value kept, and named in the legend.
 fn polar_figure<'a>(title: &'a str, series: &[Series], light_deg: Option<f64>) -> Figure<'a> {
-    let xy = |&(deg, v): &(f64, f64)| (v.max(0.0) * deg.to_radians().sin(), v.max(0.0) * deg.to_radians().cos());
-    let curves: Vec<Curve> = series.iter().map(|s| Curve::new(&s.name, s.points.iter().map(|p| Some(xy(p))))).collect();
+    let ((_, top), names) = value_range(series);
+    let xy = |&(deg, v): &(f64, f64)| {
+        let r = v.clamp(0.0, top);
+        (r * deg.to_radians().sin(), r * deg.to_radians().cos())
+    };
+    let curves: Vec<Curve> = series.iter().zip(&names).map(|(s, name)| Curve::new(name, s.points.iter().map(|p| Some(xy(p))))).collect();
     // The lobes' own extent with the origin (5 % spare), not the largest value's circle: a narrow lobe fills
     // the height, a lobe to one side the width.
     // The light's direction is shown as long as the longest lobe.
@@ -212,7 +258,8 @@ pub fn incidence_lobes(series: &[Series], o: &LobeOptions, theta_i_deg: f64, for
     if ymax == f64::NEG_INFINITY {
         return Err("nothing to plot: no curve has a finite value (is the formula NaN or infinite everywhere?)".into());
     }
-    let x_desc = "view angle θₒ in the plane of incidence (degrees; mirror at −θᵢ)";
+    let x_desc = INCIDENCE_ANGLE;
+    let log_desc = format!("{} (log)", o.value);
     if o.log {
         let ymin_pos = finite().filter(|v| *v > 0.0).fold(f64::INFINITY, f64::min);
         if !ymin_pos.is_finite() {
@@ -229,11 +276,11 @@ pub fn incidence_lobes(series: &[Series], o: &LobeOptions, theta_i_deg: f64, for
         let fig = Figure {
             title: &title,
             x: Axis { lo: xmin, hi: if xmax > xmin { xmax } else { xmin + 1.0 }, log: false, desc: x_desc },
-            y: ylim.map_or(Axis { lo: ymin_pos.log10(), hi: (ymax * 1.5).log10(), log: true, desc: "value (log)" }, |(a, b)| Axis {
+            y: ylim.map_or(Axis { lo: ymin_pos.log10(), hi: (ymax * 1.5).log10(), log: true, desc: &log_desc }, |(a, b)| Axis {
                 lo: a.log10(),
                 hi: b.log10(),
                 log: true,
-                desc: "value (log)",
+                desc: &log_desc,
             }),
             curves,
             to_scale: false,
@@ -243,10 +290,22 @@ pub fn incidence_lobes(series: &[Series], o: &LobeOptions, theta_i_deg: f64, for
     }
     if !o.polar {
         let title = format!("{}, light at θᵢ = {theta_i_deg}°", o.title);
-        return curves_sized(series, &title, x_desc, "value", format, o.size, ylim);
+        let (range, names) = value_range(series);
+        let named: Vec<Series> = series.iter().zip(names).map(|(s, name)| Series { name, points: s.points.clone() }).collect();
+        return curves_sized(&named, &title, x_desc, o.value, format, o.size, ylim.or(Some(padded(range))));
     }
     let title = format!("{}, light at θᵢ = {theta_i_deg}°", o.title);
     render_figure(&polar_figure(&title, series, Some(theta_i_deg)), format, o.size)
+}
+
+/// A value range with 5 % spare on each side (a range of one value: ±1 around it).
+fn padded((lo, hi): (f64, f64)) -> (f64, f64) {
+    if hi > lo {
+        let pad = (hi - lo) * 0.05;
+        (lo - pad, hi + pad)
+    } else {
+        (lo - 1.0, hi + 1.0)
+    }
 }
 
 /// Curves over any x range (e.g. the normalisation coefficient against n over a range of n).

@@ -2,7 +2,7 @@
 //! one curve per channel, optionally a reference formula (last) or each curve's error against it, drawn as lobes
 //! or in the plane of incidence; with the plotted numbers.
 
-use super::{incidence_lobes, incidence_points, lobe_points, lobes, Format, LobeOptions, Series};
+use super::{incidence_lobes, incidence_points, lobe_points, lobes, Format, LobeOptions, Series, DIFFERENCE, INCIDENCE_ANGLE, LOBE_ANGLE, VALUE};
 use crate::base::diag::{Diagnostic, Diagnostics};
 use crate::ir::Formula;
 use crate::measured::{Lookup, Measured};
@@ -37,6 +37,8 @@ pub struct Plotted {
     pub title: String,
     /// The x axis's meaning.
     pub x: &'static str,
+    /// The y axis's meaning.
+    pub y: &'static str,
     pub series: Vec<Series>,
 }
 
@@ -96,12 +98,13 @@ pub fn plot_lobes(p: &LobePlot, format: Format) -> Result<Plotted, Diagnostics> 
         }
         title = format!("Error against {}, {n_label}", reference.name);
     }
-    let o = LobeOptions { title: title.clone(), polar: p.polar, log: p.log, size: p.size, ylim: p.ylim };
+    let value = if p.error { DIFFERENCE } else { VALUE };
+    let o = LobeOptions { title: title.clone(), polar: p.polar, log: p.log, size: p.size, ylim: p.ylim, value };
     let bytes = match p.incidence {
         Some(t) => incidence_lobes(&series, &o, t, format),
         None => lobes(&series, &o, format),
     }
     .map_err(|e| fail(Diagnostic::error(e)))?;
-    let x = if p.incidence.is_some() { "view angle (degrees, signed; mirror at −θᵢ)" } else { "angle from the lobe axis (degrees)" };
-    Ok(Plotted { bytes, title, x, series })
+    let x = if p.incidence.is_some() { INCIDENCE_ANGLE } else { LOBE_ANGLE };
+    Ok(Plotted { bytes, title, x, y: value, series })
 }

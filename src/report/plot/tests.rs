@@ -10,13 +10,13 @@ fn cos_n(n: f64) -> Series {
 #[test]
 fn lobe_plots_render_in_every_mode() {
     for (polar, log) in [(false, false), (true, false), (false, true)] {
-        let o = LobeOptions { title: "t".into(), polar, log, size: (320, 240), ylim: None };
+        let o = LobeOptions { title: "t".into(), polar, log, size: (320, 240), ylim: None, value: VALUE };
         let png = lobes(&[cos_n(5.0), cos_n(50.0)], &o, Format::Png).unwrap();
         assert_eq!(&png[1..4], b"PNG");
         let svg = lobes(&[cos_n(5.0)], &o, Format::Svg).unwrap();
         assert!(String::from_utf8(svg).unwrap().contains("<svg"));
     }
-    let o = LobeOptions { title: "t".into(), polar: true, log: true, size: (320, 240), ylim: None };
+    let o = LobeOptions { title: "t".into(), polar: true, log: true, size: (320, 240), ylim: None, value: VALUE };
     assert!(lobes(&[cos_n(5.0)], &o, Format::Png).is_err());
 }
 
@@ -27,7 +27,7 @@ fn polar_plots_are_to_scale() {
     let half: Vec<(f64, f64)> = (0..=360).map(|i| (i as f64 * 0.25, 1.0)).collect();
     let signed: Vec<(f64, f64)> = (0..=720).map(|i| (-90.0 + i as f64 * 0.25, 1.0)).collect();
     for size in [(560, 400), (400, 500)] {
-        let o = LobeOptions { title: "t".into(), polar: true, log: false, size, ylim: None };
+        let o = LobeOptions { title: "t".into(), polar: true, log: false, size, ylim: None, value: VALUE };
         let one = |points: &[(f64, f64)]| [Series { name: "1".into(), points: points.to_vec() }];
         let pngs = [lobes(&one(&half), &o, Format::Png), incidence_lobes(&one(&signed), &o, 30.0, Format::Png)];
         for png in pngs.map(Result::unwrap) {
@@ -53,7 +53,7 @@ fn polar_plots_are_to_scale() {
 fn curves_with_nothing_to_show_are_refused_not_looped_on() {
     let zero = Series { name: "0".into(), points: (0..=90).map(|d| (d as f64, 0.0)).collect() };
     let nan = Series { name: "nan".into(), points: (0..=90).map(|d| (d as f64, f64::NAN)).collect() };
-    let log = LobeOptions { title: "t".into(), polar: false, log: true, size: (320, 240), ylim: None };
+    let log = LobeOptions { title: "t".into(), polar: false, log: true, size: (320, 240), ylim: None, value: VALUE };
     assert!(lobes(&[zero.clone(), nan.clone()], &log, Format::Png).unwrap_err().contains("log"));
     let lin = LobeOptions { log: false, ..log };
     assert!(lobes(&[nan], &lin, Format::Png).unwrap_err().contains("finite"));
@@ -216,7 +216,7 @@ fn log_axis_labels_are_clean_1_2_5_numbers_on_random_lobes() {
             })
             .collect();
         let size = (300 + (lcg(&mut seed) * 1100.0) as u32, 200 + (lcg(&mut seed) * 800.0) as u32);
-        let o = LobeOptions { title: "t".into(), polar: false, log: true, size, ylim: None };
+        let o = LobeOptions { title: "t".into(), polar: false, log: true, size, ylim: None, value: VALUE };
         let svg = String::from_utf8(lobes(&series, &o, Format::Svg).unwrap()).unwrap();
         let texts = svg_anchored_texts(&svg);
         // The value axis's labels are the right-aligned texts.
@@ -288,7 +288,7 @@ fn count_near(img: &crate::base::image::Image, c: RGBColor, tol: u8, x_max: usiz
 fn a_curve_exactly_under_another_still_shows() {
     let (mut a, mut b) = (cos_n(20.0), cos_n(20.0));
     (a.name, b.name) = ("Phong".into(), "Blinn".into());
-    let o = LobeOptions { title: "t".into(), polar: false, log: false, size: (600, 400), ylim: None };
+    let o = LobeOptions { title: "t".into(), polar: false, log: false, size: (600, 400), ylim: None, value: VALUE };
     for polar in [false, true] {
         let png = lobes(&[a.clone(), b.clone()], &LobeOptions { polar, ..o.clone() }, Format::Png).unwrap();
         let img = crate::base::image::Image::decode_png(&png).unwrap();
@@ -337,7 +337,7 @@ fn nothing_is_drawn_to_the_image_edge() {
     let mut pngs = vec![curves(&[wide], "coefficient", "n", "coef", Format::Png).unwrap()];
     for (polar, log) in [(false, false), (true, false), (false, true)] {
         for size in [(900, 600), (400, 300)] {
-            pngs.push(lobes(&many, &LobeOptions { title: "Lobes".into(), polar, log, size, ylim: None }, Format::Png).unwrap());
+            pngs.push(lobes(&many, &LobeOptions { title: "Lobes".into(), polar, log, size, ylim: None, value: VALUE }, Format::Png).unwrap());
         }
     }
     for (i, png) in pngs.iter().enumerate() {
@@ -434,4 +434,32 @@ fn labels_without_room_are_dropped_not_forced() {
     let placed = place_labels(&LabelProblem { anchors: &anchors, sizes: &small, marker: MARKER, bounds, obstacles: &[], avoid: &[] });
     let (a, b) = (placed[0].unwrap().rect, placed[1].unwrap().rect);
     assert!(!a.intersects(&b) && bounds.contains(&a) && bounds.contains(&b));
+}
+
+/// A pole at grazing (1/cos θ, 6e16 at 90°) leaves the value axis where the other curves and the pole's own
+/// finite stretch are readable, and its legend says what is off the axis; a narrow lobe's peak at 0° (cos¹⁰⁰⁰),
+/// a Fresnel-like rise to grazing and random smooth curves keep their whole extent.
+#[test]
+fn a_pole_at_grazing_does_not_set_the_value_axis() {
+    let pole = Series { name: "pole".into(), points: (0..=360).map(|i| (i as f64 * 0.25, 1.0 / (i as f64 * 0.25).to_radians().cos())).collect() };
+    let ((lo, hi), names) = value_range(&[pole.clone(), cos_n(5.0)]);
+    assert!(lo == 0.0 && hi < POLE_RATIO * 1.0 / 81f64.to_radians().cos() && hi > 10.0, "{lo} {hi}");
+    assert!(names[0].contains("off the axis") && names[1] == "cos^5", "{names:?}");
+    let fresnel = Series { name: "F".into(), points: (0..=90).map(|d| (d as f64, 0.04 + 0.96 * (1.0 - (d as f64).to_radians().cos()).powi(5))).collect() };
+    let mut rng = crate::base::rng::Rng(0x9013);
+    let mut all = vec![cos_n(1000.0), fresnel];
+    for k in 0..5 {
+        let (a, b) = (rng.unit() * 10.0, rng.unit() * 3.0);
+        all.push(Series { name: format!("r{k}"), points: (0..=90).map(|d| (d as f64, a * (d as f64 / 30.0 * b).sin() + a)).collect() });
+    }
+    for s in &all {
+        let ((lo, hi), names) = value_range(std::slice::from_ref(s));
+        let (min, max) = s.points.iter().fold((0.0f64, 0.0f64), |(a, b), p| (a.min(p.1), b.max(p.1)));
+        assert!(lo == min && hi == max && names[0] == s.name, "{}: {lo} {hi} vs {min} {max}", s.name);
+    }
+    // The plot draws (the pole clipped, not flattening the other curve).
+    let o = LobeOptions { title: "t".into(), polar: false, log: false, size: (320, 240), ylim: None, value: VALUE };
+    for polar in [false, true] {
+        assert_eq!(&lobes(&[pole.clone(), cos_n(5.0)], &LobeOptions { polar, ..o.clone() }, Format::Png).unwrap()[1..4], b"PNG");
+    }
 }
