@@ -264,7 +264,7 @@ fn measured_fit(py: Python<'_>, k: &Native, params: &[f64], free: &[FreeParam], 
     if !row.fit.best.first().is_some_and(|b| b.residual.error.is_finite()) {
         return Err(k.error(
             py,
-            Diagnostic::error(format!("no candidate has a finite error: {} is NaN or infinite at some measured entry", k.whole.display_name())).hint("run `lobe sweep` on the formula to see where"),
+            Diagnostic::error(format!("no candidate has a finite error: {} is NaN or infinite at some entry of {name}", k.whole.display_name())).hint("run `lobe sweep` on the formula to see where"),
         ));
     }
     let json = MeasuredRowJson::new(k.whole.display_name(), &k.file, name, &free, &row, metric, start.elapsed().as_secs_f64());

@@ -103,5 +103,9 @@ def test_fits_against_tables_and_formulas_refuse_bad_arguments(tmp_path):
         lobe.fit(ggx, table, {"alpha": (0.01, 1)}, top=-1)
     with pytest.raises(lobe.LobeError, match="reads none of the parameters"):
         lobe.fit(ggx, table, {"n": (1, 100)})
+    nan = lobe.compile("param a = 1 in 1..4\n0*NH/0 + a")
+    with pytest.raises(lobe.LobeError, match="no candidate has a finite error") as e:
+        lobe.fit(nan, table, {"a": (1, 4)}, stride=8)
+    assert "lobe sweep" in e.value.diagnostics[0]["hint"]
     with pytest.raises(lobe.LobeError, match="apply to fits against"):
         lobe.fit(ggx, np.zeros(3), {"alpha": (0.01, 1)}, metric="log", NH=np.zeros(3))
