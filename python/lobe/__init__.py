@@ -673,8 +673,7 @@ def _fit_against(
     ref_values = ref._param_list({k: v for k, v in fixed.items() if k in ref_names}) if ref is not None else []
     r = _lobe.fit_against(
         kernel._native,
-        None if ref is not None else target._native,
-        None if ref is None else ref._native,
+        target._native,
         ref_values,
         values,
         _free(kernel, params),

@@ -150,16 +150,22 @@ pub struct FitHow {
     n_max: u32,
 }
 
-/// `lobe fit` against a measured table (`table`) or a formula (`reference`, at `ref_params`): the papers'
+/// `lobe fit` against a measured table or a formula (at `ref_params`): the papers'
 /// n-sweep where both read n (`lobe fit --reference`), else the whole hemisphere at the tables' angles
 /// (`lobe fit --measured`). `params` is `k`'s full parameter vector, `free` the searched ones. Returns the
 /// command's `--json` dict.
+/// What a formula is fitted to: a table or a formula.
+#[derive(FromPyObject)]
+pub enum Against<'py> {
+    Table(PyRef<'py, Table>),
+    Formula(PyRef<'py, Native>),
+}
+
 #[pyfunction]
 pub fn fit_against(
     py: Python<'_>,
     k: &Native,
-    table: Option<&Table>,
-    reference: Option<&Native>,
+    against: Against<'_>,
     ref_params: Vec<f64>,
     params: Vec<f64>,
     free: Vec<(usize, f64, f64, Option<f64>)>,
@@ -170,9 +176,10 @@ pub fn fit_against(
     if !(1..=90).contains(&how.stride) || !(1..=90).contains(&how.grid_stride) || how.top == 0 {
         return Err(k.error(py, Diagnostic::error("stride and grid_stride are 1..=90, top at least 1")));
     }
-    match (table, reference) {
-        (None, Some(r)) if k.whole.reads_param("n") && r.whole.reads_param("n") => lobe_fit(py, k, r, &params, &free, &how),
-        (None, Some(r)) => {
+    match against {
+        Against::Formula(r) if k.whole.reads_param("n") && r.whole.reads_param("n") => lobe_fit(py, k, &r, &params, &free, &how),
+        Against::Formula(r) => {
+            let r: &Native = &r;
             if how.metric.as_deref().is_some_and(|m| m.parse::<lobe::numerics::fit::Metric>().is_ok()) {
                 return Err(k.error(
                     py,
@@ -188,11 +195,10 @@ pub fn fit_against(
             let fr = py.detach(|| lobe::numerics::measured::FormulaReference::new(&r.file, channels, ref_params, &others, how.fit_scale));
             measured_fit(py, k, &params, &free, &fr, &r.file, &how)
         }
-        (Some(t), None) => {
+        Against::Table(t) => {
             let name = t.path.clone().unwrap_or_else(|| t.table.name.clone());
             measured_fit(py, k, &params, &free, t.table.as_ref(), &name, &how)
         }
-        _ => Err(k.error(py, Diagnostic::error("a fit is against one table or one formula"))),
     }
 }
 
