@@ -10,7 +10,9 @@ given by name, as one value or an array broadcast with the inputs, and default t
 values. The values are the ones ``lobe eval --points``
 prints, bit for bit. The checks (:meth:`Kernel.check`, :meth:`Kernel.energy`, :meth:`Kernel.accuracy`,
 :meth:`Kernel.sweep`) return the dicts the command line prints with ``--json``. :func:`fit` fits parameters to
-target values; :func:`render` renders a scene file to an image a notebook shows.
+target values, to a measured table (:func:`load_measured`, :meth:`Kernel.tabulate`) or to another formula;
+:func:`render` renders a scene file to an image a notebook shows, :func:`compare` two formulas' renders and
+:func:`plot` their lobes; :meth:`Kernel.export` writes shaders and plugins, :meth:`Kernel.bench` a bench row.
 
 Errors are :class:`LobeError`, whose ``diagnostics`` list says where (file, line, column) and why.
 """
@@ -27,7 +29,7 @@ import numpy as np
 from . import _lobe
 from ._lobe import LobeError
 
-__all__ = ["compile", "Kernel", "LobeError", "fit", "render", "Image", "__version__"]
+__all__ = ["compile", "Kernel", "LobeError", "fit", "render", "Image", "Measured", "load_measured", "compare", "plot", "__version__"]
 __version__: str = _lobe.__version__
 
 _NAMES = ("NL", "NV", "NH", "VR", "VH")
@@ -38,7 +40,7 @@ _PATH_LIKE = re.compile(r"[\w~./\\\-]*\.[A-Za-z]\w*")
 
 def __dir__() -> list:
     """The public names only (not the modules and types the implementation imports)."""
-    return sorted(__all__ + ["__version__"])
+    return sorted(set(__all__ + ["__version__"]))
 
 
 def _error(message: str, hint: Optional[str] = None) -> LobeError:
@@ -434,6 +436,81 @@ class Kernel:
         return self._native.sweep(float(bound), int(max_evals), bool(as_written))
 
 
+    # -- tables, exports, bench rows (the CLI's tabulate, export and bench) --------------------------------
+    def _set_list(self, params: Mapping[str, float], what: str) -> List[Tuple[str, float]]:
+        """``params`` as (name, value) pairs of declared parameters, not baked (a name it does not declare has a
+        did-you-mean hint)."""
+        kinds = self._native.resolve(list(params))
+        out = []
+        for (name, v), (kind, _) in zip(params.items(), kinds):
+            _not_none(name, v)
+            if kind != "param":
+                raise _error(f"`{name}` is an input, not a parameter", f"{what} takes parameter values only")
+            out.append((name, float(v)))
+        return out
+
+    def tabulate(self, path: Union[None, str, "os.PathLike[str]"] = None, *, color: Sequence[float] = (1.0, 1.0, 1.0), **params: float) -> "Measured":
+        """The formula at the MERL table convention's angles, as ``lobe tabulate`` writes it: a :class:`Measured`
+        (``--color``: each channel times its factor; the parameters at ``params``, else their defaults). With
+        ``path`` (a ``.binary`` file) the table is also saved there, the command's file byte for byte."""
+        c = tuple(float(x) for x in color)
+        if len(c) != 3:
+            raise _error(f"color takes three factors, not {len(c)}", "e.g. color=(1, 0.8, 0.4)")
+        m = Measured._from_native(_lobe.tabulate(self._native, self._param_list(params), c))
+        if path is not None:
+            m = m.save(path)
+        return m
+
+    def export(self, format: str = "glsl", *, glsl_version: str = "450", mechanism: str = "auto", **params: float) -> str:
+        """The formula as ``lobe export`` writes it: ``format`` is ``"glsl"`` (``glsl_version`` ``"450"``,
+        ``"330"`` or ``"es300"``), ``"wgsl"``, ``"brdf"`` (a file Disney's BRDF Explorer loads) or ``"mitsuba"``
+        (a Python module registering a Mitsuba 3 plugin, every parameter baked; ``mechanism`` its sampler's,
+        ``"auto"``, ``"tabulated"``, ``"exact"`` or ``"cosine"``). ``params`` and the kernel's baked values are
+        baked as constants (``--set``); the other parameters become the shader function's arguments."""
+        return _lobe.export(self._native, str(format), self._set_list(params, "export"), str(glsl_version), str(mechanism))
+
+    def bench(
+        self,
+        *,
+        reference: Optional["Kernel"] = None,
+        math: str = "precise",
+        samples: int = 31,
+        timing_points: int = 4096,
+        albedo: bool = True,
+        tier: str = "auto",
+        **params: float,
+    ) -> Dict[str, Any]:
+        """One row of ``lobe bench --json`` for this formula: compile time, ns/eval of each path, the error
+        against ``reference`` (default: the catalogue's Blinn lobe) over n = 1..1000, the energy columns, with
+        the command's keys. The timings and energy run at ``params`` and the baked values (n = 50 unless given),
+        in ``math`` (``"precise"`` or ``"fast"``); ``samples``, ``timing_points``, ``albedo=False`` and ``tier``
+        are ``--samples``, ``--timing-points``, ``--no-albedo`` and ``--tier``. A colour formula is measured per
+        channel: the red channel's row, and ``"channels"`` with the three rows."""
+        if reference is not None and not isinstance(reference, Kernel):
+            raise TypeError("reference must be a lobe.Kernel (lobe.compile(path))")
+        rows = _lobe.bench(
+            self._native, None if reference is None else reference._native, self._set_list(params, "bench"), str(math), int(samples), int(timing_points), bool(albedo), str(tier)
+        )
+        if len(rows) == 1:
+            return rows[0]
+        return dict(rows[0], channels=rows)
+
+
+def _free(kernel: Kernel, params: Mapping[str, Any]) -> List[Tuple[int, float, float, Optional[float]]]:
+    """The searched parameters as (index, lo, hi, step or None)."""
+    names = list(kernel.params)
+    free = []
+    for name, rng in params.items():
+        if name not in names:
+            kernel._native.resolve([name])  # raises with a did-you-mean hint
+            raise _error(f"`{name}` is not a parameter")
+        r = tuple(rng)
+        if len(r) not in (2, 3):
+            raise _error(f"the range of `{name}` is (lo, hi) or (lo, hi, step), not {rng!r}")
+        free.append((names.index(name), float(r[0]), float(r[1]), float(r[2]) if len(r) == 3 else None))
+    return free
+
+
 def fit(
     kernel: Kernel,
     target: Any,
@@ -443,26 +520,54 @@ def fit(
     loss: str = "mse",
     top: int = 5,
     refine: bool = True,
+    metric: Optional[str] = None,
+    fit_scale: Optional[bool] = None,
+    set: Optional[Mapping[str, float]] = None,
+    stride: int = 1,
+    grid_stride: int = 4,
+    n_max: int = 1000,
+    derivative_free: bool = False,
     **inputs: Any,
 ) -> Dict[str, Any]:
-    """Fit ``kernel``'s parameters to ``target`` values at the points given by ``inputs``.
+    """Fit ``kernel``'s parameters to ``target``: values at points, a measured table, or another formula.
 
     ``params`` names the parameters to search, each with its range ``(lo, hi)`` (the interval [lo, hi]: a grid
     of 41 values, every integer when both ends are integers at least 40 apart, then continuous refinement) or
-    ``(lo, hi, step)``; other parameters may be fixed among ``inputs`` by name.
+    ``(lo, hi, step)``.
+
+    **Values at points** (``target`` an array): other parameters may be fixed among ``inputs`` by name.
     ``target`` (and ``weights``, ≥ 0) broadcast against the inputs (with a trailing axis of 3 for a colour
     formula). ``loss`` is ``"mse"`` (weighted least squares), ``"mae"`` or ``"max"``. The search scores every
     grid point (in parallel), then refines the best continuously (golden section for one parameter,
     Nelder–Mead for several) — lobe's fit optimiser. The result is deterministic: the same on any machine
-    and thread count.
+    and thread count. Returns ``{"params": {name: value, …} (the best full vector), "score": …, "loss": …,
+    "evaluated": …, "best": [{"params": …, "score": …, "refined": …}, …]}``.
 
-    Returns ``{"params": {name: value, …} (the best full vector), "score": …, "loss": …, "evaluated": …,
-    "best": [{"params": …, "score": …, "refined": …}, …]}``.
+    **A measured table** (``target`` a :class:`Measured`) is ``lobe fit --measured TABLE``: the formula at the
+    table's entries (every ``stride``-th index per axis; the grid on every ``grid_stride``-th), ``metric``
+    ``"log"`` (default), ``"rmse"`` or ``"cosine"``, each channel with its fitted colour scale.
+    **A formula** (``target`` a :class:`Kernel`) is ``lobe fit --reference``: the papers' metric over n = 1..
+    ``n_max`` (``metric`` ``"mean-abs"`` (default), ``"max-abs"`` or ``"epicenter"``) when both formulas read
+    ``n``, else the whole hemisphere as against a table (``lobe fit --measured REF.brdf``; absolute values
+    unless ``fit_scale=True``). ``set`` fixes parameter values (``--set``): each formula takes those it
+    declares; a name both searched and set is the reference's value. Refinement is Levenberg–Marquardt with
+    the exact Jacobian, or ``derivative_free=True`` (``--derivative-free``). Returns the command's ``--json``
+    dict, plus ``"params"`` (the best searched values) — and against a table or over the hemisphere,
+    ``"best"``: every candidate kept, with its ``"error"`` and colour ``"scale"``.
     """
     if not isinstance(kernel, Kernel):
         raise TypeError("fit() takes a lobe.Kernel first")
     if not params:
         raise _error("nothing to fit", "name at least one parameter with its range: params={'n': (1, 1000)}")
+    if isinstance(target, (Measured, Kernel)):
+        if inputs or weights is not None:
+            given = ", ".join(list(inputs) + (["weights"] if weights is not None else []))
+            raise _error(f"a fit against a table or a formula takes no points ({given})", "give fixed parameter values with set={...}")
+        return _fit_against(kernel, target, params, metric, fit_scale, dict(set or {}), stride, grid_stride, top, refine, n_max, derivative_free)
+    if set:
+        raise _error("set= applies to fits against a table or a formula", "fix parameters among the inputs by name")
+    if metric is not None or fit_scale is not None:
+        raise _error("metric and fit_scale apply to fits against a table or a formula", "points are fitted under loss= (\"mse\", \"mae\" or \"max\")")
     cos, L, V, values, varying, shape = kernel._prepare(inputs)
     if varying:
         names = list(kernel.params)
@@ -484,15 +589,7 @@ def fit(
         except ValueError:
             raise _error(f"weights do not match the inputs' shape {shape}") from None
     names = list(kernel.params)
-    free = []
-    for name, rng in params.items():
-        if name not in names:
-            kernel._native.resolve([name])  # raises with a did-you-mean hint
-            raise _error(f"`{name}` is not a parameter")
-        r = tuple(rng)
-        if len(r) not in (2, 3):
-            raise _error(f"the range of `{name}` is (lo, hi) or (lo, hi, step), not {rng!r}")
-        free.append((names.index(name), float(r[0]), float(r[1]), float(r[2]) if len(r) == 3 else None))
+    free = _free(kernel, params)
     best, evaluated = kernel._native.fit((cos, L, V, n), t, w, values, free, loss, int(top), bool(refine))
     cands = [{"params": dict(zip(names, p)), "score": s, "refined": r} for p, s, r in best]
     return {"params": cands[0]["params"], "score": cands[0]["score"], "loss": loss, "evaluated": evaluated, "best": cands}
@@ -539,3 +636,242 @@ def render(
     wh = None if size is None else (int(size[0]), int(size[1]))
     rgb, w, h = _lobe.render(os.fspath(scene), wh, [(k, float(v)) for k, v in params.items()], aa, bool(srgb), int(threads), str(math), str(backend), str(tier))
     return np.frombuffer(rgb, dtype=np.uint8).reshape(h, w, 3).copy().view(Image)
+
+
+def _fit_against(
+    kernel: Kernel,
+    target: Union["Measured", Kernel],
+    params: Mapping[str, Any],
+    metric: Optional[str],
+    fit_scale: Optional[bool],
+    fixed: Dict[str, float],
+    stride: int,
+    grid_stride: int,
+    top: int,
+    refine: bool,
+    n_max: int,
+    derivative_free: bool,
+) -> Dict[str, Any]:
+    """:func:`fit` against a table or a formula (the command's ``--measured`` and ``--reference``)."""
+    ref = target if isinstance(target, Kernel) else None
+    if ref is None and fit_scale is False:
+        raise _error("a table's colour scale is always fitted (its calibration is unknown)", "drop fit_scale, or fit against a formula")
+    names = list(kernel.params)
+    ref_names = list(ref.params) if ref is not None else []
+    for name, v in fixed.items():
+        _not_none(name, v)
+        if name not in names and name not in ref_names:
+            known = list(dict.fromkeys(names + ref_names))
+            raise _error(f"set: no formula has a parameter `{name}`", "the formulas' parameters are: " + ", ".join(known))
+        if name in params and name not in ref_names:
+            raise _error(f"`{name}` is both searched (params) and fixed (set)", "drop one of them")
+    for what, v, lo in (("stride", stride, 1), ("grid_stride", grid_stride, 1), ("top", top, 1), ("n_max", n_max, 1)):
+        if int(v) < lo:
+            raise _error(f"{what} = {v} is below {lo}", "stride and grid_stride are 1..90; top and n_max at least 1")
+    own = {k: v for k, v in fixed.items() if k in names and k not in params}
+    values = kernel._param_list(own)
+    ref_values = ref._param_list({k: v for k, v in fixed.items() if k in ref_names}) if ref is not None else []
+    r = _lobe.fit_against(
+        kernel._native,
+        target._native,
+        ref_values,
+        values,
+        _free(kernel, params),
+        {
+            "metric": metric,
+            "fit_scale": bool(fit_scale),
+            "stride": int(stride),
+            "grid_stride": int(grid_stride),
+            "top": int(top),
+            "refine": bool(refine),
+            "derivative_free": bool(derivative_free),
+            "n_max": int(n_max),
+        },
+    )
+    if "params" not in r:
+        r["params"] = dict(r["best"][0]["params"])
+    return r
+
+
+class Measured:
+    """A MERL measured table (``.binary``: 90 × 90 × 180 entries per channel, red, green, blue), from
+    :func:`load_measured` or :meth:`Kernel.tabulate`. :func:`fit` fits formulas to it; :func:`compare` and
+    :func:`plot` take it beside formulas (a table saved to or read from a file)."""
+
+    __slots__ = ("_native",)
+
+    #: Entries per channel (90 · 90 · 180).
+    entries: int = 90 * 90 * 180
+    #: Red, green, blue.
+    channels: int = 3
+
+    def __init__(self, *_: Any, **__: Any) -> None:
+        raise TypeError("use lobe.load_measured(path) or Kernel.tabulate() to make a Measured")
+
+    @classmethod
+    def _from_native(cls, native: Any) -> "Measured":
+        m = object.__new__(cls)
+        m._native = native
+        return m
+
+    @property
+    def name(self) -> str:
+        """The file it was read from, or the formula it tabulates."""
+        return self._native.name
+
+    @property
+    def path(self) -> Optional[str]:
+        """The file it was read from or saved to (None for a table only in memory)."""
+        return self._native.path
+
+    @property
+    def measured_entries(self) -> int:
+        """Entries measured in every channel (a tabulated table leaves out those below the horizon)."""
+        return self._native.measured_entries
+
+    def values(self, wi: Any, wo: Any, *, lookup: str = "linear") -> np.ndarray:
+        """The table's values (red, green, blue: shape ``(..., 3)``) for incident ``wi`` (the formula's L) and
+        outgoing ``wo`` (V), arrays of shape ``(..., 3)`` in the local frame (N = +z) broadcast together:
+        lobe's lookup, ``"linear"`` (multilinear between entries, the default) or ``"nearest"`` (MERL's
+        reference code), as ``--lookup``; 0 below either horizon (docs/measured.md)."""
+        a, b = np.asarray(wi, dtype=np.float64), np.asarray(wo, dtype=np.float64)
+        if a.ndim == 0 or b.ndim == 0 or a.shape[-1] != 3 or b.shape[-1] != 3:
+            raise _error(f"wi and wo must have shape (..., 3), not {a.shape} and {b.shape}", "directions are x, y, z in the local frame (N = +z)")
+        try:
+            shape = np.broadcast_shapes(a.shape[:-1], b.shape[:-1])
+        except ValueError:
+            raise _error(f"wi of shape {a.shape} and wo of shape {b.shape} do not broadcast") from None
+        out = self._native.values(_flat(a, shape, (3,)), _flat(b, shape, (3,)), str(lookup))
+        return out.reshape(shape + (3,))
+
+    def to_bytes(self) -> bytes:
+        """The MERL file's bytes."""
+        return self._native.to_bytes()
+
+    def save(self, path: Union[str, "os.PathLike[str]"]) -> "Measured":
+        """Write the table as a MERL ``.binary`` file; returns the table with its new :attr:`path`."""
+        p = os.fspath(path)
+        if not p.lower().endswith(".binary"):
+            raise _error(f"`{p}`: a MERL table is named .binary", "e.g. save('gold.binary')")
+        with open(p, "wb") as f:
+            f.write(self.to_bytes())
+        return Measured._from_native(self._native.saved_as(p))
+
+    def __repr__(self) -> str:
+        return f"<lobe.Measured {self.name!r}: {self.measured_entries} of {self.entries} entries measured>"
+
+
+def load_measured(path: Union[str, "os.PathLike[str]"]) -> Measured:
+    """Read a MERL ``.binary`` table (its size, header and values checked, as the command line reads it)."""
+    return Measured._from_native(_lobe.load_measured(os.fspath(path)))
+
+
+def _image(rgb: bytes, w: int, h: int) -> Image:
+    return np.frombuffer(rgb, dtype=np.uint8).reshape(h, w, 3).copy().view(Image)
+
+
+def _baked_set(items: Sequence[Any], params: Mapping[str, float]) -> List[Tuple[str, float]]:
+    """``params`` and the kernels' baked values as one ``--set`` list (a name baked at two values, or baked
+    and given, is an error)."""
+    out = {}
+    for k, v in params.items():
+        _not_none(k, v)
+        out[k] = float(v)
+    for it in items:
+        if isinstance(it, Kernel):
+            for k, v in it.baked.items():
+                if k in out and out[k] != v:
+                    raise _error(f"`{k}` is {out[k]} and baked at {v} in {it.name}", "compile the formulas without baking it, and give it once")
+                out[k] = v
+    return list(out.items())
+
+
+def _side(x: Any, what: str) -> Tuple[str, str]:
+    """A comparison's side: a kernel's file and text, or a saved table's path."""
+    if isinstance(x, Kernel):
+        return (x.file, x.source)
+    if isinstance(x, Measured):
+        if x.path is None:
+            raise _error(f"{what}: the table is not saved to a file", "save it first: table = table.save('t.binary')")
+        return (x.path, "")
+    raise TypeError(f"{what} must be a lobe.Kernel or a lobe.Measured, not {type(x).__name__}")
+
+
+def compare(
+    a: Union[Kernel, Measured],
+    b: Union[Kernel, Measured],
+    *,
+    scene: Union[None, str, "os.PathLike[str]"] = None,
+    size: Union[None, int, Tuple[int, int]] = None,
+    threads: int = 0,
+    srgb: bool = False,
+    math: str = "precise",
+    backend: str = "jit",
+    **params: float,
+) -> Dict[str, Any]:
+    """Render a scene (default: the papers' sphere) with every material's formula replaced by ``a``, then by
+    ``b`` (kernels, or measured tables saved to a file), and compare the images: ``lobe compare A B``.
+
+    ``params`` (and the kernels' baked values) go to both formulas, each taking those it declares (``--set``);
+    ``size`` is N or (width, height); ``threads``, ``srgb``, ``math`` and ``backend`` are the command's flags.
+    Returns the command's ``--json`` dict (``manhattan``, ``manhattan_covered``, ``max_gray_diff``, ``rmse``,
+    ``psnr``, ``width``, ``height``, ``nan``, …; its ``a`` and ``b``, the files, as ``a_name`` and ``b_name``)
+    with the images as :class:`Image`: ``"a"``, ``"b"``,
+    ``"difference"`` (the |Δgray| heat map, white at ``max(max_gray_diff, 1)``) and ``"figure"`` (A | B | heat
+    map with headings and colour bar: the picture ``-o`` writes)."""
+    if isinstance(size, int):
+        size = (size, size)
+    wh = None if size is None else (int(size[0]), int(size[1]))
+    sa, sb = _side(a, "a"), _side(b, "b")
+    ia, ib, diff, fig, r = _lobe.compare(sa, sb, None if scene is None else os.fspath(scene), wh, _baked_set([a, b], params), int(threads), bool(srgb), str(math), str(backend))
+    # The command's "a" and "b" name the files; here they are the images, the names "a_name" and "b_name".
+    r["a_name"], r["b_name"] = r.pop("a"), r.pop("b")
+    r.update(a=_image(*ia), b=_image(*ib), difference=_image(*diff), figure=_image(*fig))
+    return r
+
+
+def plot(
+    *items: Union[Kernel, Measured],
+    incidence: Optional[float] = None,
+    log: bool = False,
+    ylim: Optional[Tuple[float, float]] = None,
+    polar: bool = False,
+    size: Tuple[int, int] = (900, 600),
+    reference: Optional[Kernel] = None,
+    error: bool = False,
+    lookup: str = "linear",
+    **params: float,
+) -> Tuple[Image, Dict[str, Any]]:
+    """Plot lobes as ``lobe plot`` does: the kernels' formulas at ``params`` and their baked values (each takes
+    those it declares), then the measured tables (one curve per channel), then ``reference`` (or, with
+    ``error=True``, each curve minus it). Value against the angle from the lobe axis, or with ``incidence``
+    (degrees from the normal) against the signed view angle in the plane of incidence; ``polar``, ``log``,
+    ``ylim=(lo, hi)``, ``size=(width, height)`` and ``lookup`` are the command's flags.
+
+    Returns the picture (an :class:`Image`) and the plotted numbers: ``{"title", "x_label", "y_label" (the axes'
+    meanings), "x": array (every curve shares it), "y": {legend name: array}}``."""
+    kernels = [k for k in items if isinstance(k, Kernel)]
+    tables = []
+    for t in items:
+        if isinstance(t, Measured):
+            tables.append((t.path or t.name, t._native))
+        elif not isinstance(t, Kernel):
+            raise TypeError(f"plot() takes lobe.Kernel and lobe.Measured items, not {type(t).__name__}")
+    if reference is not None and not isinstance(reference, Kernel):
+        raise TypeError("reference must be a lobe.Kernel")
+    if not items:
+        raise _error("nothing to plot", "give kernels or measured tables: lobe.plot(k1, k2, n=50)")
+    lim = None
+    if ylim is not None:
+        y = tuple(ylim)
+        if len(y) != 2:
+            raise _error(f"ylim takes two values, lo and hi, not {ylim!r}", "e.g. ylim=(0, 2)")
+        lim = (float(y[0]), float(y[1]))
+    w, h = (int(size), int(size)) if isinstance(size, int) else (int(size[0]), int(size[1]))
+    sets = _baked_set(kernels + ([reference] if reference is not None else []), params)
+    (rgb, pw, ph), title, x, y, series = _lobe.plot(
+        [k._native for k in kernels], tables, None if reference is None else reference._native, bool(error), sets,
+        None if incidence is None else float(incidence), str(lookup), bool(polar), bool(log), lim, (w, h),
+    )
+    data: Dict[str, Any] = {"title": title, "x_label": x, "y_label": y, "x": np.array(series[0][1]) if series else np.empty(0), "y": {n: np.array(ys) for n, _, ys in series}}
+    return _image(rgb, pw, ph), data

@@ -1,5 +1,5 @@
 import os
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, TypedDict, Union
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, TypedDict, Union, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -92,7 +92,43 @@ class Kernel:
         """The sampler's density of ``wo`` given ``wi`` (both (..., 3)): the pdf ``sample`` reports."""
     @property
     def sampler_mechanism(self) -> Optional[str]: ...
+    def tabulate(self, path: Optional[PathOrText] = None, *, color: Sequence[float] = (1.0, 1.0, 1.0), **params: float) -> Measured:
+        """The formula at the MERL convention's angles (``lobe tabulate``), saved to ``path`` if given."""
+    def export(self, format: str = "glsl", *, glsl_version: str = "450", mechanism: str = "auto", **params: float) -> str:
+        """``lobe export``: ``"glsl"``, ``"wgsl"``, ``"brdf"`` (BRDF Explorer) or ``"mitsuba"``; ``params`` baked."""
+    def bench(
+        self,
+        *,
+        reference: Optional[Kernel] = None,
+        math: str = "precise",
+        samples: int = 31,
+        timing_points: int = 4096,
+        albedo: bool = True,
+        tier: str = "auto",
+        **params: float,
+    ) -> Dict[str, Any]:
+        """One row of ``lobe bench --json`` (``"channels"``: a colour formula's three rows)."""
 
+class Measured:
+    """A MERL table (90 × 90 × 180 entries per channel, red, green, blue)."""
+
+    entries: int
+    channels: int
+    @property
+    def name(self) -> str: ...
+    @property
+    def path(self) -> Optional[str]: ...
+    @property
+    def measured_entries(self) -> int: ...
+    def values(self, wi: ArrayLike, wo: ArrayLike, *, lookup: str = "linear") -> npt.NDArray[np.float64]:
+        """The lookup at directions ``wi`` (L) and ``wo`` (V) of shape (..., 3): values of shape (..., 3)."""
+    def to_bytes(self) -> bytes: ...
+    def save(self, path: PathOrText) -> Measured: ...
+
+def load_measured(path: PathOrText) -> Measured:
+    """Read a MERL ``.binary`` table."""
+
+@overload
 def fit(
     kernel: Kernel,
     target: ArrayLike,
@@ -105,6 +141,23 @@ def fit(
     **inputs: ArrayLike,
 ) -> FitResult:
     """Fit ``params`` (name → (lo, hi) or (lo, hi, step)) of ``kernel`` to ``target`` at ``inputs``."""
+@overload
+def fit(
+    kernel: Kernel,
+    target: Union[Measured, Kernel],
+    params: Mapping[str, Union[Tuple[float, float], Tuple[float, float, float]]],
+    *,
+    top: int = 5,
+    refine: bool = True,
+    metric: Optional[str] = None,
+    fit_scale: Optional[bool] = None,
+    set: Optional[Mapping[str, float]] = None,
+    stride: int = 1,
+    grid_stride: int = 4,
+    n_max: int = 1000,
+    derivative_free: bool = False,
+) -> Dict[str, Any]:
+    """``lobe fit --measured TABLE`` (a :class:`Measured`) or ``--reference`` (a :class:`Kernel`): the command's JSON."""
 
 class Image(np.ndarray):
     """An (H, W, 3) uint8 image that a notebook shows."""
@@ -126,3 +179,31 @@ def render(
     **params: float,
 ) -> Image:
     """Render a scene file as ``lobe render`` does (``math``, ``backend``, ``tier``: its flags and defaults)."""
+
+def compare(
+    a: Union[Kernel, Measured],
+    b: Union[Kernel, Measured],
+    *,
+    scene: Optional[PathOrText] = None,
+    size: Union[None, int, Tuple[int, int]] = None,
+    threads: int = 0,
+    srgb: bool = False,
+    math: str = "precise",
+    backend: str = "jit",
+    **params: float,
+) -> Dict[str, Any]:
+    """``lobe compare --json`` with the images ``a``, ``b``, ``difference`` and ``figure`` (file names: ``a_name``, ``b_name``)."""
+
+def plot(
+    *items: Union[Kernel, Measured],
+    incidence: Optional[float] = None,
+    log: bool = False,
+    ylim: Optional[Tuple[float, float]] = None,
+    polar: bool = False,
+    size: Tuple[int, int] = (900, 600),
+    reference: Optional[Kernel] = None,
+    error: bool = False,
+    lookup: str = "linear",
+    **params: float,
+) -> Tuple[Image, Dict[str, Any]]:
+    """``lobe plot``: the picture and ``{"title", "x_label", "y_label", "x", "y": {name: array}}``."""

@@ -23,6 +23,8 @@ use std::borrow::Cow;
 use std::sync::{Arc, Mutex};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
+mod tools;
+
 create_exception!(lobe, LobeError, PyValueError, "A formula, a scene or an argument lobe cannot take: `.diagnostics` says where and why.");
 
 /// Points per batched call when a batch is split over threads.
@@ -512,21 +514,10 @@ impl Native {
         top: usize,
         refine: bool,
     ) -> PyResult<(Vec<FitCandidate>, usize)> {
-        use lobe::numerics::fit::{fit_points, FreeParam, Loss, PointsTarget};
+        use lobe::numerics::fit::{fit_points, Loss, PointsTarget};
         self.check_params(py, &params)?;
         let loss: Loss = loss.parse().map_err(|e: String| self.error(py, Diagnostic::error(e)))?;
-        let f = self.formula();
-        let mut fp = vec![];
-        for (index, lo, hi, step) in free {
-            let d = f.params.get(index).ok_or_else(|| self.error(py, Diagnostic::error(format!("no parameter {index}"))))?;
-            if self.baked.iter().any(|(k, _)| *k == d.name) {
-                return Err(self.error(py, Diagnostic::error(format!("parameter `{}` is baked into this kernel", d.name)).hint("compile without baking the parameters you fit")));
-            }
-            if !(lo <= hi && d.admits(lo) && d.admits(hi)) {
-                return Err(self.error(py, Diagnostic::error(format!("{}: {lo}..{hi} is not a range inside the declared {}..{}", d.name, d.lo, d.hi)).hint("search inside the declared range, or widen it in the file")));
-            }
-            fp.push(FreeParam { index, name: d.name.clone(), lo, hi, step });
-        }
+        let fp = tools::free_params(py, self, free)?;
         let (cos, l, v, len) = points;
         let inputs = self.batch(py, &cos, l.as_ref(), v.as_ref(), len)?;
         let contiguous = || self.error(py, Diagnostic::error("target and weights must be contiguous float64"));
@@ -809,6 +800,14 @@ fn _lobe(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_source, m)?)?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(encode_png, m)?)?;
+    m.add_class::<tools::Table>()?;
+    m.add_function(wrap_pyfunction!(tools::load_measured, m)?)?;
+    m.add_function(wrap_pyfunction!(tools::tabulate, m)?)?;
+    m.add_function(wrap_pyfunction!(tools::fit_against, m)?)?;
+    m.add_function(wrap_pyfunction!(tools::export, m)?)?;
+    m.add_function(wrap_pyfunction!(tools::compare, m)?)?;
+    m.add_function(wrap_pyfunction!(tools::plot, m)?)?;
+    m.add_function(wrap_pyfunction!(tools::bench, m)?)?;
     m.add_function(wrap_pyfunction!(_panic_for_tests, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

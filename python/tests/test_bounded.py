@@ -77,4 +77,14 @@ def test_errors_are_value_errors_and_paths_are_not_formulas(tmp_path):
 def test_the_namespace_is_the_public_api():
     names = set(dir(lobe))
     assert {"compile", "Kernel", "LobeError", "fit", "render", "Image", "__version__"} <= names
+    assert {"Measured", "load_measured", "compare", "plot"} <= names
     assert not names & {"np", "os", "re", "Any", "Optional", "errno"}
+    assert sorted(dir(lobe)) == sorted(set(dir(lobe))), "a name listed twice"
+    # Every public name and Kernel method is typed in the stubs.
+    import ast
+    stubs = ast.parse(open(os.path.join(os.path.dirname(lobe.__file__), "__init__.pyi")).read())
+    typed = {n.name for n in stubs.body if isinstance(n, (ast.FunctionDef, ast.ClassDef))}
+    assert names - {"__version__"} <= typed
+    kernel = next(n for n in stubs.body if isinstance(n, ast.ClassDef) and n.name == "Kernel")
+    methods = {n.name for n in kernel.body if isinstance(n, ast.FunctionDef)}
+    assert {m for m in dir(lobe.Kernel) if not m.startswith("_")} <= methods

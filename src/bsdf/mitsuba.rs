@@ -57,6 +57,37 @@ fn list(v: impl Iterator<Item = f64>) -> String {
     format!("[{}]", items.join(", "))
 }
 
+/// A formula exported as a Mitsuba module ([`export`]).
+pub struct Export {
+    pub text: String,
+    /// The plugin's name ([`plugin_name`]).
+    pub plugin: String,
+    /// The sampler's mechanism.
+    pub mechanism: Mechanism,
+    /// Whether the sampler's tables are isotropic.
+    pub isotropic: bool,
+}
+
+/// The Mitsuba export of the command line and of Python: the module of `f` with every parameter baked (the `set` values, else the
+/// defaults), its sampler (mechanism `choice`) built from the formula's kernels with the accuracy pass on (its
+/// decisions cached when `cache`), as `lobe sample` builds it, and the plain simplification at the same values.
+pub fn export(f: &Formula, set: &[(String, f64)], choice: super::Choice, cache: bool) -> Result<Export, crate::base::diag::Diagnostics> {
+    use crate::base::diag::Diagnostics;
+    let opts = crate::numerics::pass_cache::command_pass(crate::Options { bake: set.to_vec(), ..crate::Options::default() }, Default::default(), cache);
+    let ks = f.channels().into_iter().map(|c| crate::compile_formula(c, &opts)).collect::<Result<Vec<_>, _>>()?;
+    let mut values = ks[0].formula.default_params();
+    for (k, v) in set {
+        if let Some(i) = ks[0].formula.param_index(k) {
+            values[i] = *v;
+        }
+    }
+    let all: Vec<(String, f64)> = f.params.iter().zip(&values).map(|(p, v)| (p.name.clone(), *v)).collect();
+    let plain = crate::simplified(f, &crate::Options { bake: all.clone(), ..crate::Options::default() })?;
+    let s = Sampler::build_channels(&ks, &values, &super::Options { choice, ..super::Options::default() }).map_err(|d| Diagnostics::single(&f.file, d))?;
+    let text = module(&plain, &s, &all).map_err(|d| Diagnostics::single_in(&plain.file, &plain.source, d))?;
+    Ok(Export { text, plugin: plugin_name(&plain), mechanism: s.report.mechanism, isotropic: s.report.isotropic })
+}
+
 /// The module for `plain` (the formula simplified with every parameter baked, without the accuracy pass) and
 /// the sampler built from its kernels at the same parameters; `params` names the values baked, for the header.
 pub fn module(plain: &Formula, sampler: &Sampler, params: &[(String, f64)]) -> Result<String, Diagnostic> {

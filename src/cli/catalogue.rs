@@ -5,24 +5,7 @@
 use lobe::base::diag::Diagnostic;
 
 /// Every catalogue file: its path in the checkout and its text.
-pub const BUILT_IN: [(&str, &str); 16] = [
-    ("examples/brdfs/beckmann.brdf", include_str!("../../examples/brdfs/beckmann.brdf")),
-    ("examples/brdfs/blinn.brdf", include_str!("../../examples/brdfs/blinn.brdf")),
-    ("examples/brdfs/cook_torrance.brdf", include_str!("../../examples/brdfs/cook_torrance.brdf")),
-    ("examples/brdfs/dsh.brdf", include_str!("../../examples/brdfs/dsh.brdf")),
-    ("examples/brdfs/fst.brdf", include_str!("../../examples/brdfs/fst.brdf")),
-    ("examples/brdfs/gaussian.brdf", include_str!("../../examples/brdfs/gaussian.brdf")),
-    ("examples/brdfs/kutlog.brdf", include_str!("../../examples/brdfs/kutlog.brdf")),
-    ("examples/brdfs/modified_schlick.brdf", include_str!("../../examples/brdfs/modified_schlick.brdf")),
-    ("examples/brdfs/modified_schlick_vr.brdf", include_str!("../../examples/brdfs/modified_schlick_vr.brdf")),
-    ("examples/brdfs/phong.brdf", include_str!("../../examples/brdfs/phong.brdf")),
-    ("examples/brdfs/quadratic.brdf", include_str!("../../examples/brdfs/quadratic.brdf")),
-    ("examples/brdfs/schlick.brdf", include_str!("../../examples/brdfs/schlick.brdf")),
-    ("examples/brdfs/schlick_vr.brdf", include_str!("../../examples/brdfs/schlick_vr.brdf")),
-    ("examples/brdfs/scos.brdf", include_str!("../../examples/brdfs/scos.brdf")),
-    ("examples/brdfs/scos2.brdf", include_str!("../../examples/brdfs/scos2.brdf")),
-    ("examples/brdfs/ward.brdf", include_str!("../../examples/brdfs/ward.brdf")),
-];
+pub use lobe::report::bench::CATALOGUE as BUILT_IN;
 
 /// A formula file's name and text: the file if it exists, else the built-in copy of a catalogue path.
 pub fn read(path: &str) -> Result<(String, String), Diagnostic> {

@@ -6,7 +6,7 @@
 
 use super::args::{self, FormulaSource, Json, Output, Params};
 use super::common::{self, CliError};
-use lobe::bsdf::{Choice, Mechanism, Options, Sampler};
+use lobe::bsdf::{Choice, Mechanism};
 use lobe::backend::glsl::{self, Dialect, GlslVersion};
 
 #[derive(clap::Args, Debug)]
@@ -72,27 +72,17 @@ pub fn run(a: &ExportArgs) -> Result<(), CliError> {
     a.out.emit_text(&text, is_ours, a.json.on.then(|| serde_json::json!({"formula": f.display_name(), "language": language})))
 }
 
-/// `--mitsuba`: the sampler from the formula's kernels (the accuracy pass on, as `lobe sample` builds it), and
-/// the module around it and the plain simplification, both at every parameter's value.
+/// `--mitsuba`: the module ([`lobe::bsdf::mitsuba::export`]) at every parameter's value.
 fn mitsuba(a: &ExportArgs) -> Result<(), CliError> {
     let set = a.set.list()?;
     let f = a.formula.load()?;
-    let ks = f
-        .channels()
-        .into_iter()
-        .map(|c| common::compile_kernel(c, &set, lobe::Backend::default(), lobe::Mode::default()))
-        .collect::<Result<Vec<lobe::Kernel>, CliError>>()?;
-    let values = common::param_values(&ks[0].formula, &set);
-    let all: Vec<(String, f64)> = f.params.iter().zip(&values).map(|(p, v)| (p.name.clone(), *v)).collect();
-    let plain = a.formula.plain(&all)?;
     let choice = match a.mechanism.as_str() {
         "auto" => Choice::Auto,
         m => Choice::Force(m.parse::<Mechanism>().map_err(|e| CliError::hint(e, "--mechanism auto picks the best measured"))?),
     };
-    let s = Sampler::build_channels(&ks, &values, &Options { choice, ..Options::default() })?;
-    let text = lobe::bsdf::mitsuba::module(&plain, &s, &all).map_err(|d| lobe::Diagnostics::single_in(&plain.file, &plain.source, d))?;
+    let e = lobe::bsdf::mitsuba::export(&f, &set, choice, common::cache_on())?;
     let json = a.json.on.then(|| {
-        serde_json::json!({"formula": plain.display_name(), "language": "mitsuba", "plugin": lobe::bsdf::mitsuba::plugin_name(&plain), "mechanism": s.report.mechanism.name(), "isotropic": s.report.isotropic})
+        serde_json::json!({"formula": f.display_name(), "language": "mitsuba", "plugin": e.plugin, "mechanism": e.mechanism.name(), "isotropic": e.isotropic})
     });
-    a.out.emit_text(&text, is_ours, json)
+    a.out.emit_text(&e.text, is_ours, json)
 }

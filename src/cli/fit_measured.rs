@@ -6,12 +6,11 @@
 use super::args::Output;
 use super::common::{self, CliError, Spinner};
 use super::fit::{free_specs, FitArgs};
-use lobe::base::json::{self, Named};
 use lobe::ir::Formula;
 use lobe::measured::{is_measured_path, Measured};
-use lobe::numerics::fit::{FreeParam, LmStats, Refinement};
+use lobe::numerics::fit::{FreeParam, Refinement};
 use lobe::numerics::grad::{Gradient, Var};
-use lobe::numerics::measured::{fit_measured, residual, FormulaReference, MeasuredFit, MeasuredFitOptions, MeasuredMetric, Reference};
+use lobe::numerics::measured::{fit_row, FormulaReference, MeasuredFitOptions, MeasuredMetric, MeasuredRow, MeasuredRowJson, Reference};
 use lobe::{Evaluator, Kernel};
 use rayon::prelude::*;
 use std::path::Path;
@@ -43,9 +42,7 @@ struct Row<'a> {
     model: &'a Model,
     against: &'a Against,
     table: &'a str,
-    fit: MeasuredFit,
-    /// The best candidate's error under every metric ([`MeasuredMetric::ALL`]'s order).
-    all: [f64; 3],
+    row: MeasuredRow,
     seconds: f64,
 }
 
@@ -254,9 +251,7 @@ pub fn formula_reference(
         .into_iter()
         .map(|c| common::compile_kernel(c, &own, backend, math).map(|k| Arc::new(k) as Arc<dyn Evaluator>))
         .collect::<Result<Vec<_>, _>>()?;
-    let isotropic = |k: &dyn Evaluator, p: &[f64]| lobe::numerics::measured::turns_with_the_frame(k, p);
-    let azimuths = !(kernels.iter().all(|k| isotropic(k.as_ref(), &params)) && others.iter().all(|(k, p)| isotropic(*k, p)));
-    Ok(FormulaReference { name: path.to_string(), channels: kernels, params, azimuths, fit_scale })
+    Ok(FormulaReference::new(path, kernels, params, others, fit_scale))
 }
 
 /// [`formula_reference`] for a fit: against every fitted formula at its fixed values.
@@ -269,22 +264,10 @@ fn fit_reference(a: &FitArgs, path: String, src: String, f: Formula, set: &[(Str
 
 fn fit_one<'a>(model: &'a Model, against: &'a Against, opts: &MeasuredFitOptions, progress: &(dyn Fn() + Sync)) -> Result<Row<'a>, CliError> {
     let start = std::time::Instant::now();
-    let t = against.reference.as_ref();
     let channels: Vec<&dyn Evaluator> = model.kernels.iter().map(|k| k as &dyn Evaluator).collect();
     let params = common::param_values(&model.formula, &model.set);
-    let fit = if model.free.is_empty() {
-        // Nothing to search: the formula as it is, with its colour scale.
-        let s = t.samples(opts.stride);
-        let r = residual(&channels, &params, &s, opts.metric);
-        let best = vec![lobe::numerics::measured::MeasuredCandidate { params: params.clone(), residual: r, refined: false }];
-        MeasuredFit { best, evaluated: 1, entries: s.len(), grid_entries: s.len(), refinement: opts.refinement, lm: LmStats::default(), fixed: vec![] }
-    } else {
-        fit_measured(&channels, model.grad.as_ref(), &params, &model.free, t, opts, progress)?
-    };
-    let best = &fit.best[0].params;
-    let s = t.samples(opts.stride);
-    let all = MeasuredMetric::ALL.map(|m| residual(&channels, best, &s, m).error);
-    Ok(Row { model, against, table: &against.path, fit, all, seconds: start.elapsed().as_secs_f64() })
+    let row = fit_row(&channels, model.grad.as_ref(), &params, &model.free, against.reference.as_ref(), opts, progress)?;
+    Ok(Row { model, against, table: &against.path, row, seconds: start.elapsed().as_secs_f64() })
 }
 
 /// The searched parameters of a candidate, `name=value` joined by `sep`.
@@ -294,7 +277,7 @@ fn shown(model: &Model, params: &[f64], sep: &str) -> String {
 }
 
 fn single(a: &FitArgs, row: &Row, metric: MeasuredMetric) -> Result<(), CliError> {
-    let (m, fit) = (row.model, &row.fit);
+    let (m, fit) = (row.model, &row.row.fit);
     let Some(best) = fit.best.first().filter(|b| b.residual.error.is_finite()) else {
         return Err(CliError::hint(
             format!("no candidate has a finite error: {} is NaN or infinite at some entry of {}", m.formula.display_name(), row.table),
@@ -306,7 +289,7 @@ fn single(a: &FitArgs, row: &Row, metric: MeasuredMetric) -> Result<(), CliError
         a.out.force.write(o, &png, lobe::render::image::is_lobe_png)?;
     }
     if a.json.on {
-        println!("{}", common::to_json(&RowJson::new(row, metric))?);
+        println!("{}", common::to_json(&row_json(row, metric))?);
         return Ok(());
     }
     println!(
@@ -340,7 +323,7 @@ fn single(a: &FitArgs, row: &Row, metric: MeasuredMetric) -> Result<(), CliError
             if c.refined { "  (continuous refinement)" } else { "" }
         );
     }
-    let [log, rmse, cosine] = row.all;
+    let [log, rmse, cosine] = row.row.all;
     println!("best: {}; log error {log:.6e}, rmse {rmse:.6e}, cosine {cosine:.6e}", shown(m, &best.params, ", "));
     if let Some(o) = &a.out.path {
         println!("wrote {} (fitted formula | measurement | |Δgray| heat map)", o.display());
@@ -351,7 +334,7 @@ fn single(a: &FitArgs, row: &Row, metric: MeasuredMetric) -> Result<(), CliError
 /// The fitted formula (its colour scale as the specular tint) beside the measurement on the papers' sphere.
 fn comparison_png(a: &FitArgs, row: &Row) -> Result<Vec<u8>, CliError> {
     use lobe::render::compare::{compare_formulas, sweep_image, CompareJob};
-    let (m, best) = (row.model, &row.fit.best[0]);
+    let (m, best) = (row.model, &row.row.fit.best[0]);
     let mut set = m.set.clone();
     set.extend(m.free.iter().map(|f| (f.name.clone(), best.params[f.index])));
     set.extend(row.against.set.iter().filter(|(k, _)| !set.iter().any(|(s, _)| s == k)).cloned().collect::<Vec<_>>());
@@ -375,64 +358,17 @@ fn comparison_png(a: &FitArgs, row: &Row) -> Result<Vec<u8>, CliError> {
 }
 
 /// One fit in `--json` and `--table` JSON (keys in docs/measured.md).
-#[derive(serde::Serialize)]
-struct RowJson<'a> {
-    formula: String,
-    file: &'a str,
-    measured: &'a str,
-    metric: &'static str,
-    params: Named,
-    #[serde(serialize_with = "json::num")]
-    error: f64,
-    #[serde(serialize_with = "json::num")]
-    log: f64,
-    #[serde(serialize_with = "json::num")]
-    rmse: f64,
-    #[serde(serialize_with = "json::num")]
-    cosine: f64,
-    scale: [f64; 3],
-    entries: usize,
-    grid_entries: usize,
-    evaluated: usize,
-    refinement: &'static str,
-    lm: LmStats,
-    fixed: &'a [String],
-    #[serde(serialize_with = "json::num")]
-    seconds: f64,
-}
-
-impl<'a> RowJson<'a> {
-    fn new(r: &'a Row, metric: MeasuredMetric) -> RowJson<'a> {
-        let b = &r.fit.best[0];
-        RowJson {
-            formula: r.model.formula.display_name(),
-            file: &r.model.file,
-            measured: r.table,
-            metric: metric.name(),
-            params: Named::new(r.model.free.iter().map(|f| (f.name.as_str(), b.params[f.index]))),
-            error: b.residual.error,
-            log: r.all[0],
-            rmse: r.all[1],
-            cosine: r.all[2],
-            scale: b.residual.scale,
-            entries: r.fit.entries,
-            grid_entries: r.fit.grid_entries,
-            evaluated: r.fit.evaluated,
-            refinement: r.fit.refinement.name(),
-            lm: r.fit.lm,
-            fixed: &r.fit.fixed,
-            seconds: r.seconds,
-        }
-    }
+fn row_json<'a>(r: &'a Row, metric: MeasuredMetric) -> MeasuredRowJson<'a> {
+    MeasuredRowJson::new(r.model.formula.display_name(), &r.model.file, r.table, &r.model.free, &r.row, metric, r.seconds)
 }
 
 fn table_json(rows: &[Row], metric: MeasuredMetric) -> Result<String, CliError> {
     #[derive(serde::Serialize)]
     struct Doc<'a> {
         generator: &'static str,
-        fits: Vec<RowJson<'a>>,
+        fits: Vec<MeasuredRowJson<'a>>,
     }
-    common::to_json(&Doc { generator: "made by lobe fit --measured", fits: rows.iter().map(|r| RowJson::new(r, metric)).collect() })
+    common::to_json(&Doc { generator: "made by lobe fit --measured", fits: rows.iter().map(|r| row_json(r, metric)).collect() })
 }
 
 /// The CSV table: a `#` comment line naming lobe, then a header and one row per fit.
@@ -441,7 +377,7 @@ fn table_csv(rows: &[Row], metric: MeasuredMetric) -> String {
     let mut out = format!("# made by lobe fit --measured (metric {})\n", metric.name());
     out.push_str("formula,file,measured,params,error,log,rmse,cosine,scale_r,scale_g,scale_b,entries,seconds\n");
     for r in rows {
-        let b = &r.fit.best[0];
+        let b = &r.row.fit.best[0];
         let [sr, sg, sb] = b.residual.scale;
         out.push_str(&format!(
             "{},{},{},{},{:e},{:e},{:e},{:e},{sr},{sg},{sb},{},{:.3}\n",
@@ -450,10 +386,10 @@ fn table_csv(rows: &[Row], metric: MeasuredMetric) -> String {
             q(r.table),
             q(&shown(r.model, &b.params, ";")),
             b.residual.error,
-            r.all[0],
-            r.all[1],
-            r.all[2],
-            r.fit.entries,
+            r.row.all[0],
+            r.row.all[1],
+            r.row.all[2],
+            r.row.fit.entries,
             r.seconds
         ));
     }
@@ -484,13 +420,13 @@ fn table_text(rows: &[Row], metric: MeasuredMetric) -> String {
         let mine: Vec<&Row> = rows.iter().filter(|x| x.model.file == r.model.file).collect();
         out.push_str(&format!("{:<28}", r.model.formula.display_name()));
         for t in &tables {
-            let cell = mine.iter().find(|x| x.table == *t).map(|x| format!("{:.4e}", x.fit.best[0].residual.error)).unwrap_or_default();
+            let cell = mine.iter().find(|x| x.table == *t).map(|x| format!("{:.4e}", x.row.fit.best[0].residual.error)).unwrap_or_default();
             out.push_str(&format!(" {cell:>22}"));
         }
         out.push('\n');
         out.push_str(&format!("{:<28}", ""));
         for t in &tables {
-            let cell = mine.iter().find(|x| x.table == *t).map(|x| shown(x.model, &x.fit.best[0].params, " ")).unwrap_or_default();
+            let cell = mine.iter().find(|x| x.table == *t).map(|x| shown(x.model, &x.row.fit.best[0].params, " ")).unwrap_or_default();
             out.push_str(&format!(" {cell:>22}"));
         }
         out.push('\n');

@@ -2,8 +2,7 @@
 
 use super::args::{self, Json, LookupArg, Output, Params};
 use super::common::{self, CliError};
-use lobe::report::plot::{self, Format, LobeOptions, Series};
-use lobe::Backend;
+use lobe::report::plot::{self, Format, LobePlot};
 
 #[derive(clap::Args, Debug)]
 #[command(mut_arg("set", args::help("Parameter values, e.g. `n=50,a=16` (each formula takes the ones it declares)")))]
@@ -61,55 +60,20 @@ pub fn run(a: &PlotArgs) -> Result<(), CliError> {
     let output = a.out.required();
     let format = Format::from_path(output).map_err(|e| CliError::hint(e, "use -o lobes.png or -o lobes.svg"))?;
     let set = a.set.list()?;
-    let mut files = a.files.clone();
-    if let Some(r) = &a.reference {
-        files.push(r.clone());
-    }
     if let Some(t) = a.incidence.filter(|t| !(0.0..=90.0).contains(t)) {
         return Err(CliError::hint(format!("--incidence {t} is outside 0..90 degrees"), "e.g. --incidence 30"));
     }
-    let (tables, formula_files): (Vec<&String>, Vec<&String>) = files.iter().partition(|p| lobe::measured::is_measured_path(p));
-    a.lookup.only_for_tables(tables.len())?;
+    let (tables, formula_files): (Vec<&String>, Vec<&String>) = a.files.iter().partition(|p| lobe::measured::is_measured_path(p));
+    let reference_table = a.reference.as_ref().is_some_and(|r| lobe::measured::is_measured_path(r));
+    a.lookup.only_for_tables(tables.len() + usize::from(reference_table))?;
     let formulas = formula_files.iter().map(|p| common::load_formula(Some(p), None)).collect::<Result<Vec<_>, _>>()?;
-    common::check_set_names(&formulas.iter().collect::<Vec<_>>(), &set)?;
-    let points = |ev: &dyn lobe::Evaluator, used, params: &[f64]| match a.incidence {
-        Some(t) => plot::incidence_points(ev, params, t),
-        None => plot::lobe_points(ev, used, params),
+    let reference = match &a.reference {
+        Some(_) if reference_table => return Err(CliError::hint("--reference takes a formula here", "plot the measured table beside the formulas: list it with them")),
+        Some(r) => Some(common::load_formula(Some(r), None)?),
+        None => None,
     };
-    let mut series = Vec::new();
-    for f in &formulas {
-        let s = common::set_for(f, &set);
-        let params = common::param_values(f, &s);
-        // The legend names the values set on this formula (the title says which were set at all).
-        let name = if s.is_empty() { f.display_name() } else { format!("{} ({})", f.display_name(), values(&s)) };
-        let k = lobe::compile_formula(f.clone(), &lobe::Options { backend: Backend::Jit, bake: s, ..Default::default() })?;
-        series.push(Series { name, points: points(&k, k.used_inputs(), &params) });
-    }
-    if a.reference.as_ref().is_some_and(|r| lobe::measured::is_measured_path(r)) {
-        return Err(CliError::hint("--reference takes a formula here", "plot the measured table beside the formulas: list it with them"));
-    }
-    // Measured tables after the formulas (and before the reference, which stays last).
-    let at = if a.reference.is_some() { series.len() - 1 } else { series.len() };
-    let mut measured = vec![];
-    for p in tables {
-        let t = std::sync::Arc::new(lobe::measured::Measured::read(p)?);
-        for (ev, c) in t.channels_with(a.lookup.how()).iter().zip(["r", "g", "b"]) {
-            measured.push(Series { name: format!("{p} ({c})"), points: points(ev.as_ref(), lobe::measured::used_inputs(), &[]) });
-        }
-    }
-    series.splice(at..at, measured);
-    let n_label = if set.is_empty() { "default parameters".to_string() } else { values(&set) };
-    let mut title = format!("Lobes, {n_label}");
-    if a.error {
-        let reference = series.pop().unwrap_or(Series { name: String::new(), points: vec![] });
-        for s in &mut series {
-            for (p, r) in s.points.iter_mut().zip(&reference.points) {
-                p.1 -= r.1;
-            }
-            s.name = format!("{} − {}", s.name, reference.name);
-        }
-        title = format!("Error against {}, {n_label}", reference.name);
-    }
+    common::check_set_names(&formulas.iter().chain(&reference).collect::<Vec<_>>(), &set)?;
+    let tables = tables.iter().map(|p| Ok(((*p).clone(), std::sync::Arc::new(lobe::measured::Measured::read(p)?)))).collect::<Result<Vec<_>, CliError>>()?;
     if a.polar && a.log {
         return Err(CliError::msg("--log applies to cartesian plots only (a log radius has no zero)"));
     }
@@ -118,28 +82,31 @@ pub fn run(a: &PlotArgs) -> Result<(), CliError> {
         [lo, hi] => Some((*lo, *hi)),
         _ => return Err(CliError::hint("--ylim takes two values, lo,hi", "e.g. --ylim 0,2")),
     };
-    let value = if a.error { plot::DIFFERENCE } else { plot::VALUE };
-    let opts = LobeOptions { title: title.clone(), polar: a.polar, log: a.log, size: a.size, ylim, value };
-    let bytes = match a.incidence {
-        Some(t) => plot::incidence_lobes(&series, &opts, t, format).map_err(CliError::msg)?,
-        None => plot::lobes(&series, &opts, format).map_err(CliError::msg)?,
+    let request = LobePlot {
+        formulas: &formulas,
+        tables: &tables,
+        reference: reference.as_ref(),
+        error: a.error,
+        set: &set,
+        incidence: a.incidence,
+        lookup: a.lookup.how(),
+        polar: a.polar,
+        log: a.log,
+        ylim,
+        size: a.size,
     };
-    a.out.force.write(output, &bytes, common::is_lobe_output)?;
+    let p = plot::plot_lobes(&request, format)?;
+    a.out.force.write(output, &p.bytes, common::is_lobe_output)?;
     if a.json.on {
-        let x = if a.incidence.is_some() { plot::INCIDENCE_ANGLE } else { plot::LOBE_ANGLE };
-        let series: Vec<serde_json::Value> = series
+        let series: Vec<serde_json::Value> = p
+            .series
             .iter()
             .map(|s| serde_json::json!({"name": s.name, "x": s.points.iter().map(|p| p.0).collect::<Vec<_>>(), "y": s.points.iter().map(|p| p.1).collect::<Vec<_>>()}))
             .collect();
         let format = if matches!(format, Format::Svg) { "svg" } else { "png" };
-        println!("{}", serde_json::json!({"output": output.display().to_string(), "format": format, "title": title, "x": x, "y": value, "series": series}));
+        println!("{}", serde_json::json!({"output": output.display().to_string(), "format": format, "title": p.title, "x": p.x, "y": p.y, "series": series}));
     } else {
         eprintln!("wrote {}", output.display());
     }
     Ok(())
-}
-
-/// `name = value` pairs as a title or a legend shows them.
-fn values(set: &[(String, f64)]) -> String {
-    set.iter().map(|(k, v)| format!("{k} = {v}")).collect::<Vec<_>>().join(", ")
 }

@@ -45,10 +45,8 @@ pub fn run(a: &TabulateArgs) -> Result<(), CliError> {
     let params = super::common::param_values(&f, &set);
     let ks = f.channels().into_iter().map(|c| super::common::compile_kernel(c, &set, a.backend.bulk_backend()?, a.backend.math.mode)).collect::<Result<Vec<_>, _>>()?;
     let name = f.display_name();
-    let t = Measured::tabulate(&name, &|l, v| {
-        let x = lobe::frame::inputs_from_dirs(l, v);
-        std::array::from_fn(|c| ks[c.min(ks.len() - 1)].eval(&x, &params) * a.color[c])
-    });
+    let channels: Vec<&dyn Evaluator> = ks.iter().map(|k| k as &dyn Evaluator).collect();
+    let t = Measured::tabulate_channels(&name, &channels, &params, [a.color[0], a.color[1], a.color[2]]);
     a.out.force.write(path, &t.to_bytes(), never_ours)?;
     if a.json.on {
         let j = serde_json::json!({"output": path.display().to_string(), "formula": name, "measured_entries": t.measured_entries(), "entries": lobe::measured::ENTRIES, "color": a.color});

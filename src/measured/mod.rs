@@ -325,6 +325,16 @@ impl Measured {
         Measured { name: name.to_string(), stored }
     }
 
+    /// [`Measured::tabulate`] of a formula's kernels at `params` (one kernel for every channel, or red, green,
+    /// blue), each channel multiplied by its factor of `color` (a scalar formula's colour): what
+    /// `lobe tabulate` writes.
+    pub fn tabulate_channels(name: &str, channels: &[&dyn Evaluator], params: &[f64], color: [f64; 3]) -> Measured {
+        Measured::tabulate(name, &|l, v| {
+            let x = crate::frame::inputs_from_dirs(l, v);
+            std::array::from_fn(|c| channels[c.min(channels.len() - 1)].eval(&x, params) * color[c])
+        })
+    }
+
     /// The stored value of channel `c` at entry `e` (as the file holds it).
     pub fn stored(&self, c: usize, e: usize) -> f64 {
         self.stored[c * ENTRIES + e]

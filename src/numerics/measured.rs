@@ -130,6 +130,16 @@ pub struct FormulaReference {
     pub fit_scale: bool,
 }
 
+impl FormulaReference {
+    /// The formula `channels` (named `name`) at `params` as a reference: compared at φ_h turns too unless it and
+    /// every formula compared with it (`others`: kernels and their parameter values) are isotropic
+    /// ([`turns_with_the_frame`]); a colour scale fitted only when `fit_scale`.
+    pub fn new(name: &str, channels: Vec<std::sync::Arc<dyn Evaluator>>, params: Vec<f64>, others: &[(&dyn Evaluator, Vec<f64>)], fit_scale: bool) -> FormulaReference {
+        let azimuths = !(channels.iter().all(|k| turns_with_the_frame(k.as_ref(), &params)) && others.iter().all(|(k, p)| turns_with_the_frame(*k, p)));
+        FormulaReference { name: name.to_string(), channels, params, azimuths, fit_scale }
+    }
+}
+
 impl Reference for FormulaReference {
     fn name(&self) -> &str {
         &self.name
@@ -300,6 +310,91 @@ pub fn residual(channels: &[&dyn Evaluator], params: &[f64], s: &Samples, metric
     }
     let error = (sum / (3 * s.len()) as f64).sqrt();
     if error.is_finite() { Residual { error, scale } } else { fail }
+}
+
+/// One formula fitted to one reference, as the fit command reports it: the fit, and the best candidate's
+/// error under every metric ([`MeasuredMetric::ALL`]'s order).
+pub struct MeasuredRow {
+    pub fit: MeasuredFit,
+    pub all: [f64; 3],
+}
+
+/// [`fit_measured`] of `free` parameters (with nothing to search: the formula as it is at `params`, with its
+/// colour scale), and the best candidate's error under every metric on the `opts.stride` entries.
+pub fn fit_row(
+    channels: &[&dyn Evaluator],
+    grad: Option<&Gradient>,
+    params: &[f64],
+    free: &[FreeParam],
+    t: &dyn Reference,
+    opts: &MeasuredFitOptions,
+    progress: &(dyn Fn() + Sync),
+) -> Result<MeasuredRow, Diagnostic> {
+    let fit = if free.is_empty() {
+        let s = t.samples(opts.stride);
+        let r = residual(channels, params, &s, opts.metric);
+        let best = vec![MeasuredCandidate { params: params.to_vec(), residual: r, refined: false }];
+        MeasuredFit { best, evaluated: 1, entries: s.len(), grid_entries: s.len(), refinement: opts.refinement, lm: LmStats::default(), fixed: vec![] }
+    } else {
+        fit_measured(channels, grad, params, free, t, opts, progress)?
+    };
+    let s = t.samples(opts.stride);
+    let all = MeasuredMetric::ALL.map(|m| residual(channels, &fit.best[0].params, &s, m).error);
+    Ok(MeasuredRow { fit, all })
+}
+
+/// One fit as the fit command's JSON gives it (keys in docs/measured.md).
+#[derive(serde::Serialize)]
+pub struct MeasuredRowJson<'a> {
+    pub formula: String,
+    pub file: &'a str,
+    pub measured: &'a str,
+    pub metric: &'static str,
+    pub params: crate::base::json::Named,
+    #[serde(serialize_with = "crate::base::json::num")]
+    pub error: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
+    pub log: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
+    pub rmse: f64,
+    #[serde(serialize_with = "crate::base::json::num")]
+    pub cosine: f64,
+    pub scale: [f64; 3],
+    pub entries: usize,
+    pub grid_entries: usize,
+    pub evaluated: usize,
+    pub refinement: &'static str,
+    pub lm: LmStats,
+    pub fixed: &'a [String],
+    #[serde(serialize_with = "crate::base::json::num")]
+    pub seconds: f64,
+}
+
+impl<'a> MeasuredRowJson<'a> {
+    /// The row of formula `formula` (read from `file`; `free` its searched parameters) fitted to `measured`
+    /// under `metric` in `seconds`.
+    pub fn new(formula: String, file: &'a str, measured: &'a str, free: &[FreeParam], r: &'a MeasuredRow, metric: MeasuredMetric, seconds: f64) -> MeasuredRowJson<'a> {
+        let b = &r.fit.best[0];
+        MeasuredRowJson {
+            formula,
+            file,
+            measured,
+            metric: metric.name(),
+            params: crate::base::json::Named::new(free.iter().map(|f| (f.name.as_str(), b.params[f.index]))),
+            error: b.residual.error,
+            log: r.all[0],
+            rmse: r.all[1],
+            cosine: r.all[2],
+            scale: b.residual.scale,
+            entries: r.fit.entries,
+            grid_entries: r.fit.grid_entries,
+            evaluated: r.fit.evaluated,
+            refinement: r.fit.refinement.name(),
+            lm: r.fit.lm,
+            fixed: &r.fit.fixed,
+            seconds,
+        }
+    }
 }
 
 /// How [`fit_measured`] runs.

@@ -14,6 +14,27 @@ mod row;
 pub use row::{bench_row, RowOptions};
 use serde::Serialize;
 
+/// The papers' catalogue (`examples/brdfs`) compiled in: every file's path in the checkout and its text (the
+/// default files and reference of `lobe bench`, from any directory).
+pub const CATALOGUE: [(&str, &str); 16] = [
+    ("examples/brdfs/beckmann.brdf", include_str!("../../../examples/brdfs/beckmann.brdf")),
+    ("examples/brdfs/blinn.brdf", include_str!("../../../examples/brdfs/blinn.brdf")),
+    ("examples/brdfs/cook_torrance.brdf", include_str!("../../../examples/brdfs/cook_torrance.brdf")),
+    ("examples/brdfs/dsh.brdf", include_str!("../../../examples/brdfs/dsh.brdf")),
+    ("examples/brdfs/fst.brdf", include_str!("../../../examples/brdfs/fst.brdf")),
+    ("examples/brdfs/gaussian.brdf", include_str!("../../../examples/brdfs/gaussian.brdf")),
+    ("examples/brdfs/kutlog.brdf", include_str!("../../../examples/brdfs/kutlog.brdf")),
+    ("examples/brdfs/modified_schlick.brdf", include_str!("../../../examples/brdfs/modified_schlick.brdf")),
+    ("examples/brdfs/modified_schlick_vr.brdf", include_str!("../../../examples/brdfs/modified_schlick_vr.brdf")),
+    ("examples/brdfs/phong.brdf", include_str!("../../../examples/brdfs/phong.brdf")),
+    ("examples/brdfs/quadratic.brdf", include_str!("../../../examples/brdfs/quadratic.brdf")),
+    ("examples/brdfs/schlick.brdf", include_str!("../../../examples/brdfs/schlick.brdf")),
+    ("examples/brdfs/schlick_vr.brdf", include_str!("../../../examples/brdfs/schlick_vr.brdf")),
+    ("examples/brdfs/scos.brdf", include_str!("../../../examples/brdfs/scos.brdf")),
+    ("examples/brdfs/scos2.brdf", include_str!("../../../examples/brdfs/scos2.brdf")),
+    ("examples/brdfs/ward.brdf", include_str!("../../../examples/brdfs/ward.brdf")),
+];
+
 /// One formula's measurements. Times are medians over repeated runs in this process; `*_spread` is the
 /// relative half-width between the 25th and 75th percentiles.
 #[derive(Clone, Debug, Serialize)]

@@ -11,7 +11,8 @@
 //! function of those boxes (tested without rendering), and whatever cannot be shown is named in a footnote.
 //!
 //! One file per concern: [`style`] (font, palette, PNG/SVG encoding), [`axis`] (ticks and their labels),
-//! `figure` (the cartesian figure the lobe and curve plots draw), [`scatter`] (the bench scatter), [`rect`] and
+//! `figure` (the cartesian figure the lobe and curve plots draw), `request` (`lobe plot`'s figure of formulas
+//! and tables), [`scatter`] (the bench scatter), [`rect`] and
 //! [`labels`] (boxes and label placement), [`comparison`] (the render comparison picture); the plots a caller
 //! asks for are here.
 
@@ -20,12 +21,14 @@ mod comparison;
 mod figure;
 mod labels;
 mod rect;
+mod request;
 mod scatter;
 mod style;
 #[cfg(test)]
 mod tests;
 
 pub use comparison::comparison_figure;
+pub use request::{plot_lobes, LobePlot, Plotted};
 pub use scatter::{speed_error, CostError};
 
 use axis::*;
