@@ -314,18 +314,24 @@ fn a_map_of_zeros_is_a_black_sky_not_an_error() {
 
 /// Debian's blender-data maps (CC0, DWAB-compressed); `.ci/run` installs the package, so CI fails rather than
 /// skips when it is missing.
-#[test]
-fn blenders_forest_map_loads() {
+/// blender-data's forest.exr, or `None` (skip, with a message) when it is not installed and
+/// `LOBE_REQUIRE_BLENDER_DATA` is not set (then missing is a failure).
+pub(crate) fn forest_map() -> Option<std::path::PathBuf> {
     let found = ["/usr/share/blender/datafiles/studiolights/world/forest.exr"]
         .into_iter()
         .map(std::path::PathBuf::from)
         .chain(std::fs::read_dir("/usr/share/blender").into_iter().flatten().flatten().map(|e| e.path().join("datafiles/studiolights/world/forest.exr")))
         .find(|p| p.is_file());
-    let Some(path) = found else {
+    if found.is_none() {
         assert!(std::env::var_os("LOBE_REQUIRE_BLENDER_DATA").is_none(), "blender-data's forest.exr is not installed");
         eprintln!("skipped: blender-data's forest.exr is not installed");
-        return;
-    };
+    }
+    found
+}
+
+#[test]
+fn blenders_forest_map_loads() {
+    let Some(path) = forest_map() else { return };
     let m = EnvMap::load(&path, &lobe::base::source::Files::any(), 1.0, 0.0).unwrap();
     assert!(m.emits());
     let (rows, cols) = m.grid();

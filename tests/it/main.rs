@@ -23,6 +23,7 @@ mod parse_errors;
 mod simplify;
 mod accuracy;
 mod energy;
+mod envcompare;
 mod envlight;
 mod everywhere;
 mod explorer_render;

@@ -19,7 +19,7 @@ fn root() -> PathBuf {
 }
 
 /// The Python to run Mitsuba with, or `None` (skip) when none is configured and it is not required.
-fn python() -> Option<PathBuf> {
+pub(crate) fn python() -> Option<PathBuf> {
     let required = std::env::var_os("LOBE_REQUIRE_MITSUBA").is_some_and(|v| v == "1");
     let Some(p) = std::env::var_os("LOBE_MITSUBA_PYTHON") else {
         assert!(!required, "LOBE_REQUIRE_MITSUBA=1 but LOBE_MITSUBA_PYTHON is not set (a Python with `pip install mitsuba`)");
