@@ -5,9 +5,10 @@
 //! * scalar: in `F64`;
 //! * batched: the loop in `F64X2` lanes, the remaining element (odd `len`) in `F64`.
 //!
-//! The translator implements the math library's [`Emit`] and the native layer's [`Lower`], so the node
-//! dispatch, the inline builtins and the builtins' code ([`crate::backend::native::lower`]) are emitted in
-//! the translator's lanes; what differs between lane types (splatting, lanes, masks and bit casts, the select
+//! The translator implements the math library's [`Emit`] and the native layer's [`Lower`] and [`Frame`], so
+//! the node dispatch, the inline builtins and the builtins' code ([`crate::backend::native::lower`]) and what
+//! each function computes in which order ([`crate::backend::native::frame`]) are emitted in the translator's
+//! lanes; what differs between lane types (splatting, lanes, masks and bit casts, the select
 //! that becomes `maxpd`/`minpd`) is the [`Lanes`] trait.
 //!
 //! None of them checks anything at run time; the safe wrappers in `native::abi` validate lengths before calling.
@@ -705,10 +706,7 @@ pub(super) fn build_batch(
     let [cols, params, block, out, len] = args[..] else { return Err(NativeError::internal("batch signature")) };
 
     // Entry: column bases, the invariants the loop reads (F64), their splats, the length of the vector part.
-    let mut bases = [None; N_INPUTS];
-    for k in frame::kernel_columns(w.ir, plan) {
-        bases[k] = Some(b.ins().load(ptr, mem(), cols, (k * 8) as i32));
-    }
+    let bases = column_bases::<N_INPUTS>(&mut b, ptr, cols, frame::kernel_columns(w.ir, plan));
     let zero = b.ins().iconst(ptr, 0);
     let mut cx = w.shared(params, block, callees);
     let splats = entry(&mut b, &mut cx, plan, Source::Cols { bases, off: zero })?;
@@ -717,6 +715,18 @@ pub(super) fn build_batch(
     batch_loop(&mut b, ptr, len, zero, splats, cx.invariants.clone(), &step, 1)?;
     b.finalize(module.target_config());
     Ok(())
+}
+
+/// The pointers `cols[k]` for the column slots `slots` of a batched function (kernel or program), `None` in the
+/// slots it does not read.
+fn column_bases<const N: usize>(b: &mut FunctionBuilder, ptr: Type, cols: Value, slots: Vec<usize>) -> [Option<Value>; N] {
+    let mut bases = [None; N];
+    for k in slots {
+        if let Some(base) = bases.get_mut(k) {
+            *base = Some(b.ins().load(ptr, mem(), cols, (k * 8) as i32));
+        }
+    }
+    bases
 }
 
 /// The entry of a batched function (kernel or program): the carried nodes loaded from the block and the

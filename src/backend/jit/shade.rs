@@ -18,8 +18,9 @@
 //! where latency dominates (measured: BENCHMARKS.md).
 //!
 //! A child of `codegen`, so it uses the translator's private parts and its one loop builder as they are. The
-//! program's plan and the order of a step's nodes and regions are the native layer's, shared with the LLVM
-//! tier ([`Plan::of_program`], [`lower::program_step`]).
+//! program's plan, the columns it reads and its step (the nodes in order, each region's nodes between its
+//! branch and its join) are the native layer's, shared with the LLVM tier ([`Plan::of_program`],
+//! [`frame::program_columns`], [`frame::program_step`]); this tier's are the branch, the join and the anchors.
 
 use super::*;
 use crate::backend::program::{Class, Program, Region, MAX_COLUMNS};
@@ -47,10 +48,7 @@ pub(in crate::backend::jit) fn build(
     let (mut b, callees, args) = begin(module, ctx, fctx, signature(module), w.imports);
     let [cols, params, block, outs, len] = args[..] else { return Err(NativeError::internal("program signature")) };
 
-    let mut bases = [None; MAX_COLUMNS];
-    for k in frame::program_columns(p)? {
-        bases[k] = Some(b.ins().load(ptr, mem(), cols, (k * 8) as i32));
-    }
+    let bases = column_bases::<MAX_COLUMNS>(&mut b, ptr, cols, frame::program_columns(p)?);
     let out_bases: Vec<Value> = (0..p.outputs.len()).map(|k| b.ins().load(ptr, mem(), outs, (k * 8) as i32)).collect();
     let zero = b.ins().iconst(ptr, 0);
     let mut cx = w.shared(params, block, callees);
