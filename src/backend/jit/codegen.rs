@@ -5,9 +5,10 @@
 //! * scalar: in `F64`;
 //! * batched: the loop in `F64X2` lanes, the remaining element (odd `len`) in `F64`.
 //!
-//! The translator implements the math library's [`Emit`] and the native layer's [`Lower`], so the node
-//! dispatch, the inline builtins and the builtins' code ([`crate::backend::native::lower`]) are emitted in
-//! the translator's lanes; what differs between lane types (splatting, lanes, masks and bit casts, the select
+//! The translator implements the math library's [`Emit`] and the native layer's [`Lower`] and [`Frame`], so
+//! the node dispatch, the inline builtins and the builtins' code ([`crate::backend::native::lower`]) and what
+//! each function computes in which order ([`crate::backend::native::frame`]) are emitted in the translator's
+//! lanes; what differs between lane types (splatting, lanes, masks and bit casts, the select
 //! that becomes `maxpd`/`minpd`) is the [`Lanes`] trait.
 //!
 //! None of them checks anything at run time; the safe wrappers in `native::abi` validate lengths before calling.
@@ -19,7 +20,8 @@
 //! Codegen never sees text from the user: the only names are the builtins table's symbols, and every error
 //! is a [`NativeError`] rather than a panic.
 
-use crate::backend::native::lower::{self, Lower};
+use crate::backend::native::frame::{self, Frame};
+use crate::backend::native::lower::Lower;
 use crate::backend::native::{NativeError, Plan};
 use crate::builtins::dd::Arith;
 use crate::builtins::math::{self, Emit};
@@ -235,6 +237,8 @@ struct Shared<'a> {
     ir: &'a Ir,
     /// The `params` pointer.
     params: Value,
+    /// The prepared block's pointer (written by the prepare function, read by the others).
+    block: Value,
     callees: Callees,
     /// `F64` values of the loop invariants computed before the loop (none in the scalar kernel): the batch
     /// tail uses them directly.
@@ -354,6 +358,19 @@ impl<L: Lanes> Lower for Translator<'_, '_, L> {
     }
     fn take_error(&mut self) -> Option<NativeError> {
         self.error.take()
+    }
+}
+
+/// The prepared block in Cranelift: `F64` loads and stores at `block + 8·k`.
+impl<L: Lanes> Frame for Translator<'_, '_, L> {
+    fn load_block(&mut self, k: usize) -> Result<Value, NativeError> {
+        let v = self.b.ins().load(types::F64, mem(), self.cx.block, (k * 8) as i32);
+        Ok(L::splat(self.b, v))
+    }
+    fn store_block(&mut self, k: usize, v: Value) -> Result<(), NativeError> {
+        let s = L::lane(self.b, v, 0);
+        self.b.ins().store(mem(), s, self.cx.block, (k * 8) as i32);
+        Ok(())
     }
 }
 
@@ -551,15 +568,6 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
     }
 }
 
-/// Node values loaded from the block (`block[k]` for the plan's k-th carried node) as `F64`, indexed by node.
-fn load_carried(plan: &Plan, b: &mut FunctionBuilder, block: Value, len: usize) -> Vec<Option<Value>> {
-    let mut vals = vec![None; len];
-    for (k, id) in plan.carried.iter().enumerate() {
-        vals[id.index()] = Some(b.ins().load(types::F64, mem(), block, (k * 8) as i32));
-    }
-    vals
-}
-
 fn import_callees(
     module: &mut JITModule,
     func: &mut cranelift_codegen::ir::Function,
@@ -611,6 +619,13 @@ pub(super) struct Build<'a> {
     pub outline: bool,
 }
 
+impl Build<'_> {
+    /// What the translators of a function with these `params` and `block` pointers share.
+    fn shared(&self, params: Value, block: Value, callees: Callees) -> Shared<'_> {
+        Shared { ir: self.ir, params, block, callees, invariants: vec![], mode: self.mode, fma: self.fma, outline: self.outline }
+    }
+}
+
 /// A function builder over `ctx` with an entry block holding the function's parameters.
 fn begin<'f>(
     module: &mut JITModule,
@@ -639,15 +654,10 @@ pub(super) fn build_prepare(
 ) -> Result<(), NativeError> {
     let (mut b, callees, args) = begin(module, ctx, fctx, prepare_signature(module), w.imports);
     let [params, block] = args[..] else { return Err(NativeError::internal("prepare signature")) };
-    let cx = Shared { ir: w.ir, params, callees, invariants: vec![], mode: w.mode, fma: w.fma, outline: w.outline };
+    let cx = w.shared(params, block, callees);
     // Invariant nodes read no input: the source is never used.
     let mut t = cx.translator::<F64>(&mut b, vec![None; w.ir.len()], Source::Ptr(params));
-    lower::nodes(&mut t, w.plan.len(), |id| w.plan.in_prepare(id))?;
-    let vals = std::mem::take(&mut t.vals);
-    for (k, id) in w.plan.carried.iter().enumerate() {
-        let v = vals[id.index()].ok_or_else(|| NativeError::Internal(format!("carried t{} not translated", id.0)))?;
-        b.ins().store(mem(), v, block, (k * 8) as i32);
-    }
+    frame::prepare(&mut t, w.plan)?;
     b.ins().return_(&[]);
     b.finalize(module.target_config());
     Ok(())
@@ -662,12 +672,9 @@ pub(super) fn build_scalar(
 ) -> Result<(), NativeError> {
     let (mut b, callees, args) = begin(module, ctx, fctx, scalar_signature(module), w.imports);
     let [x, params, block] = args[..] else { return Err(NativeError::internal("scalar signature")) };
-    let cx = Shared { ir: w.ir, params, callees, invariants: vec![], mode: w.mode, fma: w.fma, outline: w.outline };
-    let vals = load_carried(w.plan, &mut b, block, w.ir.len());
-    let mut t = cx.translator::<F64>(&mut b, vals, Source::Ptr(x));
-    let root = w.plan.root;
-    lower::nodes(&mut t, w.plan.len(), |id| w.plan.in_scalar(id))?;
-    let r = t.value(root)?;
+    let cx = w.shared(params, block, callees);
+    let mut t = cx.translator::<F64>(&mut b, vec![None; w.ir.len()], Source::Ptr(x));
+    let r = frame::scalar(&mut t, w.plan)?;
     b.ins().return_(&[r]);
     b.finalize(module.target_config());
     Ok(())
@@ -694,19 +701,15 @@ pub(super) fn build_batch(
     w: &Build,
 ) -> Result<(), NativeError> {
     let ptr = module.target_config().pointer_type();
-    let (ir, plan, root) = (w.ir, w.plan, w.plan.root);
-    let used = ir.used_inputs(root);
+    let plan = w.plan;
     let (mut b, callees, args) = begin(module, ctx, fctx, batch_signature(module), w.imports);
     let [cols, params, block, out, len] = args[..] else { return Err(NativeError::internal("batch signature")) };
 
     // Entry: column bases, the invariants the loop reads (F64), their splats, the length of the vector part.
-    let mut bases = [None; N_INPUTS];
-    for i in used.iter() {
-        bases[i.index()] = Some(b.ins().load(ptr, mem(), cols, (i.index() * 8) as i32));
-    }
+    let bases = column_bases::<N_INPUTS>(&mut b, ptr, cols, frame::kernel_columns(w.ir, plan));
     let zero = b.ins().iconst(ptr, 0);
-    let mut cx = Shared { ir, params, callees, invariants: vec![], mode: w.mode, fma: w.fma, outline: w.outline };
-    let splats = entry(&mut b, &mut cx, plan, block, Source::Cols { bases, off: zero })?;
+    let mut cx = w.shared(params, block, callees);
+    let splats = entry(&mut b, &mut cx, plan, Source::Cols { bases, off: zero })?;
     // The loop-variant nodes of one step, translated in each lane type over the shared invariants.
     let step = LoopStep { cx: &cx, plan, bases, out };
     batch_loop(&mut b, ptr, len, zero, splats, cx.invariants.clone(), &step, 1)?;
@@ -714,14 +717,25 @@ pub(super) fn build_batch(
     Ok(())
 }
 
+/// The pointers `cols[k]` for the column slots `slots` of a batched function (kernel or program), `None` in the
+/// slots it does not read.
+fn column_bases<const N: usize>(b: &mut FunctionBuilder, ptr: Type, cols: Value, slots: Vec<usize>) -> [Option<Value>; N] {
+    let mut bases = [None; N];
+    for k in slots {
+        if let Some(base) = bases.get_mut(k) {
+            *base = Some(b.ins().load(ptr, mem(), cols, (k * 8) as i32));
+        }
+    }
+    bases
+}
+
 /// The entry of a batched function (kernel or program): the carried nodes loaded from the block and the
 /// plan's entry nodes (invariant constants and parameters) computed in `F64`, kept in `cx.invariants` for the
 /// tail; returned: their splats to [`V`], which the loop reads.
-fn entry(b: &mut FunctionBuilder, cx: &mut Shared, plan: &Plan, block: Value, source: Source) -> Result<Vec<Option<Value>>, NativeError> {
+fn entry(b: &mut FunctionBuilder, cx: &mut Shared, plan: &Plan, source: Source) -> Result<Vec<Option<Value>>, NativeError> {
     let len = cx.ir.len();
-    let vals = load_carried(plan, b, block, len);
-    let mut t = cx.translator::<F64>(b, vals, source);
-    lower::nodes(&mut t, plan.len(), |id| plan.in_entry(id))?;
+    let mut t = cx.translator::<F64>(b, vec![None; len], source);
+    frame::entry(&mut t, plan)?;
     cx.invariants = std::mem::take(&mut t.vals);
     let mut splats = vec![None; len];
     for id in cx.ir.ids().take(plan.len()) {
@@ -844,9 +858,7 @@ impl LoopBody for LoopStep<'_> {
             let off = b.ins().ishl_imm_u(i, 3);
             let source = Source::Cols { bases: self.bases, off };
             let mut t = self.cx.translator::<L>(b, vals, source);
-            let root = self.plan.root;
-            lower::nodes(&mut t, self.plan.len(), |id| self.plan.variant(id))?;
-            let r = t.value(root)?;
+            let r = frame::kernel_step(&mut t, self.plan)?;
             let dst = b.ins().iadd(self.out, off);
             b.ins().store(mem(), r, dst, 0);
         }

@@ -18,14 +18,16 @@
 //! where latency dominates (measured: BENCHMARKS.md).
 //!
 //! A child of `codegen`, so it uses the translator's private parts and its one loop builder as they are. The
-//! program's plan and the order of a step's nodes and regions are the native layer's, shared with the LLVM
-//! tier ([`Plan::of_program`], [`lower::program_step`]).
+//! program's plan, the columns it reads and its step (the nodes in order, each region's nodes between its
+//! branch and its join) are the native layer's, shared with the LLVM tier ([`Plan::of_program`],
+//! [`frame::program_columns`], [`frame::program_step`]); this tier's are the branch, the join and the anchors.
 
 use super::*;
 use crate::backend::program::{Class, Program, Region, MAX_COLUMNS};
-use crate::backend::native::lower::Walk;
+use crate::backend::native::frame::ProgramStep;
+use crate::backend::native::lower;
 use crate::backend::native::plan::calls_math;
-use cranelift_codegen::ir::{StackSlotData, StackSlotKind};
+use cranelift_codegen::ir::{Block, StackSlotData, StackSlotKind};
 
 /// `fn(cols: *const *const f64, params: *const f64, block: *const f64, outs: *const *mut f64, len: usize)`.
 pub(in crate::backend::jit) fn signature(module: &JITModule) -> Signature {
@@ -42,18 +44,15 @@ pub(in crate::backend::jit) fn build(
     p: &Program,
 ) -> Result<(), NativeError> {
     let ptr = module.target_config().pointer_type();
-    let (ir, plan) = (w.ir, w.plan);
+    let plan = w.plan;
     let (mut b, callees, args) = begin(module, ctx, fctx, signature(module), w.imports);
     let [cols, params, block, outs, len] = args[..] else { return Err(NativeError::internal("program signature")) };
 
-    let mut bases = [None; MAX_COLUMNS];
-    for (k, base) in bases.iter_mut().enumerate().take(p.columns.min(MAX_COLUMNS)) {
-        *base = Some(b.ins().load(ptr, mem(), cols, (k * 8) as i32));
-    }
+    let bases = column_bases::<MAX_COLUMNS>(&mut b, ptr, cols, frame::program_columns(p)?);
     let out_bases: Vec<Value> = (0..p.outputs.len()).map(|k| b.ins().load(ptr, mem(), outs, (k * 8) as i32)).collect();
     let zero = b.ins().iconst(ptr, 0);
-    let mut cx = Shared { ir, params, callees, invariants: vec![], mode: w.mode, fma: w.fma, outline: w.outline };
-    let splats = entry(&mut b, &mut cx, plan, block, Source::Data { bases, off: zero })?;
+    let mut cx = w.shared(params, block, callees);
+    let splats = entry(&mut b, &mut cx, plan, Source::Data { bases, off: zero })?;
     let (first, count) = anchors(p);
     let slot = b.create_sized_stack_slot(StackSlotData::new(StackSlotKind::ExplicitSlot, (16 * STEP * count.max(1)) as u32, 4));
     let anchor = b.ins().stack_addr(ptr, slot, 0);
@@ -93,95 +92,92 @@ struct Step<'a> {
 }
 
 impl LoopBody for Step<'_> {
-    fn emit<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Vec<Option<Value>>>, at: &[Value]) -> Result<(), NativeError> {
-        self.emit_copies::<L>(b, vals, at)
-    }
-}
-
-impl Step<'_> {
-    /// Node `id` translated in copy `c` (the copies' tables are swapped in and out of one translator).
-    fn on<L: Lanes>(&self, b: &mut FunctionBuilder, k: &mut Copies, c: usize, id: NodeId) -> Result<Value, NativeError> {
-        let mut t = self.cx.translator::<L>(b, std::mem::take(&mut k.vals[c]), k.src[c]);
-        let v = lower::node(&mut t, id);
-        k.vals[c] = std::mem::take(&mut t.vals);
-        v
-    }
-
     /// The step for the vectors at indices `at` (one copy each, their instructions interleaved node by
-    /// node): the outer nodes in order, each region where the walk reaches its last output, then the stores.
-    fn emit_copies<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Vec<Option<Value>>>, at: &[Value]) -> Result<(), NativeError> {
+    /// node): the native layer's [`frame::program_step`] over the copies, then the stores.
+    fn emit<L: Lanes>(&self, b: &mut FunctionBuilder, vals: Vec<Vec<Option<Value>>>, at: &[Value]) -> Result<(), NativeError> {
         let offs: Vec<Value> = at.iter().map(|i| b.ins().ishl_imm_u(*i, 3)).collect();
-        let mut k = Copies { vals, src: offs.iter().map(|&off| Source::Data { bases: self.bases, off }).collect() };
-        for w in lower::program_step(self.p) {
-            match w {
-                Walk::Outer(id) => (0..at.len()).try_for_each(|c| self.on::<L>(b, &mut k, c, id).map(drop))?,
-                Walk::Region(r, region) => self.region::<L>(b, &mut k, region, &self.first[r])?,
-            }
-        }
+        let src = offs.iter().map(|&off| Source::Data { bases: self.bases, off }).collect();
+        let mut k = Copies::<L> { step: self, b, vals, src, lanes: PhantomData };
+        frame::program_step(&mut k, self.p)?;
         for (c, off) in offs.iter().enumerate() {
             for (o, base) in self.p.outputs.iter().zip(self.outs) {
                 let v = arg(&k.vals[c], *o)?;
-                let dst = b.ins().iadd(*base, *off);
-                b.ins().store(mem(), v, dst, 0);
+                let dst = k.b.ins().iadd(*base, *off);
+                k.b.ins().store(mem(), v, dst, 0);
             }
         }
         Ok(())
     }
+}
 
-    /// `any(lit ≠ 0 in some copy) ? region's outputs : +0`, the region's nodes (every copy's, interleaved) in a
-    /// block of their own; first the outer values it is the first to read are stored to the anchor slot
-    /// ([`anchors`]). A copy with no lit lane may run the region too: its outputs are then the selects' +0.
-    fn region<L: Lanes>(&self, b: &mut FunctionBuilder, k: &mut Copies, r: &Region, first: &[(NodeId, i32)]) -> Result<(), NativeError> {
-        let copies = k.vals.len();
-        for (c, vals) in k.vals.iter().enumerate() {
+/// The copies of one step in lane type `L`: their translation tables and column sources (swapped in and out
+/// of one translator per node), and the builder.
+struct Copies<'s, 'a, 'f, L> {
+    step: &'s Step<'a>,
+    b: &'s mut FunctionBuilder<'f>,
+    vals: Vec<Vec<Option<Value>>>,
+    src: Vec<Source>,
+    lanes: PhantomData<L>,
+}
+
+/// A region of the copies: `any(lit ≠ 0 in some copy) ? region's outputs : +0`, every copy's nodes
+/// (interleaved) in a block of their own; first the outer values it is the first to read are stored to the
+/// anchor slot ([`anchors`]). A copy with no lit lane may run the region too: its outputs are then the
+/// selects' +0. The join's block parameters carry the outputs.
+impl<L: Lanes> ProgramStep for Copies<'_, '_, '_, L> {
+    /// The tables from before the region, the join and its parameters.
+    type Open = (Vec<Vec<Option<Value>>>, Block, Vec<Value>);
+    fn node(&mut self, id: NodeId) -> Result<(), NativeError> {
+        for c in 0..self.vals.len() {
+            let mut t = self.step.cx.translator::<L>(self.b, std::mem::take(&mut self.vals[c]), self.src[c]);
+            let v = lower::node(&mut t, id);
+            self.vals[c] = std::mem::take(&mut t.vals);
+            v?;
+        }
+        Ok(())
+    }
+    fn open(&mut self, r: usize, region: &Region) -> Result<Self::Open, NativeError> {
+        let (s, b) = (self.step, &mut *self.b);
+        let first = s.first.get(r).ok_or(NativeError::internal("a region without its anchors"))?;
+        for (c, vals) in self.vals.iter().enumerate() {
             for &(a, off) in first {
-                b.ins().store(mem(), arg(vals, a)?, self.anchor, off + c as i32 * self.stride);
+                b.ins().store(mem(), arg(vals, a)?, s.anchor, off + c as i32 * s.stride);
             }
         }
         let z = L::konst(b, 0);
         let mut any_mask = None;
-        for vals in &k.vals {
-            let m = b.ins().fcmp(FloatCC::NotEqual, arg(vals, r.lit)?, z);
+        for vals in &self.vals {
+            let m = b.ins().fcmp(FloatCC::NotEqual, arg(vals, region.lit)?, z);
             any_mask = Some(any_mask.map_or(m, |a| b.ins().bor(a, m)));
         }
         let any = L::any(b, any_mask.ok_or(NativeError::internal("a step of no vectors"))?);
         let inside = b.create_block();
         let join = b.create_block();
-        let params: Vec<Value> = (0..copies * r.outputs.len()).map(|_| b.append_block_param(join, L::TY)).collect();
+        let params: Vec<Value> = (0..self.vals.len() * region.outputs.len()).map(|_| b.append_block_param(join, L::TY)).collect();
         let zeros: Vec<BlockArg> = params.iter().map(|_| BlockArg::Value(z)).collect();
         b.ins().brif(any, inside, &[], join, &zeros);
         b.switch_to_block(inside);
         b.seal_block(inside);
-        // The region's values live only in its block.
-        let saved = k.vals.clone();
-        for id in &r.nodes {
-            for c in 0..copies {
-                self.on::<L>(b, k, c, *id)?;
-            }
-        }
+        Ok((self.vals.clone(), join, params))
+    }
+    fn close(&mut self, region: &Region, (saved, join, params): Self::Open) -> Result<(), NativeError> {
         let mut outs = vec![];
-        for vals in &k.vals {
-            for o in &r.outputs {
+        for vals in &self.vals {
+            for o in &region.outputs {
                 outs.push(BlockArg::Value(arg(vals, *o)?));
             }
         }
-        b.ins().jump(join, &outs);
-        k.vals = saved;
-        b.switch_to_block(join);
-        b.seal_block(join);
-        for (c, vals) in k.vals.iter_mut().enumerate() {
-            for (j, o) in r.outputs.iter().enumerate() {
-                vals[o.index()] = Some(params[c * r.outputs.len() + j]);
+        self.b.ins().jump(join, &outs);
+        self.vals = saved;
+        self.b.switch_to_block(join);
+        self.b.seal_block(join);
+        for (c, vals) in self.vals.iter_mut().enumerate() {
+            for (j, o) in region.outputs.iter().enumerate() {
+                vals[o.index()] = Some(params[c * region.outputs.len() + j]);
             }
         }
         Ok(())
     }
-}
-
-/// The per-copy translation tables and column sources of one step.
-struct Copies {
-    vals: Vec<Vec<Option<Value>>>,
-    src: Vec<Source>,
 }
 
 /// The value of an already translated node in one copy's table.

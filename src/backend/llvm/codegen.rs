@@ -21,13 +21,14 @@
 //! function, once per lane, through its address as a constant. Errors are collected (the first one, as a
 //! [`NativeError`]), never panicked on.
 
-use crate::backend::native::lower::{self, Lower, Walk};
+use crate::backend::native::frame::{self, Frame, ProgramStep};
+use crate::backend::native::lower::{self, Lower};
 use crate::backend::native::{NativeError, Plan};
 use crate::backend::program::{Program, Region, MAX_COLUMNS};
 use crate::builtins::dd::Arith;
 use crate::builtins::math::{self, Emit};
 use crate::builtins::{Builtin, Libm, Mode};
-use crate::ir::{Input, Ir, Node, N_INPUTS};
+use crate::ir::{Input, Ir, NodeId, N_INPUTS};
 use inkwell::attributes::AttributeLoc;
 use inkwell::basic_block::BasicBlock;
 use inkwell::builder::{Builder, BuilderError};
@@ -74,6 +75,8 @@ struct Gen<'a, 'ctx> {
     ity: VectorType<'ctx>,
     mty: VectorType<'ctx>,
     params: PointerValue<'ctx>,
+    /// The prepared block (written by the prepare function, read by the others).
+    block: PointerValue<'ctx>,
     /// The value of each translated node.
     vals: Vec<Option<VectorValue<'ctx>>>,
     /// The loop step's input vectors.
@@ -85,7 +88,7 @@ struct Gen<'a, 'ctx> {
 }
 
 impl<'a, 'ctx> Gen<'a, 'ctx> {
-    fn new(u: &'a Unit<'a, 'ctx>, func: FunctionValue<'ctx>, w: u32, params: PointerValue<'ctx>) -> Self {
+    fn new(u: &'a Unit<'a, 'ctx>, func: FunctionValue<'ctx>, w: u32, params: PointerValue<'ctx>, block: PointerValue<'ctx>) -> Self {
         Gen {
             u,
             b: u.cx.create_builder(),
@@ -95,6 +98,7 @@ impl<'a, 'ctx> Gen<'a, 'ctx> {
             ity: u.cx.i64_type().vec_type(w),
             mty: u.cx.bool_type().vec_type(w),
             params,
+            block,
             vals: vec![None; u.ir.len()],
             inputs: [None; N_INPUTS],
             columns: vec![None; MAX_COLUMNS],
@@ -429,6 +433,64 @@ impl<'ctx> Lower for Gen<'_, 'ctx> {
     }
 }
 
+/// The prepared block in LLVM: one double at `block + 8·k`, splatted when loaded.
+impl<'ctx> Frame for Gen<'_, 'ctx> {
+    fn load_block(&mut self, k: usize) -> Result<VectorValue<'ctx>, NativeError> {
+        let s = self.load_f64(self.block, k as u64);
+        Ok(self.splat(s, self.fty))
+    }
+    fn store_block(&mut self, k: usize, v: VectorValue<'ctx>) -> Result<(), NativeError> {
+        let s = self.b.build_extract_element(v, self.i32c(0), "");
+        let s = self.scalar(s, self.u.cx.f64_type().get_poison().into());
+        let p = self.offset(self.block, self.i64c(8 * k as u64));
+        let st = self.b.build_store(p, s);
+        self.done(st);
+        Ok(())
+    }
+}
+
+/// A program's region in LLVM: a conditional branch into the region's block, and a phi per output at the
+/// join (+0 from the skipping edge).
+impl<'ctx> ProgramStep for Gen<'_, 'ctx> {
+    /// The tables from before the region, the block that branched, the join, the +0.
+    type Open = (Vec<Option<VectorValue<'ctx>>>, BasicBlock<'ctx>, BasicBlock<'ctx>, VectorValue<'ctx>);
+    fn node(&mut self, id: NodeId) -> Result<(), NativeError> {
+        lower::node(self, id).map(drop)
+    }
+    fn open(&mut self, _: usize, r: &Region) -> Result<Self::Open, NativeError> {
+        let lit = self.value(r.lit)?;
+        let zero = self.fconst(0);
+        let m = self.b.build_float_compare(FloatPredicate::UNE, lit, zero, "");
+        let m = self.m(m);
+        let any = self.any(m);
+        let from = self.current();
+        let inside = self.block("region");
+        let join = self.block("join");
+        let br = self.b.build_conditional_branch(any, inside, join);
+        self.done(br);
+        self.b.position_at_end(inside);
+        Ok((self.vals.clone(), from, join, zero))
+    }
+    fn close(&mut self, r: &Region, (saved, from, join, zero): Self::Open) -> Result<(), NativeError> {
+        let outs = r.outputs.iter().map(|o| self.value(*o)).collect::<Result<Vec<VectorValue>, _>>()?;
+        let end = self.current();
+        let br = self.b.build_unconditional_branch(join);
+        self.done(br);
+        self.vals = saved;
+        self.b.position_at_end(join);
+        for (o, v) in r.outputs.iter().zip(outs) {
+            match self.b.build_phi(self.fty, "") {
+                Ok(phi) => {
+                    phi.add_incoming(&[(&zero, from), (&v, end)]);
+                    self.vals[o.index()] = Some(self.vec_of(Ok(phi.as_basic_value()), self.fty));
+                }
+                Err(e) => self.fail(e),
+            }
+        }
+        Ok(())
+    }
+}
+
 /// The address of a library function.
 fn libm_addr(l: Libm) -> usize {
     match l {
@@ -685,39 +747,28 @@ fn param(f: FunctionValue<'_>, k: u32) -> Result<PointerValue<'_>, NativeError> 
 /// `lobe_prepare`: every carried node computed (one lane) and stored to the block.
 pub(super) fn build_prepare(u: &Unit) -> Result<(), NativeError> {
     let f = declare(u, PREPARE, 2, false);
-    let (params, block) = (param(f, 0)?, param(f, 1)?);
-    let mut g = Gen::new(u, f, 1, params);
+    let mut g = Gen::new(u, f, 1, param(f, 0)?, param(f, 1)?);
     let entry = g.block("entry");
     g.b.position_at_end(entry);
-    lower::nodes(&mut g, u.plan.len(), |id| u.plan.in_prepare(id))?;
-    for (k, id) in u.plan.carried.iter().enumerate() {
-        let v = g.value(*id)?;
-        let s = g.b.build_extract_element(v, g.i32c(0), "");
-        let s = g.scalar(s, u.cx.f64_type().get_poison().into());
-        let p = g.offset(block, g.i64c(8 * k as u64));
-        let st = g.b.build_store(p, s);
-        g.done(st);
-    }
+    frame::prepare(&mut g, u.plan)?;
     let r = g.b.build_return(None);
     g.done(r);
     g.error.map_or(Ok(()), Err)
 }
 
-/// `lobe_scalar(x, params, block) -> f64` in one lane: the carried nodes loaded from the block, the inputs
-/// from `x`, then what the plan computes per call.
+/// `lobe_scalar(x, params, block) -> f64` in one lane: the inputs loaded from `x`, then the native layer's
+/// scalar body ([`frame::scalar`]).
 pub(super) fn build_scalar(u: &Unit) -> Result<(), NativeError> {
     let f = declare(u, SCALAR, 3, false);
-    let (x, block) = (param(f, 0)?, param(f, 2)?);
-    let mut g = Gen::new(u, f, 1, param(f, 1)?);
+    let x = param(f, 0)?;
+    let mut g = Gen::new(u, f, 1, param(f, 1)?, param(f, 2)?);
     let entry = g.block("entry");
     g.b.position_at_end(entry);
-    load_carried(&mut g, block);
-    for i in u.ir.used_inputs(u.plan.root).iter() {
-        let s = g.load_f64(x, i.index() as u64);
-        g.inputs[i.index()] = Some(g.splat(s, g.fty));
+    for k in frame::kernel_columns(u.ir, u.plan) {
+        let s = g.load_f64(x, k as u64);
+        g.inputs[k] = Some(g.splat(s, g.fty));
     }
-    lower::nodes(&mut g, u.plan.len(), |id| u.plan.in_scalar(id))?;
-    let r = g.value(u.plan.root)?;
+    let r = frame::scalar(&mut g, u.plan)?;
     let s = g.b.build_extract_element(r, g.i32c(0), "");
     let s = g.scalar(s, u.cx.f64_type().get_poison().into());
     let ret = g.b.build_return(Some(&s));
@@ -725,71 +776,40 @@ pub(super) fn build_scalar(u: &Unit) -> Result<(), NativeError> {
     g.error.map_or(Ok(()), Err)
 }
 
-/// The carried nodes loaded from the block, splatted to `g`'s lanes.
-fn load_carried<'ctx>(g: &mut Gen<'_, 'ctx>, block: PointerValue<'ctx>) {
-    for (k, id) in g.u.plan.carried.iter().enumerate() {
-        let s = g.load_f64(block, k as u64);
-        g.vals[id.index()] = Some(g.splat(s, g.fty));
-    }
-}
-
 /// `lobe_batch(cols, params, block, out: *mut f64, len)` in `w` lanes: the formula's inputs read from `cols`,
 /// its root stored to `out`, in [`batch_loop`]'s loop.
 pub(super) fn build_batch(u: &Unit, w: u32) -> Result<(), NativeError> {
     let f = declare(u, BATCH, 4, true);
     let (cols, out) = (param(f, 0)?, param(f, 3)?);
-    let mut g = Gen::new(u, f, w, param(f, 1)?);
+    let mut g = Gen::new(u, f, w, param(f, 1)?, param(f, 2)?);
     let entry = g.block("entry");
     g.b.position_at_end(entry);
-    let mut bases = vec![];
-    for i in u.ir.used_inputs(u.plan.root).iter() {
-        bases.push((i.index(), load_ptr(&mut g, cols, i.index())?));
-    }
-    batch_loop(&mut g, f, param(f, 2)?, &bases, &[out], |g, loaded| {
+    let bases = frame::kernel_columns(u.ir, u.plan).into_iter().map(|k| Ok((k, load_ptr(&mut g, cols, k)?))).collect::<Result<Vec<_>, NativeError>>()?;
+    batch_loop(&mut g, f, &bases, &[out], |g, loaded| {
         for (k, v) in loaded {
             g.inputs[*k] = Some(*v);
         }
-        lower::nodes(g, u.plan.len(), |id| u.plan.variant(id))?;
-        Ok(vec![g.value(u.plan.root)?])
+        Ok(vec![frame::kernel_step(g, u.plan)?])
     })
 }
 
 /// `lobe_program(cols: *const *const f64, params, block, outs: *const *mut f64, len)` in `w` lanes: a
 /// multi-output program ([`crate::backend::program`]) in [`batch_loop`]'s loop, reading its data columns
-/// from `cols` and storing every output to `outs[o]`. The step translates the outer nodes in order and, at
-/// each region's last output, the region: `any(lit ≠ 0) ? region : join`, its outputs joined by phis (+0 from
-/// the skipping edge). The region's nodes are translated in its own block, and their values are forgotten
-/// after it (only its outputs, through the phis, reach what follows), as the Cranelift tier does.
+/// from `cols` and storing every output to `outs[o]`. The step is the native layer's
+/// ([`frame::program_step`]), its regions this tier's branch and phis ([`ProgramStep`] for [`Gen`]).
 pub(super) fn build_program(u: &Unit, w: u32, p: &Program) -> Result<(), NativeError> {
     let f = declare(u, PROGRAM, 4, true);
     let (cols, outs) = (param(f, 0)?, param(f, 3)?);
-    let mut g = Gen::new(u, f, w, param(f, 1)?);
+    let mut g = Gen::new(u, f, w, param(f, 1)?, param(f, 2)?);
     let entry = g.block("entry");
     g.b.position_at_end(entry);
-    let mut read = [false; MAX_COLUMNS];
-    for n in p.ir.nodes() {
-        if let Node::Column(k) = n {
-            match read.get_mut(usize::from(*k)) {
-                Some(r) => *r = true,
-                None => return Err(NativeError::Internal(format!("data column {k} beyond the {MAX_COLUMNS} a program may read"))),
-            }
-        }
-    }
-    let mut bases = vec![];
-    for (k, _) in read.iter().enumerate().filter(|(_, r)| **r) {
-        bases.push((k, load_ptr(&mut g, cols, k)?));
-    }
+    let bases = frame::program_columns(p)?.into_iter().map(|k| Ok((k, load_ptr(&mut g, cols, k)?))).collect::<Result<Vec<_>, NativeError>>()?;
     let out_bases = (0..p.outputs.len()).map(|o| load_ptr(&mut g, outs, o)).collect::<Result<Vec<_>, _>>()?;
-    batch_loop(&mut g, f, param(f, 2)?, &bases, &out_bases, |g, loaded| {
+    batch_loop(&mut g, f, &bases, &out_bases, |g, loaded| {
         for (k, v) in loaded {
             g.columns[*k] = Some(*v);
         }
-        for w in lower::program_step(p) {
-            match w {
-                Walk::Outer(id) => lower::node(g, id).map(drop)?,
-                Walk::Region(_, r) => region(g, r)?,
-            }
-        }
+        frame::program_step(g, p)?;
         p.outputs.iter().map(|o| g.value(*o)).collect()
     })
 }
@@ -811,7 +831,6 @@ pub(super) fn build_program(u: &Unit, w: u32, p: &Program) -> Result<(), NativeE
 fn batch_loop<'ctx>(
     g: &mut Gen<'_, 'ctx>,
     f: FunctionValue<'ctx>,
-    block: PointerValue<'ctx>,
     cols: &[(usize, PointerValue<'ctx>)],
     outs: &[PointerValue<'ctx>],
     step: impl FnOnce(&mut Gen<'_, 'ctx>, &[(usize, VectorValue<'ctx>)]) -> Result<Vec<VectorValue<'ctx>>, NativeError>,
@@ -823,8 +842,7 @@ fn batch_loop<'ctx>(
     };
     let ptr = u.cx.ptr_type(Default::default());
     let i64t = u.cx.i64_type();
-    load_carried(g, block);
-    lower::nodes(g, u.plan.len(), |id| u.plan.in_entry(id))?;
+    frame::entry(g, u.plan)?;
 
     let (head, load, load_part, body, store, store_part, latch, exit) =
         (g.block("loop"), g.block("load"), g.block("load_part"), g.block("step"), g.block("store"), g.block("store_part"), g.block("latch"), g.block("exit"));
@@ -930,40 +948,4 @@ fn load_ptr<'ctx>(g: &mut Gen<'_, 'ctx>, base: PointerValue<'ctx>, k: usize) -> 
         Ok(BasicValueEnum::PointerValue(p)) => Ok(p),
         _ => Err(NativeError::internal("pointer load")),
     }
-}
-
-/// One guarded region: `any(lit ≠ 0) ? its nodes : +0` for its outputs (see [`build_program`]).
-fn region(g: &mut Gen<'_, '_>, r: &Region) -> Result<(), NativeError> {
-    let lit = g.value(r.lit)?;
-    let zero = g.fconst(0);
-    // Not equal or unordered: a NaN lit runs the region, as the interpreter's `lit != 0`.
-    let m = g.b.build_float_compare(FloatPredicate::UNE, lit, zero, "");
-    let m = g.m(m);
-    let any = g.any(m);
-    let from = g.current();
-    let inside = g.block("region");
-    let join = g.block("join");
-    let br = g.b.build_conditional_branch(any, inside, join);
-    g.done(br);
-    g.b.position_at_end(inside);
-    let saved = g.vals.clone();
-    for id in &r.nodes {
-        lower::node(g, *id)?;
-    }
-    let outs = r.outputs.iter().map(|o| g.value(*o)).collect::<Result<Vec<VectorValue>, _>>()?;
-    let end = g.current();
-    let br = g.b.build_unconditional_branch(join);
-    g.done(br);
-    g.vals = saved;
-    g.b.position_at_end(join);
-    for (o, v) in r.outputs.iter().zip(outs) {
-        match g.b.build_phi(g.fty, "") {
-            Ok(phi) => {
-                phi.add_incoming(&[(&zero, from), (&v, end)]);
-                g.vals[o.index()] = Some(g.vec_of(Ok(phi.as_basic_value()), g.fty));
-            }
-            Err(e) => g.fail(e),
-        }
-    }
-    Ok(())
 }
