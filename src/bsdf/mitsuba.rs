@@ -12,7 +12,11 @@
 //!
 //! Conventions: Mitsuba's `si.wi` is the formula's L and the plugin's `wo` its V (the sampler's wi and wo; the
 //! same thing for a reciprocal formula); directions in the local frame (N = +z). `eval` returns f·cosθₒ as
-//! Mitsuba's BSDFs do; below either horizon eval and pdf are 0 and a sample has weight 0. Every parameter is
+//! Mitsuba's BSDFs do; below either horizon eval and pdf are 0 and a sample has weight 0. The plugin's `pdf` and
+//! `sample` follow Mitsuba's convention that a sample of weight 0 is invalid and pdf counts only valid samples:
+//! where every channel's weight f·cosθₒ/pdf is below the smallest normal f32 (the formula is 0 there, or below
+//! the horizon) `sample` returns weight 0 and pdf 0 and `pdf` returns 0; elsewhere both report lobe's pdf, so
+//! Mitsuba's stock `mi.chi2.BSDFAdapter` tests the plugin as it is. Every parameter is
 //! baked (the tables are built at fixed values): the module has no live parameters.
 
 use super::{Body, Mechanism, Sampler, COLS, EXACT_CELLS, ROWS};
@@ -107,12 +111,14 @@ pub fn module(plain: &Formula, sampler: &Sampler, params: &[(String, f64)]) -> R
     let mut cells: Vec<f64> = vec![];
     let (mut thetas, mut empty, mut nphi, mut iso) = (vec![0.0, 1.0], vec![], 1, r.isotropic);
     let (mut lobe, mut theta_max) = ("None".to_string(), 0.0);
+    let (mut bands, mut measure): (&[f64], &[f64]) = (&[], &[]);
     match &sampler.body {
         Body::Cosine => {}
         Body::Tabulated(t) => {
             thetas = t.thetas.clone();
             nphi = t.phis;
             iso = t.isotropic;
+            (bands, measure) = (&t.bands, &t.row_measure);
             for n in &t.nodes {
                 match n {
                     Some(d) => {
@@ -129,6 +135,7 @@ pub fn module(plain: &Formula, sampler: &Sampler, params: &[(String, f64)]) -> R
         Body::Exact(e) => {
             lobe = format!("'{}'", if e.lobe == Input::VR { "VR" } else { "NH" });
             theta_max = e.theta_max;
+            (bands, measure) = (&e.bands, &e.measure);
             cells.extend_from_slice(e.dist.densities());
         }
     }
@@ -139,6 +146,8 @@ pub fn module(plain: &Formula, sampler: &Sampler, params: &[(String, f64)]) -> R
     let _ = writeln!(o, "_EMPTY = {:?}", empty);
     let _ = writeln!(o, "_EXACT_LOBE = {lobe}");
     let _ = writeln!(o, "_EXACT_THETA_MAX = {}", drjit::literal(theta_max));
+    let _ = writeln!(o, "_BANDS = {}", list(bands.iter().copied()));
+    let _ = writeln!(o, "_MEASURE = {}", list(measure.iter().copied()));
     let bytes: Vec<u8> = cells.iter().flat_map(|v| v.to_le_bytes()).collect();
     let b64 = base64(&bytes);
     if b64.is_empty() {

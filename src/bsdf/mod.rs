@@ -11,15 +11,18 @@
 //! - **Tabulated** (any formula): the half-vector parameterisation. For `wi` and a half vector h with
 //!   θₕ = (π/2)·x₁² (Dupuy and Jakob's warp, as Mitsuba's `measured` plugin) and φₕ = 2π·x₂ (+ wi's azimuth for an
 //!   isotropic formula), wo = 2(wi·h)h − wi; the map h ↔ wo is a bijection (h = ±norm(wi + wo), the sign making
-//!   h.z ≥ 0) with dωₒ = 4|wi·h| dωₕ and dωₕ = sinθₕ·πx₁·2π dx₁dx₂. Per incidence node a [`ROWS`] × [`COLS`]
-//!   table over (x₁, x₂) holds, per cell, the maximum over a 3 × 3 sub-grid (corners and centre, shared between
-//!   neighbours) of g = lum(f)·max(cosθₒ, 0)·|dωₒ/dx| — pbrt-v4's `FromFuncLInfinity` rule, so a cell is never 0
-//!   where g > 0 at one of its points — sampled by a marginal and conditional inverse CDF. Every catalogue lobe
-//!   peaks at h = N, which the x₁² warp resolves.
-//! - **Exact** (a formula whose only input is NH, or only VR — one cosine, nothing else): a 1-D table of
-//!   lum(f(cos θ))·sinθ over θ ∈ [0, θmax] (θmax = π for VR, π/2 for NH) in [`EXACT_CELLS`] cells, each cell the
-//!   maximum at its ends and middle: the CDF is piecewise linear in θ and the density piecewise constant, inverted
-//!   by binary search. φ is uniform about the lobe axis: R, the mirror of wi, for VR; N for NH, whose sampled h
+//!   h.z ≥ 0) with dωₒ = 4|wi·h| dωₕ. Per incidence node a [`ROWS`] × [`COLS`] table over (x₁, x₂) holds, per
+//!   cell, its solid angle in ωₕ times the maximum over a 3 × 3 sub-grid (corners and centre, shared between
+//!   neighbours) of g = lum(f)·max(cosθₒ, 0)·4|wi·h| — pbrt-v4's `FromFuncLInfinity` rule, so a cell is never 0
+//!   where g > 0 at one of its points — sampled by a marginal and conditional inverse CDF. Within the chosen
+//!   cell, φₕ is uniform and θₕ uniform in sin²(θₕ/2) (uniform in solid angle), so the density in ωₕ is constant
+//!   over each cell: the pdf is bounded everywhere, the mirror direction (h = N, the warp's pole) included.
+//!   Every catalogue lobe peaks at h = N, which the x₁² warp resolves with small cells.
+//! - **Exact** (a formula whose only input is NH, or only VR — one cosine, nothing else): a 1-D table over
+//!   θ ∈ [0, θmax] (θmax = π for VR, π/2 for NH) in [`EXACT_CELLS`] cells, each cell its solid angle about the
+//!   axis times the maximum of lum(f(cos θ)) at its ends and middle, inverted by binary search; within a cell θ is
+//!   uniform in sin²(θ/2), so the density in solid angle is constant over each cell and bounded on the axis.
+//!   φ is uniform about the lobe axis: R, the mirror of wi, for VR; N for NH, whose sampled h
 //!   gives wo = 2(wi·h)h − wi with the Jacobian 1/(4 wo·h).
 //! - **Cosine**: cosθₒ/π, for formulas neither of the above beats (and for a formula that is 0 everywhere).
 //!
@@ -318,23 +321,51 @@ fn azimuth_of(wi: V3) -> Turn {
     }
 }
 
-/// The half vector of table coordinates (x₁, x₂), its azimuth φₕ = 2πx₂ measured in the frame turned by `turn`,
-/// and dωₕ/dx.
+/// The half vector at polar angle θₕ and azimuth φₕ = 2πx₂ measured in the frame turned by `turn`.
 #[inline]
-fn half_from(x1: f64, x2: f64, turn: Turn) -> (V3, f64) {
-    let th = FRAC_PI_2 * x1 * x1;
+fn half_at(th: f64, x2: f64, turn: Turn) -> V3 {
     let (st, ct) = th.sin_cos();
     let (sp, cp) = (2.0 * PI * x2).sin_cos();
     let (c, s) = turn;
-    ([st * (cp * c - sp * s), st * (sp * c + cp * s), ct], st * PI * x1 * 2.0 * PI)
+    [st * (cp * c - sp * s), st * (sp * c + cp * s), ct]
+}
+
+/// The half vector of table coordinates (x₁, x₂) (θₕ = (π/2)·x₁²) in the frame turned by `turn`.
+#[inline]
+fn half_from(x1: f64, x2: f64, turn: Turn) -> V3 {
+    half_at(FRAC_PI_2 * x1 * x1, x2, turn)
+}
+
+/// sin²(θ/2) = (1 − cosθ)/2 at the edges `theta(0)`, …, `theta(n)` of n bands in θ: the solid angle of the band
+/// between edges a and b about an axis is 4π·(s_b − s_a), and s is uniform in solid angle. Computed without
+/// the cancellation of 1 − cosθ near the axis.
+fn band_edges(n: usize, theta: impl Fn(usize) -> f64) -> Vec<f64> {
+    (0..=n)
+        .map(|a| {
+            let h = (0.5 * theta(a)).sin();
+            h * h
+        })
+        .collect()
+}
+
+/// The polar angle of s = sin²(θ/2) ([`band_edges`]).
+#[inline]
+fn theta_of_band(s: f64) -> f64 {
+    2.0 * s.max(0.0).sqrt().atan2((1.0 - s).max(0.0).sqrt())
+}
+
+/// The θ edges of the tabulated mechanism's rows: θₕ = (π/2)·(i/[`ROWS`])².
+fn row_theta(i: usize) -> f64 {
+    let x = i as f64 / ROWS as f64;
+    FRAC_PI_2 * x * x
 }
 
 /// Table coordinates of the half vector of (wi, wo) (azimuth in the frame turned by `turn`): x₁, the column of
-/// x₂ among [`COLS`], and |dωₒ/dx| = 4|wi·h|·dωₕ/dx; `None` when wo = −wi (no half vector).
+/// x₂ among [`COLS`], and dωₒ/dωₕ = 4|wi·h|; `None` when wo = −wi (no half vector).
 ///
 /// θₕ comes from atan2 of the unnormalised sum s = wi + wo (turned into the table's frame, sign chosen so
-/// h.z ≥ 0): atan2 is scale-free, and the Jacobian's sinθₕ·|wi·h| is |s_xy|·|wi·s|/|s|², so no square root of |s|²
-/// is taken. θₕ by atan2, not acos, which loses digits near the normal where the lobes are. The density is
+/// h.z ≥ 0): atan2 is scale-free. θₕ by atan2, not acos, which loses digits near the normal where the lobes
+/// are. The density is
 /// constant over a column, so φₕ is never computed: its column is counted from the quadrant and seven
 /// comparisons against the column edges ([`column_of`]).
 #[inline]
@@ -350,7 +381,7 @@ fn table_coords(wi: V3, wo: V3, turn: Turn) -> Option<(f64, usize, f64)> {
     let sxy = (hx * hx + hy * hy).sqrt();
     let th = sxy.atan2(s[2].abs());
     let x1 = (th / FRAC_PI_2).sqrt();
-    let jac = sxy * dot(wi, s).abs() / len2 * PI * x1 * 2.0 * PI * 4.0;
+    let jac = 4.0 * dot(wi, s).abs() / len2.sqrt();
     Some((x1, column_of(hx, hy), jac))
 }
 
@@ -413,6 +444,11 @@ struct Tabulated {
     phis: usize,
     /// Node (θ index t, φ index p) at t·phis + p; `None`: an empty table.
     nodes: Vec<Option<Dist2D>>,
+    /// sin²(θₕ/2) at the row edges ([`band_edges`]): within a cell, θₕ is drawn uniform in this (uniform in
+    /// solid angle), so the density in ωₕ is constant over each cell and bounded.
+    bands: Vec<f64>,
+    /// [`ROWS`]·4π·(bands\[i + 1\] − bands\[i\]): a cell density (∫∫ over x = 1) over this is the density in ωₕ.
+    row_measure: Vec<f64>,
 }
 
 /// What a tabulated sampler needs of one wi, computed once per wi: the nodes it mixes with their weights, and the
@@ -466,8 +502,9 @@ impl Tabulated {
         match &self.nodes[k] {
             None => cosine_sample(u, u2),
             Some(d) => {
-                let (x1, x2) = d.sample(u, u2);
-                let (h, _) = half_from(x1, x2, at.turn);
+                let (i, f1, j, f2) = d.sample_cell(u, u2);
+                let s = self.bands[i] + f1 * (self.bands[i + 1] - self.bands[i]);
+                let h = half_at(theta_of_band(s), (j as f64 + f2) / COLS as f64, at.turn);
                 reflect(wi, h)
             }
         }
@@ -481,7 +518,10 @@ impl Tabulated {
             if w > 0.0 {
                 p += w * match (&self.nodes[k], tc) {
                     (None, _) => cos_pdf,
-                    (Some(d), Some((x1, col, jac))) if jac > 0.0 => d.pdf_cell(x1, col) / jac,
+                    (Some(d), Some((x1, col, jac))) if jac > 0.0 => {
+                        let row = ((x1 * ROWS as f64) as usize).min(ROWS - 1);
+                        d.pdf_cell(x1, col) / (self.row_measure[row] * jac)
+                    }
                     _ => 0.0,
                 };
             }
@@ -499,6 +539,12 @@ struct Exact {
     lobe: Input,
     theta_max: f64,
     dist: Dist1D,
+    /// sin²(θ/2) at the cell edges ([`band_edges`]): within a cell θ is drawn uniform in this (uniform in solid
+    /// angle about the axis), so the density in solid angle is constant over each cell and bounded.
+    bands: Vec<f64>,
+    /// [`EXACT_CELLS`]·4π·(bands\[i + 1\] − bands\[i\]): a cell density (∫ over θ/θmax = 1) over this is the
+    /// density in solid angle about the axis.
+    measure: Vec<f64>,
 }
 
 /// An orthonormal basis with `n` its third axis (Duff et al. 2017).
@@ -520,8 +566,9 @@ impl Exact {
     }
 
     fn sample(&self, wi: V3, u1: f64, u2: f64) -> V3 {
-        let (v, _) = self.dist.sample(u1);
-        let d = dir(self.theta_max * v, 2.0 * PI * u2);
+        let (i, f) = self.dist.sample_cell(u1);
+        let s = self.bands[i] + f * (self.bands[i + 1] - self.bands[i]);
+        let d = dir(theta_of_band(s), 2.0 * PI * u2);
         if self.lobe == Input::NH {
             return reflect(wi, d);
         }
@@ -546,12 +593,16 @@ impl Exact {
         };
         let x = [d[1] * a[2] - d[2] * a[1], d[2] * a[0] - d[0] * a[2], d[0] * a[1] - d[1] * a[0]];
         let th = dot(x, x).sqrt().atan2(dot(d, a));
-        let s = th.sin();
-        let den = self.theta_max * s * 2.0 * PI * jac;
+        let v = th / self.theta_max;
+        if !(0.0..1.0).contains(&v) {
+            return 0.0;
+        }
+        let i = ((v * EXACT_CELLS as f64) as usize).min(EXACT_CELLS - 1);
+        let den = self.measure[i] * jac;
         if den.is_nan() || den <= 0.0 {
             return 0.0;
         }
-        self.dist.pdf(th / self.theta_max) / den
+        self.dist.pdf(v) / den
     }
 }
 
@@ -841,6 +892,13 @@ pub fn efficiency(w: impl Iterator<Item = f64>) -> f64 {
     }
 }
 
+/// [`band_edges`] of n bands and n·4π·(width of each band in sin²(θ/2)).
+fn bands_and_measure(n: usize, theta: impl Fn(usize) -> f64) -> (Vec<f64>, Vec<f64>) {
+    let bands = band_edges(n, theta);
+    let measure = bands.windows(2).map(|w| n as f64 * 4.0 * PI * (w[1] - w[0])).collect();
+    (bands, measure)
+}
+
 /// Every incidence node's table (module docs), and the nodes left empty.
 fn build_tabulated(target: &Target, isotropic: bool) -> Result<(Tabulated, Vec<(f64, f64)>), Diagnostic> {
     let (nt, np) = if isotropic { (ISO_NODES, 1) } else { (ANISO_THETA_NODES, ANISO_PHI_NODES) };
@@ -866,7 +924,8 @@ fn build_tabulated(target: &Target, isotropic: bool) -> Result<(Tabulated, Vec<(
             nodes.push(d);
         }
     }
-    Ok((Tabulated { isotropic, thetas, phis: np, nodes }, empty))
+    let (bands, row_measure) = bands_and_measure(ROWS, row_theta);
+    Ok((Tabulated { isotropic, thetas, phis: np, nodes, bands, row_measure }, empty))
 }
 
 #[derive(Default)]
@@ -891,12 +950,12 @@ fn node_table(target: &Target, wi: V3, s: &mut NodeScratch) -> Result<Option<Dis
         let x1 = a as f64 / (2 * ROWS) as f64;
         for b in 0..pc {
             let x2 = b as f64 / (2 * COLS) as f64;
-            let (h, jh) = half_from(x1, x2, NO_TURN);
+            let h = half_from(x1, x2, NO_TURN);
             let wo = reflect(wi, h);
-            if wo[2] > 0.0 && jh > 0.0 {
+            if wo[2] > 0.0 {
                 s.pairs.push((wi, wo));
                 s.slots.push(a * pc + b);
-                jacs.push(jh * 4.0 * dot(wi, h) * wo[2]);
+                jacs.push(4.0 * dot(wi, h) * wo[2]);
             }
         }
     }
@@ -907,8 +966,11 @@ fn node_table(target: &Target, wi: V3, s: &mut NodeScratch) -> Result<Option<Dis
         check_point(v, || describe_pair(s.pairs[i].0, s.pairs[i].1))?;
         s.g[slot] = target.luminance(v) * jacs[i];
     }
+    // A cell's mass: the largest density in ωₕ at its points times its solid angle, 4π·Δ(sin²(θₕ/2))/COLS.
+    let bands = band_edges(ROWS, row_theta);
     let mut cells = vec![0.0; ROWS * COLS];
     for i in 0..ROWS {
+        let omega = 4.0 * PI * (bands[i + 1] - bands[i]) / COLS as f64;
         for j in 0..COLS {
             let mut m = 0.0f64;
             for a in 2 * i..=2 * i + 2 {
@@ -916,7 +978,7 @@ fn node_table(target: &Target, wi: V3, s: &mut NodeScratch) -> Result<Option<Dis
                     m = m.max(s.g[a * pc + b]);
                 }
             }
-            cells[i * COLS + j] = m;
+            cells[i * COLS + j] = m * omega;
         }
     }
     Ok(Dist2D::new(&cells, ROWS, COLS))
@@ -943,10 +1005,12 @@ fn build_exact(target: &Target, lobe: Input) -> Result<Option<Exact>, Diagnostic
         let v = &vals[a * nch..(a + 1) * nch];
         let c = theta(a).cos();
         check_point(v, || format!("{} = {c:.9} (the formula's only input)", lobe.name()))?;
-        q[a] = target.luminance(v) * theta(a).sin();
+        q[a] = target.luminance(v);
     }
-    let cells: Vec<f64> = (0..EXACT_CELLS).map(|i| q[2 * i].max(q[2 * i + 1]).max(q[2 * i + 2])).collect();
-    Ok(Dist1D::new(&cells).map(|dist| Exact { lobe, theta_max, dist }))
+    // A cell's mass: the largest value at its ends and middle times its solid angle about the axis.
+    let (bands, measure) = bands_and_measure(EXACT_CELLS, |i| theta_max * i as f64 / EXACT_CELLS as f64);
+    let cells: Vec<f64> = (0..EXACT_CELLS).map(|i| q[2 * i].max(q[2 * i + 1]).max(q[2 * i + 2]) * (bands[i + 1] - bands[i])).collect();
+    Ok(Dist1D::new(&cells).map(|dist| Exact { lobe, theta_max, dist, bands, measure }))
 }
 
 #[cfg(test)]
@@ -958,12 +1022,14 @@ mod tests {
         let wi = dir(0.7, 0.3);
         for &(x1, x2) in &[(0.1, 0.2), (0.5, 0.9), (0.8, 0.45), (0.03, 0.6)] {
             let turn = (0.3f64.cos(), 0.3f64.sin());
-            let (h, jh) = half_from(x1, x2, turn);
+            let h = half_from(x1, x2, turn);
             let wo = reflect(wi, h);
             let (y1, col, jac) = table_coords(wi, wo, turn).unwrap();
             assert!((x1 - y1).abs() < 1e-12, "{x1} → {y1}");
             assert_eq!(col, (x2 * COLS as f64) as usize);
-            assert!((jac - 4.0 * dot(wi, h).abs() * jh).abs() < 1e-12 * jac);
+            assert!((jac - 4.0 * dot(wi, h).abs()).abs() < 1e-12 * jac);
+            let s = band_edges(1, |_| FRAC_PI_2 * x1 * x1)[0];
+            assert!((theta_of_band(s) - FRAC_PI_2 * x1 * x1).abs() < 1e-15);
         }
     }
 
