@@ -148,16 +148,6 @@ impl Dist2D {
         let j = ((x2 * self.m as f64) as usize).min(self.m - 1);
         self.pdf[i * self.m + j]
     }
-
-    /// The density at x₁ in column `j` (0 outside [0, 1) or past the last column).
-    #[inline]
-    pub fn pdf_cell(&self, x1: f64, j: usize) -> f64 {
-        if !(0.0..1.0).contains(&x1) || j >= self.m {
-            return 0.0;
-        }
-        let i = ((x1 * self.n as f64) as usize).min(self.n - 1);
-        self.pdf[i * self.m + j]
-    }
 }
 
 #[cfg(test)]

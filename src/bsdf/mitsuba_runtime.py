@@ -47,7 +47,7 @@ def _build_lists():
                 c, last = _dist1d(r)
                 ccdf += c
                 clast.append(last)
-        return dict(pdf=list(cells), rcdf=rcdf, rlast=rlast, ccdf=ccdf, clast=clast)
+        return dict(pdf=list(cells), rcdf=rcdf, rlast=rlast, ccdf=ccdf, clast=clast, corners=list(_decode(_CORNERS)))
     if _MECHANISM == 'exact':
         cdf, last = _dist1d(cells)
         return dict(pdf=list(cells), cdf=cdf, last=[last])
@@ -236,6 +236,24 @@ def _node_weights(S, wi):
     return out, S.const(0.0)
 
 
+def _sample_linear(u, a, b):
+    """lobe's sample_linear: x in [0, 1] with density ∝ (1 − x)·a + x·b (pbrt-v4's SampleLinear)."""
+    x = u * (a + b) / (a + dr.sqrt(dr.maximum(a * a + u * (b * b - a * a), 0.0)))
+    return dr.select((u == 0.0) & (a == 0.0), 0.0, dr.clip(x, 0.0, 1.0))
+
+
+def _corners(S, k, i, j):
+    """The four corners (v00, v01, v10, v11) of cell (i, j) of node k (lobe's Node::corners)."""
+    j1 = dr.select(j + 1 == _COLS, 0, j + 1)
+    base = k * ((_ROWS + 1) * _COLS)
+    return (S.gather('corners', base + i * _COLS + j), S.gather('corners', base + i * _COLS + j1),
+            S.gather('corners', base + (i + 1) * _COLS + j), S.gather('corners', base + (i + 1) * _COLS + j1))
+
+
+def _bilinear(v, a, b):
+    return (1.0 - a) * ((1.0 - b) * v[0] + b * v[1]) + a * ((1.0 - b) * v[2] + b * v[3])
+
+
 def _table_coords(wi, wo, phi0):
     s = (wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2])
     ln = dr.sqrt(_dot(s, s))
@@ -250,19 +268,22 @@ def _table_coords(wi, wo, phi0):
     r = dr.select(r < 0.0, r + 1.0, r)
     x2 = dr.select(r >= 1.0, 0.0, r)
     jac = 4.0 * dr.abs(_dot(wi, s)) / ln
-    return x1, x2, jac, valid
+    return x1, th, x2, jac, valid
 
 
 def _tab_pdf(S, wi, wo, cos_pdf):
     ws, phi0 = _node_weights(S, wi)
-    x1, x2, jac, valid = _table_coords(wi, wo, phi0)
-    i, in1 = _cell(S, x1, _ROWS)
-    j, in2 = _cell(S, x2, _COLS)
+    x1, th, x2, jac, valid = _table_coords(wi, wo, phi0)
+    i, _ = _cell(S, x1, _ROWS)
+    j, _ = _cell(S, x2, _COLS)
+    b = dr.clip(x2 * _COLS - S.F(j), 0.0, 1.0)
+    hs = dr.sin(0.5 * th)
+    s0, s1 = dr.gather(S.F, S.bands, i), dr.gather(S.F, S.bands, i + 1)
+    a = dr.clip((hs * hs - s0) / (s1 - s0), 0.0, 1.0)
     p = S.const(0.0)
     for (k, w) in ws:
-        d = S.gather('pdf', k * (_ROWS * _COLS) + i * _COLS + j)
-        d = dr.select(in1 & in2, d, 0.0)
-        term = dr.select(valid & (jac > 0.0), d / (dr.gather(S.F, S.measure, i) * jac), 0.0)
+        d = _bilinear(_corners(S, k, i, j), a, b)
+        term = dr.select(valid & (jac > 0.0) & (x1 <= 1.0), d / jac, 0.0)
         term = dr.select(dr.gather(S.U, S.empty, k) != 0, cos_pdf, term)
         p = p + dr.select(w > 0.0, w * term, 0.0)
     return p
@@ -284,8 +305,11 @@ def _tab_sample(S, wi, u1, u2):
     row, f1 = _sample1d(S, 'rcdf', 'rlast', k_sel * (_ROWS + 1), k_sel, _ROWS, u_sel)
     crow = k_sel * _ROWS + row
     col, f2 = _sample1d(S, 'ccdf', 'clast', crow * (_COLS + 1), crow, _COLS, u2)
-    x2 = (S.F(col) + f2) / _COLS
-    h = _dir(_band_theta(S, row, f1), 2.0 * _PI * x2 + phi0)
+    v = _corners(S, k_sel, row, col)
+    a = _sample_linear(f1, v[0] + v[1], v[2] + v[3])
+    b = _sample_linear(f2, v[0] + a * (v[2] - v[0]), v[1] + a * (v[3] - v[1]))
+    x2 = (S.F(col) + b) / _COLS
+    h = _dir(_band_theta(S, row, a), 2.0 * _PI * x2 + phi0)
     wo = _reflect(wi, h)
     cw = _cosine_sample(u_sel, u2)
     empty = dr.gather(S.U, S.empty, k_sel) != 0

@@ -11,13 +11,14 @@
 //! - **Tabulated** (any formula): the half-vector parameterisation. For `wi` and a half vector h with
 //!   θₕ = (π/2)·x₁² (Dupuy and Jakob's warp, as Mitsuba's `measured` plugin) and φₕ = 2π·x₂ (+ wi's azimuth for an
 //!   isotropic formula), wo = 2(wi·h)h − wi; the map h ↔ wo is a bijection (h = ±norm(wi + wo), the sign making
-//!   h.z ≥ 0) with dωₒ = 4|wi·h| dωₕ. Per incidence node a [`ROWS`] × [`COLS`] table over (x₁, x₂) holds, per
-//!   cell, its solid angle in ωₕ times the maximum over a 3 × 3 sub-grid (corners and centre, shared between
-//!   neighbours) of g = lum(f)·max(cosθₒ, 0)·4|wi·h| — pbrt-v4's `FromFuncLInfinity` rule, so a cell is never 0
-//!   where g > 0 at one of its points — sampled by a marginal and conditional inverse CDF. Within the chosen
-//!   cell, φₕ is uniform and θₕ uniform in sin²(θₕ/2) (uniform in solid angle), so the density in ωₕ is constant
-//!   over each cell: the pdf is bounded everywhere, the mirror direction (h = N, the warp's pole) included.
-//!   Every catalogue lobe peaks at h = N, which the x₁² warp resolves with small cells.
+//!   h.z ≥ 0) with dωₒ = 4|wi·h| dωₕ. Per incidence node a [`ROWS`] × [`COLS`] grid over (x₁, x₂) holds at each
+//!   cell corner the maximum over the 3 × 3 sub-grid points (corners and centres) within half a cell of it of
+//!   g = lum(f)·max(cosθₒ, 0)·4|wi·h| — pbrt-v4's `FromFuncLInfinity` rule for corners, so a cell with g > 0 at
+//!   one of its points has a positive corner. Within a cell the density in ωₕ is bilinear in (sin²(θₕ/2), φₕ),
+//!   coordinates uniform in solid angle, between its corners: continuous, and bounded everywhere, the mirror
+//!   direction (h = N, the warp's pole, whose corners share one value) included. A cell is chosen by its mass
+//!   (a marginal and conditional inverse CDF), the point in it by the bilinear density's linear marginal and
+//!   conditional. Every catalogue lobe peaks at h = N, which the x₁² warp resolves with small cells.
 //! - **Exact** (a formula whose only input is NH, or only VR — one cosine, nothing else): a 1-D table over
 //!   θ ∈ [0, θmax] (θmax = π for VR, π/2 for NH) in [`EXACT_CELLS`] cells, each cell its solid angle about the
 //!   axis times the maximum of lum(f(cos θ)) at its ends and middle, inverted by binary search; within a cell θ is
@@ -360,16 +361,16 @@ fn row_theta(i: usize) -> f64 {
     FRAC_PI_2 * x * x
 }
 
-/// Table coordinates of the half vector of (wi, wo) (azimuth in the frame turned by `turn`): x₁, the column of
-/// x₂ among [`COLS`], and dωₒ/dωₕ = 4|wi·h|; `None` when wo = −wi (no half vector).
+/// Table coordinates of the half vector of (wi, wo) (azimuth in the frame turned by `turn`): x₁, θₕ, the column
+/// of x₂ among [`COLS`], the position in that column (x₂·COLS − column, in [0, 1]), and dωₒ/dωₕ = 4|wi·h|;
+/// `None` when wo = −wi (no half vector).
 ///
 /// θₕ comes from atan2 of the unnormalised sum s = wi + wo (turned into the table's frame, sign chosen so
 /// h.z ≥ 0): atan2 is scale-free. θₕ by atan2, not acos, which loses digits near the normal where the lobes
-/// are. The density is
-/// constant over a column, so φₕ is never computed: its column is counted from the quadrant and seven
-/// comparisons against the column edges ([`column_of`]).
+/// are. The column is counted from the quadrant and seven comparisons against the column edges
+/// ([`column_of`]), the position in it from atan2 (clamped into the column where the two round apart).
 #[inline]
-fn table_coords(wi: V3, wo: V3, turn: Turn) -> Option<(f64, usize, f64)> {
+fn table_coords(wi: V3, wo: V3, turn: Turn) -> Option<(f64, f64, usize, f64, f64)> {
     let s = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
     let len2 = dot(s, s);
     if len2.is_nan() || len2 <= 0.0 {
@@ -382,7 +383,10 @@ fn table_coords(wi: V3, wo: V3, turn: Turn) -> Option<(f64, usize, f64)> {
     let th = sxy.atan2(s[2].abs());
     let x1 = (th / FRAC_PI_2).sqrt();
     let jac = 4.0 * dot(wi, s).abs() / len2.sqrt();
-    Some((x1, column_of(hx, hy), jac))
+    let col = column_of(hx, hy);
+    let x2 = (hy.atan2(hx) / (2.0 * PI)).rem_euclid(1.0);
+    let b = (x2 * COLS as f64 - col as f64).clamp(0.0, 1.0);
+    Some((x1, th, col, b, jac))
 }
 
 /// (cos, sin) of the column edges k·2π/[`COLS`] inside the first quadrant, k = 1 … COLS/4 − 1.
@@ -443,12 +447,47 @@ struct Tabulated {
     /// φᵢ nodes (anisotropic only; one node at 0 for an isotropic formula).
     phis: usize,
     /// Node (θ index t, φ index p) at t·phis + p; `None`: an empty table.
-    nodes: Vec<Option<Dist2D>>,
-    /// sin²(θₕ/2) at the row edges ([`band_edges`]): within a cell, θₕ is drawn uniform in this (uniform in
-    /// solid angle), so the density in ωₕ is constant over each cell and bounded.
+    nodes: Vec<Option<Node>>,
+    /// sin²(θₕ/2) at the row edges ([`band_edges`]).
     bands: Vec<f64>,
-    /// [`ROWS`]·4π·(bands\[i + 1\] − bands\[i\]): a cell density (∫∫ over x = 1) over this is the density in ωₕ.
-    row_measure: Vec<f64>,
+}
+
+/// One incidence node's table: the density in ωₕ at the cell corners, bilinear within each cell in
+/// (sin²(θₕ/2), φₕ) — coordinates uniform in solid angle — so continuous and bounded; and the cells' masses to
+/// choose a cell by.
+#[derive(Clone, Debug)]
+pub(crate) struct Node {
+    /// The cells' masses (row-major [`ROWS`] × [`COLS`]), as a distribution.
+    pub(crate) cells: Dist2D,
+    /// The density in ωₕ at corner (row edge i, column edge j) at i·[`COLS`] + j, i ≤ [`ROWS`] (column edge
+    /// [`COLS`] is column edge 0); ∫ over the hemisphere of h = 1.
+    pub(crate) corners: Vec<f64>,
+}
+
+impl Node {
+    /// The four corners of cell (i, j): (v₀₀, v₀₁, v₁₀, v₁₁), first index along θₕ.
+    #[inline]
+    fn corners(&self, i: usize, j: usize) -> [f64; 4] {
+        let j1 = (j + 1) % COLS;
+        let c = &self.corners;
+        [c[i * COLS + j], c[i * COLS + j1], c[(i + 1) * COLS + j], c[(i + 1) * COLS + j1]]
+    }
+}
+
+/// x in [0, 1] with density ∝ (1 − x)·a + x·b for u in [0, 1] (pbrt-v4's `SampleLinear`; uniform when a = b).
+#[inline]
+fn sample_linear(u: f64, a: f64, b: f64) -> f64 {
+    if u == 0.0 && a == 0.0 {
+        return 0.0;
+    }
+    let x = u * (a + b) / (a + (a * a + u * (b * b - a * a)).max(0.0).sqrt());
+    x.clamp(0.0, 1.0)
+}
+
+/// (1 − a)(1 − b)·v₀₀ + (1 − a)b·v₀₁ + a(1 − b)·v₁₀ + ab·v₁₁.
+#[inline]
+fn bilinear(v: [f64; 4], a: f64, b: f64) -> f64 {
+    (1.0 - a) * ((1.0 - b) * v[0] + b * v[1]) + a * ((1.0 - b) * v[2] + b * v[3])
 }
 
 /// What a tabulated sampler needs of one wi, computed once per wi: the nodes it mixes with their weights, and the
@@ -502,9 +541,14 @@ impl Tabulated {
         match &self.nodes[k] {
             None => cosine_sample(u, u2),
             Some(d) => {
-                let (i, f1, j, f2) = d.sample_cell(u, u2);
-                let s = self.bands[i] + f1 * (self.bands[i + 1] - self.bands[i]);
-                let h = half_at(theta_of_band(s), (j as f64 + f2) / COLS as f64, at.turn);
+                // The cell by its mass, then the point in it by the bilinear density: along θₕ by the marginal
+                // (linear), along φₕ by the conditional (linear), each from the uniform fraction within the cell.
+                let (i, f1, j, f2) = d.cells.sample_cell(u, u2);
+                let v = d.corners(i, j);
+                let a = sample_linear(f1, v[0] + v[1], v[2] + v[3]);
+                let b = sample_linear(f2, v[0] + a * (v[2] - v[0]), v[1] + a * (v[3] - v[1]));
+                let s = self.bands[i] + a * (self.bands[i + 1] - self.bands[i]);
+                let h = half_at(theta_of_band(s), (j as f64 + b) / COLS as f64, at.turn);
                 reflect(wi, h)
             }
         }
@@ -518,9 +562,12 @@ impl Tabulated {
             if w > 0.0 {
                 p += w * match (&self.nodes[k], tc) {
                     (None, _) => cos_pdf,
-                    (Some(d), Some((x1, col, jac))) if jac > 0.0 => {
+                    (Some(d), Some((x1, th, col, b, jac))) if jac > 0.0 && x1 <= 1.0 => {
                         let row = ((x1 * ROWS as f64) as usize).min(ROWS - 1);
-                        d.pdf_cell(x1, col) / (self.row_measure[row] * jac)
+                        let h = (0.5 * th).sin();
+                        let (s0, s1) = (self.bands[row], self.bands[row + 1]);
+                        let a = ((h * h - s0) / (s1 - s0)).clamp(0.0, 1.0);
+                        bilinear(d.corners(row, col), a, b) / jac
                     }
                     _ => 0.0,
                 };
@@ -907,7 +954,7 @@ fn build_tabulated(target: &Target, isotropic: bool) -> Result<(Tabulated, Vec<(
     let mut empty = vec![];
     let mut scratch = NodeScratch::default();
     for &t in &thetas {
-        let mut at_normal: Option<Option<Dist2D>> = None;
+        let mut at_normal: Option<Option<Node>> = None;
         for p in 0..np {
             let phi = 2.0 * PI * p as f64 / np as f64;
             // At θᵢ = 0 every azimuth is the same wi: one table.
@@ -924,8 +971,8 @@ fn build_tabulated(target: &Target, isotropic: bool) -> Result<(Tabulated, Vec<(
             nodes.push(d);
         }
     }
-    let (bands, row_measure) = bands_and_measure(ROWS, row_theta);
-    Ok((Tabulated { isotropic, thetas, phis: np, nodes, bands, row_measure }, empty))
+    let bands = band_edges(ROWS, row_theta);
+    Ok((Tabulated { isotropic, thetas, phis: np, nodes, bands }, empty))
 }
 
 #[derive(Default)]
@@ -939,7 +986,7 @@ struct NodeScratch {
 /// One node's table at incidence `wi`. φₕ is measured from azimuth 0: an isotropic formula's nodes lie at
 /// azimuth 0 (so this is φₕ from wi's azimuth, as [`Tabulated::at`] turns it), an anisotropic one's φₕ is
 /// absolute.
-fn node_table(target: &Target, wi: V3, s: &mut NodeScratch) -> Result<Option<Dist2D>, Diagnostic> {
+fn node_table(target: &Target, wi: V3, s: &mut NodeScratch) -> Result<Option<Node>, Diagnostic> {
     let (pr, pc) = (2 * ROWS + 1, 2 * COLS + 1);
     s.pairs.clear();
     s.slots.clear();
@@ -966,22 +1013,39 @@ fn node_table(target: &Target, wi: V3, s: &mut NodeScratch) -> Result<Option<Dis
         check_point(v, || describe_pair(s.pairs[i].0, s.pairs[i].1))?;
         s.g[slot] = target.luminance(v) * jacs[i];
     }
-    // A cell's mass: the largest density in ωₕ at its points times its solid angle, 4π·Δ(sin²(θₕ/2))/COLS.
+    // A corner's value: the largest g over the sub-grid points within half a cell of it (the columns wrap; the
+    // pole's corners, one direction, share the largest), so a cell with g > 0 at one of its points has a
+    // positive corner. A cell's mass: its solid angle 4π·Δ(sin²(θₕ/2))/COLS times the mean of its corners.
+    let mut corners = vec![0.0; (ROWS + 1) * COLS];
+    for i in 0..=ROWS {
+        for j in 0..COLS {
+            let mut m = 0.0f64;
+            for a in (2 * i).saturating_sub(1)..=(2 * i + 1).min(2 * ROWS) {
+                for db in 0..3 {
+                    let b = (2 * j + 2 * COLS + db - 1) % (2 * COLS);
+                    m = m.max(s.g[a * pc + b]);
+                }
+            }
+            corners[i * COLS + j] = m;
+        }
+    }
+    let pole = corners[..COLS].iter().fold(0.0f64, |a, &b| a.max(b));
+    corners[..COLS].fill(pole);
     let bands = band_edges(ROWS, row_theta);
     let mut cells = vec![0.0; ROWS * COLS];
     for i in 0..ROWS {
         let omega = 4.0 * PI * (bands[i + 1] - bands[i]) / COLS as f64;
         for j in 0..COLS {
-            let mut m = 0.0f64;
-            for a in 2 * i..=2 * i + 2 {
-                for b in 2 * j..=2 * j + 2 {
-                    m = m.max(s.g[a * pc + b]);
-                }
-            }
-            cells[i * COLS + j] = m * omega;
+            let j1 = (j + 1) % COLS;
+            let c = &corners;
+            cells[i * COLS + j] = omega * 0.25 * (c[i * COLS + j] + c[i * COLS + j1] + c[(i + 1) * COLS + j] + c[(i + 1) * COLS + j1]);
         }
     }
-    Ok(Dist2D::new(&cells, ROWS, COLS))
+    let total: f64 = cells.iter().sum();
+    Ok(Dist2D::new(&cells, ROWS, COLS).map(|cells| {
+        corners.iter_mut().for_each(|c| *c /= total);
+        Node { cells, corners }
+    }))
 }
 
 /// The exact path's table for a formula of the one input `lobe` (NH or VR); `None` when it is 0 everywhere.
@@ -1024,9 +1088,11 @@ mod tests {
             let turn = (0.3f64.cos(), 0.3f64.sin());
             let h = half_from(x1, x2, turn);
             let wo = reflect(wi, h);
-            let (y1, col, jac) = table_coords(wi, wo, turn).unwrap();
+            let (y1, th, col, b, jac) = table_coords(wi, wo, turn).unwrap();
             assert!((x1 - y1).abs() < 1e-12, "{x1} → {y1}");
+            assert!((th - FRAC_PI_2 * x1 * x1).abs() < 1e-12);
             assert_eq!(col, (x2 * COLS as f64) as usize);
+            assert!((col as f64 + b - x2 * COLS as f64).abs() < 1e-9);
             assert!((jac - 4.0 * dot(wi, h).abs()).abs() < 1e-12 * jac);
             let s = band_edges(1, |_| FRAC_PI_2 * x1 * x1)[0];
             assert!((theta_of_band(s) - FRAC_PI_2 * x1 * x1).abs() < 1e-15);
