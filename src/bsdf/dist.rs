@@ -41,14 +41,22 @@ impl Dist1D {
     /// A point of [0, 1) for `u` in [0, 1), and the cell it fell in. Only cells of positive mass are chosen.
     pub fn sample(&self, u: f64) -> (f64, usize) {
         let n = self.pdf.len();
+        let (i, frac) = self.sample_cell(u);
+        // Kept inside cell i (the rounding of i + frac can reach the next cell's edge).
+        (((i as f64 + frac) / n as f64).min(((i + 1) as f64 / n as f64).next_down()), i)
+    }
+
+    /// The cell `u` in [0, 1) falls in and where in it, as a fraction in [0, 1] of the cell's mass (the cell's
+    /// own coordinate, for a caller that spreads a cell's mass by a measure of its own). Only cells of positive
+    /// mass are chosen.
+    pub fn sample_cell(&self, u: f64) -> (usize, f64) {
+        let n = self.pdf.len();
         let target = u * self.total();
         // The last i with cdf[i] ≤ target: then cdf[i + 1] > target, so cell i has mass.
         let i = (self.cdf.partition_point(|&c| c <= target).max(1) - 1).min(n - 1);
         let i = self.skip_empty(i);
         let (lo, hi) = (self.cdf[i], self.cdf[i + 1]);
-        let frac = ((target - lo) / (hi - lo)).clamp(0.0, 1.0);
-        // Kept inside cell i (the rounding of i + frac can reach the next cell's edge).
-        (((i as f64 + frac) / n as f64).min(((i + 1) as f64 / n as f64).next_down()), i)
+        (i, ((target - lo) / (hi - lo)).clamp(0.0, 1.0))
     }
 
     /// Rounding can leave `target` on a cell of zero mass at the end; step back to the last cell with mass.
@@ -111,6 +119,20 @@ impl Dist2D {
         }
     }
 
+    /// The cell (row i, column j) for `u` in [0, 1)², and the fractions of the cell's mass below the point along
+    /// each coordinate: (i, f₁, j, f₂) ([`Dist1D::sample_cell`]).
+    pub fn sample_cell(&self, u1: f64, u2: f64) -> (usize, f64, usize, f64) {
+        let (i, f1) = self.rows.sample_cell(u1);
+        // The row was chosen for its mass, so its conditional exists.
+        match &self.cols[i] {
+            Some(c) => {
+                let (j, f2) = c.sample_cell(u2);
+                (i, f1, j, f2)
+            }
+            None => (i, f1, ((u2 * self.m as f64) as usize).min(self.m - 1), 0.5),
+        }
+    }
+
     /// The cell densities, row-major (∫∫ = 1), for exports that rebuild the distribution.
     pub fn densities(&self) -> &[f64] {
         &self.pdf
@@ -124,16 +146,6 @@ impl Dist2D {
         }
         let i = ((x1 * self.n as f64) as usize).min(self.n - 1);
         let j = ((x2 * self.m as f64) as usize).min(self.m - 1);
-        self.pdf[i * self.m + j]
-    }
-
-    /// The density at x₁ in column `j` (0 outside [0, 1) or past the last column).
-    #[inline]
-    pub fn pdf_cell(&self, x1: f64, j: usize) -> f64 {
-        if !(0.0..1.0).contains(&x1) || j >= self.m {
-            return 0.0;
-        }
-        let i = ((x1 * self.n as f64) as usize).min(self.n - 1);
         self.pdf[i * self.m + j]
     }
 }
@@ -170,8 +182,9 @@ mod tests {
         let n = 64;
         for a in 0..n {
             for b in 0..n {
-                let (x1, x2) = d.sample((a as f64 + 0.5) / n as f64, (b as f64 + 0.5) / n as f64);
-                hits[(x1 * 3.0) as usize * 2 + (x2 * 2.0) as usize] += 1;
+                let (i, f1, j, f2) = d.sample_cell((a as f64 + 0.5) / n as f64, (b as f64 + 0.5) / n as f64);
+                assert!((0.0..=1.0).contains(&f1) && (0.0..=1.0).contains(&f2));
+                hits[i * 2 + j] += 1;
             }
         }
         let total = (n * n) as f64;

@@ -5,14 +5,18 @@
 //!
 //! What the module holds: a header (the formula, the baked parameters, the mechanism, how to use it), the
 //! sampler's constants (mechanism, cosine fraction, table sizes, incidence nodes, which nodes are empty), the
-//! tables' cell densities as base64 of little-endian f64 (exact: the module rebuilds the cumulative sums from them
-//! at import), and the formula as `_formula(NL, …, Vz)`. Everything computes in Float64, so the module's
+//! tables' cell densities as base64 of little-endian f64 (the module rebuilds the cumulative sums from them at
+//! import) and, for the tabulated mechanism, the corner densities the cells interpolate, and the formula as `_formula(NL, …, Vz)`. Everything computes in Float64, so the module's
 //! `pdf_f64` equals [`Sampler::pdf_many`] and `eval_f64` lobe's values to rounding; the plugin converts to and
 //! from Mitsuba's f32 at its edges.
 //!
 //! Conventions: Mitsuba's `si.wi` is the formula's L and the plugin's `wo` its V (the sampler's wi and wo; the
 //! same thing for a reciprocal formula); directions in the local frame (N = +z). `eval` returns f·cosθₒ as
-//! Mitsuba's BSDFs do; below either horizon eval and pdf are 0 and a sample has weight 0. Every parameter is
+//! Mitsuba's BSDFs do; below either horizon eval and pdf are 0 and a sample has weight 0. The plugin's `pdf` and
+//! `sample` follow Mitsuba's convention that a sample of weight 0 is invalid and pdf counts only valid samples:
+//! where every channel's weight f·cosθₒ/pdf is below the smallest normal f32 (the formula is 0 there, or below
+//! the horizon) `sample` returns weight 0 and pdf 0 and `pdf` returns 0; elsewhere both report lobe's pdf, so
+//! Mitsuba's stock `mi.chi2.BSDFAdapter` tests the plugin as it is. Every parameter is
 //! baked (the tables are built at fixed values): the module has no live parameters.
 
 use super::{Body, Mechanism, Sampler, COLS, EXACT_CELLS, ROWS};
@@ -135,23 +139,27 @@ pub fn module(plain: &Formula, sampler: &Sampler, params: &[(String, f64)]) -> R
     let _ = writeln!(o, "_MECHANISM = '{}'", r.mechanism.name());
     let _ = writeln!(o, "_COS_FRAC = {}", drjit::literal(sampler.cosine_fraction()));
     let _ = writeln!(o, "_ROWS = {ROWS}\n_COLS = {COLS}\n_EXACT_CELLS = {EXACT_CELLS}");
-    let mut cells: Vec<f64> = vec![];
+    let (mut cells, mut corners): (Vec<f64>, Vec<f64>) = (vec![], vec![]);
     let (mut thetas, mut empty, mut nphi, mut iso) = (vec![0.0, 1.0], vec![], 1, r.isotropic);
     let (mut lobe, mut theta_max) = ("None".to_string(), 0.0);
+    let (mut bands, mut measure): (&[f64], &[f64]) = (&[], &[]);
     match &sampler.body {
         Body::Cosine => {}
         Body::Tabulated(t) => {
             thetas = t.thetas.clone();
             nphi = t.phis;
             iso = t.isotropic;
+            bands = &t.bands;
             for n in &t.nodes {
                 match n {
                     Some(d) => {
-                        cells.extend_from_slice(d.densities());
+                        cells.extend_from_slice(d.cells.densities());
+                        corners.extend_from_slice(&d.corners);
                         empty.push(0);
                     }
                     None => {
                         cells.extend(std::iter::repeat_n(0.0, ROWS * COLS));
+                        corners.extend(std::iter::repeat_n(0.0, (ROWS + 1) * COLS));
                         empty.push(1);
                     }
                 }
@@ -160,6 +168,7 @@ pub fn module(plain: &Formula, sampler: &Sampler, params: &[(String, f64)]) -> R
         Body::Exact(e) => {
             lobe = format!("'{}'", if e.lobe == Input::VR { "VR" } else { "NH" });
             theta_max = e.theta_max;
+            (bands, measure) = (&e.bands, &e.measure);
             cells.extend_from_slice(e.dist.densities());
         }
     }
@@ -170,16 +179,20 @@ pub fn module(plain: &Formula, sampler: &Sampler, params: &[(String, f64)]) -> R
     let _ = writeln!(o, "_EMPTY = {:?}", empty);
     let _ = writeln!(o, "_EXACT_LOBE = {lobe}");
     let _ = writeln!(o, "_EXACT_THETA_MAX = {}", drjit::literal(theta_max));
-    let bytes: Vec<u8> = cells.iter().flat_map(|v| v.to_le_bytes()).collect();
-    let b64 = base64(&bytes);
-    if b64.is_empty() {
-        o.push_str("_TABLE = ''\n\n\n");
-    } else {
-        o.push_str("_TABLE = (\n");
-        for chunk in b64.as_bytes().chunks(100) {
-            let _ = writeln!(o, "    '{}'", String::from_utf8_lossy(chunk));
+    let _ = writeln!(o, "_BANDS = {}", list(bands.iter().copied()));
+    let _ = writeln!(o, "_MEASURE = {}", list(measure.iter().copied()));
+    for (name, values) in [("_TABLE", &cells), ("_CORNERS", &corners)] {
+        let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let b64 = base64(&bytes);
+        if b64.is_empty() {
+            let _ = write!(o, "{name} = ''\n\n\n");
+        } else {
+            let _ = writeln!(o, "{name} = (");
+            for chunk in b64.as_bytes().chunks(100) {
+                let _ = writeln!(o, "    '{}'", String::from_utf8_lossy(chunk));
+            }
+            o.push_str(")\n\n\n");
         }
-        o.push_str(")\n\n\n");
     }
     o.push_str(&body);
     o.push_str(RUNTIME);

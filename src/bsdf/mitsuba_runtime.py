@@ -16,7 +16,6 @@ import mitsuba as mi
 
 _PI = 3.141592653589793
 _ONE_MINUS = 1.0 - 2.0 ** -53
-_BELOW_ONE = 1.0 - 2.0 ** -52
 
 
 def _decode(text):
@@ -48,7 +47,7 @@ def _build_lists():
                 c, last = _dist1d(r)
                 ccdf += c
                 clast.append(last)
-        return dict(pdf=list(cells), rcdf=rcdf, rlast=rlast, ccdf=ccdf, clast=clast)
+        return dict(pdf=list(cells), rcdf=rcdf, rlast=rlast, ccdf=ccdf, clast=clast, corners=list(_decode(_CORNERS)))
     if _MECHANISM == 'exact':
         cdf, last = _dist1d(cells)
         return dict(pdf=list(cells), cdf=cdf, last=[last])
@@ -67,6 +66,8 @@ class _State:
         self.U = dr.uint32_array_t(self.F)
         self.t = {k: (self.U(v) if k in ('rlast', 'clast', 'last') else self.F(v)) for k, v in _LISTS.items()}
         self.thetas = self.F(_THETAS)
+        self.bands = self.F(_BANDS)
+        self.measure = self.F(_MEASURE)
         self.empty = self.U(_EMPTY)
 
     def const(self, v):
@@ -186,17 +187,21 @@ def _cosine_sample(u1, u2):
 
 
 def _sample1d(S, cdf, last, base, lbase, n, u):
-    """lobe's Dist1D::sample over the n cells of `cdf` from `base`: (x in [0, 1), cell)."""
+    """lobe's Dist1D::sample_cell over the n cells of `cdf` from `base`: (cell, fraction of its mass below u)."""
     total = S.gather(cdf, base + n)
     target = u * total
     pp = S.U(dr.binary_search(0, n, lambda k: S.gather(cdf, base + S.U(k)) <= target))
     i = dr.minimum(dr.maximum(pp, 1) - 1, n - 1)
     i = dr.select(target >= total, S.gather_u(last, lbase), i)
     lo, hi = S.gather(cdf, base + i), S.gather(cdf, base + i + 1)
-    frac = dr.clip((target - lo) / (hi - lo), 0.0, 1.0)
-    fi = S.F(i)
-    x = dr.minimum((fi + frac) / n, (fi + 1.0) / n * _BELOW_ONE)
-    return x, i
+    return i, dr.clip((target - lo) / (hi - lo), 0.0, 1.0)
+
+
+def _band_theta(S, i, f):
+    """θ at fraction f of band i, uniform in sin²(θ/2) (lobe's bands; uniform in solid angle)."""
+    b0, b1 = dr.gather(S.F, S.bands, i), dr.gather(S.F, S.bands, i + 1)
+    s = b0 + f * (b1 - b0)
+    return 2.0 * dr.atan2(dr.sqrt(dr.maximum(s, 0.0)), dr.sqrt(dr.maximum(1.0 - s, 0.0)))
 
 
 def _cell(S, x, n):
@@ -231,6 +236,24 @@ def _node_weights(S, wi):
     return out, S.const(0.0)
 
 
+def _sample_linear(u, a, b):
+    """lobe's sample_linear: x in [0, 1] with density ∝ (1 − x)·a + x·b (pbrt-v4's SampleLinear)."""
+    x = u * (a + b) / (a + dr.sqrt(dr.maximum(a * a + u * (b * b - a * a), 0.0)))
+    return dr.select((u == 0.0) & (a == 0.0), 0.0, dr.clip(x, 0.0, 1.0))
+
+
+def _corners(S, k, i, j):
+    """The four corners (v00, v01, v10, v11) of cell (i, j) of node k (lobe's Node::corners)."""
+    j1 = dr.select(j + 1 == _COLS, 0, j + 1)
+    base = k * ((_ROWS + 1) * _COLS)
+    return (S.gather('corners', base + i * _COLS + j), S.gather('corners', base + i * _COLS + j1),
+            S.gather('corners', base + (i + 1) * _COLS + j), S.gather('corners', base + (i + 1) * _COLS + j1))
+
+
+def _bilinear(v, a, b):
+    return (1.0 - a) * ((1.0 - b) * v[0] + b * v[1]) + a * ((1.0 - b) * v[2] + b * v[3])
+
+
 def _table_coords(wi, wo, phi0):
     s = (wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2])
     ln = dr.sqrt(_dot(s, s))
@@ -244,20 +267,23 @@ def _table_coords(wi, wo, phi0):
     r = dr.select(dr.abs(v) >= 1.0, 0.0, v)
     r = dr.select(r < 0.0, r + 1.0, r)
     x2 = dr.select(r >= 1.0, 0.0, r)
-    jac = st * _PI * x1 * 2.0 * _PI * 4.0 * dr.abs(_dot(wi, h))
-    return x1, x2, jac, valid
+    jac = 4.0 * dr.abs(_dot(wi, s)) / ln
+    return x1, th, x2, jac, valid
 
 
 def _tab_pdf(S, wi, wo, cos_pdf):
     ws, phi0 = _node_weights(S, wi)
-    x1, x2, jac, valid = _table_coords(wi, wo, phi0)
-    i, in1 = _cell(S, x1, _ROWS)
-    j, in2 = _cell(S, x2, _COLS)
+    x1, th, x2, jac, valid = _table_coords(wi, wo, phi0)
+    i, _ = _cell(S, x1, _ROWS)
+    j, _ = _cell(S, x2, _COLS)
+    b = dr.clip(x2 * _COLS - S.F(j), 0.0, 1.0)
+    hs = dr.sin(0.5 * th)
+    s0, s1 = dr.gather(S.F, S.bands, i), dr.gather(S.F, S.bands, i + 1)
+    a = dr.clip((hs * hs - s0) / (s1 - s0), 0.0, 1.0)
     p = S.const(0.0)
     for (k, w) in ws:
-        d = S.gather('pdf', k * (_ROWS * _COLS) + i * _COLS + j)
-        d = dr.select(in1 & in2, d, 0.0)
-        term = dr.select(valid & (jac > 0.0), d / jac, 0.0)
+        d = _bilinear(_corners(S, k, i, j), a, b)
+        term = dr.select(valid & (jac > 0.0) & (x1 <= 1.0), d / jac, 0.0)
         term = dr.select(dr.gather(S.U, S.empty, k) != 0, cos_pdf, term)
         p = p + dr.select(w > 0.0, w * term, 0.0)
     return p
@@ -276,11 +302,14 @@ def _tab_sample(S, wi, u1, u2):
         u_sel = dr.select(hit, dr.clip((u1 - acc) / w, 0.0, _ONE_MINUS), dr.select(fall, _ONE_MINUS, u_sel))
         chosen = chosen | hit
         acc = dr.select(live, acc + w, acc)
-    x1, row = _sample1d(S, 'rcdf', 'rlast', k_sel * (_ROWS + 1), k_sel, _ROWS, u_sel)
+    row, f1 = _sample1d(S, 'rcdf', 'rlast', k_sel * (_ROWS + 1), k_sel, _ROWS, u_sel)
     crow = k_sel * _ROWS + row
-    x2, _ = _sample1d(S, 'ccdf', 'clast', crow * (_COLS + 1), crow, _COLS, u2)
-    th = _PI / 2.0 * x1 * x1
-    h = _dir(th, 2.0 * _PI * x2 + phi0)
+    col, f2 = _sample1d(S, 'ccdf', 'clast', crow * (_COLS + 1), crow, _COLS, u2)
+    v = _corners(S, k_sel, row, col)
+    a = _sample_linear(f1, v[0] + v[1], v[2] + v[3])
+    b = _sample_linear(f2, v[0] + a * (v[2] - v[0]), v[1] + a * (v[3] - v[1]))
+    x2 = (S.F(col) + b) / _COLS
+    h = _dir(_band_theta(S, row, a), 2.0 * _PI * x2 + phi0)
     wo = _reflect(wi, h)
     cw = _cosine_sample(u_sel, u2)
     empty = dr.gather(S.U, S.empty, k_sel) != 0
@@ -303,8 +332,8 @@ def _exact_axis(S, wi):
 
 
 def _exact_sample(S, wi, u1, u2):
-    v, _ = _sample1d(S, 'cdf', 'last', S.U(0), S.U(0), _EXACT_CELLS, u1)
-    d = _dir(_EXACT_THETA_MAX * v, 2.0 * _PI * u2)
+    i, f = _sample1d(S, 'cdf', 'last', S.U(0), S.U(0), _EXACT_CELLS, u1)
+    d = _dir(_band_theta(S, i, f), 2.0 * _PI * u2)
     if _EXACT_LOBE == 'NH':
         return _reflect(wi, d)
     t, b, n = _basis(_exact_axis(S, wi))
@@ -324,8 +353,8 @@ def _exact_pdf(S, wi, wo):
         d, a, jac, valid = wo, _exact_axis(S, wi), 1.0, wo[2] == wo[2]
     x = (d[1] * a[2] - d[2] * a[1], d[2] * a[0] - d[0] * a[2], d[0] * a[1] - d[1] * a[0])
     th = dr.atan2(dr.sqrt(_dot(x, x)), _dot(d, a))
-    den = _EXACT_THETA_MAX * dr.sin(th) * 2.0 * _PI * jac
     i, inside = _cell(S, th / _EXACT_THETA_MAX, _EXACT_CELLS)
+    den = dr.gather(S.F, S.measure, i) * jac
     p = dr.select(inside, S.gather('pdf', i), 0.0) / den
     return dr.select(valid & (den > 0.0), p, 0.0)
 
@@ -383,6 +412,31 @@ def sample_f64(wi, u1, u2):
     return wo, pdf, tuple(dr.select(ok, c * wo[2] / pdf, 0.0) for c in f)
 
 
+# The smallest normal f32: the plugin's weights and pdfs are f32, and a weight below this would be a subnormal
+# that a flush-to-zero backend reads as 0.
+_F32_MIN_NORMAL = 2.0 ** -126
+
+
+def _plugin_values(S, wi, wo):
+    """What the plugin reports at (wi, wo), in Float64: f·cosθo per channel, the pdf, and whether the direction is
+    one sample() returns as a valid sample (some channel's weight f·cosθo/pdf is a normal f32 > 0).
+
+    Mitsuba's convention, which mi.chi2.BSDFAdapter tests: a sample of weight 0 is invalid (the adapter drops it),
+    and pdf(wo) is the density of the valid samples only. lobe's sampler mixes in cosine sampling, so it also draws
+    directions where the formula is 0 (a clamped lobe, a shadowing term, below the horizon): sample() returns them
+    with weight 0 and pdf 0, and pdf() is 0 at every such direction; elsewhere pdf() is lobe's pdf. The same
+    function decides both, so sample() and pdf() stay one code path."""
+    ok = (wi[2] > 0.0) & (wo[2] > 0.0)
+    f = eval_f64(wi, wo)
+    pdf = _density(S, wi, wo)
+    ok = ok & (pdf > 0.0)
+    fc = [dr.select(ok, c * wo[2], 0.0) for c in f]
+    live = ok & (fc[0] / pdf >= _F32_MIN_NORMAL)
+    for c in fc[1:]:
+        live = live | (ok & (c / pdf >= _F32_MIN_NORMAL))
+    return fc, dr.select(live, pdf, 0.0), live
+
+
 def _spectrum(S, vals):
     v = [S.to32(c) for c in vals]
     return mi.Spectrum(v[0], v[1], v[2]) if len(v) == 3 else mi.Spectrum(v[0])
@@ -413,27 +467,25 @@ def _make_class():
 
         def eval_pdf(self, ctx, si, wo, active=True):
             S, wi, w = self._dirs(si, wo)
-            ok = (wi[2] > 0.0) & (w[2] > 0.0)
-            f = eval_f64(wi, w)
-            value = _spectrum(S, [dr.select(ok, c * w[2], 0.0) for c in f])
-            pdf = S.to32(dr.select(ok, _density(S, wi, w), 0.0))
-            return value, pdf
+            fc, pdf, _ = _plugin_values(S, wi, w)
+            return _spectrum(S, fc), S.to32(pdf)
 
         def eval(self, ctx, si, wo, active=True):
             return self.eval_pdf(ctx, si, wo, active)[0]
 
         def pdf(self, ctx, si, wo, active=True):
             S, wi, w = self._dirs(si, wo)
-            ok = (wi[2] > 0.0) & (w[2] > 0.0)
-            return S.to32(dr.select(ok, _density(S, wi, w), 0.0))
+            return S.to32(_plugin_values(S, wi, w)[1])
 
         def sample(self, ctx, si, sample1, sample2, active=True):
             S = _st()
             wi = _unit(tuple(S.to64(c) for c in (si.wi.x, si.wi.y, si.wi.z)))
             above = wi[2] > 0.0
             wi_safe = tuple(dr.select(above, c, d) for c, d in zip(wi, (0.0, 0.0, 1.0)))
-            wo, pdf, weight = sample_f64(wi_safe, S.to64(sample2.x), S.to64(sample2.y))
-            ok = above & (wo[2] > 0.0) & (pdf > 0.0)
+            wo = _draw(S, wi_safe, S.to64(sample2.x), S.to64(sample2.y))
+            fc, pdf, live = _plugin_values(S, wi_safe, wo)
+            ok = above & live
+            weight = [c / dr.select(live, pdf, 1.0) for c in fc]
             bs = dr.zeros(mi.BSDFSample3f)
             bs.wo = mi.Vector3f(S.to32(wo[0]), S.to32(wo[1]), S.to32(wo[2]))
             bs.pdf = S.to32(dr.select(ok, pdf, 0.0))

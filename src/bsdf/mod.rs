@@ -11,15 +11,19 @@
 //! - **Tabulated** (any formula): the half-vector parameterisation. For `wi` and a half vector h with
 //!   θₕ = (π/2)·x₁² (Dupuy and Jakob's warp, as Mitsuba's `measured` plugin) and φₕ = 2π·x₂ (+ wi's azimuth for an
 //!   isotropic formula), wo = 2(wi·h)h − wi; the map h ↔ wo is a bijection (h = ±norm(wi + wo), the sign making
-//!   h.z ≥ 0) with dωₒ = 4|wi·h| dωₕ and dωₕ = sinθₕ·πx₁·2π dx₁dx₂. Per incidence node a [`ROWS`] × [`COLS`]
-//!   table over (x₁, x₂) holds, per cell, the maximum over a 3 × 3 sub-grid (corners and centre, shared between
-//!   neighbours) of g = lum(f)·max(cosθₒ, 0)·|dωₒ/dx| — pbrt-v4's `FromFuncLInfinity` rule, so a cell is never 0
-//!   where g > 0 at one of its points — sampled by a marginal and conditional inverse CDF. Every catalogue lobe
-//!   peaks at h = N, which the x₁² warp resolves.
-//! - **Exact** (a formula whose only input is NH, or only VR — one cosine, nothing else): a 1-D table of
-//!   lum(f(cos θ))·sinθ over θ ∈ [0, θmax] (θmax = π for VR, π/2 for NH) in [`EXACT_CELLS`] cells, each cell the
-//!   maximum at its ends and middle: the CDF is piecewise linear in θ and the density piecewise constant, inverted
-//!   by binary search. φ is uniform about the lobe axis: R, the mirror of wi, for VR; N for NH, whose sampled h
+//!   h.z ≥ 0) with dωₒ = 4|wi·h| dωₕ. Per incidence node a [`ROWS`] × [`COLS`] grid over (x₁, x₂) holds at each
+//!   cell corner the maximum over the 3 × 3 sub-grid points (corners and centres) within half a cell of it of
+//!   g = lum(f)·max(cosθₒ, 0)·4|wi·h| — pbrt-v4's `FromFuncLInfinity` rule for corners, so a cell with g > 0 at
+//!   one of its points has a positive corner. Within a cell the density in ωₕ is bilinear in (sin²(θₕ/2), φₕ),
+//!   coordinates uniform in solid angle, between its corners: continuous, and bounded everywhere, the mirror
+//!   direction (h = N, the warp's pole, whose corners share one value) included. A cell is chosen by its mass
+//!   (a marginal and conditional inverse CDF), the point in it by the bilinear density's linear marginal and
+//!   conditional. Every catalogue lobe peaks at h = N, which the x₁² warp resolves with small cells.
+//! - **Exact** (a formula whose only input is NH, or only VR — one cosine, nothing else): a 1-D table over
+//!   θ ∈ [0, θmax] (θmax = π for VR, π/2 for NH) in [`EXACT_CELLS`] cells, each cell its solid angle about the
+//!   axis times the maximum of lum(f(cos θ)) at its ends and middle, inverted by binary search; within a cell θ is
+//!   uniform in sin²(θ/2), so the density in solid angle is constant over each cell and bounded on the axis.
+//!   φ is uniform about the lobe axis: R, the mirror of wi, for VR; N for NH, whose sampled h
 //!   gives wo = 2(wi·h)h − wi with the Jacobian 1/(4 wo·h).
 //! - **Cosine**: cosθₒ/π, for formulas neither of the above beats (and for a formula that is 0 everywhere).
 //!
@@ -318,27 +322,55 @@ fn azimuth_of(wi: V3) -> Turn {
     }
 }
 
-/// The half vector of table coordinates (x₁, x₂), its azimuth φₕ = 2πx₂ measured in the frame turned by `turn`,
-/// and dωₕ/dx.
+/// The half vector at polar angle θₕ and azimuth φₕ = 2πx₂ measured in the frame turned by `turn`.
 #[inline]
-fn half_from(x1: f64, x2: f64, turn: Turn) -> (V3, f64) {
-    let th = FRAC_PI_2 * x1 * x1;
+fn half_at(th: f64, x2: f64, turn: Turn) -> V3 {
     let (st, ct) = th.sin_cos();
     let (sp, cp) = (2.0 * PI * x2).sin_cos();
     let (c, s) = turn;
-    ([st * (cp * c - sp * s), st * (sp * c + cp * s), ct], st * PI * x1 * 2.0 * PI)
+    [st * (cp * c - sp * s), st * (sp * c + cp * s), ct]
 }
 
-/// Table coordinates of the half vector of (wi, wo) (azimuth in the frame turned by `turn`): x₁, the column of
-/// x₂ among [`COLS`], and |dωₒ/dx| = 4|wi·h|·dωₕ/dx; `None` when wo = −wi (no half vector).
+/// The half vector of table coordinates (x₁, x₂) (θₕ = (π/2)·x₁²) in the frame turned by `turn`.
+#[inline]
+fn half_from(x1: f64, x2: f64, turn: Turn) -> V3 {
+    half_at(FRAC_PI_2 * x1 * x1, x2, turn)
+}
+
+/// sin²(θ/2) = (1 − cosθ)/2 at the edges `theta(0)`, …, `theta(n)` of n bands in θ: the solid angle of the band
+/// between edges a and b about an axis is 4π·(s_b − s_a), and s is uniform in solid angle. Computed without
+/// the cancellation of 1 − cosθ near the axis.
+fn band_edges(n: usize, theta: impl Fn(usize) -> f64) -> Vec<f64> {
+    (0..=n)
+        .map(|a| {
+            let h = (0.5 * theta(a)).sin();
+            h * h
+        })
+        .collect()
+}
+
+/// The polar angle of s = sin²(θ/2) ([`band_edges`]).
+#[inline]
+fn theta_of_band(s: f64) -> f64 {
+    2.0 * s.max(0.0).sqrt().atan2((1.0 - s).max(0.0).sqrt())
+}
+
+/// The θ edges of the tabulated mechanism's rows: θₕ = (π/2)·(i/[`ROWS`])².
+fn row_theta(i: usize) -> f64 {
+    let x = i as f64 / ROWS as f64;
+    FRAC_PI_2 * x * x
+}
+
+/// Table coordinates of the half vector of (wi, wo) (azimuth in the frame turned by `turn`): x₁, θₕ, the column
+/// of x₂ among [`COLS`], the position in that column (x₂·COLS − column, in [0, 1]), and dωₒ/dωₕ = 4|wi·h|;
+/// `None` when wo = −wi (no half vector).
 ///
 /// θₕ comes from atan2 of the unnormalised sum s = wi + wo (turned into the table's frame, sign chosen so
-/// h.z ≥ 0): atan2 is scale-free, and the Jacobian's sinθₕ·|wi·h| is |s_xy|·|wi·s|/|s|², so no square root of |s|²
-/// is taken. θₕ by atan2, not acos, which loses digits near the normal where the lobes are. The density is
-/// constant over a column, so φₕ is never computed: its column is counted from the quadrant and seven
-/// comparisons against the column edges ([`column_of`]).
+/// h.z ≥ 0): atan2 is scale-free. θₕ by atan2, not acos, which loses digits near the normal where the lobes
+/// are. The column is counted from the quadrant and seven comparisons against the column edges
+/// ([`column_of`]), the position in it from atan2 (clamped into the column where the two round apart).
 #[inline]
-fn table_coords(wi: V3, wo: V3, turn: Turn) -> Option<(f64, usize, f64)> {
+fn table_coords(wi: V3, wo: V3, turn: Turn) -> Option<(f64, f64, usize, f64, f64)> {
     let s = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
     let len2 = dot(s, s);
     if len2.is_nan() || len2 <= 0.0 {
@@ -350,8 +382,11 @@ fn table_coords(wi: V3, wo: V3, turn: Turn) -> Option<(f64, usize, f64)> {
     let sxy = (hx * hx + hy * hy).sqrt();
     let th = sxy.atan2(s[2].abs());
     let x1 = (th / FRAC_PI_2).sqrt();
-    let jac = sxy * dot(wi, s).abs() / len2 * PI * x1 * 2.0 * PI * 4.0;
-    Some((x1, column_of(hx, hy), jac))
+    let jac = 4.0 * dot(wi, s).abs() / len2.sqrt();
+    let col = column_of(hx, hy);
+    let x2 = (hy.atan2(hx) / (2.0 * PI)).rem_euclid(1.0);
+    let b = (x2 * COLS as f64 - col as f64).clamp(0.0, 1.0);
+    Some((x1, th, col, b, jac))
 }
 
 /// (cos, sin) of the column edges k·2π/[`COLS`] inside the first quadrant, k = 1 … COLS/4 − 1.
@@ -412,7 +447,47 @@ struct Tabulated {
     /// φᵢ nodes (anisotropic only; one node at 0 for an isotropic formula).
     phis: usize,
     /// Node (θ index t, φ index p) at t·phis + p; `None`: an empty table.
-    nodes: Vec<Option<Dist2D>>,
+    nodes: Vec<Option<Node>>,
+    /// sin²(θₕ/2) at the row edges ([`band_edges`]).
+    bands: Vec<f64>,
+}
+
+/// One incidence node's table: the density in ωₕ at the cell corners, bilinear within each cell in
+/// (sin²(θₕ/2), φₕ) — coordinates uniform in solid angle — so continuous and bounded; and the cells' masses to
+/// choose a cell by.
+#[derive(Clone, Debug)]
+pub(crate) struct Node {
+    /// The cells' masses (row-major [`ROWS`] × [`COLS`]), as a distribution.
+    pub(crate) cells: Dist2D,
+    /// The density in ωₕ at corner (row edge i, column edge j) at i·[`COLS`] + j, i ≤ [`ROWS`] (column edge
+    /// [`COLS`] is column edge 0); ∫ over the hemisphere of h = 1.
+    pub(crate) corners: Vec<f64>,
+}
+
+impl Node {
+    /// The four corners of cell (i, j): (v₀₀, v₀₁, v₁₀, v₁₁), first index along θₕ.
+    #[inline]
+    fn corners(&self, i: usize, j: usize) -> [f64; 4] {
+        let j1 = (j + 1) % COLS;
+        let c = &self.corners;
+        [c[i * COLS + j], c[i * COLS + j1], c[(i + 1) * COLS + j], c[(i + 1) * COLS + j1]]
+    }
+}
+
+/// x in [0, 1] with density ∝ (1 − x)·a + x·b for u in [0, 1] (pbrt-v4's `SampleLinear`; uniform when a = b).
+#[inline]
+fn sample_linear(u: f64, a: f64, b: f64) -> f64 {
+    if u == 0.0 && a == 0.0 {
+        return 0.0;
+    }
+    let x = u * (a + b) / (a + (a * a + u * (b * b - a * a)).max(0.0).sqrt());
+    x.clamp(0.0, 1.0)
+}
+
+/// (1 − a)(1 − b)·v₀₀ + (1 − a)b·v₀₁ + a(1 − b)·v₁₀ + ab·v₁₁.
+#[inline]
+fn bilinear(v: [f64; 4], a: f64, b: f64) -> f64 {
+    (1.0 - a) * ((1.0 - b) * v[0] + b * v[1]) + a * ((1.0 - b) * v[2] + b * v[3])
 }
 
 /// What a tabulated sampler needs of one wi, computed once per wi: the nodes it mixes with their weights, and the
@@ -466,8 +541,14 @@ impl Tabulated {
         match &self.nodes[k] {
             None => cosine_sample(u, u2),
             Some(d) => {
-                let (x1, x2) = d.sample(u, u2);
-                let (h, _) = half_from(x1, x2, at.turn);
+                // The cell by its mass, then the point in it by the bilinear density: along θₕ by the marginal
+                // (linear), along φₕ by the conditional (linear), each from the uniform fraction within the cell.
+                let (i, f1, j, f2) = d.cells.sample_cell(u, u2);
+                let v = d.corners(i, j);
+                let a = sample_linear(f1, v[0] + v[1], v[2] + v[3]);
+                let b = sample_linear(f2, v[0] + a * (v[2] - v[0]), v[1] + a * (v[3] - v[1]));
+                let s = self.bands[i] + a * (self.bands[i + 1] - self.bands[i]);
+                let h = half_at(theta_of_band(s), (j as f64 + b) / COLS as f64, at.turn);
                 reflect(wi, h)
             }
         }
@@ -481,7 +562,13 @@ impl Tabulated {
             if w > 0.0 {
                 p += w * match (&self.nodes[k], tc) {
                     (None, _) => cos_pdf,
-                    (Some(d), Some((x1, col, jac))) if jac > 0.0 => d.pdf_cell(x1, col) / jac,
+                    (Some(d), Some((x1, th, col, b, jac))) if jac > 0.0 && x1 <= 1.0 => {
+                        let row = ((x1 * ROWS as f64) as usize).min(ROWS - 1);
+                        let h = (0.5 * th).sin();
+                        let (s0, s1) = (self.bands[row], self.bands[row + 1]);
+                        let a = ((h * h - s0) / (s1 - s0)).clamp(0.0, 1.0);
+                        bilinear(d.corners(row, col), a, b) / jac
+                    }
                     _ => 0.0,
                 };
             }
@@ -499,6 +586,12 @@ struct Exact {
     lobe: Input,
     theta_max: f64,
     dist: Dist1D,
+    /// sin²(θ/2) at the cell edges ([`band_edges`]): within a cell θ is drawn uniform in this (uniform in solid
+    /// angle about the axis), so the density in solid angle is constant over each cell and bounded.
+    bands: Vec<f64>,
+    /// [`EXACT_CELLS`]·4π·(bands\[i + 1\] − bands\[i\]): a cell density (∫ over θ/θmax = 1) over this is the
+    /// density in solid angle about the axis.
+    measure: Vec<f64>,
 }
 
 /// An orthonormal basis with `n` its third axis (Duff et al. 2017).
@@ -520,8 +613,9 @@ impl Exact {
     }
 
     fn sample(&self, wi: V3, u1: f64, u2: f64) -> V3 {
-        let (v, _) = self.dist.sample(u1);
-        let d = dir(self.theta_max * v, 2.0 * PI * u2);
+        let (i, f) = self.dist.sample_cell(u1);
+        let s = self.bands[i] + f * (self.bands[i + 1] - self.bands[i]);
+        let d = dir(theta_of_band(s), 2.0 * PI * u2);
         if self.lobe == Input::NH {
             return reflect(wi, d);
         }
@@ -546,12 +640,16 @@ impl Exact {
         };
         let x = [d[1] * a[2] - d[2] * a[1], d[2] * a[0] - d[0] * a[2], d[0] * a[1] - d[1] * a[0]];
         let th = dot(x, x).sqrt().atan2(dot(d, a));
-        let s = th.sin();
-        let den = self.theta_max * s * 2.0 * PI * jac;
+        let v = th / self.theta_max;
+        if !(0.0..1.0).contains(&v) {
+            return 0.0;
+        }
+        let i = ((v * EXACT_CELLS as f64) as usize).min(EXACT_CELLS - 1);
+        let den = self.measure[i] * jac;
         if den.is_nan() || den <= 0.0 {
             return 0.0;
         }
-        self.dist.pdf(th / self.theta_max) / den
+        self.dist.pdf(v) / den
     }
 }
 
@@ -841,6 +939,13 @@ pub fn efficiency(w: impl Iterator<Item = f64>) -> f64 {
     }
 }
 
+/// [`band_edges`] of n bands and n·4π·(width of each band in sin²(θ/2)).
+fn bands_and_measure(n: usize, theta: impl Fn(usize) -> f64) -> (Vec<f64>, Vec<f64>) {
+    let bands = band_edges(n, theta);
+    let measure = bands.windows(2).map(|w| n as f64 * 4.0 * PI * (w[1] - w[0])).collect();
+    (bands, measure)
+}
+
 /// Every incidence node's table (module docs), and the nodes left empty.
 fn build_tabulated(target: &Target, isotropic: bool) -> Result<(Tabulated, Vec<(f64, f64)>), Diagnostic> {
     let (nt, np) = if isotropic { (ISO_NODES, 1) } else { (ANISO_THETA_NODES, ANISO_PHI_NODES) };
@@ -849,7 +954,7 @@ fn build_tabulated(target: &Target, isotropic: bool) -> Result<(Tabulated, Vec<(
     let mut empty = vec![];
     let mut scratch = NodeScratch::default();
     for &t in &thetas {
-        let mut at_normal: Option<Option<Dist2D>> = None;
+        let mut at_normal: Option<Option<Node>> = None;
         for p in 0..np {
             let phi = 2.0 * PI * p as f64 / np as f64;
             // At θᵢ = 0 every azimuth is the same wi: one table.
@@ -866,7 +971,8 @@ fn build_tabulated(target: &Target, isotropic: bool) -> Result<(Tabulated, Vec<(
             nodes.push(d);
         }
     }
-    Ok((Tabulated { isotropic, thetas, phis: np, nodes }, empty))
+    let bands = band_edges(ROWS, row_theta);
+    Ok((Tabulated { isotropic, thetas, phis: np, nodes, bands }, empty))
 }
 
 #[derive(Default)]
@@ -880,7 +986,7 @@ struct NodeScratch {
 /// One node's table at incidence `wi`. φₕ is measured from azimuth 0: an isotropic formula's nodes lie at
 /// azimuth 0 (so this is φₕ from wi's azimuth, as [`Tabulated::at`] turns it), an anisotropic one's φₕ is
 /// absolute.
-fn node_table(target: &Target, wi: V3, s: &mut NodeScratch) -> Result<Option<Dist2D>, Diagnostic> {
+fn node_table(target: &Target, wi: V3, s: &mut NodeScratch) -> Result<Option<Node>, Diagnostic> {
     let (pr, pc) = (2 * ROWS + 1, 2 * COLS + 1);
     s.pairs.clear();
     s.slots.clear();
@@ -891,12 +997,12 @@ fn node_table(target: &Target, wi: V3, s: &mut NodeScratch) -> Result<Option<Dis
         let x1 = a as f64 / (2 * ROWS) as f64;
         for b in 0..pc {
             let x2 = b as f64 / (2 * COLS) as f64;
-            let (h, jh) = half_from(x1, x2, NO_TURN);
+            let h = half_from(x1, x2, NO_TURN);
             let wo = reflect(wi, h);
-            if wo[2] > 0.0 && jh > 0.0 {
+            if wo[2] > 0.0 {
                 s.pairs.push((wi, wo));
                 s.slots.push(a * pc + b);
-                jacs.push(jh * 4.0 * dot(wi, h) * wo[2]);
+                jacs.push(4.0 * dot(wi, h) * wo[2]);
             }
         }
     }
@@ -907,19 +1013,39 @@ fn node_table(target: &Target, wi: V3, s: &mut NodeScratch) -> Result<Option<Dis
         check_point(v, || describe_pair(s.pairs[i].0, s.pairs[i].1))?;
         s.g[slot] = target.luminance(v) * jacs[i];
     }
-    let mut cells = vec![0.0; ROWS * COLS];
-    for i in 0..ROWS {
+    // A corner's value: the largest g over the sub-grid points within half a cell of it (the columns wrap; the
+    // pole's corners, one direction, share the largest), so a cell with g > 0 at one of its points has a
+    // positive corner. A cell's mass: its solid angle 4π·Δ(sin²(θₕ/2))/COLS times the mean of its corners.
+    let mut corners = vec![0.0; (ROWS + 1) * COLS];
+    for i in 0..=ROWS {
         for j in 0..COLS {
             let mut m = 0.0f64;
-            for a in 2 * i..=2 * i + 2 {
-                for b in 2 * j..=2 * j + 2 {
+            for a in (2 * i).saturating_sub(1)..=(2 * i + 1).min(2 * ROWS) {
+                for db in 0..3 {
+                    let b = (2 * j + 2 * COLS + db - 1) % (2 * COLS);
                     m = m.max(s.g[a * pc + b]);
                 }
             }
-            cells[i * COLS + j] = m;
+            corners[i * COLS + j] = m;
         }
     }
-    Ok(Dist2D::new(&cells, ROWS, COLS))
+    let pole = corners[..COLS].iter().fold(0.0f64, |a, &b| a.max(b));
+    corners[..COLS].fill(pole);
+    let bands = band_edges(ROWS, row_theta);
+    let mut cells = vec![0.0; ROWS * COLS];
+    for i in 0..ROWS {
+        let omega = 4.0 * PI * (bands[i + 1] - bands[i]) / COLS as f64;
+        for j in 0..COLS {
+            let j1 = (j + 1) % COLS;
+            let c = &corners;
+            cells[i * COLS + j] = omega * 0.25 * (c[i * COLS + j] + c[i * COLS + j1] + c[(i + 1) * COLS + j] + c[(i + 1) * COLS + j1]);
+        }
+    }
+    let total: f64 = cells.iter().sum();
+    Ok(Dist2D::new(&cells, ROWS, COLS).map(|cells| {
+        corners.iter_mut().for_each(|c| *c /= total);
+        Node { cells, corners }
+    }))
 }
 
 /// The exact path's table for a formula of the one input `lobe` (NH or VR); `None` when it is 0 everywhere.
@@ -943,10 +1069,12 @@ fn build_exact(target: &Target, lobe: Input) -> Result<Option<Exact>, Diagnostic
         let v = &vals[a * nch..(a + 1) * nch];
         let c = theta(a).cos();
         check_point(v, || format!("{} = {c:.9} (the formula's only input)", lobe.name()))?;
-        q[a] = target.luminance(v) * theta(a).sin();
+        q[a] = target.luminance(v);
     }
-    let cells: Vec<f64> = (0..EXACT_CELLS).map(|i| q[2 * i].max(q[2 * i + 1]).max(q[2 * i + 2])).collect();
-    Ok(Dist1D::new(&cells).map(|dist| Exact { lobe, theta_max, dist }))
+    // A cell's mass: the largest value at its ends and middle times its solid angle about the axis.
+    let (bands, measure) = bands_and_measure(EXACT_CELLS, |i| theta_max * i as f64 / EXACT_CELLS as f64);
+    let cells: Vec<f64> = (0..EXACT_CELLS).map(|i| q[2 * i].max(q[2 * i + 1]).max(q[2 * i + 2]) * (bands[i + 1] - bands[i])).collect();
+    Ok(Dist1D::new(&cells).map(|dist| Exact { lobe, theta_max, dist, bands, measure }))
 }
 
 #[cfg(test)]
@@ -958,12 +1086,16 @@ mod tests {
         let wi = dir(0.7, 0.3);
         for &(x1, x2) in &[(0.1, 0.2), (0.5, 0.9), (0.8, 0.45), (0.03, 0.6)] {
             let turn = (0.3f64.cos(), 0.3f64.sin());
-            let (h, jh) = half_from(x1, x2, turn);
+            let h = half_from(x1, x2, turn);
             let wo = reflect(wi, h);
-            let (y1, col, jac) = table_coords(wi, wo, turn).unwrap();
+            let (y1, th, col, b, jac) = table_coords(wi, wo, turn).unwrap();
             assert!((x1 - y1).abs() < 1e-12, "{x1} → {y1}");
+            assert!((th - FRAC_PI_2 * x1 * x1).abs() < 1e-12);
             assert_eq!(col, (x2 * COLS as f64) as usize);
-            assert!((jac - 4.0 * dot(wi, h).abs() * jh).abs() < 1e-12 * jac);
+            assert!((col as f64 + b - x2 * COLS as f64).abs() < 1e-9);
+            assert!((jac - 4.0 * dot(wi, h).abs()).abs() < 1e-12 * jac);
+            let s = band_edges(1, |_| FRAC_PI_2 * x1 * x1)[0];
+            assert!((theta_of_band(s) - FRAC_PI_2 * x1 * x1).abs() < 1e-15);
         }
     }
 

@@ -52,7 +52,7 @@ fn catalogue() -> Vec<String> {
 
 /// The default parameters and two sets drawn uniformly inside the middle 80 % of each declared range (the ends
 /// of some ranges are degenerate: m = 0.01 is a mirror), from a fixed stream per file.
-fn param_sets(file: &str, defaults: &[f64], decls: &[lobe::ir::ParamDecl]) -> Vec<Vec<f64>> {
+pub(crate) fn param_sets(file: &str, defaults: &[f64], decls: &[lobe::ir::ParamDecl]) -> Vec<Vec<f64>> {
     let seed = file.bytes().fold(17u64, |h, b| h.wrapping_mul(31).wrapping_add(b as u64));
     let mut sets = vec![defaults.to_vec()];
     for k in 0..2u64 {
@@ -94,9 +94,21 @@ fn file_cases(file: &str, all_sets: bool) -> Vec<Case> {
     out
 }
 
-/// Random formulas of the differential test's generator made BSDF-like (`min(abs(e), 100)`), the first `count`
-/// whose sampler builds: the rest are refused for NaN, infinite or negative values, as they should be.
+/// The cases of [`random_formulas`] at θᵢ = 0°, 30°, 60°, 85°.
 fn random_cases(count: usize) -> Vec<Case> {
+    let mut out = vec![];
+    for (f, s) in random_formulas(count) {
+        for &t in &[0.0, 30.0, 60.0, 85.0] {
+            out.push(Case { name: format!("random {}", f.to_program_text()), sampler: s.clone(), wi: (t, 0.0) });
+        }
+    }
+    out
+}
+
+/// Random formulas of the differential test's generator made BSDF-like (`min(abs(e), 100)`), the first `count`
+/// whose sampler builds, with their samplers: the rest are refused for NaN, infinite or negative values, as they
+/// should be.
+pub(crate) fn random_formulas(count: usize) -> Vec<(lobe::Formula, Sampler)> {
     let mut runner = TestRunner::deterministic();
     let strategy = differential::expr();
     let (mut out, mut tried, mut built) = (vec![], 0, 0);
@@ -110,9 +122,7 @@ fn random_cases(count: usize) -> Vec<Case> {
         let Ok(ks) = std::panic::catch_unwind(|| kernels(f.clone())) else { continue };
         let Ok(s) = Sampler::build_channels(&ks, &params, &Options::default()) else { continue };
         built += 1;
-        for &t in &[0.0, 30.0, 60.0, 85.0] {
-            out.push(Case { name: format!("random {}", f.to_program_text()), sampler: s.clone(), wi: (t, 0.0) });
-        }
+        out.push((f, s));
     }
     out
 }
