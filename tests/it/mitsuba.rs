@@ -88,6 +88,12 @@ fn lobe_pairs(file: &Path, choice: Choice, theta: f64, phi: f64, csv: &Path) {
 /// θᵢ of the χ² tests; an anisotropic formula is also tested at φᵢ = 45°.
 const THETAS: [u32; 4] = [0, 30, 60, 85];
 
+/// The incidences `θ,φ` χ² runs at: every θ of [`THETAS`], at φ 0 and also 45° for an anisotropic formula.
+fn incidences(aniso: bool) -> Vec<String> {
+    let phis: &[u32] = if aniso { &[0, 45] } else { &[0] };
+    THETAS.iter().flat_map(|t| phis.iter().map(move |p| format!("{t},{p}"))).collect()
+}
+
 #[test]
 fn every_example_exports_a_plugin_that_passes_mitsubas_chi2() {
     let Some(py) = python() else { return };
@@ -105,10 +111,6 @@ fn every_example_exports_a_plugin_that_passes_mitsubas_chi2() {
         assert_eq!(j["plugin"], format!("lobe_{stem}"), "{j}");
         jobs.push((f.clone(), module, j["isotropic"] == false));
     }
-    let incidences = |aniso: bool| -> Vec<String> {
-        let phis: &[u32] = if aniso { &[0, 45] } else { &[0] };
-        THETAS.iter().flat_map(|t| phis.iter().map(move |p| format!("{t},{p}"))).collect()
-    };
     let tests: usize = jobs.iter().map(|j| incidences(j.2).len()).sum();
     let mut failed = vec![];
     for (f, module, aniso) in &jobs {
@@ -311,10 +313,6 @@ fn the_plugin_passes_mitsubas_chi2_at_other_parameters_and_on_random_formulas() 
         random += 1;
     }
     assert_eq!(random, 50, "only {random} random formulas in the language's words");
-    let incidences = |aniso: bool| -> Vec<String> {
-        let phis: &[u32] = if aniso { &[0, 45] } else { &[0] };
-        THETAS.iter().flat_map(|t| phis.iter().map(move |p| format!("{t},{p}"))).collect()
-    };
     let tests: usize = modules.iter().map(|m| incidences(m.1).len()).sum();
     let mut failed = vec![];
     for (module, aniso) in &modules {
