@@ -88,6 +88,22 @@ fn lobe_pairs(file: &Path, choice: Choice, theta: f64, phi: f64, csv: &Path) {
 /// θᵢ of the χ² tests; an anisotropic formula is also tested at φᵢ = 45°.
 const THETAS: [u32; 4] = [0, 30, 60, 85];
 
+/// Runs tests/it/mitsuba/check.py on `module` with `extra` arguments and a χ² at each of its [`incidences`]
+/// (Šidák over `tests` in all): the process, its stdout (echoed) and the count of `ok`/`FAIL` lines.
+fn check_py(py: &Path, dir: &Path, module: &Path, extra: &[String], aniso: bool, tests: usize) -> (std::process::Output, String, usize) {
+    let mut args: Vec<String> = vec![root().join("tests/it/mitsuba/check.py").display().to_string(), module.display().to_string()];
+    args.extend_from_slice(extra);
+    for i in incidences(aniso) {
+        args.extend(["--chi2".into(), i]);
+    }
+    args.extend(["--tests".into(), tests.to_string()]);
+    let o = Command::new(py).args(&args).current_dir(dir).output().expect("run python");
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    eprint!("{out}");
+    let checks = out.lines().filter(|l| l.starts_with("ok ") || l.starts_with("FAIL ")).count();
+    (o, out, checks)
+}
+
 /// The incidences `θ,φ` χ² runs at: every θ of [`THETAS`], at φ 0 and also 45° for an anisotropic formula.
 fn incidences(aniso: bool) -> Vec<String> {
     let phis: &[u32] = if aniso { &[0, 45] } else { &[0] };
@@ -117,16 +133,7 @@ fn every_example_exports_a_plugin_that_passes_mitsubas_chi2() {
         let inc = if *aniso { "60,45" } else { "60,0" };
         let csv = module.with_extension("csv");
         lobe_pairs(f, Choice::Auto, 60.0, if *aniso { 45.0 } else { 0.0 }, &csv);
-        let mut args: Vec<String> = vec![root().join("tests/it/mitsuba/check.py").display().to_string(), module.display().to_string()];
-        args.extend(["--csv".into(), format!("{inc}={}", csv.display())]);
-        for i in incidences(*aniso) {
-            args.extend(["--chi2".into(), i]);
-        }
-        args.extend(["--tests".into(), tests.to_string()]);
-        let o = Command::new(&py).args(&args).current_dir(&dir).output().expect("run python");
-        let out = String::from_utf8_lossy(&o.stdout);
-        eprint!("{out}");
-        let checks = out.lines().filter(|l| l.starts_with("ok ") || l.starts_with("FAIL ")).count();
+        let (o, out, checks) = check_py(&py, &dir, module, &["--csv".into(), format!("{inc}={}", csv.display())], *aniso, tests);
         // 2 f64 checks, 2 per variant, one χ² per incidence.
         let want = 6 + incidences(*aniso).len();
         if !o.status.success() || checks != want {
@@ -316,15 +323,7 @@ fn the_plugin_passes_mitsubas_chi2_at_other_parameters_and_on_random_formulas() 
     let tests: usize = modules.iter().map(|m| incidences(m.1).len()).sum();
     let mut failed = vec![];
     for (module, aniso) in &modules {
-        let mut args: Vec<String> = vec![root().join("tests/it/mitsuba/check.py").display().to_string(), module.display().to_string()];
-        for i in incidences(*aniso) {
-            args.extend(["--chi2".into(), i]);
-        }
-        args.extend(["--tests".into(), tests.to_string()]);
-        let o = Command::new(&py).args(&args).current_dir(&dir).output().expect("run python");
-        let out = String::from_utf8_lossy(&o.stdout);
-        eprint!("{out}");
-        let checks = out.lines().filter(|l| l.starts_with("ok ") || l.starts_with("FAIL ")).count();
+        let (o, out, checks) = check_py(&py, &dir, module, &[], *aniso, tests);
         if !o.status.success() || checks != incidences(*aniso).len() {
             failed.push(format!("{}: {checks} χ² tests ran\n{out}{}", module.display(), String::from_utf8_lossy(&o.stderr)));
         }
