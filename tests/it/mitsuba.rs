@@ -23,14 +23,14 @@ fn root() -> PathBuf {
 pub(crate) fn python() -> Option<PathBuf> {
     let required = std::env::var_os("LOBE_REQUIRE_MITSUBA").is_some_and(|v| v == "1");
     let Some(p) = std::env::var_os("LOBE_MITSUBA_PYTHON") else {
-        assert!(!required, "LOBE_REQUIRE_MITSUBA=1 but LOBE_MITSUBA_PYTHON is not set (a Python with `pip install mitsuba`)");
+        assert!(!required, "LOBE_REQUIRE_MITSUBA=1 but LOBE_MITSUBA_PYTHON is not set (a Python with `pip install mitsuba numpy`)");
         eprintln!("skipped: set LOBE_MITSUBA_PYTHON to a Python with mitsuba installed to run the Mitsuba export tests");
         return None;
     };
-    let ok = Command::new(&p).args(["-c", "import mitsuba, drjit"]).output().is_ok_and(|o| o.status.success());
-    assert!(ok || !required, "LOBE_MITSUBA_PYTHON={} cannot import mitsuba", Path::new(&p).display());
+    let ok = Command::new(&p).args(["-c", "import mitsuba, drjit, numpy"]).output().is_ok_and(|o| o.status.success());
+    assert!(ok || !required, "LOBE_MITSUBA_PYTHON={} cannot import mitsuba, drjit and numpy (pip install mitsuba numpy)", Path::new(&p).display());
     if !ok {
-        eprintln!("skipped: {} cannot import mitsuba", Path::new(&p).display());
+        eprintln!("skipped: {} cannot import mitsuba, drjit and numpy", Path::new(&p).display());
     }
     ok.then(|| PathBuf::from(p))
 }
