@@ -5,6 +5,10 @@
     cargo build --release --features llvm                                              # lobe with both tiers
     .venv/bin/python benches/peers.py [--points 1048576] [--rounds 5] [--json] [--formulas a.brdf …]
     .venv/bin/python benches/peers.py --self-test       # the statistics, the verdicts and the translator
+    HOME=$(mktemp -d) .venv/bin/python benches/peers.py --rounds 7 --json > peers.json  # BENCHMARKS.md §15's run
+    .venv/bin/python benches/peers.py --table peers.json                                 # (cold Dr.Jit cache), its tables
+
+The output starts with the date, the host, the versions and the machine's load (`uptime`) at the start and the end.
 
 What runs. Every system evaluates the same formula on the same float64 points (the cosines uniform in [0, 1], one
 seed), on one thread, at the formula's declared parameter values, baked as constants everywhere (with --live
