@@ -41,8 +41,9 @@ pub struct RenderArgs {
     /// scene's `spp`, else 16).
     #[arg(long, value_name = "N", value_parser = parse_spp)]
     pub spp: Option<usize>,
-    /// Which directions the ray tracer's environment estimator draws: `mis` (both, power heuristic), `bsdf`
-    /// (the material's only) or `env` (the environment's only) — the last two for measurements.
+    /// Which directions the ray tracer's environment estimator draws: `mis` (both, by the one-sample balance
+    /// heuristic, each material's share chosen by a pilot), `bsdf` (the material's only) or `env` (the
+    /// environment's only) — the last two for measurements.
     #[arg(long, default_value = "mis", value_parser = parse_strategy)]
     pub strategy: r::trace::Strategy,
     /// Encode with the sRGB curve instead of the papers' linear clamp to 0..255.

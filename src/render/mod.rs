@@ -278,6 +278,9 @@ pub struct RenderStats {
     pub program_compile: Duration,
     /// Wall time of setup + tiles (excludes encoding).
     pub render_wall: Duration,
+    /// Under an environment with [`trace::Strategy::Mis`]: per material, the probability that a camera sample
+    /// draws its direction from the environment, chosen by the tracer's pilot (empty otherwise).
+    pub env_fractions: Vec<f64>,
 }
 
 impl RenderStats {
@@ -419,6 +422,7 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions, progress: &(dyn Fn(u64, u
         kernel_cpu: Duration::from_nanos(timers.kernel.load(Ordering::Relaxed)),
         program_compile,
         render_wall: t0.elapsed(),
+        env_fractions: vec![],
     };
     Ok((Frame { image: Image { width: w, height: h, rgb }, covered }, stats))
 }

@@ -18,19 +18,24 @@
 //! Point and directional lights are evaluated at every camera sample, with a shadow ray when `shadows = true`.
 //!
 //! # Estimator
-//! Each camera sample draws one direction from the material and one from the environment and combines them with
-//! the power heuristic (Veach 1997; pbrt-v4's `PathIntegrator` direct lighting). The material's density is a
-//! mixture: cosine with probability α = kd·lum(C) / (kd·lum(C) + ks·lum(coef·Cs)), else the formula's
-//! [`Sampler`] (which samples the incident direction given V as its `wi`: exact for reciprocal formulas,
-//! still unbiased for the others since every weight uses that sampler's own `pdf`). [`Strategy::Bsdf`] and
-//! [`Strategy::Env`] keep one of the two (for measurements). Occlusion: a shadow ray per direction against the
-//! same BVH.
+//! One-sample multiple importance sampling (Veach 1997, §9.2.4): each camera sample draws one direction, from
+//! the environment with probability c, else from the material, and weights it 1/(c·p_env + (1 − c)·p_material) —
+//! the balance heuristic, the best weighting of the one-sample model. The material's density is a mixture:
+//! cosine with probability α = kd·lum(C) / (kd·lum(C) + ks·lum(coef·Cs)), else the formula's [`Sampler`] (which
+//! samples the incident direction given V as its `wi`: exact for reciprocal formulas, still unbiased for the
+//! others since every weight uses that sampler's own `pdf`). c is chosen per material by a pilot
+//! ([`env_fractions`]) that estimates, from a few samples drawn at c = ½, the estimator's second moment at every
+//! candidate c: one direction per camera sample whatever c, so the least second moment is the least noise at
+//! equal time. [`Strategy::Bsdf`] (c = 0) and [`Strategy::Env`] (c = 1) keep one of the two (for
+//! measurements). Occlusion: a shadow ray per direction against the same BVH.
 //!
 //! Determinism: sample k of pixel p draws the uniforms `counter_unit(seed(p), 8k + j)`, whoever computes it,
-//! and each pixel is summed in sample order by one thread, so 1 and N threads give the same bytes.
+//! and each pixel is summed in sample order by one thread, so 1 and N threads give the same bytes; the pilot
+//! has seeds of its own and sums in pixel order.
 //!
-//! Cost: per camera sample one ray through the BVH, two or three shadow rays, ~3 evaluations of F and two
-//! sampler densities; measured numbers in BENCHMARKS.md.
+//! Cost: per camera sample one ray through the BVH, one shadow ray per direction and light, one evaluation of
+//! F per direction and light, and both densities of the direction; the pilot adds about 1/32 of the samples.
+//! Measured numbers in BENCHMARKS.md.
 
 use super::bvh::Bvh;
 use super::mesh::onb_tangent;
@@ -50,7 +55,8 @@ pub const MAX_SPP: usize = 1 << 16;
 /// Which directions the environment estimator draws.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Strategy {
-    /// Both, combined by the power heuristic.
+    /// Both, one direction per camera sample from either, combined by the balance heuristic with a fraction
+    /// per material that a pilot chooses.
     #[default]
     Mis,
     /// The material's density only.
@@ -165,6 +171,8 @@ struct Job {
     tmax: f64,
     /// A light's direct term: also kd·NL·C without the 1/π of the environment's Lambertian term.
     light: bool,
+    /// The environment's and the material's densities of the direction (0 for a light).
+    dens: (f64, f64),
 }
 
 /// Renders `scene` with the ray tracer into linear RGB.
@@ -202,10 +210,16 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions, spp: usize, progress: &(d
     let program_compile = tc.elapsed();
     let (w, h) = (scene.width, scene.height);
     let cam = CameraRays::new(scene);
+    // The pilot's CPU time counts as shading: it is part of the estimator's cost.
+    let shade_cpu = AtomicU64::new(0);
+    let fractions = match (opts.strategy, scene.environment.as_deref().filter(|e| e.emits())) {
+        (Strategy::Mis, Some(env)) => env_fractions(scene, &bvh, &shading, &cam, env, spp, &shade_cpu),
+        (Strategy::Env, _) => vec![1.0; shading.len()],
+        _ => vec![0.0; shading.len()],
+    };
     let evals = AtomicU64::new(0);
     let nan = AtomicU64::new(0);
     let visible = AtomicU64::new(0);
-    let shade_cpu = AtomicU64::new(0);
     let rows_done = AtomicU64::new(0);
     let mut rgb = vec![[0f32; 3]; w * h];
     let mut covered = vec![false; w * h];
@@ -216,7 +230,7 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions, spp: usize, progress: &(d
         let c0 = super::thread_cpu();
         let mut counts = Counts::default();
         for x in 0..w {
-            let (c, hit) = pixel(scene, &bvh, &shading, &cam, opts.strategy, x, y, spp, &mut counts);
+            let (c, hit) = pixel(scene, &bvh, &shading, &cam, &fractions, x, y, spp, &mut counts);
             row[x] = [c.x as f32, c.y as f32, c.z as f32];
             cov[x] = hit;
         }
@@ -241,6 +255,7 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions, spp: usize, progress: &(d
         shade_cpu: Duration::from_nanos(shade_cpu.into_inner()),
         program_compile,
         render_wall: t0.elapsed(),
+        env_fractions: if opts.strategy == Strategy::Mis && scene.environment.as_deref().is_some_and(|e| e.emits()) { fractions.clone() } else { vec![] },
         ..RenderStats::default()
     };
     Ok((HdrFrame { width: w, height: h, rgb, covered }, stats))
@@ -329,12 +344,26 @@ fn surface(scene: &Scene, bvh: &Bvh, shading: &[Shading], o: DVec3, d: DVec3) ->
     Some(Some(surf))
 }
 
-/// Estimates pixel (x, y): its colour and whether its centre sees a surface.
+/// The uniforms of camera sample `k` of the pixel seeded `seed`: `j` = 0, 1 the position in the pixel, 2 the
+/// material's cosine-or-sampler choice, 3–4 the material's direction, 5–6 the environment's, 7 which of the two.
+fn uniforms(seed: u64) -> impl Fn(usize, usize) -> f64 {
+    move |k, j| counter_unit(seed, (8 * k + j) as u64)
+}
+
+/// The camera samples of pixel (x, y): the radiance of those that miss (and the ambient term of those that hit
+/// where there is no environment), the surfaces hit, and whether the pixel's centre sees a surface.
 #[allow(clippy::too_many_arguments)]
-fn pixel(scene: &Scene, bvh: &Bvh, shading: &[Shading], cam: &CameraRays, strategy: Strategy, x: usize, y: usize, spp: usize, counts: &mut Counts) -> (DVec3, bool) {
-    let seed = pixel_seed(x, y, scene.width);
-    let uni = |k: usize, j: usize| counter_unit(seed, (8 * k + j) as u64);
-    let env = scene.environment.as_deref().filter(|e| e.emits());
+fn camera_samples(
+    scene: &Scene,
+    bvh: &Bvh,
+    shading: &[Shading],
+    cam: &CameraRays,
+    uni: &impl Fn(usize, usize) -> f64,
+    x: usize,
+    y: usize,
+    spp: usize,
+    counts: &mut Counts,
+) -> (DVec3, Vec<(usize, Surface)>, bool) {
     let miss = |d: DVec3| match scene.environment.as_deref() {
         Some(e) => e.radiance(d),
         None => scene.background,
@@ -357,113 +386,214 @@ fn pixel(scene: &Scene, bvh: &Bvh, shading: &[Shading], cam: &CameraRays, strate
             }
         }
     }
-    // One batch per material present in this pixel (usually one).
+    (sum, surfs, covered)
+}
+
+/// The camera samples of each material present (usually one), in material order.
+fn by_material(surfs: &[(usize, Surface)]) -> Vec<(usize, Vec<&(usize, Surface)>)> {
     let mut mats: Vec<usize> = surfs.iter().map(|(_, s)| s.material).collect();
     mats.sort_unstable();
     mats.dedup();
-    for mi in mats {
+    mats.into_iter().map(|mi| (mi, surfs.iter().filter(|(_, s)| s.material == mi).collect())).collect()
+}
+
+/// Estimates pixel (x, y): its colour and whether its centre sees a surface. `fractions[m]`: the probability that
+/// a camera sample of material m draws its direction from the environment (one-sample MIS).
+#[allow(clippy::too_many_arguments)]
+fn pixel(scene: &Scene, bvh: &Bvh, shading: &[Shading], cam: &CameraRays, fractions: &[f64], x: usize, y: usize, spp: usize, counts: &mut Counts) -> (DVec3, bool) {
+    let uni = uniforms(pixel_seed(x, y, scene.width));
+    let env = scene.environment.as_deref().filter(|e| e.emits());
+    let (mut sum, surfs, covered) = camera_samples(scene, bvh, shading, cam, &uni, x, y, spp, counts);
+    for (mi, group) in by_material(&surfs) {
         let sh = &shading[mi];
-        let group: Vec<&(usize, Surface)> = surfs.iter().filter(|(_, s)| s.material == mi).collect();
-        let mut jobs: Vec<Job> = vec![];
-        if let Some(env) = env {
-            // The material's directions: the cosine part or the sampler, by the third uniform.
-            let mut from_sampler: Vec<usize> = vec![];
-            let mut bsdf_dirs: Vec<[f64; 3]> = vec![[0.0; 3]; group.len()];
-            if strategy != Strategy::Env {
-                for (gi, (k, _)) in group.iter().enumerate() {
-                    if uni(*k, 2) < sh.alpha || sh.sampler.is_none() {
-                        bsdf_dirs[gi] = cosine(uni(*k, 3), uni(*k, 4));
-                    } else {
-                        from_sampler.push(gi);
-                    }
-                }
-                if let (Some(smp), false) = (&sh.sampler, from_sampler.is_empty()) {
-                    let wi: Vec<[f64; 3]> = from_sampler.iter().map(|&gi| group[gi].1.v).collect();
-                    let u: Vec<[f64; 2]> = from_sampler.iter().map(|&gi| [uni(group[gi].0, 3), uni(group[gi].0, 4)]).collect();
-                    // Every V here is above the horizon (`surface`), so the sampler accepts it.
-                    if let Ok(s) = smp.sample_many(&wi, &u) {
-                        for (j, &gi) in from_sampler.iter().enumerate() {
-                            bsdf_dirs[gi] = s.wo[j];
-                        }
-                    }
-                }
-            }
-            let env_dirs: Vec<Option<(DVec3, f64)>> = if strategy != Strategy::Bsdf {
-                group.iter().map(|(k, _)| env.sample([uni(*k, 5), uni(*k, 6)])).collect()
-            } else {
-                vec![None; group.len()]
-            };
-            // The material's density of every direction that needs it.
-            let mut need: Vec<(usize, [f64; 3], bool)> = vec![];
-            for (gi, (_, s)) in group.iter().enumerate() {
-                let l = bsdf_dirs[gi];
-                if strategy != Strategy::Env && l[2] > 0.0 {
-                    need.push((gi, l, true));
-                }
-                if let Some((wd, _)) = env_dirs[gi] {
-                    let l = s.local(wd);
-                    if strategy == Strategy::Mis && l[2] > 0.0 {
-                        need.push((gi, l, false));
-                    }
-                }
-            }
-            let dens = material_pdfs(sh, &group, &need);
-            for ((gi, l, from_bsdf), pb) in need.iter().zip(&dens) {
-                let s = &group[*gi].1;
-                if *from_bsdf {
-                    let world = s.world(*l);
-                    let weight = match strategy {
-                        Strategy::Bsdf => 1.0 / pb,
-                        _ => {
-                            let pe = env.pdf(world);
-                            pb / (pb * pb + pe * pe)
-                        }
-                    };
-                    jobs.push(Job { sample: *gi, l: *l, world, scale: env.radiance(world) * weight, shadow: true, tmax: f64::INFINITY, light: false });
-                }
-            }
-            for (gi, (_, s)) in group.iter().enumerate() {
-                let Some((wd, pe)) = env_dirs[gi] else { continue };
-                let l = s.local(wd);
-                if l[2] <= 0.0 {
-                    continue;
-                }
-                let weight = match strategy {
-                    Strategy::Env => 1.0 / pe,
-                    _ => {
-                        let pb = need.iter().zip(&dens).find(|((g, _, b), _)| *g == gi && !*b).map_or(0.0, |(_, p)| *p);
-                        pe / (pb * pb + pe * pe)
-                    }
-                };
-                jobs.push(Job { sample: gi, l, world: wd, scale: env.radiance(wd) * weight, shadow: true, tmax: f64::INFINITY, light: false });
-            }
-        }
-        for (gi, (_, s)) in group.iter().enumerate() {
-            for light in &scene.lights {
-                let (world, dist) = match light.kind {
-                    LightKind::Point(p) => {
-                        let d = p - s.origin;
-                        (d.normalize_or_zero(), d.length())
-                    }
-                    LightKind::Directional(d) => (-d, f64::INFINITY),
-                };
-                let l = s.local(world);
-                if l[2] > 0.0 {
-                    jobs.push(Job { sample: gi, l, world, scale: light.color, shadow: scene.shadows, tmax: dist, light: true });
-                }
-            }
-        }
-        sum += shade_jobs(bvh, sh, &group, &mut jobs, counts);
+        let mut jobs = env.map(|env| env_jobs(env, sh, &group, fractions[mi], &uni)).unwrap_or_default();
+        light_jobs(scene, &group, &mut jobs);
+        sum += shade_jobs(bvh, sh, &group, &jobs, counts).iter().sum::<DVec3>();
     }
     ((sum / spp as f64), covered)
 }
 
-/// Shades the jobs of one material: visibility, F, the lighting model; returns the summed contribution.
-fn shade_jobs(bvh: &Bvh, sh: &Shading, group: &[&(usize, Surface)], jobs: &mut [Job], counts: &mut Counts) -> DVec3 {
+/// One direction per camera sample of `group` for the environment term: from the environment's density with
+/// probability `c`, else from the material's (the cosine part or the sampler), weighted by the one-sample
+/// balance heuristic 1 / (c·p_env + (1 − c)·p_material) — Veach's one-sample model, for which the balance
+/// heuristic is the best weighting. c = 0 and c = 1 are the single strategies, weighted 1/p of their own.
+fn env_jobs(env: &super::envmap::EnvMap, sh: &Shading, group: &[&(usize, Surface)], c: f64, uni: &impl Fn(usize, usize) -> f64) -> Vec<Job> {
+    // Each sample's direction (local, world) and, when the environment drew it, its density there.
+    type Drawn = ([f64; 3], DVec3, Option<f64>);
+    let mut dirs: Vec<Option<Drawn>> = vec![None; group.len()];
+    let mut from_sampler: Vec<usize> = vec![];
+    for (gi, (k, s)) in group.iter().enumerate() {
+        if uni(*k, 7) < c {
+            dirs[gi] = env.sample([uni(*k, 5), uni(*k, 6)]).map(|(wd, pe)| (s.local(wd), wd, Some(pe)));
+        } else if uni(*k, 2) < sh.alpha || sh.sampler.is_none() {
+            let l = cosine(uni(*k, 3), uni(*k, 4));
+            dirs[gi] = Some((l, s.world(l), None));
+        } else {
+            from_sampler.push(gi);
+        }
+    }
+    if let (Some(smp), false) = (&sh.sampler, from_sampler.is_empty()) {
+        let wi: Vec<[f64; 3]> = from_sampler.iter().map(|&gi| group[gi].1.v).collect();
+        let u: Vec<[f64; 2]> = from_sampler.iter().map(|&gi| [uni(group[gi].0, 3), uni(group[gi].0, 4)]).collect();
+        // Every V here is above the horizon (`surface`), so the sampler accepts it.
+        if let Ok(smp) = smp.sample_many(&wi, &u) {
+            for (j, &gi) in from_sampler.iter().enumerate() {
+                let l = smp.wo[j];
+                dirs[gi] = Some((l, group[gi].1.world(l), None));
+            }
+        }
+    }
+    let need: Vec<(usize, [f64; 3])> = dirs.iter().enumerate().filter_map(|(gi, d)| d.filter(|(l, _, _)| l[2] > 0.0).map(|(l, _, _)| (gi, l))).collect();
+    let pb = if c < 1.0 { material_pdfs(sh, group, &need) } else { vec![0.0; need.len()] };
+    let mut jobs = Vec::with_capacity(need.len());
+    for ((gi, l), pb) in need.into_iter().zip(pb) {
+        let Some((_, world, drawn)) = dirs[gi] else { continue };
+        let pe = match drawn {
+            Some(pe) => pe,
+            None if c > 0.0 => env.pdf(world),
+            None => 0.0,
+        };
+        let p = c * pe + (1.0 - c) * pb;
+        if p > 0.0 {
+            jobs.push(Job { sample: gi, l, world, scale: env.radiance(world) / p, shadow: true, tmax: f64::INFINITY, light: false, dens: (pe, pb) });
+        }
+    }
+    jobs
+}
+
+/// The point and directional lights' jobs for every camera sample of `group`.
+fn light_jobs(scene: &Scene, group: &[&(usize, Surface)], jobs: &mut Vec<Job>) {
+    for (gi, (_, s)) in group.iter().enumerate() {
+        for light in &scene.lights {
+            let (world, dist) = match light.kind {
+                LightKind::Point(p) => {
+                    let d = p - s.origin;
+                    (d.normalize_or_zero(), d.length())
+                }
+                LightKind::Directional(d) => (-d, f64::INFINITY),
+            };
+            let l = s.local(world);
+            if l[2] > 0.0 {
+                jobs.push(Job { sample: gi, l, world, scale: light.color, shadow: scene.shadows, tmax: dist, light: true, dens: (0.0, 0.0) });
+            }
+        }
+    }
+}
+
+/// Candidate environment fractions for [`Strategy::Mis`]: 0.02, 0.04, …, 0.98 (never a single strategy, so
+/// every direction where the integrand is not 0 keeps a density).
+const FRACTIONS: usize = 49;
+
+fn fraction(i: usize) -> f64 {
+    (i + 1) as f64 / (FRACTIONS + 1) as f64
+}
+
+/// Pixels and samples a pilot takes at most.
+const PILOT_PIXELS: usize = 1024;
+const PILOT_SPP: usize = 4;
+/// Samples a pilot takes at least, where the render has four times as many: fewer decide little.
+const PILOT_MIN: usize = 4096;
+
+/// How many standard errors of the pilot's estimate a candidate's advantage over c = ½ must clear.
+const PILOT_Z: f64 = 2.0;
+
+/// Each material's environment fraction for [`Strategy::Mis`], chosen by a pilot. On a grid of at most
+/// [`PILOT_PIXELS`] pixels, [`PILOT_SPP`] camera samples each at most (about a 32nd of the render's samples, but
+/// up to [`PILOT_MIN`] in a small render, and at least one per pilot pixel), directions drawn at c = ½ give, for every candidate c, an unbiased
+/// estimate of the estimator's second moment E[g²/(p_c·p_½)] (g a sample's contribution, p_c = c·p_env +
+/// (1 − c)·p_material). Every candidate costs the same per sample, so the least second moment is the least
+/// noise at equal time. The choice is the candidate with the least upper bound (the estimate plus [`PILOT_Z`]
+/// standard errors of its paired difference from c = ½, which is then exact): a pilot of few samples, or one
+/// whose advantage rests on a few large values — the heavy tails of a narrow lobe under a small sun — keeps
+/// c near ½, which is never worse than twice the better single strategy's variance. The pilot's seeds differ
+/// from the render's (its choice does not bias the render), and its sums are taken in pixel order, so the
+/// choice is the same on any number of threads.
+#[allow(clippy::too_many_arguments)]
+fn env_fractions(scene: &Scene, bvh: &Bvh, shading: &[Shading], cam: &CameraRays, env: &super::envmap::EnvMap, spp: usize, cpu: &AtomicU64) -> Vec<f64> {
+    let (w, h) = (scene.width, scene.height);
+    let stride = ((w * h) as f64 / PILOT_PIXELS as f64).sqrt().ceil().max(1.0) as usize;
+    let pixels: Vec<(usize, usize)> = (stride / 2..h).step_by(stride).flat_map(|y| (stride / 2..w).step_by(stride).map(move |x| (x, y))).collect();
+    let total = w * h * spp;
+    let budget = (total / 32).max((total / 4).min(PILOT_MIN));
+    let pilot_spp = (budget / pixels.len().max(1)).clamp(1, PILOT_SPP);
+    let half = FRACTIONS / 2;
+    debug_assert_eq!(fraction(half), 0.5);
+    // Per material: the samples, and per candidate the sums of x = g²·p_½/p_c and of d² = (x − g²)².
+    #[derive(Clone)]
+    struct Sums {
+        n: usize,
+        x: [f64; FRACTIONS],
+        d2: [f64; FRACTIONS],
+    }
+    let zero = Sums { n: 0, x: [0.0; FRACTIONS], d2: [0.0; FRACTIONS] };
+    let per_pixel: Vec<Vec<(usize, Sums)>> = pixels
+        .par_iter()
+        .map(|&(x, y)| {
+            let c0 = super::thread_cpu();
+            let mut counts = Counts::default();
+            let uni = uniforms(pixel_seed(x, y, w) ^ 0x7069_6C6F_7400_0000);
+            let (_, surfs, _) = camera_samples(scene, bvh, shading, cam, &uni, x, y, pilot_spp, &mut counts);
+            let r = by_material(&surfs)
+                .into_iter()
+                .map(|(mi, group)| {
+                    let sh = &shading[mi];
+                    let jobs = env_jobs(env, sh, &group, 0.5, &uni);
+                    let contrib = shade_jobs(bvh, sh, &group, &jobs, &mut counts);
+                    let mut s = Sums { n: group.len(), ..zero.clone() };
+                    for (j, g) in jobs.iter().zip(&contrib) {
+                        // The contribution is g/p_½: its square times p_½/p_c is g²/(p_c·p_½).
+                        let sq = g.length_squared() / 3.0;
+                        if sq > 0.0 && sq.is_finite() {
+                            let (pe, pb) = j.dens;
+                            let p_half = 0.5 * (pe + pb);
+                            for i in 0..FRACTIONS {
+                                let c = fraction(i);
+                                let x = sq * p_half / (c * pe + (1.0 - c) * pb);
+                                s.x[i] += x;
+                                s.d2[i] += (x - sq) * (x - sq);
+                            }
+                        }
+                    }
+                    (mi, s)
+                })
+                .collect::<Vec<_>>();
+            cpu.fetch_add(super::thread_cpu().saturating_sub(c0), Ordering::Relaxed);
+            r
+        })
+        .collect();
+    let mut total = vec![zero; shading.len()];
+    for (mi, s) in per_pixel.into_iter().flatten() {
+        let t = &mut total[mi];
+        t.n += s.n;
+        for i in 0..FRACTIONS {
+            t.x[i] += s.x[i];
+            t.d2[i] += s.d2[i];
+        }
+    }
+    total
+        .iter()
+        .map(|t| {
+            if t.n < 2 {
+                return 0.5;
+            }
+            let n = t.n as f64;
+            let bound = |i: usize| {
+                let mean_d = (t.x[i] - t.x[half]) / n;
+                let var_d = ((t.d2[i] - n * mean_d * mean_d) / (n - 1.0)).max(0.0);
+                t.x[i] / n + PILOT_Z * (var_d / n).sqrt()
+            };
+            fraction((0..FRACTIONS).min_by(|&a, &b| bound(a).total_cmp(&bound(b))).unwrap_or(half))
+        })
+        .collect()
+}
+
+/// Shades the jobs of one material: visibility, F, the lighting model; returns each job's contribution (zero
+/// for a direction under the geometric surface or occluded).
+fn shade_jobs(bvh: &Bvh, sh: &Shading, group: &[&(usize, Surface)], jobs: &[Job], counts: &mut Counts) -> Vec<DVec3> {
     // Drop directions under the geometric surface (the shading normal's hemisphere can reach below it) and
     // occluded ones; for a point light the shadow ray stops at the light.
-    let mut live: Vec<&Job> = vec![];
-    for j in jobs.iter_mut() {
+    let mut live: Vec<usize> = vec![];
+    for (i, j) in jobs.iter().enumerate() {
         let s = &group[j.sample].1;
         if j.world.dot(s.ng) <= 0.0 {
             continue;
@@ -471,24 +601,25 @@ fn shade_jobs(bvh: &Bvh, sh: &Shading, group: &[&(usize, Surface)], jobs: &mut [
         if j.shadow && bvh.occluded(s.origin, j.world, j.tmax) {
             continue;
         }
-        live.push(j);
+        live.push(i);
     }
     let mut f = vec![];
     if let Some(smp) = &sh.sampler {
         if !live.is_empty() {
-            let wi: Vec<[f64; 3]> = live.iter().map(|j| j.l).collect();
-            let wo: Vec<[f64; 3]> = live.iter().map(|j| group[j.sample].1.v).collect();
+            let wi: Vec<[f64; 3]> = live.iter().map(|&i| jobs[i].l).collect();
+            let wo: Vec<[f64; 3]> = live.iter().map(|&i| group[jobs[i].sample].1.v).collect();
             f = smp.eval_many(&wi, &wo).unwrap_or_default();
             counts.evals += live.len() as u64;
         }
     }
-    let mut sum = DVec3::ZERO;
-    for (i, j) in live.iter().enumerate() {
+    let mut out = vec![DVec3::ZERO; jobs.len()];
+    for (k, &i) in live.iter().enumerate() {
+        let j = &jobs[i];
         let cos = j.l[2];
         let mut fv = DVec3::ZERO;
         if !f.is_empty() {
             let c = sh.channels;
-            let ch = |k: usize| f[i * c + if c == 1 { 0 } else { k }];
+            let ch = |q: usize| f[k * c + if c == 1 { 0 } else { q }];
             fv = DVec3::new(ch(0), ch(1), ch(2));
             if !fv.is_finite() {
                 counts.nan += 1;
@@ -499,18 +630,18 @@ fn shade_jobs(bvh: &Bvh, sh: &Shading, group: &[&(usize, Surface)], jobs: &mut [
             }
         }
         let diffuse = if j.light { sh.diffuse * cos } else { sh.diffuse * (cos / PI) };
-        sum += (diffuse + sh.spec * fv) * j.scale;
+        out[i] = (diffuse + sh.spec * fv) * j.scale;
     }
-    sum
+    out
 }
 
 /// The material's density (cosine mixture and sampler) of each needed direction.
-fn material_pdfs(sh: &Shading, group: &[&(usize, Surface)], need: &[(usize, [f64; 3], bool)]) -> Vec<f64> {
-    let cos: Vec<f64> = need.iter().map(|(_, l, _)| l[2].max(0.0) / PI).collect();
+fn material_pdfs(sh: &Shading, group: &[&(usize, Surface)], need: &[(usize, [f64; 3])]) -> Vec<f64> {
+    let cos: Vec<f64> = need.iter().map(|(_, l)| l[2].max(0.0) / PI).collect();
     match &sh.sampler {
         Some(smp) if sh.alpha < 1.0 && !need.is_empty() => {
-            let wi: Vec<[f64; 3]> = need.iter().map(|(gi, _, _)| group[*gi].1.v).collect();
-            let wo: Vec<[f64; 3]> = need.iter().map(|(_, l, _)| *l).collect();
+            let wi: Vec<[f64; 3]> = need.iter().map(|(gi, _)| group[*gi].1.v).collect();
+            let wo: Vec<[f64; 3]> = need.iter().map(|(_, l)| *l).collect();
             match smp.pdf_many(&wi, &wo) {
                 Ok(p) => cos.iter().zip(p).map(|(c, p)| sh.alpha * c + (1.0 - sh.alpha) * p).collect(),
                 Err(_) => cos,

@@ -47,6 +47,10 @@ pub struct StatsReport {
     /// Always `program`: every material shades through its compiled shading program (the key stays for tools
     /// that read it).
     pub shading: &'static str,
+    /// Under an environment with MIS: per material name, the probability that a camera sample draws its
+    /// direction from the environment (the pilot's choice; docs/scenes.md).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub env_fraction: Option<std::collections::BTreeMap<String, f64>>,
 }
 
 /// [`CutoffEffect`] in the report.
@@ -95,6 +99,7 @@ impl StatsReport {
                 psnr: c.metrics.psnr.is_finite().then_some(c.metrics.psnr),
             }),
             shading: "program",
+            env_fraction: (!s.env_fractions.is_empty()).then(|| materials.iter().zip(&s.env_fractions).map(|(m, c)| (m.name.clone(), *c)).collect()),
         }
     }
 }
@@ -110,7 +115,7 @@ pub(crate) fn math_of(materials: &[Material]) -> String {
 
 /// The statistics as text: size, threads, the time of each stage, and the shading throughput.
 pub fn stats_text(s: &RenderStats, encode: Duration) -> String {
-    format!(
+    let mut text = format!(
         "render: {}×{} px, {} thread(s), {} triangles, {}/{} tiles touched\n\
          \x20 time: {:.2} ms wall ({:.2} Mpixel/s); setup+binning {:.2} ms; raster {:.2} ms cpu; shading {:.2} ms cpu (compiled code {:.2}); encode {:.2} ms; shading programs built in {:.2} ms\n\
          \x20 shading: {} visible px, {:.1} ns cpu per visible px ({:.1} outside compiled code), {} evaluations of F ({:.2} ns of compiled code each) in {} calls, {} NaN\n",
@@ -135,7 +140,12 @@ pub fn stats_text(s: &RenderStats, encode: Duration) -> String {
         s.kernel_ns_per_eval(),
         s.kernel_calls,
         s.nan
-    )
+    );
+    if !s.env_fractions.is_empty() {
+        let c: Vec<String> = s.env_fractions.iter().map(|c| format!("{c:.2}")).collect();
+        text += &format!("  MIS: each material's share of directions drawn from the environment (the pilot's choice): {}\n", c.join(", "));
+    }
+    text
 }
 
 /// The statistics' lines about the cut-off (empty without one).

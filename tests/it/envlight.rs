@@ -28,7 +28,7 @@ fn via_exr(f: &HdrFrame) -> Vec<[f32; 3]> {
 const FURNACE: &str = r#"
 width = 40
 height = 40
-spp = 32
+spp = 1024
 [environment]
 color = [1, 1, 1]
 [camera]
@@ -47,6 +47,8 @@ tessellation = 40
 
 #[test]
 fn white_furnace_is_one_at_every_sphere_pixel() {
+    // What the tessellation's shadow terminator (below) takes from a pixel's expectation, at most.
+    const TERMINATOR: f64 = 1e-3;
     let dir = crate::scratch_dir("envlight", "furnace");
     for strategy in [Strategy::Mis, Strategy::Env, Strategy::Bsdf] {
         let s = parse(&dir, FURNACE).unwrap();
@@ -61,15 +63,18 @@ fn white_furnace_is_one_at_every_sphere_pixel() {
             // The cosine-proportional sampler alone is exact under a constant sky, but for the directions between
             // the interpolated normal's horizon and the facet's plane, which go into the sphere (the tessellation's
             // shadow terminator): a sample in a few hundred, so the mean is 1 to 10⁻³ and σ is tiny.
-            assert!((mean - 1.0).abs() < 1e-3 && sigma < 0.01, "{strategy:?}: mean {mean}, σ {sigma}");
+            assert!((mean - 1.0).abs() < TERMINATOR && sigma < 0.01, "{strategy:?}: mean {mean}, σ {sigma}");
             continue;
         }
-        // Every pixel has expectation 1: their spread is the per-pixel σ. The mean is within 3σ/√n of 1, and every
-        // pixel within 1 ± zσ with z the two-sided Šidák quantile for α = 1 % over n pixels (≈ 4.2 for n ≈ 600).
-        assert!((mean - 1.0).abs() <= 3.0 * sigma / n.sqrt() + 1e-6, "{strategy:?}: mean {mean}, σ {sigma}");
+        // Every pixel has expectation 1 (less the terminator's share above, under 10⁻³): their spread is the
+        // per-pixel σ. The mean is within 3σ/√n of 1, and every pixel within 1 ± zσ with z the two-sided Šidák
+        // quantile for α = 1 % over n pixels (≈ 4.2 for n ≈ 600). A pixel is a mean of 1 024 samples, so it is
+        // near normal even where MIS's samples are skewed (under this sky MIS draws ~1 % of its directions from
+        // the sphere, half of them below the horizon: weight 0).
+        assert!((mean - 1.0).abs() <= 3.0 * sigma / n.sqrt() + TERMINATOR, "{strategy:?}: mean {mean}, σ {sigma}");
         let z = 4.2 + 0.25 * (n / 600.0).ln().max(0.0);
         for (i, v) in vals.iter().enumerate() {
-            assert!((v - 1.0).abs() <= z * sigma + 1e-6, "{strategy:?}: pixel {i} = {v}, σ {sigma}");
+            assert!((v - 1.0).abs() <= z * sigma + TERMINATOR, "{strategy:?}: pixel {i} = {v}, σ {sigma}");
         }
         // Uniform sphere sampling (env-only) wastes half its samples below the horizon: noisier, still bounded;
         // MIS with the cosine-proportional sampler is much better.
@@ -219,9 +224,10 @@ fn the_torus_shadows_itself() {
 }
 
 #[test]
-fn mis_has_the_lowest_error_under_a_map() {
-    // A diffuse-plus-glossy sphere under the generated sky (a sun and a sky): at equal spp, MIS is closer to a
-    // 1024-spp reference than BSDF-only and environment-only sampling.
+fn mis_is_as_good_as_the_better_strategy_under_a_map() {
+    // A diffuse-plus-glossy sphere under the generated sky (a sun and a sky). At equal spp (one direction per
+    // camera sample for all three) MIS is within 10 % of the better single strategy's RMSE against a 1024-spp
+    // reference (here environment sampling, which MIS leans on: the pilot's choice), and under half the worse one's.
     let dir = crate::scratch_dir("envlight", "strategies");
     write_map(&dir, "sky.exr", &sky(64, 32));
     let src = r#"
@@ -250,7 +256,45 @@ tessellation = 30
         (f.rgb.iter().zip(&reference.rgb).map(|(p, q)| (f64::from(p[1]) - f64::from(q[1])).powi(2)).sum::<f64>() / n).sqrt()
     };
     let e: Vec<f64> = [Strategy::Mis, Strategy::Bsdf, Strategy::Env].iter().map(|st| rmse(&hdr(&s, 2, *st))).collect();
-    assert!(e[0] < e[1] && e[0] < e[2], "RMSE mis {} bsdf {} env {}", e[0], e[1], e[2]);
+    let (better, worse) = (e[1].min(e[2]), e[1].max(e[2]));
+    assert!(e[0] <= 1.1 * better && e[0] < 0.5 * worse, "RMSE mis {} bsdf {} env {}", e[0], e[1], e[2]);
+}
+
+/// The pilot's share of environment directions follows where the light comes from: a white diffuse sphere under a
+/// constant sky (its cosine sampling is exact) draws almost none from the sky; the same sphere under a small sun
+/// draws most from the map; a narrow lobe under that sun, whose pilot sees few and heavy-tailed values, draws at
+/// least half from itself. `--stats --json` reports it.
+#[test]
+fn the_pilot_draws_from_what_carries_the_light() {
+    let dir = crate::scratch_dir("envlight", "pilot");
+    write_map(&dir, "sun.exr", &sky(64, 32));
+    let fraction = |src: &str| {
+        let s = parse(&dir, src).unwrap();
+        let (_, st) = trace::render_hdr(&s, &RenderOptions { threads: 2, spp: Some(16), ..RenderOptions::default() }).unwrap();
+        assert_eq!(st.env_fractions.len(), 1);
+        st.env_fractions[0]
+    };
+    let furnace = fraction(FURNACE);
+    assert!(furnace <= 0.1, "white diffuse under a constant sky: {furnace}");
+    let under_sun = |formula: &str, kd: f64, ks: f64| {
+        FURNACE.replace("color = [1, 1, 1]", "path = \"sun.exr\"").replace("formula = \"1/pi\"", &format!("formula = \"{formula}\"")).replace(
+            "kd = 0\nks = 1",
+            &format!("kd = {kd}\nks = {ks}"),
+        )
+    };
+    let diffuse = fraction(&under_sun("1/pi", 0.0, 1.0));
+    assert!(diffuse >= 0.6, "diffuse under a sun: {diffuse}");
+    let narrow = fraction(&under_sun("param n = 1000; (n + 2) / (2 * pi) * VR^n", 0.0, 1.0));
+    assert!(narrow <= 0.5, "a narrow lobe under a sun: {narrow}");
+    // Through the command: the text and the JSON name the share.
+    std::fs::write(dir.join("scene.toml"), under_sun("1/pi", 0.0, 1.0).replace("spp = 1024", "spp = 4")).unwrap();
+    let scene = dir.join("scene.toml");
+    let out = dir.join("out.exr");
+    let o = lobe_cmd(&["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "--stats", "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let c = j["env_fraction"]["white"].as_f64().unwrap_or_else(|| panic!("no env_fraction.white in {j}"));
+    assert!((0.0..=1.0).contains(&c), "{j}");
 }
 
 fn scene_with_env(env: &str) -> String {
