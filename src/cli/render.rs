@@ -41,8 +41,8 @@ pub struct RenderArgs {
     /// scene's `spp`, else 16).
     #[arg(long, value_name = "N", value_parser = parse_spp)]
     pub spp: Option<usize>,
-    /// Which directions the ray tracer's environment estimator draws: `mis` (both, by the one-sample balance
-    /// heuristic, each material's share chosen by a pilot), `bsdf` (the material's only) or `env` (the
+    /// Which directions the ray tracer's environment estimator draws: `mis` (both, by the power heuristic,
+    /// each material's share chosen by a pilot), `bsdf` (the material's only) or `env` (the
     /// environment's only) — the last two for measurements.
     #[arg(long, default_value = "mis", value_parser = parse_strategy)]
     pub strategy: r::trace::Strategy,

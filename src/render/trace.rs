@@ -18,15 +18,17 @@
 //! Point and directional lights are evaluated at every camera sample, with a shadow ray when `shadows = true`.
 //!
 //! # Estimator
-//! One-sample multiple importance sampling (Veach 1997, §9.2.4): each camera sample draws one direction, from
-//! the environment with probability c, else from the material, and weights it 1/(c·p_env + (1 − c)·p_material) —
-//! the balance heuristic, the best weighting of the one-sample model. The material's density is a mixture:
-//! cosine with probability α = kd·lum(C) / (kd·lum(C) + ks·lum(coef·Cs)), else the formula's [`Sampler`] (which
-//! samples the incident direction given V as its `wi`: exact for reciprocal formulas, still unbiased for the
-//! others since every weight uses that sampler's own `pdf`). c is chosen per material by a pilot
+//! Multiple importance sampling with the power heuristic (Veach 1997, ch. 9): each camera sample draws one
+//! direction, from the environment or from the material, so that a share c of a pixel's samples (⌊c·spp⌋ or
+//! ⌈c·spp⌉, in a random phase per pixel: each sample's chance is c) come from the environment — Veach's
+//! multi-sample model with those counts, at one direction per camera sample whatever c. A direction drawn by
+//! strategy t has the factor wₜ/(cₜ·pₜ), wₜ = (cₜ·pₜ)²/Σₛ(cₛ·pₛ)² ([`power_weight`]). The material's density is a
+//! mixture: cosine with probability α = kd·lum(C) / (kd·lum(C) + ks·lum(coef·Cs)), else the formula's
+//! [`Sampler`] (which samples the incident direction given V as its `wi`: exact for reciprocal formulas, still
+//! unbiased for the others since every weight uses that sampler's own `pdf`). c is chosen per material by a pilot
 //! ([`env_fractions`]) that estimates, from a few samples drawn at c = ½, the estimator's second moment at every
-//! candidate c: one direction per camera sample whatever c, so the least second moment is the least noise at
-//! equal time. [`Strategy::Bsdf`] (c = 0) and [`Strategy::Env`] (c = 1) keep one of the two (for
+//! candidate c; the cost per camera sample is the same for every c, so the least second moment is the least
+//! noise at equal time. [`Strategy::Bsdf`] (c = 0) and [`Strategy::Env`] (c = 1) keep one of the two (for
 //! measurements). Occlusion: a shadow ray per direction against the same BVH.
 //!
 //! Determinism: sample k of pixel p draws the uniforms `counter_unit(seed(p), 8k + j)`, whoever computes it,
@@ -55,8 +57,8 @@ pub const MAX_SPP: usize = 1 << 16;
 /// Which directions the environment estimator draws.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Strategy {
-    /// Both, one direction per camera sample from either, combined by the balance heuristic with a fraction
-    /// per material that a pilot chooses.
+    /// Both, one direction per camera sample from either, combined by the power heuristic, each material's
+    /// share chosen by a pilot.
     #[default]
     Mis,
     /// The material's density only.
@@ -173,6 +175,8 @@ struct Job {
     light: bool,
     /// The environment's and the material's densities of the direction (0 for a light).
     dens: (f64, f64),
+    /// The estimator's factor in `scale` ([`power_weight`]; 1 for a light).
+    weight: f64,
 }
 
 /// Renders `scene` with the ray tracer into linear RGB.
@@ -345,7 +349,8 @@ fn surface(scene: &Scene, bvh: &Bvh, shading: &[Shading], o: DVec3, d: DVec3) ->
 }
 
 /// The uniforms of camera sample `k` of the pixel seeded `seed`: `j` = 0, 1 the position in the pixel, 2 the
-/// material's cosine-or-sampler choice, 3–4 the material's direction, 5–6 the environment's, 7 which of the two.
+/// material's cosine-or-sampler choice, 3–4 the material's direction, 5–6 the environment's; (0, 7) the phase of
+/// the pixel's choice between the two.
 fn uniforms(seed: u64) -> impl Fn(usize, usize) -> f64 {
     move |k, j| counter_unit(seed, (8 * k + j) as u64)
 }
@@ -398,7 +403,7 @@ fn by_material(surfs: &[(usize, Surface)]) -> Vec<(usize, Vec<&(usize, Surface)>
 }
 
 /// Estimates pixel (x, y): its colour and whether its centre sees a surface. `fractions[m]`: the probability that
-/// a camera sample of material m draws its direction from the environment (one-sample MIS).
+/// a camera sample of material m draws its direction from the environment (MIS).
 #[allow(clippy::too_many_arguments)]
 fn pixel(scene: &Scene, bvh: &Bvh, shading: &[Shading], cam: &CameraRays, fractions: &[f64], x: usize, y: usize, spp: usize, counts: &mut Counts) -> (DVec3, bool) {
     let uni = uniforms(pixel_seed(x, y, scene.width));
@@ -413,17 +418,21 @@ fn pixel(scene: &Scene, bvh: &Bvh, shading: &[Shading], cam: &CameraRays, fracti
     ((sum / spp as f64), covered)
 }
 
-/// One direction per camera sample of `group` for the environment term: from the environment's density with
-/// probability `c`, else from the material's (the cosine part or the sampler), weighted by the one-sample
-/// balance heuristic 1 / (c·p_env + (1 − c)·p_material) — Veach's one-sample model, for which the balance
-/// heuristic is the best weighting. c = 0 and c = 1 are the single strategies, weighted 1/p of their own.
+/// One direction per camera sample of `group` for the environment term: from the environment's density for a
+/// share `c` of the pixel's samples, else from the material's (the cosine part or the sampler), with the power
+/// heuristic's factor ([`power_weight`]). c = 0 and c = 1 are the single strategies, weighted 1/p of their own.
 fn env_jobs(env: &super::envmap::EnvMap, sh: &Shading, group: &[&(usize, Surface)], c: f64, uni: &impl Fn(usize, usize) -> f64) -> Vec<Job> {
     // Each sample's direction (local, world) and, when the environment drew it, its density there.
     type Drawn = ([f64; 3], DVec3, Option<f64>);
     let mut dirs: Vec<Option<Drawn>> = vec![None; group.len()];
     let mut from_sampler: Vec<usize> = vec![];
+    // Which strategy: sample k draws from the environment when ⌊(k + 1)·c + φ⌋ > ⌊k·c + φ⌋ (φ uniform per pixel),
+    // so each sample does with probability c and a pixel's spp samples hold ⌊c·spp⌋ or ⌈c·spp⌉ of them: the
+    // multi-sample model's counts, without the noise of choosing at random per sample.
+    let phase = uni(0, 7);
+    let from_env = |k: usize| c >= 1.0 || ((k + 1) as f64 * c + phase).floor() > (k as f64 * c + phase).floor();
     for (gi, (k, s)) in group.iter().enumerate() {
-        if uni(*k, 7) < c {
+        if from_env(*k) {
             dirs[gi] = env.sample([uni(*k, 5), uni(*k, 6)]).map(|(wd, pe)| (s.local(wd), wd, Some(pe)));
         } else if uni(*k, 2) < sh.alpha || sh.sampler.is_none() {
             let l = cosine(uni(*k, 3), uni(*k, 4));
@@ -453,12 +462,37 @@ fn env_jobs(env: &super::envmap::EnvMap, sh: &Shading, group: &[&(usize, Surface
             None if c > 0.0 => env.pdf(world),
             None => 0.0,
         };
-        let p = c * pe + (1.0 - c) * pb;
-        if p > 0.0 {
-            jobs.push(Job { sample: gi, l, world, scale: env.radiance(world) / p, shadow: true, tmax: f64::INFINITY, light: false, dens: (pe, pb) });
+        let weight = power_weight(c, pe, pb, drawn.is_some());
+        if weight > 0.0 {
+            jobs.push(Job { sample: gi, l, world, scale: env.radiance(world) * weight, shadow: true, tmax: f64::INFINITY, light: false, dens: (pe, pb), weight });
         }
     }
     jobs
+}
+
+/// The power heuristic's factor for a direction the environment (`from_env`) or the material drew, at
+/// environment share c: wₜ/(cₜ·pₜ) with wₜ = (cₜ·pₜ)² / Σₛ (cₛ·pₛ)², which is a/(a² + b²) or b/(a² + b²) with
+/// a = c·p_env and b = (1 − c)·p_material (0 when both are 0). c = 1 gives 1/p_env, c = 0 gives 1/p_material.
+fn power_weight(c: f64, pe: f64, pb: f64, from_env: bool) -> f64 {
+    let (a, b) = (c * pe, (1.0 - c) * pb);
+    let den = a * a + b * b;
+    if den > 0.0 {
+        (if from_env { a } else { b }) / den
+    } else {
+        0.0
+    }
+}
+
+/// Σₜ wₜ²/(cₜ·pₜ) = (a³ + b³)/(a² + b²)² (a, b as in [`power_weight`]): a direction's share of the power-heuristic
+/// estimator's second moment at share c, per g² of its integrand.
+fn power_moment(c: f64, pe: f64, pb: f64) -> f64 {
+    let (a, b) = (c * pe, (1.0 - c) * pb);
+    let den = a * a + b * b;
+    if den > 0.0 {
+        (a * a * a + b * b * b) / (den * den)
+    } else {
+        0.0
+    }
 }
 
 /// The point and directional lights' jobs for every camera sample of `group`.
@@ -474,7 +508,7 @@ fn light_jobs(scene: &Scene, group: &[&(usize, Surface)], jobs: &mut Vec<Job>) {
             };
             let l = s.local(world);
             if l[2] > 0.0 {
-                jobs.push(Job { sample: gi, l, world, scale: light.color, shadow: scene.shadows, tmax: dist, light: true, dens: (0.0, 0.0) });
+                jobs.push(Job { sample: gi, l, world, scale: light.color, shadow: scene.shadows, tmax: dist, light: true, dens: (0.0, 0.0), weight: 1.0 });
             }
         }
     }
@@ -499,10 +533,11 @@ const PILOT_Z: f64 = 2.0;
 
 /// Each material's environment fraction for [`Strategy::Mis`], chosen by a pilot. On a grid of at most
 /// [`PILOT_PIXELS`] pixels, [`PILOT_SPP`] camera samples each at most (about a 32nd of the render's samples, but
-/// up to [`PILOT_MIN`] in a small render, and at least one per pilot pixel), directions drawn at c = ½ give, for every candidate c, an unbiased
-/// estimate of the estimator's second moment E[g²/(p_c·p_½)] (g a sample's contribution, p_c = c·p_env +
-/// (1 − c)·p_material). Every candidate costs the same per sample, so the least second moment is the least
-/// noise at equal time. The choice is the candidate with the least upper bound (the estimate plus [`PILOT_Z`]
+/// up to [`PILOT_MIN`] in a small render, and at least one per pilot pixel), directions drawn at c = ½ give, for
+/// every candidate c, an unbiased estimate of the second moment of a sample drawn at share c with the power
+/// heuristic's factor, E_q[g²/q · [`power_moment`]] (g the integrand, q the pilot's density; choosing each sample's
+/// strategy at random, an upper bound of the stratified choice the render makes). Every candidate costs the same
+/// per sample, so the least second moment is the least noise at equal time. The choice is the candidate with the least upper bound (the estimate plus [`PILOT_Z`]
 /// standard errors of its paired difference from c = ½, which is then exact): a pilot of few samples, or one
 /// whose advantage rests on a few large values — the heavy tails of a narrow lobe under a small sun — keeps
 /// c near ½, which is never worse than twice the better single strategy's variance. The pilot's seeds differ
@@ -541,16 +576,17 @@ fn env_fractions(scene: &Scene, bvh: &Bvh, shading: &[Shading], cam: &CameraRays
                     let contrib = shade_jobs(bvh, sh, &group, &jobs, &mut counts);
                     let mut s = Sums { n: group.len(), ..zero.clone() };
                     for (j, g) in jobs.iter().zip(&contrib) {
-                        // The contribution is g/p_½: its square times p_½/p_c is g²/(p_c·p_½).
-                        let sq = g.length_squared() / 3.0;
-                        if sq > 0.0 && sq.is_finite() {
-                            let (pe, pb) = j.dens;
-                            let p_half = 0.5 * (pe + pb);
+                        // g²/q with g the integrand (the contribution over its factor) and q the density the
+                        // pilot drew from, ½·(p_env + p_material); times Σₜ wₜ²/(cₜ·pₜ) it is an unbiased
+                        // estimate of the second moment at share c.
+                        let (pe, pb) = j.dens;
+                        let g2q = g.length_squared() / 3.0 / (j.weight * j.weight) / (0.5 * (pe + pb));
+                        if g2q > 0.0 && g2q.is_finite() {
+                            let at_half = g2q * power_moment(0.5, pe, pb);
                             for i in 0..FRACTIONS {
-                                let c = fraction(i);
-                                let x = sq * p_half / (c * pe + (1.0 - c) * pb);
+                                let x = g2q * power_moment(fraction(i), pe, pb);
                                 s.x[i] += x;
-                                s.d2[i] += (x - sq) * (x - sq);
+                                s.d2[i] += (x - at_half) * (x - at_half);
                             }
                         }
                     }
