@@ -54,35 +54,35 @@ def tabulate(pdf_func, ires, samples):
     return [float(x) for x in c.pdf]
 
 
+def misreads(pdf_func, samples, reference, candidates):
+    """For each candidate ires in turn, Σ (a − r)²/r over the cells expecting ≥ 5 of `samples` (r the pdf's cell
+    masses at ires `reference`, a at the candidate), until one is at most the statistic's standard deviation,
+    √(2·cells). Returns the measures computed, the last the first candidate within it (or none is)."""
+    ref = tabulate(pdf_func, reference, samples)
+    cells = [i for i, x in enumerate(ref) if x >= 5]
+    bound = math.sqrt(2 * max(len(cells), 1))
+    stats = []
+    for ires in candidates:
+        a = tabulate(pdf_func, ires, samples)
+        stats.append(sum((a[i] - ref[i]) ** 2 / ref[i] for i in cells))
+        if stats[-1] <= bound:
+            return stats, ires
+    return stats, None
+
+
 def ires_for(pdf_func, samples):
     """Mitsuba's default ires (4: a 4 × 4 trapezoid rule per χ² cell) unless that rule misreads the pdf under test
-    by more than the χ² statistic's noise: then the smallest of 8, 16, 32 that does not (and past 32, of 64 and 128
-    against a 256 reference, else 256). The measure, computed from
-    the pdf alone (never the samples): Σ (a − r)²/r over the cells expecting ≥ 5 of `samples`, r the pdf's cell
-    masses at ires 64 and a at the candidate ires, at most one standard deviation of the statistic, √(2·cells).
-    Returns the ires and the measure at ires 4. At grazing incidence even the formula's own density f·cosθo (a
-    perfect sampler's pdf) needs more than 4 (docs/mitsuba.md); so does lobe's pdf where it steps to 0 at the edge
-    of a clamped lobe (pdf() is 0 where the formula is)."""
-    ref = tabulate(pdf_func, 64, samples)
-    cells = [i for i, x in enumerate(ref) if x >= 5]
-    bound = math.sqrt(2 * max(len(cells), 1))
-    first = None
-    for ires in (4, 8, 16, 32):
-        a = tabulate(pdf_func, ires, samples)
-        stat = sum((a[i] - ref[i]) ** 2 / ref[i] for i in cells)
-        first = stat if first is None else first
-        if stat <= bound:
-            return ires, first
-    # Even 32 misreads it: a lobe so narrow (a large exponent cut by the horizon at grazing incidence) that the
-    # 64 reference may misread it too. The same test one level up: 64 and 128 against 256.
-    ref = tabulate(pdf_func, 256, samples)
-    cells = [i for i, x in enumerate(ref) if x >= 5]
-    bound = math.sqrt(2 * max(len(cells), 1))
-    for ires in (64, 128):
-        a = tabulate(pdf_func, ires, samples)
-        if sum((a[i] - ref[i]) ** 2 / ref[i] for i in cells) <= bound:
-            return ires, first
-    return 256, first
+    by more than the χ² statistic's noise: then the smallest of 8, 16, 32 that does not (`misreads`, against the
+    pdf's cell masses at ires 64, computed from the pdf alone, never the samples). Where even 32 misreads it — a
+    lobe so narrow (a large exponent cut by the horizon at grazing incidence) that the 64 reference may misread it
+    too — the same test one level up: 64 and 128 against 256, else 256. Returns the ires and the measure at ires
+    4. At grazing incidence even the formula's own density f·cosθo (a perfect sampler's pdf) needs more than 4
+    (docs/mitsuba.md); so does lobe's pdf where it steps to 0 at the edge of a clamped lobe (pdf() is 0 where the
+    formula is)."""
+    stats, ires = misreads(pdf_func, samples, 64, (4, 8, 16, 32))
+    if ires is None:
+        ires = misreads(pdf_func, samples, 256, (64, 128))[1] or 256
+    return ires, stats[0]
 
 
 def main(argv):
