@@ -216,11 +216,12 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions, spp: usize, progress: &(d
     let cam = CameraRays::new(scene);
     // The pilot's CPU time counts as shading: it is part of the estimator's cost.
     let shade_cpu = AtomicU64::new(0);
-    let fractions = match (opts.strategy, scene.environment.as_deref().filter(|e| e.emits())) {
-        (Strategy::Mis, Some(env)) => env_fractions(scene, &bvh, &shading, &cam, env, spp, &shade_cpu),
-        (Strategy::Env, _) => vec![1.0; shading.len()],
-        _ => vec![0.0; shading.len()],
+    let pilot = match (opts.strategy, scene.environment.as_deref().filter(|e| e.emits())) {
+        (Strategy::Mis, Some(env)) => Some(env_fractions(scene, &bvh, &shading, &cam, env, spp, &shade_cpu)),
+        _ => None,
     };
+    let single = if opts.strategy == Strategy::Env { 1.0 } else { 0.0 };
+    let fractions = pilot.clone().unwrap_or_else(|| vec![single; shading.len()]);
     let evals = AtomicU64::new(0);
     let nan = AtomicU64::new(0);
     let visible = AtomicU64::new(0);
@@ -259,7 +260,7 @@ fn render_in_pool(scene: &Scene, opts: &RenderOptions, spp: usize, progress: &(d
         shade_cpu: Duration::from_nanos(shade_cpu.into_inner()),
         program_compile,
         render_wall: t0.elapsed(),
-        env_fractions: if opts.strategy == Strategy::Mis && scene.environment.as_deref().is_some_and(|e| e.emits()) { fractions.clone() } else { vec![] },
+        env_fractions: pilot.unwrap_or_default(),
         ..RenderStats::default()
     };
     Ok((HdrFrame { width: w, height: h, rgb, covered }, stats))
@@ -537,12 +538,12 @@ const PILOT_Z: f64 = 2.0;
 /// every candidate c, an unbiased estimate of the second moment of a sample drawn at share c with the power
 /// heuristic's factor, E_q[g²/q · [`power_moment`]] (g the integrand, q the pilot's density; choosing each sample's
 /// strategy at random, an upper bound of the stratified choice the render makes). Every candidate costs the same
-/// per sample, so the least second moment is the least noise at equal time. The choice is the candidate with the least upper bound (the estimate plus [`PILOT_Z`]
-/// standard errors of its paired difference from c = ½, which is then exact): a pilot of few samples, or one
-/// whose advantage rests on a few large values — the heavy tails of a narrow lobe under a small sun — keeps
-/// c near ½, which is never worse than twice the better single strategy's variance. The pilot's seeds differ
-/// from the render's (its choice does not bias the render), and its sums are taken in pixel order, so the
-/// choice is the same on any number of threads.
+/// per sample, so the least second moment is the least noise at equal time. The choice is the candidate with the
+/// least upper bound: the estimate plus [`PILOT_Z`] standard errors of its paired difference from c = ½ (whose
+/// bound is its estimate). A pilot of few samples, or one whose advantage rests on a few large values — the heavy
+/// tails of a narrow lobe under a small sun — keeps c near ½, drawing from both strategies alike. The pilot's
+/// seeds differ from the render's (its choice does not bias the render), and its sums are taken in pixel order,
+/// so the choice is the same on any number of threads.
 #[allow(clippy::too_many_arguments)]
 fn env_fractions(scene: &Scene, bvh: &Bvh, shading: &[Shading], cam: &CameraRays, env: &super::envmap::EnvMap, spp: usize, cpu: &AtomicU64) -> Vec<f64> {
     let (w, h) = (scene.width, scene.height);
@@ -553,7 +554,8 @@ fn env_fractions(scene: &Scene, bvh: &Bvh, shading: &[Shading], cam: &CameraRays
     let pilot_spp = (budget / pixels.len().max(1)).clamp(1, PILOT_SPP);
     let half = FRACTIONS / 2;
     debug_assert_eq!(fraction(half), 0.5);
-    // Per material: the samples, and per candidate the sums of x = g²·p_½/p_c and of d² = (x − g²)².
+    // Per material: the camera samples, and per candidate c the sums of x = g²/q · power_moment(c) and of
+    // d² = (x − x at ½)².
     #[derive(Clone)]
     struct Sums {
         n: usize,
