@@ -12,7 +12,7 @@ use lobe::ir::{Formula, Input, N_INPUTS};
 use lobe::numerics::points::evaluate_varying;
 use lobe::numerics::robust::PassOptions;
 use lobe::{Backend, Columns, Evaluator, Kernel, Mode, Tier};
-use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray2, PyReadwriteArray1, PyUntypedArrayMethods};
+use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray2, PyReadwriteArray1, PyUntypedArrayMethods};
 use pyo3::create_exception;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -23,6 +23,7 @@ use std::borrow::Cow;
 use std::sync::{Arc, Mutex};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
+mod pool;
 mod tools;
 
 create_exception!(lobe, LobeError, PyValueError, "A formula, a scene or an argument lobe cannot take: `.diagnostics` says where and why.");
@@ -484,18 +485,24 @@ impl Native {
             let cols: [&[f64]; N_INPUTS] = std::array::from_fn(|i| &*inputs.cols[i]);
             Ok(g.run(&cols, &params, len))
         })?;
-        let values: Vec<f64> = r.value.concat();
-        let grads: Vec<f64> = r.grad.iter().flat_map(|d| d.concat()).collect();
-        Ok((g.names(), values.into_pyarray(py), grads.into_pyarray(py)))
+        // Copied into pooled buffers: every element written (each channel's and variable's `len` values).
+        let mut values = pool::Buffer::new(r.value.len() * len);
+        let mut grads = pool::Buffer::new(r.grad.iter().map(Vec::len).sum::<usize>() * len);
+        let parts = r.grad.iter().flatten();
+        for (dst, src) in values.as_mut_slice().chunks_mut(len.max(1)).zip(&r.value).chain(grads.as_mut_slice().chunks_mut(len.max(1)).zip(parts)) {
+            dst.copy_from_slice(src);
+        }
+        Ok((g.names(), values.into_pyarray(py)?, grads.into_pyarray(py)?))
     }
 
     /// Every point through every channel's batched kernel: `len` values per channel, channel after channel.
     /// `params` is the full parameter vector; `varying` (index, `len` values) overrides some per point.
     fn eval<'py>(&self, py: Python<'py>, points: Points<'py>, params: Vec<f64>, varying: Vec<(usize, PyReadonlyArray1<'py, f64>)>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        // Zeroed memory from the allocator (fresh pages for large batches, no memset), handed to numpy as is.
-        let mut out = vec![0.0; points.3 * self.kernels.len()];
-        self.fill(py, points, params, varying, &mut out)?;
-        Ok(out.into_pyarray(py))
+        // A warm buffer from the pool for large batches; `fill` writes every element (each channel's runs cover
+        // its `len` points).
+        let mut out = pool::Buffer::new(points.3 * self.kernels.len());
+        self.fill(py, points, params, varying, out.as_mut_slice())?;
+        out.into_pyarray(py)
     }
 
     /// Fits `free` = [(param index, lo, hi, step or None)] to `target` (len values per channel, channel after
@@ -552,7 +559,9 @@ impl Native {
         let contiguous = || self.error(py, Diagnostic::error("wi and u must be contiguous float64 (lobe's Python side makes them so: a bug)"));
         let (wi, u) = (wi.as_slice().map_err(|_| contiguous())?, u.as_slice().map_err(|_| contiguous())?);
         let nch = s.channels();
-        let (mut wo, mut pdf, mut weight) = (vec![0.0; 3 * len], vec![0.0; len], vec![0.0; nch * len]);
+        // Pooled buffers, every element written (`copy_from_slice` of each chunk's samples, of equal lengths).
+        let (mut wo_buf, mut pdf_buf, mut weight_buf) = (pool::Buffer::new(3 * len), pool::Buffer::new(len), pool::Buffer::new(nch * len));
+        let (wo, pdf, weight) = (wo_buf.as_mut_slice(), pdf_buf.as_mut_slice(), weight_buf.as_mut_slice());
         detached(py, &self.file, || {
             let parts = wo.par_chunks_mut(3 * CHUNK).zip(pdf.par_chunks_mut(CHUNK)).zip(weight.par_chunks_mut(nch * CHUNK)).enumerate();
             parts.try_for_each(|(c, ((wo, pdf), weight))| {
@@ -571,7 +580,7 @@ impl Native {
                 Ok(())
             })
         })?;
-        Ok((wo.into_pyarray(py), pdf.into_pyarray(py), weight.into_pyarray(py), s.report.mechanism.name()))
+        Ok((wo_buf.into_pyarray(py)?, pdf_buf.into_pyarray(py)?, weight_buf.into_pyarray(py)?, s.report.mechanism.name()))
     }
 
     /// The sampler's density of each wo given wi ([`Sampler::pdf_many`]): both `len` × 3, row-major.
@@ -583,9 +592,11 @@ impl Native {
         }
         let contiguous = || self.error(py, Diagnostic::error("wi and wo must be contiguous float64 (lobe's Python side makes them so: a bug)"));
         let (wi, wo) = (wi.as_slice().map_err(|_| contiguous())?, wo.as_slice().map_err(|_| contiguous())?);
-        let mut out = vec![0.0; len];
+        // A pooled buffer, every element written (`copy_from_slice` of each chunk's densities).
+        let mut out = pool::Buffer::new(len);
+        let slice = out.as_mut_slice();
         detached(py, &self.file, || {
-            out.par_chunks_mut(CHUNK).enumerate().try_for_each(|(c, o)| {
+            slice.par_chunks_mut(CHUNK).enumerate().try_for_each(|(c, o)| {
                 let r = c * CHUNK..c * CHUNK + o.len();
                 let row = |a: &[f64], i: usize| [a[3 * i], a[3 * i + 1], a[3 * i + 2]];
                 let wis: Vec<[f64; 3]> = r.clone().map(|i| row(wi, i)).collect();
@@ -598,7 +609,7 @@ impl Native {
                 Ok(())
             })
         })?;
-        Ok(out.into_pyarray(py))
+        out.into_pyarray(py)
     }
 
     /// `lobe check --json` ([`lobe::numerics::check`]).

@@ -10,7 +10,7 @@ use lobe::numerics::fit::{FreeParam, Refinement};
 use lobe::numerics::pass_cache::command_channels;
 use lobe::numerics::robust::PassOptions;
 use lobe::{Backend, Evaluator, Kernel};
-use numpy::{IntoPyArray, PyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{PyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyBytes;
 use rayon::prelude::*;
@@ -49,7 +49,9 @@ impl Table {
             return Err(bad("wi and wo must have shape (len, 3) (lobe's Python side makes them so: a bug)"));
         }
         let (l, v) = (wi.as_slice().map_err(|_| bad("wi is not contiguous"))?, wo.as_slice().map_err(|_| bad("wo is not contiguous"))?);
-        let mut out = vec![0.0; 3 * len];
+        // A pooled buffer: every element written when no row is bad (each chunk's rows, three channels each).
+        let mut buf = super::pool::Buffer::new(3 * len);
+        let out = buf.as_mut_slice();
         let t = &self.table;
         let first_bad = py.detach(|| {
             out.par_chunks_mut(3 * super::CHUNK)
@@ -72,7 +74,7 @@ impl Table {
         if let Some(i) = first_bad {
             return Err(msg_error(py, &self.table.name, Diagnostic::error(format!("wi or wo at flat index {i} has no direction")).hint("directions are three finite components, not all 0")));
         }
-        Ok(out.into_pyarray(py))
+        buf.into_pyarray(py)
     }
     /// The MERL file's bytes.
     fn to_bytes<'py>(&self, py: Python<'py>) -> Bound<'py, PyBytes> {
