@@ -19,7 +19,7 @@ const REST_MS = 250;
 const VIEWS_MS = 200;
 const SERVER_SCENE = "\u0000server";
 // A traced scene's live frame: one sample per pixel at this side at most (the image is scaled to the chosen
-// size), ~50 ms for environment.toml's sphere on two cores.
+// size): environment.toml's sphere measured 86 ms a frame on two cores at a load of 8 (BENCHMARKS.md §8).
 const LIVE_TRACED_SIZE = 128;
 
 // State, exposed as window.lobe for the browser test: frames[] holds the frame times (ms, request to image
@@ -269,13 +269,14 @@ function frameSettings(exact) {
   return s;
 }
 
-// The level in flight (a traced exact frame), aborted by the next change.
+// The level in flight (a traced exact frame), aborted by the next change (the server finishes it or stops it
+// at its deadline; the page no longer waits for it). A rasterised scene's exact frame is not aborted.
 let refining = null;
 let frameUrl = null;
 const frames = channel(async (settings) => {
   lobe.idle = false;
   const t0 = performance.now();
-  const level = settings.exact && settings.spp ? new AbortController() : null;
+  const level = settings.exact && lobe.scene_spp ? new AbortController() : null;
   refining = level;
   let r;
   try {

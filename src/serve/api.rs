@@ -619,8 +619,9 @@ const TRACE_EVALS_PER_SAMPLE: f64 = 8.0;
 
 /// A traced camera sample's fixed part in the budget's units (~1 ns): the camera ray and the shadow ray
 /// through the BVH, the map's 2-D sampling and density, the pilot's share. Measured 2026-12-07 on
-/// environment.toml (GGX, 256², 1 to 16 spp, 2 threads on a loaded 2-core machine): ~3 µs of wall time per
-/// sample in all, so a 256² image affords about 16 spp under the default budget and 512² about 4.
+/// environment.toml (GGX, 146 IR nodes, 256², 1 to 16 spp, 2 threads on a 2-core machine at a load of 8–11):
+/// 1.7–6 µs of wall time per sample in all; priced at ~3.2 µs, a 256² image affords 16 spp under the default
+/// budget (about 2–6 s, inside the deadline) and 512² 4.
 const TRACE_RAY_COST: f64 = 2000.0;
 
 /// `spp` of a render request: the ray tracer's samples per pixel, 1..=[`crate::render::trace::MAX_SPP`]

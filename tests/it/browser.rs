@@ -437,13 +437,9 @@ fn browser_refines_a_traced_scene() {
     assert!(after.len() >= 2 && after.windows(2).all(|w| w[1] == 4 * w[0]), "the levels after the drag: {levels:?}");
     assert_eq!(b.js("return lobe.shown.spp"), json!(last));
     let page = b.image("#frame");
-    let out = d.join("env.png");
-    let o = Command::new(env!("CARGO_BIN_EXE_lobe"))
-        .args(["render", "examples/scenes/environment.toml", "--size", "256", "--spp", &last.to_string(), "--set", &format!("alpha={alpha}"), "-q", "--force", "-o", out.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    assert!(page == std::fs::read(&out).unwrap(), "the page's last level differs from lobe render --spp {last}");
+    let set = format!("alpha={alpha}");
+    let cli = super::serve::cli_render_with(std::path::Path::new("examples/scenes/environment.toml"), &["--size", "256", "--spp", &last.to_string(), "--set", &set], &d.join("env.png"));
+    assert!(page == cli, "the page's last level differs from lobe render --spp {last}");
     assert_eq!(b.js("return lobe.errors"), json!(0), "the page showed errors: {}", b.js("return lobe.error_log"));
     let _ = std::fs::remove_dir_all(&d);
 }
