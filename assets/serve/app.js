@@ -6,6 +6,9 @@
 // recompilation), the 3D lobe and the image slice (numbers, drawn here), and — once the controls rest — the
 // exact frame (compiled as `lobe render` compiles, byte for byte the CLI's), the numbers, the plot and the
 // comparison. Each kind of request has at most one in flight; a change meanwhile is sent when it returns.
+// A traced scene (the server answers with X-Lobe-Scene-Spp) refines: live frames at 1 spp and at most
+// LIVE_TRACED_SIZE² while the controls move, then exact frames at 1, 4, 16, … spp up to the scene's spp, each
+// replacing the last; a change aborts the level in flight and starts over.
 "use strict";
 
 const $ = (id) => document.getElementById(id);
@@ -15,6 +18,9 @@ const COMPILE_DEBOUNCE_MS = 200;
 const REST_MS = 250;
 const VIEWS_MS = 200;
 const SERVER_SCENE = "\u0000server";
+// A traced scene's live frame: one sample per pixel at this side at most (the image is scaled to the chosen
+// size): environment.toml's sphere measured 86 ms a frame on two cores at a load of 8 (BENCHMARKS.md §8).
+const LIVE_TRACED_SIZE = 128;
 
 // State, exposed as window.lobe for the browser test: frames[] holds the frame times (ms, request to image
 // shown) of every completed live render; shown = the settings of the image on screen; views counts the
@@ -23,12 +29,15 @@ const lobe = (window.lobe = {
   path: null, hash: null, name: "<page>", loaded: null, text: "", decls: [], params: {}, moved: [], ok: false,
   light: { theta_i: 30, phi_i: 0 }, scene: SERVER_SCENE,
   renders: 0, frames: [], server_ms: [], shown: null, compiles: 0, compile_requests: 0, errors: 0, idle: true,
+  // The traced scene's spp (X-Lobe-Scene-Spp; 0: rasterised or not known yet) and the spp of every exact
+  // traced frame shown (the refinement, for the browser test).
+  scene_spp: 0, levels: [],
   views: { lobe: 0, slice: 0, plot: 0, albedo: 0 }, warnings: [], error_log: [], draw_ms: [],
 });
 
-async function api(path, body) {
+async function api(path, body, signal) {
   const init = body === undefined ? {} : {
-    method: "POST", body: JSON.stringify(body),
+    method: "POST", body: JSON.stringify(body), signal,
     headers: { "Content-Type": "application/json", "X-Lobe-Client": "page" },
   };
   const r = await fetch(path, init);
@@ -69,7 +78,9 @@ function channel(run, onIdle) {
       try {
         await run(w);
       } catch (e) {
-        if (e.status === 503) {
+        if (e && e.name === "AbortError") {
+          // Superseded (a refining level the page stopped): the newer wish is already queued.
+        } else if (e.status === 503) {
           status(`${e.error}; retrying`);
           if (wish === null) wish = w;
           await new Promise((ok) => setTimeout(ok, 250));
@@ -242,19 +253,50 @@ function buildLight() {
 // parameters its compile declared (the editor may already hold the next keystroke or file).
 const formula = () => ({ name: lobe.compiledName, text: lobe.text });
 
+// The spp of a traced scene's refinement (as the server's trace::levels): spp, spp/4, spp/16, … ≥ 1, smallest first.
+function levels(spp) {
+  const l = [];
+  for (let s = spp; s >= 1; s = Math.floor(s / 4)) l.unshift(s);
+  return l;
+}
+
+// Every frame asks for 1 spp (a rasterised scene ignores it): a live frame of a traced scene is that at a
+// small side; an exact one is the first level at the chosen size (the next levels follow when it is shown).
 function frameSettings(exact) {
-  const s = { ...formula(), path: lobe.path, params: { ...lobe.params }, moved: [...lobe.moved], size: +$("size").value, exact };
+  const s = { ...formula(), path: lobe.path, params: { ...lobe.params }, moved: [...lobe.moved], size: +$("size").value, exact, spp: 1 };
   if (lobe.scene !== SERVER_SCENE) s.scene = lobe.scene;
+  if (!exact && lobe.scene_spp) s.size = Math.min(s.size, LIVE_TRACED_SIZE);
   return s;
 }
 
+// The level in flight (a traced exact frame), aborted by the next change (the server finishes it or stops it
+// at its deadline; the page no longer waits for it). A rasterised scene's exact frame is not aborted.
+let refining = null;
 let frameUrl = null;
 const frames = channel(async (settings) => {
   lobe.idle = false;
   const t0 = performance.now();
-  const r = await api("/api/render", settings);
+  const level = settings.exact && lobe.scene_spp ? new AbortController() : null;
+  refining = level;
+  let r;
+  try {
+    r = await api("/api/render", settings, level ? level.signal : undefined);
+  } catch (e) {
+    // A finer level the server's budget refuses ends the refinement; the coarser image stays.
+    if (e.status === 422 && settings.exact && settings.spp > 1) {
+      $("frame-info").textContent += ` · refined up to here: ${settings.spp} spp is over the server's budget at ${settings.size}²`;
+      return;
+    }
+    throw e;
+  } finally {
+    if (refining === level) refining = null;
+  }
   const serverMs = r.headers.get("X-Lobe-Render-Ms");
   const nan = r.headers.get("X-Lobe-Nan");
+  const sceneSpp = +(r.headers.get("X-Lobe-Scene-Spp") || 0);
+  const spp = +(r.headers.get("X-Lobe-Spp") || 0);
+  // The scene is known traced (or not) from the reply of its first frame.
+  if ((settings.scene === undefined ? SERVER_SCENE : settings.scene) === lobe.scene) lobe.scene_spp = sceneSpp;
   const url = URL.createObjectURL(await r.blob());
   const img = $("frame");
   await new Promise((ok, fail) => { img.onload = ok; img.onerror = fail; img.src = url; });
@@ -266,17 +308,25 @@ const frames = channel(async (settings) => {
     lobe.server_ms.push(+serverMs);
   }
   lobe.renders++;
-  lobe.shown = settings;
+  lobe.shown = { ...settings, spp: spp || undefined };
+  if (settings.exact && spp) lobe.levels.push(spp);
   refreshViews();
   if ($("status").textContent.endsWith("retrying")) status("");
-  $("frame-info").textContent = `${settings.size}² · ${settings.exact ? "exact (as lobe render)" : "live"} · frame ${ms.toFixed(1)} ms (server ${serverMs} ms)` +
+  const refined = spp ? ` · ${spp} of ${sceneSpp} spp` : "";
+  $("frame-info").textContent = `${settings.size}² · ${settings.exact ? "exact (as lobe render)" : "live"}${refined} · frame ${ms.toFixed(1)} ms (server ${serverMs} ms)` +
     (nan !== "0" ? ` · warning: ${nan} kernel evaluations returned NaN or ±inf and were shaded as no light` : "");
+  // The next level, unless a change came meanwhile (its wish is queued and wins).
+  const next = settings.exact && spp ? levels(sceneSpp).find((l) => l > spp) : undefined;
+  if (next && settings.generation === generation) frames({ ...settings, spp: next });
 }, () => { lobe.idle = true; });
 
+// Counts the changes: a refining level continues only while no change came after it was asked for.
+let generation = 0;
 function requestFrame(exact) {
   if (!lobe.ok) return;
   lobe.idle = false;
-  frames(frameSettings(exact));
+  if (refining) refining.abort();
+  frames({ ...frameSettings(exact), generation });
 }
 
 // ---- views: 3D lobe and image slice (following the frames), plot, albedo, numbers (when the controls rest) ----
@@ -303,6 +353,7 @@ function refreshViews() {
 }
 
 function changed() {
+  generation++;
   viewsStale = true;
   requestFrame(false);
   // One side request at a time, after the controls rest: the frames keep the server's job slots.
@@ -633,7 +684,7 @@ async function init() {
   ed.addEventListener("input", () => { showDiagnostics([]); later("compile", COMPILE_DEBOUNCE_MS, () => compile(false)); });
   ed.addEventListener("scroll", syncScroll);
   $("file").addEventListener("change", () => open($("file").value));
-  $("scene").addEventListener("change", () => { lobe.scene = $("scene").value; changed(); });
+  $("scene").addEventListener("change", () => { lobe.scene = $("scene").value; lobe.scene_spp = 0; changed(); });
   $("save").addEventListener("click", () => save(false));
   $("size").addEventListener("change", () => { $("frame").style.width = $("frame").style.height = `${$("size").value}px`; changed(); });
   for (const id of ["compare-on", "other"]) $(id).addEventListener("change", () => { comparePanel(); plotPanel(); });

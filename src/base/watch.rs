@@ -31,6 +31,12 @@ fn stamp(path: &Path) -> Option<(Stamp, Vec<u8>)> {
     Some((Stamp { modified: meta.modified().ok(), len: meta.len(), hash: h.finish() }, bytes))
 }
 
+/// Whether `path` no longer holds `seen` (changed, or gone): `lobe watch` polls it during a long render to stop
+/// refining a stale image. One `stat`, read and comparison, as a poll of [`watch`] costs.
+pub fn differs(path: &Path, seen: &[u8]) -> bool {
+    stamp(path).is_none_or(|(_, bytes)| bytes != seen)
+}
+
 /// What the callback wants next.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Next {
@@ -100,6 +106,7 @@ mod tests {
         });
         writer.join().unwrap();
         assert_eq!(seen, vec!["NH^n", "VR^n"]);
+        assert!(!differs(&p, b"VR^n") && differs(&p, b"NH^n") && differs(&dir.join("gone.brdf"), b""));
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

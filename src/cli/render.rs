@@ -72,7 +72,7 @@ pub enum Shading {
 
 pub use lobe::render::parse_size;
 
-fn parse_spp(s: &str) -> Result<usize, String> {
+pub(crate) fn parse_spp(s: &str) -> Result<usize, String> {
     let max = lobe::render::trace::MAX_SPP;
     match s.trim().parse::<usize>() {
         Ok(v) if (1..=max).contains(&v) => Ok(v),

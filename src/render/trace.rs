@@ -54,6 +54,17 @@ use std::time::{Duration, Instant};
 /// Most samples per pixel ([`Scene::spp`], or the command line's samples per pixel).
 pub const MAX_SPP: usize = 1 << 16;
 
+/// The spp of a progressive series ending at `spp` (`lobe watch` and the page refine through it): spp,
+/// ⌊spp/4⌋, ⌊spp/16⌋, … while ≥ 1, smallest first — `levels(64)` is 1, 4, 16, 64. Each level is a whole render
+/// at its spp, and a pixel's samples are the same whoever renders them, so the last level's image is the image of
+/// one render at `spp`, byte for byte; the series' samples add up to at most 4/3 of that one render's
+/// (1 + 1/4 + 1/16 + … < 4/3).
+pub fn levels(spp: usize) -> Vec<usize> {
+    let mut v: Vec<usize> = std::iter::successors(Some(spp.max(1)), |&s| Some(s / 4)).take_while(|&s| s >= 1).collect();
+    v.reverse();
+    v
+}
+
 /// Which directions the environment estimator draws.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Strategy {
@@ -728,6 +739,20 @@ mod tests {
         let other = crate::render::envmap::encode_exr(3, 2, &f.rgb).unwrap().iter().map(|&b| if b == b'l' { b'x' } else { b }).collect::<Vec<u8>>();
         assert!(!is_lobe_exr(&other));
         assert!(!is_lobe_exr(b"\x89PNG"));
+    }
+
+    #[test]
+    fn progressive_levels_grow_by_four_and_cost_at_most_four_thirds() {
+        assert_eq!(levels(64), vec![1, 4, 16, 64]);
+        assert_eq!(levels(100), vec![1, 6, 25, 100]);
+        assert_eq!(levels(1), vec![1]);
+        assert_eq!(levels(3), vec![3]);
+        for spp in [1, 2, 5, 16, 17, 1000, MAX_SPP] {
+            let l = levels(spp);
+            assert_eq!(*l.last().unwrap(), spp);
+            assert!(l.windows(2).all(|w| w[0] < w[1]) && l[0] >= 1);
+            assert!(3 * l.iter().sum::<usize>() <= 4 * spp, "{spp}: {l:?}");
+        }
     }
 
     #[test]

@@ -38,6 +38,9 @@
 //! commands' 2 s search the first time (principled: 1.8 s), a read of the decision cache afterwards (tens of
 //! milliseconds); the page debounces typing (200 ms) so a burst of keystrokes is one compile. The exact frame
 //! at rest compiles with the values baked, as `lobe render` does (its pass decisions cached the same way).
+//! A traced scene (an environment map, shadows) costs per camera sample: the page drags at 1 spp and at most
+//! 128², then refines at rest through 1, 4, 16, … spp, each level priced against the budget before it runs
+//! ([`api::render`]).
 
 pub(crate) mod api;
 pub(crate) mod http;

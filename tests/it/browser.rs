@@ -392,3 +392,54 @@ fn browser_views_and_state_follow_the_file() {
     }
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// A traced scene on the page refines progressively: with environment.toml picked at 256², a drag of `alpha`
+/// shows live frames (1 spp, 128²; their times are printed), and when the slider rests the exact frames come
+/// at 1, 4, 16, … spp (`X-Lobe-Spp`), each replacing the last, up to the scene's 64 spp or the last level
+/// the server's budget allows; the last is `lobe render --spp` of it at 256² byte for byte.
+#[test]
+fn browser_refines_a_traced_scene() {
+    let Some(chromium) = chromium("browser_refines_a_traced_scene") else { return };
+    let d = scratch("browser-traced");
+    let served = Served::start(&["examples/explorer/ggx.brdf", "examples"]);
+    let b = Browser::start(&chromium);
+    b.cmd("POST", "/url", Some(json!({"url": format!("http://{}/", served.addr)})));
+    b.wait("window.lobe && lobe.renders >= 1 && lobe.idle", 60, "the first frame");
+    b.pick("size", "256");
+    b.pick("scene", "examples/scenes/environment.toml");
+    b.wait("lobe.scene_spp === 64 && lobe.idle && lobe.shown && lobe.shown.exact && lobe.shown.scene === 'examples/scenes/environment.toml'", 120, "the environment scene at rest");
+    b.js("lobe.levels = []; lobe.frames = []; lobe.server_ms = [];");
+    for k in 0..8 {
+        b.slide("alpha", 0.2 + 0.0125 * (k + 1) as f64);
+        std::thread::sleep(Duration::from_millis(60));
+    }
+    let alpha = "+document.getElementById('slider-alpha').value";
+    b.wait(&format!("lobe.idle && lobe.shown && lobe.shown.exact && lobe.shown.params.alpha === {alpha} && lobe.levels.length >= 2"), 120, "the refined frames after the drag");
+    let alpha = b.js(&format!("return {alpha}")).as_f64().unwrap();
+    let levels: Vec<u64> = serde_json::from_value(b.js("return lobe.levels")).unwrap();
+    let (frames, server): (Vec<f64>, Vec<f64>) = (serde_json::from_value(b.js("return lobe.frames")).unwrap(), serde_json::from_value(b.js("return lobe.server_ms")).unwrap());
+    let median = |v: &[f64]| {
+        let mut v = v.to_vec();
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+    };
+    println!(
+        "traced scene (environment.toml, 256² chosen): {} live frames at 128², 1 spp, median {:.1} ms (server {:.1} ms); exact levels at alpha = {alpha}: {levels:?}; {}",
+        frames.len(),
+        median(&frames),
+        median(&server),
+        b.js("return document.getElementById('frame-info').textContent")
+    );
+    assert!(!frames.is_empty(), "no live frame during the drag");
+    let last = *levels.last().unwrap();
+    // The refinement after the drag starts at the last 1 (a pause in the drag may have started one before).
+    let after = &levels[levels.iter().rposition(|&l| l == 1).unwrap_or(0)..];
+    assert!(after.len() >= 2 && after.windows(2).all(|w| w[1] == 4 * w[0]), "the levels after the drag: {levels:?}");
+    assert_eq!(b.js("return lobe.shown.spp"), json!(last));
+    let page = b.image("#frame");
+    let set = format!("alpha={alpha}");
+    let cli = super::serve::cli_render_with(std::path::Path::new("examples/scenes/environment.toml"), &["--size", "256", "--spp", &last.to_string(), "--set", &set], &d.join("env.png"));
+    assert!(page == cli, "the page's last level differs from lobe render --spp {last}");
+    assert_eq!(b.js("return lobe.errors"), json!(0), "the page showed errors: {}", b.js("return lobe.error_log"));
+    let _ = std::fs::remove_dir_all(&d);
+}

@@ -687,3 +687,65 @@ fn plot_takes_a_value_range() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `lobe watch` on a traced scene refines: one JSON line per level (`spp` 1, 4, 16 of `final_spp` 16), and the
+/// last image is `lobe render --spp 16` of the scene byte for byte.
+#[test]
+fn watch_refines_a_traced_scene_up_to_lobe_render() {
+    let dir = std::env::temp_dir().join(format!("lobe-watch-traced-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (out, cli) = (dir.join("w.png").display().to_string(), dir.join("r.png").display().to_string());
+    let scene = "examples/scenes/environment.toml";
+    let r = lobe(&["watch", "examples/explorer/ggx.brdf", "--scene", scene, "-o", &out, "--size", "32", "--spp", "16", "--count", "1", "--json"], None);
+    assert!(r.status.success(), "{}", stderr(&r));
+    let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&r.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let levels: Vec<(u64, u64, u64)> = lines.iter().map(|l| (l["reload"].as_u64().unwrap(), l["spp"].as_u64().unwrap(), l["final_spp"].as_u64().unwrap())).collect();
+    assert_eq!(levels, [(1, 1, 16), (1, 4, 16), (1, 16, 16)], "{lines:?}");
+    assert!(lines.iter().all(|l| l["ok"] == true && l["output"] == out.as_str()));
+    let o = lobe(&["render", scene, "--size", "32", "--spp", "16", "-q", "-o", &cli], None);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(std::fs::read(&out).unwrap() == std::fs::read(&cli).unwrap(), "the last level is not lobe render --spp 16");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A change of the watched file while a traced scene refines stops the series and reloads: at 4096 spp the
+/// series would take a minute, but the first reload ends below it and the second (a broken formula) follows.
+/// The time from the write to the reload is printed, not asserted.
+#[test]
+fn watch_stops_refining_when_the_file_changes() {
+    use std::io::BufRead;
+    let dir = std::env::temp_dir().join(format!("lobe-watch-stop-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let brdf = dir.join("ggx.brdf");
+    std::fs::copy("examples/explorer/ggx.brdf", &brdf).unwrap();
+    let out = dir.join("w.png");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_lobe"))
+        .args(["watch", brdf.to_str().unwrap(), "--scene", "examples/scenes/environment.toml", "-o", out.to_str().unwrap()])
+        .args(["--size", "64", "--spp", "4096", "--count", "2", "--interval-ms", "20", "--json"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = vec![];
+    let mut written = None;
+    for line in std::io::BufReader::new(child.stdout.take().unwrap()).lines() {
+        let v: serde_json::Value = serde_json::from_str(&line.unwrap()).unwrap();
+        if written.is_none() {
+            std::fs::write(&brdf, "NH^^\n").unwrap();
+            written = Some(std::time::Instant::now());
+        }
+        if v["reload"] == 2 {
+            println!("reload after the change in {:?}", written.unwrap().elapsed());
+        }
+        lines.push(v);
+    }
+    let status = child.wait().unwrap();
+    let first: Vec<u64> = lines.iter().filter(|l| l["reload"] == 1).map(|l| l["spp"].as_u64().unwrap()).collect();
+    assert!(!first.is_empty() && first.windows(2).all(|w| w[0] < w[1]) && *first.last().unwrap() < 4096, "reload 1's levels {first:?}");
+    let second: Vec<&serde_json::Value> = lines.iter().filter(|l| l["reload"] == 2).collect();
+    assert!(second.len() == 1 && second[0]["ok"] == false, "{lines:?}");
+    assert_eq!(status.code(), Some(1), "the last reload failed");
+    assert_eq!(&std::fs::read(&out).unwrap()[1..4], b"PNG", "the last good image stays");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -113,6 +113,8 @@ fn every_json_output_keeps_its_keys() {
         ("import", vec!["import", "examples/explorer/ggx.brdf", "--json"]),
         ("plot", vec!["plot", blinn, "examples/brdfs/phong.brdf", "--set", "n=20", "-o", &plot, "--json"]),
         ("watch", vec!["watch", blinn, "--scene", "examples/scenes/paper_sphere.toml", "--size", "16", "-o", &watched, "--count", "1", "--json"]),
+        // A traced scene's line also says its level (`--spp 1`: one level, one line).
+        ("watch_traced", vec!["watch", "examples/explorer/ggx.brdf", "--scene", "examples/scenes/environment.toml", "--size", "16", "--spp", "1", "-o", &watched, "--count", "1", "--json"]),
     ];
     // Errors under --json: the error object on standard output (a usage error, a message, a located diagnostic),
     // and a watch whose reload failed (its line carries the same object).

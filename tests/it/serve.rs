@@ -140,8 +140,16 @@ pub(crate) fn scratch(tag: &str) -> PathBuf {
 }
 
 pub(crate) fn cli_render(scene: &Path, set: &str, size: &str, out: &Path) -> Vec<u8> {
+    cli_render_with(scene, &["--set", set, "--size", size], out)
+}
+
+/// `lobe render SCENE ARGS… -q --force -o OUT`, its PNG bytes.
+pub(crate) fn cli_render_with(scene: &Path, args: &[&str], out: &Path) -> Vec<u8> {
     let o = Command::new(env!("CARGO_BIN_EXE_lobe"))
-        .args(["render", scene.to_str().unwrap(), "--set", set, "--size", size, "-q", "--force", "-o", out.to_str().unwrap()])
+        .arg("render")
+        .arg(scene)
+        .args(args)
+        .args(["-q", "--force", "-o", out.to_str().unwrap()])
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -499,12 +507,7 @@ fn the_scene_folder_is_served_and_scenes_cannot_name_outside_files() {
 
 /// `lobe render SCENE --size SIZE` (no `--set`), its PNG bytes.
 pub(crate) fn cli_render_plain(scene: &Path, size: &str, out: &Path) -> Vec<u8> {
-    let o = Command::new(env!("CARGO_BIN_EXE_lobe"))
-        .args(["render", scene.to_str().unwrap(), "--size", size, "-q", "--force", "-o", out.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    std::fs::read(out).unwrap()
+    cli_render_with(scene, &["--size", size], out)
 }
 
 fn values(v: &Value) -> Vec<f64> {
@@ -840,5 +843,40 @@ fn seven_renders_of_a_two_hundred_light_scene_end_promptly() {
     let t1 = Instant::now();
     assert_eq!(s.post("/api/render", &json!({"text": "VR^n", "size": 128})).status, 200);
     assert!(t1.elapsed() < PROMPT, "{:?}", t1.elapsed());
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// A traced scene on the page: `spp` picks the level (said in `X-Lobe-Spp`, the scene's own in
+/// `X-Lobe-Scene-Spp`), an exact frame at a level is `lobe render --spp` of it byte for byte, a level over the
+/// budget is refused before it runs, and a bad `spp` (0, 10⁹, not a number) is a 400 with a hint. A
+/// rasterised scene answers without the headers.
+#[test]
+fn traced_scenes_render_at_the_requested_spp() {
+    let d = scratch("spp");
+    let s = Served::start(&["examples"]);
+    let ggx = "examples/explorer/ggx.brdf";
+    let text = std::fs::read_to_string(ggx).unwrap();
+    let req = |spp: Value, size: u64| {
+        json!({"name": ggx, "text": text, "path": ggx, "params": {}, "moved": [], "scene": "examples/scenes/environment.toml", "size": size, "exact": true, "spp": spp})
+    };
+    for (level, file) in [(1, "e1.png"), (4, "e4.png")] {
+        let r = s.post("/api/render", &req(json!(level), 32));
+        assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+        assert_eq!((r.header("X-Lobe-Spp"), r.header("X-Lobe-Scene-Spp")), (Some(level.to_string().as_str()), Some("64")));
+        let cli = cli_render_with(Path::new("examples/scenes/environment.toml"), &["--size", "32", "--spp", &level.to_string()], &d.join(file));
+        assert!(r.body == cli, "the page's exact environment.toml at {level} spp differs from lobe render --spp {level}");
+    }
+    for bad in [json!(0), json!(1_000_000_000u64), json!("many"), json!(2.5), json!(-1)] {
+        let r = s.post("/api/render", &req(bad.clone(), 32));
+        assert_eq!(r.status, 400, "spp {bad}: {}", String::from_utf8_lossy(&r.body));
+        let e = r.json();
+        assert!(e["error"].as_str().unwrap().contains("spp") && e["hint"].as_str().is_some_and(|h| !h.is_empty()), "spp {bad}: {e}");
+    }
+    // The whole 65 536 spp at 2048² is far over the budget: refused at once, not run to the deadline.
+    let r = s.post("/api/render", &req(json!(65536), 2048));
+    assert_eq!(r.status, 422, "{}", String::from_utf8_lossy(&r.body));
+    assert!(r.json()["error"].as_str().unwrap().contains("budget"));
+    let r = s.post("/api/render", &json!({"text": "NH^n", "scene": "", "size": 32, "spp": 4}));
+    assert_eq!((r.status, r.header("X-Lobe-Spp")), (200, None), "a rasterised scene ignores spp");
     let _ = std::fs::remove_dir_all(&d);
 }
