@@ -17,8 +17,8 @@ use std::path::PathBuf;
 
 /// Bumped whenever the pass's choices may change for the same inputs (its rules, or the bits of the math library
 /// it measures with: 3, exp's 16-row table; 4, sin of a bounded argument without reduction; 5, the baked pass
-/// always keeps the live choice).
-pub(crate) const PASS_VERSION: u32 = 6;
+/// always keeps the live choice; 7, no second round of rules applied everywhere).
+pub(crate) const PASS_VERSION: u32 = 7;
 
 /// A cache directory.
 #[derive(Clone, Debug, PartialEq, Eq)]
