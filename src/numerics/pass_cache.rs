@@ -4,21 +4,23 @@
 //! The search measures candidates against the truth (tens of milliseconds to seconds); its result is a short
 //! [`Decision`] — the kept steps — that rebuilds the chosen formula without measuring ([`super::robust::replay`]).
 //! One file per key, in the platform cache directory: the key is the formula (its program text and parameter
-//! declarations), the baked values (bits), the pass options that change the choice, lobe's version and
-//! [`PASS_VERSION`]; the file name is a 128-bit FNV-1a hash of the key and the file holds the key itself, so a
-//! collision or a file from another version reads as a miss. A file that does not parse is a miss; writes go
-//! to a temporary file renamed into place, so concurrent commands never read half a file. Any I/O error is a
-//! miss or a skipped store: the cache never makes a command fail.
+//! declarations), the baked values (bits), the pass options that change the choice, the registry's rule names
+//! in its order (a rule added, removed or moved is a miss), lobe's version and [`PASS_VERSION`]; the file name
+//! is a 128-bit FNV-1a hash of the key and the file holds the key itself, so a collision or a file from another
+//! version reads as a miss. A file that does not parse is a miss; writes go to a temporary file renamed into
+//! place, so concurrent commands never read half a file. Any I/O error is a miss or a skipped store: the cache
+//! never makes a command fail.
 
 use super::robust::{Decision, DecisionStore, PassOptions, Step};
 use crate::ir::Formula;
-use crate::simplify::accuracy::rule;
+use crate::simplify::accuracy::{rule, RULES};
 use std::path::PathBuf;
 
-/// Bumped whenever the pass's choices may change for the same inputs (its rules, or the bits of the math library
-/// it measures with: 3, exp's 16-row table; 4, sin of a bounded argument without reduction; 5, the baked pass
-/// always keeps the live choice).
-pub(crate) const PASS_VERSION: u32 = 6;
+/// Bumped whenever the pass's choices may change for the same inputs and the same registry (the key holds the
+/// rules' names): the search, or the bits of the math library it measures with (3, exp's 16-row table; 4, sin
+/// of a bounded argument without reduction; 5, the baked pass always keeps the live choice; 7, no second round
+/// of rules applied everywhere).
+pub(crate) const PASS_VERSION: u32 = 7;
 
 /// A cache directory.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -60,6 +62,11 @@ impl Cache {
             o.seed,
             o.math.name()
         );
+        k += "rules";
+        for r in RULES {
+            k += &format!(" {}", r.name());
+        }
+        k += "\n";
         for d in &f.params {
             k += &format!("param {} {:?} {:x} {:x} {:x}\n", d.name, d.kind, d.default.to_bits(), d.lo.to_bits(), d.hi.to_bits());
         }
@@ -211,6 +218,9 @@ mod tests {
         assert_eq!(c.load(&f, &[], &o), Some(d.clone()));
         assert_eq!(c.load(&f, &[(0, 3.0)], &o), None, "other baked values");
         assert_eq!(c.load(&f, &[], &PassOptions { max_cost: 2.0, ..o }), None, "other options");
+        // The registry is part of the key: a rule added, removed or moved is a miss.
+        let key = Cache::key(&f, &[], &o);
+        assert!(RULES.iter().all(|r| key.contains(&format!(" {}", r.name()))), "{key}");
         // A damaged file is a miss, not an error.
         let path = c.path(&Cache::key(&f, &[], &o));
         std::fs::write(&path, "garbage").unwrap();

@@ -308,23 +308,10 @@ fn live_pass(orig: &Formula, o: &PassOptions, stop: &Cancel, observe: &dyn Fn(St
     let (mut cur, mut cur_stats, mut cur_cost) = (Analysis::new(base.clone()), before.clone(), cost_before);
     let mut trials: Vec<Trial> = Vec::new();
     let mut steps = Vec::new();
-    let mut tries = search_order(&cur);
+    let tries = search_order(&cur);
     let (mut i, mut k) = (0, 0);
-    let mut second_round = false;
     let mut truncated = false;
-    loop {
-        if i == tries.len() {
-            // A rule applied everywhere may have been dropped only because another defect hid its gain (the
-            // explorer Cook–Torrance's facing pairs need both scaled-norm and a quotient chain): once, after a
-            // later rule was kept, those rules are tried again on the result.
-            let retry = retries(&trials);
-            if second_round || retry.is_empty() {
-                break;
-            }
-            second_round = true;
-            tries.extend(retry);
-            continue;
-        }
+    while i < tries.len() {
         if bench.out_of_time() {
             truncated = true;
             break;
@@ -460,13 +447,6 @@ impl Outcome {
         self.points = n;
         self
     }
-}
-
-/// The rules applied everywhere dropped as no more accurate before the last trial that was kept, in the order
-/// they were tried.
-fn retries(trials: &[Trial]) -> Vec<&'static dyn Rule> {
-    let Some(last_kept) = trials.iter().rposition(|t| t.kept) else { return vec![] };
-    trials[..last_kept].iter().filter(|t| t.verdict == Verdict::NotBetter && t.rule.sites() == Sites::Everywhere).map(|t| t.rule).collect()
 }
 
 /// The accuracy pass as the compile step's chooser ([`crate::FormulaChooser`]): the decision comes from the

@@ -168,7 +168,9 @@ use super::Policy;
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Ir, Node, NodeId};
 
-/// Every candidate of the accuracy pass, one line each.
+/// Every candidate of the accuracy pass, one line each, in the order the live search tries them (a rule that
+/// asks to go early on the formula first, [`Rule::early`]): a rule kept first can hide another's pattern, and the
+/// notes on the lines say where the order matters.
 pub static RULES: &[&dyn Rule] = &[
     &power::PowCall,
     &power::CompensatedPower,
