@@ -5,7 +5,7 @@
 
 use super::args::Output;
 use super::common::{self, CliError, Spinner};
-use super::fit::{free_specs, FitArgs};
+use super::fit_args::{free_specs, FitArgs};
 use lobe::ir::Formula;
 use lobe::measured::{is_measured_path, Measured};
 use lobe::numerics::fit::{FreeParam, Refinement};

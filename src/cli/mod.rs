@@ -27,6 +27,7 @@ pub mod points;
 pub mod accuracy;
 pub mod energy;
 pub mod fit;
+pub mod fit_args;
 pub mod fit_measured;
 pub mod tabulate;
 pub mod sweep;
