@@ -503,6 +503,10 @@ impl<L: Lanes> Branch for Translator<'_, '_, L> {
         self.b.seal_block(join);
         params
     }
+    fn nonzero(&mut self, v: Value) -> Value {
+        let zero = L::konst(self.b, 0);
+        self.b.ins().fcmp(FloatCC::NotEqual, v, zero)
+    }
 }
 
 /// Integer lanes in Cranelift: `L::ITY` values, bit casts of `L::TY`.

@@ -21,15 +21,15 @@
 //! function, once per lane, through its address as a constant. Errors are collected (the first one, as a
 //! [`NativeError`]), never panicked on.
 
-use crate::backend::native::frame::{self, Frame, ProgramStep};
-use crate::backend::native::lower::{self, Lower, Scope};
+use crate::backend::native::frame::{self, Frame};
+use crate::backend::native::lower::{Lower, Scope};
 use crate::backend::native::ops::{self, Bits, Branch, Callee, Calls};
 use crate::backend::native::{NativeError, Plan};
-use crate::backend::program::{Program, Region, MAX_COLUMNS};
+use crate::backend::program::{Program, MAX_COLUMNS};
 use crate::builtins::dd::Arith;
 use crate::builtins::math::{self, Emit};
 use crate::builtins::{Builtin, Libm, Mode};
-use crate::ir::{Input, Ir, NodeId, N_INPUTS};
+use crate::ir::{Input, Ir, N_INPUTS};
 use inkwell::attributes::AttributeLoc;
 use inkwell::basic_block::BasicBlock;
 use inkwell::builder::{Builder, BuilderError};
@@ -398,33 +398,6 @@ impl<'ctx> Frame for Gen<'_, 'ctx> {
     }
 }
 
-/// A program's region in LLVM: [`Branch::branch_any`] on `lit ≠ 0` into the region's block, and a phi per
-/// output at the join (+0 from the skipping edge).
-impl<'ctx> ProgramStep for Gen<'_, 'ctx> {
-    /// The tables from before the region, and the branch.
-    type Open = (Vec<Option<VectorValue<'ctx>>>, <Self as Branch>::Open);
-    fn node(&mut self, id: NodeId) -> Result<(), NativeError> {
-        lower::node(self, id).map(drop)
-    }
-    fn open(&mut self, _: usize, r: &Region) -> Result<Self::Open, NativeError> {
-        let lit = self.value(r.lit)?;
-        let zero = self.fconst(0);
-        let m = self.b.build_float_compare(FloatPredicate::UNE, lit, zero, "");
-        let m = self.m(m);
-        let open = self.branch_any(m, &vec![zero; r.outputs.len()], false);
-        Ok((self.vals.clone(), open))
-    }
-    fn close(&mut self, r: &Region, (saved, open): Self::Open) -> Result<(), NativeError> {
-        let outs = r.outputs.iter().map(|o| self.value(*o)).collect::<Result<Vec<VectorValue>, _>>()?;
-        let joined = self.join(open, &outs);
-        self.vals = saved;
-        for (o, v) in r.outputs.iter().zip(joined) {
-            self.vals[o.index()] = Some(v);
-        }
-        Ok(())
-    }
-}
-
 /// Branches in LLVM: a conditional branch on the mask's bits (weighted 1 : 2000 into a rare block), a phi per
 /// value at the join.
 impl<'ctx> Branch for Gen<'_, 'ctx> {
@@ -469,6 +442,11 @@ impl<'ctx> Branch for Gen<'_, 'ctx> {
             }
         }
         out
+    }
+    fn nonzero(&mut self, v: Self::V) -> Self::M {
+        let zero = self.fconst(0);
+        let m = self.b.build_float_compare(FloatPredicate::UNE, v, zero, "");
+        self.m(m)
     }
 }
 
@@ -773,7 +751,7 @@ pub(super) fn build_batch(u: &Unit, w: u32) -> Result<(), NativeError> {
 /// `lobe_program(cols: *const *const f64, params, block, outs: *const *mut f64, len)` in `w` lanes: a
 /// multi-output program ([`crate::backend::program`]) in [`batch_loop`]'s loop, reading its data columns
 /// from `cols` and storing every output to `outs[o]`. The step is the native layer's
-/// ([`frame::program_step`]), its regions this tier's branch and phis ([`ProgramStep`] for [`Gen`]).
+/// ([`frame::program_step`]), its regions this tier's branch and phis ([`Branch`] for [`Gen`]).
 pub(super) fn build_program(u: &Unit, w: u32, p: &Program) -> Result<(), NativeError> {
     let f = declare(u, PROGRAM, 4, true);
     let (cols, outs) = (param(f, 0)?, param(f, 3)?);

@@ -1,9 +1,9 @@
 //! The math library's operations that are not one instruction, written once over a tier's primitives: the bit
-//! sequences ([`Emit::mask_bits`], [`Emit::pow2i`], [`Emit::exponent_field`]) over [`Bits`]' integer lanes, the
-//! compare-and-select and the exact product ([`positive_select`](crate::builtins::dd::Arith::positive_select), [`two_prod`](crate::builtins::dd::Arith::two_prod)), and the calls of
-//! a compiled function once per lane ([`Lower::library`], [`Emit::rare_call`], [`Emit::fallback`]) over
-//! [`Calls`]. A tier's `Emit`/`Arith`/`Lower` method is then one line calling the function here, so both tiers
-//! emit the same instructions in the same order.
+//! sequences ([`Emit::mask_bits`], [`Emit::pow2i`], [`Emit::exponent_field`]) over [`Bits`]' integer lanes;
+//! the compare-and-select and the exact product (`Arith::positive_select`, `Arith::two_prod`); the calls of a
+//! compiled function once per lane ([`Lower::library`], [`Emit::rare_call`], [`Emit::fallback`]) over
+//! [`Calls`]; and the rare block ([`Emit::rare`]) over [`Branch`]. A tier's `Emit`/`Arith`/`Lower` method is
+//! then one line calling the function here, so both tiers emit the same instructions in the same order.
 
 use super::lower::Lower;
 use super::NativeError;
@@ -170,6 +170,8 @@ pub(crate) trait Branch: Emit {
     /// Leaves the block for the join with `vals` (one for each `skip`), where the builder is left; the join's
     /// values, `vals` or `skip` by the edge taken.
     fn join(&mut self, open: Self::Open, vals: &[Self::V]) -> Vec<Self::V>;
+    /// `v ≠ 0`, not equal or unordered (a NaN is nonzero, as the interpreter's `lit != 0`).
+    fn nonzero(&mut self, v: Self::V) -> Self::M;
 }
 
 /// [`Emit::rare`]: `any(m) ? slow() : r`, the slow code in a block of its own.
