@@ -258,7 +258,7 @@ pub fn assembly(f: &Formula, mode: Mode) -> Result<String, NativeError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::backend::Columns;
+    use crate::backend::{Columns, Evaluator};
     use crate::ir::N_INPUTS;
 
     fn formula(src: &str) -> Formula {
