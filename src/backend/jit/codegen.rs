@@ -515,7 +515,7 @@ impl<L: Lanes> Bits for Translator<'_, '_, L> {
     fn to_bits(&mut self, x: Value) -> Value {
         L::bitcast(self.b, L::ITY, x)
     }
-    fn from_bits(&mut self, i: Value) -> Value {
+    fn of_bits(&mut self, i: Value) -> Value {
         L::bitcast(self.b, L::TY, i)
     }
     fn int(&mut self, v: u64) -> Value {
@@ -553,7 +553,7 @@ impl<L: Lanes> Calls for Translator<'_, '_, L> {
         let inst = self.b.ins().call(func, args);
         self.b.inst_results(inst).first().copied().ok_or(NativeError::internal("call without result"))
     }
-    fn from_lanes(&mut self, lanes: &[Value]) -> Value {
+    fn gather(&mut self, lanes: &[Value]) -> Value {
         L::from_lanes(self.b, lanes)
     }
     fn record(&mut self, e: NativeError) {

@@ -603,7 +603,7 @@ impl<'ctx> Bits for Gen<'_, 'ctx> {
         let i = self.b.build_bit_cast(x, self.ity, "");
         self.vec_of(i, self.ity)
     }
-    fn from_bits(&mut self, i: Self::I) -> Self::V {
+    fn of_bits(&mut self, i: Self::I) -> Self::V {
         let f = self.b.build_bit_cast(i, self.fty, "");
         self.vec_of(f, self.fty)
     }
@@ -659,7 +659,7 @@ impl<'ctx> Calls for Gen<'_, 'ctx> {
             inkwell::values::ValueKind::Instruction(_) => Err(NativeError::internal("a library call returned nothing")),
         }
     }
-    fn from_lanes(&mut self, lanes: &[Self::Lane]) -> Self::V {
+    fn gather(&mut self, lanes: &[Self::Lane]) -> Self::V {
         let mut out = self.fty.get_poison();
         for (k, l) in lanes.iter().enumerate() {
             let ins = self.b.build_insert_element(out, *l, self.i32c(k as u64), "");

@@ -17,7 +17,7 @@ pub(crate) trait Bits: Emit {
     /// The bits of `x` (a reinterpretation).
     fn to_bits(&mut self, x: Self::V) -> Self::I;
     /// The value of bits `i`.
-    fn from_bits(&mut self, i: Self::I) -> Self::V;
+    fn of_bits(&mut self, i: Self::I) -> Self::V;
     /// `v` in every lane.
     fn int(&mut self, v: u64) -> Self::I;
     fn iand(&mut self, a: Self::I, b: Self::I) -> Self::I;
@@ -39,7 +39,7 @@ pub(crate) fn mask_bits<T: Bits>(t: &mut T, x: T::V, and: u64, or: u64) -> T::V 
         let o = t.int(or);
         i = t.ior(i, o);
     }
-    t.from_bits(i)
+    t.of_bits(i)
 }
 
 /// [`Emit::pow2i`]: `from_bits((bits(k + MAGIC) + 1023 − bits(MAGIC)) << 52)`.
@@ -50,7 +50,7 @@ pub(crate) fn pow2i<T: Bits>(t: &mut T, k: T::V) -> T::V {
     let bias = t.int(1023u64.wrapping_sub(math::MAGIC.to_bits()));
     let i = t.iadd(i, bias);
     let i = t.shl(i, 52);
-    t.from_bits(i)
+    t.of_bits(i)
 }
 
 /// [`Emit::exponent_field`]: `from_bits(((bits(x) >> 52) & 0x7ff) | bits(2^52)) − 2^52`.
@@ -62,7 +62,7 @@ pub(crate) fn exponent_field<T: Bits>(t: &mut T, x: T::V) -> T::V {
     let i = t.iand(i, m);
     let o = t.int(TWO52.to_bits());
     let i = t.ior(i, o);
-    let f = t.from_bits(i);
+    let f = t.of_bits(i);
     let c = t.konst(TWO52);
     t.sub(f, c)
 }
@@ -107,7 +107,7 @@ pub(crate) trait Calls: Lower {
     /// `func(args)`.
     fn call(&mut self, func: Self::Func, args: &[Self::Lane]) -> Result<Self::Lane, NativeError>;
     /// A value from its lanes, lane 0 first.
-    fn from_lanes(&mut self, lanes: &[Self::Lane]) -> Self::V;
+    fn gather(&mut self, lanes: &[Self::Lane]) -> Self::V;
     /// Records an error raised inside an [`Emit`] method (the first one is kept), for [`Lower::take_error`].
     fn record(&mut self, e: NativeError);
 }
@@ -119,7 +119,7 @@ fn call_lanes<T: Calls>(t: &mut T, func: T::Func, args: &[T::V]) -> Result<T::V,
         let vals: Vec<T::Lane> = args.iter().map(|a| t.lane(*a, lane)).collect();
         lanes.push(t.call(func, &vals)?);
     }
-    Ok(t.from_lanes(&lanes))
+    Ok(t.gather(&lanes))
 }
 
 /// `any(m) ? (m ? func(args) : r) : r`, one call per lane inside an [`Emit::rare`] block.
