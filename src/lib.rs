@@ -121,17 +121,17 @@ pub fn build_kernel(f: Arc<Formula>, backend: Backend, math: Mode) -> Result<Ker
     let t = Instant::now();
     let ev: Arc<dyn Evaluator> = match backend {
         Backend::Interp => Arc::new(backend::interp::Interp::with_mode(&f, math)),
-        Backend::Jit => backend::jit::kernel_evaluator(&f, math).map_err(|d| Diagnostics::single(&f.file, d))?,
+        Backend::Jit => backend::native::evaluator(backend::jit::jit_kernel(&f, math)).map_err(|d| Diagnostics::single(&f.file, d))?,
         #[cfg(feature = "llvm")]
-        Backend::Llvm => backend::llvm::kernel_evaluator(&f, math).map_err(|d| Diagnostics::single(&f.file, d))?,
+        Backend::Llvm => backend::native::evaluator(backend::llvm::llvm_kernel(&f, math)).map_err(|d| Diagnostics::single(&f.file, d))?,
         #[cfg(feature = "llvm")]
         Backend::Auto => {
-            let first = backend::jit::kernel_evaluator(&f, math).map_err(|d| Diagnostics::single(&f.file, d))?;
+            let first = backend::native::evaluator(backend::jit::jit_kernel(&f, math)).map_err(|d| Diagnostics::single(&f.file, d))?;
             Arc::new(backend::tiered::Tiered::new(first, f.clone(), math))
         }
         // Without the LLVM tier, automatic tiering is Cranelift ([`Tier::resolve`] never gives `Auto` there).
         #[cfg(not(feature = "llvm"))]
-        Backend::Auto => backend::jit::kernel_evaluator(&f, math).map_err(|d| Diagnostics::single(&f.file, d))?,
+        Backend::Auto => backend::native::evaluator(backend::jit::jit_kernel(&f, math)).map_err(|d| Diagnostics::single(&f.file, d))?,
         #[cfg(not(feature = "llvm"))]
         Backend::Llvm => return Err(Diagnostics::single(&f.file, llvm_missing())),
     };

@@ -44,7 +44,7 @@ impl Tiered {
             return s;
         }
         if n >= AUTO_LLVM_POINTS {
-            if let Some(s) = self.second.get_or_init(|| super::llvm::kernel_evaluator(&self.formula, self.math).ok()) {
+            if let Some(s) = self.second.get_or_init(|| super::llvm::llvm_kernel(&self.formula, self.math).ok().map(|k| Arc::new(k) as Arc<dyn Evaluator>)) {
                 return s;
             }
         }

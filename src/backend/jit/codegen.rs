@@ -21,7 +21,8 @@
 //! is a [`NativeError`] rather than a panic.
 
 use crate::backend::native::frame::{self, Frame};
-use crate::backend::native::lower::Lower;
+use crate::backend::native::lower::{Lower, Scope};
+use crate::backend::native::ops::{self, Bits, Branch, Callee, Calls};
 use crate::backend::native::{NativeError, Plan};
 use crate::builtins::dd::Arith;
 use crate::builtins::math::{self, Emit};
@@ -30,7 +31,7 @@ use crate::ir::{Input, Ir, Node, NodeId, N_INPUTS};
 use cranelift_codegen::ir::condcodes::{FloatCC, IntCC};
 use cranelift_codegen::ir::immediates::Ieee64;
 use cranelift_codegen::ir::{
-    types, AbiParam, BlockArg, Endianness, FuncRef, InstBuilder, MemFlagsData, Signature, Type, Value,
+    types, AbiParam, Block, BlockArg, Endianness, FuncRef, InstBuilder, MemFlagsData, Signature, Type, Value,
 };
 use cranelift_codegen::Context;
 use cranelift_frontend::{FunctionBuilder, FunctionBuilderContext};
@@ -280,43 +281,11 @@ fn mem() -> MemFlagsData {
     MemFlagsData::new().with_notrap()
 }
 
-impl<L: Lanes> Translator<'_, '_, L> {
-    /// `callee` called on each lane of `args` (`F64` scalars), the results gathered into one value.
-    fn call_lanes(&mut self, callee: FuncRef, args: &[Value]) -> Result<Value, NativeError> {
-        let mut lanes = Vec::with_capacity(usize::from(L::LANES));
-        for lane in 0..L::LANES {
-            let vals: Vec<Value> = args.iter().map(|a| L::lane(self.b, *a, lane)).collect();
-            let inst = self.b.ins().call(callee, &vals);
-            let r = self.b.inst_results(inst).first().copied();
-            lanes.push(r.ok_or(NativeError::internal("call without result"))?);
-        }
-        Ok(L::from_lanes(self.b, &lanes))
-    }
-
-    /// `any(m) ? (m ? callee(args) : r) : r`, one call per lane inside an [`Emit::rare`] block.
-    fn rare_lanes(&mut self, m: Value, r: Value, callee: FuncRef, args: &[Value]) -> Value {
-        let args = args.to_vec();
-        self.rare(m, r, &mut |t| match t.call_lanes(callee, &args) {
-            Ok(y) => t.select(m, y, r),
-            Err(e) => {
-                t.error = Some(e);
-                r
-            }
-        })
-    }
-}
-
 /// Where the native lowering's values come from in Cranelift: the translator's table, the input pointer or
 /// columns, the parameters, `fmin`/`fmax`, and the imported library functions.
 impl<L: Lanes> Lower for Translator<'_, '_, L> {
-    fn ir(&self) -> &Ir {
-        self.cx.ir
-    }
-    fn mode(&self) -> Mode {
-        self.cx.mode
-    }
-    fn outline(&self) -> bool {
-        self.cx.outline
+    fn scope(&self) -> Scope<'_> {
+        Scope { ir: self.cx.ir, mode: self.cx.mode, outline: self.cx.outline, fma: self.cx.fma }
     }
     fn table(&mut self) -> &mut [Option<Value>] {
         &mut self.vals
@@ -351,10 +320,8 @@ impl<L: Lanes> Lower for Translator<'_, '_, L> {
     fn maximum(&mut self, a: Value, b: Value) -> Value {
         self.b.ins().fmax(a, b)
     }
-    /// The compiled library function of `f`, called once per lane.
     fn library(&mut self, f: Builtin, args: &[Value]) -> Result<Value, NativeError> {
-        let callee = self.cx.callees[f as usize].ok_or_else(|| NativeError::Internal(format!("library function of `{}` was not imported", f.name())))?;
-        self.call_lanes(callee, args)
+        ops::library(self, f, args)
     }
     fn take_error(&mut self) -> Option<NativeError> {
         self.error.take()
@@ -405,17 +372,10 @@ impl<L: Lanes> Arith for Translator<'_, '_, L> {
         self.b.ins().fma(a, b, c)
     }
     fn positive_select(&mut self, c: Value, a: Value, b: Value) -> Value {
-        let zero = L::konst(self.b, 0);
-        let m = self.b.ins().fcmp(FloatCC::LessThan, zero, c);
-        L::select(self.b, m, a, b)
+        ops::positive_select(self, c, a, b)
     }
     fn two_prod(&mut self, a: Value, b: Value) -> (Value, Value) {
-        if !self.cx.fma {
-            return math::dekker_two_prod(self, a, b);
-        }
-        let p = self.b.ins().fmul(a, b);
-        let np = self.b.ins().fneg(p);
-        (p, self.b.ins().fma(a, b, np))
+        ops::two_prod(self, a, b)
     }
 }
 
@@ -456,39 +416,14 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
         self.b.ins().band_not(y, mask)
     }
     fn mask_bits(&mut self, x: Value, and: u64, or: u64) -> Value {
-        let i = L::bitcast(self.b, L::ITY, x);
-        let m = L::iconst(self.b, and);
-        let mut i = self.b.ins().band(i, m);
-        if or != 0 {
-            let o = L::iconst(self.b, or);
-            i = self.b.ins().bor(i, o);
-        }
-        L::bitcast(self.b, L::TY, i)
+        ops::mask_bits(self, x, and, or)
     }
     fn pow2i(&mut self, k: Value) -> Value {
-        let magic = L::konst(self.b, math::MAGIC.to_bits());
-        let t = self.b.ins().fadd(k, magic);
-        let i = L::bitcast(self.b, L::ITY, t);
-        let bias = L::iconst(self.b, 1023u64.wrapping_sub(math::MAGIC.to_bits()));
-        let i = self.b.ins().iadd(i, bias);
-        let i = self.b.ins().ishl_imm_u(i, 52);
-        L::bitcast(self.b, L::TY, i)
+        ops::pow2i(self, k)
     }
     fn exponent_field(&mut self, x: Value) -> Value {
-        const TWO52: f64 = 4503599627370496.0;
-        let i = L::bitcast(self.b, L::ITY, x);
-        let i = self.b.ins().ushr_imm_u(i, 52);
-        let m = L::iconst(self.b, 0x7ff);
-        let i = self.b.ins().band(i, m);
-        let o = L::iconst(self.b, TWO52.to_bits());
-        let i = self.b.ins().bor(i, o);
-        let f = L::bitcast(self.b, L::TY, i);
-        let t = L::konst(self.b, TWO52.to_bits());
-        self.b.ins().fsub(f, t)
+        ops::exponent_field(self, x)
     }
-    /// Per lane: the index as an integer (the magic-number conversion), clamped with an unsigned `umin` to the
-    /// table's last element — so whatever `x` holds, the load stays inside the table — then a load from the
-    /// `'static` table, whose address is a constant in the code.
     /// The row offsets masked to the table and scaled to bytes in all lanes at once (`pand`, `psllq`: whatever
     /// `x` holds, the load stays inside the table), then per lane one 16-byte row load (`F64X2`) and the heads
     /// and tails gathered by two shuffles (`punpcklqdq`/`punpckhqdq`); in `F64`, two scalar loads.
@@ -533,38 +468,96 @@ impl<L: Lanes> Emit for Translator<'_, '_, L> {
         });
         (heads, tails)
     }
-    /// `any(m) ? slow() : r`, the slow code in a block of its own.
     fn lanes(&self) -> u32 {
         u32::from(L::LANES)
     }
     fn rare(&mut self, m: Value, r: Value, slow: &mut dyn FnMut(&mut Self) -> Value) -> Value {
-        let cold = self.b.create_block();
+        ops::rare(self, m, r, slow)
+    }
+    fn rare_call(&mut self, m: Value, r: Value, f: Builtin, args: &[Value], slow: &mut dyn FnMut(&mut Self) -> Value) -> Value {
+        ops::rare_call(self, m, r, f, args, slow)
+    }
+    fn fallback(&mut self, m: Value, x: Value, r: Value, f: Builtin) -> Value {
+        ops::fallback(self, m, x, r, f)
+    }
+}
+
+/// Branches in Cranelift: `brif` on `any(m)`, the join's values its block parameters.
+impl<L: Lanes> Branch for Translator<'_, '_, L> {
+    type Open = (Block, Vec<Value>);
+    fn branch_any(&mut self, m: Value, skip: &[Value], _: bool) -> Self::Open {
+        let inside = self.b.create_block();
         let join = self.b.create_block();
-        let out = self.b.append_block_param(join, L::TY);
+        let params: Vec<Value> = skip.iter().map(|_| self.b.append_block_param(join, L::TY)).collect();
         let any = L::any(self.b, m);
-        self.b.ins().brif(any, cold, &[], join, &[BlockArg::Value(r)]);
-        self.b.switch_to_block(cold);
-        self.b.seal_block(cold);
-        let v = slow(self);
-        self.b.ins().jump(join, &[BlockArg::Value(v)]);
+        let args: Vec<BlockArg> = skip.iter().map(|v| BlockArg::Value(*v)).collect();
+        self.b.ins().brif(any, inside, &[], join, &args);
+        self.b.switch_to_block(inside);
+        self.b.seal_block(inside);
+        (join, params)
+    }
+    fn join(&mut self, (join, params): Self::Open, vals: &[Value]) -> Vec<Value> {
+        let args: Vec<BlockArg> = vals.iter().map(|v| BlockArg::Value(*v)).collect();
+        self.b.ins().jump(join, &args);
         self.b.switch_to_block(join);
         self.b.seal_block(join);
-        out
+        params
     }
-    /// `any(m) ? (m ? f(args) : r) : r` with `f`'s compiled library function, when the module imports it.
-    fn rare_call(&mut self, m: Value, r: Value, f: Builtin, args: &[Value], slow: &mut dyn FnMut(&mut Self) -> Value) -> Value {
-        match self.cx.callees[f as usize] {
-            Some(callee) => self.rare_lanes(m, r, callee, args),
-            None => self.rare(m, r, slow),
-        }
+    fn nonzero(&mut self, v: Value) -> Value {
+        let zero = L::konst(self.b, 0);
+        self.b.ins().fcmp(FloatCC::NotEqual, v, zero)
     }
-    /// `any(m) ? (m ? libm(x) : r) : r`: the per-lane calls are in a [`Emit::rare`] block.
-    fn fallback(&mut self, m: Value, x: Value, r: Value, f: Builtin) -> Value {
-        let Some(callee) = self.cx.callees[f as usize] else {
-            self.error = Some(NativeError::Internal(format!("fallback of `{}` was not imported", f.name())));
-            return r;
-        };
-        self.rare_lanes(m, r, callee, &[x])
+}
+
+/// Integer lanes in Cranelift: `L::ITY` values, bit casts of `L::TY`.
+impl<L: Lanes> Bits for Translator<'_, '_, L> {
+    type I = Value;
+    fn to_bits(&mut self, x: Value) -> Value {
+        L::bitcast(self.b, L::ITY, x)
+    }
+    fn of_bits(&mut self, i: Value) -> Value {
+        L::bitcast(self.b, L::TY, i)
+    }
+    fn int(&mut self, v: u64) -> Value {
+        L::iconst(self.b, v)
+    }
+    fn iand(&mut self, a: Value, b: Value) -> Value {
+        self.b.ins().band(a, b)
+    }
+    fn ior(&mut self, a: Value, b: Value) -> Value {
+        self.b.ins().bor(a, b)
+    }
+    fn iadd(&mut self, a: Value, b: Value) -> Value {
+        self.b.ins().iadd(a, b)
+    }
+    fn shl(&mut self, i: Value, n: u32) -> Value {
+        self.b.ins().ishl_imm_u(i, i64::from(n))
+    }
+    fn ushr(&mut self, i: Value, n: u32) -> Value {
+        self.b.ins().ushr_imm_u(i, i64::from(n))
+    }
+}
+
+/// Per-lane calls in Cranelift: the module's import of the builtin (one per builtin: [`symbols`] chose the
+/// library function or the C library's fallback for this module), called on `F64` lanes.
+impl<L: Lanes> Calls for Translator<'_, '_, L> {
+    type Func = FuncRef;
+    type Lane = Value;
+    fn function(&mut self, f: Builtin, _: Callee) -> Option<FuncRef> {
+        self.cx.callees[f as usize]
+    }
+    fn lane(&mut self, v: Value, i: u32) -> Value {
+        L::lane(self.b, v, i as u8)
+    }
+    fn call(&mut self, func: FuncRef, args: &[Value]) -> Result<Value, NativeError> {
+        let inst = self.b.ins().call(func, args);
+        self.b.inst_results(inst).first().copied().ok_or(NativeError::internal("call without result"))
+    }
+    fn gather(&mut self, lanes: &[Value]) -> Value {
+        L::from_lanes(self.b, lanes)
+    }
+    fn record(&mut self, e: NativeError) {
+        self.error.get_or_insert(e);
     }
 }
 

@@ -44,8 +44,7 @@ use crate::backend::native::abi::{BatchFn, KernelCode, NativeCode, PrepareFn, Pr
 use crate::backend::native::cache::{Cache, Key};
 use crate::backend::native::{outlines, NativeError, NativeKernel, Plan, ShadeCode};
 use crate::backend::program::Program;
-use crate::backend::{Backend, Evaluator};
-use crate::base::diag::Diagnostic;
+use crate::backend::Backend;
 use crate::builtins::Mode;
 use crate::ir::{Formula, Ir, NodeId};
 use cranelift_codegen::ir::UserFuncName;
@@ -401,11 +400,6 @@ pub fn disassemble_program(p: &Program, mode: Mode) -> Result<String, NativeErro
     j.disasm = true;
     j.translate_program(p, mode)?;
     Ok(j.listing.into_iter().next().unwrap_or_default())
-}
-
-/// Compiles `f` with the JIT and reports failure as a diagnostic on the formula's file.
-pub(crate) fn kernel_evaluator(f: &Formula, mode: Mode) -> Result<Arc<dyn Evaluator>, Diagnostic> {
-    jit_kernel(f, mode).map(|k| Arc::new(k) as Arc<dyn Evaluator>).map_err(|e| e.to_diagnostic())
 }
 
 #[cfg(test)]

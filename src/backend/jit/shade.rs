@@ -26,6 +26,7 @@ use super::*;
 use crate::backend::program::{Class, Program, Region, MAX_COLUMNS};
 use crate::backend::native::frame::ProgramStep;
 use crate::backend::native::lower;
+use crate::backend::native::ops::Branch;
 use crate::backend::native::plan::calls_math;
 use cranelift_codegen::ir::{Block, StackSlotData, StackSlotKind};
 
@@ -120,13 +121,21 @@ struct Copies<'s, 'a, 'f, L> {
     lanes: PhantomData<L>,
 }
 
+impl<'f, L: Lanes> Copies<'_, '_, 'f, L> {
+    /// A translator over the builder for [`Branch`]'s branch and join (which read no node).
+    fn brancher(&mut self) -> Result<Translator<'_, 'f, L>, NativeError> {
+        let src = *self.src.first().ok_or(NativeError::internal("a step of no vectors"))?;
+        Ok(self.step.cx.translator::<L>(self.b, vec![], src))
+    }
+}
+
 /// A region of the copies: `any(lit ≠ 0 in some copy) ? region's outputs : +0`, every copy's nodes
 /// (interleaved) in a block of their own; first the outer values it is the first to read are stored to the
 /// anchor slot ([`anchors`]). A copy with no lit lane may run the region too: its outputs are then the
 /// selects' +0. The join's block parameters carry the outputs.
 impl<L: Lanes> ProgramStep for Copies<'_, '_, '_, L> {
-    /// The tables from before the region, the join and its parameters.
-    type Open = (Vec<Vec<Option<Value>>>, Block, Vec<Value>);
+    /// The tables from before the region, and the branch (its join and the join's parameters).
+    type Open = (Vec<Vec<Option<Value>>>, (Block, Vec<Value>));
     fn node(&mut self, id: NodeId) -> Result<(), NativeError> {
         for c in 0..self.vals.len() {
             let mut t = self.step.cx.translator::<L>(self.b, std::mem::take(&mut self.vals[c]), self.src[c]);
@@ -150,27 +159,20 @@ impl<L: Lanes> ProgramStep for Copies<'_, '_, '_, L> {
             let m = b.ins().fcmp(FloatCC::NotEqual, arg(vals, region.lit)?, z);
             any_mask = Some(any_mask.map_or(m, |a| b.ins().bor(a, m)));
         }
-        let any = L::any(b, any_mask.ok_or(NativeError::internal("a step of no vectors"))?);
-        let inside = b.create_block();
-        let join = b.create_block();
-        let params: Vec<Value> = (0..self.vals.len() * region.outputs.len()).map(|_| b.append_block_param(join, L::TY)).collect();
-        let zeros: Vec<BlockArg> = params.iter().map(|_| BlockArg::Value(z)).collect();
-        b.ins().brif(any, inside, &[], join, &zeros);
-        b.switch_to_block(inside);
-        b.seal_block(inside);
-        Ok((self.vals.clone(), join, params))
+        let any = any_mask.ok_or(NativeError::internal("a step of no vectors"))?;
+        let zeros = vec![z; self.vals.len() * region.outputs.len()];
+        let open = self.brancher()?.branch_any(any, &zeros, false);
+        Ok((self.vals.clone(), open))
     }
-    fn close(&mut self, region: &Region, (saved, join, params): Self::Open) -> Result<(), NativeError> {
+    fn close(&mut self, region: &Region, (saved, open): Self::Open) -> Result<(), NativeError> {
         let mut outs = vec![];
         for vals in &self.vals {
             for o in &region.outputs {
-                outs.push(BlockArg::Value(arg(vals, *o)?));
+                outs.push(arg(vals, *o)?);
             }
         }
-        self.b.ins().jump(join, &outs);
+        let params = self.brancher()?.join(open, &outs);
         self.vals = saved;
-        self.b.switch_to_block(join);
-        self.b.seal_block(join);
         for (c, vals) in self.vals.iter_mut().enumerate() {
             for (j, o) in region.outputs.iter().enumerate() {
                 vals[o.index()] = Some(params[c * region.outputs.len() + j]);

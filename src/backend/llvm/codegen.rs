@@ -21,14 +21,15 @@
 //! function, once per lane, through its address as a constant. Errors are collected (the first one, as a
 //! [`NativeError`]), never panicked on.
 
-use crate::backend::native::frame::{self, Frame, ProgramStep};
-use crate::backend::native::lower::{self, Lower};
+use crate::backend::native::frame::{self, Frame};
+use crate::backend::native::lower::{Lower, Scope};
+use crate::backend::native::ops::{self, Bits, Branch, Callee, Calls};
 use crate::backend::native::{NativeError, Plan};
-use crate::backend::program::{Program, Region, MAX_COLUMNS};
+use crate::backend::program::{Program, MAX_COLUMNS};
 use crate::builtins::dd::Arith;
 use crate::builtins::math::{self, Emit};
 use crate::builtins::{Builtin, Libm, Mode};
-use crate::ir::{Input, Ir, NodeId, N_INPUTS};
+use crate::ir::{Input, Ir, N_INPUTS};
 use inkwell::attributes::AttributeLoc;
 use inkwell::basic_block::BasicBlock;
 use inkwell::builder::{Builder, BuilderError};
@@ -310,40 +311,6 @@ impl<'a, 'ctx> Gen<'a, 'ctx> {
         self.scalar(r, self.u.cx.bool_type().get_poison())
     }
 
-    /// The `extern "C"` function at `addr` of `args.len()` doubles, called on each lane; the results gathered.
-    fn call_lanes(&mut self, addr: usize, args: &[VectorValue<'ctx>]) -> VectorValue<'ctx> {
-        let f64t = self.u.cx.f64_type();
-        let ptr = self.u.cx.ptr_type(Default::default());
-        let arg_tys: Vec<_> = args.iter().map(|_| f64t.into()).collect();
-        let fty = f64t.fn_type(&arg_tys, false);
-        let callee = self.i64c(addr as u64).const_to_pointer(ptr);
-        let mut out = self.fty.get_poison();
-        for lane in 0..self.w {
-            let idx = self.i32c(u64::from(lane));
-            let mut lane_args: Vec<BasicMetadataValueEnum> = Vec::with_capacity(args.len());
-            for a in args {
-                let x = self.b.build_extract_element(*a, idx, "");
-                lane_args.push(self.scalar(x, f64t.get_poison().as_basic_value_enum()).into());
-            }
-            let r = match self.b.build_indirect_call(fty, callee, &lane_args, "") {
-                Ok(c) => match c.try_as_basic_value() {
-                    inkwell::values::ValueKind::Basic(v) => v,
-                    inkwell::values::ValueKind::Instruction(_) => {
-                        self.fail("a library call returned nothing");
-                        f64t.get_poison().into()
-                    }
-                },
-                Err(e) => {
-                    self.fail(e);
-                    f64t.get_poison().into()
-                }
-            };
-            let ins = self.b.build_insert_element(out, r, idx, "");
-            out = self.f(ins);
-        }
-        out
-    }
-
     /// The lanes whose index is below `rem` (recomputed where used: a value of `load_part` does not dominate
     /// `store_part`).
     fn part_mask(&mut self, rem: IntValue<'ctx>) -> VectorValue<'ctx> {
@@ -379,29 +346,14 @@ impl<'a, 'ctx> Gen<'a, 'ctx> {
             }
         }
     }
-
-    /// `any(m) ? (m ? callee(args) : r) : r`, one call per lane in a rare block.
-    fn rare_lanes(&mut self, m: VectorValue<'ctx>, r: VectorValue<'ctx>, addr: usize, args: &[VectorValue<'ctx>]) -> VectorValue<'ctx> {
-        let args = args.to_vec();
-        self.rare(m, r, &mut |g| {
-            let y = g.call_lanes(addr, &args);
-            g.select(m, y, r)
-        })
-    }
 }
 
 /// Where the native lowering's values come from in LLVM: the generator's table, the loaded inputs and
 /// columns, the parameters, `llvm.minimum`/`llvm.maximum` (IEEE 754-2019's: NaN-propagating, −0 < +0, which x86
 /// runs as a compare, a blend and a repair of the zeros' signs), and the library's functions by address.
 impl<'ctx> Lower for Gen<'_, 'ctx> {
-    fn ir(&self) -> &Ir {
-        self.u.ir
-    }
-    fn mode(&self) -> Mode {
-        self.u.mode
-    }
-    fn outline(&self) -> bool {
-        self.u.outline
+    fn scope(&self) -> Scope<'_> {
+        Scope { ir: self.u.ir, mode: self.u.mode, outline: self.u.outline, fma: self.u.fma }
     }
     fn table(&mut self) -> &mut [Option<VectorValue<'ctx>>] {
         &mut self.vals
@@ -423,10 +375,7 @@ impl<'ctx> Lower for Gen<'_, 'ctx> {
         self.fop("llvm.maximum", &[a, b])
     }
     fn library(&mut self, f: Builtin, args: &[VectorValue<'ctx>]) -> Result<VectorValue<'ctx>, NativeError> {
-        match f.outlined(self.u.mode) {
-            Some((_, lib)) => Ok(self.call_lanes(libm_addr(lib), args)),
-            None => Err(NativeError::Internal(format!("builtin `{}` has no library function", f.name()))),
-        }
+        ops::library(self, f, args)
     }
     fn take_error(&mut self) -> Option<NativeError> {
         self.error.take()
@@ -449,45 +398,55 @@ impl<'ctx> Frame for Gen<'_, 'ctx> {
     }
 }
 
-/// A program's region in LLVM: a conditional branch into the region's block, and a phi per output at the
-/// join (+0 from the skipping edge).
-impl<'ctx> ProgramStep for Gen<'_, 'ctx> {
-    /// The tables from before the region, the block that branched, the join, the +0.
-    type Open = (Vec<Option<VectorValue<'ctx>>>, BasicBlock<'ctx>, BasicBlock<'ctx>, VectorValue<'ctx>);
-    fn node(&mut self, id: NodeId) -> Result<(), NativeError> {
-        lower::node(self, id).map(drop)
-    }
-    fn open(&mut self, _: usize, r: &Region) -> Result<Self::Open, NativeError> {
-        let lit = self.value(r.lit)?;
-        let zero = self.fconst(0);
-        let m = self.b.build_float_compare(FloatPredicate::UNE, lit, zero, "");
-        let m = self.m(m);
+/// Branches in LLVM: a conditional branch on the mask's bits (weighted 1 : 2000 into a rare block), a phi per
+/// value at the join.
+impl<'ctx> Branch for Gen<'_, 'ctx> {
+    /// The block that branched, the join, the values from the skipping edge.
+    type Open = (BasicBlock<'ctx>, BasicBlock<'ctx>, Vec<VectorValue<'ctx>>);
+    fn branch_any(&mut self, m: Self::M, skip: &[Self::V], rare: bool) -> Self::Open {
         let any = self.any(m);
         let from = self.current();
-        let inside = self.block("region");
+        let inside = self.block(if rare { "rare" } else { "region" });
         let join = self.block("join");
-        let br = self.b.build_conditional_branch(any, inside, join);
-        self.done(br);
+        match self.b.build_conditional_branch(any, inside, join) {
+            Ok(br) if rare => {
+                let cx = self.u.cx;
+                let i32t = cx.i32_type();
+                let weights = cx.metadata_node(&[cx.metadata_string("branch_weights").into(), i32t.const_int(1, false).into(), i32t.const_int(2000, false).into()]);
+                if br.set_metadata(weights, cx.get_kind_id("prof")).is_err() {
+                    self.fail("branch weights");
+                }
+            }
+            Ok(_) => {}
+            Err(e) => self.fail(e),
+        }
         self.b.position_at_end(inside);
-        Ok((self.vals.clone(), from, join, zero))
+        (from, join, skip.to_vec())
     }
-    fn close(&mut self, r: &Region, (saved, from, join, zero): Self::Open) -> Result<(), NativeError> {
-        let outs = r.outputs.iter().map(|o| self.value(*o)).collect::<Result<Vec<VectorValue>, _>>()?;
+    fn join(&mut self, (from, join, skip): Self::Open, vals: &[Self::V]) -> Vec<Self::V> {
         let end = self.current();
         let br = self.b.build_unconditional_branch(join);
         self.done(br);
-        self.vals = saved;
         self.b.position_at_end(join);
-        for (o, v) in r.outputs.iter().zip(outs) {
+        let mut out = Vec::with_capacity(vals.len());
+        for (s, v) in skip.iter().zip(vals) {
             match self.b.build_phi(self.fty, "") {
                 Ok(phi) => {
-                    phi.add_incoming(&[(&zero, from), (&v, end)]);
-                    self.vals[o.index()] = Some(self.vec_of(Ok(phi.as_basic_value()), self.fty));
+                    phi.add_incoming(&[(s, from), (v, end)]);
+                    out.push(self.vec_of(Ok(phi.as_basic_value()), self.fty));
                 }
-                Err(e) => self.fail(e),
+                Err(e) => {
+                    self.fail(e);
+                    out.push(*s);
+                }
             }
         }
-        Ok(())
+        out
+    }
+    fn nonzero(&mut self, v: Self::V) -> Self::M {
+        let zero = self.fconst(0);
+        let m = self.b.build_float_compare(FloatPredicate::UNE, v, zero, "");
+        self.m(m)
     }
 }
 
@@ -535,18 +494,10 @@ impl<'ctx> Arith for Gen<'_, 'ctx> {
         self.fop("llvm.fma", &[a, b, c])
     }
     fn positive_select(&mut self, c: Self::V, a: Self::V, b: Self::V) -> Self::V {
-        let zero = self.fconst(0);
-        let m = self.b.build_float_compare(FloatPredicate::OLT, zero, c, "");
-        let m = self.m(m);
-        self.select(m, a, b)
+        ops::positive_select(self, c, a, b)
     }
     fn two_prod(&mut self, a: Self::V, b: Self::V) -> (Self::V, Self::V) {
-        if !self.u.fma {
-            return math::dekker_two_prod(self, a, b);
-        }
-        let p = Arith::mul(self, a, b);
-        let np = Arith::neg(self, p);
-        (p, self.fop("llvm.fma", &[a, b, np]))
+        ops::two_prod(self, a, b)
     }
 }
 
@@ -585,44 +536,13 @@ impl<'ctx> Emit for Gen<'_, 'ctx> {
         self.vec_of(r, self.fty)
     }
     fn mask_bits(&mut self, x: Self::V, and: u64, or: u64) -> Self::V {
-        let i = self.b.build_bit_cast(x, self.ity, "");
-        let i = self.vec_of(i, self.ity);
-        let r = self.b.build_and(i, self.iconst(and), "");
-        let mut i = self.i(r);
-        if or != 0 {
-            let r = self.b.build_or(i, self.iconst(or), "");
-            i = self.i(r);
-        }
-        let f = self.b.build_bit_cast(i, self.fty, "");
-        self.vec_of(f, self.fty)
+        ops::mask_bits(self, x, and, or)
     }
     fn pow2i(&mut self, k: Self::V) -> Self::V {
-        let magic = self.fconst(math::MAGIC.to_bits());
-        let t = Arith::add(self, k, magic);
-        let i = self.b.build_bit_cast(t, self.ity, "");
-        let i = self.vec_of(i, self.ity);
-        let bias = self.iconst(1023u64.wrapping_sub(math::MAGIC.to_bits()));
-        let r = self.b.build_int_add(i, bias, "");
-        let i = self.i(r);
-        let r = self.b.build_left_shift(i, self.iconst(52), "");
-        let i = self.i(r);
-        let f = self.b.build_bit_cast(i, self.fty, "");
-        self.vec_of(f, self.fty)
+        ops::pow2i(self, k)
     }
     fn exponent_field(&mut self, x: Self::V) -> Self::V {
-        const TWO52: f64 = 4503599627370496.0;
-        let i = self.b.build_bit_cast(x, self.ity, "");
-        let i = self.vec_of(i, self.ity);
-        let r = self.b.build_right_shift(i, self.iconst(52), false, "");
-        let i = self.i(r);
-        let r = self.b.build_and(i, self.iconst(0x7ff), "");
-        let i = self.i(r);
-        let r = self.b.build_or(i, self.iconst(TWO52.to_bits()), "");
-        let i = self.i(r);
-        let f = self.b.build_bit_cast(i, self.fty, "");
-        let f = self.vec_of(f, self.fty);
-        let t = self.fconst(TWO52.to_bits());
-        Arith::sub(self, f, t)
+        ops::exponent_field(self, x)
     }
     /// The row index masked to the table (whatever `x` holds, the loads stay inside it) and scaled to bytes in
     /// all lanes, then two gathers (heads and tails) from the `'static` table, whose address is a constant.
@@ -661,60 +581,95 @@ impl<'ctx> Emit for Gen<'_, 'ctx> {
         let t = gather(self, tails);
         (h, t)
     }
-    /// `any(m) ? slow() : r`, the slow code in a block of its own (weighted as rarely taken).
     fn lanes(&self) -> u32 {
         self.w
     }
+    /// `any(m) ? slow() : r`, the slow code in a block of its own (weighted as rarely taken).
     fn rare(&mut self, m: Self::M, r: Self::V, slow: &mut dyn FnMut(&mut Self) -> Self::V) -> Self::V {
-        let any = self.any(m);
-        let from = self.current();
-        let cold = self.block("rare");
-        let join = self.block("join");
-        match self.b.build_conditional_branch(any, cold, join) {
-            Ok(br) => {
-                let cx = self.u.cx;
-                let i32t = cx.i32_type();
-                let weights = cx.metadata_node(&[cx.metadata_string("branch_weights").into(), i32t.const_int(1, false).into(), i32t.const_int(2000, false).into()]);
-                if br.set_metadata(weights, cx.get_kind_id("prof")).is_err() {
-                    self.fail("branch weights");
-                }
-            }
-            Err(e) => self.fail(e),
-        }
-        self.b.position_at_end(cold);
-        let v = slow(self);
-        let cold_end = self.current();
-        let br = self.b.build_unconditional_branch(join);
-        self.done(br);
-        self.b.position_at_end(join);
-        let phi = self.b.build_phi(self.fty, "");
-        match phi {
-            Ok(phi) => {
-                phi.add_incoming(&[(&r, from), (&v, cold_end)]);
-                self.vec_of(Ok(phi.as_basic_value()), self.fty)
-            }
-            Err(e) => {
-                self.fail(e);
-                r
-            }
-        }
+        ops::rare(self, m, r, slow)
     }
-    /// `f`'s library function compiled by rustc, called per lane (the Cranelift tier's choice too: the rare
-    /// code's constants do not stay live across the common path).
     fn rare_call(&mut self, m: Self::M, r: Self::V, f: Builtin, args: &[Self::V], slow: &mut dyn FnMut(&mut Self) -> Self::V) -> Self::V {
-        match f.outlined(self.u.mode) {
-            Some((_, lib)) => self.rare_lanes(m, r, libm_addr(lib), args),
-            None => self.rare(m, r, slow),
+        ops::rare_call(self, m, r, f, args, slow)
+    }
+    fn fallback(&mut self, m: Self::M, x: Self::V, r: Self::V, f: Builtin) -> Self::V {
+        ops::fallback(self, m, x, r, f)
+    }
+}
+
+/// Integer lanes in LLVM: `<W x i64>`, bit casts of `<W x double>`.
+impl<'ctx> Bits for Gen<'_, 'ctx> {
+    type I = VectorValue<'ctx>;
+    fn to_bits(&mut self, x: Self::V) -> Self::I {
+        let i = self.b.build_bit_cast(x, self.ity, "");
+        self.vec_of(i, self.ity)
+    }
+    fn of_bits(&mut self, i: Self::I) -> Self::V {
+        let f = self.b.build_bit_cast(i, self.fty, "");
+        self.vec_of(f, self.fty)
+    }
+    fn int(&mut self, v: u64) -> Self::I {
+        self.iconst(v)
+    }
+    fn iand(&mut self, a: Self::I, b: Self::I) -> Self::I {
+        let r = self.b.build_and(a, b, "");
+        self.i(r)
+    }
+    fn ior(&mut self, a: Self::I, b: Self::I) -> Self::I {
+        let r = self.b.build_or(a, b, "");
+        self.i(r)
+    }
+    fn iadd(&mut self, a: Self::I, b: Self::I) -> Self::I {
+        let r = self.b.build_int_add(a, b, "");
+        self.i(r)
+    }
+    fn shl(&mut self, i: Self::I, n: u32) -> Self::I {
+        let r = self.b.build_left_shift(i, self.iconst(u64::from(n)), "");
+        self.i(r)
+    }
+    fn ushr(&mut self, i: Self::I, n: u32) -> Self::I {
+        let r = self.b.build_right_shift(i, self.iconst(u64::from(n)), false, "");
+        self.i(r)
+    }
+}
+
+/// Per-lane calls in LLVM: the `extern "C"` function (the library compiled by rustc, or the C library's
+/// fallback) called through its address as a constant, on `double` lanes.
+impl<'ctx> Calls for Gen<'_, 'ctx> {
+    type Func = usize;
+    type Lane = BasicValueEnum<'ctx>;
+    fn function(&mut self, f: Builtin, which: Callee) -> Option<usize> {
+        match which {
+            Callee::Library => f.outlined(self.u.mode).map(|(_, lib)| libm_addr(lib)),
+            Callee::Fallback => f.libm1().map(|libm| libm as usize),
         }
     }
-    /// `any(m) ? (m ? libm(x) : r) : r`: the C library's version of `f` on the lanes that need it.
-    fn fallback(&mut self, m: Self::M, x: Self::V, r: Self::V, f: Builtin) -> Self::V {
-        match f.libm1() {
-            Some(libm) => self.rare_lanes(m, r, libm as usize, &[x]),
-            None => {
-                self.fail(format!("`{}` has no one-argument C library function", f.name()));
-                r
-            }
+    fn lane(&mut self, v: Self::V, i: u32) -> Self::Lane {
+        let x = self.b.build_extract_element(v, self.i32c(u64::from(i)), "");
+        self.scalar(x, self.u.cx.f64_type().get_poison().into())
+    }
+    fn call(&mut self, addr: usize, args: &[Self::Lane]) -> Result<Self::Lane, NativeError> {
+        let f64t = self.u.cx.f64_type();
+        let arg_tys: Vec<_> = args.iter().map(|_| f64t.into()).collect();
+        let fty = f64t.fn_type(&arg_tys, false);
+        let callee = self.i64c(addr as u64).const_to_pointer(self.u.cx.ptr_type(Default::default()));
+        let args: Vec<BasicMetadataValueEnum> = args.iter().map(|a| (*a).into()).collect();
+        let c = self.b.build_indirect_call(fty, callee, &args, "").map_err(NativeError::internal)?;
+        match c.try_as_basic_value() {
+            inkwell::values::ValueKind::Basic(v) => Ok(v),
+            inkwell::values::ValueKind::Instruction(_) => Err(NativeError::internal("a library call returned nothing")),
+        }
+    }
+    fn gather(&mut self, lanes: &[Self::Lane]) -> Self::V {
+        let mut out = self.fty.get_poison();
+        for (k, l) in lanes.iter().enumerate() {
+            let ins = self.b.build_insert_element(out, *l, self.i32c(k as u64), "");
+            out = self.f(ins);
+        }
+        out
+    }
+    fn record(&mut self, e: NativeError) {
+        if self.error.is_none() {
+            self.error = Some(e);
         }
     }
 }
@@ -796,7 +751,7 @@ pub(super) fn build_batch(u: &Unit, w: u32) -> Result<(), NativeError> {
 /// `lobe_program(cols: *const *const f64, params, block, outs: *const *mut f64, len)` in `w` lanes: a
 /// multi-output program ([`crate::backend::program`]) in [`batch_loop`]'s loop, reading its data columns
 /// from `cols` and storing every output to `outs[o]`. The step is the native layer's
-/// ([`frame::program_step`]), its regions this tier's branch and phis ([`ProgramStep`] for [`Gen`]).
+/// ([`frame::program_step`]), its regions this tier's branch and phis ([`Branch`] for [`Gen`]).
 pub(super) fn build_program(u: &Unit, w: u32, p: &Program) -> Result<(), NativeError> {
     let f = declare(u, PROGRAM, 4, true);
     let (cols, outs) = (param(f, 0)?, param(f, 3)?);

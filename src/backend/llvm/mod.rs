@@ -31,8 +31,7 @@ use super::native::cache::{Cache, Key};
 use super::native::plan::program_outlines;
 use super::native::{outlines, NativeError, NativeKernel, Plan, ShadeCode};
 use super::program::Program;
-use super::{Backend, Evaluator};
-use crate::base::diag::Diagnostic;
+use super::Backend;
 use crate::builtins::Mode;
 use crate::ir::{Formula, Ir, NodeId};
 use inkwell::context::Context;
@@ -256,15 +255,10 @@ pub fn assembly(f: &Formula, mode: Mode) -> Result<String, NativeError> {
     Ok(stats.listing.unwrap_or_default())
 }
 
-/// Compiles `f` with the LLVM tier and reports failure as a diagnostic.
-pub(crate) fn kernel_evaluator(f: &Formula, mode: Mode) -> Result<Arc<dyn Evaluator>, Diagnostic> {
-    llvm_kernel(f, mode).map(|k| Arc::new(k) as Arc<dyn Evaluator>).map_err(|e| e.to_diagnostic())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::backend::Columns;
+    use crate::backend::{Columns, Evaluator};
     use crate::ir::N_INPUTS;
 
     fn formula(src: &str) -> Formula {

@@ -12,6 +12,7 @@
 use super::{NativeError, Plan};
 use crate::backend::program::{Program, MAX_COLUMNS, MAX_OUTPUTS};
 use crate::backend::{Backend, Columns, Evaluator, Prepared};
+use crate::base::diag::Diagnostic;
 use crate::ir::{InputSet, Ir, N_INPUTS};
 use std::cell::RefCell;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -168,6 +169,11 @@ const PREPARED_KEEP: usize = 8;
 
 thread_local! {
     static PREPARED: RefCell<Vec<CachedBlock>> = const { RefCell::new(Vec::new()) };
+}
+
+/// Either tier's compiled kernel as an [`Evaluator`], or its failure as a diagnostic on the formula's file.
+pub(crate) fn evaluator(k: Result<NativeKernel, NativeError>) -> Result<Arc<dyn Evaluator>, Diagnostic> {
+    k.map(|k| Arc::new(k) as Arc<dyn Evaluator>).map_err(|e| e.to_diagnostic())
 }
 
 /// A natively compiled formula behind the [`Evaluator`] interface, whichever tier compiled it.

@@ -8,6 +8,7 @@
 //! same nodes in the same places ([`Plan`]) and the interpreter's bits.
 
 use super::lower::{self, Lower, Walk};
+use super::ops::Branch;
 use super::{NativeError, Plan};
 use crate::backend::program::{Program, Region, MAX_COLUMNS};
 use crate::ir::{Ir, Node, NodeId};
@@ -93,6 +94,32 @@ pub(crate) trait ProgramStep {
     /// Leaves the region's block for the join with its outputs; from there on the tables are as before the
     /// region (its values live only in its block) plus its outputs, the join's values.
     fn close(&mut self, region: &Region, open: Self::Open) -> Result<(), NativeError>;
+}
+
+/// A program's step on one translator (a tier that emits one copy of the step): a region is
+/// [`Branch::branch_any`] on `lit ≠ 0` into its block, its outputs the join's values (+0 from the skipping edge).
+impl<T: Lower + Branch> ProgramStep for T {
+    /// The table from before the region, and the branch.
+    type Open = (Vec<Option<T::V>>, <T as Branch>::Open);
+    fn node(&mut self, id: NodeId) -> Result<(), NativeError> {
+        lower::node(self, id).map(drop)
+    }
+    fn open(&mut self, _: usize, r: &Region) -> Result<Self::Open, NativeError> {
+        let lit = self.value(r.lit)?;
+        let m = self.nonzero(lit);
+        let zero = self.konst(0.0);
+        let open = self.branch_any(m, &vec![zero; r.outputs.len()], false);
+        Ok((self.table().to_vec(), open))
+    }
+    fn close(&mut self, r: &Region, (saved, open): Self::Open) -> Result<(), NativeError> {
+        let outs = r.outputs.iter().map(|o| self.value(*o)).collect::<Result<Vec<_>, _>>()?;
+        let joined = self.join(open, &outs);
+        self.table().copy_from_slice(&saved);
+        for (o, v) in r.outputs.iter().zip(joined) {
+            self.set(*o, v)?;
+        }
+        Ok(())
+    }
 }
 
 /// One step of a program ([`lower::program_step`]'s order): the outer nodes, and each guarded region's nodes

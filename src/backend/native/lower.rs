@@ -12,16 +12,37 @@ use crate::builtins::math::Emit;
 use crate::builtins::{Builtin, Lowering, Mode};
 use crate::ir::{BinOp, Input, Ir, Node, NodeId};
 
+/// What a translator translates and how, whatever the tier.
+#[derive(Clone, Copy)]
+pub(crate) struct Scope<'a> {
+    /// The arena.
+    pub ir: &'a Ir,
+    /// The math library's mode.
+    pub mode: Mode,
+    /// Math builtins are calls of the compiled library, not inline code ([`super::outlines`]).
+    pub outline: bool,
+    /// The host has a fused multiply-add (exact two-products in two instructions).
+    pub fma: bool,
+}
+
 /// A tier's translator of IR nodes into its values (one function, one lane shape): the primitives the
 /// lowering below needs besides [`Emit`]'s. Errors inside [`Emit`] methods (which cannot return one) are
 /// recorded and handed over by [`Lower::take_error`].
 pub(crate) trait Lower: Emit + Sized {
+    /// What is translated and how.
+    fn scope(&self) -> Scope<'_>;
     /// The arena being translated.
-    fn ir(&self) -> &Ir;
+    fn ir(&self) -> &Ir {
+        self.scope().ir
+    }
     /// The math library's mode.
-    fn mode(&self) -> Mode;
+    fn mode(&self) -> Mode {
+        self.scope().mode
+    }
     /// Whether math builtins are calls of the compiled library rather than inline code ([`super::outlines`]).
-    fn outline(&self) -> bool;
+    fn outline(&self) -> bool {
+        self.scope().outline
+    }
     /// The value of each translated node, indexed by node.
     fn table(&mut self) -> &mut [Option<Self::V>];
     /// The value of an already translated node.
@@ -303,14 +324,8 @@ mod tests {
     }
 
     impl Lower for Scalar {
-        fn ir(&self) -> &Ir {
-            &self.ir
-        }
-        fn mode(&self) -> Mode {
-            Mode::Precise
-        }
-        fn outline(&self) -> bool {
-            false
+        fn scope(&self) -> Scope<'_> {
+            Scope { ir: &self.ir, mode: Mode::Precise, outline: false, fma: true }
         }
         fn table(&mut self) -> &mut [Option<f64>] {
             &mut self.table
