@@ -39,7 +39,7 @@ enum Cmd {
     /// Accuracy against a reference lobe (mean |Δ|, epicentre, inflection, cut-off metrics).
     Accuracy(cli::accuracy::AccuracyArgs),
     /// Fit parameters to a reference lobe or to measured tables (exhaustive grid + continuous refinement).
-    Fit(cli::fit::FitArgs),
+    Fit(cli::fit_args::FitArgs),
     /// Tabulate a formula into a measured table (MERL .binary), e.g. a synthetic measurement to fit.
     Tabulate(cli::tabulate::TabulateArgs),
     /// Stability sweep: NaN, ±inf, negative and huge values over the whole domain.
