@@ -22,9 +22,13 @@
 //! - **Exact** (a formula whose only input is NH, or only VR — one cosine, nothing else): a 1-D table over
 //!   θ ∈ [0, θmax] (θmax = π for VR, π/2 for NH) in [`EXACT_CELLS`] cells, each cell its solid angle about the
 //!   axis times the maximum of lum(f(cos θ)) at its ends and middle, inverted by binary search; within a cell θ is
-//!   uniform in sin²(θ/2), so the density in solid angle is constant over each cell and bounded on the axis.
-//!   φ is uniform about the lobe axis: R, the mirror of wi, for VR; N for NH, whose sampled h
-//!   gives wo = 2(wi·h)h − wi with the Jacobian 1/(4 wo·h).
+//!   uniform in sin²(θ/2), so the density in solid angle is constant over each ring of a cell and bounded on the
+//!   axis. NH: one table; φ uniform about N; the sampled h gives wo = 2(wi·h)h − wi with the Jacobian
+//!   1/(4 wo·h). VR: the lobe about R, the mirror of wi, with the cosine: one table per isotropic incidence node
+//!   (the tabulated mechanism's θₖ, the same mixture rule), its cells weighted by the mean of max(cosθₒ, 0) over
+//!   the ring at θ from R at θₖ ([`ring`], closed form), and φ about R drawn for the actual wi with density
+//!   ∝ max(cosθₒ, 0) on the ring ([`ring_azimuth`]), so the part the horizon cuts is not sampled and
+//!   pdfₖ = tableₖ(θ)/measure(θ)·π·max(cosθₒ, 0)/H(θ, θᵢ).
 //! - **Cosine**: cosθₒ/π, for formulas neither of the above beats (and for a formula that is 0 everywhere).
 //!
 //! [`Choice::Auto`] (the default) builds every mechanism the formula admits and keeps the one of highest mean
@@ -48,9 +52,9 @@
 //! reports equals pdf(wi, wo) bit for bit; the weight is f·cosθₒ/pdf with f from the kernels, a batch at a time.
 //!
 //! # The horizon and bad input
-//! - A sampled wo below the horizon (wo.z ≤ 0: a table cell that straddles the horizon, or an exact lobe about R
-//!   cut by it) keeps its direction and density and has weight 0; the cosine fraction keeps pdf > 0 wherever
-//!   cosθₒ > 0, so f·cos > 0 implies pdf > 0.
+//! - A sampled wo below the horizon (wo.z ≤ 0: a table cell that straddles the horizon, an NH lobe's reflection
+//!   cut by it, or a VR ring wholly below it) keeps its direction and density and has weight 0; the cosine
+//!   fraction keeps pdf > 0 wherever cosθₒ > 0, so f·cos > 0 implies pdf > 0.
 //! - wi zero or not finite is an error; wi is normalised; wi below or on the horizon (wi.z ≤ 0) is an error (the
 //!   formula's L is an incident direction of the upper hemisphere). A wo given to `pdf` must be finite and
 //!   non-zero; it is normalised unless already unit to 10⁻⁹.
@@ -322,10 +326,10 @@ fn azimuth_of(wi: V3) -> Turn {
     }
 }
 
-/// The half vector at polar angle θₕ and azimuth φₕ = 2πx₂ measured in the frame turned by `turn`.
+/// The half vector at polar angle θₕ (its cosine and sine) and azimuth φₕ = 2πx₂ measured in the frame turned
+/// by `turn`.
 #[inline]
-fn half_at(th: f64, x2: f64, turn: Turn) -> V3 {
-    let (st, ct) = th.sin_cos();
+fn half_at(ct: f64, st: f64, x2: f64, turn: Turn) -> V3 {
     let (sp, cp) = (2.0 * PI * x2).sin_cos();
     let (c, s) = turn;
     [st * (cp * c - sp * s), st * (sp * c + cp * s), ct]
@@ -334,7 +338,8 @@ fn half_at(th: f64, x2: f64, turn: Turn) -> V3 {
 /// The half vector of table coordinates (x₁, x₂) (θₕ = (π/2)·x₁²) in the frame turned by `turn`.
 #[inline]
 fn half_from(x1: f64, x2: f64, turn: Turn) -> V3 {
-    half_at(FRAC_PI_2 * x1 * x1, x2, turn)
+    let (st, ct) = (FRAC_PI_2 * x1 * x1).sin_cos();
+    half_at(ct, st, x2, turn)
 }
 
 /// sin²(θ/2) = (1 − cosθ)/2 at the edges `theta(0)`, …, `theta(n)` of n bands in θ: the solid angle of the band
@@ -349,28 +354,23 @@ fn band_edges(n: usize, theta: impl Fn(usize) -> f64) -> Vec<f64> {
         .collect()
 }
 
-/// The polar angle of s = sin²(θ/2) ([`band_edges`]).
-#[inline]
-fn theta_of_band(s: f64) -> f64 {
-    2.0 * s.max(0.0).sqrt().atan2((1.0 - s).max(0.0).sqrt())
-}
-
 /// The θ edges of the tabulated mechanism's rows: θₕ = (π/2)·(i/[`ROWS`])².
 fn row_theta(i: usize) -> f64 {
     let x = i as f64 / ROWS as f64;
     FRAC_PI_2 * x * x
 }
 
-/// Table coordinates of the half vector of (wi, wo) (azimuth in the frame turned by `turn`): x₁, θₕ, the column
-/// of x₂ among [`COLS`], the position in that column (x₂·COLS − column, in [0, 1]), and dωₒ/dωₕ = 4|wi·h|;
-/// `None` when wo = −wi (no half vector).
+/// Table coordinates of the half vector of (wi, wo) (azimuth in the frame turned by `turn`): the row among
+/// [`ROWS`] and the position in it (a, in [0, 1], linear in sin²(θₕ/2) between the row's edges `bands`), the
+/// column among [`COLS`] and the position in it (b, in [0, 1], linear in φₕ), and dωₒ/dωₕ = 4|wi·h|; `None`
+/// when wo = −wi (no half vector).
 ///
-/// θₕ comes from atan2 of the unnormalised sum s = wi + wo (turned into the table's frame, sign chosen so
-/// h.z ≥ 0): atan2 is scale-free. θₕ by atan2, not acos, which loses digits near the normal where the lobes
-/// are. The column is counted from the quadrant and seven comparisons against the column edges
-/// ([`column_of`]), the position in it from atan2 (clamped into the column where the two round apart).
+/// No trigonometry: from the unnormalised sum s = wi + wo (turned into the table's frame, sign chosen so
+/// h.z ≥ 0), sin²(θₕ/2) = (1 − cosθₕ)/2 = |sₓᵧ|²/(2|s|(|s| + |s_z|)), without the cancellation of 1 − cosθₕ near
+/// the normal where the lobes are; the row by [`row_of`]; the column and the angle within it by
+/// [`column_and_position`].
 #[inline]
-fn table_coords(wi: V3, wo: V3, turn: Turn) -> Option<(f64, f64, usize, f64, f64)> {
+fn table_coords(wi: V3, wo: V3, turn: Turn, bands: &[f64], guide: &[u8]) -> Option<(usize, f64, usize, f64, f64)> {
     let s = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
     let len2 = dot(s, s);
     if len2.is_nan() || len2 <= 0.0 {
@@ -379,14 +379,81 @@ fn table_coords(wi: V3, wo: V3, turn: Turn) -> Option<(f64, f64, usize, f64, f64
     let (c, sn) = turn;
     let sign = if s[2] < 0.0 { -1.0 } else { 1.0 };
     let (hx, hy) = (sign * (s[0] * c + s[1] * sn), sign * (s[1] * c - s[0] * sn));
-    let sxy = (hx * hx + hy * hy).sqrt();
-    let th = sxy.atan2(s[2].abs());
-    let x1 = (th / FRAC_PI_2).sqrt();
-    let jac = 4.0 * dot(wi, s).abs() / len2.sqrt();
-    let col = column_of(hx, hy);
-    let x2 = (hy.atan2(hx) / (2.0 * PI)).rem_euclid(1.0);
-    let b = (x2 * COLS as f64 - col as f64).clamp(0.0, 1.0);
-    Some((x1, th, col, b, jac))
+    let len = len2.sqrt();
+    let sh = (hx * hx + hy * hy) / (2.0 * len * (len + s[2].abs()));
+    let row = row_of(sh, bands, guide);
+    let (s0, s1) = (bands[row], bands[row + 1]);
+    let a = ((sh - s0) / (s1 - s0)).clamp(0.0, 1.0);
+    let jac = 4.0 * dot(wi, s).abs() / len;
+    let (col, b) = column_and_position(hx, hy);
+    Some((row, a, col, b, jac))
+}
+
+/// The guide's resolution: sin²(θₕ/2) in [2⁻²⁴, 1) by its binary exponent and first [`GUIDE_BITS`] mantissa
+/// bits (16 steps per octave; a row spans more than 1/16 octave, the narrowest, next to 0.5, about 0.07).
+const GUIDE_BITS: u32 = 4;
+const GUIDE_OCTAVES: u64 = 24;
+const GUIDE: usize = (GUIDE_OCTAVES as usize) << GUIDE_BITS;
+/// The key of 2⁻²⁴: the guide's entry 0, which also takes every smaller value.
+const GUIDE_BASE: u64 = (1023 - GUIDE_OCTAVES) << GUIDE_BITS;
+
+/// The guide entry of sh ≥ 0: its f64 bits (monotone in a non-negative value) above the first [`GUIDE_BITS`]
+/// mantissa bits, from [`GUIDE_BASE`], clamped into the guide.
+#[inline]
+fn guide_index(sh: f64) -> usize {
+    let key = sh.max(0.0).to_bits() >> (52 - GUIDE_BITS);
+    (key.saturating_sub(GUIDE_BASE) as usize).min(GUIDE - 1)
+}
+
+/// The row guide: entry g is the row holding the least sin²(θₕ/2) of that entry (row 0 for entry 0).
+fn row_guide(bands: &[f64]) -> Vec<u8> {
+    (0..GUIDE)
+        .map(|g| {
+            if g == 0 {
+                return 0;
+            }
+            let sh = f64::from_bits((GUIDE_BASE + g as u64) << (52 - GUIDE_BITS));
+            (bands.partition_point(|&b| b <= sh).max(1) - 1).min(ROWS - 1) as u8
+        })
+        .collect()
+}
+
+/// The row whose band [bands\[row\], bands\[row + 1\]) holds sh = sin²(θₕ/2) (the last row from 0.5 on): the
+/// guide's entry, then up while the next edge is ≤ sh.
+#[inline]
+fn row_of(sh: f64, bands: &[f64], guide: &[u8]) -> usize {
+    let mut row = usize::from(guide[guide_index(sh)]);
+    while row + 1 < ROWS && bands[row + 1] <= sh {
+        row += 1;
+    }
+    row
+}
+
+/// atan z for |z| ≤ tan(π/16) ≈ 0.199 (an angle within one column): the Taylor series to z²¹, whose remainder
+/// is below z²³/23 < 4e-18.
+#[inline]
+fn atan_small(z: f64) -> f64 {
+    // p(y) = 1 − y/3 + y²/5 − … + y¹⁰/21 at y = z², by Estrin's scheme (a shallow dependency chain).
+    const C: [f64; 11] = [1.0, -1.0 / 3.0, 1.0 / 5.0, -1.0 / 7.0, 1.0 / 9.0, -1.0 / 11.0, 1.0 / 13.0, -1.0 / 15.0, 1.0 / 17.0, -1.0 / 19.0, 1.0 / 21.0];
+    let y = z * z;
+    let (y2, y4) = (y * y, y * y * (y * y));
+    let q0 = (C[0] + C[1] * y) + (C[2] + C[3] * y) * y2;
+    let q1 = (C[4] + C[5] * y) + (C[6] + C[7] * y) * y2;
+    let q2 = (C[8] + C[9] * y) + C[10] * y2;
+    z * (q0 + (q1 + q2 * y4) * y4)
+}
+
+/// The column of azimuth atan2(y, x) among [`COLS`] equal sectors of [0, 2π) — the quadrant, then the number of
+/// column edges inside it that the direction lies beyond — and the position in it, in [0, 1]: the angle past
+/// the column's first edge by [`atan_small`] of the direction turned back by that edge (0 for the zero vector).
+#[inline]
+fn column_and_position(x: f64, y: f64) -> (usize, f64) {
+    let (q, a, b) = quadrant(x, y);
+    let beyond: usize = EDGES.iter().map(|&(ce, se)| usize::from(b * ce > a * se)).sum();
+    let (ce, se) = if beyond == 0 { (1.0, 0.0) } else { EDGES[beyond - 1] };
+    let (u, v) = (a * ce + b * se, b * ce - a * se);
+    let pos = if u > 0.0 { atan_small(v / u) * (COLS as f64 / (2.0 * PI)) } else { 0.0 };
+    (q * (COLS / 4) + beyond, pos.clamp(0.0, 1.0))
 }
 
 /// (cos, sin) of the column edges k·2π/[`COLS`] inside the first quadrant, k = 1 … COLS/4 − 1.
@@ -403,20 +470,17 @@ const EDGES: [(f64, f64); COLS / 4 - 1] = {
     ]
 };
 
-/// The column of azimuth atan2(y, x) among [`COLS`] equal sectors of [0, 2π): the quadrant, then the number of
-/// column edges inside it that the direction lies beyond (0 for the zero vector).
+/// The quadrant of (x, y) and (a, b): (x, y) turned back by the quadrant's multiple of 90°, so a > 0, b ≥ 0
+/// (a = b = 0 for the zero vector, quadrant 1).
 #[inline]
-fn column_of(x: f64, y: f64) -> usize {
-    // (a, b): (x, y) turned back by the quadrant's multiple of 90°, so a > 0, b ≥ 0.
-    let (q, a, b) = if y >= 0.0 {
+fn quadrant(x: f64, y: f64) -> (usize, f64, f64) {
+    if y >= 0.0 {
         if x > 0.0 { (0, x, y) } else { (1, y, -x) }
     } else if x <= 0.0 {
         (2, -x, -y)
     } else {
         (3, -y, x)
-    };
-    let beyond: usize = EDGES.iter().map(|&(ce, se)| usize::from(b * ce > a * se)).sum();
-    q * (COLS / 4) + beyond
+    }
 }
 
 /// θᵢ of incidence node k of `count`: 89.5°·(1 − (1 − k/(count − 1))²).
@@ -450,6 +514,8 @@ struct Tabulated {
     nodes: Vec<Option<Node>>,
     /// sin²(θₕ/2) at the row edges ([`band_edges`]).
     bands: Vec<f64>,
+    /// [`row_guide`] of `bands`.
+    guide: Vec<u8>,
 }
 
 /// One incidence node's table: the density in ωₕ at the cell corners, bilinear within each cell in
@@ -525,19 +591,7 @@ impl Tabulated {
     }
 
     fn sample(&self, at: &TabAt, wi: V3, u1: f64, u2: f64) -> V3 {
-        let mut acc = 0.0;
-        let mut pick = None;
-        for &(k, w) in &at.ws {
-            if w > 0.0 {
-                if u1 < acc + w {
-                    pick = Some((k, ((u1 - acc) / w).clamp(0.0, ONE_MINUS)));
-                    break;
-                }
-                acc += w;
-                pick = Some((k, ONE_MINUS));
-            }
-        }
-        let (k, u) = pick.unwrap_or((0, u1));
+        let (k, u) = pick_node(&at.ws, u1);
         match &self.nodes[k] {
             None => cosine_sample(u, u2),
             Some(d) => {
@@ -548,7 +602,8 @@ impl Tabulated {
                 let a = sample_linear(f1, v[0] + v[1], v[2] + v[3]);
                 let b = sample_linear(f2, v[0] + a * (v[2] - v[0]), v[1] + a * (v[3] - v[1]));
                 let s = self.bands[i] + a * (self.bands[i + 1] - self.bands[i]);
-                let h = half_at(theta_of_band(s), (j as f64 + b) / COLS as f64, at.turn);
+                let (ct, st) = cos_sin_of_band(s);
+                let h = half_at(ct, st, (j as f64 + b) / COLS as f64, at.turn);
                 reflect(wi, h)
             }
         }
@@ -556,50 +611,115 @@ impl Tabulated {
 
     #[inline]
     fn pdf(&self, at: &TabAt, wi: V3, wo: V3, cos_pdf: f64) -> f64 {
-        let tc = table_coords(wi, wo, at.turn);
-        let mut p = 0.0;
+        let tc = table_coords(wi, wo, at.turn, &self.bands, &self.guide);
+        // Σ w·(density in ωₕ) over the tables, divided by the Jacobian once; empty nodes add w·cosθₒ/π.
+        let (mut empty, mut tables) = (0.0, 0.0);
         for &(k, w) in &at.ws {
             if w > 0.0 {
-                p += w * match (&self.nodes[k], tc) {
-                    (None, _) => cos_pdf,
-                    (Some(d), Some((x1, th, col, b, jac))) if jac > 0.0 && x1 <= 1.0 => {
-                        let row = ((x1 * ROWS as f64) as usize).min(ROWS - 1);
-                        let h = (0.5 * th).sin();
-                        let (s0, s1) = (self.bands[row], self.bands[row + 1]);
-                        let a = ((h * h - s0) / (s1 - s0)).clamp(0.0, 1.0);
-                        bilinear(d.corners(row, col), a, b) / jac
-                    }
-                    _ => 0.0,
-                };
+                match (&self.nodes[k], tc) {
+                    (None, _) => empty += w * cos_pdf,
+                    (Some(d), Some((row, a, col, b, jac))) if jac > 0.0 => tables += w * bilinear(d.corners(row, col), a, b),
+                    _ => {}
+                }
             }
         }
-        p
+        match tc {
+            Some((.., jac)) if tables > 0.0 => empty + tables / jac,
+            _ => empty,
+        }
     }
 }
 
 /// The largest f64 below 1.
 const ONE_MINUS: f64 = 1.0 - f64::EPSILON / 2.0;
 
-/// The exact mechanism: a 1-D table in the lobe angle about the lobe axis.
+/// The exact mechanism: a 1-D table in the lobe angle θ about the lobe axis per incidence node.
+///
+/// NH: one table of lum(f(cos θₕ)) (f alone; the half vector's map and cosθₒ are not in it). VR: one table per
+/// incidence node θₖ (the tabulated mechanism's isotropic nodes) of lum(f(cos θ))·c̄(θ, θₖ), where c̄ is the mean
+/// of max(cosθₒ, 0) over the ring of directions at angle θ from R ([`ring`]); within the ring the azimuth about R
+/// is drawn with density ∝ max(cosθₒ, 0) for the actual wi, so the lobe is sampled with the cosine and without
+/// the part the horizon cuts.
 #[derive(Clone, Debug)]
 struct Exact {
     lobe: Input,
     theta_max: f64,
-    dist: Dist1D,
+    /// θᵢ of the incidence nodes (one node at 0 for NH).
+    thetas: Vec<f64>,
+    /// Each node's table (`None`: the lobe is 0 wherever that node's rings reach above the horizon).
+    nodes: Vec<Option<Dist1D>>,
     /// sin²(θ/2) at the cell edges ([`band_edges`]): within a cell θ is drawn uniform in this (uniform in solid
-    /// angle about the axis), so the density in solid angle is constant over each cell and bounded.
+    /// angle about the axis), so the density in solid angle is constant over each ring of a cell and bounded.
     bands: Vec<f64>,
     /// [`EXACT_CELLS`]·4π·(bands\[i + 1\] − bands\[i\]): a cell density (∫ over θ/θmax = 1) over this is the
-    /// density in solid angle about the axis.
+    /// density in solid angle about the axis (before the azimuth's weighting, for VR).
     measure: Vec<f64>,
 }
 
-/// An orthonormal basis with `n` its third axis (Duff et al. 2017).
-fn basis(n: V3) -> [V3; 3] {
-    let sign = 1f64.copysign(n[2]);
-    let a = -1.0 / (sign + n[2]);
-    let b = n[0] * n[1] * a;
-    [[1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]], [b, sign + n[1] * n[1] * a, -n[1]], n]
+/// The ring at angle θ from R for wi at θᵢ: with c = cosθ·cosθᵢ and d = sinθ·sinθᵢ (≥ 0), the ring's direction
+/// at azimuth ψ from the ring's lowest point's opposite has cosθₒ = c + d·cosψ. Returns (ψmax, H): cosθₒ > 0 for
+/// |ψ| < ψmax, and H = ∫₀^ψmax (c + d·cosψ) dψ = c·ψmax + d·sinψmax, half the integral of max(cosθₒ, 0) over the
+/// ring's azimuth (so the ring's mean cosine is H/π). (0, 0) when the whole ring is at or below the horizon.
+#[inline]
+fn ring(c: f64, d: f64) -> (f64, f64) {
+    if c >= d {
+        (PI, PI * c)
+    } else if c <= -d {
+        (0.0, 0.0)
+    } else {
+        let psi = (-c / d).acos();
+        // d·sinψmax = √(d² − c²).
+        (psi, c * psi + ((d - c) * (d + c)).max(0.0).sqrt())
+    }
+}
+
+/// ψ in [0, ψmax] with c·ψ + d·sinψ = t·H ([`ring`]; t in [0, 1]), and (sinψ, cosψ): Newton's method from
+/// ψ = t·ψmax, kept inside a shrinking bracket (bisection where a step would leave it); c + d·cosψ ≥ 0 on
+/// [0, ψmax], so the left side increases. Stops when a Newton step is below 10⁻¹⁵·(1 + ψ).
+#[inline]
+fn ring_azimuth(c: f64, d: f64, psi_max: f64, h: f64, t: f64) -> (f64, f64, f64) {
+    let goal = t * h;
+    let (mut lo, mut hi) = (0.0, psi_max);
+    let mut psi = t * psi_max;
+    for _ in 0..RING_ITERATIONS {
+        let (s, co) = psi.sin_cos();
+        let g = c * psi + d * s - goal;
+        let slope = c + d * co;
+        let step = g / slope;
+        if slope > 0.0 && step.abs() <= 1e-15 * (1.0 + psi) {
+            return (psi, s, co);
+        }
+        if g < 0.0 {
+            lo = psi;
+        } else {
+            hi = psi;
+        }
+        let next = psi - step;
+        psi = if slope > 0.0 && next > lo && next < hi { next } else { 0.5 * (lo + hi) };
+    }
+    let (s, co) = psi.sin_cos();
+    (psi, s, co)
+}
+
+/// The most steps of [`ring_azimuth`] (bisection alone halves the bracket 64 times: below an ulp of π).
+const RING_ITERATIONS: usize = 64;
+
+/// The frame about R = (−wi.x, −wi.y, wi.z) for the VR lobe: t in the plane of R and N, pointing down (t.z =
+/// −sinθᵢ), b horizontal, R. A direction at angle θ from R and azimuth φ from t has cosθₒ = cosθ·cosθᵢ −
+/// sinθ·sinθᵢ·cosφ. (sinθᵢ, cosθᵢ) returned with it.
+#[inline]
+fn mirror_frame(wi: V3) -> ([V3; 3], f64, f64) {
+    let rho = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
+    let (ax, ay) = if rho > 0.0 { (-wi[0] / rho, -wi[1] / rho) } else { (1.0, 0.0) };
+    let ct = wi[2];
+    ([[ct * ax, ct * ay, -rho], [-ay, ax, 0.0], [-wi[0], -wi[1], wi[2]]], rho, ct)
+}
+
+/// (cos θ, sin θ) of s = sin²(θ/2) ([`band_edges`]), without trigonometry.
+#[inline]
+fn cos_sin_of_band(s: f64) -> (f64, f64) {
+    let s = s.clamp(0.0, 1.0);
+    (1.0 - 2.0 * s, 2.0 * (s * (1.0 - s)).sqrt())
 }
 
 impl Exact {
@@ -612,19 +732,44 @@ impl Exact {
         }
     }
 
-    fn sample(&self, wi: V3, u1: f64, u2: f64) -> V3 {
-        let (i, f) = self.dist.sample_cell(u1);
-        let s = self.bands[i] + f * (self.bands[i + 1] - self.bands[i]);
-        let d = dir(theta_of_band(s), 2.0 * PI * u2);
-        if self.lobe == Input::NH {
-            return reflect(wi, d);
+    /// The nodes wi mixes and their weights.
+    #[inline]
+    fn at(&self, wi: V3) -> [(usize, f64); 2] {
+        if self.thetas.len() == 1 {
+            return [(0, 1.0), (0, 0.0)];
         }
-        let [t, b, n] = basis(self.axis(wi));
-        std::array::from_fn(|k| t[k] * d[0] + b[k] * d[1] + n[k] * d[2])
+        theta_weights(&self.thetas, wi[2].clamp(-1.0, 1.0).acos())
+    }
+
+    fn sample(&self, ws: &[(usize, f64); 2], wi: V3, u1: f64, u2: f64) -> V3 {
+        let (k, u) = pick_node(ws, u1);
+        let Some(dist) = &self.nodes[k] else { return cosine_sample(u, u2) };
+        let (i, f) = dist.sample_cell(u);
+        let s = self.bands[i] + f * (self.bands[i + 1] - self.bands[i]);
+        let (ct, st) = cos_sin_of_band(s);
+        if self.lobe == Input::NH {
+            let (sp, cp) = (2.0 * PI * u2).sin_cos();
+            return reflect(wi, [st * cp, st * sp, ct]);
+        }
+        // The azimuth about R by max(cosθₒ, 0) on the ring, symmetric about its highest point (φ = π): u2 < ½ to
+        // one side, the rest to the other. A ring wholly below the horizon (possible only from a node steeper
+        // than wi) takes a uniform azimuth; its directions have weight 0.
+        let ([t, b, r], rho, cti) = mirror_frame(wi);
+        let (c, d) = (ct * cti, st * rho);
+        let (psi_max, h) = ring(c, d);
+        let (cp, sp) = if h > 0.0 {
+            let side = if u2 < 0.5 { 1.0 } else { -1.0 };
+            let (_, s, co) = ring_azimuth(c, d, psi_max, h, (2.0 * u2 - 1.0).abs().min(1.0));
+            (-co, -side * s)
+        } else {
+            let (s, co) = (2.0 * PI * u2).sin_cos();
+            (co, s)
+        };
+        std::array::from_fn(|k| ct * r[k] + st * (cp * t[k] + sp * b[k]))
     }
 
     #[inline]
-    fn pdf(&self, wi: V3, wo: V3) -> f64 {
+    fn pdf(&self, ws: &[(usize, f64); 2], wi: V3, wo: V3, cos_pdf: f64) -> f64 {
         // The angle to the axis by atan2(|d × a|, d·a): acos loses digits near the axis, where the lobe is.
         let (d, a, jac) = if self.lobe == Input::NH {
             let s = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
@@ -639,18 +784,53 @@ impl Exact {
             (wo, self.axis(wi), 1.0)
         };
         let x = [d[1] * a[2] - d[2] * a[1], d[2] * a[0] - d[0] * a[2], d[0] * a[1] - d[1] * a[0]];
-        let th = dot(x, x).sqrt().atan2(dot(d, a));
-        let v = th / self.theta_max;
-        if !(0.0..1.0).contains(&v) {
-            return 0.0;
-        }
+        let (sin_t, cos_t) = (dot(x, x).sqrt(), dot(d, a));
+        let v = sin_t.atan2(cos_t) / self.theta_max;
+        let inside = (0.0..1.0).contains(&v);
         let i = ((v * EXACT_CELLS as f64) as usize).min(EXACT_CELLS - 1);
         let den = self.measure[i] * jac;
-        if den.is_nan() || den <= 0.0 {
-            return 0.0;
+        // VR: the azimuth's density on the ring relative to uniform, 2π·max(cosθₒ, 0)/(2H) (1 on a ring wholly
+        // below the horizon, whose azimuth is uniform).
+        let azimuth = if self.lobe == Input::VR {
+            let (_, rho, cti) = mirror_frame(wi);
+            let (_, h) = ring(cos_t * cti, sin_t * rho);
+            if h > 0.0 {
+                PI * wo[2].max(0.0) / h
+            } else {
+                1.0
+            }
+        } else {
+            1.0
+        };
+        let mut p = 0.0;
+        for &(k, w) in ws {
+            if w > 0.0 {
+                p += w * match &self.nodes[k] {
+                    None => cos_pdf,
+                    Some(_) if !inside || den.is_nan() || den <= 0.0 => 0.0,
+                    Some(dist) => dist.pdf(v) / den * azimuth,
+                };
+            }
         }
-        self.dist.pdf(v) / den
+        p
     }
+}
+
+/// The node of `ws` that u falls in (by weight) and u rescaled within it.
+#[inline]
+fn pick_node(ws: &[(usize, f64)], u1: f64) -> (usize, f64) {
+    let mut acc = 0.0;
+    let mut pick = None;
+    for &(k, w) in ws {
+        if w > 0.0 {
+            if u1 < acc + w {
+                return (k, ((u1 - acc) / w).clamp(0.0, ONE_MINUS));
+            }
+            acc += w;
+            pick = Some((k, ONE_MINUS));
+        }
+    }
+    pick.unwrap_or((0, u1))
 }
 
 /// One checked wi and what the mechanism computed of it ([`Sampler::at`]).
@@ -658,6 +838,8 @@ impl Exact {
 struct At {
     wi: V3,
     tab: Option<TabAt>,
+    /// The exact mechanism's nodes and weights.
+    exact: [(usize, f64); 2],
 }
 
 #[derive(Clone, Debug)]
@@ -822,7 +1004,11 @@ impl Sampler {
     /// What the mechanism needs of one (checked) wi, computed once for every wo at that wi.
     #[inline]
     fn at(&self, wi: V3) -> At {
-        At { wi, tab: if let Body::Tabulated(t) = &self.body { Some(t.at(wi)) } else { None } }
+        match &self.body {
+            Body::Tabulated(t) => At { wi, tab: Some(t.at(wi)), exact: [(0, 1.0), (0, 0.0)] },
+            Body::Exact(e) => At { wi, tab: None, exact: e.at(wi) },
+            Body::Cosine => At { wi, tab: None, exact: [(0, 1.0), (0, 0.0)] },
+        }
     }
 
     /// wo for one (wi, u).
@@ -836,18 +1022,18 @@ impl Sampler {
         let v = ((u1 - c) / (1.0 - c)).clamp(0.0, ONE_MINUS);
         match (&self.body, &at.tab) {
             (Body::Tabulated(t), Some(ta)) => t.sample(ta, at.wi, v, u2),
-            (Body::Exact(e), _) => e.sample(at.wi, v, u2),
+            (Body::Exact(e), _) => e.sample(&at.exact, at.wi, v, u2),
             _ => cosine_sample(v, u2),
         }
     }
 
     /// The mixture density of wo at wi (both unit, wi checked): the one function `sample` and `pdf` share.
-    #[inline]
+    #[inline(always)]
     fn density(&self, at: &At, wo: V3) -> f64 {
         let cos_pdf = wo[2].max(0.0) / PI;
         let body = match (&self.body, &at.tab) {
             (Body::Tabulated(t), Some(ta)) => t.pdf(ta, at.wi, wo, cos_pdf),
-            (Body::Exact(e), _) => e.pdf(at.wi, wo),
+            (Body::Exact(e), _) => e.pdf(&at.exact, at.wi, wo, cos_pdf),
             _ => cos_pdf,
         };
         self.cos_frac * cos_pdf + (1.0 - self.cos_frac) * body
@@ -972,7 +1158,8 @@ fn build_tabulated(target: &Target, isotropic: bool) -> Result<(Tabulated, Vec<(
         }
     }
     let bands = band_edges(ROWS, row_theta);
-    Ok((Tabulated { isotropic, thetas, phis: np, nodes, bands }, empty))
+    let guide = row_guide(&bands);
+    Ok((Tabulated { isotropic, thetas, phis: np, nodes, bands, guide }, empty))
 }
 
 #[derive(Default)]
@@ -1071,10 +1258,31 @@ fn build_exact(target: &Target, lobe: Input) -> Result<Option<Exact>, Diagnostic
         check_point(v, || format!("{} = {c:.9} (the formula's only input)", lobe.name()))?;
         q[a] = target.luminance(v);
     }
-    // A cell's mass: the largest value at its ends and middle times its solid angle about the axis.
+    // A cell's mass: the largest value at its ends and middle times its solid angle about the axis; for VR the
+    // value at each point times the ring's mean max(cosθₒ, 0) at the node's θᵢ ([`ring`]).
     let (bands, measure) = bands_and_measure(EXACT_CELLS, |i| theta_max * i as f64 / EXACT_CELLS as f64);
-    let cells: Vec<f64> = (0..EXACT_CELLS).map(|i| q[2 * i].max(q[2 * i + 1]).max(q[2 * i + 2]) * (bands[i + 1] - bands[i])).collect();
-    Ok(Dist1D::new(&cells).map(|dist| Exact { lobe, theta_max, dist, bands, measure }))
+    let thetas: Vec<f64> = if lobe == Input::VR { (0..ISO_NODES).map(|k| node_theta(k, ISO_NODES)).collect() } else { vec![0.0] };
+    let sc: Vec<(f64, f64)> = (0..np).map(|a| theta(a).sin_cos()).collect();
+    let nodes: Vec<Option<Dist1D>> = thetas
+        .iter()
+        .map(|&ti| {
+            let (sti, cti) = ti.sin_cos();
+            let g = |a: usize| {
+                if lobe == Input::VR {
+                    let (st, ct) = sc[a];
+                    q[a] * ring(ct * cti, st * sti).1 / PI
+                } else {
+                    q[a]
+                }
+            };
+            let cells: Vec<f64> = (0..EXACT_CELLS).map(|i| g(2 * i).max(g(2 * i + 1)).max(g(2 * i + 2)) * (bands[i + 1] - bands[i])).collect();
+            Dist1D::new(&cells)
+        })
+        .collect();
+    if nodes.iter().all(Option::is_none) {
+        return Ok(None);
+    }
+    Ok(Some(Exact { lobe, theta_max, thetas, nodes, bands, measure }))
 }
 
 #[cfg(test)]
@@ -1084,19 +1292,72 @@ mod tests {
     #[test]
     fn half_vector_map_round_trips() {
         let wi = dir(0.7, 0.3);
-        for &(x1, x2) in &[(0.1, 0.2), (0.5, 0.9), (0.8, 0.45), (0.03, 0.6)] {
+        let bands = band_edges(ROWS, row_theta);
+        let guide = row_guide(&bands);
+        for &(x1, x2) in &[(0.1, 0.2), (0.5, 0.9), (0.8, 0.45), (0.03, 0.6), (0.002, 0.01), (0.999, 0.99)] {
             let turn = (0.3f64.cos(), 0.3f64.sin());
             let h = half_from(x1, x2, turn);
             let wo = reflect(wi, h);
-            let (y1, th, col, b, jac) = table_coords(wi, wo, turn).unwrap();
-            assert!((x1 - y1).abs() < 1e-12, "{x1} → {y1}");
-            assert!((th - FRAC_PI_2 * x1 * x1).abs() < 1e-12);
+            let (row, a, col, b, jac) = table_coords(wi, wo, turn, &bands, &guide).unwrap();
+            assert_eq!(row, (x1 * ROWS as f64) as usize, "{x1}");
+            let th = FRAC_PI_2 * x1 * x1;
+            let sh = (0.5 * th).sin().powi(2);
+            assert!((bands[row] + a * (bands[row + 1] - bands[row]) - sh).abs() < 1e-15, "{x1}");
             assert_eq!(col, (x2 * COLS as f64) as usize);
-            assert!((col as f64 + b - x2 * COLS as f64).abs() < 1e-9);
+            // φₕ of a half vector θₕ from the pole carries wi + wo's cancellation: an error ~ε/θₕ.
+            assert!((col as f64 + b - x2 * COLS as f64).abs() < 1e-12f64.max(1e-14 / th), "{x2}");
             assert!((jac - 4.0 * dot(wi, h).abs()).abs() < 1e-12 * jac);
-            let s = band_edges(1, |_| FRAC_PI_2 * x1 * x1)[0];
-            assert!((theta_of_band(s) - FRAC_PI_2 * x1 * x1).abs() < 1e-15);
+            let (ct, st) = cos_sin_of_band(sh);
+            assert!((ct - th.cos()).abs() < 1e-15 && (st - th.sin()).abs() < 1e-15);
         }
+    }
+
+    #[test]
+    fn small_arctangent_and_row_search_are_exact() {
+        for k in 0..=1000 {
+            let z = (PI / 16.0).tan() * k as f64 / 1000.0;
+            assert!((atan_small(z) - z.atan()).abs() <= 4.0 * f64::EPSILON * z.atan().max(f64::MIN_POSITIVE), "{z}");
+        }
+        let bands = band_edges(ROWS, row_theta);
+        let guide = row_guide(&bands);
+        let mut rng = crate::base::rng::Rng(0x80F5);
+        for _ in 0..100_000 {
+            let sh = 0.5 * rng.unit().powi(4);
+            let want = (bands.partition_point(|&b| b <= sh) - 1).min(ROWS - 1);
+            assert_eq!(row_of(sh, &bands, &guide), want, "{sh}");
+        }
+        for &sh in &bands {
+            let want = (bands.partition_point(|&b| b <= sh) - 1).min(ROWS - 1);
+            assert_eq!(row_of(sh, &bands, &guide), want, "{sh}");
+        }
+    }
+
+    #[test]
+    fn the_mirror_ring_integrates_the_cosine() {
+        // H against a midpoint sum of max(c + d·cosψ, 0) over ψ in [0, π], and the azimuth's inverse.
+        for &(th, ti) in &[(0.1, 0.2), (1.2, 1.4), (2.0, 1.0), (0.4, 1.55), (1.7, 0.0), (3.0, 1.5)] {
+            let (c, d) = (f64::cos(th) * f64::cos(ti), f64::sin(th) * f64::sin(ti));
+            let (psi_max, h) = ring(c, d);
+            let n = 200_000;
+            let sum: f64 = (0..n).map(|k| (c + d * (PI * (k as f64 + 0.5) / n as f64).cos()).max(0.0)).sum::<f64>() * PI / n as f64;
+            assert!((h - sum).abs() < 1e-8, "θ {th} θi {ti}: {h} against {sum}");
+            if h > 0.0 {
+                assert!(c + d * psi_max.cos() >= -1e-12);
+                for t in [0.0, 0.1, 0.5, 0.9, 1.0] {
+                    let (psi, sp, cp) = ring_azimuth(c, d, psi_max, h, t);
+                    assert!(psi >= 0.0 && psi <= psi_max && sp == psi.sin() && cp == psi.cos());
+                    assert!((c * psi + d * psi.sin() - t * h).abs() < 1e-12 * h.max(1.0), "t {t}");
+                }
+            }
+        }
+        // The frame: cosθₒ = cosθ·cosθᵢ − sinθ·sinθᵢ·cosφ about R.
+        let wi = dir(1.1, 0.7);
+        let ([t, b, r], rho, ct) = mirror_frame(wi);
+        assert!((rho - 1.1f64.sin()).abs() < 1e-15 && (ct - 1.1f64.cos()).abs() < 1e-15);
+        for (x, y, want) in [(t, t, 1.0), (b, b, 1.0), (r, r, 1.0), (t, b, 0.0), (t, r, 0.0), (b, r, 0.0)] {
+            assert!((dot(x, y) - want).abs() < 1e-15);
+        }
+        assert!((t[2] + rho).abs() < 1e-15 && b[2] == 0.0);
     }
 
     #[test]
@@ -1111,8 +1372,10 @@ mod tests {
             let (x, y) = (2.0 * rng.unit() - 1.0, 2.0 * rng.unit() - 1.0);
             let p = (y.atan2(x) / (2.0 * PI)).rem_euclid(1.0) * COLS as f64;
             // Away from an edge (within 1e-9 of one the two may round apart), the sector atan2 names.
+            let (col, pos) = column_and_position(x, y);
             if (p - p.round()).abs() > 1e-9 {
-                assert_eq!(column_of(x, y), (p as usize) % COLS, "({x}, {y})");
+                assert_eq!(col, (p as usize) % COLS, "({x}, {y})");
+                assert!((col as f64 + pos - p).abs() < 1e-13, "({x}, {y})");
             }
         }
     }
@@ -1126,15 +1389,5 @@ mod tests {
         let w = theta_weights(&[0.0, 1.0, 2.0], 1.25);
         assert_eq!(w, [(1, 0.75), (2, 0.25)]);
         assert_eq!(theta_weights(&[0.0, 1.0], 3.0)[0], (1, 1.0));
-    }
-
-    #[test]
-    fn basis_is_orthonormal() {
-        for n in [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], dir(1.0, 2.0), dir(2.5, -1.0)] {
-            let [t, b, nn] = basis(n);
-            for (x, y, want) in [(t, t, 1.0), (b, b, 1.0), (t, b, 0.0), (t, nn, 0.0), (b, nn, 0.0)] {
-                assert!((dot(x, y) - want).abs() < 1e-14);
-            }
-        }
     }
 }
