@@ -169,10 +169,24 @@ pub fn module(plain: &Formula, sampler: &Sampler, params: &[(String, f64)]) -> R
             lobe = format!("'{}'", if e.lobe == Input::VR { "VR" } else { "NH" });
             theta_max = e.theta_max;
             (bands, measure) = (&e.bands, &e.measure);
-            cells.extend_from_slice(e.dist.densities());
+            if e.lobe == Input::VR {
+                thetas = e.thetas.clone();
+            }
+            for n in &e.nodes {
+                match n {
+                    Some(d) => {
+                        cells.extend_from_slice(d.densities());
+                        empty.push(0);
+                    }
+                    None => {
+                        cells.extend(std::iter::repeat_n(0.0, EXACT_CELLS));
+                        empty.push(1);
+                    }
+                }
+            }
         }
     }
-    debug_assert_eq!(sampler.report.mechanism == Mechanism::Tabulated, !empty.is_empty());
+    debug_assert_eq!(sampler.report.mechanism == Mechanism::Cosine, empty.is_empty());
     let _ = writeln!(o, "_ISOTROPIC = {}", if iso { "True" } else { "False" });
     let _ = writeln!(o, "_NPHI = {nphi}");
     let _ = writeln!(o, "_THETAS = {}", list(thetas.iter().copied()));

@@ -49,8 +49,12 @@ def _build_lists():
                 clast.append(last)
         return dict(pdf=list(cells), rcdf=rcdf, rlast=rlast, ccdf=ccdf, clast=clast, corners=list(_decode(_CORNERS)))
     if _MECHANISM == 'exact':
-        cdf, last = _dist1d(cells)
-        return dict(pdf=list(cells), cdf=cdf, last=[last])
+        cdf, last = [], []
+        for k in range(len(_EMPTY)):
+            c, l = _dist1d(cells[k * _EXACT_CELLS:(k + 1) * _EXACT_CELLS])
+            cdf += c
+            last.append(l)
+        return dict(pdf=list(cells), cdf=cdf, last=last)
     return {}
 
 
@@ -289,8 +293,8 @@ def _tab_pdf(S, wi, wo, cos_pdf):
     return p
 
 
-def _tab_sample(S, wi, u1, u2):
-    ws, phi0 = _node_weights(S, wi)
+def _pick_node(S, ws, u1):
+    """lobe's pick_node: the node u1 falls in by weight, and u1 rescaled within it."""
     acc = S.const(0.0)
     chosen = dr.zeros(dr.mask_t(S.F), dr.width(u1))
     k_sel, u_sel = ws[0][0], u1
@@ -302,6 +306,12 @@ def _tab_sample(S, wi, u1, u2):
         u_sel = dr.select(hit, dr.clip((u1 - acc) / w, 0.0, _ONE_MINUS), dr.select(fall, _ONE_MINUS, u_sel))
         chosen = chosen | hit
         acc = dr.select(live, acc + w, acc)
+    return k_sel, u_sel
+
+
+def _tab_sample(S, wi, u1, u2):
+    ws, phi0 = _node_weights(S, wi)
+    k_sel, u_sel = _pick_node(S, ws, u1)
     row, f1 = _sample1d(S, 'rcdf', 'rlast', k_sel * (_ROWS + 1), k_sel, _ROWS, u_sel)
     crow = k_sel * _ROWS + row
     col, f2 = _sample1d(S, 'ccdf', 'clast', crow * (_COLS + 1), crow, _COLS, u2)
@@ -317,13 +327,6 @@ def _tab_sample(S, wi, u1, u2):
 
 
 # The exact mechanism (a formula of NH alone or VR alone).
-def _basis(n):
-    sign = dr.select(n[2] < 0.0, -1.0, 1.0)
-    a = -1.0 / (sign + n[2])
-    b = n[0] * n[1] * a
-    return ((1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]), (b, sign + n[1] * n[1] * a, -n[1]), n)
-
-
 def _exact_axis(S, wi):
     if _EXACT_LOBE == 'VR':
         return (-wi[0], -wi[1], wi[2])
@@ -331,16 +334,81 @@ def _exact_axis(S, wi):
     return (z, z, z + 1.0)
 
 
+def _cos_sin_of_band(S, i, f):
+    """(cos θ, sin θ) at fraction f of band i, uniform in sin²(θ/2) (lobe's cos_sin_of_band)."""
+    b0, b1 = dr.gather(S.F, S.bands, i), dr.gather(S.F, S.bands, i + 1)
+    s = dr.clip(b0 + f * (b1 - b0), 0.0, 1.0)
+    return 1.0 - 2.0 * s, 2.0 * dr.sqrt(s * (1.0 - s))
+
+
+def _mirror_frame(wi):
+    """lobe's mirror_frame: (t, b, R) about R, t in the plane of R and N pointing down; sinθi, cosθi."""
+    rho = dr.sqrt(wi[0] * wi[0] + wi[1] * wi[1])
+    ok = rho > 0.0
+    ax = dr.select(ok, -wi[0] / dr.select(ok, rho, 1.0), 1.0)
+    ay = dr.select(ok, -wi[1] / dr.select(ok, rho, 1.0), 0.0)
+    ct = wi[2]
+    zero = 0.0 * ct
+    return ((ct * ax, ct * ay, -rho), (-ay, ax, zero), (-wi[0], -wi[1], wi[2])), rho, ct
+
+
+def _ring(S, c, d):
+    """lobe's ring: (ψmax, H) of the ring with cosθo = c + d·cosψ."""
+    full = c >= d
+    none = c <= -d
+    r = dr.clip(-c / dr.select(d > 0.0, d, 1.0), -1.0, 1.0)
+    psi = _acos(r)
+    part = c * psi + dr.sqrt(dr.maximum((d - c) * (d + c), 0.0))
+    psi_max = dr.select(full, _PI, dr.select(none, 0.0, psi))
+    h = dr.select(full, _PI * c, dr.select(none, 0.0, part))
+    return psi_max, h
+
+
+# Steps of the ring's azimuth solve: Newton kept in a bracket that bisection at least halves (64 halvings are
+# below an ulp of π); lobe stops when a step is below 1e-15 of ψ, which Newton reaches in a few steps.
+_RING_ITERATIONS = 64
+
+
+def _ring_azimuth(S, c, d, psi_max, h, t):
+    goal = t * h
+    lo, hi = 0.0 * c, psi_max + 0.0 * c
+    psi = t * psi_max
+    for _ in range(_RING_ITERATIONS):
+        g = c * psi + d * dr.sin(psi) - goal
+        below = g < 0.0
+        lo = dr.select(below, psi, lo)
+        hi = dr.select(below, hi, psi)
+        slope = c + d * dr.cos(psi)
+        nxt = psi - g / dr.select(slope > 0.0, slope, 1.0)
+        psi = dr.select((slope > 0.0) & (nxt > lo) & (nxt < hi), nxt, 0.5 * (lo + hi))
+    return psi
+
+
 def _exact_sample(S, wi, u1, u2):
-    i, f = _sample1d(S, 'cdf', 'last', S.U(0), S.U(0), _EXACT_CELLS, u1)
-    d = _dir(_band_theta(S, i, f), 2.0 * _PI * u2)
     if _EXACT_LOBE == 'NH':
-        return _reflect(wi, d)
-    t, b, n = _basis(_exact_axis(S, wi))
-    return tuple(t[k] * d[0] + b[k] * d[1] + n[k] * d[2] for k in range(3))
+        i, f = _sample1d(S, 'cdf', 'last', S.U(0), S.U(0), _EXACT_CELLS, u1)
+        ct, st = _cos_sin_of_band(S, i, f)
+        sp, cp = dr.sin(2.0 * _PI * u2), dr.cos(2.0 * _PI * u2)
+        return _reflect(wi, (st * cp, st * sp, ct))
+    ws, _ = _node_weights(S, wi)
+    k, u = _pick_node(S, ws, u1)
+    i, f = _sample1d(S, 'cdf', 'last', k * (_EXACT_CELLS + 1), k, _EXACT_CELLS, u)
+    ct, st = _cos_sin_of_band(S, i, f)
+    (t, b, r), rho, cti = _mirror_frame(wi)
+    c, d = ct * cti, st * rho
+    psi_max, h = _ring(S, c, d)
+    side = dr.select(u2 < 0.5, 1.0, -1.0)
+    psi = _ring_azimuth(S, c, d, psi_max, h, dr.minimum(dr.abs(2.0 * u2 - 1.0), 1.0))
+    on = h > 0.0
+    cp = dr.select(on, -dr.cos(psi), dr.cos(2.0 * _PI * u2))
+    sp = dr.select(on, -side * dr.sin(psi), dr.sin(2.0 * _PI * u2))
+    wo = tuple(ct * r[k3] + st * (cp * t[k3] + sp * b[k3]) for k3 in range(3))
+    cw = _cosine_sample(u, u2)
+    empty = dr.gather(S.U, S.empty, k) != 0
+    return tuple(dr.select(empty, a, w) for a, w in zip(cw, wo))
 
 
-def _exact_pdf(S, wi, wo):
+def _exact_pdf(S, wi, wo, cos_pdf):
     if _EXACT_LOBE == 'NH':
         s = (wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2])
         ln = dr.sqrt(_dot(s, s))
@@ -352,11 +420,23 @@ def _exact_pdf(S, wi, wo):
     else:
         d, a, jac, valid = wo, _exact_axis(S, wi), 1.0, wo[2] == wo[2]
     x = (d[1] * a[2] - d[2] * a[1], d[2] * a[0] - d[0] * a[2], d[0] * a[1] - d[1] * a[0])
-    th = dr.atan2(dr.sqrt(_dot(x, x)), _dot(d, a))
+    sin_t, cos_t = dr.sqrt(_dot(x, x)), _dot(d, a)
+    th = dr.atan2(sin_t, cos_t)
     i, inside = _cell(S, th / _EXACT_THETA_MAX, _EXACT_CELLS)
     den = dr.gather(S.F, S.measure, i) * jac
-    p = dr.select(inside, S.gather('pdf', i), 0.0) / den
-    return dr.select(valid & (den > 0.0), p, 0.0)
+    ok = valid & inside & (den > 0.0)
+    if _EXACT_LOBE == 'NH':
+        return dr.select(ok, S.gather('pdf', i) / den, 0.0)
+    _, rho, cti = _mirror_frame(wi)
+    _, h = _ring(S, cos_t * cti, sin_t * rho)
+    azimuth = dr.select(h > 0.0, _PI * dr.maximum(wo[2], 0.0) / dr.select(h > 0.0, h, 1.0), 1.0)
+    ws, _ = _node_weights(S, wi)
+    p = S.const(0.0)
+    for (k, w) in ws:
+        term = dr.select(ok, S.gather('pdf', k * _EXACT_CELLS + i) / den * azimuth, 0.0)
+        term = dr.select(dr.gather(S.U, S.empty, k) != 0, cos_pdf, term)
+        p = p + dr.select(w > 0.0, w * term, 0.0)
+    return p
 
 
 # lobe's Sampler: the mixture with the cosine density.
@@ -365,7 +445,7 @@ def _density(S, wi, wo):
     if _MECHANISM == 'tabulated':
         body = _tab_pdf(S, wi, wo, cos_pdf)
     elif _MECHANISM == 'exact':
-        body = _exact_pdf(S, wi, wo)
+        body = _exact_pdf(S, wi, wo, cos_pdf)
     else:
         body = cos_pdf
     return _COS_FRAC * cos_pdf + (1.0 - _COS_FRAC) * body

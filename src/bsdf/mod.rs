@@ -22,9 +22,13 @@
 //! - **Exact** (a formula whose only input is NH, or only VR — one cosine, nothing else): a 1-D table over
 //!   θ ∈ [0, θmax] (θmax = π for VR, π/2 for NH) in [`EXACT_CELLS`] cells, each cell its solid angle about the
 //!   axis times the maximum of lum(f(cos θ)) at its ends and middle, inverted by binary search; within a cell θ is
-//!   uniform in sin²(θ/2), so the density in solid angle is constant over each cell and bounded on the axis.
-//!   φ is uniform about the lobe axis: R, the mirror of wi, for VR; N for NH, whose sampled h
-//!   gives wo = 2(wi·h)h − wi with the Jacobian 1/(4 wo·h).
+//!   uniform in sin²(θ/2), so the density in solid angle is constant over each ring of a cell and bounded on the
+//!   axis. NH: one table; φ uniform about N; the sampled h gives wo = 2(wi·h)h − wi with the Jacobian
+//!   1/(4 wo·h). VR: the lobe about R, the mirror of wi, with the cosine: one table per isotropic incidence node
+//!   (the tabulated mechanism's θₖ, the same mixture rule), its cells weighted by the mean of max(cosθₒ, 0) over
+//!   the ring at θ from R at θₖ (`exact::ring`, closed form), and φ about R drawn for the actual wi with density
+//!   ∝ max(cosθₒ, 0) on the ring (`exact::ring_azimuth`), so the part the horizon cuts is not sampled and
+//!   pdfₖ = tableₖ(θ)/measure(θ)·π·max(cosθₒ, 0)/H(θ, θᵢ).
 //! - **Cosine**: cosθₒ/π, for formulas neither of the above beats (and for a formula that is 0 everywhere).
 //!
 //! [`Choice::Auto`] (the default) builds every mechanism the formula admits and keeps the one of highest mean
@@ -48,9 +52,9 @@
 //! reports equals pdf(wi, wo) bit for bit; the weight is f·cosθₒ/pdf with f from the kernels, a batch at a time.
 //!
 //! # The horizon and bad input
-//! - A sampled wo below the horizon (wo.z ≤ 0: a table cell that straddles the horizon, or an exact lobe about R
-//!   cut by it) keeps its direction and density and has weight 0; the cosine fraction keeps pdf > 0 wherever
-//!   cosθₒ > 0, so f·cos > 0 implies pdf > 0.
+//! - A sampled wo below the horizon (wo.z ≤ 0: a table cell that straddles the horizon, an NH lobe's reflection
+//!   cut by it, or a VR ring wholly below it) keeps its direction and density and has weight 0; the cosine
+//!   fraction keeps pdf > 0 wherever cosθₒ > 0, so f·cos > 0 implies pdf > 0.
 //! - wi zero or not finite is an error; wi is normalised; wi below or on the horizon (wi.z ≤ 0) is an error (the
 //!   formula's L is an incident direction of the upper hemisphere). A wo given to `pdf` must be finite and
 //!   non-zero; it is normalised unless already unit to 10⁻⁹.
@@ -307,6 +311,11 @@ fn dir(theta: f64, phi: f64) -> V3 {
     [st * cp, st * sp, ct]
 }
 
+
+
+
+
+
 /// sin²(θ/2) = (1 − cosθ)/2 at the edges `theta(0)`, …, `theta(n)` of n bands in θ: the solid angle of the band
 /// between edges a and b about an axis is 4π·(s_b − s_a), and s is uniform in solid angle. Computed without
 /// the cancellation of 1 − cosθ near the axis.
@@ -319,20 +328,83 @@ fn band_edges(n: usize, theta: impl Fn(usize) -> f64) -> Vec<f64> {
         .collect()
 }
 
-/// The polar angle of s = sin²(θ/2) ([`band_edges`]).
-#[inline]
-fn theta_of_band(s: f64) -> f64 {
-    2.0 * s.max(0.0).sqrt().atan2((1.0 - s).max(0.0).sqrt())
+
+
+
+
+
+
+
+
+
+
+/// θᵢ of incidence node k of `count`: 89.5°·(1 − (1 − k/(count − 1))²).
+fn node_theta(k: usize, count: usize) -> f64 {
+    let s = k as f64 / (count - 1) as f64;
+    LAST_NODE_DEG.to_radians() * (1.0 - (1.0 - s) * (1.0 - s))
 }
+
+/// The nodes around θ among `thetas` (ascending) with linear weights: one node outside the range.
+fn theta_weights(thetas: &[f64], t: f64) -> [(usize, f64); 2] {
+    let last = thetas.len() - 1;
+    if t <= thetas[0] {
+        return [(0, 1.0), (0, 0.0)];
+    }
+    if t >= thetas[last] {
+        return [(last, 1.0), (last, 0.0)];
+    }
+    let k = thetas.partition_point(|&x| x <= t) - 1;
+    let f = (t - thetas[k]) / (thetas[k + 1] - thetas[k]);
+    [(k, 1.0 - f), (k + 1, f)]
+}
+
+
+
+
+
+
+
 
 /// The largest f64 below 1.
 const ONE_MINUS: f64 = 1.0 - f64::EPSILON / 2.0;
+
+
+
+
+
+
+/// (cos θ, sin θ) of s = sin²(θ/2) ([`band_edges`]), without trigonometry.
+#[inline]
+fn cos_sin_of_band(s: f64) -> (f64, f64) {
+    let s = s.clamp(0.0, 1.0);
+    (1.0 - 2.0 * s, 2.0 * (s * (1.0 - s)).sqrt())
+}
+
+
+/// The node of `ws` that u falls in (by weight) and u rescaled within it.
+#[inline]
+fn pick_node(ws: &[(usize, f64)], u1: f64) -> (usize, f64) {
+    let mut acc = 0.0;
+    let mut pick = None;
+    for &(k, w) in ws {
+        if w > 0.0 {
+            if u1 < acc + w {
+                return (k, ((u1 - acc) / w).clamp(0.0, ONE_MINUS));
+            }
+            acc += w;
+            pick = Some((k, ONE_MINUS));
+        }
+    }
+    pick.unwrap_or((0, u1))
+}
 
 /// One checked wi and what the mechanism computed of it ([`Sampler::at`]).
 #[derive(Clone, Copy, Debug)]
 struct At {
     wi: V3,
     tab: Option<TabAt>,
+    /// The exact mechanism's nodes and weights.
+    exact: [(usize, f64); 2],
 }
 
 #[derive(Clone, Debug)]
@@ -497,7 +569,11 @@ impl Sampler {
     /// What the mechanism needs of one (checked) wi, computed once for every wo at that wi.
     #[inline]
     fn at(&self, wi: V3) -> At {
-        At { wi, tab: if let Body::Tabulated(t) = &self.body { Some(t.at(wi)) } else { None } }
+        match &self.body {
+            Body::Tabulated(t) => At { wi, tab: Some(t.at(wi)), exact: [(0, 1.0), (0, 0.0)] },
+            Body::Exact(e) => At { wi, tab: None, exact: e.at(wi) },
+            Body::Cosine => At { wi, tab: None, exact: [(0, 1.0), (0, 0.0)] },
+        }
     }
 
     /// wo for one (wi, u).
@@ -511,18 +587,18 @@ impl Sampler {
         let v = ((u1 - c) / (1.0 - c)).clamp(0.0, ONE_MINUS);
         match (&self.body, &at.tab) {
             (Body::Tabulated(t), Some(ta)) => t.sample(ta, at.wi, v, u2),
-            (Body::Exact(e), _) => e.sample(at.wi, v, u2),
+            (Body::Exact(e), _) => e.sample(&at.exact, at.wi, v, u2),
             _ => cosine_sample(v, u2),
         }
     }
 
     /// The mixture density of wo at wi (both unit, wi checked): the one function `sample` and `pdf` share.
-    #[inline]
+    #[inline(always)]
     fn density(&self, at: &At, wo: V3) -> f64 {
         let cos_pdf = wo[2].max(0.0) / PI;
         let body = match (&self.body, &at.tab) {
             (Body::Tabulated(t), Some(ta)) => t.pdf(ta, at.wi, wo, cos_pdf),
-            (Body::Exact(e), _) => e.pdf(at.wi, wo),
+            (Body::Exact(e), _) => e.pdf(&at.exact, at.wi, wo, cos_pdf),
             _ => cos_pdf,
         };
         self.cos_frac * cos_pdf + (1.0 - self.cos_frac) * body
@@ -613,3 +689,9 @@ pub fn efficiency(w: impl Iterator<Item = f64>) -> f64 {
         0.0
     }
 }
+
+
+
+
+
+

@@ -24,10 +24,10 @@ fn azimuth_of(wi: V3) -> Turn {
     }
 }
 
-/// The half vector at polar angle θₕ and azimuth φₕ = 2πx₂ measured in the frame turned by `turn`.
+/// The half vector at polar angle θₕ (its cosine and sine) and azimuth φₕ = 2πx₂ measured in the frame turned
+/// by `turn`.
 #[inline]
-fn half_at(th: f64, x2: f64, turn: Turn) -> V3 {
-    let (st, ct) = th.sin_cos();
+fn half_at(ct: f64, st: f64, x2: f64, turn: Turn) -> V3 {
     let (sp, cp) = (2.0 * PI * x2).sin_cos();
     let (c, s) = turn;
     [st * (cp * c - sp * s), st * (sp * c + cp * s), ct]
@@ -36,7 +36,8 @@ fn half_at(th: f64, x2: f64, turn: Turn) -> V3 {
 /// The half vector of table coordinates (x₁, x₂) (θₕ = (π/2)·x₁²) in the frame turned by `turn`.
 #[inline]
 fn half_from(x1: f64, x2: f64, turn: Turn) -> V3 {
-    half_at(FRAC_PI_2 * x1 * x1, x2, turn)
+    let (st, ct) = (FRAC_PI_2 * x1 * x1).sin_cos();
+    half_at(ct, st, x2, turn)
 }
 
 /// The θ edges of the tabulated mechanism's rows: θₕ = (π/2)·(i/[`ROWS`])².
@@ -45,16 +46,17 @@ fn row_theta(i: usize) -> f64 {
     FRAC_PI_2 * x * x
 }
 
-/// Table coordinates of the half vector of (wi, wo) (azimuth in the frame turned by `turn`): x₁, θₕ, the column
-/// of x₂ among [`COLS`], the position in that column (x₂·COLS − column, in [0, 1]), and dωₒ/dωₕ = 4|wi·h|;
-/// `None` when wo = −wi (no half vector).
+/// Table coordinates of the half vector of (wi, wo) (azimuth in the frame turned by `turn`): the row among
+/// [`ROWS`] and the position in it (a, in [0, 1], linear in sin²(θₕ/2) between the row's edges `bands`), the
+/// column among [`COLS`] and the position in it (b, in [0, 1], linear in φₕ), and dωₒ/dωₕ = 4|wi·h|; `None`
+/// when wo = −wi (no half vector).
 ///
-/// θₕ comes from atan2 of the unnormalised sum s = wi + wo (turned into the table's frame, sign chosen so
-/// h.z ≥ 0): atan2 is scale-free. θₕ by atan2, not acos, which loses digits near the normal where the lobes
-/// are. The column is counted from the quadrant and seven comparisons against the column edges
-/// ([`column_of`]), the position in it from atan2 (clamped into the column where the two round apart).
+/// No trigonometry: from the unnormalised sum s = wi + wo (turned into the table's frame, sign chosen so
+/// h.z ≥ 0), sin²(θₕ/2) = (1 − cosθₕ)/2 = |sₓᵧ|²/(2|s|(|s| + |s_z|)), without the cancellation of 1 − cosθₕ near
+/// the normal where the lobes are; the row by [`row_of`]; the column and the angle within it by
+/// [`column_and_position`].
 #[inline]
-fn table_coords(wi: V3, wo: V3, turn: Turn) -> Option<(f64, f64, usize, f64, f64)> {
+fn table_coords(wi: V3, wo: V3, turn: Turn, bands: &[f64], guide: &[u8]) -> Option<(usize, f64, usize, f64, f64)> {
     let s = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
     let len2 = dot(s, s);
     if len2.is_nan() || len2 <= 0.0 {
@@ -63,14 +65,84 @@ fn table_coords(wi: V3, wo: V3, turn: Turn) -> Option<(f64, f64, usize, f64, f64
     let (c, sn) = turn;
     let sign = if s[2] < 0.0 { -1.0 } else { 1.0 };
     let (hx, hy) = (sign * (s[0] * c + s[1] * sn), sign * (s[1] * c - s[0] * sn));
-    let sxy = (hx * hx + hy * hy).sqrt();
-    let th = sxy.atan2(s[2].abs());
-    let x1 = (th / FRAC_PI_2).sqrt();
-    let jac = 4.0 * dot(wi, s).abs() / len2.sqrt();
-    let col = column_of(hx, hy);
-    let x2 = (hy.atan2(hx) / (2.0 * PI)).rem_euclid(1.0);
-    let b = (x2 * COLS as f64 - col as f64).clamp(0.0, 1.0);
-    Some((x1, th, col, b, jac))
+    let len = len2.sqrt();
+    let sh = (hx * hx + hy * hy) / (2.0 * len * (len + s[2].abs()));
+    let row = row_of(sh, bands, guide);
+    let (s0, s1) = (bands[row], bands[row + 1]);
+    let a = ((sh - s0) / (s1 - s0)).clamp(0.0, 1.0);
+    let jac = 4.0 * dot(wi, s).abs() / len;
+    let (col, b) = column_and_position(hx, hy);
+    Some((row, a, col, b, jac))
+}
+
+/// The guide's resolution: sin²(θₕ/2) in [2⁻²⁴, 1) by its binary exponent and first [`GUIDE_BITS`] mantissa
+/// bits (16 steps per octave; a row spans more than 1/16 octave, the narrowest, next to 0.5, about 0.07).
+const GUIDE_BITS: u32 = 4;
+
+const GUIDE_OCTAVES: u64 = 24;
+
+const GUIDE: usize = (GUIDE_OCTAVES as usize) << GUIDE_BITS;
+
+/// The key of 2⁻²⁴: the guide's entry 0, which also takes every smaller value.
+const GUIDE_BASE: u64 = (1023 - GUIDE_OCTAVES) << GUIDE_BITS;
+
+/// The guide entry of sh ≥ 0: its f64 bits (monotone in a non-negative value) above the first [`GUIDE_BITS`]
+/// mantissa bits, from [`GUIDE_BASE`], clamped into the guide.
+#[inline]
+fn guide_index(sh: f64) -> usize {
+    let key = sh.max(0.0).to_bits() >> (52 - GUIDE_BITS);
+    (key.saturating_sub(GUIDE_BASE) as usize).min(GUIDE - 1)
+}
+
+/// The row guide: entry g is the row holding the least sin²(θₕ/2) of that entry (row 0 for entry 0).
+fn row_guide(bands: &[f64]) -> Vec<u8> {
+    (0..GUIDE)
+        .map(|g| {
+            if g == 0 {
+                return 0;
+            }
+            let sh = f64::from_bits((GUIDE_BASE + g as u64) << (52 - GUIDE_BITS));
+            (bands.partition_point(|&b| b <= sh).max(1) - 1).min(ROWS - 1) as u8
+        })
+        .collect()
+}
+
+/// The row whose band [bands\[row\], bands\[row + 1\]) holds sh = sin²(θₕ/2) (the last row from 0.5 on): the
+/// guide's entry, then up while the next edge is ≤ sh.
+#[inline]
+fn row_of(sh: f64, bands: &[f64], guide: &[u8]) -> usize {
+    let mut row = usize::from(guide[guide_index(sh)]);
+    while row + 1 < ROWS && bands[row + 1] <= sh {
+        row += 1;
+    }
+    row
+}
+
+/// atan z for |z| ≤ tan(π/16) ≈ 0.199 (an angle within one column): the Taylor series to z²¹, whose remainder
+/// is below z²³/23 < 4e-18.
+#[inline]
+fn atan_small(z: f64) -> f64 {
+    // p(y) = 1 − y/3 + y²/5 − … + y¹⁰/21 at y = z², by Estrin's scheme (a shallow dependency chain).
+    const C: [f64; 11] = [1.0, -1.0 / 3.0, 1.0 / 5.0, -1.0 / 7.0, 1.0 / 9.0, -1.0 / 11.0, 1.0 / 13.0, -1.0 / 15.0, 1.0 / 17.0, -1.0 / 19.0, 1.0 / 21.0];
+    let y = z * z;
+    let (y2, y4) = (y * y, y * y * (y * y));
+    let q0 = (C[0] + C[1] * y) + (C[2] + C[3] * y) * y2;
+    let q1 = (C[4] + C[5] * y) + (C[6] + C[7] * y) * y2;
+    let q2 = (C[8] + C[9] * y) + C[10] * y2;
+    z * (q0 + (q1 + q2 * y4) * y4)
+}
+
+/// The column of azimuth atan2(y, x) among [`COLS`] equal sectors of [0, 2π) — the quadrant, then the number of
+/// column edges inside it that the direction lies beyond — and the position in it, in [0, 1]: the angle past
+/// the column's first edge by [`atan_small`] of the direction turned back by that edge (0 for the zero vector).
+#[inline]
+fn column_and_position(x: f64, y: f64) -> (usize, f64) {
+    let (q, a, b) = quadrant(x, y);
+    let beyond: usize = EDGES.iter().map(|&(ce, se)| usize::from(b * ce > a * se)).sum();
+    let (ce, se) = if beyond == 0 { (1.0, 0.0) } else { EDGES[beyond - 1] };
+    let (u, v) = (a * ce + b * se, b * ce - a * se);
+    let pos = if u > 0.0 { atan_small(v / u) * (COLS as f64 / (2.0 * PI)) } else { 0.0 };
+    (q * (COLS / 4) + beyond, pos.clamp(0.0, 1.0))
 }
 
 /// (cos, sin) of the column edges k·2π/[`COLS`] inside the first quadrant, k = 1 … COLS/4 − 1.
@@ -87,40 +159,17 @@ const EDGES: [(f64, f64); COLS / 4 - 1] = {
     ]
 };
 
-/// The column of azimuth atan2(y, x) among [`COLS`] equal sectors of [0, 2π): the quadrant, then the number of
-/// column edges inside it that the direction lies beyond (0 for the zero vector).
+/// The quadrant of (x, y) and (a, b): (x, y) turned back by the quadrant's multiple of 90°, so a > 0, b ≥ 0
+/// (a = b = 0 for the zero vector, quadrant 1).
 #[inline]
-fn column_of(x: f64, y: f64) -> usize {
-    // (a, b): (x, y) turned back by the quadrant's multiple of 90°, so a > 0, b ≥ 0.
-    let (q, a, b) = if y >= 0.0 {
+fn quadrant(x: f64, y: f64) -> (usize, f64, f64) {
+    if y >= 0.0 {
         if x > 0.0 { (0, x, y) } else { (1, y, -x) }
     } else if x <= 0.0 {
         (2, -x, -y)
     } else {
         (3, -y, x)
-    };
-    let beyond: usize = EDGES.iter().map(|&(ce, se)| usize::from(b * ce > a * se)).sum();
-    q * (COLS / 4) + beyond
-}
-
-/// θᵢ of incidence node k of `count`: 89.5°·(1 − (1 − k/(count − 1))²).
-fn node_theta(k: usize, count: usize) -> f64 {
-    let s = k as f64 / (count - 1) as f64;
-    LAST_NODE_DEG.to_radians() * (1.0 - (1.0 - s) * (1.0 - s))
-}
-
-/// The nodes around θ among `thetas` (ascending) with linear weights: one node outside the range.
-fn theta_weights(thetas: &[f64], t: f64) -> [(usize, f64); 2] {
-    let last = thetas.len() - 1;
-    if t <= thetas[0] {
-        return [(0, 1.0), (0, 0.0)];
     }
-    if t >= thetas[last] {
-        return [(last, 1.0), (last, 0.0)];
-    }
-    let k = thetas.partition_point(|&x| x <= t) - 1;
-    let f = (t - thetas[k]) / (thetas[k + 1] - thetas[k]);
-    [(k, 1.0 - f), (k + 1, f)]
 }
 
 /// The tabulated mechanism: a table per incidence node.
@@ -134,6 +183,8 @@ pub(super) struct Tabulated {
     pub(super) nodes: Vec<Option<Node>>,
     /// sin²(θₕ/2) at the row edges ([`band_edges`]).
     pub(super) bands: Vec<f64>,
+    /// [`row_guide`] of `bands`.
+    guide: Vec<u8>,
 }
 
 /// One incidence node's table: the density in ωₕ at the cell corners, bilinear within each cell in
@@ -209,19 +260,7 @@ impl Tabulated {
     }
 
     pub(super) fn sample(&self, at: &TabAt, wi: V3, u1: f64, u2: f64) -> V3 {
-        let mut acc = 0.0;
-        let mut pick = None;
-        for &(k, w) in &at.ws {
-            if w > 0.0 {
-                if u1 < acc + w {
-                    pick = Some((k, ((u1 - acc) / w).clamp(0.0, ONE_MINUS)));
-                    break;
-                }
-                acc += w;
-                pick = Some((k, ONE_MINUS));
-            }
-        }
-        let (k, u) = pick.unwrap_or((0, u1));
+        let (k, u) = pick_node(&at.ws, u1);
         match &self.nodes[k] {
             None => cosine_sample(u, u2),
             Some(d) => {
@@ -232,7 +271,8 @@ impl Tabulated {
                 let a = sample_linear(f1, v[0] + v[1], v[2] + v[3]);
                 let b = sample_linear(f2, v[0] + a * (v[2] - v[0]), v[1] + a * (v[3] - v[1]));
                 let s = self.bands[i] + a * (self.bands[i + 1] - self.bands[i]);
-                let h = half_at(theta_of_band(s), (j as f64 + b) / COLS as f64, at.turn);
+                let (ct, st) = cos_sin_of_band(s);
+                let h = half_at(ct, st, (j as f64 + b) / COLS as f64, at.turn);
                 reflect(wi, h)
             }
         }
@@ -240,24 +280,22 @@ impl Tabulated {
 
     #[inline]
     pub(super) fn pdf(&self, at: &TabAt, wi: V3, wo: V3, cos_pdf: f64) -> f64 {
-        let tc = table_coords(wi, wo, at.turn);
-        let mut p = 0.0;
+        let tc = table_coords(wi, wo, at.turn, &self.bands, &self.guide);
+        // Σ w·(density in ωₕ) over the tables, divided by the Jacobian once; empty nodes add w·cosθₒ/π.
+        let (mut empty, mut tables) = (0.0, 0.0);
         for &(k, w) in &at.ws {
             if w > 0.0 {
-                p += w * match (&self.nodes[k], tc) {
-                    (None, _) => cos_pdf,
-                    (Some(d), Some((x1, th, col, b, jac))) if jac > 0.0 && x1 <= 1.0 => {
-                        let row = ((x1 * ROWS as f64) as usize).min(ROWS - 1);
-                        let h = (0.5 * th).sin();
-                        let (s0, s1) = (self.bands[row], self.bands[row + 1]);
-                        let a = ((h * h - s0) / (s1 - s0)).clamp(0.0, 1.0);
-                        bilinear(d.corners(row, col), a, b) / jac
-                    }
-                    _ => 0.0,
-                };
+                match (&self.nodes[k], tc) {
+                    (None, _) => empty += w * cos_pdf,
+                    (Some(d), Some((row, a, col, b, jac))) if jac > 0.0 => tables += w * bilinear(d.corners(row, col), a, b),
+                    _ => {}
+                }
             }
         }
-        p
+        match tc {
+            Some((.., jac)) if tables > 0.0 => empty + tables / jac,
+            _ => empty,
+        }
     }
 }
 
@@ -287,7 +325,8 @@ pub(super) fn build_tabulated(target: &Target, isotropic: bool) -> Result<(Tabul
         }
     }
     let bands = band_edges(ROWS, row_theta);
-    Ok((Tabulated { isotropic, thetas, phis: np, nodes, bands }, empty))
+    let guide = row_guide(&bands);
+    Ok((Tabulated { isotropic, thetas, phis: np, nodes, bands, guide }, empty))
 }
 
 #[derive(Default)]
@@ -370,18 +409,43 @@ mod tests {
     #[test]
     fn half_vector_map_round_trips() {
         let wi = dir(0.7, 0.3);
-        for &(x1, x2) in &[(0.1, 0.2), (0.5, 0.9), (0.8, 0.45), (0.03, 0.6)] {
+        let bands = band_edges(ROWS, row_theta);
+        let guide = row_guide(&bands);
+        for &(x1, x2) in &[(0.1, 0.2), (0.5, 0.9), (0.8, 0.45), (0.03, 0.6), (0.002, 0.01), (0.999, 0.99)] {
             let turn = (0.3f64.cos(), 0.3f64.sin());
             let h = half_from(x1, x2, turn);
             let wo = reflect(wi, h);
-            let (y1, th, col, b, jac) = table_coords(wi, wo, turn).unwrap();
-            assert!((x1 - y1).abs() < 1e-12, "{x1} → {y1}");
-            assert!((th - FRAC_PI_2 * x1 * x1).abs() < 1e-12);
+            let (row, a, col, b, jac) = table_coords(wi, wo, turn, &bands, &guide).unwrap();
+            assert_eq!(row, (x1 * ROWS as f64) as usize, "{x1}");
+            let th = FRAC_PI_2 * x1 * x1;
+            let sh = (0.5 * th).sin().powi(2);
+            assert!((bands[row] + a * (bands[row + 1] - bands[row]) - sh).abs() < 1e-15, "{x1}");
             assert_eq!(col, (x2 * COLS as f64) as usize);
-            assert!((col as f64 + b - x2 * COLS as f64).abs() < 1e-9);
+            // φₕ of a half vector θₕ from the pole carries wi + wo's cancellation: an error ~ε/θₕ.
+            assert!((col as f64 + b - x2 * COLS as f64).abs() < 1e-12f64.max(1e-14 / th), "{x2}");
             assert!((jac - 4.0 * dot(wi, h).abs()).abs() < 1e-12 * jac);
-            let s = band_edges(1, |_| FRAC_PI_2 * x1 * x1)[0];
-            assert!((theta_of_band(s) - FRAC_PI_2 * x1 * x1).abs() < 1e-15);
+            let (ct, st) = cos_sin_of_band(sh);
+            assert!((ct - th.cos()).abs() < 1e-15 && (st - th.sin()).abs() < 1e-15);
+        }
+    }
+
+    #[test]
+    fn small_arctangent_and_row_search_are_exact() {
+        for k in 0..=1000 {
+            let z = (PI / 16.0).tan() * k as f64 / 1000.0;
+            assert!((atan_small(z) - z.atan()).abs() <= 4.0 * f64::EPSILON * z.atan().max(f64::MIN_POSITIVE), "{z}");
+        }
+        let bands = band_edges(ROWS, row_theta);
+        let guide = row_guide(&bands);
+        let mut rng = crate::base::rng::Rng(0x80F5);
+        for _ in 0..100_000 {
+            let sh = 0.5 * rng.unit().powi(4);
+            let want = (bands.partition_point(|&b| b <= sh) - 1).min(ROWS - 1);
+            assert_eq!(row_of(sh, &bands, &guide), want, "{sh}");
+        }
+        for &sh in &bands {
+            let want = (bands.partition_point(|&b| b <= sh) - 1).min(ROWS - 1);
+            assert_eq!(row_of(sh, &bands, &guide), want, "{sh}");
         }
     }
 
@@ -397,8 +461,10 @@ mod tests {
             let (x, y) = (2.0 * rng.unit() - 1.0, 2.0 * rng.unit() - 1.0);
             let p = (y.atan2(x) / (2.0 * PI)).rem_euclid(1.0) * COLS as f64;
             // Away from an edge (within 1e-9 of one the two may round apart), the sector atan2 names.
+            let (col, pos) = column_and_position(x, y);
             if (p - p.round()).abs() > 1e-9 {
-                assert_eq!(column_of(x, y), (p as usize) % COLS, "({x}, {y})");
+                assert_eq!(col, (p as usize) % COLS, "({x}, {y})");
+                assert!((col as f64 + pos - p).abs() < 1e-13, "({x}, {y})");
             }
         }
     }
