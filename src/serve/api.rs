@@ -569,8 +569,8 @@ struct CompiledParam {
 /// `X-Lobe-Spp` and the scene's own `spp` in `X-Lobe-Scene-Spp`. The page refines through them: live frames at
 /// 1 spp and at most 128² while the sliders move, then exact frames at 1, 4, 16, … spp
 /// ([`crate::render::trace::levels`] of the scene's spp) at the chosen size, each replacing the last, until
-/// the scene's spp, a level the budget refuses, or a newer request. An exact frame at `spp` is `lobe render
-/// --spp` of it byte for byte.
+/// the scene's spp, a level the budget refuses, or a newer request. An exact frame at `spp` is the command
+/// line's render at that many samples per pixel, byte for byte.
 pub(crate) fn render(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
     limited(st, move |st| {
         let t = Instant::now();
