@@ -40,15 +40,18 @@ TARGETS = (1e-3, 1e-4, 1e-6)
 PI = math.pi
 
 
-def ggx(p, L, V):
-    """examples/explorer/ggx.brdf as written (GGX D, separable Smith G1, Schlick's Fresnel)."""
-    alpha, f0 = p['alpha'], p['f0']
-    nl, nv = L[2], V[2]
+def cosines(L, V):
+    """N·L, N·V, N·H and V·H in the local frame (N = +z), H = normalize(L + V), as the files write them."""
     h = [L[i] + V[i] for i in range(3)]
     hl = dr.sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2])
     h = [c / hl for c in h]
-    vh = V[0] * h[0] + V[1] * h[1] + V[2] * h[2]
-    nh = h[2]
+    return L[2], V[2], h[2], V[0] * h[0] + V[1] * h[1] + V[2] * h[2]
+
+
+def ggx(p, L, V):
+    """examples/explorer/ggx.brdf as written (GGX D, separable Smith G1, Schlick's Fresnel)."""
+    alpha, f0 = p['alpha'], p['f0']
+    nl, nv, nh, vh = cosines(L, V)
     a2 = alpha * alpha
 
     def d(c):
@@ -66,12 +69,7 @@ def ggx(p, L, V):
 def cook_torrance(p, L, V):
     """examples/explorer/cook_torrance.brdf as written, both bools on (Beckmann D, V-groove G, dielectric F)."""
     m, eta = p['m'], p['ior']
-    nl, nv = L[2], V[2]
-    h = [L[i] + V[i] for i in range(3)]
-    hl = dr.sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2])
-    h = [c / hl for c in h]
-    nh = h[2]
-    vh = V[0] * h[0] + V[1] * h[1] + V[2] * h[2]
+    nl, nv, nh, vh = cosines(L, V)
     c2, m2 = nh * nh, m * m
     d = dr.exp((c2 - 1.0) / (m2 * c2)) / (PI * m2 * c2 * c2)
     gv = dr.select(2.0 * nh * nv < vh, 2.0 * nh * nv / vh, 1.0)
