@@ -19,9 +19,9 @@ pub(super) struct Exact {
     pub(super) lobe: Input,
     pub(super) theta_max: f64,
     /// θᵢ of the incidence nodes (one node at 0 for NH).
-    pub(crate) thetas: Vec<f64>,
+    pub(super) thetas: Vec<f64>,
     /// Each node's table (`None`: the lobe is 0 wherever that node's rings reach above the horizon).
-    pub(crate) nodes: Vec<Option<Dist1D>>,
+    pub(super) nodes: Vec<Option<Dist1D>>,
     /// sin²(θ/2) at the cell edges ([`band_edges`]): within a cell θ is drawn uniform in this (uniform in solid
     /// angle about the axis), so the density in solid angle is constant over each ring of a cell and bounded.
     pub(super) bands: Vec<f64>,

@@ -633,7 +633,7 @@ fn spp_field(v: &Value) -> Result<Option<usize>, ApiError> {
         Some(x) => match x.as_u64() {
             Some(n) if (1..=max as u64).contains(&n) => Ok(Some(n as usize)),
             Some(n) => Err(ApiError::bad(format!("spp {n} is outside 1..={max}")).hint("the page refines through 1, 4, 16, … up to the scene's spp")),
-            None => Err(ApiError::bad("`spp` must be a whole number of samples per pixel").hint("e.g. \"spp\": 16; 1..=65536")),
+            None => Err(ApiError::bad("`spp` must be a whole number of samples per pixel").hint(format!("e.g. \"spp\": 16; 1..={max}"))),
         },
     }
 }

@@ -692,8 +692,7 @@ fn plot_takes_a_value_range() {
 /// last image is `lobe render --spp 16` of the scene byte for byte.
 #[test]
 fn watch_refines_a_traced_scene_up_to_lobe_render() {
-    let dir = std::env::temp_dir().join(format!("lobe-watch-traced-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = crate::scratch_dir("watch", "traced");
     let (out, cli) = (dir.join("w.png").display().to_string(), dir.join("r.png").display().to_string());
     let scene = "examples/scenes/environment.toml";
     let r = lobe(&["watch", "examples/explorer/ggx.brdf", "--scene", scene, "-o", &out, "--size", "32", "--spp", "16", "--count", "1", "--json"], None);
@@ -714,8 +713,7 @@ fn watch_refines_a_traced_scene_up_to_lobe_render() {
 #[test]
 fn watch_stops_refining_when_the_file_changes() {
     use std::io::BufRead;
-    let dir = std::env::temp_dir().join(format!("lobe-watch-stop-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = crate::scratch_dir("watch", "stop");
     let brdf = dir.join("ggx.brdf");
     std::fs::copy("examples/explorer/ggx.brdf", &brdf).unwrap();
     let out = dir.join("w.png");

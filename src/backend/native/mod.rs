@@ -28,7 +28,7 @@
 //! loads and stores at an element, and what it does with the elements after the last full vector), and a
 //! [`abi::KernelCode`] owning its code.
 //!
-//! Mirrored code (issue 53: at most 150 lines per tier): a function of one tier that does another tier's
+//! Mirrored code (a target of at most 150 lines per tier): a function of one tier that does another tier's
 //! function's job step for step, only the builder API differing, belongs here over primitives; `.ci/mirrored`
 //! lists the pairs left and counts their lines (its docstring has the rule).
 

@@ -41,9 +41,9 @@
 //! the target, a lower average — and within the cost budget (`simplify::accuracy::cost`): [`Prefer::Speed`]
 //! keeps only rewrites that cost nothing, [`Prefer::Accuracy`] (default) those within `max_cost` (1.3) × the
 //! fastest form's cost, up to [`NONFINITE_BUDGET`] (2×) for a rewrite that keeps lobe's promise at more
-//! points (`keeps_promise`), and up to the pow calls' cost for compensated power chains. Rules are tried once each, in
-//! the registry's order, a rule that asks to go early on this formula first. Candidates are known by a structural hash of their IR
-//! (`simplify::accuracy::identity`). Every candidate keeps the formula's sign where range analysis of the
+//! points (`keeps_promise`), and up to the pow calls' cost for compensated power chains. Rules are tried once
+//! each, in the registry's order, a rule that asks to go early on this formula first. Candidates are known by a
+//! structural hash of their IR (`simplify::accuracy::identity`). Every candidate keeps the formula's sign where range analysis of the
 //! formula as written bounds it ([`crate::simplify::keep_sign`]). The search stops at [`PassOptions::budget`]
 //! with the best form so far.
 //!
