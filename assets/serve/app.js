@@ -253,13 +253,6 @@ function buildLight() {
 // parameters its compile declared (the editor may already hold the next keystroke or file).
 const formula = () => ({ name: lobe.compiledName, text: lobe.text });
 
-// The spp of a traced scene's refinement (as the server's trace::levels): spp, spp/4, spp/16, … ≥ 1, smallest first.
-function levels(spp) {
-  const l = [];
-  for (let s = spp; s >= 1; s = Math.floor(s / 4)) l.unshift(s);
-  return l;
-}
-
 // Every frame asks for 1 spp (a rasterised scene ignores it): a live frame of a traced scene is that at a
 // small side; an exact one is the first level at the chosen size (the next levels follow when it is shown).
 function frameSettings(exact) {
@@ -315,8 +308,8 @@ const frames = channel(async (settings) => {
   const refined = spp ? ` · ${spp} of ${sceneSpp} spp` : "";
   $("frame-info").textContent = `${settings.size}² · ${settings.exact ? "exact (as lobe render)" : "live"}${refined} · frame ${ms.toFixed(1)} ms (server ${serverMs} ms)` +
     (nan !== "0" ? ` · warning: ${nan} kernel evaluations returned NaN or ±inf and were shaded as no light` : "");
-  // The next level, unless a change came meanwhile (its wish is queued and wins).
-  const next = settings.exact && spp ? levels(sceneSpp).find((l) => l > spp) : undefined;
+  // The next level the server names, unless a change came meanwhile (its wish is queued and wins).
+  const next = settings.exact && spp ? +(r.headers.get("X-Lobe-Next-Spp") || 0) : 0;
   if (next && settings.generation === generation) frames({ ...settings, spp: next });
 }, () => { lobe.idle = true; });
 

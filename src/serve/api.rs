@@ -566,10 +566,11 @@ struct CompiledParam {
 /// A scene the ray tracer renders (an `[environment]`, `shadows = true`) renders at `spp` samples per pixel
 /// (1..=65536; absent: the scene's `spp`, as `lobe render`), priced per camera sample against the cost budget
 /// ([`trace_evals`]: a level over it is refused with 422 before it starts); the reply then says the level in
-/// `X-Lobe-Spp` and the scene's own `spp` in `X-Lobe-Scene-Spp`. The page refines through them: live frames at
-/// 1 spp and at most 128² while the sliders move, then exact frames at 1, 4, 16, … spp
-/// ([`crate::render::trace::levels`] of the scene's spp) at the chosen size, each replacing the last, until
-/// the scene's spp, a level the budget refuses, or a newer request. An exact frame at `spp` is the command
+/// `X-Lobe-Spp`, the scene's own `spp` in `X-Lobe-Scene-Spp`, and the next level of the series
+/// [`crate::render::trace::levels`] of the scene's spp in `X-Lobe-Next-Spp` (absent after the last). The page
+/// refines through them: live frames at 1 spp and at most 128² while the sliders move, then exact frames at 1,
+/// 4, 16, … spp at the chosen size, each replacing the last, until the scene's spp, a level the budget refuses,
+/// or a newer request. An exact frame at `spp` is the command
 /// line's render at that many samples per pixel, byte for byte.
 pub(crate) fn render(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
     limited(st, move |st| {
@@ -601,6 +602,10 @@ pub(crate) fn render(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
             .header("X-Lobe-Nan", stats.nan.to_string());
         if let Some((level, scene_spp)) = traced {
             reply = reply.header("X-Lobe-Spp", level.to_string()).header("X-Lobe-Scene-Spp", scene_spp.to_string());
+            // The refinement's next level after this one, if any: the page follows the series it does not compute.
+            if let Some(next) = crate::render::trace::levels(scene_spp).into_iter().find(|&l| l > level) {
+                reply = reply.header("X-Lobe-Next-Spp", next.to_string());
+            }
         }
         Ok(reply)
     })

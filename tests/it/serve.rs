@@ -863,6 +863,7 @@ fn traced_scenes_render_at_the_requested_spp() {
         let r = s.post("/api/render", &req(json!(level), 32));
         assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
         assert_eq!((r.header("X-Lobe-Spp"), r.header("X-Lobe-Scene-Spp")), (Some(level.to_string().as_str()), Some("64")));
+        assert_eq!(r.header("X-Lobe-Next-Spp"), Some((4 * level).to_string().as_str()), "the next level after {level}");
         let cli = cli_render_with(Path::new("examples/scenes/environment.toml"), &["--size", "32", "--spp", &level.to_string()], &d.join(file));
         assert!(r.body == cli, "the page's exact environment.toml at {level} spp differs from lobe render --spp {level}");
     }
