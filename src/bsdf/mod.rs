@@ -311,11 +311,6 @@ fn dir(theta: f64, phi: f64) -> V3 {
     [st * cp, st * sp, ct]
 }
 
-
-
-
-
-
 /// sin²(θ/2) = (1 − cosθ)/2 at the edges `theta(0)`, …, `theta(n)` of n bands in θ: the solid angle of the band
 /// between edges a and b about an axis is 4π·(s_b − s_a), and s is uniform in solid angle. Computed without
 /// the cancellation of 1 − cosθ near the axis.
@@ -327,16 +322,6 @@ fn band_edges(n: usize, theta: impl Fn(usize) -> f64) -> Vec<f64> {
         })
         .collect()
 }
-
-
-
-
-
-
-
-
-
-
 
 /// θᵢ of incidence node k of `count`: 89.5°·(1 − (1 − k/(count − 1))²).
 fn node_theta(k: usize, count: usize) -> f64 {
@@ -358,20 +343,8 @@ fn theta_weights(thetas: &[f64], t: f64) -> [(usize, f64); 2] {
     [(k, 1.0 - f), (k + 1, f)]
 }
 
-
-
-
-
-
-
-
 /// The largest f64 below 1.
 const ONE_MINUS: f64 = 1.0 - f64::EPSILON / 2.0;
-
-
-
-
-
 
 /// (cos θ, sin θ) of s = sin²(θ/2) ([`band_edges`]), without trigonometry.
 #[inline]
@@ -379,7 +352,6 @@ fn cos_sin_of_band(s: f64) -> (f64, f64) {
     let s = s.clamp(0.0, 1.0);
     (1.0 - 2.0 * s, 2.0 * (s * (1.0 - s)).sqrt())
 }
-
 
 /// The node of `ws` that u falls in (by weight) and u rescaled within it.
 #[inline]
@@ -689,9 +661,4 @@ pub fn efficiency(w: impl Iterator<Item = f64>) -> f64 {
         0.0
     }
 }
-
-
-
-
-
 
