@@ -47,36 +47,51 @@ fn ring(c: f64, d: f64) -> (f64, f64) {
     }
 }
 
-/// ψ in [0, ψmax] with c·ψ + d·sinψ = t·H ([`ring`]; t in [0, 1]), and (sinψ, cosψ): Newton's method from
+/// ψ in [0, ψmax] with c·ψ + d·sinψ = t·H ([`ring`]; t in [0, 1]), and (sinψ, cosψ): Halley's method from
 /// ψ = t·ψmax, kept inside a shrinking bracket (bisection where a step would leave it); c + d·cosψ ≥ 0 on
-/// [0, ψmax], so the left side increases. Stops when a Newton step is below 10⁻¹⁵·(1 + ψ).
+/// [0, ψmax], so the left side increases. Halley's error goes as K·e³, so once K·step³ is at the rounding level
+/// that step is taken without another evaluation, (sinψ, cosψ) turned by it: usually two evaluations where
+/// Newton's method needed three or four and one more to see it had converged.
 #[inline]
 fn ring_azimuth(c: f64, d: f64, psi_max: f64, h: f64, t: f64) -> (f64, f64, f64) {
     let goal = t * h;
     let (mut lo, mut hi) = (0.0, psi_max);
     let mut psi = t * psi_max;
     for _ in 0..RING_ITERATIONS {
-        let (s, co) = psi.sin_cos();
+        let (co, s) = turn(psi * FRAC_1_2PI);
         let g = c * psi + d * s - goal;
         let slope = c + d * co;
-        let step = g / slope;
-        if slope > 0.0 && step.abs() <= 1e-15 * (1.0 + psi) {
-            return (psi, s, co);
-        }
         if g < 0.0 {
             lo = psi;
         } else {
             hi = psi;
         }
+        // g'' = −d·sinψ: Halley's step g·g'/(g'² − g·g''/2).
+        let step = 2.0 * g * slope / (2.0 * slope * slope + g * d * s);
         let next = psi - step;
-        psi = if slope > 0.0 && next > lo && next < hi { next } else { 0.5 * (lo + hi) };
+        let inside = slope > 0.0 && next >= lo && next <= hi;
+        // Halley's error after this step, K·|step|³ with K = |g‴/(6g′) − (g″/(2g′))²| (both sides times g′²: no
+        // division), at most an ulp; or a step at the rounding level (near the ring's cut, where g′ → 0 and the
+        // convergence is slow).
+        let k2 = (d * co * slope / 6.0 + 0.25 * (d * s) * (d * s)).abs();
+        let a = step.abs();
+        let done = (a <= 1e-5 * (1.0 + psi) && k2 * a * a * a <= 1e-16 * (1.0 + psi) * slope * slope) || a <= 1e-15 * (1.0 + psi);
+        if inside && done {
+            // sin and cos of the step to its third and second powers: their remainders, below 1e-26, vanish.
+            let (cs, ss) = (1.0 - 0.5 * step * step, step * (1.0 - step * step / 6.0));
+            return (next, s * cs - co * ss, co * cs + s * ss);
+        }
+        psi = if inside { next } else { 0.5 * (lo + hi) };
     }
-    let (s, co) = psi.sin_cos();
+    let (co, s) = turn(psi * FRAC_1_2PI);
     (psi, s, co)
 }
 
 /// The most steps of [`ring_azimuth`] (bisection alone halves the bracket 64 times: below an ulp of π).
 const RING_ITERATIONS: usize = 64;
+
+/// 1/(2π): an angle in turns.
+const FRAC_1_2PI: f64 = 0.5 * std::f64::consts::FRAC_1_PI;
 
 /// The frame about R = (−wi.x, −wi.y, wi.z) for the VR lobe: t in the plane of R and N, pointing down (t.z =
 /// −sinθᵢ), b horizontal, R. A direction at angle θ from R and azimuth φ from t has cosθₒ = cosθ·cosθᵢ −
@@ -115,7 +130,7 @@ impl Exact {
         let s = self.bands[i] + f * (self.bands[i + 1] - self.bands[i]);
         let (ct, st) = cos_sin_of_band(s);
         if self.lobe == Input::NH {
-            let (sp, cp) = (2.0 * PI * u2).sin_cos();
+            let (cp, sp) = turn(u2);
             return reflect(wi, [st * cp, st * sp, ct]);
         }
         // The azimuth about R by max(cosθₒ, 0) on the ring, symmetric about its highest point (φ = π): u2 < ½ to
@@ -129,20 +144,37 @@ impl Exact {
             let (_, s, co) = ring_azimuth(c, d, psi_max, h, (2.0 * u2 - 1.0).abs().min(1.0));
             (-co, -side * s)
         } else {
-            let (s, co) = (2.0 * PI * u2).sin_cos();
-            (co, s)
+            turn(u2)
         };
         std::array::from_fn(|k| ct * r[k] + st * (cp * t[k] + sp * b[k]))
     }
 
+    /// The density of wo at wi (a sample's too: computed from the wo drawn, as the tabulated mechanism's).
     #[inline]
     pub(super) fn pdf(&self, ws: &[(usize, f64); 2], wi: V3, wo: V3, cos_pdf: f64) -> f64 {
+        let loc = self.locate(wi, wo);
+        let mut p = 0.0;
+        for &(k, w) in ws {
+            if w > 0.0 {
+                p += w * match (&self.nodes[k], loc) {
+                    (None, _) => cos_pdf,
+                    (Some(dist), Some(l)) if l.den > 0.0 => dist.cell_pdf(l.cell) / l.den * l.azimuth,
+                    _ => 0.0,
+                };
+            }
+        }
+        p
+    }
+
+    /// Where wo lies in the tables at wi ([`ExactAt`]); `None` outside them (beyond θmax, or no half vector).
+    #[inline]
+    fn locate(&self, wi: V3, wo: V3) -> Option<ExactAt> {
         // The angle to the axis by atan2(|d × a|, d·a): acos loses digits near the axis, where the lobe is.
         let (d, a, jac) = if self.lobe == Input::NH {
             let s = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
             let len = dot(s, s).sqrt();
             if len.is_nan() || len <= 0.0 {
-                return 0.0;
+                return None;
             }
             let sign = if s[2] < 0.0 { -1.0 / len } else { 1.0 / len };
             let h = [s[0] * sign, s[1] * sign, s[2] * sign];
@@ -153,9 +185,10 @@ impl Exact {
         let x = [d[1] * a[2] - d[2] * a[1], d[2] * a[0] - d[0] * a[2], d[0] * a[1] - d[1] * a[0]];
         let (sin_t, cos_t) = (dot(x, x).sqrt(), dot(d, a));
         let v = sin_t.atan2(cos_t) / self.theta_max;
-        let inside = (0.0..1.0).contains(&v);
-        let i = ((v * EXACT_CELLS as f64) as usize).min(EXACT_CELLS - 1);
-        let den = self.measure[i] * jac;
+        if !(0.0..1.0).contains(&v) {
+            return None;
+        }
+        let cell = ((v * EXACT_CELLS as f64) as usize).min(EXACT_CELLS - 1);
         // VR: the azimuth's density on the ring relative to uniform, 2π·max(cosθₒ, 0)/(2H) (1 on a ring wholly
         // below the horizon, whose azimuth is uniform).
         let azimuth = if self.lobe == Input::VR {
@@ -169,18 +202,18 @@ impl Exact {
         } else {
             1.0
         };
-        let mut p = 0.0;
-        for &(k, w) in ws {
-            if w > 0.0 {
-                p += w * match &self.nodes[k] {
-                    None => cos_pdf,
-                    Some(_) if !inside || den.is_nan() || den <= 0.0 => 0.0,
-                    Some(dist) => dist.pdf(v) / den * azimuth,
-                };
-            }
-        }
-        p
+        Some(ExactAt { cell, den: self.measure[cell] * jac, azimuth })
     }
+}
+
+/// Where a wo lies in the exact mechanism's tables: its cell in θ about the axis, the cell's measure times
+/// dωₒ/dω about the axis (4|wi·h| for NH, 1 for VR), and (VR) the azimuth's density on the ring relative to
+/// uniform.
+#[derive(Clone, Copy, Debug)]
+struct ExactAt {
+    cell: usize,
+    den: f64,
+    azimuth: f64,
 }
 
 /// [`band_edges`] of n bands and n·4π·(width of each band in sin²(θ/2)).
@@ -257,7 +290,7 @@ mod tests {
                 assert!(c + d * psi_max.cos() >= -1e-12);
                 for t in [0.0, 0.1, 0.5, 0.9, 1.0] {
                     let (psi, sp, cp) = ring_azimuth(c, d, psi_max, h, t);
-                    assert!(psi >= 0.0 && psi <= psi_max && sp == psi.sin() && cp == psi.cos());
+                    assert!(psi >= 0.0 && psi <= psi_max && (sp - psi.sin()).abs() < 1e-15 && (cp - psi.cos()).abs() < 1e-15);
                     assert!((c * psi + d * psi.sin() - t * h).abs() < 1e-12 * h.max(1.0), "t {t}");
                 }
             }

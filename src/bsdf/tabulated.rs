@@ -28,7 +28,7 @@ fn azimuth_of(wi: V3) -> Turn {
 /// by `turn`.
 #[inline]
 fn half_at(ct: f64, st: f64, x2: f64, turn: Turn) -> V3 {
-    let (sp, cp) = (2.0 * PI * x2).sin_cos();
+    let (cp, sp) = super::turn(x2);
     let (c, s) = turn;
     [st * (cp * c - sp * s), st * (sp * c + cp * s), ct]
 }
@@ -46,17 +46,27 @@ fn row_theta(i: usize) -> f64 {
     FRAC_PI_2 * x * x
 }
 
-/// Table coordinates of the half vector of (wi, wo) (azimuth in the frame turned by `turn`): the row among
-/// [`ROWS`] and the position in it (a, in [0, 1], linear in sin²(θₕ/2) between the row's edges `bands`), the
-/// column among [`COLS`] and the position in it (b, in [0, 1], linear in φₕ), and dωₒ/dωₕ = 4|wi·h|; `None`
-/// when wo = −wi (no half vector).
+/// Where a half vector falls in the tables: the row among [`ROWS`] and the position in it (`a`, in [0, 1], linear
+/// in sin²(θₕ/2) between the row's edges), the column among [`COLS`] and the position in it (`b`, in [0, 1],
+/// linear in φₕ), and dωₒ/dωₕ = 4|wi·h| (`jac`).
+#[derive(Clone, Copy, Debug)]
+struct Coords {
+    row: usize,
+    a: f64,
+    col: usize,
+    b: f64,
+    jac: f64,
+}
+
+/// [`Coords`] of the half vector of (wi, wo) (azimuth in the frame turned by `turn`); `None` when wo = −wi (no
+/// half vector).
 ///
 /// No trigonometry: from the unnormalised sum s = wi + wo (turned into the table's frame, sign chosen so
 /// h.z ≥ 0), sin²(θₕ/2) = (1 − cosθₕ)/2 = |sₓᵧ|²/(2|s|(|s| + |s_z|)), without the cancellation of 1 − cosθₕ near
 /// the normal where the lobes are; the row by [`row_of`]; the column and the angle within it by
 /// [`column_and_position`].
 #[inline]
-fn table_coords(wi: V3, wo: V3, turn: Turn, bands: &[f64], guide: &[u8]) -> Option<(usize, f64, usize, f64, f64)> {
+fn table_coords(wi: V3, wo: V3, turn: Turn, bands: &[f64], guide: &[u8]) -> Option<Coords> {
     let s = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
     let len2 = dot(s, s);
     if len2.is_nan() || len2 <= 0.0 {
@@ -72,7 +82,7 @@ fn table_coords(wi: V3, wo: V3, turn: Turn, bands: &[f64], guide: &[u8]) -> Opti
     let a = ((sh - s0) / (s1 - s0)).clamp(0.0, 1.0);
     let jac = 4.0 * dot(wi, s).abs() / len;
     let (col, b) = column_and_position(hx, hy);
-    Some((row, a, col, b, jac))
+    Some(Coords { row, a, col, b, jac })
 }
 
 /// The guide's resolution: sin²(θₕ/2) in [2⁻²⁴, 1) by its binary exponent and first [`GUIDE_BITS`] mantissa
@@ -108,14 +118,13 @@ fn row_guide(bands: &[f64]) -> Vec<u8> {
 }
 
 /// The row whose band [bands\[row\], bands\[row + 1\]) holds sh = sin²(θₕ/2) (the last row from 0.5 on): the
-/// guide's entry, then up while the next edge is ≤ sh.
+/// guide's entry, then one row up if the next edge is ≤ sh — a guide entry holds at most one row edge (every row
+/// is wider than an entry; `one_step_past_the_guide_finds_every_row`), so one comparison, without a branch,
+/// finds it.
 #[inline]
 fn row_of(sh: f64, bands: &[f64], guide: &[u8]) -> usize {
-    let mut row = usize::from(guide[guide_index(sh)]);
-    while row + 1 < ROWS && bands[row + 1] <= sh {
-        row += 1;
-    }
-    row
+    let row = usize::from(guide[guide_index(sh)]).min(ROWS - 2);
+    row + usize::from(bands[row + 1] <= sh)
 }
 
 /// atan z for |z| ≤ tan(π/16) ≈ 0.199 (an angle within one column): the Taylor series to z²¹, whose remainder
@@ -146,30 +155,23 @@ fn column_and_position(x: f64, y: f64) -> (usize, f64) {
 }
 
 /// (cos, sin) of the column edges k·2π/[`COLS`] inside the first quadrant, k = 1 … COLS/4 − 1.
-const EDGES: [(f64, f64); COLS / 4 - 1] = {
-    // cos and sin of kπ/16 (COLS = 32), to 17 digits.
-    [
-        (0.980_785_280_403_230_4, 0.195_090_322_016_128_26),
-        (0.923_879_532_511_286_7, 0.382_683_432_365_089_8),
-        (0.831_469_612_302_545_2, 0.555_570_233_019_602_2),
-        (std::f64::consts::FRAC_1_SQRT_2, std::f64::consts::FRAC_1_SQRT_2),
-        (0.555_570_233_019_602_2, 0.831_469_612_302_545_2),
-        (0.382_683_432_365_089_8, 0.923_879_532_511_286_7),
-        (0.195_090_322_016_128_26, 0.980_785_280_403_230_4),
-    ]
-};
+const EDGES: [(f64, f64); COLS / 4 - 1] = SIXTEENTHS;
 
 /// The quadrant of (x, y) and (a, b): (x, y) turned back by the quadrant's multiple of 90°, so a > 0, b ≥ 0
 /// (a = b = 0 for the zero vector, quadrant 1).
+///
+/// Without branches (the quadrant of a random direction is not predictable): the half-turn first, then the
+/// quarter-turn, each a select.
 #[inline]
 fn quadrant(x: f64, y: f64) -> (usize, f64, f64) {
-    if y >= 0.0 {
-        if x > 0.0 { (0, x, y) } else { (1, y, -x) }
-    } else if x <= 0.0 {
-        (2, -x, -y)
-    } else {
-        (3, -y, x)
-    }
+    // Quadrants 2 and 3 (y < 0) turn by 180° first; quadrants 1 and 3 by 90° more (1: x ≤ 0 above the axis,
+    // 3: x > 0 below it).
+    // y < 0, or NaN (which the comparison y ≥ 0 refuses).
+    let half = y.partial_cmp(&0.0).is_none_or(|o| o.is_lt());
+    let quarter = (x > 0.0) == half;
+    let (x1, y1) = if half { (-x, -y) } else { (x, y) };
+    let (a, b) = if quarter { (y1, -x1) } else { (x1, y1) };
+    (2 * usize::from(half) + usize::from(quarter), a, b)
 }
 
 /// The tabulated mechanism: a table per incidence node.
@@ -278,22 +280,27 @@ impl Tabulated {
         }
     }
 
+    /// The density of wo at wi: Σ w·(density in ωₕ) over the nodes' tables at wo's half vector, divided by the
+    /// Jacobian once; empty nodes add w·cosθₒ/π.
+    ///
+    /// A sample's density is this function of the wo drawn, not of the half vector it was drawn at: wo holds
+    /// that half vector only to its rounding (an error of about ε/θₕ near the pole), so only a density computed
+    /// from wo is the one `pdf` gives for the same wo.
     #[inline]
     pub(super) fn pdf(&self, at: &TabAt, wi: V3, wo: V3, cos_pdf: f64) -> f64 {
         let tc = table_coords(wi, wo, at.turn, &self.bands, &self.guide);
-        // Σ w·(density in ωₕ) over the tables, divided by the Jacobian once; empty nodes add w·cosθₒ/π.
         let (mut empty, mut tables) = (0.0, 0.0);
         for &(k, w) in &at.ws {
             if w > 0.0 {
                 match (&self.nodes[k], tc) {
                     (None, _) => empty += w * cos_pdf,
-                    (Some(d), Some((row, a, col, b, jac))) if jac > 0.0 => tables += w * bilinear(d.corners(row, col), a, b),
+                    (Some(d), Some(c)) if c.jac > 0.0 => tables += w * bilinear(d.corners(c.row, c.col), c.a, c.b),
                     _ => {}
                 }
             }
         }
         match tc {
-            Some((.., jac)) if tables > 0.0 => empty + tables / jac,
+            Some(c) if tables > 0.0 => empty + tables / c.jac,
             _ => empty,
         }
     }
@@ -415,7 +422,7 @@ mod tests {
             let turn = (0.3f64.cos(), 0.3f64.sin());
             let h = half_from(x1, x2, turn);
             let wo = reflect(wi, h);
-            let (row, a, col, b, jac) = table_coords(wi, wo, turn, &bands, &guide).unwrap();
+            let Coords { row, a, col, b, jac } = table_coords(wi, wo, turn, &bands, &guide).unwrap();
             assert_eq!(row, (x1 * ROWS as f64) as usize, "{x1}");
             let th = FRAC_PI_2 * x1 * x1;
             let sh = (0.5 * th).sin().powi(2);
@@ -466,6 +473,55 @@ mod tests {
                 assert_eq!(col, (p as usize) % COLS, "({x}, {y})");
                 assert!((col as f64 + pos - p).abs() < 1e-13, "({x}, {y})");
             }
+        }
+    }
+
+    #[test]
+    fn quadrants_match_the_branching_definition() {
+        // The definition the branch-free form replaces, on the axes, signed zeros and random points.
+        let want = |x: f64, y: f64| {
+            if y >= 0.0 {
+                if x > 0.0 { (0, x, y) } else { (1, y, -x) }
+            } else if x <= 0.0 {
+                (2, -x, -y)
+            } else {
+                (3, -y, x)
+            }
+        };
+        let mut rng = crate::base::rng::Rng(0x0ADC);
+        let mut pts = vec![];
+        for x in [0.0, -0.0, 1.0, -1.0, 1e-300, -1e-300] {
+            for y in [0.0, -0.0, 1.0, -1.0, 1e-300, -1e-300] {
+                pts.push((x, y));
+            }
+        }
+        pts.extend((0..10_000).map(|_| (2.0 * rng.unit() - 1.0, 2.0 * rng.unit() - 1.0)));
+        for (x, y) in pts {
+            let (q, a, b) = quadrant(x, y);
+            let (wq, wa, wb) = want(x, y);
+            assert!(q == wq && a.to_bits() == wa.to_bits() && b.to_bits() == wb.to_bits(), "({x}, {y}): {:?} against {:?}", (q, a, b), (wq, wa, wb));
+        }
+    }
+
+    #[test]
+    fn one_step_past_the_guide_finds_every_row() {
+        // The row by search against the row by guide and one step, at every guide entry's two ends, at every band
+        // edge and its neighbours, and at random values over the octaves.
+        let bands = band_edges(ROWS, row_theta);
+        let guide = row_guide(&bands);
+        let search = |sh: f64| (bands.partition_point(|&b| b <= sh).max(1) - 1).min(ROWS - 1);
+        let mut pts = vec![0.0, 0.5, 1.0];
+        for g in 0..=GUIDE as u64 {
+            let lo = f64::from_bits((GUIDE_BASE + g) << (52 - GUIDE_BITS));
+            pts.extend([lo, lo.next_down()]);
+        }
+        for &b in &bands {
+            pts.extend([b, b.next_up(), b.next_down()]);
+        }
+        let mut rng = crate::base::rng::Rng(0x6D1E);
+        pts.extend((0..100_000).map(|_| 0.5 * 2f64.powf(-30.0 * rng.unit())));
+        for sh in pts.into_iter().filter(|v| (0.0..=1.0).contains(v)) {
+            assert_eq!(row_of(sh, &bands, &guide), search(sh), "sin²(θₕ/2) = {sh:e}");
         }
     }
 
