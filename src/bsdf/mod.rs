@@ -452,6 +452,8 @@ const THIRTY_SECONDS: [(f64, f64); 32] = {
 pub struct Sampler {
     target: Target,
     cos_frac: f64,
+    /// 1/c and 1/(1 − c) for the cosine fraction c: u₁ rescaled within its part by a product.
+    inv_frac: [f64; 2],
     body: Body,
     pub report: Report,
 }
@@ -516,6 +518,7 @@ impl Sampler {
         let make = |body: Body, empty: Vec<(f64, f64)>, mechanism: Mechanism| Sampler {
             target: target.clone(),
             cos_frac: opts.cosine_fraction,
+            inv_frac: [1.0 / opts.cosine_fraction, 1.0 / (1.0 - opts.cosine_fraction)],
             body,
             report: Report { mechanism, isotropic, build: Duration::ZERO, empty_nodes: empty, candidates: vec![] },
         };
@@ -607,9 +610,9 @@ impl Sampler {
         let (u1, u2) = (u[0].clamp(0.0, ONE_MINUS), u[1].clamp(0.0, ONE_MINUS));
         let c = self.cos_frac;
         if u1 < c {
-            return cosine_sample((u1 / c).min(ONE_MINUS), u2);
+            return cosine_sample((u1 * self.inv_frac[0]).min(ONE_MINUS), u2);
         }
-        let v = ((u1 - c) / (1.0 - c)).clamp(0.0, ONE_MINUS);
+        let v = ((u1 - c) * self.inv_frac[1]).clamp(0.0, ONE_MINUS);
         match (&self.body, &at.tab) {
             (Body::Tabulated(t), Some(ta)) => t.sample(ta, at.wi, v, u2),
             (Body::Exact(e), _) => e.sample(&at.exact, at.wi, v, u2),
