@@ -214,41 +214,44 @@ impl Samples {
     pub fn new(t: &Measured, stride: usize) -> Samples {
         let stride = stride.max(1);
         let rows: Vec<usize> = (0..DIMS[0]).step_by(stride).collect();
-        let parts: Vec<(Vec<Vec<f64>>, [Vec<f64>; 3], Vec<f64>)> = rows
+        let dirs = measured::EntryDirs::new();
+        let per_row = DIMS[1].div_ceil(stride) * DIMS[2].div_ceil(stride);
+        // Per row: the N_INPUTS columns, m in three channels, cos θ_i, ln(1 + m·cos θ_i) in three channels.
+        let parts: Vec<Vec<Vec<f64>>> = rows
             .into_par_iter()
             .map(|i| {
-                let mut cols = vec![vec![]; N_INPUTS];
-                let (mut m, mut cos) = (<[Vec<f64>; 3]>::default(), vec![]);
+                let mut out: Vec<Vec<f64>> = (0..N_INPUTS + 7).map(|_| Vec::with_capacity(per_row)).collect();
                 for j in (0..DIMS[1]).step_by(stride) {
                     for k in (0..DIMS[2]).step_by(stride) {
                         let e = measured::index(i, j, k);
                         let (Some(r), Some(g), Some(b)) = (t.value(0, e), t.value(1, e), t.value(2, e)) else { continue };
-                        let v = [r, g, b];
-                        let (l, w) = measured::entry_dirs(i, j, k);
+                        let (l, w) = dirs.at(i, j, k);
                         if !(l[2] > 0.0 && w[2] > 0.0) {
                             continue;
                         }
                         let x = crate::frame::inputs_from_dirs(l, w);
-                        for (c, xv) in cols.iter_mut().zip(x) {
+                        for (c, xv) in out.iter_mut().zip(x) {
                             c.push(xv);
                         }
-                        for c in 0..3 {
-                            m[c].push(v[c]);
+                        for (c, v) in [r, g, b].into_iter().enumerate() {
+                            out[N_INPUTS + c].push(v);
+                            out[N_INPUTS + 4 + c].push((v * l[2]).ln_1p());
                         }
-                        cos.push(l[2]);
+                        out[N_INPUTS + 3].push(l[2]);
                     }
                 }
-                (cols, m, cos)
+                out
             })
             .collect();
-        let mut cols = vec![vec![]; N_INPUTS];
-        let (mut m, mut cos) = (<[Vec<f64>; 3]>::default(), vec![]);
-        for (pc, pm, pcos) in parts {
-            cols.iter_mut().zip(pc).for_each(|(a, b)| a.extend(b));
-            m.iter_mut().zip(pm).for_each(|(a, b)| a.extend(b));
-            cos.extend(pcos);
+        let mut all: Vec<Vec<f64>> = (0..N_INPUTS + 7).map(|c| Vec::with_capacity(parts.iter().map(|p| p[c].len()).sum())).collect();
+        for p in parts {
+            all.iter_mut().zip(p).for_each(|(a, b)| a.extend(b));
         }
-        let log_m = std::array::from_fn(|c| m[c].iter().zip(&cos).map(|(v, k)| (v * k).ln_1p()).collect());
+        let mut all = all.into_iter();
+        let cols: Vec<Vec<f64>> = all.by_ref().take(N_INPUTS).collect();
+        let m: [Vec<f64>; 3] = std::array::from_fn(|_| all.next().unwrap_or_default());
+        let cos = all.next().unwrap_or_default();
+        let log_m = std::array::from_fn(|_| all.next().unwrap_or_default());
         Samples { stride, cols, m, cos, log_m, fit_scale: true }
     }
 
