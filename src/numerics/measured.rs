@@ -539,7 +539,7 @@ fn fit_on(
         None => (free.to_vec(), free.to_vec(), vec![]),
     };
     if free.is_empty() {
-        let r = residual(channels, &base, &fine, metric);
+        let r = residual(channels, &base, fine, metric);
         let best = vec![MeasuredCandidate { params: base, residual: r, refined: false }];
         return Ok(MeasuredFit { best, evaluated: 1, entries: fine.len(), grid_entries: fine.len(), refinement: opts.refinement, lm: LmStats::default(), fixed });
     }
@@ -555,7 +555,7 @@ fn fit_on(
         // Every start on the grid's entries (cheap), then the best result polished on the fine ones.
         let (coarse_best, mut stats) = lm_refine(channels, g, coarse_ref, &free, &starts, None, metric)?;
         if let Some(c) = coarse_best {
-            let (cand, polish) = lm_refine(channels, g, &fine, &free, &[&c.params], Some(c.residual.scale), metric)?;
+            let (cand, polish) = lm_refine(channels, g, fine, &free, &[&c.params], Some(c.residual.scale), metric)?;
             stats.iterations += polish.iterations;
             stats.evaluations += polish.evaluations;
             lm_best = cand;
@@ -563,14 +563,14 @@ fn fit_on(
         lm = stats;
     } else if opts.refine {
         if let Some(b) = best.first() {
-            let (cand, used) = super::fit::refine(&|p| residual(channels, p, &fine, metric).error, &b.params, &free);
+            let (cand, used) = super::fit::refine(&|p| residual(channels, p, fine, metric).error, &b.params, &free);
             evaluated += used;
             best.insert(0, cand);
         }
     }
     let mut out: Vec<MeasuredCandidate> = best
         .par_iter()
-        .map(|c| MeasuredCandidate { params: c.params.clone(), residual: residual(channels, &c.params, &fine, metric), refined: c.refined })
+        .map(|c| MeasuredCandidate { params: c.params.clone(), residual: residual(channels, &c.params, fine, metric), refined: c.refined })
         .collect();
     out.extend(lm_best);
     out.sort_by(|a, b| a.residual.error.total_cmp(&b.residual.error));
