@@ -91,8 +91,12 @@ pub(crate) fn entry_angles(i: usize, j: usize, k: usize) -> [f64; 3] {
 /// L and V in the local frame for half/difference angles (φ_h = 0): D = (sinθ_d cosφ_d, sinθ_d sinφ_d,
 /// cosθ_d) in H's frame turned by θ_h about the bitangent is L; V is L mirrored about H.
 pub(crate) fn dirs_from_angles([th, td, pd]: [f64; 3]) -> (V3, V3) {
-    let d = [td.sin() * pd.cos(), td.sin() * pd.sin(), td.cos()];
-    let (s, c) = th.sin_cos();
+    dirs_from_sin_cos(th.sin_cos(), td.sin_cos(), pd.sin_cos())
+}
+
+/// [`dirs_from_angles`] from the sines and cosines of θ_h, θ_d and φ_d (for tables of them per index).
+pub(crate) fn dirs_from_sin_cos((s, c): (f64, f64), (sd, cd): (f64, f64), (sp, cp): (f64, f64)) -> (V3, V3) {
+    let d = [sd * cp, sd * sp, cd];
     let l = [c * d[0] + s * d[2], d[1], -s * d[0] + c * d[2]];
     let h = [s, 0.0, c];
     let lh = l[0] * h[0] + l[1] * h[1] + l[2] * h[2];
@@ -103,6 +107,24 @@ pub(crate) fn dirs_from_angles([th, td, pd]: [f64; 3]) -> (V3, V3) {
 /// L and V of entry `(i, j, k)` under the convention.
 pub(crate) fn entry_dirs(i: usize, j: usize, k: usize) -> (V3, V3) {
     dirs_from_angles(entry_angles(i, j, k))
+}
+
+/// [`entry_dirs`] of many entries: the sines and cosines of each axis's angles computed once.
+pub(crate) struct EntryDirs {
+    axes: [Vec<(f64, f64)>; 3],
+}
+
+impl EntryDirs {
+    pub(crate) fn new() -> EntryDirs {
+        EntryDirs {
+            axes: std::array::from_fn(|a| (0..DIMS[a]).map(|n| entry_angles(if a == 0 { n } else { 0 }, if a == 1 { n } else { 0 }, if a == 2 { n } else { 0 })[a].sin_cos()).collect()),
+        }
+    }
+
+    /// [`entry_dirs`]`(i, j, k)`, bit for bit.
+    pub(crate) fn at(&self, i: usize, j: usize, k: usize) -> (V3, V3) {
+        dirs_from_sin_cos(self.axes[0][i], self.axes[1][j], self.axes[2][k])
+    }
 }
 
 /// (θ_h, θ_d, φ_d ∈ (−π, π]) of unit L and V in the local frame; `None` where L + V = 0.
@@ -467,6 +489,19 @@ impl Evaluator for Channel {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn entry_dirs_from_tables_of_sines_are_entry_dirs() {
+        let dirs = EntryDirs::new();
+        for i in 0..DIMS[0] {
+            for j in (0..DIMS[1]).step_by(7) {
+                for k in 0..DIMS[2] {
+                    let (a, b) = (dirs.at(i, j, k), entry_dirs(i, j, k));
+                    assert_eq!([a.0, a.1].map(|d| d.map(f64::to_bits)), [b.0, b.1].map(|d| d.map(f64::to_bits)), "{i} {j} {k}");
+                }
+            }
+        }
+    }
     use crate::base::rng::Rng;
 
     /// A table whose every stored value names its entry and channel.

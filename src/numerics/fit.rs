@@ -19,7 +19,7 @@ use super::accuracy::{
     PAPERS_ANGLES,
 };
 use super::grad::{Gradient, Var};
-use super::lm::{minimize, Normal};
+use super::lm::{is_exact, minimize_near, LmResult, Normal};
 use super::{lobe_inputs, Diagnostic};
 use crate::backend::Evaluator;
 use crate::base::json::{self, Named};
@@ -63,9 +63,10 @@ impl Metric {
 /// Intervals of a parameter's default grid (stage 1) when no step is given.
 pub const GRID_INTERVALS: f64 = 40.0;
 
-/// Intervals of a parameter's coarse grid before a Levenberg–Marquardt refinement (no step given): the grid
-/// only has to put a start in the right basin; the exact Jacobian does the rest.
-pub const LM_GRID_INTERVALS: f64 = 8.0;
+/// Values of a parameter's coarse grid before a Levenberg–Marquardt refinement (no step given): the centres of
+/// this many equal cells of [lo, hi]. The grid only has to put a start in the right basin, the exact Jacobian
+/// does the rest; and no start lies on a bound, where the bounds' transform is flat ([`super::lm`], "Bounds").
+pub const LM_GRID_POINTS: f64 = 5.0;
 
 /// How many of the grid's best points a Levenberg–Marquardt refinement starts from.
 pub const LM_STARTS: usize = 4;
@@ -78,7 +79,7 @@ pub const LM_MAX_ITERATIONS: usize = 200;
 pub enum Refinement {
     /// Levenberg–Marquardt on the metric's least-squares form with the exact Jacobian
     /// ([`super::grad::Gradient`], [`super::lm`]) from the [`LM_STARTS`] best points of a coarse grid
-    /// ([`LM_GRID_INTERVALS`]).
+    /// ([`LM_GRID_POINTS`]).
     #[default]
     Lm,
     /// The fine grid ([`GRID_INTERVALS`]) and golden section or Nelder–Mead around its best point.
@@ -103,21 +104,28 @@ pub struct LmStats {
     pub evaluations: usize,
 }
 
-/// The parameters of `free` that move (lo < hi), with the coarse grid of [`LM_GRID_INTERVALS`] where no step
-/// was given; a parameter whose range is one value (lo == hi) is fixed there in `base` and named in the second
-/// list instead.
-pub fn lm_grid(free: &[FreeParam], base: &mut [f64]) -> (Vec<FreeParam>, Vec<String>) {
-    let (mut moving, mut fixed) = (vec![], vec![]);
+/// The parameters of `free` that move (lo < hi), and the same with the coarse grid of [`LM_GRID_POINTS`] cell
+/// centres where no step was given (their lo and hi the first and last centre: the grid's search only; the
+/// refinement moves over the first list's whole ranges); a parameter whose range is one value (lo == hi) is
+/// fixed there in `base` and named in the third list instead.
+pub fn lm_grid(free: &[FreeParam], base: &mut [f64]) -> (Vec<FreeParam>, Vec<FreeParam>, Vec<String>) {
+    let (mut moving, mut grid, mut fixed) = (vec![], vec![], vec![]);
     for f in free {
         if f.lo == f.hi {
             base[f.index] = f.lo;
             fixed.push(f.name.clone());
-        } else {
-            let step = f.step.or(Some((f.hi - f.lo) / LM_GRID_INTERVALS));
-            moving.push(FreeParam { step, ..f.clone() });
+            continue;
         }
+        moving.push(f.clone());
+        grid.push(match f.step {
+            Some(_) => f.clone(),
+            None => {
+                let h = (f.hi - f.lo) / LM_GRID_POINTS;
+                FreeParam { lo: f.lo + h / 2.0, hi: f.hi - h / 2.0, step: Some(h), ..f.clone() }
+            }
+        });
     }
-    (moving, fixed)
+    (moving, grid, fixed)
 }
 
 /// A parameter to search: its index in the parameter vector, its range — the interval [lo, hi] — and the
@@ -259,6 +267,15 @@ impl<'a> Scorer<'a> {
         Some(n_eq)
     }
 
+    /// Σ y² of the targets the least-squares form of the metric ([`Scorer::normal`]) is measured from: the
+    /// reference's values over the papers' grid (mean-abs, max-abs), 1 per epicentre (epicenter: relative).
+    fn targets(&self) -> f64 {
+        match self.metric {
+            Metric::MeanAbs | Metric::MaxAbs => (1..=self.n_max).map(|n| self.reference.row(n).iter().map(|r| r * r).sum::<f64>()).sum(),
+            Metric::Epicenter => (EPICENTER_FROM..=self.n_max).filter(|n| self.reference.at_epicenter(*n) != 0.0).count() as f64,
+        }
+    }
+
     /// The metric for one full parameter vector (n is replaced as the metric sweeps it). A NaN anywhere
     /// scores +inf. Mean |Δ| is [`papers_mean`], bit for bit what [`accuracy`](super::accuracy::accuracy)
     /// reports as `mean_abs_grid` for the same parameters.
@@ -366,7 +383,13 @@ pub fn fit_with(
     let mut best: Option<Candidate> = None;
     if !moving.is_empty() {
         let starts: Vec<Vec<f64>> = rep.best.iter().take(LM_STARTS).map(|c| c.params.clone()).collect();
+        let targets = scorer.targets();
+        let mut found: Vec<LmResult> = vec![];
         for start in &starts {
+            // No start can do better than one that fits exactly (docs of super::lm, "Several starts").
+            if found.iter().any(|r| is_exact(r.cost, targets)) {
+                break;
+            }
             let params_of = |x: &[f64]| {
                 let mut p = start.clone();
                 for (f, v) in moving.iter().zip(x) {
@@ -377,16 +400,21 @@ pub fn fit_with(
             let eval = |x: &[f64]| scorer.normal(grad, &params_of(x), &var_of);
             let x0: Vec<f64> = moving.iter().map(|f| start[f.index]).collect();
             let bounds: Vec<Option<(f64, f64)>> = moving.iter().map(|f| Some((f.lo, f.hi))).collect();
-            let Some(r) = minimize(&eval, &x0, &bounds, LM_MAX_ITERATIONS) else { continue };
+            let Some(r) = minimize_near(&eval, &x0, &bounds, LM_MAX_ITERATIONS, &found) else { continue };
             lm.starts += 1;
             lm.iterations += r.iterations;
             lm.evaluations += r.evaluations;
+            // A start that joined an earlier one's minimum adds nothing new.
+            if r.joined.is_some() {
+                continue;
+            }
             let params = params_of(&r.x);
             let score = scorer.score(&params);
             rep.evaluated += 1;
             if best.as_ref().is_none_or(|b| score < b.score) {
                 best = Some(Candidate { params, score, refined: true });
             }
+            found.push(r);
         }
     }
     if let Some(b) = best.filter(|b| rep.best.first().is_none_or(|g| b.score < g.score)) {
@@ -738,7 +766,8 @@ mod tests {
             let o = FitOptions { metric, n_max: 40, ..Default::default() };
             let r = fit_with(&k, Some(&g), &[50.0, 1.0, 1.0], Input::NH, b.ev.as_ref(), &[1.0], Input::NH, &free, &o, &|| {}).unwrap();
             let best = &r.best[0];
-            assert!(best.refined && r.refinement == Refinement::Lm && r.lm.starts == LM_STARTS, "{metric:?}: {r:?}");
+            // Every metric's least-squares form is fitted exactly here: the first start ends the search.
+            assert!(best.refined && r.refinement == Refinement::Lm && r.lm.starts == 1, "{metric:?}: {r:?}");
             // The epicentre sees s·exp(−1.2·e) only: any (s, e) on that curve is exact there.
             let exact = (best.params[1] - 1.0).abs() < 1e-9 && (best.params[2] - 1.0).abs() < 1e-9;
             assert!(exact || metric == Metric::Epicenter, "{metric:?}: {best:?}");
@@ -784,6 +813,36 @@ mod tests {
         let e = fit(b.ev.as_ref(), &[1.0], Input::NH, b.ev.as_ref(), &[1.0], Input::NH, &free, &FitOptions::default(), &|| {});
         assert!(e.is_err());
         assert!(FreeParam { index: 1, name: "a".into(), lo: 0.0, hi: 1e9, step: Some(1.0) }.grid().is_err());
+    }
+
+    #[test]
+    fn the_levenberg_marquardt_grid_is_cell_centres_inside_the_range() {
+        let mut rng = crate::base::rng::Rng(0x1f3d_5b79);
+        for _ in 0..100 {
+            let lo = rng.unit() * 10.0 - 5.0;
+            let hi = lo + 1e-3 + rng.unit() * 10.0;
+            let step = (rng.unit() < 0.3).then(|| (hi - lo) / 7.0);
+            let free = [
+                FreeParam { index: 1, name: "a".into(), lo, hi, step },
+                FreeParam { index: 2, name: "b".into(), lo: hi, hi, step: None },
+            ];
+            let mut base = [0.0; 3];
+            let (moving, grid, fixed) = lm_grid(&free, &mut base);
+            // The one-value range is fixed; the other moves over its whole range.
+            assert_eq!((base[2], fixed), (hi, vec!["b".to_string()]));
+            assert_eq!(moving, free[..1]);
+            let g = grid[0].grid().unwrap();
+            if step.is_some() {
+                assert_eq!(g, free[0].grid().unwrap());
+                continue;
+            }
+            let h = (hi - lo) / LM_GRID_POINTS;
+            assert_eq!(g.len(), LM_GRID_POINTS as usize, "{lo}..{hi}: {g:?}");
+            for (i, v) in g.iter().enumerate() {
+                assert!((v - (lo + (i as f64 + 0.5) * h)).abs() <= 1e-12 * (1.0 + v.abs()), "{lo}..{hi}: {g:?}");
+                assert!(*v > lo && *v < hi);
+            }
+        }
     }
 
     #[test]

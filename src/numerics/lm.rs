@@ -16,8 +16,18 @@
 //! # Stopping
 //! Σ r² = 0; or the scaled gradient max |Jᵀr|ₐ / √((JᵀJ)ₐₐ·Σr²) (the cosine between the residual and each
 //! column) below 10⁻¹²; or an accepted step below 10⁻¹⁰·(1 + |t|) in every variable (Levenberg–Marquardt
-//! converges quadratically near a minimum, so the next step would be far below the 10⁻⁶ a fit must reach); or λ
+//! converges quadratically near a minimum, so the next step would be far below the 10⁻⁶ a fit must reach); or
+//! the undamped (Gauss–Newton) step −(JᵀJ)⁻¹·Jᵀr at the current point below 10⁻¹⁴·(1 + |t|) in every variable
+//! (the point is a minimum to rounding: a start there, such as the last refinement of a fit on more entries
+//! whose minimum is the same, ends after its first evaluation instead of confirming it with a second); or λ
 //! past 10¹⁶ (no decrease possible in floating point); or `max_iterations`.
+//!
+//! # Several starts
+//! [`minimize_near`] is given the results of the starts run before: a start whose point comes within
+//! [`JOIN`] of one of them (a fraction of each bounded variable's range, of 1 + |x| for an unbounded one) at a
+//! cost no lower than that result's stops there, since it is converging to a minimum already found
+//! ([`LmResult::joined`]). A start whose Σ r² is at most [`EXACT`] times the targets' Σ y² fits exactly
+//! ([`is_exact`]): no other start can do better, and the callers run no more of them.
 
 /// The normal equations of a least-squares problem at one point: `cost` = Σ r², `jtj` = JᵀJ (row-major k×k)
 /// and `jtr` = Jᵀr, over the derivatives by the problem's k variables.
@@ -69,6 +79,30 @@ pub struct LmResult {
     pub cost: f64,
     pub iterations: usize,
     pub evaluations: usize,
+    /// [`minimize_near`]: the earlier result (its index) this start stopped beside, its minimum already found.
+    pub joined: Option<usize>,
+}
+
+/// How near (module docs, "Several starts") a start must come to an earlier result to stop there.
+pub const JOIN: f64 = 1e-4;
+
+/// Σ r² at most this times the targets' Σ y² is an exact fit (module docs, "Several starts").
+pub const EXACT: f64 = 1e-20;
+
+/// Whether Σ r² = `cost` fits targets whose Σ y² is `targets` exactly ([`EXACT`]).
+pub fn is_exact(cost: f64, targets: f64) -> bool {
+    cost <= EXACT * targets
+}
+
+/// Whether `x` lies within [`JOIN`] of `y` in every variable (of the range where bounded, of 1 + |y| where not).
+fn beside(x: &[f64], y: &[f64], bounds: &[Option<(f64, f64)>]) -> bool {
+    x.iter().zip(y).zip(bounds).all(|((x, y), b)| {
+        let width = match b {
+            Some((lo, hi)) => hi - lo,
+            None => 1.0 + y.abs(),
+        };
+        (x - y).abs() <= JOIN * width
+    })
 }
 
 /// The variables' map between t (what the steps move) and the problem's x (module docs, "Bounds").
@@ -137,6 +171,18 @@ fn solve(a: &[f64], g: &[f64], lambda: f64) -> Option<Vec<f64>> {
 /// by those variables), or `None` where the residuals are not all finite (a refused step). `bounds[i]`: the
 /// range of variable i, or `None` (unbounded). Returns `None` when the start itself cannot be evaluated.
 pub fn minimize(eval: &(dyn Fn(&[f64]) -> Option<Normal> + Sync), x0: &[f64], bounds: &[Option<(f64, f64)>], max_iterations: usize) -> Option<LmResult> {
+    minimize_near(eval, x0, bounds, max_iterations, &[])
+}
+
+/// [`minimize`], stopping where the start comes beside one of the `known` results of earlier starts on the same
+/// problem (module docs, "Several starts"; [`LmResult::joined`]).
+pub fn minimize_near(
+    eval: &(dyn Fn(&[f64]) -> Option<Normal> + Sync),
+    x0: &[f64],
+    bounds: &[Option<(f64, f64)>],
+    max_iterations: usize,
+    known: &[LmResult],
+) -> Option<LmResult> {
     let k = x0.len();
     let xs = |t: &[f64]| t.iter().zip(bounds).map(|(t, b)| to_x(*t, *b)).collect::<Vec<f64>>();
     let mut evaluations = 0;
@@ -159,9 +205,15 @@ pub fn minimize(eval: &(dyn Fn(&[f64]) -> Option<Normal> + Sync), x0: &[f64], bo
     let mut lambda = if dmax > 0.0 { 1e-3 } else { 1.0 };
     let mut nu = 2.0;
     let mut iterations = 0;
+    let mut joined = None;
     while iterations < max_iterations && cur.cost > 0.0 {
+        let x = xs(&t);
+        joined = known.iter().position(|r| cur.cost >= r.cost && beside(&x, &r.x, bounds));
+        if joined.is_some() {
+            break;
+        }
         let scaled = (0..k).map(|a| cur.jtr[a].abs() / (cur.jtj[a * k + a] * cur.cost).sqrt()).filter(|v| v.is_finite()).fold(0.0f64, f64::max);
-        if scaled < 1e-12 || lambda > 1e16 {
+        if scaled < 1e-12 || lambda > 1e16 || solve(&cur.jtj, &cur.jtr, 0.0).is_some_and(|gn| gn.iter().zip(&t).all(|(d, t)| d.abs() <= 1e-14 * (1.0 + t.abs()))) {
             break;
         }
         iterations += 1;
@@ -198,7 +250,7 @@ pub fn minimize(eval: &(dyn Fn(&[f64]) -> Option<Normal> + Sync), x0: &[f64], bo
             }
         }
     }
-    Some(LmResult { x: xs(&t), cost: cur.cost, iterations, evaluations })
+    Some(LmResult { x: xs(&t), cost: cur.cost, iterations, evaluations, joined })
 }
 
 #[cfg(test)]
@@ -229,6 +281,77 @@ mod tests {
             let r = minimize(&exp_fit(&xs, &ys), &start, &[Some((0.0, 5.0)), Some((0.05, 3.0))], 200).unwrap();
             assert!((r.x[0] - a).abs() < 1e-9 * a && (r.x[1] - b).abs() < 1e-9 * b, "{a} {b} from {start:?}: {r:?}");
             assert!(r.iterations < 100, "{r:?}");
+        }
+    }
+
+    #[test]
+    fn a_start_at_the_minimum_ends_after_one_evaluation() {
+        // The Gauss–Newton step at an exact minimum is rounding: no second evaluation to confirm it.
+        let mut rng = crate::base::rng::Rng(11);
+        let xs: Vec<f64> = (0..40).map(|i| f64::from(i) * 0.1).collect();
+        for _ in 0..20 {
+            let (a, b) = (0.5 + 4.0 * rng.unit(), 0.1 + 2.9 * rng.unit());
+            let ys: Vec<f64> = xs.iter().map(|x| a * (-b * x).exp()).collect();
+            let bounds = [Some((0.0, 5.0)), Some((0.05, 3.0))];
+            let r = minimize(&exp_fit(&xs, &ys), &[a, b], &bounds, 200).unwrap();
+            assert_eq!((r.iterations, r.evaluations), (0, 1), "{a} {b}: {r:?}");
+            assert!((r.x[0] - a).abs() < 1e-12 * a && (r.x[1] - b).abs() < 1e-12 * b, "{r:?}");
+            // Off the minimum it still steps, and stops as close.
+            let far = minimize(&exp_fit(&xs, &ys), &[a * 1.2, b * 0.9], &bounds, 200).unwrap();
+            assert!(far.iterations > 0 && (far.x[0] - a).abs() < 1e-9 * a && (far.x[1] - b).abs() < 1e-9 * b, "{far:?}");
+        }
+    }
+
+    #[test]
+    fn a_start_beside_a_known_minimum_joins_it() {
+        // A sum of two exponentials, fitted by one: a least-squares problem with a non-zero minimum, from
+        // random starts. A second start given the first's result stops beside it (joined), after fewer
+        // evaluations than alone, where alone it would end at the same minimum.
+        let mut rng = crate::base::rng::Rng(12);
+        let xs: Vec<f64> = (0..60).map(|i| f64::from(i) * 0.05).collect();
+        let mut joins = 0;
+        for _ in 0..20 {
+            let (a, b) = (0.5 + 4.0 * rng.unit(), 0.3 + 2.0 * rng.unit());
+            let ys: Vec<f64> = xs.iter().map(|x| a * (-b * x).exp() + 0.3 * (-0.1 * x).exp()).collect();
+            let bounds = [Some((0.0, 6.0)), Some((0.01, 3.0))];
+            let f = exp_fit(&xs, &ys);
+            let start = |rng: &mut crate::base::rng::Rng| [0.5 + 5.0 * rng.unit(), 0.1 + 2.5 * rng.unit()];
+            let (s1, s2) = (start(&mut rng), start(&mut rng));
+            let first = minimize(&f, &s1, &bounds, 200).unwrap();
+            assert!(first.cost > 1e-6 && first.joined.is_none(), "{first:?}");
+            let alone = minimize(&f, &s2, &bounds, 200).unwrap();
+            let second = minimize_near(&f, &s2, &bounds, 200, std::slice::from_ref(&first)).unwrap();
+            let same = (alone.x[0] - first.x[0]).abs() < 1e-6 && (alone.x[1] - first.x[1]).abs() < 1e-6;
+            if second.joined == Some(0) {
+                joins += 1;
+                // It joined only a minimum it was heading for, and stopped within JOIN of it, sooner.
+                assert!(same, "{first:?} {alone:?} {second:?}");
+                assert!(second.evaluations < alone.evaluations && second.cost >= first.cost, "{alone:?} {second:?}");
+                for (i, (lo, hi)) in bounds.iter().flatten().enumerate() {
+                    assert!((second.x[i] - first.x[i]).abs() <= JOIN * (hi - lo), "{second:?}");
+                }
+            } else {
+                assert_eq!(second, alone);
+            }
+        }
+        assert!(joins >= 15, "{joins} of 20 starts joined");
+    }
+
+    #[test]
+    fn an_exact_fit_is_one_at_rounding() {
+        let mut rng = crate::base::rng::Rng(13);
+        let xs: Vec<f64> = (0..50).map(|i| f64::from(i) * 0.1).collect();
+        for _ in 0..10 {
+            let (a, b) = (0.5 + 4.0 * rng.unit(), 0.1 + 2.9 * rng.unit());
+            let ys: Vec<f64> = xs.iter().map(|x| a * (-b * x).exp()).collect();
+            let targets: f64 = ys.iter().map(|y| y * y).sum();
+            let r = minimize(&exp_fit(&xs, &ys), &[2.0, 1.0], &[Some((0.0, 5.0)), Some((0.05, 3.0))], 200).unwrap();
+            assert!(is_exact(r.cost, targets), "{r:?}");
+            // Off by 10⁻⁹ in one value: not exact.
+            let mut off = ys.clone();
+            off[7] += 1e-9 * targets.sqrt();
+            let r = minimize(&exp_fit(&xs, &off), &[2.0, 1.0], &[Some((0.0, 5.0)), Some((0.05, 3.0))], 200).unwrap();
+            assert!(!is_exact(r.cost, targets), "{r:?}");
         }
     }
 

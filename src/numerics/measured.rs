@@ -39,7 +39,7 @@
 
 use super::fit::{lm_grid, search, Candidate, FreeParam, LmStats, Refinement, LM_MAX_ITERATIONS, LM_STARTS};
 use super::grad::{Gradient, Var};
-use super::lm::{minimize, Normal};
+use super::lm::{is_exact, minimize_near, LmResult, Normal};
 use super::Diagnostic;
 use crate::backend::{Columns, Evaluator};
 use crate::frame::V3;
@@ -209,37 +209,66 @@ pub fn turns_with_the_frame(ev: &dyn Evaluator, params: &[f64]) -> bool {
 }
 
 impl Samples {
-    /// Every `stride`-th index along each axis (≥ 1) of the entries measured in all three channels.
+    /// Every `stride`-th index along each axis (≥ 1) of the entries measured in all three channels, in index
+    /// order (built a θ_h row per task, in parallel).
     pub fn new(t: &Measured, stride: usize) -> Samples {
         let stride = stride.max(1);
-        let mut cols = vec![vec![]; N_INPUTS];
-        let (mut m, mut cos) = (<[Vec<f64>; 3]>::default(), vec![]);
-        for i in (0..DIMS[0]).step_by(stride) {
-            for j in (0..DIMS[1]).step_by(stride) {
-                for k in (0..DIMS[2]).step_by(stride) {
-                    let e = measured::index(i, j, k);
-                    let Some(v) = (0..3).map(|c| t.value(c, e)).collect::<Option<Vec<f64>>>() else { continue };
-                    let (l, w) = measured::entry_dirs(i, j, k);
-                    if !(l[2] > 0.0 && w[2] > 0.0) {
-                        continue;
+        let rows: Vec<usize> = (0..DIMS[0]).step_by(stride).collect();
+        let dirs = measured::EntryDirs::new();
+        let per_row = DIMS[1].div_ceil(stride) * DIMS[2].div_ceil(stride);
+        // Per row: the N_INPUTS columns, m in three channels, cos θ_i, ln(1 + m·cos θ_i) in three channels.
+        let parts: Vec<Vec<Vec<f64>>> = rows
+            .into_par_iter()
+            .map(|i| {
+                let mut out: Vec<Vec<f64>> = (0..N_INPUTS + 7).map(|_| Vec::with_capacity(per_row)).collect();
+                for j in (0..DIMS[1]).step_by(stride) {
+                    for k in (0..DIMS[2]).step_by(stride) {
+                        let e = measured::index(i, j, k);
+                        let (Some(r), Some(g), Some(b)) = (t.value(0, e), t.value(1, e), t.value(2, e)) else { continue };
+                        let (l, w) = dirs.at(i, j, k);
+                        if !(l[2] > 0.0 && w[2] > 0.0) {
+                            continue;
+                        }
+                        let x = crate::frame::inputs_from_dirs(l, w);
+                        for (c, xv) in out.iter_mut().zip(x) {
+                            c.push(xv);
+                        }
+                        for (c, v) in [r, g, b].into_iter().enumerate() {
+                            out[N_INPUTS + c].push(v);
+                            out[N_INPUTS + 4 + c].push((v * l[2]).ln_1p());
+                        }
+                        out[N_INPUTS + 3].push(l[2]);
                     }
-                    let x = crate::frame::inputs_from_dirs(l, w);
-                    for (c, xv) in cols.iter_mut().zip(x) {
-                        c.push(xv);
-                    }
-                    for c in 0..3 {
-                        m[c].push(v[c]);
-                    }
-                    cos.push(l[2]);
                 }
-            }
+                out
+            })
+            .collect();
+        let mut all: Vec<Vec<f64>> = (0..N_INPUTS + 7).map(|c| Vec::with_capacity(parts.iter().map(|p| p[c].len()).sum())).collect();
+        for p in parts {
+            all.iter_mut().zip(p).for_each(|(a, b)| a.extend(b));
         }
-        let log_m = std::array::from_fn(|c| m[c].iter().zip(&cos).map(|(v, k)| (v * k).ln_1p()).collect());
+        let mut all = all.into_iter();
+        let cols: Vec<Vec<f64>> = all.by_ref().take(N_INPUTS).collect();
+        let m: [Vec<f64>; 3] = std::array::from_fn(|_| all.next().unwrap_or_default());
+        let cos = all.next().unwrap_or_default();
+        let log_m = std::array::from_fn(|_| all.next().unwrap_or_default());
         Samples { stride, cols, m, cos, log_m, fit_scale: true }
     }
 
     pub fn len(&self) -> usize {
         self.cos.len()
+    }
+
+    /// Σ y² of the targets the residuals of `metric` are measured from ([`lm_refine`]): m (`rmse`), m·cos θ_i
+    /// (`cosine`), ln(1 + m·cos θ_i) (`log`), over every channel and entry.
+    fn targets(&self, metric: MeasuredMetric) -> f64 {
+        (0..3)
+            .map(|c| match metric {
+                MeasuredMetric::Rmse => self.m[c].iter().map(|m| m * m).sum::<f64>(),
+                MeasuredMetric::Cosine => self.m[c].iter().zip(&self.cos).map(|(m, k)| (m * k).powi(2)).sum(),
+                MeasuredMetric::Log => self.log_m[c].iter().map(|v| v * v).sum(),
+            })
+            .sum()
     }
 
     pub fn is_empty(&self) -> bool {
@@ -265,14 +294,34 @@ pub struct Residual {
 /// The error of the formula (`channels`: one kernel, or red, green, blue) with `params` against `s`, with
 /// the closed-form colour scale (module docs). Non-finite formula values anywhere: +inf.
 pub fn residual(channels: &[&dyn Evaluator], params: &[f64], s: &Samples, metric: MeasuredMetric) -> Residual {
-    let fail = Residual { error: f64::INFINITY, scale: [f64::NAN; 3] };
+    match values(channels, params, s) {
+        Some(v) => residual_of(&v, s, metric),
+        None => FAIL,
+    }
+}
+
+/// [`residual`] under every metric ([`MeasuredMetric::ALL`]'s order), the formula evaluated once.
+pub fn residuals(channels: &[&dyn Evaluator], params: &[f64], s: &Samples) -> [Residual; 3] {
+    match values(channels, params, s) {
+        Some(v) => MeasuredMetric::ALL.map(|m| residual_of(&v, s, m)),
+        None => [FAIL; 3],
+    }
+}
+
+/// No residual: +inf, the scale unknown.
+const FAIL: Residual = Residual { error: f64::INFINITY, scale: [f64::NAN; 3] };
+
+/// The formula's values per channel at every entry of `s`; `None` when there is none, or one is not finite.
+fn values(channels: &[&dyn Evaluator], params: &[f64], s: &Samples) -> Option<Vec<Vec<f64>>> {
     if s.is_empty() || channels.is_empty() {
-        return fail;
+        return None;
     }
     let values: Vec<Vec<f64>> = channels.iter().map(|ev| s.eval(*ev, params)).collect();
-    if values.iter().flatten().any(|v| !v.is_finite()) {
-        return fail;
-    }
+    values.iter().flatten().all(|v| v.is_finite()).then_some(values)
+}
+
+/// [`residual`] of the formula's `values` (one list per channel, [`values`]).
+fn residual_of(values: &[Vec<f64>], s: &Samples, metric: MeasuredMetric) -> Residual {
     let mut scale = [0.0; 3];
     let mut sum = 0.0;
     for c in 0..3 {
@@ -309,7 +358,7 @@ pub fn residual(channels: &[&dyn Evaluator], params: &[f64], s: &Samples, metric
         }
     }
     let error = (sum / (3 * s.len()) as f64).sqrt();
-    if error.is_finite() { Residual { error, scale } } else { fail }
+    if error.is_finite() { Residual { error, scale } } else { FAIL }
 }
 
 /// One formula fitted to one reference, as the fit command reports it: the fit, and the best candidate's
@@ -330,16 +379,15 @@ pub fn fit_row(
     opts: &MeasuredFitOptions,
     progress: &(dyn Fn() + Sync),
 ) -> Result<MeasuredRow, Diagnostic> {
+    let s = t.samples(opts.stride);
     let fit = if free.is_empty() {
-        let s = t.samples(opts.stride);
         let r = residual(channels, params, &s, opts.metric);
         let best = vec![MeasuredCandidate { params: params.to_vec(), residual: r, refined: false }];
         MeasuredFit { best, evaluated: 1, entries: s.len(), grid_entries: s.len(), refinement: opts.refinement, lm: LmStats::default(), fixed: vec![] }
     } else {
-        fit_measured(channels, grad, params, free, t, opts, progress)?
+        fit_on(channels, grad, params, free, t, &s, opts, progress)?
     };
-    let s = t.samples(opts.stride);
-    let all = MeasuredMetric::ALL.map(|m| residual(channels, &fit.best[0].params, &s, m).error);
+    let all = residuals(channels, &fit.best[0].params, &s).map(|r| r.error);
     Ok(MeasuredRow { fit, all })
 }
 
@@ -448,7 +496,7 @@ pub struct MeasuredFit {
 /// candidate under `metric` with its closed-form colour scale (module docs).
 ///
 /// With `opts.refinement` [`Refinement::Lm`] and `grad` (the formula's [`Gradient`] by the free parameters),
-/// the grid is coarse ([`super::fit::LM_GRID_INTERVALS`]) and Levenberg–Marquardt refines its best
+/// the grid is coarse ([`super::fit::LM_GRID_POINTS`]) and Levenberg–Marquardt refines its best
 /// [`LM_STARTS`] points on the fine entries ([`lm_refine`]).
 pub fn fit_measured(
     channels: &[&dyn Evaluator],
@@ -459,12 +507,26 @@ pub fn fit_measured(
     opts: &MeasuredFitOptions,
     progress: &(dyn Fn() + Sync),
 ) -> Result<MeasuredFit, Diagnostic> {
+    fit_on(channels, grad, base_params, free, t, &t.samples(opts.stride), opts, progress)
+}
+
+/// [`fit_measured`] with the fine entries (`t`'s at `opts.stride`) already read.
+#[allow(clippy::too_many_arguments)]
+fn fit_on(
+    channels: &[&dyn Evaluator],
+    grad: Option<&Gradient>,
+    base_params: &[f64],
+    free: &[FreeParam],
+    t: &dyn Reference,
+    fine: &Samples,
+    opts: &MeasuredFitOptions,
+    progress: &(dyn Fn() + Sync),
+) -> Result<MeasuredFit, Diagnostic> {
     if let Some(f) = free.iter().find(|f| f.index >= base_params.len()) {
         return Err(Diagnostic::error(format!("cannot fit `{}`", f.name)).hint("not a parameter of the formula"));
     }
-    let fine = t.samples(opts.stride);
     let coarse = if opts.grid_stride == fine.stride { None } else { Some(t.samples(opts.grid_stride)) };
-    let coarse_ref = coarse.as_ref().unwrap_or(&fine);
+    let coarse_ref = coarse.as_ref().unwrap_or(fine);
     if fine.is_empty() || coarse_ref.is_empty() {
         return Err(Diagnostic::error(format!("`{}` has no entry measured in all three channels at stride {}", t.name(), opts.stride.max(opts.grid_stride)))
             .hint("use a smaller stride, or check the file: every entry is negative (not measured)"));
@@ -472,18 +534,18 @@ pub fn fit_measured(
     let metric = opts.metric;
     let lm_grad = grad.filter(|_| opts.refine && opts.refinement == Refinement::Lm);
     let mut base = base_params.to_vec();
-    let (free, fixed) = match lm_grad {
+    let (free, grid_free, fixed) = match lm_grad {
         Some(_) => lm_grid(free, &mut base),
-        None => (free.to_vec(), vec![]),
+        None => (free.to_vec(), free.to_vec(), vec![]),
     };
     if free.is_empty() {
-        let r = residual(channels, &base, &fine, metric);
+        let r = residual(channels, &base, fine, metric);
         let best = vec![MeasuredCandidate { params: base, residual: r, refined: false }];
         return Ok(MeasuredFit { best, evaluated: 1, entries: fine.len(), grid_entries: fine.len(), refinement: opts.refinement, lm: LmStats::default(), fixed });
     }
     // The grid on the coarse entries, without the search's own refinement (which must run on the fine ones).
     let top = if lm_grad.is_some() { opts.top.max(LM_STARTS) } else { opts.top };
-    let grid = search(&base, &free, top, false, &|p| residual(channels, p, coarse_ref, metric).error, progress)?;
+    let grid = search(&base, &grid_free, top, false, &|p| residual(channels, p, coarse_ref, metric).error, progress)?;
     let mut evaluated = grid.evaluated;
     let mut best: Vec<Candidate> = grid.best;
     let mut lm = LmStats::default();
@@ -493,7 +555,7 @@ pub fn fit_measured(
         // Every start on the grid's entries (cheap), then the best result polished on the fine ones.
         let (coarse_best, mut stats) = lm_refine(channels, g, coarse_ref, &free, &starts, None, metric)?;
         if let Some(c) = coarse_best {
-            let (cand, polish) = lm_refine(channels, g, &fine, &free, &[&c.params], Some(c.residual.scale), metric)?;
+            let (cand, polish) = lm_refine(channels, g, fine, &free, &[&c.params], Some(c.residual.scale), metric)?;
             stats.iterations += polish.iterations;
             stats.evaluations += polish.evaluations;
             lm_best = cand;
@@ -501,14 +563,14 @@ pub fn fit_measured(
         lm = stats;
     } else if opts.refine {
         if let Some(b) = best.first() {
-            let (cand, used) = super::fit::refine(&|p| residual(channels, p, &fine, metric).error, &b.params, &free);
+            let (cand, used) = super::fit::refine(&|p| residual(channels, p, fine, metric).error, &b.params, &free);
             evaluated += used;
             best.insert(0, cand);
         }
     }
     let mut out: Vec<MeasuredCandidate> = best
         .par_iter()
-        .map(|c| MeasuredCandidate { params: c.params.clone(), residual: residual(channels, &c.params, &fine, metric), refined: c.refined })
+        .map(|c| MeasuredCandidate { params: c.params.clone(), residual: residual(channels, &c.params, fine, metric), refined: c.refined })
         .collect();
     out.extend(lm_best);
     out.sort_by(|a, b| a.residual.error.total_cmp(&b.residual.error));
@@ -553,6 +615,9 @@ pub fn lm_refine(
     let chunks = len.div_ceil(CHUNK);
     let mut stats = LmStats::default();
     let mut best: Option<MeasuredCandidate> = None;
+    let bounds: Vec<Option<(f64, f64)>> = free.iter().map(|f| Some((f.lo, f.hi))).chain(vec![None; k - nf]).collect();
+    let targets = s.targets(metric);
+    let mut found: Vec<LmResult> = vec![];
     for start in starts {
         let params_of = |x: &[f64]| {
             let mut p = start.to_vec();
@@ -608,17 +673,30 @@ pub fn lm_refine(
                 })
                 .try_reduce(|| Normal::zeros(k), |x, y| Some(x.merge(y)))
         };
-        let closed = residual(channels, start, s, metric);
-        if !closed.error.is_finite() {
-            continue;
+        // A start beyond the first runs only while no earlier one fits exactly (no start can do better).
+        if found.iter().any(|r| is_exact(r.cost, targets)) {
+            break;
         }
-        let scales = if s.fit_scale { scale.unwrap_or(closed.scale).to_vec() } else { vec![] };
+        let scales = match scale {
+            _ if !s.fit_scale => vec![],
+            Some(sc) => sc.to_vec(),
+            None => {
+                let closed = residual(channels, start, s, metric);
+                if !closed.error.is_finite() {
+                    continue;
+                }
+                closed.scale.to_vec()
+            }
+        };
         let x0: Vec<f64> = free.iter().map(|f| start[f.index]).chain(scales).collect();
-        let bounds: Vec<Option<(f64, f64)>> = free.iter().map(|f| Some((f.lo, f.hi))).chain(vec![None; k - nf]).collect();
-        let Some(r) = minimize(&eval, &x0, &bounds, LM_MAX_ITERATIONS) else { continue };
+        let Some(r) = minimize_near(&eval, &x0, &bounds, LM_MAX_ITERATIONS, &found) else { continue };
         stats.starts += 1;
         stats.iterations += r.iterations;
         stats.evaluations += r.evaluations;
+        // A start that joined an earlier one's minimum adds nothing new.
+        if r.joined.is_some() {
+            continue;
+        }
         let params = params_of(&r.x[..nf]);
         let own = Residual { error: (r.cost / (3 * len) as f64).sqrt(), scale: if s.fit_scale { [r.x[nf], r.x[nf + 1], r.x[nf + 2]] } else { [1.0; 3] } };
         let closed = residual(channels, &params, s, metric);
@@ -626,6 +704,7 @@ pub fn lm_refine(
         if residual.error.is_finite() && best.as_ref().is_none_or(|b| residual.error < b.residual.error) {
             best = Some(MeasuredCandidate { params, residual, refined: true });
         }
+        found.push(r);
     }
     Ok((best, stats))
 }
@@ -726,6 +805,77 @@ mod tests {
         assert!(turns_with_the_frame(&FnEvaluator(|x: &[f64; N_INPUTS], _: &[f64]| nh(x).powi(7)), &[]));
         let one = |azimuths| FormulaReference { name: "a".into(), channels: vec![std::sync::Arc::new(FnEvaluator(|_: &[f64; N_INPUTS], _: &[f64]| 1.0))], params: vec![], azimuths, fit_scale: false };
         assert_eq!(one(true).samples(9).len(), AZIMUTHS * one(false).samples(9).len());
+    }
+
+    #[test]
+    fn the_entries_are_in_index_order_and_every_metric_is_its_own_residual() {
+        let mut rng = crate::base::rng::Rng(0x5a3);
+        let t = table(|x| nh(x).powf(40.0) + 0.1, [0.7, 0.9, 1.1]);
+        for stride in [3, 7] {
+            // The entries built a row per task are those of one pass in index order.
+            let s = Samples::new(&t, stride);
+            let mut at = 0;
+            for i in (0..DIMS[0]).step_by(stride) {
+                for j in (0..DIMS[1]).step_by(stride) {
+                    for k in (0..DIMS[2]).step_by(stride) {
+                        let (l, w) = measured::entry_dirs(i, j, k);
+                        if !(l[2] > 0.0 && w[2] > 0.0) {
+                            continue;
+                        }
+                        let x = crate::frame::inputs_from_dirs(l, w);
+                        assert!((0..N_INPUTS).all(|c| s.cols[c][at].to_bits() == x[c].to_bits()), "{i} {j} {k}");
+                        assert_eq!(s.m[2][at], t.value(2, measured::index(i, j, k)).unwrap());
+                        at += 1;
+                    }
+                }
+            }
+            assert_eq!(at, s.len());
+            // `residuals` is `residual` under each metric, bit for bit, from one evaluation.
+            let blinn = FnEvaluator(|x: &[f64; N_INPUTS], p: &[f64]| nh(x).powf(p[0]) + p[1]);
+            for _ in 0..5 {
+                let p = [1.0 + 100.0 * rng.unit(), rng.unit()];
+                let all = residuals(&[&blinn], &p, &s);
+                for (m, r) in MeasuredMetric::ALL.iter().zip(all) {
+                    let one = residual(&[&blinn], &p, &s, *m);
+                    assert_eq!((one.error.to_bits(), one.scale.map(f64::to_bits)), (r.error.to_bits(), r.scale.map(f64::to_bits)), "{m:?}");
+                }
+            }
+        }
+    }
+
+    /// `param n … pow(NH, n)`: the kernel and its gradient by n.
+    fn power() -> (crate::Kernel, Gradient) {
+        let f = crate::front::parse("p.brdf", "param n = 50 in 1..1000\npow(NH, n)").unwrap();
+        let opts = crate::Options { backend: crate::Backend::Interp, ..Default::default() };
+        (crate::compile_formula(f.clone(), &opts).unwrap(), Gradient::compile_vars(&f, &opts, Some(&[Var::Param(0)])).unwrap())
+    }
+
+    #[test]
+    fn an_exact_fit_ends_the_starts_and_others_join_a_minimum_found_before() {
+        let (k, g) = power();
+        let free = [FreeParam { index: 0, name: "n".into(), lo: 1.0, hi: 1000.0, step: None }];
+        let mut rng = crate::base::rng::Rng(0x70f);
+        for _ in 0..3 {
+            let n = 20.0 + 300.0 * rng.unit();
+            let starts: Vec<Vec<f64>> = (0..4).map(|_| vec![1.0 + 999.0 * rng.unit()]).collect();
+            let starts: Vec<&[f64]> = starts.iter().map(Vec::as_slice).collect();
+            // A table of the formula itself: the first start fits it exactly, and is the only one run.
+            let s = Samples::new(&table(|x| nh(x).powf(n), [0.6, 0.8, 1.0]), 6);
+            let (best, stats) = lm_refine(&[&k], &g, &s, &free, &starts, None, MeasuredMetric::Log).unwrap();
+            let best = best.unwrap();
+            assert!((best.params[0] - n).abs() < 1e-9 * n && stats.starts == 1, "{n}: {best:?} {stats:?}");
+            // A table it cannot fit (a power plus a broad term): every start runs; those that come beside the
+            // minimum another found stop there, after fewer evaluations than alone, at the same answer.
+            let s = Samples::new(&table(|x| nh(x).powf(n) + 0.2 * nh(x).powi(3), [0.6, 0.8, 1.0]), 6);
+            let (best, stats) = lm_refine(&[&k], &g, &s, &free, &starts, None, MeasuredMetric::Log).unwrap();
+            let best = best.unwrap();
+            assert_eq!(stats.starts, 4, "{stats:?}");
+            let alone: Vec<(Option<MeasuredCandidate>, LmStats)> = starts.iter().map(|st| lm_refine(&[&k], &g, &s, &free, &[st], None, MeasuredMetric::Log).unwrap()).collect();
+            let lowest = alone.iter().filter_map(|a| a.0.as_ref()).map(|c| c.residual.error).fold(f64::INFINITY, f64::min);
+            assert!(best.residual.error <= lowest * (1.0 + 1e-9), "{best:?} against {lowest}");
+            let evaluations: usize = alone.iter().map(|a| a.1.evaluations).sum();
+            assert!(stats.evaluations < evaluations, "{stats:?}: {evaluations} alone");
+        }
     }
 
     #[test]
