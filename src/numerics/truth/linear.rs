@@ -254,7 +254,7 @@ impl Linear {
                             for j in bits(dm) {
                                 let (alpha, beta) = (ra.max(j), rb.max(j));
                                 let rho = beta / mb.abs();
-                                if !(rho <= 0.5) {
+                                if rho.is_nan() || rho > 0.5 {
                                     unsure |= 1 << j;
                                 }
                                 cur_b[j] += s * (alpha * beta / (mb * mb) + ma.abs() * beta * beta / (mb * mb * mb).abs()) / (1.0 - rho);
@@ -386,7 +386,7 @@ impl Linear {
                             // A move that may reach 0: |a| changes by at most what a does (either way).
                             for j in bits(dm) {
                                 let m = ra.max(j);
-                                if m != 0.0 && !(va.mant().abs() > m) {
+                                if m != 0.0 && (m.is_nan() || va.mant().abs() <= m) {
                                     cur_d[j] = 0.0;
                                     cur_b[j] = m;
                                 }
