@@ -37,6 +37,9 @@ use crate::ir::{BinOp, Formula, Node, NodeId, N_INPUTS};
 use std::cmp::Ordering;
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
+mod linear;
+pub(crate) use linear::{Estimate, Linear};
+
 type Dd = dd::Dd<f64>;
 
 /// π in three parts (QD library constants).
@@ -110,6 +113,16 @@ impl Xf {
         let (hi, lo) = dd::fast_two_sum(&mut Direct, d.0, d.1);
         if hi == 0.0 || !hi.is_finite() {
             return Xf { hi, lo: 0.0, e: 0 };
+        }
+        let bits = hi.to_bits();
+        let field = ((bits >> 52) & 0x7ff) as i64;
+        if field != 0 {
+            // A normal head: its exponent field set to 0 is the exact hi·2^-k; lo·2^-k is one exact product
+            // (what the general path computes, without its loops).
+            let k = field - 1023;
+            let hi = f64::from_bits((bits & !(0x7ffu64 << 52)) | (1023u64 << 52));
+            let lo = if k.abs() <= 1000 { lo * f64::from_bits(((1023 - k) as u64) << 52) } else { ldexp(lo, -k) };
+            return Xf { hi, lo, e: e.saturating_add(k) };
         }
         let k = exponent(hi);
         Xf { hi: ldexp(hi, -k), lo: ldexp(lo, -k), e: e.saturating_add(k) }
@@ -597,7 +610,15 @@ pub(crate) fn eval_moves_with(f: &Formula, readers: &Readers, x: &[f64; N_INPUTS
         let value = node_value(f, id, &base, &xs, params);
         base.push(value);
     }
-    let mut v = base.clone();
+    eval_moves_from(f, readers, &base, x, params, moves)
+}
+
+/// [`eval_moves_with`] from the exact values of every node at the point, computed beforehand (as
+/// [`Linear::eval`] gives them).
+pub(crate) fn eval_moves_from(f: &Formula, readers: &Readers, base: &[Xf], x: &[f64; N_INPUTS], params: &[f64], moves: &[Move]) -> Vec<f64> {
+    let n = f.root.index() + 1;
+    let xs = x.map(Xf::from_f64);
+    let mut v = base.to_vec();
     let no_nodes = Vec::new();
     moves
         .iter()

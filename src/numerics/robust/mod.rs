@@ -58,10 +58,12 @@
 //! Cost: one truth evaluation per point (1–5 µs for a catalogue formula in release; a limit only where it is
 //! NaN), computed once per pass ([`Reference`]), one evaluation per point and candidate (compiled by the JIT,
 //! which gives the interpreter's bits, from `JIT_FROM_POINTS` points; interpreted below), and the condition
-//! (two truth evaluations per read input, re-evaluating only the nodes that read it) once per point where some
-//! candidate is more than [`TARGET_BITS`] off, or everywhere for the report ([`Conditioning::Everywhere`]);
-//! parallel over points (rayon). On one core: 3–65 ms per catalogue formula, up to ~265 ms for BRDF Explorer's
-//! largest files, and 6 s for `lobe check`'s 10⁵ points on the largest
+//! (two truth evaluations per read input and live parameter, re-evaluating only the nodes that read it) once
+//! per point where some candidate is more than [`TARGET_BITS`] off; for the report, at every point
+//! ([`Conditioning::Everywhere`]), the truth's first-order condition and a bound on its rest, carried in the
+//! truth's own pass ([`Reference::everywhere`], `truth::linear`), with exact moves only of the variables it
+//! does not settle; parallel over points (rayon). On one core: 3–65 ms per catalogue formula, up to ~265 ms
+//! for BRDF Explorer's largest files, and 0.5–1.5 s for `lobe check`'s 10⁵ points per explorer file
 //! (BENCHMARKS.md, the `pass` bench).
 
 mod measure;

@@ -439,7 +439,7 @@ impl Outcome {
         let truth_f = crate::simplify::bake_only(orig, &bake);
         let n = points_for(&self.base, &truth_f, &PassOptions { points, ..*o });
         observe(Stage::Truth { points: n });
-        let reference = Reference::new(&truth_f, sample(orig, &bake, n, o.seed));
+        let reference = Reference::everywhere(&truth_f, sample(orig, &bake, n, o.seed));
         observe(Stage::Report);
         let measure = |f: &Formula| reference.measure(&*measurer(f, o.math, n), Conditioning::Everywhere);
         self.before = measure(&self.base);
