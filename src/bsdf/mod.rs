@@ -21,9 +21,9 @@
 //!   conditional. Every catalogue lobe peaks at h = N, which the x₁² warp resolves with small cells.
 //! - **Exact** (a formula whose only input is NH, or only VR — one cosine, nothing else): a 1-D table over
 //!   θ ∈ [0, θmax] (θmax = π for VR, π/2 for NH) in [`EXACT_CELLS`] cells, each cell its solid angle about the
-//!   axis times the maximum of lum(f(cos θ)) at its ends and middle, inverted by binary search; within a cell θ is
-//!   uniform in sin²(θ/2), so the density in solid angle is constant over each ring of a cell and bounded on the
-//!   axis. NH: one table; φ uniform about N; the sampled h gives wo = 2(wi·h)h − wi with the Jacobian
+//!   axis times the maximum of lum(f(cos θ)) at its ends and middle, inverted from a guide table; within a cell
+//!   θ is uniform in sin²(θ/2), so the density in solid angle is constant over each ring of a cell and bounded on
+//!   the axis. NH: one table; φ uniform about N; the sampled h gives wo = 2(wi·h)h − wi with the Jacobian
 //!   1/(4 wo·h). VR: the lobe about R, the mirror of wi, with the cosine: one table per isotropic incidence node
 //!   (the tabulated mechanism's θₖ, the same mixture rule), its cells weighted by the mean of max(cosθₒ, 0) over
 //!   the ring at θ from R at θₖ (`exact::ring`, closed form), and φ about R drawn for the actual wi with density

@@ -24,8 +24,8 @@
 //! Negative values no larger than 10⁻³ of the map's largest value are lossy compression's ringing (DWAB
 //! maps have them next to dark pixels) and are read as 0.
 //!
-//! Cost: building is one pass over the pixels plus the distribution's cumulative sums (O(W·H)); a sample is two
-//! binary searches, a density one table read.
+//! Cost: building is one pass over the pixels plus the distribution's cumulative sums and their guide tables
+//! (O(W·H)); a sample is two guided searches (a step or two each), a density one table read.
 
 use crate::base::source::{Files, ReadError};
 use crate::bsdf::dist::Dist2D;
