@@ -260,6 +260,9 @@ impl Target {
 /// Checks one point's channel values; the error names the point.
 fn check_point(vals: &[f64], at: impl Fn() -> String) -> Result<(), Diagnostic> {
     for (c, &v) in vals.iter().enumerate() {
+        if v >= 0.0 && v.is_finite() {
+            continue;
+        }
         let ch = if vals.len() > 1 { format!(" (channel {})", ["r", "g", "b"][c.min(2)]) } else { String::new() };
         if v.is_nan() {
             return Err(Diagnostic::error(format!("the formula is NaN{ch} at {}", at()))

@@ -312,7 +312,12 @@ pub(super) fn build_tabulated(target: &Target, isotropic: bool) -> Result<(Tabul
     let thetas: Vec<f64> = (0..nt).map(|k| node_theta(k, nt)).collect();
     let mut nodes = Vec::with_capacity(nt * np);
     let mut empty = vec![];
-    let mut scratch = NodeScratch::default();
+    // The sub-grid's half vectors are the same at every node (φₕ from azimuth 0): computed once.
+    let (pr, pc) = (2 * ROWS + 1, 2 * COLS + 1);
+    let mut scratch = NodeScratch {
+        halves: (0..pr * pc).map(|k| half_from((k / pc) as f64 / (2 * ROWS) as f64, (k % pc) as f64 / (2 * COLS) as f64, NO_TURN)).collect(),
+        ..NodeScratch::default()
+    };
     for &t in &thetas {
         let mut at_normal: Option<Option<Node>> = None;
         for p in 0..np {
@@ -338,6 +343,8 @@ pub(super) fn build_tabulated(target: &Target, isotropic: bool) -> Result<(Tabul
 
 #[derive(Default)]
 struct NodeScratch {
+    /// The half vector at sub-grid point (a, b) at a·(2·[`COLS`] + 1) + b, φₕ from azimuth 0.
+    halves: Vec<V3>,
     pairs: Vec<(V3, V3)>,
     slots: Vec<usize>,
     g: Vec<f64>,
@@ -355,10 +362,8 @@ fn node_table(target: &Target, wi: V3, s: &mut NodeScratch) -> Result<Option<Nod
     s.g.resize(pr * pc, 0.0);
     let mut jacs = Vec::with_capacity(pr * pc);
     for a in 0..pr {
-        let x1 = a as f64 / (2 * ROWS) as f64;
         for b in 0..pc {
-            let x2 = b as f64 / (2 * COLS) as f64;
-            let h = half_from(x1, x2, NO_TURN);
+            let h = s.halves[a * pc + b];
             let wo = reflect(wi, h);
             if wo[2] > 0.0 {
                 s.pairs.push((wi, wo));
