@@ -152,68 +152,57 @@ impl Exact {
     /// The density of wo at wi (a sample's too: computed from the wo drawn, as the tabulated mechanism's).
     #[inline]
     pub(super) fn pdf(&self, ws: &[(usize, f64); 2], wi: V3, wo: V3, cos_pdf: f64) -> f64 {
-        let loc = self.locate(wi, wo);
+        // wo's cell in θ about the axis, the cell's measure times dωₒ/dω about the axis (4|wi·h| for NH, 1 for VR),
+        // and (VR) the azimuth's density on the ring relative to uniform; `None` outside the tables (beyond θmax,
+        // or no half vector).
+        let at = || -> Option<(usize, f64, f64)> {
+            // The angle to the axis by atan2(|d × a|, d·a): acos loses digits near the axis, where the lobe is.
+            let (d, a, jac) = if self.lobe == Input::NH {
+                let s = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
+                let len = dot(s, s).sqrt();
+                if len.is_nan() || len <= 0.0 {
+                    return None;
+                }
+                let sign = if s[2] < 0.0 { -1.0 / len } else { 1.0 / len };
+                let h = [s[0] * sign, s[1] * sign, s[2] * sign];
+                (h, [0.0, 0.0, 1.0], 4.0 * dot(wi, h).abs())
+            } else {
+                (wo, self.axis(wi), 1.0)
+            };
+            let x = [d[1] * a[2] - d[2] * a[1], d[2] * a[0] - d[0] * a[2], d[0] * a[1] - d[1] * a[0]];
+            let (sin_t, cos_t) = (dot(x, x).sqrt(), dot(d, a));
+            let v = sin_t.atan2(cos_t) / self.theta_max;
+            if !(0.0..1.0).contains(&v) {
+                return None;
+            }
+            let cell = ((v * EXACT_CELLS as f64) as usize).min(EXACT_CELLS - 1);
+            // VR: 2π·max(cosθₒ, 0)/(2H) (1 on a ring wholly below the horizon, whose azimuth is uniform).
+            let azimuth = if self.lobe == Input::VR {
+                let (_, rho, cti) = mirror_frame(wi);
+                let (_, h) = ring(cos_t * cti, sin_t * rho);
+                if h > 0.0 {
+                    PI * wo[2].max(0.0) / h
+                } else {
+                    1.0
+                }
+            } else {
+                1.0
+            };
+            Some((cell, self.measure[cell] * jac, azimuth))
+        };
+        let loc = at();
         let mut p = 0.0;
         for &(k, w) in ws {
             if w > 0.0 {
                 p += w * match (&self.nodes[k], loc) {
                     (None, _) => cos_pdf,
-                    (Some(dist), Some(l)) if l.den > 0.0 => dist.cell_pdf(l.cell) / l.den * l.azimuth,
+                    (Some(dist), Some((cell, den, azimuth))) if den > 0.0 => dist.cell_pdf(cell) / den * azimuth,
                     _ => 0.0,
                 };
             }
         }
         p
     }
-
-    /// Where wo lies in the tables at wi ([`ExactAt`]); `None` outside them (beyond θmax, or no half vector).
-    #[inline]
-    fn locate(&self, wi: V3, wo: V3) -> Option<ExactAt> {
-        // The angle to the axis by atan2(|d × a|, d·a): acos loses digits near the axis, where the lobe is.
-        let (d, a, jac) = if self.lobe == Input::NH {
-            let s = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
-            let len = dot(s, s).sqrt();
-            if len.is_nan() || len <= 0.0 {
-                return None;
-            }
-            let sign = if s[2] < 0.0 { -1.0 / len } else { 1.0 / len };
-            let h = [s[0] * sign, s[1] * sign, s[2] * sign];
-            (h, [0.0, 0.0, 1.0], 4.0 * dot(wi, h).abs())
-        } else {
-            (wo, self.axis(wi), 1.0)
-        };
-        let x = [d[1] * a[2] - d[2] * a[1], d[2] * a[0] - d[0] * a[2], d[0] * a[1] - d[1] * a[0]];
-        let (sin_t, cos_t) = (dot(x, x).sqrt(), dot(d, a));
-        let v = sin_t.atan2(cos_t) / self.theta_max;
-        if !(0.0..1.0).contains(&v) {
-            return None;
-        }
-        let cell = ((v * EXACT_CELLS as f64) as usize).min(EXACT_CELLS - 1);
-        // VR: the azimuth's density on the ring relative to uniform, 2π·max(cosθₒ, 0)/(2H) (1 on a ring wholly
-        // below the horizon, whose azimuth is uniform).
-        let azimuth = if self.lobe == Input::VR {
-            let (_, rho, cti) = mirror_frame(wi);
-            let (_, h) = ring(cos_t * cti, sin_t * rho);
-            if h > 0.0 {
-                PI * wo[2].max(0.0) / h
-            } else {
-                1.0
-            }
-        } else {
-            1.0
-        };
-        Some(ExactAt { cell, den: self.measure[cell] * jac, azimuth })
-    }
-}
-
-/// Where a wo lies in the exact mechanism's tables: its cell in θ about the axis, the cell's measure times
-/// dωₒ/dω about the axis (4|wi·h| for NH, 1 for VR), and (VR) the azimuth's density on the ring relative to
-/// uniform.
-#[derive(Clone, Copy, Debug)]
-struct ExactAt {
-    cell: usize,
-    den: f64,
-    azimuth: f64,
 }
 
 /// [`band_edges`] of n bands and n·4π·(width of each band in sin²(θ/2)).

@@ -632,12 +632,6 @@ impl Sampler {
             (Body::Exact(e), _) => e.pdf(&at.exact, at.wi, wo, cos_pdf),
             _ => cos_pdf,
         };
-        self.mix(cos_pdf, body)
-    }
-
-    /// The cosine fraction's mixture of cosθₒ/π and the mechanism's density.
-    #[inline(always)]
-    fn mix(&self, cos_pdf: f64, body: f64) -> f64 {
         self.cos_frac * cos_pdf + (1.0 - self.cos_frac) * body
     }
 
