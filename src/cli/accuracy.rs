@@ -140,7 +140,7 @@ fn text(a: &AccuracyArgs, k: &Kernel, r: &Kernel, lobe: lobe::ir::Input, rep: &A
 /// scored by the measured fit's metrics over every entry, each with its closed-form colour scale against a
 /// table, at scale 1 against a formula ([`lobe::numerics::measured`]).
 fn measured(a: &AccuracyArgs, rf: Option<&lobe::ir::Formula>) -> Result<String, CliError> {
-    use lobe::numerics::measured::{residual, MeasuredMetric, Reference};
+    use lobe::numerics::measured::{residuals, Reference};
     let path = &a.against.reference;
     let set = a.set.list()?;
     let f = a.against.formula.load()?;
@@ -162,7 +162,7 @@ fn measured(a: &AccuracyArgs, rf: Option<&lobe::ir::Formula>) -> Result<String, 
             "check the file: every entry is negative (not measured)",
         ));
     }
-    let [log, rmse, cosine] = MeasuredMetric::ALL.map(|m| residual(&channels, &params, &s, m));
+    let [log, rmse, cosine] = residuals(&channels, &params, &s);
     let mut out = String::new();
     if a.json.on {
         #[derive(serde::Serialize)]

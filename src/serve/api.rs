@@ -785,12 +785,12 @@ pub(crate) fn analyze(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
             } else {
                 // The papers' metrics sweep n in both: without it, the measured fits' metrics over the whole
                 // hemisphere (every fourth table index per axis, both formulas at their values).
-                use crate::numerics::measured::{residual, turns_with_the_frame, FormulaReference, MeasuredMetric, Reference};
+                use crate::numerics::measured::{residuals, turns_with_the_frame, FormulaReference, Reference};
                 let channels: Vec<Arc<dyn crate::Evaluator>> = vec![rk.clone()];
                 let azimuths = !(turns_with_the_frame(k.as_ref(), &params) && turns_with_the_frame(rk.as_ref(), &rp));
                 let samples = FormulaReference { name: rn, channels, params: rp, azimuths, fit_scale: false }.samples(4);
                 st.cancel.check().map_err(|c| ApiError::new(503, c.to_string()))?;
-                let [log, rmse, cosine] = MeasuredMetric::ALL.map(|m| residual(&[k.as_ref()], &params, &samples, m).error);
+                let [log, rmse, cosine] = residuals(&[k.as_ref()], &params, &samples).map(|r| r.error);
                 out.hemisphere = Some(HemisphereError { entries: samples.len(), log, rmse, cosine });
             }
         }
