@@ -301,8 +301,12 @@ pub(crate) enum Sign {
 /// The sign of `f` as written with `bake` folded (range analysis of the unsimplified formula: a clamp, a
 /// square or a pow of a clamped base bound it even where the simplifier later drops the clamp as redundant).
 pub(crate) fn sign_of(f: &Formula, bake: &[(usize, f64)]) -> Sign {
-    let g = bake_only(f, bake);
-    let r = node_ranges(&g, &Policy::default())[g.root.index()];
+    range_sign(&bake_only(f, bake))
+}
+
+/// The sign of `g` by range analysis as it stands ([`sign_of`] once the values are baked).
+pub(crate) fn range_sign(g: &Formula) -> Sign {
+    let r = node_ranges(g, &Policy::default())[g.root.index()];
     if r.lo >= 0.0 {
         Sign::NonNeg
     } else if r.hi <= 0.0 {

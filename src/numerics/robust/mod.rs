@@ -1,7 +1,9 @@
 //! Numerical robustness: bits of error against the truth over a formula's domain, and the accuracy pass's
 //! choice among candidate rewrites. By concern: the metric and the judgement (`metric.rs`), the domain's
 //! points (`sample.rs`), measuring against the truth (`measure.rs`), the search (`search.rs`), the check
-//! command's report (`report.rs`). The candidates themselves are built in `simplify::accuracy`.
+//! command's report (`report.rs`). The candidates themselves are built in `simplify::accuracy`: one
+//! `Candidates` per search (the formula as written and its truth's formula, the base and its sign, each rule's
+//! candidate from the current best with its cost), asked for once per pass; this module only measures and judges.
 //!
 //! # Design
 //! Herbie's measure (Panchekha et al., PLDI 2015): at each input point the error of an f64 result `y` is

@@ -1,13 +1,14 @@
-//! The pass's search (module docs of [`super`]): candidates from the rule registry
-//! ([`crate::simplify::accuracy::RULES`]) built from the current best, measured, judged, kept or dropped; the
-//! baked pass; the replay of a decision; the pass as the compile step's chooser.
+//! The pass's search (module docs of [`super`]): the candidates of the rule registry
+//! ([`crate::simplify::accuracy::RULES`]) from the current best, as `simplify::accuracy::Candidates` builds them
+//! (one per search), measured, judged, kept or dropped; the baked pass; the replay of a decision; the pass as the
+//! compile step's chooser.
 
 use super::measure::{measurer, Conditioning, Reference};
 use super::metric::{better, keeps_promise, ErrorStats, TARGET_BITS};
 use super::sample::sample;
 use crate::base::cancel::Cancel;
 use crate::ir::Formula;
-use crate::simplify::accuracy::{cost, identity, Rule, Sites, Source, COMPENSATED_POWER, LIVE_CHOICE, RULES};
+use crate::simplify::accuracy::{identity, Candidate, Candidates, Rule, Sites, Written, COMPENSATED_POWER, LIVE_CHOICE};
 use crate::simplify::rewrite::Analysis;
 
 /// Budget multiple for a candidate that removes NaN/∞ results where the truth is finite (wrong answers rather
@@ -151,10 +152,8 @@ pub struct Outcome {
 }
 
 /// The live pass's formula from its steps, without measuring (what [`Decision::live`] replays).
-fn replay_live(orig: &Formula, steps: &[Step], prefer: Prefer) -> Formula {
-    let sign = crate::simplify::sign_of(orig, &[]);
-    let cands = Source::new(orig, &[], sign, prefer == Prefer::Accuracy);
-    let mut cur = Analysis::new(cands.base(orig));
+fn replay_live(cands: &Candidates, steps: &[Step]) -> Formula {
+    let mut cur = Analysis::new(cands.base().clone());
     for s in steps {
         if let Some(g) = cands.build(s.rule, &cur, s.site) {
             cur = Analysis::new(g);
@@ -165,28 +164,19 @@ fn replay_live(orig: &Formula, steps: &[Step], prefer: Prefer) -> Formula {
 
 /// The baked formula from a decision, without measuring.
 pub fn replay(orig: &Formula, bake: &[(usize, f64)], d: &Decision, prefer: Prefer) -> Formula {
-    let bake = read_bake(orig, bake);
-    let live = replay_live(orig, &d.live, prefer);
-    if bake.is_empty() {
+    let pow_calls = prefer == Prefer::Accuracy;
+    let written = Written::new(orig, bake);
+    let live = replay_live(&Candidates::new(Written::live(orig), None, pow_calls), &d.live);
+    if written.bake().is_empty() {
         return live;
     }
-    let sign = crate::simplify::sign_of(orig, &bake);
-    let src = if d.live.is_empty() { orig } else { &live };
-    let cands = Source::new(if d.baked_live_choice { src } else { orig }, &bake, sign, prefer == Prefer::Accuracy);
-    let base = Analysis::new(cands.base(orig));
+    let cands = Candidates::new(written, (!d.live.is_empty()).then_some(&live), pow_calls);
+    let base = Analysis::new(cands.base().clone());
     match (d.baked_power, d.baked_live_choice) {
-        (Some(r), _) => cands.build(r, &base, None).unwrap_or(base.f),
-        (None, true) => cands.build(LIVE_CHOICE, &base, None).unwrap_or(base.f),
+        (Some(r), after_choice) => cands.build_baked(r, &base, after_choice).unwrap_or(base.f),
+        (None, true) => cands.build_baked(LIVE_CHOICE, &base, true).unwrap_or(base.f),
         (None, false) => base.f,
     }
-}
-
-/// The baked values the formula reads (a value it never reads changes nothing: the live decision is the whole
-/// decision).
-fn read_bake(orig: &Formula, bake: &[(usize, f64)]) -> Vec<(usize, f64)> {
-    let read = crate::simplify::simplify(orig, &[]);
-    let read = read.ir.used_params(read.root);
-    bake.iter().copied().filter(|(k, _)| read.contains(&(*k as u16))).collect()
 }
 
 /// The measuring half of a search: the reference, the interpreter in the pass's math mode, the budget.
@@ -229,12 +219,12 @@ impl Bench<'_> {
     }
 }
 
-/// The points a search measures: fewer for a costly kernel, and for a formula whose truth (every node as
-/// written, parameter-only ones included, at every point) is far larger than its simplified kernel — an eighth
-/// of a cost unit per node, so only such formulas are affected (a 10⁶-node chain that simplifies to `NH`).
-fn points_for(base: &Formula, truth_f: &Formula, o: &PassOptions) -> usize {
-    let truth_nodes = truth_f.ir.use_counts(truth_f.root).iter().filter(|&&u| u > 0).count() as f64;
-    let work = cost(base).max(truth_nodes / 8.0).max(1.0);
+/// The points a search measures: fewer for a costly kernel (`base_cost`, the simplified formula's), and for a
+/// formula whose truth (every node as written, parameter-only ones included, at every point) is far larger than
+/// its simplified kernel — an eighth of a cost unit per node, so only such formulas are affected (a 10⁶-node
+/// chain that simplifies to `NH`).
+fn points_for(base_cost: f64, truth_nodes: usize, o: &PassOptions) -> usize {
+    let work = base_cost.max(truth_nodes as f64 / 8.0).max(1.0);
     o.points.min((MAX_WORK / work) as usize).max(64)
 }
 
@@ -252,19 +242,14 @@ pub(crate) fn improve_observed(orig: &Formula, bake: &[(usize, f64)], o: &PassOp
 /// the time budget is a child of the caller's token, so one mechanism stops the search either way.
 pub(crate) fn improve_cancellable(orig: &Formula, bake: &[(usize, f64)], o: &PassOptions, cancel: &Cancel, observe: &dyn Fn(Stage)) -> Outcome {
     let stop = cancel.child(o.budget);
-    let bake = read_bake(orig, bake);
-    let live = live_pass(orig, o, &stop, observe);
-    if bake.is_empty() {
+    let pow_calls = o.prefer == Prefer::Accuracy;
+    let written = Written::new(orig, bake);
+    let live = live_pass(&Candidates::new(Written::live(orig), None, pow_calls), o, &stop, observe);
+    if written.bake().is_empty() {
         return live;
     }
-    baked_pass(orig, &bake, &live, o, &stop, observe)
-}
-
-/// The rules of the live search in the order it tries them: the registry's, those that ask to go early on
-/// `a` (the simplified formula) first; the baked pass's own rule left out.
-fn search_order(a: &Analysis) -> Vec<&'static dyn Rule> {
-    let (early, late): (Vec<&'static dyn Rule>, Vec<&'static dyn Rule>) = RULES.iter().copied().filter(|r| r.sites() != Sites::Baked).partition(|r| r.early(a));
-    early.into_iter().chain(late).collect()
+    let choice = (!live.decision.live.is_empty()).then_some(&live.formula);
+    baked_pass(&Candidates::new(written, choice, pow_calls), &live, o, &stop, observe)
 }
 
 /// A trial's verdict: kept when `better` and within `budget`.
@@ -294,21 +279,17 @@ impl Trial {
 }
 
 /// The search with every parameter live (module docs).
-fn live_pass(orig: &Formula, o: &PassOptions, stop: &Cancel, observe: &dyn Fn(Stage)) -> Outcome {
-    let sign = crate::simplify::sign_of(orig, &[]);
-    let cands = Source::new(orig, &[], sign, o.prefer == Prefer::Accuracy);
-    let base = cands.base(orig);
-    let truth_f = crate::simplify::bake_only(orig, &[]);
-    let n = points_for(&base, &truth_f, o);
+fn live_pass(cands: &Candidates, o: &PassOptions, stop: &Cancel, observe: &dyn Fn(Stage)) -> Outcome {
+    let (w, base, cost_before) = (cands.written(), cands.base().clone(), cands.base_cost());
+    let n = points_for(cost_before, w.truth_nodes(), o);
     observe(Stage::Truth { points: n });
-    let bench = Bench { reference: Reference::new_until(&truth_f, sample(orig, &[], n, o.seed), stop), o, stop, observe };
+    let bench = Bench { reference: Reference::new_until(w.truth(), sample(w.orig(), w.bake(), n, o.seed), stop), o, stop, observe };
     let (before, mut cur_got) = bench.run(&base, None);
-    let cost_before = cost(&base);
     let base_budget = o.budget_for(cost_before);
     let (mut cur, mut cur_stats, mut cur_cost) = (Analysis::new(base.clone()), before.clone(), cost_before);
     let mut trials: Vec<Trial> = Vec::new();
     let mut steps = Vec::new();
-    let tries = search_order(&cur);
+    let tries = cands.order(&cur);
     let (mut i, mut k) = (0, 0);
     let mut truncated = false;
     while i < tries.len() {
@@ -318,17 +299,19 @@ fn live_pass(orig: &Formula, o: &PassOptions, stop: &Cancel, observe: &dyn Fn(St
         }
         let r = tries[i];
         let site = matches!(r.sites(), Sites::EachInTurn | Sites::FirstKept).then_some(k);
-        let Some(cand) = cands.build(r, &cur, site) else {
-            (i, k) = (i + 1, 0);
-            continue;
+        let (cand, cost_c) = match cands.next(r, &cur, site) {
+            Candidate::Done => {
+                (i, k) = (i + 1, 0);
+                continue;
+            }
+            Candidate::Same => {
+                k += 1;
+                continue;
+            }
+            Candidate::New(cand, cost_c) => (cand, cost_c),
         };
-        if site.is_some() && identity(&cand) == identity(&cur.f) {
-            k += 1;
-            continue;
-        }
         observe(Stage::Candidate { name: r.name(), tried: trials.len() + 1 });
         let (stats, got) = bench.run(&cand, Some(&cur_got));
-        let cost_c = cost(&cand);
         let fixes = keeps_promise(&stats, &cur_stats);
         let budget = match o.prefer {
             Prefer::Accuracy if fixes => base_budget.max(NONFINITE_BUDGET * cost_before),
@@ -364,28 +347,18 @@ fn live_pass(orig: &Formula, o: &PassOptions, stop: &Cancel, observe: &dyn Fn(St
 /// kernel computes what the live one does; then the compensated chains of those powers where they are
 /// no less accurate and cheaper (within 3 ulp of pow). No other rule is tried, so the baked kernel agrees with
 /// the live one. `Prefer::Speed` bakes with the simplifier's own chains (the fastest form).
-fn baked_pass(orig: &Formula, bake: &[(usize, f64)], live: &Outcome, o: &PassOptions, stop: &Cancel, observe: &dyn Fn(Stage)) -> Outcome {
-    let sign = crate::simplify::sign_of(orig, bake);
-    let pow_calls = o.prefer == Prefer::Accuracy;
-    let plain = Source::new(orig, bake, sign, pow_calls);
-    let base = plain.base(orig);
-    let truth_f = crate::simplify::bake_only(orig, bake);
-    let n = points_for(&base, &truth_f, o);
+fn baked_pass(cands: &Candidates, live: &Outcome, o: &PassOptions, stop: &Cancel, observe: &dyn Fn(Stage)) -> Outcome {
+    let (w, base, cost_before) = (cands.written(), cands.base().clone(), cands.base_cost());
+    let n = points_for(cost_before, w.truth_nodes(), o);
     observe(Stage::Truth { points: n });
-    let bench = Bench { reference: Reference::new_until(&truth_f, sample(orig, bake, n, o.seed), stop), o, stop, observe };
+    let bench = Bench { reference: Reference::new_until(w.truth(), sample(w.orig(), w.bake(), n, o.seed), stop), o, stop, observe };
     let (before, mut cur_got) = bench.run(&base, None);
-    let cost_before = cost(&base);
     let base_budget = o.budget_for(cost_before);
     let (mut cur, mut cur_stats, mut cur_cost) = (base.clone(), before.clone(), cost_before);
     let mut trials = Vec::new();
     let mut decision = Decision { live: live.decision.live.clone(), ..Decision::default() };
-    // The live choice's source; the plain one when the live pass kept nothing (the same formula).
-    let lc_live = (!live.decision.live.is_empty()).then(|| Source::new(&live.formula, bake, sign, pow_calls));
-    let lc = lc_live.as_ref().unwrap_or(&plain);
-    let plain_analysis = Analysis::new(base.clone());
-    if let Some(cand) = lc.build(LIVE_CHOICE, &plain_analysis, None).filter(|c| identity(c) != identity(&base)) {
+    if let Some((cand, c)) = cands.live_choice() {
         let (stats, got) = bench.run(&cand, None);
-        let c = cost(&cand);
         let rules: Vec<&str> = live.decision.live.iter().map(|s| s.rule.name()).collect();
         let rules = if rules.is_empty() { "the formula as written".to_string() } else { rules.join(", ") };
         // Always kept: a baked kernel computes what the live one does, whatever the sample of these values
@@ -399,13 +372,13 @@ fn baked_pass(orig: &Formula, bake: &[(usize, f64)], live: &Outcome, o: &PassOpt
         trials.push(t);
     }
     let mut truncated = false;
-    let power = if decision.baked_live_choice { lc } else { &plain };
-    if let (Some(cand), true) = (power.build(COMPENSATED_POWER, &Analysis::new(cur.clone()), None), pow_calls) {
+    // `Prefer::Speed` bakes with the simplifier's own chains: no compensated power.
+    let power = if o.prefer == Prefer::Accuracy { cands.compensated_power(&cur, decision.baked_live_choice) } else { None };
+    if let Some((cand, cost_c)) = power {
         if bench.out_of_time() {
             truncated = true;
         } else {
             let (stats, _) = bench.run(&cand, Some(&cur_got));
-            let cost_c = cost(&cand);
             // In place of pow calls: no less accurate (within a bit) and cheaper; in place of plain chains: more
             // accurate within the pow calls' cost.
             let v = if decision.baked_live_choice {
@@ -414,7 +387,7 @@ fn baked_pass(orig: &Formula, bake: &[(usize, f64)], live: &Outcome, o: &PassOpt
                     && stats.max_bits_well <= cur_stats.max_bits_well.max(TARGET_BITS - 2.0) + 1.0;
                 verdict(no_worse, cost_c, cur_cost.next_down())
             } else {
-                verdict(better(&stats, &cur_stats), cost_c, base_budget.max(plain.pow_cost()))
+                verdict(better(&stats, &cur_stats), cost_c, base_budget.max(cands.pow_cost()))
             };
             let why = ["less accurate on the sample".to_string(), format!("costs {:.2}× the fastest form, no less than the form it would replace", cost_c / cost_before)];
             let t = Trial::new(COMPENSATED_POWER, None, v, "", why, stats, cost_c, cost_before);
@@ -435,11 +408,10 @@ impl Outcome {
     /// and math, the condition everywhere): the report of a search made on the commands' sample, so that what it
     /// describes is the kernel they compile (`lobe check`). The trials keep the search's own measurements.
     pub fn measured_on(mut self, orig: &Formula, bake: &[(usize, f64)], o: &PassOptions, points: usize, observe: &dyn Fn(Stage)) -> Outcome {
-        let bake = read_bake(orig, bake);
-        let truth_f = crate::simplify::bake_only(orig, &bake);
-        let n = points_for(&self.base, &truth_f, &PassOptions { points, ..*o });
+        let w = Written::new(orig, bake);
+        let n = points_for(self.cost_before, w.truth_nodes(), &PassOptions { points, ..*o });
         observe(Stage::Truth { points: n });
-        let reference = Reference::everywhere(&truth_f, sample(orig, &bake, n, o.seed));
+        let reference = Reference::everywhere(w.truth(), sample(w.orig(), w.bake(), n, o.seed));
         observe(Stage::Report);
         let measure = |f: &Formula| reference.measure(&*measurer(f, o.math, n), Conditioning::Everywhere);
         self.before = measure(&self.base);
@@ -519,6 +491,7 @@ pub(crate) fn with_pass_until(mut opts: crate::Options, pass: PassOptions, cache
 mod tests {
     use super::*;
     use crate::numerics::truth;
+    use crate::simplify::accuracy::RULES;
 
     /// The registry: every rule listed once under a distinct name, and each rule's example rewritten by it (the
     /// rewritten program shows the example's text, the plain one does not) into a formula equal to the written
@@ -536,8 +509,8 @@ mod tests {
             assert!(!r.doc().is_empty(), "{r}");
             let ex = r.example();
             let f = crate::front::parse("rule.brdf", ex.before).unwrap();
-            let src = Source::new(&f, ex.bake, crate::simplify::sign_of(&f, ex.bake), true);
-            let plain = src.base(&f);
+            let src = Candidates::new(Written::new(&f, ex.bake), None, true);
+            let plain = src.base().clone();
             let g = src.build(r, &Analysis::new(plain.clone()), ex.site).unwrap_or_else(|| panic!("{r} does not rewrite its example {:?}", ex.before));
             assert_ne!(identity(&g), identity(&plain), "{r}");
             let (t, p) = (g.to_program_text(), plain.to_program_text());

@@ -12,8 +12,10 @@
 //! `angle.rs` (direction-based formulas: normalised vectors, powers of cosines, angles from acos).
 //! Every rule reads the formula through one [`Analysis`] (ranges, guards, product lists), built once for all
 //! the rules and sites tried on a formula; the builders they share are in `rewrite.rs`, below this module.
-//! Which candidates are kept is decided above the backends (`numerics::robust`), by measured bits of error
-//! against a higher-precision truth over the formula's domain, within a cost budget. A rule that does not
+//! What one search measures is built here too, in one call per search (`candidates.rs`: the formula as
+//! written and its truth's formula, the fastest form and its sign, each rule's candidate from the current best
+//! and its cost). Which candidates are kept is decided above the backends (`numerics::robust`), by measured
+//! bits of error against a higher-precision truth over the formula's domain, within a cost budget. A rule that does not
 //! apply returns `None`. Every rule is exact in real arithmetic; what changes is where f64 rounds:
 //!
 //! - `split-sqrt`: `sqrt(a·b) → sqrt(a)·sqrt(b)` for a, b ≥ 0 (range analysis, or a guard: the sqrt is used
@@ -152,6 +154,7 @@
 
 mod angle;
 mod cancel;
+mod candidates;
 mod chain;
 mod compensated;
 mod power;
@@ -161,7 +164,7 @@ mod vector;
 
 pub use chain::{compensated_powers, pow_call_policy};
 pub use rule::{identity, Example, Rule, Sites};
-pub(crate) use rule::Source;
+pub(crate) use candidates::{Candidate, Candidates, Written};
 
 use super::rewrite::Analysis;
 use super::Policy;
