@@ -1,12 +1,15 @@
 //! Cost of the samplers per call: `Sampler::sample_many` (a draw, its density and f for the weight),
 //! `Sampler::pdf_many` and `Sampler::eval_many` (f alone, what the weight needs), at θᵢ = 30° in batches of
 //! 4096 with one wi per batch, on every file of examples/brdfs and examples/explorer at its defaults, precise
-//! math, the default tier, each channel through the accuracy pass as `lobe sample` compiles; and each sampler's
+//! math, the tier `lobe sample` uses (`auto`: in a build with the LLVM tier, Cranelift first and LLVM from the
+//! first batch of 4096 points; `--tier` to choose), each channel through the accuracy pass as `lobe sample`
+//! compiles; and each sampler's
 //! build time. Each figure is the minimum over interleaved rounds
 //! (`--rounds`, default 7) of this thread's CPU time per call. Targets (docs/sampling.md): sample ≤ 100 ns,
 //! pdf ≤ 50 ns, build ≤ 20 ms isotropic and ≤ 200 ms anisotropic.
 //!
-//! Run: `cargo bench --bench sample [-- --rounds 7] [--mechanism tabulated|exact|cosine] [FILTER]`.
+//! Run: `cargo bench [--features llvm] --bench sample [-- --rounds 7] [--mechanism tabulated|exact|cosine]
+//! [--tier auto|cranelift|llvm] [FILTER]`.
 
 use lobe::bsdf::{Options as SamplerOptions, Sampler};
 use lobe::{Kernel, Options};
@@ -48,10 +51,13 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).filter(|a| a != "--bench").collect();
     let rounds = args.iter().position(|a| a == "--rounds").and_then(|i| args.get(i + 1)).and_then(|r| r.parse().ok()).unwrap_or(7usize);
     let mechanism = args.iter().position(|a| a == "--mechanism").and_then(|i| args.get(i + 1)).map(|m| m.parse::<lobe::bsdf::Mechanism>().unwrap());
-    let filter = args.iter().enumerate().find(|(i, a)| !a.starts_with("--") && (*i == 0 || (args[i - 1] != "--rounds" && args[i - 1] != "--mechanism"))).map(|(_, a)| a.clone());
+    let tier = args.iter().position(|a| a == "--tier").and_then(|i| args.get(i + 1)).map_or(lobe::Tier::Auto, |t| t.parse::<lobe::Tier>().unwrap());
+    let backend = lobe::resolve_backend(lobe::Backend::Jit, tier).unwrap();
+    let filter = args.iter().enumerate().find(|(i, a)| !a.starts_with("--") && (*i == 0 || !["--rounds", "--mechanism", "--tier"].contains(&args[i - 1].as_str()))).map(|(_, a)| a.clone());
     let choice = mechanism.map_or(lobe::bsdf::Choice::Auto, lobe::bsdf::Choice::Force);
     let wi = [30f64.to_radians().sin(), 0.0, 30f64.to_radians().cos()];
     let u = uniforms(CALLS);
+    println!("tier {} (backend {backend:?})", tier.name());
     println!("{:<36} {:>10} {:>9} {:>9} {:>9} {:>9}", "file", "mechanism", "build ms", "sample ns", "pdf ns", "eval ns");
     for path in files() {
         let name = path.display().to_string();
@@ -61,7 +67,7 @@ fn main() {
         let text = std::fs::read_to_string(&path).unwrap();
         // As `lobe sample` compiles: each channel through the accuracy pass (its decision cache on).
         let f = lobe::front::parse(&name, &text).unwrap_or_else(|d| panic!("{name}: {d:?}"));
-        let opts = lobe::numerics::pass_cache::command_pass(Options::default(), Default::default(), true);
+        let opts = lobe::numerics::pass_cache::command_pass(Options { backend, ..Options::default() }, Default::default(), true);
         let kernels: Vec<Kernel> = f.channels().into_iter().map(|c| lobe::compile_formula(c, &opts).unwrap_or_else(|d| panic!("{name}: {d:?}"))).collect();
         let params = kernels[0].formula.default_params();
         let mut build = f64::INFINITY;
