@@ -59,6 +59,11 @@ impl Cancel {
         Cancel::default()
     }
 
+    /// A token that trips only when cancelled (a request's "the client has gone").
+    pub fn untimed() -> Cancel {
+        Cancel::at(None, None)
+    }
+
     /// A token that trips `after` from now, or when cancelled.
     pub fn with_timeout(after: Duration) -> Cancel {
         Cancel::at(Instant::now().checked_add(after), None)

@@ -242,18 +242,19 @@ fn busy(running: usize, what: &str) -> ApiError {
 }
 
 /// Runs `work` (from the calling thread: the HTTP layer's blocking pool) with a token that trips at the
-/// request deadline; refuses new work with 503 while `max_jobs + light_jobs` jobs run, and a job whose cost
-/// [`check_cost`] finds heavy while `max_jobs` heavy ones run. A job past its deadline stops at its next poll
+/// request deadline or when the client leaves (`gone`, the request's); refuses new work with 503 while
+/// `max_jobs + light_jobs` jobs run, and a job whose cost [`check_cost`] finds heavy while `max_jobs` heavy ones
+/// run. A job past its deadline, or whose client has closed the connection, stops at its next poll
 /// — the renderer between tiles, the integrals between incidence angles, the accuracy metrics between n, the
 /// accuracy pass between candidates — and is answered 503; its slots are free again as soon as it has stopped.
 /// The job's parallel work runs on worker threads of its own (as many as the machine has cores): a shared pool
 /// would run each request's tiles after those of the requests before it, so a light render would wait for
 /// every heavy one. With the cost budget checked before each job, a hostile request costs at most one slot for
 /// about the deadline, and the page's other requests keep being served.
-pub(crate) fn limited<T: Send>(st: &Arc<State>, work: impl FnOnce(&Job) -> Result<T, ApiError> + Send) -> Result<T, ApiError> {
+pub(crate) fn limited<T: Send>(st: &Arc<State>, gone: &Cancel, work: impl FnOnce(&Job) -> Result<T, ApiError> + Send) -> Result<T, ApiError> {
     let max = st.limits.max_jobs + st.limits.light_jobs;
     let Some(_slot) = take(&st.jobs, max) else { return Err(busy(max, "computations")) };
-    let job = Job { st, cancel: Cancel::with_timeout(st.limits.deadline), heavy: std::sync::OnceLock::new() };
+    let job = Job { st, cancel: gone.child(st.limits.deadline), heavy: std::sync::OnceLock::new() };
     let threads = std::thread::available_parallelism().map_or(2, usize::from);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
@@ -262,7 +263,11 @@ pub(crate) fn limited<T: Send>(st: &Arc<State>, work: impl FnOnce(&Job) -> Resul
         .map_err(|e| ApiError::new(503, format!("cannot start worker threads: {e}")).hint("try again in a moment"))?;
     let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| pool.install(|| work(&job))))
         .unwrap_or_else(|_| Err(ApiError::new(500, "internal error in the computation")));
-    // A job stopped by its token fails with whatever error its loop gave; the deadline is the reason.
+    // A job stopped by its token fails with whatever error its loop gave; the deadline is the reason, or the
+    // client's leaving (whom no answer reaches).
+    if gone.is_cancelled() {
+        return Err(ApiError::new(503, "the client closed the connection; the computation was stopped"));
+    }
     if job.cancel.is_cancelled() {
         let secs = st.limits.deadline.as_secs_f64();
         return Err(ApiError::new(503, format!("the computation took longer than {secs} s and was stopped"))
@@ -500,8 +505,8 @@ fn read_limited(p: &Path, max: u64) -> Result<Vec<u8>, ApiError> {
 }
 
 /// `POST /api/compile {name, text}`: parameters (with ranges), inputs, the simplified formula, warnings.
-pub(crate) fn compile(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
-    limited(st, move |st| {
+pub(crate) fn compile(st: &Arc<State>, gone: &Cancel, req: Value) -> Result<Reply, ApiError> {
+    limited(st, gone, move |st| {
         let (name, text) = formula_field(&req)?;
         let c = st.compiled(&name, &text)?;
         let f = &c.kernel().formula;
@@ -572,8 +577,8 @@ struct CompiledParam {
 /// 4, 16, … spp at the chosen size, each replacing the last, until the scene's spp, a level the budget refuses,
 /// or a newer request. An exact frame at `spp` is the command
 /// line's render at that many samples per pixel, byte for byte.
-pub(crate) fn render(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
-    limited(st, move |st| {
+pub(crate) fn render(st: &Arc<State>, gone: &Cancel, req: Value) -> Result<Reply, ApiError> {
+    limited(st, gone, move |st| {
         let t = Instant::now();
         let (name, text) = formula_field(&req)?;
         let size = size_field(st, &req)?;
@@ -682,8 +687,8 @@ fn scene_set(st: &State, req: &Value, g: &Geometry) -> Result<Vec<(String, f64)>
 /// difference); the metrics (`manhattan`,
 /// `manhattan_covered`, `max_gray_diff`, `rmse`, `psnr`) as JSON in `X-Lobe-Metrics`, the gray difference
 /// the bar's right end stands for in `X-Lobe-Heat-Scale`.
-pub(crate) fn compare(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
-    limited(st, move |st| {
+pub(crate) fn compare(st: &Arc<State>, gone: &Cancel, req: Value) -> Result<Reply, ApiError> {
+    limited(st, gone, move |st| {
         let a = formula_field(req.get("a").ok_or_else(|| ApiError::bad("missing `a`"))?)?;
         let b = formula_field(req.get("b").ok_or_else(|| ApiError::bad("missing `b`"))?)?;
         let size = size_field(st, &req)?;
@@ -708,8 +713,8 @@ pub(crate) fn compare(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
 /// With `theta_i` (degrees, 0..90) the curves are in the plane of incidence at azimuth `phi_i` (degrees) with
 /// the light there, else the lobes under the lobe convention; polar plots are to scale. All-NaN curves are a
 /// 422 that says so.
-pub(crate) fn plot(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
-    limited(st, move |st| {
+pub(crate) fn plot(st: &Arc<State>, gone: &Cancel, req: Value) -> Result<Reply, ApiError> {
+    limited(st, gone, move |st| {
         let set = params_field(&req)?;
         let polar = req.get("polar").and_then(Value::as_bool).unwrap_or(false);
         let incidence = incidence_field(&req)?;
@@ -746,8 +751,8 @@ pub(crate) fn plot(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
 /// `POST /api/analyze {name, text, params, reference: {name, text}}`: the energy coefficient, ρ(θᵢ) and its maximum
 /// (and the incidence angle of the maximum), the papers' error metrics against the reference, ns/eval of the compiled
 /// kernel (scalar and batched JIT, interpreter) and its compile time.
-pub(crate) fn analyze(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
-    limited(st, move |st| {
+pub(crate) fn analyze(st: &Arc<State>, gone: &Cancel, req: Value) -> Result<Reply, ApiError> {
+    limited(st, gone, move |st| {
         let (name, text) = formula_field(&req)?;
         let set = params_field(&req)?;
         let k = st.compiled(&name, &text)?.kernel().clone();
@@ -877,7 +882,7 @@ pub(crate) fn save(st: &State, req: &Value) -> Result<Reply, ApiError> {
 
 /// `GET /render.png?file=SCENE&set=n=50&size=256`: exactly what rendering SCENE with n = 50 at size 256 gives (JIT,
 /// linear transfer, default tiles and threads), so the bytes equal the CLI's output file.
-pub(crate) fn render_png(st: &Arc<State>, query: &str) -> Result<Reply, ApiError> {
+pub(crate) fn render_png(st: &Arc<State>, gone: &Cancel, query: &str) -> Result<Reply, ApiError> {
     let mut file = None;
     let mut set = vec![];
     let mut size = None;
@@ -897,7 +902,7 @@ pub(crate) fn render_png(st: &Arc<State>, query: &str) -> Result<Reply, ApiError
             return Err(ApiError::bad(format!("size {w}×{h} is over the server's {max}×{max}")).hint("rendering outside the page has no such cap"));
         }
     }
-    limited(st, move |st| {
+    limited(st, gone, move |st| {
         // The scene's own size when none is given: read it with the geometry, then check the cap. The scene
         // and every file it names are read through the served-files policy.
         let files = ServedFiles::new(&st.roots);
@@ -928,7 +933,7 @@ mod tests {
         let st = state(50, 1, 0);
         // A job that polls its token until it trips: stopped at the deadline, 503, and its slot is free at once.
         let t = std::time::Instant::now();
-        let e = limited(&st, |job| {
+        let e = limited(&st, &Cancel::never(), |job| {
             while job.cancel.check().is_ok() {
                 std::thread::sleep(Duration::from_millis(1));
             }
@@ -939,14 +944,14 @@ mod tests {
         assert!(e.error.message.contains("longer than") && e.error.message.contains("stopped"), "{}", e.error);
         assert!(t.elapsed() < Duration::from_secs(20), "the job ran on past its deadline");
         assert_eq!(st.jobs.load(Ordering::SeqCst), 0);
-        assert_eq!(limited(&st, |_| Ok(8)).unwrap(), 8, "the slot is free again");
+        assert_eq!(limited(&st, &Cancel::never(), |_| Ok(8)).unwrap(), 8, "the slot is free again");
         // While a job runs, a second one is refused as busy.
         let st = state(30_000, 1, 0);
-        let busy = limited(&st, |_| Ok(limited(&st, |_| Ok(())).unwrap_err())).unwrap();
+        let busy = limited(&st, &Cancel::never(), |_| Ok(limited(&st, &Cancel::never(), |_| Ok(())).unwrap_err())).unwrap();
         assert!(busy.status == 503 && busy.error.message.contains("busy"), "{}", busy.error);
         // A panicking job (the panic message below in the test output is expected) is a 500 and frees its slot.
-        assert_eq!(limited(&st, |_| -> Result<(), ApiError> { panic!("expected panic in a test job") }).unwrap_err().status, 500);
-        assert_eq!(limited(&st, |_| Ok(9)).unwrap(), 9);
+        assert_eq!(limited(&st, &Cancel::never(), |_| -> Result<(), ApiError> { panic!("expected panic in a test job") }).unwrap_err().status, 500);
+        assert_eq!(limited(&st, &Cancel::never(), |_| Ok(9)).unwrap(), 9);
     }
 
     #[test]
@@ -956,8 +961,8 @@ mod tests {
         let c = st.compiled("h.brdf", &heavy, &Cancel::never()).unwrap();
         assert!(c.warnings.items.iter().any(|d| d.message.contains("accuracy pass was skipped")), "the pass is priced too");
         let k = c.kernel().clone();
-        assert!(limited(&st, |job| check_cost(job, &k, 64.0 * 64.0, "a small render")).is_ok());
-        let e = limited(&st, |job| check_cost(job, &k, 2048.0 * 2048.0, "this render")).unwrap_err();
+        assert!(limited(&st, &Cancel::never(), |job| check_cost(job, &k, 64.0 * 64.0, "a small render")).is_ok());
+        let e = limited(&st, &Cancel::never(), |job| check_cost(job, &k, 2048.0 * 2048.0, "this render")).unwrap_err();
         assert_eq!(e.status, 422);
         assert_eq!(st.compiled("big.brdf", &"1+".repeat(40 << 10), &Cancel::never()).err().map(|e| e.status), Some(413));
         assert_eq!(content_hash(b"NH^n"), content_hash(b"NH^n"));
@@ -971,18 +976,18 @@ mod tests {
         let st = state(30_000, 1, 1);
         let k = st.compiled("h.brdf", &((0..300).map(|i| format!("sin(NH*{i}.5) + ")).collect::<String>() + "0"), &Cancel::never()).unwrap().kernel().clone();
         let heavy_evals = st.limits.light_cost / k.formula.ir.len() as f64 * 2.0;
-        let inner = limited(&st, |job| {
+        let inner = limited(&st, &Cancel::never(), |job| {
             check_cost(job, &k, heavy_evals, "a heavy render")?;
-            let second = limited(&st, |j2| check_cost(j2, &k, heavy_evals, "another heavy render")).unwrap_err();
-            let light = limited(&st, |j2| check_cost(j2, &k, 16.0, "a light render").map(|()| 7));
+            let second = limited(&st, &Cancel::never(), |j2| check_cost(j2, &k, heavy_evals, "another heavy render")).unwrap_err();
+            let light = limited(&st, &Cancel::never(), |j2| check_cost(j2, &k, 16.0, "a light render").map(|()| 7));
             Ok((second, light))
         })
         .unwrap();
         assert!(inner.0.status == 503 && inner.0.error.message.contains("heavy"), "{}", inner.0.error);
         assert_eq!(inner.1.unwrap(), 7);
-        let full = limited(&st, |_| Ok(limited(&st, |_| Ok(limited(&st, |_| Ok(())).unwrap_err())).unwrap())).unwrap();
+        let full = limited(&st, &Cancel::never(), |_| Ok(limited(&st, &Cancel::never(), |_| Ok(limited(&st, &Cancel::never(), |_| Ok(())).unwrap_err())).unwrap())).unwrap();
         assert_eq!(full.status, 503);
         assert_eq!((st.jobs.load(Ordering::SeqCst), st.heavy.load(Ordering::SeqCst)), (0, 0));
-        assert!(limited(&st, |job| check_cost(job, &k, heavy_evals, "a heavy render")).is_ok(), "the heavy slot is free again");
+        assert!(limited(&st, &Cancel::never(), |job| check_cost(job, &k, heavy_evals, "a heavy render")).is_ok(), "the heavy slot is free again");
     }
 }

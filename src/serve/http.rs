@@ -24,6 +24,7 @@
 //! HTTP/1.1. Build cost: tokio (rt, net, time), hyper (http1, server), hyper-util, http-body-util and the 7
 //! crates they add cost ~35 s of CPU in a clean release build, off its critical path (BENCHMARKS.md §11).
 
+use crate::base::cancel::Cancel;
 use crate::base::diag::{Diagnostic, Plain};
 use crate::base::source::{read_regular_file, FileAccess, ReadError};
 use bytes::Bytes;
@@ -62,6 +63,11 @@ pub(crate) struct Request {
     pub query: String,
     pub headers: Vec<(String, String)>,
     pub body: Vec<u8>,
+    /// Trips when the client closes the connection before the answer (hyper drops the request's future: it
+    /// reads the socket's end while the answer is computed): the computation answering it stops at its next
+    /// poll and frees its slot, as at its deadline — the page cancels a refinement level it no longer needs by
+    /// aborting its fetch.
+    pub gone: Cancel,
 }
 
 impl Request {
@@ -200,6 +206,16 @@ async fn connection(stream: tokio::net::TcpStream, busy: Arc<AtomicUsize>, leave
     let _ = b.serve_connection(hyper_util::rt::TokioIo::new(stream), service).await;
 }
 
+/// Trips a request's [`Request::gone`] when dropped: when the answer is sent (the computation is over then), or
+/// when the connection ends first and hyper drops the future awaiting the computation.
+struct TripOnDrop(Cancel);
+
+impl Drop for TripOnDrop {
+    fn drop(&mut self) {
+        self.0.cancel();
+    }
+}
+
 /// Counts a request as being answered while it lives.
 struct Busy(Arc<AtomicUsize>);
 
@@ -219,6 +235,7 @@ async fn answer(rq: hyper::Request<Incoming>, busy: &Arc<AtomicUsize>, body_cap:
     // but a socket, so over a cap it goes first — a client trickling bodies cannot lock its own address out.
     busy.fetch_add(1, Ordering::SeqCst);
     let _busy = Busy(busy.clone());
+    let _gone = TripOnDrop(rq.gone.clone());
     let reply = tokio::task::spawn_blocking(move || handler(&rq)).await;
     response(reply.unwrap_or_else(|_| ApiError::new(500, "internal error while answering the request").reply()))
 }
@@ -237,6 +254,7 @@ async fn read_request(rq: hyper::Request<Incoming>, body_cap: usize) -> Result<R
         query: parts.uri.query().unwrap_or("").to_string(),
         headers,
         body: vec![],
+        gone: Cancel::untimed(),
     };
     if rq.header("Transfer-Encoding").is_some() {
         return Err(ApiError::new(411, "chunked request bodies are not accepted").hint("send Content-Length"));

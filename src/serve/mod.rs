@@ -213,21 +213,21 @@ fn route(state: &Arc<api::State>, addr: Option<SocketAddr>, rq: &http::Request) 
             let p = q.iter().find(|(k, _)| k == "path").map(|(_, v)| v.as_str()).unwrap_or("");
             api::file(state, p)
         }
-        ("GET", "/render.png") => api::render_png(state, query),
+        ("GET", "/render.png") => api::render_png(state, &rq.gone, query),
         ("POST", p) if p.starts_with("/api/") => {
             if rq.header("X-Lobe-Client").is_none() {
                 return Err(ApiError::new(403, "POST requests need the X-Lobe-Client header").hint("the lobe page sends it; other sites cannot"));
             }
             let req = http::json_body(&rq.body)?;
             match p {
-                "/api/compile" => api::compile(state, req),
-                "/api/render" => api::render(state, req),
-                "/api/compare" => api::compare(state, req),
-                "/api/plot" => api::plot(state, req),
-                "/api/analyze" => api::analyze(state, req),
+                "/api/compile" => api::compile(state, &rq.gone, req),
+                "/api/render" => api::render(state, &rq.gone, req),
+                "/api/compare" => api::compare(state, &rq.gone, req),
+                "/api/plot" => api::plot(state, &rq.gone, req),
+                "/api/analyze" => api::analyze(state, &rq.gone, req),
                 "/api/save" => api::save(state, &req),
-                "/api/lobe" => views::lobe(state, req),
-                "/api/slice" => views::slice(state, req),
+                "/api/lobe" => views::lobe(state, &rq.gone, req),
+                "/api/slice" => views::slice(state, &rq.gone, req),
                 _ => Err(ApiError::new(404, format!("no endpoint {p}"))),
             }
         }

@@ -14,6 +14,7 @@
 
 use super::api::{self, State};
 use super::http::{ApiError, Reply};
+use crate::base::cancel::Cancel;
 use crate::Evaluator;
 use serde_json::Value;
 use std::sync::Arc;
@@ -71,8 +72,8 @@ fn summary(values: &[f64]) -> (f64, usize) {
 /// `POST /api/lobe {name, text, params, theta_i, phi_i, n_theta, n_phi}`: f(L, V) with L at (θᵢ, φᵢ) (degrees)
 /// and V at θₒ = 90°·i/(n_theta − 1), φₒ = 360°·j/n_phi, row by row in θₒ (`values`, NaN/inf as `null`); the
 /// light's direction `light`, the largest finite value `max` and the count of non-finite values `nonfinite`.
-pub(crate) fn lobe(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
-    api::limited(st, move |st| {
+pub(crate) fn lobe(st: &Arc<State>, gone: &Cancel, req: Value) -> Result<Reply, ApiError> {
+    api::limited(st, gone, move |st| {
         let (ti, pi) = api::incidence_field(&req)?.unwrap_or((0.0, 0.0));
         let nt = count_field(&req, "n_theta", 33, 3, 91)?;
         let np = count_field(&req, "n_phi", 64, 4, 360)?;
@@ -95,8 +96,8 @@ pub(crate) fn lobe(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
 /// `POST /api/slice {name, text, params, res, phi_d}`: f at θ_h = 90°·i/res (columns) and θ_d = 90°·j/res
 /// (rows), at φ_d (degrees, default 90 as BRDF Explorer) and φ_h = 0; `null` where L or V is below the horizon
 /// or the value is not finite. `max` and `nonfinite` as for `/api/lobe`.
-pub(crate) fn slice(st: &Arc<State>, req: Value) -> Result<Reply, ApiError> {
-    api::limited(st, move |st| {
+pub(crate) fn slice(st: &Arc<State>, gone: &Cancel, req: Value) -> Result<Reply, ApiError> {
+    api::limited(st, gone, move |st| {
         let res = count_field(&req, "res", 64, 8, 256)?;
         let pd = match req.get("phi_d") {
             None => 90.0,

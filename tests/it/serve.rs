@@ -881,3 +881,42 @@ fn traced_scenes_render_at_the_requested_spp() {
     assert_eq!((r.status, r.header("X-Lobe-Spp")), (200, None), "a rasterised scene ignores spp");
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// A request whose client leaves before the answer (the page aborts a refinement level it no longer needs)
+/// stops its computation at the next poll and frees its slot: a heavy render that takes seconds when awaited
+/// ends within a second of its connection's close, long before the deadline.
+#[test]
+fn a_computation_whose_client_leaves_stops_and_frees_its_slot() {
+    let s = Served::start(&["examples/brdfs", "--deadline", "60"]);
+    let heavy: String = (0..500).map(|i| format!("sin(NH*{i}.5) + ")).collect::<String>() + "0";
+    let body = json!({"name": "heavy.brdf", "text": heavy, "size": 1024});
+    assert_eq!(s.post("/api/compile", &json!({"name": "heavy.brdf", "text": heavy})).status, 200);
+    let t0 = Instant::now();
+    let r = s.post("/api/render", &body);
+    let awaited = t0.elapsed();
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    // The same request on a kept-alive connection (as a browser's fetch), closed once the job runs.
+    let mut c = TcpStream::connect(s.addr).unwrap();
+    let text = body.to_string();
+    let head = format!("POST /api/render HTTP/1.1\r\nHost: {}\r\nX-Lobe-Client: test\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n", s.addr, text.len());
+    c.write_all(head.as_bytes()).unwrap();
+    c.write_all(text.as_bytes()).unwrap();
+    let running = |s: &Served| s.get("/api/session").json()["jobs_running"].as_u64().unwrap();
+    let t1 = Instant::now();
+    while running(&s) == 0 {
+        assert!(t1.elapsed() < awaited, "the render did not start");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    drop(c);
+    let t2 = Instant::now();
+    while running(&s) > 0 {
+        assert!(t2.elapsed() < Duration::from_secs(30), "the render still runs 30 s after its client left");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let stopped = t2.elapsed();
+    eprintln!("render awaited {awaited:?}; stopped {stopped:?} after its client left");
+    assert!(stopped < Duration::from_secs(1).min(awaited / 2), "stopped {stopped:?} after the close; the render takes {awaited:?}");
+    // The slot is free: a normal render is answered.
+    let r = s.post("/api/render", &json!({"text": "VR^n", "params": {"n": 20}, "size": 64}));
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+}
