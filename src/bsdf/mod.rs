@@ -86,6 +86,7 @@ use crate::numerics::energy::turns_with_the_frame;
 use exact::{build_exact, Exact};
 use tabulated::{build_tabulated, TabAt, Tabulated};
 use std::f64::consts::PI;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// Rec. 709 luminance of (r, g, b): the target density of a colour formula.
@@ -202,10 +203,11 @@ impl Samples {
     }
 }
 
-/// The formula's channels as one target: kernels, their luminance weights, the parameters.
+/// The formula's channels as one target: their evaluators (compiled kernels, or a measured table's lookups),
+/// their luminance weights, the parameters, the inputs they read.
 #[derive(Clone)]
 struct Target {
-    kernels: Vec<Kernel>,
+    kernels: Vec<Arc<dyn Evaluator>>,
     lum: Vec<f64>,
     params: Vec<f64>,
     used: InputSet,
@@ -504,6 +506,15 @@ impl Sampler {
 
     /// A sampler for a formula's channel kernels (one, or red, green, blue: `Formula::channels`).
     pub fn build_channels(kernels: &[Kernel], params: &[f64], opts: &Options) -> Result<Sampler, Diagnostic> {
+        let used: InputSet = kernels.iter().map(|k| k.used_inputs()).collect();
+        let evs: Vec<Arc<dyn Evaluator>> = kernels.iter().map(|k| Arc::new(k.clone()) as Arc<dyn Evaluator>).collect();
+        Sampler::build_evaluators(&evs, used, params, opts)
+    }
+
+    /// A sampler for channels given as evaluators reading `used` (one, or red, green, blue) — a measured
+    /// table's lookups as well as compiled formulas. Only the tabulated and cosine mechanisms (the exact one
+    /// needs a formula of one cosine, which `used` alone does not show for an evaluator of directions).
+    pub fn build_evaluators(kernels: &[Arc<dyn Evaluator>], used: InputSet, params: &[f64], opts: &Options) -> Result<Sampler, Diagnostic> {
         let t0 = Instant::now();
         if !(opts.cosine_fraction > 0.0 && opts.cosine_fraction < 1.0) {
             return Err(Diagnostic::error(format!("the cosine fraction {} is not in (0, 1)", opts.cosine_fraction))
@@ -514,9 +525,8 @@ impl Sampler {
             3 => LUMINANCE.to_vec(),
             n => return Err(Diagnostic::error(format!("a sampler takes 1 or 3 channel kernels, not {n}"))),
         };
-        let used: InputSet = kernels.iter().map(|k| k.used_inputs()).collect();
         let target = Target { kernels: kernels.to_vec(), lum, params: params.to_vec(), used };
-        let isotropic = !used.reads_directions() || kernels.iter().all(|k| turns_with_the_frame(k, params));
+        let isotropic = !used.reads_directions() || kernels.iter().all(|k| turns_with_the_frame(k.as_ref(), params));
         let one_cosine = crate::numerics::one_lobe_cosine(used);
         let make = |body: Body, empty: Vec<(f64, f64)>, mechanism: Mechanism| Sampler {
             target: target.clone(),

@@ -114,7 +114,7 @@ fn mean_var(x: &[f64]) -> (f64, f64) {
 pub fn albedo_quadrature(s: &Sampler, theta_i: f64, phi_i: f64) -> Result<f64, Diagnostic> {
     let t = &s.target;
     let phi = t.used.reads_directions().then_some(phi_i);
-    let per: Result<Vec<f64>, Diagnostic> = t.kernels.iter().map(|k| crate::numerics::energy::albedo_at(k, &t.params, theta_i, phi)).collect();
+    let per: Result<Vec<f64>, Diagnostic> = t.kernels.iter().map(|k| crate::numerics::energy::albedo_at(k.as_ref(), &t.params, theta_i, phi)).collect();
     Ok(t.luminance(&per?))
 }
 

@@ -42,7 +42,9 @@
 use super::bvh::Bvh;
 use super::mesh::onb_tangent;
 use super::{LightKind, Material, RenderOptions, RenderStats, Scene};
-use crate::backend::Kernel;
+use crate::backend::{Evaluator, Kernel};
+use crate::ir::InputSet;
+use std::sync::Arc;
 use crate::base::rng::counter_unit;
 use crate::bsdf::{Options as SamplerOptions, Sampler, LUMINANCE};
 use glam::DVec3;
@@ -122,30 +124,32 @@ fn lum(c: DVec3) -> f64 {
 }
 
 fn prepare(m: &Material) -> Result<Shading, String> {
-    if m.program.channels.is_empty() {
-        return Err(format!(
-            "material `{}`: a measured table cannot be rendered under an environment or with shadows yet",
-            m.name
-        ));
-    }
-    let kernels: Vec<Kernel> = m
-        .program
-        .channels
-        .iter()
-        .zip(std::iter::once(m.evaluator.clone()).chain(m.green_blue.iter().flat_map(|gb| gb.iter().cloned())))
-        .map(|(f, ev)| Kernel::new(f.clone(), m.program.backend, m.program.math, ev, Duration::ZERO))
-        .collect();
+    // A formula's channels as compiled kernels; a measured table's as its lookups (sampled by their tables too).
+    let (evaluators, used): (Vec<Arc<dyn Evaluator>>, InputSet) = match &m.program.evaluated {
+        Some(rgb) if m.program.channels.is_empty() => (rgb.to_vec(), m.used),
+        _ => {
+            let kernels: Vec<Kernel> = m
+                .program
+                .channels
+                .iter()
+                .zip(std::iter::once(m.evaluator.clone()).chain(m.green_blue.iter().flat_map(|gb| gb.iter().cloned())))
+                .map(|(f, ev)| Kernel::new(f.clone(), m.program.backend, m.program.math, ev, Duration::ZERO))
+                .collect();
+            let used = kernels.iter().map(Kernel::used_inputs).collect();
+            (kernels.into_iter().map(|k| Arc::new(k) as Arc<dyn Evaluator>).collect(), used)
+        }
+    };
     let diffuse = m.kd * m.color;
     let spec = m.ks * m.coef * m.specular;
     let sampler = if lum(spec) > 0.0 {
-        Some(Sampler::build_channels(&kernels, &m.params, &SamplerOptions::default()).map_err(|d| format!("material `{}`: {d}", m.name))?)
+        Some(Sampler::build_evaluators(&evaluators, used, &m.params, &SamplerOptions::default()).map_err(|d| format!("material `{}`: {d}", m.name))?)
     } else {
         None
     };
     let (wd, ws) = (lum(diffuse).max(0.0), if sampler.is_some() { lum(spec).max(0.0) } else { 0.0 });
     let alpha = if wd + ws > 0.0 { wd / (wd + ws) } else { 1.0 };
     let (s, c) = m.tangent_angle_deg.to_radians().sin_cos();
-    Ok(Shading { sampler, diffuse, spec, times_nl: m.times_nl, rot: (c, s), alpha, channels: kernels.len() })
+    Ok(Shading { sampler, diffuse, spec, times_nl: m.times_nl, rot: (c, s), alpha, channels: evaluators.len() })
 }
 
 /// A camera sample's surface point.
