@@ -34,6 +34,7 @@ mod robust;
 mod serve;
 mod sample;
 mod shading;
+mod truth_mpmath;
 
 /// A fresh, empty scratch directory `lobe-AREA-TAG-PID` under the system's temporary directory.
 pub fn scratch_dir(area: &str, tag: &str) -> std::path::PathBuf {
