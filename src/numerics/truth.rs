@@ -35,6 +35,8 @@ use crate::builtins::math::Direct;
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Node, NodeId, N_INPUTS};
 use std::cmp::Ordering;
+
+mod reduce;
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
 mod linear;
@@ -385,22 +387,27 @@ impl Xf {
         if self.is_special() {
             return (Xf::special(self.hi.sin()), Xf::special(self.hi.cos()));
         }
-        if self.e >= 40 {
-            let v = self.to_f64();
-            return (Xf::from_f64(v.sin()), Xf::from_f64(v.cos()));
-        }
         if self.e < -60 {
             // sin x = x − x³/6, cos x = 1 − x²/2 to far below 2^-104 relative.
             let x2 = self.mul(self);
             return (self.sub(x2.mul(self).div(Xf::from_f64(6.0))), Xf::ONE.sub(x2.div(Xf::from_f64(2.0))));
         }
         let x = self.to_dd();
-        let k = (x.0 / (PI3[0] / 2.0)).round();
-        // r = x − k·π/2 with π/2 in three parts (k < 2^41, so k·p exact-ish in dd).
-        let mut r = x;
-        for p in PI3 {
-            r = dd::add(&mut Direct, r, dd::neg(&mut Direct, dd::mul(&mut Direct, (k, 0.0), (p / 2.0, 0.0))));
-        }
+        let (k, r) = if self.e < 40 {
+            let k = (x.0 / (PI3[0] / 2.0)).round();
+            // r = x − k·π/2 with π/2 in three parts (k < 2^41, so k·p exact-ish in dd).
+            let mut r = x;
+            for p in PI3 {
+                r = dd::add(&mut Direct, r, dd::neg(&mut Direct, dd::mul(&mut Direct, (k, 0.0), (p / 2.0, 0.0))));
+            }
+            (k, r)
+        } else {
+            // Past 2⁴⁰ the quadrant count outgrows the three parts: Payne–Hanek (past its table, no value).
+            match reduce::reduce(self) {
+                Some((k, r)) => (k as f64, r),
+                None => return (Xf::NAN, Xf::NAN),
+            }
+        };
         let r2 = dd::mul(&mut Direct, r, r);
         // |r| ≤ π/4: the terms r^i/i! fall below 1e-40 (far below 2^-106 of the sums) by i = 33.
         let inv = inverse_factorials();
