@@ -38,7 +38,7 @@ use std::cmp::Ordering;
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
 mod linear;
-pub(crate) use linear::{Estimate, Linear};
+pub(crate) use linear::{Estimate, Linear, Scratch};
 
 type Dd = dd::Dd<f64>;
 
@@ -614,7 +614,7 @@ pub(crate) fn eval_moves_with(f: &Formula, readers: &Readers, x: &[f64; N_INPUTS
 }
 
 /// [`eval_moves_with`] from the exact values of every node at the point, computed beforehand (as
-/// [`Linear::eval`] gives them).
+/// [`Linear::eval`] leaves them in its [`Scratch`]).
 pub(crate) fn eval_moves_from(f: &Formula, readers: &Readers, base: &[Xf], x: &[f64; N_INPUTS], params: &[f64], moves: &[Move]) -> Vec<f64> {
     let n = f.root.index() + 1;
     let xs = x.map(Xf::from_f64);
