@@ -217,6 +217,7 @@ impl Node {
     }
 
     /// Calls `f` on every operand, in order.
+    #[inline]
     pub(crate) fn for_each_arg(&self, mut f: impl FnMut(NodeId)) {
         match self {
             Node::Const(_) | Node::Input(_) | Node::Param(_) | Node::Column(_) => {}

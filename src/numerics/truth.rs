@@ -40,7 +40,7 @@ mod reduce;
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
 mod linear;
-pub(crate) use linear::{Estimate, Linear};
+pub(crate) use linear::{Estimate, Linear, Scratch};
 
 type Dd = dd::Dd<f64>;
 
@@ -50,6 +50,7 @@ const PI3: [f64; 3] = [std::f64::consts::PI, 1.224646799147353207e-16, -2.994769
 const LN2: Dd = (std::f64::consts::LN_2, 2.319046813846299558e-17);
 
 /// x·2^k for any k, in steps that neither overflow nor underflow the scale factor.
+#[inline]
 fn ldexp(mut x: f64, mut k: i64) -> f64 {
     while k > 1000 {
         x *= pow2(1000);
@@ -68,6 +69,7 @@ fn ldexp(mut x: f64, mut k: i64) -> f64 {
     x * pow2(k)
 }
 /// 2^k for |k| ≤ 1022: the math library's exact power of two (`powi` was a tenth of the truth's time).
+#[inline]
 fn pow2(k: i64) -> f64 {
     crate::builtins::math::pow2i(k as f64)
 }
@@ -108,6 +110,7 @@ impl Xf {
     pub(crate) const NAN: Xf = Xf { hi: f64::NAN, lo: 0.0, e: 0 };
 
     /// `(hi + lo)·2^e`, normalised.
+    #[inline]
     fn make(d: Dd, e: i64) -> Xf {
         if d.1 == 0.0 && (d.0 == 0.0 || !d.0.is_finite()) {
             return Xf::special(d.0);
@@ -170,6 +173,7 @@ impl Xf {
         Xf::make(d, 0)
     }
 
+    #[inline]
     fn xneg(self) -> Xf {
         Xf { hi: -self.hi, lo: -self.lo, e: self.e }
     }
@@ -181,6 +185,7 @@ impl Xf {
         }
     }
 
+    #[inline]
     fn xadd(self, b: Xf) -> Xf {
         let a = self;
         if a.is_special() || b.is_special() {
@@ -209,9 +214,11 @@ impl Xf {
             Xf::make(dd::add(&mut Direct, (ldexp(a.hi, d), ldexp(a.lo, d)), (b.hi, b.lo)), b.e)
         }
     }
+    #[inline]
     fn xsub(self, b: Xf) -> Xf {
         self.add(b.neg())
     }
+    #[inline]
     fn xmul(self, b: Xf) -> Xf {
         if self.is_special() || b.is_special() {
             // A finite non-zero operand acts as ±1: the result is ±0, ±∞ or NaN, as in f64.
@@ -219,6 +226,7 @@ impl Xf {
         }
         Xf::make(dd::mul(&mut Direct, (self.hi, self.lo), (b.hi, b.lo)), self.e.saturating_add(b.e))
     }
+    #[inline]
     fn xdiv(self, b: Xf) -> Xf {
         if self.is_special() || b.is_special() {
             return Xf::special(self.hi.signum_or_special() / b.hi.signum_or_special());
@@ -478,30 +486,35 @@ impl Xf {
 
 impl std::ops::Neg for Xf {
     type Output = Xf;
+    #[inline]
     fn neg(self) -> Xf {
         self.xneg()
     }
 }
 impl std::ops::Add for Xf {
     type Output = Xf;
+    #[inline]
     fn add(self, b: Xf) -> Xf {
         self.xadd(b)
     }
 }
 impl std::ops::Sub for Xf {
     type Output = Xf;
+    #[inline]
     fn sub(self, b: Xf) -> Xf {
         self.xsub(b)
     }
 }
 impl std::ops::Mul for Xf {
     type Output = Xf;
+    #[inline]
     fn mul(self, b: Xf) -> Xf {
         self.xmul(b)
     }
 }
 impl std::ops::Div for Xf {
     type Output = Xf;
+    #[inline]
     fn div(self, b: Xf) -> Xf {
         self.xdiv(b)
     }
@@ -521,6 +534,7 @@ impl SignumOrSpecial for f64 {
     }
 }
 
+#[inline]
 fn call(f: Builtin, a: &[Xf]) -> Xf {
     match f {
         Builtin::Pow => a[0].pow(a[1]),
@@ -642,7 +656,7 @@ pub(crate) fn eval_moves_with(f: &Formula, readers: &Readers, x: &[f64; N_INPUTS
 }
 
 /// [`eval_moves_with`] from the exact values of every node at the point, computed beforehand (as
-/// [`Linear::eval`] gives them).
+/// [`Linear::eval`] leaves them in its [`Scratch`]).
 pub(crate) fn eval_moves_from(f: &Formula, readers: &Readers, base: &[Xf], x: &[f64; N_INPUTS], params: &[f64], moves: &[Move]) -> Vec<f64> {
     let n = f.root.index() + 1;
     let xs = x.map(Xf::from_f64);
@@ -678,6 +692,7 @@ pub(crate) fn eval_moves_from(f: &Formula, readers: &Readers, base: &[Xf], x: &[
 }
 
 /// The exact value of node `id` given the values `v` of the nodes before it.
+#[inline(always)]
 fn node_value(f: &Formula, id: NodeId, v: &[Xf], x: &[Xf; N_INPUTS], params: &[f64]) -> Xf {
     match *f.ir.node(id) {
         Node::Const(b) => Xf::from_f64(f64::from_bits(b)),

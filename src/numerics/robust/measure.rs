@@ -175,25 +175,31 @@ impl<'a> Reference<'a> {
         let readers_ref = &readers;
         let not_reached = (TruthAt { value: f64::NAN, limit: false }, FirstOrder::Exact);
         let linear = linear.as_ref();
+        // The first order's buffers are kept from one point to the next (one set per rayon job).
         let rows: Vec<(TruthAt, FirstOrder)> = points
             .par_chunks(16)
-            .flat_map_iter(|ch| {
+            .map_init(truth::Scratch::default, |scratch, ch| {
                 let stopped = stop.is_cancelled();
-                ch.iter().map(move |pt| match linear {
-                    _ if stopped => not_reached,
-                    None => (TruthAt::new(truth_f, pt), FirstOrder::Exact),
-                    Some(l) => {
-                        let (value, estimate, nodes) = l.eval(truth_f, &pt.x, &pt.p);
-                        let at = TruthAt::from_value(truth_f, pt, value);
-                        let verdict = match first_order(&estimate) {
-                            _ if at.limit || !value.is_finite() => FirstOrder::Exact,
-                            FirstOrder::Check(only) if only != 0 => FirstOrder::Checked(condition_ulps_with(truth_f, readers_ref, pt, value, only, Some(&nodes))),
-                            v => v,
-                        };
-                        (at, verdict)
-                    }
-                })
+                ch.iter()
+                    .map(|pt| match linear {
+                        _ if stopped => not_reached,
+                        None => (TruthAt::new(truth_f, pt), FirstOrder::Exact),
+                        Some(l) => {
+                            let (value, estimate) = l.eval(truth_f, &pt.x, &pt.p, scratch);
+                            let at = TruthAt::from_value(truth_f, pt, value);
+                            let verdict = match first_order(&estimate) {
+                                _ if at.limit || !value.is_finite() => FirstOrder::Exact,
+                                FirstOrder::Check(only) if only != 0 => {
+                                    FirstOrder::Checked(condition_ulps_with(truth_f, readers_ref, pt, value, only, Some(scratch.values())))
+                                }
+                                v => v,
+                            };
+                            (at, verdict)
+                        }
+                    })
+                    .collect::<Vec<_>>()
             })
+            .flatten_iter()
             .collect();
         let (truth, first): (Vec<TruthAt>, Vec<FirstOrder>) = rows.into_iter().unzip();
         let cond = (0..points.len()).map(|_| std::sync::OnceLock::new()).collect();

@@ -41,6 +41,26 @@ enum Var {
 pub(crate) struct Linear {
     vars: Vec<Var>,
     deps: Vec<u64>,
+    /// Each constant node's exact value (zero at the other nodes), converted once instead of at every point.
+    consts: Vec<Xf>,
+}
+
+/// The buffers [`Linear::eval`] works in, kept from one point to the next (one per thread): the nodes' exact
+/// values, their per-node state, their rows of changes and bounds.
+#[derive(Default)]
+pub(crate) struct Scratch {
+    vals: Vec<Xf>,
+    at: Vec<At>,
+    rows: Vec<f64>,
+    bounds: Vec<f64>,
+}
+
+impl Scratch {
+    /// The exact value of every node at the last point [`Linear::eval`] was given (for
+    /// [`super::eval_moves_from`]).
+    pub(crate) fn values(&self) -> &[Xf] {
+        &self.vals
+    }
 }
 
 /// The first-order condition at one point.
@@ -126,14 +146,16 @@ struct At {
     exact: bool,
 }
 
-/// A node's change per variable and its bound, both scaled by 2^-e of the node.
+/// A node's change per variable and its bound, both scaled by 2^-e of the node: `W` entries, the variables
+/// rounded up to a fixed width (8, 16, 32 or 64) so that arithmetic over a whole row is straight vector code;
+/// 0 past the variables and outside the node's own.
 #[derive(Clone, Copy)]
-struct Rows<'a> {
-    d: &'a [f64],
-    b: &'a [f64],
+struct Rows<'a, const W: usize> {
+    d: &'a [f64; W],
+    b: &'a [f64; W],
 }
 
-impl Rows<'_> {
+impl<const W: usize> Rows<'_, W> {
     /// |change| + bound for variable `j`: the largest actual change.
     fn max(&self, j: usize) -> f64 {
         self.d[j].abs() + self.b[j]
@@ -159,7 +181,8 @@ impl Linear {
             node.for_each_arg(|a| m |= deps[a.index()]);
             deps.push(m);
         }
-        Some(Linear { vars, deps })
+        let consts = f.ir.ids().take(n).map(|id| if let Node::Const(b) = *f.ir.node(id) { Xf::from_f64(f64::from_bits(b)) } else { Xf::ZERO }).collect();
+        Some(Linear { vars, deps, consts })
     }
 
     /// Every variable (bit k for variable k).
@@ -172,26 +195,47 @@ impl Linear {
     }
 
     /// The truth of `f` at (`x`, `params`) rounded to f64 (as [`super::eval`]) and its first-order condition
-    /// there (module docs), in one pass; and the exact value of every node (for [`super::eval_moves_from`]).
-    pub(crate) fn eval(&self, f: &Formula, x: &[f64; N_INPUTS], params: &[f64]) -> (f64, Estimate, Vec<Xf>) {
+    /// there (module docs), in one pass, working in `scratch`, which keeps the exact value of every node
+    /// ([`Scratch::values`]).
+    pub(crate) fn eval(&self, f: &Formula, x: &[f64; N_INPUTS], params: &[f64], scratch: &mut Scratch) -> (f64, Estimate) {
+        match self.vars.len() {
+            0..=8 => self.eval_in::<8>(f, x, params, scratch),
+            9..=16 => self.eval_in::<16>(f, x, params, scratch),
+            17..=32 => self.eval_in::<32>(f, x, params, scratch),
+            _ => self.eval_in::<64>(f, x, params, scratch),
+        }
+    }
+
+    /// [`Linear::eval`] with rows `W` wide (at least the count of variables).
+    fn eval_in<const W: usize>(&self, f: &Formula, x: &[f64; N_INPUTS], params: &[f64], scratch: &mut Scratch) -> (f64, Estimate) {
         let n = f.root.index() + 1;
         let nv = self.vars.len();
         let xs = x.map(Xf::from_f64);
-        let mut vals: Vec<Xf> = Vec::with_capacity(n);
-        let mut at: Vec<At> = Vec::with_capacity(n);
-        // Row k (nv entries) is node k's change per variable, times 2^-e of node k; 0 outside its deps. The
-        // bounds likewise.
-        let mut rows = vec![0.0; n * nv];
-        let mut bounds = vec![0.0; n * nv];
-        let (mut tmp_d, mut tmp_b) = (vec![0.0; nv], vec![0.0; nv]);
+        let Scratch { vals, at, rows, bounds } = scratch;
+        vals.clear();
+        at.clear();
+        // Row k (W entries) is node k's change per variable, times 2^-e of node k; 0 outside its deps (each row is
+        // cleared when its node is reached). The bounds likewise.
+        for r in [&mut *rows, &mut *bounds] {
+            if r.len() < n * W {
+                r.resize(n * W, 0.0);
+            }
+        }
+        let (rows, _) = rows.as_chunks_mut::<W>();
+        let (bounds, _) = bounds.as_chunks_mut::<W>();
         for id in f.ir.ids().take(n) {
             let k = id.index();
-            let value = node_value(f, id, &vals, &xs, params);
+            let value = if let Node::Const(_) = f.ir.node(id) { self.consts[k] } else { node_value(f, id, vals, &xs, params) };
             vals.push(value);
             let dm = self.deps[k];
             let own = |default: i64| if value.is_regular() { value.e } else { default };
             let node = *f.ir.node(id);
             let exact = matches!(node, Node::Input(_) | Node::Param(_) | Node::Const(_)) || matches!(node, Node::Neg(a) if at[a.index()].exact);
+            let (done_d, cur_d) = rows.split_at_mut(k);
+            let (done_b, cur_b) = bounds.split_at_mut(k);
+            let (cur_d, cur_b) = (&mut cur_d[0], &mut cur_b[0]);
+            *cur_d = [0.0; W];
+            *cur_b = [0.0; W];
             if dm == 0 {
                 at.push(At { e: own(0), unsure: 0, exact });
                 continue;
@@ -203,10 +247,7 @@ impl Linear {
                 at.push(At { e: 0, unsure: unsure | dm, exact });
                 continue;
             }
-            let (done_d, cur_d) = rows.split_at_mut(k * nv);
-            let (done_b, cur_b) = bounds.split_at_mut(k * nv);
-            let (cur_d, cur_b) = (&mut cur_d[..nv], &mut cur_b[..nv]);
-            let of = |a: usize| Rows { d: &done_d[a * nv..(a + 1) * nv], b: &done_b[a * nv..(a + 1) * nv] };
+            let of = |a: usize| Rows { d: &done_d[a], b: &done_b[a] };
             let e = match node {
                 Node::Input(_) | Node::Param(_) => {
                     let (var, v) = match node {
@@ -251,12 +292,11 @@ impl Linear {
                             let (ma, mb) = (va.mant(), vb.mant());
                             combine(cur_d, cur_b, dm, &[(ra, s / mb), (rb, -ma * s / (mb * mb))]);
                             // (a + α)/(b + β) − a/b − (α/b − aβ/b²) = −(αb − aβ)β/(b²(b + β)).
-                            for j in bits(dm) {
+                            // Only where β ≠ 0 (elsewhere the term is 0).
+                            for j in bits(dm & (nonzero(rb.d, dm) | nonzero(rb.b, dm))) {
                                 let (alpha, beta) = (ra.max(j), rb.max(j));
                                 let rho = beta / mb.abs();
-                                if rho.is_nan() || rho > 0.5 {
-                                    unsure |= 1 << j;
-                                }
+                                unsure |= u64::from(rho.is_nan() || rho > 0.5) << j;
                                 cur_b[j] += s * (alpha * beta / (mb * mb) + ma.abs() * beta * beta / (mb * mb * mb).abs()) / (1.0 - rho);
                             }
                             e
@@ -398,6 +438,7 @@ impl Linear {
                         }
                         Builtin::Clamp => {
                             let m = va.max(vals[ix(1)]);
+                            let (mut tmp_d, mut tmp_b) = ([0.0; W], [0.0; W]);
                             let em = min_max(&mut tmp_d, &mut tmp_b, dm, (va, ea, ra), (vals[ix(1)], at[ix(1)].e, of(ix(1))), m);
                             let mid = Rows { d: &tmp_d, b: &tmp_b };
                             min_max(cur_d, cur_b, dm, (m, em, mid), (vals[ix(2)], at[ix(2)].e, of(ix(2))), value)
@@ -407,6 +448,7 @@ impl Linear {
                             let (ec, rc) = (at[ix(2)].e, of(ix(2)));
                             let p = va * vb;
                             let ep = if p.is_regular() { p.e } else { ea + eb };
+                            let (mut tmp_d, mut tmp_b) = ([0.0; W], [0.0; W]);
                             product(&mut tmp_d, &mut tmp_b, dm, (va, ra), (vb, rb), p2(ea + eb - ep));
                             let e = own(ep.max(ec));
                             if ep - e > 1000 || ec - e > 1000 {
@@ -519,8 +561,9 @@ impl Linear {
                     }
                 }
             };
+            // (Over the variables' span, without an early exit: straight code.)
             let sp = span(dm);
-            if !cur_d[sp.clone()].iter().chain(cur_b[sp].iter()).all(|v| v.is_finite()) {
+            if !cur_d[sp.clone()].iter().chain(cur_b[sp].iter()).fold(true, |ok, v| ok & v.is_finite()) {
                 for j in bits(dm) {
                     if !(cur_d[j].is_finite() && cur_b[j].is_finite()) {
                         unsure |= 1 << j;
@@ -534,21 +577,20 @@ impl Linear {
         let root = vals[n - 1];
         let t = root.to_f64();
         if !t.is_finite() || root.is_infinite_or_nan() {
-            return (t, Estimate { ulps: vec![(f64::NAN, f64::NAN); nv], unsure: self.all() }, vals);
+            return (t, Estimate { ulps: vec![(f64::NAN, f64::NAN); nv], unsure: self.all() });
         }
         let e = at[n - 1].e;
-        let (d, b) = (&rows[(n - 1) * nv..n * nv], &bounds[(n - 1) * nv..n * nv]);
+        let (d, b) = (&rows[n - 1][..nv], &bounds[n - 1][..nv]);
         let ulps = d
             .iter()
             .zip(b)
             .map(|(d, b)| if *d == 0.0 && *b == 0.0 { (0.0, 0.0) } else { count(t, ldexp((d.abs() - b).max(0.0), e), ldexp(d.abs() + b, e)) })
             .collect();
-        (t, Estimate { ulps, unsure: at[n - 1].unsure }, vals)
+        (t, Estimate { ulps, unsure: at[n - 1].unsure })
     }
 }
 
-/// The variables from the lowest to the highest set bit of `m` (a node's rows are 0 outside its variables, so
-/// arithmetic over this range is arithmetic over them, in straight loops).
+/// The variables from the lowest to the highest set bit of `m` (a row is 0 outside its node's variables).
 fn span(m: u64) -> std::ops::Range<usize> {
     if m == 0 {
         0..0
@@ -578,22 +620,20 @@ fn over(m: f64, j: usize) -> u64 {
 }
 
 /// `Σ c·rows` over the variables in `dm` (a term whose entry is 0 adds 0, whatever `c`), and `Σ |c|·bounds`.
-/// With finite coefficients, over every variable at once (a row is 0 outside its node's variables, which `dm`
-/// holds).
-fn combine(cur_d: &mut [f64], cur_b: &mut [f64], dm: u64, terms: &[(Rows, f64)]) {
-    let span = span(dm);
+/// With finite coefficients, over the whole row at once (a row is 0 outside its node's variables, which `dm`
+/// holds); otherwise only the entries of `dm` are written (the others stay as they were: 0).
+fn combine<const W: usize>(cur_d: &mut [f64; W], cur_b: &mut [f64; W], dm: u64, terms: &[(Rows<W>, f64)]) {
     match terms {
         [(r, c)] if c.is_finite() => {
             let a = c.abs();
-            let (rd, rb) = (&r.d[span.clone()], &r.b[span.clone()]);
-            for ((d, b), (rd, rb)) in cur_d[span.clone()].iter_mut().zip(cur_b[span].iter_mut()).zip(rd.iter().zip(rb)) {
-                *d = rd * c;
-                *b = rb * a;
+            for j in 0..W {
+                cur_d[j] = r.d[j] * c;
+                cur_b[j] = r.b[j] * a;
             }
         }
         [(r, c), (q, e)] if c.is_finite() && e.is_finite() => {
             let (a, f) = (c.abs(), e.abs());
-            for j in span {
+            for j in 0..W {
                 cur_d[j] = r.d[j] * c + q.d[j] * e;
                 cur_b[j] = r.b[j] * a + q.b[j] * f;
             }
@@ -618,12 +658,12 @@ fn combine(cur_d: &mut [f64], cur_b: &mut [f64], dm: u64, terms: &[(Rows, f64)])
 
 /// The change of a product `a·b` (scaled by `s` = 2^(ea + eb − e)) and its bound: |a|·β + |b|·α + the
 /// product of the two largest changes.
-fn product(cur_d: &mut [f64], cur_b: &mut [f64], dm: u64, (va, ra): (Xf, Rows), (vb, rb): (Xf, Rows), s: f64) {
+fn product<const W: usize>(cur_d: &mut [f64; W], cur_b: &mut [f64; W], dm: u64, (va, ra): (Xf, Rows<W>), (vb, rb): (Xf, Rows<W>), s: f64) {
     let (ma, mb) = (va.mant(), vb.mant());
     combine(cur_d, cur_b, dm, &[(ra, mb * s), (rb, ma * s)]);
     if s.is_finite() {
-        for j in span(dm) {
-            cur_b[j] += (ra.d[j].abs() + ra.b[j]) * (rb.d[j].abs() + rb.b[j]) * s;
+        for (c, (((ad, ab), bd), bb)) in cur_b.iter_mut().zip(ra.d.iter().zip(ra.b).zip(rb.d).zip(rb.b)) {
+            *c += (ad.abs() + ab) * (bd.abs() + bb) * s;
         }
     } else {
         for j in bits(dm) {
@@ -644,7 +684,7 @@ fn nonzero(row: &[f64], dm: u64) -> u64 {
 /// `cur`, and its exponent. Where a move may swap the sides (the truth compares exactly), the result's change
 /// lies between the two sides' changes: `cur` holds the middle of that range and its half-width as the bound
 /// (the function is continuous there, only its slope jumps).
-fn min_max(cur_d: &mut [f64], cur_b: &mut [f64], dm: u64, a: (Xf, i64, Rows), b: (Xf, i64, Rows), value: Xf) -> i64 {
+fn min_max<const W: usize>(cur_d: &mut [f64; W], cur_b: &mut [f64; W], dm: u64, a: (Xf, i64, Rows<W>), b: (Xf, i64, Rows<W>), value: Xf) -> i64 {
     let taken = if value == a.0 { &a } else { &b };
     let e = if value.is_regular() { value.e } else { taken.1 };
     combine(cur_d, cur_b, dm, &[(taken.2, p2(taken.1 - e))]);
@@ -669,6 +709,50 @@ fn min_max(cur_d: &mut [f64], cur_b: &mut [f64], dm: u64, a: (Xf, i64, Rows), b:
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The example files and formulas with every kind of node (steps, kinks, powers, quotients, functions
+    /// near their singularities), each channel as the truth sees it (baked values folded).
+    fn formulas() -> Vec<Formula> {
+        let sources = [
+            "param m = 0.3 in 0.01..1\nlet d = exp((NH^2 - 1)/(m*m*NH^2))\nNL <= 0 ? 0 : d*VH/(NL*NV + m) + NV^3",
+            "param a = 0.5 in 0..1\nclamp(1 - VH, 0, 1)^5*(1 - a) + a*sqrt(1 - NL*NL)/max(NV, 0.001)",
+            "param s = 25 in 0..90\nlet b = min(acos(NL), acos(NV))\nsin(max(acos(NL), acos(NV)))*tan(b)*s/90 + atan(NH/(VH + 0.1))",
+            "param k = 2 in 0.1..10\nfloor(k*NH*4)/4 + ln(NL + 1e-3)*abs(NV - 0.5) + (NH < VH ? NL : NV) + fma(NL, k, -NV)",
+            "param n = 50 in 1..1000\npow(NH, n)*(n + 2)/(2*pi) - asin(NV)*pow(-NL, 3)",
+        ];
+        let mut out: Vec<Formula> = sources.iter().map(|src| crate::front::parse("t.brdf", src).unwrap()).collect();
+        for dir in ["examples/explorer", "examples/brdfs"] {
+            let mut files: Vec<_> = std::fs::read_dir(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(dir)).unwrap().map(|e| e.unwrap().path()).collect();
+            files.sort();
+            for path in files.iter().filter(|p| p.extension().is_some_and(|e| e == "brdf")) {
+                let f = crate::front::parse(&path.to_string_lossy(), &std::fs::read_to_string(path).unwrap()).unwrap();
+                out.extend(f.channels());
+            }
+        }
+        out.iter().map(|f| crate::simplify::bake_only(f, &[])).collect()
+    }
+
+    /// The rows' width changes nothing, nor do buffers kept from other points and other formulas: at the
+    /// sample's points (edge classes included) of every formula of [`formulas`], the truth, the estimate and
+    /// the nodes' values are bit for bit those of rows 64 wide in fresh buffers.
+    #[test]
+    fn any_width_and_kept_buffers_give_the_same_estimates() {
+        let mut kept = Scratch::default();
+        let mut checked = 0;
+        for f in formulas() {
+            let Some(l) = Linear::new(&f, &Readers::new(&f)) else { continue };
+            for pt in crate::numerics::robust::sample(&f, &[], 1000, 5) {
+                let got = l.eval(&f, &pt.x, &pt.p, &mut kept);
+                let mut fresh = Scratch::default();
+                let want = l.eval_in::<64>(&f, &pt.x, &pt.p, &mut fresh);
+                // (Debug prints a NaN as itself and tells −0 from +0.)
+                assert_eq!(format!("{got:?}"), format!("{want:?}"), "at {pt:?}");
+                assert_eq!(format!("{:?}", kept.values()), format!("{:?}", fresh.values()), "at {pt:?}");
+                checked += 1;
+            }
+        }
+        assert!(checked >= 20_000, "{checked} points");
+    }
 
     #[test]
     fn powers_and_spacings() {
