@@ -35,11 +35,10 @@ use crate::builtins::math::Direct;
 use crate::builtins::Builtin;
 use crate::ir::{BinOp, Formula, Node, NodeId, N_INPUTS};
 use std::cmp::Ordering;
-
-mod reduce;
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
 mod linear;
+mod reduce;
 pub(crate) use linear::{Estimate, Linear, Scratch};
 
 type Dd = dd::Dd<f64>;

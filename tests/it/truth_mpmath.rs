@@ -249,13 +249,19 @@ fn judge(cases: &[Value], res: &[Value]) -> (Vec<String>, usize, (f64, String)) 
     (failures, judged, worst)
 }
 
+/// Runs `cases` through mpmath and judges them, printing the summary line (`what`: the cases' kind); `None`
+/// without a Python with mpmath.
+fn compared(what: &str, cases: &[Value]) -> Option<Vec<String>> {
+    let py = python()?;
+    let res = through_mpmath(&py, cases);
+    let (failures, judged, worst) = judge(cases, &res);
+    eprintln!("{what} against mpmath: {judged} of {} judged to {TOLERANCE:e}, worst relative {:e} at {}", cases.len(), worst.0, worst.1);
+    Some(failures)
+}
+
 #[test]
 fn the_truth_agrees_with_mpmath_on_every_builtin() {
-    let Some(py) = python() else { return };
-    let cases = builtin_cases(&mut lobe::base::rng::Rng(0x3A7E));
-    let res = through_mpmath(&py, &cases);
-    let (failures, judged, worst) = judge(&cases, &res);
-    eprintln!("builtins against mpmath: {judged} of {} calls judged to {TOLERANCE:e}, worst relative {:e} at {}", cases.len(), worst.0, worst.1);
+    let Some(failures) = compared("builtin calls", &builtin_cases(&mut lobe::base::rng::Rng(0x3A7E))) else { return };
     assert!(failures.is_empty(), "{} disagreements, e.g.\n{}", failures.len(), failures.iter().take(25).cloned().collect::<Vec<_>>().join("\n"));
 }
 
@@ -264,11 +270,7 @@ fn the_truth_agrees_with_mpmath_on_every_builtin() {
 #[test]
 #[ignore = "a report: `cargo test --release --test it truth_mpmath::explorer_report -- --ignored --nocapture`"]
 fn explorer_report() {
-    let Some(py) = python() else { return };
-    let cases = explorer_cases(&mut lobe::base::rng::Rng(0x3A7F));
-    let res = through_mpmath(&py, &cases);
-    let (failures, judged, worst) = judge(&cases, &res);
-    eprintln!("explorer files against mpmath: {judged} of {} points judged to {TOLERANCE:e}, worst relative {:e} at {}", cases.len(), worst.0, worst.1);
+    let Some(failures) = compared("explorer files' points", &explorer_cases(&mut lobe::base::rng::Rng(0x3A7F))) else { return };
     let mut by_file = std::collections::BTreeMap::<String, usize>::new();
     for f in &failures {
         *by_file.entry(f.split(" at ").next().unwrap_or("").to_string()).or_default() += 1;
