@@ -1,6 +1,7 @@
 //! `lobe sample FILE [--set k=v…] --incidence θ[,φ] --count N [--seed S] [--mechanism M] [-o samples.csv] [--json]`
 //!
-//! Builds the formula's sampler ([`lobe::bsdf`]), draws N seeded samples at the incidence (degrees; φ defaults
+//! Builds the formula's sampler ([`lobe::bsdf`]; FILE may also be a measured table, MERL `.binary`, sampled from
+//! its lookups, whose quadrature is `energy --mode full`'s rule for tables), draws N seeded samples at the incidence (degrees; φ defaults
 //! to 0), tests them against the sampler's own pdf (χ², Mitsuba's method), and prints the summary: `chi2_p`,
 //! `efficiency`, `albedo`, `albedo_stderr`, `albedo_quadrature`, `build_ms`, `ns_per_sample`, `mechanism` and
 //! the rest of [`lobe::bsdf::validate::SampleReport`]. `-o` writes one CSV row per sample: `ox,oy,oz,pdf,weight`
@@ -78,25 +79,43 @@ pub fn run(a: &SampleArgs) -> Result<(), CliError> {
         a.force.check(p, is_sample_csv)?;
     }
     let backend = a.backend.backend()?;
-    let f = a.formula.load()?;
-    let ks = f.channels().into_iter().map(|c| common::compile_kernel(c, &set, backend, a.backend.math.mode)).collect::<Result<Vec<Kernel>, CliError>>()?;
-    let params = common::param_values(&ks[0].formula, &set);
-    let s = Sampler::build_channels(&ks, &params, &Options { choice, ..Options::default() })?;
+    let opts = Options { choice, ..Options::default() };
     let (tr, pr) = (theta.to_radians(), phi.to_radians());
+    let table = a.formula.file.as_deref().filter(|p| lobe::measured::is_measured_path(p));
+    let (s, name, shown, quad) = match table {
+        Some(path) => {
+            if !set.is_empty() {
+                return Err(CliError::hint(format!("--set: the measured table {path} has no parameters"), "drop --set"));
+            }
+            let channels = std::sync::Arc::new(lobe::measured::Measured::read(path)?).channels_with(Default::default());
+            let s = Sampler::build_evaluators(&channels, lobe::measured::used_inputs(), &[], &opts)?;
+            // A table is isotropic: its albedo by the midpoint rule over its own cells (the adaptive rule on
+            // piecewise-linear lookups takes tens of seconds).
+            let quad = channels.iter().zip(lobe::bsdf::LUMINANCE).map(|(c, w)| w * lobe::numerics::energy::albedo_tabulated(c.as_ref(), &[], tr)).sum();
+            (s, path.to_string(), Named::new(std::iter::empty::<(&str, f64)>()), quad)
+        }
+        None => {
+            let f = a.formula.load()?;
+            let ks = f.channels().into_iter().map(|c| common::compile_kernel(c, &set, backend, a.backend.math.mode)).collect::<Result<Vec<Kernel>, CliError>>()?;
+            let params = common::param_values(&ks[0].formula, &set);
+            let s = Sampler::build_channels(&ks, &params, &opts)?;
+            let shown = Named::new(ks[0].formula.params.iter().zip(&params).map(|(d, v)| (d.name.as_str(), *v)));
+            let quad = albedo_quadrature(&s, tr, pr)?;
+            (s, ks[0].formula.display_name(), shown, quad)
+        }
+    };
     let wi = [tr.sin() * pr.cos(), tr.sin() * pr.sin(), tr.cos()];
     let v = validate(&s, wi, a.count, a.seed)?;
-    let quad = albedo_quadrature(&s, tr, pr)?;
     if let Some(p) = &a.output {
         a.force.write(p, csv(&v.samples).as_bytes(), is_sample_csv)?;
         eprintln!("wrote {} samples to {}", v.samples.pdf.len(), p.display());
     }
-    let shown = Named::new(ks[0].formula.params.iter().zip(&params).map(|(d, v)| (d.name.as_str(), *v)));
     let r = SampleReport::new(&s, &v, shown, (theta, phi), a.count, a.seed, quad);
     if a.json.on {
         println!("{}", common::to_json(&r)?);
         return Ok(());
     }
-    print!("{}", text(&ks[0].formula.display_name(), &r));
+    print!("{}", text(&name, &r));
     Ok(())
 }
 

@@ -515,31 +515,32 @@ pub(crate) fn full_energy_cancellable(ev: &dyn Evaluator, used: crate::ir::Input
 /// `albedo_phi` holds φᵢ = 0 only). Measured on linear-lookup tables of Blinn (n = 10, 60, 500), Phong 60,
 /// Ward 0.1: 4 × 4 times the cells move ρ(θᵢ ≤ 80°) by ≤ 0.2 %, the table's own error against the formula.
 pub fn full_energy_tabulated(ev: &dyn Evaluator, params: &[f64]) -> Result<FullEnergy, Diagnostic> {
-    let (nt, np) = (90usize, 360usize);
-    let (dt, dp) = (FRAC_PI_2 / nt as f64, 2.0 * PI / np as f64);
-    let rows: Vec<(f64, f64)> = full_mode_angles()
-        .par_iter()
-        .map(|&deg| {
-            let l = dir(deg.to_radians(), 0.0);
-            let mut sum = 0.0;
-            for a in 0..nt {
-                let to = (a as f64 + 0.5) * dt;
-                let w = to.cos() * to.sin() * dt * dp;
-                for b in 0..np {
-                    let y = ev.eval(&inputs_from_dirs(l, dir(to, (b as f64 + 0.5) * dp)), params);
-                    if y.is_finite() {
-                        sum += crate::builtins::fmax(y, 0.0) * w;
-                    }
-                }
-            }
-            (deg, sum)
-        })
-        .collect();
+    let rows: Vec<(f64, f64)> = full_mode_angles().par_iter().map(|&deg| (deg, albedo_tabulated(ev, params, deg.to_radians()))).collect();
     let mut r = summarise(rows.clone(), reciprocity_over(ev, params, &[0.0]))?;
     r.albedo_phi = rows.iter().map(|&(t, v)| (t, 0.0, v)).collect();
     r.phi_i_at_max_deg = Some(0.0);
     r.isotropic = Some(true);
     Ok(r)
+}
+
+/// ρ(θᵢ) (θᵢ in radians) of an isotropic evaluator with kinks or steps everywhere, a measured table's channel,
+/// by the midpoint rule over 90 θₒ × 360 φₒ cells ([`full_energy_tabulated`]'s rule), L at azimuth 0.
+pub fn albedo_tabulated(ev: &dyn Evaluator, params: &[f64], theta_i: f64) -> f64 {
+    let (nt, np) = (90usize, 360usize);
+    let (dt, dp) = (FRAC_PI_2 / nt as f64, 2.0 * PI / np as f64);
+    let l = dir(theta_i, 0.0);
+    let mut sum = 0.0;
+    for a in 0..nt {
+        let to = (a as f64 + 0.5) * dt;
+        let w = to.cos() * to.sin() * dt * dp;
+        for b in 0..np {
+            let y = ev.eval(&inputs_from_dirs(l, dir(to, (b as f64 + 0.5) * dp)), params);
+            if y.is_finite() {
+                sum += crate::builtins::fmax(y, 0.0) * w;
+            }
+        }
+    }
+    sum
 }
 
 /// Pairs [`turns_with_the_frame`] tries.
