@@ -1,8 +1,8 @@
 //! `lobe sample FILE [--set k=v…] --incidence θ[,φ] --count N [--seed S] [--mechanism M] [-o samples.csv] [--json]`
 //!
 //! Builds the formula's sampler ([`lobe::bsdf`]; FILE may also be a measured table, MERL `.binary`, sampled from
-//! its lookups, whose quadrature is `energy --mode full`'s rule for tables), draws N seeded samples at the incidence (degrees; φ defaults
-//! to 0), tests them against the sampler's own pdf (χ², Mitsuba's method), and prints the summary: `chi2_p`,
+//! its lookups, whose quadrature is `energy --mode full`'s rule for tables), draws N seeded samples at the
+//! incidence (degrees; φ defaults to 0), tests them against the sampler's own pdf (χ², Mitsuba's method), and prints the summary: `chi2_p`,
 //! `efficiency`, `albedo`, `albedo_stderr`, `albedo_quadrature`, `build_ms`, `ns_per_sample`, `mechanism` and
 //! the rest of [`lobe::bsdf::validate::SampleReport`]. `-o` writes one CSV row per sample: `ox,oy,oz,pdf,weight`
 //! (colour: `weight_r,weight_g,weight_b`), directions in the local frame (N = +z, X = +x).
@@ -10,7 +10,7 @@
 use super::args::{BackendArg, Force, FormulaSource, Json, Params};
 use super::common::{self, CliError};
 use lobe::base::json::Named;
-use lobe::bsdf::validate::{albedo_quadrature, validate, SampleReport};
+use lobe::bsdf::validate::{albedo_quadrature, albedo_quadrature_tabulated, validate, SampleReport};
 use lobe::bsdf::{Choice, Mechanism, Options, Sampler};
 use lobe::Kernel;
 use std::path::PathBuf;
@@ -89,9 +89,7 @@ pub fn run(a: &SampleArgs) -> Result<(), CliError> {
             }
             let channels = std::sync::Arc::new(lobe::measured::Measured::read(path)?).channels_with(Default::default());
             let s = Sampler::build_evaluators(&channels, lobe::measured::used_inputs(), &[], &opts)?;
-            // A table is isotropic: its albedo by the midpoint rule over its own cells (the adaptive rule on
-            // piecewise-linear lookups takes tens of seconds).
-            let quad = channels.iter().zip(lobe::bsdf::LUMINANCE).map(|(c, w)| w * lobe::numerics::energy::albedo_tabulated(c.as_ref(), &[], tr)).sum();
+            let quad = albedo_quadrature_tabulated(&s, tr);
             (s, path.to_string(), Named::new(std::iter::empty::<(&str, f64)>()), quad)
         }
         None => {

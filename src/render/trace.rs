@@ -42,8 +42,7 @@
 use super::bvh::Bvh;
 use super::mesh::onb_tangent;
 use super::{LightKind, Material, RenderOptions, RenderStats, Scene};
-use crate::backend::{Evaluator, Kernel};
-use crate::ir::InputSet;
+use crate::backend::Evaluator;
 use std::sync::Arc;
 use crate::base::rng::counter_unit;
 use crate::bsdf::{Options as SamplerOptions, Sampler, LUMINANCE};
@@ -124,25 +123,13 @@ fn lum(c: DVec3) -> f64 {
 }
 
 fn prepare(m: &Material) -> Result<Shading, String> {
-    // A formula's channels as compiled kernels; a measured table's as its lookups (sampled by their tables too).
-    let (evaluators, used): (Vec<Arc<dyn Evaluator>>, InputSet) = match &m.program.evaluated {
-        Some(rgb) if m.program.channels.is_empty() => (rgb.to_vec(), m.used),
-        _ => {
-            let kernels: Vec<Kernel> = m
-                .program
-                .channels
-                .iter()
-                .zip(std::iter::once(m.evaluator.clone()).chain(m.green_blue.iter().flat_map(|gb| gb.iter().cloned())))
-                .map(|(f, ev)| Kernel::new(f.clone(), m.program.backend, m.program.math, ev, Duration::ZERO))
-                .collect();
-            let used = kernels.iter().map(Kernel::used_inputs).collect();
-            (kernels.into_iter().map(|k| Arc::new(k) as Arc<dyn Evaluator>).collect(), used)
-        }
-    };
+    // The channels as the material evaluates them (a formula's compiled kernels, or a measured table's lookups),
+    // sampled by their own tables.
+    let evaluators: Vec<Arc<dyn Evaluator>> = std::iter::once(m.evaluator.clone()).chain(m.green_blue.iter().flat_map(|gb| gb.iter().cloned())).collect();
     let diffuse = m.kd * m.color;
     let spec = m.ks * m.coef * m.specular;
     let sampler = if lum(spec) > 0.0 {
-        Some(Sampler::build_evaluators(&evaluators, used, &m.params, &SamplerOptions::default()).map_err(|d| format!("material `{}`: {d}", m.name))?)
+        Some(Sampler::build_evaluators(&evaluators, m.used, &m.params, &SamplerOptions::default()).map_err(|d| format!("material `{}`: {d}", m.name))?)
     } else {
         None
     };

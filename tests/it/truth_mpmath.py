@@ -15,8 +15,9 @@ from mpmath.libmp import libmpf
 mp.prec = 2300
 
 
-def f64(bits_hex):
-    return mpf(float.fromhex(bits_hex))
+def f64(text):
+    """An f64 from the Rust side's shortest round-trip text (exact)."""
+    return mpf(float(text))
 
 
 def to_f64(x):
@@ -112,7 +113,7 @@ def main():
     out = []
     for c in cases:
         ref = run(c["nodes"], c["inputs"], c["params"])
-        hi, lo, e = (float.fromhex(c["truth"][0]), float.fromhex(c["truth"][1]), c["truth"][2])
+        hi, lo, e = (float(c["truth"][0]), float(c["truth"][1]), c["truth"][2])
         truth_f64 = math.ldexp(hi, e) if not math.isfinite(hi) or hi == 0 else None
         if truth_f64 is None:
             truth_f64 = to_f64((mpf(hi) + mpf(lo)) * mpmath.ldexp(mpf(1), e))

@@ -26,23 +26,9 @@ use std::process::{Command, Stdio};
 
 const TOLERANCE: f64 = 1e-25;
 
-fn hex(x: f64) -> String {
-    // Rust has no %a; a hexadecimal float Python's float.fromhex reads exactly.
-    if x.is_nan() {
-        return "nan".into();
-    }
-    if x.is_infinite() {
-        return if x > 0.0 { "inf".into() } else { "-inf".into() };
-    }
-    let bits = x.to_bits();
-    let sign = if bits >> 63 == 1 { "-" } else { "" };
-    let exp = ((bits >> 52) & 0x7ff) as i64;
-    let man = bits & ((1 << 52) - 1);
-    match exp {
-        0 if man == 0 => format!("{sign}0x0p+0"),
-        0 => format!("{sign}0x0.{man:013x}p-1022"),
-        _ => format!("{sign}0x1.{man:013x}p{:+}", exp - 1023),
-    }
+/// An f64 as text Python's `float()` reads back exactly (the shortest round trip; `inf`, `-inf`, `NaN`).
+fn text(x: f64) -> String {
+    format!("{x:?}")
 }
 
 fn python() -> Option<String> {
@@ -62,10 +48,10 @@ fn program(f: &Formula) -> Vec<Value> {
     f.ir.ids()
         .take(f.root.0 as usize + 1)
         .map(|id| match *f.ir.node(id) {
-            Node::Const(b) => json!(["const", hex(f64::from_bits(b))]),
+            Node::Const(b) => json!(["const", text(f64::from_bits(b))]),
             Node::Input(i) => json!(["input", i.index()]),
             Node::Param(p) => json!(["param", p]),
-            Node::Column(_) => json!(["const", "nan"]),
+            Node::Column(_) => json!(["const", "NaN"]),
             Node::Neg(a) => json!(["neg", a.0]),
             Node::Binary(op, a, b) => {
                 let op = match op {
@@ -82,7 +68,7 @@ fn program(f: &Formula) -> Vec<Value> {
 }
 
 fn parts(p: (f64, f64, i64)) -> Value {
-    json!([hex(p.0), hex(p.1), p.2])
+    json!([text(p.0), text(p.1), p.2])
 }
 
 /// How a case is judged: to [`TOLERANCE`] relative (`true`), or beyond the truth's reach by its rounding to f64.
@@ -99,7 +85,7 @@ fn builtin_case(b: Builtin, args: &[f64]) -> Value {
     let mut nodes: Vec<Value> = (0..args.len()).map(|k| json!(["param", k])).collect();
     nodes.push(json!(["call", b.name(), (0..args.len()).collect::<Vec<_>>()]));
     json!({"what": format!("{}({})", b.name(), args.iter().map(|a| format!("{a:e}")).collect::<Vec<_>>().join(", ")),
-           "nodes": nodes, "inputs": [], "params": args.iter().map(|a| hex(*a)).collect::<Vec<_>>(),
+           "nodes": nodes, "inputs": [], "params": args.iter().map(|a| text(*a)).collect::<Vec<_>>(),
            "truth": parts(truth::call_parts(b, args)), "exact": within_reach(b, args)})
 }
 
@@ -185,7 +171,7 @@ fn explorer_cases(rng: &mut lobe::base::rng::Rng) -> Vec<Value> {
             for chan in &chans {
                 let nodes = if chans.len() == 1 { prog.clone() } else { program(chan) };
                 cases.push(json!({"what": format!("{name} at L {l:?} V {v:?} params {params:?}"), "nodes": nodes,
-                    "inputs": x.iter().map(|a| hex(*a)).collect::<Vec<_>>(), "params": params.iter().map(|a| hex(*a)).collect::<Vec<_>>(),
+                    "inputs": x.iter().map(|a| text(*a)).collect::<Vec<_>>(), "params": params.iter().map(|a| text(*a)).collect::<Vec<_>>(),
                     "truth": parts(truth::eval_parts(chan, &x, &params)), "exact": true}));
             }
         }
@@ -235,10 +221,10 @@ fn judge(cases: &[Value], res: &[Value]) -> (Vec<String>, usize, (f64, String)) 
                 // mpmath's value is 0, ±∞ or NaN: the truth's must be that too (its head, exactly).
                 let re = r["ref"].as_str().unwrap();
                 let ok = match re {
-                    "0" => head == "0x0p+0" || head == "-0x0p+0",
+                    "0" => head == "0.0" || head == "-0.0",
                     "+inf" => head == "inf",
                     "-inf" => head == "-inf",
-                    _ => head == "nan",
+                    _ => head == "NaN",
                 };
                 if !ok {
                     failures.push(format!("{what}: mpmath {re}, truth {:?}", c["truth"]));
