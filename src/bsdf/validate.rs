@@ -119,8 +119,8 @@ pub fn albedo_quadrature(s: &Sampler, theta_i: f64, phi_i: f64) -> Result<f64, D
 }
 
 /// [`albedo_quadrature`] of a sampler built from a measured table's lookups (isotropic by construction), by the
-/// midpoint rule over the table's own cells ([`crate::numerics::energy::albedo_tabulated`], `energy --mode
-/// full`'s rule for tables): the adaptive rule on piecewise-linear lookups takes tens of seconds.
+/// midpoint rule over the table's own cells ([`crate::numerics::energy::albedo_tabulated`], the full
+/// energy check's rule for tables): the adaptive rule on piecewise-linear lookups takes tens of seconds.
 pub fn albedo_quadrature_tabulated(s: &Sampler, theta_i: f64) -> f64 {
     let t = &s.target;
     let per: Vec<f64> = t.kernels.iter().map(|k| crate::numerics::energy::albedo_tabulated(k.as_ref(), &t.params, theta_i)).collect();
