@@ -34,7 +34,7 @@ pub struct EvalArgs {
     #[arg(long)]
     pub normalize: bool,
     /// Print the ground truth instead of a kernel's value: the formula as written (--set values folded)
-    /// evaluated in ~104-bit precision with an unbounded exponent and rounded to f64, what `lobe check`
+    /// evaluated in ~104-bit precision with an unbounded exponent (more where its error bound asks) and rounded to f64, what `lobe check`
     /// measures errors against (µs per point, all threads)
     #[arg(long, conflicts_with = "normalize")]
     pub truth: bool,
@@ -223,7 +223,7 @@ pub fn run(a: &EvalArgs) -> Result<(), CliError> {
     }
     let (x, note) = at_inputs(&at, used(&ks))?;
     let v: Vec<f64> = match &truth {
-        Some(t) => t.iter().map(|g| lobe::numerics::truth::eval(g, &x, &params)).collect(),
+        Some(t) => t.iter().map(|g| lobe::numerics::truth::eval_settled(g, &x, &params)).collect(),
         None => ks.iter().map(|k| k.eval(&x, &params)).collect(),
     };
     if a.json.on {

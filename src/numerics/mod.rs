@@ -1,6 +1,6 @@
 //! Numerical checks of a BRDF kernel: energy (normalisation and albedo), accuracy against a reference lobe,
 //! a stability sweep over the whole domain, and a parameter fit; the ground truth ([`truth`]: any formula in
-//! ~104-bit precision with an unbounded exponent) and the accuracy pass's measurement and choice ([`robust`]);
+//! ~104-bit precision with an unbounded exponent, settled at more bits where its own error bound asks) and the accuracy pass's measurement and choice ([`robust`]);
 //! a formula's value and gradient as one compiled multi-output kernel ([`grad`]).
 //!
 //! Design: every check takes a `&dyn Evaluator` plus a parameter slice (and, where needed, the formula's
