@@ -57,7 +57,7 @@ mod big;
 mod bound;
 mod linear;
 mod reduce;
-pub(crate) use bound::Target;
+use bound::Target;
 pub(crate) use linear::{Estimate, Linear, Scratch};
 
 type Dd = dd::Dd<f64>;
@@ -601,24 +601,25 @@ pub(crate) fn eval_x(f: &Formula, x: &[f64; N_INPUTS], params: &[f64]) -> Xf {
 /// [`eval_x`] at inputs that need not be f64 (an input 2⁻⁸¹⁹² away from an edge, [`limit`]): the double-double's
 /// value, not settled ([`eval_settled`] settles it).
 fn eval_xs(f: &Formula, x: &[Xf; N_INPUTS], params: &[f64]) -> Xf {
+    let v = values(f, x, params);
+    v[v.len() - 1]
+}
+
+/// The double-double's value of every node up to the root, in order.
+fn values(f: &Formula, x: &[Xf; N_INPUTS], params: &[f64]) -> Vec<Xf> {
     let n = f.root.index() + 1;
     let mut v: Vec<Xf> = Vec::with_capacity(n);
     for id in f.ir.ids().take(n) {
         let r = node_value(f, id, &v, x, params);
         v.push(r);
     }
-    v[n - 1]
+    v
 }
 
 /// [`eval_xs`], settled for `target`: the double-double's value with its error bound, evaluated again at a
 /// higher precision where the bound does not settle it ([`settle`]).
 fn eval_xs_for(f: &Formula, x: &[Xf; N_INPUTS], params: &[f64], target: Target) -> Xf {
-    let n = f.root.index() + 1;
-    let mut v: Vec<Xf> = Vec::with_capacity(n);
-    for id in f.ir.ids().take(n) {
-        let r = node_value(f, id, &v, x, params);
-        v.push(r);
-    }
+    let v = values(f, x, params);
     let lr = bounds(f, &v);
     settle(f, x, params, &v, &lr, target)
 }
@@ -645,16 +646,16 @@ fn settle(f: &Formula, x: &[Xf; N_INPUTS], params: &[f64], v: &[Xf], lr: &[f64],
     if bound::sure(v[n - 1], lr[n - 1], bound::XF_UNIT, target) {
         return v[n - 1];
     }
-    escalate(f, x, params, (v, lr), target).map_or(v[n - 1], |vals| vals[n - 1])
+    escalate(f, x, params, (v, lr), target).unwrap_or(v[n - 1])
 }
 
 /// The formula evaluated again ([`big`]) at as many bits as the double-double's bound at the root asks for (at
 /// most 4× as many per step), more while the bound is not met (twice as many where it is unknown), up to
-/// [`MAX_PRECISION`]: every node's value from the first evaluation that settles the root for `target`, or from
-/// the last one; `None` when the arithmetic refuses (an exponent out of its range). The double-double's values and
+/// [`MAX_PRECISION`]: the root's value from the first evaluation that settles it for `target`, or from the last
+/// one; `None` when the arithmetic refuses (an exponent out of its range). The double-double's values and
 /// bounds `xf` are reused where they are good to 2⁻⁹⁰ at a transcendental function (its cost at hundreds of
 /// bits), their bound carried over.
-fn escalate(f: &Formula, x: &[Xf; N_INPUTS], params: &[f64], xf: (&[Xf], &[f64]), target: Target) -> Option<Vec<Xf>> {
+fn escalate(f: &Formula, x: &[Xf; N_INPUTS], params: &[f64], xf: (&[Xf], &[f64]), target: Target) -> Option<Xf> {
     // Enough bits for the bound to fall ~96 below the value, as far as the bound at this precision tells, but at
     // most 4× the bits: a bound that comes from an operand rounded at this precision (1 − 2⁻³⁵⁰ is 1 at 192 bits)
     // vanishes once the precision holds it, long before the bound's own estimate.
@@ -687,13 +688,12 @@ fn escalate(f: &Formula, x: &[Xf; N_INPUTS], params: &[f64], xf: (&[Xf], &[f64])
     let mut reuse = true;
     loop {
         let p_now = p.min(MAX_PRECISION);
-        let Some((vals, lr)) = big::eval(f, x, params, p_now, xf, reuse) else { return best };
+        let Some((root, lr)) = big::eval(f, x, params, p_now, xf, reuse) else { return best };
         reuse = false;
-        let root = vals[vals.len() - 1];
         if bound::sure(root, lr, -(p_now as f64 - 2.0), target) || p_now == MAX_PRECISION {
-            return Some(vals);
+            return Some(root);
         }
-        best = Some(vals);
+        best = Some(root);
         p = wanted(lr, p_now);
     }
 }
@@ -753,19 +753,14 @@ pub(crate) enum Move {
 /// finite-difference condition number moves each read input and parameter both ways: most of a BRDF's nodes
 /// read one or two), from the formula's [`Readers`] built beforehand (they depend on the formula, not the point).
 pub(crate) fn eval_moves_with(f: &Formula, readers: &Readers, x: &[f64; N_INPUTS], params: &[f64], moves: &[Move]) -> Vec<f64> {
-    let n = f.root.index() + 1;
-    let xs = x.map(Xf::from_f64);
-    let mut base: Vec<Xf> = Vec::with_capacity(n);
-    for id in f.ir.ids().take(n) {
-        let value = node_value(f, id, &base, &xs, params);
-        base.push(value);
-    }
+    let base = values(f, &x.map(Xf::from_f64), params);
     eval_moves_from(f, readers, &base, x, params, moves)
 }
 
 /// [`eval_moves_with`] from the exact values of every node at the point, computed beforehand (as
 /// [`Linear::eval`] leaves them in its [`Scratch`]).
 pub(crate) fn eval_moves_from(f: &Formula, readers: &Readers, base: &[Xf], x: &[f64; N_INPUTS], params: &[f64], moves: &[Move]) -> Vec<f64> {
+    let n = f.root.index() + 1;
     let xs = x.map(Xf::from_f64);
     let mut v = base.to_vec();
     let no_nodes = Vec::new();
@@ -789,7 +784,7 @@ pub(crate) fn eval_moves_from(f: &Formula, readers: &Readers, base: &[Xf], x: &[
             for &id in nodes {
                 v[id.index()] = node_value(f, id, &v, &moved, &moved_params);
             }
-            let r = v[v.len() - 1].to_f64();
+            let r = v[n - 1].to_f64();
             for &id in nodes {
                 v[id.index()] = base[id.index()];
             }
@@ -991,7 +986,7 @@ let b = acos(NV)
             let lr = bounds(&f, &v);
             if bound::sure(v[n - 1], lr[n - 1], bound::XF_UNIT, Target::Rounded) {
                 let big = big::eval(&f, &xs, &[], 640, (&v, &lr), false).unwrap().0;
-                assert_eq!(v[n - 1].to_f64().to_bits(), big[n - 1].to_f64().to_bits(), "x = {x:?}");
+                assert_eq!(v[n - 1].to_f64().to_bits(), big.to_f64().to_bits(), "x = {x:?}");
             }
         }
     }

@@ -36,15 +36,6 @@ fn power_of_two(f: &Formula, id: NodeId) -> Option<f64> {
     }
 }
 
-/// Log₂ bound of a sum's error from its terms' (the bound module's rule).
-fn sum_lr(a: Xf, la: f64, b: Xf, lb: f64, s: Xf) -> f64 {
-    let ls = super::bound::lg(s);
-    let t = |l: f64, x: Xf| if l == f64::NEG_INFINITY || x.is_zero() { f64::NEG_INFINITY } else { l + super::bound::lg(x) - ls };
-    let (p, q) = (t(la, a), t(lb, b));
-    let m = p.max(q).max(0.0);
-    m + ((p - m).exp2() + (q - m).exp2() + (-m).exp2()).log2()
-}
-
 /// The form of node `id`, if it has one, from the nodes' values `v` (and their bounds `lr`, for the form's).
 pub(super) fn form(f: &Formula, id: NodeId, v: &[Xf], lr: Option<&[f64]>) -> Option<Form> {
     let l = |a: NodeId| lr.map_or(0.0, |lr| lr[a.index()]);
@@ -66,7 +57,7 @@ pub(super) fn form(f: &Formula, id: NodeId, v: &[Xf], lr: Option<&[f64]>) -> Opt
                 return None;
             }
             let r = fa.r.add(rb);
-            Some(Form { q, r, lr: sum_lr(fa.r, fa.lr, rb, fb.lr, r) })
+            Some(Form { q, r, lr: super::bound::sum(fa.r, fa.lr, rb, fb.lr, r, 0.0) })
         }
         Node::Binary(op @ (BinOp::Mul | BinOp::Div), a, b) => {
             let (g, c) = match (power_of_two(f, b), power_of_two(f, a)) {

@@ -200,7 +200,7 @@ impl Eval {
             Builtin::Min => Some((Eval::min_max(&a[0], &a[1], false), true)),
             Builtin::Max => Some((Eval::min_max(&a[0], &a[1], true), true)),
             Builtin::Clamp => Some((Eval::min_max(&Eval::min_max(&a[0], &a[1], true), &a[2], false), true)),
-            Builtin::Abs => Some((if signum(&a[0]).is_sign_negative() { Eval::neg(&a[0]) } else { a[0].clone() }, true)),
+            Builtin::Abs => Some((Eval::abs(&a[0]), true)),
             Builtin::Fma => {
                 let (p, e1) = self.mul(&a[0], &a[1])?;
                 let (s, e2) = self.add(&p, &a[2])?;
@@ -311,12 +311,12 @@ impl Eval {
     }
 }
 
-/// The formula at inputs `x` and parameters `params`, evaluated at `precision` bits: every node's value as an
-/// [`Xf`] (rounded to 106 bits) and the root's bound (log₂, in units of 2^-(precision − 2)); `None` when dashu
+/// The formula at inputs `x` and parameters `params`, evaluated at `precision` bits: the root's value as an
+/// [`Xf`] (rounded to 106 bits) and its bound (log₂, in units of 2^-(precision − 2)); `None` when dashu
 /// refuses an operation (module docs). `xf`: the double-double's values and bounds at the same point; with
 /// `reuse_xf`, a transcendental function whose value there is good to 2⁻⁹⁰ is taken from it (its bound carried
 /// over), not computed again at `precision` bits.
-pub(super) fn eval(f: &Formula, x: &[Xf; N_INPUTS], params: &[f64], precision: usize, xf: (&[Xf], &[f64]), reuse_xf: bool) -> Option<(Vec<Xf>, f64)> {
+pub(super) fn eval(f: &Formula, x: &[Xf; N_INPUTS], params: &[f64], precision: usize, xf: (&[Xf], &[f64]), reuse_xf: bool) -> Option<(Xf, f64)> {
     let ev = Eval { ctx: Context::new(precision) };
     let unit = -(precision as f64 - 2.0);
     // A transcendental node the double-double has to 2⁻⁹⁰: its value reused, its bound in this unit.
@@ -362,5 +362,5 @@ pub(super) fn eval(f: &Formula, x: &[Xf; N_INPUTS], params: &[f64], precision: u
         vals.push(v);
         lr.push(bound::node(f, id, &approx, &lr, Some(exact), unit));
     }
-    Some((approx, lr[n - 1]))
+    Some((approx[n - 1], lr[n - 1]))
 }

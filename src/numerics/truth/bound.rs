@@ -175,6 +175,13 @@ fn in_units(rel: f64, unit: f64) -> f64 {
     }
 }
 
+/// The bound of a sum `s = a + b` (not 0) from its operands' bounds and its own rounding `own` (all log₂, in
+/// units): (|a|·rₐ + |b|·r_b)/|s| + own.
+pub(super) fn sum(a: Xf, la: f64, b: Xf, lb: f64, s: Xf, own: f64) -> f64 {
+    let ls = lg(s);
+    lse3(abs_err(a, la) - ls, abs_err(b, lb) - ls, own)
+}
+
 /// log₂ of a value's absolute error bound (in units) from its bound: a zero's bound is absolute already.
 fn abs_err(x: Xf, l: f64) -> f64 {
     if x.is_zero() {
@@ -221,13 +228,11 @@ pub(super) fn node(f: &Formula, id: NodeId, v: &[Xf], lr: &[f64], exact: Option<
                         Some(e) => if e { NEG_INF } else { 0.0 },
                         None => in_units(add_rel_err(x, if op == BinOp::Sub { y.neg() } else { y }), unit),
                     };
-                    let lv = lg(r);
-                    lse3(abs_err(x, la) - lv, abs_err(y, lb) - lv, own)
+                    sum(x, la, y, lb, r, own)
                 }
                 BinOp::Mul | BinOp::Div if rh == 0.0 => {
                     // 0·y, 0/y: absolute, the zero's error times |y| (or over it).
-                    let (z, lz, other) = if x.is_zero() { (x, la, y) } else { (y, lb, x) };
-                    let _ = z;
+                    let (lz, other) = if x.is_zero() { (la, y) } else { (lb, x) };
                     if op == BinOp::Div && !x.is_zero() {
                         return INF;
                     }

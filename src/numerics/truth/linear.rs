@@ -227,10 +227,6 @@ impl Linear {
             let k = id.index();
             let value = if let Node::Const(_) = f.ir.node(id) { self.consts[k] } else { node_value(f, id, vals, &xs, params) };
             vals.push(value);
-        }
-        for id in f.ir.ids().take(n) {
-            let k = id.index();
-            let value = vals[k];
             let dm = self.deps[k];
             let own = |default: i64| if value.is_regular() { value.e } else { default };
             let node = *f.ir.node(id);
